@@ -1,0 +1,58 @@
+# mascore: the two commands of the README are `make book` and `make test`.
+# Both create .venv if needed and install the exact versions of requirements.lock.
+
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed-stamp
+PIP_VERSION := 26.3
+
+# One BLAS thread per process: notebooks and test workers run side by side on 2 cores.
+export OMP_NUM_THREADS := 1
+export OPENBLAS_NUM_THREADS := 1
+export MKL_NUM_THREADS := 1
+export MPLBACKEND := Agg
+export PYDEVD_DISABLE_FILE_VALIDATION := 1
+
+JOBS ?= 2
+
+.PHONY: help install book test reproduce lab bench lock clean
+
+help:  ## list the targets
+	@grep -E '^[a-z]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/'
+
+install: $(STAMP)  ## create .venv and install the locked environment
+
+$(STAMP): requirements.lock pyproject.toml
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check pip==$(PIP_VERSION)
+	$(BIN)/python -m pip install --quiet -r requirements.lock
+	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
+	@touch $(STAMP)
+
+book: $(STAMP) reproduce  ## execute every notebook and render the HTML book into book/_build/html
+	$(BIN)/jupyter-book build book --all -W -n --keep-going
+	@echo "Open book/_build/html/index.html"
+
+test: $(STAMP) reproduce  ## unit tests, published-number tests and every notebook (nbmake), on $(JOBS) workers
+	$(BIN)/python -m pytest -n $(JOBS) --nbmake tests notebooks
+
+reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json into results/
+	$(BIN)/python -m mascore reproduce all --out results
+
+lab: $(STAMP)  ## JupyterLab on notebooks/ with the project's environment
+	$(BIN)/jupyter lab notebooks
+
+bench: $(STAMP)  ## timing benchmarks (printed, and written to results/benchmarks/)
+	$(BIN)/python -m benchmarks
+
+lock:  ## regenerate requirements.lock from pyproject.toml in a scratch venv
+	rm -rf .lock-venv && $(PYTHON) -m venv .lock-venv
+	.lock-venv/bin/python -m pip install --quiet pip==$(PIP_VERSION) && .lock-venv/bin/python -m pip install --quiet ".[book,dev]" "setuptools>=77" wheel
+	echo '# Exact versions installed by the Makefile (regenerate with `make lock`).' > requirements.lock
+	.lock-venv/bin/python -m pip freeze --all --exclude-editable | grep -v -e '^mascore' -e '^pip==' >> requirements.lock
+	rm -rf .lock-venv
+
+clean:  ## remove the environment, the built book, results and caches
+	rm -rf $(VENV) book/_build results .pytest_cache .hypothesis
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -1,0 +1,1 @@
+"""Timing benchmarks of mascore (see ``benchmarks/__main__.py``)."""

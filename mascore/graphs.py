@@ -1,0 +1,258 @@
+"""Graphs of interacting agents: adjacency, Laplacians and connectivity.
+
+Convention used throughout mascore: for an adjacency matrix ``A`` of shape
+``(N, N)``, ``A[i, j] > 0`` means that agent ``i`` *receives* information from
+agent ``j`` (the directed edge ``j -> i``). An undirected graph has a symmetric
+``A``. The (in-degree) Laplacian is ``L = diag(A @ 1) - A``; its rows sum to
+zero. This is the convention of Ren, Beard and Kingston (2005) and of most of
+the consensus literature.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Iterable, Sequence
+
+import networkx as nx
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._validation import as_matrix, check_square
+
+__all__ = [
+    "adjacency_from_edges",
+    "complete_graph",
+    "graph_union",
+    "has_spanning_tree",
+    "is_connected",
+    "laplacian",
+    "path_graph",
+    "proximity_graph",
+    "ring_graph",
+    "spanning_tree_roots",
+    "star_graph",
+    "to_networkx",
+    "unions_over_windows",
+]
+
+
+def adjacency_from_edges(
+    n_agents: int,
+    edges: Iterable[tuple[int, int]] | Iterable[tuple[int, int, float]],
+    directed: bool = False,
+) -> np.ndarray:
+    """Build an adjacency matrix from an edge list.
+
+    Parameters
+    ----------
+    n_agents : int
+        Number of agents N.
+    edges : iterable of (j, i) or (j, i, weight)
+        Edge ``j -> i`` (agent ``i`` hears agent ``j``), optionally weighted.
+    directed : bool
+        If False every edge is added in both directions.
+
+    Returns
+    -------
+    A : (N, N) ndarray
+        Weighted adjacency matrix with zero diagonal.
+    """
+    n_agents = _check_n(n_agents)
+    A = np.zeros((n_agents, n_agents))
+    for edge in edges:
+        if len(edge) not in (2, 3):
+            raise ValueError(f"edges must hold (j, i) or (j, i, weight) tuples; got {edge!r}")
+        j, i = int(edge[0]), int(edge[1])
+        w = float(edge[2]) if len(edge) == 3 else 1.0
+        if not (0 <= i < n_agents and 0 <= j < n_agents):
+            raise ValueError(f"edge {edge!r} names an agent outside 0..{n_agents - 1}")
+        if i == j:
+            raise ValueError(f"edge {edge!r} is a self-loop; adjacency has a zero diagonal")
+        if w <= 0:
+            raise ValueError(f"edge {edge!r} has a non-positive weight")
+        A[i, j] = w
+        if not directed:
+            A[j, i] = w
+    return A
+
+
+def laplacian(A: ArrayLike) -> np.ndarray:
+    """Graph Laplacian ``L = diag(A 1) - A`` (in-degree for directed graphs).
+
+    Parameters
+    ----------
+    A : (N, N) array_like
+        Non-negative adjacency matrix, ``A[i, j]`` the weight of ``j -> i``.
+
+    Returns
+    -------
+    L : (N, N) ndarray
+        Rows sum to zero; symmetric positive semidefinite when `A` is symmetric.
+    """
+    A = _check_adjacency(A)
+    return np.diag(A.sum(axis=1)) - A
+
+
+def ring_graph(n_agents: int) -> np.ndarray:
+    """Undirected cycle 0-1-...-(N-1)-0 (N >= 3)."""
+    n_agents = _check_n(n_agents, minimum=3)
+    idx = np.arange(n_agents)
+    return adjacency_from_edges(n_agents, zip(idx, (idx + 1) % n_agents))
+
+
+def path_graph(n_agents: int) -> np.ndarray:
+    """Undirected path 0-1-...-(N-1)."""
+    n_agents = _check_n(n_agents)
+    idx = np.arange(n_agents - 1)
+    return adjacency_from_edges(n_agents, zip(idx, idx + 1))
+
+
+def complete_graph(n_agents: int) -> np.ndarray:
+    """Undirected complete graph on N agents."""
+    n_agents = _check_n(n_agents)
+    return np.ones((n_agents, n_agents)) - np.eye(n_agents)
+
+
+def star_graph(n_agents: int, center: int = 0) -> np.ndarray:
+    """Undirected star with hub `center`."""
+    n_agents = _check_n(n_agents)
+    if not 0 <= center < n_agents:
+        raise ValueError(f"center must be in 0..{n_agents - 1}; got {center}")
+    return adjacency_from_edges(n_agents, ((center, i) for i in range(n_agents) if i != center))
+
+
+def proximity_graph(positions: ArrayLike, sensing_range: float) -> np.ndarray:
+    """Undirected disk graph: agents closer than `sensing_range` are neighbours.
+
+    Parameters
+    ----------
+    positions : (N, n) or (..., N, n) array_like
+        Agent positions (m); leading axes (time, Monte Carlo runs) are kept.
+    sensing_range : float
+        Range r (m); ``||p_i - p_j|| <= r`` makes ``i`` and ``j`` neighbours.
+
+    Returns
+    -------
+    A : (N, N) or (..., N, N) ndarray of float
+        0/1 adjacency with zero diagonal.
+    """
+    p = np.asarray(positions, dtype=float)
+    if p.ndim < 2:
+        raise ValueError(f"positions must have shape (..., N, n); got {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise ValueError("positions contains NaN or infinite entries")
+    if not np.isfinite(sensing_range) or sensing_range <= 0:
+        raise ValueError(f"sensing_range must be a positive number; got {sensing_range}")
+    diff = p[..., :, None, :] - p[..., None, :, :]
+    dist = np.linalg.norm(diff, axis=-1)
+    A = (dist <= sensing_range).astype(float)
+    n_agents = p.shape[-2]
+    A[..., np.arange(n_agents), np.arange(n_agents)] = 0.0
+    return A
+
+
+def spanning_tree_roots(A: ArrayLike) -> np.ndarray:
+    """Agents from which every other agent can be reached along directed edges.
+
+    The graph contains a directed spanning tree iff this set is non-empty.
+
+    Returns
+    -------
+    roots : (k,) ndarray of int
+        Indices of all possible roots (sorted).
+    """
+    A = _check_adjacency(A)
+    n_agents = A.shape[0]
+    # out-neighbours of j: agents i with A[i, j] > 0 (information flows j -> i)
+    out = [np.flatnonzero(A[:, j] > 0) for j in range(n_agents)]
+    roots = [r for r in range(n_agents) if _reach_count(out, r) == n_agents]
+    return np.array(roots, dtype=int)
+
+
+def has_spanning_tree(A: ArrayLike) -> bool:
+    """True iff the directed graph of `A` contains a directed spanning tree."""
+    return spanning_tree_roots(A).size > 0
+
+
+def is_connected(A: ArrayLike) -> bool:
+    """True iff the undirected graph of ``A + A.T`` is connected."""
+    A = _check_adjacency(A)
+    return has_spanning_tree(A + A.T)
+
+
+def graph_union(adjacencies: Sequence[ArrayLike] | np.ndarray) -> np.ndarray:
+    """Union of graphs: the edge weights summed over the sequence.
+
+    Parameters
+    ----------
+    adjacencies : sequence of (N, N) array_like, or (T, N, N) array
+        The graphs to unite; all of the same size.
+
+    Returns
+    -------
+    A : (N, N) ndarray
+        Sum of the adjacency matrices (an edge is present if present once).
+    """
+    stack = np.asarray(adjacencies, dtype=float)
+    if stack.ndim != 3 or stack.shape[1] != stack.shape[2] or stack.shape[0] == 0:
+        raise ValueError(
+            f"adjacencies must be a non-empty sequence of (N, N) matrices; got shape {stack.shape}"
+        )
+    for A in stack:
+        _check_adjacency(A)
+    return stack.sum(axis=0)
+
+
+def unions_over_windows(adjacencies: Sequence[ArrayLike] | np.ndarray, window: int) -> np.ndarray:
+    """Unions over consecutive, non-overlapping windows of `window` graphs.
+
+    Returns
+    -------
+    unions : (ceil(T / window), N, N) ndarray
+    """
+    stack = np.asarray(adjacencies, dtype=float)
+    if window < 1:
+        raise ValueError(f"window must be a positive integer; got {window}")
+    return np.stack([graph_union(stack[k : k + window]) for k in range(0, len(stack), window)])
+
+
+def to_networkx(A: ArrayLike, directed: bool | None = None) -> nx.Graph:
+    """Convert an adjacency matrix to a networkx graph for drawing.
+
+    Edges point in the direction information flows (``j -> i`` for
+    ``A[i, j] > 0``). `directed` defaults to "is `A` asymmetric".
+    """
+    A = _check_adjacency(A)
+    if directed is None:
+        directed = not np.allclose(A, A.T)
+    G = nx.DiGraph() if directed else nx.Graph()
+    G.add_nodes_from(range(A.shape[0]))
+    for i, j in zip(*np.nonzero(A)):
+        G.add_edge(int(j), int(i), weight=float(A[i, j]))
+    return G
+
+
+def _reach_count(out: list[np.ndarray], root: int) -> int:
+    seen = {root}
+    queue = deque([root])
+    while queue:
+        for nxt in out[queue.popleft()]:
+            if nxt not in seen:
+                seen.add(int(nxt))
+                queue.append(int(nxt))
+    return len(seen)
+
+
+def _check_adjacency(A: ArrayLike) -> np.ndarray:
+    A = check_square(as_matrix(A, "A"), "A")
+    if np.any(A < 0):
+        raise ValueError("A must have non-negative entries (edge weights)")
+    if np.any(np.diag(A) != 0):
+        raise ValueError("A must have a zero diagonal (no self-loops)")
+    return A
+
+
+def _check_n(n_agents: int, minimum: int = 1) -> int:
+    if isinstance(n_agents, bool) or not isinstance(n_agents, (int, np.integer)) or n_agents < minimum:
+        raise ValueError(f"n_agents must be an integer >= {minimum}; got {n_agents!r}")
+    return int(n_agents)

@@ -1,0 +1,175 @@
+"""One figure style for the whole book, and the plots every paper reuses.
+
+Functions take data and an optional matplotlib ``Axes`` and return the Axes
+(compute and draw stay apart). Call :func:`use_style` once per notebook.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib as mpl
+import matplotlib.pyplot as plt
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._validation import as_matrix
+
+__all__ = [
+    "STYLE",
+    "agent_colors",
+    "new_axes",
+    "plot_band",
+    "plot_graph",
+    "plot_trajectories",
+    "save_figure",
+    "use_style",
+]
+
+#: rcParams of the book's figures.
+STYLE = {
+    "figure.figsize": (6.4, 4.0),
+    "figure.dpi": 100,
+    "savefig.dpi": 150,
+    "savefig.bbox": "tight",
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+    "axes.spines.top": False,
+    "axes.spines.right": False,
+    "axes.titlesize": "medium",
+    "axes.labelsize": "medium",
+    "legend.fontsize": "small",
+    "legend.frameon": False,
+    "lines.linewidth": 1.4,
+    "image.cmap": "viridis",
+}
+
+
+def use_style() -> None:
+    """Apply the book's figure style to matplotlib's global rcParams."""
+    mpl.rcParams.update(STYLE)
+
+
+def agent_colors(n_agents: int) -> list:
+    """N distinguishable colours, the same agent always getting the same one."""
+    cmap = plt.get_cmap("tab10" if n_agents <= 10 else "tab20")
+    return [cmap(i % cmap.N) for i in range(n_agents)]
+
+
+def new_axes(ax: plt.Axes | None = None, **subplots_kw) -> plt.Axes:
+    """Return `ax`, or a fresh Axes in a new figure."""
+    if ax is not None:
+        return ax
+    _, ax = plt.subplots(**subplots_kw)
+    return ax
+
+
+def plot_trajectories(
+    positions: ArrayLike,
+    ax: plt.Axes | None = None,
+    labels: Sequence[str] | None = None,
+    marker_start: str = "o",
+    marker_end: str = "s",
+    unit: str = "m",
+    **line_kw,
+) -> plt.Axes:
+    """Plot planar trajectories of a team.
+
+    Parameters
+    ----------
+    positions : (T, N, 2) array_like
+        Positions over time (``unit``).
+    labels : sequence of str, optional
+        Legend labels per agent (default "agent 1", ...).
+    """
+    p = np.asarray(positions, dtype=float)
+    if p.ndim != 3 or p.shape[-1] != 2:
+        raise ValueError(f"positions must have shape (T, N, 2); got {p.shape}")
+    ax = new_axes(ax)
+    n_agents = p.shape[1]
+    labels = labels or [f"agent {i + 1}" for i in range(n_agents)]
+    for i, color in enumerate(agent_colors(n_agents)):
+        ax.plot(p[:, i, 0], p[:, i, 1], color=color, label=labels[i], **line_kw)
+        ax.plot(*p[0, i], marker_start, color=color, ms=5)
+        ax.plot(*p[-1, i], marker_end, color=color, ms=5, mfc="none")
+    ax.set_xlabel(f"x ({unit})")
+    ax.set_ylabel(f"y ({unit})")
+    ax.set_aspect("equal", adjustable="datalim")
+    return ax
+
+
+def plot_graph(
+    positions: ArrayLike,
+    A: ArrayLike,
+    ax: plt.Axes | None = None,
+    sensing_range: float | None = None,
+    unit: str = "m",
+    directed: bool | None = None,
+    node_labels: bool = True,
+) -> plt.Axes:
+    """Draw a graph at given node positions, optionally with sensing circles.
+
+    Parameters
+    ----------
+    positions : (N, 2) array_like
+        Node positions (``unit``).
+    A : (N, N) array_like
+        Adjacency, ``A[i, j] > 0`` for the edge ``j -> i``.
+    sensing_range : float, optional
+        Radius of a dashed circle drawn around each agent.
+    directed : bool, optional
+        Draw arrows; defaults to "is `A` asymmetric".
+    """
+    p = as_matrix(positions, "positions", (None, 2))
+    A = as_matrix(A, "A", (p.shape[0], p.shape[0]))
+    ax = new_axes(ax)
+    colors = agent_colors(p.shape[0])
+    directed = (not np.allclose(A, A.T)) if directed is None else directed
+    for i, j in zip(*np.nonzero(A)):
+        if directed:
+            ax.annotate("", xy=p[i], xytext=p[j],
+                        arrowprops=dict(arrowstyle="-|>", color="0.4", lw=1.0, shrinkA=7, shrinkB=7))
+        elif i > j:
+            ax.plot(*p[[i, j]].T, color="0.5", lw=1.0, zorder=1)
+    for i, color in enumerate(colors):
+        if sensing_range is not None:
+            ax.add_patch(plt.Circle(p[i], sensing_range, fill=False, ls="--", lw=0.8, color=color))
+        ax.plot(*p[i], "o", color=color, ms=9, zorder=2)
+        if node_labels:
+            ax.annotate(str(i + 1), p[i], ha="center", va="center", fontsize=7, color="white", zorder=3)
+    ax.set_xlabel(f"x ({unit})")
+    ax.set_ylabel(f"y ({unit})")
+    ax.set_aspect("equal", adjustable="datalim")
+    return ax
+
+
+def plot_band(
+    t: ArrayLike,
+    center: ArrayLike,
+    low: ArrayLike | None = None,
+    high: ArrayLike | None = None,
+    ax: plt.Axes | None = None,
+    label: str | None = None,
+    color=None,
+    alpha: float = 0.25,
+) -> plt.Axes:
+    """A time series with a shaded band (e.g. mean and a percentile range)."""
+    t = np.asarray(t, dtype=float)
+    center = np.asarray(center, dtype=float)
+    if center.shape != t.shape:
+        raise ValueError(f"center must have the shape of t {t.shape}; got {center.shape}")
+    ax = new_axes(ax)
+    (line,) = ax.plot(t, center, color=color, label=label)
+    if low is not None and high is not None:
+        ax.fill_between(t, low, high, color=line.get_color(), alpha=alpha, lw=0)
+    return ax
+
+
+def save_figure(fig: plt.Figure, path: str | Path) -> Path:
+    """Save `fig` (creating folders) and close it; returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
