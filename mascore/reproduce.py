@@ -22,10 +22,28 @@ from tqdm.auto import tqdm
 
 from .ledger import PAPERS, Claim, write_claims
 
-__all__ = ["DEFAULT_SEED", "available_papers", "main", "reproduce_paper"]
+__all__ = ["DEFAULT_SEED", "available_papers", "main", "reproduce_paper", "results_dir"]
 
 #: Seed used when the caller gives none.
 DEFAULT_SEED = 1
+
+
+def results_dir() -> Path:
+    """The project's ``results/`` folder, found from the current directory.
+
+    Uses ``$MASCORE_RESULTS`` if set, else ``results/`` beside the nearest
+    ``pyproject.toml`` above the working directory (so notebooks executed from
+    ``notebooks/`` or the book find it), else ``./results``.
+    """
+    import os
+
+    if os.environ.get("MASCORE_RESULTS"):
+        return Path(os.environ["MASCORE_RESULTS"])
+    here = Path.cwd().resolve()
+    for folder in (here, *here.parents):
+        if (folder / "pyproject.toml").exists():
+            return folder / "results"
+    return here / "results"
 
 
 def available_papers() -> list[str]:

@@ -1,0 +1,108 @@
+"""Tests of mascore.kalman against filterpy, the textbook formulas and Monte Carlo."""
+
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+
+from mascore import agents, kalman, noise
+
+
+def _random_spd(rng, m):
+    M = rng.standard_normal((m, m))
+    return M @ M.T + m * np.eye(m)
+
+
+def test_matches_filterpy_over_a_run():
+    """Same model, same measurements: our predict/update equals filterpy's KalmanFilter."""
+    rng = np.random.default_rng(1)
+    model = agents.double_integrator(2, 0.1)
+    H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
+    Q, R = 0.2 * np.eye(4), 0.5 * np.eye(2)
+    kf = KalmanFilter(dim_x=4, dim_z=2, dim_u=2)
+    kf.F, kf.B, kf.H, kf.Q, kf.R = model.A, model.B, H, Q, R
+    kf.x, kf.P = np.zeros(4), 10 * np.eye(4)
+    x, P = np.zeros(4), 10 * np.eye(4)
+    for k in range(30):
+        u = rng.standard_normal(2)
+        z = rng.standard_normal(2)
+        kf.predict(u=u)
+        kf.update(z)
+        x, P = kalman.predict(x, P, model.A, Q, B=model.B, u=u)
+        x, P = kalman.update(x, P, z, H, R)
+        np.testing.assert_allclose(x, kf.x, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(P, kf.P, rtol=1e-10, atol=1e-12)
+
+
+def test_joseph_equals_textbook_form_for_optimal_gain():
+    """With the optimal gain, Joseph form equals (I - K H) P."""
+    rng = np.random.default_rng(2)
+    P, R = _random_spd(rng, 5), _random_spd(rng, 3)
+    H = rng.standard_normal((3, 5))
+    _, P_post = kalman.update(np.zeros(5), P, np.zeros(3), H, R)
+    K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+    np.testing.assert_allclose(P_post, (np.eye(5) - K @ H) @ P, rtol=1e-10, atol=1e-10)
+    # information form: P+^{-1} = P^{-1} + H^T R^{-1} H
+    np.testing.assert_allclose(np.linalg.inv(P_post), np.linalg.inv(P) + H.T @ np.linalg.solve(R, H), rtol=1e-9)
+
+
+def test_batched_equals_loop():
+    rng = np.random.default_rng(3)
+    xs = rng.standard_normal((6, 4))
+    Ps = np.stack([_random_spd(rng, 4) for _ in range(6)])
+    zs = rng.standard_normal((6, 2))
+    H, R = rng.standard_normal((2, 4)), np.eye(2)
+    xb, Pb = kalman.update(xs, Ps, zs, H, R)
+    for i in range(6):
+        xi, Pi = kalman.update(xs[i], Ps[i], zs[i], H, R)
+        np.testing.assert_allclose(xb[i], xi, rtol=1e-12)
+        np.testing.assert_allclose(Pb[i], Pi, rtol=1e-12)
+
+
+def test_covariance_stays_symmetric_positive_definite():
+    rng = np.random.default_rng(4)
+    F = rng.standard_normal((4, 4))
+    x, P = np.zeros(4), np.eye(4)
+    for _ in range(50):
+        x, P = kalman.predict(x, P, F, 0.01 * np.eye(4))
+        x, P = kalman.update(x, P, rng.standard_normal(1), rng.standard_normal((1, 4)), np.eye(1))
+        np.testing.assert_array_equal(P, P.T)
+        assert np.linalg.eigvalsh(P).min() > 0
+
+
+def test_nees_is_chi_square_consistent_over_monte_carlo():
+    """A correctly tuned filter's average NEES lies in the 95% chi-square interval."""
+    rng = np.random.default_rng(5)
+    model = agents.double_integrator(1, 0.5)
+    H, Q, R = np.array([[1.0, 0.0]]), 0.1 * np.eye(2), np.array([[0.5]])
+    runs, steps = 200, 40
+    x_true = noise.gaussian(rng, np.eye(2), runs)
+    x_hat, P = np.zeros((runs, 2)), np.broadcast_to(np.eye(2), (runs, 2, 2))
+    for _ in range(steps):
+        x_true = x_true @ model.A.T + noise.gaussian(rng, Q, runs)
+        z = x_true @ H.T + noise.gaussian(rng, R, runs)
+        x_hat, P = kalman.predict(x_hat, P, model.A, Q)
+        x_hat, P = kalman.update(x_hat, P, z, H, R)
+    avg = kalman.nees(x_true - x_hat, P).mean()
+    low, high = kalman.nees_interval(2, runs)
+    assert low < avg < high
+    # and an over-confident filter (P shrunk 4x) is caught
+    assert kalman.nees(x_true - x_hat, P / 4).mean() > high
+
+
+def test_nees_interval_brackets_dof():
+    low, high = kalman.nees_interval(4, 50)
+    assert low < 4 < high
+    assert kalman.nees_interval(4, 500)[1] - kalman.nees_interval(4, 500)[0] < high - low
+
+
+def test_bad_inputs():
+    with pytest.raises(ValueError, match="Q"):
+        kalman.predict(np.zeros(2), np.eye(2), np.eye(2), -np.eye(2))
+    with pytest.raises(ValueError, match="positive definite"):
+        kalman.update(np.zeros(2), np.eye(2), np.zeros(1), np.ones((1, 2)), np.zeros((1, 1)))
+    with pytest.raises(ValueError, match="H"):
+        kalman.update(np.zeros(2), np.eye(2), np.zeros(1), np.ones((1, 3)), np.eye(1))
+    with pytest.raises(ValueError, match="P"):
+        kalman.predict(np.zeros(2), np.eye(3), np.eye(2), np.eye(2))
+    with pytest.raises(ValueError, match="symmetric"):
+        kalman.predict(np.zeros(2), np.eye(2), np.eye(2), np.array([[1.0, 0.5], [0.0, 1.0]]))
