@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.linalg import expm
 
 from mascore import agents, noise
@@ -73,3 +75,15 @@ def test_noise_requires_generator():
         noise.gaussian(np.random.default_rng(0), -np.eye(2))
     with pytest.raises(ValueError, match="high"):
         noise.uniform_box(np.random.default_rng(0), [1.0], [0.0])
+
+
+@given(st.integers(1, 4), st.integers(0, 2**31 - 1))
+@settings(max_examples=40, deadline=None)
+def test_uniform_ellipsoid_samples_stay_inside_any_ellipsoid(dim, seed):
+    rng = np.random.default_rng(seed)
+    M = rng.standard_normal((dim, dim))
+    P = M @ M.T + 1e-3 * np.eye(dim)
+    c = rng.standard_normal(dim)
+    x = noise.uniform_ellipsoid(rng, c, P, 500)
+    d = x - c
+    assert np.einsum("ni,ij,nj->n", d, np.linalg.inv(P), d).max() <= 1 + 1e-9
