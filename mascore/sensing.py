@@ -1,0 +1,283 @@
+"""Team sensing model of Song et al. (2023), eqs. (2)-(3).
+
+Every agent ``i`` measures the full state of itself and of each neighbour in
+its *closed* neighbourhood ``N̄_i = N_i ∪ {i}``::
+
+    z_{i,x_j}[k] = x_j[k] + nu_ij[k],   j in N̄_i          (eq. (2))
+    z_i[k] = H_i[k] (X[k] + nu_i[k])                         (eq. (3))
+
+``X = [x_1; ...; x_N]`` stacks the ``m``-dimensional agent states (``m = 2n``
+for the double integrator) and ``H_i`` (``m |N̄_i| x m N``) selects the blocks
+of the agents in ``N̄_i`` in increasing index order.
+
+Two equivalent representations are offered:
+
+* the paper's: a list of selection matrices ``H_i`` and stacked vectors
+  ``z_i`` of varying length (:func:`selection_matrix`,
+  :func:`selection_matrices`, :func:`stacked_measurement`);
+* a fixed-shape, batched one used by the filters: a boolean *sensing mask*
+  ``S[..., i, j]`` (true when ``i`` senses ``j``, diagonal true) and a
+  measurement tensor ``Z[..., i, j, :]`` (:func:`sensing_mask`,
+  :func:`measure`). ``H_i^T H_i = diag(S[i]) ⊗ I_m``, so masks replace the
+  selection matrices without ragged arrays, and the adjacency may change at
+  every step and differ between Monte Carlo runs.
+
+Adjacency convention (as in :mod:`mascore.graphs`): ``A[i, j] > 0`` means
+``i`` receives from (senses) ``j``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._validation import check_covariance, check_generator
+
+__all__ = [
+    "IsolatedAgentError",
+    "sensing_mask",
+    "neighbor_sets",
+    "selection_matrix",
+    "selection_matrices",
+    "team_noise_covariance",
+    "measurement_noise",
+    "measure",
+    "stacked_measurement",
+]
+
+
+class IsolatedAgentError(ValueError):
+    """An agent has no neighbour, so it cannot sense anyone but itself."""
+
+
+def sensing_mask(adjacency: ArrayLike, allow_isolated: bool = False) -> np.ndarray:
+    """Closed-neighbourhood mask ``S = (A > 0) + I``.
+
+    Parameters
+    ----------
+    adjacency : (N, N) or (..., N, N) array_like
+        Adjacency matrices, ``A[..., i, j] > 0`` when ``i`` senses ``j``;
+        leading axes (time steps, Monte Carlo runs) are kept.
+    allow_isolated : bool
+        If false (default), an agent without any neighbour raises
+        :class:`IsolatedAgentError` naming the agent.
+
+    Returns
+    -------
+    S : (..., N, N) ndarray of bool
+        ``S[..., i, j]`` is true iff ``j`` is in ``N̄_i`` (diagonal true).
+    """
+    A = _check_adjacency(adjacency)
+    S = A > 0
+    if not allow_isolated:
+        isolated = ~np.any(S, axis=-1)
+        if np.any(isolated):
+            where = np.argwhere(isolated)
+            first = tuple(int(v) for v in where[0])
+            agent = first[-1]
+            batch = f" (at batch index {first[:-1]})" if len(first) > 1 else ""
+            raise IsolatedAgentError(
+                f"agent {agent} has no neighbour{batch}: with this adjacency / sensing range "
+                f"it senses only itself ({int(isolated.sum())} isolated agent-slot(s) in total)"
+            )
+    S = S.copy()
+    n = S.shape[-1]
+    S[..., np.arange(n), np.arange(n)] = True
+    return S
+
+
+def neighbor_sets(adjacency: ArrayLike, allow_isolated: bool = False) -> list[np.ndarray]:
+    """Closed neighbour sets ``N̄_i`` (sorted agent indices) of one graph.
+
+    Parameters
+    ----------
+    adjacency : (N, N) array_like
+    allow_isolated : bool
+        See :func:`sensing_mask`.
+
+    Returns
+    -------
+    list of N int arrays
+        ``out[i]`` lists ``N̄_i = N_i ∪ {i}`` in increasing order.
+    """
+    S = sensing_mask(adjacency, allow_isolated=allow_isolated)
+    if S.ndim != 2:
+        raise ValueError(f"adjacency must be a single (N, N) matrix here; got shape {S.shape}")
+    return [np.flatnonzero(row) for row in S]
+
+
+def selection_matrix(neighbors: ArrayLike, n_agents: int, m: int) -> np.ndarray:
+    """The paper's ``H_i`` (eq. (3)) for one closed neighbour set.
+
+    Parameters
+    ----------
+    neighbors : (d,) array_like of int
+        The agents ``N̄_i`` measured by agent ``i``, in the order they are
+        stacked in ``z_i``.
+    n_agents : int
+        N.
+    m : int
+        Agent state dimension (``2n``).
+
+    Returns
+    -------
+    H : (m d, m N) ndarray
+        Block ``(l, j)`` is ``I_m`` if ``j = neighbors[l]``, else ``0``.
+    """
+    idx = np.asarray(neighbors)
+    if idx.ndim != 1 or idx.size == 0 or not np.issubdtype(idx.dtype, np.integer):
+        raise ValueError(f"neighbors must be a non-empty 1-D array of agent indices; got {neighbors!r}")
+    if np.any(idx < 0) or np.any(idx >= n_agents) or len(set(idx.tolist())) != idx.size:
+        raise ValueError(f"neighbors must be distinct indices in [0, {n_agents}); got {idx.tolist()}")
+    if m < 1:
+        raise ValueError(f"m must be a positive integer; got {m}")
+    sel = np.zeros((idx.size, n_agents))
+    sel[np.arange(idx.size), idx] = 1.0
+    return np.kron(sel, np.eye(m))
+
+
+def selection_matrices(adjacency: ArrayLike, m: int, allow_isolated: bool = False) -> list[np.ndarray]:
+    """``[H_1, ..., H_N]`` for one graph (eq. (3)), self included."""
+    sets = neighbor_sets(adjacency, allow_isolated=allow_isolated)
+    n_agents = len(sets)
+    return [selection_matrix(s, n_agents, m) for s in sets]
+
+
+def team_noise_covariance(R: ArrayLike, n_agents: int, m: int) -> np.ndarray:
+    """Full ``(m N, m N)`` covariance of ``nu_i`` (one observer's noise vector).
+
+    Parameters
+    ----------
+    R : (m, m) or (m N, m N) array_like
+        Either the covariance per measured agent (the team covariance is then
+        ``I_N ⊗ R``) or the full covariance of ``nu_i`` as in the paper, where
+        ``nu_i ~ N(0, R)`` with ``R`` of size ``2nN``. Symmetric PSD.
+
+    Returns
+    -------
+    (m N, m N) ndarray
+    """
+    R = np.asarray(R, dtype=float)
+    if R.ndim == 2 and R.shape == (m, m):
+        check_covariance(R, "R", size=m)
+        return np.kron(np.eye(n_agents), R)
+    if R.ndim == 2 and R.shape == (m * n_agents, m * n_agents):
+        return check_covariance(R, "R", size=m * n_agents)
+    raise ValueError(
+        f"Incompatible dimensions of R; expected ({m}, {m}) per measured agent or "
+        f"({m * n_agents}, {m * n_agents}) for the team, but found {R.shape}"
+    )
+
+
+def measurement_noise(
+    rng: np.random.Generator | int, R: ArrayLike, shape: tuple[int, ...], n_agents: int, m: int
+) -> np.ndarray:
+    """Draw ``nu_i`` for every observer: shape ``(*shape, N, N, m)``.
+
+    ``out[..., i, j, :]`` is ``nu_ij``, agent ``i``'s noise on agent ``j``.
+    Noise is drawn for every pair (sensed or not) so that a realization does
+    not depend on the topology (common random numbers across variants).
+    """
+    rng = check_generator(rng)
+    R_team = team_noise_covariance(R, n_agents, m)
+    root = _psd_sqrt(R_team)
+    std = rng.standard_normal((*shape, n_agents, n_agents * m))
+    nu = std @ root.T
+    return nu.reshape(*shape, n_agents, n_agents, m)
+
+
+def measure(
+    rng: np.random.Generator | int,
+    states: ArrayLike,
+    adjacency: ArrayLike,
+    R: ArrayLike,
+    allow_isolated: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Noisy sensing of the closed neighbourhoods, batched (eq. (2)).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator or int
+        Source of the noise.
+    states : (..., N, m) array_like
+        True agent states ``x_j`` (leading axes: Monte Carlo runs).
+    adjacency : (N, N) or (..., N, N) array_like
+        Who senses whom; broadcast against the leading axes of `states`
+        (one graph for all runs, or one per run).
+    R : (m, m) or (m N, m N) array_like
+        Measurement-noise covariance (see :func:`team_noise_covariance`).
+    allow_isolated : bool
+        See :func:`sensing_mask`.
+
+    Returns
+    -------
+    Z : (..., N, N, m) ndarray
+        ``Z[..., i, j, :] = x_j + nu_ij`` where ``i`` senses ``j``, and ``0``
+        elsewhere (never NaN, so it is safe in masked matrix products).
+    S : (..., N, N) ndarray of bool
+        The sensing mask used.
+    """
+    x = np.asarray(states, dtype=float)
+    if x.ndim < 2:
+        raise ValueError(f"states must have shape (..., N, m); got {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError("states contains NaN or infinite entries")
+    n_agents, m = x.shape[-2:]
+    S = sensing_mask(adjacency, allow_isolated=allow_isolated)
+    if S.shape[-1] != n_agents:
+        raise ValueError(
+            f"adjacency is for {S.shape[-1]} agents but states has {n_agents} agents (shape {x.shape})"
+        )
+    batch = np.broadcast_shapes(x.shape[:-2], S.shape[:-2])
+    nu = measurement_noise(rng, R, batch, n_agents, m)
+    Z = np.broadcast_to(x[..., None, :, :], (*batch, n_agents, n_agents, m)) + nu
+    S = np.broadcast_to(S, (*batch, n_agents, n_agents))
+    return np.where(S[..., None], Z, 0.0), S
+
+
+def stacked_measurement(Z: ArrayLike, mask: ArrayLike, agent: int) -> np.ndarray:
+    """Agent ``i``'s stacked vector ``z_i`` of eq. (3) from the tensor form.
+
+    Parameters
+    ----------
+    Z : (N, N, m) array_like
+        Output of :func:`measure` for one run.
+    mask : (N, N) array_like of bool
+        The sensing mask.
+    agent : int
+        Index ``i``.
+
+    Returns
+    -------
+    z_i : (m |N̄_i|,) ndarray
+        ``[z_{i,x_j}]`` for ``j`` in ``N̄_i`` in increasing order; equals
+        ``H_i (X + nu_i)`` with ``H_i`` from :func:`selection_matrix`.
+    """
+    Z = np.asarray(Z, dtype=float)
+    mask = np.asarray(mask, dtype=bool)
+    if Z.ndim != 3 or mask.shape != Z.shape[:2]:
+        raise ValueError(f"Z must be (N, N, m) and mask (N, N); got {Z.shape} and {mask.shape}")
+    return Z[agent, mask[agent]].reshape(-1)
+
+
+def _check_adjacency(adjacency: ArrayLike) -> np.ndarray:
+    A = np.asarray(adjacency, dtype=float)
+    if A.ndim < 2 or A.shape[-1] != A.shape[-2]:
+        raise ValueError(f"adjacency must have shape (..., N, N); got {A.shape}")
+    if not np.all(np.isfinite(A)):
+        raise ValueError("adjacency contains NaN or infinite entries")
+    if np.any(A < 0):
+        raise ValueError("adjacency entries must be non-negative")
+    n = A.shape[-1]
+    if np.any(A[..., np.arange(n), np.arange(n)] != 0):
+        raise ValueError("adjacency must have a zero diagonal (self-sensing is implicit in N̄_i)")
+    return A
+
+
+def _psd_sqrt(M: np.ndarray) -> np.ndarray:
+    """A square root ``L`` with ``L L^T = M`` for symmetric PSD ``M``."""
+    try:
+        return np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        w, V = np.linalg.eigh(M)
+        return V * np.sqrt(np.clip(w, 0.0, None))
