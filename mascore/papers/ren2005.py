@@ -231,7 +231,7 @@ def switching_demo(graphs: np.ndarray) -> SwitchingDemo:
 def plot_switching(demo: SwitchingDemo, axes=None, label=""):
     """States of the discrete (left) and continuous (right) runs."""
     if axes is None:
-        _, axes = plt.subplots(1, 2, figsize=(10, 3.2))
+        _, axes = plt.subplots(1, 2, figsize=(10, 3.4), layout="constrained")
     colors = agent_colors(demo.discrete.xi.shape[-1])
     for i, c in enumerate(colors):
         axes[0].plot(demo.discrete.t, demo.discrete.xi[:, i], color=c, label=f"A{i + 1}")
@@ -240,7 +240,7 @@ def plot_switching(demo: SwitchingDemo, axes=None, label=""):
     axes[1].set_xlabel("time t (s)")
     for ax, kind in zip(axes, ("discrete, eqs. (4)-(5)", "continuous, eqs. (1)-(3)")):
         ax.set_ylabel("$\\xi_i$")
-        ax.set_title(f"{label}: {kind}")
+        ax.set_title(f"{label}\n{kind}" if label else kind)
     axes[0].legend(ncol=3, fontsize="x-small")
     return axes
 
@@ -331,7 +331,7 @@ def reproduce(out_dir: Path, seed: int) -> list[Claim]:
 
     # Fig. 1 ------------------------------------------------------------------
     res = fig1(seed)
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
+    fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True, layout="constrained")
     plot_fig1(res, axes)
     save_figure(fig, fig_dir / "fig1.png")
     pd.DataFrame({"agent": np.arange(1, 11), "xi0": fig1_initial(True)[0],
@@ -385,7 +385,7 @@ def reproduce(out_dir: Path, seed: int) -> list[Claim]:
     good, bad = switching_demo(union_sequence()), switching_demo(no_union_sequence())
     fixed = cs.kalman_consensus_continuous(THEOREM["xi0"], np.full(6, THEOREM["P0"]), A2, THEOREM["t_final"],
                                            THEOREM["Q"], THEOREM["Omega"])
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6))
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7), layout="constrained")
     plot_switching(good, axes[0], "Fig. 3(a) / 3(b) alternating")
     plot_switching(bad, axes[1], "union never has a spanning tree")
     save_figure(fig, fig_dir / "theorems.png")
