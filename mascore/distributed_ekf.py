@@ -1,0 +1,285 @@
+"""Per-agent extended Kalman filters over the whole team, and estimation-based flocking.
+
+Song et al. (2023), Sec. III-B: every agent ``i`` runs its own EKF of the
+*whole* team state ``X`` (size ``2nN``), from measurements of itself and of its
+current neighbours only (eqs. (2)-(3)).
+
+* Prediction, eqs. (37)-(38) and (40): ``X_hat_i^- = f'(X_hat_i)`` with
+  ``f'(X) = (I_N kron A) X + (I_N kron B) U(X)``, ``U`` the fully-connected
+  flocking law (eq. (39) applied to the common argument ``X``), and
+  ``Sigma_i^- = F_i Sigma_i F_i^T + I_N kron Q`` with ``F_i = df'/dX`` at
+  ``X_hat_i`` (:func:`mascore.flocking.closed_loop_jacobian`).
+* Update, eqs. (16)-(20): the linear Kalman update with the selection matrix
+  ``H_i`` of the agent's current closed neighbourhood.
+* Control, eq. (39): agent ``i`` applies the flocking law to its own estimate,
+  treating *every* other agent as a neighbour (the virtual fully-connected
+  network).
+
+Batched, fixed-size update
+--------------------------
+``H_i`` has a size that changes with the neighbourhood, which would force a
+Python loop over agents. :func:`masked_update` uses the equivalent fixed-size
+form: with the diagonal 0/1 mask ``M_i = H_i^T H_i``,
+``S~ = M_i (Sigma + R) M_i + (I - M_i)`` is, up to a permutation,
+``blockdiag(S_i, I)``, so ``Sigma M_i S~^{-1}`` equals ``Sigma H_i^T S_i^{-1} H_i``
+and the update (eqs. (18)-(20), Joseph form) is exactly the one with ``H_i``
+(tested against :func:`mascore.kalman.update` with the explicit ``H_i``). All
+N filters (and all Monte Carlo runs) then advance in a handful of batched
+``matmul``/``solve`` calls.
+
+Shapes: team states are ``(..., N, 2n)`` (rows ``[p_j; v_j]``), covariances
+``(..., 2nN, 2nN)`` in the matching flattened order; leading axes are the
+estimating agent and Monte Carlo runs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._validation import check_covariance, check_generator
+from .flocking import (
+    FlockingGains,
+    _check_steps,
+    _check_team,
+    _chol,
+    _propagate,
+    closed_loop_jacobian,
+    closed_loop_step,
+    control_from_views,
+)
+from .graphs import proximity_graph
+from .kalman import symmetrize
+from .sensing import measure, team_noise_covariance
+
+__all__ = [
+    "ekf_predict",
+    "masked_update",
+    "EstimatedFlockingRun",
+    "simulate_estimation_based_flocking",
+]
+
+
+def ekf_predict(
+    X_hat: ArrayLike, Sigma: ArrayLike, dt: float, gains: FlockingGains, Q_team: ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    """EKF time update through the fully-connected flocking dynamics, eqs. (38), (40).
+
+    Parameters
+    ----------
+    X_hat : (..., N, 2n) array_like
+        Updated estimates of the team (one per estimating agent / run).
+    Sigma : (..., 2nN, 2nN) array_like
+        Their error covariances.
+    dt : float
+        Sampling time (s).
+    gains : FlockingGains
+    Q_team : (2nN, 2nN) array_like
+        Team process-noise covariance ``I_N kron Q``.
+
+    Returns
+    -------
+    X_pred : (..., N, 2n) ndarray
+    Sigma_pred : (..., 2nN, 2nN) ndarray
+    """
+    X_hat = _check_team(X_hat, "X_hat")
+    Sigma = np.asarray(Sigma, dtype=float)
+    M = X_hat.shape[-1] * X_hat.shape[-2]
+    if Sigma.shape[-2:] != (M, M):
+        raise ValueError(f"Incompatible dimensions of Sigma; expected (..., {M}, {M}) but found {Sigma.shape}")
+    Q_team = np.asarray(Q_team, dtype=float)
+    if Q_team.shape != (M, M):
+        raise ValueError(f"Incompatible dimensions of Q_team; expected ({M}, {M}) but found {Q_team.shape}")
+    return _predict(X_hat, Sigma, dt, gains, Q_team)
+
+
+def masked_update(
+    X_pred: ArrayLike, Sigma_pred: ArrayLike, z: ArrayLike, observed: ArrayLike, R: ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    """Kalman update with the states of the `observed` agents, eqs. (16)-(20).
+
+    Parameters
+    ----------
+    X_pred : (..., N, 2n) array_like
+        Predicted team estimate(s).
+    Sigma_pred : (..., 2nN, 2nN) array_like
+        Predicted covariance(s).
+    z : (..., N, 2n) array_like
+        Measured states ``z_{i,x_j} = x_j + nu_ij`` (eq. (2)); rows of agents
+        that are not observed are ignored (they must be finite).
+    observed : (..., N) array_like of bool
+        The closed neighbourhood ``N_i bar``: which agents' states are in
+        ``z_i = H_i (X + nu_i)`` (eq. (3)).
+    R : (2nN, 2nN) array_like
+        Measurement-noise covariance of ``nu_i`` (the paper's ``R``).
+
+    Returns
+    -------
+    X_post : (..., N, 2n) ndarray
+    Sigma_post : (..., 2nN, 2nN) ndarray
+        Joseph form, symmetric.
+    """
+    X_pred = _check_team(X_pred, "X_pred")
+    N, m = X_pred.shape[-2:]
+    M = N * m
+    Sigma_pred = np.asarray(Sigma_pred, dtype=float)
+    if Sigma_pred.shape[-2:] != (M, M):
+        raise ValueError(f"Incompatible dimensions of Sigma_pred; expected (..., {M}, {M}) but found {Sigma_pred.shape}")
+    z = _check_team(z, "z")
+    if z.shape[-2:] != (N, m):
+        raise ValueError(f"Incompatible dimensions of z; expected (..., {N}, {m}) but found {z.shape}")
+    observed = np.asarray(observed)
+    if observed.dtype != bool or observed.shape[-1] != N:
+        raise ValueError(f"observed must be a boolean array (..., {N}); got {observed.dtype} {observed.shape}")
+    R = check_covariance(R, "R", size=M, definite=True)
+    return _update(X_pred, Sigma_pred, z, observed, R)
+
+
+@dataclass(frozen=True)
+class EstimatedFlockingRun:
+    """Outcome of :func:`simulate_estimation_based_flocking`.
+
+    Attributes
+    ----------
+    t : (T+1,) ndarray
+        Times (s).
+    X : (..., T+1, N, 2n) ndarray
+        True team states.
+    adjacency : (..., T+1, N, N) ndarray of bool
+        Proximity graph of the true positions (who measures whom).
+    observer : int
+        Index of the agent whose filter is recorded.
+    X_hat : (..., T+1, N, 2n) ndarray
+        The observer's updated estimate of the team at each step.
+    position_variance : (..., T+1, N) ndarray
+        Trace of the position block of the observer's covariance, per agent
+        (m^2); its square root is the "statistical error" of Fig. 4(f).
+    rms_error : (..., T+1) ndarray
+        Root-mean-square position error (m) over every estimating agent and
+        every estimated agent, ``sqrt(mean_{i,j} |p_hat_{i,j} - p_j|^2)``.
+    """
+
+    t: np.ndarray
+    X: np.ndarray
+    adjacency: np.ndarray
+    observer: int
+    X_hat: np.ndarray
+    position_variance: np.ndarray
+    rms_error: np.ndarray
+
+
+def simulate_estimation_based_flocking(
+    X0: ArrayLike,
+    X_hat0: ArrayLike,
+    Sigma0: ArrayLike,
+    n_steps: int,
+    dt: float,
+    gains: FlockingGains,
+    Q: ArrayLike,
+    R: ArrayLike,
+    rng: np.random.Generator | int,
+    sensing_range: float,
+    observer: int = 0,
+) -> EstimatedFlockingRun:
+    """Estimation-based flocking over a virtual fully-connected network, Sec. III-B.
+
+    Step ``k``: (1) the proximity graph of the true positions gives each
+    agent's closed neighbourhood; (2) agent ``i`` measures those states with
+    noise (eq. (2)) and updates its EKF (eqs. (16)-(20)); (3) it applies eq. (39)
+    to its updated estimate; (4) the team moves by eq. (1) with process noise;
+    (5) every EKF predicts through eq. (40) with the Jacobian of eq. (38).
+
+    Parameters
+    ----------
+    X0 : (..., N, 2n) array_like
+        True initial states (leading axes: Monte Carlo runs).
+    X_hat0 : (..., N, N, 2n) array_like
+        Prior estimates at step 0: ``X_hat0[..., i]`` is agent ``i``'s.
+    Sigma0 : (2nN, 2nN) array_like
+        Their common error covariance (Assumption 2).
+    n_steps : int
+    dt : float
+        Sampling time (s).
+    gains : FlockingGains
+    Q : (2n, 2n) array_like
+        Process-noise covariance of one agent (team: ``I_N kron Q``).
+    R : (2n, 2n) or (2nN, 2nN) array_like
+        Measurement-noise covariance per measured agent (team ``I_N kron R``)
+        or the paper's full ``R`` (:func:`mascore.sensing.team_noise_covariance`).
+    rng : numpy.random.Generator or int
+    sensing_range : float
+        ``r`` (m).
+    observer : int
+        Agent whose estimate and covariance are recorded (0-based).
+    """
+    rng = check_generator(rng)
+    X = _check_team(X0, "X0").copy()
+    N, m = X.shape[-2:]
+    n = m // 2
+    M = N * m
+    batch = X.shape[:-2]
+    X_hat = np.array(X_hat0, dtype=float)
+    if X_hat.shape != (*batch, N, N, m) or not np.all(np.isfinite(X_hat)):
+        raise ValueError(f"X_hat0 must be finite with shape {(*batch, N, N, m)}; got {X_hat.shape}")
+    Sigma0 = check_covariance(Sigma0, "Sigma0", size=M)
+    if not 0 <= observer < N:
+        raise ValueError(f"observer must be in 0..{N - 1}; got {observer}")
+    Lq = _chol(Q, "Q", m)
+    Q_team = np.kron(np.eye(N), Lq @ Lq.T)
+    R_team = check_covariance(team_noise_covariance(R, N, m), "R", definite=True)
+    n_steps = _check_steps(n_steps)
+    Sigma = np.broadcast_to(Sigma0, (*batch, N, M, M)).copy()
+
+    Xs = np.empty((n_steps + 1, *X.shape))
+    As = np.empty((n_steps + 1, *batch, N, N), dtype=bool)
+    X_obs = np.empty((n_steps + 1, *batch, N, m))
+    var_obs = np.empty((n_steps + 1, *batch, N))
+    rms = np.empty((n_steps + 1, *batch))
+    pos_idx = (np.arange(N)[:, None] * m + np.arange(n)[None, :])  # (N, n) flat indices of positions
+    for k in range(n_steps + 1):
+        A_k = proximity_graph(X[..., :n], sensing_range).astype(bool)
+        z, observed = measure(rng, X, A_k, R_team, allow_isolated=True)  # eqs. (2)-(3)
+        X_hat, Sigma = _update(X_hat, Sigma, z, observed, R_team)  # eqs. (16)-(20)
+        Xs[k], As[k] = X, A_k
+        X_obs[k] = X_hat[..., observer, :, :]
+        diag = np.diagonal(Sigma[..., observer, :, :], axis1=-2, axis2=-1)
+        var_obs[k] = diag[..., pos_idx].sum(-1)
+        rms[k] = np.sqrt(np.mean(np.sum((X_hat[..., :n] - X[..., None, :, :n]) ** 2, axis=-1), axis=(-1, -2)))
+        if k == n_steps:
+            break
+        U = control_from_views(X_hat, gains)  # eq. (39), virtual fully-connected network
+        X = _propagate(X, U, dt) + rng.standard_normal((*batch, N, m)) @ Lq.T  # eq. (1)
+        X_hat, Sigma = _predict(X_hat, Sigma, dt, gains, Q_team)  # eqs. (38), (40)
+    t = dt * np.arange(n_steps + 1)
+    mv = lambda a, nd: np.moveaxis(a, 0, a.ndim - nd - 1)  # noqa: E731  (put time after the batch axes)
+    return EstimatedFlockingRun(
+        t, mv(Xs, 2), mv(As, 2), int(observer), mv(X_obs, 2), mv(var_obs, 1), mv(rms, 0)
+    )
+
+
+# ----------------------------------------------------------------------------- private
+
+
+def _predict(X_hat, Sigma, dt, gains, Q_team):
+    F = closed_loop_jacobian(X_hat, dt, gains)  # eq. (38)
+    X_pred = closed_loop_step(X_hat, dt, gains)  # eq. (40)
+    Sigma_pred = F @ Sigma @ np.swapaxes(F, -1, -2) + Q_team
+    return X_pred, symmetrize(Sigma_pred)
+
+
+def _update(X_pred, Sigma, z, observed, R):
+    shape = X_pred.shape
+    m = shape[-1]
+    M = shape[-2] * m
+    mask = np.repeat(observed, m, axis=-1).astype(float)  # diagonal of M_i = H_i^T H_i
+    both = mask[..., :, None] * mask[..., None, :]
+    S = both * (Sigma + R)  # M (Sigma + R) M
+    idx = np.arange(M)
+    S[..., idx, idx] += 1.0 - mask  # + (I - M): S~ = blockdiag(S_i, I) up to a permutation
+    K = np.swapaxes(np.linalg.solve(S, mask[..., :, None] * Sigma), -1, -2)  # eq. (19): Sigma M S~^-1
+    innovation = mask * (z - X_pred).reshape(*shape[:-2], M)  # eq. (16)
+    X_post = X_pred + np.einsum("...ij,...j->...i", K, innovation).reshape(shape)  # eq. (18)
+    Sigma_post = Sigma - K @ (mask[..., :, None] * Sigma)  # eq. (20): (I - G_i H_i) Sigma_i^-
+    return X_post, symmetrize(Sigma_post)

@@ -1,0 +1,442 @@
+"""Augmented Cucker-Smale flocking: control law, its Jacobian and closed-loop simulation.
+
+The control of Song et al. (2023), Sec. II-D, eq. (6), after Cucker and Smale
+(2007) and Park et al. (their ref. [19]): agent ``i`` with position ``p_i`` and
+velocity ``v_i`` (both in R^n) applies the acceleration::
+
+    u_i = rho3 sum_j a_ij phi1(p_ij) (v_j - v_i) + rho4 sum_j a_ij phi2(p_ij, v_ij) (p_j - p_i)
+
+    phi1(p)    = 1 / (1 + |p|^2)^beta
+    phi2(p, v) = rho5 / (2 |p|^2) <v, p> + rho6 / (2 |p|) (|p| - R)
+
+with ``p_ij = p_i - p_j`` and ``v_ij = v_i - v_j``. The second term is a
+damped spring of rest length ``R`` along the line of sight. ``a_ij`` is the
+adjacency of the proximity graph (eq. (6)/(7)) or 1 for every ``j != i`` (the
+fully-connected law, and eq. (39) when evaluated on an estimate).
+
+Conventions
+-----------
+* A team state is an array ``X`` of shape ``(..., N, 2n)`` whose row ``i`` is
+  ``x_i = [p_i; v_i]`` (m, m/s). Flattening the last two axes gives the paper's
+  ``X = [x_1; ...; x_N]`` of eq. (3); leading axes are Monte Carlo runs (or
+  estimating agents) and are broadcast everywhere.
+* A set of *views* is an array ``(..., N, N, 2n)``: ``views[..., i, j, :]`` is
+  agent ``i``'s knowledge of agent ``j``'s state -- its measurement ``z_{i,x_j}``
+  (eq. (7)) or its estimate ``x_hat_{i,j}`` (eq. (39)). Agent ``i`` then applies
+  the law to the differences ``views[i, i] - views[i, j]``.
+
+When two agents meet
+--------------------
+``phi2`` divides by ``|p_ij|``: the unit vector ``p_ij / |p_ij|`` of the
+line of sight is undefined when two agents (or two estimated or measured
+positions) coincide. The pair term itself stays bounded: its size is at most
+``rho4 (rho5 |v_ij| + rho6 R) / 2``. mascore replaces ``|p_ij|`` by
+``max(|p_ij|, d_min)`` in every denominator (``FlockingGains.min_distance``,
+default 1e-6 m). Closer than ``d_min`` the pair term therefore shrinks
+linearly to exactly zero at contact -- finite, deterministic, no NaN -- and
+farther than ``d_min`` it is the law as printed. The Jacobian is the exact
+derivative of this regularised law on both sides of ``d_min``.
+
+Symbols follow the paper; equations are cited as ``eq. (N)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._validation import check_generator, check_covariance
+from .graphs import complete_graph, proximity_graph
+from .sensing import measure, team_noise_covariance
+
+__all__ = [
+    "FlockingGains",
+    "phi1",
+    "phi2",
+    "pair_term",
+    "pair_term_jacobian",
+    "flocking_control",
+    "control_from_views",
+    "closed_loop_step",
+    "closed_loop_jacobian",
+    "FlockingRun",
+    "simulate_measured_flocking",
+    "flock_spread",
+    "max_distance_from_centre",
+]
+
+
+@dataclass(frozen=True)
+class FlockingGains:
+    """Gains of the augmented Cucker-Smale law, eq. (6).
+
+    Parameters
+    ----------
+    rho3 : float
+        Velocity-consensus gain (1/s), positive.
+    rho4 : float
+        Distance-keeping gain, positive.
+    rho5 : float
+        Radial damping gain of ``phi2`` (1/s), positive.
+    rho6 : float
+        Spring gain of ``phi2`` (1/s^2), positive.
+    beta : float
+        Communication decay rate of ``phi1``, ``0 <= beta`` (stable for
+        ``beta < 1/2``).
+    R : float
+        Spring rest length (m): the distance of two agents at rest, and for
+        N > 2 fully-connected agents the bound on every agent's distance from
+        the centre of mass (Sec. II-D).
+    min_distance : float
+        ``d_min`` (m) below which ``|p_ij|`` is replaced by ``d_min`` in the
+        denominators (see the module docstring). Positive.
+    """
+
+    rho3: float
+    rho4: float
+    rho5: float
+    rho6: float
+    beta: float
+    R: float
+    min_distance: float = 1e-6
+
+    def __post_init__(self) -> None:
+        for name in ("rho3", "rho4", "rho5", "rho6", "R", "min_distance"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"{name} must be a positive number; got {value!r}")
+        if not np.isfinite(self.beta) or self.beta < 0:
+            raise ValueError(f"beta must be a non-negative number; got {self.beta!r}")
+
+
+def phi1(p: ArrayLike, beta: float) -> np.ndarray:
+    """Communication weight ``1 / (1 + |p|^2)^beta`` of eq. (6), shape ``(...)`` for ``p`` ``(..., n)``."""
+    p = np.asarray(p, dtype=float)
+    return (1.0 + np.einsum("...i,...i->...", p, p)) ** (-beta)
+
+
+def phi2(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
+    """Spring-damper weight of eq. (6), with ``|p|`` floored at ``gains.min_distance``.
+
+    Parameters
+    ----------
+    p, v : (..., n) array_like
+        Relative position ``p_ij`` (m) and velocity ``v_ij`` (m/s).
+
+    Returns
+    -------
+    (...) ndarray
+    """
+    p = np.asarray(p, dtype=float)
+    v = np.asarray(v, dtype=float)
+    de = np.maximum(np.sqrt(np.einsum("...i,...i->...", p, p)), gains.min_distance)
+    return gains.rho5 / (2 * de**2) * np.einsum("...i,...i->...", v, p) + gains.rho6 / (2 * de) * (de - gains.R)
+
+
+def pair_term(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
+    """Contribution of neighbour ``j`` to ``u_i`` for ``p = p_ij``, ``v = v_ij``.
+
+    ``g = -rho3 phi1(p) v - rho4 phi2(p, v) p`` (eq. (6) with ``v_j - v_i = -v``
+    and ``p_j - p_i = -p``). Odd: ``g(-p, -v) = -g(p, v)``.
+
+    Parameters
+    ----------
+    p, v : (..., n) array_like
+
+    Returns
+    -------
+    (..., n) ndarray
+        Acceleration (m/s^2).
+    """
+    p = np.asarray(p, dtype=float)
+    v = np.asarray(v, dtype=float)
+    return -gains.rho3 * phi1(p, gains.beta)[..., None] * v - gains.rho4 * phi2(p, v, gains)[..., None] * p
+
+
+def pair_term_jacobian(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
+    """Analytic Jacobian of :func:`pair_term` with respect to ``[p; v]``.
+
+    Returns
+    -------
+    (..., n, 2n) ndarray
+        ``[dg/dp, dg/dv]``. Even in ``(p, v)``.
+    """
+    p = np.asarray(p, dtype=float)
+    v = np.asarray(v, dtype=float)
+    n = p.shape[-1]
+    eye = np.eye(n)
+    d2 = np.einsum("...i,...i->...", p, p)
+    d = np.sqrt(d2)
+    far = (d > gains.min_distance)[..., None, None]
+    de = np.maximum(d, gains.min_distance)[..., None, None]
+    vp = np.einsum("...i,...i->...", v, p)[..., None, None]
+    ppT = p[..., :, None] * p[..., None, :]
+    pvT = p[..., :, None] * v[..., None, :]
+    vpT = v[..., :, None] * p[..., None, :]
+    f1 = phi1(p, gains.beta)[..., None, None]
+    c5 = gains.rho4 * gains.rho5 / 2
+    c6 = gains.rho4 * gains.rho6 / 2
+    # term -rho3 phi1(p) v
+    dA_dp = 2 * gains.beta * gains.rho3 * f1 / (1 + d2[..., None, None]) * vpT
+    dA_dv = -gains.rho3 * f1 * eye
+    # term -c5 <v, p> p / de^2   (de = |p| when far, d_min otherwise)
+    dB_dp = -c5 * (vp / de**2 * eye + pvT / de**2 - np.where(far, 2 * vp / de**4 * ppT, 0.0))
+    dB_dv = -c5 * ppT / de**2
+    # term -c6 (1 - R / de) p
+    dC_dp = -c6 * (eye - gains.R / de * (eye - np.where(far, ppT / de**2, 0.0)))
+    return np.concatenate([dA_dp + dB_dp + dC_dp, dA_dv + dB_dv], axis=-1)
+
+
+def flocking_control(X: ArrayLike, gains: FlockingGains, adjacency: ArrayLike | None = None) -> np.ndarray:
+    """Control of every agent from a common team state, eq. (6).
+
+    Parameters
+    ----------
+    X : (..., N, 2n) array_like
+        Team state, rows ``[p_i; v_i]``.
+    gains : FlockingGains
+    adjacency : (N, N) or (..., N, N) array_like, optional
+        ``a_ij``; ``None`` means fully connected (every ``j != i``), the law
+        that eq. (40) applies to an estimate.
+
+    Returns
+    -------
+    U : (..., N, n) ndarray
+        Accelerations (m/s^2).
+    """
+    X = _check_team(X, "X")
+    diff = X[..., :, None, :] - X[..., None, :, :]  # x_i - x_j
+    return _sum_pairs(diff, gains, adjacency, X.shape[-2])
+
+
+def control_from_views(views: ArrayLike, gains: FlockingGains, adjacency: ArrayLike | None = None) -> np.ndarray:
+    """Each agent's control from its own view of the team, eq. (7) or eq. (39).
+
+    Parameters
+    ----------
+    views : (..., N, N, 2n) array_like
+        ``views[..., i, j, :]``: agent ``i``'s measurement (eq. (7)) or estimate
+        (eq. (39)) of agent ``j``'s state ``[p_j; v_j]``. Entries for ``j`` that
+        agent ``i`` does not use (``a_ij = 0``) are ignored but must be finite.
+    gains : FlockingGains
+    adjacency : (N, N) or (..., N, N) array_like, optional
+        ``None``: every ``j != i`` (virtual fully-connected network, eq. (39)).
+
+    Returns
+    -------
+    U : (..., N, n) ndarray
+        ``U[..., i, :] = u_i`` computed by agent ``i`` from ``views[..., i]``.
+    """
+    views = np.asarray(views, dtype=float)
+    if views.ndim < 3 or views.shape[-3] != views.shape[-2] or views.shape[-1] % 2:
+        raise ValueError(f"views must have shape (..., N, N, 2n); got {views.shape}")
+    if not np.all(np.isfinite(views)):
+        raise ValueError("views contains NaN or infinite entries")
+    N = views.shape[-2]
+    own = np.diagonal(views, axis1=-3, axis2=-2)  # (..., 2n, N)
+    own = np.moveaxis(own, -1, -2)  # (..., N, 2n): views[i, i]
+    diff = own[..., :, None, :] - views  # x_hat_{i,i} - x_hat_{i,j}
+    return _sum_pairs(diff, gains, adjacency, N)
+
+
+def closed_loop_step(X: ArrayLike, dt: float, gains: FlockingGains) -> np.ndarray:
+    """``f'(X) = (I_N kron A) X + (I_N kron B) U(X)`` of eq. (40), fully connected.
+
+    ``A``, ``B`` are the double integrator of eq. (1) with step `dt` (s).
+
+    Parameters
+    ----------
+    X : (..., N, 2n) array_like
+
+    Returns
+    -------
+    (..., N, 2n) ndarray
+    """
+    X = _check_team(X, "X")
+    n = X.shape[-1] // 2
+    U = flocking_control(X, gains)
+    p, v = X[..., :n], X[..., n:]
+    return np.concatenate([p + dt * v + 0.5 * dt**2 * U, v + dt * U], axis=-1)
+
+
+def closed_loop_jacobian(X: ArrayLike, dt: float, gains: FlockingGains) -> np.ndarray:
+    """Analytic Jacobian ``dF'/dX`` of eq. (40) (the matrix of eq. (38)).
+
+    Parameters
+    ----------
+    X : (..., N, 2n) array_like
+
+    Returns
+    -------
+    F : (..., 2nN, 2nN) ndarray
+        Block ``(i, j)`` (size 2n) is ``delta_ij A + B dU_i/dx_j`` where
+        ``dU_i/dx_j = -J(x_i - x_j)`` for ``j != i`` and
+        ``dU_i/dx_i = sum_{j != i} J(x_i - x_j)``, ``J`` the pair Jacobian.
+    """
+    X = _check_team(X, "X")
+    N, m = X.shape[-2], X.shape[-1]
+    n = m // 2
+    # J(x_i - x_j) is even, so one evaluation per unordered pair i < j
+    iu, ju = np.triu_indices(N, 1)
+    diff = X[..., iu, :] - X[..., ju, :]
+    J = pair_term_jacobian(diff[..., :n], diff[..., n:], gains)  # (..., P, n, 2n)
+    BJ = np.concatenate([0.5 * dt**2 * J, dt * J], axis=-2)  # B J: (..., P, 2n, 2n)
+    blocks = np.zeros((*X.shape[:-2], N, N, m, m))
+    blocks[..., iu, ju, :, :] = -BJ
+    blocks[..., ju, iu, :, :] = -BJ
+    A = np.block([[np.eye(n), dt * np.eye(n)], [np.zeros((n, n)), np.eye(n)]])
+    idx = np.arange(N)
+    blocks[..., idx, idx, :, :] = A - blocks.sum(axis=-3)
+    return np.swapaxes(blocks, -3, -2).reshape(*X.shape[:-2], N * m, N * m)
+
+
+@dataclass(frozen=True)
+class FlockingRun:
+    """Outcome of a flocking simulation.
+
+    Attributes
+    ----------
+    t : (T+1,) ndarray
+        Times (s).
+    X : (..., T+1, N, 2n) ndarray
+        True team states.
+    adjacency : (..., T+1, N, N) ndarray of bool
+        Proximity graph of the true positions at each step (who measures whom).
+    """
+
+    t: np.ndarray
+    X: np.ndarray
+    adjacency: np.ndarray
+
+
+def simulate_measured_flocking(
+    X0: ArrayLike,
+    n_steps: int,
+    dt: float,
+    gains: FlockingGains,
+    Q: ArrayLike,
+    R: ArrayLike,
+    rng: np.random.Generator | int,
+    sensing_range: float | None,
+) -> FlockingRun:
+    """Conventional flocking from noisy measurements, eq. (7), on eq. (1).
+
+    Each step, agent ``i`` measures itself and its current neighbours,
+    ``z_{i,x_j} = x_j + nu_ij`` (eq. (2)), and applies eq. (7) to those
+    measurements; the team then moves by eq. (1) with process noise.
+
+    Parameters
+    ----------
+    X0 : (..., N, 2n) array_like
+        Initial team states (leading axes: Monte Carlo runs).
+    n_steps : int
+        Number of steps T.
+    dt : float
+        Sampling time (s).
+    gains : FlockingGains
+    Q : (2n, 2n) array_like
+        Process-noise covariance of one agent.
+    R : (2n, 2n) or (2nN, 2nN) array_like
+        Measurement-noise covariance: per measured agent (team ``I_N kron R``)
+        or the paper's full ``R`` (see :func:`mascore.sensing.team_noise_covariance`).
+    rng : numpy.random.Generator or int
+    sensing_range : float or None
+        ``r`` (m) of the proximity graph (case (i) of Fig. 5); ``None`` for a
+        fixed fully-connected network (case (ii)).
+    """
+    rng = check_generator(rng)
+    X = _check_team(X0, "X0").copy()
+    m = X.shape[-1]
+    n, N = m // 2, X.shape[-2]
+    Lq = _chol(Q, "Q", m)
+    team_noise_covariance(R, N, m)  # validates R early
+    n_steps = _check_steps(n_steps)
+    batch = X.shape[:-2]
+    Xs = np.empty((n_steps + 1, *X.shape))
+    As = np.empty((n_steps + 1, *batch, N, N), dtype=bool)
+    full = complete_graph(N).astype(bool)
+    for k in range(n_steps + 1):
+        A_k = full if sensing_range is None else proximity_graph(X[..., :n], sensing_range).astype(bool)
+        Xs[k] = X
+        As[k] = A_k
+        if k == n_steps:
+            break
+        views, _ = measure(rng, X, A_k, R, allow_isolated=True)  # eq. (2)
+        U = control_from_views(views, gains, A_k)  # eq. (7)
+        X = _propagate(X, U, dt) + rng.standard_normal((*batch, N, m)) @ Lq.T
+    t = dt * np.arange(n_steps + 1)
+    return FlockingRun(t, np.moveaxis(Xs, 0, -3), np.moveaxis(As, 0, -3))
+
+
+def flock_spread(X: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Standard deviation of positions and of velocities across the agents.
+
+    ``std_p = sqrt(mean_i |p_i - mean_j p_j|^2)`` and likewise for velocities.
+
+    Parameters
+    ----------
+    X : (..., N, 2n) array_like
+
+    Returns
+    -------
+    std_p, std_v : (...) ndarrays
+        In m and m/s.
+    """
+    X = np.asarray(X, dtype=float)
+    n = X.shape[-1] // 2
+    dev = X - X.mean(axis=-2, keepdims=True)
+    sq = dev**2
+    return np.sqrt(sq[..., :n].sum(-1).mean(-1)), np.sqrt(sq[..., n:].sum(-1).mean(-1))
+
+
+def max_distance_from_centre(X: ArrayLike) -> np.ndarray:
+    """Largest distance (m) of an agent from the centre of mass, shape ``(...)``."""
+    X = np.asarray(X, dtype=float)
+    n = X.shape[-1] // 2
+    p = X[..., :n]
+    return np.linalg.norm(p - p.mean(axis=-2, keepdims=True), axis=-1).max(axis=-1)
+
+
+# ----------------------------------------------------------------------------- private
+
+
+def _sum_pairs(diff: np.ndarray, gains: FlockingGains, adjacency: ArrayLike | None, N: int) -> np.ndarray:
+    n = diff.shape[-1] // 2
+    g = pair_term(diff[..., :n], diff[..., n:], gains)  # (..., N, N, n)
+    if adjacency is None:
+        weights = (~np.eye(N, dtype=bool)).astype(float)
+    else:
+        weights = np.asarray(adjacency, dtype=float)
+        if weights.shape[-2:] != (N, N):
+            raise ValueError(f"adjacency must have shape (..., {N}, {N}); got {weights.shape}")
+        weights = weights * (~np.eye(N, dtype=bool))
+    return np.einsum("...ij,...ijk->...ik", weights, g)
+
+
+def _propagate(X: np.ndarray, U: np.ndarray, dt: float) -> np.ndarray:
+    n = U.shape[-1]
+    p, v = X[..., :n], X[..., n:]
+    return np.concatenate([p + dt * v + 0.5 * dt**2 * U, v + dt * U], axis=-1)
+
+
+def _check_team(X: ArrayLike, name: str) -> np.ndarray:
+    X = np.asarray(X, dtype=float)
+    if X.ndim < 2 or X.shape[-1] % 2 or X.shape[-1] == 0:
+        raise ValueError(f"{name} must have shape (..., N, 2n) with rows [p_i; v_i]; got {X.shape}")
+    if not np.all(np.isfinite(X)):
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    return X
+
+
+def _chol(C: ArrayLike, name: str, size: int) -> np.ndarray:
+    C = check_covariance(C, name, size=size)
+    w, V = np.linalg.eigh(C)
+    return V * np.sqrt(np.clip(w, 0, None))  # C = L L^T, works for semidefinite C
+
+
+def _check_steps(n_steps: int) -> int:
+    if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
+        raise ValueError(f"n_steps must be a positive integer; got {n_steps!r}")
+    return int(n_steps)
