@@ -276,7 +276,7 @@ def consensus_matrix(
     P_m = _check_P(P_arr[:, None, None] if scalar else P_arr, "P")
     n, m = P_m.shape[0], P_m.shape[-1]
     g = _check_topologies(G, n, "G", stacked=False).astype(float)
-    S = _inv(P_m[None, :, :, :] + _expand_omega(Omega, n, m))  # S[i, j] = (P_j + Omega_ij)^-1
+    S = _inv_sum(P_m, _expand_omega(Omega, n, m))  # S[i, j] = (P_j + Omega_ij)^-1
     P_next = _covariance_update(P_m, g, S, _expand_Q(Q, n, m), include_self)
     blocks = np.einsum("iab,ij,ijbc->ijac", P_next, g, S)
     blocks[np.arange(n), np.arange(n)] = np.eye(m) - blocks.sum(axis=1)
@@ -561,6 +561,16 @@ def _inv(M: np.ndarray) -> np.ndarray:
     return np.linalg.inv(M)
 
 
+def _inv_sum(P: np.ndarray, Om: np.ndarray) -> np.ndarray:
+    """S[..., i, j] = (P_j + Omega_ij)^-1 as a (..., n, n, m, m) array (a broadcast view if Omega is common)."""
+    n, m = P.shape[-3], P.shape[-1]
+    if Om.ndim == 2:  # common Omega: only n inverses
+        S = _inv(P + Om)[..., None, :, :, :]
+    else:
+        S = _inv(P[..., None, :, :, :] + Om)
+    return np.broadcast_to(S, P.shape[:-3] + (n, n, m, m))
+
+
 def _sqrt_psd(M: np.ndarray) -> np.ndarray:
     """Symmetric square root of a stack of PSD matrices."""
     w, V = np.linalg.eigh(M)
@@ -582,7 +592,7 @@ def _covariance_update(P, g, S, Q, include_self):
 
 def _step(xi, P, g, Q, Om, gen, include_self):
     g = g.astype(float)
-    S = _inv(P[..., None, :, :, :] + Om)  # S[..., i, j] = (P_j + Omega_ij)^-1, eq. (4)
+    S = _inv_sum(P, Om)  # S[..., i, j] = (P_j + Omega_ij)^-1, eq. (4)
     P_next = _covariance_update(P, g, S, Q, include_self)
     innov = xi[..., None, :, :] - xi[..., :, None, :]  # xi_j - xi_i at [..., i, j]
     if gen is not None:
@@ -594,16 +604,16 @@ def _step(xi, P, g, Q, Om, gen, include_self):
 
 def _draw_noise(gen, Om, shape):
     """nu_ij ~ N(0, Omega_ij), shape (..., n, n, m); the diagonal (self) is zero."""
-    L = _sqrt_psd(Om)
+    n, m = shape[-2], shape[-1]
+    L = np.broadcast_to(_sqrt_psd(Om), (n, n, m, m))
     nu = np.einsum("ijab,...ijb->...ija", L, gen.standard_normal(shape))
-    n = shape[-2]
     nu[..., np.arange(n), np.arange(n), :] = 0.0
     return nu
 
 
 def _rhs(xi, P, g, Q, Om, include_self):
     """Right-hand sides of eqs. (1) and (3) without noise."""
-    S = _inv(P[None, :, :, :] + Om)
+    S = _inv_sum(P, Om)
     gs = g + np.eye(g.shape[0]) if include_self else g
     dP = -np.einsum("iab,ij,ijbc,icd->iad", P, gs, S, P) + Q  # eq. (1)
     K = np.einsum("iab,ijbc->ijac", P, S)  # eq. (2)
@@ -638,7 +648,7 @@ def _integrate_ode(xi, P, breaks, graphs, Q, Om, t_eval, include_self, rtol, ato
 
 def _integrate_em(xi, P, breaks, graphs, Q, Om, t_eval, include_self, gen, dt):
     n, m = xi.shape
-    L = _sqrt_psd(Om)  # Omega_ij^(1/2)
+    L = np.broadcast_to(_sqrt_psd(Om), (n, n, m, m))  # Omega_ij^(1/2)
     off = 1.0 - np.eye(n)
     xs = np.empty((t_eval.size, n, m))
     Ps = np.empty((t_eval.size, n, m, m))
@@ -778,4 +788,4 @@ def _expand_omega(Omega, n, m):
             f"Incompatible dimensions of Omega; expected a scalar, ({m}, {m}) or ({n}, {n}, {m}, {m}); got {Om.shape}"
         )
     check_covariance(Om, "Omega")
-    return np.broadcast_to(Om, (n, n, m, m))
+    return Om
