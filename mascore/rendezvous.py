@@ -1,0 +1,363 @@
+"""Second-order consensus (rendezvous) of Song et al. (2023), eqs. (4), (5), (21).
+
+All laws share one form. Agent ``i`` holds a *view* ``Y[i, j]`` of every agent
+``j`` (the true state, its measurement ``z_{i,x_j}`` or its estimate
+``x̂_{i,j}``) and applies::
+
+    u_i = K sum_{j in N_i} (Y[i, j] - Y[i, i]) = -K sum_j L_ij Y[i, j],
+    K = [rho_1 I_n, rho_2 I_n]
+
+* eq. (4): ``Y[i, j] = x_j`` (true states, the noise-free reference);
+* eq. (5): ``Y[i, j] = z_{i,x_j}`` (raw measurements, "conventional");
+* eq. (21)/(23): ``Y[i, j] = x̂_{i,j}`` (the agent's own team estimate).
+
+Units: positions in m, velocities in m/s, inputs in m/s^2.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from . import distributed_kf as dkf
+from ._validation import check_covariance, check_generator
+from .sensing import measure, sensing_mask
+
+__all__ = [
+    "MODES",
+    "RendezvousResult",
+    "simulate_rendezvous",
+    "rendezvous_gain",
+    "consensus_control",
+    "true_state_views",
+    "propagate_team",
+    "team_spread",
+]
+
+
+def rendezvous_gain(rho1: float, rho2: float, n: int) -> np.ndarray:
+    """``K = [rho_1 I_n, rho_2 I_n]`` of eq. (4), shape ``(n, 2n)``."""
+    for name, val in (("rho1", rho1), ("rho2", rho2)):
+        if not np.isfinite(val) or val <= 0:
+            raise ValueError(f"{name} must be a positive gain; got {val!r}")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"n must be a positive integer; got {n!r}")
+    return np.hstack([rho1 * np.eye(n), rho2 * np.eye(n)])
+
+
+def consensus_control(views: ArrayLike, laplacian: ArrayLike, K: ArrayLike) -> np.ndarray:
+    """Inputs ``u_i = -K sum_j L_ij Y[i, j]`` for every agent (eqs. (4), (5), (23)).
+
+    Parameters
+    ----------
+    views : (..., N, N, m) array_like
+        ``views[..., i, j, :]``: agent ``i``'s view of agent ``j``. Only
+        entries with ``L_ij != 0`` are used, so unsensed entries may hold
+        anything finite (e.g. the zeros of :func:`mascore.sensing.measure`).
+    laplacian : (N, N) or (..., N, N) array_like
+        Graph Laplacian ``L = D - A`` (broadcast over the leading axes).
+    K : (p, m) array_like
+        Feedback gain, e.g. :func:`rendezvous_gain`.
+
+    Returns
+    -------
+    U : (..., N, p) ndarray
+    """
+    Y = np.asarray(views, dtype=float)
+    L = np.asarray(laplacian, dtype=float)
+    K = np.asarray(K, dtype=float)
+    if Y.ndim < 3 or Y.shape[-3] != Y.shape[-2]:
+        raise ValueError(f"views must have shape (..., N, N, m); got {Y.shape}")
+    N, m = Y.shape[-2:]
+    if L.shape[-2:] != (N, N):
+        raise ValueError(f"Incompatible dimensions of laplacian; expected (..., {N}, {N}) but found {L.shape}")
+    if K.ndim != 2 or K.shape[1] != m:
+        raise ValueError(f"Incompatible dimensions of K; expected (p, {m}) but found {K.shape}")
+    weighted = np.einsum("...ij,...ijm->...im", L, Y)
+    return -weighted @ K.T
+
+
+def true_state_views(states: ArrayLike) -> np.ndarray:
+    """Views ``Y[i, j] = x_j`` for the noise-free law (4): ``(..., N, N, m)``."""
+    x = np.asarray(states, dtype=float)
+    N = x.shape[-2]
+    return np.broadcast_to(x[..., None, :, :], (*x.shape[:-1][:-1], N, N, x.shape[-1]))
+
+
+def propagate_team(
+    rng: np.random.Generator | int,
+    states: ArrayLike,
+    inputs: ArrayLike,
+    A: ArrayLike,
+    B: ArrayLike,
+    Q: ArrayLike,
+) -> np.ndarray:
+    """One step of eq. (1) for every agent: ``x+ = A x + B u + w``, ``w ~ N(0, Q)``.
+
+    Parameters
+    ----------
+    states : (..., N, m) array_like
+    inputs : (..., N, p) array_like
+    A : (m, m), B : (m, p), Q : (m, m) symmetric PSD
+    """
+    rng = check_generator(rng)
+    x = np.asarray(states, dtype=float)
+    u = np.asarray(inputs, dtype=float)
+    A = np.asarray(A, dtype=float)
+    B = np.asarray(B, dtype=float)
+    m = x.shape[-1]
+    Q = check_covariance(Q, "Q", size=m)
+    if A.shape != (m, m) or B.shape != (m, u.shape[-1]):
+        raise ValueError(f"Incompatible dimensions: A {A.shape}, B {B.shape} for states {x.shape}, inputs {u.shape}")
+    w = rng.standard_normal(x.shape) @ _sqrt_psd(Q).T
+    return x @ A.T + u @ B.T + w
+
+
+def team_spread(values: ArrayLike) -> np.ndarray:
+    """Standard deviation of the agents about their mean, ``(...)``.
+
+    ``sqrt(mean_i ||y_i - mean_j y_j||^2)`` over the agent axis (``-2``) of
+    ``(..., N, d)`` data, e.g. positions (m) or velocities (m/s). Song et al.
+    (2023) Fig. 3 plots its root mean square over Monte Carlo runs.
+    """
+    y = np.asarray(values, dtype=float)
+    dev = y - y.mean(axis=-2, keepdims=True)
+    return np.sqrt(np.mean(np.sum(dev**2, axis=-1), axis=-1))
+
+
+#: Control laws / estimator loops understood by :func:`simulate_rendezvous`.
+MODES = ("true", "measurement", "measurement-filter", "estimation")
+
+
+@dataclass(frozen=True)
+class RendezvousResult:
+    """Output of :func:`simulate_rendezvous` (``T`` steps, ``R`` runs, ``N`` agents).
+
+    Attributes
+    ----------
+    mode : str
+    dt : float
+        Sampling time (s); ``time = dt * arange(T + 1)``.
+    states : (T+1, R, N, m) true agent states ``[p; v]``.
+    pos_error : (T+1, R, N) or None
+        ``sqrt(sum_j ||p_j - p̂_{i,j}||^2)`` (m): agent ``i``'s position error
+        over the whole team (Song et al. Fig. 2(c)).
+    pos_std : (T+1, B, N) or None
+        ``sqrt(trace)`` of the position block of ``Σ_i`` (m) (Fig. 2(d)).
+    nees : (T+1, R, N) or None
+        ``e_i^T Σ_i^{-1} e_i`` (eq. (45)); chi-square with ``m N`` dof.
+    central_pos_std : (T+1, B) or None
+        The same statistic for the centralized Kalman filter over all
+        measurements (applied inputs known): a lower bound.
+    central_pos_error : (T+1, R) or None
+    sigma_i : (T+1, N, M_r, M_r) or None
+        Reduced ``Σ̄_i[k]`` (only when the covariance is shared, ``B = 1``).
+    gains : (T+1, N, M_r, M_r) or None
+        Reduced ``G_i H_i[k]`` (only when ``B = 1``; entry 0 is zero).
+    f2_cross : (T+1, N, M_r, M_r) or None
+        ``F_2 E[e e_i^T]`` (estimation mode, ``B = 1``), for Theorem 1.
+    model : TeamFilterModel or None
+    """
+
+    mode: str
+    dt: float
+    states: np.ndarray
+    pos_error: np.ndarray | None = None
+    pos_std: np.ndarray | None = None
+    nees: np.ndarray | None = None
+    central_pos_std: np.ndarray | None = None
+    central_pos_error: np.ndarray | None = None
+    sigma_i: np.ndarray | None = None
+    gains: np.ndarray | None = None
+    f2_cross: np.ndarray | None = None
+    model: dkf.TeamFilterModel | None = None
+
+    @property
+    def time(self) -> np.ndarray:
+        """Time stamps (s), ``(T+1,)``."""
+        return self.dt * np.arange(self.states.shape[0])
+
+
+def simulate_rendezvous(
+    rng: np.random.Generator | int,
+    x0: ArrayLike,
+    adjacency: ArrayLike,
+    A: ArrayLike,
+    B: ArrayLike,
+    K: ArrayLike,
+    Q: ArrayLike,
+    R: ArrayLike,
+    n_steps: int,
+    mode: str,
+    dt: float,
+    x_hat0: ArrayLike | None = None,
+    P0: ArrayLike | None = None,
+    exact_control_noise: bool = False,
+    central: bool = False,
+    progress: bool = False,
+) -> RendezvousResult:
+    """Closed-loop rendezvous on a fixed topology, batched over Monte Carlo runs.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator or int
+        Source of process and measurement noise (two independent child
+        streams, so every mode sees the same noise for the same seed).
+    x0 : (R, N, m) array_like
+        Initial true states of R runs.
+    adjacency : (N, N) or (R, N, N) array_like
+        Fixed sensing topology (one for all runs, or one per run). With one
+        shared topology the filters' covariance recursion is computed once
+        for all runs.
+    A, B : agent model (eq. (1)); K : (p, m) consensus gain (eq. (4)).
+    Q : (m, m) process-noise covariance; R : (m, m) or (m N, m N) measurement noise.
+    n_steps : int
+        Number of steps T.
+    mode : {"true", "measurement", "measurement-filter", "estimation"}
+        Control law: eq. (4) on true states, eq. (5) on measurements (no
+        filter), eq. (5) with every agent also running the filter of
+        eqs. (8)-(20), or eq. (21) on the agents' own estimates with the
+        filter of eqs. (29)-(34).
+    dt : float
+        Sampling time (s), stored for the time axis.
+    x_hat0 : (R, N m) array_like
+        Common initial team estimate of all agents (filter modes).
+    P0 : (m, m) or (m N, m N) array_like
+        Covariance of the initial estimate error (filter modes).
+    exact_control_noise : bool
+        "measurement-filter" only: add the correlation between an agent's own
+        measurement noise in its control and its estimate that eq. (15)
+        neglects.
+    central : bool
+        Also run the centralized Kalman filter reference (filter modes).
+    progress : bool
+        Show a tqdm progress bar.
+
+    Raises
+    ------
+    ValueError
+        Unknown mode, bad shapes, an isolated agent, or (mode "estimation") a
+        topology for which system (43) is not observable.
+    """
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}; got {mode!r}")
+    rng = check_generator(rng)
+    x = np.array(x0, dtype=float)
+    if x.ndim != 3:
+        raise ValueError(f"x0 must have shape (R, N, m); got {x.shape}")
+    n_runs, N, m = x.shape
+    Adj = np.asarray(adjacency, dtype=float)
+    S = sensing_mask(Adj)  # raises on isolated agents
+    if S.shape[-1] != N or S.ndim not in (2, 3) or (S.ndim == 3 and S.shape[0] != n_runs):
+        raise ValueError(f"adjacency must be ({N}, {N}) or ({n_runs}, {N}, {N}); got {Adj.shape}")
+    Lap = np.diag(np.ones(N)) * Adj.sum(axis=-1)[..., None] - Adj
+    if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
+        raise ValueError(f"n_steps must be a positive integer; got {n_steps!r}")
+    K = np.asarray(K, dtype=float)
+    filt = mode in ("measurement-filter", "estimation")
+    model = dkf.team_filter_model(A, B, K, Q, R, N) if filt else None
+    if mode == "estimation":
+        for adj in Adj.reshape(-1, N, N):
+            dkf.require_observable(model.A, model.BK, adj)
+    proc_rng, meas_rng = rng.spawn(2)
+    states = np.empty((n_steps + 1, n_runs, N, m))
+    states[0] = x
+    out: dict[str, np.ndarray | None] = {}
+    if filt:
+        if x_hat0 is None or P0 is None:
+            raise ValueError(f"mode {mode!r} needs x_hat0 and P0 (initial estimate and its covariance)")
+        xh0 = np.asarray(x_hat0, dtype=float)
+        if xh0.shape != (n_runs, N * m):
+            raise ValueError(f"Incompatible dimensions of x_hat0; expected ({n_runs}, {N * m}) but found {xh0.shape}")
+        X_hat = np.broadcast_to(xh0.reshape(n_runs, 1, N, m), (n_runs, N, N, m)).copy()
+        Sig_aug = dkf.eb_initial_covariance(model, P0, common=True)
+        Sig_i = dkf.agent_covariances(model, Sig_aug)
+        nb = 1 if Adj.ndim == 2 else n_runs
+        Sig_aug = np.broadcast_to(Sig_aug, (nb, *Sig_aug.shape[1:])).copy()
+        Sig_i = np.broadcast_to(Sig_i, (nb, *Sig_i.shape[1:])).copy()
+        KH = np.zeros_like(Sig_i)
+        n = model.kron
+        pos = _position_index(model)
+        out["pos_error"] = np.empty((n_steps + 1, n_runs, N))
+        out["pos_std"] = np.empty((n_steps + 1, nb, N))
+        out["nees"] = np.empty((n_steps + 1, n_runs, N))
+        if nb == 1:
+            out["sigma_i"] = np.empty((n_steps + 1, N, model.M_r, model.M_r))
+            out["gains"] = np.zeros((n_steps + 1, N, model.M_r, model.M_r))
+            if mode == "estimation":
+                out["f2_cross"] = np.empty((n_steps + 1, N, model.M_r, model.M_r))
+        if central:
+            xc = xh0.reshape(n_runs, N, m).copy()
+            Pc = Sig_i[:, 0].copy()
+            out["central_pos_std"] = np.empty((n_steps + 1, nb))
+            out["central_pos_error"] = np.empty((n_steps + 1, n_runs))
+
+        def record(k: int) -> None:
+            e = x[:, None] - X_hat
+            err = e[..., pos_slice]
+            out["pos_error"][k] = np.sqrt(np.sum(err**2, axis=(-1, -2)))
+            diag = np.diagonal(Sig_i, axis1=-2, axis2=-1)[..., pos]
+            out["pos_std"][k] = np.sqrt(n * diag.sum(axis=-1))
+            out["nees"][k] = dkf.team_nees(model, x, X_hat, Sig_i)
+            if nb == 1:
+                out["sigma_i"][k] = Sig_i[0]
+                out["gains"][k] = KH[0]
+                if mode == "estimation":
+                    out["f2_cross"][k] = dkf.f2_cross(model, Sig_aug, Lap)[0]
+            if central:
+                out["central_pos_std"][k] = np.sqrt(n * np.diagonal(Pc, axis1=-2, axis2=-1)[..., pos].sum(-1))
+                out["central_pos_error"][k] = np.sqrt(np.sum((x - xc)[..., pos_slice] ** 2, axis=(-1, -2)))
+
+        pos_slice = slice(0, m // 2)
+        record(0)
+    Z, _ = measure(meas_rng, x, Adj, R)
+    steps = range(n_steps)
+    if progress:
+        from tqdm.auto import tqdm
+
+        steps = tqdm(steps, desc=f"rendezvous ({mode})", leave=False)
+    for k in steps:
+        if mode == "true":
+            U = consensus_control(true_state_views(x), Lap, K)
+        elif mode in ("measurement", "measurement-filter"):
+            U = consensus_control(Z, Lap, K)
+        else:
+            U = consensus_control(X_hat, Lap, K)
+        x_new = propagate_team(proc_rng, x, U, A, B, Q)
+        if filt and central:
+            xc, Pc = dkf.centralized_predict(model, xc, Pc, U, B)
+        if mode == "estimation":
+            X_hat, Sig_aug = dkf.eb_predict(model, X_hat, Sig_aug, Lap)
+        elif mode == "measurement-filter":
+            X_hat, Sig_i = dkf.mb_predict(model, X_hat, Sig_i, Lap, KH if exact_control_noise else None)
+        x = x_new
+        Z, _ = measure(meas_rng, x, Adj, R)
+        if mode == "estimation":
+            X_hat, Sig_aug, KH = dkf.eb_update(model, X_hat, Sig_aug, Z, S)
+            Sig_i = dkf.agent_covariances(model, Sig_aug)
+        elif mode == "measurement-filter":
+            X_hat, Sig_i, KH = dkf.mb_update(model, X_hat, Sig_i, Z, S)
+        if filt and central:
+            xc, Pc = dkf.centralized_update(model, xc, Pc, Z, S)
+        states[k + 1] = x
+        if filt:
+            record(k + 1)
+    return RendezvousResult(mode=mode, dt=float(dt), states=states, model=model, **out)
+
+
+def _position_index(model: dkf.TeamFilterModel) -> np.ndarray:
+    """Reduced-coordinate indices of the position entries (first half of each agent block)."""
+    mr = model.m_r
+    half = model.m // 2
+    per_agent = np.arange(mr)[(np.arange(mr) * model.kron) < half]
+    return (np.arange(model.n_agents)[:, None] * mr + per_agent).reshape(-1)
+
+
+def _sqrt_psd(M: np.ndarray) -> np.ndarray:
+    try:
+        return np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        w, V = np.linalg.eigh(M)
+        return V * np.sqrt(np.clip(w, 0.0, None))
