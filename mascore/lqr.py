@@ -1,0 +1,436 @@
+"""Continuous-time LQR, and LQR for networks of identical agents.
+
+Sign convention (python-control's): a gain ``K`` acts as ``u = -K x``. The
+paper of Vlahakis and Halikias writes gains with the opposite sign
+(``u = K x`` with ``K = -R^{-1} B^T P``, eq. (8)); every docstring below says
+which equation a quantity comes from and flips the sign where needed.
+
+Network notation (Vlahakis and Halikias, Sec. 2-3): N identical agents
+``x_i' = A x_i + B u_i``, stacked as ``X' = (I_N (x) A) X + (I_N (x) B) U``
+(eq. (3)), and the aggregate cost (7) with the weights of eqs. (10)-(12):
+``Q~ = I_N (x) Q1 + Lap (x) Q2`` and ``R~ = I_N (x) R``, where ``Lap`` is the
+graph Laplacian (for the complete graph this is exactly eq. (11)). Every
+network controller here has the form ``U = -(I_N (x) K_self + Lap (x)
+K_coupling) X``; since ``Lap = V diag(lambda) V^T`` with orthogonal ``V``, the
+closed loop splits into N independent ``n``-state modes
+``A - B (K_self + lambda_i K_coupling)`` and the costs are sums over modes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+from numpy.typing import ArrayLike
+
+from ._validation import as_matrix, check_covariance, check_square
+
+__all__ = [
+    "BottomUpLQR",
+    "DistributedGain",
+    "RiccatiError",
+    "TopDownLQR",
+    "assemble_network_gain",
+    "borrelli_keviczky_structure",
+    "bottom_up_lqr",
+    "centralized_network_cost",
+    "centralized_network_lqr",
+    "is_controllable",
+    "laplacian_spectrum",
+    "lqr",
+    "network_controller_cost",
+    "network_lqr_weights",
+    "top_down_lqr",
+]
+
+#: Largest relative Riccati residual accepted from the solver.
+RICCATI_RTOL = 1e-8
+
+
+class RiccatiError(ArithmeticError):
+    """The algebraic Riccati equation has no stabilizing solution, or it was solved inaccurately."""
+
+
+def is_controllable(A: ArrayLike, B: ArrayLike, tol: float = 1e-9) -> bool:
+    """PBH test: ``rank [A - s I, B] = n`` at every eigenvalue ``s`` of `A`.
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+    B : (n, m) array_like
+    tol : float
+        Relative singular-value threshold for the rank.
+    """
+    A = check_square(A, "A")
+    B = as_matrix(B, "B", (A.shape[0], None))
+    n = A.shape[0]
+    scale = max(1.0, np.linalg.norm(A, 2), np.linalg.norm(B, 2))
+    for s in np.linalg.eigvals(A):
+        sv = np.linalg.svd(np.hstack([A - s * np.eye(n), B]), compute_uv=False)
+        if sv[n - 1] <= tol * scale:
+            return False
+    return True
+
+
+def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Continuous-time infinite-horizon LQR, python-control's ``K, S, E = lqr(A, B, Q, R)``.
+
+    Minimizes ``int_0^inf (x^T Q x + u^T R u) dt`` for ``x' = A x + B u``.
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+    B : (n, m) array_like
+        ``(A, B)`` must be controllable.
+    Q : (n, n) array_like, symmetric positive semidefinite
+    R : (m, m) array_like, symmetric positive definite
+
+    Returns
+    -------
+    K : (m, n) ndarray
+        Optimal gain, ``u = -K x``, ``K = R^{-1} B^T S``.
+    S : (n, n) ndarray
+        Stabilizing solution of ``A^T S + S A - S B R^{-1} B^T S + Q = 0``.
+    E : (n,) ndarray
+        Closed-loop eigenvalues (of ``A - B K``).
+
+    Raises
+    ------
+    ValueError
+        Bad shapes, non-symmetric or indefinite weights, or ``(A, B)`` not controllable.
+    RiccatiError
+        No stabilizing solution (e.g. ``(Q, A)`` has unobservable modes on the
+        imaginary axis) or a Riccati residual above :data:`RICCATI_RTOL`.
+    """
+    A = check_square(A, "A")
+    n = A.shape[0]
+    B = as_matrix(B, "B", (n, None))
+    m = B.shape[1]
+    Q = check_covariance(Q, "Q", n)
+    R = check_covariance(R, "R", m, definite=True)
+    if not is_controllable(A, B):
+        raise ValueError("(A, B) is not controllable: the LQR problem has no stabilizing solution")
+    return _care(A, B, Q, R)
+
+
+def laplacian_spectrum(laplacian: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Eigen-decomposition ``Lap = V diag(lam) V^T`` of a connected undirected graph's Laplacian.
+
+    Parameters
+    ----------
+    laplacian : (N, N) array_like
+        Symmetric Laplacian (rows sum to zero, non-positive off-diagonal).
+
+    Returns
+    -------
+    lam : (N,) ndarray
+        Eigenvalues in increasing order; ``lam[0]`` is set to exactly 0.
+    V : (N, N) ndarray
+        Orthonormal eigenvectors (columns).
+
+    Raises
+    ------
+    ValueError
+        If the matrix is not a symmetric Laplacian or the graph is disconnected.
+    """
+    Lap = check_square(laplacian, "laplacian")
+    N = Lap.shape[0]
+    scale = max(1.0, float(np.abs(Lap).max()))
+    if not np.allclose(Lap, Lap.T, atol=1e-12 * scale):
+        raise ValueError("laplacian must be symmetric (an undirected graph)")
+    if not np.allclose(Lap.sum(axis=1), 0, atol=1e-10 * scale):
+        raise ValueError("laplacian rows must sum to zero")
+    if np.any(Lap - np.diag(np.diag(Lap)) > 0):
+        raise ValueError("laplacian off-diagonal entries must be <= 0")
+    lam, V = np.linalg.eigh(Lap)
+    if N > 1 and lam[1] <= 1e-9 * scale:
+        raise ValueError(
+            f"the graph is disconnected (second-smallest Laplacian eigenvalue {lam[1]:.2g}); "
+            "the network designs need a connected undirected graph"
+        )
+    lam[0] = 0.0
+    return lam, V
+
+
+def network_lqr_weights(
+    Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike, laplacian: ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    """Aggregate weights of eqs. (10)-(12): ``Q~ = I (x) Q1 + Lap (x) Q2``, ``R~ = I (x) R``.
+
+    With the complete graph's Laplacian this is eq. (11) entry by entry
+    (``Q~_ii = Q1 + (N-1) Q2``, ``Q~_ij = -Q2``); with another graph it penalizes
+    ``Q2`` only on the differences between neighbours.
+
+    Returns
+    -------
+    Qt : (N n, N n) ndarray
+    Rt : (N m, N m) ndarray
+    """
+    Lap = check_square(laplacian, "laplacian")
+    Q1 = check_covariance(Q1, "Q1")
+    Q2 = check_covariance(Q2, "Q2", Q1.shape[0])
+    R = check_covariance(R, "R", definite=True)
+    N = Lap.shape[0]
+    return np.kron(np.eye(N), Q1) + np.kron(Lap, Q2), np.kron(np.eye(N), R)
+
+
+def centralized_network_lqr(
+    A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike, laplacian: ArrayLike
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centralized network LQR, eqs. (7)-(9), solved as one ``N n``-state Riccati equation.
+
+    This is the dense reference (cost ``O((N n)^3)``); use
+    :func:`centralized_network_cost` for large N.
+
+    Returns
+    -------
+    K : (N m, N n) ndarray
+        ``U = -K X`` (the paper's eq. (8) is ``-K``).
+    P : (N n, N n) ndarray
+        Solution of eq. (9).
+    E : (N n,) ndarray
+        Closed-loop eigenvalues.
+    """
+    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
+    Qt, Rt = network_lqr_weights(Q1, Q2, R, laplacian)
+    N = Qt.shape[0] // A.shape[0]
+    return _care(np.kron(np.eye(N), A), np.kron(np.eye(N), B), Qt, Rt)
+
+
+def borrelli_keviczky_structure(
+    A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike, n_agents: int
+) -> dict:
+    """Closed-form blocks of the centralized solution for all-to-all weights, eqs. (13)-(16).
+
+    ``P`` solves the node ARE (14); ``P2~ = -Pbar / N`` where ``Pbar`` solves
+    eq. (15), an ARE for ``(A - X P, B)`` with weight ``N Q2`` and
+    ``X = B R^{-1} B^T``. The network solution is eq. (13): diagonal blocks
+    ``P - (N-1) P2~``, off-diagonal blocks ``P2~``; the gain has the two-block
+    pattern (16).
+
+    Returns
+    -------
+    dict
+        ``P``, ``P2`` (= P2~), ``K1``, ``K2`` (blocks of ``K`` with ``U = -K X``),
+        ``P_network`` (N n, N n) and ``K_network`` (N m, N n) assembled from them.
+    """
+    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
+    N = _check_agents(n_agents)
+    Rinv_Bt = np.linalg.solve(R, B.T)
+    _, P, _ = _care(A, B, Q1, R)  # eq. (14)
+    _, Pbar, _ = _care(A - B @ Rinv_Bt @ P, B, N * Q2, R)  # eq. (15), Pbar = -N P2~
+    P2 = -Pbar / N
+    ones = np.ones((N, N))
+    P_network = np.kron(np.eye(N), P - N * P2) + np.kron(ones, P2)  # eq. (13)
+    K1, K2 = Rinv_Bt @ (P - (N - 1) * P2), Rinv_Bt @ P2  # eq. (16), sign flipped: U = -K X
+    K_network = np.kron(np.eye(N), K1 - K2) + np.kron(ones, K2)
+    return {"P": P, "P2": P2, "K1": K1, "K2": K2, "P_network": P_network, "K_network": K_network}
+
+
+@dataclass(frozen=True)
+class DistributedGain:
+    """A network gain ``U = -(I_N (x) K_self + Lap (x) K_coupling) X``.
+
+    Attributes
+    ----------
+    K_self, K_coupling : (m, n) ndarray
+    """
+
+    K_self: np.ndarray
+    K_coupling: np.ndarray
+
+
+@dataclass(frozen=True)
+class TopDownLQR(DistributedGain):
+    """Borrelli-Keviczky distributed LQR (eq. (17)).
+
+    Attributes
+    ----------
+    n_local : int
+        ``N_L = d_max + 1``, size of the all-to-all problem the gain is taken from.
+    lam : (N,) ndarray
+        Laplacian eigenvalues.
+    condition_holds : bool
+        The sufficient stability condition: every nonzero eigenvalue of the
+        Laplacian exceeds ``N_L / 2``.
+    spectral_abscissa : float
+        Largest real part of the closed-loop eigenvalues (negative: stable).
+    """
+
+    n_local: int = 0
+    lam: np.ndarray | None = None
+    condition_holds: bool = False
+    spectral_abscissa: float = np.nan
+
+
+@dataclass(frozen=True)
+class BottomUpLQR(DistributedGain):
+    """Deshpande et al. bottom-up distributed LQR (eq. (18)): ``K_coupling = Phi K``.
+
+    Attributes
+    ----------
+    Phi : (m, m) ndarray
+    bound : float
+        Optimal value of the convex program, an upper bound on the aggregate
+        cost ``sum_i trace(P_i)`` (average cost over unit-covariance ``X(0)``)
+        in the program's coordinates.
+    """
+
+    Phi: np.ndarray | None = None
+    bound: float = np.nan
+
+
+def top_down_lqr(
+    A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike, adjacency: ArrayLike
+) -> TopDownLQR:
+    """Top-down distributed LQR of Borrelli and Keviczky (2008), eq. (17).
+
+    Solves the all-to-all problem for ``N_L = d_max + 1`` agents (eqs. (14)-(15))
+    and keeps its gain only on the graph's edges, with ``M`` the Laplacian:
+    ``U = -(I (x) R^{-1} B^T P - Lap (x) R^{-1} B^T P2~) X``. Mode ``i`` of the
+    closed loop is ``A - X P - (lambda_i / N_L) X Pbar``: an LQR loop for
+    ``(A - X P, B)`` with its gain scaled by ``lambda_i / N_L``, stable when the
+    scale is at least 1/2 (the LQR gain margin): the condition
+    ``lambda_i > N_L / 2`` of eq. (17) is sufficient, not necessary. Both the
+    condition and the actual closed-loop spectrum are returned.
+
+    Parameters
+    ----------
+    adjacency : (N, N) array_like
+        Symmetric adjacency of a connected graph.
+    """
+    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
+    Adj = check_square(adjacency, "adjacency")
+    lam, _ = laplacian_spectrum(np.diag(Adj.sum(axis=1)) - Adj)
+    d_max = int(round(float((Adj > 0).sum(axis=1).max())))
+    n_local = d_max + 1
+    blocks = borrelli_keviczky_structure(A, B, Q1, Q2, R, n_local)
+    Rinv_Bt = np.linalg.solve(R, B.T)
+    K_self, K_coupling = Rinv_Bt @ blocks["P"], -Rinv_Bt @ blocks["P2"]
+    abscissa = _spectral_abscissa(A, B, K_self, K_coupling, lam)
+    return TopDownLQR(
+        K_self=K_self, K_coupling=K_coupling, n_local=n_local, lam=lam,
+        condition_holds=bool(np.all(lam[1:] > n_local / 2)), spectral_abscissa=abscissa,
+    )
+
+
+def bottom_up_lqr(
+    A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike, adjacency: ArrayLike
+) -> BottomUpLQR:
+    """Bottom-up distributed LQR (eq. (18), Deshpande et al. 2011): ``U = -(I (x) K + Lap (x) Phi K) X``.
+
+    ``K`` is the node LQR gain for ``(Q1, R)`` (eq. (14)); ``Phi`` (m x m)
+    minimizes an upper bound on the aggregate cost with weights
+    ``Q~ = I (x) Q1 + Lap (x) Q2``. The convex program is the transpose (dual)
+    of the observer program of eqs. (56)-(62): mode ``i`` must satisfy
+    ``A_i^T P_i + P_i A_i + Q1 + lambda_i Q2 + K_i^T R K_i <= 0`` with
+    ``A_i = A - B (I + lambda_i Phi) K`` and ``K_i = (I + lambda_i Phi) K``,
+    and ``sum_i trace(P_i)`` is minimized; it is solved by
+    :func:`mascore.observers.coupled_gain_lmi` on ``(A^T, B^T)``.
+
+    Raises
+    ------
+    ValueError
+        Bad input, uncontrollable ``(A, B)``, disconnected graph.
+    mascore._solver.SolverError
+        The program is infeasible or not solved to optimality.
+    """
+    from .observers import coupled_gain_lmi
+
+    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
+    if not is_controllable(A, B):
+        raise ValueError("(A, B) is not controllable: the LQR problem has no stabilizing solution")
+    Adj = check_square(adjacency, "adjacency")
+    lam, _ = laplacian_spectrum(np.diag(Adj.sum(axis=1)) - Adj)
+    K, _, _ = _care(A, B, Q1, R)
+    Rinv = np.linalg.inv(R)
+    # dual: process factor G_i with G_i G_i^T = Q1 + lam_i Q2, noise weight R^{-1}, gain K^T
+    factors = [_psd_sqrt(Q1 + l * Q2) for l in lam]
+    result = coupled_gain_lmi(A.T, B.T, K.T, lam, factors, [Rinv] * len(lam), trace_in="original",
+                              what="bottom-up LQR program")
+    Phi = result["Phi"].T
+    return BottomUpLQR(K_self=K, K_coupling=Phi @ K, Phi=Phi, bound=result["bound"])
+
+
+def assemble_network_gain(gain: DistributedGain, laplacian: ArrayLike) -> np.ndarray:
+    """The dense ``(N m, N n)`` matrix ``I (x) K_self + Lap (x) K_coupling``."""
+    Lap = check_square(laplacian, "laplacian")
+    return np.kron(np.eye(Lap.shape[0]), gain.K_self) + np.kron(Lap, gain.K_coupling)
+
+
+def network_controller_cost(
+    A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike,
+    laplacian: ArrayLike, gain: DistributedGain,
+) -> float:
+    """Aggregate LQR cost ``trace(P_K)`` of a distributed gain, by Laplacian modes.
+
+    ``P_K`` solves the closed-loop Lyapunov equation with the weights of
+    :func:`network_lqr_weights`; ``trace(P_K)`` is the expected cost (7) for
+    ``X(0) ~ N(0, I)``. Returns ``inf`` if the closed loop is not stable.
+    """
+    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
+    lam, _ = laplacian_spectrum(laplacian)
+    total = 0.0
+    for l in lam:
+        Ki = gain.K_self + l * gain.K_coupling
+        Ai = A - B @ Ki
+        if np.max(np.linalg.eigvals(Ai).real) >= 0:
+            return float("inf")
+        Pi = sla.solve_continuous_lyapunov(Ai.T, -(Q1 + l * Q2 + Ki.T @ R @ Ki))
+        total += float(np.trace(Pi))
+    return total
+
+
+def centralized_network_cost(
+    A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike, laplacian: ArrayLike
+) -> float:
+    """Optimal aggregate cost ``trace(P~)`` of eq. (9), as ``sum_i trace(ARE(A, B, Q1 + lam_i Q2, R))``."""
+    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
+    lam, _ = laplacian_spectrum(laplacian)
+    return float(sum(np.trace(_care(A, B, Q1 + l * Q2, R)[1]) for l in lam))
+
+
+def _care(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stabilizing CARE solution with residual and stability checks (inputs already validated)."""
+    try:
+        S = sla.solve_continuous_are(A, B, Q, R)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise RiccatiError(f"the Riccati equation has no stabilizing solution: {exc}") from exc
+    S = (S + S.T) / 2
+    K = np.linalg.solve(R, B.T @ S)
+    residual = A.T @ S + S @ A - S @ B @ K + Q
+    scale = max(1.0, np.linalg.norm(Q), np.linalg.norm(A.T @ S), np.linalg.norm(S @ B @ K))
+    if np.linalg.norm(residual) > RICCATI_RTOL * scale:
+        raise RiccatiError(
+            f"Riccati residual {np.linalg.norm(residual) / scale:.2g} (relative) exceeds {RICCATI_RTOL:g}"
+        )
+    E = np.linalg.eigvals(A - B @ K)
+    if np.max(E.real) >= 0:
+        raise RiccatiError("the Riccati solution is not stabilizing (closed-loop eigenvalue in the right half-plane)")
+    return K, S, E
+
+
+def _check_agent(A, B, Q1, Q2, R):
+    A = check_square(A, "A")
+    n = A.shape[0]
+    B = as_matrix(B, "B", (n, None))
+    Q1 = check_covariance(np.atleast_2d(Q1), "Q1", n)
+    Q2 = check_covariance(np.atleast_2d(Q2), "Q2", n)
+    R = check_covariance(np.atleast_2d(R), "R", B.shape[1], definite=True)
+    return A, B, Q1, Q2, R
+
+
+def _check_agents(n_agents: int) -> int:
+    if isinstance(n_agents, bool) or not isinstance(n_agents, (int, np.integer)) or n_agents < 1:
+        raise ValueError(f"n_agents must be a positive integer; got {n_agents!r}")
+    return int(n_agents)
+
+
+def _spectral_abscissa(A, B, K_self, K_coupling, lam) -> float:
+    return float(max(np.max(np.linalg.eigvals(A - B @ (K_self + l * K_coupling)).real) for l in lam))
+
+
+def _psd_sqrt(M: np.ndarray) -> np.ndarray:
+    w, U = np.linalg.eigh((M + M.T) / 2)
+    return U * np.sqrt(np.clip(w, 0, None))

@@ -1,0 +1,452 @@
+"""Minimum-energy observers and the LQR-dual distributed observer of Vlahakis and Halikias.
+
+Agents (eq. (26)): ``x_i' = A x_i + Bbar d_i``, ``y_i = C x_i + n_i`` with a
+disturbance ``d_i`` weighted by ``R`` and a measurement noise ``n_i`` weighted
+by ``Q`` in the minimum-energy cost (20). The single-agent optimal observer
+(eqs. (23)-(25)) is ``x_e' = (A - L C) x_e + L y`` with ``L = S C^T Q`` and
+``S`` the solution of the dual ARE ``A S + S A^T + Bbar R^{-1} Bbar^T -
+S C^T Q C S = 0``; its optimal cost is ``trace(S)``.
+
+The distributed observer (eq. (37), network form (42)) adds a coupling through
+the graph Laplacian ``Lap``: the estimation errors obey
+``E' = A_e E + ...`` with ``A_e = I_N (x) (A - L C) - Lap (x) L Phi C``.
+With ``Lap = V diag(lambda) V^T`` the design splits into N ``n``-state modes
+(eqs. (43)-(55)); ``Phi`` (m x m) comes from the LMI program (56)-(62), which
+is solved once per *distinct* Laplacian eigenvalue, so a ring of 100 agents
+needs 51 small blocks, not a 200-state problem.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cvxpy as cp
+import numpy as np
+import scipy.linalg as sla
+from numpy.typing import ArrayLike
+
+from ._solver import LMI_EPS, solve
+from ._validation import as_matrix, check_covariance, check_square
+from .lqr import _care, is_controllable, laplacian_spectrum
+
+__all__ = [
+    "READINGS",
+    "DistributedObserver",
+    "MinEnergyObserver",
+    "coupled_gain_lmi",
+    "disagreement",
+    "distributed_observer",
+    "is_observable",
+    "min_energy_observer",
+    "observer_error_matrix",
+    "simulate_estimation_errors",
+]
+
+#: Readings of eqs. (29)-(30) for the local gain L (see :func:`distributed_observer`).
+READINGS = ("as-printed", "inverse-weight-are")
+
+
+def is_observable(A: ArrayLike, C: ArrayLike) -> bool:
+    """PBH test of observability of ``(A, C)`` (controllability of ``(A^T, C^T)``)."""
+    A = check_square(A, "A")
+    C = as_matrix(C, "C", (None, A.shape[0]))
+    return is_controllable(A.T, C.T)
+
+
+@dataclass(frozen=True)
+class MinEnergyObserver:
+    """Minimum-energy observer, eqs. (23)-(25).
+
+    Attributes
+    ----------
+    L : (n, m) ndarray
+        Gain ``L = S C^T Q``.
+    S : (n, n) ndarray
+        Solution of the dual ARE (23).
+    cost : float
+        Optimal cost ``trace(S)`` (eq. (25)).
+    E : (n,) ndarray
+        Eigenvalues of ``A - L C``.
+    """
+
+    L: np.ndarray
+    S: np.ndarray
+    cost: float
+    E: np.ndarray
+
+
+def min_energy_observer(
+    A: ArrayLike, Bbar: ArrayLike, C: ArrayLike, Q: ArrayLike, R: ArrayLike
+) -> MinEnergyObserver:
+    """Minimum-energy (deterministic Kalman-Bucy) observer, eqs. (19)-(25).
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+    Bbar : (n, q) array_like
+        Disturbance input; ``(A, Bbar)`` must be controllable.
+    C : (m, n) array_like
+        ``(A, C)`` must be observable.
+    Q : (m, m) array_like, symmetric positive definite
+        Weight on the measurement noise (large: trust the measurements).
+    R : (q, q) array_like, symmetric positive definite
+        Weight on the disturbance (large: trust the model).
+
+    Raises
+    ------
+    ValueError
+        Bad shapes or weights, ``(A, Bbar)`` not controllable or ``(A, C)`` not observable.
+    """
+    A, Bbar, C, Q, R = _check_observer(A, Bbar, C, Q, R)
+    K, S, E = _care(A.T, C.T, Bbar @ np.linalg.solve(R, Bbar.T), np.linalg.inv(Q))
+    return MinEnergyObserver(L=K.T, S=S, cost=float(np.trace(S)), E=E)
+
+
+@dataclass(frozen=True)
+class DistributedObserver:
+    """Result of :func:`distributed_observer` (Vlahakis and Halikias, Sec. 4.2).
+
+    Attributes
+    ----------
+    L : (n, m) ndarray
+        Local gain in the agent's original coordinates.
+    Phi : (m, m) ndarray
+        Coupling gain from the LMI program (62).
+    bound : float
+        Optimal value of (62), an upper bound on the aggregate cost (55).
+    cost : float
+        Cost the observer actually achieves: ``sum_i trace(S_i)`` with ``S_i``
+        from the mode Lyapunov equations (57) taken with equality.
+    centralized_cost : float
+        Optimum of the network dual ARE (40), ``sum_i trace`` of eq. (53).
+    local_cost : float
+        Cost of ``Phi = 0`` (agents do not couple), ``inf`` if unstable.
+    lam : (N,) ndarray
+        Laplacian eigenvalues.
+    T : (n, n) ndarray
+        Coordinate change ``x_hat = T x`` of eqs. (27) and (32).
+    A_hat, Bbar_hat, C_hat, L_hat : ndarray
+        The agent in the ``x_hat`` coordinates (eqs. (33)-(34)); ``L_hat = [0; L2]``.
+    spectral_abscissa : float
+        Largest real part of the eigenvalues of ``A_e``.
+    disagreement_abscissa : float
+        Same over the modes with ``lambda_i > 0`` only: the decay rate of the
+        differences between the agents' errors.
+    reading : str
+        Which reading of eqs. (29)-(30) produced ``L``.
+    trace_in : str
+        Coordinates of the traces (``"transformed"``: ``x_hat``, as in eq. (57)).
+    """
+
+    L: np.ndarray
+    Phi: np.ndarray
+    bound: float
+    cost: float
+    centralized_cost: float
+    local_cost: float
+    lam: np.ndarray
+    T: np.ndarray
+    A_hat: np.ndarray
+    Bbar_hat: np.ndarray
+    C_hat: np.ndarray
+    L_hat: np.ndarray
+    spectral_abscissa: float
+    disagreement_abscissa: float
+    reading: str
+    trace_in: str
+
+    @property
+    def hurwitz(self) -> bool:
+        """True if ``A_e`` is Hurwitz (all estimation errors decay)."""
+        return self.spectral_abscissa < 0
+
+
+def distributed_observer(
+    A: ArrayLike,
+    Bbar: ArrayLike,
+    C: ArrayLike,
+    Q1: ArrayLike,
+    Q2: ArrayLike,
+    R: ArrayLike,
+    adjacency: ArrayLike,
+    reading: str = "as-printed",
+    trace_in: str = "transformed",
+) -> DistributedObserver:
+    """LQR-dual distributed observer by the bottom-up method (Sec. 4.2, eqs. (26)-(62)).
+
+    1. Local gain: ``L = S C^T Q1`` with ``S`` from the dual ARE (29).
+    2. Coordinates: rotation (27) so that ``C = (0 C2)``, then eq. (32) so that
+       ``L_hat = [0; L2]`` (and ``S_hat`` block diagonal).
+    3. Modes: the Laplacian eigenvalues ``lambda_i`` (eqs. (43)-(55)).
+    4. LMI (56)-(62) for ``W_i = diag(W_i1, W2)``, ``Y2 = W2 L2 Phi`` and
+       slack ``Z_i``; ``Phi = L2^{-1} W2^{-1} Y2``. Mode ``i`` uses the noise
+       weight ``Q_i = Q1 + lambda_i Q2`` (eq. (61)).
+
+    Parameters
+    ----------
+    A, Bbar, C : agent matrices, shapes (n, n), (n, q), (m, n), with ``m < n``,
+        ``(A, Bbar)`` controllable and ``(A, C)`` observable.
+    Q1, Q2 : (m, m) array_like
+        Weights on the absolute and on the relative output errors (eq. (38));
+        ``Q1`` positive definite, ``Q2`` positive semidefinite.
+    R : (q, q) array_like
+        Weight on the disturbance, positive definite.
+    adjacency : (N, N) array_like
+        Symmetric adjacency of a connected undirected graph.
+    reading : {"as-printed", "inverse-weight-are"}
+        ``"as-printed"``: eqs. (29)-(30) as printed. ``"inverse-weight-are"``:
+        ``S`` from eq. (29) with ``Q1^{-1}`` in place of ``Q1`` (``Q1`` read as a
+        noise covariance, Kalman style) but ``L = S C^T Q1`` as in eq. (30);
+        this is the reading that reproduces the paper's printed ``L`` of
+        Example 1. The LMI uses ``Q1 + lambda_i Q2`` in both readings.
+    trace_in : {"transformed", "original"}
+        Coordinates in which ``trace(S_i)`` is measured: ``x_hat`` as in
+        eq. (57), or the agent's original ones.
+
+    Raises
+    ------
+    ValueError
+        Bad input, uncontrollable/unobservable pair, disconnected graph.
+    mascore._solver.SolverError
+        The LMI program is infeasible or not solved to optimality.
+    """
+    A, Bbar, C, Q1, R = _check_observer(A, Bbar, C, Q1, R, qname="Q1")
+    m = C.shape[0]
+    Q2 = check_covariance(np.atleast_2d(Q2), "Q2", m)
+    if reading not in READINGS:
+        raise ValueError(f"reading must be one of {READINGS}; got {reading!r}")
+    Adj = check_square(adjacency, "adjacency")
+    lam, _ = laplacian_spectrum(np.diag(Adj.sum(axis=1)) - Adj)
+    BRB = Bbar @ np.linalg.solve(R, Bbar.T)
+    are_weight = Q1 if reading == "as-printed" else np.linalg.inv(Q1)
+    _, S, _ = _care(A.T, C.T, BRB, np.linalg.inv(are_weight))  # eq. (29)
+    L = S @ C.T @ Q1  # eq. (30)
+    G = Bbar @ np.real(sla.sqrtm(np.linalg.inv(R)))
+    noise = [Q1 + l * Q2 for l in lam]
+    res = coupled_gain_lmi(A, C, L, lam, [G] * len(lam), noise, trace_in=trace_in,
+                           what="distributed observer LMI (62)")
+    Phi = res["Phi"]
+    T = res["T"]
+    tr = (lambda M: np.trace(T @ M @ T.T)) if trace_in == "transformed" else np.trace
+    cost = _mode_costs(A, C, L, Phi, lam, BRB, noise, tr)
+    local = _mode_costs(A, C, L, np.zeros_like(Phi), lam, BRB, noise, tr)
+    central = sum(tr(_care(A.T, C.T, BRB, np.linalg.inv(Qi))[1]) for Qi in noise)  # eq. (53)
+    absc = [np.max(np.linalg.eigvals(A - L @ (np.eye(m) + l * Phi) @ C).real) for l in lam]
+    Tinv = np.linalg.inv(T)
+    return DistributedObserver(
+        L=L, Phi=Phi, bound=res["bound"], cost=cost, centralized_cost=float(central), local_cost=local,
+        lam=lam, T=T, A_hat=T @ A @ Tinv, Bbar_hat=T @ Bbar, C_hat=C @ Tinv, L_hat=T @ L,
+        spectral_abscissa=float(max(absc)), disagreement_abscissa=float(max(absc[1:], default=-np.inf)),
+        reading=reading, trace_in=trace_in,
+    )
+
+
+def coupled_gain_lmi(
+    A: ArrayLike,
+    C: ArrayLike,
+    L: ArrayLike,
+    lam: ArrayLike,
+    process_factors: Sequence[ArrayLike],
+    noise_weights: Sequence[ArrayLike],
+    trace_in: str = "transformed",
+    what: str = "coupled-gain LMI",
+) -> dict:
+    """The LMI program (56)-(62) for the coupling ``Phi`` of gains ``L (I + lambda_i Phi)``.
+
+    For each Laplacian eigenvalue ``lambda_i`` the mode
+    ``A_i = A - L (I + lambda_i Phi) C`` must admit ``S_i > 0`` with
+
+        A_i S_i + S_i A_i^T + G_i G_i^T + L (I + lambda_i Phi) Q_i^{-1} (...)^T < 0   (57)
+
+    and ``sum_i trace(S_i)`` is minimized. In the coordinates of eqs. (27) and
+    (32), where ``C_hat = (0 C2)`` and ``L_hat = (0; L2)``, restricting
+    ``S_i^{-1} = W_i = diag(W_i1, W2)`` with a common ``W2`` makes the product
+    ``W_i L_hat Phi = (0; W2 L2 Phi)`` a single linear variable ``Y2`` (eq. (60));
+    the Schur complement gives eq. (61) and the slack ``Z_i >= W_i^{-1}``
+    eq. (62). Modes with equal ``lambda`` share their variables (the program is
+    separable given ``W2`` and ``Y2``), weighted by their multiplicity.
+
+    Parameters
+    ----------
+    A : (n, n), C : (m, n) with full row rank ``m < n``, L : (n, m)
+        Agent and local gain; ``L2`` (the part of ``T L`` on the output
+        coordinates) must be invertible.
+    lam : (N,) array_like
+        Laplacian eigenvalues (>= 0).
+    process_factors : sequence of N (n, q_i) arrays
+        ``G_i`` (``Bbar R^{-1/2}`` for the observer of eq. (61)).
+    noise_weights : sequence of N (m, m) arrays
+        ``Q_i`` (``Q1 + lambda_i Q2`` in eq. (61)), positive definite.
+    trace_in : {"transformed", "original"}
+        Minimize the traces in the ``x_hat`` coordinates (as printed) or in the original ones.
+    what : str
+        Name used in solver errors.
+
+    Returns
+    -------
+    dict
+        ``Phi`` (m, m), ``bound`` (float), ``T`` (n, n) with ``x_hat = T x``,
+        ``W`` (list of the W_i per distinct lambda), ``lam_unique``, ``multiplicity``.
+    """
+    A = check_square(A, "A")
+    n = A.shape[0]
+    C = as_matrix(C, "C", (None, n))
+    m = C.shape[0]
+    L = as_matrix(L, "L", (n, m))
+    lam = np.asarray(lam, dtype=float)
+    if lam.ndim != 1 or np.any(lam < -1e-12):
+        raise ValueError("lam must be a 1-D array of non-negative Laplacian eigenvalues")
+    if len(process_factors) != lam.size or len(noise_weights) != lam.size:
+        raise ValueError("process_factors and noise_weights need one entry per eigenvalue in lam")
+    if trace_in not in ("transformed", "original"):
+        raise ValueError(f"trace_in must be 'transformed' or 'original'; got {trace_in!r}")
+    if m >= n:
+        raise ValueError(f"C must have fewer rows than columns (m < n); got shape {C.shape}")
+    n1 = n - m
+    # eq. (27): rotation making C = (0 C2)
+    U, sv, Vt = np.linalg.svd(C)
+    if sv[-1] <= 1e-10 * max(1.0, sv[0]):
+        raise ValueError("C must have full row rank")
+    swap = np.block([[np.zeros((n1, m)), np.eye(n1)], [np.eye(m), np.zeros((m, n1))]])
+    T_rot = swap @ Vt
+    L_rot = T_rot @ L
+    L1, L2 = L_rot[:n1], L_rot[n1:]
+    if np.linalg.cond(L2) > 1e12:
+        raise ValueError("the output part L2 of the local gain is singular; eq. (32) needs it invertible")
+    # eq. (32), written through L (L1 L2^{-1} = S12 S22^{-1} when L = S C^T Q1)
+    T_hat = np.block([[np.eye(n1), -L1 @ np.linalg.inv(L2)], [np.zeros((m, n1)), np.eye(m)]])
+    T = T_hat @ T_rot
+    Tinv = np.linalg.inv(T)
+    A_hat, C_hat, L_hat = T @ A @ Tinv, C @ Tinv, T @ L
+    L2 = L_hat[n1:]
+    Ac = A_hat - L_hat @ C_hat
+    # distinct eigenvalues with multiplicities (identical blocks share variables)
+    groups: list[list[int]] = []
+    for i in np.argsort(lam):
+        if groups and abs(lam[i] - lam[groups[-1][0]]) <= 1e-9 * max(1.0, abs(lam[i])):
+            groups[-1].append(int(i))
+        else:
+            groups.append([int(i)])
+    W2 = cp.Variable((m, m), symmetric=True)
+    Y2 = cp.Variable((m, m))
+    Y = cp.vstack([np.zeros((n1, m)), Y2])
+    weight = Tinv.T @ Tinv if trace_in == "original" else np.eye(n)
+    constraints, objective, Ws = [], 0, []
+    for g in groups:
+        k = g[0]
+        li = float(lam[k])
+        G = T @ as_matrix(process_factors[k], f"process_factors[{k}]", (n, None))
+        Qi = check_covariance(np.atleast_2d(noise_weights[k]), f"noise_weights[{k}]", m, definite=True)
+        W1 = cp.Variable((n1, n1), symmetric=True)
+        W = cp.bmat([[W1, np.zeros((n1, m))], [np.zeros((m, n1)), W2]])
+        Z = cp.Variable((n, n), symmetric=True)
+        Psi = W @ Ac - li * Y @ C_hat
+        Psi = Psi + Psi.T  # eq. (60)
+        WL = W @ L_hat + li * Y
+        q = G.shape[1]
+        lmi1 = cp.bmat([  # eq. (61)
+            [Psi, W @ G, WL],
+            [(W @ G).T, -np.eye(q), np.zeros((q, m))],
+            [WL.T, np.zeros((m, q)), -Qi],
+        ])
+        lmi1 = (lmi1 + lmi1.T) / 2
+        lmi2 = cp.bmat([[Z, np.eye(n)], [np.eye(n), W]])  # eq. (62): Z >= W^{-1}
+        lmi2 = (lmi2 + lmi2.T) / 2
+        constraints += [lmi1 << -LMI_EPS * np.eye(n + q + m), lmi2 >> 0, W >> LMI_EPS * np.eye(n)]
+        objective = objective + len(g) * cp.trace(weight @ Z)
+        Ws.append(W)
+    problem = cp.Problem(cp.Minimize(objective), constraints)
+    bound = solve(problem, what)
+    Phi = np.linalg.solve(L2, np.linalg.solve(W2.value, Y2.value))
+    return {
+        "Phi": Phi, "bound": bound, "T": T, "W": [W.value for W in Ws],
+        "lam_unique": np.array([lam[g[0]] for g in groups]),
+        "multiplicity": np.array([len(g) for g in groups]),
+    }
+
+
+def observer_error_matrix(
+    A: ArrayLike, L: ArrayLike, C: ArrayLike, Phi: ArrayLike, laplacian: ArrayLike
+) -> np.ndarray:
+    """``A_e = I_N (x) (A - L C) - Lap (x) L Phi C`` (Example 1; error form of eq. (42)).
+
+    Returns
+    -------
+    (N n, N n) ndarray
+    """
+    A = check_square(A, "A")
+    n = A.shape[0]
+    C = as_matrix(C, "C", (None, n))
+    m = C.shape[0]
+    L = as_matrix(L, "L", (n, m))
+    Phi = as_matrix(np.atleast_2d(Phi), "Phi", (m, m))
+    Lap = check_square(laplacian, "laplacian")
+    return np.kron(np.eye(Lap.shape[0]), A - L @ C) - np.kron(Lap, L @ Phi @ C)
+
+
+def simulate_estimation_errors(A_e: ArrayLike, e0: ArrayLike, t: ArrayLike) -> np.ndarray:
+    """Noise-free network estimation errors ``e(t) = expm(A_e t) e(0)`` on a uniform grid.
+
+    Parameters
+    ----------
+    A_e : (N n, N n) array_like
+    e0 : (N, n) array_like
+        Initial estimation error of each agent.
+    t : (T,) array_like
+        Uniform time grid starting at 0, seconds.
+
+    Returns
+    -------
+    (T, N, n) ndarray
+    """
+    A_e = check_square(A_e, "A_e")
+    e0 = as_matrix(e0, "e0")
+    if e0.size != A_e.shape[0]:
+        raise ValueError(f"e0 must have N*n = {A_e.shape[0]} entries; got shape {e0.shape}")
+    t = np.asarray(t, dtype=float)
+    if t.ndim != 1 or t.size < 2 or t[0] != 0:
+        raise ValueError("t must be a 1-D grid of at least two times starting at 0")
+    dt = np.diff(t)
+    if not np.allclose(dt, dt[0], rtol=1e-9) or dt[0] <= 0:
+        raise ValueError("t must be uniform and increasing")
+    step = sla.expm(A_e * dt[0])
+    out = np.empty((t.size, e0.size))
+    out[0] = e0.ravel()
+    for k in range(1, t.size):
+        out[k] = step @ out[k - 1]
+    return out.reshape(t.size, *e0.shape)
+
+
+def disagreement(errors: ArrayLike) -> np.ndarray:
+    """Errors minus their mean over the agents (axis -2 of a (..., N, n) array)."""
+    errors = np.asarray(errors, dtype=float)
+    return errors - errors.mean(axis=-2, keepdims=True)
+
+
+def _mode_costs(A, C, L, Phi, lam, BRB, noise, tr) -> float:
+    """sum_i tr(S_i), S_i from eq. (57) with equality; inf if a mode is unstable."""
+    m = C.shape[0]
+    total = 0.0
+    for li, Qi in zip(lam, noise):
+        Li = L @ (np.eye(m) + li * Phi)
+        Ai = A - Li @ C
+        if np.max(np.linalg.eigvals(Ai).real) >= 0:
+            return float("inf")
+        Si = sla.solve_continuous_lyapunov(Ai, -(BRB + Li @ np.linalg.solve(Qi, Li.T)))
+        total += float(tr(Si))
+    return total
+
+
+def _check_observer(A, Bbar, C, Q, R, qname="Q"):
+    A = check_square(A, "A")
+    n = A.shape[0]
+    Bbar = as_matrix(Bbar, "Bbar", (n, None))
+    C = as_matrix(C, "C", (None, n))
+    Q = check_covariance(np.atleast_2d(Q), qname, C.shape[0], definite=True)
+    R = check_covariance(np.atleast_2d(R), "R", Bbar.shape[1], definite=True)
+    if not is_controllable(A, Bbar):
+        raise ValueError("(A, Bbar) is not controllable: the minimum-energy ARE has no positive definite solution")
+    if not is_controllable(A.T, C.T):
+        raise ValueError("(A, C) is not observable: no observer gain makes the error decay")
+    return A, Bbar, C, Q, R
