@@ -1,0 +1,526 @@
+"""Ellipsoids: a small toolkit for set-membership estimation.
+
+Convention (as in Bhattacharjee and Subbarao 2021 and merlresearch/pycvxset)::
+
+    E(c, P) = {x : (x - c)^T P^{-1} (x - c) <= 1}
+
+with centre ``c`` (n,) and shape matrix ``P`` (n, n), symmetric positive
+definite. ``trace(P)`` is the sum of the squared semi-axes (the "trace
+criterion"); ``volume = vol(unit ball) * sqrt(det P)``.
+
+Most functions work on plain arrays and broadcast over leading (batch)
+dimensions, so that many ellipsoids (agents x Monte Carlo runs) are handled in
+one call; :class:`Ellipsoid` is a small validated convenience wrapper.
+
+Two operations are exact only as outer approximations, chosen from a
+one-parameter family by the trace criterion:
+
+* Minkowski sum ``E(c1, P1) + E(c2, P2)`` is contained in
+  ``E(c1 + c2, P1 / (1 - b) + P2 / b)`` for every ``b`` in (0, 1);
+  the trace is minimised in closed form by ``b = sqrt(t2) / (sqrt(t1) + sqrt(t2))``
+  with ``t_i = trace(P_i)`` (:func:`minkowski_sum_min_trace`).
+* Intersection of ``E(c, P)`` with the measurement set
+  ``{x : (y - C x)^T W^{-1} (y - C x) <= 1}`` (``W = D R D^T``, a "strip" when
+  ``C`` has one row) is contained in every member of the family
+  ``{x : (1 - t) |x - c|^2_{P^{-1}} + t |y - C x|^2_{W^{-1}} <= 1}``, ``t`` in [0, 1]
+  (Schweppe 1968; :func:`intersection_family`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._validation import as_matrix, as_vector, check_covariance, check_generator
+
+__all__ = [
+    "Ellipsoid",
+    "affine_image",
+    "contains",
+    "intersection_family",
+    "intersection_gain_form",
+    "intersection_is_empty",
+    "intersection_min_trace",
+    "max_innovation_form",
+    "minkowski_sum",
+    "minkowski_sum_min_trace",
+    "sample_boundary",
+    "sample_interior",
+    "trace",
+    "volume",
+]
+
+
+@dataclass(frozen=True)
+class Ellipsoid:
+    """``E(c, P) = {x : (x - c)^T P^{-1} (x - c) <= 1}``.
+
+    Parameters
+    ----------
+    center : (n,) array_like
+    shape : (n, n) array_like, symmetric positive definite
+    """
+
+    center: np.ndarray
+    shape: np.ndarray
+
+    def __post_init__(self) -> None:
+        P = check_covariance(self.shape, "shape", definite=True)
+        if P.ndim != 2:
+            raise ValueError(f"shape must be a single (n, n) matrix; got shape {P.shape}")
+        c = as_vector(self.center, "center", P.shape[0])
+        object.__setattr__(self, "shape", 0.5 * (P + P.T))
+        object.__setattr__(self, "center", c)
+
+    @property
+    def dim(self) -> int:
+        """Dimension n of the space."""
+        return self.center.shape[0]
+
+    @property
+    def trace(self) -> float:
+        """``trace(P)``: the sum of the squared semi-axis lengths."""
+        return float(np.trace(self.shape))
+
+    @property
+    def volume(self) -> float:
+        """Lebesgue volume ``vol(unit ball) * sqrt(det P)``."""
+        return float(volume(self.shape))
+
+    def contains(self, points: ArrayLike, rtol: float = 1e-9) -> np.ndarray:
+        """Boolean membership of points (..., n); see :func:`contains`."""
+        return contains(points, self.center, self.shape, rtol)
+
+    def affine_image(self, M: ArrayLike, b: ArrayLike | None = None) -> "Ellipsoid":
+        """``{M x + b : x in E}`` (M must have full row rank to stay non-degenerate)."""
+        c, P = affine_image(self.center, self.shape, M, b)
+        return Ellipsoid(c, P)
+
+    def __add__(self, other: "Ellipsoid") -> "Ellipsoid":
+        """Trace-optimal outer ellipsoid of the Minkowski sum."""
+        if not isinstance(other, Ellipsoid):
+            return NotImplemented
+        c, P, _ = minkowski_sum_min_trace(self.center, self.shape, other.center, other.shape)
+        return Ellipsoid(c, P)
+
+    def sample_boundary(self, rng: np.random.Generator, size: int) -> np.ndarray:
+        """`size` points on the boundary (directions uniform on the unit sphere)."""
+        return sample_boundary(rng, self.center, self.shape, size)
+
+    def sample_interior(self, rng: np.random.Generator, size: int) -> np.ndarray:
+        """`size` points uniform in the ellipsoid."""
+        return sample_interior(rng, self.center, self.shape, size)
+
+
+def trace(shape: ArrayLike) -> np.ndarray:
+    """``trace(P)`` of one or a stack (..., n, n) of shape matrices."""
+    return np.trace(np.asarray(shape, dtype=float), axis1=-2, axis2=-1)
+
+
+def volume(shape: ArrayLike) -> np.ndarray:
+    """Volume ``pi^(n/2) / Gamma(n/2 + 1) * sqrt(det P)`` of E(c, P); shape (...,)."""
+    P = np.asarray(shape, dtype=float)
+    n = P.shape[-1]
+    unit = math.pi ** (n / 2) / math.gamma(n / 2 + 1)
+    return unit * np.sqrt(np.clip(np.linalg.det(P), 0.0, None))
+
+
+def contains(points: ArrayLike, center: ArrayLike, shape: ArrayLike, rtol: float = 1e-9) -> np.ndarray:
+    """Whether points lie in ``E(c, P)`` (within ``1 + rtol``).
+
+    Parameters
+    ----------
+    points : (..., n) array_like
+    center : (..., n) array_like, broadcast against `points`
+    shape : (..., n, n) array_like, positive definite
+    rtol : float
+        Accept ``(x - c)^T P^{-1} (x - c) <= 1 + rtol`` (round-off and solver tolerance).
+
+    Returns
+    -------
+    (...,) bool ndarray
+    """
+    return mahalanobis_sq(points, center, shape) <= 1.0 + rtol
+
+
+def mahalanobis_sq(points: ArrayLike, center: ArrayLike, shape: ArrayLike) -> np.ndarray:
+    """``(x - c)^T P^{-1} (x - c)`` broadcast over leading dimensions; shape (...,)."""
+    d = np.asarray(points, dtype=float) - np.asarray(center, dtype=float)
+    P = np.asarray(shape, dtype=float)
+    P, d = np.broadcast_arrays(P, d[..., None])
+    sol = np.linalg.solve(P, d[..., :1])[..., 0]
+    return np.einsum("...i,...i->...", d[..., 0], sol)
+
+
+def affine_image(
+    center: ArrayLike, shape: ArrayLike, M: ArrayLike, b: ArrayLike | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Image ``{M x + b : x in E(c, P)} = E(M c + b, M P M^T)``.
+
+    Parameters
+    ----------
+    center : (..., n) array_like
+    shape : (..., n, n) array_like
+    M : (m, n) array_like
+    b : (m,) array_like, optional
+
+    Returns
+    -------
+    center : (..., m) ndarray
+    shape : (..., m, m) ndarray
+        Symmetric; only positive semidefinite if M lacks full row rank.
+    """
+    M = as_matrix(M, "M")
+    c = np.asarray(center, dtype=float)
+    P = np.asarray(shape, dtype=float)
+    if c.shape[-1] != M.shape[1] or P.shape[-1] != M.shape[1]:
+        raise ValueError(f"M has {M.shape[1]} columns but the ellipsoid lives in R^{c.shape[-1]}")
+    new_c = c @ M.T
+    if b is not None:
+        new_c = new_c + as_vector(b, "b", M.shape[0])
+    new_P = M @ P @ M.T
+    return new_c, 0.5 * (new_P + np.swapaxes(new_P, -1, -2))
+
+
+def minkowski_sum(
+    center1: ArrayLike, shape1: ArrayLike, center2: ArrayLike, shape2: ArrayLike, beta: ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    """Member of the outer family of ``E(c1, P1) + E(c2, P2)`` for parameter beta in (0, 1).
+
+    ``E(c1 + c2, P1 / (1 - beta) + P2 / beta)`` contains the sum for every beta
+    (Schweppe 1968); beta broadcasts over the batch dimensions.
+    """
+    beta = np.asarray(beta, dtype=float)[..., None, None]
+    if np.any((beta <= 0) | (beta >= 1)):
+        raise ValueError("beta must lie strictly between 0 and 1")
+    c = np.asarray(center1, dtype=float) + np.asarray(center2, dtype=float)
+    P = np.asarray(shape1, dtype=float) / (1 - beta) + np.asarray(shape2, dtype=float) / beta
+    return c, P
+
+
+def minkowski_sum_min_trace(
+    center1: ArrayLike, shape1: ArrayLike, center2: ArrayLike, shape2: ArrayLike
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Trace-optimal member of the outer family of a Minkowski sum.
+
+    ``trace(P1 / (1 - b) + P2 / b) = t1 / (1 - b) + t2 / b`` is minimised at
+    ``b* = sqrt(t2) / (sqrt(t1) + sqrt(t2))`` with value ``(sqrt(t1) + sqrt(t2))^2``.
+    This equals the optimum of the prediction SDP, eq. (8) of Bhattacharjee
+    and Subbarao (2021), with ``P1 = A P A^T``, ``P2 = G Q G^T``.
+
+    Parameters
+    ----------
+    center1, center2 : (..., n) array_like
+    shape1, shape2 : (..., n, n) array_like, positive semidefinite (either may be singular,
+        not both zero)
+
+    Returns
+    -------
+    center : (..., n) ndarray
+    shape : (..., n, n) ndarray
+    beta : (...,) ndarray
+        The optimal parameter (0 when ``trace(P2) = 0``, 1 when ``trace(P1) = 0``).
+    """
+    P1 = np.asarray(shape1, dtype=float)
+    P2 = np.asarray(shape2, dtype=float)
+    s1 = np.sqrt(np.clip(trace(P1), 0.0, None))
+    s2 = np.sqrt(np.clip(trace(P2), 0.0, None))
+    total = s1 + s2
+    if np.any(total <= 0):
+        raise ValueError("Minkowski sum of two points: both shape matrices are zero")
+    # P1 / (1 - b) + P2 / b with b = s2 / (s1 + s2)  ==  (s1 + s2) (P1 / s1 + P2 / s2)
+    w1 = np.divide(total, s1, out=np.zeros_like(total), where=s1 > 0)[..., None, None]
+    w2 = np.divide(total, s2, out=np.zeros_like(total), where=s2 > 0)[..., None, None]
+    P = w1 * P1 + w2 * P2
+    c = np.asarray(center1, dtype=float) + np.asarray(center2, dtype=float)
+    return c, 0.5 * (P + np.swapaxes(P, -1, -2)), s2 / total
+
+
+def intersection_gain_form(
+    center: ArrayLike, shape: ArrayLike, C: ArrayLike, y: ArrayLike, W: ArrayLike, t: ArrayLike,
+    shrink: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Member t of the ellipsoid/measurement-set intersection family, in gain form.
+
+    The set ``{x : (1 - t) |x - c|^2_{P^{-1}} + t |y - C x|^2_{W^{-1}} <= 1}`` is
+    ``E(c + L (y - C c), delta * P_t)`` with the Kalman-like formulas::
+
+        S = C P C^T / (1 - t) + W / t,   L = P C^T S^{-1} / (1 - t),
+        P_t = (P - L C P) / (1 - t)  =  (I - L C) P (I - L C)^T / (1 - t) + L W L^T / t,
+        delta = 1 - nu^T S^{-1} nu,   nu = y - C c.
+
+    (the second, Joseph-like form is the one evaluated: it is the matrix of the
+    SDP's LMI and stays accurate as t -> 1.)
+
+    With ``shrink=False`` the factor delta is dropped (``delta = 1``): the
+    result is then the gain-based outer bound ``(I - L C) P (I - L C)^T / (1 - t)
+    + L W L^T / t`` used by the correction SDP, eqs. (6)-(7), which does not use y
+    in the shape. With ``shrink=True`` it is Schweppe's tighter set.
+
+    Parameters
+    ----------
+    center : (..., n), shape : (..., n, n)
+        Prior ellipsoid E(c, P).
+    C : (p, n) array_like
+    y : (..., p) array_like
+    W : (p, p) array_like, positive definite (``D R D^T``)
+    t : (...,) array_like in (0, 1)
+    shrink : bool
+
+    Returns
+    -------
+    center : (..., n), shape : (..., n, n), gain L : (..., n, p)
+    """
+    C = as_matrix(C, "C")
+    c = np.asarray(center, dtype=float)
+    P = np.asarray(shape, dtype=float)
+    W = np.asarray(W, dtype=float)
+    t = np.asarray(t, dtype=float)[..., None, None]
+    PCt = P @ C.T
+    S = (C @ PCt) / (1 - t) + W / t
+    L = np.swapaxes(np.linalg.solve(S, np.swapaxes(PCt, -1, -2)), -1, -2) / (1 - t)
+    IKC = np.eye(P.shape[-1]) - L @ C
+    Pt = IKC @ P @ np.swapaxes(IKC, -1, -2) / (1 - t) + L @ W @ np.swapaxes(L, -1, -2) / t  # Joseph form
+    nu = np.asarray(y, dtype=float) - c @ C.T
+    new_c = c + np.einsum("...ij,...j->...i", L, nu)
+    if shrink:
+        delta = 1.0 - np.einsum("...i,...i->...", nu, np.linalg.solve(S, nu[..., None])[..., 0])
+        Pt = delta[..., None, None] * Pt
+    return new_c, 0.5 * (Pt + np.swapaxes(Pt, -1, -2)), L
+
+
+def intersection_family(
+    center: ArrayLike, shape: ArrayLike, C: ArrayLike, y: ArrayLike, W: ArrayLike, t: ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    """Schweppe's outer ellipsoid of ``E(c, P) ∩ {x : |y - C x|_{W^{-1}} <= 1}`` for t in (0, 1).
+
+    Returns ``(center, shape)``; the shape includes the shrink factor delta and
+    is not positive definite when delta <= 0 (then the intersection is empty,
+    or a single point when delta = 0).
+    """
+    c, P, _ = intersection_gain_form(center, shape, C, y, W, t, shrink=True)
+    return c, P
+
+
+def intersection_min_trace(
+    center: ArrayLike, shape: ArrayLike, C: ArrayLike, y: ArrayLike, W: ArrayLike,
+    shrink: bool = False, tol: float = 1e-13, max_iter: int = 100,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Trace-optimal member of the intersection family (batched 1-D search).
+
+    With ``shrink=False`` this is the closed-form twin of the correction SDP of
+    Bhattacharjee and Subbarao (2021), eqs. (6)-(7): the SDP optimum over the
+    gain L and the multipliers is attained in the family of
+    :func:`intersection_gain_form` with ``t = tau_2``, ``1 - t = tau_1``.
+
+    The search exploits structure: with ``P = E E^T`` and
+    ``E^T C^T W^{-1} C E = U diag(m) U^T``,
+    ``trace P_t = sum_i h_i / (1 + t (m_i - 1))`` with ``h = diag(U^T E^T E U)``,
+    a convex function of t; its minimiser is found by safeguarded Newton
+    iterations on the derivative, vectorized over the batch.
+    With ``shrink=True`` the factor delta(t) multiplies this function; the
+    minimiser of the product is then found by a bounded golden-section search.
+
+    Returns
+    -------
+    center : (..., n), shape : (..., n, n), gain : (..., n, p), t : (...,)
+    """
+    c = np.asarray(center, dtype=float)
+    P = np.asarray(shape, dtype=float)
+    C = as_matrix(C, "C")
+    W = np.asarray(W, dtype=float)
+    if C.shape[0] == 1 and not shrink:
+        return _min_trace_one_measurement(c, P, C, y, W)
+    h, m = _trace_profile(P, C, W)
+    if shrink:
+        nu = np.asarray(y, dtype=float) - c @ C.T
+        t = _golden(lambda tt: _trace_delta(tt, P, C, W, nu, h, m), P.shape[:-2], tol=1e-10)
+    else:
+        t = _newton_trace(h, m, tol, max_iter)
+    new_c, new_P, L = intersection_gain_form(c, P, C, y, W, t, shrink=shrink)
+    return new_c, new_P, L, t
+
+
+def max_innovation_form(
+    center: ArrayLike, shape: ArrayLike, C: ArrayLike, y: ArrayLike, W: ArrayLike, n_iter: int = 60,
+) -> np.ndarray:
+    """``max_t nu^T (W / t + C P C^T / (1 - t))^{-1} nu``, nu = y - C c; shape (...,).
+
+    This is the largest value of ``min_x q_t(x)`` over the intersection family;
+    the intersection ``E(c, P) ∩ {x : |y - C x|_{W^{-1}} <= 1}`` is empty iff it
+    exceeds 1. For one measurement (p = 1) the maximum is
+    ``nu^2 / (sqrt(W) + sqrt(C P C^T))^2`` (the strip misses the projected
+    ellipsoid); otherwise the concave function of t is maximised by bisection
+    on its derivative after a simultaneous diagonalisation.
+    """
+    C = as_matrix(C, "C")
+    c = np.asarray(center, dtype=float)
+    P = np.asarray(shape, dtype=float)
+    W = np.asarray(W, dtype=float)
+    nu = np.asarray(y, dtype=float) - c @ C.T
+    S0 = C @ P @ C.T
+    if C.shape[0] == 1:
+        return nu[..., 0] ** 2 / (np.sqrt(W[..., 0, 0]) + np.sqrt(np.clip(S0[..., 0, 0], 0, None))) ** 2
+    Fi = np.linalg.inv(np.linalg.cholesky(W))
+    sig, V = np.linalg.eigh(Fi @ S0 @ np.swapaxes(Fi, -1, -2))
+    sig = np.clip(sig, 0.0, None)
+    z2 = np.einsum("...ji,...j->...i", V, np.einsum("...ij,...j->...i", Fi, nu)) ** 2
+    # g(t) = sum z2 * t (1 - t) / ((1 - t) + sig t); g'(t) changes sign once (g concave)
+    lo = np.zeros(sig.shape[:-1])
+    hi = np.ones(sig.shape[:-1])
+    for _ in range(n_iter):
+        mid = 0.5 * (lo + hi)
+        tt = mid[..., None]
+        den = (1 - tt) + sig * tt
+        dg = np.sum(z2 * ((1 - 2 * tt) * den - tt * (1 - tt) * (sig - 1)) / den**2, axis=-1)
+        lo = np.where(dg > 0, mid, lo)
+        hi = np.where(dg > 0, hi, mid)
+    tt = (0.5 * (lo + hi))[..., None]
+    return np.sum(z2 * tt * (1 - tt) / ((1 - tt) + sig * tt), axis=-1)
+
+
+def intersection_is_empty(
+    center: ArrayLike, shape: ArrayLike, C: ArrayLike, y: ArrayLike, W: ArrayLike, rtol: float = 1e-9
+) -> np.ndarray:
+    """True where ``E(c, P) ∩ {x : (y - C x)^T W^{-1} (y - C x) <= 1}`` is empty."""
+    return max_innovation_form(center, shape, C, y, W) > 1.0 + rtol
+
+
+def sample_boundary(
+    rng: np.random.Generator, center: ArrayLike, shape: ArrayLike, size: int | tuple[int, ...] = ()
+) -> np.ndarray:
+    """Points ``c + E u`` with u uniform on the unit sphere (``P = E E^T``); shape (*size, n)."""
+    rng = check_generator(rng)
+    P = check_covariance(shape, "shape")
+    c = as_vector(center, "center", P.shape[0])
+    size = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
+    u = rng.standard_normal((*size, P.shape[0]))
+    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    return c + u @ _sqrt_factor(P).T
+
+
+def sample_interior(
+    rng: np.random.Generator, center: ArrayLike, shape: ArrayLike, size: int | tuple[int, ...] = ()
+) -> np.ndarray:
+    """Points uniform in E(c, P); shape (*size, n)."""
+    rng = check_generator(rng)
+    P = check_covariance(shape, "shape")
+    n = P.shape[0]
+    c = as_vector(center, "center", n)
+    size = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
+    u = rng.standard_normal((*size, n))
+    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    u *= rng.random((*size, 1)) ** (1.0 / n)
+    return c + u @ _sqrt_factor(P).T
+
+
+def _sqrt_factor(P: np.ndarray) -> np.ndarray:
+    w, V = np.linalg.eigh(P)
+    return V * np.sqrt(np.clip(w, 0.0, None))
+
+
+def _trace_profile(P: np.ndarray, C: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """h, m with trace P_t = sum_i h_i / (1 + t (m_i - 1)) (see intersection_min_trace)."""
+    try:
+        E = np.linalg.cholesky(P)
+    except np.linalg.LinAlgError as exc:
+        raise ValueError("prior shape matrix is not positive definite") from exc
+    try:
+        Wi = np.linalg.inv(np.linalg.cholesky(W))
+    except np.linalg.LinAlgError as exc:
+        raise ValueError("measurement shape W = D R D^T must be positive definite") from exc
+    F = Wi @ C @ E  # (..., p, n)
+    m, U = np.linalg.eigh(np.swapaxes(F, -1, -2) @ F)
+    EU = E @ U
+    h = np.einsum("...ij,...ij->...j", EU, EU)
+    return h, np.clip(m, 0.0, None)
+
+
+def _min_trace_one_measurement(c, P, C, y, W):
+    """intersection_min_trace for a single measurement (p = 1), in closed form.
+
+    With ``s = C P C^T``, ``g = P C^T``, ``b = |g|^2 / s``, ``a = trace P - b`` and
+    ``mu = s / W``: ``trace P_t = a / (1 - t) + b / (1 + t (mu - 1))``, whose
+    minimiser is ``t* = (rho - 1) / (mu - 1 + rho)``, ``rho = sqrt(b (mu - 1) / a)``
+    (``t* = 0`` when ``rho <= 1``: the measurement cannot shrink the trace).
+    """
+    g = P @ C[0]  # (..., n)
+    s = g @ C[0]  # (...,)
+    w = W[..., 0, 0]
+    if np.any(s <= 0):
+        raise ValueError("prior shape matrix is not positive definite (C P C^T <= 0)")
+    if np.any(w <= 0):
+        raise ValueError("measurement shape W = D R D^T must be positive definite")
+    b = np.einsum("...i,...i->...", g, g) / s
+    a = np.clip(trace(P) - b, 0.0, None)
+    mu = s / w
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = np.sqrt(np.clip(b * (mu - 1.0), 0.0, None) / a)
+        t = np.where(np.isfinite(rho), (rho - 1.0) / (mu - 1.0 + rho), 1.0)
+    t = np.clip(np.where(mu > 1.0, t, 0.0), _T_MIN, 1.0 - _T_MIN)
+    S = s / (1.0 - t) + w / t
+    L = g / ((1.0 - t) * S)[..., None]
+    # Joseph form (I - L C) P (I - L C)^T / (1 - t) + L W L^T / t: the matrix of the SDP, stable as t -> 1
+    IKC = np.eye(P.shape[-1]) - L[..., :, None] * C[0]
+    Pt = (IKC @ P @ np.swapaxes(IKC, -1, -2) / (1.0 - t)[..., None, None]
+          + (w / t)[..., None, None] * L[..., :, None] * L[..., None, :])
+    nu = np.asarray(y, dtype=float)[..., 0] - c @ C[0]
+    return c + L * nu[..., None], 0.5 * (Pt + np.swapaxes(Pt, -1, -2)), L[..., None], t
+
+
+#: Smallest family parameter used (t = 0 or 1 are limits of the family).
+_T_MIN = 1e-12
+
+
+def _newton_trace(h: np.ndarray, m: np.ndarray, tol: float, max_iter: int) -> np.ndarray:
+    """Minimiser over t in (0, 1) of f(t) = sum h / (1 + t (m - 1)), batched."""
+    a = m - 1.0
+    lo = np.zeros(h.shape[:-1])
+    hi = np.ones(h.shape[:-1])
+    t = np.full(h.shape[:-1], 0.5)
+    for _ in range(max_iter):
+        den = 1.0 + t[..., None] * a
+        d1 = -np.sum(h * a / den**2, axis=-1)
+        d2 = 2.0 * np.sum(h * a**2 / den**3, axis=-1)
+        lo = np.where(d1 < 0, t, lo)
+        hi = np.where(d1 < 0, hi, t)
+        step = np.divide(d1, d2, out=np.zeros_like(d1), where=d2 > 0)
+        new = t - step
+        bad = ~((new > lo) & (new < hi))
+        new = np.where(bad, 0.5 * (lo + hi), new)
+        done = np.abs(new - t) <= tol
+        t = new
+        if np.all(done):
+            break
+    return np.clip(t, 1e-15, 1 - 1e-15)
+
+
+def _trace_delta(t, P, C, W, nu, h, m):
+    tt = t[..., None]
+    f = np.sum(h / (1.0 + tt * (m - 1.0)), axis=-1)
+    S = (C @ P @ C.T) / (1 - tt[..., None]) + W / tt[..., None]
+    delta = 1.0 - np.einsum("...i,...i->...", nu, np.linalg.solve(S, nu[..., None])[..., 0])
+    return delta * f
+
+
+def _golden(fun, batch_shape, tol: float = 1e-10) -> np.ndarray:
+    """Batched golden-section minimisation of a unimodal function on (0, 1)."""
+    g = (math.sqrt(5) - 1) / 2
+    a = np.full(batch_shape, 1e-12)
+    b = np.full(batch_shape, 1 - 1e-12)
+    x1 = b - g * (b - a)
+    x2 = a + g * (b - a)
+    f1, f2 = fun(x1), fun(x2)
+    while np.max(b - a) > tol:
+        left = f1 < f2
+        b = np.where(left, x2, b)
+        a = np.where(left, a, x1)
+        x2n = np.where(left, x1, a + g * (b - a))
+        x1n = np.where(left, b - g * (b - a), x2)
+        f_new = fun(np.where(left, x1n, x2n))
+        f2, f1 = np.where(left, f1, f_new), np.where(left, f_new, f2)
+        x1, x2 = x1n, x2n
+    return 0.5 * (a + b)

@@ -1,0 +1,424 @@
+"""Ellipsoidal set-membership filter (SMF), Algorithm 1 of Bhattacharjee and Subbarao (2021).
+
+System (eq. (1)), with unknown-but-bounded disturbances::
+
+    x_{k+1} = A x_k + B u_k + G w_k,   w_k in E(0, Q_k)
+    y_k     = C x_k + D v_k,           v_k in E(0, R_k)
+
+and the ellipsoid convention ``E(c, P) = {x : (x - c)^T P^{-1} (x - c) <= 1}``.
+``G`` here is always the *disturbance* matrix of eq. (1); the pinning gains of
+the synchronization law live in :mod:`mascore.synchronization`.
+
+Each step comes in two interchangeable implementations, selected with ``method=``:
+
+``"sdp"``
+    The semidefinite programs of the paper, solved with Clarabel through
+    :func:`mascore._solver.solve`. Correction, eqs. (6)-(7): minimise
+    ``trace(P_{k|k})`` over ``P_{k|k}, L_k, tau_1, tau_2 >= 0`` subject to
+    ``[[-P, Pi], [Pi^T, -Theta]] <= 0`` with
+    ``Pi = [0, (I - L C) E, -L D]``, ``Theta = diag(1 - tau_1 - tau_2, tau_1 I, tau_2 R^{-1})``.
+    Prediction, eq. (8): the same with ``Pi = [0, A E, G]`` and
+    ``Psi = diag(1 - tau_3 - tau_4, tau_3 I, tau_4 Q^{-1})``. The LMIs are the
+    S-procedure certificates that ``x - x_hat`` stays in ``E(0, P)`` whenever
+    ``|z| <= 1`` and ``v^T R^{-1} v <= 1`` (or ``w^T Q^{-1} w <= 1``). Each program
+    is compiled once per problem size with cvxpy ``Parameter`` s and reused.
+
+``"closed_form"``
+    The fast twins. By a Schur complement the LMI reads
+    ``P >= (I - L C) P^- (I - L C)^T / tau_1 + L W L^T / tau_2`` (``W = D R D^T``),
+    whose best L for fixed tau is a Kalman gain: the optimum lies in the
+    one-parameter ellipsoid/strip intersection family and is found by a 1-D
+    convex search (:func:`mascore.ellipsoids.intersection_min_trace`). The
+    prediction optimum is the trace-optimal Minkowski sum, in closed form
+    (:func:`mascore.ellipsoids.minkowski_sum_min_trace`). Both are vectorized
+    over any leading batch dimensions (agents, Monte Carlo runs).
+
+Errors name the step (correction/prediction, time k) and the agent.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from typing import Literal
+
+import cvxpy as cp
+import numpy as np
+from numpy.typing import ArrayLike
+
+from . import ellipsoids
+from ._solver import LMI_EPS, SolverError, solve
+from ._validation import as_matrix, check_covariance, check_square
+
+__all__ = [
+    "METHODS",
+    "FilterHistory",
+    "correct",
+    "predict",
+    "run_filter",
+]
+
+#: Available implementations of each step.
+METHODS = ("sdp", "closed_form")
+
+#: Tolerance of the consistency test y_k vs. the prior ellipsoid (relative, on the quadratic form).
+CONSISTENCY_RTOL = 1e-6
+
+Method = Literal["sdp", "closed_form"]
+
+
+def correct(
+    center: ArrayLike, shape: ArrayLike, y: ArrayLike, C: ArrayLike, D: ArrayLike, R: ArrayLike,
+    method: Method = "closed_form", step: int | None = None, agent: ArrayLike | None = None,
+    check_consistency: bool = True,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Correction step: eqs. (2), (6)-(7).
+
+    Parameters
+    ----------
+    center : (..., n) array_like
+        Predicted centre ``x_hat_{k|k-1}``.
+    shape : (..., n, n) array_like
+        Predicted shape ``P_{k|k-1}``, positive definite.
+    y : (..., p) array_like
+        Measurement ``y_k``.
+    C : (p, n), D : (p, v), R : (v, v) array_like
+        Output matrices and the output-disturbance shape (``R`` positive definite,
+        ``D R D^T`` positive definite for ``method="closed_form"``).
+    method : {"sdp", "closed_form"}
+    step, agent : optional
+        Time index and agent label(s) used in error messages; `agent` may be an
+        array broadcast against the batch dimensions (e.g. ``np.arange(N)``).
+    check_consistency : bool
+        Raise if ``y`` is inconsistent with the prior ellipsoid (empty intersection).
+
+    Returns
+    -------
+    center : (..., n) ndarray
+        ``x_hat_{k|k} = x_hat_{k|k-1} + L_k (y_k - C x_hat_{k|k-1})``, eq. (2).
+    shape : (..., n, n) ndarray
+        ``P_{k|k}``.
+    gain : (..., n, p) ndarray
+        ``L_k``.
+
+    Raises
+    ------
+    ValueError
+        Non positive-definite prior shape, or empty intersection.
+    SolverError
+        The SDP was not solved to optimality.
+    """
+    method = _check_method(method)
+    c, P = _check_ellipsoid(center, shape, "correction", step, agent)
+    n = c.shape[-1]
+    C = as_matrix(C, "C", (None, n))
+    p = C.shape[0]
+    D = as_matrix(D, "D", (p, None))
+    R = _check_pd_small(R, "R", D.shape[1])
+    y = np.asarray(y, dtype=float)
+    if y.shape[-1:] != (p,):
+        raise ValueError(f"y must have last dimension {p} (rows of C); got shape {y.shape}")
+    batch = np.broadcast_shapes(c.shape[:-1], P.shape[:-2], y.shape[:-1])
+    if c.shape[:-1] != batch or P.shape[:-2] != batch or y.shape[:-1] != batch:
+        c, P, y = (np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n)),
+                   np.broadcast_to(y, (*batch, p)))
+    W = D @ R @ D.T
+    if check_consistency:
+        _check_pd_small(W, "D R D^T (needed to test the consistency of y)", p)
+        q = np.asarray(ellipsoids.max_innovation_form(c, P, C, y, W))
+        bad = q > 1.0 + CONSISTENCY_RTOL
+        if np.any(bad):
+            idx = tuple(int(i) for i in np.argwhere(bad)[0]) if bad.ndim else ()
+            raise ValueError(
+                f"{_where('correction', step, agent, idx, batch)}: measurement y = {y[idx]} is "
+                f"inconsistent with the prior ellipsoid (empty intersection; the innovation form "
+                f"max_t nu^T S_t^-1 nu = {float(q[idx]):.6g} > 1)"
+            )
+    if method == "closed_form":
+        try:
+            new_c, new_P, L, _ = ellipsoids.intersection_min_trace(c, P, C, y, W)
+        except ValueError as exc:
+            raise ValueError(f"{_where('correction', step, agent, None, batch)}: {exc}") from exc
+    else:
+        new_c = np.empty_like(c)
+        new_P = np.empty_like(P)
+        L = np.empty((*batch, n, p))
+        sdp = _correction_sdp(n, p, D.shape[1])
+        Rinv = np.linalg.inv(R)
+        for idx in np.ndindex(*batch):
+            E = _cholesky(P[idx], "correction", step, agent, idx, batch)
+            where = _where("correction SDP eq. (6)", step, agent, idx, batch)
+            new_P[idx], L[idx] = sdp(E, C, D, Rinv, where)
+            new_c[idx] = c[idx] + L[idx] @ (y[idx] - C @ c[idx])
+    _check_result(new_P, "correction", step, agent, batch)
+    return new_c, new_P, L
+
+
+def predict(
+    center: ArrayLike, shape: ArrayLike, A: ArrayLike, G: ArrayLike, Q: ArrayLike,
+    B: ArrayLike | None = None, u: ArrayLike | None = None, method: Method = "closed_form",
+    step: int | None = None, agent: ArrayLike | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Prediction step: eqs. (4), (8).
+
+    Parameters
+    ----------
+    center : (..., n), shape : (..., n, n)
+        Corrected ellipsoid ``E(x_hat_{k|k}, P_{k|k})``.
+    A : (n, n), G : (n, w) disturbance matrix, Q : (w, w) positive definite
+    B : (n, m), u : (..., m), optional
+        Known input.
+    method, step, agent
+        As in :func:`correct`.
+
+    Returns
+    -------
+    center : (..., n) ndarray
+        ``A x_hat_{k|k} + B u_k``, eq. (4).
+    shape : (..., n, n) ndarray
+        ``P_{k+1|k}``.
+    """
+    method = _check_method(method)
+    c, P = _check_ellipsoid(center, shape, "prediction", step, agent)
+    n = c.shape[-1]
+    A = check_square(A, "A", n)
+    G = as_matrix(G, "G (disturbance matrix)", (n, None))
+    Q = _check_pd_small(Q, "Q", G.shape[1])
+    batch = np.broadcast_shapes(c.shape[:-1], P.shape[:-2])
+    if c.shape[:-1] != batch or P.shape[:-2] != batch:
+        c, P = np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n))
+    new_c = c @ A.T
+    if (B is None) != (u is None):
+        raise ValueError("give both B and u, or neither")
+    if B is not None:
+        B = as_matrix(B, "B", (n, None))
+        new_c = new_c + np.asarray(u, dtype=float) @ B.T
+    if method == "closed_form":
+        APA = A @ P @ A.T
+        GQG = np.broadcast_to(G @ Q @ G.T, APA.shape)
+        _, new_P, _ = ellipsoids.minkowski_sum_min_trace(new_c, APA, np.zeros_like(new_c), GQG)
+    else:
+        new_P = np.empty_like(P)
+        sdp = _prediction_sdp(n, G.shape[1])
+        Qinv = np.linalg.inv(Q)
+        for idx in np.ndindex(*batch):
+            E = _cholesky(P[idx], "prediction", step, agent, idx, batch)
+            new_P[idx] = sdp(A @ E, G, Qinv, _where("prediction SDP eq. (8)", step, agent, idx, batch))
+    _check_result(new_P, "prediction", step, agent, batch)
+    return new_c, new_P
+
+
+@dataclass(frozen=True)
+class FilterHistory:
+    """Output of :func:`run_filter` over k = 0..T_f.
+
+    Attributes
+    ----------
+    center_corr, shape_corr : (T_f + 1, ..., n), (T_f + 1, ..., n, n)
+        Correction ellipsoids ``E(x_hat_{k|k}, P_{k|k})``.
+    center_pred, shape_pred : same shapes
+        Prediction ellipsoids ``E(x_hat_{k+1|k}, P_{k+1|k})``.
+    gain : (T_f + 1, ..., n, p)
+    """
+
+    center_corr: np.ndarray
+    shape_corr: np.ndarray
+    center_pred: np.ndarray
+    shape_pred: np.ndarray
+    gain: np.ndarray
+
+
+def run_filter(
+    x0_hat: ArrayLike, P0: ArrayLike, y: ArrayLike, A: ArrayLike, G: ArrayLike, C: ArrayLike,
+    D: ArrayLike, Q: ArrayLike, R: ArrayLike, B: ArrayLike | None = None, u: ArrayLike | None = None,
+    method: Method = "closed_form", agent: ArrayLike | None = None,
+) -> FilterHistory:
+    """Algorithm 1 for open-loop data: correct with ``y[k]``, then predict, k = 0..T_f.
+
+    Parameters
+    ----------
+    x0_hat : (..., n), P0 : (..., n, n)
+        Initial ellipsoid (Assumption 1.1).
+    y : (T_f + 1, ..., p)
+        Measurements.
+    u : (T_f + 1, ..., m), optional
+        Known inputs (with `B`).
+    Q, R : constant disturbance shapes (time-invariant here).
+    """
+    y = np.asarray(y, dtype=float)
+    c, P = np.asarray(x0_hat, dtype=float), np.asarray(P0, dtype=float)
+    out: dict[str, list] = {k: [] for k in ("cc", "pc", "cp", "pp", "L")}
+    for k in range(y.shape[0]):
+        c, P, L = correct(c, P, y[k], C, D, R, method=method, step=k, agent=agent)
+        out["cc"].append(c)
+        out["pc"].append(P)
+        out["L"].append(L)
+        uk = None if u is None else np.asarray(u, dtype=float)[k]
+        c, P = predict(c, P, A, G, Q, B=None if u is None else B, u=uk, method=method, step=k, agent=agent)
+        out["cp"].append(c)
+        out["pp"].append(P)
+    return FilterHistory(np.array(out["cc"]), np.array(out["pc"]), np.array(out["cp"]),
+                         np.array(out["pp"]), np.array(out["L"]))
+
+
+# --------------------------------------------------------------------------- private
+
+
+def _check_method(method: str) -> str:
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}; got {method!r}")
+    return method
+
+
+def _where(what: str, step, agent, idx, batch) -> str:
+    parts = [what + " step" if not what.endswith(")") else what]
+    if step is not None:
+        parts.append(f"k = {step}")
+    if agent is not None:
+        lab = np.broadcast_to(np.asarray(agent), batch) if np.ndim(agent) else np.asarray(agent)
+        if idx is None or not np.ndim(agent):
+            parts.append(f"agent {agent if not np.ndim(agent) else 'batch'}")
+        else:
+            parts.append(f"agent {lab[idx]}")
+    if idx is not None and len(batch):
+        parts.append(f"batch index {idx}")
+    return ", ".join(parts)
+
+
+def _check_ellipsoid(center, shape, what, step, agent):
+    c = np.asarray(center, dtype=float)
+    P = np.asarray(shape, dtype=float)
+    if c.ndim < 1 or P.ndim < 2 or P.shape[-2:] != (c.shape[-1], c.shape[-1]):
+        raise ValueError(
+            f"{_where(what, step, agent, None, ())}: center (..., n) and shape (..., n, n) do not "
+            f"match; got {c.shape} and {P.shape}"
+        )
+    if not (np.isfinite(c).all() and np.isfinite(P).all()):
+        raise ValueError(f"{_where(what, step, agent, None, ())}: center or shape has NaN/inf entries")
+    _require_pd(P, what, step, agent, "the shape matrix")
+    return c, P
+
+
+def _require_pd(P, what, step, agent, label):
+    """Raise naming the step and agent unless every matrix of the stack P is symmetric PD."""
+    scale = np.abs(P).max(axis=(-1, -2))
+    asym = np.abs(P - np.swapaxes(P, -1, -2)).max(axis=(-1, -2)) > 1e-8 * np.maximum(1.0, scale)
+    ok = not np.any(asym)
+    if ok:
+        try:
+            np.linalg.cholesky(P)
+        except np.linalg.LinAlgError:
+            ok = False
+    if ok:
+        return
+    eig = np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2)))[..., 0]
+    bad = (eig <= 0) | asym | ~np.isfinite(eig)
+    batch = bad.shape
+    idx = tuple(int(i) for i in np.argwhere(bad)[0]) if bad.ndim else ()
+    raise ValueError(
+        f"{_where(what, step, agent, idx, batch)}: {label} is not symmetric positive definite "
+        f"(smallest eigenvalue {float(eig[idx]):.3g})"
+    )
+
+
+def _check_result(P, what, step, agent, batch):
+    _require_pd(P, what, step, agent, "the new shape matrix")
+
+
+def _check_pd_small(M, name, size):
+    M = check_square(M, name, size)
+    try:
+        np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        raise ValueError(f"{name} must be symmetric positive definite") from None
+    if np.abs(M - M.T).max() > 1e-8 * max(1.0, np.abs(M).max()):
+        raise ValueError(f"{name} must be symmetric")
+    return M
+
+
+def _cholesky(P, what, step, agent, idx, batch):
+    try:
+        return np.linalg.cholesky(P)
+    except np.linalg.LinAlgError as exc:  # pragma: no cover - caught by _check_ellipsoid first
+        raise ValueError(f"{_where(what, step, agent, idx, batch)}: shape matrix is not positive definite") from exc
+
+
+class _CorrectionSDP:
+    """Eqs. (6)-(7), compiled once for sizes (n, p, v)."""
+
+    def __init__(self, n: int, p: int, nv: int) -> None:
+        self.P = cp.Variable((n, n), symmetric=True, name="P_kk")
+        self.L = cp.Variable((n, p), name="L_k")
+        self.tau = cp.Variable(2, name="tau")
+        self.E = cp.Parameter((n, n), name="E_pred")
+        self.CE = cp.Parameter((p, n), name="CE_pred")
+        self.D = cp.Parameter((p, nv), name="D")
+        self.Rinv = cp.Parameter((nv, nv), symmetric=True, name="R_inv")
+        Pi = cp.hstack([np.zeros((n, 1)), self.E - self.L @ self.CE, -self.L @ self.D])  # eq. (7)
+        t1, t2 = self.tau[0], self.tau[1]
+        Theta = cp.bmat([
+            [cp.reshape(1 - t1 - t2, (1, 1), order="F"), np.zeros((1, n)), np.zeros((1, nv))],
+            [np.zeros((n, 1)), t1 * np.eye(n), np.zeros((n, nv))],
+            [np.zeros((nv, 1)), np.zeros((nv, n)), t2 * self.Rinv],
+        ])
+        M = cp.bmat([[self.P, -Pi], [-Pi.T, Theta]])  # minus the matrix of eq. (6)
+        self.problem = cp.Problem(
+            cp.Minimize(cp.trace(self.P)),
+            [0.5 * (M + M.T) >> 0, self.P >> LMI_EPS * np.eye(n), self.tau >= 0],
+        )
+        assert self.problem.is_dcp(dpp=True)
+
+    def __call__(self, E, C, D, Rinv, where):
+        self.E.value = E
+        self.CE.value = C @ E
+        self.D.value = D
+        self.Rinv.value = 0.5 * (Rinv + Rinv.T)
+        solve(self.problem, where)
+        P = self.P.value
+        return 0.5 * (P + P.T), np.asarray(self.L.value)
+
+
+class _PredictionSDP:
+    """Eq. (8), compiled once for sizes (n, w)."""
+
+    def __init__(self, n: int, nw: int) -> None:
+        self.P = cp.Variable((n, n), symmetric=True, name="P_pred")
+        self.tau = cp.Variable(2, name="tau")
+        self.AE = cp.Parameter((n, n), name="AE_corr")
+        self.G = cp.Parameter((n, nw), name="G_disturbance")
+        self.Qinv = cp.Parameter((nw, nw), symmetric=True, name="Q_inv")
+        Pi = cp.hstack([np.zeros((n, 1)), self.AE, self.G])
+        t3, t4 = self.tau[0], self.tau[1]
+        Psi = cp.bmat([
+            [cp.reshape(1 - t3 - t4, (1, 1), order="F"), np.zeros((1, n)), np.zeros((1, nw))],
+            [np.zeros((n, 1)), t3 * np.eye(n), np.zeros((n, nw))],
+            [np.zeros((nw, 1)), np.zeros((nw, n)), t4 * self.Qinv],
+        ])
+        M = cp.bmat([[self.P, -Pi], [-Pi.T, Psi]])
+        self.problem = cp.Problem(
+            cp.Minimize(cp.trace(self.P)),
+            [0.5 * (M + M.T) >> 0, self.P >> LMI_EPS * np.eye(n), self.tau >= 0],
+        )
+        assert self.problem.is_dcp(dpp=True)
+
+    def __call__(self, AE, G, Qinv, where):
+        self.AE.value = AE
+        self.G.value = G
+        self.Qinv.value = 0.5 * (Qinv + Qinv.T)
+        solve(self.problem, where)
+        P = self.P.value
+        return 0.5 * (P + P.T)
+
+
+@functools.lru_cache(maxsize=16)
+def _correction_sdp(n: int, p: int, nv: int) -> _CorrectionSDP:
+    return _CorrectionSDP(n, p, nv)
+
+
+@functools.lru_cache(maxsize=16)
+def _prediction_sdp(n: int, nw: int) -> _PredictionSDP:
+    return _PredictionSDP(n, nw)
+
+
+# re-exported for callers that catch it from here
+SolverError = SolverError
