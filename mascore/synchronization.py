@@ -169,7 +169,7 @@ def closed_loop_matrices(
 
 def spectral_radius(M: ArrayLike) -> float:
     """``rho(M) = max |eig(M)|``."""
-    return float(np.max(np.abs(np.linalg.eigvals(np.asarray(M, dtype=float)))))
+    return float(np.max(np.abs(np.linalg.eigvals(np.asarray(M)))))
 
 
 def power_norms(M: ArrayLike, k_max: int) -> np.ndarray:
