@@ -108,7 +108,7 @@ def test_reproduce_writes_figures_table_and_required_claims(reproduced):
 
 @pytest.mark.slow
 def test_ledger_verdicts_are_the_documented_ones(reproduced):
-    """Exact design numbers reproduce; Table 1 means are ~7-10 % high (documented), RMS within 5 %."""
+    """Exact design numbers reproduce; Table 1 means are 5-10 % high (documented), RMS within 5 %."""
     _, claims = reproduced
     v = {c.id.split("/")[1]: c.verdict for c in claims}
     for key in ("lemma2-r", "coupling-gain-c", "bound-eq21", "table1-row1-rms", "table1-row2-rms", "table1-row3-rms"):

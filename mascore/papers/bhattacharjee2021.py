@@ -41,7 +41,7 @@ from ..plotting import agent_colors, save_figure, use_style
 __all__ = [
     "ALPHA", "A", "ADJACENCY", "B", "C", "C0", "D", "G_DIST", "LEADER_X0", "MU", "N_AGENTS",
     "P0", "P0_BOUND", "PINNING", "Q_BAR", "Q_RICCATI", "R0", "SETTINGS", "T_F", "X0_HAT",
-    "ClosedLoopRun", "DisturbanceSetting", "design", "draw", "plot_fig1", "plot_fig2",
+    "ClosedLoopRun", "DisturbanceSetting", "Draw", "design", "draw", "ledger_claims", "plot_fig1", "plot_fig2",
     "plot_fig3_4", "plot_fig5", "plot_fig6", "reproduce", "simulate", "table1_study",
 ]
 
@@ -386,10 +386,14 @@ def reproduce(out_dir: Path, seed: int) -> list[Claim]:
     table, runs = table1_study(seed, n_runs=100, progress=True)
     (out_dir / "tables").mkdir(parents=True, exist_ok=True)
     table.to_csv(out_dir / "tables" / "table1.csv", index=False, float_format="%.6g")
-    return _claims(des, run_sdp, table, runs, time.perf_counter() - start, t_sdp, seed)
+    return ledger_claims(des, run_sdp, table, runs, seed, time.perf_counter() - start, t_sdp)
 
 
-def _claims(des, run_sdp, table, runs, seconds, t_sdp, seed) -> list[Claim]:
+def ledger_claims(
+    des: sync.SyncDesign, run_sdp: ClosedLoopRun, table: pd.DataFrame, runs: list[ClosedLoopRun], seed: int,
+    seconds: float | None = None, t_sdp: float | None = None,
+) -> list[Claim]:
+    """The ledger claims from the design, the SDP figure run and the Table 1 study (see :func:`reproduce`)."""
     n_runs = int(table["n_runs"].iloc[0])
     claims = [
         Claim("bhattacharjee2021/lemma2-r", "Sec. 5, text", "Lemma 2's r for the example (Q = 0.1 I, B = I).",
@@ -423,6 +427,11 @@ def _claims(des, run_sdp, table, runs, seconds, t_sdp, seed) -> list[Claim]:
         f"Ours: trace P_{{k|k}} at k = {T_F}, mean over the four agents, SDP path; the paper reads the value "
         f"off its plot ('approximately 1.5', a {4 / 1.5:.3f}-fold decrease); ours is a {4 / tr_end:.3f}-fold decrease. "
         "The trace does not depend on the noise draw (the SDPs use only P, Q, R)."))
+    # the noise-free transient |A_c^k delta_0| / mu_bar from run 0's initial states: what dominates Table 1
+    d0 = (runs[0].x[0, 0] - LEADER_X0).ravel()
+    transient = np.array([np.linalg.norm(np.linalg.matrix_power(des.A_c, k) @ d0) for k in range(T_F + 1)])
+    transient /= sync.mu_bar(ALPHA, MU, N_AGENTS)
+    tr_mean, tr_rms = transient.mean(), np.sqrt((transient**2).mean())
     for i, row in table.iterrows():
         for metric in ("mean", "rms"):
             claims.append(Claim(
@@ -434,7 +443,9 @@ def _claims(des, run_sdp, table, runs, seconds, t_sdp, seed) -> list[Claim]:
                 f"{n_runs} seeds: mean {row[f'{metric}_avg']:.4f}, std {row[f'{metric}_std']:.4f}, 5-95% "
                 f"[{row[f'{metric}_q05']:.4f}, {row[f'{metric}_q95']:.4f}], range [{row[f'{metric}_min']:.4f}, "
                 f"{row[f'{metric}_max']:.4f}]. The paper gives one unseeded MATLAB draw; the tolerance (5 %) was "
-                "fixed before comparing."))
+                "fixed before comparing. The gap is systematic, not a draw effect: the metrics are dominated by the "
+                f"noise-free transient A_c^k delta_0 (alone: mean {tr_mean:.4f}, RMS {tr_rms:.4f}), which the paper's "
+                "A_c, delta_0 and mu_bar fix; we did not find the setting of the authors' runs that explains it."))
     forms = [r.containment for r in runs] + [run_sdp.containment]
     worst = float(max(f.max() for f in forms))
     n_checks = int(sum(f.size for f in forms))
@@ -478,6 +489,6 @@ def _claims(des, run_sdp, table, runs, seconds, t_sdp, seed) -> list[Claim]:
         "Every correction (eqs. (6)-(7)) and prediction (eq. (8)) of the SDP figure run redone in closed form from the "
         "same input ellipsoid (Clarabel's tolerances are 1e-8). Run separately in closed loop the two paths drift apart "
         f"by up to {drift:.1e} in trace: the trace is flat at its optimum, so a solver tolerance eps moves the "
-        "optimal Minkowski-sum parameter, and the shape, by O(sqrt(eps)). "
-        f"Reproduce took {seconds:.1f} s ({t_sdp:.1f} s for the SDP run)."))
+        "optimal Minkowski-sum parameter, and the shape, by O(sqrt(eps))."
+        + (f" Reproduce took {seconds:.1f} s ({t_sdp:.1f} s for the SDP run)." if seconds is not None else "")))
     return claims
