@@ -44,6 +44,7 @@ __all__ = [
     "intersection_gain_form",
     "intersection_is_empty",
     "intersection_min_trace",
+    "mahalanobis_sq",
     "max_innovation_form",
     "minkowski_sum",
     "minkowski_sum_min_trace",
