@@ -227,15 +227,15 @@ def minkowski_sum_min_trace(
     """
     P1 = np.asarray(shape1, dtype=float)
     P2 = np.asarray(shape2, dtype=float)
-    s1 = np.sqrt(np.clip(trace(P1), 0.0, None))
-    s2 = np.sqrt(np.clip(trace(P2), 0.0, None))
+    s1 = np.sqrt(np.maximum(np.trace(P1, axis1=-2, axis2=-1), 0.0))
+    s2 = np.sqrt(np.maximum(np.trace(P2, axis1=-2, axis2=-1), 0.0))
     total = s1 + s2
-    if np.any(total <= 0):
+    if not np.all(total > 0):
         raise ValueError("Minkowski sum of two points: both shape matrices are zero")
-    # P1 / (1 - b) + P2 / b with b = s2 / (s1 + s2)  ==  (s1 + s2) (P1 / s1 + P2 / s2)
-    w1 = np.divide(total, s1, out=np.zeros_like(total), where=s1 > 0)[..., None, None]
-    w2 = np.divide(total, s2, out=np.zeros_like(total), where=s2 > 0)[..., None, None]
-    P = w1 * P1 + w2 * P2
+    # P1 / (1 - b) + P2 / b with b = s2 / (s1 + s2)  ==  (s1 + s2) (P1 / s1 + P2 / s2); a zero term drops out
+    w1 = np.where(s1 > 0, total / np.where(s1 > 0, s1, 1.0), 0.0)
+    w2 = np.where(s2 > 0, total / np.where(s2 > 0, s2, 1.0), 0.0)
+    P = w1[..., None, None] * P1 + w2[..., None, None] * P2
     c = np.asarray(center1, dtype=float) + np.asarray(center2, dtype=float)
     return c, 0.5 * (P + np.swapaxes(P, -1, -2)), s2 / total
 

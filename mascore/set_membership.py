@@ -111,10 +111,10 @@ def correct(
     method = _check_method(method)
     c, P = _check_ellipsoid(center, shape, "correction", step, agent)
     n = c.shape[-1]
-    C = as_matrix(C, "C", (None, n))
+    C = _checked(as_matrix, C, "C", (None, n))
     p = C.shape[0]
-    D = as_matrix(D, "D", (p, None))
-    R = _check_pd_small(R, "R", D.shape[1])
+    D = _checked(as_matrix, D, "D", (p, None))
+    R = _checked(_check_pd_small, R, "R", D.shape[1])
     y = np.asarray(y, dtype=float)
     if y.shape[-1:] != (p,):
         raise ValueError(f"y must have last dimension {p} (rows of C); got shape {y.shape}")
@@ -124,7 +124,7 @@ def correct(
                    np.broadcast_to(y, (*batch, p)))
     W = D @ R @ D.T
     if check_consistency:
-        _check_pd_small(W, "D R D^T (needed to test the consistency of y)", p)
+        _checked(_check_pd_small, W, "D R D^T (needed to test the consistency of y)", p)
         q = np.asarray(ellipsoids.max_innovation_form(c, P, C, y, W))
         bad = q > 1.0 + CONSISTENCY_RTOL
         if np.any(bad):
@@ -181,9 +181,9 @@ def predict(
     method = _check_method(method)
     c, P = _check_ellipsoid(center, shape, "prediction", step, agent)
     n = c.shape[-1]
-    A = check_square(A, "A", n)
-    G = as_matrix(G, "G (disturbance matrix)", (n, None))
-    Q = _check_pd_small(Q, "Q", G.shape[1])
+    A = _checked(check_square, A, "A", n)
+    G = _checked(as_matrix, G, "G (disturbance matrix)", (n, None))
+    Q = _checked(_check_pd_small, Q, "Q", G.shape[1])
     batch = np.broadcast_shapes(c.shape[:-1], P.shape[:-2])
     if c.shape[:-1] != batch or P.shape[:-2] != batch:
         c, P = np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n))
@@ -191,7 +191,7 @@ def predict(
     if (B is None) != (u is None):
         raise ValueError("give both B and u, or neither")
     if B is not None:
-        B = as_matrix(B, "B", (n, None))
+        B = _checked(as_matrix, B, "B", (n, None))
         new_c = new_c + np.asarray(u, dtype=float) @ B.T
     if method == "closed_form":
         APA = A @ P @ A.T
@@ -322,7 +322,28 @@ def _require_pd(P, what, step, agent, label):
 
 
 def _check_result(P, what, step, agent, batch):
-    _require_pd(P, what, step, agent, "the new shape matrix")
+    try:  # results are symmetric by construction: a Cholesky attempt is the whole test
+        np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        _require_pd(P, what, step, agent, "the new shape matrix")
+
+
+_CHECKED: dict = {}
+
+
+def _checked(check, M, name, size):
+    """Validate a (usually constant) system matrix once per distinct value; later calls hit a cache."""
+    arr = np.asarray(M, dtype=float)
+    key = (check.__name__, name, str(size), arr.shape, arr.tobytes())
+    hit = _CHECKED.get(key)
+    if hit is None:
+        hit = check(arr, name, size)
+        hit = np.array(hit, dtype=float)
+        hit.setflags(write=False)
+        if len(_CHECKED) > 512:
+            _CHECKED.clear()
+        _CHECKED[key] = hit
+    return hit
 
 
 def _check_pd_small(M, name, size):
