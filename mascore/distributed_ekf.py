@@ -42,6 +42,7 @@ from numpy.typing import ArrayLike
 from ._validation import check_covariance, check_generator
 from .flocking import (
     FlockingGains,
+    _check_divergence,
     _check_steps,
     _check_team,
     _chol,
@@ -213,6 +214,12 @@ def simulate_estimation_based_flocking(
         ``r`` (m).
     observer : int
         Agent whose estimate and covariance are recorded (0-based).
+
+    Raises
+    ------
+    mascore.flocking.DivergenceError
+        If the true state, an estimate or an estimated standard deviation
+        exceeds ``DIVERGENCE_LIMIT`` (the sampled loop is unstable).
     """
     rng = check_generator(rng)
     X = _check_team(X0, "X0").copy()
@@ -252,6 +259,9 @@ def simulate_estimation_based_flocking(
         U = control_from_views(X_hat, gains)  # eq. (39), virtual fully-connected network
         X = _propagate(X, U, dt) + rng.standard_normal((*batch, N, m)) @ Lq.T  # eq. (1)
         X_hat, Sigma = _predict(X_hat, Sigma, dt, gains, Q_team)  # eqs. (38), (40)
+        _check_divergence(X, k + 1, dt)
+        _check_divergence(X_hat, k + 1, dt, "estimate")
+        _check_divergence(np.sqrt(np.abs(np.diagonal(Sigma, axis1=-2, axis2=-1))), k + 1, dt, "estimated std")
     t = dt * np.arange(n_steps + 1)
     mv = lambda a, nd: np.moveaxis(a, 0, a.ndim - nd - 1)  # noqa: E731  (put time after the batch axes)
     return EstimatedFlockingRun(

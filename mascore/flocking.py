@@ -52,6 +52,8 @@ from .graphs import complete_graph, proximity_graph
 from .sensing import measure, team_noise_covariance
 
 __all__ = [
+    "DivergenceError",
+    "DIVERGENCE_LIMIT",
     "FlockingGains",
     "phi1",
     "phi2",
@@ -66,6 +68,19 @@ __all__ = [
     "flock_spread",
     "max_distance_from_centre",
 ]
+
+
+#: A simulated state component (m or m/s) larger than this means the closed loop diverged.
+DIVERGENCE_LIMIT = 1e7
+
+
+class DivergenceError(FloatingPointError):
+    """The sampled closed loop blew up (raised instead of returning overflowed states).
+
+    With the fully-connected law every agent feels N - 1 springs and dampers,
+    so the loop gain grows with N; with the gains of Song et al. (2023),
+    Table I, and dt = 0.1 s the sampled loop is unstable from about N = 18.
+    """
 
 
 @dataclass(frozen=True)
@@ -366,6 +381,7 @@ def simulate_measured_flocking(
         views, _ = measure(rng, X, A_k, R, allow_isolated=True)  # eq. (2)
         U = control_from_views(views, gains, A_k)  # eq. (7)
         X = _propagate(X, U, dt) + rng.standard_normal((*batch, N, m)) @ Lq.T
+        _check_divergence(X, k + 1, dt)
     t = dt * np.arange(n_steps + 1)
     return FlockingRun(t, np.moveaxis(Xs, 0, -3), np.moveaxis(As, 0, -3))
 
@@ -419,6 +435,14 @@ def _propagate(X: np.ndarray, U: np.ndarray, dt: float) -> np.ndarray:
     n = U.shape[-1]
     p, v = X[..., :n], X[..., n:]
     return np.concatenate([p + dt * v + 0.5 * dt**2 * U, v + dt * U], axis=-1)
+
+
+def _check_divergence(X: np.ndarray, k: int, dt: float, what: str = "team state") -> None:
+    if not np.all(np.abs(X) < DIVERGENCE_LIMIT):
+        raise DivergenceError(
+            f"the closed loop diverged: the {what} exceeded {DIVERGENCE_LIMIT:g} at step {k} (t = {k * dt:g} s); "
+            "the sampled flocking law is unstable for these gains, dt and number of agents"
+        )
 
 
 def _check_team(X: ArrayLike, name: str) -> np.ndarray:

@@ -217,3 +217,15 @@ def test_bad_inputs_raise():
         flocking.simulate_measured_flocking(np.zeros((2, 4)), 5, 0.1, GAINS, -np.eye(4), np.eye(4), 0, None)
     with pytest.raises(TypeError, match="rng"):
         flocking.simulate_measured_flocking(np.zeros((2, 4)), 5, 0.1, GAINS, np.eye(4), np.eye(4), "seed", None)
+
+
+def test_large_fully_connected_team_diverges_with_clear_error():
+    """Beyond the paper: with Table I gains and dt = 0.1 s the sampled fully-connected loop is unstable
+    for N = 24 (N - 1 dampers per agent); the simulator raises instead of returning overflowed states."""
+    rng = np.random.default_rng(8)
+    X0 = np.concatenate([rng.uniform(0, 600, (24, 2)), np.zeros((24, 2))], -1)
+    with pytest.raises(flocking.DivergenceError, match="diverged"):
+        flocking.simulate_measured_flocking(X0, 600, 0.1, GAINS, np.zeros((4, 4)), np.zeros((4, 4)), 0, None)
+    # the same team is stable with a ten times smaller step
+    run = flocking.simulate_measured_flocking(X0, 300, 0.01, GAINS, np.zeros((4, 4)), np.zeros((4, 4)), 0, None)
+    assert np.all(np.isfinite(run.X))

@@ -1,7 +1,8 @@
 """Song et al. (2023), nonlinear part: estimation-based flocking, Figs. 4-6.
 
-Scenarios of Sec. V-B of Song, Lee, Kim, Kim, Sung and Seo, "Distributed
-estimation-based control of stochastic multi-agent systems" (IEEE TCST 2023).
+Scenarios of Sec. V-B of Song, Lee, Kwon, Shin and Oh, "Distributed Estimation
+of Stochastic Multi-Agent Systems for Cooperative Control With a Virtual
+Network", IEEE Trans. Systems, Man, and Cybernetics: Systems 53(4), 2023.
 Algorithms live in :mod:`mascore.flocking` (eqs. (6)-(7), (39)-(40)) and
 :mod:`mascore.distributed_ekf` (eqs. (35)-(40) with the update of
 eqs. (16)-(20)); this module holds the paper's settings, the three cases of
@@ -41,6 +42,7 @@ import numpy as np
 
 from ..distributed_ekf import EstimatedFlockingRun, simulate_estimation_based_flocking
 from ..flocking import (
+    DivergenceError,
     FlockingGains,
     FlockingRun,
     flock_spread,
@@ -77,6 +79,8 @@ __all__ = [
     "fig5_claims",
     "fig6_claim",
     "flocking_claims_and_figures",
+    "beyond_study",
+    "plot_beyond",
 ]
 
 # --- Table I
@@ -101,9 +105,9 @@ SETTLED_WINDOW = 20.0  # s, window at the end over which converged values are av
 CASES = ("(i) measured, proximity graph", "(ii) measured, fully connected", "(iii) estimated, virtual full")
 
 
-def n_steps() -> int:
-    """Number of steps of the horizon ``T_FINAL``."""
-    return int(round(T_FINAL / DT))
+def n_steps(t_final: float = T_FINAL) -> int:
+    """Number of steps of the horizon `t_final` (s)."""
+    return int(round(t_final / DT))
 
 
 def initial_states(rng: np.random.Generator, n_runs: int, n_agents: int = N_AGENTS) -> np.ndarray:
@@ -166,6 +170,9 @@ class Fig5Result:
         True states of run 0 per case (shown in Fig. 6).
     rms_error : (n_runs, T+1) ndarray
         Case (iii): RMS position error (m) over all estimators and agents.
+    diverged : tuple of 3 bool
+        Cases whose sampled loop blew up (their arrays are NaN); never with
+        the paper's settings, but from about N = 18 agents with Table I gains.
     """
 
     t: np.ndarray
@@ -175,6 +182,7 @@ class Fig5Result:
     max_distance: np.ndarray
     trajectories: np.ndarray
     rms_error: np.ndarray
+    diverged: tuple = (False, False, False)
 
     def settled(self, series: np.ndarray) -> np.ndarray:
         """Time average of ``series[..., t]`` over the last ``SETTLED_WINDOW`` seconds."""
@@ -182,31 +190,45 @@ class Fig5Result:
 
 
 def run_fig5(seed: int, n_runs: int = N_RUNS, sensing_range: float = SENSING_RANGE,
-             n_agents: int = N_AGENTS, R: np.ndarray = R_FIG5) -> Fig5Result:
-    """Monte Carlo of the three cases of Fig. 5 (and the configurations of Fig. 6)."""
+             n_agents: int = N_AGENTS, R: np.ndarray = R_FIG5, t_final: float = T_FINAL) -> Fig5Result:
+    """Monte Carlo of the three cases of Fig. 5 (and the configurations of Fig. 6).
+
+    The defaults are the paper's settings; `n_runs`, `sensing_range`,
+    `n_agents` (initial square scaled by ``sqrt(N / 8)`` to keep the density),
+    `R` (measurement noise per agent) and `t_final` (s) may be changed.
+    """
     root = np.random.SeedSequence([seed, 5])
     init_ss, *case_ss = root.spawn(4)
     rng0 = np.random.default_rng(init_ss)
     X0 = initial_states(rng0, n_runs, n_agents)
     X_hat0, Sigma0 = initial_estimates(rng0, X0)
-    runs: list[FlockingRun | EstimatedFlockingRun] = [
-        simulate_measured_flocking(X0, n_steps(), DT, GAINS, Q_AGENT, R, np.random.default_rng(case_ss[0]),
-                                   sensing_range),
-        simulate_measured_flocking(X0, n_steps(), DT, GAINS, Q_AGENT, R, np.random.default_rng(case_ss[1]),
-                                   None),
-        simulate_estimation_based_flocking(X0, X_hat0, Sigma0, n_steps(), DT, GAINS, Q_AGENT, R,
-                                           np.random.default_rng(case_ss[2]), sensing_range),
-    ]
-    spreads = [flock_spread(r.X) for r in runs]  # each (n_runs, T+1)
+    T = n_steps(t_final)
+    simulations = (
+        lambda: simulate_measured_flocking(X0, T, DT, GAINS, Q_AGENT, R, np.random.default_rng(case_ss[0]),
+                                           sensing_range),
+        lambda: simulate_measured_flocking(X0, T, DT, GAINS, Q_AGENT, R, np.random.default_rng(case_ss[1]), None),
+        lambda: simulate_estimation_based_flocking(X0, X_hat0, Sigma0, T, DT, GAINS, Q_AGENT, R,
+                                                   np.random.default_rng(case_ss[2]), sensing_range),
+    )
+    runs: list[FlockingRun | EstimatedFlockingRun | None] = []
+    for simulate in simulations:
+        try:
+            runs.append(simulate())
+        except DivergenceError:
+            runs.append(None)
+    nan_X = np.full((n_runs, T + 1, n_agents, 2 * N_DIM), np.nan)
+    Xs = [nan_X if r is None else r.X for r in runs]
+    spreads = [flock_spread(X) for X in Xs]  # each (n_runs, T+1)
     rms = lambda a: np.sqrt(np.mean(a**2, axis=0))  # noqa: E731
     return Fig5Result(
-        t=runs[0].t,
-        std_p=np.stack([rms(s[0]) for s in spreads]),
-        std_v=np.stack([rms(s[1]) for s in spreads]),
-        final=np.stack([r.X[:, -1] for r in runs]),
-        max_distance=np.stack([max_distance_from_centre(r.X) for r in runs]),
-        trajectories=np.stack([r.X[0] for r in runs]),
-        rms_error=runs[2].rms_error,
+        t=DT * np.arange(T + 1),
+        std_p=np.stack([rms(sp[0]) for sp in spreads]),
+        std_v=np.stack([rms(sp[1]) for sp in spreads]),
+        final=np.stack([X[:, -1] for X in Xs]),
+        max_distance=np.stack([max_distance_from_centre(X) for X in Xs]),
+        trajectories=np.stack([X[0] for X in Xs]),
+        rms_error=np.full((n_runs, T + 1), np.nan) if runs[2] is None else runs[2].rms_error,
+        diverged=tuple(r is None for r in runs),
     )
 
 
@@ -399,7 +421,7 @@ def fig6_claim(res: Fig5Result) -> Claim:
         "the proximity graph (i).",
         value, holds,
         note=("Lists are cases [(i), (ii), (iii)] at t = "
-              f"{T_FINAL:.0f} s over {d_end.shape[1]} runs (Q=I, R=10I). Without noise, a fully-connected "
+              f"{res.t[-1]:.0f} s over {d_end.shape[1]} runs (Q=I, R=10I). Without noise, a fully-connected "
               "equilibrium has N (p_i - CoM) = R sum_j (p_i - p_j)/|p_i - p_j|, so |p_i - CoM| <= R (N-1)/N "
               "= 105 m for N = 8: the spring rest length R bounds the flock only when every pair interacts. "
               "On the proximity graph (r = 150 m, only 30 m above the rest length) agents settle about R "
@@ -424,3 +446,73 @@ def flocking_claims_and_figures(out_dir: Path | str, seed: int) -> list[Claim]:
                     f"{np.median(res.max_distance[c, :, -1]):.4f}")
     (tables / "fig5_fig6_flocking.csv").write_text("\n".join(rows) + "\n")
     return [fig4_claim(run4), *fig5_claims(res), fig6_claim(res)]
+
+
+# ----------------------------------------------------------------------------- beyond the paper
+
+
+def beyond_study(seed: int, sensing_ranges=(130.0, 150.0, 200.0, 250.0), sizes=(4, 8, 12, 16, 20, 32),
+                 n_runs: int = 4, t_final: float = 40.0, progress: bool = False):
+    """Flock size and estimation error against the sensing range r (N = 8) and the team size N (r = 150 m).
+
+    Not in the paper. For each setting, the three cases of Fig. 5 are run with
+    the Fig. 5 noise (Q = I, R = 10 I); reported: the median over runs of the
+    final largest distance from the centre of mass for cases (i)-(iii), the
+    settled RMS position error of all estimators in case (iii), which cases
+    are unstable (blew up past ``DIVERGENCE_LIMIT``, or ended with an agent
+    farther than 10 R from the centre of mass), and the wall time per step of
+    the three cases together (all runs, this machine).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per (N, r).
+    """
+    import time
+
+    import pandas as pd
+    from tqdm.auto import tqdm
+
+    settings = [(N_AGENTS, r) for r in sensing_ranges] + [(N, SENSING_RANGE) for N in sizes if N != N_AGENTS]
+    rows = []
+    for N, r in tqdm(settings, disable=not progress, desc="beyond"):
+        start = time.perf_counter()
+        res = run_fig5(seed, n_runs=n_runs, sensing_range=r, n_agents=N, t_final=t_final)
+        elapsed = time.perf_counter() - start
+        d_end = np.median(res.max_distance[:, :, -1], axis=1)
+        rows.append({
+            "N": N, "r_m": r,
+            "max_dist_i_m": d_end[0], "max_dist_ii_m": d_end[1], "max_dist_iii_m": d_end[2],
+            "rms_est_error_iii_m": float(res.settled(np.sqrt(np.mean(res.rms_error**2, axis=0)))),
+            "unstable": ",".join(c for c, d, dist in zip(("(i)", "(ii)", "(iii)"), res.diverged, d_end)
+                                 if d or dist > 10 * GAINS.R) or "-",
+            "wall_s_per_step_all_cases": elapsed / n_steps(t_final),
+        })
+    return pd.DataFrame(rows).sort_values(["N", "r_m"]).reset_index(drop=True)
+
+
+def plot_beyond(table, fig: plt.Figure | None = None) -> plt.Figure:
+    """Largest distance from the CoM and estimation error against r (N = 8) and N (r = 150 m)."""
+    fig = fig or plt.figure(figsize=(12, 3.8))
+    axes = fig.subplots(1, 3)
+    by_r = table[table["N"] == N_AGENTS]
+    by_n = table[table["r_m"] == SENSING_RANGE]
+    for ax, data, x, xlabel in ((axes[0], by_r, "r_m", "sensing range r (m), N = 8"),
+                                (axes[1], by_n, "N", "number of agents N, r = 150 m")):
+        for col, label in (("max_dist_i_m", "(i)"), ("max_dist_ii_m", "(ii)"), ("max_dist_iii_m", "(iii)")):
+            ax.plot(data[x], data[col], "o-", label=label)
+        ax.axhline(GAINS.R, color="k", ls=":", label="R")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("final max |p_i - CoM| (m)")
+        ax.legend()
+    axes[2].plot(by_n["N"], by_n["rms_est_error_iii_m"], "o-", label="vs N (r = 150 m)")
+    axes[2].set_xlabel("number of agents N")
+    axes[2].set_ylabel("settled RMS position error, case (iii) (m)")
+    ax2 = axes[2].twiny()
+    ax2.plot(by_r["r_m"], by_r["rms_est_error_iii_m"], "s--", color="C3", label="vs r (N = 8)")
+    ax2.set_xlabel("sensing range r (m)")
+    ax2.grid(False)
+    lines = axes[2].get_lines() + ax2.get_lines()
+    axes[2].legend(lines, [ln.get_label() for ln in lines])
+    fig.tight_layout()
+    return fig
