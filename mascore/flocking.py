@@ -360,6 +360,15 @@ def simulate_measured_flocking(
     sensing_range : float or None
         ``r`` (m) of the proximity graph (case (i) of Fig. 5); ``None`` for a
         fixed fully-connected network (case (ii)).
+
+    Returns
+    -------
+    FlockingRun
+
+    Raises
+    ------
+    DivergenceError
+        If a state component exceeds ``DIVERGENCE_LIMIT`` (unstable sampled loop).
     """
     rng = check_generator(rng)
     X = _check_team(X0, "X0").copy()
