@@ -340,9 +340,10 @@ def reproduce(out_dir: Path, seed: int) -> list[Claim]:
         "than the centralized optimum of eq. (40).",
         order, all(v["centralized_cost"] <= v["actual_cost"] <= v["bound_J"] * (1 + 1e-6) for v in order.values()),
         "Actual cost: sum of trace(S_i) from the mode Lyapunov equations (57) with equality; centralized: sum "
-        "of traces of eq. (53); all in the transformed coordinates of eq. (32). Noticed: the bound is loose, "
-        "and in every case here the uncoupled observer (Phi = 0) achieves a lower actual cost than the "
-        "LMI's Phi (cost_Phi_0)."))
+        "of traces of eq. (53); all in the transformed coordinates of eq. (32). Noticed: the bound is loose; "
+        "with the reading that reproduces L, the uncoupled observer (Phi = 0, cost_Phi_0) achieves a lower "
+        "actual cost than the LMI's Phi, so minimizing the bound does not minimize the cost; as printed, "
+        "Phi is about 0 and the two coincide."))
 
     # eq. (13) ----------------------------------------------------------------------
     dev = structure_check()
