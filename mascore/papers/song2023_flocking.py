@@ -22,7 +22,7 @@ Settings the paper leaves out, chosen here (one place):
   uniform in [-5, 5] m/s per axis; the same initial states for all three
   cases (common random numbers), independent noise streams per case;
 * Fig. 4 initial positions: a 2 x 4 grid with 100 m spacing (agent 1 at a
-  corner, so that it starts with non-neighbours), plus the same velocity draw;
+  corner, so that it starts with non-neighbours), velocities drawn as above;
 * initial estimates: every agent's prior of the team is the truth plus a draw
   from ``N(0, Sigma0)``, ``Sigma0 = I_N kron diag(10^2, 10^2, 1, 1)``
   (10 m, 1 m/s), the same ``Sigma0`` for all agents (Assumption 2);
