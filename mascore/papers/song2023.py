@@ -344,6 +344,8 @@ def reproduce(out_dir: Path, seed: int) -> list[Claim]:
     """Rebuild Figs. 2-3, the Theorem 1 check and the linear-part ledger claims."""
     out_dir = Path(out_dir)
     claims = _linear_claims(out_dir, seed)
+    from .song2023_flocking import flocking_claims_and_figures  # nonlinear part, Figs. 4-6 (issue 4)
+    claims += flocking_claims_and_figures(out_dir, seed)
     return claims
 
 
