@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
+from tqdm.auto import tqdm
 
 from ._validation import check_covariance, check_generator
 from .flocking import (
@@ -183,6 +184,7 @@ def simulate_estimation_based_flocking(
     rng: np.random.Generator | int,
     sensing_range: float,
     observer: int = 0,
+    progress: bool = False,
 ) -> EstimatedFlockingRun:
     """Estimation-based flocking over a virtual fully-connected network, Sec. III-B.
 
@@ -214,6 +216,8 @@ def simulate_estimation_based_flocking(
         ``r`` (m).
     observer : int
         Agent whose estimate and covariance are recorded (0-based).
+    progress : bool
+        Show a ``tqdm`` progress bar over the steps.
 
     Raises
     ------
@@ -245,7 +249,7 @@ def simulate_estimation_based_flocking(
     var_obs = np.empty((n_steps + 1, *batch, N))
     rms = np.empty((n_steps + 1, *batch))
     pos_idx = (np.arange(N)[:, None] * m + np.arange(n)[None, :])  # (N, n) flat indices of positions
-    for k in range(n_steps + 1):
+    for k in tqdm(range(n_steps + 1), disable=not progress, desc="EKF flocking", leave=False):
         A_k = proximity_graph(X[..., :n], sensing_range).astype(bool)
         z, observed = measure(rng, X, A_k, R_team, allow_isolated=True)  # eqs. (2)-(3)
         X_hat, Sigma = _update(X_hat, Sigma, z, observed, R_team)  # eqs. (16)-(20)

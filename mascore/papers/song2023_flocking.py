@@ -190,7 +190,8 @@ class Fig5Result:
 
 
 def run_fig5(seed: int, n_runs: int = N_RUNS, sensing_range: float = SENSING_RANGE,
-             n_agents: int = N_AGENTS, R: np.ndarray = R_FIG5, t_final: float = T_FINAL) -> Fig5Result:
+             n_agents: int = N_AGENTS, R: np.ndarray = R_FIG5, t_final: float = T_FINAL,
+             progress: bool = False) -> Fig5Result:
     """Monte Carlo of the three cases of Fig. 5 (and the configurations of Fig. 6).
 
     The defaults are the paper's settings; `n_runs`, `sensing_range`,
@@ -208,7 +209,8 @@ def run_fig5(seed: int, n_runs: int = N_RUNS, sensing_range: float = SENSING_RAN
                                            sensing_range),
         lambda: simulate_measured_flocking(X0, T, DT, GAINS, Q_AGENT, R, np.random.default_rng(case_ss[1]), None),
         lambda: simulate_estimation_based_flocking(X0, X_hat0, Sigma0, T, DT, GAINS, Q_AGENT, R,
-                                                   np.random.default_rng(case_ss[2]), sensing_range),
+                                                   np.random.default_rng(case_ss[2]), sensing_range,
+                                                   progress=progress),
     )
     runs: list[FlockingRun | EstimatedFlockingRun | None] = []
     for simulate in simulations:
@@ -435,7 +437,7 @@ def flocking_claims_and_figures(out_dir: Path | str, seed: int) -> list[Claim]:
     out_dir = Path(out_dir)
     run4 = run_fig4(seed)
     save_figure(plot_fig4(run4), out_dir / "figures" / "fig4.png")
-    res = run_fig5(seed)
+    res = run_fig5(seed, progress=True)
     save_figure(plot_fig5(res), out_dir / "figures" / "fig5.png")
     save_figure(plot_fig6(res), out_dir / "figures" / "fig6.png")
     tables = out_dir / "tables"
