@@ -38,7 +38,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from tqdm.auto import tqdm
 
 from ._validation import check_covariance, check_generator
 from .flocking import (
@@ -249,7 +248,12 @@ def simulate_estimation_based_flocking(
     var_obs = np.empty((n_steps + 1, *batch, N))
     rms = np.empty((n_steps + 1, *batch))
     pos_idx = (np.arange(N)[:, None] * m + np.arange(n)[None, :])  # (N, n) flat indices of positions
-    for k in tqdm(range(n_steps + 1), disable=not progress, desc="EKF flocking", leave=False):
+    steps = range(n_steps + 1)
+    if progress:
+        from tqdm.auto import tqdm  # imported only when asked for (no widget warning in notebooks)
+
+        steps = tqdm(steps, desc="EKF flocking", leave=False)
+    for k in steps:
         A_k = proximity_graph(X[..., :n], sensing_range).astype(bool)
         z, observed = measure(rng, X, A_k, R_team, allow_isolated=True)  # eqs. (2)-(3)
         X_hat, Sigma = _update(X_hat, Sigma, z, observed, R_team)  # eqs. (16)-(20)

@@ -473,11 +473,14 @@ def beyond_study(seed: int, sensing_ranges=(130.0, 150.0, 200.0, 250.0), sizes=(
     import time
 
     import pandas as pd
-    from tqdm.auto import tqdm
 
     settings = [(N_AGENTS, r) for r in sensing_ranges] + [(N, SENSING_RANGE) for N in sizes if N != N_AGENTS]
     rows = []
-    for N, r in tqdm(settings, disable=not progress, desc="beyond"):
+    if progress:
+        from tqdm.auto import tqdm
+
+        settings = tqdm(settings, desc="beyond")
+    for N, r in settings:
         start = time.perf_counter()
         res = run_fig5(seed, n_runs=n_runs, sensing_range=r, n_agents=N, t_final=t_final)
         elapsed = time.perf_counter() - start
