@@ -26,7 +26,7 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import ArrayLike
 
-from ._solver import LMI_EPS, solve
+from ._solver import solve
 from ._validation import as_matrix, check_covariance, check_square
 from .lqr import _care, is_controllable, laplacian_spectrum
 
@@ -379,7 +379,7 @@ def coupled_gain_lmi(
         lmi1 = (lmi1 + lmi1.T) / 2
         lmi2 = cp.bmat([[Z, np.eye(n)], [np.eye(n), W]])  # eq. (62): Z >= W^{-1}
         lmi2 = (lmi2 + lmi2.T) / 2
-        constraints += [lmi1 << -STRICT_MARGIN * np.eye(n + q + m), lmi2 >> 0, W >> LMI_EPS * np.eye(n)]
+        constraints += [lmi1 << -STRICT_MARGIN * np.eye(n + q + m), lmi2 >> 0]
         objective = objective + len(g) * cp.trace(weight @ Z)
         Ws.append(W)
     # Tie-break: when Phi barely changes the bound (e.g. the lambda = 0 mode pins W2) the optimal face
