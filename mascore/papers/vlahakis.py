@@ -164,9 +164,11 @@ def plot_fig12(res: Fig12Result, axes=None):
         for i in range(data.shape[1]):
             ax.plot(res.t, data[:, i], color=colors[i], label=f"agent {i + 1}")
         ax.axhline(0, color="0.6", lw=0.8)
-        ax.set_xscale("log")  # the fast pole (about -23 rad/s) and the slow one (about -0.25) both show
-        ax.set_xlim(res.t[1], res.t[-1])
-        ax.set_xlabel("time t (s, log scale)")
+        # linear up to 0.1 s, logarithmic after: the fast pole (about -23 rad/s) and the slow one
+        # (about -0.25 rad/s) both show
+        ax.set_xscale("symlog", linthresh=0.1, linscale=0.6)
+        ax.set_xlim(0, res.t[-1])
+        ax.set_xlabel("time t (s, linear to 0.1 s, then log)")
         ax.set_title(f"Q2 = {res.Q2:g}, {title}")
     axes[0].set_ylabel("position estimation error (m)")
     axes[1].legend(loc="upper right", ncols=1)
