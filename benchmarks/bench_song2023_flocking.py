@@ -31,9 +31,7 @@ def _setup(N: int, rng: np.random.Generator):
 
 
 def _batched_step(X_hat, Sigma, Z, S, R, Q):
-    X_up, S_up = dekf.masked_update(X_hat, Sigma, Z, S, R)
-    U = flocking.control_from_views(X_up, s.GAINS)
-    return U, dekf.ekf_predict(X_up, S_up, s.DT, s.GAINS, Q)
+    return dekf.ekf_flocking_step(X_hat, Sigma, Z, S, R, s.DT, s.GAINS, Q)
 
 
 def _loop_step(X_hat, Sigma, Z, S, A, R, Q):
@@ -49,11 +47,19 @@ def _loop_step(X_hat, Sigma, Z, S, A, R, Q):
 
 
 def run(sizes=(8, 16, 32, 64)) -> pd.DataFrame:
-    """Median wall time (s) of one step of all N filters, batched, and (N <= 16) looped."""
+    """Median wall time (s) of one step of all N filters, batched, and (N <= 16) looped.
+
+    The two implementations are checked to agree before they are timed.
+    """
     rng = np.random.default_rng(0)
     rows = []
     for N in sizes:
         X_hat, Sigma, Z, S, A, R, Q = _setup(N, rng)
+        if N <= 16:  # same numbers from both implementations
+            batched = _batched_step(X_hat, Sigma, Z, S, R, Q)
+            for i, (u_i, (x_next, P_next)) in enumerate(_loop_step(X_hat, Sigma, Z, S, A, R, Q)):
+                np.testing.assert_allclose(batched[2][i], u_i, rtol=1e-8, atol=1e-8)
+                np.testing.assert_allclose(batched[4][i], P_next, rtol=1e-8, atol=1e-6)
         repeat = 7 if N <= 16 else 3
         row = {"N": N, "filter_state_size": 4 * N,
                "batched_step_s": median_time(lambda: _batched_step(X_hat, Sigma, Z, S, R, Q), repeat=repeat)}

@@ -58,6 +58,7 @@ from .sensing import measure, team_noise_covariance
 __all__ = [
     "ekf_predict",
     "masked_update",
+    "ekf_flocking_step",
     "EstimatedFlockingRun",
     "simulate_estimation_based_flocking",
 ]
@@ -136,6 +137,53 @@ def masked_update(
         raise ValueError(f"observed must be a boolean array (..., {N}); got {observed.dtype} {observed.shape}")
     R = check_covariance(R, "R", size=M, definite=True)
     return _update(X_pred, Sigma_pred, z, observed, R)
+
+
+def ekf_flocking_step(
+    X_pred: ArrayLike,
+    Sigma_pred: ArrayLike,
+    z: ArrayLike,
+    observed: ArrayLike,
+    R: ArrayLike,
+    dt: float,
+    gains: FlockingGains,
+    Q_team: ArrayLike,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One step of every agent's filter and control, batched over agents (and runs).
+
+    Update with the current measurements (eqs. (16)-(20)), control of each agent
+    on its own updated estimate (eq. (39)), prediction to the next step
+    (eqs. (38), (40)).
+
+    Parameters
+    ----------
+    X_pred : (..., N, N, 2n) array_like
+        ``X_pred[..., i]``: agent ``i``'s predicted team state.
+    Sigma_pred : (..., N, 2nN, 2nN) array_like
+        Their covariances.
+    z : (..., N, N, 2n) array_like
+        ``z[..., i, j]``: agent ``i``'s measurement of agent ``j`` (eq. (2)).
+    observed : (..., N, N) array_like of bool
+        Sensing mask, ``observed[..., i, j]`` iff ``j`` in ``N_i bar``.
+    R : (2nN, 2nN) array_like
+        Measurement-noise covariance of ``nu_i``.
+    dt : float
+        Sampling time (s).
+    gains : FlockingGains
+    Q_team : (2nN, 2nN) array_like
+        ``I_N kron Q``.
+
+    Returns
+    -------
+    X_post, Sigma_post : updated estimates and covariances
+    U : (..., N, n) ndarray
+        ``U[..., i]``: agent ``i``'s control (m/s^2).
+    X_next, Sigma_next : predictions for the next step
+    """
+    X_post, Sigma_post = masked_update(X_pred, Sigma_pred, z, observed, R)
+    U = control_from_views(X_post, gains)
+    X_next, Sigma_next = ekf_predict(X_post, Sigma_post, dt, gains, Q_team)
+    return X_post, Sigma_post, U, X_next, Sigma_next
 
 
 @dataclass(frozen=True)

@@ -180,3 +180,24 @@ def test_bad_inputs_raise():
     with pytest.raises(ValueError, match="observer must be in"):
         dekf.simulate_estimation_based_flocking(x, np.zeros((N, N, m)), P, 3, 0.1, GAINS, np.eye(4), np.eye(4), 0,
                                                 150.0, observer=5)
+
+
+def test_ekf_flocking_step_equals_its_parts():
+    """ekf_flocking_step == masked_update, then control_from_views (eq. (39)), then ekf_predict."""
+    rng = np.random.default_rng(8)
+    N, m = 4, 4
+    M = N * m
+    X = _team(rng, (), N)
+    A = np.array([[0, 1, 0, 0], [1, 0, 1, 0], [0, 1, 0, 1], [0, 0, 1, 0]], float)
+    Z, S = sensing.measure(rng, X, A, np.eye(m))
+    X_pred = X[None] + rng.standard_normal((N, N, m))
+    Sigma = np.broadcast_to(4 * np.eye(M), (N, M, M)).copy()
+    Q = np.eye(M)
+    X_post, S_post, U, X_next, S_next = dekf.ekf_flocking_step(X_pred, Sigma, Z, S, np.eye(M), 0.1, GAINS, Q)
+    ref_X, ref_S = dekf.masked_update(X_pred, Sigma, Z, S, np.eye(M))
+    np.testing.assert_allclose(X_post, ref_X)
+    np.testing.assert_allclose(U, flocking.control_from_views(ref_X, GAINS))
+    for i in range(N):  # agent i's own control from its own estimate, fully connected
+        np.testing.assert_allclose(U[i], flocking.flocking_control(ref_X[i], GAINS)[i], atol=1e-12)
+    np.testing.assert_allclose(X_next, flocking.closed_loop_step(ref_X, 0.1, GAINS))
+    np.testing.assert_allclose(S_next, dekf.ekf_predict(ref_X, ref_S, 0.1, GAINS, Q)[1])
