@@ -107,8 +107,8 @@ def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndar
     n = A.shape[0]
     B = as_matrix(B, "B", (n, None))
     m = B.shape[1]
-    Q = check_covariance(Q, "Q", n)
-    R = check_covariance(R, "R", m, definite=True)
+    Q = check_covariance(np.atleast_2d(Q), "Q", n)
+    R = check_covariance(np.atleast_2d(R), "R", m, definite=True)
     if not is_controllable(A, B):
         raise ValueError("(A, B) is not controllable: the LQR problem has no stabilizing solution")
     return _care(A, B, Q, R)
@@ -273,8 +273,8 @@ class BottomUpLQR(DistributedGain):
     Phi : (m, m) ndarray
     bound : float
         Optimal value of the convex program, an upper bound on the aggregate
-        cost ``sum_i trace(P_i)`` (average cost over unit-covariance ``X(0)``)
-        in the program's coordinates.
+        cost ``sum_i trace(P_i)`` (expected cost (7) for ``X(0) ~ N(0, I)``),
+        traces taken in the agent's original coordinates.
     """
 
     Phi: np.ndarray | None = None

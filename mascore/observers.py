@@ -219,6 +219,13 @@ def distributed_observer(
         Bad input, uncontrollable/unobservable pair, disconnected graph.
     mascore._solver.SolverError
         The LMI program is infeasible or not solved to optimality.
+
+    Notes
+    -----
+    With several outputs (``m >= 2``) the program is often degenerate and
+    Clarabel stops at 'optimal_inaccurate' (gap about 5e-8 instead of 1e-8),
+    which :func:`mascore._solver.solve` rejects; single-output agents, such as
+    Example 1, solve cleanly for the graphs and weights we tried.
     """
     A, Bbar, C, Q1, R = _check_observer(A, Bbar, C, Q1, R, qname="Q1")
     m = C.shape[0]

@@ -143,3 +143,16 @@ def test_simulation_matches_matrix_exponential(ring_design):
         observers.simulate_estimation_errors(A_e, e0, np.array([0.0, 1.0, 3.0]))
     with pytest.raises(ValueError, match="N\\*n"):
         observers.simulate_estimation_errors(A_e, e0[:3], t)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_random_connected_graphs(seed):
+    """Any connected undirected graph: Hurwitz A_e and centralized <= achieved <= bound."""
+    import networkx as nx
+
+    g = nx.connected_watts_strogatz_graph(8, 3, 0.5, seed=seed)
+    adjacency = nx.to_numpy_array(g)
+    d = observers.distributed_observer(A, B, C, 10, 5, 1, adjacency, reading="inverse-weight-are")
+    assert d.hurwitz
+    assert d.centralized_cost <= d.cost <= d.bound * (1 + 1e-6)
+    assert d.lam[1] > 0
