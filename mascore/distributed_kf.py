@@ -727,33 +727,26 @@ def _graph_observability(A, BK, L, S, tol) -> np.ndarray | None:
     """PBH test through the Laplacian eigenvectors (see :func:`observable_agents`); None if not applicable."""
     lam, V = np.linalg.eigh(L)
     scale = max(1.0, float(np.max(np.abs(lam))))
-    groups, start = [], 0
-    for k in range(1, lam.size + 1):
-        if k == lam.size or lam[k] - lam[k - 1] > 1e-7 * scale:
-            groups.append(np.arange(start, k))
-            start = k
+    cuts = np.flatnonzero(np.diff(lam) > 1e-7 * scale) + 1
+    groups = np.split(np.arange(lam.size), cuts)
     m = A.shape[0]
-    spectra = []
-    for g in groups:
-        M = A - lam[g].mean() * BK
-        mu = np.linalg.eigvals(M)
-        for u in mu:  # non-derogatory: each eigenvalue has a one-dimensional eigenspace
-            sv = np.linalg.svd(M - u * np.eye(m), compute_uv=False)
-            if m > 1 and sv[m - 2] <= 1e-6 * max(1.0, sv[0]):
-                return None
-        spectra.append(mu)
-    for a in range(len(spectra)):
-        for b in range(a + 1, len(spectra)):
-            if np.min(np.abs(spectra[a][:, None] - spectra[b][None, :])) < 1e-6:
-                return None
+    lam_g = np.array([lam[g].mean() for g in groups])
+    M = A[None] - lam_g[:, None, None] * BK[None]  # (G, m, m)
+    mu = np.linalg.eigvals(M)  # (G, m)
+    if m > 1:  # non-derogatory: every eigenvalue has a one-dimensional eigenspace
+        sv = np.linalg.svd(M[:, None] - mu[:, :, None, None] * np.eye(m), compute_uv=False)
+        if np.any(sv[..., m - 2] <= 1e-6 * np.maximum(1.0, sv[..., 0])):
+            return None
+    gid = np.repeat(np.arange(len(groups)), m)
+    dist = np.abs(mu.reshape(-1)[:, None] - mu.reshape(-1)[None, :])
+    if np.any(dist[gid[:, None] != gid[None, :]] < 1e-6):
+        return None
+    Sf = S.astype(float)
     out = np.ones(S.shape[0], dtype=bool)
-    for i, row in enumerate(S):
-        for g in groups:
-            sub = V[np.ix_(row, g)]
-            sv = np.linalg.svd(sub, compute_uv=False)
-            if sv.size < g.size or sv[-1] <= tol:
-                out[i] = False
-                break
+    for g in groups:
+        Vg = V[:, g]
+        rows = Sf[:, :, None] * Vg[None]  # rows of V_g outside N̄_i zeroed (singular values unchanged)
+        out &= np.linalg.svd(rows, compute_uv=False)[:, -1] > tol
     return out
 
 

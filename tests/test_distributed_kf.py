@@ -1,0 +1,308 @@
+"""Tests of the per-agent whole-team Kalman filters (Song et al. 2023, eqs. (8)-(34), Theorem 1)."""
+
+import numpy as np
+import pytest
+
+from mascore import distributed_kf as dk
+from mascore.agents import double_integrator
+from mascore.graphs import complete_graph, laplacian, path_graph, ring_graph, star_graph
+from mascore.kalman import nees, nees_interval, update
+from mascore.rendezvous import consensus_control, rendezvous_gain, simulate_rendezvous
+from mascore.sensing import IsolatedAgentError, measure, selection_matrices, stacked_measurement
+
+AGENT = double_integrator(2, 0.1)
+K = rendezvous_gain(0.5, 1.5, 2)
+BK = AGENT.B @ K
+
+
+def _model(N, reduce=True, Q=None, R=None):
+    Q = np.eye(4) if Q is None else Q
+    R = 2.0 * np.eye(4) if R is None else R
+    return dk.team_filter_model(AGENT.A, AGENT.B, K, Q, R, N, reduce=reduce)
+
+
+def _random_sigma(model, rng, B=1):
+    """A generic SPD reduced augmented covariance (B, N M_r, N M_r)."""
+    n = model.n_agents * model.M_r
+    G = rng.normal(size=(B, n, n)) / np.sqrt(n)
+    return G @ np.swapaxes(G, -1, -2) + 0.5 * np.eye(n)
+
+
+@pytest.mark.parametrize("reduce", [True, False])
+@pytest.mark.parametrize("graph", [path_graph(4), star_graph(4)])
+def test_structured_estimation_based_step_equals_plain_eqs_29_34(reduce, graph):
+    """Sibling implementations: tensor/Kronecker recursion == eqs. (14), (29)-(34), (16)-(20) written out."""
+    N = 4
+    model = _model(N, reduce)
+    rng = np.random.default_rng(0)
+    Sig = _random_sigma(model, rng)
+    Xh = rng.normal(size=(1, N, N, 4))
+    Z, S = measure(1, rng.normal(size=(1, N, 4)), graph, 2.0 * np.eye(4))
+    Xp, Sp = dk.eb_predict(model, Xh, Sig, laplacian(graph))
+    Xn, Sn, _ = dk.eb_update(model, Xp, Sp, Z, S[0])
+    z = [stacked_measurement(Z[0], S[0], i) for i in range(N)]
+    Xn2, Sn2 = dk.plain_estimation_based_step(
+        Xh[0].reshape(N, -1), dk.expand_covariance(Sig[0], model.kron), AGENT.A, BK, np.eye(4), model.R, graph, z)
+    np.testing.assert_allclose(Xn[0].reshape(N, -1), Xn2, atol=1e-10)
+    np.testing.assert_allclose(dk.expand_covariance(Sn[0], model.kron), Sn2, atol=1e-10)
+
+
+def test_structured_step_batched_over_topologies():
+    """One covariance per run (Fig. 3): batch entry b equals the unbatched step with topology b."""
+    N = 4
+    model = _model(N)
+    rng = np.random.default_rng(1)
+    graphs = np.stack([path_graph(N), ring_graph(N)])
+    Sig = _random_sigma(model, rng, B=2)
+    Xh = rng.normal(size=(2, N, N, 4))
+    Z, S = measure(2, rng.normal(size=(2, N, 4)), graphs, 2.0 * np.eye(4))
+    Lb = np.stack([laplacian(g) for g in graphs])
+    Xp, Sp = dk.eb_predict(model, Xh, Sig, Lb)
+    Xn, Sn, _ = dk.eb_update(model, Xp, Sp, Z, S)
+    for b in range(2):
+        xp, sp = dk.eb_predict(model, Xh[b:b + 1], Sig[b:b + 1], Lb[b])
+        xn, sn, _ = dk.eb_update(model, xp, sp, Z[b:b + 1], S[b])
+        np.testing.assert_allclose(Xn[b], xn[0], atol=1e-12)
+        np.testing.assert_allclose(Sn[b], sn[0], atol=1e-12)
+
+
+@pytest.mark.parametrize("reduce", [True, False])
+def test_measurement_based_step_equals_plain_eqs_14_20(reduce):
+    N = 5
+    model = _model(N, reduce)
+    rng = np.random.default_rng(2)
+    Si = dk.agent_covariances(model, _random_sigma(model, rng))
+    Xh = rng.normal(size=(1, N, N, 4))
+    A = path_graph(N)
+    Z, S = measure(3, rng.normal(size=(1, N, 4)), A, 2.0 * np.eye(4))
+    Xp, Sp = dk.mb_predict(model, Xh, Si, laplacian(A))
+    Xn, Sn, _ = dk.mb_update(model, Xp, Sp, Z, S[0])
+    z = [stacked_measurement(Z[0], S[0], i) for i in range(N)]
+    Xn2, Sn2 = dk.plain_measurement_based_step(
+        Xh[0].reshape(N, -1), dk.expand_covariance(Si[0], model.kron), AGENT.A, BK, np.eye(4), model.R, A, z)
+    np.testing.assert_allclose(Xn[0].reshape(N, -1), Xn2, atol=1e-10)
+    np.testing.assert_allclose(dk.expand_covariance(Sn[0], model.kron), Sn2, atol=1e-10)
+
+
+def test_agent_update_equals_textbook_update_with_selection_matrices():
+    """The masked batched update == mascore.kalman.update with H_i and stacked z_i (eq. (3))."""
+    N, m = 4, 4
+    rng = np.random.default_rng(4)
+    A = path_graph(N)
+    R_team = np.kron(np.eye(N), np.diag([1.0, 2.0, 0.5, 0.3]))
+    G = rng.normal(size=(N, N * m, N * m))
+    P = G @ np.swapaxes(G, -1, -2) + np.eye(N * m)
+    X = rng.normal(size=(N, N, m))
+    Z, S = measure(5, rng.normal(size=(N, m)), A, R_team)
+    Xa, Pa, _ = dk.agent_update(X, P, Z, S, R_team)
+    for i, H in enumerate(selection_matrices(A, m)):
+        x_ref, P_ref = update(X[i].reshape(-1), P[i], stacked_measurement(Z, S, i), H, H @ R_team @ H.T)
+        np.testing.assert_allclose(Xa[i].reshape(-1), x_ref, atol=1e-10)
+        np.testing.assert_allclose(Pa[i], P_ref, atol=1e-10)
+
+
+def test_centralized_update_equals_stacked_kalman_update_and_bounds_every_agent():
+    N = 4
+    model = _model(N)
+    rng = np.random.default_rng(6)
+    A = path_graph(N)
+    Pr = dk.agent_covariances(model, _random_sigma(model, rng))[:, 0]  # (1, Mr, Mr)
+    x = rng.normal(size=(1, N, 4))
+    Z, S = measure(7, rng.normal(size=(1, N, 4)), A, 2.0 * np.eye(4))
+    xc, Pc = dk.centralized_update(model, x, Pr, Z, S[0])
+    Hs = selection_matrices(A, 4)
+    H = np.vstack(Hs)
+    z = np.concatenate([stacked_measurement(Z[0], S[0], i) for i in range(N)])
+    Rbig = np.kron(np.eye(H.shape[0] // 4), 2.0 * np.eye(4))
+    x_ref, P_ref = update(x[0].reshape(-1), dk.expand_covariance(Pr[0], 2), z, H, Rbig)
+    np.testing.assert_allclose(xc[0].reshape(-1), x_ref, atol=1e-10)
+    np.testing.assert_allclose(dk.expand_covariance(Pc[0], 2), P_ref, atol=1e-10)
+    # every agent alone (same prior) is less certain: P_i - P_c is PSD
+    Xh = np.broadcast_to(x[:, None], (1, N, N, 4)).copy()
+    _, Pi, _ = dk.mb_update(model, Xh, np.broadcast_to(Pr[:, None], (1, N, *Pr.shape[1:])), Z, S[0])
+    assert np.all(np.linalg.eigvalsh(Pi[0] - Pc[0]) > -1e-10)
+
+
+def test_lyapunov_v_is_nees():
+    rng = np.random.default_rng(8)
+    G = rng.normal(size=(6, 6))
+    P_r = G @ G.T + np.eye(6)
+    e = rng.normal(size=12)
+    np.testing.assert_allclose(dk.lyapunov_v(e, P_r, kron=2), nees(e, dk.expand_covariance(P_r, 2)))
+
+
+def test_lemma1_initial_map_gives_F_i1_equal_I_kron_A():
+    """With a common initial estimate, C_i[0] = 1 ⊗ I and F_2 C_i = L ⊗ BK, so F_i,1 = I ⊗ A."""
+    N = 4
+    model = _model(N)
+    A = path_graph(N)
+    Sig0 = dk.eb_initial_covariance(model, np.diag([9.0, 9.0, 1.0, 1.0]), common=True)
+    F2C = dk.f2_cross(model, Sig0, laplacian(A))[0] @ np.linalg.inv(dk.agent_covariances(model, Sig0)[0])
+    for i in range(N):
+        np.testing.assert_allclose(F2C[i], np.kron(laplacian(A), model.BK_r), atol=1e-12)
+
+
+def test_closed_loop_matrices_reproduce_the_control_laws():
+    """F_1 X = (I⊗A)X + (I⊗B)U(X) (eq. (11)) and F_2 e = (I⊗B)(U(X̂) - U(X)) (eqs. (26)-(28))."""
+    N = 4
+    rng = np.random.default_rng(9)
+    Adj = ring_graph(N)
+    L = laplacian(Adj)
+    F1, F2 = dk.closed_loop_matrices(AGENT.A, BK, L)
+    x = rng.normal(size=(N, 4))
+    Xh = rng.normal(size=(N, N, 4))
+    U_true = consensus_control(np.broadcast_to(x, (N, N, 4)), L, K)
+    U_est = consensus_control(Xh, L, K)
+    np.testing.assert_allclose(F1 @ x.reshape(-1), (x @ AGENT.A.T + U_true @ AGENT.B.T).reshape(-1), atol=1e-12)
+    e = (x[None] - Xh).reshape(-1)
+    np.testing.assert_allclose(F2 @ e, ((U_est - U_true) @ AGENT.B.T).reshape(-1), atol=1e-12)
+    # u_i = K sum_{j in N_i} (x_j - x_i), eq. (4), written as a loop
+    for i in range(N):
+        ref = sum(K @ (x[j] - x[i]) for j in np.flatnonzero(Adj[i]))
+        np.testing.assert_allclose(U_true[i], ref, atol=1e-12)
+
+
+def test_observability_of_system_43():
+    """Star seen from a leaf hides the antisymmetric modes of the other leaves; paths and rings do not."""
+    assert dk.observable_agents(AGENT.A, BK, star_graph(5)).tolist() == [True, False, False, False, False]
+    assert dk.observable_agents(AGENT.A, BK, path_graph(6)).all()
+    assert dk.observable_agents(AGENT.A, BK, ring_graph(6)).all()
+    assert dk.observable_agents(AGENT.A, BK, complete_graph(4)).all()
+
+
+def test_graph_observability_agrees_with_observability_matrix():
+    """The Laplacian PBH shortcut and the observability-matrix rank agree on small graphs."""
+    rng = np.random.default_rng(10)
+    Ar, BKr = AGENT.A[::2, ::2], BK[::2, ::2]
+    for _ in range(20):
+        A = np.triu((rng.random((5, 5)) < 0.5).astype(float), 1)
+        A = A + A.T
+        if np.any(A.sum(1) == 0):
+            continue
+        fast = dk.observable_agents(AGENT.A, BK, A)
+        F1, _ = dk.closed_loop_matrices(Ar, BKr, laplacian(A))
+        for i in range(5):
+            row = A[i] > 0
+            row[i] = True
+            H = np.kron(np.eye(5)[row], np.eye(2))
+            assert dk._observable(F1, H, 1e-9) == fast[i]
+
+
+def test_require_observable_and_simulation_refuse_unobservable_graph():
+    with pytest.raises(ValueError, match=r"not observable for agent\(s\) \[1, 2, 3\]"):
+        dk.require_observable(AGENT.A, BK, star_graph(4))
+    x0 = np.zeros((1, 4, 4))
+    with pytest.raises(ValueError, match="system \\(43\\)"):
+        simulate_rendezvous(0, x0, star_graph(4), AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), 5,
+                            "estimation", 0.1, x_hat0=np.zeros((1, 16)), P0=np.eye(4))
+    # the measurement-based loop does not need (43)
+    simulate_rendezvous(0, x0, star_graph(4), AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), 2, "measurement", 0.1)
+
+
+def test_isolated_agent_raises():
+    A = path_graph(4)
+    A[3, 2] = A[2, 3] = 0
+    with pytest.raises(IsolatedAgentError, match="agent 3"):
+        simulate_rendezvous(0, np.zeros((1, 4, 4)), A, AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), 2,
+                            "measurement", 0.1)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(Q=-np.eye(4)), "Q must be positive semidefinite"),
+        (dict(Q=np.eye(3)), "Incompatible dimensions of Q"),
+        (dict(R=np.zeros((4, 4))), "R must be positive definite"),
+        (dict(R=np.eye(5)), "Incompatible dimensions of R"),
+        (dict(K=np.ones((2, 3))), "Incompatible dimensions of K"),
+        (dict(n_agents=1), "n_agents"),
+    ],
+)
+def test_bad_model_input(kwargs, match):
+    args = dict(A=AGENT.A, B=AGENT.B, K=K, Q=np.eye(4), R=np.eye(4), n_agents=4)
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        dk.team_filter_model(**args)
+
+
+def test_bad_shapes_in_steps():
+    model = _model(3)
+    Sig = dk.eb_initial_covariance(model, np.eye(4))
+    with pytest.raises(ValueError, match="X_hat"):
+        dk.eb_predict(model, np.zeros((1, 3, 4)), Sig, laplacian(path_graph(3)))
+    with pytest.raises(ValueError, match="Sigma"):
+        dk.eb_predict(model, np.zeros((1, 3, 3, 4)), Sig[:, :5, :5], laplacian(path_graph(3)))
+    with pytest.raises(ValueError, match="laplacian"):
+        dk.eb_predict(model, np.zeros((1, 3, 3, 4)), Sig, np.ones((3, 3)))
+    with pytest.raises(ValueError, match="P0 is not of the form"):
+        dk.eb_initial_covariance(model, np.array([[1.0, 0.5, 0, 0], [0.5, 1.0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]))
+    with pytest.raises(ValueError, match="mode must be one of"):
+        simulate_rendezvous(0, np.zeros((1, 3, 4)), path_graph(3), AGENT.A, AGENT.B, K, np.eye(4), np.eye(4),
+                            2, "magic", 0.1)
+
+
+def test_reduced_and_unreduced_simulations_agree():
+    """The Kronecker reduction changes nothing but the cost."""
+    x0 = np.random.default_rng(11).normal(scale=20, size=(2, 3, 4))
+    xh0 = (x0 + 3.0).reshape(2, -1)
+    common = (x0, path_graph(3), AGENT.A, AGENT.B, K)
+    a = simulate_rendezvous(12, *common, np.eye(4), np.eye(4), 20, "estimation", 0.1, x_hat0=xh0, P0=9 * np.eye(4))
+    Q = np.diag([1.0, 1.0, 1.0, 1.0 + 1e-9])  # breaks the I_2 factor -> unreduced model
+    b = simulate_rendezvous(12, *common, Q, np.eye(4), 20, "estimation", 0.1, x_hat0=xh0, P0=9 * np.eye(4))
+    assert a.model.kron == 2 and b.model.kron == 1
+    np.testing.assert_allclose(a.states, b.states, atol=1e-6)
+    np.testing.assert_allclose(a.nees, b.nees, rtol=1e-6)
+
+
+@pytest.mark.parametrize("mode", ["estimation", "measurement-filter"])
+def test_nees_consistent_over_monte_carlo(mode):
+    """Statistical honesty: run-averaged NEES of every agent lies in its 95 % interval (eqs. (15), (29)-(34))."""
+    N, n_runs = 4, 200
+    rng = np.random.default_rng(13)
+    x0 = np.broadcast_to(rng.normal(scale=30, size=(N, 4)), (n_runs, N, 4)).copy()
+    P0 = np.diag([25.0, 25.0, 1.0, 1.0])
+    xh0 = (x0 + rng.standard_normal(x0.shape) * np.sqrt(np.diag(P0))).reshape(n_runs, -1)
+    res = simulate_rendezvous(14, x0, path_graph(N), AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), 60, mode, 0.1,
+                              x_hat0=xh0, P0=P0)
+    avg = res.nees[1:].mean(axis=1)  # (T, N)
+    lo, hi = nees_interval(4 * N, n_runs)
+    grand_lo, grand_hi = nees_interval(4 * N, n_runs * avg.shape[0] // 10)  # ~10-step correlation allowance
+    assert grand_lo < avg.mean() < grand_hi
+    assert np.mean((avg > lo) & (avg < hi)) > 0.88
+
+
+def test_estimation_based_covariance_needs_the_cross_terms():
+    """Dropping the cross-covariances (treating the loop as measurement-based) underestimates the error."""
+    N, n_runs = 4, 200
+    rng = np.random.default_rng(15)
+    x0 = np.broadcast_to(rng.normal(scale=30, size=(N, 4)), (n_runs, N, 4)).copy()
+    P0 = np.diag([25.0, 25.0, 1.0, 1.0])
+    xh0 = (x0 + rng.standard_normal(x0.shape) * np.sqrt(np.diag(P0))).reshape(n_runs, -1)
+    res = simulate_rendezvous(16, x0, path_graph(N), AGENT.A, AGENT.B, K, np.eye(4), 4 * np.eye(4), 40,
+                              "estimation", 0.1, x_hat0=xh0, P0=P0)
+    model = res.model
+    # the naive covariance: eq. (15) recursion of every agent, ignoring F_2 e
+    Si = dk.agent_covariances(model, dk.eb_initial_covariance(model, P0))
+    L = laplacian(path_graph(N))
+    S = np.ones((N, N), bool)
+    S[np.abs(L) == 0] = False
+    for _ in range(40):
+        Tr = np.einsum("ab,ibc,dc->iad", np.kron(np.eye(N), model.A_r) - np.kron(L, model.BK_r), Si[0],
+                       np.kron(np.eye(N), model.A_r) - np.kron(L, model.BK_r))
+        Si = Tr[None] + np.kron(np.eye(N), model.Q_r)
+        _, Si, _ = dk.mb_update(model, np.zeros((1, N, N, 4)), Si, np.zeros((1, N, N, 4)), S)
+    ratio = np.trace(res.sigma_i[-1], axis1=-2, axis2=-1) / np.trace(Si[0], axis1=-2, axis2=-1)
+    assert np.all(ratio > 1.01)
+
+
+def test_theorem1_M_positive_along_run():
+    """Eq. (49) with the regression map C_i: smallest eigenvalue of M_i[k+1] > 0 (Theorem 1)."""
+    N = 5
+    rng = np.random.default_rng(17)
+    x0 = rng.normal(scale=30, size=(1, N, 4))
+    res = simulate_rendezvous(18, x0, path_graph(N), AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), 80, "estimation",
+                              0.1, x_hat0=(x0 + 5).reshape(1, -1), P0=25 * np.eye(4))
+    th = dk.theorem1_min_eigenvalues(res.model, laplacian(path_graph(N)), res.gains, res.sigma_i, res.f2_cross)
+    assert th["min_eig"].shape == (80, N)
+    assert th["min_eig"].min() > 0
+    assert np.all(th["min_eig_rel"] <= 1 + 1e-9)
