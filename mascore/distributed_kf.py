@@ -544,14 +544,11 @@ def plain_estimation_based_step(
     blk = lambda i: slice(i * M, (i + 1) * M)  # noqa: E731
     # eq. (34) (eq. (32) for i = j)
     F2S = F2 @ Sig @ F2.T
+    cross = [F1 @ Sig[blk(i), :] @ F2.T for i in range(N)]  # F_1 E[e_i e^T] F_2^T
     Sig_pred = np.empty_like(Sig)
     for i in range(N):
-        Ei = Sig[blk(i), :]  # E[e_i e^T]
-        for j in range(N):
-            Ej = Sig[blk(j), :]
-            Sig_pred[blk(i), blk(j)] = (
-                F1 @ Sig[blk(i), blk(j)] @ F1.T + F2S + F1 @ Ei @ F2.T + F2 @ Ej.T @ F1.T + Qc
-            )
+        for j in range(N):  # F_2 E[e e_j^T] F_1^T = (F_1 E[e_j e^T] F_2^T)^T
+            Sig_pred[blk(i), blk(j)] = F1 @ Sig[blk(i), blk(j)] @ F1.T + F2S + cross[i] + cross[j].T + Qc
     X_pred = X_hat @ F1.T  # eq. (14)
     G, X_next = [], np.empty_like(X_hat)
     for i in range(N):
