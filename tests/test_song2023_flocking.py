@@ -82,3 +82,14 @@ def test_full_reproduction_writes_figures_and_claims(tmp_path):
     assert (tmp_path / "tables" / "fig5_fig6_flocking.csv").exists()
     json.dumps([c.to_dict() for c in claims], allow_nan=False)
     assert {c.verdict for c in claims} == {"holds"}, [(c.id, c.verdict, c.value) for c in claims]
+
+
+def test_beyond_study_flags_unstable_large_teams():
+    """Beyond the paper: with Table I gains and dt = 0.1 s, N = 24 diverges for the (virtually)
+    fully-connected cases (ii), (iii) but not on the proximity graph (i)."""
+    res = s.run_fig5(seed=1, n_runs=1, n_agents=24, t_final=10.0)
+    assert res.diverged == (False, True, True)
+    assert np.all(np.isfinite(res.max_distance[0])) and np.all(np.isnan(res.max_distance[1:]))
+    table = s.beyond_study(1, sensing_ranges=(200.0,), sizes=(4,), n_runs=1, t_final=3.0)
+    assert list(table["N"]) == [4, 8] and list(table["r_m"]) == [150.0, 200.0]
+    assert set(table["unstable"]) == {"-"}
