@@ -39,6 +39,7 @@ __all__ = [
     "plot_fig2",
     "plot_fig3",
     "plot_theorem1",
+    "linear_claims",
     "reproduce",
 ]
 
@@ -305,7 +306,7 @@ def plot_fig3(res: Fig3Result, axes=None):
         ax.set_yscale("log")
         ax.set_xlabel("time (s)")
         ax.set_ylabel(f"RMS STD ({unit})")
-        ax.set_title(f"{title} STD over 50 runs")
+        ax.set_title(f"{title} STD over {next(iter(res.pos_runs.values())).shape[1]} runs")
         ax.axvspan(res.converged_from, res.time[-1], color="0.9", zorder=0)
     axes[0].legend(fontsize=8)
     return axes
@@ -343,24 +344,38 @@ def plot_theorem1(res: Fig2Result, th: dict[str, np.ndarray], agent: int = 0, ax
 def reproduce(out_dir: Path, seed: int) -> list[Claim]:
     """Rebuild Figs. 2-3, the Theorem 1 check and the linear-part ledger claims."""
     out_dir = Path(out_dir)
-    claims = _linear_claims(out_dir, seed)
-    from .song2023_flocking import flocking_claims_and_figures  # nonlinear part, Figs. 4-6 (issue 4)
-    claims += flocking_claims_and_figures(out_dir, seed)
+    claims = _linear_reproduce(out_dir, seed)
     return claims
 
 
-def _linear_claims(out_dir: Path, seed: int) -> list[Claim]:
+def _linear_reproduce(out_dir: Path, seed: int) -> list[Claim]:
     fig_dir, tab_dir = out_dir / "figures", out_dir / "tables"
     tab_dir.mkdir(parents=True, exist_ok=True)
     pd.DataFrame([{"parameter": k, "value": v} for k, v in TABLE_I.items()]).to_csv(
         tab_dir / "table1.csv", index=False)
-    claims: list[Claim] = []
-
-    # Fig. 2 ---------------------------------------------------------------------
     r2 = fig2(seed)
+    th = theorem1(r2)
+    r3 = fig3(seed, progress=True)
     fig, axes = plt.subplots(2, 2, figsize=(11, 9), layout="constrained")
     plot_fig2(r2, axes)
     save_figure(fig, fig_dir / "fig2.png")
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), layout="constrained")
+    plot_theorem1(r2, th, axes=axes)
+    save_figure(fig, fig_dir / "theorem1.png")
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), layout="constrained")
+    plot_fig3(r3, axes)
+    save_figure(fig, fig_dir / "fig3.png")
+    pd.DataFrame({"time_s": r3.time, **{f"pos_std_m[{k}]": v for k, v in r3.pos_std.items()},
+                  **{f"vel_std_mps[{k}]": v for k, v in r3.vel_std.items()}}).iloc[::10].to_csv(
+        tab_dir / "fig3_std.csv", index=False)
+    return linear_claims(r2, th, r3)
+
+
+def linear_claims(r2: Fig2Result, th: dict[str, np.ndarray], r3: Fig3Result) -> list[Claim]:
+    """The ledger claims of the linear part from computed results (:func:`fig2`, :func:`theorem1`, :func:`fig3`)."""
+    claims: list[Claim] = []
+
+    # Fig. 2 ---------------------------------------------------------------------
     ratio = r2.error_to_std_ratio()
     ratio_mb = r2.error_to_std_ratio(r2.measurement)
     k0 = int(round(r2.converged_from / r2.setup.dt))
@@ -399,10 +414,6 @@ def _linear_claims(out_dir: Path, seed: int) -> list[Claim]:
                            "eq. (15), which neglects the correlation between an agent's own measurement noise "
                            "in its control and its estimate (mb_predict(KH_prev=...) adds it; the effect is "
                            "small here).")))
-    th = theorem1(r2)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4), layout="constrained")
-    plot_theorem1(r2, th, axes=axes)
-    save_figure(fig, fig_dir / "theorem1.png")
     min_eig, min_rel = float(th["min_eig"].min()), float(th["min_eig_rel"].min())
     claims.append(Claim.qualitative(
         "song2023/theorem1-lyapunov-decrease", "Sec. IV, Theorem 1, eqs. (49), (59)",
@@ -427,13 +438,6 @@ def _linear_claims(out_dir: Path, seed: int) -> list[Claim]:
         "the Fig. 2 scenario."))
 
     # Fig. 3 ---------------------------------------------------------------------
-    r3 = fig3(seed, progress=True)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4), layout="constrained")
-    plot_fig3(r3, axes)
-    save_figure(fig, fig_dir / "fig3.png")
-    pd.DataFrame({"time_s": r3.time, **{f"pos_std_m[{k}]": v for k, v in r3.pos_std.items()},
-                  **{f"vel_std_mps[{k}]": v for k, v in r3.vel_std.items()}}).iloc[::10].to_csv(
-        tab_dir / "fig3_std.csv", index=False)
     conv = "conventional (eq. (5))"
     est = "estimation-based (eq. (21))"
     for which, unit in (("pos", "m"), ("vel", "m/s")):
