@@ -345,6 +345,8 @@ def reproduce(out_dir: Path, seed: int) -> list[Claim]:
     """Rebuild Figs. 2-3, the Theorem 1 check and the linear-part ledger claims."""
     out_dir = Path(out_dir)
     claims = _linear_reproduce(out_dir, seed)
+    from .song2023_flocking import flocking_claims_and_figures  # Figs. 4-6 (issue 4): keep this line
+    claims += flocking_claims_and_figures(out_dir, seed)
     return claims
 
 
