@@ -90,3 +90,14 @@ def test_reproduce_writes_ledger(tmp_path):
     for key in ("example1-hurwitz", "fig2-faster-than-fig1", "structure-eq13", "observer-cost-ordering",
                 "bottom-up-cost-bounded"):
         assert verdicts[f"vlahakis/{key}"] == "holds"
+
+
+def test_lmi_variants_printed_row_agrees_with_design():
+    """Two routes to the same program: lmi_variants_table's printed row and distributed_observer."""
+    table = v.lmi_variants_table()
+    row = table[(table.L_reading == "inverse-weight-are") & (table.variant == "Q1 + lam Q2 (as printed)")
+                & (table.Q2 == 5.0)].iloc[0]
+    d = v.design(5.0, "inverse-weight-are")
+    assert row.J == pytest.approx(d.bound, rel=1e-5)
+    assert row.Phi == pytest.approx(d.Phi.item(), abs=1e-3)
+    assert (table.status == "optimal").all()
