@@ -29,12 +29,14 @@ When two agents meet
 --------------------
 ``phi2`` divides by ``|p_ij|``: the unit vector ``p_ij / |p_ij|`` of the
 line of sight is undefined when two agents (or two estimated or measured
-positions) coincide. The pair term itself stays bounded: its size is at most
+positions) coincide. The ``phi2`` part of the pair term itself stays bounded
+near contact: for ``|p_ij| <= R`` its size is at most
 ``rho4 (rho5 |v_ij| + rho6 R) / 2``. mascore replaces ``|p_ij|`` by
-``max(|p_ij|, d_min)`` in every denominator (``FlockingGains.min_distance``,
-default 1e-6 m). Closer than ``d_min`` the pair term therefore shrinks
-linearly to exactly zero at contact -- finite, deterministic, no NaN -- and
-farther than ``d_min`` it is the law as printed. The Jacobian is the exact
+``max(|p_ij|, d_min)`` everywhere in ``phi2`` (``FlockingGains.min_distance``,
+default 1e-6 m). Closer than ``d_min`` the damper and spring therefore shrink
+linearly to exactly zero at contact -- finite, deterministic, no NaN -- while
+the alignment term ``phi1`` is smooth and unchanged; farther than ``d_min`` the
+law is exactly as printed. The Jacobian is the exact
 derivative of this regularised law on both sides of ``d_min``.
 
 Symbols follow the paper; equations are cited as ``eq. (N)``.
@@ -133,7 +135,7 @@ def phi1(p: ArrayLike, beta: float) -> np.ndarray:
 
 
 def phi2(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
-    """Spring-damper weight of eq. (6), with ``|p|`` floored at ``gains.min_distance``.
+    """Spring-damper weight of eq. (6), with ``|p|`` replaced by ``max(|p|, gains.min_distance)``.
 
     Parameters
     ----------
