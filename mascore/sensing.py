@@ -231,7 +231,7 @@ def measure(
     batch = np.broadcast_shapes(x.shape[:-2], S.shape[:-2])
     nu = measurement_noise(rng, R, batch, n_agents, m)
     Z = np.broadcast_to(x[..., None, :, :], (*batch, n_agents, n_agents, m)) + nu
-    S = np.broadcast_to(S, (*batch, n_agents, n_agents))
+    S = np.broadcast_to(S, (*batch, n_agents, n_agents)).copy()
     return np.where(S[..., None], Z, 0.0), S
 
 

@@ -306,3 +306,39 @@ def test_theorem1_M_positive_along_run():
     assert th["min_eig"].shape == (80, N)
     assert th["min_eig"].min() > 0
     assert np.all(th["min_eig_rel"] <= 1 + 1e-9)
+
+
+def test_exact_control_noise_correlation_matches_monte_carlo_and_eq15_does_not():
+    """Eq. (15) neglects E[e_i nu_bar^T] (agent i's own noise is in its posterior and its control).
+
+    One prediction step sampled directly: the corrected covariance (mb_predict with KH_prev) matches the
+    sample covariance of the true prediction error; the paper's eq. (15) is visibly off for R = 10 I.
+    """
+    N, Rv, n = 3, 10.0, 100_000
+    model = dk.team_filter_model(AGENT.A, AGENT.B, K, np.eye(4), Rv * np.eye(4), N, reduce=False)
+    A = path_graph(N)
+    L = laplacian(A)
+    S = A > 0
+    S[np.diag_indices(N)] = True
+    rng = np.random.default_rng(20)
+    M = 4 * N
+    G = rng.normal(size=(N, M, M))
+    Sp = G @ np.swapaxes(G, -1, -2) / M * 20 + np.eye(M)
+    X0 = np.zeros((1, N, N, 4))
+    _, Spost, KH = dk.mb_update(model, X0, Sp[None], X0, S)
+    F1, _ = dk.closed_loop_matrices(AGENT.A, model.BK, L)
+    IBK = np.kron(np.eye(N), model.BK)
+    nu = rng.normal(size=(n, N, M)) * np.sqrt(Rv)  # nu[:, j] = observer j's noise vector
+    nubar = np.einsum("jl,njlm->njm", L, nu.reshape(n, N, N, 4)).reshape(n, M)
+    omega = rng.normal(size=(n, M))
+    _, P_paper = dk.mb_predict(model, X0, Spost, L)
+    _, P_exact = dk.mb_predict(model, X0, Spost, L, KH)
+    for i in range(N):
+        e_prior = rng.normal(size=(n, M)) @ np.linalg.cholesky(Sp[i]).T
+        e_post = e_prior @ (np.eye(M) - KH[0, i]).T - nu[:, i] @ KH[0, i].T
+        e_next = e_post @ F1.T - nubar @ IBK.T + omega
+        emp = e_next.T @ e_next / n
+        scale = np.abs(emp).max()
+        assert np.abs(P_exact[0, i] - emp).max() < 0.02 * scale
+        if i == 1:  # the middle agent has two neighbours: the neglected term is largest
+            assert np.abs(P_paper[0, i] - emp).max() > 0.04 * scale
