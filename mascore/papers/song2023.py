@@ -36,6 +36,7 @@ __all__ = [
     "Fig3Result",
     "fig3",
     "theorem1",
+    "process_noise_study",
     "plot_fig2",
     "plot_fig3",
     "plot_theorem1",
@@ -294,6 +295,38 @@ def fig3(seed: int = 0, n_runs: int | None = None, horizon: float | None = None,
     return Fig3Result(t, pos, vel, min(SETTINGS["converged_from"], 0.5 * t[-1]), pos_runs, vel_runs)
 
 
+def process_noise_study(seed: int = 0, q_values=(1.0, 0.1, 0.01), n_runs: int = 10,
+                        horizon: float = 30.0) -> pd.DataFrame:
+    """Beyond the paper: converged spreads of both laws as the process noise ``Q = q I`` shrinks.
+
+    Same setting as Fig. 3 otherwise (R = 100 I, random connected and observable
+    topologies, common random numbers); converged = RMS over runs and over the
+    second half of the horizon.
+
+    Returns
+    -------
+    DataFrame with columns ``q``, ``law``, ``pos_std_m``, ``vel_std_mps``.
+    """
+    rng = np.random.default_rng([seed, 4])
+    s = setup()
+    draws = [random_initial_states(rng, s) for _ in range(n_runs)]
+    X0 = np.stack([d[0] for d in draws])
+    A = np.stack([d[1] for d in draws])
+    xh0 = _initial_estimates(rng, s, X0)
+    n_steps = int(round(horizon / s.dt))
+    k0 = n_steps // 2
+    rows = []
+    for q in q_values:
+        for mode, law in (("measurement", "conventional (eq. (5))"), ("estimation", "estimation-based (eq. (21))")):
+            r = simulate_rendezvous(np.random.default_rng([seed, 40]), X0, A, s.A, s.B, s.K, q * np.eye(s.m),
+                                    SETTINGS["fig3"]["r"] * np.eye(s.m), n_steps, mode, s.dt,
+                                    x_hat0=xh0, P0=s.P0())
+            rows.append({"q": q, "law": law,
+                         "pos_std_m": float(np.sqrt(np.mean(team_spread(r.states[k0:, ..., : s.n]) ** 2))),
+                         "vel_std_mps": float(np.sqrt(np.mean(team_spread(r.states[k0:, ..., s.n:]) ** 2)))})
+    return pd.DataFrame(rows)
+
+
 def plot_fig3(res: Fig3Result, axes=None):
     """Song et al. 2023, Fig. 3 (a) position and (b) velocity RMS STD."""
     if axes is None:
@@ -464,6 +497,8 @@ def linear_claims(r2: Fig2Result, th: dict[str, np.ndarray], r3: Fig3Result) -> 
                "per 0.1 s step on every agent, the true-state law still has a spread of about half), and the "
                "estimation-based law replaces the white measurement noise in the control by time-correlated "
                "estimation errors that the consensus loop follows; the two laws end up statistically "
-               "indistinguishable (or ordered the other way, depending on the seed) in our runs."
+               "indistinguishable (or ordered the other way, depending on the seed) in our runs. With smaller "
+               "process noise (Q = 0.1 I or 0.01 I, process_noise_study, shown in the notebook) the paper's "
+               "ordering appears clearly."
                if which == "pos" else "")))
     return claims
