@@ -22,7 +22,7 @@ from ..agents import double_integrator
 from ..graphs import is_connected, laplacian, proximity_graph
 from ..kalman import nees_interval
 from ..ledger import Claim
-from ..plotting import agent_colors, new_axes, plot_graph, plot_trajectories, save_figure
+from ..plotting import agent_colors, plot_graph, plot_trajectories, save_figure
 from ..rendezvous import RendezvousResult, rendezvous_gain, simulate_rendezvous, team_spread
 
 __all__ = [
