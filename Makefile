@@ -5,6 +5,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
+RESULTS := results/.reproduced-stamp
 PIP_VERSION := 26.3
 
 # One BLAS thread per process: notebooks and test workers run side by side on 2 cores.
@@ -30,15 +31,21 @@ $(STAMP): requirements.lock pyproject.toml
 	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
 	@touch $(STAMP)
 
-book: $(STAMP) reproduce  ## execute every notebook and render the HTML book into book/_build/html
+book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book into book/_build/html
 	$(BIN)/jupyter-book build book --all -W -n --keep-going
 	@echo "Open book/_build/html/index.html"
 
-test: $(STAMP) reproduce  ## unit tests, published-number tests and every notebook (nbmake), on $(JOBS) workers
+test: $(STAMP) $(RESULTS)  ## unit tests, published-number tests and every notebook (nbmake), on $(JOBS) workers
 	$(BIN)/python -m pytest -n $(JOBS) --nbmake tests notebooks
 
 reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json into results/
+	@rm -f $(RESULTS)
+	@$(MAKE) --no-print-directory $(RESULTS)
+
+# book and test reuse results/ while no source file of the package has changed since.
+$(RESULTS): $(STAMP) $(wildcard mascore/*.py mascore/papers/*.py)
 	$(BIN)/python -m mascore reproduce all --out results
+	@touch $(RESULTS)
 
 lab: $(STAMP)  ## JupyterLab on notebooks/ with the project's environment
 	$(BIN)/jupyter lab notebooks

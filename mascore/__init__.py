@@ -4,10 +4,41 @@ A reproducible companion to Song et al. (2023), Ren, Beard and Kingston (2005),
 Bhattacharjee and Subbarao (2021) and Vlahakis and Halikias. The concept
 modules hold general algorithms; :mod:`mascore.papers` holds each paper's
 exact scenarios.
+
+Submodules are imported on first use (``mascore.observers`` works after a bare
+``import mascore``), so that importing the package does not pay for cvxpy
+unless an SDP is actually needed.
 """
 
-from . import agents, graphs, kalman, ledger, noise
+from __future__ import annotations
+
+import importlib
+from types import ModuleType
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__", "agents", "graphs", "kalman", "ledger", "noise"]
+#: Public submodules, grouped by concept.
+SUBMODULES = (
+    # shared building blocks
+    "agents", "graphs", "kalman", "noise", "plotting", "ledger", "reproduce",
+    # consensus and cooperative control
+    "consensus", "rendezvous", "flocking", "synchronization", "lqr",
+    # estimation
+    "sensing", "distributed_kf", "distributed_ekf", "ellipsoids", "set_membership", "observers",
+    # the papers' scenarios
+    "papers",
+)
+
+__all__ = ["__version__", *SUBMODULES]
+
+
+def __getattr__(name: str) -> ModuleType:
+    if name in SUBMODULES:
+        module = importlib.import_module(f".{name}", __name__)
+        globals()[name] = module
+        return module
+    raise AttributeError(f"module 'mascore' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(SUBMODULES))

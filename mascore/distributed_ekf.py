@@ -42,6 +42,7 @@ from numpy.typing import ArrayLike
 from ._validation import check_covariance, check_generator
 from .flocking import (
     FlockingGains,
+    FlockingRun,
     _check_divergence,
     _check_steps,
     _check_team,
@@ -187,17 +188,13 @@ def ekf_flocking_step(
 
 
 @dataclass(frozen=True)
-class EstimatedFlockingRun:
+class EstimatedFlockingRun(FlockingRun):
     """Outcome of :func:`simulate_estimation_based_flocking`.
 
     Attributes
     ----------
-    t : (T+1,) ndarray
-        Times (s).
-    X : (..., T+1, N, 2n) ndarray
-        True team states.
-    adjacency : (..., T+1, N, N) ndarray of bool
-        Proximity graph of the true positions (who measures whom).
+    t, X, adjacency
+        As in :class:`mascore.flocking.FlockingRun`.
     observer : int
         Index of the agent whose filter is recorded.
     X_hat : (..., T+1, N, 2n) ndarray
@@ -210,9 +207,6 @@ class EstimatedFlockingRun:
         every estimated agent, ``sqrt(mean_{i,j} |p_hat_{i,j} - p_j|^2)``.
     """
 
-    t: np.ndarray
-    X: np.ndarray
-    adjacency: np.ndarray
     observer: int
     X_hat: np.ndarray
     position_variance: np.ndarray

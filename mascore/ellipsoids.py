@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import as_matrix, as_vector, check_covariance, check_generator
+from .noise import psd_factor, uniform_ellipsoid
 
 __all__ = [
     "Ellipsoid",
@@ -400,27 +401,14 @@ def sample_boundary(
     size = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
     u = rng.standard_normal((*size, P.shape[0]))
     u /= np.linalg.norm(u, axis=-1, keepdims=True)
-    return c + u @ _sqrt_factor(P).T
+    return c + u @ psd_factor(P).T
 
 
 def sample_interior(
     rng: np.random.Generator, center: ArrayLike, shape: ArrayLike, size: int | tuple[int, ...] = ()
 ) -> np.ndarray:
-    """Points uniform in E(c, P); shape (*size, n)."""
-    rng = check_generator(rng)
-    P = check_covariance(shape, "shape")
-    n = P.shape[0]
-    c = as_vector(center, "center", n)
-    size = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
-    u = rng.standard_normal((*size, n))
-    u /= np.linalg.norm(u, axis=-1, keepdims=True)
-    u *= rng.random((*size, 1)) ** (1.0 / n)
-    return c + u @ _sqrt_factor(P).T
-
-
-def _sqrt_factor(P: np.ndarray) -> np.ndarray:
-    w, V = np.linalg.eigh(P)
-    return V * np.sqrt(np.clip(w, 0.0, None))
+    """Points uniform in E(c, P); shape (*size, n). Same as :func:`mascore.noise.uniform_ellipsoid`."""
+    return uniform_ellipsoid(rng, center, shape, size)
 
 
 def _trace_profile(P: np.ndarray, C: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -25,6 +25,8 @@ import scipy.linalg as sla
 from numpy.typing import ArrayLike
 
 from ._validation import as_matrix, check_covariance, check_square
+from .kalman import symmetrize
+from .noise import psd_factor
 
 __all__ = [
     "BottomUpLQR",
@@ -346,7 +348,7 @@ def bottom_up_lqr(
     K, _, _ = _care(A, B, Q1, R)
     Rinv = np.linalg.inv(R)
     # dual: process factor G_i with G_i G_i^T = Q1 + lam_i Q2, noise weight R^{-1}, gain K^T
-    factors = [_psd_sqrt(Q1 + l * Q2) for l in lam]
+    factors = [psd_factor(symmetrize(Q1 + l * Q2)) for l in lam]
     result = coupled_gain_lmi(A.T, B.T, K.T, lam, factors, [Rinv] * len(lam), trace_in="original",
                               what="bottom-up LQR program")
     Phi = result["Phi"].T
@@ -429,8 +431,3 @@ def _check_agents(n_agents: int) -> int:
 
 def _spectral_abscissa(A, B, K_self, K_coupling, lam) -> float:
     return float(max(np.max(np.linalg.eigvals(A - B @ (K_self + l * K_coupling)).real) for l in lam))
-
-
-def _psd_sqrt(M: np.ndarray) -> np.ndarray:
-    w, U = np.linalg.eigh((M + M.T) / 2)
-    return U * np.sqrt(np.clip(w, 0, None))

@@ -11,7 +11,35 @@ from numpy.typing import ArrayLike
 
 from ._validation import as_vector, check_covariance, check_generator
 
-__all__ = ["gaussian", "uniform_box", "uniform_ellipsoid"]
+__all__ = ["gaussian", "psd_factor", "uniform_box", "uniform_ellipsoid"]
+
+
+def psd_factor(M: ArrayLike, cholesky_first: bool = False) -> np.ndarray:
+    """A factor ``F`` with ``F F^T = M`` for a symmetric positive semidefinite ``M``.
+
+    Parameters
+    ----------
+    M : (..., m, m) array_like
+        Symmetric positive semidefinite matrices (not checked: callers validate).
+    cholesky_first : bool
+        Return the lower Cholesky factor when ``M`` is positive definite and fall
+        back to the eigenvector factor only when it is singular. By default the
+        eigenvector factor ``V diag(sqrt(w))`` is always used.
+
+    Returns
+    -------
+    (..., m, m) ndarray
+        ``F`` maps standard normal draws to draws of covariance ``M``
+        (``x = F z``), also for singular ``M``.
+    """
+    M = np.asarray(M, dtype=float)
+    if cholesky_first:
+        try:
+            return np.linalg.cholesky(M)
+        except np.linalg.LinAlgError:
+            pass
+    w, V = np.linalg.eigh(M)
+    return V * np.sqrt(np.clip(w, 0.0, None))[..., None, :]
 
 
 def gaussian(
@@ -38,10 +66,7 @@ def gaussian(
     m = cov.shape[0]
     mean = np.zeros(m) if mean is None else as_vector(mean, "mean", m)
     size = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
-    # eigh-based factor works for singular (semidefinite) covariances too
-    w, V = np.linalg.eigh(cov)
-    factor = V * np.sqrt(np.clip(w, 0.0, None))
-    return mean + rng.standard_normal((*size, m)) @ factor.T
+    return mean + rng.standard_normal((*size, m)) @ psd_factor(cov).T
 
 
 def uniform_box(
@@ -85,6 +110,4 @@ def uniform_ellipsoid(
     direction = rng.standard_normal((*size, m))
     direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
     radius = rng.random((*size, 1)) ** (1.0 / m)
-    w, V = np.linalg.eigh(P)
-    factor = V * np.sqrt(np.clip(w, 0.0, None))
-    return c + (radius * direction) @ factor.T
+    return c + (radius * direction) @ psd_factor(P).T

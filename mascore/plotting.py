@@ -93,10 +93,7 @@ def plot_trajectories(
         ax.plot(p[:, i, 0], p[:, i, 1], color=color, label=labels[i], **line_kw)
         ax.plot(*p[0, i], marker_start, color=color, ms=5)
         ax.plot(*p[-1, i], marker_end, color=color, ms=5, mfc="none")
-    ax.set_xlabel(f"x ({unit})")
-    ax.set_ylabel(f"y ({unit})")
-    ax.set_aspect("equal", adjustable="datalim")
-    return ax
+    return _plane_axes(ax, unit)
 
 
 def plot_graph(
@@ -138,6 +135,11 @@ def plot_graph(
         ax.plot(*p[i], "o", color=color, ms=9, zorder=2)
         if node_labels:
             ax.annotate(str(i + 1), p[i], ha="center", va="center", fontsize=7, color="white", zorder=3)
+    return _plane_axes(ax, unit)
+
+
+def _plane_axes(ax: plt.Axes, unit: str) -> plt.Axes:
+    """Label the x-y plane in `unit` and keep its aspect ratio."""
     ax.set_xlabel(f"x ({unit})")
     ax.set_ylabel(f"y ({unit})")
     ax.set_aspect("equal", adjustable="datalim")

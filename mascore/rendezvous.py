@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 
 from . import distributed_kf as dkf
 from ._validation import check_covariance, check_generator
+from .noise import psd_factor
 from .sensing import measure, sensing_mask
 
 __all__ = [
@@ -111,7 +112,7 @@ def propagate_team(
     Q = check_covariance(Q, "Q", size=m)
     if A.shape != (m, m) or B.shape != (m, u.shape[-1]):
         raise ValueError(f"Incompatible dimensions: A {A.shape}, B {B.shape} for states {x.shape}, inputs {u.shape}")
-    w = rng.standard_normal(x.shape) @ _sqrt_psd(Q).T
+    w = rng.standard_normal(x.shape) @ psd_factor(Q, cholesky_first=True).T
     return x @ A.T + u @ B.T + w
 
 
@@ -353,11 +354,3 @@ def _position_index(model: dkf.TeamFilterModel) -> np.ndarray:
     half = model.m // 2
     per_agent = np.arange(mr)[(np.arange(mr) * model.kron) < half]
     return (np.arange(model.n_agents)[:, None] * mr + per_agent).reshape(-1)
-
-
-def _sqrt_psd(M: np.ndarray) -> np.ndarray:
-    try:
-        return np.linalg.cholesky(M)
-    except np.linalg.LinAlgError:
-        w, V = np.linalg.eigh(M)
-        return V * np.sqrt(np.clip(w, 0.0, None))

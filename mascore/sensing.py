@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import check_covariance, check_generator
+from .noise import psd_factor
 
 __all__ = [
     "IsolatedAgentError",
@@ -180,7 +181,7 @@ def measurement_noise(
     """
     rng = check_generator(rng)
     R_team = team_noise_covariance(R, n_agents, m)
-    root = _psd_sqrt(R_team)
+    root = psd_factor(R_team, cholesky_first=True)
     std = rng.standard_normal((*shape, n_agents, n_agents * m))
     nu = std @ root.T
     return nu.reshape(*shape, n_agents, n_agents, m)
@@ -272,12 +273,3 @@ def _check_adjacency(adjacency: ArrayLike) -> np.ndarray:
     if np.any(A[..., np.arange(n), np.arange(n)] != 0):
         raise ValueError("adjacency must have a zero diagonal (self-sensing is implicit in N̄_i)")
     return A
-
-
-def _psd_sqrt(M: np.ndarray) -> np.ndarray:
-    """A square root ``L`` with ``L L^T = M`` for symmetric PSD ``M``."""
-    try:
-        return np.linalg.cholesky(M)
-    except np.linalg.LinAlgError:
-        w, V = np.linalg.eigh(M)
-        return V * np.sqrt(np.clip(w, 0.0, None))

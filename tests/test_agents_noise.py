@@ -87,3 +87,17 @@ def test_uniform_ellipsoid_samples_stay_inside_any_ellipsoid(dim, seed):
     x = noise.uniform_ellipsoid(rng, c, P, 500)
     d = x - c
     assert np.einsum("ni,ij,nj->n", d, np.linalg.inv(P), d).max() <= 1 + 1e-9
+
+
+@pytest.mark.parametrize("cholesky_first", [False, True])
+def test_psd_factor_reconstructs_definite_singular_and_stacked_matrices(cholesky_first):
+    rng = np.random.default_rng(5)
+    G = rng.standard_normal((4, 3, 3))
+    definite = G @ G.transpose(0, 2, 1) + 0.1 * np.eye(3)
+    singular = np.outer([1.0, 2.0, 0.5], [1.0, 2.0, 0.5])
+    for M in (definite, definite[0], singular):
+        F = noise.psd_factor(M, cholesky_first=cholesky_first)
+        np.testing.assert_allclose(F @ np.swapaxes(F, -1, -2), M, atol=1e-12)
+    # positive definite + cholesky_first: the lower-triangular Cholesky factor
+    F = noise.psd_factor(definite[0], cholesky_first=True)
+    np.testing.assert_array_equal(F, np.tril(F))
