@@ -22,8 +22,8 @@ Python loop over agents. :func:`masked_update` uses the equivalent fixed-size
 form: with the diagonal 0/1 mask ``M_i = H_i^T H_i``,
 ``S~ = M_i (Sigma + R) M_i + (I - M_i)`` is, up to a permutation,
 ``blockdiag(S_i, I)``, so ``Sigma M_i S~^{-1}`` equals ``Sigma H_i^T S_i^{-1} H_i``
-and the update (eqs. (18)-(20), Joseph form) is exactly the one with ``H_i``
-(tested against :func:`mascore.kalman.update` with the explicit ``H_i``). All
+and the update (eqs. (18)-(20), covariance ``(I - G_i H_i) Sigma_i^-`` as in
+eq. (20)) is exactly the one with ``H_i`` (tested against :func:`mascore.kalman.update` with the explicit ``H_i``). All
 N filters (and all Monte Carlo runs) then advance in a handful of batched
 ``matmul``/``solve`` calls.
 
@@ -122,7 +122,8 @@ def masked_update(
     -------
     X_post : (..., N, 2n) ndarray
     Sigma_post : (..., 2nN, 2nN) ndarray
-        Joseph form, symmetric.
+        ``(I - G_i H_i) Sigma_i^-`` of eq. (20) (equal to the Joseph form for
+        this optimal gain), symmetrized.
     """
     X_pred = _check_team(X_pred, "X_pred")
     N, m = X_pred.shape[-2:]

@@ -14,7 +14,8 @@ from mascore.reproduce import available_papers, results_dir
 REQUIRED = {
     "song2023": ["fig2-error-matches-covariance", "fig3-position-std", "fig3-velocity-std",
                  "theorem1-lyapunov-decrease", "fig4-non-neighbour-error-bounded",
-                 "fig5-position-std", "fig5-velocity-std", "fig6-within-boundary"],
+                 "fig5-position-std", "fig5-velocity-std", "fig6-within-boundary", "nees-rendezvous",
+                 "nees-rendezvous-measurement-based"],
     "ren2005": ["fig1-consensus-equal", "fig1-confident-agent-dominates", "thm32-continuous-consensus",
                 "thm39-switching-union-consensus", "no-spanning-tree-no-consensus"],
     "bhattacharjee2021": ["lemma2-r", "coupling-gain-c", "bound-eq21", "fig2c-Ac-bound", "fig6-trace-limit",
