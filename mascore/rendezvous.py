@@ -198,8 +198,9 @@ def simulate_rendezvous(
     exact_control_noise: bool = False,
     central: bool = False,
     progress: bool = False,
+    switching: bool = False,
 ) -> RendezvousResult:
-    """Closed-loop rendezvous on a fixed topology, batched over Monte Carlo runs.
+    """Closed-loop rendezvous on a fixed or switching topology, batched over Monte Carlo runs.
 
     Parameters
     ----------
@@ -208,10 +209,12 @@ def simulate_rendezvous(
         streams, so every mode sees the same noise for the same seed).
     x0 : (R, N, m) array_like
         Initial true states of R runs.
-    adjacency : (N, N) or (R, N, N) array_like
-        Fixed sensing topology (one for all runs, or one per run). With one
-        shared topology the filters' covariance recursion is computed once
-        for all runs.
+    adjacency : (N, N), (R, N, N) or, with `switching`, (T+1, N, N) array_like
+        Sensing topology: fixed (one for all runs, or one per run), or the
+        topology of every step ``k = 0..T`` shared by all runs. The control
+        of step k uses graph k, the measurements of step k+1 use graph k+1.
+        With one shared topology (fixed or switching) the filters'
+        covariance recursion is computed once for all runs.
     A, B : agent model (eq. (1)); K : (p, m) consensus gain (eq. (4)).
     Q : (m, m) process-noise covariance; R : (m, m) or (m N, m N) measurement noise.
     n_steps : int
@@ -235,6 +238,9 @@ def simulate_rendezvous(
         Also run the centralized Kalman filter reference (filter modes).
     progress : bool
         Show a tqdm progress bar.
+    switching : bool
+        Read `adjacency` as one graph per step (Theorem 1 assumes a fixed
+        one; with "estimation" every graph must make system (43) observable).
 
     Raises
     ------
@@ -249,18 +255,26 @@ def simulate_rendezvous(
     if x.ndim != 3:
         raise ValueError(f"x0 must have shape (R, N, m); got {x.shape}")
     n_runs, N, m = x.shape
-    Adj = np.asarray(adjacency, dtype=float)
-    S = sensing_mask(Adj)  # raises on isolated agents
-    if S.shape[-1] != N or S.ndim not in (2, 3) or (S.ndim == 3 and S.shape[0] != n_runs):
-        raise ValueError(f"adjacency must be ({N}, {N}) or ({n_runs}, {N}, {N}); got {Adj.shape}")
-    Lap = np.diag(np.ones(N)) * Adj.sum(axis=-1)[..., None] - Adj
     if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
         raise ValueError(f"n_steps must be a positive integer; got {n_steps!r}")
+    Adj = np.asarray(adjacency, dtype=float)
+    S = sensing_mask(Adj)  # raises on isolated agents
+    if switching:
+        if S.shape != (n_steps + 1, N, N):
+            raise ValueError(f"with switching=True, adjacency must be ({n_steps + 1}, {N}, {N}); got {Adj.shape}")
+    elif S.shape[-1] != N or S.ndim not in (2, 3) or (S.ndim == 3 and S.shape[0] != n_runs):
+        raise ValueError(f"adjacency must be ({N}, {N}) or ({n_runs}, {N}, {N}); got {Adj.shape}")
+    Laps = np.diag(np.ones(N)) * Adj.sum(axis=-1)[..., None] - Adj
+
+    def topology(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Adjacency, sensing mask and Laplacian in force at step k."""
+        return (Adj[k], S[k], Laps[k]) if switching else (Adj, S, Laps)
+
     K = np.asarray(K, dtype=float)
     filt = mode in ("measurement-filter", "estimation")
     model = dkf.team_filter_model(A, B, K, Q, R, N) if filt else None
     if mode == "estimation":
-        for adj in Adj.reshape(-1, N, N):
+        for adj in np.unique(Adj.reshape(-1, N, N), axis=0):  # each distinct graph once
             dkf.require_observable(model.A, model.BK, adj)
     proc_rng, meas_rng = rng.spawn(2)
     states = np.empty((n_steps + 1, n_runs, N, m))
@@ -275,7 +289,7 @@ def simulate_rendezvous(
         X_hat = np.broadcast_to(xh0.reshape(n_runs, 1, N, m), (n_runs, N, N, m)).copy()
         Sig_aug = dkf.eb_initial_covariance(model, P0, common=True)
         Sig_i = dkf.agent_covariances(model, Sig_aug)
-        nb = 1 if Adj.ndim == 2 else n_runs
+        nb = 1 if switching or Adj.ndim == 2 else n_runs
         Sig_aug = np.broadcast_to(Sig_aug, (nb, *Sig_aug.shape[1:])).copy()
         Sig_i = np.broadcast_to(Sig_i, (nb, *Sig_i.shape[1:])).copy()
         KH = np.zeros_like(Sig_i)
@@ -306,20 +320,21 @@ def simulate_rendezvous(
                 out["sigma_i"][k] = Sig_i[0]
                 out["gains"][k] = KH[0]
                 if mode == "estimation":
-                    out["f2_cross"][k] = dkf.f2_cross(model, Sig_aug, Lap)[0]
+                    out["f2_cross"][k] = dkf.f2_cross(model, Sig_aug, topology(k)[2])[0]
             if central:
                 out["central_pos_std"][k] = np.sqrt(n * np.diagonal(Pc, axis1=-2, axis2=-1)[..., pos].sum(-1))
                 out["central_pos_error"][k] = np.sqrt(np.sum((x - xc)[..., pos_slice] ** 2, axis=(-1, -2)))
 
         pos_slice = slice(0, m // 2)
         record(0)
-    Z, _ = measure(meas_rng, x, Adj, R)
+    Z, _ = measure(meas_rng, x, topology(0)[0], R)
     steps = range(n_steps)
     if progress:
         from tqdm.auto import tqdm
 
         steps = tqdm(steps, desc=f"rendezvous ({mode})", leave=False)
     for k in steps:
+        Lap = topology(k)[2]
         if mode == "true":
             U = consensus_control(true_state_views(x), Lap, K)
         elif mode in ("measurement", "measurement-filter"):
@@ -334,14 +349,15 @@ def simulate_rendezvous(
         elif mode == "measurement-filter":
             X_hat, Sig_i = dkf.mb_predict(model, X_hat, Sig_i, Lap, KH if exact_control_noise else None)
         x = x_new
-        Z, _ = measure(meas_rng, x, Adj, R)
+        Adj_next, S_next, _ = topology(k + 1)
+        Z, _ = measure(meas_rng, x, Adj_next, R)
         if mode == "estimation":
-            X_hat, Sig_aug, KH = dkf.eb_update(model, X_hat, Sig_aug, Z, S)
+            X_hat, Sig_aug, KH = dkf.eb_update(model, X_hat, Sig_aug, Z, S_next)
             Sig_i = dkf.agent_covariances(model, Sig_aug)
         elif mode == "measurement-filter":
-            X_hat, Sig_i, KH = dkf.mb_update(model, X_hat, Sig_i, Z, S)
+            X_hat, Sig_i, KH = dkf.mb_update(model, X_hat, Sig_i, Z, S_next)
         if filt and central:
-            xc, Pc = dkf.centralized_update(model, xc, Pc, Z, S)
+            xc, Pc = dkf.centralized_update(model, xc, Pc, Z, S_next)
         states[k + 1] = x
         if filt:
             record(k + 1)

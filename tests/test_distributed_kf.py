@@ -342,3 +342,40 @@ def test_exact_control_noise_correlation_matches_monte_carlo_and_eq15_does_not()
         assert np.abs(P_exact[0, i] - emp).max() < 0.02 * scale
         if i == 1:  # the middle agent has two neighbours: the neglected term is largest
             assert np.abs(P_paper[0, i] - emp).max() > 0.04 * scale
+
+
+def test_switching_with_a_constant_sequence_is_the_fixed_topology_run():
+    x0 = np.random.default_rng(21).normal(scale=20, size=(3, 4, 4))
+    xh0 = (x0 + 2.0).reshape(3, -1)
+    args = (x0, AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), 15, "estimation", 0.1)
+    fixed = simulate_rendezvous(22, x0, ring_graph(4), *args[1:], x_hat0=xh0, P0=4 * np.eye(4))
+    seq = np.broadcast_to(ring_graph(4), (16, 4, 4))
+    switched = simulate_rendezvous(22, x0, seq, *args[1:], x_hat0=xh0, P0=4 * np.eye(4), switching=True)
+    np.testing.assert_array_equal(fixed.states, switched.states)
+    np.testing.assert_array_equal(fixed.nees, switched.nees)
+
+
+@pytest.mark.parametrize("mode", ["estimation", "measurement-filter"])
+def test_nees_consistent_on_a_switching_topology(mode):
+    """Graph k drives the control of step k and graph k+1 the next measurements: if the two were
+    mixed up, the covariance would stop describing the actual errors."""
+    N, n_runs, n_steps = 4, 200, 60
+    rng = np.random.default_rng(23)
+    x0 = np.broadcast_to(rng.normal(scale=30, size=(N, 4)), (n_runs, N, 4)).copy()
+    P0 = np.diag([25.0, 25.0, 1.0, 1.0])
+    xh0 = (x0 + rng.standard_normal(x0.shape) * np.sqrt(np.diag(P0))).reshape(n_runs, -1)
+    graphs = np.array([path_graph(N), ring_graph(N), complete_graph(N)])
+    seq = graphs[(np.arange(n_steps + 1) // 4) % 3]  # a new graph every 4 steps
+    res = simulate_rendezvous(24, x0, seq, AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), n_steps, mode, 0.1,
+                              x_hat0=xh0, P0=P0, switching=True)
+    avg = res.nees[1:].mean(axis=1)  # (T, N)
+    lo, hi = nees_interval(4 * N, n_runs)
+    grand_lo, grand_hi = nees_interval(4 * N, n_runs * avg.shape[0] // 10)
+    assert grand_lo < avg.mean() < grand_hi
+    assert np.mean((avg > lo) & (avg < hi)) > 0.88
+
+
+def test_switching_sequence_of_the_wrong_length_is_refused():
+    with pytest.raises(ValueError, match="with switching=True, adjacency must be"):
+        simulate_rendezvous(0, np.zeros((1, 3, 4)), np.broadcast_to(path_graph(3), (4, 3, 3)), AGENT.A, AGENT.B,
+                            K, np.eye(4), np.eye(4), 5, "measurement", 0.1, switching=True)
