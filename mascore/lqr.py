@@ -193,8 +193,15 @@ def centralized_network_lqr(
         Solution of eq. (9).
     E : (N n,) ndarray
         Closed-loop eigenvalues.
+
+    Raises
+    ------
+    ValueError
+        Bad shapes or weights, ``(A, B)`` not controllable, or `laplacian` not the
+        Laplacian of a connected undirected graph.
     """
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
+    laplacian_spectrum(laplacian)  # symmetric Laplacian of a connected graph, else ValueError
     Qt, Rt = network_lqr_weights(Q1, Q2, R, laplacian)
     N = Qt.shape[0] // A.shape[0]
     return _care(np.kron(np.eye(N), A), np.kron(np.eye(N), B), Qt, Rt)
@@ -216,6 +223,11 @@ def borrelli_keviczky_structure(
     dict
         ``P``, ``P2`` (= P2~), ``K1``, ``K2`` (blocks of ``K`` with ``U = -K X``),
         ``P_network`` (N n, N n) and ``K_network`` (N m, N n) assembled from them.
+
+    Raises
+    ------
+    ValueError
+        Bad shapes or weights, ``(A, B)`` not controllable, or `n_agents` not a positive integer.
     """
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
     N = _check_agents(n_agents)
@@ -301,6 +313,11 @@ def top_down_lqr(
     ----------
     adjacency : (N, N) array_like
         Symmetric adjacency of a connected graph.
+
+    Raises
+    ------
+    ValueError
+        Bad shapes or weights, ``(A, B)`` not controllable, or a disconnected graph.
     """
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
     Adj = check_square(adjacency, "adjacency")
@@ -341,8 +358,6 @@ def bottom_up_lqr(
     from .observers import coupled_gain_lmi
 
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
-    if not is_controllable(A, B):
-        raise ValueError("(A, B) is not controllable: the LQR problem has no stabilizing solution")
     Adj = check_square(adjacency, "adjacency")
     lam, _ = laplacian_spectrum(np.diag(Adj.sum(axis=1)) - Adj)
     K, _, _ = _care(A, B, Q1, R)
@@ -369,9 +384,10 @@ def network_controller_cost(
 
     ``P_K`` solves the closed-loop Lyapunov equation with the weights of
     :func:`network_lqr_weights`; ``trace(P_K)`` is the expected cost (7) for
-    ``X(0) ~ N(0, I)``. Returns ``inf`` if the closed loop is not stable.
+    ``X(0) ~ N(0, I)``. Returns ``inf`` if the closed loop is not stable. ``(A, B)``
+    need not be controllable (the gain is given).
     """
-    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
+    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R, controllable=False)
     lam, _ = laplacian_spectrum(laplacian)
     total = 0.0
     for l in lam:
@@ -387,7 +403,14 @@ def network_controller_cost(
 def centralized_network_cost(
     A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike, laplacian: ArrayLike
 ) -> float:
-    """Optimal aggregate cost ``trace(P~)`` of eq. (9), as ``sum_i trace(ARE(A, B, Q1 + lam_i Q2, R))``."""
+    """Optimal aggregate cost ``trace(P~)`` of eq. (9), as ``sum_i trace(ARE(A, B, Q1 + lam_i Q2, R))``.
+
+    Raises
+    ------
+    ValueError
+        Bad shapes or weights, ``(A, B)`` not controllable, or `laplacian` not the
+        Laplacian of a connected undirected graph.
+    """
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
     lam, _ = laplacian_spectrum(laplacian)
     return float(sum(np.trace(_care(A, B, Q1 + l * Q2, R)[1]) for l in lam))
@@ -413,13 +436,16 @@ def _care(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray) -> tuple[n
     return K, S, E
 
 
-def _check_agent(A, B, Q1, Q2, R):
+def _check_agent(A, B, Q1, Q2, R, controllable: bool = True):
+    """Validate the agent and weights; with `controllable`, also require ``(A, B)`` controllable (PBH)."""
     A = check_square(A, "A")
     n = A.shape[0]
     B = as_matrix(B, "B", (n, None))
     Q1 = check_covariance(np.atleast_2d(Q1), "Q1", n)
     Q2 = check_covariance(np.atleast_2d(Q2), "Q2", n)
     R = check_covariance(np.atleast_2d(R), "R", B.shape[1], definite=True)
+    if controllable and not is_controllable(A, B):
+        raise ValueError("(A, B) is not controllable: the LQR problem has no stabilizing solution")
     return A, B, Q1, Q2, R
 
 

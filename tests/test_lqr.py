@@ -138,3 +138,37 @@ def test_disconnected_graph_is_rejected():
         lqr.bottom_up_lqr(A, B, np.eye(2), np.eye(2), np.eye(1), adj)
     with pytest.raises(ValueError, match="symmetric"):
         lqr.laplacian_spectrum(graphs.laplacian(np.triu(graphs.ring_graph(4))))
+
+
+#: Uncontrollable yet stabilizable agent: the mode -1 is untouched by B, so the Riccati equations
+#: still have stabilizing solutions and only an explicit controllability check rejects it.
+A_UNC, B_UNC = np.diag([-1.0, 1.0]), np.array([[0.0], [1.0]])
+
+
+def test_uncontrollable_agent_rejected_by_network_designs():
+    assert not lqr.is_controllable(A_UNC, B_UNC)
+    w = (np.eye(2), np.eye(2), np.eye(1))
+    ring = graphs.ring_graph(4)
+    Lap = graphs.laplacian(ring)
+    with pytest.raises(ValueError, match=r"\(A, B\) is not controllable"):
+        lqr.top_down_lqr(A_UNC, B_UNC, *w, ring)
+    with pytest.raises(ValueError, match=r"\(A, B\) is not controllable"):
+        lqr.centralized_network_lqr(A_UNC, B_UNC, *w, Lap)
+    with pytest.raises(ValueError, match=r"\(A, B\) is not controllable"):
+        lqr.centralized_network_cost(A_UNC, B_UNC, *w, Lap)
+    with pytest.raises(ValueError, match=r"\(A, B\) is not controllable"):
+        lqr.borrelli_keviczky_structure(A_UNC, B_UNC, *w, 4)
+    with pytest.raises(ValueError, match=r"\(A, B\) is not controllable"):
+        lqr.bottom_up_lqr(A_UNC, B_UNC, *w, ring)
+    # evaluating a given stabilizing gain needs no controllability
+    gain = lqr.DistributedGain(np.array([[0.0, 3.0]]), np.zeros((1, 2)))
+    assert np.isfinite(lqr.network_controller_cost(A_UNC, B_UNC, *w, Lap, gain))
+
+
+def test_centralized_network_lqr_rejects_disconnected_laplacian():
+    adj = np.zeros((4, 4))
+    adj[0, 1] = adj[1, 0] = adj[2, 3] = adj[3, 2] = 1
+    with pytest.raises(ValueError, match="disconnected"):
+        lqr.centralized_network_lqr(A, B, np.eye(2), np.eye(2), np.eye(1), graphs.laplacian(adj))
+    with pytest.raises(ValueError, match="laplacian rows must sum to zero"):
+        lqr.centralized_network_lqr(A, B, np.eye(2), np.eye(2), np.eye(1), graphs.ring_graph(4))

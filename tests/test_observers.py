@@ -156,3 +156,63 @@ def test_random_connected_graphs(seed):
     assert d.hurwitz
     assert d.centralized_cost <= d.cost <= d.bound * (1 + 1e-6)
     assert d.lam[1] > 0
+
+
+def test_network_observer_error_equals_error_dynamics(ring_design):
+    """Plant + observer (42) fed by Y = (I (x) C) X: X - X_hat follows expm(A_e t) e0, an independent check."""
+    d = ring_design
+    Lap = graphs.laplacian(graphs.ring_graph(6))
+    rng = np.random.default_rng(7)
+    x0, x_hat0 = rng.uniform(-1, 1, size=(6, 2)), rng.uniform(-1, 1, size=(6, 2))
+    t = np.linspace(0, 10, 1001)
+    X, X_hat = observers.simulate_network_observer(A, C, d.L, d.Phi, Lap, x0, x_hat0, t)
+    assert X.shape == X_hat.shape == (t.size, 6, 2)
+    A_e = observers.observer_error_matrix(A, d.L, C, d.Phi, Lap)
+    np.testing.assert_allclose(X - X_hat, observers.simulate_estimation_errors(A_e, x0 - x_hat0, t),
+                               rtol=0, atol=1e-11)
+    # the plant is not affected by the observer; the estimates converge to the true states
+    np.testing.assert_allclose(X[-1].ravel(), sla.expm(np.kron(np.eye(6), A) * 10) @ x0.ravel(), atol=1e-11)
+    assert np.abs(X - X_hat)[-1].max() < 1e-3 * np.abs(x0 - x_hat0).max()
+    assert np.abs(X[-1]).max() > 0.1  # the states themselves have not died out: the estimates track them
+
+
+def test_network_observer_with_constant_disturbance(ring_design):
+    """Constant d on a non-uniform grid: e(t) = expm(A_e t) e0 + A_e^-1 (expm(A_e t) - I) (I (x) Bbar) d."""
+    d = ring_design
+    Lap = graphs.laplacian(graphs.ring_graph(6))
+    rng = np.random.default_rng(8)
+    x0, x_hat0 = rng.uniform(-1, 1, size=(6, 2)), np.zeros((6, 2))
+    dist = rng.uniform(-1, 1, size=(6, 1))
+    t = np.concatenate([np.linspace(0, 1, 11), np.linspace(1.5, 4, 6)])
+    X, X_hat = observers.simulate_network_observer(A, C, d.L, d.Phi, Lap, x0, x_hat0, t, Bbar=B,
+                                                   disturbance=np.broadcast_to(dist, (t.size, 6, 1)))
+    A_e = observers.observer_error_matrix(A, d.L, C, d.Phi, Lap)
+    forcing = np.kron(np.eye(6), B) @ dist.ravel()
+    for k in (5, 10, t.size - 1):
+        F = sla.expm(A_e * t[k])
+        expected = F @ (x0 - x_hat0).ravel() + np.linalg.solve(A_e, (F - np.eye(12)) @ forcing)
+        np.testing.assert_allclose((X[k] - X_hat[k]).ravel(), expected, atol=1e-10)
+    # Phi = 0 and no disturbance: the agents' observers decouple (each one is x_e' = (A - L C) x_e + L y)
+    X0, Xh0 = observers.simulate_network_observer(A, C, d.L, 0.0, Lap, x0, x_hat0, t)
+    np.testing.assert_allclose((X0 - Xh0)[-1, 0], sla.expm((A - d.L @ C) * 4) @ (x0 - x_hat0)[0], atol=1e-11)
+
+
+def test_network_observer_bad_input_names_the_argument(ring_design):
+    d = ring_design
+    Lap = graphs.laplacian(graphs.ring_graph(6))
+    x0, t = np.zeros((6, 2)), np.linspace(0, 1, 11)
+    sim = observers.simulate_network_observer
+    with pytest.raises(ValueError, match="Incompatible dimensions of x0"):
+        sim(A, C, d.L, d.Phi, Lap, np.zeros((5, 2)), x0, t)
+    with pytest.raises(ValueError, match="Incompatible dimensions of x_hat0"):
+        sim(A, C, d.L, d.Phi, Lap, x0, np.zeros((6, 3)), t)
+    with pytest.raises(ValueError, match="laplacian rows must sum to zero"):
+        sim(A, C, d.L, d.Phi, graphs.ring_graph(6), x0, x0, t)
+    with pytest.raises(ValueError, match="t must be strictly increasing"):
+        sim(A, C, d.L, d.Phi, Lap, x0, x0, t[::-1])
+    with pytest.raises(ValueError, match="Incompatible dimensions of Phi"):
+        sim(A, C, d.L, np.eye(2), Lap, x0, x0, t)
+    with pytest.raises(ValueError, match="disturbance needs Bbar"):
+        sim(A, C, d.L, d.Phi, Lap, x0, x0, t, disturbance=np.zeros((11, 6, 1)))
+    with pytest.raises(ValueError, match="disturbance must have shape"):
+        sim(A, C, d.L, d.Phi, Lap, x0, x0, t, Bbar=B, disturbance=np.zeros((10, 6, 1)))
