@@ -197,6 +197,7 @@ def kalman_consensus_step(
     scalar, xi_v, P_m = _as_state(xi, P)
     n, m = xi_v.shape[-2], xi_v.shape[-1]
     g = _check_topologies(G, n, "G", stacked=False)
+    _check_batch(g.shape[:-2], xi_v.shape[:-2], "G")
     gen = None if rng is None else check_generator(rng)
     xi_next, P_next = _step(xi_v, P_m, g, _expand_Q(Q, n, m), _expand_omega(Omega, n, m), gen, include_self)
     return _from_state(scalar, xi_next, P_next)
@@ -239,7 +240,7 @@ def kalman_consensus_discrete(
     n, m = xi.shape[-2], xi.shape[-1]
     Q_, Om = _expand_Q(Q, n, m), _expand_omega(Omega, n, m)
     gen = None if rng is None else check_generator(rng)
-    graph_at, n_steps = _discrete_topology(topologies, n, n_steps)
+    graph_at, n_steps = _discrete_topology(topologies, n, n_steps, xi.shape[:-2])
     xs, Ps = [xi], [P]
     for k in range(n_steps):
         xi, P = _step(xi, P, graph_at(k), Q_, Om, gen, include_self)
@@ -313,9 +314,10 @@ def kalman_consensus_continuous(
 
     Parameters
     ----------
-    xi0 : (n,) or (n, m) array_like
-        Initial information states.
-    P0 : (n,) or (n, m, m) array_like
+    xi0 : (..., n) or (..., n, m) array_like
+        Initial information states; leading batch axes are independent runs on
+        the same topology (e.g. Monte Carlo paths of the noisy SDE).
+    P0 : (..., n) or (..., n, m, m) array_like
         Initial covariances (positive definite).
     topology : SwitchingTopology, (n, n) array_like or callable ``t -> (n, n)``
         The interaction graph ``g_ij(t)``. A callable is held constant between
@@ -323,8 +325,8 @@ def kalman_consensus_continuous(
         the start of each interval.
     t_final : float
         End time (s); the run starts at 0.
-    Q : float or (m, m) array_like
-        Process-noise intensity (positive definite, the paper assumes Q > 0).
+    Q : float, (m, m) or (n, m, m) array_like
+        Process-noise intensity (the paper assumes Q > 0; Q = 0 is accepted).
     Omega : float, (m, m) or (n, n, m, m) array_like
         Communication-noise intensity.
     t_eval : (T,) array_like, optional
@@ -334,7 +336,9 @@ def kalman_consensus_continuous(
     rng : numpy.random.Generator or int, optional
         Turns communication noise on (Euler-Maruyama).
     dt : float
-        Euler-Maruyama step (s), used only with noise.
+        Euler-Maruyama step (s), used only with noise. Eq. (1) is stepped by
+        explicit Euler too; a step too large for it raises RuntimeError
+        instead of returning a non-positive covariance.
     include_self : bool
         Keep the ``g_ii = 1`` term of eq. (1).
     rtol, atol : float
@@ -345,15 +349,15 @@ def kalman_consensus_continuous(
     ConsensusResult
     """
     scalar, xi, P = _as_state(xi0, P0)
-    if xi.ndim != 2:
-        raise ValueError("continuous-time consensus takes a single run: xi0 must be (n,) or (n, m)")
-    n, m = xi.shape
+    n, m = xi.shape[-2], xi.shape[-1]
     if not (np.isfinite(t_final) and t_final > 0):
         raise ValueError(f"t_final must be a positive number; got {t_final}")
     Q_, Om = _expand_Q(Q, n, m), _expand_omega(Omega, n, m)
     t_eval = np.linspace(0.0, t_final, 201) if t_eval is None else np.asarray(t_eval, dtype=float)
     if t_eval.ndim != 1 or t_eval[0] < 0 or t_eval[-1] > t_final or np.any(np.diff(t_eval) < 0):
         raise ValueError("t_eval must be a non-decreasing 1-D grid inside [0, t_final]")
+    if switch_times is not None and not callable(topology):
+        raise ValueError("switch_times is only used with a callable topology; a SwitchingTopology carries its own times")
     breaks, graphs = _continuous_topology(topology, n, t_final, t_eval, switch_times)
     if rng is None:
         xs, Ps = _integrate_ode(xi, P, breaks, graphs, Q_, Om, t_eval, include_self, rtol, atol)
@@ -399,7 +403,7 @@ def average_consensus(
     if step_size is not None and not step_size > 0:
         raise ValueError(f"step_size must be positive; got {step_size}")
     n = xi.shape[-1]
-    graph_at, n_steps = _discrete_topology(topologies, n, n_steps)
+    graph_at, n_steps = _discrete_topology(topologies, n, n_steps, xi.shape[:-1])
     xs = [xi]
     for k in range(n_steps):
         g = graph_at(k).astype(float)
@@ -612,21 +616,45 @@ def _draw_noise(gen, Om, shape):
 
 
 def _rhs(xi, P, g, Q, Om, include_self):
-    """Right-hand sides of eqs. (1) and (3) without noise."""
-    S = _inv_sum(P, Om)
-    gs = g + np.eye(g.shape[0]) if include_self else g
-    dP = -np.einsum("iab,ij,ijbc,icd->iad", P, gs, S, P) + Q  # eq. (1)
-    K = np.einsum("iab,ijbc->ijac", P, S)  # eq. (2)
-    dxi = np.einsum("ij,ijab,ijb->ia", g, K, xi[None, :, :] - xi[:, None, :])  # eq. (3)
-    return dxi, _sym(dP), K
+    """Right-hand sides of eqs. (1) and (3) without noise, for states (..., n, m).
+
+    Also returns ``S``: ``S_j = (P_j + Omega)^-1`` as (..., n, m, m) for a common
+    Omega, ``S_ij = (P_j + Omega_ij)^-1`` as (..., n, n, m, m) per link.
+    """
+    n, m = xi.shape[-2], xi.shape[-1]
+    # (m, m) blocks times blocks / vectors; for m = 1 plain products (the ODE calls this thousands of times)
+    mat, vec = (np.multiply, _scalar_matvec) if m == 1 else (np.matmul, _matvec)
+    if Om.ndim == 2:  # common Omega: n inverses, sums over j as matrix products with g
+        S = _inv(P + Om)
+        A = (g @ S.reshape(S.shape[:-3] + (n, m * m))).reshape(S.shape)  # sum_j g_ij S_j
+        b = g @ vec(S, xi)  # sum_j g_ij S_j xi_j
+        S_self = S
+    else:
+        S = _inv(P[..., None, :, :, :] + Om)
+        A = np.einsum("ij,...ijab->...iab", g, S)
+        b = np.einsum("ij,...ijab,...jb->...ia", g, S, xi)
+        S_self = S[..., np.arange(n), np.arange(n), :, :]
+    info = A + S_self if include_self else A  # sum_j g_ij (P_j + Omega_ij)^-1 with g_ii = 1
+    dP = Q - mat(mat(P, info), P)  # eq. (1)
+    # eqs. (2)-(3): sum_j g_ij K_ij (xi_j - xi_i) = P_i [sum_j g_ij S_ij xi_j - (sum_j g_ij S_ij) xi_i]
+    return vec(P, b - vec(A, xi)), (dP if m == 1 else _sym(dP)), S
+
+
+def _matvec(M: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Stacked matrix-vector product (..., m, m) x (..., m) -> (..., m)."""
+    return (M @ v[..., None])[..., 0]
+
+
+def _scalar_matvec(M: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """:func:`_matvec` for m = 1: (..., 1, 1) x (..., 1) -> (..., 1)."""
+    return M[..., 0] * v
 
 
 def _integrate_ode(xi, P, breaks, graphs, Q, Om, t_eval, include_self, rtol, atol):
-    n, m = xi.shape
-    split = n * m
+    split = xi.size
 
     def fun(_t, y, g):
-        dxi, dP, _ = _rhs(y[:split].reshape(n, m), y[split:].reshape(n, m, m), g, Q, Om, include_self)
+        dxi, dP, _ = _rhs(y[:split].reshape(xi.shape), y[split:].reshape(P.shape), g, Q, Om, include_self)
         return np.concatenate([dxi.ravel(), dP.ravel()])
 
     y = np.concatenate([xi.ravel(), P.ravel()])
@@ -643,15 +671,15 @@ def _integrate_ode(xi, P, breaks, graphs, Q, Om, t_eval, include_self, rtol, ato
             raise RuntimeError(f"ODE solver failed on [{t0}, {t1}]: {sol.message}")
         out[sel] = sol.y[:, np.searchsorted(pts, t_eval[sel])].T
         y = sol.y[:, -1]
-    return out[:, :split].reshape(-1, n, m), _sym(out[:, split:].reshape(-1, n, m, m))
+    return out[:, :split].reshape((-1,) + xi.shape), _sym(out[:, split:].reshape((-1,) + P.shape))
 
 
 def _integrate_em(xi, P, breaks, graphs, Q, Om, t_eval, include_self, gen, dt):
-    n, m = xi.shape
-    L = np.broadcast_to(_sqrt_psd(Om), (n, n, m, m))  # Omega_ij^(1/2)
-    off = 1.0 - np.eye(n)
-    xs = np.empty((t_eval.size, n, m))
-    Ps = np.empty((t_eval.size, n, m, m))
+    n, m = xi.shape[-2], xi.shape[-1]
+    L = _sqrt_psd(Om)  # Omega^(1/2), (m, m) or (n, n, m, m)
+    off = 1.0 - np.eye(n)  # no noise on an agent's own state
+    xs = np.empty((t_eval.size,) + xi.shape)
+    Ps = np.empty((t_eval.size,) + P.shape)
     t, idx = 0.0, 0
     while idx < t_eval.size and t_eval[idx] <= t + 1e-12:
         xs[idx], Ps[idx] = xi, P
@@ -661,11 +689,19 @@ def _integrate_em(xi, P, breaks, graphs, Q, Om, t_eval, include_self, gen, dt):
         h = min(dt, t_end - t)
         k = int(np.searchsorted(breaks, t + 0.5 * h, side="right")) - 1
         g = graphs[min(max(k, 0), len(graphs) - 1)].astype(float)
-        dxi, dP, K = _rhs(xi, P, g, Q, Om, include_self)
-        dW = gen.standard_normal((n, n, m)) * np.sqrt(h)
-        noise = np.einsum("ij,ijab,ijbc,ijc->ia", g * off, K, L, dW)
-        xi = xi + dxi * h + noise
+        dxi, dP, S = _rhs(xi, P, g, Q, Om, include_self)
+        dW = gen.standard_normal(xi.shape[:-1] + (n, m)) * np.sqrt(h)  # (..., n, n, m): one per link i <- j
+        # sum_{j != i} g_ij K_ij Omega_ij^(1/2) dW_ij with K_ij = P_i S_ij, eq. (3)
+        SL = S @ L
+        if Om.ndim == 2:
+            u = np.einsum("ij,...jab,...ijb->...ia", g * off, SL, dW)
+        else:
+            u = np.einsum("ij,...ijab,...ijb->...ia", g * off, SL, dW)
+        xi = xi + dxi * h + np.einsum("...iab,...ib->...ia", P, u)
         P = _sym(P + dP * h)
+        if np.any(np.diagonal(P, axis1=-2, axis2=-1) <= 0) or not np.all(np.isfinite(xi)):
+            raise RuntimeError(f"Euler-Maruyama step dt = {dt} is too large for eq. (1): the covariance lost "
+                               f"positive definiteness at t = {t + h:.4g} s; use a smaller dt")
         t += h
         while idx < t_eval.size and t_eval[idx] <= t + 1e-9:
             xs[idx], Ps[idx] = xi, P
@@ -693,7 +729,7 @@ def _continuous_topology(topology, n, t_final, t_eval, switch_times):
     return np.array([0.0, t_final]), g[None]
 
 
-def _discrete_topology(topologies, n, n_steps):
+def _discrete_topology(topologies, n, n_steps, batch):
     if callable(topologies):
         if n_steps is None:
             raise ValueError("n_steps is required when topologies is a function of k")
@@ -706,12 +742,24 @@ def _discrete_topology(topologies, n, n_steps):
             raise ValueError("n_steps is required when topologies is a single (n, n) graph")
         return (lambda k: g), _check_steps(n_steps)
     g = _check_topologies(arr, n, "topologies", stacked=True)
+    _check_batch(g.shape[1:-2], batch, "topologies")
     if n_steps is None:
         n_steps = g.shape[0]
     n_steps = _check_steps(n_steps)
     if n_steps > g.shape[0]:
         raise ValueError(f"topologies holds {g.shape[0]} graphs but n_steps = {n_steps}")
     return (lambda k: g[k]), n_steps
+
+
+def _check_batch(graph_batch, state_batch, name):
+    """One graph per run: the graphs' batch axes must broadcast against the states' batch axes."""
+    try:
+        np.broadcast_shapes(graph_batch, state_batch)
+    except ValueError:
+        raise ValueError(
+            f"{name} has batch axes {graph_batch} (one graph per run) that do not match the states' batch "
+            f"axes {state_batch}"
+        ) from None
 
 
 def _check_steps(n_steps):

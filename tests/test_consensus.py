@@ -217,17 +217,45 @@ def test_euler_maruyama_mean_follows_the_ode():
     """P does not depend on xi, so xi is a linear SDE: its mean is the noise-free ODE solution (up to O(dt))."""
     G = cs.SwitchingTopology.periodic([adjacency_from_edges(3, [(0, 1)]), adjacency_from_edges(3, [(1, 2)])],
                                       0.25, 1.0)
-    args = ([0.0, 1.0, 3.0], [1.0, 0.5, 0.2], G, 1.0, 0.1, 0.1)
+    xi0, P0, R = np.array([0.0, 1.0, 3.0]), np.array([1.0, 0.5, 0.2]), 2000
     t_eval = np.array([0.0, 0.5, 1.0])
-    ode = cs.kalman_consensus_continuous(*args, t_eval=t_eval)
-    rng = np.random.default_rng(10)
-    runs = np.stack([cs.kalman_consensus_continuous(*args, t_eval=t_eval, rng=rng, dt=5e-3).xi[-1]
-                     for _ in range(300)])
-    em = cs.kalman_consensus_continuous(*args, t_eval=t_eval, rng=rng, dt=5e-3)
-    np.testing.assert_allclose(em.P, ode.P, atol=5e-3)  # Euler on eq. (1), O(dt)
-    se = runs.std(axis=0) / np.sqrt(len(runs))
-    assert np.all(runs.std(axis=0)[:2] > 0.01)  # noise is really injected into agents that listen
-    assert np.all(np.abs(runs.mean(axis=0) - ode.xi[-1]) < 4 * se + 1e-2)
+    ode = cs.kalman_consensus_continuous(xi0, P0, G, 1.0, 0.1, 0.1, t_eval=t_eval)
+    em = cs.kalman_consensus_continuous(np.broadcast_to(xi0, (R, 3)), np.broadcast_to(P0, (R, 3)), G, 1.0, 0.1,
+                                        0.1, t_eval=t_eval, rng=10, dt=5e-3)
+    assert em.xi.shape == (3, R, 3)
+    np.testing.assert_allclose(em.P[:, 0], ode.P, atol=5e-3)  # Euler on eq. (1), O(dt)
+    runs = em.xi[-1]
+    se = runs.std(axis=0) / np.sqrt(R)
+    assert np.all(runs.std(axis=0) > 0.01)  # noise is really injected (agent 3 only via the mean of 1, 2)
+    assert np.all(np.abs(runs.mean(axis=0) - ode.xi[-1]) < 4 * se + 2e-3)
+    one = cs.kalman_consensus_continuous(xi0, P0, G, 1.0, 0.1, 0.1, t_eval=t_eval, rng=10, dt=5e-3)
+    assert one.xi.shape == (3, 3) and np.all(one.xi[-1] != ode.xi[-1])
+
+
+def test_euler_maruyama_first_step_variance():
+    """One EM step from equal states: Var(dxi_i) = h sum_{j != i} g_ij K_ij^2 Omega (white noise of intensity Omega)."""
+    G = adjacency_from_edges(3, [(1, 0), (2, 0), (2, 1)], directed=True)  # 1 hears 2, 3; 2 hears 3
+    P0, h, R, om = np.array([0.5, 1.0, 2.0]), 1e-2, 20_000, 0.3
+    res = cs.kalman_consensus_continuous(np.zeros((R, 3)), np.broadcast_to(P0, (R, 3)), G, h, 0.1, om,
+                                         t_eval=[0.0, h], rng=11, dt=h)
+    K = P0[:, None] / (P0[None, :] + om)
+    var = h * (G * K**2 * om).sum(axis=1)
+    np.testing.assert_allclose(res.xi[-1].var(axis=0), var, rtol=0.05, atol=1e-15)
+    assert np.all(res.xi[-1][:, 2] == 0.0)  # agent 3 hears nobody: no noise
+
+
+def test_continuous_batch_equals_separate_runs():
+    rng = np.random.default_rng(12)
+    n, R = 4, 3
+    xi, P = rng.standard_normal((R, n)), rng.uniform(0.1, 2, (R, n))
+    topo = cs.SwitchingTopology([0.0, 0.4], [_random_graph(rng, n), _random_graph(rng, n)])
+    batch = cs.kalman_consensus_continuous(xi, P, topo, 1.0, 0.1, 0.2, t_eval=[0.0, 0.5, 1.0], rtol=1e-10,
+                                           atol=1e-12)
+    for r in range(R):
+        one = cs.kalman_consensus_continuous(xi[r], P[r], topo, 1.0, 0.1, 0.2, t_eval=[0.0, 0.5, 1.0],
+                                             rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(batch.xi[:, r], one.xi, atol=1e-8)
+        np.testing.assert_allclose(batch.P[:, r], one.P, atol=1e-8)
 
 
 # --------------------------------------------------------------------------- tools
@@ -316,3 +344,27 @@ def test_other_bad_input():
         cs.random_pairings(4, 10, 0, max_duration=0)
     with pytest.raises(ValueError, match="dwell"):
         cs.periodic_sequence(np.zeros((2, 3, 3)), 0, 10)
+    with pytest.raises(ValueError, match="switch_times is only used"):
+        cs.kalman_consensus_continuous(np.zeros(3), np.ones(3), np.zeros((3, 3)), 1.0, 0.1, 0.1, switch_times=[0.5])
+    with pytest.raises(ValueError, match="batch axes"):  # one schedule per run, but 4 schedules for 3 runs
+        cs.kalman_consensus_discrete(np.zeros((3, 5)), np.ones((3, 5)), cs.random_pairings(5, 10, 0, size=4),
+                                     0.1, 0.1)
+    with pytest.raises(ValueError, match="G has batch axes"):
+        cs.kalman_consensus_step(np.zeros((3, 5)), np.ones((3, 5)), np.zeros((2, 5, 5)), 0.1, 0.1)
+    with pytest.raises(ValueError, match="Q must be symmetric"):
+        cs.kalman_consensus_discrete(np.zeros((3, 2)), np.broadcast_to(np.eye(2), (3, 2, 2)), np.zeros((4, 3, 3)),
+                                     [[0.1, 0.05], [0.0, 0.1]], 0.1)
+    with pytest.raises(ValueError, match="Omega must be symmetric"):
+        cs.kalman_consensus_continuous(np.zeros((3, 2)), np.broadcast_to(np.eye(2), (3, 2, 2)), np.zeros((3, 3)),
+                                       1.0, 0.1, [[0.1, 0.05], [0.0, 0.1]])
+    with pytest.raises(ValueError, match="Omega"):  # per-link Omega of the wrong team size
+        cs.kalman_consensus_step(np.zeros(3), np.ones(3), np.zeros((3, 3)), 0.1, np.full((4, 4, 1, 1), 0.1))
+    with pytest.raises(ValueError, match="graph on 4 agents"):
+        cs.consensus_matrix(np.ones(3), np.zeros((4, 4)), 0.1, 0.1)
+    with pytest.raises(ValueError, match="topology\\(t\\) is a graph on 2 agents"):
+        cs.kalman_consensus_continuous(np.zeros(3), np.ones(3), lambda t: np.zeros((2, 2)), 1.0, 0.1, 0.1)
+    with pytest.raises(ValueError, match="topologies\\(0\\) must have a zero diagonal"):
+        cs.kalman_consensus_discrete(np.zeros(3), np.ones(3), lambda k: np.ones((3, 3)), 0.1, 0.1, n_steps=2)
+    big = cs.SwitchingTopology([0.0], [np.ones((3, 3)) - np.eye(3)])
+    with pytest.raises(RuntimeError, match="dt"):  # explicit Euler on eq. (1): P(1 - 3 h) < 0 for h = 0.5
+        cs.kalman_consensus_continuous(np.zeros(3), np.full(3, 100.0), big, 1.0, 0.1, 0.1, rng=0, dt=0.5)
