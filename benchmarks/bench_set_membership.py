@@ -1,6 +1,11 @@
 """Time per set-membership filter step (correction + prediction, Bhattacharjee and Subbarao 2021):
 the SDPs of eqs. (6)-(8) (Clarabel via cvxpy, compiled once with Parameters) against their closed-form
-twins, for one agent per call and for a batch of agents x Monte Carlo runs in one call."""
+twins, for one agent per call and for a batch of agents x Monte Carlo runs in one call.
+
+Per agent-step the batched closed form is thousands of times faster than the SDPs; with one agent per
+call it is only some tens of times faster (about 40 on an idle 2-core machine), because each call pays
+Python's fixed overhead (input checks, a few dozen small NumPy calls) of about 0.4 ms against about
+15 ms for the two SDP solves."""
 
 import numpy as np
 import pandas as pd

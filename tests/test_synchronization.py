@@ -61,6 +61,30 @@ def test_riccati_general_B_residual_and_fixed_point(A, B):
     assert np.allclose(P, riccati_fixed_point(A, B, Q), rtol=1e-8)
 
 
+@pytest.mark.parametrize(
+    "A,B",
+    [
+        (np.array([[1.0, 1.0], [0.0, 1.0]]), np.array([[0.0], [1.0]])),  # double integrator, r < 1
+        (np.array([[1.1, 0.3, 0.0], [0.0, 0.9, 1.0], [0.2, 0.0, 1.05]]), np.array([[1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])),
+    ],
+)
+def test_lemma2_conclusion_for_general_B(A, B):
+    """Lemma 2 beyond B = I: K and c from eq. (16) make rho(A_c) < 1 (checked per mode, Lemma 1, and on A_c)."""
+    # pinned directed path 1 -> 2 -> 3 -> 4: Gamma is triangular with all eigenvalues 1/2
+    adj = graphs.adjacency_from_edges(4, [(0, 1), (1, 2), (2, 3)], directed=True)
+    pin = [1.0, 0.0, 0.0, 0.0]
+    Q = np.eye(A.shape[0])
+    d = sync.design_synchronization(A, B, Q, adj, pin, 0.5, 0.05)
+    assert d.residual < 1e-9 and d.r < 1 and 0.05 / 0.5 < d.r
+    assert np.allclose(d.eigs, 0.5)
+    assert np.allclose(d.K, np.linalg.solve(B.T @ d.P @ B, B.T @ d.P @ A))
+    assert d.rho < 1
+    # Gamma is one Jordan block here, so eig(A_c) is only accurate to ~eps^(1/4)
+    assert d.rho == pytest.approx(sync.spectral_radius(A - d.c * 0.5 * B @ d.K), rel=1e-3)
+    alpha = sync.fit_alpha(d.A_c, 0.5 * (1 + d.rho))
+    assert sync.exponential_bound_ratio(d.A_c, alpha, 0.5 * (1 + d.rho), 300) == pytest.approx(1.0)
+
+
 def test_lemma1_two_computations_of_rho():
     """rho(A_c) = max_i rho(A - c Lambda_i B K) (Lemma 1, the Kronecker structure of eq. (15))."""
     A = np.array([[1.0, 1.0], [0.0, 1.0]])
