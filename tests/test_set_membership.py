@@ -21,9 +21,9 @@ def random_spd(rng, n, floor=0.05):
     return M @ M.T + floor * np.eye(n)
 
 
-def random_case(seed):
+def random_case(seed, p=2):
     rng = np.random.default_rng(seed)
-    n, p, nv, nw = 3, 2, 2, 2
+    n, nv, nw = 3, p, 2
     return dict(
         c=rng.standard_normal(n), P=random_spd(rng, n), A=rng.standard_normal((n, n)),
         G=rng.standard_normal((n, nw)), Q=random_spd(rng, nw, 0.2), C=rng.standard_normal((p, n)),
@@ -51,9 +51,10 @@ def test_paper_example_prediction_sdp_equals_closed_form():
     assert np.trace(Pf) == pytest.approx((np.sqrt(np.trace(A @ P @ A.T)) + np.sqrt(np.trace(Q))) ** 2)
 
 
+@pytest.mark.parametrize("p", [1, 2])  # p = 1: the analytic t*; p = 2: the Newton search
 @pytest.mark.parametrize("seed", range(4))
-def test_random_cases_sdp_equals_closed_form(seed):
-    k = random_case(seed)
+def test_random_cases_sdp_equals_closed_form(seed, p):
+    k = random_case(seed, p)
     y = k["C"] @ k["c"] + 0.1
     _, Ps, _ = smf.correct(k["c"], k["P"], y, k["C"], k["D"], k["R"], method="sdp")
     _, Pf, _ = smf.correct(k["c"], k["P"], y, k["C"], k["D"], k["R"], method="closed_form")
