@@ -59,6 +59,7 @@ __all__ = [
     "average_consensus",
     "central_fusion",
     "consensus_matrix",
+    "error_covariance",
     "kalman_consensus_continuous",
     "kalman_consensus_discrete",
     "kalman_consensus_step",
@@ -283,6 +284,64 @@ def consensus_matrix(
     blocks[np.arange(n), np.arange(n)] = np.eye(m) - blocks.sum(axis=1)
     D = blocks.transpose(0, 2, 1, 3).reshape(n * m, n * m)
     return D
+
+
+def error_covariance(
+    P0: ArrayLike,
+    topologies: ArrayLike | Callable[[int], ArrayLike],
+    Q: ArrayLike,
+    Omega: ArrayLike,
+    n_steps: int | None = None,
+    include_self: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The actual error covariances of noise-free discrete Kalman consensus, next to the believed ones.
+
+    If the initial estimates are ``xi_i[0] = xi* + e_i`` with independent errors
+    ``e_i ~ (0, P0_i)`` and the true value ``xi*`` is constant, then
+    ``xi[k] = Phi[k] xi[0]`` with ``Phi[k] = D[k-1] ... D[0]`` (eq. (8)); its
+    rows sum to the identity, so the error is ``Phi[k] e`` with covariance
+    ``Phi[k] blockdiag(P0) Phi[k]^T``. The scheme's own ``P_i[k]`` (eq. (4))
+    assumes the agents' errors stay uncorrelated; comparing the two shows what
+    that assumption costs.
+
+    Parameters
+    ----------
+    P0 : (n,) or (n, m, m) array_like
+        Initial covariances (a single run).
+    topologies, n_steps : as in :func:`kalman_consensus_discrete`
+    Q, Omega : covariances
+        As in :func:`kalman_consensus_step` (messages are noise-free).
+    include_self : bool
+        Keep the ``g_ii = 1`` term.
+
+    Returns
+    -------
+    actual : (K+1, n) or (K+1, n, m, m) ndarray
+        Diagonal (blocks) of ``Phi[k] blockdiag(P0) Phi[k]^T``.
+    believed : (K+1, n) or (K+1, n, m, m) ndarray
+        ``P_i[k]`` of eq. (4).
+    """
+    P_arr = np.asarray(P0, dtype=float)
+    if P_arr.ndim not in (1, 3):
+        raise ValueError(f"P0 must be (n,) or (n, m, m) for a single run; got shape {P_arr.shape}")
+    scalar = P_arr.ndim == 1
+    n = P_arr.shape[0]
+    m = 1 if scalar else P_arr.shape[-1]
+    xi0 = np.zeros(n) if scalar else np.zeros((n, m))
+    run = kalman_consensus_discrete(xi0, P_arr, topologies, Q, Omega, n_steps=n_steps, include_self=include_self)
+    graph_at, n_steps = _discrete_topology(topologies, n, n_steps, ())
+    P_blocks = run.P[:, :, None, None] if scalar else run.P
+    cov0 = np.zeros((n, m, n, m))
+    cov0[np.arange(n), :, np.arange(n), :] = P_blocks[0]
+    cov0 = cov0.reshape(n * m, n * m)
+    Phi = np.eye(n * m)
+    actual = [P_blocks[0]]
+    for k in range(n_steps):
+        Phi = consensus_matrix(run.P[k], graph_at(k), Q, Omega, include_self=include_self) @ Phi
+        C = (Phi @ cov0 @ Phi.T).reshape(n, m, n, m)
+        actual.append(C[np.arange(n), :, np.arange(n), :])
+    actual = np.stack(actual)
+    return (actual[..., 0, 0], run.P) if scalar else (actual, run.P)
 
 
 # --------------------------------------------------------------------------- continuous time

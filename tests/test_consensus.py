@@ -368,3 +368,42 @@ def test_other_bad_input():
     big = cs.SwitchingTopology([0.0], [np.ones((3, 3)) - np.eye(3)])
     with pytest.raises(RuntimeError, match="dt"):  # explicit Euler on eq. (1): P(1 - 3 h) < 0 for h = 0.5
         cs.kalman_consensus_continuous(np.zeros(3), np.full(3, 100.0), big, 1.0, 0.1, 0.1, rng=0, dt=0.5)
+
+
+# --------------------------------------------------------------------------- cost of the independence assumption
+
+
+def test_error_covariance_matches_monte_carlo():
+    """Actual covariance Phi P0 Phi^T against independent runs with random initial errors (constant xi*)."""
+    rng = np.random.default_rng(13)
+    n, R, K = 5, 20_000, 12
+    P0 = rng.uniform(0.1, 2.0, n)
+    G = cs.random_pairings(n, K, rng)
+    actual, believed = cs.error_covariance(P0, G, 0.1, 0.2)
+    assert actual.shape == believed.shape == (K + 1, n)
+    np.testing.assert_allclose(actual[0], P0)
+    xi_star = 3.0
+    xi0 = xi_star + rng.standard_normal((R, n)) * np.sqrt(P0)
+    runs = cs.kalman_consensus_discrete(xi0, np.broadcast_to(P0, (R, n)), G, 0.1, 0.2)
+    np.testing.assert_allclose(runs.P[:, 0], believed, atol=1e-14)
+    np.testing.assert_allclose(((runs.xi - xi_star) ** 2).mean(axis=1), actual, rtol=0.05)
+
+
+def test_error_covariance_identities():
+    """First meeting of two independent agents is an exact Kalman update; no schedule beats central fusion."""
+    P0 = np.array([0.5, 2.0, 1.0])
+    G = adjacency_from_edges(3, [(0, 1)])[None]
+    actual, believed = cs.error_covariance(P0, G, 0.0, 0.0, include_self=False)
+    fused = 1 / (1 / 0.5 + 1 / 2.0)
+    np.testing.assert_allclose(actual[1], [fused, fused, 1.0], rtol=1e-12)
+    np.testing.assert_allclose(believed[1], actual[1], rtol=1e-12)  # the assumption is still true here
+    rng = np.random.default_rng(14)
+    P0 = rng.uniform(0.01, 3.0, 8)
+    G = cs.random_pairings(8, 60, rng)
+    actual, believed = cs.error_covariance(P0, G, 0.0, 1e-6, include_self=False)
+    P_f = cs.central_fusion(np.zeros(8), P0)[1]
+    assert np.all(actual >= P_f * (1 - 1e-9))  # Cauchy-Schwarz: rows of Phi sum to 1
+    assert np.all(believed[-1] < 1e-2 * P_f)  # shared information counted again: overconfident
+    vec_a, vec_b = cs.error_covariance(P0[:, None, None] * np.eye(2), G, 0.0, 1e-6 * np.eye(2), include_self=False)
+    np.testing.assert_allclose(vec_a[..., 1, 1], actual, rtol=1e-9)
+    np.testing.assert_allclose(vec_a[..., 0, 1], 0.0, atol=1e-15)

@@ -63,23 +63,38 @@ def test_bias_study_shapes_and_equal_variance_case():
 
 
 def test_noise_study_floor():
-    st = ren.noise_study(seed=3, n_runs=40, n_steps=120)
-    assert st["rms"].shape == (121,)
-    assert st["floor"] > 1e-2
+    """Q > 0: a stationary disagreement floor (log-log slope ~ 0); Q = 0: decay like 1/sqrt(k) (slope ~ -1/2)."""
+    st = ren.noise_study(seed=3, n_runs=40, n_steps=200)
+    assert st["rms"].shape == (201,)
+    assert st["floor"] > 1e-2 and abs(st["slope"]) < 0.1
+    q0 = ren.noise_study(seed=3, n_runs=40, n_steps=200, Q=0.0)
+    assert -0.8 < q0["slope"] < -0.3
+
+
+def test_overconfidence_study():
+    st = ren.overconfidence(seed=2)
+    paper, ideal = st["variants"].values()
+    for v in (paper, ideal):
+        assert v["actual"].shape == v["believed"].shape == (ren.FIG1["n_steps"] + 1, 10)
+        assert np.all(v["actual"] >= st["fused_variance"] * (1 - 1e-9))  # nothing beats central fusion
+    np.testing.assert_allclose(paper["believed"][-1], 0.05, rtol=1e-6)  # fixed point of eq. (4) on pairings
+    assert np.all(paper["actual"][-1] > paper["believed"][-1])
+    assert np.all(ideal["believed"][-1] < 1e-3 * ideal["actual"][-1])
 
 
 @pytest.mark.slow
 def test_reproduce_writes_figures_tables_and_claims(tmp_path):
     claims = reproduce_paper("ren2005", tmp_path, seed=1)
     out = tmp_path / "ren2005"
-    for name in ("fig1.png", "fig2_fig3.png", "theorems.png", "bias.png"):
+    for name in ("fig1.png", "fig2_fig3.png", "theorems.png", "bias.png", "overconfidence.png"):
         assert (out / "figures" / name).stat().st_size > 0
     for name in ("fig1_final.csv", "theorems.csv", "bias.csv"):
         assert (out / "tables" / name).exists()
     doc = json.loads((out / "claims.json").read_text())
     ids = {c["id"] for c in doc["claims"]}
     required = {"fig1-consensus-equal", "fig1-confident-agent-dominates", "thm32-continuous-consensus",
-                "thm39-switching-union-consensus", "no-spanning-tree-no-consensus", "noise-consensus-approximate"}
+                "thm39-switching-union-consensus", "no-spanning-tree-no-consensus", "noise-consensus-approximate",
+                "beyond-fusion-bias", "beyond-overconfidence"}
     assert {f"ren2005/{r}" for r in required} <= ids
     verdicts = {c.id: c.verdict for c in claims}
     assert all(verdicts[f"ren2005/{r}"] == "holds" for r in required), verdicts
