@@ -28,7 +28,7 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import ArrayLike
 
-from ._solver import solve
+from ._solver import SolverError, solve
 from ._validation import as_matrix, check_covariance, check_square
 from .lqr import _care, is_controllable, laplacian_spectrum
 
@@ -36,6 +36,7 @@ __all__ = [
     "READINGS",
     "DistributedObserver",
     "MinEnergyObserver",
+    "bound_at_fixed_phi",
     "coupled_gain_lmi",
     "disagreement",
     "distributed_observer",
@@ -321,22 +322,8 @@ def coupled_gain_lmi(
         raise ValueError("process_factors and noise_weights need one entry per eigenvalue in lam")
     if trace_in not in ("transformed", "original"):
         raise ValueError(f"trace_in must be 'transformed' or 'original'; got {trace_in!r}")
-    if m >= n:
-        raise ValueError(f"C must have fewer rows than columns (m < n); got shape {C.shape}")
     n1 = n - m
-    # eq. (27): rotation making C = (0 C2)
-    U, sv, Vt = np.linalg.svd(C)
-    if sv[-1] <= 1e-10 * max(1.0, sv[0]):
-        raise ValueError("C must have full row rank")
-    swap = np.block([[np.zeros((n1, m)), np.eye(n1)], [np.eye(m), np.zeros((m, n1))]])
-    T_rot = swap @ Vt
-    L_rot = T_rot @ L
-    L1, L2 = L_rot[:n1], L_rot[n1:]
-    if np.linalg.cond(L2) > 1e12:
-        raise ValueError("the output part L2 of the local gain is singular; eq. (32) needs it invertible")
-    # eq. (32), written through L (L1 L2^{-1} = S12 S22^{-1} when L = S C^T Q1)
-    T_hat = np.block([[np.eye(n1), -L1 @ np.linalg.inv(L2)], [np.zeros((m, n1)), np.eye(m)]])
-    T = T_hat @ T_rot
+    T = _node_coordinates(C, L)
     Tinv = np.linalg.inv(T)
     A_hat, C_hat, L_hat = T @ A @ Tinv, C @ Tinv, T @ L
     # Diagonal scaling (keeps the block structure; Phi is unchanged): unit diagonal for the Phi = 0
@@ -404,6 +391,111 @@ def coupled_gain_lmi(
         "lam_unique": np.array([lam[g[0]] for g in groups]),
         "multiplicity": np.array([len(g) for g in groups]),
     }
+
+
+def bound_at_fixed_phi(
+    A: ArrayLike,
+    C: ArrayLike,
+    L: ArrayLike,
+    lam: ArrayLike,
+    process_factors: Sequence[ArrayLike],
+    noise_weights: Sequence[ArrayLike],
+    Phi: ArrayLike,
+    trace_in: str = "transformed",
+    what: str = "fixed-Phi program (56)-(58)",
+) -> float:
+    """Optimum of the program (56)-(58) for a *given* ``Phi``, written in ``S_i`` directly.
+
+    For fixed ``Phi`` the Lyapunov inequalities (57) are linear in ``S_i``, so
+    ``min sum_i trace(S_i)`` over ``S_i = diag(S_i1, S2) >= 0`` (common ``S2``,
+    eq. (56)) is an SDP without the change of variables ``W_i = S_i^{-1}``,
+    ``Y2 = W2 L2 Phi`` of eqs. (59)-(62). Its minimum over ``Phi`` is the optimum
+    of :func:`coupled_gain_lmi`: an independent check of that program, and the
+    profile ``Gamma(Phi)`` that shows how sharply the optimum determines ``Phi``.
+    The inequalities are taken non-strict (the closure; the value is the infimum
+    of the strict program).
+
+    Parameters
+    ----------
+    A, C, L, lam, process_factors, noise_weights, trace_in
+        As in :func:`coupled_gain_lmi`.
+    Phi : (m, m) array_like or float
+        Coupling gain.
+    what : str
+        Name used in solver errors.
+
+    Returns
+    -------
+    float
+        ``min sum_i trace(S_i)``; ``+inf`` if no ``S_i`` of the structure (56)
+        exists (a mode ``A - L (I + lambda_i Phi) C`` not Hurwitz, or the program
+        proved infeasible).
+
+    Raises
+    ------
+    ValueError
+        Bad shapes (as :func:`coupled_gain_lmi`).
+    mascore._solver.SolverError
+        The program is neither solved to optimality nor proved infeasible.
+    """
+    A = check_square(A, "A")
+    n = A.shape[0]
+    C = as_matrix(C, "C", (None, n))
+    m = C.shape[0]
+    L = as_matrix(L, "L", (n, m))
+    Phi = as_matrix(np.atleast_2d(Phi), "Phi", (m, m))
+    lam = np.asarray(lam, dtype=float)
+    if lam.ndim != 1 or len(process_factors) != lam.size or len(noise_weights) != lam.size:
+        raise ValueError("lam must be 1-D, with one process factor and one noise weight per eigenvalue")
+    if trace_in not in ("transformed", "original"):
+        raise ValueError(f"trace_in must be 'transformed' or 'original'; got {trace_in!r}")
+    T = _node_coordinates(C, L)
+    Tinv = np.linalg.inv(T)
+    A_hat, C_hat, L_hat = T @ A @ Tinv, C @ Tinv, T @ L
+    n1 = n - m
+    weight = Tinv.T @ Tinv if trace_in == "original" else np.eye(n)
+    S2 = cp.Variable((m, m), symmetric=True)
+    constraints, objective = [S2 >> 0], 0
+    for k, li in enumerate(lam):
+        Li = L_hat @ (np.eye(m) + li * Phi)
+        Ai = A_hat - Li @ C_hat
+        if np.max(np.linalg.eigvals(Ai).real) >= 0:
+            return float("inf")
+        G = T @ as_matrix(process_factors[k], f"process_factors[{k}]", (n, None))
+        Qi = check_covariance(np.atleast_2d(noise_weights[k]), f"noise_weights[{k}]", m, definite=True)
+        S1 = cp.Variable((n1, n1), symmetric=True)
+        S = cp.bmat([[S1, np.zeros((n1, m))], [np.zeros((m, n1)), S2]])
+        M = Ai @ S + S @ Ai.T + G @ G.T + Li @ np.linalg.solve(Qi, Li.T)  # eq. (57)
+        constraints += [(M + M.T) / 2 << 0, S1 >> 0]
+        objective = objective + cp.trace(weight @ S)
+    problem = cp.Problem(cp.Minimize(objective), constraints)
+    try:
+        return solve(problem, what)
+    except SolverError:
+        if problem.status == cp.INFEASIBLE:  # no S_i with the structure (56): the bound is +inf
+            return float("inf")
+        raise
+
+
+def _node_coordinates(C: np.ndarray, L: np.ndarray) -> np.ndarray:
+    """``T = T_hat T_rot`` of eqs. (27) and (32): ``C T^-1 = (0 C2)`` and ``T L = (0; L2)``."""
+    m, n = C.shape
+    if m >= n:
+        raise ValueError(f"C must have fewer rows than columns (m < n); got shape {C.shape}")
+    n1 = n - m
+    # eq. (27): rotation making C = (0 C2)
+    _, sv, Vt = np.linalg.svd(C)
+    if sv[-1] <= 1e-10 * max(1.0, sv[0]):
+        raise ValueError("C must have full row rank")
+    swap = np.block([[np.zeros((n1, m)), np.eye(n1)], [np.eye(m), np.zeros((m, n1))]])
+    T_rot = swap @ Vt
+    L_rot = T_rot @ L
+    L1, L2 = L_rot[:n1], L_rot[n1:]
+    if np.linalg.cond(L2) > 1e12:
+        raise ValueError("the output part L2 of the local gain is singular; eq. (32) needs it invertible")
+    # eq. (32), written through L (L1 L2^{-1} = S12 S22^{-1} when L = S C^T Q1)
+    T_hat = np.block([[np.eye(n1), -L1 @ np.linalg.inv(L2)], [np.zeros((m, n1)), np.eye(m)]])
+    return T_hat @ T_rot
 
 
 def observer_error_matrix(

@@ -216,3 +216,37 @@ def test_network_observer_bad_input_names_the_argument(ring_design):
         sim(A, C, d.L, d.Phi, Lap, x0, x0, t, disturbance=np.zeros((11, 6, 1)))
     with pytest.raises(ValueError, match="disturbance must have shape"):
         sim(A, C, d.L, d.Phi, Lap, x0, x0, t, Bbar=B, disturbance=np.zeros((10, 6, 1)))
+
+
+def test_fixed_phi_program_cross_checks_the_lmi():
+    """Eqs. (56)-(58) at fixed Phi, solved in S_i (no W = S^-1, Y2 = W2 L2 Phi change of variables):
+    its minimum over Phi is the LMI (62) optimum, reached at the LMI's Phi."""
+    lam = np.linalg.eigvalsh(graphs.laplacian(graphs.ring_graph(5)))
+    lam[0] = 0.0
+    L = np.array([[3.0], [1.0]])  # stabilizing but not optimal for any mode: the program is not degenerate
+    G, noise = [B] * 5, [[[10.0 + 5.0 * l]] for l in lam]
+    res = observers.coupled_gain_lmi(A, C, L, lam, G, noise)
+    phi = res["Phi"].item()
+    at_phi = observers.bound_at_fixed_phi(A, C, L, lam, G, noise, phi)
+    # the LMI carries the strictness margin, so its bound is a hair above the non-strict optimum
+    assert at_phi == pytest.approx(res["bound"], rel=1e-3)
+    assert at_phi <= res["bound"]
+    for other in (phi - 0.2, phi - 0.05, phi + 0.05, phi + 0.2):
+        assert observers.bound_at_fixed_phi(A, C, L, lam, G, noise, other) > at_phi * (1 + 1e-6)
+
+
+def test_fixed_phi_program_unstable_mode_is_infinite():
+    lam = np.array([0.0, 2.0])
+    obs = observers.min_energy_observer(A, B, C, [[10.0]], [[1.0]])
+    # Phi = -1 / lambda makes the second mode's gain zero: A itself, whose poles have real part -0.05 (stable);
+    # a more negative Phi flips the sign of the gain and destabilizes it
+    assert observers.bound_at_fixed_phi(A, C, obs.L, lam, [B, B], [[[10.0]], [[20.0]]], -2.0) == float("inf")
+
+
+@pytest.mark.filterwarnings("ignore:Solution may be inaccurate")
+def test_lmi_not_solved_to_optimality_raises(monkeypatch):
+    from mascore import _solver
+
+    monkeypatch.setitem(_solver.SOLVER_OPTIONS, "max_iter", 1)
+    with pytest.raises(SolverError, match=r"distributed observer LMI \(62\).*expected 'optimal'"):
+        observers.distributed_observer(A, B, C, 10, 5, 1, graphs.ring_graph(5))

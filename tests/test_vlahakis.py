@@ -88,7 +88,7 @@ def test_reproduce_writes_ledger(tmp_path):
     for key in ("phi-q2-5", "J-q2-5", "phi-q2-25", "J-q2-25"):
         assert verdicts[f"vlahakis/example1-{key}"] == "does-not-reproduce"
     for key in ("example1-hurwitz", "fig2-faster-than-fig1", "structure-eq13", "observer-cost-ordering",
-                "bottom-up-cost-bounded"):
+                "bottom-up-cost-bounded", "example1-printed-phi-optimal-as-printed"):
         assert verdicts[f"vlahakis/{key}"] == "holds"
 
 
@@ -101,3 +101,27 @@ def test_lmi_variants_printed_row_agrees_with_design():
     assert row.J == pytest.approx(d.bound, rel=1e-5)
     assert row.Phi == pytest.approx(d.Phi.item(), abs=1e-3)
     assert (table.status == "optimal").all()
+
+
+def test_as_printed_optimal_phi_interval():
+    """As printed the optimum N trace(S_hat) is attained by every Phi of the closed-form interval (the printed
+    Phi included) and by none outside: checked by the program at fixed Phi in S_i, an independent route."""
+    obs = observers.min_energy_observer(E["A"], E["Bbar"], E["C"], [[10.0]], [[1.0]])
+    for Q2 in E["Q2"]:
+        T = v.design(Q2).T
+        optimum = 5 * np.trace(T @ obs.S @ T.T)
+        lo, hi = v.as_printed_phi_interval(Q2)
+        assert lo < 0 < v.PAPER["Phi"][Q2] < hi
+        inside = v.phi_profile(Q2, "as-printed", [lo + 1e-3, 0.0, v.PAPER["Phi"][Q2], hi - 1e-3])
+        np.testing.assert_allclose(inside, optimum, rtol=1e-7)
+        outside = v.phi_profile(Q2, "as-printed", [lo - 0.02, hi + 0.02])
+        assert np.all(outside > optimum * (1 + 1e-4))
+
+
+def test_inverse_reading_lmi_phi_minimizes_the_profile():
+    """With the reading that reproduces L the program determines Phi (weakly): the profile is lowest there."""
+    d = v.design(5.0, v.L_READING)
+    phi = d.Phi.item()
+    g = v.phi_profile(5.0, v.L_READING, [phi - 0.1, phi, phi + 0.1, v.PAPER["Phi"][5.0]])
+    assert g[1] == pytest.approx(d.bound, rel=1e-3)
+    assert g[1] < min(g[0], g[2], g[3])
