@@ -123,11 +123,22 @@ def trace(shape: ArrayLike) -> np.ndarray:
 
 
 def volume(shape: ArrayLike) -> np.ndarray:
-    """Volume ``pi^(n/2) / Gamma(n/2 + 1) * sqrt(det P)`` of E(c, P); shape (...,)."""
+    """Volume ``pi^(n/2) / Gamma(n/2 + 1) * sqrt(det P)`` of E(c, P); shape (...,).
+
+    Raises ValueError unless every P of the stack (..., n, n) is symmetric positive
+    semidefinite (a singular P, a flat ellipsoid, has volume 0).
+    """
     P = np.asarray(shape, dtype=float)
+    if P.ndim < 2 or P.shape[-1] != P.shape[-2]:
+        raise ValueError(f"shape must be (..., n, n); got {P.shape}")
+    scale = np.maximum(np.abs(P).max(axis=(-1, -2), initial=0.0), 1e-300)
+    sym = np.abs(P - np.swapaxes(P, -1, -2)).max(axis=(-1, -2), initial=0.0) <= 1e-10 * scale
+    eig = np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2)))
+    if not (np.all(sym) and np.all(eig[..., 0] >= -1e-12 * scale)):
+        raise ValueError("shape must be symmetric positive semidefinite to have a volume")
     n = P.shape[-1]
     unit = math.pi ** (n / 2) / math.gamma(n / 2 + 1)
-    return unit * np.sqrt(np.clip(np.linalg.det(P), 0.0, None))
+    return unit * np.sqrt(np.prod(np.clip(eig, 0.0, None), axis=-1))
 
 
 def contains(points: ArrayLike, center: ArrayLike, shape: ArrayLike, rtol: float = 1e-9) -> np.ndarray:

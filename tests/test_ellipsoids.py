@@ -30,6 +30,15 @@ def test_volume_and_trace_known_values():
     assert el.Ellipsoid(np.zeros(2), np.diag([4.0, 9.0])).trace == pytest.approx(13.0)
 
 
+def test_volume_rejects_indefinite_and_handles_flat():
+    with pytest.raises(ValueError, match="positive semidefinite"):
+        el.volume(np.diag([1.0, -1.0]))  # det < 0
+    with pytest.raises(ValueError, match="positive semidefinite"):
+        el.volume(-np.eye(2))  # det > 0 but negative definite
+    assert el.volume(np.diag([1.0, 0.0])) == 0.0
+    assert np.allclose(el.volume(np.stack([np.eye(2), 4 * np.eye(2)])), [math.pi, 4 * math.pi])
+
+
 def test_samples_on_boundary_and_inside():
     rng = np.random.default_rng(0)
     P = random_spd(rng, 3)

@@ -20,6 +20,10 @@ Settings the paper leaves out (chosen here):
   share the unit draws (scaled by alpha_w, alpha_v): common random numbers.
 * Fig. 6's "about 1.5" is compared with trace P_{k|k} at k = T_f averaged over agents.
 * alpha = 1.1, mu = 0.9, p0 = 2, q_bar = 0.1 are the paper's (Sec. 5).
+* Graph: the Laplacian of eq. (24) as printed. The reading with reversed edges
+  (adjacency transposed) fits Table 1's means better and its RMS values worse; it is
+  computed alongside (:func:`table1_readings`, ``tables/table1_edges_reversed.csv``)
+  and quoted in the notes, never used for a verdict.
 """
 
 from __future__ import annotations
