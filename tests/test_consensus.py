@@ -201,6 +201,35 @@ def test_continuous_matches_naive_implementation():
     np.testing.assert_allclose(fun.xi, res.xi, atol=1e-12)
 
 
+def test_continuous_vector_matches_naive_matrix_implementation():
+    """Eqs. (1)-(3) with full (m, m) covariances and per-link Omega_ij, written agent by agent."""
+    rng = np.random.default_rng(15)
+    n, m = 4, 2
+    xi0, P0 = rng.standard_normal((n, m)), _random_spd(rng, n, m)
+    Om = 0.1 * _random_spd(rng, n * n, m).reshape(n, n, m, m)
+    Q = np.array([[0.1, 0.03], [0.03, 0.05]])
+    G = _random_graph(rng, n, 0.6)
+
+    def rhs(_t, y):
+        xi, P = y[: n * m].reshape(n, m), y[n * m:].reshape(n, m, m)
+        dxi, dP = np.zeros((n, m)), np.zeros((n, m, m))
+        for i in range(n):
+            info = np.linalg.inv(P[i] + Om[i, i])  # g_ii = 1
+            for j in range(n):
+                if G[i, j] > 0:
+                    Sij = np.linalg.inv(P[j] + Om[i, j])
+                    info += Sij
+                    dxi[i] += P[i] @ Sij @ (xi[j] - xi[i])  # K_ij (xi_j - xi_i), eqs. (2)-(3)
+            dP[i] = -P[i] @ info @ P[i] + Q  # eq. (1)
+        return np.concatenate([dxi.ravel(), dP.ravel()])
+
+    ref = solve_ivp(rhs, (0, 1.5), np.concatenate([xi0.ravel(), P0.ravel()]), method="LSODA", rtol=1e-10,
+                    atol=1e-12, t_eval=[1.5])
+    res = cs.kalman_consensus_continuous(xi0, P0, G, 1.5, Q, Om, t_eval=[0.0, 1.5])
+    np.testing.assert_allclose(res.xi[-1], ref.y[: n * m, -1].reshape(n, m), atol=1e-6)
+    np.testing.assert_allclose(res.P[-1], ref.y[n * m:, -1].reshape(n, m, m), atol=1e-6)
+
+
 def test_continuous_steady_state_and_vector_form():
     """Paired for ever: dP = -2 P^2 / (P + Omega) + Q = 0 -> P = 0.1 for Q = Omega = 0.1."""
     G = adjacency_from_edges(2, [(0, 1)])
@@ -365,6 +394,15 @@ def test_other_bad_input():
         cs.kalman_consensus_continuous(np.zeros(3), np.ones(3), lambda t: np.zeros((2, 2)), 1.0, 0.1, 0.1)
     with pytest.raises(ValueError, match="topologies\\(0\\) must have a zero diagonal"):
         cs.kalman_consensus_discrete(np.zeros(3), np.ones(3), lambda k: np.ones((3, 3)), 0.1, 0.1, n_steps=2)
+    with pytest.raises(ValueError, match="topology has 2 agents; the states have 3"):
+        cs.kalman_consensus_continuous(np.zeros(3), np.ones(3), cs.SwitchingTopology([0.0], np.zeros((1, 2, 2))),
+                                       1.0, 0.1, 0.1)
+    with pytest.raises(ValueError, match="graphs must be a switching sequence"):
+        cs.SwitchingTopology([0.0], np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="dwell must be positive"):
+        cs.SwitchingTopology.periodic(np.zeros((2, 3, 3)), 0.0, 10.0)
+    with pytest.raises(ValueError, match="t_eval"):
+        cs.kalman_consensus_continuous(np.zeros(3), np.ones(3), np.zeros((3, 3)), 1.0, 0.1, 0.1, t_eval=[0.0, 2.0])
     big = cs.SwitchingTopology([0.0], [np.ones((3, 3)) - np.eye(3)])
     with pytest.raises(RuntimeError, match="dt"):  # explicit Euler on eq. (1): P(1 - 3 h) < 0 for h = 0.5
         cs.kalman_consensus_continuous(np.zeros(3), np.full(3, 100.0), big, 1.0, 0.1, 0.1, rng=0, dt=0.5)
