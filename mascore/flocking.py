@@ -37,7 +37,14 @@ default 1e-6 m). Closer than ``d_min`` the damper and spring therefore shrink
 linearly to exactly zero at contact -- finite, deterministic, no NaN -- while
 the alignment term ``phi1`` is smooth and unchanged; farther than ``d_min`` the
 law is exactly as printed. The Jacobian is the exact
-derivative of this regularised law on both sides of ``d_min``.
+derivative of this regularised law on both sides of ``d_min``; inside
+``d_min`` the spring's slope is about ``rho4 rho6 R / (2 d_min)`` (6e7 s^-2
+with Table I gains), the honest price of a law whose direction flips at
+contact: an EKF linearised at two coincident estimates inflates its
+covariance accordingly (and the simulators raise ``DivergenceError`` if it
+blows up). In the paper's scenarios no two agents (nor two estimates) come
+closer than a few metres (closest pair over 20 Monte Carlo runs of the three
+cases of Fig. 5: about 7 m), so the regularisation is never active there.
 
 Symbols follow the paper; equations are cited as ``eq. (N)``.
 """

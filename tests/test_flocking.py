@@ -229,3 +229,17 @@ def test_large_fully_connected_team_diverges_with_clear_error():
     # the same team is stable with a ten times smaller step
     run = flocking.simulate_measured_flocking(X0, 300, 0.01, GAINS, np.zeros((4, 4)), np.zeros((4, 4)), 0, None)
     assert np.all(np.isfinite(run.X))
+
+
+def test_agents_that_meet_separate_to_rest_length():
+    """Documented behaviour at contact, in closed loop: two agents starting at the same point with
+    different velocities get a finite control, fly apart and settle R apart; with identical states
+    they stay together (the pair term is exactly 0 at contact, so that unstable equilibrium is kept)."""
+    zero = np.zeros((4, 4))
+    X0 = np.array([[50.0, 50.0, 1.0, 0.0], [50.0, 50.0, -1.0, 0.5]])
+    run = flocking.simulate_measured_flocking(X0, 800, 0.1, GAINS, zero, zero, 0, None)
+    assert np.all(np.isfinite(run.X))
+    assert np.linalg.norm(run.X[-1, 0, :2] - run.X[-1, 1, :2]) == pytest.approx(GAINS.R, rel=1e-6)
+    same = np.array([[50.0, 50.0, 1.0, 0.0], [50.0, 50.0, 1.0, 0.0]])
+    still = flocking.simulate_measured_flocking(same, 50, 0.1, GAINS, zero, zero, 0, None)
+    np.testing.assert_array_equal(still.X[:, 0], still.X[:, 1])
