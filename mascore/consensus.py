@@ -416,7 +416,8 @@ def kalman_consensus_continuous(
     if t_eval.ndim != 1 or t_eval[0] < 0 or t_eval[-1] > t_final or np.any(np.diff(t_eval) < 0):
         raise ValueError("t_eval must be a non-decreasing 1-D grid inside [0, t_final]")
     if switch_times is not None and not callable(topology):
-        raise ValueError("switch_times is only used with a callable topology; a SwitchingTopology carries its own times")
+        raise ValueError("switch_times is only used with a callable topology; "
+                         "a SwitchingTopology carries its own times")
     breaks, graphs = _continuous_topology(topology, n, t_final, t_eval, switch_times)
     if rng is None:
         xs, Ps = _integrate_ode(xi, P, breaks, graphs, Q_, Om, t_eval, include_self, rtol, atol)
