@@ -403,8 +403,8 @@ def bound_at_fixed_phi(
     Phi: ArrayLike,
     trace_in: str = "transformed",
     what: str = "fixed-Phi program (56)-(58)",
-) -> float:
-    """Optimum of the program (56)-(58) for a *given* ``Phi``, written in ``S_i`` directly.
+) -> float | np.ndarray:
+    """Optimum of the program (56)-(58) for *given* ``Phi``, written in ``S_i`` directly.
 
     For fixed ``Phi`` the Lyapunov inequalities (57) are linear in ``S_i``, so
     ``min sum_i trace(S_i)`` over ``S_i = diag(S_i1, S2) >= 0`` (common ``S2``,
@@ -413,20 +413,21 @@ def bound_at_fixed_phi(
     of :func:`coupled_gain_lmi`: an independent check of that program, and the
     profile ``Gamma(Phi)`` that shows how sharply the optimum determines ``Phi``.
     The inequalities are taken non-strict (the closure; the value is the infimum
-    of the strict program).
+    of the strict program). Several gains share one compiled (parametrized) problem.
 
     Parameters
     ----------
     A, C, L, lam, process_factors, noise_weights, trace_in
         As in :func:`coupled_gain_lmi`.
-    Phi : (m, m) array_like or float
-        Coupling gain.
+    Phi : array_like
+        One coupling gain, ``(m, m)`` (or a float when ``m = 1``), or several:
+        ``(K, m, m)``, or ``(K,)`` when ``m = 1``.
     what : str
         Name used in solver errors.
 
     Returns
     -------
-    float
+    float, or (K,) ndarray for several gains
         ``min sum_i trace(S_i)``; ``+inf`` if no ``S_i`` of the structure (56)
         exists (a mode ``A - L (I + lambda_i Phi) C`` not Hurwitz, or the program
         proved infeasible).
@@ -443,7 +444,13 @@ def bound_at_fixed_phi(
     C = as_matrix(C, "C", (None, n))
     m = C.shape[0]
     L = as_matrix(L, "L", (n, m))
-    Phi = as_matrix(np.atleast_2d(Phi), "Phi", (m, m))
+    phis = np.asarray(Phi, dtype=float)
+    single = phis.ndim == 0 or phis.shape == (m, m)
+    if single or (m == 1 and phis.ndim == 1):
+        phis = phis.reshape(-1, m, m)
+    if phis.ndim != 3 or phis.shape[1:] != (m, m) or not np.all(np.isfinite(phis)):
+        raise ValueError(f"Phi must be finite, one ({m}, {m}) gain or a (K, {m}, {m}) stack; got shape "
+                         f"{np.shape(Phi)}")
     lam = np.asarray(lam, dtype=float)
     if lam.ndim != 1 or len(process_factors) != lam.size or len(noise_weights) != lam.size:
         raise ValueError("lam must be 1-D, with one process factor and one noise weight per eigenvalue")
@@ -453,28 +460,41 @@ def bound_at_fixed_phi(
     Tinv = np.linalg.inv(T)
     A_hat, C_hat, L_hat = T @ A @ Tinv, C @ Tinv, T @ L
     n1 = n - m
+    GG = [T @ as_matrix(g, f"process_factors[{k}]", (n, None)) for k, g in enumerate(process_factors)]
+    GG = [G @ G.T for G in GG]
+    Qinv = [np.linalg.inv(check_covariance(np.atleast_2d(q), f"noise_weights[{k}]", m, definite=True))
+            for k, q in enumerate(noise_weights)]
     weight = Tinv.T @ Tinv if trace_in == "original" else np.eye(n)
+    # one parametrized problem: mode matrix A_i and constant term of eq. (57) per mode
     S2 = cp.Variable((m, m), symmetric=True)
-    constraints, objective = [S2 >> 0], 0
-    for k, li in enumerate(lam):
-        Li = L_hat @ (np.eye(m) + li * Phi)
-        Ai = A_hat - Li @ C_hat
-        if np.max(np.linalg.eigvals(Ai).real) >= 0:
-            return float("inf")
-        G = T @ as_matrix(process_factors[k], f"process_factors[{k}]", (n, None))
-        Qi = check_covariance(np.atleast_2d(noise_weights[k]), f"noise_weights[{k}]", m, definite=True)
+    constraints, objective, params = [S2 >> 0], 0, []
+    for _ in lam:
+        Ai, Mi = cp.Parameter((n, n)), cp.Parameter((n, n))
         S1 = cp.Variable((n1, n1), symmetric=True)
         S = cp.bmat([[S1, np.zeros((n1, m))], [np.zeros((m, n1)), S2]])
-        M = Ai @ S + S @ Ai.T + G @ G.T + Li @ np.linalg.solve(Qi, Li.T)  # eq. (57)
+        M = Ai @ S + S @ Ai.T + Mi  # eq. (57)
         constraints += [(M + M.T) / 2 << 0, S1 >> 0]
         objective = objective + cp.trace(weight @ S)
+        params.append((Ai, Mi))
     problem = cp.Problem(cp.Minimize(objective), constraints)
-    try:
-        return solve(problem, what)
-    except SolverError:
-        if problem.status == cp.INFEASIBLE:  # no S_i with the structure (56): the bound is +inf
-            return float("inf")
-        raise
+    out = np.empty(len(phis))
+    for j, phi in enumerate(phis):
+        stable = True
+        for (Ai, Mi), li, GGi, Qi in zip(params, lam, GG, Qinv):
+            Li = L_hat @ (np.eye(m) + li * phi)
+            Ai.value = A_hat - Li @ C_hat
+            Mi.value = GGi + Li @ Qi @ Li.T
+            stable = stable and np.max(np.linalg.eigvals(Ai.value).real) < 0
+        if not stable:
+            out[j] = np.inf
+            continue
+        try:
+            out[j] = solve(problem, what)
+        except SolverError:
+            if problem.status != cp.INFEASIBLE:
+                raise
+            out[j] = np.inf  # no S_i with the structure (56)
+    return float(out[0]) if single else out
 
 
 def _node_coordinates(C: np.ndarray, L: np.ndarray) -> np.ndarray:

@@ -168,9 +168,9 @@ def phi_profile(Q2: float, reading: str, phis: np.ndarray) -> np.ndarray:
     e, d = EXAMPLE1, design(Q2, reading)
     G = [e["Bbar"] / np.sqrt(e["R"])] * d.lam.size
     noise = [[[e["Q1"] + l * Q2]] for l in d.lam]
-    return np.array([observers.bound_at_fixed_phi(e["A"], e["C"], d.L, d.lam, G, noise, p,
-                                                  what=f"fixed-Phi program, Phi = {p:g}")
-                     for p in np.asarray(phis, dtype=float)])
+    phis = np.asarray(phis, dtype=float).ravel()
+    return observers.bound_at_fixed_phi(e["A"], e["C"], d.L, d.lam, G, noise, phis,
+                                        what=f"fixed-Phi program of Example 1 ({reading}, Q2 = {Q2:g})")
 
 
 def initial_errors(seed: int) -> np.ndarray:
