@@ -211,8 +211,8 @@ def unions_over_windows(adjacencies: Sequence[ArrayLike] | np.ndarray, window: i
     unions : (ceil(T / window), N, N) ndarray
     """
     stack = np.asarray(adjacencies, dtype=float)
-    if window < 1:
-        raise ValueError(f"window must be a positive integer; got {window}")
+    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
+        raise ValueError(f"window must be a positive integer; got {window!r}")
     return np.stack([graph_union(stack[k : k + window]) for k in range(0, len(stack), window)])
 
 

@@ -92,6 +92,9 @@ def test_union_over_windows():
     assert graphs.has_spanning_tree(graphs.graph_union([a, b]))
     unions = graphs.unions_over_windows([a, b, a, b], window=2)
     assert unions.shape == (2, 3, 3) and all(graphs.has_spanning_tree(U) for U in unions)
+    for bad_window in (0, 1.5, True):
+        with pytest.raises(ValueError, match="window"):
+            graphs.unions_over_windows([a, b], window=bad_window)
 
 
 @pytest.mark.parametrize("bad,match", [
