@@ -36,6 +36,7 @@ __all__ = [
     "READINGS",
     "DistributedObserver",
     "MinEnergyObserver",
+    "achieved_cost",
     "bound_at_fixed_phi",
     "coupled_gain_lmi",
     "disagreement",
@@ -689,6 +690,52 @@ def disagreement(errors: ArrayLike) -> np.ndarray:
     """Errors minus their mean over the agents (axis -2 of a (..., N, n) array)."""
     errors = np.asarray(errors, dtype=float)
     return errors - errors.mean(axis=-2, keepdims=True)
+
+
+def achieved_cost(
+    A: ArrayLike, Bbar: ArrayLike, C: ArrayLike, R: ArrayLike, L: ArrayLike, Phi: ArrayLike,
+    lam: ArrayLike, noise_weights: Sequence[ArrayLike], T: ArrayLike | None = None,
+) -> float:
+    """Aggregate cost (55) that gains ``L`` and ``Phi`` actually achieve: ``sum_i trace(S_i)``.
+
+    ``S_i`` solves the Lyapunov equation (57) taken with equality for the mode
+    ``A - L (I + lambda_i Phi) C`` with noise weight ``Q_i = noise_weights[i]``.
+
+    Parameters
+    ----------
+    A : (n, n), Bbar : (n, q), C : (m, n), R : (q, q) positive definite, L : (n, m) array_like
+    Phi : (m, m) array_like or float
+    lam : (N,) array_like
+        Laplacian eigenvalues.
+    noise_weights : sequence of N (m, m) positive definite arrays
+    T : (n, n) array_like, optional
+        Measure ``trace(T S_i T^T)`` (e.g. ``DistributedObserver.T``, the
+        coordinates of eq. (32)); default: the agent's original coordinates.
+
+    Returns
+    -------
+    float
+        ``inf`` if some mode is not Hurwitz.
+    """
+    A = check_square(A, "A")
+    n = A.shape[0]
+    Bbar = as_matrix(Bbar, "Bbar", (n, None))
+    C = as_matrix(C, "C", (None, n))
+    m = C.shape[0]
+    R = check_covariance(np.atleast_2d(R), "R", Bbar.shape[1], definite=True)
+    L = as_matrix(L, "L", (n, m))
+    Phi = as_matrix(np.atleast_2d(Phi), "Phi", (m, m))
+    lam = np.asarray(lam, dtype=float)
+    if lam.ndim != 1 or len(noise_weights) != lam.size:
+        raise ValueError("lam must be 1-D, with one noise weight per eigenvalue")
+    noise = [check_covariance(np.atleast_2d(q), f"noise_weights[{k}]", m, definite=True)
+             for k, q in enumerate(noise_weights)]
+    if T is None:
+        tr = np.trace
+    else:
+        T = as_matrix(T, "T", (n, n))
+        tr = lambda M: np.trace(T @ M @ T.T)  # noqa: E731
+    return _mode_costs(A, C, L, Phi, lam, Bbar @ np.linalg.solve(R, Bbar.T), noise, tr)
 
 
 def _mode_costs(A, C, L, Phi, lam, BRB, noise, tr) -> float:

@@ -250,3 +250,17 @@ def test_lmi_not_solved_to_optimality_raises(monkeypatch):
     monkeypatch.setitem(_solver.SOLVER_OPTIONS, "max_iter", 1)
     with pytest.raises(SolverError, match=r"distributed observer LMI \(62\).*expected 'optimal'"):
         observers.distributed_observer(A, B, C, 10, 5, 1, graphs.ring_graph(5))
+
+
+def test_achieved_cost_matches_design_and_dense_lyapunov(ring_design):
+    """achieved_cost equals the design's cost, and the trace of the dense network Lyapunov equation."""
+    d = ring_design
+    noise = [[[10.0 + 5.0 * l]] for l in d.lam]
+    assert observers.achieved_cost(A, B, C, [[1.0]], d.L, d.Phi, d.lam, noise, T=d.T) == pytest.approx(d.cost, rel=1e-10)
+    Lap = graphs.laplacian(graphs.ring_graph(6))
+    A_e = observers.observer_error_matrix(A, d.L, C, d.Phi, Lap)
+    Lnet = np.kron(np.eye(6), d.L) + np.kron(Lap, d.L @ d.Phi)  # input matrix of Y in eq. (42)
+    Qnet = np.kron(np.eye(6), [[10.0]]) + np.kron(Lap, [[5.0]])
+    S = sla.solve_continuous_lyapunov(A_e, -(np.kron(np.eye(6), B @ B.T) + Lnet @ np.linalg.solve(Qnet, Lnet.T)))
+    assert np.trace(S) == pytest.approx(observers.achieved_cost(A, B, C, [[1.0]], d.L, d.Phi, d.lam, noise), rel=1e-8)
+    assert observers.achieved_cost(A, B, C, [[1.0]], -d.L, d.Phi, d.lam, noise) == float("inf")

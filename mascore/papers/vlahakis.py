@@ -16,8 +16,13 @@ Findings (see the claims' notes and the notebook):
   in (position, velocity) order. The slow pole "near the origin" that the
   paper mentions exists only with this gain (``A - L C`` has poles -22.64 and
   -0.26; with the as-printed gain they are -1.03 +- 1.39j).
-* ``Phi`` and ``J`` reproduce under none of the readings we tried (table
-  ``example1_readings.csv``).
+* As printed, the LMI program (56)-(62) does not determine ``Phi``: its
+  optimum is ``N trace(S_hat)`` for every ``Q2`` and is attained by every
+  ``Phi`` of an interval (:func:`as_printed_phi_interval`) that contains the
+  printed values. The printed ``J`` (which depends on ``Q2``) is therefore not
+  reproduced, and ``Phi`` and ``J`` together reproduce under none of the
+  readings we tried (tables ``example1_readings.csv`` and
+  ``example1_lmi_variants.csv``).
 
 Settings the paper leaves out, chosen here: initial estimation errors (drawn
 uniformly in [-1, 1] for position and velocity from the run's seed), the time
@@ -87,6 +92,9 @@ LQR_WEIGHTS = {"Q1": np.eye(2), "Q2": np.eye(2), "R": np.eye(1)}
 
 #: The reading that reproduces the printed L (see module docstring).
 L_READING = "inverse-weight-are"
+
+#: The printed L as a column in (position, velocity) order (printed in the rotated order of eq. (27)).
+L_PRINTED = np.array([[PAPER["L"][1]], [PAPER["L"][0]]])
 
 
 @lru_cache(maxsize=64)
@@ -215,12 +223,11 @@ def fig12(seed: int) -> list[Fig12Result]:
     t = np.arange(0.0, e["t_end"] + e["dt"] / 2, e["dt"])
     e0 = initial_errors(seed)
     Lap = graphs.laplacian(graphs.ring_graph(e["n_agents"]))
-    L_paper = np.array([[PAPER["L"][1]], [PAPER["L"][0]]])  # printed (velocity, position) -> (position, velocity)
     out = []
     for Q2 in e["Q2"]:
         d = design(Q2, reading=L_READING)
         runs = {}
-        for name, (L, Phi) in {"ours": (d.L, d.Phi), "paper": (L_paper, PAPER["Phi"][Q2])}.items():
+        for name, (L, Phi) in {"ours": (d.L, d.Phi), "paper": (L_PRINTED, PAPER["Phi"][Q2])}.items():
             A_e = observers.observer_error_matrix(e["A"], L, e["C"], Phi, Lap)
             runs[name] = observers.simulate_estimation_errors(A_e, e0, t)
         settle = {}
@@ -410,6 +417,10 @@ def reproduce(out_dir: Path, seed: int) -> list[Claim]:
     gamma = {(r, Q2): phi_profile(Q2, r, [design(Q2, r).Phi.item(), PAPER["Phi"][Q2]])
              for r in observers.READINGS for Q2 in EXAMPLE1["Q2"]}
     interval = {Q2: as_printed_phi_interval(Q2) for Q2 in EXAMPLE1["Q2"]}
+    printed_cost = {Q2: observers.achieved_cost(
+        EXAMPLE1["A"], EXAMPLE1["Bbar"], EXAMPLE1["C"], [[EXAMPLE1["R"]]], L_PRINTED, PAPER["Phi"][Q2],
+        design(Q2, L_READING).lam, [[[EXAMPLE1["Q1"] + l * Q2]] for l in design(Q2, L_READING).lam],
+        T=design(Q2, L_READING).T) for Q2 in EXAMPLE1["Q2"]}
     for Q2, tag in ((5.0, "5"), (25.0, "25")):
         mine = ok[ok.Q2 == Q2]
         near_phi = mine.sort_values("dev_phi").iloc[0]
@@ -447,7 +458,9 @@ def reproduce(out_dir: Path, seed: int) -> list[Claim]:
             f"As printed the optimum is N trace(S_hat) = {n_trace_hat:.4f} whatever Q2 and Phi (see the Phi "
             "claims; ours carries the 1e-5 strictness margin), while the printed J changes with Q2: no Phi "
             "gives the printed J under the equations as printed. " + note_common
-            + f" The cost the observer actually achieves (Lyapunov equation) is "
+            + f" Nor is the printed J the cost that the printed L and Phi achieve (Lyapunov equation (57) with "
+            f"equality, coordinates of eq. (32)): {printed_cost[Q2]:.4f}."
+            + f" The cost our observer actually achieves is "
             f"{printed.loc[Q2, 'actual_cost']:.4f} as printed, {alt.loc[Q2, 'actual_cost']:.4f} with the other "
             "reading; the centralized optimum (40) is "
             f"{printed.loc[Q2, 'centralized_cost']:.4f} / {alt.loc[Q2, 'centralized_cost']:.4f}."))
@@ -471,9 +484,8 @@ def reproduce(out_dir: Path, seed: int) -> list[Claim]:
     absc = {f"{r}_Q2_{Q2:g}": float(design(Q2, r).spectral_abscissa)
             for r in observers.READINGS for Q2 in EXAMPLE1["Q2"]}
     Lap = graphs.laplacian(graphs.ring_graph(EXAMPLE1["n_agents"]))
-    L_paper = np.array([[PAPER["L"][1]], [PAPER["L"][0]]])
     for Q2 in EXAMPLE1["Q2"]:
-        A_e = observers.observer_error_matrix(EXAMPLE1["A"], L_paper, EXAMPLE1["C"], PAPER["Phi"][Q2], Lap)
+        A_e = observers.observer_error_matrix(EXAMPLE1["A"], L_PRINTED, EXAMPLE1["C"], PAPER["Phi"][Q2], Lap)
         absc[f"printed_L_Phi_Q2_{Q2:g}"] = float(np.linalg.eigvals(A_e).real.max())
     claims.append(Claim.qualitative(
         "vlahakis/example1-hurwitz", "Sec. 5, Example 1, text",
