@@ -39,6 +39,9 @@ def test_unobservable_and_uncontrollable_pairs_raise():
     with pytest.raises(ValueError, match="not controllable"):
         observers.distributed_observer(np.diag([-1.0, -2.0]), [[1.0], [0.0]], [[1.0, 1.0]], 1, 1, 1,
                                        graphs.ring_graph(4))
+    with pytest.raises(ValueError, match="not observable"):
+        observers.distributed_observer(np.diag([-1.0, -2.0]), [[1.0], [1.0]], [[1.0, 0.0]], 1, 1, 1,
+                                       graphs.ring_graph(4))
 
 
 def test_bad_reading_and_disconnected_graph_raise():
