@@ -93,3 +93,4 @@ def test_beyond_study_flags_unstable_large_teams():
     table = s.beyond_study(1, sensing_ranges=(200.0,), sizes=(4,), n_runs=1, t_final=3.0)
     assert list(table["N"]) == [4, 8] and list(table["r_m"]) == [150.0, 200.0]
     assert set(table["unstable"]) == {"-"}
+    assert np.all(np.isfinite(table["ekf_step_ms"])) and np.all(table["ekf_step_ms"] > 0)
