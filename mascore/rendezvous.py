@@ -22,9 +22,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import distributed_kf as dkf
-from ._validation import check_covariance, check_generator
+from ._validation import as_matrix, check_covariance, check_generator, check_square
 from .noise import psd_factor
-from .sensing import measure, sensing_mask
+from .sensing import measure, sensing_mask, team_noise_covariance
 
 __all__ = [
     "MODES",
@@ -35,6 +35,7 @@ __all__ = [
     "true_state_views",
     "propagate_team",
     "team_spread",
+    "expected_spread",
 ]
 
 
@@ -126,6 +127,88 @@ def team_spread(values: ArrayLike) -> np.ndarray:
     y = np.asarray(values, dtype=float)
     dev = y - y.mean(axis=-2, keepdims=True)
     return np.sqrt(np.mean(np.sum(dev**2, axis=-1), axis=-1))
+
+
+def expected_spread(
+    x0: ArrayLike,
+    adjacency: ArrayLike,
+    A: ArrayLike,
+    B: ArrayLike,
+    K: ArrayLike,
+    Q: ArrayLike,
+    R: ArrayLike,
+    n_steps: int,
+    mode: str,
+) -> np.ndarray:
+    """Exact expected squared spread of laws (4) and (5) on a fixed topology, no sampling.
+
+    Both laws are linear with white noise, ``X+ = F_1 X + (noise)`` with
+    ``F_1 = I_N ⊗ A - L ⊗ BK`` (eq. (11)) and, per agent, noise covariance
+    ``Q`` (law (4), ``mode="true"``) or ``Q + BK (L_i ⊗ I) R (L_i ⊗ I)^T BK^T``
+    (law (5), ``mode="measurement"``: agent ``i``'s own measurement noise
+    enters its input). The mean and covariance of ``X`` are propagated from
+    the known ``x0``; the result is the cross-check of the Monte Carlo spread
+    of :func:`simulate_rendezvous` + :func:`team_spread` (same horizon, same
+    graphs).
+
+    Parameters
+    ----------
+    x0 : (R, N, m) array_like
+        Initial states of R runs (known exactly).
+    adjacency : (N, N) or (R, N, N) array_like
+        Fixed topology, shared or one per run.
+    A, B, K, Q, R, n_steps
+        As in :func:`simulate_rendezvous`.
+    mode : {"true", "measurement"}
+
+    Returns
+    -------
+    (T+1, R, m) ndarray
+        ``E[mean_i (x_ic - mean_j x_jc)^2]`` for every state component ``c``;
+        the squared position spread of :func:`team_spread` is the sum over the
+        position components (m^2), the velocity one over the velocity
+        components (m^2/s^2).
+    """
+    if mode not in ("true", "measurement"):
+        raise ValueError(f"mode must be 'true' or 'measurement' (linear laws with white noise); got {mode!r}")
+    x = np.asarray(x0, dtype=float)
+    if x.ndim != 3 or not np.all(np.isfinite(x)):
+        raise ValueError(f"x0 must be a finite (R, N, m) array; got shape {x.shape}")
+    n_runs, N, m = x.shape
+    A = check_square(A, "A", m)
+    B = as_matrix(B, "B", (m, None))
+    BK = B @ as_matrix(K, "K", (B.shape[1], m))
+    Q = check_covariance(Q, "Q", size=m)
+    if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
+        raise ValueError(f"n_steps must be a positive integer; got {n_steps!r}")
+    Adj = np.asarray(adjacency, dtype=float)
+    sensing_mask(Adj)  # shape, sign and isolated-agent checks
+    if Adj.shape[-1] != N or Adj.ndim not in (2, 3) or (Adj.ndim == 3 and Adj.shape[0] != n_runs):
+        raise ValueError(f"adjacency must be ({N}, {N}) or ({n_runs}, {N}, {N}); got {Adj.shape}")
+    Lb = (np.eye(N) * Adj.sum(axis=-1)[..., None] - Adj).reshape(-1, N, N)  # (G, N, N), G = 1 or R
+    Nm = N * m
+    F1 = np.kron(np.eye(N), A)[None] - (Lb[:, :, None, :, None] * BK[:, None, :]).reshape(-1, Nm, Nm)
+    noise = np.broadcast_to(Q, (Lb.shape[0], N, m, m)).copy()
+    if mode == "measurement":
+        Rr = team_noise_covariance(R, N, m).reshape(N, m, N, m)
+        check_covariance(Rr.reshape(Nm, Nm), "R", definite=True)
+        C = np.einsum("gil,gik,lakc->giac", Lb, Lb, Rr)  # cov of (L_i ⊗ I) nu_i
+        noise += BK @ C @ BK.T
+    D = np.zeros((Lb.shape[0], N, m, N, m))
+    D[:, np.arange(N), :, np.arange(N), :] = np.moveaxis(noise, 1, 0)
+    D = D.reshape(-1, Nm, Nm)
+    mean = x.reshape(n_runs, Nm, 1)
+    P = np.zeros_like(D)
+    out = np.empty((n_steps + 1, n_runs, m))
+    eye_c = np.eye(N) - 1.0 / N  # centring matrix
+    for k in range(n_steps + 1):
+        dev = mean.reshape(n_runs, N, m) - mean.reshape(n_runs, N, m).mean(axis=1, keepdims=True)
+        Pc = np.diagonal(P.reshape(-1, N, m, N, m), axis1=2, axis2=4)  # (G, N, N, m): cov(x_ic, x_jc)
+        out[k] = np.mean(dev**2, axis=1) + np.einsum("ij,gjic->gc", eye_c, Pc) / N
+        if k < n_steps:
+            mean = F1 @ mean
+            P = F1 @ P @ np.swapaxes(F1, -1, -2) + D
+    return out
 
 
 #: Control laws / estimator loops understood by :func:`simulate_rendezvous`.
@@ -255,6 +338,13 @@ def simulate_rendezvous(
     if x.ndim != 3:
         raise ValueError(f"x0 must have shape (R, N, m); got {x.shape}")
     n_runs, N, m = x.shape
+    if not np.all(np.isfinite(x)):
+        raise ValueError("x0 contains NaN or infinite entries")
+    A = check_square(A, "A", m)  # agent model against the state dimension of x0
+    B = as_matrix(B, "B", (m, None))
+    K = as_matrix(K, "K", (B.shape[1], m))
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be a positive sampling time in seconds; got {dt!r}")
     if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
         raise ValueError(f"n_steps must be a positive integer; got {n_steps!r}")
     Adj = np.asarray(adjacency, dtype=float)
@@ -270,7 +360,6 @@ def simulate_rendezvous(
         """Adjacency, sensing mask and Laplacian in force at step k."""
         return (Adj[k], S[k], Laps[k]) if switching else (Adj, S, Laps)
 
-    K = np.asarray(K, dtype=float)
     filt = mode in ("measurement-filter", "estimation")
     model = dkf.team_filter_model(A, B, K, Q, R, N) if filt else None
     if mode == "estimation":
@@ -286,6 +375,8 @@ def simulate_rendezvous(
         xh0 = np.asarray(x_hat0, dtype=float)
         if xh0.shape != (n_runs, N * m):
             raise ValueError(f"Incompatible dimensions of x_hat0; expected ({n_runs}, {N * m}) but found {xh0.shape}")
+        if not np.all(np.isfinite(xh0)):
+            raise ValueError("x_hat0 contains NaN or infinite entries")
         X_hat = np.broadcast_to(xh0.reshape(n_runs, 1, N, m), (n_runs, N, N, m)).copy()
         Sig_aug = dkf.eb_initial_covariance(model, P0, common=True)
         Sig_i = dkf.agent_covariances(model, Sig_aug)

@@ -241,6 +241,34 @@ def test_bad_shapes_in_steps():
                             2, "magic", 0.1)
 
 
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(x0=np.full((1, 3, 4), np.nan)), "x0 contains NaN"),
+        (dict(x_hat0=np.full((1, 12), np.inf)), "x_hat0 contains NaN"),
+        (dict(x_hat0=np.zeros((1, 3, 4))), "Incompatible dimensions of x_hat0"),
+        (dict(P0=np.eye(3)), "Incompatible dimensions of P0"),
+        (dict(P0=-np.eye(4)), "P0 must be positive semidefinite"),
+        (dict(A=np.eye(3)), "Incompatible dimensions of A"),
+        (dict(B=np.ones((3, 2))), "Incompatible dimensions of B"),
+        (dict(K=np.ones((2, 3))), "Incompatible dimensions of K"),
+        (dict(Q=np.diag([1.0, 1.0, 1.0, -1.0])), "Q must be positive semidefinite"),
+        (dict(R=np.diag([1.0, 1.0, 1.0, 0.0])), "R must be positive definite"),
+        (dict(adjacency=ring_graph(4)), r"adjacency must be \(3, 3\)"),
+        (dict(dt=-0.1), "dt must be a positive sampling time"),
+        (dict(n_steps=0), "n_steps must be a positive integer"),
+    ],
+)
+def test_bad_simulation_input_is_named(kwargs, match):
+    """Every bad argument of the estimation-based loop fails early, naming the argument."""
+    args = dict(rng=0, x0=np.zeros((1, 3, 4)), adjacency=path_graph(3), A=AGENT.A, B=AGENT.B, K=K,
+                Q=np.eye(4), R=np.eye(4), n_steps=2, mode="estimation", dt=0.1,
+                x_hat0=np.zeros((1, 12)), P0=np.eye(4))
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        simulate_rendezvous(**args)
+
+
 def test_reduced_and_unreduced_simulations_agree():
     """The Kronecker reduction changes nothing but the cost."""
     x0 = np.random.default_rng(11).normal(scale=20, size=(2, 3, 4))
