@@ -239,17 +239,9 @@ def minkowski_sum_min_trace(
     """
     P1 = np.asarray(shape1, dtype=float)
     P2 = np.asarray(shape2, dtype=float)
-    s1 = np.sqrt(np.maximum(np.trace(P1, axis1=-2, axis2=-1), 0.0))
-    s2 = np.sqrt(np.maximum(np.trace(P2, axis1=-2, axis2=-1), 0.0))
-    total = s1 + s2
-    if not np.all(total > 0):
-        raise ValueError("Minkowski sum of two points: both shape matrices are zero")
-    # P1 / (1 - b) + P2 / b with b = s2 / (s1 + s2)  ==  (s1 + s2) (P1 / s1 + P2 / s2); a zero term drops out
-    w1 = np.where(s1 > 0, total / np.where(s1 > 0, s1, 1.0), 0.0)
-    w2 = np.where(s2 > 0, total / np.where(s2 > 0, s2, 1.0), 0.0)
-    P = w1[..., None, None] * P1 + w2[..., None, None] * P2
+    P, beta = _sum_min_trace(P1, P2, _sqrt_trace(P1), _sqrt_trace(P2))
     c = np.asarray(center1, dtype=float) + np.asarray(center2, dtype=float)
-    return c, 0.5 * (P + np.swapaxes(P, -1, -2)), s2 / total
+    return c, P, beta
 
 
 def intersection_gain_form(
@@ -341,10 +333,14 @@ def intersection_min_trace(
     -------
     center : (..., n), shape : (..., n, n), gain : (..., n, p), t : (...,)
     """
-    c = np.asarray(center, dtype=float)
-    P = np.asarray(shape, dtype=float)
-    C = as_matrix(C, "C")
-    W = np.asarray(W, dtype=float)
+    return _intersection_min_trace(
+        np.asarray(center, dtype=float), np.asarray(shape, dtype=float), as_matrix(C, "C"),
+        np.asarray(y, dtype=float), np.asarray(W, dtype=float), shrink, tol, max_iter,
+    )
+
+
+def _intersection_min_trace(c, P, C, y, W, shrink=False, tol=1e-13, max_iter=100):
+    """:func:`intersection_min_trace` on arrays already converted (no argument checks)."""
     if C.shape[0] == 1 and not shrink:
         return _min_trace_one_measurement(c, P, C, y, W)
     h, m = _trace_profile(P, C, W)
@@ -369,14 +365,18 @@ def max_innovation_form(
     ellipsoid); otherwise the concave function of t is maximised by bisection
     on its derivative after a simultaneous diagonalisation.
     """
-    C = as_matrix(C, "C")
-    c = np.asarray(center, dtype=float)
-    P = np.asarray(shape, dtype=float)
-    W = np.asarray(W, dtype=float)
-    nu = np.asarray(y, dtype=float) - c @ C.T
+    return _max_innovation_form(
+        np.asarray(center, dtype=float), np.asarray(shape, dtype=float), as_matrix(C, "C"),
+        np.asarray(y, dtype=float), np.asarray(W, dtype=float), n_iter,
+    )
+
+
+def _max_innovation_form(c, P, C, y, W, n_iter=60):
+    """:func:`max_innovation_form` on arrays already converted (no argument checks)."""
+    nu = y - c @ C.T
     S0 = C @ P @ C.T
     if C.shape[0] == 1:
-        return nu[..., 0] ** 2 / (np.sqrt(W[..., 0, 0]) + np.sqrt(np.clip(S0[..., 0, 0], 0, None))) ** 2
+        return nu[..., 0] ** 2 / (np.sqrt(W[..., 0, 0]) + np.sqrt(np.maximum(S0[..., 0, 0], 0.0))) ** 2
     Fi = np.linalg.inv(np.linalg.cholesky(W))
     sig, V = np.linalg.eigh(Fi @ S0 @ np.swapaxes(Fi, -1, -2))
     sig = np.clip(sig, 0.0, None)
@@ -422,6 +422,26 @@ def sample_interior(
     return uniform_ellipsoid(rng, center, shape, size)
 
 
+def _sqrt_trace(P: np.ndarray) -> np.ndarray:
+    """``sqrt(trace P)`` of a stack of PSD matrices (round-off below zero clipped)."""
+    return np.sqrt(np.maximum(P.trace(axis1=-2, axis2=-1), 0.0))
+
+
+def _sum_min_trace(P1, P2, s1, s2):
+    """Shape and beta of :func:`minkowski_sum_min_trace` given ``s_i = sqrt(trace P_i)`` (no argument checks).
+
+    ``P1 / (1 - b) + P2 / b`` with ``b = s2 / (s1 + s2)`` equals ``(s1 + s2) (P1 / s1 + P2 / s2)``;
+    a zero term drops out. `P1`, `P2` (and `s1`, `s2`) broadcast against each other.
+    """
+    total = s1 + s2
+    if not (total > 0).all():
+        raise ValueError("Minkowski sum of two points: both shape matrices are zero")
+    w1 = np.divide(total, s1, out=np.zeros(np.shape(total)), where=s1 > 0)
+    w2 = np.divide(total, s2, out=np.zeros(np.shape(total)), where=s2 > 0)
+    P = w1[..., None, None] * P1 + w2[..., None, None] * P2
+    return 0.5 * (P + P.swapaxes(-1, -2)), s2 / total
+
+
 def _trace_profile(P: np.ndarray, C: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """h, m with trace P_t = sum_i h_i / (1 + t (m_i - 1)) (see intersection_min_trace)."""
     try:
@@ -447,28 +467,30 @@ def _min_trace_one_measurement(c, P, C, y, W):
     minimiser is ``t* = (rho - 1) / (mu - 1 + rho)``, ``rho = sqrt(b (mu - 1) / a)``
     (``t* = 0`` when ``rho <= 1``: the measurement cannot shrink the trace).
     """
-    g = P @ C[0]  # (..., n)
-    s = g @ C[0]  # (...,)
+    C0 = C[0]
+    g = P @ C0  # (..., n)
+    s = g @ C0  # (...,)
     w = W[..., 0, 0]
-    if np.any(s <= 0):
+    if not (s > 0).all():
         raise ValueError("prior shape matrix is not positive definite (C P C^T <= 0)")
-    if np.any(w <= 0):
+    if not (w > 0).all():
         raise ValueError("measurement shape W = D R D^T must be positive definite")
     b = np.einsum("...i,...i->...", g, g) / s
-    a = np.clip(trace(P) - b, 0.0, None)
-    mu = s / w
+    a = np.maximum(P.trace(axis1=-2, axis2=-1) - b, 0.0)
+    mu1 = s / w - 1.0
     with np.errstate(divide="ignore", invalid="ignore"):
-        rho = np.sqrt(np.clip(b * (mu - 1.0), 0.0, None) / a)
-        t = np.where(np.isfinite(rho), (rho - 1.0) / (mu - 1.0 + rho), 1.0)
-    t = np.clip(np.where(mu > 1.0, t, 0.0), _T_MIN, 1.0 - _T_MIN)
-    S = s / (1.0 - t) + w / t
-    L = g / ((1.0 - t) * S)[..., None]
+        rho = np.sqrt(np.maximum(b * mu1, 0.0) / a)
+        t = np.where(np.isfinite(rho), (rho - 1.0) / (mu1 + rho), 1.0)
+    t = np.minimum(np.maximum(np.where(mu1 > 0.0, t, 0.0), _T_MIN), 1.0 - _T_MIN)
+    omt = 1.0 - t
+    w_t = w / t
+    L = g / (omt * (s / omt + w_t))[..., None]  # P C^T S^-1 / (1 - t), S = s / (1 - t) + w / t
+    Lc = L[..., :, None]
     # Joseph form (I - L C) P (I - L C)^T / (1 - t) + L W L^T / t: the matrix of the SDP, stable as t -> 1
-    IKC = np.eye(P.shape[-1]) - L[..., :, None] * C[0]
-    Pt = (IKC @ P @ np.swapaxes(IKC, -1, -2) / (1.0 - t)[..., None, None]
-          + (w / t)[..., None, None] * L[..., :, None] * L[..., None, :])
-    nu = np.asarray(y, dtype=float)[..., 0] - c @ C[0]
-    return c + L * nu[..., None], 0.5 * (Pt + np.swapaxes(Pt, -1, -2)), L[..., None], t
+    IKC = np.eye(P.shape[-1]) - Lc * C0
+    Pt = IKC @ P @ IKC.swapaxes(-1, -2) / omt[..., None, None] + w_t[..., None, None] * Lc * L[..., None, :]
+    nu = y[..., 0] - c @ C0
+    return c + L * nu[..., None], 0.5 * (Pt + Pt.swapaxes(-1, -2)), Lc, t
 
 
 #: Smallest family parameter used (t = 0 or 1 are limits of the family).

@@ -33,14 +33,16 @@ Each step comes in two interchangeable implementations, selected with ``method=`
     (:func:`mascore.ellipsoids.minkowski_sum_min_trace`). Both are vectorized
     over any leading batch dimensions (agents, Monte Carlo runs).
 
-Errors name the step (correction/prediction, time k) and the agent.
+Errors name the step (correction/prediction, time k) and the agent. The public functions check
+their arguments once at entry (the constant system matrices once per distinct value, cached) and
+then call the unchecked kernels of :mod:`mascore.ellipsoids`.
 """
 
 from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import cvxpy as cp
 import numpy as np
@@ -48,7 +50,7 @@ from numpy.typing import ArrayLike
 
 from . import ellipsoids
 from ._solver import LMI_EPS, SolverError, solve
-from ._validation import as_matrix, check_covariance, check_square
+from ._validation import as_matrix, check_square
 
 __all__ = [
     "METHODS",
@@ -111,23 +113,24 @@ def correct(
     method = _check_method(method)
     c, P = _check_ellipsoid(center, shape, "correction", step, agent)
     n = c.shape[-1]
-    C = _checked(as_matrix, C, "C", (None, n))
+    C, D, R, W, W_error = _cached(_correction_system, n, C, D, R)
     p = C.shape[0]
-    D = _checked(as_matrix, D, "D", (p, None))
-    R = _checked(_check_pd_small, R, "R", D.shape[1])
     y = np.asarray(y, dtype=float)
     if y.shape[-1:] != (p,):
         raise ValueError(f"y must have last dimension {p} (rows of C); got shape {y.shape}")
-    batch = np.broadcast_shapes(c.shape[:-1], P.shape[:-2], y.shape[:-1])
-    if c.shape[:-1] != batch or P.shape[:-2] != batch or y.shape[:-1] != batch:
+    if not np.isfinite(y).all():
+        raise ValueError(f"{_where('correction', step, agent, None, ())}: y has NaN/inf entries")
+    batch = c.shape[:-1]
+    if P.shape[:-2] != batch or y.shape[:-1] != batch:
+        batch = np.broadcast_shapes(batch, P.shape[:-2], y.shape[:-1])
         c, P, y = (np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n)),
                    np.broadcast_to(y, (*batch, p)))
-    W = D @ R @ D.T
     if check_consistency:
-        _checked(_check_pd_small, W, "D R D^T (needed to test the consistency of y)", p)
-        q = np.asarray(ellipsoids.max_innovation_form(c, P, C, y, W))
+        if W_error is not None:
+            raise ValueError(W_error)
+        q = ellipsoids._max_innovation_form(c, P, C, y, W)
         bad = q > 1.0 + CONSISTENCY_RTOL
-        if np.any(bad):
+        if bad.any():
             idx = tuple(int(i) for i in np.argwhere(bad)[0]) if bad.ndim else ()
             raise ValueError(
                 f"{_where('correction', step, agent, idx, batch)}: measurement y = {y[idx]} is "
@@ -136,7 +139,7 @@ def correct(
             )
     if method == "closed_form":
         try:
-            new_c, new_P, L, _ = ellipsoids.intersection_min_trace(c, P, C, y, W)
+            new_c, new_P, L, _ = ellipsoids._intersection_min_trace(c, P, C, y, W)
         except ValueError as exc:
             raise ValueError(f"{_where('correction', step, agent, None, batch)}: {exc}") from exc
     else:
@@ -181,22 +184,22 @@ def predict(
     method = _check_method(method)
     c, P = _check_ellipsoid(center, shape, "prediction", step, agent)
     n = c.shape[-1]
-    A = _checked(check_square, A, "A", n)
-    G = _checked(as_matrix, G, "G (disturbance matrix)", (n, None))
-    Q = _checked(_check_pd_small, Q, "Q", G.shape[1])
-    batch = np.broadcast_shapes(c.shape[:-1], P.shape[:-2])
-    if c.shape[:-1] != batch or P.shape[:-2] != batch:
-        c, P = np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n))
-    new_c = c @ A.T
     if (B is None) != (u is None):
         raise ValueError("give both B and u, or neither")
+    A, G, Q, GQG, sqrt_tr_GQG, B = _cached(_prediction_system, n, A, G, Q, *(() if B is None else (B,)))
+    batch = c.shape[:-1]
+    if P.shape[:-2] != batch:
+        batch = np.broadcast_shapes(batch, P.shape[:-2])
+        c, P = np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n))
+    new_c = c @ A.T
     if B is not None:
-        B = _checked(as_matrix, B, "B", (n, None))
-        new_c = new_c + np.asarray(u, dtype=float) @ B.T
-    if method == "closed_form":
+        u = np.asarray(u, dtype=float)
+        if u.shape[-1:] != B.shape[1:] or not np.isfinite(u).all():
+            raise ValueError(f"u must be finite with last dimension {B.shape[1]} (columns of B); got shape {u.shape}")
+        new_c = new_c + u @ B.T
+    if method == "closed_form":  # trace-optimal Minkowski sum of E(0, A P A^T) and E(0, G Q G^T)
         APA = A @ P @ A.T
-        GQG = np.broadcast_to(G @ Q @ G.T, APA.shape)
-        _, new_P, _ = ellipsoids.minkowski_sum_min_trace(new_c, APA, np.zeros_like(new_c), GQG)
+        new_P, _ = ellipsoids._sum_min_trace(APA, GQG, ellipsoids._sqrt_trace(APA), sqrt_tr_GQG)
     else:
         new_P = np.empty_like(P)
         sdp = _prediction_sdp(n, G.shape[1])
@@ -301,6 +304,12 @@ def _check_ellipsoid(center, shape, what, step, agent):
 
 def _require_pd(P, what, step, agent, label):
     """Raise naming the step and agent unless every matrix of the stack P is symmetric PD."""
+    if (P == np.swapaxes(P, -1, -2)).all():  # exactly symmetric (the usual case): Cholesky decides
+        try:
+            np.linalg.cholesky(P)
+            return
+        except np.linalg.LinAlgError:
+            pass  # fall through to locate the offending matrix
     scale = np.abs(P).max(axis=(-1, -2))
     asym = np.abs(P - np.swapaxes(P, -1, -2)).max(axis=(-1, -2)) > 1e-8 * np.maximum(1.0, scale)
     ok = not np.any(asym)
@@ -328,21 +337,71 @@ def _check_result(P, what, step, agent, batch):
         _require_pd(P, what, step, agent, "the new shape matrix")
 
 
-_CHECKED: dict = {}
+class _CorrectionSystem(NamedTuple):
+    C: np.ndarray
+    D: np.ndarray
+    R: np.ndarray
+    W: np.ndarray  #: D R D^T
+    W_error: str | None  #: why W cannot serve the consistency test (not positive definite), if so
 
 
-def _checked(check, M, name, size):
-    """Validate a (usually constant) system matrix once per distinct value; later calls hit a cache."""
-    arr = np.asarray(M, dtype=float)
-    key = (check.__name__, name, str(size), arr.shape, arr.tobytes())
-    hit = _CHECKED.get(key)
+class _PredictionSystem(NamedTuple):
+    A: np.ndarray
+    G: np.ndarray
+    Q: np.ndarray
+    GQG: np.ndarray  #: G Q G^T
+    sqrt_tr_GQG: np.ndarray  #: sqrt(trace(G Q G^T))
+    B: np.ndarray | None  #: input matrix, if any
+
+
+def _correction_system(n: int, C: np.ndarray, D: np.ndarray, R: np.ndarray) -> _CorrectionSystem:
+    C = as_matrix(C, "C", (None, n))
+    p = C.shape[0]
+    D = as_matrix(D, "D", (p, None))
+    R = _check_pd_small(R, "R", D.shape[1])
+    W = D @ R @ D.T
+    try:
+        _check_pd_small(W, "D R D^T (needed to test the consistency of y)", p)
+        W_error = None
+    except ValueError as exc:
+        W_error = str(exc)
+    return _CorrectionSystem(*_frozen(C, D, R, W), W_error)
+
+
+def _prediction_system(
+    n: int, A: np.ndarray, G: np.ndarray, Q: np.ndarray, B: np.ndarray | None = None
+) -> _PredictionSystem:
+    A = check_square(A, "A", n)
+    G = as_matrix(G, "G (disturbance matrix)", (n, None))
+    Q = _check_pd_small(Q, "Q", G.shape[1])
+    if B is not None:
+        B = _frozen(as_matrix(B, "B", (n, None)))[0]
+    GQG = G @ Q @ G.T
+    return _PredictionSystem(*_frozen(A, G, Q, GQG), ellipsoids._sqrt_trace(GQG), B)
+
+
+def _frozen(*arrays: np.ndarray) -> list[np.ndarray]:
+    """Read-only copies (cached values must not alias the caller's arrays)."""
+    out = [np.array(a, dtype=float) for a in arrays]
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+_CACHE: dict = {}
+
+
+def _cached(build, n: int, *matrices: ArrayLike):
+    """``build(n, *matrices)``: validate and derive from the (usually constant) system matrices once per
+    distinct value; later calls with equal matrices (compared by value) return the cached result."""
+    arrays = [np.asarray(M, dtype=float) for M in matrices]
+    key = (build, n, *[(a.shape, a.tobytes()) for a in arrays])
+    hit = _CACHE.get(key)
     if hit is None:
-        hit = check(arr, name, size)
-        hit = np.array(hit, dtype=float)
-        hit.setflags(write=False)
-        if len(_CHECKED) > 512:
-            _CHECKED.clear()
-        _CHECKED[key] = hit
+        hit = build(n, *arrays)
+        if len(_CACHE) > 512:
+            _CACHE.clear()
+        _CACHE[key] = hit
     return hit
 
 

@@ -171,3 +171,21 @@ def test_bad_arguments():
         smf.correct(np.zeros(2), np.eye(2), [0.0], np.ones((1, 3)), D, R)
     with pytest.raises(ValueError, match="give both B and u"):
         smf.predict(np.zeros(2), np.eye(2), A, G, Q, B=np.eye(2))
+    with pytest.raises(ValueError, match=r"correction step, k = 3, agent 2: y has NaN"):
+        smf.correct(np.zeros(2), np.eye(2), [np.nan], C, D, R, step=3, agent=2)
+    with pytest.raises(ValueError, match="u must be finite with last dimension 2"):
+        smf.predict(np.zeros(2), np.eye(2), A, G, Q, B=np.eye(2), u=[0.0, np.inf])
+    with pytest.raises(ValueError, match="u must be finite with last dimension 2"):
+        smf.predict(np.zeros(2), np.eye(2), A, G, Q, B=np.eye(2), u=[0.0])
+
+
+def test_cached_system_matrices_do_not_alias_the_callers_arrays():
+    """System matrices are validated once per value; changing the caller's array afterwards changes the result."""
+    Qm = Q.copy()
+    _, P1 = smf.predict(np.zeros(2), np.eye(2), A, G, Qm)
+    Qm *= 4.0  # same object, new value: must not hit the old cache entry
+    _, P2 = smf.predict(np.zeros(2), np.eye(2), A, G, Qm)
+    assert np.trace(P2) == pytest.approx((np.sqrt(np.trace(A @ A.T)) + np.sqrt(np.trace(Qm))) ** 2)
+    assert np.trace(P2) > np.trace(P1)
+    with pytest.raises(ValueError, match="Q must be symmetric positive definite"):
+        smf.predict(np.zeros(2), np.eye(2), A, G, -Qm)
