@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._progress import progress_bar
 from ._validation import check_covariance, check_generator
 from .flocking import (
     FlockingGains,
@@ -291,12 +292,7 @@ def simulate_estimation_based_flocking(
     var_obs = np.empty((n_steps + 1, *batch, N))
     rms = np.empty((n_steps + 1, *batch))
     pos_idx = (np.arange(N)[:, None] * m + np.arange(n)[None, :])  # (N, n) flat indices of positions
-    steps = range(n_steps + 1)
-    if progress:
-        from tqdm.auto import tqdm  # imported only when asked for (no widget warning in notebooks)
-
-        steps = tqdm(steps, desc="EKF flocking", leave=False)
-    for k in steps:
+    for k in progress_bar(range(n_steps + 1), enabled=progress, desc="EKF flocking", leave=False):
         A_k = proximity_graph(X[..., :n], sensing_range).astype(bool)
         z, observed = measure(rng, X, A_k, R_team, allow_isolated=True)  # eqs. (2)-(3)
         X_hat, Sigma = _update(X_hat, Sigma, z, observed, R_team)  # eqs. (16)-(20)

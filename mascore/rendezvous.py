@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import distributed_kf as dkf
+from ._progress import progress_bar
 from ._validation import as_matrix, check_covariance, check_generator, check_square
 from .noise import psd_factor
 from .sensing import measure, sensing_mask, team_noise_covariance
@@ -419,12 +420,7 @@ def simulate_rendezvous(
         pos_slice = slice(0, m // 2)
         record(0)
     Z, _ = measure(meas_rng, x, topology(0)[0], R)
-    steps = range(n_steps)
-    if progress:
-        from tqdm.auto import tqdm
-
-        steps = tqdm(steps, desc=f"rendezvous ({mode})", leave=False)
-    for k in steps:
+    for k in progress_bar(range(n_steps), enabled=progress, desc=f"rendezvous ({mode})", leave=False):
         Lap = topology(k)[2]
         if mode == "true":
             U = consensus_control(true_state_views(x), Lap, K)

@@ -18,8 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from tqdm.auto import tqdm
-
+from ._progress import progress_bar
 from .ledger import PAPERS, Claim, write_claims
 
 __all__ = ["DEFAULT_SEED", "available_papers", "main", "reproduce_paper", "results_dir"]
@@ -96,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     papers = available_papers() if args.paper == "all" else [args.paper]
     command = "python -m mascore " + shlex.join(sys.argv[1:] if argv is None else argv)
     failed = False
-    for paper in tqdm(papers, desc="papers", unit="paper", disable=len(papers) < 2):
+    for paper in progress_bar(papers, enabled=len(papers) > 1, desc="papers", unit="paper"):
         start = time.perf_counter()
         try:
             claims = reproduce_paper(paper, args.out, args.seed, created_by=command)

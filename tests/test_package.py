@@ -24,3 +24,27 @@ def test_bare_import_does_not_load_cvxpy():
     code = "import sys, mascore; print('cvxpy' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_progress_bar_passes_items_through_and_can_be_off():
+    from mascore._progress import progress_bar
+
+    items = [3, 1, 2]
+    assert progress_bar(items, enabled=False) is items
+    assert list(progress_bar(items, desc="test", disable=True)) == items
+
+
+def test_progress_bar_is_silent_in_a_notebook_kernel_without_ipywidgets():
+    # In a Jupyter kernel without ipywidgets, importing tqdm.auto warns "IProgress not found";
+    # that warning must not reach the rendered book.
+    code = (
+        "import sys, types, IPython\n"
+        "sys.modules['ipywidgets'] = None\n"  # as if not installed
+        "sys.modules['ipykernel.zmqshell'] = types.ModuleType('ipykernel.zmqshell')\n"  # as in a kernel
+        "from mascore._progress import progress_bar\n"
+        "print(list(progress_bar([1, 2], desc='x', file=sys.stdout)))\n"
+    )
+    out = subprocess.run([sys.executable, "-W", "always", "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().endswith("[1, 2]")
+    assert "IProgress" not in out.stderr and "Warning" not in out.stderr, out.stderr

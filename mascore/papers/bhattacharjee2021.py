@@ -34,10 +34,10 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from .. import set_membership as smf
 from .. import synchronization as sync
+from .._progress import progress_bar
 from ..ledger import Claim
 from ..plotting import agent_colors, save_figure, use_style
 
@@ -207,7 +207,7 @@ def simulate(
     P = np.broadcast_to(P0, (*x.shape, 2)).copy()
     leader = LEADER_X0.copy()
     xs, xh, Ps, us, ls, xp, Pp = [], [], [], [], [], [], []
-    for k in tqdm(range(T_F + 1), desc=f"closed loop ({method})", disable=not progress, leave=False):
+    for k in progress_bar(range(T_F + 1), enabled=progress, desc=f"closed loop ({method})", leave=False):
         y = x @ C.T + v[:, k] @ D.T
         xp.append(c)
         Pp.append(P)
@@ -248,7 +248,7 @@ def table1_study(
     """
     draws = draw(seed, n_runs)
     rows, runs = [], []
-    for i, s in enumerate(tqdm(SETTINGS, desc="Table 1", disable=not progress)):
+    for i, s in enumerate(progress_bar(SETTINGS, enabled=progress, desc="Table 1")):
         run = simulate(s, draws=draws, method="closed_form", adjacency=adjacency)
         runs.append(run)
         mean, rms = run.table1_metrics()

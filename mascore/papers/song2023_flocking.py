@@ -50,6 +50,7 @@ from ..flocking import (
     simulate_measured_flocking,
 )
 from ..graphs import is_connected, proximity_graph
+from .._progress import progress_bar
 from ..ledger import Claim
 from ..plotting import agent_colors, plot_graph, save_figure
 from ..sensing import measure
@@ -540,11 +541,7 @@ def beyond_study(seed: int, sensing_ranges=(130.0, 150.0, 200.0, 250.0), sizes=(
 
     settings = [(N_AGENTS, r) for r in sensing_ranges] + [(N, SENSING_RANGE) for N in sizes if N != N_AGENTS]
     rows = []
-    if progress:
-        from tqdm.auto import tqdm
-
-        settings = tqdm(settings, desc="beyond")
-    for N, r in settings:
+    for N, r in progress_bar(settings, enabled=progress, desc="beyond"):
         start = time.perf_counter()
         res = run_fig5(seed, n_runs=n_runs, sensing_range=r, n_agents=N, t_final=t_final)
         elapsed = time.perf_counter() - start
