@@ -35,8 +35,11 @@ __all__ = [
     "PAPERS",
     "VERDICTS",
     "Claim",
+    "ClaimsView",
     "claims_table",
+    "format_value",
     "load_claims",
+    "show_claims",
     "write_claims",
 ]
 
@@ -166,11 +169,66 @@ def load_claims(results_dir: str | Path, papers: Iterable[str] = PAPERS) -> list
 
 
 def claims_table(records: Sequence[dict]):
-    """A pandas DataFrame of claim records for display."""
+    """A pandas DataFrame of claim records (full values, for analysis; see :func:`show_claims` to read)."""
     import pandas as pd
 
     columns = ["id", "where", "paper_value", "value", "tolerance", "verdict", "note"]
     return pd.DataFrame([{k: r.get(k) for k in columns} for r in records], columns=columns)
+
+
+def format_value(value: Any, digits: int = 4, max_items: int = 4) -> str:
+    """A short human-readable form of a claim value: numbers to `digits` significant digits,
+    lists and dicts cut after `max_items` entries (marked with an ellipsis), ``None`` as a dash."""
+    if value is None:
+        return "\u2014"
+    if isinstance(value, bool | np.bool_):
+        return str(bool(value))
+    if isinstance(value, int | float | np.integer | np.floating):
+        return f"{float(value):.{digits}g}" if isinstance(value, float | np.floating) else str(value)
+    if isinstance(value, dict):
+        def item(v: Any) -> str:
+            text = format_value(v, digits, max_items)
+            return "{" + text + "}" if isinstance(v, dict) else text
+
+        items = [f"{k}: {item(v)}" for k, v in list(value.items())[:max_items]]
+        return "; ".join(items) + ("; \u2026" if len(value) > max_items else "")
+    if isinstance(value, list | tuple | np.ndarray):
+        items = [format_value(v, digits, max_items) for v in list(value)[:max_items]]
+        return "[" + ", ".join(items) + (", \u2026" if len(value) > max_items else "") + "]"
+    return str(value)
+
+
+@dataclass(frozen=True)
+class ClaimsView:
+    """Claims laid out for reading in a notebook: a compact table, then each claim's note.
+
+    Jupyter shows it as Markdown (``_repr_markdown_``); ``str()`` gives the same text.
+    """
+
+    records: tuple[dict, ...]
+
+    def _repr_markdown_(self) -> str:
+        def cell(text: str) -> str:
+            return text.replace("|", "\\|").replace("\n", " ")
+
+        def name(r: dict) -> str:  # the paper is named once, above the table
+            return r["id"].split("/", 1)[-1]
+
+        lines = ["| verdict | claim | where | paper | ours |", "|---|---|---|---|---|"]
+        for r in self.records:
+            lines.append(
+                f"| **{r['verdict']}** | {name(r)} | {cell(str(r.get('where', '')))} "
+                f"| {cell(format_value(r.get('paper_value')))} | {cell(format_value(r.get('value'), max_items=3))} |"
+            )
+        notes = [f"- `{name(r)}`: {r['note']}" for r in self.records if r.get("note")]
+        return "\n".join(lines + (["", "Notes:", "", *notes] if notes else []))
+
+    __str__ = _repr_markdown_
+
+
+def show_claims(claims: Iterable[Claim | dict]) -> ClaimsView:
+    """Claims (objects or ``claims.json`` records) as a :class:`ClaimsView` for display."""
+    return ClaimsView(tuple(c.to_dict() if isinstance(c, Claim) else dict(c) for c in claims))
 
 
 def _quantitative_verdict(claim: Claim) -> str:

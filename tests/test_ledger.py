@@ -56,3 +56,27 @@ def test_cli_rejects_unknown_paper(capsys):
     with pytest.raises(SystemExit):
         reproduce.main(["reproduce", "nosuchpaper"])
     assert "invalid choice" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("value,text", [
+    (None, "\u2014"),
+    (3, "3"),
+    (2.4615707509952616, "2.462"),
+    (True, "True"),
+    ([1.0, 2.0, 3.0, 4.0, 5.0], "[1, 2, 3, 4, \u2026]"),
+    ({"a": 0.123456, "b": {"c": 1e-12}}, "a: 0.1235; b: {c: 1e-12}"),
+])
+def test_format_value_is_short_and_exact_to_four_digits(value, text):
+    assert ledger.format_value(value) == text
+
+
+def test_show_claims_lays_out_one_row_and_one_note_per_claim():
+    claims = [Claim("vlahakis/a", "Fig. 1 | left", "s", 2.0, 2.0004, {"abs": 0.1}, note="a note"),
+              Claim.qualitative("vlahakis/b", "w", "s", {"max": 1.0}, False)]
+    text = ledger.show_claims([claims[0], claims[1].to_dict()])._repr_markdown_()
+    rows = [line for line in text.splitlines() if line.startswith("| **")]
+    assert len(rows) == 2
+    assert rows[0].count(" | ") == 4  # the '|' inside 'where' is escaped, not a new column
+    assert rows[0].startswith("| **reproduces** | a |") and rows[0].endswith("| 2 | 2 |")
+    assert rows[1].startswith("| **fails** | b |")
+    assert "- `a`: a note" in text and "`b`:" not in text
