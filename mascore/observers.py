@@ -311,18 +311,8 @@ def coupled_gain_lmi(
         ``W`` (list of the W_i per distinct lambda, in ``x_hat`` scaled to unit
         diagonal of the first mode's ``Phi = 0`` Lyapunov solution), ``lam_unique``, ``multiplicity``.
     """
-    A = check_square(A, "A")
-    n = A.shape[0]
-    C = as_matrix(C, "C", (None, n))
-    m = C.shape[0]
-    L = as_matrix(L, "L", (n, m))
-    lam = np.asarray(lam, dtype=float)
-    if lam.ndim != 1 or np.any(lam < -1e-12):
-        raise ValueError("lam must be a 1-D array of non-negative Laplacian eigenvalues")
-    if len(process_factors) != lam.size or len(noise_weights) != lam.size:
-        raise ValueError("process_factors and noise_weights need one entry per eigenvalue in lam")
-    if trace_in not in ("transformed", "original"):
-        raise ValueError(f"trace_in must be 'transformed' or 'original'; got {trace_in!r}")
+    A, C, L, lam = _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in)
+    n, m = L.shape
     n1 = n - m
     T = _node_coordinates(C, L)
     Tinv = np.linalg.inv(T)
@@ -440,11 +430,8 @@ def bound_at_fixed_phi(
     mascore._solver.SolverError
         The program is neither solved to optimality nor proved infeasible.
     """
-    A = check_square(A, "A")
-    n = A.shape[0]
-    C = as_matrix(C, "C", (None, n))
-    m = C.shape[0]
-    L = as_matrix(L, "L", (n, m))
+    A, C, L, lam = _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in)
+    n, m = L.shape
     phis = np.asarray(Phi, dtype=float)
     single = phis.ndim == 0 or phis.shape == (m, m)
     if single or (m == 1 and phis.ndim == 1):
@@ -452,11 +439,6 @@ def bound_at_fixed_phi(
     if phis.ndim != 3 or phis.shape[1:] != (m, m) or not np.all(np.isfinite(phis)):
         raise ValueError(f"Phi must be finite, one ({m}, {m}) gain or a (K, {m}, {m}) stack; got shape "
                          f"{np.shape(Phi)}")
-    lam = np.asarray(lam, dtype=float)
-    if lam.ndim != 1 or len(process_factors) != lam.size or len(noise_weights) != lam.size:
-        raise ValueError("lam must be 1-D, with one process factor and one noise weight per eigenvalue")
-    if trace_in not in ("transformed", "original"):
-        raise ValueError(f"trace_in must be 'transformed' or 'original'; got {trace_in!r}")
     T = _node_coordinates(C, L)
     Tinv = np.linalg.inv(T)
     A_hat, C_hat, L_hat = T @ A @ Tinv, C @ Tinv, T @ L
@@ -496,6 +478,22 @@ def bound_at_fixed_phi(
                 raise
             out[j] = np.inf  # no S_i with the structure (56)
     return float(out[0]) if single else out
+
+
+def _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in):
+    """Validate the inputs shared by the mode programs (56)-(62); returns ``A, C, L, lam`` as arrays."""
+    A = check_square(A, "A")
+    n = A.shape[0]
+    C = as_matrix(C, "C", (None, n))
+    L = as_matrix(L, "L", (n, C.shape[0]))
+    lam = np.asarray(lam, dtype=float)
+    if lam.ndim != 1 or np.any(lam < -1e-12):
+        raise ValueError("lam must be a 1-D array of non-negative Laplacian eigenvalues")
+    if len(process_factors) != lam.size or len(noise_weights) != lam.size:
+        raise ValueError("process_factors and noise_weights need one entry per eigenvalue in lam")
+    if trace_in not in ("transformed", "original"):
+        raise ValueError(f"trace_in must be 'transformed' or 'original'; got {trace_in!r}")
+    return A, C, L, lam
 
 
 def _node_coordinates(C: np.ndarray, L: np.ndarray) -> np.ndarray:
