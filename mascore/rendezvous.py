@@ -188,7 +188,7 @@ def expected_spread(
         raise ValueError(f"adjacency must be ({N}, {N}) or ({n_runs}, {N}, {N}); got {Adj.shape}")
     Lb = (np.eye(N) * Adj.sum(axis=-1)[..., None] - Adj).reshape(-1, N, N)  # (G, N, N), G = 1 or R
     Nm = N * m
-    F1 = np.kron(np.eye(N), A)[None] - (Lb[:, :, None, :, None] * BK[:, None, :]).reshape(-1, Nm, Nm)
+    F1 = np.stack([dkf.closed_loop_matrices(A, BK, Lg)[0] for Lg in Lb])  # eq. (11), one per graph
     noise = np.broadcast_to(Q, (Lb.shape[0], N, m, m)).copy()
     if mode == "measurement":
         Rr = team_noise_covariance(R, N, m).reshape(N, m, N, m)

@@ -48,3 +48,13 @@ def test_progress_bar_is_silent_in_a_notebook_kernel_without_ipywidgets():
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().endswith("[1, 2]")
     assert "IProgress" not in out.stderr and "Warning" not in out.stderr, out.stderr
+
+
+def test_median_time_calls_once_to_warm_up_then_repeat_times_number():
+    from mascore._timing import median_time
+
+    calls = []
+    assert median_time(lambda: calls.append(1), repeat=3, number=2) >= 0.0
+    assert len(calls) == 1 + 3 * 2
+    with pytest.raises(ValueError, match="repeat"):
+        median_time(lambda: None, repeat=0)

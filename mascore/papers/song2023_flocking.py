@@ -51,6 +51,7 @@ from ..flocking import (
 )
 from ..graphs import is_connected, proximity_graph
 from .._progress import progress_bar
+from .._timing import median_time
 from ..ledger import Claim
 from ..plotting import agent_colors, plot_graph, save_figure
 from ..sensing import measure
@@ -498,8 +499,6 @@ def ekf_step_seconds(n_agents: int = N_AGENTS, sensing_range: float = SENSING_RA
     after one warm-up call; median of `repeat` calls. This machine, reported
     only (never asserted).
     """
-    import time
-
     rng = np.random.default_rng([seed, 7])
     X = initial_states(rng, 1, n_agents)[0]
     X_hat, Sigma0 = initial_estimates(rng, X)
@@ -507,13 +506,7 @@ def ekf_step_seconds(n_agents: int = N_AGENTS, sensing_range: float = SENSING_RA
     z, observed = measure(rng, X, proximity_graph(X[:, :N_DIM], sensing_range), R_FIG5, allow_isolated=True)
     args = (X_hat, Sigma, z, observed, np.kron(np.eye(n_agents), R_FIG5), DT, GAINS,
             np.kron(np.eye(n_agents), Q_AGENT))
-    ekf_flocking_step(*args)
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        ekf_flocking_step(*args)
-        times.append(time.perf_counter() - start)
-    return float(np.median(times))
+    return median_time(lambda: ekf_flocking_step(*args), repeat=repeat)
 
 
 def beyond_study(seed: int, sensing_ranges=(130.0, 150.0, 200.0, 250.0), sizes=(4, 8, 12, 16, 20, 32),
