@@ -7,16 +7,20 @@ one of ``shared/REPRODUCTION.md``.
 Verdict rules
 -------------
 Quantitative claims (``paper_value`` is a number or a list of numbers) carry a
-tolerance ``{"abs": a}`` or ``{"rel": r}``. With ``d`` the largest deviation
-over the entries:
+tolerance ``{"abs": t}`` or ``{"rel": t}`` and a band for "approximately",
+``{"abs": t, "approx_abs": a}`` or ``{"rel": t, "approx_rel": a}``; the band
+defaults to ``APPROX_FACTOR * t`` = 3t and may be wider only with a stated
+``band_reason``. With ``d`` the largest deviation over the entries:
 
-* ``reproduces`` if ``d <= tol``;
-* ``approximately`` if ``d <= APPROX_FACTOR * tol``;
+* ``reproduces`` if ``d <= t``;
+* ``approximately`` if ``t < d <= a``;
 * ``does-not-reproduce`` otherwise.
 
 Qualitative claims (``paper_value`` is ``None``) are built with
 :meth:`Claim.qualitative` from a boolean condition evaluated on measured
-numbers; their verdict is ``holds`` or ``fails``.
+numbers (the ``rule``); their verdict is ``holds`` or ``fails``.
+
+Every number the book prints in a ledger goes through :func:`format_number`.
 """
 
 from __future__ import annotations
@@ -37,20 +41,24 @@ __all__ = [
     "Claim",
     "ClaimsView",
     "claims_table",
+    "format_number",
     "format_value",
     "load_claims",
     "show_claims",
     "write_claims",
 ]
 
-#: A deviation within this many tolerances is "approximately".
-APPROX_FACTOR = 10.0
+#: The default band of "approximately": this many tolerances.
+APPROX_FACTOR = 3.0
 
 #: Allowed verdicts.
 VERDICTS = ("reproduces", "approximately", "does-not-reproduce", "holds", "fails")
 
 #: Paper keys, in book order.
 PAPERS = ("song2023", "ren2005", "bhattacharjee2021", "vlahakis")
+
+_RECORD_KEYS = ("id", "where", "statement", "paper_value", "value", "tolerance", "verdict", "note")
+_OPTIONAL_KEYS = ("unit", "labels", "rule", "band_reason", "study")
 
 
 @dataclass(frozen=True)
@@ -68,14 +76,37 @@ class Claim:
         Where the paper states it (``"Table 1, row 2"``, ``"Fig. 5"``).
     statement : str
         One sentence in our words.
-    paper_value : float or list of float
-        The published value(s).
-    value : float or list of float
-        Our value(s), same shape as `paper_value`.
-    tolerance : dict
-        ``{"abs": a}`` or ``{"rel": r}``.
+    paper_value : float or list of float, or None
+        The published value(s); ``None`` for a qualitative claim.
+    value : float, list of float or dict
+        Our value(s), same shape as `paper_value`; for a qualitative claim the
+        measured quantities that decide it (a dict labels them).
+    tolerance : dict or None
+        ``{"abs": t}`` or ``{"rel": t}``, optionally with the band of
+        "approximately" (``"approx_abs"`` / ``"approx_rel"``, default 3t).
     note : str
         Why it differs, what reading we chose, what setting the paper left out.
+        Paragraphs are separated by a blank line; a paragraph shared word for
+        word by several claims is shown once by :func:`show_claims`.
+    unit : str
+        Unit of the values (``"m"``, ``"s"``), ``""`` if dimensionless.
+    labels : sequence of str, optional
+        One label per entry of a list-valued claim (``["row 1", "row 2"]``).
+    rule : str
+        The condition that decides a qualitative claim, in words or symbols.
+    band_reason : str
+        Required when the band of "approximately" is wider than 3t: why.
+    study : str
+        The study (book chapter) that computed the claim; set by the writer.
+    holds : bool, optional
+        The decided condition of a qualitative claim (use :meth:`qualitative`).
+
+    Examples
+    --------
+    >>> Claim("ren2005/x", "Fig. 1", "A number.", 1.0, 1.04, {"rel": 0.05}).verdict
+    'reproduces'
+    >>> Claim("ren2005/x", "Fig. 1", "A number.", 1.0, 1.1, {"rel": 0.05}).verdict
+    'approximately'
     """
 
     id: str
@@ -85,6 +116,12 @@ class Claim:
     value: Any
     tolerance: dict | None
     note: str = ""
+    unit: str = ""
+    labels: tuple[str, ...] | None = None
+    rule: str = ""
+    band_reason: str = ""
+    study: str = ""
+    holds: bool | None = None
     verdict: str = field(default="", init=False)
 
     def __post_init__(self) -> None:
@@ -92,15 +129,21 @@ class Claim:
             raise ValueError(f"claim id must look like 'PAPER/short-name' with PAPER in {PAPERS}; got {self.id!r}")
         object.__setattr__(self, "value", _jsonable(self.value))
         object.__setattr__(self, "paper_value", _jsonable(self.paper_value))
+        if self.labels is not None:
+            object.__setattr__(self, "labels", tuple(str(x) for x in self.labels))
         if self.paper_value is None:
-            if self.verdict not in ("holds", "fails"):
+            if self.holds is None or self.tolerance is not None:
                 raise ValueError(f"{self.id}: qualitative claims must be built with Claim.qualitative")
+            object.__setattr__(self, "holds", bool(self.holds))
+            object.__setattr__(self, "verdict", "holds" if self.holds else "fails")
             return
+        object.__setattr__(self, "tolerance", _normalized_tolerance(self))
         object.__setattr__(self, "verdict", _quantitative_verdict(self))
 
     @classmethod
     def qualitative(
-        cls, id: str, where: str, statement: str, value: Any, holds: bool | np.bool_, note: str = ""
+        cls, id: str, where: str, statement: str, value: Any, holds: bool | np.bool_, note: str = "",
+        *, rule: str = "", unit: str = "",
     ) -> "Claim":
         """A claim without a published number, decided by a measured condition.
 
@@ -110,21 +153,33 @@ class Claim:
             The measured quantity (or quantities) that decides the claim.
         holds : bool
             The condition evaluated on `value` by the caller's code.
+        rule : str
+            The condition in words or symbols (``"max_ratio <= 1"``).
         """
-        claim = object.__new__(cls)
-        for name, val in dict(
-            id=id, where=where, statement=statement, paper_value=None, value=value,
-            tolerance=None, note=note, verdict="holds" if bool(holds) else "fails",
-        ).items():
-            object.__setattr__(claim, name, val)
-        claim.__post_init__()
-        return claim
+        return cls(id, where, statement, None, value, None, note, unit=unit, rule=rule, holds=bool(holds))
+
+    @property
+    def deviation(self) -> float | None:
+        """Largest deviation from the paper (relative or absolute, as the tolerance), or None."""
+        if self.paper_value is None:
+            return None
+        kind = "rel" if "rel" in self.tolerance else "abs"
+        return _worst_deviation(self.paper_value, self.value, kind)
 
     def to_dict(self) -> dict:
-        """The JSON record of REPRODUCTION.md."""
-        keys = ("id", "where", "statement", "paper_value", "value", "tolerance", "verdict", "note")
+        """The JSON record of REPRODUCTION.md (optional keys only when set)."""
         record = asdict(self)
-        return {k: record[k] for k in keys}
+        out = {k: record[k] for k in _RECORD_KEYS}
+        out |= {k: (list(record[k]) if k == "labels" else record[k]) for k in _OPTIONAL_KEYS if record[k]}
+        return out
+
+    @classmethod
+    def from_dict(cls, record: dict) -> "Claim":
+        """Rebuild a claim from its JSON record, recomputing the verdict."""
+        keys = {k: record[k] for k in (*_RECORD_KEYS, *_OPTIONAL_KEYS) if k in record and k != "verdict"}
+        if keys.get("paper_value") is None:
+            keys["holds"] = record["verdict"] == "holds"
+        return cls(**keys)
 
 
 def write_claims(
@@ -176,31 +231,86 @@ def claims_table(records: Sequence[dict]):
     return pd.DataFrame([{k: r.get(k) for k in columns} for r in records], columns=columns)
 
 
-def format_value(value: Any, digits: int = 4, max_items: int = 4) -> str:
-    """A short human-readable form of a claim value: numbers to `digits` significant digits,
-    lists and dicts cut after `max_items` entries (marked with an ellipsis), ``None`` as a dash."""
+_SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079")
+
+
+def format_number(x: float, digits: int = 4) -> str:
+    """One number as the book prints it: `digits` significant digits, no ``e`` notation.
+
+    Numbers from 1e-3 to below 1e6 are written out (``0.07681``, ``2.462``, ``136.4``,
+    ``12,346``); smaller and larger ones as ``2.776 × 10⁻¹⁷``. Integers are written
+    exactly. Trailing zeros are dropped.
+
+    Examples
+    --------
+    >>> format_number(0.076812345), format_number(2.7755575615628914e-17), format_number(5.0)
+    ('0.07681', '2.776 × 10⁻¹⁷', '5')
+    """
+    if isinstance(x, bool | np.bool_):
+        return str(bool(x))
+    if isinstance(x, int | np.integer):
+        return f"{int(x):,}" if abs(int(x)) >= 10_000 else str(int(x))
+    x = float(x)
+    if not math.isfinite(x):
+        return str(x)
+    if x == 0.0:
+        return "0"
+    exponent = math.floor(math.log10(abs(x)))
+    if -3 <= exponent < 6:
+        decimals = max(digits - 1 - exponent, 0)
+        text = f"{x:,.{decimals}f}"
+        if "." in text:
+            text = text.rstrip("0").rstrip(".")
+        return "0" if text in ("-0", "") else text
+    mantissa = f"{x / 10.0**exponent:.{digits - 1}f}".rstrip("0").rstrip(".")
+    if mantissa in ("10", "-10"):  # rounding carried into the next decade
+        mantissa, exponent = mantissa[:-1], exponent + 1
+    return f"{mantissa} \u00d7 10{str(exponent).translate(_SUPERSCRIPT)}"
+
+
+def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = "",
+                 labels: Sequence[str] | None = None) -> str:
+    """A short human-readable form of a claim value.
+
+    Numbers through :func:`format_number` (with `unit` appended), lists labelled by
+    `labels` when given and cut after `max_items` entries (marked with an ellipsis),
+    dicts as ``label = value`` pairs (underscores in labels read as spaces), ``None``
+    as a dash.
+    """
+    suffix = f"\u00a0{unit}" if unit else ""
     if value is None:
         return "\u2014"
     if isinstance(value, bool | np.bool_):
         return str(bool(value))
     if isinstance(value, int | float | np.integer | np.floating):
-        return f"{float(value):.{digits}g}" if isinstance(value, float | np.floating) else str(value)
+        return format_number(value, digits) + suffix
+    if isinstance(value, str):
+        return value
     if isinstance(value, dict):
         def item(v: Any) -> str:
             text = format_value(v, digits, max_items)
-            return "{" + text + "}" if isinstance(v, dict) else text
+            return "(" + text + ")" if isinstance(v, dict) else text
 
-        items = [f"{k}: {item(v)}" for k, v in list(value.items())[:max_items]]
-        return "; ".join(items) + ("; \u2026" if len(value) > max_items else "")
+        items = [f"{_label(k)} = {item(v)}" for k, v in list(value.items())[:max_items + 2]]
+        more = len(value) > max_items + 2
+        return "; ".join(items) + ("; \u2026" if more else "") + (f" ({unit})" if unit else "")
     if isinstance(value, list | tuple | np.ndarray):
-        items = [format_value(v, digits, max_items) for v in list(value)[:max_items]]
-        return "[" + ", ".join(items) + (", \u2026" if len(value) > max_items else "") + "]"
+        value = list(value)
+        if labels is not None and len(labels) == len(value):
+            pairs = [f"{lab}: {format_value(v, digits, max_items)}" for lab, v in zip(labels, value)]
+            return "; ".join(pairs) + (f" ({unit})" if unit else "")
+        items = [format_value(v, digits, max_items) for v in value[:max_items]]
+        return "[" + ", ".join(items) + (", \u2026" if len(value) > max_items else "") + "]" + suffix
     return str(value)
+
+
+def _label(key: Any) -> str:
+    return str(key).replace("_", " ")
 
 
 @dataclass(frozen=True)
 class ClaimsView:
-    """Claims laid out for reading in a notebook: a compact table, then each claim's note.
+    """Claims laid out for reading: a numbered table, then the notes (shared paragraphs once).
 
     Jupyter shows it as Markdown (``_repr_markdown_``); ``str()`` gives the same text.
     """
@@ -208,22 +318,51 @@ class ClaimsView:
     records: tuple[dict, ...]
 
     def _repr_markdown_(self) -> str:
-        def cell(text: str) -> str:
-            return text.replace("|", "\\|").replace("\n", " ")
-
-        def name(r: dict) -> str:  # the paper is named once, above the table
-            return r["id"].split("/", 1)[-1]
-
-        lines = ["| verdict | claim | where | paper | ours |", "|---|---|---|---|---|"]
-        for r in self.records:
+        lines = ["| # | claim (where the paper says it) | paper | ours | verdict |", "|---|---|---|---|---|"]
+        for n, r in enumerate(self.records, 1):
+            unit, labels = r.get("unit", ""), r.get("labels")
+            claim = f"{_cell(r.get('statement', ''))} *({_cell(r.get('where', ''))})*"
             lines.append(
-                f"| **{r['verdict']}** | {name(r)} | {cell(str(r.get('where', '')))} "
-                f"| {cell(format_value(r.get('paper_value')))} | {cell(format_value(r.get('value'), max_items=3))} |"
+                f"| {n} | {claim} | {_cell(format_value(r.get('paper_value'), unit=unit, labels=labels))} "
+                f"| {_cell(format_value(r.get('value'), unit=unit, labels=labels))} | {_cell(_verdict_text(r))} |"
             )
-        notes = [f"- `{name(r)}`: {r['note']}" for r in self.records if r.get("note")]
-        return "\n".join(lines + (["", "Notes:", "", *notes] if notes else []))
+        return "\n".join(lines + _notes_markdown(self.records))
 
     __str__ = _repr_markdown_
+
+
+def _verdict_text(record: dict) -> str:
+    verdict = f"**{record['verdict']}**"
+    tol = record.get("tolerance")
+    if not tol:
+        return verdict + (f"<br>rule: {record['rule']}" if record.get("rule") else "")
+    kind = "rel" if "rel" in tol else "abs"
+    fmt = (lambda v: format_number(100 * v, 3) + " %") if kind == "rel" else format_number
+    dev = _worst_deviation(record["paper_value"], record["value"], kind)
+    return (f"{verdict}<br>off by {fmt(dev)}; reproduces within {fmt(tol[kind])}, "
+            f"approximately within {fmt(tol[f'approx_{kind}'])}")
+
+
+def _notes_markdown(records: Sequence[dict]) -> list[str]:
+    """Notes by claim number; a paragraph shared by several claims is printed once."""
+    owners: dict[str, list[int]] = {}
+    for n, r in enumerate(records, 1):
+        paragraphs = [p.strip() for p in (r.get("note") or "").split("\n\n") if p.strip()]
+        if r.get("band_reason"):
+            paragraphs.append(f"Band of 'approximately' wider than 3 tolerances: {r['band_reason']}")
+        for p in paragraphs:
+            owners.setdefault(p, []).append(n)
+    if not owners:
+        return []
+    lines = ["", "**Notes**", ""]
+    for paragraph, claims in owners.items():
+        who = f"Claim {claims[0]}" if len(claims) == 1 else "Claims " + ", ".join(map(str, claims))
+        lines.append(f"- *{who}.* {' '.join(paragraph.split())}")
+    return lines
+
+
+def _cell(text: str) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
 
 
 def show_claims(claims: Iterable[Claim | dict]) -> ClaimsView:
@@ -231,24 +370,46 @@ def show_claims(claims: Iterable[Claim | dict]) -> ClaimsView:
     return ClaimsView(tuple(c.to_dict() if isinstance(c, Claim) else dict(c) for c in claims))
 
 
-def _quantitative_verdict(claim: Claim) -> str:
+def _normalized_tolerance(claim: Claim) -> dict:
     tol = claim.tolerance
-    if not isinstance(tol, dict) or len(tol) != 1 or next(iter(tol)) not in ("abs", "rel"):
-        raise ValueError(f"{claim.id}: tolerance must be {{'abs': a}} or {{'rel': r}}; got {tol!r}")
-    kind, size = next(iter(tol.items()))
+    kinds = [k for k in ("abs", "rel") if isinstance(tol, dict) and k in tol]
+    if len(kinds) != 1 or set(tol) - {kinds[0], f"approx_{kinds[0]}"}:
+        raise ValueError(f"{claim.id}: tolerance must be {{'abs': t}} or {{'rel': t}}, optionally with "
+                         f"'approx_abs' / 'approx_rel'; got {tol!r}")
+    kind = kinds[0]
+    t = float(tol[kind])
+    a = float(tol.get(f"approx_{kind}", round(APPROX_FACTOR * t, 12)))
+    if not (t >= 0 and a >= t):
+        raise ValueError(f"{claim.id}: tolerance needs 0 <= {kind} <= approx_{kind}; got {tol!r}")
+    if a > APPROX_FACTOR * t * (1 + 1e-12) and not claim.band_reason:
+        raise ValueError(f"{claim.id}: a band of 'approximately' wider than {APPROX_FACTOR:g} tolerances "
+                         f"({a:g} > {APPROX_FACTOR:g} x {t:g}) needs a band_reason")
+    return {kind: t, f"approx_{kind}": a}
+
+
+def _worst_deviation(paper_value: Any, value: Any, kind: str) -> float:
+    paper = np.atleast_1d(np.asarray(paper_value, dtype=float))
+    ours = np.atleast_1d(np.asarray(value, dtype=float))
+    dev = np.abs(ours - paper)
+    if kind == "rel":
+        dev = dev / np.maximum(np.abs(paper), np.finfo(float).tiny)
+    return float(dev.max())
+
+
+def _quantitative_verdict(claim: Claim) -> str:
+    kind = "rel" if "rel" in claim.tolerance else "abs"
     paper = np.atleast_1d(np.asarray(claim.paper_value, dtype=float))
     ours = np.atleast_1d(np.asarray(claim.value, dtype=float))
     if paper.shape != ours.shape:
         raise ValueError(f"{claim.id}: value shape {ours.shape} differs from paper_value shape {paper.shape}")
+    if claim.labels is not None and len(claim.labels) != paper.size:
+        raise ValueError(f"{claim.id}: {len(claim.labels)} labels for {paper.size} values")
     if not np.all(np.isfinite(ours)):
         return "does-not-reproduce"
-    dev = np.abs(ours - paper)
-    if kind == "rel":
-        dev = dev / np.maximum(np.abs(paper), np.finfo(float).tiny)
-    worst = float(dev.max())
-    if worst <= size:
+    worst = _worst_deviation(paper, ours, kind)
+    if worst <= claim.tolerance[kind]:
         return "reproduces"
-    if worst <= APPROX_FACTOR * size:
+    if worst <= claim.tolerance[f"approx_{kind}"]:
         return "approximately"
     return "does-not-reproduce"
 

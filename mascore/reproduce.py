@@ -1,11 +1,10 @@
 """``python -m mascore reproduce PAPER|all``: rebuild a paper's figures, tables and ledger.
 
-Each paper module ``mascore.papers.<PAPER>`` exposes::
-
-    def reproduce(out_dir: pathlib.Path, seed: int) -> list[Claim]
-
-which writes ``out_dir/figures/*.png`` and ``out_dir/tables/*.csv`` and returns
-the paper's claims; this module writes ``out_dir/claims.json``.
+Each paper module ``mascore.papers.<PAPER>`` declares its registry ``REGISTRY``
+(:class:`mascore.registry.PaperRegistry`); for every study this module calls
+``study.run(study.settings, seed)`` and writes, through one generic writer
+(:func:`mascore.registry.write_study`), ``out_dir/figures/*.png``,
+``out_dir/tables/*.csv`` and ``out_dir/claims.json``.
 """
 
 from __future__ import annotations
@@ -20,6 +19,7 @@ from pathlib import Path
 
 from ._progress import progress_bar
 from .ledger import PAPERS, Claim, write_claims
+from .registry import write_study
 
 __all__ = ["DEFAULT_SEED", "available_papers", "main", "reproduce_paper", "results_dir"]
 
@@ -74,7 +74,13 @@ def reproduce_paper(
     out_dir = Path(out) / paper
     (out_dir / "figures").mkdir(parents=True, exist_ok=True)
     (out_dir / "tables").mkdir(parents=True, exist_ok=True)
-    claims = module.reproduce(out_dir, seed)
+    if hasattr(module, "REGISTRY"):
+        claims = []
+        for study in module.REGISTRY.studies:
+            result = study.run(study.settings, seed, progress=True)
+            claims += write_study(module.REGISTRY, study, result, out_dir)
+    else:  # transitional: modules not yet on the registry
+        claims = module.reproduce(out_dir, seed)
     write_claims(
         claims, out_dir / "claims.json", paper, seed,
         created_by or f"python -m mascore reproduce {paper} --out {out} --seed {seed}",

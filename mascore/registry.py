@@ -1,0 +1,284 @@
+"""One registry per paper: its settings, runs, figures, tables and claims.
+
+The layer between the algorithms (the concept modules) and the outputs a
+reader sees (``python -m mascore reproduce``, the book's chapters, the tests).
+Each paper module ``mascore.papers.<KEY>`` declares once, as ``REGISTRY``, a
+:class:`PaperRegistry` made of one or more :class:`Study` objects (one per
+chapter of the book). A study holds
+
+* ``settings``: a frozen dataclass with every parameter of the run, the ones
+  the paper gives and the ones it leaves out (declare the fields with
+  :func:`setting`, so that :func:`show_settings` can say which is which);
+* ``run(settings, seed, progress=False) -> result``: everything random or
+  expensive, computed once;
+* ``figures`` and ``tables``: :class:`FigureSpec` / :class:`TableSpec`, each
+  drawn or built from the result alone, with the paper's number and a caption;
+* ``claims(result) -> list[Claim]``: the ledger entries, from the result alone.
+
+``reproduce`` writes every figure, table and claim of every study through one
+generic writer (:func:`write_study`); a notebook calls the same ``run`` with
+the same seed and draws the same figures, so the chapter shows exactly the
+published ledger.
+
+Examples
+--------
+>>> from mascore.registry import paper_registry
+>>> reg = paper_registry("ren2005")          # doctest: +SKIP
+>>> study = reg.studies[0]                    # doctest: +SKIP
+>>> result = study.run(study.settings, seed=1)  # doctest: +SKIP
+>>> fig = study.draw("fig1", result)          # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from .ledger import PAPERS, Claim, format_value
+
+if TYPE_CHECKING:  # pragma: no cover
+    import matplotlib.figure
+    import pandas as pd
+
+__all__ = [
+    "FigureSpec",
+    "PaperRegistry",
+    "SettingsView",
+    "Study",
+    "TableSpec",
+    "all_figures",
+    "paper_registry",
+    "setting",
+    "show_settings",
+    "write_study",
+]
+
+
+@dataclass(frozen=True)
+class FigureSpec:
+    """A figure of a study: which paper figure it rebuilds, its caption and how to draw it.
+
+    Parameters
+    ----------
+    name : str
+        File stem in ``results/PAPER/figures/`` (``"fig2"``); unique within the paper.
+    number : str
+        The paper's figure it rebuilds (``"Fig. 2"``), or ``""`` for a figure beyond the paper.
+    caption : str
+        What the figure shows and what to look for (MyST Markdown: ``$math$`` allowed).
+    draw : callable
+        ``draw(result) -> matplotlib.figure.Figure``.
+    """
+
+    name: str
+    number: str
+    caption: str
+    draw: Callable[[Any], "matplotlib.figure.Figure"]
+
+
+@dataclass(frozen=True)
+class TableSpec:
+    """A table of a study (written to ``results/PAPER/tables/NAME.csv``).
+
+    ``build(result) -> pandas.DataFrame``; `number` is the paper's table (``"Table 1"``) or ``""``.
+    """
+
+    name: str
+    number: str
+    caption: str
+    build: Callable[[Any], "pd.DataFrame"]
+
+
+@dataclass(frozen=True)
+class Study:
+    """One chapter's worth of a paper: settings, one run, and what is computed from it.
+
+    Parameters
+    ----------
+    name : str
+        Short name (``"rendezvous"``); also the anchor of the chapter's ledger
+        section, ``{paper}-{name}-ledger``.
+    chapter : str
+        Notebook stem of the chapter (``"song2023_rendezvous"``).
+    settings : frozen dataclass
+        The default (paper-faithful) settings.
+    run : callable
+        ``run(settings, seed, progress=False) -> result``.
+    figures, tables : sequences of FigureSpec, TableSpec
+    claims : callable
+        ``claims(result) -> list[Claim]``.
+    """
+
+    name: str
+    chapter: str
+    settings: Any
+    run: Callable[..., Any]
+    figures: tuple[FigureSpec, ...] = ()
+    tables: tuple[TableSpec, ...] = ()
+    claims: Callable[[Any], list[Claim]] = lambda result: []
+
+    def figure(self, name: str) -> FigureSpec:
+        """The figure spec called `name` (``ValueError`` naming the choices otherwise)."""
+        for spec in self.figures:
+            if spec.name == name:
+                return spec
+        raise ValueError(f"figure must be one of {[f.name for f in self.figures]}; got {name!r}")
+
+    def table(self, name: str) -> TableSpec:
+        """The table spec called `name` (``ValueError`` naming the choices otherwise)."""
+        for spec in self.tables:
+            if spec.name == name:
+                return spec
+        raise ValueError(f"table must be one of {[t.name for t in self.tables]}; got {name!r}")
+
+    def draw(self, name: str, result: Any) -> "matplotlib.figure.Figure":
+        """Draw figure `name` from `result` (in the book's style)."""
+        from .plotting import use_style
+
+        use_style()
+        return self.figure(name).draw(result)
+
+    def build(self, name: str, result: Any) -> "pd.DataFrame":
+        """Build table `name` from `result`."""
+        return self.table(name).build(result)
+
+
+@dataclass(frozen=True)
+class PaperRegistry:
+    """Everything the companion reproduces of one paper.
+
+    Parameters
+    ----------
+    key : str
+        One of :data:`mascore.ledger.PAPERS`.
+    citation : str
+        Short author-year form used in captions (``"Song et al. 2023"``).
+    studies : sequence of Study
+    errata : sequence of str
+        Errata and readings we found, one Markdown sentence or two each (the report lists them).
+    """
+
+    key: str
+    citation: str
+    studies: tuple[Study, ...]
+    errata: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.key not in PAPERS:
+            raise ValueError(f"key must be one of {PAPERS}; got {self.key!r}")
+        names = [f.name for s in self.studies for f in (*s.figures, *s.tables)]
+        if len(set(names)) != len(names):
+            raise ValueError(f"{self.key}: figure and table names must be unique; got {names}")
+
+    def study(self, name: str) -> Study:
+        """The study called `name`."""
+        for s in self.studies:
+            if s.name == name:
+                return s
+        raise ValueError(f"study must be one of {[s.name for s in self.studies]}; got {name!r}")
+
+    def figure_label(self, name: str) -> str:
+        """Cross-reference label of figure `name` in the book: ``fig-{key}-{name}``."""
+        return f"fig-{self.key}-{name}"
+
+    def full_caption(self, spec: FigureSpec | TableSpec) -> str:
+        """The caption as the book prints it: the paper's number first, then the spec's caption."""
+        source = f"{self.citation}, {spec.number} (rebuilt). " if spec.number else "Beyond the paper. "
+        return source + spec.caption
+
+
+def paper_registry(key: str) -> PaperRegistry:
+    """The :class:`PaperRegistry` declared as ``REGISTRY`` in ``mascore.papers.<key>``."""
+    if key not in PAPERS:
+        raise ValueError(f"paper must be one of {', '.join(PAPERS)}; got {key!r}")
+    return importlib.import_module(f"mascore.papers.{key}").REGISTRY
+
+
+def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | Path) -> list[Claim]:
+    """Write a study's figures (PNG) and tables (CSV) into `out_dir`; return its claims.
+
+    Each claim is tagged with the study's name (``Claim.study``), so the report can
+    link it to its chapter.
+    """
+    import matplotlib.pyplot as plt
+
+    from .plotting import save_figure
+
+    out_dir = Path(out_dir)
+    for spec in study.figures:
+        save_figure(study.draw(spec.name, result), out_dir / "figures" / f"{spec.name}.png")
+        plt.close("all")
+    for spec in study.tables:
+        (out_dir / "tables").mkdir(parents=True, exist_ok=True)
+        spec.build(result).to_csv(out_dir / "tables" / f"{spec.name}.csv", index=False, float_format="%.6g")
+    return [dataclasses.replace(c, study=study.name) for c in study.claims(result)]
+
+
+# ---------------------------------------------------------------- settings
+
+
+def setting(default: Any, *, source: str = "paper", where: str = "", unit: str = "", note: str = "") -> Any:
+    """A settings-dataclass field that documents itself.
+
+    Parameters
+    ----------
+    default : the value (use a tuple, not a list or array, to keep the dataclass frozen and hashable)
+    source : {"paper", "chosen", "derived"}
+        Given by the paper, chosen by us because the paper leaves it out, or derived from others.
+    where : str
+        Where the paper gives it (``"Table I"``) or why we chose it.
+    unit : str
+        Physical unit, ``""`` if dimensionless.
+    note : str
+        One short phrase on what it is.
+    """
+    if source not in ("paper", "chosen", "derived"):
+        raise ValueError(f"source must be 'paper', 'chosen' or 'derived'; got {source!r}")
+    return field(default=default, metadata={"source": source, "where": where, "unit": unit, "note": note})
+
+
+@dataclass(frozen=True)
+class SettingsView:
+    """A settings dataclass laid out as a Markdown table (Jupyter shows it as such)."""
+
+    settings: Any
+
+    def _repr_markdown_(self) -> str:
+        rows = ["| setting | value | from | note |", "|---|---|---|---|"]
+        for f in dataclasses.fields(self.settings):
+            meta = f.metadata
+            value = format_value(getattr(self.settings, f.name), max_items=6)
+            if meta.get("unit"):
+                value += f" {meta['unit']}"
+            origin = {"paper": "paper", "chosen": "**our choice**", "derived": "derived"}.get(meta.get("source"), "")
+            if meta.get("where"):
+                origin += f" ({meta['where']})"
+            rows.append(f"| `{f.name}` | {_cell(value)} | {_cell(origin)} | {_cell(meta.get('note', ''))} |")
+        return "\n".join(rows)
+
+    __str__ = _repr_markdown_
+
+
+def show_settings(settings: Any) -> SettingsView:
+    """Display a settings dataclass as a table: value with unit, whether the paper gives it, a note."""
+    if not dataclasses.is_dataclass(settings):
+        raise TypeError(f"settings must be a dataclass instance; got {type(settings).__name__}")
+    return SettingsView(settings)
+
+
+def _cell(text: str) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def all_figures(papers: Sequence[str] = PAPERS) -> list[tuple[PaperRegistry, Study, FigureSpec]]:
+    """Every registered figure as ``(paper, study, spec)``, in book order."""
+    out = []
+    for key in papers:
+        reg = paper_registry(key)
+        out += [(reg, s, f) for s in reg.studies for f in s.figures]
+    return out
+
