@@ -12,12 +12,14 @@ PIP_VERSION := 26.3
 export OMP_NUM_THREADS := 1
 export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
-export MPLBACKEND := Agg
+# No MPLBACKEND here: the book's kernels (and `make lab`) need ipykernel's inline backend to
+# show figures. A headless backend is set only where nothing is shown: reproduce and pytest.
+HEADLESS := MPLBACKEND=Agg
 export PYDEVD_DISABLE_FILE_VALIDATION := 1
 
 JOBS ?= 2
 
-.PHONY: help install book test reproduce lab bench lock clean
+.PHONY: help install book test reproduce lab bench captions lock clean
 
 help:  ## list the targets
 	@grep -E '^[a-z]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/'
@@ -32,11 +34,11 @@ $(STAMP): requirements.lock pyproject.toml
 	@touch $(STAMP)
 
 book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book into book/_build/html
-	$(BIN)/jupyter-book build book --all -W -n --keep-going
+	env -u MPLBACKEND $(BIN)/jupyter-book build book --all -W -n --keep-going
 	@echo "Open book/_build/html/index.html"
 
-test: $(STAMP) $(RESULTS)  ## unit tests, published-number tests and every notebook (nbmake), on $(JOBS) workers
-	$(BIN)/python -m pytest -n $(JOBS) --nbmake tests notebooks
+test: $(STAMP) $(RESULTS) book  ## build the book, then unit tests, published numbers, the rendered HTML and every notebook (nbmake)
+	$(HEADLESS) $(BIN)/python -m pytest -n $(JOBS) --nbmake tests notebooks
 
 reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json into results/
 	@rm -f $(RESULTS)
@@ -44,14 +46,17 @@ reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json in
 
 # book and test reuse results/ while no source file of the package has changed since.
 $(RESULTS): $(STAMP) $(wildcard mascore/*.py mascore/papers/*.py)
-	$(BIN)/python -m mascore reproduce all --out results
+	$(HEADLESS) $(BIN)/python -m mascore reproduce all --out results
 	@touch $(RESULTS)
 
 lab: $(STAMP)  ## JupyterLab on notebooks/ with the project's environment
-	$(BIN)/jupyter lab notebooks
+	env -u MPLBACKEND $(BIN)/jupyter lab notebooks
 
 bench: $(STAMP)  ## timing benchmarks (printed, and written to results/benchmarks/)
-	$(BIN)/python -m benchmarks
+	$(HEADLESS) $(BIN)/python -m benchmarks
+
+captions:  ## write the registry's figure captions into the notebooks' figure cells
+	$(BIN)/python -m mascore._booktools sync
 
 lock:  ## regenerate requirements.lock from pyproject.toml in a scratch venv
 	rm -rf .lock-venv && $(PYTHON) -m venv .lock-venv

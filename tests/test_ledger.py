@@ -12,7 +12,9 @@ RESULTS_FIELDS = {"id", "where", "statement", "paper_value", "value", "tolerance
 
 @pytest.mark.parametrize("value,tol,verdict", [
     (1.004, {"rel": 0.01}, "reproduces"),
-    (1.05, {"rel": 0.01}, "approximately"),
+    (1.025, {"rel": 0.01}, "approximately"),
+    (1.05, {"rel": 0.01}, "does-not-reproduce"),  # 5 tolerances: outside the default 3t band
+    (1.05, {"rel": 0.01, "approx_rel": 0.02}, "does-not-reproduce"),
     (1.5, {"rel": 0.01}, "does-not-reproduce"),
     ([1.0, 2.001], {"abs": 0.01}, "reproduces"),
     ([1.0, 2.5], {"abs": 0.01}, "does-not-reproduce"),
@@ -20,6 +22,25 @@ RESULTS_FIELDS = {"id", "where", "statement", "paper_value", "value", "tolerance
 def test_verdict_is_computed_from_numbers(value, tol, verdict):
     paper = [1.0, 2.0] if isinstance(value, list) else 1.0
     assert Claim("ren2005/x", "Fig. 1", "s", paper, value, tol).verdict == verdict
+
+
+def test_band_is_explicit_and_at_most_three_tolerances_without_a_reason():
+    claim = Claim("ren2005/x", "Fig. 1", "s", 1.0, 1.0, {"rel": 0.05})
+    assert claim.tolerance == {"rel": 0.05, "approx_rel": 0.15}
+    with pytest.raises(ValueError, match="band_reason"):
+        Claim("ren2005/x", "Fig. 1", "s", 1.0, 1.2, {"rel": 0.05, "approx_rel": 0.5})
+    wide = Claim("ren2005/x", "Fig. 1", "s", 1.0, 1.2, {"rel": 0.05, "approx_rel": 0.5}, band_reason="read off a plot")
+    assert wide.verdict == "approximately"
+    with pytest.raises(ValueError, match="approx_rel"):
+        Claim("ren2005/x", "Fig. 1", "s", 1.0, 1.0, {"rel": 0.05, "approx_rel": 0.01})
+
+
+def test_claims_roundtrip_through_json_records():
+    claims = [Claim("ren2005/x", "Table 1", "s", [1.0, 2.0], [1.1, 2.0], {"rel": 0.05}, labels=("a", "b"), unit="m"),
+              Claim.qualitative("ren2005/q", "Thm 3.2", "s", {"max ratio": 0.4}, False, rule="max ratio < 0.1")]
+    for c in claims:
+        again = Claim.from_dict(json.loads(json.dumps(c.to_dict())))
+        assert again == c and again.verdict == c.verdict
 
 
 def test_qualitative_claims():
@@ -63,20 +84,32 @@ def test_cli_rejects_unknown_paper(capsys):
     (3, "3"),
     (2.4615707509952616, "2.462"),
     (True, "True"),
+    (0.076812, "0.07681"),
+    (5.000000e-02, "0.05"),
+    (2.7755575615628914e-17, "2.776 \u00d7 10\u207b\u00b9\u2077"),
+    (12345.6, "12,346"),
     ([1.0, 2.0, 3.0, 4.0, 5.0], "[1, 2, 3, 4, \u2026]"),
-    ({"a": 0.123456, "b": {"c": 1e-12}}, "a: 0.1235; b: {c: 1e-12}"),
+    ({"a_b": 0.123456, "c": {"d": 1e-12}}, "a b = 0.1235; c = (d = 1 \u00d7 10\u207b\u00b9\u00b2)"),
 ])
 def test_format_value_is_short_and_exact_to_four_digits(value, text):
     assert ledger.format_value(value) == text
 
 
-def test_show_claims_lays_out_one_row_and_one_note_per_claim():
-    claims = [Claim("vlahakis/a", "Fig. 1 | left", "s", 2.0, 2.0004, {"abs": 0.1}, note="a note"),
-              Claim.qualitative("vlahakis/b", "w", "s", {"max": 1.0}, False)]
+def test_format_value_labels_and_units():
+    assert ledger.format_value([136.4, 75.48], unit="s", labels=["a", "b"]) == "a: 136.4; b: 75.48 (s)"
+    assert ledger.format_value(0.5, unit="m") == "0.5\u00a0m"
+
+
+def test_show_claims_numbers_claims_states_them_and_prints_a_shared_note_once():
+    shared = "The same long explanation."
+    claims = [Claim("vlahakis/a", "Fig. 1 | left", "First statement.", 2.0, 2.0004, {"abs": 0.1},
+                    note="own a\n\n" + shared),
+              Claim.qualitative("vlahakis/b", "w", "Second statement.", {"max": 1.0}, False, note=shared,
+                                rule="max < 1")]
     text = ledger.show_claims([claims[0], claims[1].to_dict()])._repr_markdown_()
-    rows = [line for line in text.splitlines() if line.startswith("| **")]
+    rows = [line for line in text.splitlines() if line.startswith("| 1 ") or line.startswith("| 2 ")]
     assert len(rows) == 2
     assert rows[0].count(" | ") == 4  # the '|' inside 'where' is escaped, not a new column
-    assert rows[0].startswith("| **reproduces** | a |") and rows[0].endswith("| 2 | 2 |")
-    assert rows[1].startswith("| **fails** | b |")
-    assert "- `a`: a note" in text and "`b`:" not in text
+    assert "First statement." in rows[0] and "**reproduces**" in rows[0] and "within 0.1" in rows[0]
+    assert "**fails**" in rows[1] and "max < 1" in rows[1]
+    assert text.count(shared) == 1 and "Claims 1, 2." in text and "Claim 1.* own a" in text

@@ -46,9 +46,11 @@ def test_ledger_format_and_verdicts(paper):
         assert record["verdict"] in VERDICTS
         assert record["where"] and record["statement"]
         if record["paper_value"] is not None:
-            recomputed = Claim(record["id"], record["where"], record["statement"],
-                               record["paper_value"], record["value"], record["tolerance"])
+            recomputed = Claim.from_dict(record)
             assert recomputed.verdict == record["verdict"], record["id"]
+            kind = "rel" if "rel" in record["tolerance"] else "abs"
+            assert record["tolerance"][f"approx_{kind}"] <= 3 * record["tolerance"][kind] * (1 + 1e-9) \
+                or record.get("band_reason"), f"{record['id']}: band wider than 3t without a reason"
         else:
             assert record["verdict"] in ("holds", "fails") and record["tolerance"] is None
 

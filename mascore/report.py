@@ -1,0 +1,74 @@
+"""The reproduction report: the state of every paper's ledger on one page.
+
+:func:`verdict_summary` counts verdicts per paper; :func:`attention_list` gives one
+line for every claim that is approximate, does not reproduce or fails, linked to
+its chapter's ledger; :func:`errata_list` gives, per paper, the errata and
+readings recorded in its registry. The book's report page shows the three.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from .ledger import PAPERS, VERDICTS
+from .registry import paper_registry
+
+__all__ = ["MarkdownText", "attention_list", "errata_list", "verdict_summary"]
+
+#: Verdicts the report lists one by one (everything else is counted only).
+ATTENTION = ("approximately", "does-not-reproduce", "fails")
+
+
+@dataclass(frozen=True)
+class MarkdownText:
+    """Markdown that Jupyter (and the book) renders; ``str()`` gives the text."""
+
+    text: str
+
+    def _repr_markdown_(self) -> str:
+        return self.text
+
+    def __str__(self) -> str:
+        return self.text
+
+
+def verdict_summary(records: Sequence[dict]):
+    """Claims per paper (rows, book order) and verdict (columns), with totals: a pandas DataFrame."""
+    import pandas as pd
+
+    papers = [p for p in PAPERS if any(r["paper"] == p for r in records)]
+    table = pd.DataFrame(0, index=pd.Index(papers, name="paper"), columns=list(VERDICTS))
+    for r in records:
+        table.loc[r["paper"], r["verdict"]] += 1
+    table = table.loc[:, table.sum() > 0]
+    table["total"] = table.sum(axis=1)
+    table.loc["all papers"] = table.sum()
+    return table
+
+
+def ledger_label(paper: str, study: str) -> str:
+    """The MyST target of a chapter's ledger section: ``{paper}-{study}-ledger``."""
+    return f"{paper}-{study}-ledger"
+
+
+def attention_list(records: Sequence[dict]) -> MarkdownText:
+    """One line per claim that is approximate, does not reproduce or fails, linked to its ledger."""
+    lines = []
+    for verdict in ATTENTION:
+        for r in (r for r in records if r["verdict"] == verdict):
+            study = r.get("study") or paper_registry(r["paper"]).studies[0].name
+            citation = paper_registry(r["paper"]).citation
+            lines.append(f"- **{verdict}**: {citation}, {r['where']}: {r['statement']} "
+                         f"({{ref}}`ledger <{ledger_label(r['paper'], study)}>`)")
+    return MarkdownText("\n".join(lines) if lines else "Every claim reproduces or holds.")
+
+
+def errata_list(papers: Sequence[str] = PAPERS) -> MarkdownText:
+    """Per paper, the errata and readings its registry records (one bullet each)."""
+    blocks = []
+    for key in papers:
+        reg = paper_registry(key)
+        if reg.errata:
+            blocks.append(f"**{reg.citation}** {{cite}}`{key}`\n\n" + "\n".join(f"- {e}" for e in reg.errata))
+    return MarkdownText("\n\n".join(blocks))

@@ -1,0 +1,151 @@
+"""What a reader sees: checks of the rendered book in book/_build/html.
+
+`make test` builds the book first (`make book`), then runs these checks: every
+registered figure of every paper is an image with its numbered caption in its
+chapter, every chapter shows its ledger table, no page shows raw LaTeX, an
+error or stderr block, or loads anything from the network. The last tests show
+that each check fails on a page with a figure removed or a formula broken.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from mascore._booktools import page_problems
+from mascore.registry import all_figures, paper_registry
+from mascore.ledger import PAPERS
+from mascore.report import ledger_label
+
+HTML = Path(__file__).resolve().parents[1] / "book" / "_build" / "html"
+
+
+def _page(chapter: str) -> str:
+    path = HTML / "notebooks" / f"{chapter}.html"
+    if not path.exists():
+        pytest.fail(f"{path} not found: build the book first (`make book`; `make test` does it)")
+    return path.read_text()
+
+
+def _html_id(label: str) -> str:
+    """docutils' id of a label (lowercase; runs of other characters become one hyphen)."""
+    return re.sub(r"[^a-z0-9]+", "-", label.lower()).strip("-")
+
+
+def _figures(html: str) -> dict[str, str]:
+    """``<figure id=...>`` blocks of a page by id."""
+    return {m["id"]: m["body"] for m in
+            re.finditer(r'<figure[^>]*\bid="(?P<id>[^"]+)"[^>]*>(?P<body>.*?)</figure>', html, re.S)}
+
+
+def figure_problems(html: str, label: str, caption_start: str) -> list[str]:
+    """Problems with one registered figure on a page: missing, no image, no numbered caption."""
+    block = _figures(html).get(_html_id(label))
+    if block is None:
+        return [f"figure {label} is not on the page"]
+    problems = []
+    img = re.search(r'<img[^>]*src="(?P<src>[^"]+)"', block)
+    if not img:
+        problems.append(f"figure {label} has no image")
+    elif not img["src"].startswith("data:") and not (HTML / "notebooks" / img["src"]).resolve().exists():
+        problems.append(f"figure {label}: image {img['src']} missing from the build")
+    caption = re.search(r"<figcaption>(.*?)</figcaption>", block, re.S)
+    text = re.sub(r"<[^>]+>", "", caption.group(1)) if caption else ""
+    if not re.search(r"Fig\. \d+", text):
+        problems.append(f"figure {label} has no numbered caption")
+    if " ".join(caption_start.split()) not in " ".join(text.split()):
+        problems.append(f"figure {label}: caption does not start as registered ({caption_start!r})")
+    return problems
+
+
+def _caption_start(reg, spec) -> str:
+    """The registered caption up to its first math or markup (what survives as plain text)."""
+    return re.split(r"[$`*{\[]", reg.full_caption(spec))[0].strip()[:60]
+
+
+FIGURES = all_figures()
+
+
+@pytest.mark.parametrize("reg,study,spec", FIGURES, ids=[f"{r.key}-{s.name}" for r, _, s in FIGURES])
+def test_registered_figure_is_on_its_chapter_page(reg, study, spec):
+    problems = figure_problems(_page(study.chapter), reg.figure_label(spec.name), _caption_start(reg, spec))
+    assert not problems, problems
+
+
+STUDIES = [(paper_registry(p), s) for p in PAPERS for s in paper_registry(p).studies]
+
+
+@pytest.mark.parametrize("reg,study", STUDIES, ids=[f"{r.key}-{s.name}" for r, s in STUDIES])
+def test_chapter_shows_its_ledger_table(reg, study):
+    html = _page(study.chapter)
+    section = re.search(rf'<section id="{_html_id(ledger_label(reg.key, study.name))}">(.*?)(<section|$)', html, re.S)
+    assert section, f"{study.chapter}: no ledger section ({ledger_label(reg.key, study.name)})"
+    assert re.search(r"<table.*?verdict.*?</table>", section.group(1), re.S), f"{study.chapter}: ledger table missing"
+
+
+PAGES = sorted(HTML.rglob("*.html")) if HTML.exists() else []
+
+
+def test_the_book_is_built():
+    names = {p.relative_to(HTML).as_posix() for p in PAGES}
+    needed = {"intro.html", "notation.html", "bibliography.html", "notebooks/reproduction_report.html"}
+    needed |= {f"notebooks/{s.chapter}.html" for _, s in STUDIES}
+    assert needed <= names, f"pages missing from {HTML}: {sorted(needed - names)}"
+
+
+@pytest.mark.parametrize("path", [p for p in PAGES if "_static" not in p.parts and p.name not in ("search.html",)],
+                         ids=lambda p: p.relative_to(HTML).as_posix())
+def test_page_has_no_raw_latex_errors_or_network_loads(path):
+    assert not page_problems(path.read_text()), page_problems(path.read_text())
+
+
+def test_report_is_a_summary():
+    """The report: the crosstab, links to the ledgers of the claims to look at, the errata; no ledger dump."""
+    html = (HTML / "notebooks" / "reproduction_report.html").read_text()
+    assert "Verdicts by paper" in html and "Errata and readings" in html
+    assert html.count("<table") == 1, "the report should hold the crosstab only, not the chapters' ledgers"
+    if "Every claim reproduces or holds" not in html:
+        assert re.search(r'href="[a-z0-9_]+\.html#[a-z0-9-]+-ledger"', html), "no link to a chapter ledger"
+
+
+# ---------------------------------------------------------------- the checks can fail
+
+
+def _sample_page() -> tuple[str, str, str]:
+    reg, study, spec = FIGURES[0]
+    return _page(study.chapter), reg.figure_label(spec.name), _caption_start(reg, spec)
+
+
+def test_figure_check_fails_when_a_figure_is_removed():
+    html, label, start = _sample_page()
+    assert not figure_problems(html, label, start)
+    without_img = re.sub(rf'(<figure[^>]*id="{_html_id(label)}"[^>]*>.*?)<img[^>]*>', r"\1", html, count=1, flags=re.S)
+    assert any("no image" in p for p in figure_problems(without_img, label, start))
+    without_fig = re.sub(rf'<figure[^>]*id="{_html_id(label)}"[^>]*>.*?</figure>', "", html, count=1, flags=re.S)
+    assert any("not on the page" in p for p in figure_problems(without_fig, label, start))
+
+
+def test_latex_check_fails_when_a_formula_breaks():
+    html, _, _ = _sample_page()
+    assert not page_problems(html)
+    broken = html.replace("</h1>", "</h1><p>where $\\Sigma_i^- = F\\Sigma_i F^\\top$ holds</p>", 1)
+    assert any("raw LaTeX" in p for p in page_problems(broken))
+    inside_math = html.replace("</h1>", '</h1><span class="math notranslate nohighlight">\\(\\Sigma_i\\)</span>', 1)
+    assert not page_problems(inside_math)
+
+
+def test_network_and_stderr_checks_fail():
+    html, _, _ = _sample_page()
+    assert any("network" in p for p in page_problems(html + '<script src="https://cdn.example.org/x.js"></script>'))
+    assert any("stderr" in p for p in page_problems(html + '<div class="output stderr"><pre>Warning</pre></div>'))
+
+
+def test_every_image_of_a_chapter_is_a_captioned_figure():
+    """Plots outside the registry get figure metadata by hand: no bare image in a chapter."""
+    for _, study in STUDIES:
+        html = _page(study.chapter)
+        outside = re.sub(r"<figure.*?</figure>", "", html, flags=re.S)
+        bare = re.findall(r'<img[^>]*src="(?!data:image/svg)[^"]*_images/[^"]*"', outside)
+        assert not bare, f"{study.chapter}: {len(bare)} image(s) without a numbered caption"
