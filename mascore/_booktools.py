@@ -74,7 +74,10 @@ def sync_notebook(path: str | Path) -> int:
 # ---------------------------------------------------------------- checks of the rendered HTML
 
 #: LaTeX that must never be visible as text (outside MathJax's math containers).
-RAW_LATEX = re.compile(r"\$[^$\s]|\\(mathbb|mathcal|frac|sum|sigma|Sigma|top|hat|bar|left|right|begin|mathrm|le|ge|in)\b")
+RAW_LATEX = re.compile(
+    r"\$|\\[A-Za-z]+\{|\\(mathbb|mathcal|frac|sum|sigma|Sigma|top|hat|bar|left|right|begin|mathrm|le|ge|in|otimes|"
+    r"alpha|beta|gamma|delta|lambda|mu|nu|xi|Phi|Gamma|Omega|infty|cdot|quad|qquad)\b"
+)
 
 
 def page_problems(html: str) -> list[str]:
