@@ -44,7 +44,9 @@ __all__ = [
     "format_number",
     "format_value",
     "load_claims",
+    "output_hashes",
     "show_claims",
+    "verify_outputs",
     "write_claims",
 ]
 
@@ -183,9 +185,14 @@ class Claim:
 
 
 def write_claims(
-    claims: Sequence[Claim], path: str | Path, paper: str, seed: int, created_by: str
+    claims: Sequence[Claim], path: str | Path, paper: str, seed: int, created_by: str,
+    files: dict[str, str] | None = None,
 ) -> Path:
-    """Write ``claims.json`` for one paper; returns the path written."""
+    """Write ``claims.json`` for one paper; returns the path written.
+
+    `files` maps the paper directory's figures and tables (relative paths) to their
+    SHA-256 (:func:`output_hashes`); :func:`verify_outputs` checks them later.
+    """
     from . import __version__
 
     if paper not in PAPERS:
@@ -200,14 +207,60 @@ def write_claims(
         "seed": int(seed),
         "mascore_version": __version__,
         "created_by": created_by,
+        "files": dict(sorted((files or {}).items())),
         "claims": [c.to_dict() for c in claims],
     }
     path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
     return path
 
 
-def load_claims(results_dir: str | Path, papers: Iterable[str] = PAPERS) -> list[dict]:
+def output_hashes(paper_dir: str | Path) -> dict[str, str]:
+    """SHA-256 of every file under ``paper_dir/figures`` and ``paper_dir/tables``, by relative path."""
+    import hashlib
+
+    paper_dir = Path(paper_dir)
+    return {p.relative_to(paper_dir).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+            for sub in ("figures", "tables") for p in sorted((paper_dir / sub).glob("*")) if p.is_file()}
+
+
+def verify_outputs(paper_dir: str | Path) -> dict:
+    """Read ``paper_dir/claims.json`` and check that the figures and tables beside it are its own.
+
+    Returns
+    -------
+    dict
+        The ledger document.
+
+    Raises
+    ------
+    ValueError
+        A figure or table is missing, extra or changed since the ledger was written
+        (for example a run interrupted by hand or files copied in from another seed).
+    """
+    paper_dir = Path(paper_dir)
+    doc = json.loads((paper_dir / "claims.json").read_text())
+    if "files" not in doc:
+        raise ValueError(f"{paper_dir}/claims.json lists no file hashes (written by an older mascore): "
+                         "rerun `python -m mascore reproduce`")
+    found = output_hashes(paper_dir)
+    if found != doc["files"]:
+        missing = sorted(set(doc["files"]) - set(found))
+        extra = sorted(set(found) - set(doc["files"]))
+        changed = sorted(k for k in set(found) & set(doc["files"]) if found[k] != doc["files"][k])
+        raise ValueError(f"{paper_dir} does not match its claims.json (seed {doc.get('seed')}): missing {missing}, "
+                         f"not in the ledger {extra}, changed {changed}; rerun `python -m mascore reproduce "
+                         f"{doc.get('paper')}`")
+    return doc
+
+
+def load_claims(results_dir: str | Path, papers: Iterable[str] = PAPERS, verify: bool = True) -> list[dict]:
     """Read every ``results_dir/PAPER/claims.json`` that exists.
+
+    Parameters
+    ----------
+    verify : bool
+        Check first that each paper's figures and tables match its ledger
+        (:func:`verify_outputs`; ``ValueError`` otherwise).
 
     Returns
     -------
@@ -218,7 +271,7 @@ def load_claims(results_dir: str | Path, papers: Iterable[str] = PAPERS) -> list
     for paper in papers:
         path = Path(results_dir) / paper / "claims.json"
         if path.exists():
-            doc = json.loads(path.read_text())
+            doc = verify_outputs(path.parent) if verify else json.loads(path.read_text())
             records += [{"paper": paper, **c} for c in doc["claims"]]
     return records
 

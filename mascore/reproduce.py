@@ -5,6 +5,13 @@ Each paper module ``mascore.papers.<PAPER>`` declares its registry ``REGISTRY``
 ``study.run(study.settings, seed)`` and writes, through one generic writer
 (:func:`mascore.registry.write_study`), ``out_dir/figures/*.png``,
 ``out_dir/tables/*.csv`` and ``out_dir/claims.json``.
+
+A paper's directory is replaced all at once: everything is written into a
+temporary directory beside it, which takes the place of the old one in a
+rename only when the whole paper succeeded. On a failure or an interrupt the
+previous complete output stays as it was. ``claims.json`` records the SHA-256
+of every figure and table it belongs with, so a directory whose files do not
+match its ledger is detected (:func:`mascore.ledger.verify_outputs`).
 """
 
 from __future__ import annotations
@@ -12,13 +19,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
-import shlex
+import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 from ._progress import progress_bar
-from .ledger import PAPERS, Claim, write_claims
+from .ledger import PAPERS, Claim, output_hashes, write_claims
 from .registry import write_study
 
 __all__ = ["DEFAULT_SEED", "available_papers", "main", "reproduce_paper", "results_dir"]
@@ -51,62 +59,113 @@ def available_papers() -> list[str]:
 
 
 def reproduce_paper(
-    paper: str, out: str | Path = "results", seed: int = DEFAULT_SEED, created_by: str | None = None
+    paper: str, out: str | Path = "results", seed: int = DEFAULT_SEED, created_by: str | None = None,
+    progress: bool = True,
 ) -> list[Claim]:
-    """Run one paper's reproduction and write its ledger.
+    """Run one paper's reproduction and write its figures, tables and ledger, all or nothing.
 
     Parameters
     ----------
     paper : str
         One of :data:`mascore.ledger.PAPERS`.
     out : path
-        Results root; files go to ``out/PAPER/``.
+        Results root; files go to ``out/PAPER/``, which is replaced as a whole.
     seed : int
-        Seed of every random draw in the run.
+        Seed of every random draw in the run (non-negative).
     created_by : str, optional
-        Command line recorded in ``claims.json``.
+        Command line recorded in ``claims.json`` (default: the equivalent
+        ``mascore reproduce`` command, without paths).
+    progress : bool
+        Show progress bars of the long runs.
+
+    Returns
+    -------
+    list of Claim
+
+    Raises
+    ------
+    ValueError
+        Unknown `paper`, negative or non-integer `seed`, or `out` is a file.
     """
     if paper not in PAPERS:
-        raise ValueError(f"unknown paper {paper!r}; expected one of {', '.join(PAPERS)} or 'all'")
-    if paper not in available_papers():
-        raise RuntimeError(f"paper {paper!r} has no scenario module (mascore/papers/{paper}.py) yet")
-    module = importlib.import_module(f"mascore.papers.{paper}")
-    out_dir = Path(out) / paper
-    (out_dir / "figures").mkdir(parents=True, exist_ok=True)
-    (out_dir / "tables").mkdir(parents=True, exist_ok=True)
-    if hasattr(module, "REGISTRY"):
-        claims = []
-        for study in module.REGISTRY.studies:
-            result = study.run(study.settings, seed, progress=True)
-            claims += write_study(module.REGISTRY, study, result, out_dir)
-    else:  # transitional: modules not yet on the registry
-        claims = module.reproduce(out_dir, seed)
-    write_claims(
-        claims, out_dir / "claims.json", paper, seed,
-        created_by or f"python -m mascore reproduce {paper} --out {out} --seed {seed}",
-    )
+        raise ValueError(f"paper must be one of {', '.join(PAPERS)} or 'all'; got {paper!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer; got {seed!r}")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"out must be a directory; {str(out)!r} is a file")
+    registry = importlib.import_module(f"mascore.papers.{paper}").REGISTRY
+    out.mkdir(parents=True, exist_ok=True)
+    final = out / paper
+    staging = Path(tempfile.mkdtemp(prefix=f".{paper}-incomplete-", dir=out))
+    try:
+        claims: list[Claim] = []
+        for study in registry.studies:
+            result = study.run(study.settings, seed, progress=progress)
+            claims += write_study(registry, study, result, staging)
+        write_claims(claims, staging / "claims.json", paper, seed,
+                     created_by or f"mascore reproduce {paper} --seed {seed}", files=output_hashes(staging))
+        _replace_directory(final, staging)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
     return claims
+
+
+def _replace_directory(final: Path, staging: Path) -> None:
+    """Put `staging` in the place of `final` (renames only; the old one is removed last)."""
+    if not final.exists():
+        staging.rename(final)
+        return
+    old = Path(tempfile.mkdtemp(prefix=f".{final.name}-old-", dir=final.parent))
+    old.rmdir()
+    final.rename(old)
+    staging.rename(final)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def _seed_argument(text: str) -> int:
+    try:
+        seed = int(text)
+    except ValueError:
+        seed = -1
+    if seed < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer seed, got {text!r}")
+    return seed
+
+
+def _out_argument(text: str) -> Path:
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"expected a directory, but {text!r} is a file")
+    return path
 
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the process exit code."""
+    from . import __version__
+
     parser = argparse.ArgumentParser(prog="mascore", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"mascore {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     rep = sub.add_parser("reproduce", help="rebuild a paper's figures, tables and claims.json")
     rep.add_argument("paper", choices=[*PAPERS, "all"])
-    rep.add_argument("--out", default="results", help="results directory (default: results/)")
-    rep.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"random seed (default: {DEFAULT_SEED})")
+    rep.add_argument("--out", type=_out_argument, default=Path("results"),
+                     help="results directory (default: results/)")
+    rep.add_argument("--seed", type=_seed_argument, default=DEFAULT_SEED,
+                     help=f"random seed, a non-negative integer (default: {DEFAULT_SEED})")
     args = parser.parse_args(argv)
 
     papers = available_papers() if args.paper == "all" else [args.paper]
-    command = "python -m mascore " + shlex.join(sys.argv[1:] if argv is None else argv)
     failed = False
     for paper in progress_bar(papers, enabled=len(papers) > 1, desc="papers", unit="paper"):
         start = time.perf_counter()
         try:
-            claims = reproduce_paper(paper, args.out, args.seed, created_by=command)
+            claims = reproduce_paper(paper, args.out, args.seed,
+                                     created_by=f"mascore reproduce {args.paper} --seed {args.seed}")
         except Exception as exc:  # report and go on with the other papers
-            print(f"mascore: reproducing {paper} failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+            print(f"mascore: reproducing {paper} failed, {args.out / paper} left as it was: "
+                  f"{type(exc).__name__}: {exc}", file=sys.stderr)
             failed = True
             continue
         counts: dict[str, int] = {}
@@ -114,5 +173,5 @@ def main(argv: list[str] | None = None) -> int:
             counts[c.verdict] = counts.get(c.verdict, 0) + 1
         summary = ", ".join(f"{n} {v}" for v, n in sorted(counts.items()))
         print(f"{paper}: {len(claims)} claims ({summary}) in {time.perf_counter() - start:.1f} s "
-              f"-> {Path(args.out) / paper}")
+              f"-> {args.out / paper}")
     return 1 if failed else 0
