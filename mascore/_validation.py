@@ -12,8 +12,14 @@ from numpy.typing import ArrayLike
 __all__ = [
     "as_matrix",
     "as_vector",
+    "cached_covariance",
+    "check_adjacency",
     "check_covariance",
     "check_generator",
+    "check_laplacian",
+    "check_positive",
+    "check_positive_int",
+    "check_probability",
     "check_square",
 ]
 
@@ -131,15 +137,117 @@ def check_generator(rng: object, name: str = "rng") -> np.random.Generator:
     """Require an explicit :class:`numpy.random.Generator`.
 
     Randomness in mascore always comes from a generator the caller passes in;
-    integer seeds are accepted and turned into ``np.random.default_rng(seed)``.
+    non-negative integer seeds are accepted and turned into ``np.random.default_rng(seed)``.
+
+    Raises
+    ------
+    TypeError
+        `rng` is neither a Generator nor an integer.
+    ValueError
+        `rng` is a negative integer.
     """
     if isinstance(rng, np.random.Generator):
         return rng
     if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
+        if rng < 0:
+            raise ValueError(f"{name} must be a numpy.random.Generator or a non-negative integer seed; got {rng}")
         return np.random.default_rng(int(rng))
     raise TypeError(
         f"{name} must be a numpy.random.Generator or an integer seed; got {type(rng).__name__}"
     )
+
+
+def check_positive_int(n: object, name: str, minimum: int = 1) -> int:
+    """Return `n` as an int, requiring an integer (not a bool or a float) ``>= minimum``."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer >= {minimum}; got {type(n).__name__} {n!r}")
+    if n < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}; got {n}")
+    return int(n)
+
+
+def check_positive(x: object, name: str, unit: str = "", allow_zero: bool = False) -> float:
+    """Return `x` as a finite float > 0 (or >= 0 with `allow_zero`); `unit` goes into the message."""
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a real number; got {type(x).__name__} {x!r}")
+    value = float(x)
+    bound = ">= 0" if allow_zero else "> 0"
+    if not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
+        raise ValueError(f"{name} must be a finite number {bound}{' ' + unit if unit else ''}; got {x!r}")
+    return value
+
+
+def check_probability(p: object, name: str) -> float:
+    """Return `p` as a float in [0, 1]."""
+    value = check_positive(p, name, allow_zero=True)
+    if value > 1:
+        raise ValueError(f"{name} must be a probability in [0, 1]; got {p!r}")
+    return value
+
+
+def check_adjacency(
+    A: ArrayLike, name: str = "adjacency", size: int | None = None, undirected: bool = False
+) -> np.ndarray:
+    """Check a weighted adjacency matrix: square, finite, non-negative, no self-loops.
+
+    ``A[i, j] > 0`` means agent i receives from agent j. A Laplacian passed by
+    mistake (negative off-diagonal entries, positive diagonal) is named as such.
+    With `undirected`, `A` must be symmetric.
+    """
+    arr = check_square(A, name, size)
+    if np.any(np.diag(arr) != 0):
+        if np.all(arr - np.diag(np.diag(arr)) <= 0) and np.allclose(arr.sum(axis=1), 0):
+            raise ValueError(f"{name} looks like a Laplacian (rows sum to zero, negative off-diagonal entries); "
+                             f"pass the adjacency matrix instead (A = diag(diag(L)) - L)")
+        raise ValueError(f"{name} must have a zero diagonal (no self-loops); got diagonal {np.diag(arr)}")
+    if np.any(arr < 0):
+        raise ValueError(f"{name} must have non-negative weights; smallest entry is {arr.min():.3g}")
+    if undirected and not np.allclose(arr, arr.T):
+        raise ValueError(f"{name} must be symmetric (an undirected graph) here")
+    return arr
+
+
+def check_laplacian(
+    L: ArrayLike, name: str = "laplacian", size: int | None = None, undirected: bool = False
+) -> np.ndarray:
+    """Check a graph Laplacian: square, finite, rows summing to zero, non-positive off-diagonal.
+
+    An adjacency matrix passed by mistake is named as such, with the function to call.
+    With `undirected`, `L` must be symmetric (a theorem for undirected graphs needs it).
+    """
+    arr = check_square(L, name, size)
+    off = arr - np.diag(np.diag(arr))
+    scale = max(1.0, float(np.abs(arr).max())) if arr.size else 1.0
+    if np.any(off > SYMMETRY_RTOL * scale) or not np.allclose(arr.sum(axis=1), 0, atol=SYMMETRY_RTOL * scale):
+        if np.all(arr >= 0) and np.all(np.diag(arr) == 0):
+            raise ValueError(f"{name} looks like an adjacency matrix; pass mascore.graphs.laplacian(A) instead")
+        raise ValueError(f"{name} must be a graph Laplacian: rows summing to zero and off-diagonal entries <= 0")
+    if undirected and not np.allclose(arr, arr.T, atol=SYMMETRY_RTOL * scale):
+        raise ValueError(f"{name} must be symmetric (an undirected graph) here; got a directed Laplacian")
+    return arr
+
+
+_CHECKED: dict[tuple, np.ndarray] = {}
+
+
+def cached_covariance(P: ArrayLike, name: str, size: int | None = None, definite: bool = False) -> np.ndarray:
+    """:func:`check_covariance` that checks each distinct constant matrix once.
+
+    For matrices that stay the same over a long run (Q, R): the check is keyed by the
+    matrix's bytes, so a 10^4-step loop pays one eigen-decomposition, not 10^4.
+    """
+    arr = np.asarray(P, dtype=float)
+    key = (name, size, definite, arr.shape, arr.tobytes())
+    hit = _CHECKED.get(key)
+    if hit is not None:
+        return hit
+    checked = check_covariance(arr, name, size, definite)
+    if len(_CHECKED) > 256:
+        _CHECKED.clear()
+    checked = checked.copy()
+    checked.setflags(write=False)
+    _CHECKED[key] = checked
+    return checked
 
 
 def _check_finite(arr: np.ndarray, name: str) -> None:
