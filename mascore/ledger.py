@@ -53,6 +53,9 @@ __all__ = [
 #: The default band of "approximately": this many tolerances.
 APPROX_FACTOR = 3.0
 
+#: Significant digits of the paper's values in a ledger: enough to keep every printed digit.
+PAPER_DIGITS = 6
+
 #: Allowed verdicts.
 VERDICTS = ("reproduces", "approximately", "does-not-reproduce", "holds", "fails")
 
@@ -376,7 +379,7 @@ class ClaimsView:
             unit, labels = r.get("unit", ""), r.get("labels")
             claim = f"{_cell(r.get('statement', ''))} *({_cell(r.get('where', ''))})*"
             lines.append(
-                f"| {n} | {claim} | {_cell(format_value(r.get('paper_value'), unit=unit, labels=labels))} "
+                f"| {n} | {claim} | {_cell(format_value(r.get('paper_value'), PAPER_DIGITS, unit=unit, labels=labels))} "
                 f"| {_cell(format_value(r.get('value'), unit=unit, labels=labels))} | {_cell(_verdict_text(r))} |"
             )
         return "\n".join(lines + _notes_markdown(self.records))

@@ -1,13 +1,22 @@
-"""Tests of the Sec. 5 scenario of Bhattacharjee and Subbarao (2021) and its ledger."""
+"""Tests of the Sec. 5 scenario of Bhattacharjee and Subbarao (2021), its registry and its ledger."""
 
+import dataclasses
 import json
+import re
 
-import numpy as np
-import pytest
+import matplotlib
 
-from mascore import synchronization as sync
-from mascore.papers import bhattacharjee2021 as paper
-from mascore.reproduce import reproduce_paper
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from mascore import synchronization as sync  # noqa: E402
+from mascore.ledger import show_claims  # noqa: E402
+from mascore.papers import bhattacharjee2021 as paper  # noqa: E402
+from mascore.registry import paper_registry, show_settings  # noqa: E402
+from mascore.reproduce import reproduce_paper  # noqa: E402
 
 REQUIRED = [
     "lemma2-r", "coupling-gain-c", "bound-eq21", "fig2c-Ac-bound", "fig6-trace-limit",
@@ -138,7 +147,8 @@ def test_reproduce_writes_figures_table_and_required_claims(reproduced):
 
 @pytest.mark.slow
 def test_ledger_verdicts_are_the_documented_ones(reproduced):
-    """Exact design numbers reproduce; Table 1 means are 5-10 % high (documented), RMS within 5 %."""
+    """Exact design numbers reproduce; Table 1 means are 5-10 % high (documented), within the 3t band of
+    15 %, so 'approximately'; RMS within 5 %; Fig. 6's 1.558 against 'about 1.5' is off by 0.058 (band 0.15)."""
     out, claims = reproduced
     v = {c.id.split("/")[1]: c.verdict for c in claims}
     for key in ("lemma2-r", "coupling-gain-c", "bound-eq21", "table1-row1-rms", "table1-row2-rms", "table1-row3-rms"):
@@ -147,4 +157,98 @@ def test_ledger_verdicts_are_the_documented_ones(reproduced):
         assert v[key] == "holds", key
     for key in ("fig6-trace-limit", "table1-row1-mean", "table1-row2-mean", "table1-row3-mean"):
         assert v[key] == "approximately", key
-    assert (out / "tables" / "table1_edges_reversed.csv").exists()
+    by_id = {c.id.split("/")[1]: c for c in claims}
+    assert by_id["table1-row1-mean"].tolerance == {"rel": 0.05, "approx_rel": 0.15}
+    assert 0.05 < by_id["fig6-trace-limit"].deviation < 0.06
+    assert all(c.study == "set-membership" for c in claims)
+    for name in ("table1_edges_reversed", "table1_readings"):
+        assert (out / "tables" / f"{name}.csv").exists()
+
+
+# ---------------------------------------------------------------- the registry
+
+
+@pytest.fixture(scope="module")
+def cheap():
+    """The study on cheap settings (few seeds, a shorter horizon): what the figures and claims need."""
+    settings = dataclasses.replace(paper.DEFAULTS, n_runs=4, t_f=30)
+    return paper.run(settings, seed=3)
+
+
+def test_registry_declares_the_study():
+    reg = paper_registry("bhattacharjee2021")
+    assert reg is paper.REGISTRY and [s.name for s in reg.studies] == ["set-membership"]
+    study = reg.study("set-membership")
+    assert study.chapter == "bhattacharjee2021_set_membership" and study.settings == paper.DEFAULTS
+    assert [(f.name, f.number) for f in study.figures] == [(f"fig{i}", f"Fig. {i}") for i in range(1, 7)]
+    assert [t.name for t in study.tables] == ["table1", "table1_edges_reversed", "table1_readings"]
+    errata = " ".join(reg.errata)
+    assert "-0.051_2" in errata and "reversed" in errata and "1.558" in errata
+
+
+def test_settings_object_is_the_one_source():
+    """Module constants come from DEFAULTS, the run reads the settings it is given, and the table shows them."""
+    d = paper.DEFAULTS
+    assert paper.SETTINGS == d.rows and paper.T_F == d.t_f and np.array_equal(paper.X0_HAT, d.matrix("x0_hat"))
+    assert np.array_equal(paper.P0, 2 * np.eye(2)) and (d.alpha, d.mu, d.p0, d.q_bar) == (1.1, 0.9, 2.0, 0.1)
+    with pytest.raises(ValueError, match="one entry per Table 1 row"):
+        dataclasses.replace(d, q=(0.1, 1.0))
+    table = str(show_settings(d))
+    assert "**our choice**" in table and "| `n_runs` | 100 |" in table
+    hash(d)  # frozen and hashable (tuples only)
+
+
+def test_run_follows_its_settings(cheap):
+    assert cheap.figure_run.k[-1] == 30 and cheap.runs[0].x.shape[:2] == (4, 31)
+    assert int(cheap.table["n_runs"].iloc[0]) == 4 and len(cheap.table_reversed) == 3
+    assert np.allclose(cheap.sdp_run.trace, cheap.closed_form_run.trace, rtol=1e-4)
+
+
+def test_every_figure_draws_with_labelled_axes(cheap):
+    for spec in paper.STUDY.figures:
+        fig = paper.STUDY.draw(spec.name, cheap)
+        assert isinstance(fig, matplotlib.figure.Figure), spec.name
+        axes = [ax for ax in fig.get_axes() if ax.axison]
+        assert axes, spec.name
+        for ax in axes:  # an x label on the axes or on one it shares its x axis with (a column of panels)
+            xlabels = [a.get_xlabel() for a in ax.get_shared_x_axes().get_siblings(ax)]
+            assert any(xlabels) and ax.get_ylabel(), (spec.name, ax.get_title())
+        plt.close(fig)
+
+
+def test_fig2_panel_letters_are_unique():
+    """Panel (a) holds both state components under one letter; (b) and (c) as in the paper's Fig. 2."""
+    run = paper.simulate(seed=1)
+    fig = paper.plot_fig2(run)
+    titles = [ax.get_title() for ax in fig.get_axes()] + [sf.get_suptitle() for sf in fig.subfigs]
+    letters = [m for t in titles for m in re.findall(r"^\(([a-z])\)", t)]
+    assert sorted(letters) == ["a", "b", "c"]
+    plt.close(fig)
+
+
+def test_fig6_agents_are_distinguishable():
+    """The four traces coincide, so each agent has its own line style and marker."""
+    fig = paper.plot_fig6(paper.simulate(seed=1))
+    lines = [ln for ln in fig.axes[0].get_lines() if ln.get_label().startswith("agent")]
+    assert len(lines) == 4 and len({(ln.get_linestyle(), ln.get_marker()) for ln in lines}) == 4
+    assert np.allclose(*[ln.get_ydata() for ln in lines[:2]])
+    plt.close(fig)
+
+
+def test_table1_notes_share_one_paragraph(cheap):
+    """Each Table 1 claim has its own numbers and the same two shared paragraphs, printed once by show_claims."""
+    claims = [c for c in paper.STUDY.claims(cheap) if "/table1-" in c.id]
+    assert len(claims) == 6
+    paragraphs = [c.note.split("\n\n") for c in claims]
+    assert all(len(p) == 3 for p in paragraphs)
+    assert len({p[0] for p in paragraphs}) == 6 and len({tuple(p[1:]) for p in paragraphs}) == 1
+    assert all(c.unit == "state units" for c in claims)
+    text = str(show_claims(claims))
+    assert text.count(paragraphs[0][1][:60]) == 1 and "Claims 1, 2, 3, 4, 5, 6." in text
+
+
+def test_table1_view_is_labelled():
+    table, _ = paper.table1_study(seed=1, n_runs=3)
+    view = paper.table1_view(table)
+    assert list(view.index) == [1, 2, 3] and ("mean", "paper") in view.columns
+    assert view.loc[1, ("RMS", "paper")] == "1.1985"

@@ -3,12 +3,17 @@
 Four agents ``x_{k+1} = A x_k + B u_k + G w_k``, ``y_k = C x_k + D v_k`` with
 eq. (23), the directed ring of eq. (24) pinned at agent 1, each agent running
 the set-membership filter of Algorithm 1 and the Riccati-designed law of
-Sec. 4.2 on its corrected estimate. Everything the paper's Figs. 1-6 and
-Table 1 need is computed here (:func:`simulate`, :func:`table1_study`) and
-drawn by the ``plot_fig*`` functions; :func:`reproduce` writes the figures,
-``tables/table1.csv`` and the ledger claims.
+Sec. 4.2 on its corrected estimate.
 
-Settings the paper leaves out (chosen here):
+``REGISTRY`` declares one study, ``"set-membership"`` (the book chapter
+``bhattacharjee2021_set_membership``): the settings
+(:class:`SetMembershipSettings`, every parameter of the example, the paper's and
+ours), :func:`run` (the figure run on the SDP path and the Table 1 study over
+``n_runs`` seeds on the closed-form path, computed once), Figs. 1-6, Table 1 (as
+printed and with the edges of eq. (24) reversed) and the ledger
+(:func:`ledger_claims`).
+
+Settings the paper leaves out (chosen here, see :class:`SetMembershipSettings`):
 
 * Horizon: k = 0..T_f with T_f = 60 (Table 1's ``T = 61`` steps); the figures use the same.
 * Order of one time step: correct with y_k, compute u_k from the corrected
@@ -19,17 +24,15 @@ Settings the paper leaves out (chosen here):
   the same draw in every study and on both filter paths. The three Table 1 rows
   share the unit draws (scaled by alpha_w, alpha_v): common random numbers.
 * Fig. 6's "about 1.5" is compared with trace P_{k|k} at k = T_f averaged over agents.
-* alpha = 1.1, mu = 0.9, p0 = 2, q_bar = 0.1 are the paper's (Sec. 5).
 * Graph: the Laplacian of eq. (24) as printed. The reading with reversed edges
   (adjacency transposed) fits Table 1's means better and its RMS values worse; it is
-  computed alongside (:func:`table1_readings`, ``tables/table1_edges_reversed.csv``)
+  computed alongside (:func:`table1_readings`, table ``table1_edges_reversed``)
   and quoted in the notes, never used for a verdict.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -38,44 +41,24 @@ import pandas as pd
 from .. import set_membership as smf
 from .. import synchronization as sync
 from .._progress import progress_bar
-from ..ledger import Claim
-from ..plotting import agent_colors, save_figure, use_style
+from ..ledger import Claim, format_number
+from ..plotting import agent_colors
+from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, setting
 
 __all__ = [
-    "ALPHA", "A", "ADJACENCY", "B", "C", "C0", "D", "G_DIST", "LEADER_X0", "MU", "N_AGENTS",
-    "P0", "P0_BOUND", "PINNING", "Q_BAR", "Q_RICCATI", "R0", "SETTINGS", "T_F", "X0_HAT",
-    "ClosedLoopRun", "DisturbanceSetting", "Draw", "design", "draw", "ledger_claims", "noise_free_metrics", "plot_fig1",
-    "plot_fig2", "plot_fig3_4", "plot_fig5", "plot_fig6", "reproduce", "simulate", "table1_readings", "table1_study",
+    "A", "ADJACENCY", "ALPHA", "B", "C", "C0", "D", "DEFAULTS", "G_DIST", "LEADER_X0", "MU", "N_AGENTS",
+    "P0", "P0_BOUND", "PINNING", "Q_BAR", "Q_RICCATI", "R0", "REGISTRY", "REVERSED", "SETTINGS", "STUDY", "T_F",
+    "TABLE1_PUBLISHED", "X0_BOX", "X0_HAT",
+    "ClosedLoopRun", "DisturbanceSetting", "Draw", "SetMembershipResult", "SetMembershipSettings",
+    "design", "draw", "ledger_claims", "noise_free_metrics", "plot_fig1", "plot_fig2", "plot_fig3_4",
+    "plot_fig5", "plot_fig6", "run", "simulate", "table1_readings", "table1_study", "table1_view",
 ]
 
-# ---------------------------------------------------------------- eq. (23)
-A = np.array([[0.0, -1.0], [1.0, 0.0]])
-B = np.eye(2)
-C = np.array([[1.0, 0.0]])
-D = np.eye(1)
-#: Disturbance matrix G of eqs. (1), (9), (23) (not the pinning gains).
-G_DIST = np.eye(2)
+#: Table 1 as published: (mean, RMS) of |delta_bar_k| over k = 0..60, one pair per row.
+TABLE1_PUBLISHED = ((0.3706, 1.1985), (0.4219, 1.2052), (0.4730, 1.2124))
 
-# ---------------------------------------------------------------- eq. (24), Fig. 1(a)
-N_AGENTS = 4
-#: adjacency[i, j] = 1: agent i+1 receives from agent j+1 (rows of L in eq. (24)).
-ADJACENCY = np.array([[0, 0, 0, 1], [1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]], dtype=float)
-#: Pinning gains g_i: calligraphic G = diag(1, 0, 0, 0) (only agent 1 hears the leader).
-PINNING = np.array([1.0, 0.0, 0.0, 0.0])
-
-# ---------------------------------------------------------------- Lemma 2 and Corollary 1 (Sec. 5)
-Q_RICCATI = 0.1 * np.eye(2)
-C0, R0 = 2.0 / 3.0, 0.6
-ALPHA, MU = 1.1, 0.9
-P0_BOUND, Q_BAR = 2.0, 0.1
-
-# ---------------------------------------------------------------- filters and initial conditions
-T_F = 60
-P0 = 2.0 * np.eye(2)
-X0_HAT = np.array([[50.0, -50.0], [50.0, -50.0], [-50.0, 50.0], [-50.0, 50.0]])
-#: True x_0^(i) uniform in [X0_HAT, X0_HAT + 1] componentwise (Sec. 5).
-X0_BOX = 1.0
-LEADER_X0 = np.array([5.0, 5.0])
+_STATE = "state units"
+_STATE2 = "state units²"
 
 
 @dataclass(frozen=True)
@@ -98,43 +81,154 @@ class DisturbanceSetting:
         return self.r * np.eye(1)
 
 
+@dataclass(frozen=True)
+class SetMembershipSettings:
+    """Every parameter of the example of Sec. 5: the paper's, and ours where it says nothing.
+
+    Matrices are nested tuples (rows); :meth:`matrix` returns them as arrays.
+    """
+
+    A: tuple = setting(((0.0, -1.0), (1.0, 0.0)), where="eq. (23)", note="dynamics of the agents and the leader")
+    B: tuple = setting(((1.0, 0.0), (0.0, 1.0)), where="eq. (23)", note="input matrix")
+    C: tuple = setting(((1.0, 0.0),), where="eq. (23)", note="each agent measures its first component")
+    D: tuple = setting(((1.0,),), where="eq. (23)", note="output disturbance matrix")
+    G: tuple = setting(((1.0, 0.0), (0.0, 1.0)), where="eq. (23)",
+                       note="input disturbance matrix (not the pinning gains, also written G in Sec. 4)")
+    adjacency: tuple = setting(((0, 0, 0, 1), (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0)),
+                               where="eq. (24), Fig. 1(a)",
+                               note="row i, column j = 1: agent i hears agent j (off-diagonal rows of the Laplacian)")
+    pinning: tuple = setting((1.0, 0.0, 0.0, 0.0), where="Sec. 5, G = diag(1, 0, 0, 0)",
+                             note="pinning gains: only agent 1 hears the leader")
+    q_riccati: float = setting(0.1, where="Sec. 5", note="weight Q = 0.1 I₂ of the Riccati-like eq. (16)")
+    c0: float = setting(2.0 / 3.0, where="Sec. 5", note="centre of the circle C(c0, r0) of Lemma 2")
+    r0: float = setting(0.6, where="Sec. 5", note="radius of C(c0, r0)")
+    alpha: float = setting(1.1, where="Sec. 5", note="α of the bound |A_c^k| ≤ α μ^k (Fig. 2(c))")
+    mu: float = setting(0.9, where="Sec. 5", note="μ of the same bound")
+    p0: float = setting(2.0, where="Sec. 5", unit=_STATE2, note="bound p0 of eq. (21)")
+    q_bar: float = setting(0.1, where="Sec. 5", unit=_STATE2, note="bound q̄ of eq. (21)")
+    P0: tuple = setting(((2.0, 0.0), (0.0, 2.0)), where="Sec. 5", unit=_STATE2,
+                        note="initial ellipsoid shape of every agent")
+    x0_hat: tuple = setting(((50.0, -50.0), (50.0, -50.0), (-50.0, 50.0), (-50.0, 50.0)), where="Sec. 5",
+                            unit=_STATE, note="initial estimates of agents 1-4")
+    x0_box: float = setting(1.0, where="Sec. 5", unit=_STATE,
+                            note="true x0 uniform in [x̂0, x̂0 + x0_box] componentwise")
+    leader_x0: tuple = setting((5.0, 5.0), where="Sec. 5", unit=_STATE, note="initial state of the leader")
+    t_f: int = setting(60, where="Table 1: T = 61 steps, T_f = 60; Figs. 2-6 use the same",
+                       note="last time step; k = 0..T_f")
+    alpha_w: tuple = setting((0.05, 0.5, 1.0), where="Table 1 and Sec. 5", unit=_STATE,
+                             note="w uniform in [-α_w, α_w]², one entry per row")
+    alpha_v: tuple = setting((0.05, 0.5, 1.0), where="Table 1 and Sec. 5", unit=_STATE,
+                             note="v uniform in [-α_v, α_v], one entry per row")
+    q: tuple = setting((0.1, 1.0, 2.0), where="Table 1", unit=_STATE2, note="filter bound Q_k = q I₂ per row")
+    r: tuple = setting((0.1, 1.0, 1.0), where="Table 1", unit=_STATE2, note="filter bound R_k = r per row")
+    figure_row: int = setting(1, where="Sec. 5: 'the first row in Table 1 corresponds to Fig. 2(b)'",
+                              note="Table 1 row of Figs. 2-6")
+    figure_method: str = setting("sdp", source="chosen", where="the paper solves the SDPs with SDPT3; we use Clarabel",
+                                 note="filter of Figs. 2-6: 'sdp' or 'closed_form'")
+    table_method: str = setting("closed_form", source="chosen",
+                                where="same optimum as the SDPs, claim sdp-closed-form-agree; far faster",
+                                note="filter of the Table 1 study")
+    n_runs: int = setting(100, source="chosen", where="the paper reports one unseeded draw per row",
+                          note="seeds per Table 1 row (run 0 is the ledger's value, the rest the spread)")
+    k_max_check: int = setting(400, source="chosen", where="0.9^400 ≈ 5 × 10⁻¹⁹: the bound is checked to zero",
+                               note="last k of the check |A_c^k| ≤ α μ^k")
+
+    def __post_init__(self) -> None:
+        lengths = {len(self.alpha_w), len(self.alpha_v), len(self.q), len(self.r)}
+        if lengths != {len(TABLE1_PUBLISHED)}:
+            raise ValueError(f"alpha_w, alpha_v, q and r need one entry per Table 1 row "
+                             f"({len(TABLE1_PUBLISHED)}); got lengths {sorted(lengths)}")
+        if not 1 <= self.figure_row <= len(TABLE1_PUBLISHED):
+            raise ValueError(f"figure_row must be 1..{len(TABLE1_PUBLISHED)}; got {self.figure_row}")
+
+    def matrix(self, name: str) -> np.ndarray:
+        """Field `name` as a float array (``"A"``, ``"adjacency"``, ``"x0_hat"``, ...)."""
+        return np.array(getattr(self, name), dtype=float)
+
+    @property
+    def n_agents(self) -> int:
+        return len(self.x0_hat)
+
+    @property
+    def mu_bar(self) -> float:
+        """Normalization of Corollary 1, ``alpha sqrt(N) / (1 - mu)``."""
+        return sync.mu_bar(self.alpha, self.mu, self.n_agents)
+
+    @property
+    def rows(self) -> tuple[DisturbanceSetting, ...]:
+        """The Table 1 rows, each with the paper's published mean and RMS."""
+        return tuple(DisturbanceSetting(aw, av, q, r, *pub) for aw, av, q, r, pub in
+                     zip(self.alpha_w, self.alpha_v, self.q, self.r, TABLE1_PUBLISHED))
+
+    @property
+    def figure_setting(self) -> DisturbanceSetting:
+        """The Table 1 row simulated for Figs. 2-6."""
+        return self.rows[self.figure_row - 1]
+
+
+#: The paper's example as printed, with our choices where it says nothing.
+DEFAULTS = SetMembershipSettings()
+
+# ---------------------------------------------------------------- module constants (from DEFAULTS)
+A, B, C, D = (DEFAULTS.matrix(m) for m in "ABCD")
+#: Disturbance matrix G of eqs. (1), (9), (23) (not the pinning gains).
+G_DIST = DEFAULTS.matrix("G")
+N_AGENTS = DEFAULTS.n_agents
+#: adjacency[i, j] = 1: agent i+1 receives from agent j+1 (rows of L in eq. (24)).
+ADJACENCY = DEFAULTS.matrix("adjacency")
+#: Pinning gains g_i: calligraphic G = diag(1, 0, 0, 0) (only agent 1 hears the leader).
+PINNING = DEFAULTS.matrix("pinning")
+Q_RICCATI = DEFAULTS.q_riccati * np.eye(2)
+C0, R0 = DEFAULTS.c0, DEFAULTS.r0
+ALPHA, MU = DEFAULTS.alpha, DEFAULTS.mu
+P0_BOUND, Q_BAR = DEFAULTS.p0, DEFAULTS.q_bar
+T_F = DEFAULTS.t_f
+P0 = DEFAULTS.matrix("P0")
+X0_HAT = DEFAULTS.matrix("x0_hat")
+#: True x_0^(i) uniform in [X0_HAT, X0_HAT + X0_BOX] componentwise (Sec. 5).
+X0_BOX = DEFAULTS.x0_box
+LEADER_X0 = DEFAULTS.matrix("leader_x0")
 #: Table 1 rows (row 1 is the setting of Figs. 2-6).
-SETTINGS = (
-    DisturbanceSetting(0.05, 0.05, 0.1, 0.1, 0.3706, 1.1985),
-    DisturbanceSetting(0.5, 0.5, 1.0, 1.0, 0.4219, 1.2052),
-    DisturbanceSetting(1.0, 1.0, 2.0, 1.0, 0.4730, 1.2124),
-)
+SETTINGS = DEFAULTS.rows
 
 
-def design() -> sync.SyncDesign:
-    """Lemma 2 for the example: P = Q = 0.1 I (B = I), K = A, c = 1.5, r = 1."""
-    return sync.design_synchronization(A, B, Q_RICCATI, ADJACENCY, PINNING, C0, R0)
+def design(scenario: SetMembershipSettings = DEFAULTS, adjacency: np.ndarray | None = None) -> sync.SyncDesign:
+    """Lemma 2 for the example: P = Q = 0.1 I (B = I), K = A, c = 1.5, r = 1.
+
+    `adjacency` replaces the graph of the settings (Assumption 4 and the circle are checked).
+    """
+    adjacency = scenario.matrix("adjacency") if adjacency is None else adjacency
+    return sync.design_synchronization(scenario.matrix("A"), scenario.matrix("B"),
+                                       scenario.q_riccati * np.eye(len(scenario.A)), adjacency,
+                                       scenario.matrix("pinning"), scenario.c0, scenario.r0)
 
 
 @dataclass(frozen=True)
 class Draw:
     """Unit random draws of a batch of runs (scaled by a setting when simulated)."""
 
-    x0: np.ndarray  # (R, N, 2) true initial states
-    w_unit: np.ndarray  # (R, T_F, N, 2) in [-1, 1]
-    v_unit: np.ndarray  # (R, T_F + 1, N, 1) in [-1, 1]
+    x0: np.ndarray  # (R, N, n) true initial states
+    w_unit: np.ndarray  # (R, T_f, N, n) in [-1, 1]
+    v_unit: np.ndarray  # (R, T_f + 1, N, p) in [-1, 1]
 
 
-def draw(seed: int, n_runs: int = 1) -> Draw:
+def draw(seed: int, n_runs: int = 1, scenario: SetMembershipSettings = DEFAULTS) -> Draw:
     """Random draws of `n_runs` runs; run r uses ``SeedSequence(seed).spawn(n_runs)[r]``."""
-    children = np.random.SeedSequence(int(seed)).spawn(n_runs)
+    x0_hat, t_f = scenario.matrix("x0_hat"), scenario.t_f
+    n_agents, n = x0_hat.shape
+    p = len(scenario.C)
     x0, w, v = [], [], []
-    for child in children:
+    for child in np.random.SeedSequence(int(seed)).spawn(n_runs):
         rng = np.random.default_rng(child)
-        x0.append(X0_HAT + X0_BOX * rng.random((N_AGENTS, 2)))
-        w.append(rng.uniform(-1.0, 1.0, (T_F, N_AGENTS, 2)))
-        v.append(rng.uniform(-1.0, 1.0, (T_F + 1, N_AGENTS, 1)))
+        x0.append(x0_hat + scenario.x0_box * rng.random((n_agents, n)))
+        w.append(rng.uniform(-1.0, 1.0, (t_f, n_agents, n)))
+        v.append(rng.uniform(-1.0, 1.0, (t_f + 1, n_agents, p)))
     return Draw(np.array(x0), np.array(w), np.array(v))
 
 
 @dataclass(frozen=True)
 class ClosedLoopRun:
-    """Trajectories of a batch of closed-loop runs, k = 0..T_F.
+    """Trajectories of a batch of closed-loop runs, k = 0..T_f.
 
     Attributes
     ----------
@@ -170,75 +264,82 @@ class ClosedLoopRun:
         e = self.error
         return np.einsum("...i,...i->...", e, np.linalg.solve(self.P, e[..., None])[..., 0])
 
+    @property
+    def trace(self) -> np.ndarray:
+        """trace P_{k|k} for every run, step and agent; (R, T+1, N)."""
+        return np.trace(self.P, axis1=-2, axis2=-1)
+
     def table1_metrics(self) -> tuple[np.ndarray, np.ndarray]:
-        """Mean and RMS of |delta_bar_k| over k = 0..T_F, per run (Table 1)."""
+        """Mean and RMS of |delta_bar_k| over k = 0..T_f, per run (Table 1)."""
         return self.delta_bar.mean(axis=-1), np.sqrt((self.delta_bar**2).mean(axis=-1))
 
 
 def simulate(
-    setting: DisturbanceSetting = SETTINGS[0], seed: int = 1, n_runs: int = 1,
+    setting: DisturbanceSetting | None = None, seed: int = 1, n_runs: int = 1,
     method: str = "closed_form", draws: Draw | None = None, progress: bool = False,
-    adjacency: np.ndarray = ADJACENCY,
+    adjacency: np.ndarray | None = None, scenario: SetMembershipSettings = DEFAULTS,
 ) -> ClosedLoopRun:
     """Closed loop of Sec. 5 for `n_runs` runs, vectorized over runs and agents.
 
     Parameters
     ----------
-    setting : DisturbanceSetting
-        Disturbance amplitudes and filter bounds (a Table 1 row).
+    setting : DisturbanceSetting, optional
+        Disturbance amplitudes and filter bounds (a Table 1 row; default: the figure row).
     seed, n_runs : int
         Random draws (see :func:`draw`); ignored if `draws` is given.
     method : {"sdp", "closed_form"}
         Filter implementation (:mod:`mascore.set_membership`).
-    adjacency : (N, N) array
-        Interaction graph (default: eq. (24)); any other must satisfy Assumption 4
-        and Lemma 2 with the example's circle (checked).
+    adjacency : (N, N) array, optional
+        Interaction graph (default: the settings', eq. (24)); any other must satisfy
+        Assumption 4 and Lemma 2 with the example's circle (checked).
+    scenario : SetMembershipSettings
+        Everything else: model, graph, initial conditions, horizon (default: the paper's).
     """
-    des = design() if adjacency is ADJACENCY else sync.design_synchronization(
-        A, B, Q_RICCATI, adjacency, PINNING, C0, R0)
-    draws = draws if draws is not None else draw(seed, n_runs)
-    R = draws.x0.shape[0]
-    agent = np.arange(1, N_AGENTS + 1)  # 1-based labels in error messages, as in the paper
+    s = scenario
+    setting = s.figure_setting if setting is None else setting
+    adjacency = s.matrix("adjacency") if adjacency is None else np.asarray(adjacency, dtype=float)
+    des = design(s, adjacency)
+    draws = draws if draws is not None else draw(seed, n_runs, s)
+    A_, B_, C_, D_, G_, pin = (s.matrix(m) for m in ("A", "B", "C", "D", "G", "pinning"))
+    t_f = draws.w_unit.shape[1]
+    agent = np.arange(1, s.n_agents + 1)  # 1-based labels in error messages, as in the paper
     w = setting.alpha_w * draws.w_unit
     v = setting.alpha_v * draws.v_unit
-    Q, Rm = setting.Q, setting.R
     x = draws.x0.copy()
-    c = np.broadcast_to(X0_HAT, x.shape).copy()
-    P = np.broadcast_to(P0, (*x.shape, 2)).copy()
-    leader = LEADER_X0.copy()
+    c = np.broadcast_to(s.matrix("x0_hat"), x.shape).copy()
+    P = np.broadcast_to(s.matrix("P0"), (*x.shape, x.shape[-1])).copy()
+    leader = s.matrix("leader_x0")
     xs, xh, Ps, us, ls, xp, Pp = [], [], [], [], [], [], []
-    for k in progress_bar(range(T_F + 1), enabled=progress, desc=f"closed loop ({method})", leave=False):
-        y = x @ C.T + v[:, k] @ D.T
+    for k in progress_bar(range(t_f + 1), enabled=progress, desc=f"closed loop ({method})", leave=False):
+        y = x @ C_.T + v[:, k] @ D_.T
         xp.append(c)
         Pp.append(P)
-        c, P, _ = smf.correct(c, P, y, C, D, Rm, method=method, step=k, agent=agent)
+        c, P, _ = smf.correct(c, P, y, C_, D_, setting.R, method=method, step=k, agent=agent)
         xs.append(x)
         xh.append(c)
         Ps.append(P)
         ls.append(leader)
-        if k == T_F:
+        if k == t_f:
             break
-        u = sync.local_control(c, leader, adjacency, PINNING, des.K, des.c)
-        x = x @ A.T + u @ B.T + w[:, k] @ G_DIST.T
-        c, P = smf.predict(c, P, A, G_DIST, Q, B=B, u=u, method=method, step=k, agent=agent)
-        leader = A @ leader
+        u = sync.local_control(c, leader, adjacency, pin, des.K, des.c)
+        x = x @ A_.T + u @ B_.T + w[:, k] @ G_.T
+        c, P = smf.predict(c, P, A_, G_, setting.Q, B=B_, u=u, method=method, step=k, agent=agent)
+        leader = A_ @ leader
         us.append(u)
     x, xhat, P = np.stack(xs, 1), np.stack(xh, 1), np.stack(Ps, 1)
     lead = np.array(ls)
-    delta = x - lead[None, :, None, :]
-    dnorm = np.sqrt(np.sum(delta**2, axis=(-1, -2)))
-    mbar = sync.mu_bar(ALPHA, MU, N_AGENTS)
-    return ClosedLoopRun(np.arange(T_F + 1), x, lead, X0_HAT.copy(), xhat, P, np.stack(xp, 1),
-                         np.stack(Pp, 1), np.stack(us, 1),
-                         dnorm, dnorm / mbar)
+    dnorm = np.sqrt(np.sum((x - lead[None, :, None, :]) ** 2, axis=(-1, -2)))
+    return ClosedLoopRun(np.arange(t_f + 1), x, lead, s.matrix("x0_hat"), xhat, P, np.stack(xp, 1),
+                         np.stack(Pp, 1), np.stack(us, 1), dnorm, dnorm / s.mu_bar)
 
 
 def table1_study(
-    seed: int = 1, n_runs: int = 100, progress: bool = False, adjacency: np.ndarray = ADJACENCY,
+    seed: int = 1, n_runs: int | None = None, progress: bool = False, adjacency: np.ndarray | None = None,
+    scenario: SetMembershipSettings = DEFAULTS,
 ) -> tuple[pd.DataFrame, list[ClosedLoopRun]]:
-    """Table 1 on the fast path: each row over `n_runs` seeds (common random numbers).
+    """Table 1 on the settings' filter path: each row over `n_runs` seeds (common random numbers).
 
-    `adjacency` is passed to :func:`simulate` (default: the graph of eq. (24)).
+    `n_runs` defaults to ``scenario.n_runs``; `adjacency` is passed to :func:`simulate`.
 
     Returns
     -------
@@ -246,99 +347,195 @@ def table1_study(
         and the spread (mean, std, 5/50/95 % quantiles, min, max) over the runs.
     runs : the :class:`ClosedLoopRun` of each row.
     """
-    draws = draw(seed, n_runs)
+    n_runs = scenario.n_runs if n_runs is None else n_runs
+    draws = draw(seed, n_runs, scenario)
     rows, runs = [], []
-    for i, s in enumerate(progress_bar(SETTINGS, enabled=progress, desc="Table 1")):
-        run = simulate(s, draws=draws, method="closed_form", adjacency=adjacency)
-        runs.append(run)
-        mean, rms = run.table1_metrics()
+    for i, s in enumerate(progress_bar(scenario.rows, enabled=progress, desc="Table 1")):
+        run_ = simulate(s, draws=draws, method=scenario.table_method, adjacency=adjacency, scenario=scenario)
+        runs.append(run_)
+        mean, rms = run_.table1_metrics()
         row = {"row": i + 1, "alpha_w": s.alpha_w, "alpha_v": s.alpha_v, "Q": f"{s.q:g} I_2", "R": f"{s.r:g}",
                "paper_mean": s.paper_mean, "paper_rms": s.paper_rms, "n_runs": n_runs,
                "mean_run0": mean[0], "rms_run0": rms[0]}
         for name, vals in (("mean", mean), ("rms", rms)):
             q05, q50, q95 = np.quantile(vals, [0.05, 0.5, 0.95])
-            row |= {f"{name}_avg": vals.mean(), f"{name}_std": vals.std(ddof=1), f"{name}_q05": q05,
-                    f"{name}_q50": q50, f"{name}_q95": q95, f"{name}_min": vals.min(), f"{name}_max": vals.max()}
+            row |= {f"{name}_avg": vals.mean(), f"{name}_std": vals.std(ddof=1) if n_runs > 1 else 0.0,
+                    f"{name}_q05": q05, f"{name}_q50": q50, f"{name}_q95": q95,
+                    f"{name}_min": vals.min(), f"{name}_max": vals.max()}
         rows.append(row)
     return pd.DataFrame(rows), runs
 
 
+def table1_view(table: pd.DataFrame) -> pd.DataFrame:
+    """Table 1 for reading: per row the paper's value, ours (run 0) and the 5-95 % range over the seeds.
+
+    Numbers as the book prints them (:func:`mascore.ledger.format_number`, five significant digits, as
+    the paper's 1.1985); values in state units. Two header levels keep the columns narrow.
+    """
+    def fmt(x: float) -> str:
+        return format_number(x, 5)
+
+    out = {("setting", "α_w = α_v"): table["alpha_w"].map(fmt),
+           ("setting", "Q"): table["Q"].str.replace("_2", "₂"), ("setting", "R"): table["R"]}
+    for metric, label in (("mean", "mean"), ("rms", "RMS")):
+        out[(label, "paper")] = table[f"paper_{metric}"].map(fmt)
+        out[(label, "ours, run 0")] = table[f"{metric}_run0"].map(fmt)
+        out[(label, "5-95 % of seeds")] = [f"{fmt(a)}–{fmt(b)}" for a, b in
+                                           zip(table[f"{metric}_q05"], table[f"{metric}_q95"])]
+    return pd.DataFrame(out).set_axis(pd.Index(table["row"], name="row"))
+
+
 def noise_free_metrics(
-    x0: np.ndarray, adjacency: np.ndarray = ADJACENCY, c: float | None = None, leader_shift: int = 0,
-    first_k: int = 0,
+    x0: np.ndarray, adjacency: np.ndarray | None = None, c: float | None = None, leader_shift: int = 0,
+    first_k: int = 0, scenario: SetMembershipSettings = DEFAULTS,
 ) -> tuple[float, float]:
     """Table 1's mean and RMS of ``|delta_k| / mu_bar`` without disturbances and with exact estimates.
 
     The law of Sec. 4.2 on the true states (``w = v = 0``, ``xhat = x``), i.e. the
-    transient ``A_c^k delta_0`` of eq. (14), averaged over ``k = first_k .. first_k + T_F``.
+    transient ``A_c^k delta_0`` of eq. (14), averaged over ``k = first_k .. first_k + T_f``.
 
     Parameters
     ----------
     x0 : (N, 2) true initial states
-    adjacency : (N, N) interaction graph (default: eq. (24))
+    adjacency : (N, N) interaction graph (default: the settings', eq. (24))
     c : coupling gain (default: Lemma 2's ``1 / c0`` = 1.5)
     leader_shift : the law uses ``x^(0)_{k + leader_shift}`` instead of ``x^(0)_k``
     first_k : first time step of the average (0 in our reading)
     """
-    des = design()
+    s = scenario
+    adjacency = s.matrix("adjacency") if adjacency is None else np.asarray(adjacency, dtype=float)
+    des = design(s)
     c = des.c if c is None else float(c)
-    lead_op = np.linalg.matrix_power(A, leader_shift) if leader_shift >= 0 else np.linalg.matrix_power(A.T, -leader_shift)
-    x, lead, norms = np.asarray(x0, dtype=float), LEADER_X0.copy(), []
-    for _ in range(first_k + T_F + 1):
+    A_, B_ = s.matrix("A"), s.matrix("B")
+    # A is orthogonal in the example, so A^T moves the leader back
+    lead_op = np.linalg.matrix_power(A_ if leader_shift >= 0 else A_.T, abs(leader_shift))
+    x, lead, norms = np.asarray(x0, dtype=float), s.matrix("leader_x0"), []
+    for _ in range(first_k + s.t_f + 1):
         norms.append(np.linalg.norm(x - lead))
-        u = sync.local_control(x, lead_op @ lead, adjacency, PINNING, des.K, c)
-        x = x @ A.T + u @ B.T
-        lead = A @ lead
-    s = np.array(norms[first_k:]) / sync.mu_bar(ALPHA, MU, N_AGENTS)
-    return float(s.mean()), float(np.sqrt((s**2).mean()))
+        u = sync.local_control(x, lead_op @ lead, adjacency, s.matrix("pinning"), des.K, c)
+        x = x @ A_.T + u @ B_.T
+        lead = A_ @ lead
+    d = np.array(norms[first_k:]) / s.mu_bar
+    return float(d.mean()), float(np.sqrt((d**2).mean()))
 
 
-def table1_readings(x0: np.ndarray | None = None) -> pd.DataFrame:
+#: Name of the reversed-edges reading in :func:`table1_readings`.
+REVERSED = "edges reversed (adjacency transposed)"
+
+
+def table1_readings(x0: np.ndarray | None = None, scenario: SetMembershipSettings = DEFAULTS) -> pd.DataFrame:
     """Other readings of the paper tried against Table 1 row 1 (noise-free transient, see :func:`noise_free_metrics`).
 
     ``x0`` defaults to the centre of the boxes the true initial states are drawn from.
     (A is orthogonal, so ``A^T = A^{-1}`` moves the leader one step back.)
     """
-    x0 = X0_HAT + 0.5 * X0_BOX if x0 is None else np.asarray(x0, dtype=float)
+    s = scenario
+    x0_hat = s.matrix("x0_hat")
+    x0 = x0_hat + 0.5 * s.x0_box if x0 is None else np.asarray(x0, dtype=float)
     readings = [
         ("as printed (ours)", dict(x0=x0)),
-        ("x_0 = xhat_0 (lower box corner)", dict(x0=X0_HAT)),
-        ("x_0 = xhat_0 + 1 (upper box corner)", dict(x0=X0_HAT + X0_BOX)),
-        ("edges reversed (adjacency transposed)", dict(x0=x0, adjacency=ADJACENCY.T)),
+        ("x_0 = xhat_0 (lower box corner)", dict(x0=x0_hat)),
+        ("x_0 = xhat_0 + 1 (upper box corner)", dict(x0=x0_hat + s.x0_box)),
+        (REVERSED, dict(x0=x0, adjacency=s.matrix("adjacency").T)),
         ("coupling gain c = 1", dict(x0=x0, c=1.0)),
         ("leader one step ahead in the law", dict(x0=x0, leader_shift=1)),
         ("leader one step behind in the law", dict(x0=x0, leader_shift=-1)),
         ("average over k = 1..61 (k = 0 left out)", dict(x0=x0, first_k=1)),
     ]
-    s = SETTINGS[0]
+    row1 = s.rows[0]
     rows = []
     for name, kw in readings:
-        mean, rms = noise_free_metrics(**kw)
+        mean, rms = noise_free_metrics(**kw, scenario=s)
         rows.append({"reading": name, "mean": mean, "rms": rms,
-                     "mean_rel_diff": mean / s.paper_mean - 1, "rms_rel_diff": rms / s.paper_rms - 1})
+                     "mean_rel_diff": mean / row1.paper_mean - 1, "rms_rel_diff": rms / row1.paper_rms - 1})
     return pd.DataFrame(rows)
+
+
+# ---------------------------------------------------------------- the study: one run, everything else from it
+
+
+@dataclass(frozen=True)
+class SetMembershipResult:
+    """Everything the figures, tables and claims of the study need (see :func:`run`).
+
+    Attributes
+    ----------
+    settings : the settings of the run;  seed : its seed
+    design : Lemma 2's design (:class:`mascore.synchronization.SyncDesign`)
+    figure_run : run 0 of the figure row on ``settings.figure_method`` (Figs. 2-6)
+    figure_twin : the same draw on the other filter path (SDP <-> closed form)
+    table, runs : :func:`table1_study` (the graph as printed)
+    table_reversed : the same study with the edges of eq. (24) reversed
+    readings : :func:`table1_readings`
+    """
+
+    settings: SetMembershipSettings
+    seed: int
+    design: sync.SyncDesign
+    figure_run: ClosedLoopRun
+    figure_twin: ClosedLoopRun
+    table: pd.DataFrame
+    runs: tuple[ClosedLoopRun, ...]
+    table_reversed: pd.DataFrame
+    readings: pd.DataFrame
+
+    @property
+    def sdp_run(self) -> ClosedLoopRun:
+        """The figure row's run 0 on the SDP path."""
+        return self.figure_run if self.settings.figure_method == "sdp" else self.figure_twin
+
+    @property
+    def closed_form_run(self) -> ClosedLoopRun:
+        """The figure row's run 0 on the closed-form path."""
+        return self.figure_twin if self.settings.figure_method == "sdp" else self.figure_run
+
+
+def run(settings: SetMembershipSettings = DEFAULTS, seed: int = 1, progress: bool = False) -> SetMembershipResult:
+    """The study, once: the figure run on both filter paths, Table 1 as printed and with edges reversed.
+
+    Parameters
+    ----------
+    settings : SetMembershipSettings
+        Every parameter (default: the paper's example, :data:`DEFAULTS`).
+    seed : int
+        Seed of every random draw (run r of a study uses ``SeedSequence(seed).spawn(n)[r]``).
+    progress : bool
+        Show progress bars.
+    """
+    if settings.figure_method not in smf.METHODS or settings.table_method not in smf.METHODS:
+        raise ValueError(f"figure_method and table_method must be in {smf.METHODS}; got "
+                         f"{settings.figure_method!r}, {settings.table_method!r}")
+    twin_method = next(m for m in smf.METHODS if m != settings.figure_method)
+    kw = dict(seed=seed, n_runs=1, scenario=settings)
+    figure_run = simulate(method=settings.figure_method, progress=progress, **kw)
+    figure_twin = simulate(method=twin_method, **kw)
+    table, runs = table1_study(seed, progress=progress, scenario=settings)
+    table_reversed, _ = table1_study(seed, adjacency=settings.matrix("adjacency").T, scenario=settings)
+    return SetMembershipResult(settings, int(seed), design(settings), figure_run, figure_twin, table,
+                               tuple(runs), table_reversed, table1_readings(scenario=settings))
 
 
 # ---------------------------------------------------------------- figures
 
 
-def plot_fig1(des: sync.SyncDesign | None = None) -> plt.Figure:
+def plot_fig1(des: sync.SyncDesign | None = None, scenario: SetMembershipSettings = DEFAULTS) -> plt.Figure:
     """Fig. 1: (a) the interaction graph with the leader, (b) eigenvalues of Gamma in C(c0, r0)."""
-    des = des if des is not None else design()
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9.5, 4.0))
-    ang = np.pi / 2 - np.arange(N_AGENTS) * 2 * np.pi / N_AGENTS
+    des = des if des is not None else design(scenario)
+    adjacency, pinning, n = scenario.matrix("adjacency"), scenario.matrix("pinning"), scenario.n_agents
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(8.0, 3.8), layout="constrained")
+    ang = np.pi / 2 - np.arange(n) * 2 * np.pi / n
     pos = np.c_[np.cos(ang), np.sin(ang)]
     lead = np.array([0.0, 2.0])
-    colors = agent_colors(N_AGENTS)
+    colors = agent_colors(n)
     arrow = dict(arrowstyle="-|>", color="0.35", lw=1.2, shrinkA=13, shrinkB=13)
-    for i, j in zip(*np.nonzero(ADJACENCY)):
+    for i, j in zip(*np.nonzero(adjacency)):
         ax1.annotate("", xy=pos[i], xytext=pos[j], arrowprops=arrow)
-    for i in np.flatnonzero(PINNING):
+    for i in np.flatnonzero(pinning):
         ax1.annotate("", xy=pos[i], xytext=lead, arrowprops=arrow | {"ls": "--"})
-        ax1.text(*(0.5 * (pos[i] + lead) + [0.12, 0]), f"$g_{i + 1}={PINNING[i]:g}$", fontsize=8)
+        ax1.text(*(0.5 * (pos[i] + lead) + [0.12, 0]), f"$g_{i + 1}={pinning[i]:g}$", fontsize=8)
     ax1.plot(*lead, "s", ms=20, color="k")
     ax1.text(*lead, "0", color="w", ha="center", va="center")
-    for i in range(N_AGENTS):
+    for i in range(n):
         ax1.plot(*pos[i], "o", ms=20, color=colors[i])
         ax1.text(*pos[i], str(i + 1), color="w", ha="center", va="center")
     ax1.set_xlim(-1.6, 1.6)
@@ -347,251 +544,408 @@ def plot_fig1(des: sync.SyncDesign | None = None) -> plt.Figure:
     ax1.axis("off")
     ax1.set_title("(a) interaction graph (0 = leader)")
     th = np.linspace(0, 2 * np.pi, 400)
-    ax2.plot(des.c0 + des.r0 * np.cos(th), des.r0 * np.sin(th), "k--", lw=1, label=f"$C(c_0, r_0)$, $c_0$={des.c0:.3g}, $r_0$={des.r0:g}")
+    ax2.plot(des.c0 + des.r0 * np.cos(th), des.r0 * np.sin(th), "k--", lw=1,
+             label=f"$C(c_0, r_0)$, $c_0$ = {des.c0:.3g}, $r_0$ = {des.r0:g}")
     ax2.plot(des.eigs.real, des.eigs.imag, "x", ms=9, mew=2, color="C3", label=r"eigenvalues $\Lambda_i$ of $\Gamma$")
     ax2.set_xlabel("real part")
     ax2.set_ylabel("imaginary part")
     ax2.set_aspect("equal")
-    ax2.legend(loc="lower left", fontsize=7)
+    ax2.set_ylim(-1.0, 0.95)
+    ax2.legend(loc="lower center", fontsize=7)
     ax2.set_title(r"(b) eigenvalues of $\Gamma$")
-    fig.tight_layout()
     return fig
 
 
-def plot_fig2(run: ClosedLoopRun, des: sync.SyncDesign | None = None, k_max: int = 60) -> plt.Figure:
-    """Fig. 2: (a) leader and agent states, (b) |delta_bar_k| with the bound of eq. (21), (c) |A_c^k|."""
-    des = des if des is not None else design()
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7))
-    colors = agent_colors(N_AGENTS)
-    for comp, ax in enumerate(axes[0]):
-        for i in range(N_AGENTS):
+def plot_fig2(run: ClosedLoopRun, des: sync.SyncDesign | None = None, k_max: int | None = None,
+              scenario: SetMembershipSettings = DEFAULTS) -> plt.Figure:
+    """Fig. 2: (a) leader and agent states, (b) |delta_bar_k| with the bound of eq. (21), (c) |A_c^k|.
+
+    Panel (a) shows the two state components side by side, under one panel letter.
+    """
+    s = scenario
+    des = des if des is not None else design(s)
+    k_max = s.t_f if k_max is None else k_max
+    fig = plt.figure(figsize=(8.0, 6.4), layout="constrained")
+    top, bottom = fig.subfigures(2, 1)
+    colors = agent_colors(s.n_agents)
+    axes_a = top.subplots(1, 2, sharey=True)
+    for comp, ax in enumerate(axes_a):
+        for i in range(s.n_agents):
             ax.plot(run.k, run.x[0, :, i, comp], color=colors[i], label=f"agent {i + 1}")
         ax.plot(run.k, run.leader[:, comp], "k--", label="leader")
         ax.set_xlabel("time step k")
         ax.set_ylabel(f"$x_{{{comp + 1}k}}$ (state units)")
-        ax.set_title(f"(a) true states, component {comp + 1}")
-    axes[0, 0].legend(ncol=2)
-    bound = sync.bound_eq21(des.B_c, G_DIST, P0_BOUND, Q_BAR)
-    ax = axes[1, 0]
-    ax.plot(run.k, run.delta_bar[0], label=r"$|\bar\delta_k|$")
-    ax.axhline(bound, color="k", ls=":", label=f"bound eq. (21) = {bound:.3f}")
-    ax.set_xlabel("time step k")
-    ax.set_ylabel(r"$|\bar\delta_k|$ (state units)")
-    ax.set_title("(b) normalized global disagreement error")
-    ax.legend()
-    ax = axes[1, 1]
+        ax.set_title(f"component {comp + 1}")
+    top.suptitle("(a) true states of the leader and the agents", fontsize="medium")
+    top.legend(*axes_a[0].get_legend_handles_labels(), loc="outside right center")  # beside, not over, the data
+    ax_b, ax_c = bottom.subplots(1, 2)
+    bound = sync.bound_eq21(des.B_c, s.matrix("G"), s.p0, s.q_bar)
+    ax_b.plot(run.k, run.delta_bar[0], label=r"$|\bar\delta_k|$")
+    ax_b.axhline(bound, color="k", ls=":", label=f"bound of eq. (21) = {bound:.3f}")
+    ax_b.set_xlabel("time step k")
+    ax_b.set_ylabel(r"$|\bar\delta_k|$ (state units)")
+    ax_b.set_title("(b) normalized global disagreement error")
+    ax_b.legend(loc="upper right")
     kk = np.arange(k_max + 1)
-    ax.semilogy(kk, sync.power_norms(des.A_c, k_max), label=r"$|A_c^k|$")
-    ax.semilogy(kk, ALPHA * MU**kk, "k--", label=rf"$\alpha\mu^k$ = {ALPHA} $\cdot$ {MU}$^k$")
-    ax.set_xlabel("k")
-    ax.set_ylabel("induced 2-norm")
-    ax.set_title(r"(c) $|A_c^k|$ and its bound")
-    ax.legend()
-    fig.tight_layout()
+    ax_c.semilogy(kk, sync.power_norms(des.A_c, k_max), label=r"$\|A_c^k\|$")
+    ax_c.semilogy(kk, s.alpha * s.mu**kk, "k--", label=rf"$\alpha\mu^k$ = {s.alpha:g} $\cdot$ {s.mu:g}$^k$")
+    ax_c.set_xlabel("time step k")
+    ax_c.set_ylabel("induced 2-norm")
+    ax_c.set_title(r"(c) $\|A_c^k\|$ and its upper bound")
+    ax_c.legend(loc="lower left")
     return fig
 
 
 def plot_fig3_4(run: ClosedLoopRun, agents: tuple[int, int]) -> plt.Figure:
     """Figs. 3-4: errors e_{jk} of two agents (1-based) with the bounds +-sqrt(P_jj)."""
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
+    fig, axes = plt.subplots(2, 2, figsize=(8.0, 5.6), sharex=True, layout="constrained")
     for row, a in enumerate(agents):
         i = a - 1
         e = run.error[0, :, i]
         for comp in range(2):
             ax = axes[row, comp]
             s = np.sqrt(run.P[0, :, i, comp, comp])
-            ax.fill_between(run.k, -s, s, color="C0", alpha=0.2, lw=0, label=r"$\pm\sqrt{(P_{k|k})_{jj}}$")
-            ax.plot(run.k, e[:, comp], "C3", label=f"$e_{{{comp + 1}k}}$")
-            ax.set_ylabel(f"agent {a}: $e_{{{comp + 1}k}}$ (state units)")
-            ax.set_xlabel("time step k")
-        axes[row, 0].legend(loc="upper right")
-    fig.tight_layout()
+            ax.fill_between(run.k, -s, s, color="C0", alpha=0.2, lw=0, label=r"bound $\pm\sqrt{(P_{k|k})_{jj}}$")
+            ax.plot(run.k, e[:, comp], "C3", label=r"error $e_{jk}$")
+            ax.set_title(f"agent {a}, component {comp + 1}")
+            ax.set_ylabel(f"$e_{{{comp + 1}k}}^{{({a})}}$ (state units)")
+    for ax in axes[1]:
+        ax.set_xlabel("time step k")
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=2)
     return fig
 
 
 def plot_fig5(run: ClosedLoopRun) -> plt.Figure:
     """Fig. 5: estimation error norms |e_k| of the four agents."""
-    fig, ax = plt.subplots(figsize=(6.4, 4))
-    colors = agent_colors(N_AGENTS)
-    for i in range(N_AGENTS):
+    fig, ax = plt.subplots(figsize=(6.4, 3.8), layout="constrained")
+    n = run.x.shape[2]
+    colors = agent_colors(n)
+    for i in range(n):
         ax.plot(run.k, np.linalg.norm(run.error[0, :, i], axis=-1), color=colors[i], label=f"agent {i + 1}")
     ax.set_xlabel("time step k")
-    ax.set_ylabel(r"$|e_k^{(i)}|$ (state units)")
-    ax.legend()
+    ax.set_ylabel(r"$\|e_k^{(i)}\|$ (state units)")
+    ax.legend(loc="upper right")
     return fig
 
 
-def plot_fig6(run: ClosedLoopRun) -> plt.Figure:
-    """Fig. 6: trace of the correction shape matrices P_{k|k}^(i)."""
-    fig, ax = plt.subplots(figsize=(6.4, 4))
-    colors = agent_colors(N_AGENTS)
-    tr = np.trace(run.P[0], axis1=-2, axis2=-1)
-    for i in range(N_AGENTS):
-        ax.plot(run.k, tr[:, i], color=colors[i], label=f"agent {i + 1}")
-    ax.axhline(np.trace(P0), color="0.5", ls=":", label=r"trace $P_0$ = 4")
+#: Line styles and markers that keep four coinciding curves apart (Fig. 6).
+_COINCIDENT = (("-", "o", 3.4), ("--", "s", 2.4), ("-.", "^", 1.6), (":", "x", 1.2))
+
+
+def plot_fig6(run: ClosedLoopRun, scenario: SetMembershipSettings = DEFAULTS) -> plt.Figure:
+    """Fig. 6: trace of the correction shape matrices P_{k|k}^(i).
+
+    The four traces coincide (same P0, Q, R for every agent); each agent gets its own
+    line style, width and staggered markers so that all four stay visible.
+    """
+    fig, ax = plt.subplots(figsize=(6.4, 3.8), layout="constrained")
+    tr = run.trace[0]
+    n = tr.shape[1]
+    colors = agent_colors(n)
+    for i in range(n):
+        ls, marker, lw = _COINCIDENT[i % len(_COINCIDENT)]
+        ax.plot(run.k, tr[:, i], color=colors[i], ls=ls, lw=lw, marker=marker, ms=5, mfc="none",
+                markevery=(2 * i, 2 * n), label=f"agent {i + 1}")
+    tr0 = float(np.trace(scenario.matrix("P0")))
+    ax.axhline(tr0, color="0.5", ls=":", lw=1, label=f"trace $P_0$ = {tr0:g}")
+    spread = float(np.ptp(tr, axis=1).max())
+    ax.text(0.98, 0.8, f"the four traces coincide\n(largest gap between agents: {format_number(spread)})",
+            transform=ax.transAxes, ha="right", va="center", fontsize=8)
     ax.set_xlabel("time step k")
     ax.set_ylabel(r"trace $P_{k|k}^{(i)}$ (state units$^2$)")
-    ax.legend()
+    ax.legend(loc="center right", bbox_to_anchor=(1.0, 0.45), ncol=2)
     return fig
 
 
 # ---------------------------------------------------------------- ledger
 
 
-def reproduce(out_dir: Path, seed: int) -> list[Claim]:
-    """Figs. 1-6 (SDP path), Table 1 (fast path, 100 seeds per row) and the ledger."""
-    out_dir = Path(out_dir)
-    use_style()
-    des = design()
-    # figures: run 0 of `seed` on the SDP path (the paper's solver route)
-    run_sdp = simulate(SETTINGS[0], seed=seed, n_runs=1, method="sdp", progress=True)
-    figs = {"fig1": plot_fig1(des), "fig2": plot_fig2(run_sdp, des), "fig3": plot_fig3_4(run_sdp, (1, 2)),
-            "fig4": plot_fig3_4(run_sdp, (3, 4)), "fig5": plot_fig5(run_sdp), "fig6": plot_fig6(run_sdp)}
-    for name, fig in figs.items():
-        save_figure(fig, out_dir / "figures" / f"{name}.png")
-    table, runs = table1_study(seed, n_runs=100, progress=True)
-    # the same study with the edges of eq. (24) reversed: a reading that fits the means (see the notes)
-    table_rev, _ = table1_study(seed, n_runs=100, adjacency=ADJACENCY.T)
-    (out_dir / "tables").mkdir(parents=True, exist_ok=True)
-    table.to_csv(out_dir / "tables" / "table1.csv", index=False, float_format="%.6g")
-    table_rev.to_csv(out_dir / "tables" / "table1_edges_reversed.csv", index=False, float_format="%.6g")
-    return ledger_claims(des, run_sdp, table, runs, seed, table_reversed=table_rev)
+def _pct(x: float) -> str:
+    """A signed relative difference in percent (``+9.9 %``)."""
+    return f"{100 * x:+.1f} %"
 
 
-def ledger_claims(
-    des: sync.SyncDesign, run_sdp: ClosedLoopRun, table: pd.DataFrame, runs: list[ClosedLoopRun], seed: int,
-    table_reversed: pd.DataFrame | None = None,
-) -> list[Claim]:
-    """The ledger claims from the design, the SDP figure run and the Table 1 study (see :func:`reproduce`).
+def _percent_range(values: pd.Series) -> str:
+    return f"{_pct(values.min())} to {_pct(values.max())}"
 
-    `table_reversed`, if given, is :func:`table1_study` with ``adjacency=ADJACENCY.T``; its run-0
-    values are quoted in the Table 1 notes.
-    """
-    n_runs = int(table["n_runs"].iloc[0])
-    claims = [
+
+def _complex(z: complex) -> str:
+    sign = "+" if z.imag >= 0 else "−"
+    if abs(z.imag) < 1e-12:
+        return format_number(z.real)
+    return f"{format_number(z.real)} {sign} {format_number(abs(z.imag))}j"
+
+
+def _design_claims(des: sync.SyncDesign, s: SetMembershipSettings) -> list[Claim]:
+    """Lemma 2's r, the coupling gain, the bound of eq. (21) and Fig. 2(c)."""
+    eigs = ", ".join(_complex(z) for z in des.eigs)
+    dist = ", ".join(format_number(d) for d in np.abs(des.eigs - des.c0))
+    bound = sync.bound_eq21(des.B_c, s.matrix("G"), s.p0, s.q_bar)
+    ratio = sync.exponential_bound_ratio(des.A_c, s.alpha, s.mu, s.k_max_check)
+    return [
         Claim("bhattacharjee2021/lemma2-r", "Sec. 5, text", "Lemma 2's r for the example (Q = 0.1 I, B = I).",
               1.0, des.r, {"abs": 1e-9},
-              f"P of eq. (16) solved by scipy's DARE with zero input weight (residual {des.residual:.1e}); with "
-              "B = I it equals Q, and r = 1 exactly."),
+              f"P of eq. (16) solved by scipy's DARE with zero input weight (residual "
+              f"{format_number(des.residual)}); with B = I it equals Q, and r = 1 exactly."),
         Claim("bhattacharjee2021/coupling-gain-c", "Sec. 5, text",
               "Coupling gain c = 1/c0 with all eigenvalues of Gamma in C(2/3, 0.6) and r0/c0 = 0.9 < r.",
               1.5, des.c, {"abs": 1e-12},
-              f"Eigenvalues of Gamma {np.round(des.eigs, 4).tolist()} all lie in the open circle "
-              f"(distances to c0: {np.round(np.abs(des.eigs - des.c0), 4).tolist()} < 0.6); rho(A_c) = {des.rho:.4f}."),
+              f"Eigenvalues of Gamma: {eigs}; their distances to c0, {dist}, are all below r0 = "
+              f"{format_number(des.r0)}; rho(A_c) = {format_number(des.rho)}."),
+        Claim("bhattacharjee2021/bound-eq21", "Sec. 5, text (Fig. 2(b))",
+              "Conservative limit bound |B_c| sqrt(p0) + |G| sqrt(q_bar) of eq. (21), p0 = 2, q_bar = 0.1.",
+              2.462, bound, {"abs": 5e-4},
+              f"|B_c| = {format_number(np.linalg.norm(des.B_c, 2), 6)} (spectral norm), |G| = 1 (disturbance "
+              "matrix I_2); the paper prints three decimals.", unit=_STATE),
+        Claim.qualitative(
+            "bhattacharjee2021/fig2c-Ac-bound", "Fig. 2(c)", "|A_c^k| <= 1.1 * 0.9^k for all k.",
+            {"largest |A_c^k| / (α μ^k)": ratio, "last k checked": s.k_max_check,
+             f"smallest α for μ = {s.mu:g}": sync.fit_alpha(des.A_c, s.mu)}, ratio <= 1.0,
+            f"Checked for k = 0..{s.k_max_check} (0.9^{s.k_max_check} ≈ "
+            f"{format_number(s.mu ** s.k_max_check, 1)}, and rho(A_c) = {format_number(des.rho)} < 0.9).",
+            rule=f"max over k = 0..{s.k_max_check} of |A_c^k| / (α μ^k) ≤ 1"),
     ]
-    bound = sync.bound_eq21(des.B_c, G_DIST, P0_BOUND, Q_BAR)
-    claims.append(Claim(
-        "bhattacharjee2021/bound-eq21", "Sec. 5, text (Fig. 2(b))",
-        "Conservative limit bound |B_c| sqrt(p0) + |G| sqrt(q_bar) of eq. (21), p0 = 2, q_bar = 0.1.",
-        2.462, bound, {"abs": 5e-4},
-        f"|B_c| = {np.linalg.norm(des.B_c, 2):.5f} (spectral norm), |G| = 1 (disturbance matrix I_2); "
-        "the paper prints three decimals."))
-    kmax = 400
-    ratio = sync.exponential_bound_ratio(des.A_c, ALPHA, MU, kmax)
-    claims.append(Claim.qualitative(
-        "bhattacharjee2021/fig2c-Ac-bound", "Fig. 2(c)", "|A_c^k| <= 1.1 * 0.9^k for all k.",
-        {"max_ratio": ratio, "k_max": kmax, "smallest_alpha_for_mu_0.9": sync.fit_alpha(des.A_c, MU)}, ratio <= 1.0,
-        f"Checked for k = 0..{kmax} (0.9^{kmax} ~ 5e-19, and rho(A_c) = {des.rho:.4f} < 0.9)."))
-    tr_sdp_run = np.trace(run_sdp.P[0], axis1=-2, axis2=-1).mean(axis=-1)
-    tr_end = float(tr_sdp_run[-1])
-    trace_settle = float(np.ptp(tr_sdp_run[-11:]))
-    claims.append(Claim(
+
+
+def _fig6_claim(result: SetMembershipResult) -> Claim:
+    tr_mean = result.sdp_run.trace[0].mean(axis=-1)
+    tr_end, settle = float(tr_mean[-1]), float(np.ptp(tr_mean[-11:]))
+    tr0 = float(np.trace(result.settings.matrix("P0")))
+    return Claim(
         "bhattacharjee2021/fig6-trace-limit", "Fig. 6 and Sec. 5, text",
         "Trace of the correction shape matrices settles at about 1.5 (from trace P_0 = 4).",
         1.5, tr_end, {"abs": 0.05},
-        f"Ours: trace P_{{k|k}} at k = {T_F}, mean over the four agents, SDP path; the paper reads the value "
-        f"off its plot ('approximately 1.5'; its {4 / 1.5:.3f}-fold decrease is 4 / 1.5, so it carries no further "
-        f"digits); ours is a {4 / tr_end:.3f}-fold decrease. The gap of {tr_end - 1.5:.3f} is not numerical: the trace "
-        f"does not depend on the noise draw (the SDPs use only P, Q, R), has settled by k = 10 (change over the last "
-        f"10 steps {trace_settle:.1e}), and the closed-form twins give the same value (claim sdp-closed-form-agree). "
-        "We read the paper's 1.5 as a rounded reading of its plot and keep the 0.05 tolerance fixed beforehand."))
-    # the noise-free transient |A_c^k delta_0| / mu_bar from run 0's initial states: what dominates Table 1
-    d0 = (runs[0].x[0, 0] - LEADER_X0).ravel()
-    transient = np.array([np.linalg.norm(np.linalg.matrix_power(des.A_c, k) @ d0) for k in range(T_F + 1)])
-    transient /= sync.mu_bar(ALPHA, MU, N_AGENTS)
-    tr_mean, tr_rms = transient.mean(), np.sqrt((transient**2).mean())
-    readings = table1_readings().set_index("reading")
+        f"Ours: trace P_{{k|k}} at k = {result.settings.t_f}, mean over the four agents, SDP path; a "
+        f"{format_number(tr0 / tr_end)}-fold decrease against the paper's {format_number(4 / 1.5)}-fold. The paper "
+        f"reads the value off its plot ('approximately 1.5'; its 2.667-fold decrease is 4 / 1.5, so it carries no "
+        f"further digits). The gap of {format_number(tr_end - 1.5)} is not numerical: the trace does not depend on "
+        f"the noise draw (the SDPs use only P, Q, R), has settled by k = 10 (change over the last 10 steps "
+        f"{format_number(settle, 2)}), and the closed-form twins give the same value (claim sdp-closed-form-agree). "
+        "We read the paper's 1.5 as a rounded reading of its plot and keep the 0.05 tolerance fixed beforehand.",
+        unit=_STATE2)
+
+
+def _table1_shared_notes(result: SetMembershipResult) -> str:
+    """The two paragraphs every Table 1 claim shares (shown once in the ledger)."""
+    s, des = result.settings, result.design
+    d0 = (result.runs[0].x[0, 0] - s.matrix("leader_x0")).ravel()
+    transient = np.array([np.linalg.norm(np.linalg.matrix_power(des.A_c, k) @ d0) for k in range(s.t_f + 1)])
+    transient /= s.mu_bar
+    row1 = s.rows[0]
+    draws = (
+        "Ours is run 0 of the seed: one uniform draw, the paper's kind of draw (it gives one unseeded MATLAB draw), "
+        f"on the {s.table_method.replace('_', '-')} filter path; the tolerance (5 %) was fixed before comparing. "
+        "The gap is systematic, not a draw effect: the spread over seeds is a few thousandths, and the metrics are "
+        f"dominated by the noise-free transient A_c^k delta_0 (alone, from run 0's initial states: mean "
+        f"{format_number(transient.mean())}, RMS {format_number(np.sqrt((transient**2).mean()))}), which the "
+        "paper's A_c, delta_0 and mu_bar fix.")
+    readings = result.readings.set_index("reading")
     within = (readings["mean_rel_diff"].abs() <= 0.05) & (readings["rms_rel_diff"].abs() <= 0.05)
-    rev_name = "edges reversed (adjacency transposed)"
-    others = readings.iloc[1:].drop(index=rev_name)
-    tried = "; ".join(f"{name} {r['mean']:.3f} / {r['rms']:.3f}" for name, r in others.iterrows())
-    tried += "; " + ("none is within 5 % on both" if not within[others.index].any()
-                     else f"within 5 % on both: {', '.join(others.index[within[others.index]])}")
-    rev = readings.loc[rev_name]
-    rev_note = (f"Reversing the edges of eq. (24) (adjacency transposed, an easy slip in the edge convention; Gamma keeps "
-                f"its eigenvalues, so Fig. 1(b) cannot tell) gives {rev['mean']:.3f} / {rev['rms']:.3f} noise-free")
-    if table_reversed is not None:
-        dm = table_reversed["mean_run0"] / table_reversed["paper_mean"] - 1
-        dr = table_reversed["rms_run0"] / table_reversed["paper_rms"] - 1
-        om = table["mean_run0"] / table["paper_mean"] - 1
-        orr = table["rms_run0"] / table["paper_rms"] - 1
-        rev_note += (f". The full study with reversed edges (run 0, tables/table1_edges_reversed.csv) puts the means "
-                     f"{dm.min():+.1%} to {dm.max():+.1%} and the RMS values {dr.min():+.1%} to {dr.max():+.1%} from "
-                     f"the paper's (as printed: means {om.min():+.1%} to {om.max():+.1%}, RMS {orr.min():+.1%} to "
-                     f"{orr.max():+.1%}): largest gap {max(dm.abs().max(), dr.abs().max()):.1%} with reversed edges "
-                     f"against {max(om.abs().max(), orr.abs().max()):.1%} as printed. Reversed edges fit the means but "
-                     "put every RMS value low where the printed graph puts it high, so neither graph matches both "
-                     "columns closely; the paper prints the Laplacian of eq. (24) explicitly, so we keep it and the "
-                     "verdicts are for it.")
-    else:
-        rev_note += ": closer on the mean, further on the RMS; we keep eq. (24) as printed."
-    for i, row in table.iterrows():
-        for metric in ("mean", "rms"):
+    others = readings.iloc[1:].drop(index=REVERSED)
+    tried = "; ".join(f"{name} {format_number(r['mean'])} / {format_number(r['rms'])}" for name, r in others.iterrows())
+    fits = others.index[within[others.index]]
+    tried += "; " + (f"within 5 % on both: {', '.join(fits)}" if len(fits) else "none is within 5 % on both")
+    rev, t, tr = readings.loc[REVERSED], result.table, result.table_reversed
+    dm, dr = tr["mean_run0"] / tr["paper_mean"] - 1, tr["rms_run0"] / tr["paper_rms"] - 1
+    om, orr = t["mean_run0"] / t["paper_mean"] - 1, t["rms_run0"] / t["paper_rms"] - 1
+    graph = (
+        f"Other readings tried on the noise-free transient, mean / RMS against row 1's "
+        f"{format_number(row1.paper_mean, 5)} / {format_number(row1.paper_rms, 5)}: {tried}. Reversing the edges of "
+        "eq. (24) (adjacency transposed, an easy slip in the edge convention; Gamma keeps its eigenvalues, so "
+        f"Fig. 1(b) cannot tell) gives {format_number(rev['mean'])} / {format_number(rev['rms'])} noise-free. The "
+        f"full study with reversed edges (run 0, table table1_edges_reversed) puts the means {_percent_range(dm)} "
+        f"and the RMS values {_percent_range(dr)} from the paper's (as printed: means {_percent_range(om)}, RMS "
+        f"{_percent_range(orr)}). Reversed edges fit the means but put every RMS value low where the printed graph "
+        "puts it high, so neither graph matches both columns closely; the paper prints the Laplacian of eq. (24) "
+        "explicitly, so we keep it and the verdicts are for it.")
+    return draws + "\n\n" + graph
+
+
+def _table1_claims(result: SetMembershipResult) -> list[Claim]:
+    """Six claims: mean and RMS of each row; one paragraph of numbers each, two shared paragraphs."""
+    shared = _table1_shared_notes(result)
+    claims = []
+    for i, row in result.table.iterrows():
+        rev = result.table_reversed.iloc[i]
+        for metric, name in (("mean", "Mean"), ("rms", "RMS")):
+            ours, paper = float(row[f"{metric}_run0"]), float(row[f"paper_{metric}"])
+            own = (f"Row {i + 1}, {name.lower() if metric == 'mean' else name}: run 0 gives {format_number(ours)} "
+                   f"({_pct(ours / paper - 1)}). Over {int(row['n_runs'])} seeds: mean "
+                   f"{format_number(row[f'{metric}_avg'])}, "
+                   f"std {format_number(row[f'{metric}_std'], 2)}, 5-95 % {format_number(row[f'{metric}_q05'])} to "
+                   f"{format_number(row[f'{metric}_q95'])}. With the edges reversed, run 0 gives "
+                   f"{format_number(rev[f'{metric}_run0'])} ({_pct(rev[f'{metric}_run0'] / paper - 1)}).")
             claims.append(Claim(
                 f"bhattacharjee2021/table1-row{i + 1}-{metric}", f"Table 1, row {i + 1}",
-                f"{'Mean' if metric == 'mean' else 'RMS'} of |delta_bar_k| over k = 0..60 with alpha_w = alpha_v = "
+                f"{name} of |delta_bar_k| over k = 0..{result.settings.t_f} with alpha_w = alpha_v = "
                 f"{row.alpha_w:g}, Q = {row.Q}, R = {row.R}.",
-                float(row[f"paper_{metric}"]), float(row[f"{metric}_run0"]), {"rel": 0.05},
-                f"Ours is run 0 (one uniform draw, the paper's kind of draw; closed-form filter path). Over "
-                f"{n_runs} seeds: mean {row[f'{metric}_avg']:.4f}, std {row[f'{metric}_std']:.4f}, 5-95% "
-                f"[{row[f'{metric}_q05']:.4f}, {row[f'{metric}_q95']:.4f}], range [{row[f'{metric}_min']:.4f}, "
-                f"{row[f'{metric}_max']:.4f}]. The paper gives one unseeded MATLAB draw; the tolerance (5 %) was "
-                "fixed before comparing. The gap is systematic, not a draw effect: the metrics are dominated by the "
-                f"noise-free transient A_c^k delta_0 (alone: mean {tr_mean:.4f}, RMS {tr_rms:.4f}), which the paper's "
-                "A_c, delta_0 and mu_bar fix. Other readings tried, noise-free mean / RMS against row 1's "
-                f"0.3706 / 1.1985: {tried}. {rev_note}"))
-    forms = [r.containment for r in runs] + [run_sdp.containment]
+                paper, ours, {"rel": 0.05}, own + "\n\n" + shared, unit=_STATE))
+    return claims
+
+
+def _filter_claims(result: SetMembershipResult) -> list[Claim]:
+    """Containment, Fig. 5's step of Corollary 1, and the SDPs against their closed-form twins."""
+    s, run_sdp = result.settings, result.sdp_run
+    s_n = s.n_runs
+    forms = [r.containment for r in result.runs] + [run_sdp.containment]
     worst = float(max(f.max() for f in forms))
-    n_checks = int(sum(f.size for f in forms))
-    claims.append(Claim.qualitative(
+    claims = [Claim.qualitative(
         "bhattacharjee2021/containment", "Figs. 3-4 and Sec. 5, text",
         "The true state lies in every agent's correction ellipsoid at every step.",
-        {"max_e_Pinv_e": worst, "n_checks": n_checks, "runs": 3 * n_runs + 1}, worst <= 1.0 + 1e-6,
-        f"e^T P_{{k|k}}^-1 e over all 3 x {n_runs} Table 1 runs (closed form) and the SDP figure run, all agents, "
-        "k = 0..60 (tolerance 1e-6 for the SDP solver accuracy)."))
-    # Fig. 5 / proof of Corollary 1: sup_k |e_k^(g)| <= |e_0^(g)| (stacked over agents)
-    def sup_over_e0(run):
-        e0 = np.linalg.norm(run.x[:, 0] - X0_HAT, axis=(-1, -2))
-        return np.linalg.norm(run.error, axis=(-1, -2)).max(axis=1) / e0
+        {"largest e^T P^-1 e": worst, "checks": int(sum(f.size for f in forms)), "runs": 3 * s_n + 1},
+        worst <= 1.0 + 1e-6,
+        f"e^T P_{{k|k}}^-1 e over all 3 × {s_n} Table 1 runs ({s.table_method.replace('_', '-')}) and the SDP "
+        f"figure run, all agents, k = 0..{s.t_f}; the margin 10⁻⁶ allows for the SDP solver's accuracy.",
+        rule="max e^T P^-1 e ≤ 1 + 10⁻⁶")]
+
+    def sup_over_e0(run_: ClosedLoopRun) -> np.ndarray:
+        e0 = np.linalg.norm(run_.x[:, 0] - run_.x0_hat, axis=(-1, -2))
+        return np.linalg.norm(run_.error, axis=(-1, -2)).max(axis=1) / e0
+
     ratio_fig = float(sup_over_e0(run_sdp)[0])
-    frac = [float(np.mean(sup_over_e0(r) <= 1.0)) for r in runs]
+    frac = [float(np.mean(sup_over_e0(r) <= 1.0)) for r in result.runs]
     claims.append(Claim.qualitative(
         "bhattacharjee2021/fig5-error-below-initial", "Fig. 5 and Sec. 5, text",
-        "The global estimation error never exceeds its initial value: sup_k |e_k^(g)| <= |e_0^(g)| (used for eq. (21)).",
-        {"sup_over_e0_figure_run": ratio_fig, "fraction_of_seeds_holding_rows_1_2_3": frac}, ratio_fig <= 1.0,
-        f"Decided on the figure run (row 1, SDP path). Over {n_runs} seeds it holds in a fraction {frac} of the runs of "
-        "rows 1-3: when the random x_0 falls close to xhat_0 the initial error is tiny and later errors, driven by "
-        "v_k, exceed it, so the step in the proof of Corollary 1 is an assumption about the draw, not a guarantee."))
-    # the closed-form twins against the SDPs, step by step from the same inputs (the SDP run's ellipsoids)
-    # (the correction shape does not depend on y_k, so y = C xpred is used)
-    _, Pc_cf, _ = smf.correct(run_sdp.xpred[0], run_sdp.Ppred[0], run_sdp.xpred[0] @ C.T,
-                              C, D, SETTINGS[0].R, method="closed_form")
-    rel_corr = float(np.max(np.abs(np.trace(Pc_cf - run_sdp.P[0], axis1=-2, axis2=-1))
-                            / np.trace(Pc_cf, axis1=-2, axis2=-1)))
-    _, Pp_cf = smf.predict(run_sdp.xhat[0, :-1], run_sdp.P[0, :-1], A, G_DIST, SETTINGS[0].Q, method="closed_form")
-    rel_pred = float(np.max(np.abs(np.trace(Pp_cf - run_sdp.Ppred[0, 1:], axis1=-2, axis2=-1))
-                            / np.trace(Pp_cf, axis1=-2, axis2=-1)))
-    run_fast = simulate(SETTINGS[0], seed=seed, n_runs=1, method="closed_form")
-    tr_sdp = np.trace(run_sdp.P, axis1=-2, axis2=-1)
-    tr_fast = np.trace(run_fast.P, axis1=-2, axis2=-1)
-    drift = float(np.max(np.abs(tr_sdp - tr_fast) / tr_fast))
-    claims.append(Claim.qualitative(
+        "The global estimation error never exceeds its initial value: sup_k |e_k^(g)| <= |e_0^(g)| "
+        "(used for eq. (21)).",
+        {"figure run: sup |e_k| / |e_0|": ratio_fig}
+        | {f"share of seeds holding, row {i + 1}": f for i, f in enumerate(frac)},
+        ratio_fig <= 1.0,
+        f"Decided on the figure run (row {s.figure_row}, SDP path). Over {s_n} seeds it holds in the fractions "
+        f"{', '.join(format_number(f) for f in frac)} of the runs of rows 1-3: when the random x_0 falls close to "
+        "xhat_0 the initial error is tiny and later errors, driven by v_k, exceed it, so the step in the proof of "
+        "Corollary 1 is an assumption about the draw, not a guarantee.",
+        rule="sup_k |e_k^(g)| / |e_0^(g)| ≤ 1 on the figure run"))
+    claims.append(_twins_claim(result))
+    return claims
+
+
+def _twins_claim(result: SetMembershipResult) -> Claim:
+    """Every SDP step of the figure run redone in closed form from the same input ellipsoid."""
+    s, run_sdp = result.settings, result.sdp_run
+    C_, D_, A_, G_ = (s.matrix(m) for m in ("C", "D", "A", "G"))
+    row = s.figure_setting
+    # the correction shape does not depend on y_k, so y = C xpred is used
+    _, Pc_cf, _ = smf.correct(run_sdp.xpred[0], run_sdp.Ppred[0], run_sdp.xpred[0] @ C_.T, C_, D_, row.R,
+                              method="closed_form")
+    tr_cf = np.trace(Pc_cf, axis1=-2, axis2=-1)
+    rel_corr = float(np.max(np.abs(tr_cf - run_sdp.trace[0]) / tr_cf))
+    _, Pp_cf = smf.predict(run_sdp.xhat[0, :-1], run_sdp.P[0, :-1], A_, G_, row.Q, method="closed_form")
+    trp_cf = np.trace(Pp_cf, axis1=-2, axis2=-1)
+    rel_pred = float(np.max(np.abs(trp_cf - np.trace(run_sdp.Ppred[0, 1:], axis1=-2, axis2=-1)) / trp_cf))
+    tr_fast = result.closed_form_run.trace
+    drift = float(np.max(np.abs(run_sdp.trace - tr_fast) / tr_fast))
+    return Claim.qualitative(
         "bhattacharjee2021/sdp-closed-form-agree", "Sec. 3, eqs. (6)-(8)",
         "The closed-form twins reach the SDP optima: same trace from the same ellipsoid at every step.",
-        {"max_rel_trace_diff_correction": rel_corr, "max_rel_trace_diff_prediction": rel_pred,
-         "closed_loop_max_rel_trace_diff": drift}, max(rel_corr, rel_pred) <= 1e-6,
+        {"corrections: largest relative trace gap": rel_corr, "predictions: largest relative trace gap": rel_pred,
+         "separate closed loops: largest relative trace gap": drift}, max(rel_corr, rel_pred) <= 1e-6,
         "Every correction (eqs. (6)-(7)) and prediction (eq. (8)) of the SDP figure run redone in closed form from the "
-        "same input ellipsoid (Clarabel's tolerances are 1e-8). Run separately in closed loop the two paths drift apart "
-        f"by up to {drift:.1e} in trace: the trace is flat at its optimum, so a solver tolerance eps moves the "
-        "optimal Minkowski-sum parameter, and the shape, by O(sqrt(eps))."))
-    return claims
+        "same input ellipsoid (Clarabel's tolerances are 10⁻⁸). Run separately in closed loop the two paths drift "
+        f"apart by up to {format_number(drift, 2)} in trace: the trace is flat at its optimum, so a solver tolerance "
+        "eps moves the optimal Minkowski-sum parameter, and the shape, by O(sqrt(eps)).",
+        rule="largest relative trace difference per step ≤ 10⁻⁶ (corrections and predictions)")
+
+
+def ledger_claims(result: SetMembershipResult) -> list[Claim]:
+    """The ledger of the study, computed from `result` alone (see :func:`run`)."""
+    return [*_design_claims(result.design, result.settings), _fig6_claim(result), *_table1_claims(result),
+            *_filter_claims(result)]
+
+
+# ---------------------------------------------------------------- the registry
+
+_FIGURES = (
+    FigureSpec(
+        "fig1", "Fig. 1",
+        "(a) The interaction graph of eq. (24): the directed ring 1 → 2 → 3 → 4 → 1 (an arrow from $j$ to $i$: "
+        "agent $i$ hears agent $j$), with agent 1 pinned to the leader, node 0. (b) The eigenvalues $\\Lambda_i$ "
+        "of $\\Gamma$ (eq. (15)) and the circle $C(c_0, r_0)$, $c_0 = 2/3$, $r_0 = 0.6$ of Lemma 2. Look for all "
+        "four crosses inside the dashed circle: Lemma 2's condition, which gives the coupling gain $c = 1/c_0 = 1.5$.",
+        lambda r: plot_fig1(r.design, r.settings)),
+    FigureSpec(
+        "fig2", "Fig. 2",
+        "The closed loop of Sec. 5 (row 1 of Table 1, run 0 of the seed, SDP filters). (a) True states of the "
+        "four agents and the leader (dashed), the two components side by side: the agents start about 70 state "
+        "units from the leader and lock onto its rotation within about 15 steps. (b) The normalized global "
+        "disagreement $\\lvert\\bar\\delta_k\\rvert = \\lvert\\delta_k\\rvert/\\bar\\mu$, $\\bar\\mu = 22$, and the "
+        "conservative limit 2.462 of eq. (21) (dotted): look for the curve settling far below the line. "
+        "(c) $\\lVert A_c^k\\rVert$ under the bound $1.1 \\cdot 0.9^k$ (dashed) at every step.",
+        lambda r: plot_fig2(r.figure_run, r.design, scenario=r.settings)),
+    FigureSpec(
+        "fig3", "Fig. 3",
+        "Estimation errors $e_{jk}$ of agents 1 (top) and 2 (bottom), components $j = 1, 2$, with the extent "
+        "of the correction ellipsoid along each axis, $\\pm\\sqrt{(P_{k|k})_{jj}}$ (shaded). Look for the errors "
+        "staying inside the band at every step (claim containment), and the band reaching its steady width "
+        "within a few steps: about $\\pm 0.63$ on the measured component 1, $\\pm 1.08$ on component 2.",
+        lambda r: plot_fig3_4(r.figure_run, (1, 2))),
+    FigureSpec(
+        "fig4", "Fig. 4",
+        "As the paper's Fig. 3, for agents 3 (top) and 4 (bottom). The bands are the same as for "
+        "agents 1 and 2 (the shapes do not depend on the measurements); the errors differ with the draw.",
+        lambda r: plot_fig3_4(r.figure_run, (3, 4))),
+    FigureSpec(
+        "fig5", "Fig. 5",
+        "Norms of the estimation errors $\\lVert e_k^{(i)}\\rVert$ of the four agents. Look for every curve "
+        "staying below its value at $k = 0$ after the first step: the step $\\sup_k \\lVert e^{(g)}_k\\rVert \\le "
+        "\\lVert e^{(g)}_0\\rVert$ of the proof of Corollary 1 holds for this draw (claim "
+        "fig5-error-below-initial), though not for every draw.",
+        lambda r: plot_fig5(r.figure_run)),
+    FigureSpec(
+        "fig6", "Fig. 6",
+        "Trace of the correction shape matrices $P^{(i)}_{k|k}$ of the four agents: 2.87 after the first "
+        "correction of $P_0$ (trace 4, dotted), then down to 1.558 within about five steps (the paper reads "
+        "'approximately 1.5'). The four curves coincide: "
+        "the shapes depend only on $P_0$, $Q$ and $R$, the same for every agent, not on the measurements, so "
+        "each agent is drawn with its own line style and markers to keep all four visible.",
+        lambda r: plot_fig6(r.figure_run, r.settings)),
+)
+
+_TABLES = (
+    TableSpec(
+        "table1", "Table 1",
+        "Mean and RMS of $\\lvert\\bar\\delta_k\\rvert$ over $k = 0..60$ (state units) per row: the paper's, ours "
+        "for run 0 (one draw, as the paper) and the spread over the seeds (mean, std, 5/50/95 % quantiles, min, "
+        "max). Look for a spread of a few thousandths (the deterministic transient sets the metrics), our means "
+        "5-10 % above the paper's and our RMS values 1.5-3 % above.",
+        lambda r: r.table),
+    TableSpec(
+        "table1_edges_reversed", "Table 1",
+        "The same study with the edges of eq. (24) reversed (adjacency transposed). Look for the means "
+        "within 2 % of the paper's but every RMS value about 4 % low: evidence on which graph the paper "
+        "simulated; no verdict uses it.",
+        lambda r: r.table_reversed),
+    TableSpec(
+        "table1_readings", "",
+        "Readings of the example tried against row 1 of Table 1, on the noise-free transient (no "
+        "disturbances, exact estimates): mean and RMS and their relative differences from the paper's. "
+        "Look for the reversed edges, the only reading near the means.",
+        lambda r: r.readings),
+)
+
+#: The study of the chapter ``bhattacharjee2021_set_membership``.
+STUDY = Study("set-membership", "bhattacharjee2021_set_membership", DEFAULTS, run, _FIGURES, _TABLES,
+              ledger_claims)
+
+REGISTRY = PaperRegistry(
+    "bhattacharjee2021", "Bhattacharjee and Subbarao 2021", studies=(STUDY,),
+    errata=(
+        "**Which graph Table 1 uses.** With the Laplacian of eq. (24) as printed (agent 1 hears agent 4, agent "
+        "$i+1$ hears agent $i$) our Table 1 means come out 5-10 % above the paper's and the RMS values 1.5-3 % "
+        "above. With the edges reversed (adjacency transposed; $\\Gamma$ keeps its eigenvalues, so Fig. 1(b) "
+        "cannot tell the two apart) the means agree within 2 % and every RMS value is about 4 % low. Neither "
+        "graph fits both columns; the verdicts are for the graph as printed.",
+        "**Disturbance box.** Sec. 5's 'between -0.051_2 and 0.051_2' (the text as extracted) reads "
+        "$-0.05 \\cdot 1_2$ and $0.05 \\cdot 1_2$, $1_2$ the vector of ones: $w_k$ uniform in "
+        "$[-0.05, 0.05]^2$, as $\\alpha_w = 0.05$ in row 1 of Table 1 confirms.",
+        "**Fig. 6's limit.** The trace of $P_{k|k}$ settles at 1.558 for the paper's $P_0$, $Q$, $R$, whatever "
+        "the draw; the paper's 'approximately 1.5' and its '2.667-fold decrease' (= 4/1.5) are readings of its "
+        "plot, rounded.",
+        "**Corollary 1's proof** uses $\\sup_k \\lVert e^{(g)}_k\\rVert \\le \\lVert e^{(g)}_0\\rVert$ (Fig. 5). "
+        "It holds for the figure's draw and every draw of row 1, but fails in about a third of the draws of row 2 "
+        "and in all of row 3, where the output noise later drives the error above its small initial value: an "
+        "assumption on the draw, not a consequence of the filter.",
+        "**Notation.** The paper writes $G$ both for the disturbance matrix (eq. (23)) and, calligraphic, for "
+        "the pinning gains (Sec. 4); the code keeps them apart (`G`, `pinning`).",
+    ),
+)
