@@ -347,8 +347,8 @@ def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = ""
             text = format_value(v, digits, max_items)
             return "(" + text + ")" if isinstance(v, dict) else text
 
-        items = [f"{_label(k)} = {item(v)}" for k, v in list(value.items())[:max_items + 2]]
-        more = len(value) > max_items + 2
+        items = [f"{_label(k)} = {item(v)}" for k, v in list(value.items())[:2 * max_items]]
+        more = len(value) > 2 * max_items
         return "; ".join(items) + ("; \u2026" if more else "") + (f" ({unit})" if unit else "")
     if isinstance(value, list | tuple | np.ndarray):
         value = list(value)

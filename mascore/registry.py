@@ -67,7 +67,9 @@ class FigureSpec:
     name : str
         File stem in ``results/PAPER/figures/`` (``"fig2"``); unique within the paper.
     number : str
-        The paper's figure it rebuilds (``"Fig. 2"``), or ``""`` for a figure beyond the paper.
+        The paper's figure it rebuilds (``"Fig. 2"``); what of the paper it checks when the
+        paper has no such figure (``"Theorems 3.2 and 3.9 (our check)"``); or ``""`` for a
+        figure beyond the paper.
     caption : str
         What the figure shows and what to look for (MyST Markdown: ``$math$`` allowed).
     draw : callable
@@ -187,7 +189,12 @@ class PaperRegistry:
 
     def full_caption(self, spec: FigureSpec | TableSpec) -> str:
         """The caption as the book prints it: the paper's number first, then the spec's caption."""
-        source = f"{self.citation}, {spec.number} (rebuilt). " if spec.number else "Beyond the paper. "
+        if not spec.number:
+            source = "Beyond the paper. "
+        elif spec.number.startswith(("Fig", "Table")):
+            source = f"{self.citation}, {spec.number} (rebuilt). "
+        else:  # e.g. "Theorems 3.2 and 3.9 (our check)": what of the paper the figure is about
+            source = f"{self.citation}, {spec.number}. "
         return source + spec.caption
 
 
@@ -251,7 +258,7 @@ class SettingsView:
         rows = ["| setting | value | from | note |", "|---|---|---|---|"]
         for f in dataclasses.fields(self.settings):
             meta = f.metadata
-            value = format_value(getattr(self.settings, f.name), max_items=6)
+            value = format_value(getattr(self.settings, f.name), max_items=12)
             if meta.get("unit"):
                 value += f" {meta['unit']}"
             origin = {"paper": "paper", "chosen": "**our choice**", "derived": "derived"}.get(meta.get("source"), "")

@@ -1,14 +1,23 @@
 """Tests of the Ren, Beard and Kingston (2005) scenarios (mascore.papers.ren2005)."""
 
+import dataclasses
 import json
 
+import matplotlib
 import numpy as np
 import pytest
 
 from mascore import consensus as cs
 from mascore.graphs import has_spanning_tree, is_connected, spanning_tree_roots
 from mascore.papers import ren2005 as ren
+from mascore.registry import paper_registry, show_settings
 from mascore.reproduce import reproduce_paper
+
+matplotlib.use("Agg")
+
+#: Small settings for the tests that only check shapes and drawing (the full run is the slow test's).
+CHEAP = dataclasses.replace(ren.SETTINGS, switch_steps=100, t_final=20.0, noise_runs=10, noise_steps=40,
+                            noise_paths=4, noise_t_final=4.0, bias_runs=20)
 
 
 def test_fig2_graph_matches_the_caption():
@@ -35,7 +44,7 @@ def test_fig3_graphs_have_no_spanning_tree_but_their_union_does():
 def test_fig1_scenario():
     """Sec. II-C: n = 10, Omega = Q = 0.1; equal variances agree on the average, P -> 0.05."""
     res = ren.fig1(seed=1)
-    assert res.pairings.shape == (ren.FIG1["n_steps"], 10, 10)
+    assert res.pairings.shape == (ren.SETTINGS.n_steps, 10, 10)
     assert res.equal.spread[-1] < 1e-3 * res.equal.spread[0]
     assert res.equal.final_value == pytest.approx(5.5, abs=1e-6)
     assert res.confident.P[0, ren.CONFIDENT_AGENT] == 0.001 and res.confident.xi[0, ren.CONFIDENT_AGENT] == 7.0
@@ -75,26 +84,91 @@ def test_overconfidence_study():
     st = ren.overconfidence(seed=2)
     paper, ideal = st["variants"].values()
     for v in (paper, ideal):
-        assert v["actual"].shape == v["believed"].shape == (ren.FIG1["n_steps"] + 1, 10)
+        assert v["actual"].shape == v["believed"].shape == (ren.SETTINGS.n_steps + 1, 10)
         assert np.all(v["actual"] >= st["fused_variance"] * (1 - 1e-9))  # nothing beats central fusion
     np.testing.assert_allclose(paper["believed"][-1], 0.05, rtol=1e-6)  # fixed point of eq. (4) on pairings
     assert np.all(paper["actual"][-1] > paper["believed"][-1])
     assert np.all(ideal["believed"][-1] < 1e-3 * ideal["actual"][-1])
 
 
+def test_settings_are_frozen_documented_and_read_by_the_run():
+    s = ren.SETTINGS
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        s.Q = 0.2
+    for f in dataclasses.fields(s):
+        assert f.metadata["source"] in ("paper", "chosen", "derived") and f.metadata["note"], f.name
+        assert not isinstance(getattr(s, f.name), list | np.ndarray), f.name
+    table = str(show_settings(s))
+    assert "`n_steps`" in table and "**our choice**" in table and "Sec. II-C" in table
+    assert s.xi0[s.confident_agent - 1] == 7.0 and ren.CONFIDENT_AGENT == s.confident_agent - 1
+    assert ren.THEOREM["t_final"] == s.t_final and ren.FIG1["max_duration"] == s.max_call  # the aliases
+    short = dataclasses.replace(CHEAP, n_steps=30, P_confident=0.01)
+    res = ren.fig1(seed=1, settings=short)
+    assert res.pairings.shape == (30, 10, 10) and res.confident.P[0, ren.CONFIDENT_AGENT] == 0.01
+
+
+@pytest.fixture(scope="module")
+def cheap_result():
+    return ren.run(CHEAP, seed=3)
+
+
+def test_registry_declares_one_study_with_its_figures_tables_and_claims(cheap_result):
+    reg = paper_registry("ren2005")
+    assert reg is ren.REGISTRY and reg.citation == "Ren, Beard and Kingston 2005" and reg.errata
+    study = reg.study("kalman-consensus")
+    assert study.chapter == "ren2005_kalman_consensus" and study.settings is ren.SETTINGS
+    numbers = {f.name: f.number for f in study.figures}
+    assert numbers == {"fig1": "Fig. 1", "average": "", "fig2_fig3": "Figs. 2-3", "theorems": "", "noise": "",
+                       "noise_continuous": "", "bias": "", "overconfidence": ""}
+    assert all("Look for" in f.caption or "look for" in f.caption for f in study.figures if f.number)
+    claims = study.claims(cheap_result)
+    assert len(claims) == 9 and all(c.rule and c.paper_value is None for c in claims)
+    assert all(len(c.value) <= 6 for c in claims), "the ledger shows at most six labelled values per claim"
+    for spec in study.tables:
+        table = study.build(spec.name, cheap_result)
+        assert len(table) > 0 and table.notna().all().all(), spec.name
+
+
+@pytest.mark.parametrize("name", [f.name for f in ren.STUDY.figures])
+def test_every_registered_figure_draws_with_labelled_axes(cheap_result, name):
+    fig = ren.STUDY.draw(name, cheap_result)
+    try:
+        assert isinstance(fig, matplotlib.figure.Figure)
+        visible = [ax for ax in fig.axes if ax.axison]
+        if visible:  # graph drawings (Figs. 2-3) have no axes, only titles
+            assert any(ax.get_xlabel() for ax in visible) and any(ax.get_ylabel() for ax in visible)
+        assert all(ax.get_title() or ax.get_xlabel() or ax.get_ylabel() for ax in fig.axes)
+    finally:
+        matplotlib.pyplot.close(fig)
+
+
+def test_run_reuses_the_fig1_pairings_and_the_bias_runs(cheap_result):
+    r = cheap_result
+    assert r.fig1.pairings.shape == (CHEAP.n_steps, 10, 10)
+    assert r.bias["paper"]["values"].shape == (CHEAP.bias_runs,)
+    assert set(r.noise) == {"paper", "small_Omega", "Q0"} and r.noise["small_Omega"]["Omega"] == CHEAP.noise_Omega_small
+    again = ren.overconfidence(3, CHEAP)  # same seed: same pairings as the run's Fig. 1
+    np.testing.assert_array_equal(again["variants"]["paper"]["actual"],
+                                  r.overconfidence["variants"]["paper"]["actual"])
+
+
 @pytest.mark.slow
 def test_reproduce_writes_figures_tables_and_claims(tmp_path):
     claims = reproduce_paper("ren2005", tmp_path, seed=1)
     out = tmp_path / "ren2005"
-    for name in ("fig1.png", "fig2_fig3.png", "theorems.png", "bias.png", "overconfidence.png"):
-        assert (out / "figures" / name).stat().st_size > 0
-    for name in ("fig1_final.csv", "theorems.csv", "bias.csv"):
-        assert (out / "tables" / name).exists()
+    for spec in ren.STUDY.figures:
+        assert (out / "figures" / f"{spec.name}.png").stat().st_size > 0
+    for spec in ren.STUDY.tables:
+        assert (out / "tables" / f"{spec.name}.csv").exists()
     doc = json.loads((out / "claims.json").read_text())
     ids = {c["id"] for c in doc["claims"]}
-    required = {"fig1-consensus-equal", "fig1-confident-agent-dominates", "thm32-continuous-consensus",
+    required = {"fig1-consensus-equal", "fig1-confident-agent-dominates", "fig2-fig3-graphs",
+                "thm32-continuous-consensus",
                 "thm39-switching-union-consensus", "no-spanning-tree-no-consensus", "noise-consensus-approximate",
                 "beyond-fusion-bias", "beyond-overconfidence"}
-    assert {f"ren2005/{r}" for r in required} <= ids
+    assert ids == {f"ren2005/{r}" for r in required}
     verdicts = {c.id: c.verdict for c in claims}
-    assert all(verdicts[f"ren2005/{r}"] == "holds" for r in required), verdicts
+    assert all(v == "holds" for v in verdicts.values()), verdicts
+    # the chapter shows the same ledger: run + claims with the same seed
+    assert [c.to_dict() for c in ren.STUDY.claims(ren.run(ren.SETTINGS, 1))] == \
+        [{k: v for k, v in c.items() if k != "study"} for c in doc["claims"]]

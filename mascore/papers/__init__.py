@@ -1,6 +1,6 @@
-"""One module per paper, holding the exact scenarios of its figures and tables.
+"""One module per paper: its registry (settings, runs, figures, tables, claims) and scenarios.
 
-Each module exposes ``reproduce(out_dir, seed) -> list[Claim]`` (see
-:mod:`mascore.reproduce`) plus the scenario functions that the notebooks and
-tests call.
+Each module declares ``REGISTRY`` (:class:`mascore.registry.PaperRegistry`),
+which ``python -m mascore reproduce``, the book's chapters and the tests all
+use, plus the scenario functions that the notebooks and tests call.
 """
