@@ -1,12 +1,19 @@
-"""Tests of the Vlahakis and Halikias scenarios (Example 1, Figs. 1-2) and their ledger claims."""
+"""Tests of the Vlahakis and Halikias study (Example 1, Figs. 1-2): registry, run, figures, ledger claims."""
 
+import dataclasses
 import json
 
-import numpy as np
-import pytest
+import matplotlib
 
-from mascore import observers
-from mascore.papers import vlahakis as v
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from mascore import observers  # noqa: E402
+from mascore.ledger import format_number, show_claims  # noqa: E402
+from mascore.papers import vlahakis as v  # noqa: E402
 
 E = v.EXAMPLE1
 REQUIRED = [
@@ -14,22 +21,106 @@ REQUIRED = [
     "vlahakis/example1-phi-q2-25", "vlahakis/example1-J-q2-25", "vlahakis/example1-hurwitz",
     "vlahakis/fig2-faster-than-fig1", "vlahakis/structure-eq13",
 ]
+#: The documented state of the reproduction: L only through the mixed convention, Phi and J not at all
+#: (with the printed L), the printed Phi optimal but not determined as printed; the rest holds.
+EXPECTED_VERDICTS = {
+    "example1-L": "does-not-reproduce",
+    "example1-L-mixed-convention": "holds",
+    "example1-phi-q2-5": "does-not-reproduce",
+    "example1-J-q2-5": "does-not-reproduce",
+    "example1-phi-q2-25": "does-not-reproduce",
+    "example1-J-q2-25": "does-not-reproduce",
+    "example1-printed-phi-optimal-as-printed": "holds",
+    "example1-hurwitz": "holds",
+    "fig2-faster-than-fig1": "holds",
+    "observer-cost-ordering": "holds",
+    "structure-eq13": "holds",
+    "bottom-up-cost-bounded": "holds",
+}
 
 
-def test_printed_L_reproduced_by_inverse_weight_reading():
+@pytest.fixture(scope="module")
+def result():
+    return v.run(v.SETTINGS, 1)
+
+
+@pytest.fixture(scope="module")
+def claims(result):
+    return {c.id.split("/")[1]: c for c in v.ledger_claims(result)}
+
+
+# ---------------------------------------------------------------- the registry
+
+
+def test_registry_declares_the_study():
+    assert v.REGISTRY.key == "vlahakis" and v.REGISTRY.citation == "Vlahakis and Halikias"
+    study = v.REGISTRY.study("distributed-observer")
+    assert study is v.STUDY and study.chapter == "vlahakis_distributed_observer"
+    assert [(f.name, f.number) for f in study.figures] == [("fig1", "Fig. 1"), ("fig2", "Fig. 2"), ("phi-profile", "")]
+    assert {t.name for t in study.tables} == {"example1_readings", "example1_lmi_variants", "fig1_position_errors",
+                                             "fig2_position_errors", "lqr_costs"}
+    assert len(v.REGISTRY.errata) >= 3
+    assert not hasattr(v, "reproduce")
+
+
+def test_settings_document_every_field():
+    for f in dataclasses.fields(v.ObserverSettings):
+        assert f.metadata["source"] in ("paper", "chosen", "derived"), f.name
+        assert f.metadata["where"], f.name
+    assert hash(v.SETTINGS) == hash(v.ObserverSettings())  # frozen and hashable (the designs are cached on it)
+    assert v.EXAMPLE1["Q1"] == v.SETTINGS.Q1 and v.EXAMPLE1["Q2"] == v.SETTINGS.Q2
+
+
+def test_run_needs_the_printed_cases():
+    with pytest.raises(ValueError, match="printed cases"):
+        v.run(dataclasses.replace(v.SETTINGS, Q2=(5.0,)), 1)
+
+
+def test_every_figure_draws_with_labelled_axes(result):
+    for spec in v.STUDY.figures:
+        fig = v.STUDY.draw(spec.name, result)
+        assert isinstance(fig, plt.Figure), spec.name
+        axes = [ax for ax in fig.axes if ax.has_data()]
+        assert len(axes) == 2, spec.name
+        for ax in axes:
+            assert ax.get_xlabel(), spec.name
+        assert axes[0].get_ylabel(), spec.name
+        assert [ax.get_title()[:3] for ax in axes] == ["(a)", "(b)"], spec.name
+        assert not any(ax.get_legend() for ax in axes), f"{spec.name}: legend over the data"
+        assert spec.caption and not spec.caption.startswith("Vlahakis"), spec.name
+        plt.close(fig)
+
+
+def test_tables_build_from_the_result(result):
+    for spec in v.STUDY.tables:
+        table = v.STUDY.build(spec.name, result)
+        assert len(table) > 0, spec.name
+    errors = v.STUDY.build("fig1_position_errors", result)
+    assert errors.t.diff().iloc[1] == pytest.approx(0.02)
+
+
+# ---------------------------------------------------------------- the gain L
+
+
+def test_printed_L_is_the_mixed_convention_gain():
     """Sec. 5 prints L = [2.6004; 22.8051] (velocity gain first, rotated coordinates of eq. (27))."""
     d = v.design(5.0, reading="inverse-weight-are")
-    np.testing.assert_allclose([d.L[1, 0], d.L[0, 0]], [2.6004, 22.8051], atol=1e-4)
+    np.testing.assert_allclose([d.L[1, 0], d.L[0, 0]], [2.6004, 22.8051], atol=5e-5)
+    # Q1^2 times the consistent (Kalman) gain of the same Riccati equation
+    kalman = observers.min_energy_observer(E["A"], E["Bbar"], E["C"], [[1 / E["Q1"]]], [[E["R"]]])
+    np.testing.assert_allclose(d.L, E["Q1"] ** 2 * kalman.L, rtol=1e-10)
 
 
-def test_as_printed_L_is_the_min_energy_gain():
+def test_as_printed_L_is_the_min_energy_gain_with_its_poles():
     d = v.design(5.0, reading="as-printed")
     obs = observers.min_energy_observer(E["A"], E["Bbar"], E["C"], [[10.0]], [[1.0]])
     np.testing.assert_allclose(d.L, obs.L, rtol=1e-12)
     np.testing.assert_allclose(d.L.ravel(), [2.0548, 2.1111], atol=1e-4)
+    poles = np.linalg.eigvals(E["A"] - d.L @ E["C"])
+    np.testing.assert_allclose(sorted(poles, key=np.imag), [-1.0774 - 1.4683j, -1.0774 + 1.4683j], atol=1e-4)
 
 
-def test_slow_pole_near_origin_only_with_the_inverse_reading():
+def test_slow_pole_near_origin_only_with_the_printed_L():
     """Sec. 5: 'the slowest pole being near the origin' fits the printed L, not the as-printed one."""
     slow = {}
     for reading in observers.READINGS:
@@ -39,12 +130,58 @@ def test_slow_pole_near_origin_only_with_the_inverse_reading():
     assert slow["as-printed"] < -1.0
 
 
-def test_as_printed_bound_is_node_optimum_times_N():
+# ---------------------------------------------------------------- Phi and J
+
+
+def test_as_printed_bound_is_node_optimum_times_N(result):
     """As printed, the LMI optimum equals N trace(S_hat) whatever Q2 (Phi undetermined)."""
-    obs = observers.min_energy_observer(E["A"], E["Bbar"], E["C"], [[10.0]], [[1.0]])
     for Q2 in E["Q2"]:
-        d = v.design(Q2)
-        assert d.bound == pytest.approx(5 * np.trace(d.T @ obs.S @ d.T.T), rel=1e-4)
+        assert v.design(Q2).bound == pytest.approx(result.n_trace_s_hat, rel=1e-4)
+
+
+def test_as_printed_optimal_phi_interval(result):
+    """As printed the optimum N trace(S_hat) is attained by every Phi of the closed-form interval (the printed
+    Phi included) and by none outside: checked by the program at fixed Phi in S_i, an independent route."""
+    for Q2 in E["Q2"]:
+        lo, hi = result.intervals[Q2]
+        assert lo < 0 < v.PUBLISHED["Phi"][Q2] < hi
+        inside = v.phi_profile(Q2, "as-printed", [lo + 1e-3, 0.0, v.PUBLISHED["Phi"][Q2], hi - 1e-3])
+        np.testing.assert_allclose(inside, result.n_trace_s_hat, rtol=1e-7)
+        outside = v.phi_profile(Q2, "as-printed", [lo - 0.02, hi + 0.02])
+        assert np.all(outside > result.n_trace_s_hat * (1 + 1e-4))
+
+
+def test_printed_L_determines_phi(result):
+    """Fed the printed L the program determines Phi (weakly): the LMI's Phi is the profile's minimum."""
+    for Q2 in E["Q2"]:
+        d = result.designs[(v.L_READING, Q2)]
+        assert result.phi_argmin[Q2] == pytest.approx(d.Phi.item(), abs=2e-3)
+        assert result.gamma_at_lmi[Q2] == pytest.approx(d.bound, rel=1e-3)
+        assert result.gamma_at_lmi[Q2] < result.gamma_at_printed[(v.L_READING, Q2)]
+
+
+def test_readings_table_reports_the_free_interval_not_the_tie_break(result):
+    table = result.readings
+    free = table[table.reading == "as-printed"]
+    assert free.Phi.isna().all()
+    for _, row in free.iterrows():
+        assert (row.Phi_free_low, row.Phi_free_high) == pytest.approx(result.intervals[row.Q2])
+    fixed = table[table.reading == v.L_READING]
+    assert fixed.Phi.notna().all() and fixed.Phi_free_low.isna().all()
+
+
+def test_lmi_variants_printed_row_agrees_with_design(result):
+    """Two routes to the same program: lmi_variants_table's printed row and distributed_observer."""
+    table = result.variants
+    rows = table[table.variant == "Q1 + lam Q2 (as printed)"].set_index(["L_reading", "Q2"])
+    d = v.design(5.0, v.L_READING)
+    assert rows.loc[(v.L_READING, 5.0), "J"] == pytest.approx(d.bound, rel=1e-5)
+    assert rows.loc[(v.L_READING, 5.0), "Phi"] == pytest.approx(d.Phi.item(), abs=1e-3)
+    assert not rows.loc[("as-printed", 5.0), "Phi_determined"]
+    assert (table.status == "optimal").all()
+
+
+# ---------------------------------------------------------------- Figs. 1-2 and the LQR checks
 
 
 def test_fig12_deterministic_and_faster_for_larger_Q2():
@@ -71,57 +208,52 @@ def test_settling_time():
     assert v.settling_time(t, sig, 0.05) == pytest.approx(np.log(20), abs=0.011)
 
 
+# ---------------------------------------------------------------- the ledger
+
+
+def test_claims_and_verdicts(claims):
+    assert set(claims) == set(EXPECTED_VERDICTS)
+    assert {k: c.verdict for k, c in claims.items()} == EXPECTED_VERDICTS
+    assert claims["example1-phi-q2-5"].value == pytest.approx(0.1205, abs=1e-3)
+    assert claims["example1-J-q2-5"].value == pytest.approx(19.17, rel=1e-3)
+    for c in claims.values():
+        assert c.tolerance is None or c.tolerance.get("approx_rel", c.tolerance.get("approx_abs")) <= 3 * max(
+            c.tolerance.get("rel", 0), c.tolerance.get("abs", 0)) * (1 + 1e-12)
+
+
+def test_shared_note_paragraph_printed_once(claims):
+    keys = ["example1-phi-q2-5", "example1-J-q2-5", "example1-phi-q2-25", "example1-J-q2-25"]
+    shared = [set(claims[k].note.split("\n\n")[1:]) for k in keys]
+    assert all(s == shared[0] for s in shared) and len(shared[0]) == 2
+    text = str(show_claims(list(claims.values())))
+    for paragraph in shared[0]:
+        assert text.count(" ".join(paragraph.split())[:80]) == 1
+    assert "-1.077 ± 1.468j" in text and "-1.03" not in text
+
+
+def test_errata_numbers_match_the_run(result):
+    errata = " ".join(v.REGISTRY.errata)
+    for Q2 in E["Q2"]:
+        lo, hi = result.intervals[Q2]
+        assert f"[{format_number(lo)}, {format_number(hi)}]" in errata
+        assert format_number(result.designs[(v.L_READING, Q2)].bound) in errata
+        assert format_number(result.designs[(v.L_READING, Q2)].Phi.item()) in errata
+        assert format_number(result.printed_cost[Q2]) in errata
+    assert format_number(result.n_trace_s_hat) in errata
+    assert "-1.077 \\pm 1.468j" in errata
+
+
 @pytest.mark.slow
 def test_reproduce_writes_ledger(tmp_path):
     from mascore.reproduce import reproduce_paper
 
     claims = reproduce_paper("vlahakis", tmp_path, seed=1)
-    ids = [c.id for c in claims]
-    assert set(REQUIRED) <= set(ids)
+    assert set(REQUIRED) <= {c.id for c in claims}
+    assert {c.study for c in claims} == {"distributed-observer"}
     out = tmp_path / "vlahakis"
-    assert (out / "figures" / "fig1.png").exists() and (out / "figures" / "fig2.png").exists()
-    assert (out / "tables" / "example1_readings.csv").exists()
+    for name in ("fig1", "fig2", "phi-profile"):
+        assert (out / "figures" / f"{name}.png").exists()
+    for name in ("example1_readings", "example1_lmi_variants", "lqr_costs", "fig1_position_errors"):
+        assert (out / "tables" / f"{name}.csv").exists()
     verdicts = {c["id"]: c["verdict"] for c in json.loads((out / "claims.json").read_text())["claims"]}
-    # the documented state of the reproduction: L only under the inverse-weight reading, Phi and J not at all
-    assert verdicts["vlahakis/example1-L-inverse-weight-reading"] == "reproduces"
-    assert verdicts["vlahakis/example1-L"] == "does-not-reproduce"
-    for key in ("phi-q2-5", "J-q2-5", "phi-q2-25", "J-q2-25"):
-        assert verdicts[f"vlahakis/example1-{key}"] == "does-not-reproduce"
-    for key in ("example1-hurwitz", "fig2-faster-than-fig1", "structure-eq13", "observer-cost-ordering",
-                "bottom-up-cost-bounded", "example1-printed-phi-optimal-as-printed"):
-        assert verdicts[f"vlahakis/{key}"] == "holds"
-
-
-def test_lmi_variants_printed_row_agrees_with_design():
-    """Two routes to the same program: lmi_variants_table's printed row and distributed_observer."""
-    table = v.lmi_variants_table()
-    row = table[(table.L_reading == "inverse-weight-are") & (table.variant == "Q1 + lam Q2 (as printed)")
-                & (table.Q2 == 5.0)].iloc[0]
-    d = v.design(5.0, "inverse-weight-are")
-    assert row.J == pytest.approx(d.bound, rel=1e-5)
-    assert row.Phi == pytest.approx(d.Phi.item(), abs=1e-3)
-    assert (table.status == "optimal").all()
-
-
-def test_as_printed_optimal_phi_interval():
-    """As printed the optimum N trace(S_hat) is attained by every Phi of the closed-form interval (the printed
-    Phi included) and by none outside: checked by the program at fixed Phi in S_i, an independent route."""
-    obs = observers.min_energy_observer(E["A"], E["Bbar"], E["C"], [[10.0]], [[1.0]])
-    for Q2 in E["Q2"]:
-        T = v.design(Q2).T
-        optimum = 5 * np.trace(T @ obs.S @ T.T)
-        lo, hi = v.as_printed_phi_interval(Q2)
-        assert lo < 0 < v.PAPER["Phi"][Q2] < hi
-        inside = v.phi_profile(Q2, "as-printed", [lo + 1e-3, 0.0, v.PAPER["Phi"][Q2], hi - 1e-3])
-        np.testing.assert_allclose(inside, optimum, rtol=1e-7)
-        outside = v.phi_profile(Q2, "as-printed", [lo - 0.02, hi + 0.02])
-        assert np.all(outside > optimum * (1 + 1e-4))
-
-
-def test_inverse_reading_lmi_phi_minimizes_the_profile():
-    """With the reading that reproduces L the program determines Phi (weakly): the profile is lowest there."""
-    d = v.design(5.0, v.L_READING)
-    phi = d.Phi.item()
-    g = v.phi_profile(5.0, v.L_READING, [phi - 0.1, phi, phi + 0.1, v.PAPER["Phi"][5.0]])
-    assert g[1] == pytest.approx(d.bound, rel=1e-3)
-    assert g[1] < min(g[0], g[2], g[3])
+    assert verdicts == {f"vlahakis/{k}": v_ for k, v_ in EXPECTED_VERDICTS.items()}

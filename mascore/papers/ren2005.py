@@ -1017,7 +1017,7 @@ _FIGURES = (
 
 _TABLES = (
     TableSpec("fig1_final", "", "Fig. 1: initial and final meeting times and variances per agent.", _fig1_table),
-    TableSpec("theorem_spreads", "", "Theorem demos: union condition and final spreads.", _theorems_table),
+    TableSpec("theorem_spreads", "", "Theorem demos: whether the union condition holds and the final spread of the agents' values, per sequence.", _theorems_table),
     TableSpec("noise_floors", "", "Communication noise: RMS floors and log-log slopes per variant.", _noise_table),
     TableSpec("bias_by_variant", "", "Agreed value against central fusion, per variant of the scheme.", _bias_table),
     TableSpec("overconfidence_variances", "", "Believed and actual error variances at the last step.",
