@@ -8,6 +8,8 @@ also timed as a Python loop over agents with the paper's selection matrices
 H_i and :func:`mascore.kalman.update` (reference implementation).
 """
 
+from dataclasses import replace
+
 import numpy as np
 import pandas as pd
 
@@ -19,7 +21,7 @@ from mascore.papers import song2023_flocking as s
 
 
 def _setup(N: int, rng: np.random.Generator):
-    X = s.initial_states(rng, 1, N)[0]
+    X = s.initial_states(rng, 1, replace(s.SETTINGS, n_agents=N))[0]
     X_hat = X[None] + rng.standard_normal((N, N, 4))
     M = 4 * N
     Sigma = np.broadcast_to(np.kron(np.eye(N), s.SIGMA0_AGENT), (N, M, M)).copy()
