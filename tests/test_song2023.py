@@ -1,22 +1,61 @@
-"""Tests of the Song et al. (2023) linear scenarios (Sec. V.A, Figs. 2-3, Theorem 1)."""
+"""Tests of the Song et al. (2023) linear scenarios (Sec. V.A, Figs. 2-3, Theorem 1) and its registry."""
 
+from dataclasses import fields, replace
+from pathlib import Path
+
+import matplotlib
 import numpy as np
 import pytest
 
 from mascore import distributed_kf as dk
 from mascore.graphs import is_connected
+from mascore.ledger import VERDICTS
 from mascore.papers import song2023 as S
-from mascore.reproduce import DEFAULT_SEED
+from mascore.registry import paper_registry
 from mascore.rendezvous import expected_spread, simulate_rendezvous, team_spread
+from mascore.reproduce import DEFAULT_SEED
+
+matplotlib.use("Agg")
+
+#: Cheap settings for the registry tests (the paper's run takes about half a minute).
+SMALL = replace(S.SETTINGS, fig2_runs=5, fig3_runs=4, horizon=10.0, process_noise_q=(1.0, 0.01),
+                process_noise_runs=2, process_noise_horizon=6.0)
 
 
 def test_table_I_values():
-    """Song et al. 2023, Table I (rendezvous rows)."""
+    """Song et al. 2023, Table I (rendezvous rows), as settings and as the registered table."""
     t = S.TABLE_I
     assert (t["N"], t["n"], t["dt"], t["r"], t["rho1"], t["rho2"]) == (8, 2, 0.1, 150.0, 0.5, 1.5)
     s = S.setup()
     np.testing.assert_array_equal(s.K, [[0.5, 0, 1.5, 0], [0, 0.5, 0, 1.5]])
     np.testing.assert_allclose(s.B, [[0.005, 0], [0, 0.005], [0.1, 0], [0, 0.1]])
+    st = S.SETTINGS
+    assert (st.fig2_q, st.fig2_r, st.fig3_q, st.fig3_r, st.fig3_runs) == (1.0, 1.0, 1.0, 100.0, 50)
+
+
+def test_settings_say_where_every_value_comes_from():
+    for f in fields(S.RendezvousSettings):
+        meta = f.metadata
+        assert meta["source"] in ("paper", "chosen", "derived"), f.name
+        assert meta["where"] and meta["note"], f.name
+    topology = next(f for f in fields(S.RendezvousSettings) if f.name == "fig3_topology")
+    assert topology.metadata["source"] == "chosen" and "fixed per run" in S.SETTINGS.fig3_topology
+    assert "Remark 6" in topology.metadata["note"]
+    hash(S.SETTINGS)  # frozen, tuples only
+
+
+def test_registry_holds_both_studies_and_errata():
+    reg = paper_registry("song2023")
+    assert reg is S.REGISTRY
+    assert [s.name for s in reg.studies] == ["rendezvous", "flocking"]
+    study = reg.study("rendezvous")
+    assert study.chapter == "song2023_rendezvous"
+    assert (Path(__file__).parents[1] / "notebooks" / f"{study.chapter}.ipynb").exists()
+    assert [f.name for f in study.figures] == ["fig2", "nees", "theorem1", "fig3", "fig3_remark6"]
+    assert {f.name: f.number for f in study.figures}["fig3"] == "Fig. 3"
+    assert [t.name for t in study.tables] == ["table1", "fig3_std", "process_noise"]
+    assert any("Eq. (31)" in e and "e_i e^T" in e for e in reg.errata)
+    assert not hasattr(S, "reproduce")  # reproduce_paper writes the registry
 
 
 def test_random_initial_states_are_connected_and_observable():
@@ -43,19 +82,65 @@ def test_fig2_small_error_matches_covariance_and_is_deterministic():
 
 
 @pytest.fixture(scope="module")
+def small_result():
+    return S.RENDEZVOUS_STUDY.run(SMALL, seed=0)
+
+
+def test_every_figure_draws_with_labelled_axes(small_result):
+    import matplotlib.pyplot as plt
+
+    for spec in S.RENDEZVOUS_STUDY.figures:
+        fig = S.RENDEZVOUS_STUDY.draw(spec.name, small_result)
+        assert isinstance(fig, matplotlib.figure.Figure), spec.name
+        for ax in fig.axes:
+            assert ax.get_xlabel() and ax.get_ylabel(), (spec.name, ax.get_title())
+        assert "Look for" in spec.caption, spec.name
+        plt.close(fig)
+
+
+def test_tables_and_claims_from_a_small_run(small_result):
+    t1 = S.RENDEZVOUS_STUDY.build("table1", small_result)
+    assert list(t1["value"]) == [8, 2, 0.1, 150.0, 0.5, 1.5]
+    std = S.RENDEZVOUS_STUDY.build("fig3_std", small_result)
+    assert std.shape == (11, 1 + 2 * len(S.LAWS)) and std["time_s"].iloc[-1] == pytest.approx(10.0)
+    assert len(S.RENDEZVOUS_STUDY.build("process_noise", small_result)) == 4
+    claims = S.RENDEZVOUS_STUDY.claims(small_result)
+    assert len({c.id for c in claims}) == len(claims) == 9
+    assert all(c.verdict in VERDICTS for c in claims)
+    assert all(c.rule for c in claims if c.paper_value is None)
+
+
+def test_remark6_loop_with_the_sensing_graph_is_the_estimation_loop():
+    """simulate_remark6(control = sensing graph) is simulate_rendezvous(mode="estimation"), same noise."""
+    s = S.setup()
+    rng = np.random.default_rng(5)
+    x0, A = S.random_initial_states(rng, s)
+    X0 = np.repeat(x0[None], 3, axis=0)
+    xh0 = S._initial_estimates(rng, s, X0)
+    Q, R = np.eye(4), 10 * np.eye(4)
+    ref = simulate_rendezvous(np.random.default_rng(9), X0, A, s.A, s.B, s.K, Q, R, 30, "estimation", s.dt,
+                              x_hat0=xh0, P0=s.P0())
+    ours = S.simulate_remark6(np.random.default_rng(9), X0, A, s, Q, R, 30, xh0, control_adjacency=A)
+    np.testing.assert_allclose(ours, ref.states, rtol=1e-10, atol=1e-9)
+    # the Remark 6 reading (complete control graph) is a different, still bounded loop
+    full = S.simulate_remark6(np.random.default_rng(9), X0, A, s, Q, R, 30, xh0)
+    assert not np.allclose(full, ref.states) and np.all(np.isfinite(full))
+
+
+@pytest.fixture(scope="module")
 def fig3_small():
     return S.fig3(seed=1, n_runs=10, horizon=20.0)
 
 
 def test_fig3_small_velocity_spread_smaller_with_estimates(fig3_small):
     """Fig. 3(b) ordering with a reduced Monte Carlo (10 runs, 20 s)."""
-    r = fig3_small
-    c = r.converged("vel")
-    assert c["estimation-based (eq. (21))"] < c["conventional (eq. (5))"]
-    assert c["true states (eq. (4), reference)"] < c["estimation-based (eq. (21))"]
+    c = fig3_small.converged("vel")
+    assert c[S.ESTIMATION] < c[S.CONVENTIONAL]
+    assert c[S.REMARK6] < c[S.CONVENTIONAL]
+    assert c[S.TRUE_STATES] < c[S.ESTIMATION]
 
 
-@pytest.mark.parametrize("law", ["conventional (eq. (5))", "true states (eq. (4), reference)"])
+@pytest.mark.parametrize("law", [S.CONVENTIONAL, S.TRUE_STATES])
 @pytest.mark.parametrize("which", ["pos", "vel"])
 def test_fig3_monte_carlo_spread_matches_exact_expectation(fig3_small, law, which):
     """Independent check of the Fig. 3 statistic: Monte Carlo spread vs its exact expectation (laws (4), (5))."""
@@ -92,40 +177,40 @@ def test_noise_free_true_state_law_reaches_rendezvous():
 
 
 @pytest.fixture(scope="module")
-def claims(tmp_path_factory):
-    out = tmp_path_factory.mktemp("song2023")
-    # the linear part of reproduce(), with the seed of the published ledger
-    return {c.id: c for c in S._linear_reproduce(out, seed=DEFAULT_SEED)}, out
+def published():
+    """The study's run and claims with the seed of the published ledger."""
+    result = S.RENDEZVOUS_STUDY.run(S.SETTINGS, DEFAULT_SEED)
+    return result, {c.id: c for c in S.RENDEZVOUS_STUDY.claims(result)}
 
 
 @pytest.mark.slow
-def test_reproduce_claims_and_outputs(claims):
-    """The ledger of the linear part: ids, computed verdicts and the documented mismatch."""
-    by_id, out = claims
-    for name in ("fig2.png", "fig3.png", "theorem1.png"):
-        assert (out / "figures" / name).exists()
-    assert (out / "tables" / "table1.csv").exists()
+def test_published_claims(published):
+    """The ledger of the rendezvous study: computed verdicts and the documented mismatch."""
+    result, by_id = published
     assert by_id["song2023/fig2-error-matches-covariance"].verdict == "reproduces"
-    assert by_id["song2023/nees-rendezvous"].verdict == "holds"
-    assert by_id["song2023/nees-rendezvous-measurement-based"].verdict == "holds"
-    assert by_id["song2023/theorem1-lyapunov-decrease"].verdict == "holds"
-    assert by_id["song2023/fig3-velocity-std"].verdict == "holds"
-    # documented mismatch: the position spreads of the two laws are statistically indistinguishable
+    for key in ("nees-rendezvous", "nees-rendezvous-measurement-based", "theorem1-lyapunov-decrease",
+                "centralized-bound", "fig3-velocity-std", "fig3-position-std-remark6", "fig3-velocity-std-remark6"):
+        assert by_id[f"song2023/{key}"].verdict == "holds", key
+    # documented mismatch: on the neighbours' estimates the position spreads of the two laws are
+    # statistically indistinguishable; Remark 6's reading gives the paper's ordering
     pos = by_id["song2023/fig3-position-std"]
     assert pos.verdict == "fails"
     v = pos.value
-    assert abs(v["estimation_based"] - v["conventional"]) < 0.1 * v["conventional"]
-    assert abs(v["paired_diff_mean_square"]) < 2 * v["paired_diff_std_error"]
-    assert v["excess_removed_fraction"] < 0.3 < by_id["song2023/fig3-velocity-std"].value["excess_removed_fraction"]
+    assert abs(v["estimation-based (m)"] - v["conventional (m)"]) < 0.1 * v["conventional (m)"]
+    assert abs(v["paired difference (m²)"]) < 2 * v["its standard error (m²)"]
+    assert v["excess removed"] < 0.3 < by_id["song2023/fig3-velocity-std"].value["excess removed"]
+    r6 = by_id["song2023/fig3-position-std-remark6"].value
+    assert r6["paired difference (m²)"] < -3 * r6["its standard error (m²)"]
     # the Monte Carlo statistic agrees with its exact expectation (laws (4), (5)) to sampling accuracy
-    for claim in (pos, by_id["song2023/fig3-velocity-std"]):
-        v = claim.value
-        assert abs(v["conventional"] / v["conventional_exact"] - 1) < 0.1
-        assert abs(v["true_state_reference"] / v["true_state_exact"] - 1) < 0.1
+    r3 = result.fig3
+    for which in ("pos", "vel"):
+        mc, ex = r3.converged(which), r3.converged(which, exact=True)
+        for law in (S.CONVENTIONAL, S.TRUE_STATES):
+            assert abs(mc[law] / ex[law] - 1) < 0.1
 
 
 def test_process_noise_study_small_q_restores_position_ordering():
     """Beyond the paper: with little process noise the estimation-based law also wins on position."""
     df = S.process_noise_study(seed=0, q_values=(0.01,), n_runs=3, horizon=24.0)
     pos = df.set_index("law")["pos_std_m"]
-    assert pos["estimation-based (eq. (21))"] < 0.5 * pos["conventional (eq. (5))"]
+    assert pos[S.ESTIMATION] < 0.5 * pos[S.CONVENTIONAL]
