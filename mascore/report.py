@@ -53,22 +53,25 @@ def ledger_label(paper: str, study: str) -> str:
 
 
 def attention_list(records: Sequence[dict]) -> MarkdownText:
-    """One line per claim that is approximate, does not reproduce or fails, linked to its ledger."""
-    lines = []
+    """A table of every claim that is approximate, does not reproduce or fails, linked to its ledger."""
+    rows = ["| verdict | paper | where | claim | |", "|---|---|---|---|---|"]
     for verdict in ATTENTION:
         for r in (r for r in records if r["verdict"] == verdict):
-            study = r.get("study") or paper_registry(r["paper"]).studies[0].name
-            citation = paper_registry(r["paper"]).citation
-            lines.append(f"- **{verdict}**: {citation}, {r['where']}: {r['statement']} "
-                         f"({{ref}}`ledger <{ledger_label(r['paper'], study)}>`)")
-    return MarkdownText("\n".join(lines) if lines else "Every claim reproduces or holds.")
+            reg = paper_registry(r["paper"])
+            study = r.get("study") or reg.studies[0].name
+            cells = (f"**{verdict}**", reg.citation, r["where"], r["statement"],
+                     f"{{ref}}`ledger <{ledger_label(r['paper'], study)}>`")
+            rows.append("| " + " | ".join(c.replace("|", "\\|").replace("\n", " ") for c in cells) + " |")
+    return MarkdownText("\n".join(rows) if len(rows) > 2 else "Every claim reproduces or holds.")
 
 
 def errata_list(papers: Sequence[str] = PAPERS) -> MarkdownText:
-    """Per paper, the errata and readings its registry records (one bullet each)."""
+    """Per paper, the errata and readings its registry records, each paper in a collapsed dropdown."""
     blocks = []
     for key in papers:
         reg = paper_registry(key)
         if reg.errata:
-            blocks.append(f"**{reg.citation}** {{cite}}`{key}`\n\n" + "\n".join(f"- {e}" for e in reg.errata))
+            items = "\n".join(f"- {e}" for e in reg.errata)
+            blocks.append(f":::{{dropdown}} {reg.citation}: {len(reg.errata)} errata and readings\n"
+                          f"{items}\n:::")
     return MarkdownText("\n\n".join(blocks))
