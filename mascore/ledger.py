@@ -378,6 +378,8 @@ class ClaimsView:
         for n, r in enumerate(self.records, 1):
             unit, labels = r.get("unit", ""), r.get("labels")
             claim = f"{_cell(r.get('statement', ''))} *({_cell(r.get('where', ''))})*"
+            if r.get("rule"):
+                claim += f"<br>*Decided by:* {_cell(r['rule'])}"
             lines.append(
                 f"| {n} | {claim} | {_cell(format_value(r.get('paper_value'), PAPER_DIGITS, unit=unit, labels=labels))} "
                 f"| {_cell(format_value(r.get('value'), unit=unit, labels=labels))} | {_cell(_verdict_text(r))} |"
@@ -391,7 +393,7 @@ def _verdict_text(record: dict) -> str:
     verdict = f"**{record['verdict']}**"
     tol = record.get("tolerance")
     if not tol:
-        return verdict + (f"<br>rule: {record['rule']}" if record.get("rule") else "")
+        return verdict
     kind = "rel" if "rel" in tol else "abs"
     fmt = (lambda v: format_number(100 * v, 3) + " %") if kind == "rel" else format_number
     dev = _worst_deviation(record["paper_value"], record["value"], kind)

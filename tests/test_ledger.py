@@ -111,5 +111,5 @@ def test_show_claims_numbers_claims_states_them_and_prints_a_shared_note_once():
     assert len(rows) == 2
     assert rows[0].count(" | ") == 4  # the '|' inside 'where' is escaped, not a new column
     assert "First statement." in rows[0] and "**reproduces**" in rows[0] and "within 0.1" in rows[0]
-    assert "**fails**" in rows[1] and "max < 1" in rows[1]
+    assert "**fails**" in rows[1] and "Decided by:* max < 1" in rows[1]
     assert text.count(shared) == 1 and "Claims 1, 2." in text and "Claim 1.* own a" in text
