@@ -54,13 +54,13 @@ def ledger_label(paper: str, study: str) -> str:
 
 def attention_list(records: Sequence[dict]) -> MarkdownText:
     """A table of every claim that is approximate, does not reproduce or fails, linked to its ledger."""
-    rows = ["| verdict | paper | where | claim | |", "|---|---|---|---|---|"]
+    rows = ["| verdict | where | claim |", "|---|---|---|"]
     for verdict in ATTENTION:
         for r in (r for r in records if r["verdict"] == verdict):
             reg = paper_registry(r["paper"])
             study = r.get("study") or reg.studies[0].name
-            cells = (f"**{verdict}**", reg.citation, r["where"], r["statement"],
-                     f"{{ref}}`ledger <{ledger_label(r['paper'], study)}>`")
+            cells = (f"**{verdict}**", f"{reg.citation}, {r['where']}",
+                     f"{r['statement']} ({{ref}}`ledger <{ledger_label(r['paper'], study)}>`)")
             rows.append("| " + " | ".join(c.replace("|", "\\|").replace("\n", " ") for c in cells) + " |")
     return MarkdownText("\n".join(rows) if len(rows) > 2 else "Every claim reproduces or holds.")
 
