@@ -6,6 +6,8 @@ never with cvxpy's default choice, and the status is always checked.
 
 from __future__ import annotations
 
+import math
+
 import cvxpy as cp
 
 __all__ = ["LMI_EPS", "SOLVER", "SOLVER_OPTIONS", "SolverError", "solve"]
@@ -41,12 +43,20 @@ def solve(problem: cp.Problem, what: str) -> float:
     Raises
     ------
     SolverError
-        If the solver fails or the status is not ``optimal``.
+        If the solver fails, the status is not ``optimal`` or the optimal value is not finite.
+    TypeError
+        If `problem` is not a :class:`cvxpy.Problem` or `what` not a string.
     """
+    if not isinstance(problem, cp.Problem):
+        raise TypeError(f"problem must be a cvxpy.Problem; got {type(problem).__name__}")
+    if not isinstance(what, str):
+        raise TypeError(f"what must be a string naming the program; got {type(what).__name__}")
     try:
         value = problem.solve(solver=SOLVER, **SOLVER_OPTIONS)
     except cp.error.SolverError as exc:
         raise SolverError(f"{what}: the solver {SOLVER} failed: {exc}") from exc
     if problem.status != cp.OPTIMAL:
         raise SolverError(f"{what}: solver status is {problem.status!r}, expected 'optimal'")
+    if value is None or not math.isfinite(float(value)):
+        raise SolverError(f"{what}: the solver reported 'optimal' with a non-finite value {value!r}")
     return float(value)

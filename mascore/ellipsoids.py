@@ -24,6 +24,15 @@ one-parameter family by the trace criterion:
   ``C`` has one row) is contained in every member of the family
   ``{x : (1 - t) |x - c|^2_{P^{-1}} + t |y - C x|^2_{W^{-1}} <= 1}``, ``t`` in [0, 1]
   (Schweppe 1968; :func:`intersection_family`).
+
+Input checks: every public function checks its arguments and names the one at
+fault (finite entries; matching and broadcastable shapes; shape matrices
+symmetric positive definite, or semidefinite where a flat ellipsoid makes sense;
+family parameters strictly inside (0, 1); counts and tolerances). The
+set-membership filter calls the unchecked private kernels (``_intersection_min_trace``,
+``_max_innovation_form``, ``_sum_min_trace``) after checking its own arguments once.
+A result that overflows (NaN or inf from finite input, e.g. entries near 1e308)
+raises a ``ValueError`` instead of being returned.
 """
 
 from __future__ import annotations
@@ -34,7 +43,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_matrix, as_vector, check_covariance, check_generator
+from ._validation import (
+    as_matrix,
+    as_vector,
+    check_covariance,
+    check_generator,
+    check_positive,
+    check_positive_int,
+)
 from .noise import psd_factor, uniform_ellipsoid
 
 __all__ = [
@@ -70,10 +86,10 @@ class Ellipsoid:
     shape: np.ndarray
 
     def __post_init__(self) -> None:
-        P = check_covariance(self.shape, "shape", definite=True)
+        P = check_covariance(_float_array(self.shape, "shape"), "shape", definite=True)
         if P.ndim != 2:
             raise ValueError(f"shape must be a single (n, n) matrix; got shape {P.shape}")
-        c = as_vector(self.center, "center", P.shape[0])
+        c = as_vector(_float_array(self.center, "center"), "center", P.shape[0])
         object.__setattr__(self, "shape", 0.5 * (P + P.T))
         object.__setattr__(self, "center", c)
 
@@ -118,8 +134,12 @@ class Ellipsoid:
 
 
 def trace(shape: ArrayLike) -> np.ndarray:
-    """``trace(P)`` of one or a stack (..., n, n) of shape matrices."""
-    return np.trace(np.asarray(shape, dtype=float), axis1=-2, axis2=-1)
+    """``trace(P)`` of one or a stack (..., n, n) of shape matrices (finite, square)."""
+    P = _float_array(shape, "shape")
+    if P.ndim < 2 or P.shape[-1] != P.shape[-2]:
+        raise ValueError(f"shape must be a square matrix or a stack (..., n, n); got shape {P.shape}")
+    _require_finite(P, "shape")
+    return _finite_result(np.trace(P, axis1=-2, axis2=-1), "trace")
 
 
 def volume(shape: ArrayLike) -> np.ndarray:
@@ -128,9 +148,10 @@ def volume(shape: ArrayLike) -> np.ndarray:
     Raises ValueError unless every P of the stack (..., n, n) is symmetric positive
     semidefinite (a singular P, a flat ellipsoid, has volume 0).
     """
-    P = np.asarray(shape, dtype=float)
+    P = _float_array(shape, "shape")
     if P.ndim < 2 or P.shape[-1] != P.shape[-2]:
         raise ValueError(f"shape must be (..., n, n); got {P.shape}")
+    _require_finite(P, "shape")
     scale = np.maximum(np.abs(P).max(axis=(-1, -2), initial=0.0), 1e-300)
     sym = np.abs(P - np.swapaxes(P, -1, -2)).max(axis=(-1, -2), initial=0.0) <= 1e-10 * scale
     eig = np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2)))
@@ -138,7 +159,7 @@ def volume(shape: ArrayLike) -> np.ndarray:
         raise ValueError("shape must be symmetric positive semidefinite to have a volume")
     n = P.shape[-1]
     unit = math.pi ** (n / 2) / math.gamma(n / 2 + 1)
-    return unit * np.sqrt(np.prod(np.clip(eig, 0.0, None), axis=-1))
+    return _finite_result(unit * np.sqrt(np.prod(np.clip(eig, 0.0, None), axis=-1)), "volume")
 
 
 def contains(points: ArrayLike, center: ArrayLike, shape: ArrayLike, rtol: float = 1e-9) -> np.ndarray:
@@ -148,24 +169,33 @@ def contains(points: ArrayLike, center: ArrayLike, shape: ArrayLike, rtol: float
     ----------
     points : (..., n) array_like
     center : (..., n) array_like, broadcast against `points`
-    shape : (..., n, n) array_like, positive definite
+    shape : (..., n, n) array_like, symmetric positive definite (a negative definite or
+        singular `shape` is refused: it describes no ellipsoid of this convention)
     rtol : float
-        Accept ``(x - c)^T P^{-1} (x - c) <= 1 + rtol`` (round-off and solver tolerance).
+        Accept ``(x - c)^T P^{-1} (x - c) <= 1 + rtol`` (round-off and solver tolerance); finite, >= 0.
 
     Returns
     -------
     (...,) bool ndarray
     """
+    rtol = check_positive(rtol, "rtol", allow_zero=True)
     return mahalanobis_sq(points, center, shape) <= 1.0 + rtol
 
 
 def mahalanobis_sq(points: ArrayLike, center: ArrayLike, shape: ArrayLike) -> np.ndarray:
-    """``(x - c)^T P^{-1} (x - c)`` broadcast over leading dimensions; shape (...,)."""
-    d = np.asarray(points, dtype=float) - np.asarray(center, dtype=float)
-    P = np.asarray(shape, dtype=float)
+    """``(x - c)^T P^{-1} (x - c)`` broadcast over leading dimensions; shape (...,).
+
+    `points` (..., n) and `center` (..., n) finite, `shape` (..., n, n) symmetric positive definite.
+    """
+    P = _shape_matrix(shape, "shape")
+    n = P.shape[-1]
+    x = _points(points, "points", n)
+    c = _points(center, "center", n)
+    _broadcast(points=x.shape[:-1], center=c.shape[:-1], shape=P.shape[:-2])
+    d = x - c
     P, d = np.broadcast_arrays(P, d[..., None])
     sol = np.linalg.solve(P, d[..., :1])[..., 0]
-    return np.einsum("...i,...i->...", d[..., 0], sol)
+    return _finite_result(np.einsum("...i,...i->...", d[..., 0], sol), "Mahalanobis form")
 
 
 def affine_image(
@@ -176,7 +206,7 @@ def affine_image(
     Parameters
     ----------
     center : (..., n) array_like
-    shape : (..., n, n) array_like
+    shape : (..., n, n) array_like, symmetric positive semidefinite
     M : (m, n) array_like
     b : (m,) array_like, optional
 
@@ -186,16 +216,22 @@ def affine_image(
     shape : (..., m, m) ndarray
         Symmetric; only positive semidefinite if M lacks full row rank.
     """
-    M = as_matrix(M, "M")
-    c = np.asarray(center, dtype=float)
-    P = np.asarray(shape, dtype=float)
-    if c.shape[-1] != M.shape[1] or P.shape[-1] != M.shape[1]:
-        raise ValueError(f"M has {M.shape[1]} columns but the ellipsoid lives in R^{c.shape[-1]}")
+    P = _shape_matrix(shape, "shape", definite=False)
+    n = P.shape[-1]
+    c = _points(center, "center", n)
+    _broadcast(center=c.shape[:-1], shape=P.shape[:-2])
+    M = as_matrix(_float_array(M, "M"), "M")
+    if M.shape[1] != n:
+        raise ValueError(f"M has {M.shape[1]} columns but the ellipsoid lives in R^{n}")
     new_c = c @ M.T
     if b is not None:
+        b = _float_array(b, "b")
+        if b.shape != (M.shape[0],):
+            raise ValueError(f"b must have shape ({M.shape[0]},) (one entry per row of M); got {b.shape}")
         new_c = new_c + as_vector(b, "b", M.shape[0])
     new_P = M @ P @ M.T
-    return new_c, 0.5 * (new_P + np.swapaxes(new_P, -1, -2))
+    return _finite_result(new_c, "affine image (center)"), _finite_result(
+        0.5 * (new_P + np.swapaxes(new_P, -1, -2)), "affine image (shape)")
 
 
 def minkowski_sum(
@@ -204,14 +240,22 @@ def minkowski_sum(
     """Member of the outer family of ``E(c1, P1) + E(c2, P2)`` for parameter beta in (0, 1).
 
     ``E(c1 + c2, P1 / (1 - beta) + P2 / beta)`` contains the sum for every beta
-    (Schweppe 1968); beta broadcasts over the batch dimensions.
+    (Schweppe 1968); beta broadcasts over the batch dimensions. `shape1` and `shape2`
+    must be symmetric positive semidefinite (an indefinite one is refused: the
+    result would be indefinite, no ellipsoid).
     """
-    beta = np.asarray(beta, dtype=float)[..., None, None]
-    if np.any((beta <= 0) | (beta >= 1)):
-        raise ValueError("beta must lie strictly between 0 and 1")
-    c = np.asarray(center1, dtype=float) + np.asarray(center2, dtype=float)
-    P = np.asarray(shape1, dtype=float) / (1 - beta) + np.asarray(shape2, dtype=float) / beta
-    return c, P
+    P1 = _shape_matrix(shape1, "shape1", definite=False)
+    n = P1.shape[-1]
+    P2 = _shape_matrix(shape2, "shape2", definite=False, size=n)
+    c1 = _points(center1, "center1", n)
+    c2 = _points(center2, "center2", n)
+    beta = _open_unit(beta, "beta")
+    _broadcast(center1=c1.shape[:-1], shape1=P1.shape[:-2], center2=c2.shape[:-1], shape2=P2.shape[:-2],
+               beta=beta.shape)
+    beta = beta[..., None, None]
+    c = c1 + c2
+    P = P1 / (1 - beta) + P2 / beta
+    return _finite_result(c, "Minkowski sum (center)"), _finite_result(P, "Minkowski sum (shape)")
 
 
 def minkowski_sum_min_trace(
@@ -237,11 +281,16 @@ def minkowski_sum_min_trace(
     beta : (...,) ndarray
         The optimal parameter (0 when ``trace(P2) = 0``, 1 when ``trace(P1) = 0``).
     """
-    P1 = np.asarray(shape1, dtype=float)
-    P2 = np.asarray(shape2, dtype=float)
+    P1 = _shape_matrix(shape1, "shape1", definite=False)
+    n = P1.shape[-1]
+    P2 = _shape_matrix(shape2, "shape2", definite=False, size=n)
+    c1 = _points(center1, "center1", n)
+    c2 = _points(center2, "center2", n)
+    _broadcast(center1=c1.shape[:-1], shape1=P1.shape[:-2], center2=c2.shape[:-1], shape2=P2.shape[:-2])
     P, beta = _sum_min_trace(P1, P2, _sqrt_trace(P1), _sqrt_trace(P2))
-    c = np.asarray(center1, dtype=float) + np.asarray(center2, dtype=float)
-    return c, P, beta
+    c = c1 + c2
+    return (_finite_result(c, "Minkowski sum (center)"), _finite_result(P, "Minkowski sum (shape)"),
+            beta)
 
 
 def intersection_gain_form(
@@ -268,28 +317,35 @@ def intersection_gain_form(
     Parameters
     ----------
     center : (..., n), shape : (..., n, n)
-        Prior ellipsoid E(c, P).
+        Prior ellipsoid E(c, P), `shape` symmetric positive definite.
     C : (p, n) array_like
     y : (..., p) array_like
-    W : (p, p) array_like, positive definite (``D R D^T``)
-    t : (...,) array_like in (0, 1)
+    W : (p, p) array_like, symmetric positive definite (``D R D^T``)
+    t : (...,) array_like, strictly inside (0, 1): ``t = 0`` and ``t = 1`` are only limits
+        of the family (``W / t`` and ``P / (1 - t)`` are undefined there) and are refused.
     shrink : bool
 
     Returns
     -------
     center : (..., n), shape : (..., n, n), gain L : (..., n, p)
     """
-    C = as_matrix(C, "C")
-    c = np.asarray(center, dtype=float)
-    P = np.asarray(shape, dtype=float)
-    W = np.asarray(W, dtype=float)
+    c, P, C, y, W = _intersection_args(center, shape, C, y, W)
+    t = _open_unit(t, "t")
+    _broadcast(center=c.shape[:-1], shape=P.shape[:-2], y=y.shape[:-1], W=W.shape[:-2], t=t.shape)
+    new_c, Pt, L = _gain_form(c, P, C, y, W, t, shrink)
+    return (_finite_result(new_c, "intersection (center)"), _finite_result(Pt, "intersection (shape)"),
+            _finite_result(L, "intersection (gain)"))
+
+
+def _gain_form(c, P, C, y, W, t, shrink):
+    """:func:`intersection_gain_form` on arrays already checked (no argument checks)."""
     t = np.asarray(t, dtype=float)[..., None, None]
     PCt = P @ C.T
     S = (C @ PCt) / (1 - t) + W / t
     L = np.swapaxes(np.linalg.solve(S, np.swapaxes(PCt, -1, -2)), -1, -2) / (1 - t)
     IKC = np.eye(P.shape[-1]) - L @ C
     Pt = IKC @ P @ np.swapaxes(IKC, -1, -2) / (1 - t) + L @ W @ np.swapaxes(L, -1, -2) / t  # Joseph form
-    nu = np.asarray(y, dtype=float) - c @ C.T
+    nu = y - c @ C.T
     new_c = c + np.einsum("...ij,...j->...i", L, nu)
     if shrink:
         delta = 1.0 - np.einsum("...i,...i->...", nu, np.linalg.solve(S, nu[..., None])[..., 0])
@@ -329,14 +385,19 @@ def intersection_min_trace(
     With ``shrink=True`` the factor delta(t) multiplies this function; the
     minimiser of the product is then found by a bounded golden-section search.
 
+    Arguments as in :func:`intersection_gain_form`; `tol` (finite, > 0) and `max_iter`
+    (integer >= 1) bound the Newton search.
+
     Returns
     -------
     center : (..., n), shape : (..., n, n), gain : (..., n, p), t : (...,)
     """
-    return _intersection_min_trace(
-        np.asarray(center, dtype=float), np.asarray(shape, dtype=float), as_matrix(C, "C"),
-        np.asarray(y, dtype=float), np.asarray(W, dtype=float), shrink, tol, max_iter,
-    )
+    c, P, C, y, W = _intersection_args(center, shape, C, y, W)
+    tol = check_positive(tol, "tol")
+    max_iter = check_positive_int(max_iter, "max_iter")
+    new_c, new_P, L, t = _intersection_min_trace(c, P, C, y, W, bool(shrink), tol, max_iter)
+    return (_finite_result(new_c, "intersection (center)"), _finite_result(new_P, "intersection (shape)"),
+            _finite_result(L, "intersection (gain)"), t)
 
 
 def _intersection_min_trace(c, P, C, y, W, shrink=False, tol=1e-13, max_iter=100):
@@ -349,7 +410,7 @@ def _intersection_min_trace(c, P, C, y, W, shrink=False, tol=1e-13, max_iter=100
         t = _golden(lambda tt: _trace_delta(tt, P, C, W, nu, h, m), P.shape[:-2], tol=1e-10)
     else:
         t = _newton_trace(h, m, tol, max_iter)
-    new_c, new_P, L = intersection_gain_form(c, P, C, y, W, t, shrink=shrink)
+    new_c, new_P, L = _gain_form(c, P, C, y, W, t, shrink)
     return new_c, new_P, L, t
 
 
@@ -363,12 +424,12 @@ def max_innovation_form(
     exceeds 1. For one measurement (p = 1) the maximum is
     ``nu^2 / (sqrt(W) + sqrt(C P C^T))^2`` (the strip misses the projected
     ellipsoid); otherwise the concave function of t is maximised by bisection
-    on its derivative after a simultaneous diagonalisation.
+    on its derivative after a simultaneous diagonalisation (`n_iter` bisection steps, >= 1).
+    Arguments as in :func:`intersection_gain_form`.
     """
-    return _max_innovation_form(
-        np.asarray(center, dtype=float), np.asarray(shape, dtype=float), as_matrix(C, "C"),
-        np.asarray(y, dtype=float), np.asarray(W, dtype=float), n_iter,
-    )
+    c, P, C, y, W = _intersection_args(center, shape, C, y, W)
+    n_iter = check_positive_int(n_iter, "n_iter")
+    return _finite_result(_max_innovation_form(c, P, C, y, W, n_iter), "innovation form")
 
 
 def _max_innovation_form(c, P, C, y, W, n_iter=60):
@@ -398,18 +459,23 @@ def _max_innovation_form(c, P, C, y, W, n_iter=60):
 def intersection_is_empty(
     center: ArrayLike, shape: ArrayLike, C: ArrayLike, y: ArrayLike, W: ArrayLike, rtol: float = 1e-9
 ) -> np.ndarray:
-    """True where ``E(c, P) ∩ {x : (y - C x)^T W^{-1} (y - C x) <= 1}`` is empty."""
+    """True where ``E(c, P) ∩ {x : (y - C x)^T W^{-1} (y - C x) <= 1}`` is empty.
+
+    Arguments as in :func:`intersection_gain_form`; `rtol` finite, >= 0.
+    """
+    rtol = check_positive(rtol, "rtol", allow_zero=True)
     return max_innovation_form(center, shape, C, y, W) > 1.0 + rtol
 
 
 def sample_boundary(
     rng: np.random.Generator, center: ArrayLike, shape: ArrayLike, size: int | tuple[int, ...] = ()
 ) -> np.ndarray:
-    """Points ``c + E u`` with u uniform on the unit sphere (``P = E E^T``); shape (*size, n)."""
-    rng = check_generator(rng)
-    P = check_covariance(shape, "shape")
-    c = as_vector(center, "center", P.shape[0])
-    size = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
+    """Points ``c + E u`` with u uniform on the unit sphere (``P = E E^T``); shape (*size, n).
+
+    `rng`: a Generator or a non-negative integer seed; `shape` symmetric positive
+    semidefinite (n, n); `size`: an integer >= 1 or a tuple of them (``()``: one point).
+    """
+    rng, c, P, size = _sampling_args(rng, center, shape, size)
     u = rng.standard_normal((*size, P.shape[0]))
     u /= np.linalg.norm(u, axis=-1, keepdims=True)
     return c + u @ psd_factor(P).T
@@ -418,8 +484,12 @@ def sample_boundary(
 def sample_interior(
     rng: np.random.Generator, center: ArrayLike, shape: ArrayLike, size: int | tuple[int, ...] = ()
 ) -> np.ndarray:
-    """Points uniform in E(c, P); shape (*size, n). Same as :func:`mascore.noise.uniform_ellipsoid`."""
-    return uniform_ellipsoid(rng, center, shape, size)
+    """Points uniform in E(c, P); shape (*size, n). Same as :func:`mascore.noise.uniform_ellipsoid`.
+
+    Arguments as in :func:`sample_boundary`.
+    """
+    rng, c, P, size = _sampling_args(rng, center, shape, size)
+    return uniform_ellipsoid(rng, c, P, size)
 
 
 def _sqrt_trace(P: np.ndarray) -> np.ndarray:
@@ -435,7 +505,7 @@ def _sum_min_trace(P1, P2, s1, s2):
     """
     total = s1 + s2
     if not (total > 0).all():
-        raise ValueError("Minkowski sum of two points: both shape matrices are zero")
+        raise ValueError("Minkowski sum of two points: both shape matrices (shape1 and shape2) are zero")
     w1 = np.divide(total, s1, out=np.zeros(np.shape(total)), where=s1 > 0)
     w2 = np.divide(total, s2, out=np.zeros(np.shape(total)), where=s2 > 0)
     P = w1[..., None, None] * P1 + w2[..., None, None] * P2
@@ -546,3 +616,115 @@ def _golden(fun, batch_shape, tol: float = 1e-10) -> np.ndarray:
         f2, f1 = np.where(left, f1, f_new), np.where(left, f_new, f2)
         x1, x2 = x1n, x2n
     return 0.5 * (a + b)
+
+
+# --------------------------------------------------------------------------- argument checks
+
+
+def _float_array(value: object, name: str) -> np.ndarray:
+    """`value` as a float array; a string, None or anything numpy cannot convert is a ``TypeError`` naming `name`."""
+    if type(value) is np.ndarray and value.dtype is _FLOAT:  # the usual case, first and fast
+        return value
+    if isinstance(value, (str, bytes)) or value is None:
+        raise TypeError(f"{name} must be an array of real numbers; got {type(value).__name__} {value!r}")
+    if isinstance(value, np.ndarray) and value.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must be an array of real numbers; got an array of dtype {value.dtype}")
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(
+            f"{name} must be an array of real numbers; numpy cannot convert the {type(value).__name__} "
+            f"given ({exc})"
+        ) from None
+
+
+_FLOAT = np.dtype(float)
+
+
+def _require_finite(arr: np.ndarray, name: str) -> None:
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} contains NaN or infinite entries")
+
+
+def _points(x: ArrayLike, name: str, n: int | None = None) -> np.ndarray:
+    """A finite array (..., n) of points (centres, measurements)."""
+    arr = _float_array(x, name)
+    if arr.ndim < 1:
+        raise ValueError(f"{name} must be an array (..., n); got a scalar")
+    if n is not None and arr.shape[-1] != n:
+        raise ValueError(f"{name} must have last dimension {n}; got shape {arr.shape}")
+    _require_finite(arr, name)
+    return arr
+
+
+def _shape_matrix(P: ArrayLike, name: str, definite: bool = True, size: int | None = None) -> np.ndarray:
+    """A stack (..., n, n) of symmetric positive definite (or semidefinite) shape matrices."""
+    arr = check_covariance(_float_array(P, name), name, size, definite=definite)
+    if arr.shape[-1] == 0:
+        raise ValueError(f"{name} must be at least 1 x 1; got shape {arr.shape}")
+    return arr
+
+
+def _open_unit(t: ArrayLike, name: str) -> np.ndarray:
+    """Family parameters: finite, strictly between 0 and 1."""
+    if isinstance(t, bool):
+        raise TypeError(f"{name} must be a number or an array of numbers in (0, 1); got bool")
+    arr = _float_array(t, name)
+    _require_finite(arr, name)
+    if np.any((arr <= 0) | (arr >= 1)):
+        bad = arr[(arr <= 0) | (arr >= 1)].ravel()[0]
+        raise ValueError(
+            f"{name} must lie strictly between 0 and 1 (0 and 1 are limits of the family, where a "
+            f"term is divided by zero); got {bad:g}"
+        )
+    return arr
+
+
+def _broadcast(**batches: tuple[int, ...]) -> tuple[int, ...]:
+    """Common batch shape of the named arguments, or a ``ValueError`` naming them."""
+    try:
+        return np.broadcast_shapes(*batches.values())
+    except ValueError:
+        listed = ", ".join(f"{k} {v}" for k, v in batches.items())
+        raise ValueError(f"the batch (leading) dimensions do not broadcast: {listed}") from None
+
+
+def _intersection_args(center, shape, C, y, W):
+    """Check the prior ellipsoid, the output matrix, the measurement and its shape ``W``."""
+    P = _shape_matrix(shape, "shape")
+    n = P.shape[-1]
+    c = _points(center, "center", n)
+    C = as_matrix(_float_array(C, "C"), "C", (None, n))
+    p = C.shape[0]
+    if p == 0:
+        raise ValueError(f"C must have at least one row; got shape {C.shape}")
+    y = _float_array(y, "y")
+    if y.ndim < 1 or y.shape[-1] != p:
+        raise ValueError(f"y must have last dimension {p} (the rows of C); got shape {y.shape}")
+    _require_finite(y, "y")
+    W = _shape_matrix(W, "W", size=p)
+    _broadcast(center=c.shape[:-1], shape=P.shape[:-2], y=y.shape[:-1], W=W.shape[:-2])
+    return c, P, C, y, W
+
+
+def _sampling_args(rng, center, shape, size):
+    rng = check_generator(rng)
+    P = _shape_matrix(shape, "shape", definite=False)
+    if P.ndim != 2:
+        raise ValueError(f"shape must be a single (n, n) matrix; got shape {P.shape}")
+    c = as_vector(_float_array(center, "center"), "center", P.shape[0])
+    if isinstance(size, (tuple, list)):
+        size = tuple(check_positive_int(k, "size") for k in size)
+    else:
+        size = (check_positive_int(size, "size"),)
+    return rng, c, P, size
+
+
+def _finite_result(arr: np.ndarray, what: str) -> np.ndarray:
+    """Return `arr`, or raise if finite input overflowed to NaN/inf."""
+    if not np.isfinite(arr).all():
+        raise ValueError(
+            f"the {what} overflowed (NaN or inf in the result) although every input is finite: "
+            "the values are too large to be represented; rescale the problem"
+        )
+    return arr

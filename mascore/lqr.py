@@ -14,6 +14,13 @@ network controller here has the form ``U = -(I_N (x) K_self + Lap (x)
 K_coupling) X``; since ``Lap = V diag(lambda) V^T`` with orthogonal ``V``, the
 closed loop splits into N independent ``n``-state modes
 ``A - B (K_self + lambda_i K_coupling)`` and the costs are sums over modes.
+
+That decomposition needs a *symmetric* Laplacian (orthogonal eigenvectors): every
+network function here requires an undirected graph and says so when given a
+directed one; an adjacency passed where a Laplacian is expected (or a Laplacian
+where an adjacency is expected) is named as such. Arguments are checked on entry
+(finite entries, shapes, symmetric positive (semi)definite weights, no
+self-loops, non-negative weights) and the error names the argument.
 """
 
 from __future__ import annotations
@@ -24,7 +31,16 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import ArrayLike
 
-from ._validation import as_matrix, check_covariance, check_square
+from ._validation import (
+    as_matrix,
+    check_adjacency,
+    check_covariance,
+    check_laplacian,
+    check_positive,
+    check_positive_int,
+    check_square,
+)
+from .ellipsoids import _float_array
 from .kalman import symmetrize
 from .noise import psd_factor
 
@@ -62,10 +78,11 @@ def is_controllable(A: ArrayLike, B: ArrayLike, tol: float = 1e-9) -> bool:
     A : (n, n) array_like
     B : (n, m) array_like
     tol : float
-        Relative singular-value threshold for the rank.
+        Relative singular-value threshold for the rank; finite, > 0.
     """
-    A = check_square(A, "A")
-    B = as_matrix(B, "B", (A.shape[0], None))
+    A = _square(A, "A")
+    B = _matrix(B, "B", (A.shape[0], None))
+    check_positive(tol, "tol")
     n = A.shape[0]
     scale = max(1.0, np.linalg.norm(A, 2), np.linalg.norm(B, 2))
     for s in np.linalg.eigvals(A):
@@ -105,12 +122,12 @@ def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndar
         No stabilizing solution (e.g. ``(Q, A)`` has unobservable modes on the
         imaginary axis) or a Riccati residual above :data:`RICCATI_RTOL`.
     """
-    A = check_square(A, "A")
+    A = _square(A, "A")
     n = A.shape[0]
-    B = as_matrix(B, "B", (n, None))
+    B = _matrix(B, "B", (n, None))
     m = B.shape[1]
-    Q = check_covariance(np.atleast_2d(Q), "Q", n)
-    R = check_covariance(np.atleast_2d(R), "R", m, definite=True)
+    Q = _weight(Q, "Q", n)
+    R = _weight(R, "R", m, definite=True)
     if not is_controllable(A, B):
         raise ValueError("(A, B) is not controllable: the LQR problem has no stabilizing solution")
     return _care(A, B, Q, R)
@@ -134,25 +151,53 @@ def laplacian_spectrum(laplacian: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     Raises
     ------
     ValueError
-        If the matrix is not a symmetric Laplacian or the graph is disconnected.
+        If the matrix is not a symmetric Laplacian (a directed one, or an adjacency
+        matrix passed by mistake) or the graph is disconnected.
     """
-    Lap = check_square(laplacian, "laplacian")
+    return _spectrum(_undirected_laplacian(laplacian, "laplacian", _WHY_SYMMETRIC), "laplacian")
+
+
+#: Why the network functions need an undirected graph (quoted in their errors).
+_WHY_SYMMETRIC = ("the network designs split the loop into modes by the orthogonal eigenvectors of a "
+                  "symmetric Laplacian, which a directed graph does not have")
+
+
+def _spectrum(Lap: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Eigen-decomposition of a checked symmetric Laplacian; `name` is the argument it came from."""
     N = Lap.shape[0]
     scale = max(1.0, float(np.abs(Lap).max()))
-    if not np.allclose(Lap, Lap.T, atol=1e-12 * scale):
-        raise ValueError("laplacian must be symmetric (an undirected graph)")
-    if not np.allclose(Lap.sum(axis=1), 0, atol=1e-10 * scale):
-        raise ValueError("laplacian rows must sum to zero")
-    if np.any(Lap - np.diag(np.diag(Lap)) > 0):
-        raise ValueError("laplacian off-diagonal entries must be <= 0")
     lam, V = np.linalg.eigh(Lap)
     if N > 1 and lam[1] <= 1e-9 * scale:
         raise ValueError(
-            f"the graph is disconnected (second-smallest Laplacian eigenvalue {lam[1]:.2g}); "
+            f"{name} describes a disconnected graph (second-smallest Laplacian eigenvalue {lam[1]:.2g}); "
             "the network designs need a connected undirected graph"
         )
     lam[0] = 0.0
     return lam, V
+
+
+def _undirected_laplacian(laplacian: ArrayLike, name: str, why: str) -> np.ndarray:
+    """A symmetric graph Laplacian (an adjacency passed by mistake is named as such)."""
+    Lap = check_laplacian(_float_array(laplacian, name), name)
+    if Lap.shape[0] == 0:
+        raise ValueError(f"{name} must describe at least one agent; got shape {Lap.shape}")
+    scale = max(1.0, float(np.abs(Lap).max()))
+    if not np.allclose(Lap, Lap.T, atol=1e-12 * scale):
+        raise ValueError(f"{name} must be symmetric (an undirected graph): {why}; got a directed Laplacian")
+    if not np.allclose(Lap.sum(axis=1), 0, atol=1e-10 * scale):
+        raise ValueError(f"{name} rows must sum to zero")
+    return Lap
+
+
+def _undirected_adjacency(adjacency: ArrayLike, name: str = "adjacency") -> tuple[np.ndarray, np.ndarray]:
+    """A symmetric adjacency (no self-loops, non-negative weights) and its Laplacian ``diag(A 1) - A``."""
+    Adj = check_adjacency(_float_array(adjacency, name), name)
+    if Adj.shape[0] == 0:
+        raise ValueError(f"{name} must describe at least one agent; got shape {Adj.shape}")
+    scale = max(1.0, float(np.abs(Adj).max()))
+    if not np.allclose(Adj, Adj.T, atol=1e-12 * scale):
+        raise ValueError(f"{name} must be symmetric (an undirected graph): {_WHY_SYMMETRIC}")
+    return Adj, np.diag(Adj.sum(axis=1)) - Adj
 
 
 def network_lqr_weights(
@@ -164,15 +209,19 @@ def network_lqr_weights(
     (``Q~_ii = Q1 + (N-1) Q2``, ``Q~_ij = -Q2``); with another graph it penalizes
     ``Q2`` only on the differences between neighbours.
 
+    `laplacian` must be symmetric (undirected): ``Q~`` weighs a quadratic cost and must
+    be symmetric itself.
+
     Returns
     -------
     Qt : (N n, N n) ndarray
     Rt : (N m, N m) ndarray
     """
-    Lap = check_square(laplacian, "laplacian")
-    Q1 = check_covariance(Q1, "Q1")
-    Q2 = check_covariance(Q2, "Q2", Q1.shape[0])
-    R = check_covariance(R, "R", definite=True)
+    Lap = _undirected_laplacian(laplacian, "laplacian",
+                                "the cost weight I (x) Q1 + Lap (x) Q2 must be symmetric")
+    Q1 = _weight(Q1, "Q1", atleast_2d=False)
+    Q2 = _weight(Q2, "Q2", Q1.shape[0], atleast_2d=False)
+    R = _weight(R, "R", definite=True, atleast_2d=False)
     N = Lap.shape[0]
     return np.kron(np.eye(N), Q1) + np.kron(Lap, Q2), np.kron(np.eye(N), R)
 
@@ -227,7 +276,8 @@ def borrelli_keviczky_structure(
     Raises
     ------
     ValueError
-        Bad shapes or weights, ``(A, B)`` not controllable, or `n_agents` not a positive integer.
+        Bad shapes or weights, ``(A, B)`` not controllable, or `n_agents` not a positive integer
+        (``TypeError`` for a float or another non-integer type).
     """
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
     N = _check_agents(n_agents)
@@ -312,16 +362,18 @@ def top_down_lqr(
     Parameters
     ----------
     adjacency : (N, N) array_like
-        Symmetric adjacency of a connected graph.
+        Symmetric adjacency of a connected graph: non-negative weights, no self-loops
+        (a self-loop would count in the degree ``d_max`` but not in the Laplacian).
 
     Raises
     ------
     ValueError
-        Bad shapes or weights, ``(A, B)`` not controllable, or a disconnected graph.
+        Bad shapes or weights, ``(A, B)`` not controllable, a directed or disconnected graph,
+        self-loops, or a Laplacian passed as `adjacency`.
     """
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
-    Adj = check_square(adjacency, "adjacency")
-    lam, _ = laplacian_spectrum(np.diag(Adj.sum(axis=1)) - Adj)
+    Adj, Lap = _undirected_adjacency(adjacency)
+    lam, _ = _spectrum(Lap, "adjacency")
     d_max = int(round(float((Adj > 0).sum(axis=1).max())))
     n_local = d_max + 1
     blocks = borrelli_keviczky_structure(A, B, Q1, Q2, R, n_local)
@@ -348,31 +400,49 @@ def bottom_up_lqr(
     and ``sum_i trace(P_i)`` is minimized; it is solved by
     :func:`mascore.observers.coupled_gain_lmi` on ``(A^T, B^T)``.
 
+    `adjacency` (N, N): symmetric (undirected), connected, non-negative weights, no self-loops.
+
     Raises
     ------
     ValueError
-        Bad input, uncontrollable ``(A, B)``, disconnected graph.
+        Bad input, uncontrollable ``(A, B)``, a directed or disconnected graph, self-loops,
+        or a Laplacian passed as `adjacency`.
     mascore._solver.SolverError
         The program is infeasible or not solved to optimality.
     """
     from .observers import coupled_gain_lmi
 
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
-    Adj = check_square(adjacency, "adjacency")
-    lam, _ = laplacian_spectrum(np.diag(Adj.sum(axis=1)) - Adj)
+    _, Lap = _undirected_adjacency(adjacency)
+    lam, _ = _spectrum(Lap, "adjacency")
     K, _, _ = _care(A, B, Q1, R)
     Rinv = np.linalg.inv(R)
     # dual: process factor G_i with G_i G_i^T = Q1 + lam_i Q2, noise weight R^{-1}, gain K^T
     factors = [psd_factor(symmetrize(Q1 + l * Q2)) for l in lam]
-    result = coupled_gain_lmi(A.T, B.T, K.T, lam, factors, [Rinv] * len(lam), trace_in="original",
-                              what="bottom-up LQR program")
+    try:
+        result = coupled_gain_lmi(A.T, B.T, K.T, lam, factors, [Rinv] * len(lam), trace_in="original",
+                                  what="bottom-up LQR program")
+    except ValueError as exc:
+        if "L2" not in str(exc):
+            raise
+        raise ValueError(
+            "the node LQR gain K from Q1 and R is singular on the input directions (the dual of eq. (32) "
+            "needs it invertible there); choose Q1 so that the node LQR gain has full rank (e.g. Q1 positive "
+            f"definite): {exc}"
+        ) from None
     Phi = result["Phi"].T
     return BottomUpLQR(K_self=K, K_coupling=Phi @ K, Phi=Phi, bound=result["bound"])
 
 
 def assemble_network_gain(gain: DistributedGain, laplacian: ArrayLike) -> np.ndarray:
-    """The dense ``(N m, N n)`` matrix ``I (x) K_self + Lap (x) K_coupling``."""
-    Lap = check_square(laplacian, "laplacian")
+    """The dense ``(N m, N n)`` matrix ``I (x) K_self + Lap (x) K_coupling``.
+
+    `gain` a :class:`DistributedGain` with finite ``K_self``, ``K_coupling`` of one shape (m, n);
+    `laplacian` (N, N) symmetric: the gain was designed mode by mode on the orthogonal
+    eigenvectors of an undirected graph's Laplacian, so a directed Laplacian is refused.
+    """
+    _check_gain(gain)
+    Lap = _undirected_laplacian(laplacian, "laplacian", _WHY_SYMMETRIC)
     return np.kron(np.eye(Lap.shape[0]), gain.K_self) + np.kron(Lap, gain.K_coupling)
 
 
@@ -384,10 +454,12 @@ def network_controller_cost(
 
     ``P_K`` solves the closed-loop Lyapunov equation with the weights of
     :func:`network_lqr_weights`; ``trace(P_K)`` is the expected cost (7) for
-    ``X(0) ~ N(0, I)``. Returns ``inf`` if the closed loop is not stable. ``(A, B)``
-    need not be controllable (the gain is given).
+    ``X(0) ~ N(0, I)``. Returns ``inf`` (a defined value, not an error: the cost of an
+    unstable loop is infinite) if the closed loop is not stable. ``(A, B)`` need not be
+    controllable (the gain is given); `laplacian` must be symmetric (undirected) and connected.
     """
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R, controllable=False)
+    _check_gain(gain, B.shape[1], A.shape[0])
     lam, _ = laplacian_spectrum(laplacian)
     total = 0.0
     for l in lam:
@@ -438,21 +510,46 @@ def _care(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray) -> tuple[n
 
 def _check_agent(A, B, Q1, Q2, R, controllable: bool = True):
     """Validate the agent and weights; with `controllable`, also require ``(A, B)`` controllable (PBH)."""
-    A = check_square(A, "A")
+    A = _square(A, "A")
     n = A.shape[0]
-    B = as_matrix(B, "B", (n, None))
-    Q1 = check_covariance(np.atleast_2d(Q1), "Q1", n)
-    Q2 = check_covariance(np.atleast_2d(Q2), "Q2", n)
-    R = check_covariance(np.atleast_2d(R), "R", B.shape[1], definite=True)
+    B = _matrix(B, "B", (n, None))
+    if B.shape[1] == 0:
+        raise ValueError(f"B must have at least one column; got shape {B.shape}")
+    Q1 = _weight(Q1, "Q1", n)
+    Q2 = _weight(Q2, "Q2", n)
+    R = _weight(R, "R", B.shape[1], definite=True)
     if controllable and not is_controllable(A, B):
         raise ValueError("(A, B) is not controllable: the LQR problem has no stabilizing solution")
     return A, B, Q1, Q2, R
 
 
 def _check_agents(n_agents: int) -> int:
-    if isinstance(n_agents, bool) or not isinstance(n_agents, (int, np.integer)) or n_agents < 1:
-        raise ValueError(f"n_agents must be a positive integer; got {n_agents!r}")
-    return int(n_agents)
+    return check_positive_int(n_agents, "n_agents")
+
+
+def _matrix(M, name, shape=None) -> np.ndarray:
+    return as_matrix(_float_array(M, name), name, shape)
+
+
+def _square(M, name, size=None) -> np.ndarray:
+    M = check_square(_float_array(M, name), name, size)
+    if M.shape[0] == 0:
+        raise ValueError(f"{name} must be at least 1 x 1; got shape {M.shape}")
+    return M
+
+
+def _weight(M, name, size=None, definite=False, atleast_2d=True) -> np.ndarray:
+    """A symmetric positive semidefinite (or definite) weight; a scalar is read as 1 x 1 if `atleast_2d`."""
+    M = _float_array(M, name)
+    return check_covariance(np.atleast_2d(M) if atleast_2d else M, name, size, definite=definite)
+
+
+def _check_gain(gain, m: int | None = None, n: int | None = None) -> None:
+    """A :class:`DistributedGain` with finite blocks of one shape (m, n)."""
+    if not isinstance(gain, DistributedGain):
+        raise TypeError(f"gain must be a DistributedGain (K_self, K_coupling); got {type(gain).__name__}")
+    Ks = as_matrix(_float_array(gain.K_self, "gain.K_self"), "gain.K_self", (m, n))
+    as_matrix(_float_array(gain.K_coupling, "gain.K_coupling"), "gain.K_coupling", Ks.shape)
 
 
 def _spectral_abscissa(A, B, K_self, K_coupling, lam) -> float:

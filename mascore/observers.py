@@ -16,6 +16,12 @@ is solved once per *distinct* Laplacian eigenvalue, so a ring of 100 agents
 needs 51 small blocks, not a 200-state problem.
 :func:`simulate_network_observer` runs the plants and the observer (42) on the
 measurements, so that ``X - X_hat`` can be checked against ``A_e``.
+
+The mode decomposition needs a symmetric Laplacian (orthogonal eigenvectors):
+the design, the error matrix and the simulation all require an undirected graph
+and refuse a directed one (or an adjacency passed as a Laplacian, and the
+reverse) with a message that says so. Every public function checks its
+arguments and names the one at fault.
 """
 
 from __future__ import annotations
@@ -30,7 +36,12 @@ from numpy.typing import ArrayLike
 
 from ._solver import SolverError, solve
 from ._validation import as_matrix, check_covariance, check_square
-from .lqr import _care, is_controllable, laplacian_spectrum
+from .ellipsoids import _float_array
+from .lqr import _care, _spectrum, _undirected_adjacency, _undirected_laplacian, is_controllable
+
+#: Why the observer functions need an undirected graph (quoted in their errors).
+_WHY_SYMMETRIC = ("the observer (42) is designed mode by mode on the orthogonal eigenvectors of a symmetric "
+                  "Laplacian (eqs. (43)-(55)), which a directed graph does not have")
 
 __all__ = [
     "READINGS",
@@ -63,8 +74,8 @@ READINGS = ("as-printed", "inverse-weight-are")
 
 def is_observable(A: ArrayLike, C: ArrayLike) -> bool:
     """PBH test of observability of ``(A, C)`` (controllability of ``(A^T, C^T)``)."""
-    A = check_square(A, "A")
-    C = as_matrix(C, "C", (None, A.shape[0]))
+    A = _square(A, "A")
+    C = _matrix(C, "C", (None, A.shape[0]))
     return is_controllable(A.T, C.T)
 
 
@@ -207,7 +218,9 @@ def distributed_observer(
     R : (q, q) array_like
         Weight on the disturbance, positive definite.
     adjacency : (N, N) array_like
-        Symmetric adjacency of a connected undirected graph.
+        Symmetric adjacency of a connected undirected graph of N >= 2 agents (non-negative
+        weights, no self-loops). One agent is refused: it has no disagreement modes
+        (``lambda_i > 0``), so ``Phi`` is not determined; use :func:`min_energy_observer`.
     reading : {"as-printed", "inverse-weight-are"}
         ``"as-printed"``: eqs. (29)-(30) as printed. ``"inverse-weight-are"``:
         ``S`` from eq. (29) with ``Q1^{-1}`` in place of ``Q1`` (``Q1`` read as a
@@ -221,7 +234,7 @@ def distributed_observer(
     Raises
     ------
     ValueError
-        Bad input, uncontrollable/unobservable pair, disconnected graph.
+        Bad input, uncontrollable/unobservable pair, a directed or disconnected graph, one agent.
     mascore._solver.SolverError
         The LMI program is infeasible or not solved to optimality.
 
@@ -234,11 +247,17 @@ def distributed_observer(
     """
     A, Bbar, C, Q1, R = _check_observer(A, Bbar, C, Q1, R, qname="Q1")
     m = C.shape[0]
-    Q2 = check_covariance(np.atleast_2d(Q2), "Q2", m)
-    if reading not in READINGS:
+    Q2 = check_covariance(np.atleast_2d(_float_array(Q2, "Q2")), "Q2", m)
+    if not isinstance(reading, str) or reading not in READINGS:
         raise ValueError(f"reading must be one of {READINGS}; got {reading!r}")
-    Adj = check_square(adjacency, "adjacency")
-    lam, _ = laplacian_spectrum(np.diag(Adj.sum(axis=1)) - Adj)
+    _check_trace_in(trace_in)
+    _, Lap = _undirected_adjacency(adjacency)
+    if Lap.shape[0] < 2:
+        raise ValueError(
+            "adjacency describes one agent: the distributed observer needs N >= 2 agents (one agent has no "
+            "disagreement modes, so the coupling Phi is not determined); use min_energy_observer instead"
+        )
+    lam, _ = _spectrum(Lap, "adjacency")
     BRB = Bbar @ np.linalg.solve(R, Bbar.T)
     are_weight = Q1 if reading == "as-printed" else np.linalg.inv(Q1)
     _, S, _ = _care(A.T, C.T, BRB, np.linalg.inv(are_weight))  # eq. (29)
@@ -258,7 +277,7 @@ def distributed_observer(
     return DistributedObserver(
         L=L, Phi=Phi, bound=res["bound"], cost=cost, centralized_cost=float(central), local_cost=local,
         lam=lam, T=T, A_hat=T @ A @ Tinv, Bbar_hat=T @ Bbar, C_hat=C @ Tinv, L_hat=T @ L,
-        spectral_abscissa=float(max(absc)), disagreement_abscissa=float(max(absc[1:], default=-np.inf)),
+        spectral_abscissa=float(max(absc)), disagreement_abscissa=float(max(absc[1:])),
         reading=reading, trace_in=trace_in,
     )
 
@@ -432,7 +451,7 @@ def bound_at_fixed_phi(
     """
     A, C, L, lam = _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in)
     n, m = L.shape
-    phis = np.asarray(Phi, dtype=float)
+    phis = _float_array(Phi, "Phi")
     single = phis.ndim == 0 or phis.shape == (m, m)
     if single or (m == 1 and phis.ndim == 1):
         phis = phis.reshape(-1, m, m)
@@ -482,17 +501,19 @@ def bound_at_fixed_phi(
 
 def _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in):
     """Validate the inputs shared by the mode programs (56)-(62); returns ``A, C, L, lam`` as arrays."""
-    A = check_square(A, "A")
+    A = _square(A, "A")
     n = A.shape[0]
-    C = as_matrix(C, "C", (None, n))
-    L = as_matrix(L, "L", (n, C.shape[0]))
-    lam = np.asarray(lam, dtype=float)
-    if lam.ndim != 1 or np.any(lam < -1e-12):
-        raise ValueError("lam must be a 1-D array of non-negative Laplacian eigenvalues")
-    if len(process_factors) != lam.size or len(noise_weights) != lam.size:
-        raise ValueError("process_factors and noise_weights need one entry per eigenvalue in lam")
-    if trace_in not in ("transformed", "original"):
-        raise ValueError(f"trace_in must be 'transformed' or 'original'; got {trace_in!r}")
+    C = _matrix(C, "C", (None, n))
+    L = _matrix(L, "L", (n, C.shape[0]))
+    lam = _eigenvalues(lam)
+    _check_sequence(process_factors, "process_factors", lam.size)
+    _check_sequence(noise_weights, "noise_weights", lam.size)
+    m = C.shape[0]
+    for k in range(lam.size):
+        _matrix(process_factors[k], f"process_factors[{k}]", (n, None))
+        check_covariance(np.atleast_2d(_float_array(noise_weights[k], f"noise_weights[{k}]")),
+                         f"noise_weights[{k}]", m, definite=True)
+    _check_trace_in(trace_in)
     return A, C, L, lam
 
 
@@ -522,17 +543,20 @@ def observer_error_matrix(
 ) -> np.ndarray:
     """``A_e = I_N (x) (A - L C) - Lap (x) L Phi C`` (Example 1; error form of eq. (42)).
 
+    `laplacian` (N, N) must be symmetric (an undirected graph): the gains ``L``, ``Phi``
+    and the error analysis come from the mode decomposition by its orthogonal eigenvectors.
+
     Returns
     -------
     (N n, N n) ndarray
     """
-    A = check_square(A, "A")
+    A = _square(A, "A")
     n = A.shape[0]
-    C = as_matrix(C, "C", (None, n))
+    C = _matrix(C, "C", (None, n))
     m = C.shape[0]
-    L = as_matrix(L, "L", (n, m))
-    Phi = as_matrix(np.atleast_2d(Phi), "Phi", (m, m))
-    Lap = check_square(laplacian, "laplacian")
+    L = _matrix(L, "L", (n, m))
+    Phi = as_matrix(np.atleast_2d(_float_array(Phi, "Phi")), "Phi", (m, m))
+    Lap = _undirected_laplacian(laplacian, "laplacian", _WHY_SYMMETRIC)
     return np.kron(np.eye(Lap.shape[0]), A - L @ C) - np.kron(Lap, L @ Phi @ C)
 
 
@@ -551,13 +575,15 @@ def simulate_estimation_errors(A_e: ArrayLike, e0: ArrayLike, t: ArrayLike) -> n
     -------
     (T, N, n) ndarray
     """
-    A_e = check_square(A_e, "A_e")
-    e0 = as_matrix(e0, "e0")
+    A_e = _square(A_e, "A_e")
+    e0 = _matrix(e0, "e0")
     if e0.size != A_e.shape[0]:
         raise ValueError(f"e0 must have N*n = {A_e.shape[0]} entries; got shape {e0.shape}")
-    t = np.asarray(t, dtype=float)
+    t = _float_array(t, "t")
     if t.ndim != 1 or t.size < 2 or t[0] != 0:
         raise ValueError("t must be a 1-D grid of at least two times starting at 0")
+    if not np.all(np.isfinite(t)):
+        raise ValueError("t contains NaN or infinite entries")
     dt = np.diff(t)
     if not np.allclose(dt, dt[0], rtol=1e-9) or dt[0] <= 0:
         raise ValueError("t must be uniform and increasing")
@@ -566,6 +592,7 @@ def simulate_estimation_errors(A_e: ArrayLike, e0: ArrayLike, t: ArrayLike) -> n
     out[0] = e0.ravel()
     for k in range(1, t.size):
         out[k] = step @ out[k - 1]
+    _finite_result(out, "estimation errors")
     return out.reshape(t.size, *e0.shape)
 
 
@@ -608,7 +635,9 @@ def simulate_network_observer(
     Phi : (m, m) array_like or float
         Coupling gain (dimensionless).
     laplacian : (N, N) array_like
-        Graph Laplacian (rows sum to zero).
+        Laplacian of an undirected graph (symmetric, rows sum to zero): ``L`` and ``Phi``
+        come from the mode decomposition by its orthogonal eigenvectors, which a directed
+        graph does not have, so a directed Laplacian is refused.
     x0, x_hat0 : (N, n) array_like
         True states and estimates at ``t[0]``.
     t : (T,) array_like
@@ -627,22 +656,21 @@ def simulate_network_observer(
     Raises
     ------
     ValueError
-        Bad shapes, a `laplacian` whose rows do not sum to zero, a grid that is
-        not 1-D and increasing, or `disturbance` without `Bbar`.
+        Bad shapes, a `laplacian` that is not the Laplacian of an undirected graph (an
+        adjacency, a directed Laplacian), a grid that is not 1-D and increasing, or
+        `disturbance` without `Bbar`.
     """
-    A = check_square(A, "A")
+    A = _square(A, "A")
     n = A.shape[0]
-    C = as_matrix(C, "C", (None, n))
+    C = _matrix(C, "C", (None, n))
     m = C.shape[0]
-    L = as_matrix(L, "L", (n, m))
-    Phi = as_matrix(np.atleast_2d(Phi), "Phi", (m, m))
-    Lap = check_square(laplacian, "laplacian")
+    L = _matrix(L, "L", (n, m))
+    Phi = as_matrix(np.atleast_2d(_float_array(Phi, "Phi")), "Phi", (m, m))
+    Lap = _undirected_laplacian(laplacian, "laplacian", _WHY_SYMMETRIC)
     N = Lap.shape[0]
-    if not np.allclose(Lap.sum(axis=1), 0, atol=1e-10 * max(1.0, float(np.abs(Lap).max()))):
-        raise ValueError("laplacian rows must sum to zero")
-    x0 = as_matrix(x0, "x0", (N, n))
-    x_hat0 = as_matrix(x_hat0, "x_hat0", (N, n))
-    t = np.asarray(t, dtype=float)
+    x0 = _matrix(x0, "x0", (N, n))
+    x_hat0 = _matrix(x_hat0, "x_hat0", (N, n))
+    t = _float_array(t, "t")
     if t.ndim != 1 or t.size < 2 or not np.all(np.isfinite(t)):
         raise ValueError(f"t must be a finite 1-D grid of at least two times; got shape {t.shape}")
     dt = np.diff(t)
@@ -658,9 +686,9 @@ def simulate_network_observer(
     else:
         if Bbar is None:
             raise ValueError("disturbance needs Bbar (the disturbance input matrix)")
-        Bbar = as_matrix(Bbar, "Bbar", (n, None))
+        Bbar = _matrix(Bbar, "Bbar", (n, None))
         q = Bbar.shape[1]
-        D = np.asarray(disturbance, dtype=float)
+        D = _float_array(disturbance, "disturbance")
         if D.shape != (t.size, N, q):
             raise ValueError(f"disturbance must have shape (T, N, q) = {(t.size, N, q)}; got {D.shape}")
         if not np.all(np.isfinite(D)):
@@ -681,12 +709,17 @@ def simulate_network_observer(
     for k in range(1, t.size):
         Fz, Fd = steps[float(dt[0] if uniform else dt[k - 1])]
         z[k] = Fz @ z[k - 1] + Fd @ D[k - 1]
+    _finite_result(z, "simulated states")
     return z[:, :Nn].reshape(t.size, N, n), z[:, Nn:].reshape(t.size, N, n)
 
 
 def disagreement(errors: ArrayLike) -> np.ndarray:
-    """Errors minus their mean over the agents (axis -2 of a (..., N, n) array)."""
-    errors = np.asarray(errors, dtype=float)
+    """Errors minus their mean over the agents (axis -2 of a finite (..., N, n) array)."""
+    errors = _float_array(errors, "errors")
+    if errors.ndim < 2 or errors.shape[-2] == 0:
+        raise ValueError(f"errors must be an array (..., N, n) with N >= 1 agents; got shape {errors.shape}")
+    if not np.all(np.isfinite(errors)):
+        raise ValueError("errors contains NaN or infinite entries")
     return errors - errors.mean(axis=-2, keepdims=True)
 
 
@@ -713,25 +746,26 @@ def achieved_cost(
     Returns
     -------
     float
-        ``inf`` if some mode is not Hurwitz.
+        ``inf`` (a defined value: the cost of an unstable mode is infinite) if some mode
+        is not Hurwitz.
     """
-    A = check_square(A, "A")
+    A = _square(A, "A")
     n = A.shape[0]
-    Bbar = as_matrix(Bbar, "Bbar", (n, None))
-    C = as_matrix(C, "C", (None, n))
+    Bbar = _matrix(Bbar, "Bbar", (n, None))
+    C = _matrix(C, "C", (None, n))
     m = C.shape[0]
-    R = check_covariance(np.atleast_2d(R), "R", Bbar.shape[1], definite=True)
-    L = as_matrix(L, "L", (n, m))
-    Phi = as_matrix(np.atleast_2d(Phi), "Phi", (m, m))
-    lam = np.asarray(lam, dtype=float)
-    if lam.ndim != 1 or len(noise_weights) != lam.size:
-        raise ValueError("lam must be 1-D, with one noise weight per eigenvalue")
-    noise = [check_covariance(np.atleast_2d(q), f"noise_weights[{k}]", m, definite=True)
+    R = check_covariance(np.atleast_2d(_float_array(R, "R")), "R", Bbar.shape[1], definite=True)
+    L = _matrix(L, "L", (n, m))
+    Phi = as_matrix(np.atleast_2d(_float_array(Phi, "Phi")), "Phi", (m, m))
+    lam = _eigenvalues(lam)
+    _check_sequence(noise_weights, "noise_weights", lam.size)
+    noise = [check_covariance(np.atleast_2d(_float_array(q, f"noise_weights[{k}]")), f"noise_weights[{k}]", m,
+                              definite=True)
              for k, q in enumerate(noise_weights)]
     if T is None:
         tr = np.trace
     else:
-        T = as_matrix(T, "T", (n, n))
+        T = _matrix(T, "T", (n, n))
         tr = lambda M: np.trace(T @ M @ T.T)  # noqa: E731
     return _mode_costs(A, C, L, Phi, lam, Bbar @ np.linalg.solve(R, Bbar.T), noise, tr)
 
@@ -751,14 +785,60 @@ def _mode_costs(A, C, L, Phi, lam, BRB, noise, tr) -> float:
 
 
 def _check_observer(A, Bbar, C, Q, R, qname="Q"):
-    A = check_square(A, "A")
+    A = _square(A, "A")
     n = A.shape[0]
-    Bbar = as_matrix(Bbar, "Bbar", (n, None))
-    C = as_matrix(C, "C", (None, n))
-    Q = check_covariance(np.atleast_2d(Q), qname, C.shape[0], definite=True)
-    R = check_covariance(np.atleast_2d(R), "R", Bbar.shape[1], definite=True)
+    Bbar = _matrix(Bbar, "Bbar", (n, None))
+    C = _matrix(C, "C", (None, n))
+    if Bbar.shape[1] == 0 or C.shape[0] == 0:
+        raise ValueError(f"Bbar needs at least one column and C at least one row; got shapes {Bbar.shape}, {C.shape}")
+    Q = check_covariance(np.atleast_2d(_float_array(Q, qname)), qname, C.shape[0], definite=True)
+    R = check_covariance(np.atleast_2d(_float_array(R, "R")), "R", Bbar.shape[1], definite=True)
     if not is_controllable(A, Bbar):
         raise ValueError("(A, Bbar) is not controllable: the minimum-energy ARE has no positive definite solution")
     if not is_controllable(A.T, C.T):
         raise ValueError("(A, C) is not observable: no observer gain makes the error decay")
     return A, Bbar, C, Q, R
+
+
+# --------------------------------------------------------------------------- argument checks
+
+
+def _matrix(M, name, shape=None) -> np.ndarray:
+    return as_matrix(_float_array(M, name), name, shape)
+
+
+def _square(M, name, size=None) -> np.ndarray:
+    M = check_square(_float_array(M, name), name, size)
+    if M.shape[0] == 0:
+        raise ValueError(f"{name} must be at least 1 x 1; got shape {M.shape}")
+    return M
+
+
+def _eigenvalues(lam) -> np.ndarray:
+    """Laplacian eigenvalues: a finite, non-empty 1-D array, each >= 0."""
+    lam = _float_array(lam, "lam")
+    if lam.ndim != 1 or lam.size == 0:
+        raise ValueError(f"lam must be a non-empty 1-D array of Laplacian eigenvalues; got shape {lam.shape}")
+    if not np.all(np.isfinite(lam)):
+        raise ValueError("lam contains NaN or infinite entries")
+    if np.any(lam < -1e-12):
+        raise ValueError(f"lam must hold non-negative Laplacian eigenvalues; smallest is {lam.min():.3g}")
+    return lam
+
+
+def _check_sequence(seq, name: str, size: int) -> None:
+    if isinstance(seq, (str, bytes)) or not hasattr(seq, "__len__") or not hasattr(seq, "__getitem__"):
+        raise TypeError(f"{name} must be a sequence of arrays, one per eigenvalue in lam; got {type(seq).__name__}")
+    if len(seq) != size:
+        raise ValueError(f"{name} needs one entry per eigenvalue in lam ({size}); got {len(seq)}")
+
+
+def _check_trace_in(trace_in) -> None:
+    if not isinstance(trace_in, str) or trace_in not in ("transformed", "original"):
+        raise ValueError(f"trace_in must be 'transformed' or 'original'; got {trace_in!r}")
+
+
+def _finite_result(arr: np.ndarray, what: str) -> None:
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"the {what} overflowed (NaN or inf) although every input is finite: the error "
+                         "matrix grows too fast over this horizon; shorten t or rescale")

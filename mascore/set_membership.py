@@ -51,6 +51,7 @@ from numpy.typing import ArrayLike
 from . import ellipsoids
 from ._solver import LMI_EPS, SolverError, solve
 from ._validation import as_matrix, check_square
+from .ellipsoids import _float_array
 
 __all__ = [
     "METHODS",
@@ -113,9 +114,9 @@ def correct(
     method = _check_method(method)
     c, P = _check_ellipsoid(center, shape, "correction", step, agent)
     n = c.shape[-1]
-    C, D, R, W, W_error = _cached(_correction_system, n, C, D, R)
+    C, D, R, W, W_error = _cached(_correction_system, n, ("C", "D", "R"), C, D, R)
     p = C.shape[0]
-    y = np.asarray(y, dtype=float)
+    y = _float_array(y, "y")
     if y.shape[-1:] != (p,):
         raise ValueError(f"y must have last dimension {p} (rows of C); got shape {y.shape}")
     if not np.isfinite(y).all():
@@ -186,14 +187,15 @@ def predict(
     n = c.shape[-1]
     if (B is None) != (u is None):
         raise ValueError("give both B and u, or neither")
-    A, G, Q, GQG, sqrt_tr_GQG, B = _cached(_prediction_system, n, A, G, Q, *(() if B is None else (B,)))
+    A, G, Q, GQG, sqrt_tr_GQG, B = _cached(_prediction_system, n, ("A", "G", "Q", "B"), A, G, Q,
+                                           *(() if B is None else (B,)))
     batch = c.shape[:-1]
     if P.shape[:-2] != batch:
         batch = np.broadcast_shapes(batch, P.shape[:-2])
         c, P = np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n))
     new_c = c @ A.T
     if B is not None:
-        u = np.asarray(u, dtype=float)
+        u = _float_array(u, "u")
         if u.shape[-1:] != B.shape[1:] or not np.isfinite(u).all():
             raise ValueError(f"u must be finite with last dimension {B.shape[1]} (columns of B); got shape {u.shape}")
         new_c = new_c + u @ B.T
@@ -245,19 +247,34 @@ def run_filter(
     y : (T_f + 1, ..., p)
         Measurements.
     u : (T_f + 1, ..., m), optional
-        Known inputs (with `B`).
+        Known inputs (with `B`; give both or neither).
     Q, R : constant disturbance shapes (time-invariant here).
+
+    The initial ellipsoid, the measurement array and the method are checked before the
+    first step; each step then checks its data as :func:`correct` and :func:`predict` do.
     """
-    y = np.asarray(y, dtype=float)
-    c, P = np.asarray(x0_hat, dtype=float), np.asarray(P0, dtype=float)
+    method = _check_method(method)
+    P = ellipsoids._shape_matrix(P0, "P0")
+    c = ellipsoids._points(x0_hat, "x0_hat", P.shape[-1])
+    y = _float_array(y, "y")
+    if y.ndim < 2 or y.shape[0] < 1:
+        raise ValueError(f"y must be an array (T_f + 1, ..., p) with at least one measurement; got shape {y.shape}")
+    ellipsoids._broadcast(x0_hat=c.shape[:-1], P0=P.shape[:-2], y=y.shape[1:-1])
+    if (B is None) != (u is None):
+        raise ValueError("give both B and u, or neither")
+    if u is not None:
+        u = _float_array(u, "u")
+        if u.ndim < 1 or u.shape[0] < y.shape[0]:
+            raise ValueError(f"u must have one input per measurement, shape (T_f + 1, ..., m) with T_f + 1 = "
+                             f"{y.shape[0]}; got shape {u.shape}")
     out: dict[str, list] = {k: [] for k in ("cc", "pc", "cp", "pp", "L")}
     for k in range(y.shape[0]):
         c, P, L = correct(c, P, y[k], C, D, R, method=method, step=k, agent=agent)
         out["cc"].append(c)
         out["pc"].append(P)
         out["L"].append(L)
-        uk = None if u is None else np.asarray(u, dtype=float)[k]
-        c, P = predict(c, P, A, G, Q, B=None if u is None else B, u=uk, method=method, step=k, agent=agent)
+        uk = None if u is None else u[k]
+        c, P = predict(c, P, A, G, Q, B=B, u=uk, method=method, step=k, agent=agent)
         out["cp"].append(c)
         out["pp"].append(P)
     return FilterHistory(np.array(out["cc"]), np.array(out["pc"]), np.array(out["cp"]),
@@ -268,6 +285,8 @@ def run_filter(
 
 
 def _check_method(method: str) -> str:
+    if not isinstance(method, str):
+        raise TypeError(f"method must be one of {METHODS}; got {type(method).__name__} {method!r}")
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got {method!r}")
     return method
@@ -289,8 +308,8 @@ def _where(what: str, step, agent, idx, batch) -> str:
 
 
 def _check_ellipsoid(center, shape, what, step, agent):
-    c = np.asarray(center, dtype=float)
-    P = np.asarray(shape, dtype=float)
+    c = _float_array(center, "center")
+    P = _float_array(shape, "shape")
     if c.ndim < 1 or P.ndim < 2 or P.shape[-2:] != (c.shape[-1], c.shape[-1]):
         raise ValueError(
             f"{_where(what, step, agent, None, ())}: center (..., n) and shape (..., n, n) do not "
@@ -391,10 +410,11 @@ def _frozen(*arrays: np.ndarray) -> list[np.ndarray]:
 _CACHE: dict = {}
 
 
-def _cached(build, n: int, *matrices: ArrayLike):
+def _cached(build, n: int, names: tuple[str, ...], *matrices: ArrayLike):
     """``build(n, *matrices)``: validate and derive from the (usually constant) system matrices once per
-    distinct value; later calls with equal matrices (compared by value) return the cached result."""
-    arrays = [np.asarray(M, dtype=float) for M in matrices]
+    distinct value; later calls with equal matrices (compared by value) return the cached result.
+    `names` name the matrices in the error raised for one that is not an array of numbers."""
+    arrays = [_float_array(M, name) for M, name in zip(matrices, names)]
     key = (build, n, *[(a.shape, a.tobytes()) for a in arrays])
     hit = _CACHE.get(key)
     if hit is None:

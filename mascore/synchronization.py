@@ -19,10 +19,18 @@ Gamma with ``r0 / c0 < r``. Corollary 1 bounds the normalized error, eq. (21).
 
 Adjacency convention (as in :mod:`mascore.graphs`): ``adjacency[i, j] > 0``
 means agent i receives from agent j.
+
+Graphs may be directed (the paper's example is a directed ring pinned at one
+agent): nothing here uses a Laplacian eigen-decomposition. What the theory needs
+is checked instead: Assumption 4 (a directed spanning tree with a pinned root)
+wherever Gamma is formed. Every public function checks its arguments and names
+the one at fault; :func:`local_control`, called once per time step, checks the
+constant graph and gains once per distinct value (cached).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,7 +38,16 @@ import scipy.linalg
 from numpy.typing import ArrayLike
 
 from . import graphs
-from ._validation import as_matrix, as_vector, check_covariance, check_square
+from ._validation import (
+    as_matrix,
+    as_vector,
+    check_adjacency,
+    check_covariance,
+    check_positive,
+    check_positive_int,
+    check_square,
+)
+from .ellipsoids import _float_array
 
 __all__ = [
     "SyncDesign",
@@ -65,16 +82,16 @@ def riccati_like(A: ArrayLike, B: ArrayLike, Q: ArrayLike, rtol: float = 1e-8) -
     Parameters
     ----------
     A : (n, n), B : (n, m) with full column rank, Q : (n, n) positive definite
+    rtol : float
+        Accepted residual relative to ``max(1, max |Q|)``; finite, > 0.
 
     Raises
     ------
     ValueError
         B lacks full column rank, (A, B) not stabilizable, or no PD solution found.
     """
-    A = check_square(A, "A")
-    n = A.shape[0]
-    B = as_matrix(B, "B", (n, None))
-    Q = check_covariance(Q, "Q", n, definite=True)
+    A, B, Q = _check_system(A, B, Q)
+    check_positive(rtol, "rtol")
     if np.linalg.matrix_rank(B) < B.shape[1]:
         raise ValueError(f"Assumption 3 fails: B must have full column rank; rank {np.linalg.matrix_rank(B)} < {B.shape[1]}")
     _check_stabilizable(A, B)
@@ -84,38 +101,63 @@ def riccati_like(A: ArrayLike, B: ArrayLike, Q: ArrayLike, rtol: float = 1e-8) -
         P = scipy.linalg.solve_discrete_are(A, B, Q, np.zeros((B.shape[1], B.shape[1])))
     except (np.linalg.LinAlgError, ValueError):
         P = None
-    if P is None or riccati_like_residual(A, B, Q, P) > rtol * scale:
+    if P is None or not np.all(np.isfinite(P)) or _residual(A, B, Q, P) > rtol * scale:
         P = Q.copy()
         for _ in range(100_000):
-            new = A.T @ P @ A + Q - A.T @ P @ B @ np.linalg.solve(B.T @ P @ B, B.T @ P @ A)
+            try:
+                new = A.T @ P @ A + Q - A.T @ P @ B @ np.linalg.solve(B.T @ P @ B, B.T @ P @ A)
+            except np.linalg.LinAlgError:
+                break
             new = 0.5 * (new + new.T)
+            if not np.all(np.isfinite(new)):
+                break
             if np.max(np.abs(new - P)) <= 1e-14 * max(1.0, np.abs(new).max()):
                 P = new
                 break
             P = new
     P = 0.5 * (P + P.T)
-    res = riccati_like_residual(A, B, Q, P)
-    if res > rtol * scale or np.linalg.eigvalsh(P)[0] <= 0:
+    res = _residual(A, B, Q, P) if np.all(np.isfinite(P)) else np.inf
+    if not res <= rtol * scale or np.linalg.eigvalsh(P)[0] <= 0:
         raise ValueError(f"eq. (16) has no positive definite solution found (residual {res:.3g})")
     return P
 
 
 def riccati_like_residual(A: ArrayLike, B: ArrayLike, Q: ArrayLike, P: ArrayLike) -> float:
-    """Largest absolute entry of the left-hand side of eq. (16)."""
-    A, B, Q, P = (np.asarray(M, dtype=float) for M in (A, B, Q, P))
+    """Largest absolute entry of the left-hand side of eq. (16).
+
+    `A` (n, n), `B` (n, m) of full column rank, `Q` (n, n) symmetric positive definite,
+    `P` (n, n) symmetric positive definite (so that ``B^T P B`` is invertible).
+    """
+    A, B, Q = _check_system(A, B, Q)
+    P = _check_P(P, B)
+    return _finite_float(_residual(A, B, Q, P), "residual of eq. (16)")
+
+
+def _residual(A, B, Q, P) -> float:
+    """:func:`riccati_like_residual` on checked arrays."""
     lhs = A.T @ P @ A - P + Q - A.T @ P @ B @ np.linalg.solve(B.T @ P @ B, B.T @ P @ A)
     return float(np.max(np.abs(lhs)))
 
 
 def riccati_gain(A: ArrayLike, B: ArrayLike, P: ArrayLike) -> np.ndarray:
-    """``K = (B^T P B)^{-1} B^T P A`` of Lemma 2; shape (m, n)."""
-    A, B, P = (np.asarray(M, dtype=float) for M in (A, B, P))
-    return np.linalg.solve(B.T @ P @ B, B.T @ P @ A)
+    """``K = (B^T P B)^{-1} B^T P A`` of Lemma 2; shape (m, n).
+
+    `A` (n, n), `B` (n, m) of full column rank, `P` (n, n) symmetric positive definite.
+    """
+    A = _square(A, "A")
+    B = _matrix(B, "B", (A.shape[0], None))
+    P = _check_P(P, B)
+    return _finite_array(np.linalg.solve(B.T @ P @ B, B.T @ P @ A), "gain K")
 
 
 def lemma2_r(A: ArrayLike, B: ArrayLike, Q: ArrayLike, P: ArrayLike) -> float:
-    """``r = sigma_max(Q^{-1/2} A^T P B (B^T P B)^{-1} B^T P A Q^{-1/2})^{-1/2}`` (Lemma 2)."""
-    A, B, Q, P = (np.asarray(M, dtype=float) for M in (A, B, Q, P))
+    """``r = sigma_max(Q^{-1/2} A^T P B (B^T P B)^{-1} B^T P A Q^{-1/2})^{-1/2}`` (Lemma 2).
+
+    Arguments as in :func:`riccati_like_residual`. Returns ``inf`` when the matrix is zero
+    (e.g. ``A = 0``): Lemma 2's condition ``r0 / c0 < r`` then holds for every circle.
+    """
+    A, B, Q = _check_system(A, B, Q)
+    P = _check_P(P, B)
     w, V = np.linalg.eigh(Q)
     Qmh = (V / np.sqrt(w)) @ V.T
     M = Qmh @ A.T @ P @ B @ np.linalg.solve(B.T @ P @ B, B.T @ P @ A) @ Qmh
@@ -127,15 +169,15 @@ def check_assumption4(adjacency: ArrayLike, pinning: ArrayLike) -> None:
     """Raise ValueError unless Assumption 4 holds.
 
     The interaction graph must contain a directed spanning tree and at least one
-    of its root nodes must be pinned to the leader (``g_root > 0``).
+    of its root nodes must be pinned to the leader (``g_root > 0``). `adjacency`
+    (N, N): finite, non-negative weights, no self-loops, directed allowed; `pinning`
+    (N,): finite, non-negative.
     """
-    Aadj = check_square(adjacency, "adjacency")
-    g = as_vector(pinning, "pinning", Aadj.shape[0])
-    if np.any(g < 0) or np.any(Aadj < 0):
-        raise ValueError("adjacency weights and pinning gains must be non-negative")
+    Aadj, g = _check_graph(adjacency, pinning)
     roots = graphs.spanning_tree_roots(Aadj)
     if roots.size == 0:
-        raise ValueError("Assumption 4 fails: the interaction graph has no directed spanning tree")
+        raise ValueError("Assumption 4 fails: the interaction graph has no directed spanning tree "
+                         "(adjacency[i, j] > 0 means agent i receives from agent j)")
     if not np.any(g[roots] > 0):
         raise ValueError(
             f"Assumption 4 fails: no root of a spanning tree (agents {roots.tolist()}, 0-based) is "
@@ -154,32 +196,60 @@ def pinned_interaction_matrix(adjacency: ArrayLike, pinning: ArrayLike) -> np.nd
 
 
 def circle_contains(points: ArrayLike, c0: float, r0: float) -> np.ndarray:
-    """Whether complex points lie in the open circle ``C(c0, r0)`` (``|z - c0| < r0``)."""
-    return np.abs(np.asarray(points) - c0) < r0
+    """Whether complex points lie in the open circle ``C(c0, r0)`` (``|z - c0| < r0``).
+
+    `points` finite (real or complex), `c0` a finite real centre, `r0` a finite radius > 0.
+    """
+    z = _numeric(points, "points")
+    c0 = _real(c0, "c0")
+    check_positive(r0, "r0")
+    return np.abs(z - c0) < r0
 
 
 def closed_loop_matrices(
     A: ArrayLike, B: ArrayLike, K: ArrayLike, c: float, Gamma: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``A_c = I_N (x) A - c Gamma (x) B K`` and ``B_c = c Gamma (x) B K`` (eq. (15))."""
-    A, B, K, Gamma = (np.asarray(M, dtype=float) for M in (A, B, K, Gamma))
+    """``A_c = I_N (x) A - c Gamma (x) B K`` and ``B_c = c Gamma (x) B K`` (eq. (15)).
+
+    `A` (n, n), `B` (n, m), `K` (m, n), `Gamma` (N, N), all finite; `c` a finite real.
+    """
+    A = _square(A, "A")
+    n = A.shape[0]
+    B = _matrix(B, "B", (n, None))
+    K = _matrix(K, "K", (B.shape[1], n))
+    Gamma = _square(Gamma, "Gamma")
+    _real(c, "c")
     Bc = c * np.kron(Gamma, B @ K)
-    return np.kron(np.eye(Gamma.shape[0]), A) - Bc, Bc
+    return _finite_array(np.kron(np.eye(Gamma.shape[0]), A) - Bc, "A_c"), _finite_array(Bc, "B_c")
 
 
 def spectral_radius(M: ArrayLike) -> float:
-    """``rho(M) = max |eig(M)|``."""
-    return float(np.max(np.abs(np.linalg.eigvals(np.asarray(M)))))
+    """``rho(M) = max |eig(M)|`` of a finite square (real or complex) matrix."""
+    M = _numeric(M, "M")
+    if M.ndim != 2 or M.shape[0] != M.shape[1] or M.shape[0] == 0:
+        raise ValueError(f"M must be a non-empty square matrix; got shape {M.shape}")
+    return _finite_float(float(np.max(np.abs(np.linalg.eigvals(M)))), "spectral radius")
 
 
 def power_norms(M: ArrayLike, k_max: int) -> np.ndarray:
-    """Induced 2-norms ``|M^k|`` for k = 0..k_max; shape (k_max + 1,)."""
-    M = check_square(M, "M")
+    """Induced 2-norms ``|M^k|`` for k = 0..k_max; shape (k_max + 1,).
+
+    `M` finite square; `k_max` an integer >= 1. Raises ValueError if ``|M^k|`` overflows.
+    """
+    M = _square(M, "M")
+    k_max = check_positive_int(k_max, "k_max")
+    return _power_norms(M, k_max)
+
+
+def _power_norms(M: np.ndarray, k_max: int) -> np.ndarray:
     out = np.empty(k_max + 1)
     Mk = np.eye(M.shape[0])
     for k in range(k_max + 1):
         out[k] = np.linalg.norm(Mk, 2)
         Mk = Mk @ M
+    if not np.all(np.isfinite(out)):
+        k_bad = int(np.argmin(np.isfinite(out)))
+        raise ValueError(f"|M^k| overflowed at k = {k_bad} (rho(M) > 1 and k_max = {k_max} too large)")
     return out
 
 
@@ -188,30 +258,62 @@ def fit_alpha(M: ArrayLike, mu: float, k_max: int | None = None) -> float:
 
     By default k_max is long enough that ``mu^k`` has fallen below 1e-12, beyond
     which the geometric decay at rate rho(M) < mu cannot catch up in practice.
+    `M` finite square, `mu` finite, `k_max` None or an integer >= 1.
     """
+    M = _square(M, "M")
+    _real(mu, "mu")
+    if k_max is not None:
+        k_max = check_positive_int(k_max, "k_max")
     rho = spectral_radius(M)
     if not rho < mu < 1:
         raise ValueError(f"need rho(A_c) = {rho:.4g} < mu = {mu} < 1")
     k_max = k_max if k_max is not None else int(np.ceil(np.log(1e-12) / np.log(mu)))
-    norms = power_norms(M, k_max)
-    return float(np.max(norms / mu ** np.arange(k_max + 1)))
+    norms = _power_norms(M, k_max)
+    return _finite_float(float(np.max(norms / mu ** np.arange(k_max + 1))), "alpha")
 
 
 def exponential_bound_ratio(M: ArrayLike, alpha: float, mu: float, k_max: int) -> float:
-    """``max_k |M^k| / (alpha mu^k)`` over k = 0..k_max (<= 1 iff the bound holds there)."""
-    norms = power_norms(M, k_max)
-    return float(np.max(norms / (alpha * mu ** np.arange(k_max + 1))))
+    """``max_k |M^k| / (alpha mu^k)`` over k = 0..k_max (<= 1 iff the bound holds there).
+
+    `M` finite square, `alpha` and `mu` finite > 0, `k_max` an integer >= 1.
+    """
+    M = _square(M, "M")
+    check_positive(alpha, "alpha")
+    check_positive(mu, "mu")
+    k_max = check_positive_int(k_max, "k_max")
+    norms = _power_norms(M, k_max)
+    with np.errstate(over="ignore", divide="ignore", under="ignore"):
+        ratio = float(np.max(norms / (alpha * mu ** np.arange(k_max + 1))))
+    if not np.isfinite(ratio):
+        raise ValueError(f"alpha mu^k under- or overflowed for alpha = {alpha!r}, mu = {mu!r} over k <= {k_max}; "
+                         "the ratio cannot be represented")
+    return ratio
 
 
 def mu_bar(alpha: float, mu: float, n_agents: int) -> float:
-    """Normalization ``mu_bar = alpha sqrt(N) / (1 - mu)`` of Corollary 1."""
-    return alpha * np.sqrt(n_agents) / (1.0 - mu)
+    """Normalization ``mu_bar = alpha sqrt(N) / (1 - mu)`` of Corollary 1.
+
+    `alpha` finite > 0, `mu` in (0, 1) (Corollary 1's decay rate), `n_agents` an integer >= 1.
+    """
+    check_positive(alpha, "alpha")
+    check_positive(mu, "mu")
+    if not mu < 1:
+        raise ValueError(f"mu must lie in (0, 1) (the decay rate of |A_c^k| <= alpha mu^k); got {mu!r}")
+    check_positive_int(n_agents, "n_agents")
+    return _finite_float(alpha * np.sqrt(n_agents) / (1.0 - mu), "mu_bar")
 
 
 def bound_eq21(Bc: ArrayLike, G_dist: ArrayLike, p0: float, q_bar: float) -> float:
-    """Limit bound of eq. (21): ``|B_c| sqrt(p0) + |G| sqrt(q_bar)`` (G: disturbance matrix)."""
-    return float(np.linalg.norm(np.asarray(Bc, dtype=float), 2) * np.sqrt(p0)
-                 + np.linalg.norm(np.asarray(G_dist, dtype=float), 2) * np.sqrt(q_bar))
+    """Limit bound of eq. (21): ``|B_c| sqrt(p0) + |G| sqrt(q_bar)`` (G: disturbance matrix).
+
+    `Bc`, `G_dist` finite matrices; `p0`, `q_bar` finite >= 0.
+    """
+    Bc = _matrix(Bc, "Bc")
+    G_dist = _matrix(G_dist, "G_dist")
+    check_positive(p0, "p0", allow_zero=True)
+    check_positive(q_bar, "q_bar", allow_zero=True)
+    return _finite_float(float(np.linalg.norm(Bc, 2) * np.sqrt(p0) + np.linalg.norm(G_dist, 2) * np.sqrt(q_bar)),
+                         "bound of eq. (21)")
 
 
 @dataclass(frozen=True)
@@ -253,8 +355,8 @@ def design_synchronization(
         Assumption 3 or 4 fails, an eigenvalue of Gamma lies outside C(c0, r0),
         or ``r0 / c0 >= r``.
     """
-    if not (c0 > 0 and r0 > 0):
-        raise ValueError(f"c0 and r0 must be positive; got c0={c0}, r0={r0}")
+    check_positive(c0, "c0")
+    check_positive(r0, "r0")
     P = riccati_like(A, B, Q)
     r = lemma2_r(A, B, Q, P)
     K = riccati_gain(A, B, P)
@@ -262,7 +364,8 @@ def design_synchronization(
     eigs = np.linalg.eigvals(Gamma)
     inside = circle_contains(eigs, c0, r0)
     if not np.all(inside):
-        raise ValueError(f"Lemma 2: eigenvalues {eigs[~inside]} of Gamma lie outside C({c0}, {r0})")
+        raise ValueError(f"Lemma 2: eigenvalues {eigs[~inside]} of Gamma (eq. (15), from adjacency and pinning) "
+                         f"lie outside C({c0}, {r0})")
     if not r0 / c0 < r:
         raise ValueError(f"Lemma 2: r0/c0 = {r0 / c0:.4g} is not below r = {r:.4g}")
     c = 1.0 / c0
@@ -286,14 +389,35 @@ def local_control(
     -------
     (..., N, m) ndarray
         ``u^{(i)} = c (1 + d_i + g_i)^{-1} K eps^{(i)}``.
+
+    The graph may be directed; it is checked (finite, non-negative, no self-loops) but
+    Assumption 4 is not required here (it is a property of the design, checked by
+    :func:`design_synchronization`). The constant `adjacency`, `pinning`, `K`, `c` are
+    checked once per distinct value; `xhat` and `x_leader` at every call.
     """
-    xhat = np.asarray(xhat, dtype=float)
-    Aadj = np.asarray(adjacency, dtype=float)
-    g = np.asarray(pinning, dtype=float)
-    d = Aadj.sum(axis=1)
-    Lp = graphs.laplacian(Aadj) + np.diag(g)
-    eps = -(Lp @ xhat) + g[:, None] * np.asarray(x_leader, dtype=float)[..., None, :]
-    return (c / (1.0 + d + g))[:, None] * (eps @ np.asarray(K, dtype=float).T)
+    g, K, Lp, one_d_g = _control_constants(adjacency, pinning, K, c)
+    N, n = g.shape[0], K.shape[1]
+    xhat = _float_array(xhat, "xhat")
+    if xhat.ndim < 2 or xhat.shape[-2:] != (N, n):
+        raise ValueError(f"xhat must have shape (..., N, n) = (..., {N}, {n}); got {xhat.shape}")
+    x_leader = _float_array(x_leader, "x_leader")
+    if x_leader.ndim < 1 or x_leader.shape[-1] != n:
+        raise ValueError(f"x_leader must have shape (..., n) = (..., {n}); got {x_leader.shape}")
+    if not math.isfinite(xhat.sum()) and not np.isfinite(xhat).all():
+        raise ValueError("xhat contains NaN or infinite entries")
+    if not math.isfinite(x_leader.sum()) and not np.isfinite(x_leader).all():
+        raise ValueError("x_leader contains NaN or infinite entries")
+    if x_leader.ndim > 1:
+        try:
+            np.broadcast_shapes(xhat.shape[:-2], x_leader.shape[:-1])
+        except ValueError:
+            raise ValueError(f"the batch dimensions of xhat {xhat.shape} and x_leader {x_leader.shape} "
+                             "do not broadcast") from None
+    eps = -(Lp @ xhat) + g[:, None] * x_leader[..., None, :]
+    u = (c / one_d_g)[:, None] * (eps @ K.T)
+    if not math.isfinite(u.sum()) and not np.isfinite(u).all():
+        raise ValueError("the control overflowed (NaN or inf) although every input is finite; rescale the problem")
+    return u
 
 
 def _check_stabilizable(A: np.ndarray, B: np.ndarray) -> None:
@@ -303,3 +427,107 @@ def _check_stabilizable(A: np.ndarray, B: np.ndarray) -> None:
         if abs(lam) >= 1 - 1e-12:
             if np.linalg.matrix_rank(np.hstack([A - lam * np.eye(n), B]), tol=1e-9) < n:
                 raise ValueError(f"Assumption 3 fails: (A, B) is not stabilizable (mode lambda = {lam:.4g})")
+
+
+# --------------------------------------------------------------------------- argument checks
+
+
+def _matrix(M, name, shape=None) -> np.ndarray:
+    return as_matrix(_float_array(M, name), name, shape)
+
+
+def _square(M, name, size=None) -> np.ndarray:
+    M = check_square(_float_array(M, name), name, size)
+    if M.shape[0] == 0:
+        raise ValueError(f"{name} must be at least 1 x 1; got shape {M.shape}")
+    return M
+
+
+def _real(x, name) -> float:
+    """A finite real number (any sign)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a real number; got {type(x).__name__} {x!r}")
+    if not math.isfinite(float(x)):
+        raise ValueError(f"{name} must be finite; got {x!r}")
+    return float(x)
+
+
+def _numeric(x, name) -> np.ndarray:
+    """A finite real or complex array."""
+    if isinstance(x, (str, bytes)) or x is None:
+        raise TypeError(f"{name} must be an array of numbers; got {type(x).__name__} {x!r}")
+    arr = np.asarray(x)
+    if arr.dtype.kind not in "biufc":
+        raise TypeError(f"{name} must be an array of numbers; got dtype {arr.dtype}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    return arr
+
+
+def _check_system(A, B, Q):
+    """A (n, n), B (n, m) with m >= 1, Q (n, n) symmetric positive definite."""
+    A = _square(A, "A")
+    n = A.shape[0]
+    B = _matrix(B, "B", (n, None))
+    if B.shape[1] == 0:
+        raise ValueError(f"B must have at least one column; got shape {B.shape}")
+    Q = check_covariance(_float_array(Q, "Q"), "Q", n, definite=True)
+    return A, B, Q
+
+
+def _check_P(P, B) -> np.ndarray:
+    """P (n, n) symmetric positive definite, and ``B^T P B`` invertible (B of full column rank)."""
+    P = check_covariance(_float_array(P, "P"), "P", B.shape[0], definite=True)
+    if np.linalg.matrix_rank(B) < B.shape[1]:
+        raise ValueError(f"B must have full column rank (Assumption 3) so that B^T P B is invertible; "
+                         f"rank {np.linalg.matrix_rank(B)} < {B.shape[1]}")
+    return P
+
+
+def _check_graph(adjacency, pinning):
+    """Adjacency (directed allowed) and pinning gains: finite, non-negative, no self-loops."""
+    Aadj = check_adjacency(_float_array(adjacency, "adjacency"), "adjacency")
+    if Aadj.shape[0] == 0:
+        raise ValueError("adjacency must describe at least one agent; got shape (0, 0)")
+    g = as_vector(_float_array(pinning, "pinning"), "pinning", Aadj.shape[0])
+    if np.any(g < 0):
+        raise ValueError(f"pinning gains must be non-negative; got {g.tolist()}")
+    return Aadj, g
+
+
+_CONTROL_CACHE: dict = {}
+
+
+def _control_constants(adjacency, pinning, K, c):
+    """For :func:`local_control`, checked once per distinct value (cached): pinning gains ``g``,
+    gain ``K``, ``L + diag(g)`` and ``1 + d + g`` (read-only copies)."""
+    arrays = [_float_array(adjacency, "adjacency"), _float_array(pinning, "pinning"), _float_array(K, "K")]
+    if type(c) is not float:
+        _real(c, "c")
+    key = (*[(a.shape, a.tobytes()) for a in arrays], c)  # a NaN c never hits (NaN != NaN) and is refused
+    hit = _CONTROL_CACHE.get(key)
+    if hit is None:
+        _real(c, "c")
+        Aadj, g = _check_graph(arrays[0], arrays[1])
+        K = _matrix(arrays[2], "K")
+        Aadj, g, K = (np.array(a, dtype=float) for a in (Aadj, g, K))  # copies: the caller may modify theirs
+        d = Aadj.sum(axis=1)
+        hit = (g, K, graphs.laplacian(Aadj) + np.diag(g), 1.0 + d + g)
+        for a in hit:
+            a.setflags(write=False)
+        if len(_CONTROL_CACHE) > 64:
+            _CONTROL_CACHE.clear()
+        _CONTROL_CACHE[key] = hit
+    return hit
+
+
+def _finite_float(x: float, what: str) -> float:
+    if not math.isfinite(x):
+        raise ValueError(f"the {what} overflowed (NaN or inf) although every input is finite; rescale the problem")
+    return x
+
+
+def _finite_array(x: np.ndarray, what: str) -> np.ndarray:
+    if not np.isfinite(x).all():
+        raise ValueError(f"the {what} overflowed (NaN or inf) although every input is finite; rescale the problem")
+    return x
