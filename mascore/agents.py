@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_matrix, check_square
+from ._validation import as_matrix, check_positive, check_positive_int, check_square
+from .kalman import _finite, _float_array
 
 __all__ = [
     "LTIAgent",
@@ -39,8 +40,10 @@ class LTIAgent:
     B: np.ndarray
 
     def __post_init__(self) -> None:
-        A = check_square(self.A, "A")
-        B = as_matrix(self.B, "B", (A.shape[0], None))
+        A = check_square(_float_array(self.A, "A"), "A")
+        if A.shape[0] == 0:
+            raise ValueError("A must be at least 1 x 1 (an agent with no state)")
+        B = as_matrix(_float_array(self.B, "B"), "B", (A.shape[0], None))
         object.__setattr__(self, "A", A)
         object.__setattr__(self, "B", B)
 
@@ -55,8 +58,17 @@ class LTIAgent:
         return self.B.shape[1]
 
     def step(self, x: ArrayLike, u: ArrayLike) -> np.ndarray:
-        """One step for a state ``(..., m)`` and input ``(..., p)`` (batched)."""
-        return np.asarray(x) @ self.A.T + np.asarray(u) @ self.B.T
+        """One step for a state ``(..., m)`` and input ``(..., p)`` (batched, finite)."""
+        x = _finite(_float_array(x, "x"), "x")
+        u = _finite(_float_array(u, "u"), "u")
+        if x.ndim < 1 or x.shape[-1] != self.n_states:
+            raise ValueError(f"Incompatible dimensions of x; expected (..., {self.n_states}) but found {x.shape}")
+        if u.ndim < 1 or u.shape[-1] != self.n_inputs:
+            raise ValueError(f"Incompatible dimensions of u; expected (..., {self.n_inputs}) but found {u.shape}")
+        try:
+            return x @ self.A.T + u @ self.B.T
+        except ValueError:
+            raise ValueError(f"the batch axes of x {x.shape} and u {u.shape} do not broadcast") from None
 
     def team(self, n_agents: int) -> "LTIAgent":
         """The stacked team ``(I_N kron A, I_N kron B)`` as one LTI system."""
@@ -78,10 +90,8 @@ def double_integrator(n: int, dt: float) -> LTIAgent:
     dt : float
         Sampling time (s), positive.
     """
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ValueError(f"n must be a positive integer; got {n!r}")
-    if not np.isfinite(dt) or dt <= 0:
-        raise ValueError(f"dt must be a positive number of seconds; got {dt!r}")
+    n = check_positive_int(n, "n")
+    check_positive(dt, "dt", "seconds (the sampling time)")
     eye = np.eye(n)
     A = np.block([[eye, dt * eye], [np.zeros((n, n)), eye]])
     B = np.vstack([0.5 * dt**2 * eye, dt * eye])
@@ -90,25 +100,27 @@ def double_integrator(n: int, dt: float) -> LTIAgent:
 
 def team_matrices(A: ArrayLike, B: ArrayLike, n_agents: int) -> tuple[np.ndarray, np.ndarray]:
     """Block-diagonal team matrices ``(I_N kron A, I_N kron B)``."""
-    A = check_square(A, "A")
-    B = as_matrix(B, "B", (A.shape[0], None))
-    if isinstance(n_agents, bool) or not isinstance(n_agents, (int, np.integer)) or n_agents < 1:
-        raise ValueError(f"n_agents must be a positive integer; got {n_agents!r}")
+    A = check_square(_float_array(A, "A"), "A")
+    B = as_matrix(_float_array(B, "B"), "B", (A.shape[0], None))
+    n_agents = check_positive_int(n_agents, "n_agents")
     eye = np.eye(n_agents)
     return np.kron(eye, A), np.kron(eye, B)
 
 
 def team_state(agent_states_: ArrayLike) -> np.ndarray:
     """Stack per-agent states ``(..., N, m)`` into team vectors ``(..., N m)``."""
-    x = np.asarray(agent_states_, dtype=float)
+    x = _finite(_float_array(agent_states_, "agent_states_"), "agent_states_")
     if x.ndim < 2:
-        raise ValueError(f"agent states must have shape (..., N, m); got {x.shape}")
+        raise ValueError(f"agent_states_ (the per-agent states) must have shape (..., N, m); got {x.shape}")
     return x.reshape(*x.shape[:-2], x.shape[-2] * x.shape[-1])
 
 
 def agent_states(team: ArrayLike, n_states: int) -> np.ndarray:
     """Split team vectors ``(..., N m)`` into per-agent states ``(..., N, m)``."""
-    X = np.asarray(team, dtype=float)
+    n_states = check_positive_int(n_states, "n_states")
+    X = _finite(_float_array(team, "team"), "team")
+    if X.ndim < 1:
+        raise ValueError("team must have shape (..., N m); got a scalar")
     if X.shape[-1] % n_states:
         raise ValueError(
             f"team state length {X.shape[-1]} is not a multiple of n_states={n_states}"

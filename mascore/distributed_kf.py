@@ -52,14 +52,23 @@ augmented, with ``B`` either 1 (shared) or ``R``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_matrix, check_covariance, check_square
+from ._validation import as_matrix, check_covariance, check_laplacian, check_positive, check_positive_int, check_square
 from .graphs import laplacian as graph_laplacian
-from .sensing import selection_matrices, sensing_mask, team_noise_covariance
+from .kalman import _finite, _float_array, _RecentArrays, _ValueMemo
+from .sensing import (
+    _check_adjacency,
+    _check_flag,
+    _check_mask_values,
+    selection_matrices,
+    sensing_mask,
+    team_noise_covariance,
+)
 
 __all__ = [
     "TeamFilterModel",
@@ -167,14 +176,16 @@ def team_filter_model(
         Look for a factor ``A = A_r ⊗ I_k`` shared by ``A, BK, Q, R`` (true by
         default); ``False`` forces the unreduced recursion.
     """
-    A = check_square(A, "A")
+    A = check_square(_float_array(A, "A"), "A")
     m = A.shape[0]
-    B = as_matrix(B, "B", (m, None))
-    K = as_matrix(K, "K", (B.shape[1], m))
-    Q = check_covariance(Q, "Q", size=m)
-    if isinstance(n_agents, bool) or not isinstance(n_agents, (int, np.integer)) or n_agents < 2:
-        raise ValueError(f"n_agents must be an integer >= 2; got {n_agents!r}")
-    R_team = team_noise_covariance(R, int(n_agents), m)
+    if m == 0:
+        raise ValueError("A must be at least 1 x 1 (an agent with no state)")
+    B = as_matrix(_float_array(B, "B"), "B", (m, None))
+    K = as_matrix(_float_array(K, "K"), "K", (B.shape[1], m))
+    Q = check_covariance(_float_array(Q, "Q"), "Q", size=m)
+    n_agents = check_positive_int(n_agents, "n_agents", minimum=2)
+    _check_flag(reduce, "reduce")
+    R_team = team_noise_covariance(R, n_agents, m)
     check_covariance(R_team, "R", definite=True)
     BK = B @ K
     kron = 1
@@ -193,15 +204,31 @@ def team_filter_model(
 def closed_loop_matrices(A: ArrayLike, BK: ArrayLike, laplacian: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Dense ``F_1 = I_N ⊗ A - L ⊗ BK`` (eq. (11)) and ``F_2 = (I_N ⊗ BK) L'`` (eq. (28)).
 
+    Parameters
+    ----------
+    A, BK : (m, m) array_like
+        Agent transition matrix and input matrix times gain.
+    laplacian : (N, N) array_like
+        Graph Laplacian ``L = D - A`` (rows summing to zero, off-diagonal
+        entries <= 0; directed graphs allowed): pass
+        ``mascore.graphs.laplacian(adjacency)``, not the adjacency.
+
     Returns
     -------
     F1 : (m N, m N) ndarray
     F2 : (m N, m N^2) ndarray
         ``L' = diag(L_1 ⊗ I_m, ..., L_N ⊗ I_m)`` with ``L_i`` the i-th row.
     """
-    A = check_square(A, "A")
-    BK = check_square(BK, "BK", A.shape[0])
-    L = check_square(laplacian, "laplacian")
+    A = check_square(_float_array(A, "A"), "A")
+    BK = check_square(_float_array(BK, "BK"), "BK", A.shape[0])
+    L = check_laplacian(_float_array(laplacian, "laplacian"), "laplacian")
+    if L.shape[0] == 0 or A.shape[0] == 0:
+        raise ValueError(f"laplacian and A must be at least 1 x 1; got {L.shape} and {A.shape}")
+    return _closed_loop_matrices(A, BK, L)
+
+
+def _closed_loop_matrices(A: np.ndarray, BK: np.ndarray, L: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`closed_loop_matrices` without checks."""
     N, m = L.shape[0], A.shape[0]
     F1 = np.kron(np.eye(N), A) - np.kron(L, BK)
     Lp = np.zeros((m * N, m * N * N))
@@ -212,8 +239,17 @@ def closed_loop_matrices(A: ArrayLike, BK: ArrayLike, laplacian: ArrayLike) -> t
 
 
 def reduce_covariance(P: ArrayLike, kron: int, name: str = "P") -> np.ndarray:
-    """``P̄`` with ``P = P̄ ⊗ I_kron`` over the last two axes (error if not of that form)."""
-    P = np.asarray(P, dtype=float)
+    """``P̄`` with ``P = P̄ ⊗ I_kron`` over the last two axes (error if not of that form).
+
+    `P` is a covariance (or a stack of them): finite, symmetric, positive
+    semidefinite, of a size divisible by `kron`; `name` names it in messages.
+    """
+    if not isinstance(name, str):
+        raise TypeError(f"name must be a string (the argument name used in messages); got {name!r}")
+    kron = check_positive_int(kron, "kron")
+    P = check_covariance(_float_array(P, name), name)
+    if P.shape[-1] % kron:
+        raise ValueError(f"{name} has size {P.shape[-1]}, not a multiple of kron={kron}")
     if kron == 1:
         return P
     red = _kron_factor(P, kron)
@@ -226,8 +262,11 @@ def reduce_covariance(P: ArrayLike, kron: int, name: str = "P") -> np.ndarray:
 
 
 def expand_covariance(P_r: ArrayLike, kron: int) -> np.ndarray:
-    """``P_r ⊗ I_kron`` over the last two axes."""
-    P_r = np.asarray(P_r, dtype=float)
+    """``P_r ⊗ I_kron`` over the last two axes (`P_r` a finite ``(..., n, n)`` array, `kron` >= 1)."""
+    kron = check_positive_int(kron, "kron")
+    P_r = _finite(_float_array(P_r, "P_r"), "P_r")
+    if P_r.ndim < 2 or P_r.shape[-1] != P_r.shape[-2]:
+        raise ValueError(f"P_r must be a (..., n, n) array of square matrices; got shape {P_r.shape}")
     if kron == 1:
         return P_r
     out = P_r[..., :, None, :, None] * np.eye(kron)[:, None, :]
@@ -267,26 +306,34 @@ def agent_update(
     KH : (..., N, m N, m N) ndarray
         ``G_i H_i`` embedded in the team space (zero columns for unsensed agents).
     """
-    X = np.asarray(X_pred, dtype=float)
-    if X.ndim < 3 or X.shape[-3] != X.shape[-2]:
-        raise ValueError(f"X_pred must have shape (..., N, N, m); got {X.shape}")
+    X = _finite(_float_array(X_pred, "X_pred"), "X_pred")
+    if X.ndim < 3 or X.shape[-3] != X.shape[-2] or X.shape[-1] == 0 or X.shape[-2] == 0:
+        raise ValueError(f"X_pred must have shape (..., N, N, m) with N, m >= 1; got {X.shape}")
     N, m = X.shape[-2:]
-    Sig = check_covariance(Sigma_pred, "Sigma_pred", size=m * N)
+    Sig = check_covariance(_float_array(Sigma_pred, "Sigma_pred"), "Sigma_pred", size=m * N)
     R_team = team_noise_covariance(R, N, m)
     check_covariance(R_team, "R", definite=True)
-    Zt = np.asarray(Z, dtype=float)
-    if Zt.shape[-3:] != (N, N, m):
+    Zt = _finite(_float_array(Z, "Z"), "Z")
+    if Zt.ndim < 3 or Zt.shape[-3:] != (N, N, m):
         raise ValueError(f"Incompatible dimensions of Z; expected (..., {N}, {N}, {m}) but found {Zt.shape}")
-    S = np.asarray(mask, dtype=bool)
-    if S.shape[-2:] != (N, N):
+    S = _check_mask_values(mask, "mask")
+    if S.ndim < 2 or S.shape[-2:] != (N, N):
         raise ValueError(f"Incompatible dimensions of mask; expected (..., {N}, {N}) but found {S.shape}")
-    d = np.repeat(S, m, axis=-1).astype(float)  # (..., N, mN)
-    KH = _masked_gain(Sig, d, R_team)
-    lead = X.shape[:-3]
-    innov = (Zt - X).reshape(*np.broadcast_shapes(lead, Zt.shape[:-3]), N, N * m, 1)
-    X_post = X.reshape(*lead, N, N * m, 1) + KH @ innov
-    Sig_post = _joseph(Sig, KH, R_team)
-    return X_post.reshape(*X_post.shape[:-3], N, N, m), Sig_post, KH
+    if not np.all(S[..., np.arange(N), np.arange(N)]):
+        raise ValueError("mask must include every agent itself (closed neighbourhoods); use sensing_mask(A)")
+    try:
+        d = np.repeat(S, m, axis=-1).astype(float)  # (..., N, mN)
+        KH = _masked_gain(Sig, d, R_team)
+        lead = X.shape[:-3]
+        innov = (Zt - X).reshape(*np.broadcast_shapes(lead, Zt.shape[:-3]), N, N * m, 1)
+        X_post = X.reshape(*lead, N, N * m, 1) + KH @ innov
+        Sig_post = _joseph(Sig, KH, R_team)
+    except ValueError:
+        raise ValueError(
+            f"the leading (batch) axes of X_pred {X.shape}, Sigma_pred {Sig.shape}, Z {Zt.shape} and "
+            f"mask {S.shape} do not broadcast"
+        ) from None
+    return _finite_result("agent update", X_post.reshape(*X_post.shape[:-3], N, N, m), Sig_post, KH)
 
 
 # ----------------------------------------------------------------------------
@@ -323,13 +370,27 @@ def mb_predict(
     X_pred : (R, N, N, m) ndarray
     Sigma_pred : (B, N, M_r, M_r) ndarray
     """
-    N = model.n_agents
+    model = _check_model(model)
+    N, Mr = model.n_agents, model.M_r
     L = _check_laplacian(laplacian, N)
+    X = _check_estimates(model, X_hat, "X_hat")
+    Sig = _check_covariances(Sigma, "Sigma", (None, N, Mr, Mr))
+    _check_batch(L, Sig, "laplacian", "Sigma", X)
+    KH = None
+    if KH_prev is not None:
+        KH = _finite(_float_array(KH_prev, "KH_prev"), "KH_prev")
+        if KH.shape != Sig.shape:
+            raise ValueError(
+                f"Incompatible dimensions of KH_prev; expected {Sig.shape} (as Sigma) but found {KH.shape}"
+            )
+    return _remember_result("measurement-based prediction", *_mb_predict(model, X, Sig, L, KH), cov=1)
+
+
+def _mb_predict(model, X_hat, Sig, L, KH_prev=None):
+    """:func:`mb_predict` without checks."""
+    N = model.n_agents
     X_pred = _F1_means(model, X_hat, L)
-    Sig = np.asarray(Sigma, dtype=float)
     Mr, mr = model.M_r, model.m_r
-    if Sig.ndim != 4 or Sig.shape[1:] != (N, Mr, Mr):
-        raise ValueError(f"Incompatible dimensions of Sigma; expected (B, {N}, {Mr}, {Mr}) but found {Sig.shape}")
     Lb = L if L.ndim == 3 else L[None]
     # F_1 Σ_i F_1^T via the tensor form
     T = _F1_rows(model, Sig.reshape(*Sig.shape[:2], N, mr, Mr), Lb[:, None])
@@ -344,7 +405,7 @@ def mb_predict(
     blk[:, np.arange(N), :, np.arange(N), :] = np.moveaxis(noise, 1, 0)
     P = P + blk.reshape(Lb.shape[0], 1, Mr, Mr)
     if KH_prev is not None:
-        KH = np.asarray(KH_prev, dtype=float)
+        KH = KH_prev
         # E[e_i nu_bar_i^T] = -KH_i R (L_i ⊗ I)^T, column block i of E[e_i nu_bar^T]
         RL = np.einsum("lakc,bik->bilac", Rr, Lb).reshape(Lb.shape[0], N, Mr, mr)  # R (L_i ⊗ I)^T
         Xc = -(KH @ RL)  # (B, N, Mr, mr)
@@ -371,10 +432,22 @@ def mb_update(
     -------
     X_post, Sigma_post, KH : reduced ``G_i H_i`` of shape (B, N, M_r, M_r).
     """
-    Sig = np.asarray(Sigma_pred, dtype=float)
-    S = _check_mask(mask, model.n_agents)
+    model = _check_model(model)
+    N, Mr = model.n_agents, model.M_r
+    X = _check_estimates(model, X_pred, "X_pred")
+    Sig = _check_covariances(Sigma_pred, "Sigma_pred", (None, N, Mr, Mr))
+    Zt = _check_estimates(model, Z, "Z")
+    S = _check_mask(mask, N)
     if S.shape[0] not in (1, Sig.shape[0]):
         raise ValueError(f"mask has {S.shape[0]} topologies but Sigma_pred has {Sig.shape[0]}")
+    _check_runs(X, Zt, "X_pred", "Z")
+    if Sig.shape[0] not in (1, X.shape[0]):
+        raise ValueError(f"Sigma_pred has batch {Sig.shape[0]} but X_pred has {X.shape[0]} runs")
+    return _remember_result("measurement-based update", *_mb_update(model, X, Sig, Zt, S), cov=1)
+
+
+def _mb_update(model, X_pred, Sig, Z, S):
+    """:func:`mb_update` without checks (`S` a (B, N, N) bool mask)."""
     KH = _masked_gain(Sig, _mask_vec(model, S), model.R_r)
     X_post = _apply_gain(model, X_pred, Z, KH)
     return X_post, _joseph(Sig, KH, model.R_r), KH
@@ -400,14 +473,21 @@ def eb_initial_covariance(model: TeamFilterModel, P0: ArrayLike, common: bool = 
         ``C_i[0] = 1_N ⊗ I``). False: independent initial errors,
         ``Σ[0] = I_N ⊗ P0``.
     """
+    model = _check_model(model)
+    _check_flag(common, "common")
     N, m = model.n_agents, model.m
-    P0 = np.asarray(P0, dtype=float)
+    P0 = _finite(_float_array(P0, "P0"), "P0")
     if P0.shape == (m, m):
         P0 = np.kron(np.eye(N), P0)
+    if P0.shape != (m * N, m * N):
+        raise ValueError(
+            f"Incompatible dimensions of P0; expected ({m}, {m}) per agent block or ({m * N}, {m * N}) "
+            f"but found {P0.shape}"
+        )
     P0 = check_covariance(P0, "P0", size=m * N)
     P0r = reduce_covariance(P0, model.kron, "P0")
     outer = np.ones((N, N)) if common else np.eye(N)
-    return np.kron(outer, P0r)[None]
+    return _RECENT_COVARIANCES.remember(np.kron(outer, P0r)[None])
 
 
 def eb_predict(
@@ -431,14 +511,19 @@ def eb_predict(
     X_pred : (R, N, N, m)
     Sigma_pred : (B, N M_r, N M_r)
     """
-    N, mr, Mr = model.n_agents, model.m_r, model.M_r
+    model = _check_model(model)
+    N, Mr = model.n_agents, model.M_r
     L = _check_laplacian(laplacian, N)
+    X = _check_estimates(model, X_hat, "X_hat")
+    Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr))
+    _check_batch(L, Sig, "laplacian", "Sigma", X)
+    return _remember_result("estimation-based prediction", *_eb_predict(model, X, Sig, L), cov=1)
+
+
+def _eb_predict(model, X_hat, Sig, L):
+    """:func:`eb_predict` without checks."""
+    N, mr, Mr = model.n_agents, model.m_r, model.M_r
     X_pred = _F1_means(model, X_hat, L)
-    Sig = np.asarray(Sigma, dtype=float)
-    if Sig.ndim != 3 or Sig.shape[1:] != (N * Mr, N * Mr):
-        raise ValueError(
-            f"Incompatible dimensions of Sigma; expected (B, {N * Mr}, {N * Mr}) but found {Sig.shape}"
-        )
     Lb = L if L.ndim == 3 else L[None]
     P1 = _phi_rows(model, Sig, Lb)
     P2 = _phi_rows(model, np.swapaxes(P1, -1, -2), Lb)
@@ -462,15 +547,27 @@ def eb_update(
     Sigma_post : (B, N M_r, N M_r)
     KH : (B, N, M_r, M_r) reduced ``G_i H_i``.
     """
+    model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
-    Sig = np.asarray(Sigma_pred, dtype=float)
-    B = Sig.shape[0]
+    X = _check_estimates(model, X_pred, "X_pred")
+    Sig = _check_covariances(Sigma_pred, "Sigma_pred", (None, N * Mr, N * Mr))
+    Zt = _check_estimates(model, Z, "Z")
     S = _check_mask(mask, N)
-    if S.shape[0] not in (1, B):
+    if S.shape[0] not in (1, Sig.shape[0]):
         raise ValueError(
-            f"mask has {S.shape[0]} topologies but Sigma_pred has {B}: the covariance batch must "
+            f"mask has {S.shape[0]} topologies but Sigma_pred has {Sig.shape[0]}: the covariance batch must "
             "match the topology batch (pass the topology mask, not the per-run measurement mask)"
         )
+    _check_runs(X, Zt, "X_pred", "Z")
+    if Sig.shape[0] not in (1, X.shape[0]):
+        raise ValueError(f"Sigma_pred has batch {Sig.shape[0]} but X_pred has {X.shape[0]} runs")
+    return _remember_result("estimation-based update", *_eb_update(model, X, Sig, Zt, S), cov=1)
+
+
+def _eb_update(model, X_pred, Sig, Z, S):
+    """:func:`eb_update` without checks (`S` a (B, N, N) bool mask)."""
+    N, Mr = model.n_agents, model.M_r
+    B = Sig.shape[0]
     blocks = Sig.reshape(B, N, Mr, N, Mr)
     diag = blocks[:, np.arange(N), :, np.arange(N), :]  # (N, B, Mr, Mr)
     diag = np.moveaxis(diag, 0, 1)
@@ -487,7 +584,14 @@ def eb_update(
 
 def agent_covariances(model: TeamFilterModel, Sigma: ArrayLike) -> np.ndarray:
     """Diagonal blocks ``Σ̄_i`` of a reduced augmented covariance: ``(B, N, M_r, M_r)``."""
-    Sig = np.asarray(Sigma, dtype=float)
+    model = _check_model(model)
+    N, Mr = model.n_agents, model.M_r
+    Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr))
+    return _agent_covariances(model, Sig)
+
+
+def _agent_covariances(model, Sig):
+    """:func:`agent_covariances` without checks."""
     N, Mr = model.n_agents, model.M_r
     blocks = Sig.reshape(Sig.shape[0], N, Mr, N, Mr)
     return np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)
@@ -534,15 +638,18 @@ def plain_estimation_based_step(
     X_hat_next : (N, m N) ndarray
     Sigma_next : (m N^2, m N^2) ndarray
     """
-    X_hat = np.asarray(X_hat, dtype=float)
-    Sig = np.asarray(Sigma, dtype=float)
-    A = np.asarray(A, dtype=float)
+    X_hat, A, BK, Q, R, Adj, z = _check_plain_step(X_hat, A, BK, Q, R, adjacency, z)
     N, m = X_hat.shape[0], A.shape[0]
     M = m * N
-    L = graph_laplacian(adjacency)
-    F1, F2 = closed_loop_matrices(A, BK, L)
+    Sig = check_covariance(_float_array(Sigma, "Sigma"), "Sigma", size=M * N)
+    if Sig.ndim != 2:
+        raise ValueError(f"Sigma must be the full ({M * N}, {M * N}) augmented covariance; got shape {Sig.shape}")
+    Adj_next = Adj if adjacency_next is None else _check_plain_adjacency(adjacency_next, N, "adjacency_next")
+    z = _check_plain_z(z, Adj_next, m)
+    L = graph_laplacian(Adj)
+    F1, F2 = _closed_loop_matrices(A, BK, L)
     Qc = np.kron(np.eye(N), Q)
-    H = selection_matrices(adjacency if adjacency_next is None else adjacency_next, m)
+    H = selection_matrices(Adj_next, m)
     blk = lambda i: slice(i * M, (i + 1) * M)  # noqa: E731
     # eq. (34) (eq. (32) for i = j)
     F2S = F2 @ Sig @ F2.T
@@ -568,7 +675,7 @@ def plain_estimation_based_step(
                 Sig_next[blk(i), blk(j)] = (
                     -G[i] @ H[i] @ P - P @ H[j].T @ G[j].T + G[i] @ H[i] @ P @ H[j].T @ G[j].T + P
                 )
-    return X_next, 0.5 * (Sig_next + Sig_next.T)
+    return _finite_result("estimation-based step", X_next, 0.5 * (Sig_next + Sig_next.T))
 
 
 def plain_measurement_based_step(
@@ -591,18 +698,21 @@ def plain_measurement_based_step(
     -------
     X_hat_next : (N, m N), Sigma_next : (N, m N, m N)
     """
-    X_hat = np.asarray(X_hat, dtype=float)
-    A = np.asarray(A, dtype=float)
+    X_hat, A, BK, Q, R, Adj, z = _check_plain_step(X_hat, A, BK, Q, R, adjacency, z)
     N, m = X_hat.shape[0], A.shape[0]
-    L = graph_laplacian(adjacency)
-    F1, _ = closed_loop_matrices(A, BK, L)
+    z = _check_plain_z(z, Adj, m)
+    Sigma = check_covariance(_float_array(Sigma, "Sigma"), "Sigma", size=m * N)
+    if Sigma.shape != (N, m * N, m * N):
+        raise ValueError(f"Incompatible dimensions of Sigma; expected ({N}, {m * N}, {m * N}) but found {Sigma.shape}")
+    L = graph_laplacian(Adj)
+    F1, _ = _closed_loop_matrices(A, BK, L)
     Qc = np.kron(np.eye(N), Q)
     Ebar = np.zeros((m * N, m * N))
     for i in range(N):
         Li = np.kron(L[i:i + 1], np.eye(m))
         Ebar[i * m:(i + 1) * m, i * m:(i + 1) * m] = Li @ R @ Li.T
     IBK = np.kron(np.eye(N), BK)
-    H = selection_matrices(adjacency, m)
+    H = selection_matrices(Adj, m)
     X_next, S_next = np.empty_like(X_hat), np.empty((N, m * N, m * N))
     for i in range(N):
         P = F1 @ Sigma[i] @ F1.T + IBK @ Ebar @ IBK.T + Qc  # eq. (15)
@@ -611,7 +721,7 @@ def plain_measurement_based_step(
         G = P @ H[i].T @ np.linalg.inv(S_i)
         X_next[i] = x + G @ (z[i] - H[i] @ x)
         S_next[i] = (np.eye(m * N) - G @ H[i]) @ P
-    return X_next, 0.5 * (S_next + np.swapaxes(S_next, -1, -2))
+    return _finite_result("measurement-based step", X_next, 0.5 * (S_next + np.swapaxes(S_next, -1, -2)))
 
 
 # ----------------------------------------------------------------------------
@@ -629,10 +739,25 @@ def centralized_predict(
     x : (R, N, m) team estimates, P : (B, M_r, M_r) reduced covariance,
     U : (R, N, p) applied inputs, B : (m, p) input matrix.
     """
+    model = _check_model(model)
+    N, m, Mr = model.n_agents, model.m, model.M_r
+    x = _finite(_float_array(x, "x"), "x")
+    if x.ndim != 3 or x.shape[1:] != (N, m):
+        raise ValueError(f"Incompatible dimensions of x; expected (R, {N}, {m}) but found {x.shape}")
+    P = _check_covariances(P, "P", (None, Mr, Mr))
+    B = as_matrix(_float_array(B, "B"), "B", (m, None))
+    U = _finite(_float_array(U, "U"), "U")
+    if U.shape != (x.shape[0], N, B.shape[1]):
+        raise ValueError(
+            f"Incompatible dimensions of U; expected ({x.shape[0]}, {N}, {B.shape[1]}) but found {U.shape}"
+        )
+    return _remember_result("centralized prediction", *_centralized_predict(model, x, P, U, B), cov=1)
+
+
+def _centralized_predict(model, x, P, U, B):
+    """:func:`centralized_predict` without checks."""
     N, mr = model.n_agents, model.m_r
-    x = np.asarray(x, dtype=float)
-    x_pred = x @ model.A.T + np.asarray(U, dtype=float) @ np.asarray(B, dtype=float).T
-    P = np.asarray(P, dtype=float)
+    x_pred = x @ model.A.T + U @ B.T
     T = (model.A_r @ P.reshape(P.shape[0], N, mr, N * mr)).reshape(P.shape)
     T = (model.A_r @ np.swapaxes(T, -1, -2).reshape(P.shape[0], N, mr, N * mr)).reshape(P.shape)
     return x_pred, _sym(T + np.kron(np.eye(N), model.Q_r))
@@ -648,20 +773,36 @@ def centralized_update(
 
     Parameters
     ----------
-    x_pred : (R, N, m), P_pred : (B, M_r, M_r) reduced,
+    x_pred : (R, N, m), P_pred : (B, M_r, M_r) reduced, positive definite,
     Z : (R, N, N, m), mask : (N, N) or (B, N, N).
     """
+    model = _check_model(model)
+    N, m, Mr = model.n_agents, model.m, model.M_r
+    x_pred = _finite(_float_array(x_pred, "x_pred"), "x_pred")
+    if x_pred.ndim != 3 or x_pred.shape[1:] != (N, m):
+        raise ValueError(f"Incompatible dimensions of x_pred; expected (R, {N}, {m}) but found {x_pred.shape}")
+    P_pred = _check_covariances(P_pred, "P_pred", (None, Mr, Mr), definite=True)
+    Zt = _check_estimates(model, Z, "Z")
+    S = _check_mask(mask, N)
+    if Zt.shape[0] != x_pred.shape[0]:
+        raise ValueError(f"Z has {Zt.shape[0]} runs but x_pred has {x_pred.shape[0]}")
+    for name, b in (("mask", S.shape[0]), ("Z", Zt.shape[0])):
+        if P_pred.shape[0] not in (1, b) and b != 1:
+            raise ValueError(f"{name} has batch {b} but P_pred has {P_pred.shape[0]}")
+    return _remember_result("centralized update", *_centralized_update(model, x_pred, P_pred, Zt, S), cov=1)
+
+
+def _centralized_update(model, x_pred, P_pred, Z, S):
+    """:func:`centralized_update` without checks (`S` a (B, N, N) bool mask)."""
     N, m, k = model.n_agents, model.m, model.kron
     Mr = model.M_r
-    S = _check_mask(mask, N)
     d = _mask_vec(model, S)  # (B, N, Mr)
     Dm = d[..., :, None] * d[..., None, :]
     W = np.linalg.inv(Dm * model.R_r + np.eye(Mr) * (1 - d[..., None])) * Dm  # (B, N, Mr, Mr)
-    info = np.linalg.inv(np.asarray(P_pred, dtype=float)) + W.sum(axis=1)
+    info = np.linalg.inv(P_pred) + W.sum(axis=1)
     P = _sym(np.linalg.inv(info))
-    x_pred = np.asarray(x_pred, dtype=float)
     R_ = x_pred.shape[0]
-    innov = (np.asarray(Z, dtype=float) - x_pred[:, None]).reshape(R_, N, Mr, k)
+    innov = (Z - x_pred[:, None]).reshape(R_, N, Mr, k)
     total = (W @ innov).sum(axis=1)  # (R, Mr, k); W broadcasts over runs when B = 1
     x = x_pred + (P @ total).reshape(R_, N, m)
     return x, P
@@ -699,11 +840,16 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
     -------
     (N,) ndarray of bool
     """
-    A = check_square(A, "A")
-    BK = check_square(BK, "BK", A.shape[0])
+    A = check_square(_float_array(A, "A"), "A")
+    BK = check_square(_float_array(BK, "BK"), "BK", A.shape[0])
+    if A.shape[0] == 0:
+        raise ValueError("A must be at least 1 x 1 (an agent with no state)")
+    tol = check_positive(tol, "tol", "(relative rank tolerance)")
     m = A.shape[0]
-    S = sensing_mask(adjacency, allow_isolated=True)
-    Adj = np.asarray(adjacency, dtype=float)
+    Adj = _check_adjacency(adjacency)
+    if Adj.ndim != 2:
+        raise ValueError(f"adjacency must be a single (N, N) topology here; got shape {Adj.shape}")
+    S = sensing_mask(Adj, allow_isolated=True)
     L = graph_laplacian(Adj)
     # work on the per-axis factor when A = A_r ⊗ I_k and BK = BK_r ⊗ I_k (same rank test)
     for k in range(m, 0, -1):
@@ -714,7 +860,7 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
         graph_test = _graph_observability(A, BK, L, S, tol)
         if graph_test is not None:
             return graph_test
-    F1, _ = closed_loop_matrices(A, BK, L)
+    F1, _ = _closed_loop_matrices(A, BK, L)
     out = []
     for row in S:
         H = np.kron(np.eye(row.size)[row], np.eye(m))
@@ -751,12 +897,16 @@ def _graph_observability(A, BK, L, S, tol) -> np.ndarray | None:
 
 def require_observable(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike) -> None:
     """Raise ``ValueError`` naming the agents for which system (43) is unobservable."""
-    sensing_mask(adjacency)  # isolated agents first, with their own message
+    Adj = _check_adjacency(adjacency)
+    if Adj.ndim != 2:
+        raise ValueError(f"adjacency must be a single (N, N) topology here; got shape {Adj.shape}")
+    sensing_mask(Adj)  # isolated agents first, with their own message
     ok = observable_agents(A, BK, adjacency)
     if not np.all(ok):
         bad = np.flatnonzero(~ok).tolist()
         raise ValueError(
-            f"system (43) (F_1, H_i) is not observable for agent(s) {bad} with this topology: "
+            f"system (43) (F_1, H_i) is not observable for agent(s) {bad} with this topology (F_1 from A, BK "
+            "and the adjacency's Laplacian, H_i from the adjacency): "
             "Theorem 1 does not apply and the estimation-based loop needs an observable graph "
             "(symmetric neighbourhoods, e.g. a star seen from a leaf, hide modes)"
         )
@@ -774,8 +924,24 @@ def lyapunov_v(error: ArrayLike, Sigma_r: ArrayLike, kron: int = 1) -> np.ndarra
     kron : int
         Kronecker factor of the model.
     """
-    e = np.asarray(error, dtype=float)
-    P = np.asarray(Sigma_r, dtype=float)
+    kron = check_positive_int(kron, "kron")
+    e = _finite(_float_array(error, "error"), "error")
+    P = check_covariance(_float_array(Sigma_r, "Sigma_r"), "Sigma_r", definite=True)
+    Mr = P.shape[-1]
+    if e.ndim < 1 or e.shape[-1] != Mr * kron:
+        raise ValueError(
+            f"Incompatible dimensions of error; expected (..., {Mr * kron}) = Sigma_r size {Mr} x kron {kron} "
+            f"but found {e.shape}"
+        )
+    try:
+        np.broadcast_shapes(e.shape[:-1], P.shape[:-2])
+    except ValueError:
+        raise ValueError(f"the batch axes of error {e.shape} and Sigma_r {P.shape} do not broadcast") from None
+    return _lyapunov_v(e, P, kron)
+
+
+def _lyapunov_v(e, P, kron):
+    """:func:`lyapunov_v` without checks."""
     Mr = P.shape[-1]
     E = e.reshape(*e.shape[:-1], Mr, kron)
     sol = np.linalg.solve(P, E)
@@ -787,11 +953,25 @@ def team_nees(model: TeamFilterModel, X_true: ArrayLike, X_hat: ArrayLike, Sigma
 
     Parameters
     ----------
-    X_true : (R, N, m), X_hat : (R, N, N, m), Sigma_i : (B, N, M_r, M_r)
+    X_true : (R, N, m), X_hat : (R, N, N, m), Sigma_i : (B, N, M_r, M_r) positive definite
     """
-    X_true = np.asarray(X_true, dtype=float)
-    e = (X_true[:, None] - np.asarray(X_hat, dtype=float)).reshape(X_true.shape[0], model.n_agents, -1)
-    return lyapunov_v(e, np.asarray(Sigma_i)[:, :, :, :], model.kron)
+    model = _check_model(model)
+    N, m, Mr = model.n_agents, model.m, model.M_r
+    X_true = _finite(_float_array(X_true, "X_true"), "X_true")
+    if X_true.ndim != 3 or X_true.shape[1:] != (N, m):
+        raise ValueError(f"Incompatible dimensions of X_true; expected (R, {N}, {m}) but found {X_true.shape}")
+    X = _check_estimates(model, X_hat, "X_hat")
+    _check_runs(X_true, X, "X_true", "X_hat")
+    Sig = _check_covariances(Sigma_i, "Sigma_i", (None, N, Mr, Mr), definite=True)
+    if Sig.shape[0] not in (1, X.shape[0]):
+        raise ValueError(f"Sigma_i has batch {Sig.shape[0]} but X_hat has {X.shape[0]} runs")
+    return _team_nees(model, X_true, X, Sig)
+
+
+def _team_nees(model, X_true, X_hat, Sigma_i):
+    """:func:`team_nees` without checks."""
+    e = (X_true[:, None] - X_hat).reshape(X_true.shape[0], model.n_agents, -1)
+    return _lyapunov_v(e, Sigma_i, model.kron)
 
 
 def f2_cross(model: TeamFilterModel, Sigma: ArrayLike, laplacian: ArrayLike) -> np.ndarray:
@@ -800,9 +980,17 @@ def f2_cross(model: TeamFilterModel, Sigma: ArrayLike, laplacian: ArrayLike) -> 
     Used to form the map ``C_i = E[e e_i^T] Σ_i^{-1}`` of Lemma 1 without
     storing the augmented covariance: ``F_2 C_i = F_2 E[e e_i^T] Σ_i^{-1}``.
     """
-    N, mr, Mr = model.n_agents, model.m_r, model.M_r
-    Sig = np.asarray(Sigma, dtype=float)
+    model = _check_model(model)
+    N, Mr = model.n_agents, model.M_r
     L = _check_laplacian(laplacian, N)
+    Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr))
+    _check_batch(L, Sig, "laplacian", "Sigma")
+    return _f2_cross(model, Sig, L)
+
+
+def _f2_cross(model, Sig, L):
+    """:func:`f2_cross` without checks."""
+    N, mr, Mr = model.n_agents, model.m_r, model.M_r
     Lb = L if L.ndim == 3 else L[None]
     B = Sig.shape[0]
     T = Sig.reshape(B, N, N, mr * N * Mr)
@@ -844,16 +1032,22 @@ def theorem1_min_eigenvalues(
         ``min_eig_rel`` (T, N): smallest eigenvalue of
         ``Σ_i^{1/2} M_i Σ_i^{1/2}`` (scale-free, at most 1).
     """
+    model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
     L = _check_laplacian(laplacian, N)
-    KH = np.asarray(KH, dtype=float)
-    Sig = np.asarray(Sigma_i, dtype=float)
-    F2C_all = np.asarray(F2_cross, dtype=float)
-    if Sig.ndim != 4 or Sig.shape[1:] != (N, Mr, Mr) or KH.shape != Sig.shape or F2C_all.shape != Sig.shape:
-        raise ValueError(
-            f"KH, Sigma_i and F2_cross must all have shape (T+1, {N}, {Mr}, {Mr}); "
-            f"got {KH.shape}, {Sig.shape}, {F2C_all.shape}"
-        )
+    if L.ndim != 2:
+        raise ValueError(f"laplacian must be a single fixed ({N}, {N}) topology here; got shape {L.shape}")
+    KH = _finite(_float_array(KH, "KH"), "KH")
+    Sig = _check_covariances(Sigma_i, "Sigma_i", (None, N, Mr, Mr), definite=True)
+    F2C_all = _finite(_float_array(F2_cross, "F2_cross"), "F2_cross")
+    if Sig.shape[0] < 2:
+        raise ValueError(f"Sigma_i must hold at least two steps (T+1 >= 2); got shape {Sig.shape}")
+    for name, arr in (("KH", KH), ("F2_cross", F2C_all)):
+        if arr.shape != Sig.shape:
+            raise ValueError(
+                f"Incompatible dimensions of {name}; KH, Sigma_i and F2_cross must all have shape "
+                f"(T+1, {N}, {Mr}, {Mr}); got {name} {arr.shape} and Sigma_i {Sig.shape}"
+            )
     F1 = np.kron(np.eye(N), model.A_r) - np.kron(L, model.BK_r)
     eye = np.eye(Mr)
     Sig_inv = np.linalg.inv(Sig)
@@ -862,10 +1056,12 @@ def theorem1_min_eigenvalues(
     M = Sig_inv[:-1] - np.swapaxes(T, -1, -2) @ Sig_inv[1:] @ T
     root = np.linalg.cholesky(Sig[:-1])
     rel = np.swapaxes(root, -1, -2) @ M @ root
-    return {
+    out = {
         "min_eig": np.linalg.eigvalsh(_sym(M))[..., 0],
         "min_eig_rel": np.linalg.eigvalsh(_sym(rel))[..., 0],
     }
+    _finite_result("Theorem 1 eigenvalue computation", *out.values())
+    return out
 
 
 # ----------------------------------------------------------------------------
@@ -894,17 +1090,156 @@ def _sym(P: np.ndarray) -> np.ndarray:
     return 0.5 * (P + np.swapaxes(P, -1, -2))
 
 
-def _check_laplacian(L: ArrayLike, N: int) -> np.ndarray:
-    L = np.asarray(L, dtype=float)
-    if L.shape[-2:] != (N, N) or L.ndim not in (2, 3):
-        raise ValueError(f"Incompatible dimensions of laplacian; expected ({N}, {N}) or (B, {N}, {N}) but found {L.shape}")
-    if not np.allclose(L.sum(axis=-1), 0):
-        raise ValueError("laplacian rows must sum to zero (pass mascore.graphs.laplacian(A))")
+#: Covariances returned by the public steps (symmetric PSD by construction), recognised when fed back.
+_RECENT_COVARIANCES = _RecentArrays(n=16)
+#: Laplacians already checked, by value (the topologies of a run are few and repeat at every step).
+_LAPLACIANS = _ValueMemo(max_entries=256, max_key_bytes=1 << 22, max_total_bytes=1 << 25)
+
+
+def _check_model(model: object) -> TeamFilterModel:
+    if not isinstance(model, TeamFilterModel):
+        raise TypeError(
+            f"model must be a TeamFilterModel (build it with team_filter_model); got {type(model).__name__}"
+        )
+    return model
+
+
+def _check_estimates(model: TeamFilterModel, X: ArrayLike, name: str) -> np.ndarray:
+    """Team estimates or measurements ``(R, N, N, m)``, finite."""
+    X = _float_array(X, name)
+    N, m = model.n_agents, model.m
+    if X.ndim != 4 or X.shape[1:] != (N, N, m):
+        raise ValueError(f"Incompatible dimensions of {name}; expected (R, {N}, {N}, {m}) but found {X.shape}")
+    return _finite(X, name)
+
+
+def _check_covariances(P: ArrayLike, name: str, shape: tuple, definite: bool = False) -> np.ndarray:
+    """A stack of covariances of the given shape (None: any batch size >= 1), symmetric PSD (or PD).
+
+    A covariance that one of this module's steps returned (unmodified) is recognised without a scan.
+    """
+    P = _float_array(P, name)
+    if P.ndim != len(shape) or any(w is not None and g != w for g, w in zip(P.shape, shape)) or P.shape[0] == 0:
+        want = tuple("B" if w is None else w for w in shape)
+        raise ValueError(f"Incompatible dimensions of {name}; expected {want} but found {P.shape}".replace("'", ""))
+    if definite or P not in _RECENT_COVARIANCES:
+        check_covariance(P, name, definite=definite)
+    return P
+
+
+def _check_plain_adjacency(adjacency: ArrayLike, N: int, name: str = "adjacency") -> np.ndarray:
+    Adj = _check_adjacency(adjacency, name)
+    if Adj.shape != (N, N):
+        raise ValueError(f"Incompatible dimensions of {name}; expected ({N}, {N}) for {N} agents but found {Adj.shape}")
+    sensing_mask(Adj)  # an isolated agent has no H_i: refused here, naming the agent
+    return Adj
+
+
+def _check_plain_step(X_hat, A, BK, Q, R, adjacency, z) -> tuple:
+    """Arguments of the plain reference steps (z is checked separately, against its topology)."""
+    A = check_square(_float_array(A, "A"), "A")
+    m = A.shape[0]
+    if m == 0:
+        raise ValueError("A must be at least 1 x 1 (an agent with no state)")
+    X_hat = _finite(_float_array(X_hat, "X_hat"), "X_hat")
+    if X_hat.ndim != 2 or X_hat.shape[0] == 0 or X_hat.shape[1] != m * X_hat.shape[0]:
+        raise ValueError(f"X_hat must have shape (N, {m} N) (row i: agent i's team estimate); got {X_hat.shape}")
+    N = X_hat.shape[0]
+    BK = check_square(_float_array(BK, "BK"), "BK", m)
+    Q = check_covariance(_float_array(Q, "Q"), "Q", size=m)
+    if Q.ndim != 2:
+        raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
+    R = team_noise_covariance(R, N, m)
+    check_covariance(R, "R", definite=True)
+    Adj = _check_plain_adjacency(adjacency, N)
+    return X_hat, A, BK, Q, R, Adj, z
+
+
+def _check_plain_z(z: object, Adj: np.ndarray, m: int) -> list[np.ndarray]:
+    """The stacked measurements ``z_i`` (eq. (3)) of every agent for topology `Adj`."""
+    N = Adj.shape[0]
+    if isinstance(z, (str, bytes)) or not hasattr(z, "__len__"):
+        raise TypeError(f"z must be a list of {N} measurement vectors (one per agent); got {type(z).__name__}")
+    if len(z) != N:
+        raise ValueError(f"z must hold {N} measurement vectors (one per agent); got {len(z)}")
+    sizes = m * (1 + np.count_nonzero(Adj > 0, axis=1))
+    out = []
+    for i, zi in enumerate(z):
+        zi = _finite(_float_array(zi, f"z[{i}]"), f"z[{i}]")
+        if zi.shape != (sizes[i],):
+            raise ValueError(
+                f"Incompatible dimensions of z[{i}]; expected ({sizes[i]},) (in this adjacency agent {i} senses "
+                f"{sizes[i] // m} agents of {m} states, itself included) but found {zi.shape}"
+            )
+        out.append(zi)
+    return out
+
+
+def _check_runs(X: np.ndarray, Y: np.ndarray, xname: str, yname: str) -> None:
+    if X.shape[0] != Y.shape[0]:
+        raise ValueError(f"{yname} has {Y.shape[0]} runs but {xname} has {X.shape[0]}")
+
+
+def _check_batch(L: np.ndarray, Sig: np.ndarray, lname: str, sname: str, X: np.ndarray | None = None) -> None:
+    """A batch of topologies must match the covariance batch and the runs (or be a single topology)."""
+    if L.ndim == 3 and L.shape[0] not in (1, Sig.shape[0]):
+        raise ValueError(
+            f"{lname} has {L.shape[0]} topologies but {sname} has batch {Sig.shape[0]}: one covariance per "
+            "topology (or a single topology for all)"
+        )
+    if X is not None and L.ndim == 3 and L.shape[0] not in (1, X.shape[0]):
+        raise ValueError(f"{lname} has {L.shape[0]} topologies but there are {X.shape[0]} runs")
+    if X is not None and Sig.shape[0] not in (1, X.shape[0]):
+        raise ValueError(f"{sname} has batch {Sig.shape[0]} but there are {X.shape[0]} runs")
+
+
+def _finite_result(what: str, *arrays: np.ndarray):
+    """Refuse NaN/inf in a result computed from checked, finite input (an overflow): name the computation."""
+    for arr in arrays:  # a sum is NaN/inf if any entry is (or if it overflows: then the exact test decides)
+        if not math.isfinite(arr.sum()) and not np.all(np.isfinite(arr)):
+            raise ValueError(
+                f"the {what} produced NaN or inf from finite input: the values overflow floating point "
+                "(rescale the problem) or the covariances are too close to singular"
+            )
+    return arrays if len(arrays) > 1 else arrays[0]
+
+
+def _remember_result(what: str, *arrays: np.ndarray, cov: int):
+    """:func:`_finite_result`, then remember ``arrays[cov]`` (a PSD covariance) as checked."""
+    _finite_result(what, *arrays)
+    _RECENT_COVARIANCES.remember(arrays[cov])
+    return arrays
+
+
+def _check_laplacian(L: ArrayLike, N: int, name: str = "laplacian", any_batch: bool = False) -> np.ndarray:
+    """One Laplacian ``(N, N)`` or a batch ``(B, N, N)`` (``(..., N, N)`` with `any_batch`): finite, rows
+    summing to zero, off-diagonal entries <= 0.
+
+    Directed graphs are allowed. An adjacency matrix passed by mistake is named as such.
+    """
+    L = _float_array(L, name)
+    if (L.ndim < 2 or (L.ndim > 3 and not any_batch) or L.shape[-2:] != (N, N) or L.size == 0):
+        want = f"(..., {N}, {N})" if any_batch else f"({N}, {N}) or (B, {N}, {N})"
+        raise ValueError(f"Incompatible dimensions of {name}; expected {want} but found {L.shape}")
+    key = L.tobytes()
+    if _LAPLACIANS.store.get(key) == L.shape:  # a topology of a long run: checked once per distinct value
+        return L
+    _finite(L, name)
+    off = L * (1.0 - np.eye(N))
+    scale = max(1.0, float(np.abs(L).max()))
+    if np.any(off > 1e-8 * scale) or not np.allclose(L.sum(axis=-1), 0, atol=1e-8 * scale):
+        if np.all(L >= 0) and np.all(L[..., np.arange(N), np.arange(N)] == 0):
+            raise ValueError(f"{name} looks like an adjacency matrix; pass mascore.graphs.laplacian(A) instead")
+        raise ValueError(
+            f"{name} must be a graph Laplacian: rows summing to zero and off-diagonal entries <= 0 "
+            "(pass mascore.graphs.laplacian(A))"
+        )
+    _LAPLACIANS.put(key, L.shape)
     return L
 
 
 def _check_mask(mask: ArrayLike, N: int) -> np.ndarray:
-    S = np.asarray(mask, dtype=bool)
+    S = _check_mask_values(mask, "mask")
     if S.shape[-2:] != (N, N) or S.ndim not in (2, 3):
         raise ValueError(f"Incompatible dimensions of mask; expected ({N}, {N}) or (B, {N}, {N}) but found {S.shape}")
     if not np.all(S[..., np.arange(N), np.arange(N)]):

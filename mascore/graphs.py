@@ -17,7 +17,8 @@ import networkx as nx
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_matrix, check_square
+from ._validation import check_adjacency, check_positive, check_positive_int
+from .kalman import _float_array
 
 __all__ = [
     "adjacency_from_edges",
@@ -58,18 +59,35 @@ def adjacency_from_edges(
         Weighted adjacency matrix with zero diagonal.
     """
     n_agents = _check_n(n_agents)
+    if isinstance(edges, (str, bytes)):
+        raise TypeError(f"edges must be an iterable of (j, i) or (j, i, weight) tuples; got {edges!r}")
+    try:
+        edge_list = list(edges)
+    except TypeError:
+        raise TypeError(
+            f"edges must be an iterable of (j, i) or (j, i, weight) tuples; got {type(edges).__name__}"
+        ) from None
     A = np.zeros((n_agents, n_agents))
-    for edge in edges:
-        if len(edge) not in (2, 3):
+    for edge in edge_list:
+        if isinstance(edge, (str, bytes)) or not hasattr(edge, "__len__") or len(edge) not in (2, 3):
             raise ValueError(f"edges must hold (j, i) or (j, i, weight) tuples; got {edge!r}")
+        for end in edge[:2]:
+            if isinstance(end, bool) or not isinstance(end, (int, np.integer)):
+                raise TypeError(f"edges must name agents by integer index; edge {edge!r} holds {end!r}")
         j, i = int(edge[0]), int(edge[1])
-        w = float(edge[2]) if len(edge) == 3 else 1.0
+        if len(edge) == 3:
+            w = edge[2]
+            if isinstance(w, bool) or not isinstance(w, (int, float, np.integer, np.floating)):
+                raise TypeError(f"edges: the weight of edge {edge!r} must be a real number; got {w!r}")
+            w = float(w)
+        else:
+            w = 1.0
         if not (0 <= i < n_agents and 0 <= j < n_agents):
-            raise ValueError(f"edge {edge!r} names an agent outside 0..{n_agents - 1}")
+            raise ValueError(f"edges: edge {edge!r} names an agent outside 0..{n_agents - 1}")
         if i == j:
-            raise ValueError(f"edge {edge!r} is a self-loop; adjacency has a zero diagonal")
-        if w <= 0:
-            raise ValueError(f"edge {edge!r} has a non-positive weight")
+            raise ValueError(f"edges: edge {edge!r} is a self-loop; adjacency has a zero diagonal")
+        if not np.isfinite(w) or w <= 0:
+            raise ValueError(f"edges: edge {edge!r} must have a finite positive weight")
         A[i, j] = w
         if not directed:
             A[j, i] = w
@@ -116,6 +134,8 @@ def complete_graph(n_agents: int) -> np.ndarray:
 def star_graph(n_agents: int, center: int = 0) -> np.ndarray:
     """Undirected star with hub `center`."""
     n_agents = _check_n(n_agents)
+    if isinstance(center, bool) or not isinstance(center, (int, np.integer)):
+        raise TypeError(f"center must be an agent index (an int); got {type(center).__name__} {center!r}")
     if not 0 <= center < n_agents:
         raise ValueError(f"center must be in 0..{n_agents - 1}; got {center}")
     return adjacency_from_edges(n_agents, ((center, i) for i in range(n_agents) if i != center))
@@ -136,13 +156,12 @@ def proximity_graph(positions: ArrayLike, sensing_range: float) -> np.ndarray:
     A : (N, N) or (..., N, N) ndarray of float
         0/1 adjacency with zero diagonal.
     """
-    p = np.asarray(positions, dtype=float)
-    if p.ndim < 2:
-        raise ValueError(f"positions must have shape (..., N, n); got {p.shape}")
+    p = _float_array(positions, "positions")
+    if p.ndim < 2 or p.shape[-1] == 0:
+        raise ValueError(f"positions must have shape (..., N, n) with n >= 1; got {p.shape}")
     if not np.all(np.isfinite(p)):
         raise ValueError("positions contains NaN or infinite entries")
-    if not np.isfinite(sensing_range) or sensing_range <= 0:
-        raise ValueError(f"sensing_range must be a positive number; got {sensing_range}")
+    check_positive(sensing_range, "sensing_range", "(the range r, in the unit of the positions)")
     diff = p[..., :, None, :] - p[..., None, :, :]
     dist = np.linalg.norm(diff, axis=-1)
     A = (dist <= sensing_range).astype(float)
@@ -193,13 +212,13 @@ def graph_union(adjacencies: Sequence[ArrayLike] | np.ndarray) -> np.ndarray:
     A : (N, N) ndarray
         Sum of the adjacency matrices (an edge is present if present once).
     """
-    stack = np.asarray(adjacencies, dtype=float)
+    stack = _float_array(adjacencies, "adjacencies")
     if stack.ndim != 3 or stack.shape[1] != stack.shape[2] or stack.shape[0] == 0:
         raise ValueError(
             f"adjacencies must be a non-empty sequence of (N, N) matrices; got shape {stack.shape}"
         )
-    for A in stack:
-        _check_adjacency(A)
+    for k, A in enumerate(stack):
+        _check_adjacency(A, f"adjacencies[{k}]")
     return stack.sum(axis=0)
 
 
@@ -210,9 +229,14 @@ def unions_over_windows(adjacencies: Sequence[ArrayLike] | np.ndarray, window: i
     -------
     unions : (ceil(T / window), N, N) ndarray
     """
-    stack = np.asarray(adjacencies, dtype=float)
-    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
-        raise ValueError(f"window must be a positive integer; got {window!r}")
+    window = check_positive_int(window, "window")
+    stack = _float_array(adjacencies, "adjacencies")
+    if stack.ndim != 3 or stack.shape[1] != stack.shape[2] or stack.shape[0] == 0:
+        raise ValueError(
+            f"adjacencies must be a non-empty sequence of (N, N) matrices; got shape {stack.shape}"
+        )
+    for k, A in enumerate(stack):
+        _check_adjacency(A, f"adjacencies[{k}]")
     return np.stack([graph_union(stack[k : k + window]) for k in range(0, len(stack), window)])
 
 
@@ -223,6 +247,8 @@ def to_networkx(A: ArrayLike, directed: bool | None = None) -> nx.Graph:
     ``A[i, j] > 0``). `directed` defaults to "is `A` asymmetric".
     """
     A = _check_adjacency(A)
+    if directed is not None and not isinstance(directed, (bool, np.bool_)):
+        raise TypeError(f"directed must be True, False or None; got {directed!r}")
     if directed is None:
         directed = not np.allclose(A, A.T)
     G = nx.DiGraph() if directed else nx.Graph()
@@ -243,16 +269,13 @@ def _reach_count(out: list[np.ndarray], root: int) -> int:
     return len(seen)
 
 
-def _check_adjacency(A: ArrayLike) -> np.ndarray:
-    A = check_square(as_matrix(A, "A"), "A")
-    if np.any(A < 0):
-        raise ValueError("A must have non-negative entries (edge weights)")
-    if np.any(np.diag(A) != 0):
-        raise ValueError("A must have a zero diagonal (no self-loops)")
+def _check_adjacency(A: ArrayLike, name: str = "A") -> np.ndarray:
+    """A weighted adjacency matrix (square, finite, non-negative, zero diagonal); a Laplacian is named."""
+    A = check_adjacency(_float_array(A, name), name)
+    if A.shape[0] == 0:
+        raise ValueError(f"{name} must describe at least one agent; got shape {A.shape}")
     return A
 
 
 def _check_n(n_agents: int, minimum: int = 1) -> int:
-    if isinstance(n_agents, bool) or not isinstance(n_agents, (int, np.integer)) or n_agents < minimum:
-        raise ValueError(f"n_agents must be an integer >= {minimum}; got {n_agents!r}")
-    return int(n_agents)
+    return check_positive_int(n_agents, "n_agents", minimum)

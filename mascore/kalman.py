@@ -8,17 +8,259 @@ The measurement update uses the Joseph form
 ``P+ = (I - K H) P (I - K H)^T + K R K^T``, which keeps ``P+`` symmetric
 positive semidefinite for any gain and is the form Song et al. (2023) write in
 their eq. (20).
+
+Input checks and their cost
+---------------------------
+Every public function checks its arguments (shapes, finite entries, symmetric
+positive (semi)definite covariances) and raises a ``ValueError``/``TypeError``
+that names the argument; a result that is not finite (an overflow) raises too.
+:func:`predict` and :func:`update` are called in long loops, so they pay each
+full check once: the constant matrices (``F``, ``Q``, ``B``, ``H``, ``R``) are
+checked once per distinct value (remembered by their bytes), and the mean and
+covariance that one of these two functions returned are recognised when they
+come back as the next call's arguments (the same objects, still holding the
+same bytes: an array modified in place is checked again). What remains per call
+is a few comparisons and the NaN/inf test of the result;
+``benchmarks/bench_validation.py`` measures it against the unchecked kernels
+:func:`_predict` and :func:`_update`, which compute the same numbers.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy import stats
 
-from ._validation import check_covariance
+from ._validation import check_covariance, check_positive_int
 
 __all__ = ["predict", "update", "kalman_gain", "nees", "nees_interval", "symmetrize"]
+
+
+# ----------------------------------------------------------------------------
+# private helpers, also used by the other core modules (candidates for _validation)
+# ----------------------------------------------------------------------------
+
+_ND = np.ndarray
+_F64 = np.dtype(float)
+
+
+def _float_array(value: object, name: str) -> np.ndarray:
+    """`value` as a float array.
+
+    Lists, ints and bools are converted; a string, None, a complex or ragged
+    array is a ``TypeError`` that names `name`.
+    """
+    if type(value) is _ND and value.dtype is _F64:
+        return value
+    if value is None or isinstance(value, (str, bytes)):
+        raise TypeError(f"{name} must be an array of real numbers; got {type(value).__name__} {value!r}")
+    try:
+        arr = np.asarray(value)
+        if arr.dtype.kind == "O":  # e.g. Python ints beyond int64, numbers mixed with arrays
+            arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(
+            f"{name} must be an array of real numbers; got a {type(value).__name__} that numpy cannot "
+            f"convert ({exc})"
+        ) from None
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must be an array of real numbers; got an array of dtype {arr.dtype}")
+    return arr.astype(float, copy=False)
+
+
+def _finite(arr: np.ndarray, name: str) -> np.ndarray:
+    """Raise a ``ValueError`` naming `name` if `arr` holds NaN or inf."""
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    return arr
+
+
+class _ValueMemo:
+    """Values that already passed a check, keyed by their bytes (the tag says which shapes were checked).
+
+    Keyed by value, an array modified in place after it was stored is simply not
+    recognised any more. Bounded: cleared when it would hold more than
+    `max_entries` keys or `max_total_bytes` bytes; a key longer than
+    `max_key_bytes` is never stored (that value is checked every time).
+    """
+
+    __slots__ = ("store", "_max_entries", "_max_key", "_max_total", "_total")
+
+    def __init__(self, max_entries: int = 512, max_key_bytes: int = 1 << 22, max_total_bytes: int = 1 << 26) -> None:
+        self.store: dict[bytes, object] = {}
+        self._max_entries = max_entries
+        self._max_key = max_key_bytes
+        self._max_total = max_total_bytes
+        self._total = 0
+
+    def put(self, key: bytes, tag: object) -> None:
+        n = len(key)
+        if n > self._max_key:
+            return
+        if len(self.store) >= self._max_entries or self._total + n > self._max_total:
+            self.store.clear()
+            self._total = 0
+        self.store[key] = tag
+        self._total += n
+
+
+class _RecentArrays:
+    """The last few arrays that passed a check (or were computed from checked input), with their bytes.
+
+    An argument is recognised if it *is* one of them (identity) and still holds
+    the same bytes (not modified in place since): a long run that feeds a result
+    back in, or calls a step again with the same arguments, pays a copy and a
+    comparison instead of the full check. Least recently used entries go first.
+    """
+
+    __slots__ = ("_items", "_n", "_max_bytes")
+
+    def __init__(self, n: int = 16, max_bytes: int = 1 << 24) -> None:
+        self._items: list[tuple[np.ndarray, bytes, tuple]] = []
+        self._n = n
+        self._max_bytes = max_bytes
+
+    def remember(self, arr: np.ndarray) -> np.ndarray:
+        if type(arr) is _ND and arr.nbytes <= self._max_bytes:
+            self._items.insert(0, (arr, arr.tobytes(), arr.shape))
+            del self._items[self._n:]
+        return arr
+
+    def __contains__(self, arr: object) -> bool:
+        items = self._items
+        for i, item in enumerate(items):
+            if item[0] is arr:
+                ok = arr.shape == item[2] and arr.tobytes() == item[1]
+                if ok and i and i < len(items) and items[i] is item:  # most recently used first
+                    del items[i]
+                    items.insert(0, item)
+                return ok
+        return False
+
+
+#: Constant matrices checked once per distinct value: F, H, B (finite) and Q, R (covariances).
+_FINITE_CONSTANTS = _ValueMemo()
+_COVARIANCE_CONSTANTS = _ValueMemo()
+
+
+def _const_finite(M: ArrayLike, name: str) -> np.ndarray:
+    """A constant matrix as a float array, its finiteness checked once per distinct value."""
+    arr = _float_array(M, name)
+    key = arr.tobytes()
+    if _FINITE_CONSTANTS.store.get(key) != arr.shape:
+        _finite(arr, name)
+        _FINITE_CONSTANTS.put(key, arr.shape)
+    return arr
+
+
+def _const_covariance(M: ArrayLike, name: str, size: int | None = None, definite: bool = False) -> np.ndarray:
+    """A constant covariance (Q, R): :func:`check_covariance` once per distinct value."""
+    arr = _float_array(M, name)
+    key = arr.tobytes()
+    got = _COVARIANCE_CONSTANTS.store.get(key)
+    if got != (True, arr.shape) and (definite or got != (False, arr.shape)):
+        check_covariance(arr, name, size=size, definite=definite)
+        _COVARIANCE_CONSTANTS.put(key, (definite, arr.shape))
+    elif size is not None and arr.shape[-1] != size:
+        raise ValueError(f"Incompatible dimensions of {name}; expected ({size}, {size}) but found {arr.shape[-2:]}")
+    return arr
+
+
+# A long run calls predict and update with the state the previous call returned and with the same
+# model matrices. Both are recognised cheaply, so that the run pays each full check once:
+# * _RECENT_STATES holds the last few (x, P) results, finite and P symmetric PSD, with their bytes: an
+#   argument that *is* one of them (identity) and still holds the same bytes (not modified in place)
+#   needs no scan;
+# * _LAST_MODELS holds, per step kind, the last checked model matrices with their bytes (same test);
+#   other model matrices go through the value-keyed memos of _const_finite and _const_covariance.
+_RECENT_STATES: list[tuple] = []
+_NO_STATE = (object(), object(), b"", b"")  # matches no argument
+_N_RECENT = 8
+_MAX_REMEMBERED_BYTES = 1 << 22
+_LAST_MODELS: dict[str, tuple] = {}
+#: Results up to this many bytes are tested for NaN/inf by a Python sum over their bytes (no numpy call).
+_SMALL_BYTES = 2048
+
+
+def _recognised_state(x: object, P: object) -> bool:
+    """True if (x, P) is a result of :func:`predict`/:func:`update`, unmodified since."""
+    for ox, oP, xb, Pb in _RECENT_STATES:
+        if ox is x and oP is P:
+            return x.tobytes() == xb and P.tobytes() == Pb
+    return False
+
+
+def _check_predict_model(F: ArrayLike, Q: ArrayLike, B: ArrayLike | None) -> tuple:
+    """Check F (finite, square), Q (covariance) and B (finite), each once per distinct value."""
+    F = _const_finite(F, "F")
+    if F.ndim < 2 or F.shape[-1] != F.shape[-2] or F.shape[-1] == 0:
+        raise ValueError(f"F must be a square (m, m) or (..., m, m) matrix with m >= 1; got shape {F.shape}")
+    Q = _const_covariance(Q, "Q")
+    if B is not None:
+        B = _const_finite(B, "B")
+        if B.ndim < 2:
+            raise ValueError(f"B must be an (m, p) matrix; got shape {B.shape}")
+    _LAST_MODELS["p"] = (F, Q, B, F.tobytes(), Q.tobytes(), None if B is None else B.tobytes())
+    return F, Q, B
+
+
+def _check_update_model(H: ArrayLike, R: ArrayLike) -> tuple:
+    """Check H (finite) and R (positive definite covariance), each once per distinct value."""
+    H = _const_finite(H, "H")
+    if H.ndim < 2:
+        raise ValueError(f"H must be a (q, m) or (..., q, m) matrix; got shape {H.shape}")
+    R = _const_covariance(R, "R", definite=True)
+    _LAST_MODELS["u"] = (H, R, H.tobytes(), R.tobytes())
+    return H, R
+
+
+def _checked_state(x: ArrayLike, P: ArrayLike, xname: str = "x", Pname: str = "P") -> tuple[np.ndarray, np.ndarray]:
+    """A mean (..., m) and covariance (..., m, m): finite, P symmetric positive semidefinite."""
+    x = _float_array(x, xname)
+    P = _float_array(P, Pname)
+    if x.ndim < 1 or x.shape[-1] == 0:
+        raise ValueError(f"{xname} must be a (..., m) array of state means with m >= 1; got shape {x.shape}")
+    m = x.shape[-1]
+    if P.ndim < 2 or P.shape[-2:] != (m, m):
+        raise ValueError(
+            f"Incompatible dimensions of {Pname}; expected (..., {m}, {m}) for {xname} of shape {x.shape} "
+            f"but found {P.shape}"
+        )
+    _finite(x, xname)
+    check_covariance(P, Pname, size=m)
+    return x, P
+
+
+def _checked_result(x: np.ndarray, P: np.ndarray, what: str, fresh: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """Refuse a non-finite result, naming the cause; remember a finite one as a checked state.
+
+    `fresh` holds ``(array, name)`` pairs of inputs that change at every step (a
+    measurement, an input) and were not scanned: a NaN or inf in them reaches
+    the result, so they are scanned only when the result is not finite.
+    """
+    xb, Pb = x.tobytes(), P.tobytes()
+    # NaN/inf anywhere makes a sum NaN/inf; so does an overflow of the sum itself (then the exact test decides)
+    if len(xb) + len(Pb) <= _SMALL_BYTES:
+        ok = math.isfinite(sum(memoryview(xb + Pb).cast("d")))
+    else:
+        ok = math.isfinite(x.sum()) and math.isfinite(P.sum())
+    if not ok and not (np.isfinite(x).all() and np.isfinite(P).all()):
+        for arr, name in fresh:
+            _finite(arr, name)
+        raise ValueError(
+            f"the {what} overflowed (NaN or inf in the result) although every input is finite: "
+            "the values are too large to be represented in floating point; rescale the problem"
+        )
+    if len(xb) + len(Pb) <= _MAX_REMEMBERED_BYTES:
+        _RECENT_STATES.insert(0, (x, P, xb, Pb))
+        del _RECENT_STATES[_N_RECENT:]
+    return x, P
+
+
+# ----------------------------------------------------------------------------
+# public API
+# ----------------------------------------------------------------------------
 
 
 def predict(
@@ -34,11 +276,11 @@ def predict(
     Parameters
     ----------
     x : (..., m) array_like
-        Prior mean(s).
+        Prior mean(s), finite.
     P : (..., m, m) array_like
         Prior covariance(s), symmetric positive semidefinite.
     F : (m, m) or (..., m, m) array_like
-        State-transition matrix.
+        State-transition matrix, finite.
     Q : (m, m) or (..., m, m) array_like
         Process-noise covariance, symmetric positive semidefinite.
     B : (m, p) array_like, optional
@@ -50,32 +292,83 @@ def predict(
     -------
     x_pred : (..., m) ndarray
     P_pred : (..., m, m) ndarray
+
+    Raises
+    ------
+    ValueError, TypeError
+        A bad argument (named in the message), or a result that overflowed.
     """
-    x, P, F = _as_float(x, P, F)
+    # model and state recognised by identity and bytes (see _RECENT_STATES), else checked in full
+    last = _LAST_MODELS.get("p")
+    if (last is None or F is not last[0] or Q is not last[1] or B is not last[2]
+            or F.tobytes() != last[3] or Q.tobytes() != last[4] or (B is not None and B.tobytes() != last[5])):
+        F, Q, B = _check_predict_model(F, Q, B)
+    r = _RECENT_STATES[0] if _RECENT_STATES else _NO_STATE  # the usual case: the last result comes back
+    if (x is not r[0] or P is not r[1] or x.tobytes() != r[2] or P.tobytes() != r[3]) and not _recognised_state(x, P):
+        x, P = _checked_state(x, P)
     m = x.shape[-1]
-    _check_pair(x, P)
-    if F.shape[-2:] != (m, m):
-        raise ValueError(f"Incompatible dimensions of F; expected (..., {m}, {m}) but found {F.shape}")
-    Q = check_covariance(Q, "Q", size=m)
-    x_pred = np.einsum("...ij,...j->...i", F, x)
+    if F.shape[-1] != m:
+        raise ValueError(f"Incompatible dimensions of F; expected (..., {m}, {m}) for x of shape {x.shape} "
+                         f"but found {F.shape}")
+    if Q.shape[-1] != m:
+        raise ValueError(f"Incompatible dimensions of Q; expected (..., {m}, {m}) for x of shape {x.shape} "
+                         f"but found {Q.shape}")
     if u is not None or B is not None:
         if u is None or B is None:
-            raise ValueError("B and u must be given together")
-        B = np.asarray(B, dtype=float)
-        u = np.asarray(u, dtype=float)
-        if B.shape[-2] != m or B.shape[-1] != u.shape[-1]:
-            raise ValueError(f"Incompatible dimensions of B {B.shape} and u {u.shape} for m={m}")
-        x_pred = x_pred + np.einsum("...ij,...j->...i", B, u)
-    P_pred = F @ P @ np.swapaxes(F, -1, -2) + Q
-    return x_pred, symmetrize(P_pred)
+            raise ValueError("B and u must be given together (B alone or u alone cannot form B u)")
+        u = _float_array(u, "u")  # scanned only if the result is not finite (a NaN in u reaches x_pred)
+        if B.shape[-2] != m or u.ndim < 1 or B.shape[-1] != u.shape[-1]:
+            raise ValueError(
+                f"Incompatible dimensions of B {B.shape} and u {u.shape}; expected B ({m}, p) and u (..., p)"
+            )
+    try:
+        out = _predict(x, P, F, Q, B, u)
+    except ValueError as exc:  # leading (batch) axes that do not broadcast
+        raise ValueError(
+            f"the batch axes of x {x.shape}, P {P.shape}, F {F.shape}, Q {Q.shape}"
+            f"{'' if u is None else f', u {u.shape}'} do not broadcast ({exc})"
+        ) from None
+    return _checked_result(*out, "prediction", () if u is None else ((u, "u"),))
 
 
 def kalman_gain(P: ArrayLike, H: ArrayLike, R: ArrayLike) -> np.ndarray:
-    """Optimal gain ``K = P H^T (H P H^T + R)^{-1}``, shape ``(..., m, q)``."""
-    P, H, R = _as_float(P, H, R)
-    S = H @ P @ np.swapaxes(H, -1, -2) + R
-    # K^T = S^{-1} H P because S and P are symmetric
-    return np.swapaxes(np.linalg.solve(S, H @ P), -1, -2)
+    """Optimal gain ``K = P H^T (H P H^T + R)^{-1}``, shape ``(..., m, q)``.
+
+    Parameters
+    ----------
+    P : (..., m, m) array_like
+        Predicted covariance, symmetric positive semidefinite.
+    H : (q, m) or (..., q, m) array_like
+        Measurement matrix.
+    R : (q, q) or (..., q, q) array_like
+        Measurement-noise covariance, symmetric positive semidefinite; the
+        innovation covariance ``H P H^T + R`` must be invertible.
+    """
+    P = _float_array(P, "P")
+    if P.ndim < 2 or P.shape[-1] == 0:
+        raise ValueError(f"P must be a (..., m, m) covariance with m >= 1; got shape {P.shape}")
+    m = P.shape[-1]
+    check_covariance(P, "P", size=m)
+    H = _const_finite(H, "H")
+    if H.ndim < 2 or H.shape[-1] != m:
+        raise ValueError(f"Incompatible dimensions of H and P; H must be (..., q, m) for P (..., m, m) = {P.shape} "
+                         f"but found {H.shape}")
+    R = _const_covariance(R, "R")
+    if R.shape[-1] != H.shape[-2]:
+        raise ValueError(f"Incompatible dimensions of H {H.shape} and R {R.shape}: H must be (..., q, m) "
+                         f"and R (..., q, q) with the same q")
+    try:
+        K = _gain(P, H, R)
+    except np.linalg.LinAlgError:
+        K = None
+    except ValueError as exc:  # leading (batch) axes that do not broadcast
+        raise ValueError(f"the batch axes of P {P.shape}, H {H.shape}, R {R.shape} do not broadcast ({exc})") from None
+    if K is None or not np.isfinite(K).all():
+        raise ValueError(
+            "the innovation covariance H P H^T + R is singular (or the gain overflowed): "
+            "R must be positive definite where H P H^T is not"
+        )
+    return K
 
 
 def update(
@@ -86,13 +379,13 @@ def update(
     Parameters
     ----------
     x : (..., m) array_like
-        Predicted mean(s).
+        Predicted mean(s), finite.
     P : (..., m, m) array_like
-        Predicted covariance(s).
+        Predicted covariance(s), symmetric positive semidefinite.
     z : (..., q) array_like
-        Measurement(s).
+        Measurement(s), finite.
     H : (q, m) or (..., q, m) array_like
-        Measurement matrix.
+        Measurement matrix, finite.
     R : (q, q) or (..., q, q) array_like
         Measurement-noise covariance, symmetric positive definite.
 
@@ -101,20 +394,40 @@ def update(
     x_post : (..., m) ndarray
     P_post : (..., m, m) ndarray
         Symmetric positive semidefinite by construction (Joseph form).
+
+    Raises
+    ------
+    ValueError, TypeError
+        A bad argument (named in the message), or a result that overflowed.
     """
-    x, P, z, H = _as_float(x, P, z, H)
+    # model and state recognised by identity and bytes (see _RECENT_STATES), else checked in full
+    last = _LAST_MODELS.get("u")
+    if last is None or H is not last[0] or R is not last[1] or H.tobytes() != last[2] or R.tobytes() != last[3]:
+        H, R = _check_update_model(H, R)
+    r = _RECENT_STATES[0] if _RECENT_STATES else _NO_STATE  # the usual case: the last result comes back
+    if (x is not r[0] or P is not r[1] or x.tobytes() != r[2] or P.tobytes() != r[3]) and not _recognised_state(x, P):
+        x, P = _checked_state(x, P)
     m = x.shape[-1]
-    _check_pair(x, P)
-    q = z.shape[-1]
-    if H.shape[-2:] != (q, m):
-        raise ValueError(f"Incompatible dimensions of H; expected (..., {q}, {m}) but found {H.shape}")
-    R = check_covariance(R, "R", size=q, definite=True)
-    K = kalman_gain(P, H, R)
-    innovation = z - np.einsum("...ij,...j->...i", H, x)
-    x_post = x + np.einsum("...ij,...j->...i", K, innovation)
-    I_KH = np.eye(m) - K @ H
-    P_post = I_KH @ P @ np.swapaxes(I_KH, -1, -2) + K @ R @ np.swapaxes(K, -1, -2)
-    return x_post, symmetrize(P_post)
+    if type(z) is not _ND or z.dtype is not _F64:
+        z = _float_array(z, "z")  # scanned only if the result is not finite (a NaN in z reaches x_post)
+    if z.ndim < 1 or H.shape[-1] != m or H.shape[-2] != z.shape[-1]:
+        raise ValueError(
+            f"Incompatible dimensions of H; expected (..., q, {m}) with q the length of z (shape {z.shape}) "
+            f"but found {H.shape}"
+        )
+    if R.shape[-1] != z.shape[-1]:
+        raise ValueError(
+            f"Incompatible dimensions of R; expected (..., {z.shape[-1]}, {z.shape[-1]}) for z of shape {z.shape} "
+            f"but found {R.shape}"
+        )
+    try:
+        out = _update(x, P, z, H, R)
+    except ValueError as exc:  # leading (batch) axes that do not broadcast
+        raise ValueError(
+            f"the batch axes of x {x.shape}, P {P.shape}, z {z.shape}, H {H.shape}, R {R.shape} "
+            f"do not broadcast ({exc})"
+        ) from None
+    return _checked_result(*out, "measurement update", ((z, "z"),))
 
 
 def nees(error: ArrayLike, P: ArrayLike) -> np.ndarray:
@@ -123,9 +436,9 @@ def nees(error: ArrayLike, P: ArrayLike) -> np.ndarray:
     Parameters
     ----------
     error : (..., m) array_like
-        Estimation error(s) ``x_true - x_hat``.
+        Estimation error(s) ``x_true - x_hat``, finite.
     P : (..., m, m) array_like
-        The filter's covariance(s), positive definite.
+        The filter's covariance(s), symmetric positive definite.
 
     Returns
     -------
@@ -133,8 +446,21 @@ def nees(error: ArrayLike, P: ArrayLike) -> np.ndarray:
         Chi-square distributed with m degrees of freedom for a consistent
         Gaussian filter.
     """
-    e, P = _as_float(error, P)
-    _check_pair(e, P)
+    e = _float_array(error, "error")
+    if e.ndim < 1 or e.shape[-1] == 0:
+        raise ValueError(f"error must be a (..., m) array with m >= 1; got shape {e.shape}")
+    _finite(e, "error")
+    m = e.shape[-1]
+    P = _float_array(P, "P")
+    if P.ndim < 2 or P.shape[-2:] != (m, m):
+        raise ValueError(
+            f"Incompatible dimensions of error {e.shape} and P {P.shape}; P must be (..., m, m) for error (..., m)"
+        )
+    check_covariance(P, "P", size=m, definite=True)
+    try:
+        np.broadcast_shapes(e.shape[:-1], P.shape[:-2])
+    except ValueError:
+        raise ValueError(f"the batch axes of error {e.shape} and P {P.shape} do not broadcast") from None
     return np.einsum("...i,...i->...", e, np.linalg.solve(P, e[..., None])[..., 0])
 
 
@@ -144,14 +470,27 @@ def nees_interval(dof: int, n_runs: int, confidence: float = 0.95) -> tuple[floa
     ``n_runs * mean(NEES)`` is chi-square with ``n_runs * dof`` degrees of
     freedom (Bar-Shalom, Li and Kirubarajan 2001, Sec. 5.4).
 
+    Parameters
+    ----------
+    dof : int
+        State dimension m (>= 1).
+    n_runs : int
+        Number of runs averaged (>= 1).
+    confidence : float
+        Probability in the open interval (0, 1).
+
     Returns
     -------
     (low, high) : tuple of float
         Bounds on the *average* NEES.
     """
-    if dof < 1 or n_runs < 1:
-        raise ValueError(f"dof and n_runs must be positive; got dof={dof}, n_runs={n_runs}")
-    if not 0 < confidence < 1:
+    from scipy import stats
+
+    dof = check_positive_int(dof, "dof")
+    n_runs = check_positive_int(n_runs, "n_runs")
+    if isinstance(confidence, bool) or not isinstance(confidence, (int, float, np.integer, np.floating)):
+        raise TypeError(f"confidence must be a real number in (0, 1); got {type(confidence).__name__} {confidence!r}")
+    if not 0 < confidence < 1:  # also refuses NaN
         raise ValueError(f"confidence must lie in (0, 1); got {confidence}")
     tail = (1 - confidence) / 2
     total = dof * n_runs
@@ -161,18 +500,45 @@ def nees_interval(dof: int, n_runs: int, confidence: float = 0.95) -> tuple[floa
     )
 
 
-def symmetrize(P: np.ndarray) -> np.ndarray:
-    """``(P + P^T) / 2`` over the last two axes."""
+def symmetrize(P: ArrayLike) -> np.ndarray:
+    """``(P + P^T) / 2`` over the last two axes of a finite ``(..., n, n)`` array."""
+    P = _float_array(P, "P")
+    if P.ndim < 2 or P.shape[-1] != P.shape[-2]:
+        raise ValueError(f"P must be a (..., n, n) array of square matrices; got shape {P.shape}")
+    return _symmetrize(_finite(P, "P"))
+
+
+# ----------------------------------------------------------------------------
+# unchecked kernels (inner loops; callers have validated the arguments)
+# ----------------------------------------------------------------------------
+
+
+def _predict(x, P, F, Q, B=None, u=None):
+    """:func:`predict` without checks."""
+    x_pred = np.einsum("...ij,...j->...i", F, x)
+    if u is not None:
+        x_pred = x_pred + np.einsum("...ij,...j->...i", B, u)
+    P_pred = F @ P @ np.swapaxes(F, -1, -2) + Q
+    return x_pred, _symmetrize(P_pred)
+
+
+def _gain(P, H, R):
+    """:func:`kalman_gain` without checks."""
+    S = H @ P @ np.swapaxes(H, -1, -2) + R
+    # K^T = S^{-1} H P because S and P are symmetric
+    return np.swapaxes(np.linalg.solve(S, H @ P), -1, -2)
+
+
+def _update(x, P, z, H, R):
+    """:func:`update` without checks."""
+    K = _gain(P, H, R)
+    innovation = z - np.einsum("...ij,...j->...i", H, x)
+    x_post = x + np.einsum("...ij,...j->...i", K, innovation)
+    I_KH = np.eye(x.shape[-1]) - K @ H
+    P_post = I_KH @ P @ np.swapaxes(I_KH, -1, -2) + K @ R @ np.swapaxes(K, -1, -2)
+    return x_post, _symmetrize(P_post)
+
+
+def _symmetrize(P):
+    """:func:`symmetrize` without checks."""
     return 0.5 * (P + np.swapaxes(P, -1, -2))
-
-
-def _as_float(*arrays: ArrayLike) -> list[np.ndarray]:
-    return [np.asarray(a, dtype=float) for a in arrays]
-
-
-def _check_pair(x: np.ndarray, P: np.ndarray) -> None:
-    m = x.shape[-1] if x.ndim else 0
-    if x.ndim < 1 or P.shape[-2:] != (m, m):
-        raise ValueError(
-            f"Incompatible dimensions of x {x.shape} and P {P.shape}; P must be (..., m, m) for x (..., m)"
-        )

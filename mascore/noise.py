@@ -10,8 +10,31 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import as_vector, check_covariance, check_generator
+from .kalman import _float_array
 
 __all__ = ["gaussian", "psd_factor", "uniform_box", "uniform_ellipsoid"]
+
+
+def _sample_shape(size: object, name: str = "size") -> tuple[int, ...]:
+    """`size` (an int or a tuple of ints, each >= 0) as a tuple; anything else is refused by name."""
+    dims = (size,) if isinstance(size, (int, np.integer)) and not isinstance(size, bool) else size
+    if isinstance(dims, np.ndarray) and dims.ndim == 1:
+        dims = dims.tolist()
+    if not isinstance(dims, (tuple, list)) or not all(
+        isinstance(d, (int, np.integer)) and not isinstance(d, bool) for d in dims
+    ):
+        raise TypeError(f"{name} must be an int or a tuple of ints (the leading shape of the output); got {size!r}")
+    if any(d < 0 for d in dims):
+        raise ValueError(f"{name} must hold non-negative ints; got {size!r}")
+    return tuple(int(d) for d in dims)
+
+
+def _check_psd(M: object, name: str) -> np.ndarray:
+    """A symmetric positive semidefinite (m, m) matrix with m >= 1."""
+    P = check_covariance(_float_array(M, name), name)
+    if P.ndim != 2 or P.shape[0] == 0:
+        raise ValueError(f"{name} must be a single (m, m) matrix with m >= 1; got shape {P.shape}")
+    return P
 
 
 def psd_factor(M: ArrayLike, cholesky_first: bool = False) -> np.ndarray:
@@ -20,7 +43,8 @@ def psd_factor(M: ArrayLike, cholesky_first: bool = False) -> np.ndarray:
     Parameters
     ----------
     M : (..., m, m) array_like
-        Symmetric positive semidefinite matrices (not checked: callers validate).
+        Symmetric positive semidefinite matrices (checked; inner loops use the
+        unchecked ``_psd_factor``).
     cholesky_first : bool
         Return the lower Cholesky factor when ``M`` is positive definite and fall
         back to the eigenvector factor only when it is singular. By default the
@@ -32,7 +56,12 @@ def psd_factor(M: ArrayLike, cholesky_first: bool = False) -> np.ndarray:
         ``F`` maps standard normal draws to draws of covariance ``M``
         (``x = F z``), also for singular ``M``.
     """
-    M = np.asarray(M, dtype=float)
+    M = check_covariance(_float_array(M, "M"), "M")
+    return _psd_factor(M, bool(cholesky_first))
+
+
+def _psd_factor(M: np.ndarray, cholesky_first: bool = False) -> np.ndarray:
+    """:func:`psd_factor` without checks."""
     if cholesky_first:
         try:
             return np.linalg.cholesky(M)
@@ -62,11 +91,13 @@ def gaussian(
     (*size, m) ndarray
     """
     rng = check_generator(rng)
-    cov = check_covariance(cov, "cov")
+    cov = _check_psd(cov, "cov")
     m = cov.shape[0]
-    mean = np.zeros(m) if mean is None else as_vector(mean, "mean", m)
-    size = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
-    return mean + rng.standard_normal((*size, m)) @ psd_factor(cov).T
+    mean = np.zeros(m) if mean is None else as_vector(_float_array(mean, "mean"), "mean")
+    if mean.size != m:
+        raise ValueError(f"Incompatible dimensions of mean and cov: mean has length {mean.size}, cov is {cov.shape}")
+    size = _sample_shape(size)
+    return mean + rng.standard_normal((*size, m)) @ _psd_factor(cov).T
 
 
 def uniform_box(
@@ -79,11 +110,13 @@ def uniform_box(
     (*size, m) ndarray
     """
     rng = check_generator(rng)
-    low = as_vector(np.atleast_1d(low), "low")
-    high = as_vector(np.atleast_1d(high), "high", low.size)
+    low = as_vector(np.atleast_1d(_float_array(low, "low")), "low")
+    high = as_vector(np.atleast_1d(_float_array(high, "high")), "high")
+    if low.size != high.size:
+        raise ValueError(f"low and high must have the same length; got {low.size} and {high.size}")
     if np.any(high < low):
-        raise ValueError("high must be >= low in every component")
-    size = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
+        raise ValueError(f"high must be >= low in every component; got low={low}, high={high}")
+    size = _sample_shape(size)
     return low + (high - low) * rng.random((*size, low.size))
 
 
@@ -103,11 +136,13 @@ def uniform_ellipsoid(
     (*size, m) ndarray
     """
     rng = check_generator(rng)
-    P = check_covariance(shape, "shape")
+    P = _check_psd(shape, "shape")
     m = P.shape[0]
-    c = as_vector(center, "center", m)
-    size = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
+    c = as_vector(_float_array(center, "center"), "center")
+    if c.size != m:
+        raise ValueError(f"Incompatible dimensions of center and shape: center has length {c.size}, shape is {P.shape}")
+    size = _sample_shape(size)
     direction = rng.standard_normal((*size, m))
     direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
     radius = rng.random((*size, 1)) ** (1.0 / m)
-    return c + (radius * direction) @ psd_factor(P).T
+    return c + (radius * direction) @ _psd_factor(P).T

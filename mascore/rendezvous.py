@@ -23,9 +23,17 @@ from numpy.typing import ArrayLike
 
 from . import distributed_kf as dkf
 from ._progress import progress_bar
-from ._validation import as_matrix, check_covariance, check_generator, check_square
-from .noise import psd_factor
-from .sensing import measure, sensing_mask, team_noise_covariance
+from ._validation import (
+    as_matrix,
+    check_covariance,
+    check_generator,
+    check_positive,
+    check_positive_int,
+    check_square,
+)
+from .kalman import _const_covariance, _finite, _float_array
+from .noise import _psd_factor
+from .sensing import _check_adjacency, _check_flag, _measure, sensing_mask, team_noise_covariance
 
 __all__ = [
     "MODES",
@@ -42,11 +50,9 @@ __all__ = [
 
 def rendezvous_gain(rho1: float, rho2: float, n: int) -> np.ndarray:
     """``K = [rho_1 I_n, rho_2 I_n]`` of eq. (4), shape ``(n, 2n)``."""
-    for name, val in (("rho1", rho1), ("rho2", rho2)):
-        if not np.isfinite(val) or val <= 0:
-            raise ValueError(f"{name} must be a positive gain; got {val!r}")
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ValueError(f"n must be a positive integer; got {n!r}")
+    rho1 = check_positive(rho1, "rho1", "(a positive gain)")
+    rho2 = check_positive(rho2, "rho2", "(a positive gain)")
+    n = check_positive_int(n, "n")
     return np.hstack([rho1 * np.eye(n), rho2 * np.eye(n)])
 
 
@@ -68,23 +74,37 @@ def consensus_control(views: ArrayLike, laplacian: ArrayLike, K: ArrayLike) -> n
     -------
     U : (..., N, p) ndarray
     """
-    Y = np.asarray(views, dtype=float)
-    L = np.asarray(laplacian, dtype=float)
-    K = np.asarray(K, dtype=float)
-    if Y.ndim < 3 or Y.shape[-3] != Y.shape[-2]:
-        raise ValueError(f"views must have shape (..., N, N, m); got {Y.shape}")
+    Y = _finite(_float_array(views, "views"), "views")
+    if Y.ndim < 3 or Y.shape[-3] != Y.shape[-2] or Y.shape[-2] == 0 or Y.shape[-1] == 0:
+        raise ValueError(f"views must have shape (..., N, N, m) with N, m >= 1; got {Y.shape}")
     N, m = Y.shape[-2:]
-    if L.shape[-2:] != (N, N):
-        raise ValueError(f"Incompatible dimensions of laplacian; expected (..., {N}, {N}) but found {L.shape}")
-    if K.ndim != 2 or K.shape[1] != m:
-        raise ValueError(f"Incompatible dimensions of K; expected (p, {m}) but found {K.shape}")
+    L = dkf._check_laplacian(laplacian, N, any_batch=True)
+    K = as_matrix(_float_array(K, "K"), "K", (None, m))
+    try:
+        np.broadcast_shapes(L.shape[:-2], Y.shape[:-3])
+    except ValueError:
+        raise ValueError(
+            f"the leading (batch) axes of laplacian {L.shape} and views {Y.shape} do not broadcast"
+        ) from None
+    return _consensus_control(Y, L, K)
+
+
+def _consensus_control(Y: np.ndarray, L: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """:func:`consensus_control` without checks."""
     weighted = np.einsum("...ij,...ijm->...im", L, Y)
     return -weighted @ K.T
 
 
 def true_state_views(states: ArrayLike) -> np.ndarray:
-    """Views ``Y[i, j] = x_j`` for the noise-free law (4): ``(..., N, N, m)``."""
-    x = np.asarray(states, dtype=float)
+    """Views ``Y[i, j] = x_j`` for the noise-free law (4): ``(..., N, N, m)`` (`states` finite ``(..., N, m)``)."""
+    x = _finite(_float_array(states, "states"), "states")
+    if x.ndim < 2:
+        raise ValueError(f"states must have shape (..., N, m); got {x.shape}")
+    return _true_state_views(x)
+
+
+def _true_state_views(x: np.ndarray) -> np.ndarray:
+    """:func:`true_state_views` without checks."""
     N = x.shape[-2]
     return np.broadcast_to(x[..., None, :, :], (*x.shape[:-1][:-1], N, N, x.shape[-1]))
 
@@ -106,15 +126,28 @@ def propagate_team(
     A : (m, m), B : (m, p), Q : (m, m) symmetric PSD
     """
     rng = check_generator(rng)
-    x = np.asarray(states, dtype=float)
-    u = np.asarray(inputs, dtype=float)
-    A = np.asarray(A, dtype=float)
-    B = np.asarray(B, dtype=float)
+    x = _finite(_float_array(states, "states"), "states")
+    u = _finite(_float_array(inputs, "inputs"), "inputs")
+    if x.ndim < 2 or x.shape[-1] == 0:
+        raise ValueError(f"states must have shape (..., N, m) with m >= 1; got {x.shape}")
+    if u.ndim < 2 or u.shape[-2] != x.shape[-2]:
+        raise ValueError(f"Incompatible dimensions of inputs; expected (..., {x.shape[-2]}, p) but found {u.shape}")
     m = x.shape[-1]
-    Q = check_covariance(Q, "Q", size=m)
-    if A.shape != (m, m) or B.shape != (m, u.shape[-1]):
-        raise ValueError(f"Incompatible dimensions: A {A.shape}, B {B.shape} for states {x.shape}, inputs {u.shape}")
-    w = rng.standard_normal(x.shape) @ psd_factor(Q, cholesky_first=True).T
+    A = check_square(_float_array(A, "A"), "A", m)
+    B = as_matrix(_float_array(B, "B"), "B", (m, u.shape[-1]))
+    Q = _const_covariance(Q, "Q", size=m)
+    if Q.ndim != 2:
+        raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
+    try:
+        np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
+    except ValueError:
+        raise ValueError(f"the leading axes of states {x.shape} and inputs {u.shape} do not broadcast") from None
+    return _propagate_team(rng, x, u, A, B, Q)
+
+
+def _propagate_team(rng, x, u, A, B, Q):
+    """:func:`propagate_team` without checks."""
+    w = rng.standard_normal(x.shape) @ _psd_factor(Q, cholesky_first=True).T
     return x @ A.T + u @ B.T + w
 
 
@@ -125,7 +158,9 @@ def team_spread(values: ArrayLike) -> np.ndarray:
     ``(..., N, d)`` data, e.g. positions (m) or velocities (m/s). Song et al.
     (2023) Fig. 3 plots its root mean square over Monte Carlo runs.
     """
-    y = np.asarray(values, dtype=float)
+    y = _finite(_float_array(values, "values"), "values")
+    if y.ndim < 2 or y.shape[-2] == 0:
+        raise ValueError(f"values must have shape (..., N, d) with N >= 1 agents; got {y.shape}")
     dev = y - y.mean(axis=-2, keepdims=True)
     return np.sqrt(np.mean(np.sum(dev**2, axis=-1), axis=-1))
 
@@ -170,25 +205,27 @@ def expected_spread(
         position components (m^2), the velocity one over the velocity
         components (m^2/s^2).
     """
-    if mode not in ("true", "measurement"):
+    if not isinstance(mode, str) or mode not in ("true", "measurement"):
         raise ValueError(f"mode must be 'true' or 'measurement' (linear laws with white noise); got {mode!r}")
-    x = np.asarray(x0, dtype=float)
-    if x.ndim != 3 or not np.all(np.isfinite(x)):
-        raise ValueError(f"x0 must be a finite (R, N, m) array; got shape {x.shape}")
+    x = _float_array(x0, "x0")
+    if x.ndim != 3 or 0 in x.shape:
+        raise ValueError(f"x0 must be a finite (R, N, m) array with R, N, m >= 1; got shape {x.shape}")
+    _finite(x, "x0")
     n_runs, N, m = x.shape
-    A = check_square(A, "A", m)
-    B = as_matrix(B, "B", (m, None))
-    BK = B @ as_matrix(K, "K", (B.shape[1], m))
-    Q = check_covariance(Q, "Q", size=m)
-    if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
-        raise ValueError(f"n_steps must be a positive integer; got {n_steps!r}")
-    Adj = np.asarray(adjacency, dtype=float)
-    sensing_mask(Adj)  # shape, sign and isolated-agent checks
+    A = check_square(_float_array(A, "A"), "A", m)
+    B = as_matrix(_float_array(B, "B"), "B", (m, None))
+    BK = B @ as_matrix(_float_array(K, "K"), "K", (B.shape[1], m))
+    Q = check_covariance(_float_array(Q, "Q"), "Q", size=m)
+    if Q.ndim != 2:
+        raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
+    n_steps = check_positive_int(n_steps, "n_steps")
+    Adj = _check_adjacency(adjacency)
+    sensing_mask(Adj)  # isolated-agent check
     if Adj.shape[-1] != N or Adj.ndim not in (2, 3) or (Adj.ndim == 3 and Adj.shape[0] != n_runs):
         raise ValueError(f"adjacency must be ({N}, {N}) or ({n_runs}, {N}, {N}); got {Adj.shape}")
     Lb = (np.eye(N) * Adj.sum(axis=-1)[..., None] - Adj).reshape(-1, N, N)  # (G, N, N), G = 1 or R
     Nm = N * m
-    F1 = np.stack([dkf.closed_loop_matrices(A, BK, Lg)[0] for Lg in Lb])  # eq. (11), one per graph
+    F1 = np.stack([dkf._closed_loop_matrices(A, BK, Lg)[0] for Lg in Lb])  # eq. (11), one per graph
     noise = np.broadcast_to(Q, (Lb.shape[0], N, m, m)).copy()
     if mode == "measurement":
         Rr = team_noise_covariance(R, N, m).reshape(N, m, N, m)
@@ -209,6 +246,11 @@ def expected_spread(
         if k < n_steps:
             mean = F1 @ mean
             P = F1 @ P @ np.swapaxes(F1, -1, -2) + D
+    if not np.all(np.isfinite(out)):
+        raise ValueError(
+            "the expected spread overflowed (NaN or inf) over n_steps: the closed loop is unstable for these "
+            "gains and dt, or the horizon is too long; use fewer steps or a stable gain"
+        )
     return out
 
 
@@ -332,23 +374,31 @@ def simulate_rendezvous(
         Unknown mode, bad shapes, an isolated agent, or (mode "estimation") a
         topology for which system (43) is not observable.
     """
-    if mode not in MODES:
+    if not isinstance(mode, str) or mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}; got {mode!r}")
     rng = check_generator(rng)
-    x = np.array(x0, dtype=float)
-    if x.ndim != 3:
-        raise ValueError(f"x0 must have shape (R, N, m); got {x.shape}")
+    x = np.array(_float_array(x0, "x0"), dtype=float)
+    if x.ndim != 3 or 0 in x.shape:
+        raise ValueError(f"x0 must have shape (R, N, m) with R, N, m >= 1; got {x.shape}")
     n_runs, N, m = x.shape
     if not np.all(np.isfinite(x)):
         raise ValueError("x0 contains NaN or infinite entries")
-    A = check_square(A, "A", m)  # agent model against the state dimension of x0
-    B = as_matrix(B, "B", (m, None))
-    K = as_matrix(K, "K", (B.shape[1], m))
+    A = check_square(_float_array(A, "A"), "A", m)  # agent model against the state dimension of x0
+    B = as_matrix(_float_array(B, "B"), "B", (m, None))
+    K = as_matrix(_float_array(K, "K"), "K", (B.shape[1], m))
+    Q = check_covariance(_float_array(Q, "Q"), "Q", size=m)
+    if Q.ndim != 2:
+        raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
+    R_team = team_noise_covariance(R, N, m)
+    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)):
+        raise TypeError(f"dt must be a positive sampling time in seconds; got {type(dt).__name__} {dt!r}")
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be a positive sampling time in seconds; got {dt!r}")
-    if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
-        raise ValueError(f"n_steps must be a positive integer; got {n_steps!r}")
-    Adj = np.asarray(adjacency, dtype=float)
+    n_steps = check_positive_int(n_steps, "n_steps")
+    for flag, value in (("exact_control_noise", exact_control_noise), ("central", central),
+                        ("progress", progress), ("switching", switching)):
+        _check_flag(value, flag)
+    Adj = _check_adjacency(adjacency)
     S = sensing_mask(Adj)  # raises on isolated agents
     if switching:
         if S.shape != (n_steps + 1, N, N):
@@ -373,14 +423,14 @@ def simulate_rendezvous(
     if filt:
         if x_hat0 is None or P0 is None:
             raise ValueError(f"mode {mode!r} needs x_hat0 and P0 (initial estimate and its covariance)")
-        xh0 = np.asarray(x_hat0, dtype=float)
+        xh0 = _float_array(x_hat0, "x_hat0")
         if xh0.shape != (n_runs, N * m):
             raise ValueError(f"Incompatible dimensions of x_hat0; expected ({n_runs}, {N * m}) but found {xh0.shape}")
         if not np.all(np.isfinite(xh0)):
             raise ValueError("x_hat0 contains NaN or infinite entries")
         X_hat = np.broadcast_to(xh0.reshape(n_runs, 1, N, m), (n_runs, N, N, m)).copy()
         Sig_aug = dkf.eb_initial_covariance(model, P0, common=True)
-        Sig_i = dkf.agent_covariances(model, Sig_aug)
+        Sig_i = dkf._agent_covariances(model, Sig_aug)
         nb = 1 if switching or Adj.ndim == 2 else n_runs
         Sig_aug = np.broadcast_to(Sig_aug, (nb, *Sig_aug.shape[1:])).copy()
         Sig_i = np.broadcast_to(Sig_i, (nb, *Sig_i.shape[1:])).copy()
@@ -407,47 +457,59 @@ def simulate_rendezvous(
             out["pos_error"][k] = np.sqrt(np.sum(err**2, axis=(-1, -2)))
             diag = np.diagonal(Sig_i, axis1=-2, axis2=-1)[..., pos]
             out["pos_std"][k] = np.sqrt(n * diag.sum(axis=-1))
-            out["nees"][k] = dkf.team_nees(model, x, X_hat, Sig_i)
+            out["nees"][k] = dkf._team_nees(model, x, X_hat, Sig_i)
             if nb == 1:
                 out["sigma_i"][k] = Sig_i[0]
                 out["gains"][k] = KH[0]
                 if mode == "estimation":
-                    out["f2_cross"][k] = dkf.f2_cross(model, Sig_aug, topology(k)[2])[0]
+                    out["f2_cross"][k] = dkf._f2_cross(model, Sig_aug, topology(k)[2])[0]
             if central:
                 out["central_pos_std"][k] = np.sqrt(n * np.diagonal(Pc, axis1=-2, axis2=-1)[..., pos].sum(-1))
                 out["central_pos_error"][k] = np.sqrt(np.sum((x - xc)[..., pos_slice] ** 2, axis=(-1, -2)))
 
         pos_slice = slice(0, m // 2)
         record(0)
-    Z, _ = measure(meas_rng, x, topology(0)[0], R)
+    # the loop runs on the unchecked kernels: every argument was checked above
+    Z, _ = _measure(meas_rng, x, topology(0)[1], R_team)
     for k in progress_bar(range(n_steps), enabled=progress, desc=f"rendezvous ({mode})", leave=False):
         Lap = topology(k)[2]
         if mode == "true":
-            U = consensus_control(true_state_views(x), Lap, K)
+            U = _consensus_control(_true_state_views(x), Lap, K)
         elif mode in ("measurement", "measurement-filter"):
-            U = consensus_control(Z, Lap, K)
+            U = _consensus_control(Z, Lap, K)
         else:
-            U = consensus_control(X_hat, Lap, K)
-        x_new = propagate_team(proc_rng, x, U, A, B, Q)
+            U = _consensus_control(X_hat, Lap, K)
+        x_new = _propagate_team(proc_rng, x, U, A, B, Q)
         if filt and central:
-            xc, Pc = dkf.centralized_predict(model, xc, Pc, U, B)
+            xc, Pc = dkf._centralized_predict(model, xc, Pc, U, B)
         if mode == "estimation":
-            X_hat, Sig_aug = dkf.eb_predict(model, X_hat, Sig_aug, Lap)
+            X_hat, Sig_aug = dkf._eb_predict(model, X_hat, Sig_aug, Lap)
         elif mode == "measurement-filter":
-            X_hat, Sig_i = dkf.mb_predict(model, X_hat, Sig_i, Lap, KH if exact_control_noise else None)
+            X_hat, Sig_i = dkf._mb_predict(model, X_hat, Sig_i, Lap, KH if exact_control_noise else None)
         x = x_new
-        Adj_next, S_next, _ = topology(k + 1)
-        Z, _ = measure(meas_rng, x, Adj_next, R)
+        _, S_next, _ = topology(k + 1)
+        Z, _ = _measure(meas_rng, x, S_next, R_team)
         if mode == "estimation":
-            X_hat, Sig_aug, KH = dkf.eb_update(model, X_hat, Sig_aug, Z, S_next)
-            Sig_i = dkf.agent_covariances(model, Sig_aug)
+            X_hat, Sig_aug, KH = dkf._eb_update(model, X_hat, Sig_aug, Z, S_next[None] if S_next.ndim == 2 else S_next)
+            Sig_i = dkf._agent_covariances(model, Sig_aug)
         elif mode == "measurement-filter":
-            X_hat, Sig_i, KH = dkf.mb_update(model, X_hat, Sig_i, Z, S_next)
+            X_hat, Sig_i, KH = dkf._mb_update(model, X_hat, Sig_i, Z, S_next[None] if S_next.ndim == 2 else S_next)
         if filt and central:
-            xc, Pc = dkf.centralized_update(model, xc, Pc, Z, S_next)
+            xc, Pc = dkf._centralized_update(model, xc, Pc, Z, S_next[None] if S_next.ndim == 2 else S_next)
         states[k + 1] = x
         if filt:
             record(k + 1)
+    for name, value in out.items():
+        if value is not None and not np.all(np.isfinite(value)):
+            raise ValueError(
+                f"the simulation produced NaN or inf in {name}: the closed loop diverged (unstable gains for "
+                "this dt, or values beyond floating point); check K, dt and n_steps"
+            )
+    if not np.all(np.isfinite(states)):
+        raise ValueError(
+            "the simulation produced NaN or inf states: the closed loop diverged (unstable gains for this dt, "
+            "or values beyond floating point); check K, dt and n_steps"
+        )
     return RendezvousResult(mode=mode, dt=float(dt), states=states, model=model, **out)
 
 

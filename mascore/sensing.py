@@ -31,8 +31,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import check_covariance, check_generator
-from .noise import psd_factor
+from ._validation import check_generator, check_positive_int
+from .kalman import _const_covariance, _finite, _float_array
+from .noise import _psd_factor, _sample_shape
 
 __all__ = [
     "IsolatedAgentError",
@@ -69,6 +70,7 @@ def sensing_mask(adjacency: ArrayLike, allow_isolated: bool = False) -> np.ndarr
         ``S[..., i, j]`` is true iff ``j`` is in ``N̄_i`` (diagonal true).
     """
     A = _check_adjacency(adjacency)
+    _check_flag(allow_isolated, "allow_isolated")
     S = A > 0
     if not allow_isolated:
         isolated = ~np.any(S, axis=-1)
@@ -125,13 +127,17 @@ def selection_matrix(neighbors: ArrayLike, n_agents: int, m: int) -> np.ndarray:
     H : (m d, m N) ndarray
         Block ``(l, j)`` is ``I_m`` if ``j = neighbors[l]``, else ``0``.
     """
+    n_agents = check_positive_int(n_agents, "n_agents")
+    m = check_positive_int(m, "m")
+    if isinstance(neighbors, (str, bytes)):
+        raise TypeError(f"neighbors must be a 1-D array of agent indices (ints); got {neighbors!r}")
     idx = np.asarray(neighbors)
-    if idx.ndim != 1 or idx.size == 0 or not np.issubdtype(idx.dtype, np.integer):
+    if idx.ndim != 1 or idx.size == 0:
         raise ValueError(f"neighbors must be a non-empty 1-D array of agent indices; got {neighbors!r}")
+    if not np.issubdtype(idx.dtype, np.integer):
+        raise TypeError(f"neighbors must hold agent indices (ints); got dtype {idx.dtype}: {neighbors!r}")
     if np.any(idx < 0) or np.any(idx >= n_agents) or len(set(idx.tolist())) != idx.size:
         raise ValueError(f"neighbors must be distinct indices in [0, {n_agents}); got {idx.tolist()}")
-    if m < 1:
-        raise ValueError(f"m must be a positive integer; got {m}")
     sel = np.zeros((idx.size, n_agents))
     sel[np.arange(idx.size), idx] = 1.0
     return np.kron(sel, np.eye(m))
@@ -139,6 +145,7 @@ def selection_matrix(neighbors: ArrayLike, n_agents: int, m: int) -> np.ndarray:
 
 def selection_matrices(adjacency: ArrayLike, m: int, allow_isolated: bool = False) -> list[np.ndarray]:
     """``[H_1, ..., H_N]`` for one graph (eq. (3)), self included."""
+    m = check_positive_int(m, "m")
     sets = neighbor_sets(adjacency, allow_isolated=allow_isolated)
     n_agents = len(sets)
     return [selection_matrix(s, n_agents, m) for s in sets]
@@ -158,12 +165,14 @@ def team_noise_covariance(R: ArrayLike, n_agents: int, m: int) -> np.ndarray:
     -------
     (m N, m N) ndarray
     """
-    R = np.asarray(R, dtype=float)
+    n_agents = check_positive_int(n_agents, "n_agents")
+    m = check_positive_int(m, "m")
+    R = _float_array(R, "R")
     if R.ndim == 2 and R.shape == (m, m):
-        check_covariance(R, "R", size=m)
+        _const_covariance(R, "R", size=m)  # checked once per distinct value (a constant of long runs)
         return np.kron(np.eye(n_agents), R)
     if R.ndim == 2 and R.shape == (m * n_agents, m * n_agents):
-        return check_covariance(R, "R", size=m * n_agents)
+        return _const_covariance(R, "R", size=m * n_agents)
     raise ValueError(
         f"Incompatible dimensions of R; expected ({m}, {m}) per measured agent or "
         f"({m * n_agents}, {m * n_agents}) for the team, but found {R.shape}"
@@ -180,8 +189,14 @@ def measurement_noise(
     not depend on the topology (common random numbers across variants).
     """
     rng = check_generator(rng)
+    shape = _sample_shape(shape, "shape")
     R_team = team_noise_covariance(R, n_agents, m)
-    root = psd_factor(R_team, cholesky_first=True)
+    return _measurement_noise(rng, R_team, shape, n_agents, m)
+
+
+def _measurement_noise(rng: np.random.Generator, R_team: np.ndarray, shape: tuple, n_agents: int, m: int) -> np.ndarray:
+    """:func:`measurement_noise` without checks (`R_team` the full ``(m N, m N)`` covariance)."""
+    root = _psd_factor(R_team, cholesky_first=True)
     std = rng.standard_normal((*shape, n_agents, n_agents * m))
     nu = std @ root.T
     return nu.reshape(*shape, n_agents, n_agents, m)
@@ -218,9 +233,10 @@ def measure(
     S : (..., N, N) ndarray of bool
         The sensing mask used.
     """
-    x = np.asarray(states, dtype=float)
-    if x.ndim < 2:
-        raise ValueError(f"states must have shape (..., N, m); got {x.shape}")
+    rng = check_generator(rng)
+    x = _float_array(states, "states")
+    if x.ndim < 2 or x.shape[-1] == 0 or x.shape[-2] == 0:
+        raise ValueError(f"states must have shape (..., N, m) with N, m >= 1; got {x.shape}")
     if not np.all(np.isfinite(x)):
         raise ValueError("states contains NaN or infinite entries")
     n_agents, m = x.shape[-2:]
@@ -229,8 +245,22 @@ def measure(
         raise ValueError(
             f"adjacency is for {S.shape[-1]} agents but states has {n_agents} agents (shape {x.shape})"
         )
+    try:
+        np.broadcast_shapes(x.shape[:-2], S.shape[:-2])
+    except ValueError:
+        raise ValueError(
+            f"the leading (batch) axes of states {x.shape} and adjacency {S.shape} do not broadcast"
+        ) from None
+    return _measure(rng, x, S, team_noise_covariance(R, n_agents, m))
+
+
+def _measure(
+    rng: np.random.Generator, x: np.ndarray, S: np.ndarray, R_team: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`measure` without checks: `S` the sensing mask, `R_team` the full ``(m N, m N)`` covariance."""
+    n_agents, m = x.shape[-2:]
     batch = np.broadcast_shapes(x.shape[:-2], S.shape[:-2])
-    nu = measurement_noise(rng, R, batch, n_agents, m)
+    nu = _measurement_noise(rng, R_team, batch, n_agents, m)
     Z = np.broadcast_to(x[..., None, :, :], (*batch, n_agents, n_agents, m)) + nu
     S = np.broadcast_to(S, (*batch, n_agents, n_agents)).copy()
     return np.where(S[..., None], Z, 0.0), S
@@ -254,22 +284,59 @@ def stacked_measurement(Z: ArrayLike, mask: ArrayLike, agent: int) -> np.ndarray
         ``[z_{i,x_j}]`` for ``j`` in ``N̄_i`` in increasing order; equals
         ``H_i (X + nu_i)`` with ``H_i`` from :func:`selection_matrix`.
     """
-    Z = np.asarray(Z, dtype=float)
-    mask = np.asarray(mask, dtype=bool)
-    if Z.ndim != 3 or mask.shape != Z.shape[:2]:
-        raise ValueError(f"Z must be (N, N, m) and mask (N, N); got {Z.shape} and {mask.shape}")
+    Z = _finite(_float_array(Z, "Z"), "Z")
+    mask = _check_mask_values(mask, "mask")
+    if Z.ndim != 3 or Z.shape[0] != Z.shape[1]:
+        raise ValueError(f"Z must have shape (N, N, m); got {Z.shape}")
+    if mask.shape != Z.shape[:2]:
+        raise ValueError(f"Incompatible dimensions of mask; expected {Z.shape[:2]} but found {mask.shape}")
+    if isinstance(agent, bool) or not isinstance(agent, (int, np.integer)):
+        raise TypeError(f"agent must be an agent index (an int); got {type(agent).__name__} {agent!r}")
+    if not 0 <= agent < Z.shape[0]:
+        raise ValueError(f"agent must be in 0..{Z.shape[0] - 1}; got {agent}")
     return Z[agent, mask[agent]].reshape(-1)
 
 
-def _check_adjacency(adjacency: ArrayLike) -> np.ndarray:
-    A = np.asarray(adjacency, dtype=float)
-    if A.ndim < 2 or A.shape[-1] != A.shape[-2]:
-        raise ValueError(f"adjacency must have shape (..., N, N); got {A.shape}")
+def _check_adjacency(adjacency: ArrayLike, name: str = "adjacency") -> np.ndarray:
+    """One adjacency ``(N, N)`` or a stack ``(..., N, N)``: finite, non-negative, zero diagonal, N >= 1."""
+    A = _float_array(adjacency, name)
+    if A.ndim < 2 or A.shape[-1] != A.shape[-2] or A.shape[-1] == 0:
+        raise ValueError(f"{name} must have shape (..., N, N) with N >= 1; got {A.shape}")
     if not np.all(np.isfinite(A)):
-        raise ValueError("adjacency contains NaN or infinite entries")
-    if np.any(A < 0):
-        raise ValueError("adjacency entries must be non-negative")
+        raise ValueError(f"{name} contains NaN or infinite entries")
     n = A.shape[-1]
-    if np.any(A[..., np.arange(n), np.arange(n)] != 0):
-        raise ValueError("adjacency must have a zero diagonal (self-sensing is implicit in N̄_i)")
+    diag = A[..., np.arange(n), np.arange(n)]
+    if np.any(diag != 0):
+        off = A * (1 - np.eye(n))
+        if np.all(off <= 0) and np.allclose(A.sum(axis=-1), 0):
+            raise ValueError(
+                f"{name} looks like a Laplacian (rows sum to zero, negative off-diagonal entries); "
+                "pass the adjacency matrix instead (A = diag(diag(L)) - L)"
+            )
+        raise ValueError(f"{name} must have a zero diagonal (self-sensing is implicit in N̄_i)")
+    if np.any(A < 0):
+        raise ValueError(f"{name} entries must be non-negative (edge weights); smallest is {A.min():.3g}")
     return A
+
+
+def _check_flag(value: object, name: str) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False; got {type(value).__name__} {value!r}")
+    return bool(value)
+
+
+def _check_mask_values(mask: ArrayLike, name: str = "mask") -> np.ndarray:
+    """A sensing mask as a bool array: bool, or numbers that are all exactly 0 or 1 (NaN is refused)."""
+    if isinstance(mask, (str, bytes)) or mask is None:
+        raise TypeError(f"{name} must be a boolean array (a sensing mask); got {mask!r}")
+    S = np.asarray(mask)
+    if S.dtype == bool:
+        return S
+    if S.dtype.kind not in "iuf":
+        raise TypeError(f"{name} must be a boolean array (a sensing mask); got dtype {S.dtype}")
+    if not np.all((S == 0) | (S == 1)):
+        raise ValueError(
+            f"{name} must be a boolean array (or hold only 0 and 1); got other values"
+            f"{' (NaN)' if S.dtype.kind == 'f' and np.isnan(S).any() else ''}"
+        )
+    return S.astype(bool)

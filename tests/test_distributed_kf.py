@@ -256,7 +256,7 @@ def test_bad_shapes_in_steps():
         (dict(R=np.diag([1.0, 1.0, 1.0, 0.0])), "R must be positive definite"),
         (dict(adjacency=ring_graph(4)), r"adjacency must be \(3, 3\)"),
         (dict(dt=-0.1), "dt must be a positive sampling time"),
-        (dict(n_steps=0), "n_steps must be a positive integer"),
+        (dict(n_steps=0), "n_steps must be an integer >= 1"),
     ],
 )
 def test_bad_simulation_input_is_named(kwargs, match):

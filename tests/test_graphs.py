@@ -92,8 +92,10 @@ def test_union_over_windows():
     assert graphs.has_spanning_tree(graphs.graph_union([a, b]))
     unions = graphs.unions_over_windows([a, b, a, b], window=2)
     assert unions.shape == (2, 3, 3) and all(graphs.has_spanning_tree(U) for U in unions)
-    for bad_window in (0, 1.5, True):
-        with pytest.raises(ValueError, match="window"):
+    with pytest.raises(ValueError, match="window"):
+        graphs.unions_over_windows([a, b], window=0)
+    for bad_window in (1.5, True):  # a float or a bool where a count goes is a type error
+        with pytest.raises(TypeError, match="window"):
             graphs.unions_over_windows([a, b], window=bad_window)
 
 
