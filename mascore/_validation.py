@@ -13,6 +13,9 @@ __all__ = [
     "as_matrix",
     "as_vector",
     "cached_covariance",
+    "cached_finite",
+    "float_array",
+    "require_finite",
     "check_adjacency",
     "check_covariance",
     "check_generator",
@@ -35,7 +38,7 @@ def as_vector(x: ArrayLike, name: str, size: int | None = None) -> np.ndarray:
     ValueError
         If `x` is not one-dimensional, has the wrong length or is not finite.
     """
-    arr = np.asarray(x, dtype=float)
+    arr = float_array(x, name)
     if arr.ndim != 1:
         raise ValueError(f"{name} must be a 1-D array; got shape {arr.shape}")
     if size is not None and arr.shape[0] != size:
@@ -58,7 +61,7 @@ def as_matrix(
     shape : tuple of (int or None), optional
         Expected shape; ``None`` in a slot accepts any size there.
     """
-    arr = np.asarray(M, dtype=float)
+    arr = float_array(M, name)
     if arr.ndim != 2:
         raise ValueError(f"{name} must be a 2-D array; got shape {arr.shape}")
     if shape is not None:
@@ -109,7 +112,7 @@ def check_covariance(
     numpy.ndarray
         `P` as a float array, unchanged.
     """
-    arr = np.asarray(P, dtype=float)
+    arr = float_array(P, name)
     if arr.ndim < 2 or arr.shape[-1] != arr.shape[-2]:
         raise ValueError(f"{name} must be a square matrix (..., n, n); got shape {arr.shape}")
     if size is not None and arr.shape[-1] != size:
@@ -227,29 +230,100 @@ def check_laplacian(
     return arr
 
 
-_CHECKED: dict[tuple, np.ndarray] = {}
-
-
-def cached_covariance(P: ArrayLike, name: str, size: int | None = None, definite: bool = False) -> np.ndarray:
-    """:func:`check_covariance` that checks each distinct constant matrix once.
-
-    For matrices that stay the same over a long run (Q, R): the check is keyed by the
-    matrix's bytes, so a 10^4-step loop pays one eigen-decomposition, not 10^4.
-    """
-    arr = np.asarray(P, dtype=float)
-    key = (name, size, definite, arr.shape, arr.tobytes())
-    hit = _CHECKED.get(key)
-    if hit is not None:
-        return hit
-    checked = check_covariance(arr, name, size, definite)
-    if len(_CHECKED) > 256:
-        _CHECKED.clear()
-    checked = checked.copy()
-    checked.setflags(write=False)
-    _CHECKED[key] = checked
-    return checked
-
-
 def _check_finite(arr: np.ndarray, name: str) -> None:
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or infinite entries")
+
+
+# ---------------------------------------------------------------- conversion and value-keyed checks
+
+_ND = np.ndarray
+_F64 = np.dtype(float)
+
+
+def float_array(value: object, name: str) -> np.ndarray:
+    """`value` as a float array.
+
+    Lists, ints and bools are converted; a string, None, a complex or ragged
+    array is a ``TypeError`` that names `name`.
+    """
+    if type(value) is _ND and value.dtype is _F64:
+        return value
+    if value is None or isinstance(value, (str, bytes)):
+        raise TypeError(f"{name} must be an array of real numbers; got {type(value).__name__} {value!r}")
+    try:
+        arr = np.asarray(value)
+        if arr.dtype.kind == "O":  # e.g. Python ints beyond int64, numbers mixed with arrays
+            arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(
+            f"{name} must be an array of real numbers; got a {type(value).__name__} that numpy cannot "
+            f"convert ({exc})"
+        ) from None
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must be an array of real numbers; got an array of dtype {arr.dtype}")
+    return arr.astype(float, copy=False)
+
+
+def require_finite(arr: np.ndarray, name: str) -> np.ndarray:
+    """Raise a ``ValueError`` naming `name` if `arr` holds NaN or inf."""
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    return arr
+
+
+class _ValueMemo:
+    """Values that already passed a check, keyed by their bytes (the tag says which shapes were checked).
+
+    Keyed by value, an array modified in place after it was stored is simply not
+    recognised any more. Bounded: cleared when it would hold more than
+    `max_entries` keys or `max_total_bytes` bytes; a key longer than
+    `max_key_bytes` is never stored (that value is checked every time).
+    """
+
+    __slots__ = ("store", "_max_entries", "_max_key", "_max_total", "_total")
+
+    def __init__(self, max_entries: int = 512, max_key_bytes: int = 1 << 22, max_total_bytes: int = 1 << 26) -> None:
+        self.store: dict[bytes, object] = {}
+        self._max_entries = max_entries
+        self._max_key = max_key_bytes
+        self._max_total = max_total_bytes
+        self._total = 0
+
+    def put(self, key: bytes, tag: object) -> None:
+        n = len(key)
+        if n > self._max_key:
+            return
+        if len(self.store) >= self._max_entries or self._total + n > self._max_total:
+            self.store.clear()
+            self._total = 0
+        self.store[key] = tag
+        self._total += n
+
+
+#: Constant matrices checked once per distinct value: F, H, B (finite) and Q, R (covariances).
+_FINITE_CONSTANTS = _ValueMemo()
+_COVARIANCE_CONSTANTS = _ValueMemo()
+
+
+def cached_finite(M: ArrayLike, name: str) -> np.ndarray:
+    """A constant matrix as a float array, its finiteness checked once per distinct value."""
+    arr = float_array(M, name)
+    key = arr.tobytes()
+    if _FINITE_CONSTANTS.store.get(key) != arr.shape:
+        require_finite(arr, name)
+        _FINITE_CONSTANTS.put(key, arr.shape)
+    return arr
+
+
+def cached_covariance(M: ArrayLike, name: str, size: int | None = None, definite: bool = False) -> np.ndarray:
+    """A constant covariance (Q, R): :func:`check_covariance` once per distinct value."""
+    arr = float_array(M, name)
+    key = arr.tobytes()
+    got = _COVARIANCE_CONSTANTS.store.get(key)
+    if got != (True, arr.shape) and (definite or got != (False, arr.shape)):
+        check_covariance(arr, name, size=size, definite=definite)
+        _COVARIANCE_CONSTANTS.put(key, (definite, arr.shape))
+    elif size is not None and arr.shape[-1] != size:
+        raise ValueError(f"Incompatible dimensions of {name}; expected ({size}, {size}) but found {arr.shape[-2:]}")
+    return arr

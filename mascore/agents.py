@@ -13,7 +13,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import as_matrix, check_positive, check_positive_int, check_square
-from .kalman import _finite, _float_array
+from ._validation import require_finite as _finite
+from ._validation import float_array as _float_array
 
 __all__ = [
     "LTIAgent",

@@ -60,7 +60,10 @@ from numpy.typing import ArrayLike
 
 from ._validation import as_matrix, check_covariance, check_laplacian, check_positive, check_positive_int, check_square
 from .graphs import laplacian as graph_laplacian
-from .kalman import _finite, _float_array, _RecentArrays, _ValueMemo
+from ._validation import require_finite as _finite
+from ._validation import float_array as _float_array
+from ._validation import _ValueMemo
+from .kalman import _RecentArrays
 from .sensing import (
     _check_adjacency,
     _check_flag,

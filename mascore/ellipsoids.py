@@ -51,6 +51,7 @@ from ._validation import (
     check_positive,
     check_positive_int,
 )
+from ._validation import float_array as _float_array
 from .noise import psd_factor, uniform_ellipsoid
 
 __all__ = [
@@ -621,24 +622,6 @@ def _golden(fun, batch_shape, tol: float = 1e-10) -> np.ndarray:
 # --------------------------------------------------------------------------- argument checks
 
 
-def _float_array(value: object, name: str) -> np.ndarray:
-    """`value` as a float array; a string, None or anything numpy cannot convert is a ``TypeError`` naming `name`."""
-    if type(value) is np.ndarray and value.dtype is _FLOAT:  # the usual case, first and fast
-        return value
-    if isinstance(value, (str, bytes)) or value is None:
-        raise TypeError(f"{name} must be an array of real numbers; got {type(value).__name__} {value!r}")
-    if isinstance(value, np.ndarray) and value.dtype.kind not in "biuf":
-        raise TypeError(f"{name} must be an array of real numbers; got an array of dtype {value.dtype}")
-    try:
-        return np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(
-            f"{name} must be an array of real numbers; numpy cannot convert the {type(value).__name__} "
-            f"given ({exc})"
-        ) from None
-
-
-_FLOAT = np.dtype(float)
 
 
 def _require_finite(arr: np.ndarray, name: str) -> None:

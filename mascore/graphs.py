@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import check_adjacency, check_positive, check_positive_int
-from .kalman import _float_array
+from ._validation import float_array as _float_array
 
 __all__ = [
     "adjacency_from_edges",

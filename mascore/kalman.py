@@ -32,7 +32,11 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._validation import cached_covariance as _const_covariance
+from ._validation import cached_finite as _const_finite
 from ._validation import check_covariance, check_positive_int
+from ._validation import float_array as _float_array
+from ._validation import require_finite as _finite
 
 __all__ = ["predict", "update", "kalman_gain", "nees", "nees_interval", "symmetrize"]
 
@@ -43,67 +47,6 @@ __all__ = ["predict", "update", "kalman_gain", "nees", "nees_interval", "symmetr
 
 _ND = np.ndarray
 _F64 = np.dtype(float)
-
-
-def _float_array(value: object, name: str) -> np.ndarray:
-    """`value` as a float array.
-
-    Lists, ints and bools are converted; a string, None, a complex or ragged
-    array is a ``TypeError`` that names `name`.
-    """
-    if type(value) is _ND and value.dtype is _F64:
-        return value
-    if value is None or isinstance(value, (str, bytes)):
-        raise TypeError(f"{name} must be an array of real numbers; got {type(value).__name__} {value!r}")
-    try:
-        arr = np.asarray(value)
-        if arr.dtype.kind == "O":  # e.g. Python ints beyond int64, numbers mixed with arrays
-            arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(
-            f"{name} must be an array of real numbers; got a {type(value).__name__} that numpy cannot "
-            f"convert ({exc})"
-        ) from None
-    if arr.dtype.kind not in "biuf":
-        raise TypeError(f"{name} must be an array of real numbers; got an array of dtype {arr.dtype}")
-    return arr.astype(float, copy=False)
-
-
-def _finite(arr: np.ndarray, name: str) -> np.ndarray:
-    """Raise a ``ValueError`` naming `name` if `arr` holds NaN or inf."""
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{name} contains NaN or infinite entries")
-    return arr
-
-
-class _ValueMemo:
-    """Values that already passed a check, keyed by their bytes (the tag says which shapes were checked).
-
-    Keyed by value, an array modified in place after it was stored is simply not
-    recognised any more. Bounded: cleared when it would hold more than
-    `max_entries` keys or `max_total_bytes` bytes; a key longer than
-    `max_key_bytes` is never stored (that value is checked every time).
-    """
-
-    __slots__ = ("store", "_max_entries", "_max_key", "_max_total", "_total")
-
-    def __init__(self, max_entries: int = 512, max_key_bytes: int = 1 << 22, max_total_bytes: int = 1 << 26) -> None:
-        self.store: dict[bytes, object] = {}
-        self._max_entries = max_entries
-        self._max_key = max_key_bytes
-        self._max_total = max_total_bytes
-        self._total = 0
-
-    def put(self, key: bytes, tag: object) -> None:
-        n = len(key)
-        if n > self._max_key:
-            return
-        if len(self.store) >= self._max_entries or self._total + n > self._max_total:
-            self.store.clear()
-            self._total = 0
-        self.store[key] = tag
-        self._total += n
-
 
 class _RecentArrays:
     """The last few arrays that passed a check (or were computed from checked input), with their bytes.
@@ -137,34 +80,6 @@ class _RecentArrays:
                     items.insert(0, item)
                 return ok
         return False
-
-
-#: Constant matrices checked once per distinct value: F, H, B (finite) and Q, R (covariances).
-_FINITE_CONSTANTS = _ValueMemo()
-_COVARIANCE_CONSTANTS = _ValueMemo()
-
-
-def _const_finite(M: ArrayLike, name: str) -> np.ndarray:
-    """A constant matrix as a float array, its finiteness checked once per distinct value."""
-    arr = _float_array(M, name)
-    key = arr.tobytes()
-    if _FINITE_CONSTANTS.store.get(key) != arr.shape:
-        _finite(arr, name)
-        _FINITE_CONSTANTS.put(key, arr.shape)
-    return arr
-
-
-def _const_covariance(M: ArrayLike, name: str, size: int | None = None, definite: bool = False) -> np.ndarray:
-    """A constant covariance (Q, R): :func:`check_covariance` once per distinct value."""
-    arr = _float_array(M, name)
-    key = arr.tobytes()
-    got = _COVARIANCE_CONSTANTS.store.get(key)
-    if got != (True, arr.shape) and (definite or got != (False, arr.shape)):
-        check_covariance(arr, name, size=size, definite=definite)
-        _COVARIANCE_CONSTANTS.put(key, (definite, arr.shape))
-    elif size is not None and arr.shape[-1] != size:
-        raise ValueError(f"Incompatible dimensions of {name}; expected ({size}, {size}) but found {arr.shape[-2:]}")
-    return arr
 
 
 # A long run calls predict and update with the state the previous call returned and with the same

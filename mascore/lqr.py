@@ -40,7 +40,7 @@ from ._validation import (
     check_positive_int,
     check_square,
 )
-from .ellipsoids import _float_array
+from ._validation import float_array as _float_array
 from .kalman import symmetrize
 from .noise import psd_factor
 

@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import as_vector, check_covariance, check_generator
-from .kalman import _float_array
+from ._validation import float_array as _float_array
 
 __all__ = ["gaussian", "psd_factor", "uniform_box", "uniform_ellipsoid"]
 

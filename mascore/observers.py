@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike
 
 from ._solver import SolverError, solve
 from ._validation import as_matrix, check_covariance, check_square
-from .ellipsoids import _float_array
+from ._validation import float_array as _float_array
 from .lqr import _care, _spectrum, _undirected_adjacency, _undirected_laplacian, is_controllable
 
 #: Why the observer functions need an undirected graph (quoted in their errors).

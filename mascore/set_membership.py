@@ -51,7 +51,7 @@ from numpy.typing import ArrayLike
 from . import ellipsoids
 from ._solver import LMI_EPS, SolverError, solve
 from ._validation import as_matrix, check_square
-from .ellipsoids import _float_array
+from ._validation import float_array as _float_array
 
 __all__ = [
     "METHODS",

@@ -47,7 +47,7 @@ from ._validation import (
     check_positive_int,
     check_square,
 )
-from .ellipsoids import _float_array
+from ._validation import float_array as _float_array
 
 __all__ = [
     "SyncDesign",
