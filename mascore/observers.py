@@ -224,9 +224,10 @@ def distributed_observer(
     reading : {"as-printed", "inverse-weight-are"}
         ``"as-printed"``: eqs. (29)-(30) as printed. ``"inverse-weight-are"``:
         ``S`` from eq. (29) with ``Q1^{-1}`` in place of ``Q1`` (``Q1`` read as a
-        noise covariance, Kalman style) but ``L = S C^T Q1`` as in eq. (30);
-        this is the reading that reproduces the paper's printed ``L`` of
-        Example 1. The LMI uses ``Q1 + lambda_i Q2`` in both readings.
+        noise covariance, Kalman style) but ``L = S C^T Q1`` as in eq. (30):
+        not a consistent reading of eqs. (29)-(30) but the mixed convention
+        (``Q1^2`` times the consistent gain) that gives the paper's printed
+        ``L`` of Example 1. The LMI uses ``Q1 + lambda_i Q2`` in both readings.
     trace_in : {"transformed", "original"}
         Coordinates in which ``trace(S_i)`` is measured: ``x_hat`` as in
         eq. (57), or the agent's original ones.
