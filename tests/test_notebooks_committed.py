@@ -24,6 +24,7 @@ def test_notebook_is_clean_and_has_cell_ids(path):
     for cell in nb["cells"]:
         if cell["cell_type"] == "code":
             assert not cell["outputs"] and cell["execution_count"] is None, f"{path.name}: outputs committed"
+    assert nb["metadata"].get("kernelspec", {}).get("name") == "python3", f"{path.name}: no python3 kernelspec"
 
 
 def test_every_notebook_is_in_the_book():
