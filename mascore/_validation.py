@@ -171,6 +171,8 @@ def check_positive_int(n: object, name: str, minimum: int = 1) -> int:
 
 def check_positive(x: object, name: str, unit: str = "", allow_zero: bool = False) -> float:
     """Return `x` as a finite float > 0 (or >= 0 with `allow_zero`); `unit` goes into the message."""
+    if isinstance(x, np.ndarray) and x.ndim == 0:
+        x = x.item()
     if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name} must be a real number; got {type(x).__name__} {x!r}")
     value = float(x)

@@ -39,6 +39,28 @@ Conventions
   graph, or a function ``k -> (n, n)``. In continuous time it is a
   :class:`SwitchingTopology`, a single graph, or a function ``t -> (n, n)``
   held constant between given switching times.
+* Directed graphs are fine everywhere (Ren et al. use directed switching
+  graphs); the theorems need a spanning tree in the union over bounded
+  windows, not symmetry (:func:`union_condition_holds`).
+
+Input checks and degenerate cases
+---------------------------------
+Every public function checks its arguments and raises a ``ValueError`` (bad
+value or shape) or ``TypeError`` (wrong type) that names the argument. A graph
+Laplacian passed where an adjacency is expected is named as such. The long runs
+pay the checks once, then call unchecked private kernels.
+
+* One agent (``n = 1``) and an isolated agent (a zero row of ``G``) are
+  defined: such an agent hears nobody, keeps its state, and its covariance
+  follows eq. (4) with the self term only.
+* Zero communication noise (``Omega`` singular) is accepted, but every message
+  then counts as exact and ``P`` shrinks geometrically: after a few hundred
+  steps it underflows double precision. The runs then raise
+  :class:`ConsensusBreakdownError`, naming the step, instead of returning NaN.
+* Horizons are bounded: at most :data:`MAX_STEPS` steps (discrete time and
+  Euler-Maruyama) and at most :data:`ODE_MAX_EVALUATIONS` right-hand-side
+  evaluations of the ODE solver; a longer run raises a ``ValueError`` naming
+  ``n_steps`` or ``t_final`` instead of hanging.
 """
 
 from __future__ import annotations
@@ -50,11 +72,16 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.integrate import solve_ivp
 
-from ._validation import check_covariance, check_generator
+from ._validation import float_array as _float_array
+from ._validation import cached_covariance, check_covariance, check_generator, check_positive, check_positive_int
 from .graphs import has_spanning_tree, unions_over_windows
 
 __all__ = [
+    "ConsensusBreakdownError",
     "ConsensusResult",
+    "MAX_STEPS",
+    "MAX_STORED",
+    "ODE_MAX_EVALUATIONS",
     "SwitchingTopology",
     "average_consensus",
     "central_fusion",
@@ -69,6 +96,28 @@ __all__ = [
     "spread",
     "union_condition_holds",
 ]
+
+
+#: Largest number of steps of a discrete run or of an Euler-Maruyama integration ("absurdly many" beyond).
+MAX_STEPS = 10_000_000
+#: Largest number of stored numbers in a returned trajectory (8 bytes each: 2 GB).
+MAX_STORED = 250_000_000
+#: Largest number of right-hand-side evaluations of the ODE solver in one continuous run.
+ODE_MAX_EVALUATIONS = 1_000_000
+#: A continuous run is stopped early when the solver's pace so far projects more than this many
+#: times :data:`ODE_MAX_EVALUATIONS` (``t_final = 1e300`` is refused in a fraction of a second).
+_ODE_PROJECTION_FACTOR = 10_000
+_ODE_CHECK_EVERY = 10_000
+
+
+class ConsensusBreakdownError(ValueError, FloatingPointError):
+    """The covariances of a Kalman consensus run left double precision (e.g. zero communication noise).
+
+    Raised with the step (or time) where ``P`` underflowed to zero, lost
+    positivity or overflowed, and what to change; a ``ValueError`` (the
+    arguments ask for more than floating point can hold) and a
+    ``FloatingPointError``.
+    """
 
 
 # --------------------------------------------------------------------------- results
@@ -127,7 +176,7 @@ class SwitchingTopology:
     graphs: np.ndarray
 
     def __post_init__(self):
-        times = np.asarray(self.times, dtype=float)
+        times = _float_array(self.times, "times")
         graphs = _check_topologies(self.graphs, None, "graphs", stacked=True)
         if times.ndim != 1 or times.shape[0] != graphs.shape[0]:
             raise ValueError(
@@ -135,6 +184,8 @@ class SwitchingTopology:
             )
         if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
             raise ValueError("times must be finite and strictly increasing")
+        if graphs.ndim != 3:
+            raise ValueError(f"graphs must have shape (S, n, n) (one graph per switching time); got {graphs.shape}")
         object.__setattr__(self, "times", times)
         object.__setattr__(self, "graphs", graphs)
 
@@ -145,15 +196,23 @@ class SwitchingTopology:
 
     def at(self, t: float) -> np.ndarray:
         """The graph active at time `t`."""
+        if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) or not np.isfinite(t):
+            raise ValueError(f"t must be a finite time (s); got {t!r}")
         k = int(np.searchsorted(self.times, t, side="right")) - 1
         return self.graphs[max(k, 0)]
 
     @classmethod
     def periodic(cls, graphs: ArrayLike, dwell: float, t_final: float, t0: float = 0.0) -> "SwitchingTopology":
         """Cycle through `graphs`, each held for `dwell` s, from `t0` up to `t_final`."""
-        graphs = np.asarray(graphs, dtype=float)
-        if not dwell > 0:
-            raise ValueError(f"dwell must be positive; got {dwell}")
+        graphs = _check_topologies(graphs, None, "graphs", stacked=True)
+        dwell = _positive(dwell, "dwell", "s")
+        t_final = _finite_number(t_final, "t_final")
+        t0 = _finite_number(t0, "t0")
+        if t_final <= t0:
+            raise ValueError(f"t_final must be later than t0 = {t0:g} s; got {t_final:g}")
+        if (t_final - t0) / dwell > MAX_STEPS:
+            raise ValueError(f"dwell = {dwell:g} s over [t0, t_final] = [{t0:g}, {t_final:g}] s gives more than "
+                             f"{MAX_STEPS} switches; use a longer dwell or a shorter t_final")
         times = np.arange(t0, t_final, dwell)
         return cls(times, graphs[np.arange(times.size) % graphs.shape[0]])
 
@@ -194,13 +253,26 @@ def kalman_consensus_step(
     Returns
     -------
     xi_next, P_next : arrays of the shapes of `xi` and `P`
+
+    Raises
+    ------
+    ConsensusBreakdownError
+        If ``P_next`` underflows to zero or the result overflows (e.g. ``Omega = 0``
+        after a long run made ``P`` tiny).
     """
-    scalar, xi_v, P_m = _as_state(xi, P)
+    scalar, xi_v, P_m = _as_state(xi, P, "xi", "P")
     n, m = xi_v.shape[-2], xi_v.shape[-1]
-    g = _check_topologies(G, n, "G", stacked=False)
+    g = _check_topologies(G, n, "G", stacked=False, states="xi and P")
     _check_batch(g.shape[:-2], xi_v.shape[:-2], "G")
+    Q_, Om = _expand_Q(Q, n, m), _expand_omega(Omega, n, m)
     gen = None if rng is None else check_generator(rng)
-    xi_next, P_next = _step(xi_v, P_m, g, _expand_Q(Q, n, m), _expand_omega(Omega, n, m), gen, include_self)
+    _check_bool(include_self, "include_self")
+    try:
+        with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+            xi_next, P_next = _step(xi_v, P_m, g, Q_, Om, gen, include_self)
+    except np.linalg.LinAlgError:
+        xi_next, P_next = np.full_like(xi_v, np.nan), np.full_like(P_m, np.nan)
+    _check_trajectory(np.stack([xi_v, xi_next]), np.stack([P_m, P_next]), Om, "step", "kalman_consensus_step")
     return _from_state(scalar, xi_next, P_next)
 
 
@@ -236,18 +308,41 @@ def kalman_consensus_discrete(
     -------
     ConsensusResult
         ``t = 0..n_steps``; ``xi`` and ``P`` with a leading time axis of length ``n_steps + 1``.
+
+    Raises
+    ------
+    ConsensusBreakdownError
+        If ``P`` underflows to zero or a value overflows during the run. With
+        zero communication noise (``Omega = 0``) every message counts as exact
+        and ``P`` shrinks geometrically (by about ``1 / (1 + d_i)`` a step): on
+        a ring of 5 agents it leaves double precision at step 512. The message
+        names the step; the states have agreed to machine precision long before.
     """
-    scalar, xi, P = _as_state(xi0, P0)
+    scalar, xi, P = _as_state(xi0, P0, "xi0", "P0")
     n, m = xi.shape[-2], xi.shape[-1]
     Q_, Om = _expand_Q(Q, n, m), _expand_omega(Omega, n, m)
     gen = None if rng is None else check_generator(rng)
+    _check_bool(include_self, "include_self")
     graph_at, n_steps = _discrete_topology(topologies, n, n_steps, xi.shape[:-2])
+    _check_storage(n_steps, xi.size + P.size, "n_steps")
+    return _run_discrete(scalar, xi, P, graph_at, n_steps, Q_, Om, gen, include_self, "kalman_consensus_discrete")
+
+
+def _run_discrete(scalar, xi, P, graph_at, n_steps, Q_, Om, gen, include_self, who):
+    """The loop of :func:`kalman_consensus_discrete` on checked arguments; the trajectory is checked at the end."""
     xs, Ps = [xi], [P]
-    for k in range(n_steps):
-        xi, P = _step(xi, P, graph_at(k), Q_, Om, gen, include_self)
-        xs.append(xi)
-        Ps.append(P)
-    xi_t, P_t = _from_state(scalar, np.stack(xs), np.stack(Ps))
+    try:
+        with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+            for k in range(n_steps):
+                xi, P = _step(xi, P, graph_at(k), Q_, Om, gen, include_self)
+                xs.append(xi)
+                Ps.append(P)
+    except np.linalg.LinAlgError:  # a covariance became exactly singular: the step that failed is len(xs)
+        xs.append(np.full_like(xs[-1], np.nan))
+        Ps.append(np.full_like(Ps[-1], np.nan))
+    xs, Ps = np.stack(xs), np.stack(Ps)
+    _check_trajectory(xs, Ps, Om, "step", who)
+    xi_t, P_t = _from_state(scalar, xs, Ps)
     return ConsensusResult(np.arange(n_steps + 1), xi_t, P_t)
 
 
@@ -273,13 +368,29 @@ def consensus_matrix(
         identity (row-stochastic with positive diagonal in the scalar case).
         The stacked state is ``xi.reshape(n*m)`` (agent-major).
     """
-    P_arr = np.asarray(P, dtype=float)
+    P_arr = _single_run_P(P, "P")
     scalar = P_arr.ndim == 1
-    P_m = _check_P(P_arr[:, None, None] if scalar else P_arr, "P")
+    P_m = P_arr[:, None, None] if scalar else P_arr
     n, m = P_m.shape[0], P_m.shape[-1]
-    g = _check_topologies(G, n, "G", stacked=False).astype(float)
-    S = _inv_sum(P_m, _expand_omega(Omega, n, m))  # S[i, j] = (P_j + Omega_ij)^-1
-    P_next = _covariance_update(P_m, g, S, _expand_Q(Q, n, m), include_self)
+    g = _check_topologies(G, n, "G", stacked=False, states="P")
+    Om, Q_ = _expand_omega(Omega, n, m), _expand_Q(Q, n, m)
+    _check_bool(include_self, "include_self")
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        D = _consensus_matrix(P_m, g, Q_, Om, include_self)
+    if not np.all(np.isfinite(D)):
+        raise ConsensusBreakdownError(
+            "consensus_matrix: P is too small (or too large) to invert in double precision "
+            f"(smallest variance {_min_variance(P_m):.3g}); the matrix D is not representable"
+        )
+    return D
+
+
+def _consensus_matrix(P_m, g, Q_, Om, include_self):
+    """:func:`consensus_matrix` on checked arguments (P as (n, m, m), g boolean)."""
+    n, m = P_m.shape[0], P_m.shape[-1]
+    g = g.astype(float)
+    S = _inv_sum(P_m, Om)  # S[i, j] = (P_j + Omega_ij)^-1
+    P_next = _covariance_update(P_m, g, S, Q_, include_self)
     blocks = np.einsum("iab,ij,ijbc->ijac", P_next, g, S)
     blocks[np.arange(n), np.arange(n)] = np.eye(m) - blocks.sum(axis=1)
     D = blocks.transpose(0, 2, 1, 3).reshape(n * m, n * m)
@@ -321,15 +432,17 @@ def error_covariance(
     believed : (K+1, n) or (K+1, n, m, m) ndarray
         ``P_i[k]`` of eq. (4).
     """
-    P_arr = np.asarray(P0, dtype=float)
-    if P_arr.ndim not in (1, 3):
-        raise ValueError(f"P0 must be (n,) or (n, m, m) for a single run; got shape {P_arr.shape}")
+    P_arr = _single_run_P(P0, "P0")
     scalar = P_arr.ndim == 1
     n = P_arr.shape[0]
     m = 1 if scalar else P_arr.shape[-1]
     xi0 = np.zeros(n) if scalar else np.zeros((n, m))
-    run = kalman_consensus_discrete(xi0, P_arr, topologies, Q, Omega, n_steps=n_steps, include_self=include_self)
-    graph_at, n_steps = _discrete_topology(topologies, n, n_steps, ())
+    _, xi, P = _as_state(xi0, P_arr, "xi0", "P0")
+    Q_, Om = _expand_Q(Q, n, m), _expand_omega(Omega, n, m)
+    _check_bool(include_self, "include_self")
+    graph_at, n_steps = _discrete_topology(topologies, n, n_steps, (), "P0")
+    _check_storage(n_steps, (n * m) ** 2 + xi.size + P.size, "n_steps")
+    run = _run_discrete(scalar, xi, P, graph_at, n_steps, Q_, Om, None, include_self, "error_covariance")
     P_blocks = run.P[:, :, None, None] if scalar else run.P
     cov0 = np.zeros((n, m, n, m))
     cov0[np.arange(n), :, np.arange(n), :] = P_blocks[0]
@@ -337,10 +450,14 @@ def error_covariance(
     Phi = np.eye(n * m)
     actual = [P_blocks[0]]
     for k in range(n_steps):
-        Phi = consensus_matrix(run.P[k], graph_at(k), Q, Omega, include_self=include_self) @ Phi
+        P_k = run.P[k]
+        P_k = P_k[:, None, None] if scalar else P_k
+        Phi = _consensus_matrix(P_k, graph_at(k), Q_, Om, include_self) @ Phi
         C = (Phi @ cov0 @ Phi.T).reshape(n, m, n, m)
         actual.append(C[np.arange(n), :, np.arange(n), :])
     actual = np.stack(actual)
+    if not np.all(np.isfinite(actual)):
+        raise ConsensusBreakdownError("error_covariance: the actual covariances overflowed; rescale P0")
     return (actual[..., 0, 0], run.P) if scalar else (actual, run.P)
 
 
@@ -383,7 +500,11 @@ def kalman_consensus_continuous(
         consecutive `switch_times` (default: the `t_eval` grid) and sampled at
         the start of each interval.
     t_final : float
-        End time (s); the run starts at 0.
+        End time (s), finite and > 0; the run starts at 0. Without noise the
+        ODE solver may use at most :data:`ODE_MAX_EVALUATIONS` right-hand-side
+        evaluations (a ``ValueError`` naming `t_final` otherwise, raised early
+        when the pace so far shows the horizon is out of reach); with noise
+        ``t_final / dt`` may be at most :data:`MAX_STEPS`.
     Q : float, (m, m) or (n, m, m) array_like
         Process-noise intensity (the paper assumes Q > 0; Q = 0 is accepted).
     Omega : float, (m, m) or (n, n, m, m) array_like
@@ -401,30 +522,55 @@ def kalman_consensus_continuous(
     include_self : bool
         Keep the ``g_ii = 1`` term of eq. (1).
     rtol, atol : float
-        Tolerances of the ODE solver.
+        Tolerances of the ODE solver (finite, > 0).
 
     Returns
     -------
     ConsensusResult
+
+    Raises
+    ------
+    ConsensusBreakdownError
+        If ``P`` leaves double precision (zero communication noise makes it
+        decay exponentially) or loses positivity in the ODE solution.
+    RuntimeError
+        If the Euler-Maruyama step `dt` is too large for eq. (1).
     """
-    scalar, xi, P = _as_state(xi0, P0)
+    scalar, xi, P = _as_state(xi0, P0, "xi0", "P0")
     n, m = xi.shape[-2], xi.shape[-1]
-    if not (np.isfinite(t_final) and t_final > 0):
-        raise ValueError(f"t_final must be a positive number; got {t_final}")
+    t_final = _positive(t_final, "t_final", "s")
     Q_, Om = _expand_Q(Q, n, m), _expand_omega(Omega, n, m)
-    t_eval = np.linspace(0.0, t_final, 201) if t_eval is None else np.asarray(t_eval, dtype=float)
-    if t_eval.ndim != 1 or t_eval[0] < 0 or t_eval[-1] > t_final or np.any(np.diff(t_eval) < 0):
-        raise ValueError("t_eval must be a non-decreasing 1-D grid inside [0, t_final]")
-    if switch_times is not None and not callable(topology):
-        raise ValueError("switch_times is only used with a callable topology; "
-                         "a SwitchingTopology carries its own times")
-    breaks, graphs = _continuous_topology(topology, n, t_final, t_eval, switch_times)
-    if rng is None:
-        xs, Ps = _integrate_ode(xi, P, breaks, graphs, Q_, Om, t_eval, include_self, rtol, atol)
+    if t_eval is None:
+        t_eval = np.linspace(0.0, t_final, 201)
     else:
-        if not dt > 0:
-            raise ValueError(f"dt must be positive; got {dt}")
-        xs, Ps = _integrate_em(xi, P, breaks, graphs, Q_, Om, t_eval, include_self, check_generator(rng), dt)
+        t_eval = _float_array(t_eval, "t_eval")
+        if t_eval.ndim != 1 or t_eval.size == 0 or not np.all(np.isfinite(t_eval)):
+            raise ValueError(f"t_eval must be a finite, non-empty 1-D grid of times; got shape {t_eval.shape}")
+    if t_eval[0] < 0 or t_eval[-1] > t_final or np.any(np.diff(t_eval) < 0):
+        raise ValueError("t_eval must be a non-decreasing 1-D grid inside [0, t_final]")
+    _check_storage(t_eval.size, xi.size + P.size, "t_eval")
+    if switch_times is not None:
+        if not callable(topology):
+            raise ValueError("switch_times is only used with a callable topology; "
+                             "a SwitchingTopology carries its own times")
+        switch_times = _float_array(switch_times, "switch_times")
+        if switch_times.ndim != 1 or not np.all(np.isfinite(switch_times)):
+            raise ValueError(f"switch_times must be a finite 1-D sequence of times; got shape {switch_times.shape}")
+    _check_bool(include_self, "include_self")
+    rtol = _positive(rtol, "rtol")
+    atol = _positive(atol, "atol")
+    dt = _positive(dt, "dt", "s")
+    gen = None if rng is None else check_generator(rng)
+    if gen is not None and t_eval[-1] / dt > MAX_STEPS:
+        raise ValueError(f"t_final / dt = {t_eval[-1] / dt:.3g} Euler-Maruyama steps is more than MAX_STEPS = "
+                         f"{MAX_STEPS}; use a shorter t_final or a larger dt")
+    breaks, graphs = _continuous_topology(topology, n, t_final, t_eval, switch_times)
+    if gen is None:
+        with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+            xs, Ps = _integrate_ode(xi, P, breaks, graphs, Q_, Om, t_eval, include_self, rtol, atol)
+        _check_trajectory(xs, Ps, Om, "time", "kalman_consensus_continuous", t_eval)
+    else:
+        xs, Ps = _integrate_em(xi, P, breaks, graphs, Q_, Om, t_eval, include_self, gen, dt)
     xi_t, P_t = _from_state(scalar, xs, Ps)
     return ConsensusResult(t_eval, xi_t, P_t)
 
@@ -457,21 +603,33 @@ def average_consensus(
     ConsensusResult
         With ``P = None``.
     """
-    xi = np.asarray(xi0, dtype=float)
-    if xi.ndim < 1 or not np.all(np.isfinite(xi)):
-        raise ValueError(f"xi0 must be a finite array of shape (..., n); got shape {xi.shape}")
-    if step_size is not None and not step_size > 0:
-        raise ValueError(f"step_size must be positive; got {step_size}")
+    xi = _float_array(xi0, "xi0")
+    if xi.ndim < 1 or xi.shape[-1] == 0:
+        raise ValueError(f"xi0 must have shape (..., n) with at least one agent; got shape {xi.shape}")
+    _finite(xi, "xi0")
+    if step_size is not None:
+        step_size = _positive(step_size, "step_size")
     n = xi.shape[-1]
-    graph_at, n_steps = _discrete_topology(topologies, n, n_steps, xi.shape[:-1])
+    graph_at, n_steps = _discrete_topology(topologies, n, n_steps, xi.shape[:-1], "xi0")
+    _check_storage(n_steps, xi.size, "n_steps")
     xs = [xi]
-    for k in range(n_steps):
-        g = graph_at(k).astype(float)
-        deg = g.sum(axis=-1)
-        eps = step_size if step_size is not None else 1.0 / (1.0 + deg.max(axis=-1, keepdims=True))
-        xi = xi + eps * (np.einsum("...ij,...j->...i", g, xi) - deg * xi)
-        xs.append(xi)
-    return ConsensusResult(np.arange(n_steps + 1), np.stack(xs), None)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for k in range(n_steps):
+            g = graph_at(k).astype(float)
+            deg = g.sum(axis=-1)
+            eps = step_size if step_size is not None else 1.0 / (1.0 + deg.max(axis=-1, keepdims=True))
+            xi = xi + eps * (np.einsum("...ij,...j->...i", g, xi) - deg * xi)
+            xs.append(xi)
+    xs = np.stack(xs)
+    if not np.all(np.isfinite(xs)):
+        k = int(np.argmin(np.isfinite(xs).reshape(xs.shape[0], -1).all(axis=1)))
+        raise ValueError(
+            f"average_consensus overflowed at step {k}: "
+            + ("step_size is too large for these graphs (the iteration is stable for step_size < 2 / "
+               "(largest Laplacian eigenvalue)); use a smaller step_size or the default"
+               if step_size is not None else "xi0 is too large for floating point; rescale xi0")
+        )
+    return ConsensusResult(np.arange(n_steps + 1), xs, None)
 
 
 def central_fusion(xi0: ArrayLike, P0: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -490,10 +648,16 @@ def central_fusion(xi0: ArrayLike, P0: ArrayLike) -> tuple[np.ndarray, np.ndarra
     xi_f : (...) or (..., m) ndarray
     P_f : (...) or (..., m, m) ndarray
     """
-    scalar, xi, P = _as_state(xi0, P0)
-    info = _inv(P)
-    P_f = _inv(info.sum(axis=-3))
-    xi_f = np.einsum("...ab,...b->...a", P_f, np.einsum("...iab,...ib->...a", info, xi))
+    scalar, xi, P = _as_state(xi0, P0, "xi0", "P0")
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        info = _inv(P)
+        P_f = _inv(info.sum(axis=-3))
+        xi_f = np.einsum("...ab,...b->...a", P_f, np.einsum("...iab,...ib->...a", info, xi))
+    if not (np.all(np.isfinite(P_f)) and np.all(np.isfinite(xi_f))):
+        raise ValueError(
+            "central_fusion: the fused estimate is not representable in floating point: P0 is too small to "
+            f"invert (smallest variance {_min_variance(P):.3g}) or xi0 too large; rescale the problem"
+        )
     if scalar:
         return xi_f[..., 0], P_f[..., 0, 0]
     return xi_f, P_f
@@ -517,7 +681,7 @@ def random_pairings(
     Parameters
     ----------
     n_agents : int
-        Team size n >= 2.
+        Team size n >= 2 (a pairing needs two agents; one agent has nobody to meet).
     n_steps : int
         Number of steps K.
     rng : numpy.random.Generator or int
@@ -532,14 +696,19 @@ def random_pairings(
         Symmetric 0/1 adjacency, one perfect (or near-perfect) matching per step.
     """
     gen = check_generator(rng)
-    for name, val, low in (("n_agents", n_agents, 2), ("n_steps", n_steps, 1), ("min_duration", min_duration, 1)):
-        if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < low:
-            raise ValueError(f"{name} must be an integer >= {low}; got {val!r}")
-    if not isinstance(max_duration, (int, np.integer)) or max_duration < min_duration:
+    if isinstance(n_agents, (int, np.integer)) and not isinstance(n_agents, bool) and n_agents == 1:
+        raise ValueError("n_agents must be an integer >= 2: one agent has nobody to pair with "
+                         "(its graph would be empty at every step); got 1")
+    n_agents = check_positive_int(n_agents, "n_agents", minimum=2)
+    n_steps = _check_steps(n_steps)
+    min_duration = check_positive_int(min_duration, "min_duration", minimum=1)
+    if isinstance(max_duration, bool) or not isinstance(max_duration, (int, np.integer)):
+        raise TypeError(f"max_duration must be an integer >= min_duration ({min_duration}); "
+                        f"got {type(max_duration).__name__} {max_duration!r}")
+    if max_duration < min_duration:
         raise ValueError(f"max_duration must be an integer >= min_duration ({min_duration}); got {max_duration!r}")
-    R = 1 if size is None else int(size)
-    if R < 1:
-        raise ValueError(f"size must be a positive integer; got {size!r}")
+    R = 1 if size is None else check_positive_int(size, "size", minimum=1)
+    _check_storage(n_steps, R * (n_agents**2 + n_agents + 1), "n_steps")
     # epoch starts: a new epoch begins after each drawn duration (at most n_steps epochs)
     durations = gen.integers(min_duration, max_duration + 1, size=(R, n_steps))
     starts = np.cumsum(durations, axis=1) - durations  # start step of each epoch
@@ -563,8 +732,9 @@ def random_pairings(
 def periodic_sequence(graphs: ArrayLike, dwell: int, n_steps: int) -> np.ndarray:
     """Cycle through `graphs`, each held for `dwell` steps: a (n_steps, n, n) sequence."""
     graphs = _check_topologies(graphs, None, "graphs", stacked=True).astype(float)
-    if isinstance(dwell, bool) or not isinstance(dwell, (int, np.integer)) or dwell < 1:
-        raise ValueError(f"dwell must be a positive integer; got {dwell!r}")
+    dwell = check_positive_int(dwell, "dwell", minimum=1)
+    n_steps = _check_steps(n_steps)
+    _check_storage(n_steps, graphs[0].size, "n_steps")
     return graphs[(np.arange(n_steps) // dwell) % graphs.shape[0]]
 
 
@@ -583,6 +753,9 @@ def spanning_tree_windows(adjacencies: ArrayLike, window: int) -> np.ndarray:
     (ceil(K / window),) ndarray of bool
     """
     stack = _check_topologies(adjacencies, None, "adjacencies", stacked=True).astype(float)
+    if stack.ndim != 3:
+        raise ValueError(f"adjacencies must be one switching sequence of shape (K, n, n); got {stack.shape}")
+    window = check_positive_int(window, "window", minimum=1)
     return np.array([has_spanning_tree(U) for U in unions_over_windows(stack, window)])
 
 
@@ -594,8 +767,9 @@ def union_condition_holds(adjacencies: ArrayLike, window: int, drop_partial: boo
     intervals", checked over the horizon given). A trailing window shorter
     than `window` is ignored when `drop_partial` is True.
     """
+    _check_bool(drop_partial, "drop_partial")
     ok = spanning_tree_windows(adjacencies, window)
-    K = np.asarray(adjacencies).shape[0]
+    K = np.shape(adjacencies)[0]
     if drop_partial and K % window and ok.size > 1:
         ok = ok[:-1]
     return bool(np.all(ok))
@@ -612,8 +786,15 @@ def spread(xi: ArrayLike) -> np.ndarray:
     -------
     (...) ndarray
     """
-    xi = np.asarray(xi, dtype=float)
-    return (xi.max(axis=-2) - xi.min(axis=-2)).max(axis=-1)
+    xi = _float_array(xi, "xi")
+    if xi.ndim < 2 or xi.shape[-2] == 0 or xi.shape[-1] == 0:
+        raise ValueError(f"xi must have shape (..., n, m) with n, m >= 1; got shape {xi.shape}")
+    _finite(xi, "xi")
+    with np.errstate(over="ignore"):
+        out = (xi.max(axis=-2) - xi.min(axis=-2)).max(axis=-1)
+    if not np.all(np.isfinite(out)):
+        raise ValueError("spread overflowed: xi holds values too far apart for floating point; rescale xi")
+    return out
 
 
 # --------------------------------------------------------------------------- private helpers
@@ -712,8 +893,14 @@ def _scalar_matvec(M: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 def _integrate_ode(xi, P, breaks, graphs, Q, Om, t_eval, include_self, rtol, atol):
     split = xi.size
+    t_final = breaks[-1]
+    count = [0]
+    zero_noise = bool(np.any(np.linalg.eigvalsh(Om) <= 0))
 
     def fun(_t, y, g):
+        count[0] += 1
+        if count[0] % _ODE_CHECK_EVERY == 0:
+            _ode_budget(count[0], _t, t_final, y[split:].reshape(P.shape), zero_noise)
         dxi, dP, _ = _rhs(y[:split].reshape(xi.shape), y[split:].reshape(P.shape), g, Q, Om, include_self)
         return np.concatenate([dxi.ravel(), dP.ravel()])
 
@@ -732,6 +919,26 @@ def _integrate_ode(xi, P, breaks, graphs, Q, Om, t_eval, include_self, rtol, ato
         out[sel] = sol.y[:, np.searchsorted(pts, t_eval[sel])].T
         y = sol.y[:, -1]
     return out[:, :split].reshape((-1,) + xi.shape), _sym(out[:, split:].reshape((-1,) + P.shape))
+
+
+def _ode_budget(count, t, t_final, P, zero_noise):
+    """Stop a continuous run that has used, or at its pace so far would use, too many evaluations."""
+    limit = ODE_MAX_EVALUATIONS
+    projected = count * t_final / t if t > 0 else np.inf
+    if count < limit and projected <= _ODE_PROJECTION_FACTOR * limit:
+        return
+    with np.errstate(invalid="ignore"):
+        p_min = _min_variance(P)
+    reach = (f"at its pace so far it would need about {projected:.3g}" if count < limit
+             else f"it has used {count}")
+    raise ValueError(
+        f"t_final = {t_final:.4g} s is out of reach of the ODE solver: after {count} evaluations of eqs. (1)-(3) "
+        f"it is at t = {t:.4g} s, and {reach} evaluations (ODE_MAX_EVALUATIONS = {limit}). Either t_final is "
+        f"far longer than the time the run takes to settle, or the equations are stiff (smallest variance now "
+        f"{p_min:.3g}"
+        + ("; with zero communication noise (singular Omega) P collapses and the rates P_i / P_j explode); "
+           "shorten t_final or give Omega > 0" if zero_noise else "); shorten t_final or loosen rtol/atol")
+    )
 
 
 def _integrate_em(xi, P, breaks, graphs, Q, Om, t_eval, include_self, gen, dt):
@@ -772,7 +979,8 @@ def _integrate_em(xi, P, breaks, graphs, Q, Om, t_eval, include_self, gen, dt):
 def _continuous_topology(topology, n, t_final, t_eval, switch_times):
     if isinstance(topology, SwitchingTopology):
         if topology.n_agents != n:
-            raise ValueError(f"topology has {topology.n_agents} agents; the states have {n}")
+            raise ValueError(f"topology has {topology.n_agents} agents; the states have {n} "
+                             "(xi0 and P0 hold one row per agent)")
         keep = topology.times < t_final
         times, graphs = topology.times[keep], topology.graphs[keep]
         if times.size == 0 or times[0] > 0:
@@ -783,25 +991,27 @@ def _continuous_topology(topology, n, t_final, t_eval, switch_times):
     if callable(topology):
         pts = np.asarray(t_eval if switch_times is None else switch_times, dtype=float)
         breaks = np.unique(np.concatenate([[0.0], pts[(pts > 0) & (pts < t_final)], [t_final]]))
-        graphs = np.stack([_check_topologies(topology(t), n, "topology(t)", stacked=False) for t in breaks[:-1]])
+        graphs = np.stack([_check_topologies(topology(t), n, "topology(t)", stacked=False, states="xi0 and P0")
+                           for t in breaks[:-1]])
         return breaks, graphs
-    g = _check_topologies(topology, n, "topology", stacked=False)
+    g = _check_topologies(topology, n, "topology", stacked=False, states="xi0 and P0")
     return np.array([0.0, t_final]), g[None]
 
 
-def _discrete_topology(topologies, n, n_steps, batch):
+def _discrete_topology(topologies, n, n_steps, batch, states="xi0 and P0"):
     if callable(topologies):
         if n_steps is None:
             raise ValueError("n_steps is required when topologies is a function of k")
         n_steps = _check_steps(n_steps)
-        return (lambda k: _check_topologies(topologies(k), n, f"topologies({k})", stacked=False)), n_steps
-    arr = np.asarray(topologies, dtype=float)
+        return (lambda k: _check_topologies(topologies(k), n, f"topologies({k})", stacked=False, states=states)), \
+            n_steps
+    arr = _float_array(topologies, "topologies")
     if arr.ndim == 2:
-        g = _check_topologies(arr, n, "topologies", stacked=False)
+        g = _check_topologies(arr, n, "topologies", stacked=False, states=states)
         if n_steps is None:
             raise ValueError("n_steps is required when topologies is a single (n, n) graph")
         return (lambda k: g), _check_steps(n_steps)
-    g = _check_topologies(arr, n, "topologies", stacked=True)
+    g = _check_topologies(arr, n, "topologies", stacked=True, states=states)
     _check_batch(g.shape[1:-2], batch, "topologies")
     if n_steps is None:
         n_steps = g.shape[0]
@@ -822,52 +1032,129 @@ def _check_batch(graph_batch, state_batch, name):
         ) from None
 
 
-def _check_steps(n_steps):
-    if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 0:
-        raise ValueError(f"n_steps must be a non-negative integer; got {n_steps!r}")
-    return int(n_steps)
+def _check_steps(n_steps, name="n_steps"):
+    n_steps = check_positive_int(n_steps, name, minimum=1)
+    if n_steps > MAX_STEPS:
+        raise ValueError(f"{name} = {n_steps} is more than MAX_STEPS = {MAX_STEPS}; run fewer steps (in chunks)")
+    return n_steps
 
 
-def _check_topologies(G, n, name, stacked):
-    """Return boolean adjacency g_ij (i hears j); (n, n) or (K, ..., n, n) if `stacked`."""
-    arr = np.asarray(G, dtype=float)
-    if arr.ndim < 2 or arr.shape[-1] != arr.shape[-2]:
+def _check_storage(n_rows, per_row, name):
+    """Refuse a trajectory of more than :data:`MAX_STORED` numbers (``n_rows + 1`` rows of `per_row`)."""
+    total = (int(n_rows) + 1) * int(per_row)
+    if total > MAX_STORED:
+        raise ValueError(
+            f"{name} = {n_rows} would store {total:.3g} numbers ({8 * total / 1e9:.3g} GB), more than "
+            f"MAX_STORED = {MAX_STORED:.3g}; run fewer steps or fewer runs at a time"
+        )
+
+
+
+
+def _finite(arr, name):
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    return arr
+
+
+def _positive(x, name, unit=""):
+    """A finite number > 0 (numpy 0-d arrays accepted), as a float."""
+    if isinstance(x, np.ndarray) and x.ndim == 0:
+        x = x[()]
+    return check_positive(x, name, unit)
+
+
+def _finite_number(x, name):
+    if isinstance(x, np.ndarray) and x.ndim == 0:
+        x = x[()]
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a real number; got {type(x).__name__} {x!r}")
+    if not np.isfinite(x):
+        raise ValueError(f"{name} must be a finite number; got {x!r}")
+    return float(x)
+
+
+def _check_bool(value, name):
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False; got {type(value).__name__} {value!r}")
+
+
+def _check_topologies(G, n, name, stacked, states="the states"):
+    """Return boolean adjacency g_ij (i hears j); (n, n) or (K, ..., n, n) if `stacked`.
+
+    Directed graphs are accepted (the scheme and its theorems allow them).
+    """
+    arr = _float_array(G, name)
+    if arr.ndim < 2 or arr.shape[-1] != arr.shape[-2] or arr.shape[-1] == 0:
         raise ValueError(f"{name} must be a square (n, n) adjacency (or a stack of them); got shape {arr.shape}")
     if stacked and arr.ndim < 3:
         raise ValueError(f"{name} must be a switching sequence of shape (K, n, n); got shape {arr.shape}")
+    if stacked and arr.shape[0] == 0:
+        raise ValueError(f"{name} must hold at least one graph; got shape {arr.shape}")
     if n is not None and arr.shape[-1] != n:
-        raise ValueError(f"{name} is a graph on {arr.shape[-1]} agents; expected {n} (shape {arr.shape})")
-    if not np.all(np.isfinite(arr)) or np.any(arr < 0):
-        raise ValueError(f"{name} must have finite, non-negative entries")
-    if np.any(np.diagonal(arr, axis1=-2, axis2=-1) != 0):
+        raise ValueError(f"{name} is a graph on {arr.shape[-1]} agents; expected {n}, the number of agents in "
+                         f"{states} (shape {arr.shape})")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    diag = np.diagonal(arr, axis1=-2, axis2=-1)
+    if np.any(arr < 0):
+        if np.all(diag >= 0) and np.any(diag > 0) and np.allclose(arr.sum(axis=-1), 0.0):
+            raise ValueError(
+                f"{name} looks like a graph Laplacian (negative off-diagonal entries, rows summing to zero); "
+                "pass the adjacency matrix instead (A = diag(diag(L)) - L)"
+            )
+        raise ValueError(f"{name} must have finite, non-negative entries (G[i, j] > 0: i hears j); "
+                         f"smallest entry is {arr.min():.3g}")
+    if np.any(diag != 0):
         raise ValueError(f"{name} must have a zero diagonal (g_ii = 1 is implied by the scheme)")
     return arr > 0
 
 
-def _check_P(P, name):
-    check_covariance(P, name, definite=True)
-    return P
+def _single_run_P(P, name):
+    """Covariances of a single run: (n,) positive variances or (n, m, m) positive definite."""
+    P_arr = _float_array(P, name)
+    if P_arr.ndim not in (1, 3) or P_arr.shape[0] == 0:
+        raise ValueError(f"{name} must be (n,) or (n, m, m) for a single run; got shape {P_arr.shape}")
+    if P_arr.ndim == 1:
+        _finite(P_arr, name)
+        if np.any(P_arr <= 0):
+            raise ValueError(f"{name} must hold positive variances; smallest is {P_arr.min():.3g}")
+    else:
+        check_covariance(P_arr, name, definite=True)
+    return P_arr
 
 
-def _as_state(xi, P):
+def _as_state(xi, P, xi_name, P_name):
     """Bring (xi, P) to the vector form (..., n, m), (..., n, m, m); report if scalar."""
-    xi = np.asarray(xi, dtype=float)
-    P = np.asarray(P, dtype=float)
-    if xi.ndim < 1 or not np.all(np.isfinite(xi)):
-        raise ValueError(f"xi must be a finite array of shape (..., n) or (..., n, m); got shape {xi.shape}")
+    xi = _float_array(xi, xi_name)
+    P = _float_array(P, P_name)
+    if xi.ndim < 1 or xi.shape[-1] == 0:
+        raise ValueError(f"{xi_name} must have shape (..., n) or (..., n, m) with at least one agent; "
+                         f"got shape {xi.shape}")
+    _finite(xi, xi_name)
     if P.ndim == xi.ndim:  # scalar information states
         if P.shape != xi.shape:
-            raise ValueError(f"P must have the shape of xi {xi.shape} for scalar states; got {P.shape}")
-        if not np.all(np.isfinite(P)) or np.any(P <= 0):
-            raise ValueError("P must hold positive, finite variances")
+            raise ValueError(f"{P_name} must have the shape of {xi_name} {xi.shape} for scalar states; "
+                             f"got shape {P.shape}")
+        _finite(P, P_name)
+        if np.any(P <= 0):
+            raise ValueError(f"{P_name} must hold positive variances; smallest is {P.min():.3g}")
         return True, xi[..., None], P[..., None, None]
     if P.ndim == xi.ndim + 1:
+        if xi.ndim < 2 or xi.shape[-2] == 0:
+            raise ValueError(
+                f"{xi_name} of shape {xi.shape} is a scalar state per agent: {P_name} must then have the same "
+                f"shape (one variance per agent); got shape {P.shape}"
+            )
         m = xi.shape[-1]
         if P.shape != xi.shape + (m,):
-            raise ValueError(f"P must have shape {xi.shape + (m,)} for states of shape {xi.shape}; got {P.shape}")
-        return False, xi, _check_P(P, "P")
+            raise ValueError(f"{P_name} must have shape {xi.shape + (m,)} to match {xi_name} of shape {xi.shape}; "
+                             f"got shape {P.shape}")
+        check_covariance(P, P_name, definite=True)
+        return False, xi, P
     raise ValueError(
-        f"P must have shape (..., n) (scalar states) or (..., n, m, m); got {P.shape} for xi of shape {xi.shape}"
+        f"{P_name} must have shape (..., n) (scalar states) or (..., n, m, m); got shape {P.shape} for "
+        f"{xi_name} of shape {xi.shape}"
     )
 
 
@@ -878,22 +1165,77 @@ def _from_state(scalar, xi, P):
 
 
 def _expand_Q(Q, n, m):
-    Q = np.asarray(Q, dtype=float)
+    Q = _float_array(Q, "Q")
     if Q.ndim == 0:
         Q = Q * np.eye(m)
     if Q.shape not in ((m, m), (n, m, m)):
-        raise ValueError(f"Incompatible dimensions of Q; expected a scalar, ({m}, {m}) or ({n}, {m}, {m}); got {Q.shape}")
-    check_covariance(Q, "Q")
-    return Q
+        raise ValueError(
+            f"Incompatible dimensions of Q; expected a scalar, ({m}, {m}) or ({n}, {m}, {m}); got {Q.shape}"
+        )
+    return cached_covariance(Q, "Q")
 
 
 def _expand_omega(Omega, n, m):
-    Om = np.asarray(Omega, dtype=float)
+    Om = _float_array(Omega, "Omega")
     if Om.ndim == 0:
         Om = Om * np.eye(m)
     if Om.shape not in ((m, m), (n, n, m, m)):
         raise ValueError(
             f"Incompatible dimensions of Omega; expected a scalar, ({m}, {m}) or ({n}, {n}, {m}, {m}); got {Om.shape}"
         )
-    check_covariance(Om, "Omega")
-    return Om
+    return cached_covariance(Om, "Omega")
+
+
+def _min_variance(P):
+    with np.errstate(invalid="ignore"):
+        d = np.diagonal(P, axis1=-2, axis2=-1)
+        return float(np.nanmin(d)) if np.any(np.isfinite(d)) else float("nan")
+
+
+def _check_trajectory(xs, Ps, Om, unit, who, times=None):
+    """Raise :class:`ConsensusBreakdownError` at the first row of (xs, Ps) that is not finite or has P_ii <= 0.
+
+    xs : (T, ..., n, m), Ps : (T, ..., n, m, m) in vector form; `unit` is "step" or "time".
+    """
+    with np.errstate(over="ignore", invalid="ignore"):  # fast path: a NaN/inf or P_ii <= 0 spoils one of these
+        if (np.isfinite(xs.sum()) and np.isfinite(Ps.sum())
+                and np.diagonal(Ps, axis1=-2, axis2=-1).min() > 0):
+            return
+    T = xs.shape[0]
+    ok = np.isfinite(xs).reshape(T, -1).all(axis=1) & np.isfinite(Ps).reshape(T, -1).all(axis=1)
+    with np.errstate(invalid="ignore"):
+        ok &= (np.diagonal(Ps, axis1=-2, axis2=-1) > 0).reshape(T, -1).all(axis=1)
+    if ok.all():
+        return
+    k = int(np.argmin(ok))
+    where = f"step {k}" if times is None else f"t = {times[k]:.4g} s"
+    last = f"step {k - 1}" if times is None else f"t = {times[k - 1]:.4g} s"
+    prev = Ps[k - 1] if k > 0 else Ps[0]
+    agree = float(np.max(spread(xs[k - 1]))) if k > 0 and np.all(np.isfinite(xs[k - 1])) else float("nan")
+    with np.errstate(invalid="ignore"):
+        P_bad = not (np.all(np.isfinite(Ps[k])) and np.all(np.diagonal(Ps[k], axis1=-2, axis2=-1) > 0))
+    if not P_bad:
+        raise ConsensusBreakdownError(f"{who}: the information states overflowed at {where}: xi0 is too large "
+                                      "for floating point; rescale xi0")
+    if who == "kalman_consensus_step":
+        earlier = ""
+    elif times is None:
+        earlier = f", or stop earlier (n_steps <= {k - 1})"
+    else:
+        earlier = f", or stop earlier (t_final <= {times[k - 1]:.4g} s)"
+    if bool(np.any(np.linalg.eigvalsh(Om) <= 0)):
+        cause = (
+            "Omega is singular (zero communication noise), so every received state counts as exact and P "
+            + ("shrinks geometrically" if times is None else "decays exponentially")
+            + f"; the smallest variance was {_min_variance(prev):.3g} at {last}"
+            + ("" if np.isnan(agree) else f", when the states agreed to {agree:.3g}")
+            + f". Give Omega > 0 (a little communication noise){earlier}"
+        )
+    else:
+        cause = (f"the smallest variance was {_min_variance(prev):.3g} at {last}: P0, Q and Omega span too many "
+                 "orders of magnitude for double precision; rescale the problem"
+                 + ("" if times is None else " or tighten atol"))
+    raise ConsensusBreakdownError(
+        f"{who}: the covariances P left double precision at {where} (P underflowed to zero, lost positivity "
+        f"or overflowed): {cause}"
+    )

@@ -30,6 +30,20 @@ N filters (and all Monte Carlo runs) then advance in a handful of batched
 Shapes: team states are ``(..., N, 2n)`` (rows ``[p_j; v_j]``), covariances
 ``(..., 2nN, 2nN)`` in the matching flattened order; leading axes are the
 estimating agent and Monte Carlo runs.
+
+Input checks
+------------
+The public functions check every argument and raise a ``ValueError`` or
+``TypeError`` naming it: finite states, ``dt > 0``, covariances symmetric
+positive semidefinite (``R`` definite). The constant matrices (``Q_team``,
+``R``) are checked once per distinct value; a covariance that changes every
+step (``Sigma``) is checked by one Cholesky factorisation of
+``Sigma + 1e-8 max(1, max|Sigma|) I`` (the tolerance of
+:func:`mascore._validation.check_covariance`, a few times cheaper than its
+eigenvalues). The simulator checks once and then runs unchecked kernels. One
+agent (``N = 1``) and an isolated agent (observing only itself) are defined: the
+update then uses the agent's own measurement only. A result that overflows
+raises instead of returning NaN or inf.
 """
 
 from __future__ import annotations
@@ -40,21 +54,25 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._progress import progress_bar
-from ._validation import check_covariance, check_generator
+from ._validation import SYMMETRY_RTOL, cached_covariance, check_covariance, check_generator, check_positive_int
 from .flocking import (
     FlockingGains,
     FlockingRun,
     _check_divergence,
+    _check_dt,
+    _check_gains,
+    _check_range,
     _check_steps,
     _check_team,
     _chol,
+    _closed_loop_jacobian,
+    _closed_loop_step,
+    _control_from_views,
+    _finite_result,
+    _float_array,
     _propagate,
-    closed_loop_jacobian,
-    closed_loop_step,
-    control_from_views,
 )
 from .graphs import proximity_graph
-from .kalman import symmetrize
 from .sensing import measure, team_noise_covariance
 
 __all__ = [
@@ -76,12 +94,12 @@ def ekf_predict(
     X_hat : (..., N, 2n) array_like
         Updated estimates of the team (one per estimating agent / run).
     Sigma : (..., 2nN, 2nN) array_like
-        Their error covariances.
+        Their error covariances (symmetric positive semidefinite).
     dt : float
-        Sampling time (s).
+        Sampling time (s), finite and > 0.
     gains : FlockingGains
     Q_team : (2nN, 2nN) array_like
-        Team process-noise covariance ``I_N kron Q``.
+        Team process-noise covariance ``I_N kron Q`` (symmetric positive semidefinite).
 
     Returns
     -------
@@ -89,14 +107,13 @@ def ekf_predict(
     Sigma_pred : (..., 2nN, 2nN) ndarray
     """
     X_hat = _check_team(X_hat, "X_hat")
-    Sigma = np.asarray(Sigma, dtype=float)
     M = X_hat.shape[-1] * X_hat.shape[-2]
-    if Sigma.shape[-2:] != (M, M):
-        raise ValueError(f"Incompatible dimensions of Sigma; expected (..., {M}, {M}) but found {Sigma.shape}")
-    Q_team = np.asarray(Q_team, dtype=float)
-    if Q_team.shape != (M, M):
-        raise ValueError(f"Incompatible dimensions of Q_team; expected ({M}, {M}) but found {Q_team.shape}")
-    return _predict(X_hat, Sigma, dt, gains, Q_team)
+    Sigma = _check_sigma(Sigma, "Sigma", M, X_hat.shape[:-2], "X_hat")
+    dt = _check_dt(dt)
+    _check_gains(gains)
+    Q_team = _constant_covariance(Q_team, "Q_team", M)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _finite_result(_predict(X_hat, Sigma, dt, gains, Q_team), "ekf_predict", "X_hat, Sigma")
 
 
 def masked_update(
@@ -126,20 +143,30 @@ def masked_update(
         ``(I - G_i H_i) Sigma_i^-`` of eq. (20) (equal to the Joseph form for
         this optimal gain), symmetrized.
     """
+    X_pred, Sigma_pred, z, observed, R = _update_args(X_pred, Sigma_pred, z, observed, R)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _finite_result(_update(X_pred, Sigma_pred, z, observed, R), "masked_update", "X_pred, Sigma_pred, z")
+
+
+def _update_args(X_pred, Sigma_pred, z, observed, R):
+    """Check the arguments of :func:`masked_update`."""
     X_pred = _check_team(X_pred, "X_pred")
     N, m = X_pred.shape[-2:]
     M = N * m
-    Sigma_pred = np.asarray(Sigma_pred, dtype=float)
-    if Sigma_pred.shape[-2:] != (M, M):
-        raise ValueError(f"Incompatible dimensions of Sigma_pred; expected (..., {M}, {M}) but found {Sigma_pred.shape}")
+    batch = X_pred.shape[:-2]
+    Sigma_pred = _check_sigma(Sigma_pred, "Sigma_pred", M, batch, "X_pred")
     z = _check_team(z, "z")
     if z.shape[-2:] != (N, m):
         raise ValueError(f"Incompatible dimensions of z; expected (..., {N}, {m}) but found {z.shape}")
+    _check_batch(z.shape[:-2], batch, "z", "X_pred")
+    if isinstance(observed, (str, bytes)) or observed is None:
+        raise TypeError(f"observed must be a boolean array (..., {N}); got {type(observed).__name__}")
     observed = np.asarray(observed)
-    if observed.dtype != bool or observed.shape[-1] != N:
+    if observed.dtype != bool or observed.ndim < 1 or observed.shape[-1] != N:
         raise ValueError(f"observed must be a boolean array (..., {N}); got {observed.dtype} {observed.shape}")
-    R = check_covariance(R, "R", size=M, definite=True)
-    return _update(X_pred, Sigma_pred, z, observed, R)
+    _check_batch(observed.shape[:-1], batch, "observed", "X_pred")
+    R = _constant_covariance(R, "R", M, definite=True)
+    return X_pred, Sigma_pred, z, observed, R
 
 
 def ekf_flocking_step(
@@ -183,10 +210,19 @@ def ekf_flocking_step(
         ``U[..., i]``: agent ``i``'s control (m/s^2).
     X_next, Sigma_next : predictions for the next step
     """
-    X_post, Sigma_post = masked_update(X_pred, Sigma_pred, z, observed, R)
-    U = control_from_views(X_post, gains)
-    X_next, Sigma_next = ekf_predict(X_post, Sigma_post, dt, gains, Q_team)
-    return X_post, Sigma_post, U, X_next, Sigma_next
+    X_pred, Sigma_pred, z, observed, R = _update_args(X_pred, Sigma_pred, z, observed, R)
+    N, m = X_pred.shape[-2:]
+    if X_pred.ndim < 3 or X_pred.shape[-3] != N:
+        raise ValueError(f"X_pred must have shape (..., N, N, 2n) (one team estimate per agent); got {X_pred.shape}")
+    dt = _check_dt(dt)
+    _check_gains(gains)
+    Q_team = _constant_covariance(Q_team, "Q_team", N * m)
+    with np.errstate(over="ignore", invalid="ignore"):
+        X_post, Sigma_post = _update(X_pred, Sigma_pred, z, observed, R)
+        U = _control_from_views(X_post, gains, None)
+        X_next, Sigma_next = _predict(X_post, Sigma_post, dt, gains, Q_team)
+    return _finite_result((X_post, Sigma_post, U, X_next, Sigma_next), "ekf_flocking_step",
+                          "X_pred, Sigma_pred, z")
 
 
 @dataclass(frozen=True)
@@ -246,8 +282,9 @@ def simulate_estimation_based_flocking(
     Sigma0 : (2nN, 2nN) array_like
         Their common error covariance (Assumption 2).
     n_steps : int
+        Number of steps (1 to :data:`mascore.flocking.MAX_STEPS`).
     dt : float
-        Sampling time (s).
+        Sampling time (s), finite and > 0.
     gains : FlockingGains
     Q : (2n, 2n) array_like
         Process-noise covariance of one agent (team: ``I_N kron Q``).
@@ -256,7 +293,7 @@ def simulate_estimation_based_flocking(
         or the paper's full ``R`` (:func:`mascore.sensing.team_noise_covariance`).
     rng : numpy.random.Generator or int
     sensing_range : float
-        ``r`` (m).
+        ``r`` (m), finite and > 0.
     observer : int
         Agent whose estimate and covariance are recorded (0-based).
     progress : bool
@@ -274,16 +311,28 @@ def simulate_estimation_based_flocking(
     n = m // 2
     M = N * m
     batch = X.shape[:-2]
-    X_hat = np.array(X_hat0, dtype=float)
+    X_hat = _float_array(X_hat0, "X_hat0").copy()
     if X_hat.shape != (*batch, N, N, m) or not np.all(np.isfinite(X_hat)):
-        raise ValueError(f"X_hat0 must be finite with shape {(*batch, N, N, m)}; got {X_hat.shape}")
-    Sigma0 = check_covariance(Sigma0, "Sigma0", size=M)
-    if not 0 <= observer < N:
+        raise ValueError(f"X_hat0 must be finite with shape {(*batch, N, N, m)} (one team estimate per agent, "
+                         f"to match X0 of shape {X.shape}); got {X_hat.shape}")
+    Sigma0 = check_covariance(_float_array(Sigma0, "Sigma0"), "Sigma0", size=M)
+    try:
+        np.broadcast_to(Sigma0, (*batch, N, M, M))
+    except ValueError:
+        raise ValueError(f"Sigma0 must be a ({M}, {M}) covariance common to every filter (or broadcast to "
+                         f"{(*batch, N, M, M)}); got shape {Sigma0.shape}") from None
+    observer = check_positive_int(observer, "observer", minimum=0)
+    if not observer < N:
         raise ValueError(f"observer must be in 0..{N - 1}; got {observer}")
+    n_steps = _check_steps(n_steps)
+    dt = _check_dt(dt)
+    _check_gains(gains)
+    sensing_range = _check_range(sensing_range)
+    if not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"progress must be True or False; got {type(progress).__name__} {progress!r}")
     Lq = _chol(Q, "Q", m)
     Q_team = np.kron(np.eye(N), Lq @ Lq.T)
-    R_team = check_covariance(team_noise_covariance(R, N, m), "R", definite=True)
-    n_steps = _check_steps(n_steps)
+    R_team = check_covariance(team_noise_covariance(_float_array(R, "R"), N, m), "R", definite=True)
     Sigma = np.broadcast_to(Sigma0, (*batch, N, M, M)).copy()
 
     Xs = np.empty((n_steps + 1, *X.shape))
@@ -303,7 +352,7 @@ def simulate_estimation_based_flocking(
         rms[k] = np.sqrt(np.mean(np.sum((X_hat[..., :n] - X[..., None, :, :n]) ** 2, axis=-1), axis=(-1, -2)))
         if k == n_steps:
             break
-        U = control_from_views(X_hat, gains)  # eq. (39), virtual fully-connected network
+        U = _control_from_views(X_hat, gains, None)  # eq. (39), virtual fully-connected network
         X = _propagate(X, U, dt) + rng.standard_normal((*batch, N, m)) @ Lq.T  # eq. (1)
         X_hat, Sigma = _predict(X_hat, Sigma, dt, gains, Q_team)  # eqs. (38), (40)
         _check_divergence(X, k + 1, dt)
@@ -319,11 +368,53 @@ def simulate_estimation_based_flocking(
 # ----------------------------------------------------------------------------- private
 
 
+def _symmetrize(P):
+    return 0.5 * (P + np.swapaxes(P, -1, -2))
+
+
+def _check_batch(got, batch, name, of):
+    try:
+        np.broadcast_shapes(got, batch)
+    except ValueError:
+        raise ValueError(f"{name} has batch axes {got} that do not match those of {of} {batch}") from None
+
+
+def _constant_covariance(C, name, size, definite=False):
+    """A constant (size, size) covariance, checked once per distinct value."""
+    C = _float_array(C, name)
+    if C.shape != (size, size):
+        raise ValueError(f"Incompatible dimensions of {name}; expected ({size}, {size}) but found {C.shape}")
+    return cached_covariance(C, name, size=size, definite=definite)
+
+
+def _check_sigma(S, name, M, batch, of):
+    """A (..., M, M) stack of covariances: finite, symmetric, positive semidefinite (one Cholesky).
+
+    Same tolerance as :func:`mascore._validation.check_covariance`: symmetric to
+    ``1e-8 s`` and smallest eigenvalue ``>= -1e-8 s`` with ``s = max(1, max|S|)``.
+    """
+    S = _float_array(S, name)
+    if S.ndim < 2 or S.shape[-2:] != (M, M):
+        raise ValueError(f"Incompatible dimensions of {name}; expected (..., {M}, {M}) but found {S.shape}")
+    _check_batch(S.shape[:-2], batch, name, of)
+    scale = float(np.abs(S).max())
+    if not np.isfinite(scale):
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    tol = SYMMETRY_RTOL * max(1.0, scale)
+    if float(np.abs(S - np.swapaxes(S, -1, -2)).max()) > tol:
+        raise ValueError(f"{name} must be symmetric")
+    try:
+        np.linalg.cholesky(S + tol * np.eye(M))
+    except np.linalg.LinAlgError:
+        check_covariance(S, name)  # raises, with the smallest eigenvalue
+    return S
+
+
 def _predict(X_hat, Sigma, dt, gains, Q_team):
-    F = closed_loop_jacobian(X_hat, dt, gains)  # eq. (38)
-    X_pred = closed_loop_step(X_hat, dt, gains)  # eq. (40)
+    F = _closed_loop_jacobian(X_hat, dt, gains)  # eq. (38)
+    X_pred = _closed_loop_step(X_hat, dt, gains)  # eq. (40)
     Sigma_pred = F @ Sigma @ np.swapaxes(F, -1, -2) + Q_team
-    return X_pred, symmetrize(Sigma_pred)
+    return X_pred, _symmetrize(Sigma_pred)
 
 
 def _update(X_pred, Sigma, z, observed, R):
@@ -339,4 +430,4 @@ def _update(X_pred, Sigma, z, observed, R):
     innovation = mask * (z - X_pred).reshape(*shape[:-2], M)  # eq. (16)
     X_post = X_pred + np.einsum("...ij,...j->...i", K, innovation).reshape(shape)  # eq. (18)
     Sigma_post = Sigma - K @ (mask[..., :, None] * Sigma)  # eq. (20): (I - G_i H_i) Sigma_i^-
-    return X_post, symmetrize(Sigma_post)
+    return X_post, _symmetrize(Sigma_post)

@@ -46,6 +46,17 @@ blows up). In the paper's scenarios no two agents (nor two estimates) come
 closer than a few metres (closest pair over 20 Monte Carlo runs of the three
 cases of Fig. 5: about 7 m), so the regularisation is never active there.
 
+Input checks
+------------
+Every public function checks its arguments (finite entries, shapes, ``dt > 0``,
+a :class:`FlockingGains`, non-negative adjacency weights -- a graph Laplacian
+passed by mistake is named as such) and raises a ``ValueError`` or
+``TypeError`` naming the argument; the simulators then loop over unchecked
+private kernels. A self-loop ``a_ii`` is accepted and ignored: the pair term
+of an agent with itself is exactly zero. One agent (``N = 1``) or an isolated
+agent feels no pair term: its control is zero. A result that overflows (inputs
+too large for floating point) raises instead of returning NaN or inf.
+
 Symbols follow the paper; equations are cited as ``eq. (N)``.
 """
 
@@ -56,13 +67,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import check_generator, check_covariance
+from ._validation import float_array as _float_array
+from ._validation import check_covariance, check_generator, check_positive, check_positive_int
 from .graphs import complete_graph, proximity_graph
 from .sensing import measure, team_noise_covariance
 
 __all__ = [
     "DivergenceError",
     "DIVERGENCE_LIMIT",
+    "MAX_STEPS",
     "FlockingGains",
     "phi1",
     "phi2",
@@ -81,6 +94,8 @@ __all__ = [
 
 #: A simulated state component (m or m/s) larger than this means the closed loop diverged.
 DIVERGENCE_LIMIT = 1e7
+#: Largest number of steps of a simulation ("absurdly many" beyond).
+MAX_STEPS = 10_000_000
 
 
 class DivergenceError(FloatingPointError):
@@ -127,6 +142,10 @@ class FlockingGains:
     min_distance: float = 1e-6
 
     def __post_init__(self) -> None:
+        for name in ("rho3", "rho4", "rho5", "rho6", "R", "min_distance", "beta"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise TypeError(f"{name} must be a real number; got {type(value).__name__} {value!r}")
         for name in ("rho3", "rho4", "rho5", "rho6", "R", "min_distance"):
             value = getattr(self, name)
             if not np.isfinite(value) or value <= 0:
@@ -137,7 +156,13 @@ class FlockingGains:
 
 def phi1(p: ArrayLike, beta: float) -> np.ndarray:
     """Communication weight ``1 / (1 + |p|^2)^beta`` of eq. (6), shape ``(...)`` for ``p`` ``(..., n)``."""
-    p = np.asarray(p, dtype=float)
+    p = _vectors(p, "p")
+    beta = check_positive(beta, "beta", allow_zero=True)
+    with np.errstate(over="ignore"):
+        return _finite_result(_phi1(p, beta), "phi1", "p")
+
+
+def _phi1(p, beta):
     return (1.0 + np.einsum("...i,...i->...", p, p)) ** (-beta)
 
 
@@ -153,8 +178,12 @@ def phi2(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
     -------
     (...) ndarray
     """
-    p = np.asarray(p, dtype=float)
-    v = np.asarray(v, dtype=float)
+    p, v = _pair_args(p, v, gains)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _finite_result(_phi2(p, v, gains), "phi2", "p, v")
+
+
+def _phi2(p, v, gains):
     de = np.maximum(np.sqrt(np.einsum("...i,...i->...", p, p)), gains.min_distance)
     return gains.rho5 / (2 * de**2) * np.einsum("...i,...i->...", v, p) + gains.rho6 / (2 * de) * (de - gains.R)
 
@@ -174,9 +203,13 @@ def pair_term(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
     (..., n) ndarray
         Acceleration (m/s^2).
     """
-    p = np.asarray(p, dtype=float)
-    v = np.asarray(v, dtype=float)
-    return -gains.rho3 * phi1(p, gains.beta)[..., None] * v - gains.rho4 * phi2(p, v, gains)[..., None] * p
+    p, v = _pair_args(p, v, gains)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _finite_result(_pair_term(p, v, gains), "pair_term", "p, v")
+
+
+def _pair_term(p, v, gains):
+    return -gains.rho3 * _phi1(p, gains.beta)[..., None] * v - gains.rho4 * _phi2(p, v, gains)[..., None] * p
 
 
 def pair_term_jacobian(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
@@ -187,8 +220,12 @@ def pair_term_jacobian(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.n
     (..., n, 2n) ndarray
         ``[dg/dp, dg/dv]``. Even in ``(p, v)``.
     """
-    p = np.asarray(p, dtype=float)
-    v = np.asarray(v, dtype=float)
+    p, v = _pair_args(p, v, gains)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _finite_result(_pair_term_jacobian(p, v, gains), "pair_term_jacobian", "p, v")
+
+
+def _pair_term_jacobian(p, v, gains):
     n = p.shape[-1]
     eye = np.eye(n)
     d2 = np.einsum("...i,...i->...", p, p)
@@ -199,7 +236,7 @@ def pair_term_jacobian(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.n
     ppT = p[..., :, None] * p[..., None, :]
     pvT = p[..., :, None] * v[..., None, :]
     vpT = v[..., :, None] * p[..., None, :]
-    f1 = phi1(p, gains.beta)[..., None, None]
+    f1 = _phi1(p, gains.beta)[..., None, None]
     c5 = gains.rho4 * gains.rho5 / 2
     c6 = gains.rho4 * gains.rho6 / 2
     # term -rho3 phi1(p) v
@@ -231,8 +268,15 @@ def flocking_control(X: ArrayLike, gains: FlockingGains, adjacency: ArrayLike | 
         Accelerations (m/s^2).
     """
     X = _check_team(X, "X")
+    _check_gains(gains)
+    weights = _check_weights(adjacency, X.shape[-2], "adjacency", X.shape[:-2])
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _finite_result(_flocking_control(X, gains, weights), "flocking_control", "X")
+
+
+def _flocking_control(X, gains, weights):
     diff = X[..., :, None, :] - X[..., None, :, :]  # x_i - x_j
-    return _sum_pairs(diff, gains, adjacency, X.shape[-2])
+    return _sum_pairs(diff, gains, weights, X.shape[-2])
 
 
 def control_from_views(views: ArrayLike, gains: FlockingGains, adjacency: ArrayLike | None = None) -> np.ndarray:
@@ -253,16 +297,23 @@ def control_from_views(views: ArrayLike, gains: FlockingGains, adjacency: ArrayL
     U : (..., N, n) ndarray
         ``U[..., i, :] = u_i`` computed by agent ``i`` from ``views[..., i]``.
     """
-    views = np.asarray(views, dtype=float)
-    if views.ndim < 3 or views.shape[-3] != views.shape[-2] or views.shape[-1] % 2:
+    views = _float_array(views, "views")
+    if views.ndim < 3 or views.shape[-3] != views.shape[-2] or views.shape[-1] % 2 or 0 in views.shape[-3:]:
         raise ValueError(f"views must have shape (..., N, N, 2n); got {views.shape}")
     if not np.all(np.isfinite(views)):
         raise ValueError("views contains NaN or infinite entries")
+    _check_gains(gains)
+    weights = _check_weights(adjacency, views.shape[-2], "adjacency", views.shape[:-3])
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _finite_result(_control_from_views(views, gains, weights), "control_from_views", "views")
+
+
+def _control_from_views(views, gains, weights):
     N = views.shape[-2]
     own = np.diagonal(views, axis1=-3, axis2=-2)  # (..., 2n, N)
     own = np.moveaxis(own, -1, -2)  # (..., N, 2n): views[i, i]
     diff = own[..., :, None, :] - views  # x_hat_{i,i} - x_hat_{i,j}
-    return _sum_pairs(diff, gains, adjacency, N)
+    return _sum_pairs(diff, gains, weights, N)
 
 
 def closed_loop_step(X: ArrayLike, dt: float, gains: FlockingGains) -> np.ndarray:
@@ -273,14 +324,24 @@ def closed_loop_step(X: ArrayLike, dt: float, gains: FlockingGains) -> np.ndarra
     Parameters
     ----------
     X : (..., N, 2n) array_like
+    dt : float
+        Sampling time (s), finite and > 0.
+    gains : FlockingGains
 
     Returns
     -------
     (..., N, 2n) ndarray
     """
     X = _check_team(X, "X")
+    dt = _check_dt(dt)
+    _check_gains(gains)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _finite_result(_closed_loop_step(X, dt, gains), "closed_loop_step", "X")
+
+
+def _closed_loop_step(X, dt, gains):
     n = X.shape[-1] // 2
-    U = flocking_control(X, gains)
+    U = _flocking_control(X, gains, None)
     p, v = X[..., :n], X[..., n:]
     return np.concatenate([p + dt * v + 0.5 * dt**2 * U, v + dt * U], axis=-1)
 
@@ -291,6 +352,9 @@ def closed_loop_jacobian(X: ArrayLike, dt: float, gains: FlockingGains) -> np.nd
     Parameters
     ----------
     X : (..., N, 2n) array_like
+    dt : float
+        Sampling time (s), finite and > 0.
+    gains : FlockingGains
 
     Returns
     -------
@@ -300,12 +364,19 @@ def closed_loop_jacobian(X: ArrayLike, dt: float, gains: FlockingGains) -> np.nd
         ``dU_i/dx_i = sum_{j != i} J(x_i - x_j)``, ``J`` the pair Jacobian.
     """
     X = _check_team(X, "X")
+    dt = _check_dt(dt)
+    _check_gains(gains)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _finite_result(_closed_loop_jacobian(X, dt, gains), "closed_loop_jacobian", "X")
+
+
+def _closed_loop_jacobian(X, dt, gains):
     N, m = X.shape[-2], X.shape[-1]
     n = m // 2
     # J(x_i - x_j) is even, so one evaluation per unordered pair i < j
     iu, ju = np.triu_indices(N, 1)
     diff = X[..., iu, :] - X[..., ju, :]
-    J = pair_term_jacobian(diff[..., :n], diff[..., n:], gains)  # (..., P, n, 2n)
+    J = _pair_term_jacobian(diff[..., :n], diff[..., n:], gains)  # (..., P, n, 2n)
     BJ = np.concatenate([0.5 * dt**2 * J, dt * J], axis=-2)  # B J: (..., P, 2n, 2n)
     blocks = np.zeros((*X.shape[:-2], N, N, m, m))
     blocks[..., iu, ju, :, :] = -BJ
@@ -356,9 +427,9 @@ def simulate_measured_flocking(
     X0 : (..., N, 2n) array_like
         Initial team states (leading axes: Monte Carlo runs).
     n_steps : int
-        Number of steps T.
+        Number of steps T (1 to :data:`MAX_STEPS`).
     dt : float
-        Sampling time (s).
+        Sampling time (s), finite and > 0.
     gains : FlockingGains
     Q : (2n, 2n) array_like
         Process-noise covariance of one agent.
@@ -367,8 +438,8 @@ def simulate_measured_flocking(
         or the paper's full ``R`` (see :func:`mascore.sensing.team_noise_covariance`).
     rng : numpy.random.Generator or int
     sensing_range : float or None
-        ``r`` (m) of the proximity graph (case (i) of Fig. 5); ``None`` for a
-        fixed fully-connected network (case (ii)).
+        ``r`` (m) of the proximity graph (case (i) of Fig. 5), finite and > 0;
+        ``None`` for a fixed fully-connected network (case (ii)).
 
     Returns
     -------
@@ -383,9 +454,13 @@ def simulate_measured_flocking(
     X = _check_team(X0, "X0").copy()
     m = X.shape[-1]
     n, N = m // 2, X.shape[-2]
-    Lq = _chol(Q, "Q", m)
-    team_noise_covariance(R, N, m)  # validates R early
     n_steps = _check_steps(n_steps)
+    dt = _check_dt(dt)
+    _check_gains(gains)
+    Lq = _chol(Q, "Q", m)
+    team_noise_covariance(_float_array(R, "R"), N, m)  # validates R early
+    if sensing_range is not None:
+        sensing_range = _check_range(sensing_range, "use None for a fully connected network")
     batch = X.shape[:-2]
     Xs = np.empty((n_steps + 1, *X.shape))
     As = np.empty((n_steps + 1, *batch, N, N), dtype=bool)
@@ -397,7 +472,7 @@ def simulate_measured_flocking(
         if k == n_steps:
             break
         views, _ = measure(rng, X, A_k, R, allow_isolated=True)  # eq. (2)
-        U = control_from_views(views, gains, A_k)  # eq. (7)
+        U = _control_from_views(views, gains, A_k)  # eq. (7)
         X = _propagate(X, U, dt) + rng.standard_normal((*batch, N, m)) @ Lq.T
         _check_divergence(X, k + 1, dt)
     t = dt * np.arange(n_steps + 1)
@@ -412,39 +487,52 @@ def flock_spread(X: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     Parameters
     ----------
     X : (..., N, 2n) array_like
+        Team states; a NaN entry marks a missing state (e.g. the placeholder of
+        a diverged run) and gives NaN statistics for that team. Infinite
+        entries are refused.
 
     Returns
     -------
     std_p, std_v : (...) ndarrays
         In m and m/s.
     """
-    X = np.asarray(X, dtype=float)
+    X = _check_team(X, "X", allow_nan=True)
     n = X.shape[-1] // 2
-    dev = X - X.mean(axis=-2, keepdims=True)
-    sq = dev**2
-    return np.sqrt(sq[..., :n].sum(-1).mean(-1)), np.sqrt(sq[..., n:].sum(-1).mean(-1))
+    with np.errstate(over="ignore", invalid="ignore"):
+        dev = X - X.mean(axis=-2, keepdims=True)
+        sq = dev**2
+        out = np.sqrt(sq[..., :n].sum(-1).mean(-1)), np.sqrt(sq[..., n:].sum(-1).mean(-1))
+    _finite_where_input_is(out[0], X, "flock_spread")
+    _finite_where_input_is(out[1], X, "flock_spread")
+    return out
 
 
 def max_distance_from_centre(X: ArrayLike) -> np.ndarray:
-    """Largest distance (m) of an agent from the centre of mass, shape ``(...)``."""
-    X = np.asarray(X, dtype=float)
+    """Largest distance (m) of an agent from the centre of mass, shape ``(...)``.
+
+    A NaN entry of `X` marks a missing state (a diverged run's placeholder) and
+    gives NaN for that team; infinite entries are refused.
+    """
+    X = _check_team(X, "X", allow_nan=True)
     n = X.shape[-1] // 2
     p = X[..., :n]
-    return np.linalg.norm(p - p.mean(axis=-2, keepdims=True), axis=-1).max(axis=-1)
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = np.linalg.norm(p - p.mean(axis=-2, keepdims=True), axis=-1).max(axis=-1)
+    _finite_where_input_is(out, X, "max_distance_from_centre")
+    return out
 
 
 # ----------------------------------------------------------------------------- private
 
 
-def _sum_pairs(diff: np.ndarray, gains: FlockingGains, adjacency: ArrayLike | None, N: int) -> np.ndarray:
+def _sum_pairs(diff: np.ndarray, gains: FlockingGains, adjacency: np.ndarray | None, N: int) -> np.ndarray:
+    """sum_j a_ij g(x_i - x_j) on checked arguments; `adjacency` a float or boolean (..., N, N) array or None."""
     n = diff.shape[-1] // 2
-    g = pair_term(diff[..., :n], diff[..., n:], gains)  # (..., N, N, n)
+    g = _pair_term(diff[..., :n], diff[..., n:], gains)  # (..., N, N, n)
     if adjacency is None:
         weights = (~np.eye(N, dtype=bool)).astype(float)
     else:
         weights = np.asarray(adjacency, dtype=float)
-        if weights.shape[-2:] != (N, N):
-            raise ValueError(f"adjacency must have shape (..., {N}, {N}); got {weights.shape}")
         weights = weights * (~np.eye(N, dtype=bool))
     return np.einsum("...ij,...ijk->...ik", weights, g)
 
@@ -463,22 +551,107 @@ def _check_divergence(X: np.ndarray, k: int, dt: float, what: str = "team state"
         )
 
 
-def _check_team(X: ArrayLike, name: str) -> np.ndarray:
-    X = np.asarray(X, dtype=float)
-    if X.ndim < 2 or X.shape[-1] % 2 or X.shape[-1] == 0:
+def _check_team(X: ArrayLike, name: str, allow_nan: bool = False) -> np.ndarray:
+    X = _float_array(X, name)
+    if X.ndim < 2 or X.shape[-1] % 2 or X.shape[-1] == 0 or X.shape[-2] == 0:
         raise ValueError(f"{name} must have shape (..., N, 2n) with rows [p_i; v_i]; got {X.shape}")
-    if not np.all(np.isfinite(X)):
+    if allow_nan:
+        if np.any(np.isinf(X)):
+            raise ValueError(f"{name} contains infinite entries")
+    elif not np.all(np.isfinite(X)):
         raise ValueError(f"{name} contains NaN or infinite entries")
     return X
 
 
+def _finite_where_input_is(out: np.ndarray, X: np.ndarray, what: str) -> None:
+    """Overflow check of a statistic over the last two axes of X: finite wherever X[..., :, :] is."""
+    known = np.isfinite(X).all(axis=(-1, -2))
+    if not np.all(np.isfinite(out[known])):
+        raise ValueError(f"{what} overflowed although X is finite: X holds values too large for floating "
+                         "point; rescale it")
+
+
 def _chol(C: ArrayLike, name: str, size: int) -> np.ndarray:
-    C = check_covariance(C, name, size=size)
+    C = check_covariance(_float_array(C, name), name, size=size)
     w, V = np.linalg.eigh(C)
     return V * np.sqrt(np.clip(w, 0, None))  # C = L L^T, works for semidefinite C
 
 
 def _check_steps(n_steps: int) -> int:
-    if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
-        raise ValueError(f"n_steps must be a positive integer; got {n_steps!r}")
-    return int(n_steps)
+    n_steps = check_positive_int(n_steps, "n_steps", minimum=1)
+    if n_steps > MAX_STEPS:
+        raise ValueError(f"n_steps = {n_steps} is more than MAX_STEPS = {MAX_STEPS}; run fewer steps")
+    return n_steps
+
+
+
+
+def _check_dt(dt: object) -> float:
+    if isinstance(dt, np.ndarray) and dt.ndim == 0:
+        dt = dt[()]
+    return check_positive(dt, "dt", "s")
+
+
+def _check_range(r: object, hint: str = "") -> float:
+    if isinstance(r, np.ndarray) and r.ndim == 0:
+        r = r[()]
+    if isinstance(r, (int, float, np.integer, np.floating)) and not isinstance(r, bool) and np.isinf(r) and hint:
+        raise ValueError(f"sensing_range must be a finite number > 0 m; got {r!r} ({hint})")
+    return check_positive(r, "sensing_range", "m")
+
+
+def _check_gains(gains: object) -> None:
+    if not isinstance(gains, FlockingGains):
+        raise TypeError(f"gains must be a mascore.flocking.FlockingGains; got {type(gains).__name__}")
+
+
+def _vectors(x: ArrayLike, name: str) -> np.ndarray:
+    x = _float_array(x, name)
+    if x.ndim < 1 or x.shape[-1] == 0:
+        raise ValueError(f"{name} must have shape (..., n) with n >= 1; got {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    return x
+
+
+def _pair_args(p: ArrayLike, v: ArrayLike, gains: object) -> tuple[np.ndarray, np.ndarray]:
+    p, v = _vectors(p, "p"), _vectors(v, "v")
+    try:
+        np.broadcast_shapes(p.shape, v.shape)
+    except ValueError:
+        raise ValueError(f"v must have the shape of p {p.shape} (or broadcast against it); got {v.shape}") from None
+    if v.shape[-1] != p.shape[-1]:
+        raise ValueError(f"v must have the shape of p {p.shape}; got {v.shape}")
+    _check_gains(gains)
+    return p, v
+
+
+def _check_weights(adjacency: ArrayLike | None, N: int, name: str, batch: tuple = ()) -> np.ndarray | None:
+    """A (..., N, N) adjacency a_ij >= 0, finite (None passes through: fully connected)."""
+    if adjacency is None:
+        return None
+    A = _float_array(adjacency, name)
+    if A.ndim < 2 or A.shape[-2:] != (N, N):
+        raise ValueError(f"{name} must have shape (..., {N}, {N}); got {A.shape}")
+    if not np.all(np.isfinite(A)):
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    if np.any(A < 0):
+        diag = np.diagonal(A, axis1=-2, axis2=-1)
+        if np.all(diag >= 0) and np.any(diag > 0) and np.allclose(A.sum(axis=-1), 0.0):
+            raise ValueError(f"{name} looks like a graph Laplacian (negative off-diagonal entries, rows summing "
+                             "to zero); pass the adjacency matrix instead (A = diag(diag(L)) - L)")
+        raise ValueError(f"{name} must have non-negative weights a_ij; smallest entry is {A.min():.3g}")
+    try:
+        np.broadcast_shapes(A.shape[:-2], batch)
+    except ValueError:
+        raise ValueError(f"{name} has batch axes {A.shape[:-2]} that do not match the team's {batch}") from None
+    return A
+
+
+def _finite_result(out, what: str, names: str):
+    """Return `out` (an array or a tuple of arrays) if finite; else name the overflow."""
+    arrays = out if isinstance(out, tuple) else (out,)
+    if not all(np.all(np.isfinite(a)) for a in arrays):
+        raise ValueError(f"{what} overflowed (NaN or inf in the result) although every input is finite: "
+                         f"{names} hold values too large for floating point; rescale them")
+    return out

@@ -399,7 +399,7 @@ def test_other_bad_input():
                                        1.0, 0.1, 0.1)
     with pytest.raises(ValueError, match="graphs must be a switching sequence"):
         cs.SwitchingTopology([0.0], np.zeros((3, 3)))
-    with pytest.raises(ValueError, match="dwell must be positive"):
+    with pytest.raises(ValueError, match="dwell must be a finite number > 0"):
         cs.SwitchingTopology.periodic(np.zeros((2, 3, 3)), 0.0, 10.0)
     with pytest.raises(ValueError, match="t_eval"):
         cs.kalman_consensus_continuous(np.zeros(3), np.ones(3), np.zeros((3, 3)), 1.0, 0.1, 0.1, t_eval=[0.0, 2.0])

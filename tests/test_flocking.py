@@ -211,7 +211,7 @@ def test_bad_inputs_raise():
         flocking.flocking_control(np.zeros((3, 4)), GAINS, np.ones((2, 2)))
     with pytest.raises(ValueError, match="views must have shape"):
         flocking.control_from_views(np.zeros((3, 2, 4)), GAINS)
-    with pytest.raises(ValueError, match="n_steps must be a positive integer"):
+    with pytest.raises(ValueError, match="n_steps must be an integer >= 1"):
         flocking.simulate_measured_flocking(np.zeros((2, 4)), 0, 0.1, GAINS, np.eye(4), np.eye(4), 0, None)
     with pytest.raises(ValueError, match="Q"):
         flocking.simulate_measured_flocking(np.zeros((2, 4)), 5, 0.1, GAINS, -np.eye(4), np.eye(4), 0, None)
