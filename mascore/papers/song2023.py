@@ -25,6 +25,7 @@ from matplotlib.ticker import FuncFormatter
 import pandas as pd
 
 from .. import distributed_kf as dkf
+from .._validation import check_generator, check_positive, check_positive_int
 from .._progress import progress_bar
 from .._timing import median_time
 from ..agents import double_integrator
@@ -248,6 +249,11 @@ def random_initial_states(
     -------
     x0 : (N, 2n) initial states, adjacency : (N, N)
     """
+    rng = check_generator(rng)
+    if not isinstance(s, RendezvousSetup):
+        raise TypeError(f"s must be a RendezvousSetup (see setup()); got {type(s).__name__}")
+    max_tries = check_positive_int(max_tries, "max_tries")
+    check_positive(max_edge_fraction, "max_edge_fraction")
     N, n = s.n_agents, s.n
     for _ in range(max_tries):
         p = rng.uniform(0.0, s.box, (N, n))
@@ -257,7 +263,8 @@ def random_initial_states(
             continue
         if np.all(dkf.observable_agents(s.A, s.BK, A)):
             return np.hstack([p, v]), A
-    raise RuntimeError(f"no connected, observable configuration found in {max_tries} draws")
+    raise ValueError(f"no connected, observable configuration found in {max_tries} draws (max_tries); "
+                     "increase the sensing range or max_edge_fraction")
 
 
 def _initial_estimates(rng: np.random.Generator, s: RendezvousSetup, x0: np.ndarray) -> np.ndarray:

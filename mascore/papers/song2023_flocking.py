@@ -42,6 +42,7 @@ from ..flocking import (
     max_distance_from_centre,
     simulate_measured_flocking,
 )
+from .._validation import check_generator, check_positive, check_positive_int
 from ..graphs import is_connected, proximity_graph
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors, plot_graph
@@ -205,22 +206,38 @@ _STYLES = ({"ls": "-"}, {"ls": "--"}, {"ls": ":", "lw": 2.0})  # (ii) and (iii) 
 # ----------------------------------------------------------------------------- initial conditions
 
 
-def initial_states(rng: np.random.Generator, n_runs: int, settings: FlockingSettings = SETTINGS) -> np.ndarray:
+def initial_states(
+    rng: np.random.Generator, n_runs: int, settings: FlockingSettings = SETTINGS, max_tries: int = 10_000
+) -> np.ndarray:
     """Random initial team states with a connected proximity graph, ``(n_runs, N, 2n)``.
 
     Positions uniform in a square of side ``box * sqrt(N / 8)`` (the paper's
     density for any N), redrawn until the graph of range ``sensing_range`` is
     connected; velocities uniform in ``[-v0_max, v0_max]`` per axis.
+
+    Raises
+    ------
+    ValueError
+        Bad `n_runs`, `max_tries` or settings, or no connected placement in
+        `max_tries` draws (the sensing range is too short for the square).
     """
-    N, n = settings.n_agents, settings.n_dim
+    rng = check_generator(rng)
+    n_runs = check_positive_int(n_runs, "n_runs")
+    max_tries = check_positive_int(max_tries, "max_tries")
+    N, n = check_positive_int(settings.n_agents, "settings.n_agents"), settings.n_dim
+    check_positive(settings.sensing_range, "settings.sensing_range", "m")
     side = settings.box * np.sqrt(N / N_AGENTS)
     positions = np.empty((n_runs, N, n))
     for k in range(n_runs):
-        while True:
+        for _ in range(max_tries):
             p = rng.uniform(0.0, side, (N, n))
             if is_connected(proximity_graph(p, settings.sensing_range)):
                 positions[k] = p
                 break
+        else:
+            raise ValueError(f"no connected placement of {N} agents in a {side:.4g} m square with "
+                             f"settings.sensing_range = {settings.sensing_range:g} m in {max_tries} draws "
+                             "(max_tries); increase the sensing range")
     velocities = rng.uniform(-settings.v0_max, settings.v0_max, (n_runs, N, n))
     return np.concatenate([positions, velocities], axis=-1)
 
