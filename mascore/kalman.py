@@ -38,7 +38,7 @@ from ._validation import check_covariance, check_positive_int
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 
-__all__ = ["predict", "update", "kalman_gain", "nees", "nees_interval", "symmetrize"]
+__all__ = ["predict", "update", "kalman_gain", "run_filter", "nees", "nees_interval", "symmetrize"]
 
 
 # ----------------------------------------------------------------------------
@@ -47,6 +47,7 @@ __all__ = ["predict", "update", "kalman_gain", "nees", "nees_interval", "symmetr
 
 _ND = np.ndarray
 _F64 = np.dtype(float)
+
 
 class _RecentArrays:
     """The last few arrays that passed a check (or were computed from checked input), with their bytes.
@@ -421,6 +422,70 @@ def symmetrize(P: ArrayLike) -> np.ndarray:
     if P.ndim < 2 or P.shape[-1] != P.shape[-2]:
         raise ValueError(f"P must be a (..., n, n) array of square matrices; got shape {P.shape}")
     return _symmetrize(_finite(P, "P"))
+
+
+def run_filter(
+    x0: ArrayLike, P0: ArrayLike, z: ArrayLike, F: ArrayLike, Q: ArrayLike, H: ArrayLike, R: ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    """A whole Kalman filter run: predict then update for each measurement, checked once.
+
+    The arguments are checked once, at the start; the steps run on the unchecked
+    kernels, so a long run costs what the arithmetic costs. The result is the
+    same, bit for bit, as a loop of :func:`predict` and :func:`update`.
+
+    Parameters
+    ----------
+    x0 : (..., m) array_like
+        Initial mean(s), finite (a leading batch shape runs several filters at once).
+    P0 : (..., m, m) array_like
+        Initial covariance(s), symmetric positive semidefinite.
+    z : (K, ..., q) array_like
+        Measurements of steps 1..K, finite.
+    F, Q : (m, m) array_like
+        Transition matrix and process noise covariance (positive semidefinite).
+    H, R : (q, m), (q, q) array_like
+        Measurement matrix and noise covariance (positive definite).
+
+    Returns
+    -------
+    x : (K, ..., m) ndarray
+        Posterior means after each measurement.
+    P : (K, ..., m, m) ndarray
+        Posterior covariances.
+
+    Raises
+    ------
+    ValueError
+        Bad shapes, non-finite entries, an indefinite covariance, or a run that overflows.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x, P = run_filter([0.0], [[1.0]], np.ones((3, 1)), [[1.0]], [[0.0]], [[1.0]], [[1.0]])
+    >>> np.round(x[:, 0], 4).tolist(), float(np.round(P[-1, 0, 0], 4))
+    ([0.5, 0.6667, 0.75], 0.25)
+    """
+    x, P = _checked_state(x0, P0, "x0", "P0")
+    F, Q, _ = _check_predict_model(F, Q, None)
+    H, R = _check_update_model(H, R)
+    z = _finite(_float_array(z, "z"), "z")
+    m = x.shape[-1]
+    if F.shape[-2:] != (m, m) or Q.shape[-2:] != (m, m):
+        raise ValueError(f"F and Q must be ({m}, {m}) for x0 of shape {x.shape}; got {F.shape} and {Q.shape}")
+    if H.shape[-1] != m or R.shape[-2:] != (H.shape[-2], H.shape[-2]):
+        raise ValueError(f"H must be (q, {m}) and R (q, q); got {H.shape} and {R.shape}")
+    if z.ndim < 1 or z.shape[-1] != H.shape[-2] or z.shape[1:-1] != x.shape[:-1]:
+        raise ValueError(f"Incompatible dimensions of z; expected (K, *{x.shape[:-1]}, {H.shape[-2]}) "
+                         f"but found {z.shape}")
+    xs = np.empty((z.shape[0], *x.shape))
+    Ps = np.empty((z.shape[0], *P.shape))
+    for k in range(z.shape[0]):
+        x, P = _predict(x, P, F, Q)
+        x, P = _update(x, P, z[k], H, R)
+        xs[k], Ps[k] = x, P
+    if not (np.isfinite(xs).all() and np.isfinite(Ps).all()):
+        raise ValueError("the filter run overflowed (NaN or inf) although every input is finite; rescale the problem")
+    return xs, Ps
 
 
 # ----------------------------------------------------------------------------

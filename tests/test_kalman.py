@@ -106,3 +106,37 @@ def test_bad_inputs():
         kalman.predict(np.zeros(2), np.eye(3), np.eye(2), np.eye(2))
     with pytest.raises(ValueError, match="symmetric"):
         kalman.predict(np.zeros(2), np.eye(2), np.eye(2), np.array([[1.0, 0.5], [0.0, 1.0]]))
+
+
+def test_run_filter_equals_a_loop_of_checked_steps_bit_for_bit():
+    """run_filter checks once and loops on the kernels: same numbers as predict/update, step by step."""
+    import numpy as np
+
+    from mascore import agents, kalman
+
+    rng = np.random.default_rng(3)
+    F = agents.double_integrator(2, 0.1).A
+    H, Q, R = np.eye(2, 4), 0.01 * np.eye(4), 0.25 * np.eye(2)
+    z = rng.standard_normal((50, 3, 2))  # 50 steps of a batch of 3 filters
+    x0, P0 = np.zeros((3, 4)), np.broadcast_to(np.eye(4), (3, 4, 4))
+    xs, Ps = kalman.run_filter(x0, P0, z, F, Q, H, R)
+    x, P = x0, P0
+    for k in range(z.shape[0]):
+        x, P = kalman.predict(x, P, F, Q)
+        x, P = kalman.update(x, P, z[k], H, R)
+        assert np.array_equal(xs[k], x) and np.array_equal(Ps[k], P)
+    assert np.all(np.linalg.eigvalsh(Ps) > 0)
+
+
+def test_run_filter_refuses_bad_input_by_name():
+    import numpy as np
+    import pytest
+
+    from mascore import kalman
+
+    good = dict(x0=np.zeros(2), P0=np.eye(2), z=np.zeros((4, 1)), F=np.eye(2), Q=0.1 * np.eye(2),
+                H=np.array([[1.0, 0.0]]), R=np.eye(1))
+    for name, bad in (("z", np.full((4, 1), np.nan)), ("P0", -np.eye(2)), ("R", np.zeros((1, 1))),
+                      ("z", np.zeros((4, 2)))):
+        with pytest.raises(ValueError, match=name):
+            kalman.run_filter(**(good | {name: bad}))
