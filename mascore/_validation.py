@@ -77,10 +77,12 @@ def as_matrix(
 
 
 def check_square(M: ArrayLike, name: str, size: int | None = None) -> np.ndarray:
-    """Return `M` as a square float matrix (optionally of a given size)."""
+    """Return `M` as a square float matrix, at least 1 x 1 (optionally of a given size)."""
     arr = as_matrix(M, name)
     if arr.shape[0] != arr.shape[1]:
         raise ValueError(f"{name} must be square; got shape {arr.shape}")
+    if arr.shape[0] == 0:
+        raise ValueError(f"{name} must be at least 1 x 1; got shape {arr.shape}")
     if size is not None and arr.shape[0] != size:
         raise ValueError(
             f"Incompatible dimensions of {name}; expected ({size}, {size}) "

@@ -31,6 +31,8 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import ArrayLike
 
+from ._validation import as_matrix as _matrix
+from ._validation import check_square as _square
 from ._validation import (
     as_matrix,
     check_adjacency,
@@ -525,17 +527,6 @@ def _check_agent(A, B, Q1, Q2, R, controllable: bool = True):
 
 def _check_agents(n_agents: int) -> int:
     return check_positive_int(n_agents, "n_agents")
-
-
-def _matrix(M, name, shape=None) -> np.ndarray:
-    return as_matrix(_float_array(M, name), name, shape)
-
-
-def _square(M, name, size=None) -> np.ndarray:
-    M = check_square(_float_array(M, name), name, size)
-    if M.shape[0] == 0:
-        raise ValueError(f"{name} must be at least 1 x 1; got shape {M.shape}")
-    return M
 
 
 def _weight(M, name, size=None, definite=False, atleast_2d=True) -> np.ndarray:

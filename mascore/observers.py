@@ -35,6 +35,8 @@ import scipy.linalg as sla
 from numpy.typing import ArrayLike
 
 from ._solver import SolverError, solve
+from ._validation import as_matrix as _matrix
+from ._validation import check_square as _square
 from ._validation import as_matrix, check_covariance, check_square
 from ._validation import float_array as _float_array
 from .lqr import _care, _spectrum, _undirected_adjacency, _undirected_laplacian, is_controllable
@@ -802,17 +804,6 @@ def _check_observer(A, Bbar, C, Q, R, qname="Q"):
 
 
 # --------------------------------------------------------------------------- argument checks
-
-
-def _matrix(M, name, shape=None) -> np.ndarray:
-    return as_matrix(_float_array(M, name), name, shape)
-
-
-def _square(M, name, size=None) -> np.ndarray:
-    M = check_square(_float_array(M, name), name, size)
-    if M.shape[0] == 0:
-        raise ValueError(f"{name} must be at least 1 x 1; got shape {M.shape}")
-    return M
 
 
 def _eigenvalues(lam) -> np.ndarray:

@@ -38,6 +38,8 @@ import scipy.linalg
 from numpy.typing import ArrayLike
 
 from . import graphs
+from ._validation import as_matrix as _matrix
+from ._validation import check_square as _square
 from ._validation import (
     as_matrix,
     as_vector,
@@ -430,17 +432,6 @@ def _check_stabilizable(A: np.ndarray, B: np.ndarray) -> None:
 
 
 # --------------------------------------------------------------------------- argument checks
-
-
-def _matrix(M, name, shape=None) -> np.ndarray:
-    return as_matrix(_float_array(M, name), name, shape)
-
-
-def _square(M, name, size=None) -> np.ndarray:
-    M = check_square(_float_array(M, name), name, size)
-    if M.shape[0] == 0:
-        raise ValueError(f"{name} must be at least 1 x 1; got shape {M.shape}")
-    return M
 
 
 def _real(x, name) -> float:

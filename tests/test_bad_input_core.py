@@ -63,6 +63,8 @@ def baselines() -> dict[str, tuple]:
         "kalman.predict": (kalman.predict, dict(x=x4, P=P4, F=AGENT.A, Q=0.1 * np.eye(4), B=AGENT.B, u=np.ones(2))),
         "kalman.update": (kalman.update, dict(x=x4, P=P4, z=np.ones(2), H=H, R=np.eye(2))),
         "kalman.kalman_gain": (kalman.kalman_gain, dict(P=P4, H=H, R=np.eye(2))),
+        "kalman.run_filter": (kalman.run_filter, dict(x0=x4, P0=P4, z=np.ones((3, 2)), F=np.eye(4),
+                                                      Q=0.1 * np.eye(4), H=H, R=np.eye(2))),
         "kalman.nees": (kalman.nees, dict(error=np.ones(4), P=P4)),
         "kalman.nees_interval": (kalman.nees_interval, dict(dof=4, n_runs=10, confidence=0.95)),
         "kalman.symmetrize": (kalman.symmetrize, dict(P=rng.normal(size=(3, 3)))),
