@@ -586,3 +586,31 @@ def test_random_directed_graphs_are_refused_where_a_symmetric_laplacian_is_neede
         lqr.top_down_lqr(A_AG, B_AG, np.eye(2), np.eye(2), [[1.0]], adj)
     # the synchronization law accepts it (directed graphs are the paper's setting)
     assert np.all(np.isfinite(sync.local_control(np.ones((N, 2)), [0.0, 0.0], adj, np.ones(N), A_SYNC, 1.0)))
+
+
+def test_set_membership_filter_stays_pd_and_contains_the_truth_over_10_000_steps():
+    """Long horizon: the correction shapes stay symmetric positive definite and finite, and the
+    true state of a system driven by bounded noise stays inside every correction ellipsoid."""
+    from mascore import set_membership as smf
+
+    rng = np.random.default_rng(11)
+    A = np.array([[np.cos(0.1), -np.sin(0.1)], [np.sin(0.1), np.cos(0.1)]])
+    G, C, D = np.eye(2), np.array([[1.0, 0.0]]), np.eye(1)
+    Q, R = 0.01 * np.eye(2), 0.01 * np.eye(1)
+    n_steps = 10_000
+    # w_k in the ball of shape Q (radius 0.1), v_k in [-0.1, 0.1]: inside E(0, Q) and E(0, R)
+    w = rng.uniform(-1, 1, (n_steps, 2)) * 0.1 / np.sqrt(2)
+    v = rng.uniform(-0.1, 0.1, (n_steps + 1, 1))
+    x = np.array([1.0, -0.5])
+    xs = [x]
+    for k in range(n_steps):
+        x = A @ x + w[k]
+        xs.append(x)
+    xs = np.array(xs)
+    y = xs @ C.T + v
+    hist = smf.run_filter(np.zeros(2), 4.0 * np.eye(2), y, A, G, C, D, Q, R)
+    P = hist.shape_corr
+    assert np.all(np.isfinite(P)) and np.allclose(P, np.swapaxes(P, -1, -2))
+    assert np.linalg.eigvalsh(P).min() > 0
+    e = xs - hist.center_corr
+    assert np.max(np.einsum("ki,ki->k", e, np.linalg.solve(P, e[..., None])[..., 0])) <= 1 + 1e-9
