@@ -38,7 +38,7 @@ def verdict_summary(records: Sequence[dict]):
     import pandas as pd
 
     papers = [p for p in PAPERS if any(r["paper"] == p for r in records)]
-    table = pd.DataFrame(0, index=pd.Index(papers, name="paper"), columns=list(VERDICTS))
+    table = pd.DataFrame(0, index=pd.Index(papers), columns=list(VERDICTS))
     for r in records:
         table.loc[r["paper"], r["verdict"]] += 1
     table = table.loc[:, table.sum() > 0]
