@@ -62,10 +62,10 @@ TIME_LIMIT_S = 10
 # ---------------------------------------------------------------- step 1: record baselines
 
 
-def public_functions() -> list[tuple[str, str, object]]:
+def public_functions(modules: tuple[str, ...] | None = None) -> list[tuple[str, str, object]]:
     """(module, name, function) for every public callable of the swept modules."""
     out = []
-    for mod_name in MODULES:
+    for mod_name in modules or MODULES:
         module = importlib.import_module(f"mascore.{mod_name}")
         for name in getattr(module, "__all__", []):
             obj = getattr(module, name, None)
@@ -94,12 +94,13 @@ def _small(value) -> bool:
 class Recorder:
     """pytest plugin: wraps the public functions and records one successful call of each."""
 
-    def __init__(self, out: Path) -> None:
+    def __init__(self, out: Path, modules: tuple[str, ...] | None = None) -> None:
         self.out = out
+        self.modules = modules
         self.calls: dict[str, tuple] = {}
 
     def pytest_configure(self, config) -> None:  # noqa: D401 - pytest hook
-        functions = public_functions()
+        functions = public_functions(self.modules)
         self.n_functions = len(functions)
         for mod_name, name, func in functions:
             module = importlib.import_module(f"mascore.{mod_name}")
@@ -136,11 +137,11 @@ class Recorder:
         print(f"\nrecorded baselines of {len(self.calls)} of {self.n_functions} functions -> {self.out}")
 
 
-def record(out: Path, tests: list[str]) -> int:
+def record(out: Path, tests: list[str], modules: tuple[str, ...] | None = None) -> int:
     import pytest
 
     return pytest.main(["-q", "-p", "no:cacheprovider", "--no-header", *tests],
-                       plugins=[Recorder(out)])
+                       plugins=[Recorder(out, modules)])
 
 
 # ---------------------------------------------------------------- step 2: spoil and classify
@@ -233,9 +234,9 @@ def classify(func, args, kwargs, arg_name: str, always_invalid: bool) -> str:
     return "accepted" if always_invalid else "returned"
 
 
-def sweep(baselines: Path, csv: Path | None) -> Counter:
+def sweep(baselines: Path, csv: Path | None, modules: tuple[str, ...] | None = None) -> Counter:
     calls = pickle.loads(baselines.read_bytes())
-    functions = {f"{m}.{n}": f for m, n, f in public_functions()}
+    functions = {f"{m}.{n}": f for m, n, f in public_functions(modules)}
     rows = []
     for key, (args, kwargs) in sorted(calls.items()):
         func = functions.get(key)
@@ -277,10 +278,14 @@ def main(argv: list[str] | None = None) -> int:
     swp = sub.add_parser("sweep", help="spoil the baselines one argument at a time")
     swp.add_argument("baselines", type=Path)
     swp.add_argument("--csv", type=Path, default=None)
+    for p in (rec, swp):
+        p.add_argument("--modules", nargs="+", default=None,
+                       help="modules of mascore to sweep (default: the concept modules), e.g. papers.ren2005")
     args = parser.parse_args(argv)
+    modules = tuple(args.modules) if args.modules else None
     if args.command == "record":
-        return int(record(args.out, [t for t in args.tests if Path(t).exists()]))
-    sweep(args.baselines, args.csv)
+        return int(record(args.out, [t for t in args.tests if Path(t).exists()], modules))
+    sweep(args.baselines, args.csv, modules)
     return 0
 
 

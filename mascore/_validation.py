@@ -22,6 +22,7 @@ __all__ = [
     "check_laplacian",
     "check_positive",
     "check_positive_int",
+    "check_seed",
     "check_probability",
     "check_square",
 ]
@@ -160,6 +161,15 @@ def check_generator(rng: object, name: str = "rng") -> np.random.Generator:
     raise TypeError(
         f"{name} must be a numpy.random.Generator or an integer seed; got {type(rng).__name__}"
     )
+
+
+def check_seed(seed: object, name: str = "seed") -> int:
+    """Return `seed` as an int, requiring a non-negative integer (what ``numpy.random.SeedSequence`` takes)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"{name} must be a non-negative integer seed; got {type(seed).__name__} {seed!r}")
+    if seed < 0:
+        raise ValueError(f"{name} must be a non-negative integer seed; got {seed}")
+    return int(seed)
 
 
 def check_positive_int(n: object, name: str, minimum: int = 1) -> int:
