@@ -173,3 +173,95 @@ def test_reproduce_writes_figures_tables_and_claims(tmp_path):
     # the chapter shows the same ledger: run + claims with the same seed
     assert [c.to_dict() for c in ren.STUDY.claims(ren.run(ren.SETTINGS, 1))] == \
         [{k: v for k, v in c.items() if k != "study"} for c in doc["claims"]]
+
+
+# --------------------------------------------------------------------------- bad input (issue 14)
+
+_FIG1_SMALL = None
+
+
+def _small_fig1():
+    global _FIG1_SMALL
+    if _FIG1_SMALL is None:
+        _FIG1_SMALL = ren.fig1(seed=1, settings=dataclasses.replace(ren.SETTINGS, n_steps=5))
+    return _FIG1_SMALL
+
+
+_OC_STUDY = {"variants": {"paper": {"actual": np.ones((3, 10)), "believed": np.ones((3, 10)), "label": "x"}},
+             "fused_variance": 0.1}
+_T = np.arange(6.0)
+_SPREAD = np.exp(-_T)
+_BAD_INPUT = [
+    (lambda: ren.fig1(seed=-1), "seed"),
+    (lambda: ren.run(CHEAP, seed=-1), "seed"),
+    (lambda: ren.overconfidence(seed=-1), "seed"),
+    (lambda: ren.noise_study(seed=-1, settings=CHEAP), "seed"),
+    (lambda: ren.noise_study(n_runs=0, settings=CHEAP), "n_runs"),
+    (lambda: ren.noise_study(n_runs=-2, settings=CHEAP), "n_runs"),
+    (lambda: ren.noise_study(n_runs=2.0, settings=CHEAP), "n_runs"),
+    (lambda: ren.noise_study(n_runs="2", settings=CHEAP), "n_runs"),
+    (lambda: ren.noise_study(n_steps=3, settings=CHEAP), "n_steps"),
+    (lambda: ren.bias_study(seed=-1, settings=CHEAP), "seed"),
+    (lambda: ren.bias_study(n_runs=0, settings=CHEAP), "n_runs"),
+    (lambda: ren.bias_study(n_runs=1, settings=CHEAP), "n_runs"),
+    (lambda: ren.bias_study(n_runs=4.0, settings=CHEAP), "n_runs"),
+    (lambda: ren.bias_study(n_runs="4", settings=CHEAP), "n_runs"),
+    (lambda: ren.bias_study(n_steps=0, settings=CHEAP), "n_steps"),
+    (lambda: ren.decay_rate([0.0, np.nan, 2.0, 3.0], _SPREAD[:4]), "t"),
+    (lambda: ren.decay_rate(_T, np.where(_T == 3, np.nan, _SPREAD)), "spread"),
+    (lambda: ren.decay_rate(_T, np.where(_T == 3, np.inf, _SPREAD)), "spread"),
+    (lambda: ren.decay_rate(_T, "abc"), "spread"),
+    (lambda: ren.decay_rate(_T, _SPREAD[:4]), "spread"),
+    (lambda: ren.decay_rate(_T, -_SPREAD), "spread"),
+    (lambda: ren.decay_rate(_T[:2], _SPREAD[:2]), "t"),
+    (lambda: ren.plot_directed(np.where(np.eye(6) > 0, 0.0, np.nan), ren.FIG3_LAYOUT), "A"),
+    (lambda: ren.plot_directed("abc", ren.FIG3_LAYOUT), "A"),
+    (lambda: ren.plot_directed(ren.fig2_graph()[:5], ren.FIG3_LAYOUT), "A"),
+    (lambda: ren.plot_directed(-ren.fig2_graph(), ren.FIG3_LAYOUT), "A"),
+    (lambda: ren.plot_directed(ren.fig2_graph(), np.where(ren.FIG3_LAYOUT > 1, np.nan, 0.0)), "layout"),
+    (lambda: ren.plot_directed(ren.fig2_graph(), np.full((6, 2), np.inf)), "layout"),
+    (lambda: ren.plot_directed(ren.fig2_graph(), "abc"), "layout"),
+    (lambda: ren.plot_directed(ren.fig2_graph(), ren.FIG3_LAYOUT[:4]), "layout"),
+    (lambda: ren.plot_directed(ren.fig2_graph(), ren.FIG3_LAYOUT, highlight=[(0, 9)]), "highlight"),
+    (lambda: ren.plot_fig1(_small_fig1(), confident_agent=0), "confident_agent"),
+    (lambda: ren.plot_fig1(_small_fig1(), confident_agent=-1), "confident_agent"),
+    (lambda: ren.plot_fig1(_small_fig1(), confident_agent=7.0), "confident_agent"),
+    (lambda: ren.plot_fig1(_small_fig1(), confident_agent="7"), "confident_agent"),
+    (lambda: ren.plot_fig1(_small_fig1(), confident_agent=11), "confident_agent"),
+    (lambda: ren.plot_overconfidence(_OC_STUDY, confident_agent=0), "confident_agent"),
+    (lambda: ren.plot_overconfidence(_OC_STUDY, confident_agent=-3), "confident_agent"),
+    (lambda: ren.plot_overconfidence(_OC_STUDY, confident_agent=7.0), "confident_agent"),
+    (lambda: ren.plot_overconfidence(_OC_STUDY, confident_agent="7"), "confident_agent"),
+    (lambda: ren.switching_demo("abc", CHEAP), "graphs"),
+    (lambda: ren.switching_demo(ren.union_sequence()[:, :5, :5], CHEAP), "graphs"),
+    (lambda: ren.switching_demo(ren.fig2_graph(), CHEAP), "graphs"),
+    (lambda: ren.switching_demo(-ren.union_sequence(), CHEAP), "graphs"),
+    (lambda: ren.variant_label(np.nan, 0.1), "Q"),
+    (lambda: ren.variant_label(np.inf, 0.1), "Q"),
+    (lambda: ren.variant_label(-0.1, 0.1), "Q"),
+    (lambda: ren.variant_label("0.1", 0.1), "Q"),
+    (lambda: ren.variant_label(0.1, np.nan), "Omega"),
+    (lambda: ren.variant_label(0.1, np.inf), "Omega"),
+    (lambda: ren.variant_label(0.1, -1.0), "Omega"),
+    (lambda: ren.variant_label(0.1, "0.1"), "Omega"),
+]
+
+
+@pytest.mark.parametrize("call, name", _BAD_INPUT, ids=[f"{i}-{n}" for i, (_, n) in enumerate(_BAD_INPUT)])
+def test_bad_input_names_the_argument(call, name):
+    import matplotlib.pyplot as plt
+    try:
+        with pytest.raises((ValueError, TypeError), match=rf"\b{name}\b"):
+            call()
+    finally:
+        plt.close("all")
+
+
+def test_checked_functions_accept_their_valid_inputs():
+    import matplotlib.pyplot as plt
+    assert ren.variant_label(0, 0.0) == "Q = 0, Ω = 0"
+    assert ren.decay_rate(list(_T), list(_SPREAD)) == pytest.approx(-1.0)
+    ax = ren.plot_directed(np.zeros((6, 6)), ren.FIG3_LAYOUT.tolist(), highlight=np.array([[0, 1]]))
+    assert ax is not None
+    assert ren.bias_study(n_runs=2, n_steps=5, settings=CHEAP)["values"].shape == (2,)
+    plt.close("all")

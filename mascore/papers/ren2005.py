@@ -25,6 +25,8 @@ import pandas as pd
 
 from .. import consensus as cs
 from .._progress import progress_bar
+from .._validation import (as_matrix, check_adjacency, check_positive, check_positive_int, check_seed,
+                           float_array, require_finite)
 from ..graphs import adjacency_from_edges, has_spanning_tree, is_connected, spanning_tree_roots
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors, new_axes
@@ -149,6 +151,8 @@ THEOREM = dict(xi0=np.asarray(SETTINGS.switch_xi0), P0=SETTINGS.switch_P0, Q=SET
 
 def variant_label(Q: float, Omega: float, include_self: bool = True, paper: bool = False) -> str:
     """A short name of a variant of the scheme: ``"Q = 0, Ω = 0.1"``, ``"... no self term"``, ``"(paper)"``."""
+    check_positive(Q, "Q", "h²", allow_zero=True)
+    check_positive(Omega, "Omega", "h²", allow_zero=True)
     label = f"Q = {format_number(Q)}, Ω = {format_number(Omega)}"
     label += "" if include_self else ", no self term"
     return label + (" (paper)" if paper else "")
@@ -239,6 +243,7 @@ def fig1(seed: int = 1, noise: bool | None = None, settings: KalmanConsensusSett
         was also injected is not said.
     settings : KalmanConsensusSettings
     """
+    check_seed(seed, "seed")
     noise = settings.fig1_noise if noise is None else noise
     rng = np.random.default_rng(seed)
     G = _pairings(settings, rng, settings.n_steps)
@@ -266,10 +271,22 @@ class SwitchingDemo:
     continuous: cs.ConsensusResult
 
 
+def _check_graph_stack(graphs: np.ndarray, n: int) -> np.ndarray:
+    """`graphs` as a float (S, n, n) stack of adjacency matrices (S >= 1), each checked."""
+    arr = float_array(graphs, "graphs")
+    if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1:] != (n, n):
+        raise ValueError(f"graphs must be a stack of adjacency matrices of shape (S, {n}, {n}) with S >= 1 "
+                         f"(one row and column per agent of settings.switch_xi0); got shape {arr.shape}")
+    for k, g in enumerate(arr):
+        check_adjacency(g, f"graphs[{k}]")
+    return arr
+
+
 def switching_demo(graphs: np.ndarray, settings: KalmanConsensusSettings = SETTINGS) -> SwitchingDemo:
     """Kalman consensus, eqs. (1)-(3) and (4)-(5), while cycling through `graphs`."""
     s = settings
     xi0 = np.asarray(s.switch_xi0, dtype=float)
+    graphs = _check_graph_stack(graphs, xi0.size)
     P0 = np.full(graphs.shape[-1], s.switch_P0)
     seq = cs.periodic_sequence(graphs, s.dwell_steps, s.switch_steps)
     disc = cs.kalman_consensus_discrete(xi0, P0, seq, s.Q, s.Omega, include_self=s.include_self)
@@ -290,6 +307,14 @@ def fixed_graph_run(settings: KalmanConsensusSettings = SETTINGS) -> cs.Consensu
 
 def decay_rate(t: np.ndarray, spread: np.ndarray) -> float:
     """Least-squares slope of log(spread) over the second half of the run (per step or per s)."""
+    t = require_finite(float_array(t, "t"), "t")
+    spread = require_finite(float_array(spread, "spread"), "spread")
+    if t.ndim != 1 or t.size < 3:
+        raise ValueError(f"t must be a 1-D array of at least 3 times; got shape {t.shape}")
+    if spread.shape != t.shape:
+        raise ValueError(f"spread must have the shape of t, {t.shape}; got shape {spread.shape}")
+    if np.any(spread < 0):
+        raise ValueError(f"spread must be non-negative (max - min over the agents); smallest entry {spread.min():.3g}")
     half = len(t) // 2
     return float(np.polyfit(np.asarray(t[half:], float), np.log(np.maximum(spread[half:], 1e-300)), 1)[0])
 
@@ -321,8 +346,10 @@ def noise_study(seed: int = 1, n_runs: int | None = None, n_steps: int | None = 
         floor, -1/2 for a disagreement that decays like 1/sqrt(k)); ``team_mean``.
     """
     s = settings
-    n_runs = s.noise_runs if n_runs is None else n_runs
-    n_steps = s.noise_steps if n_steps is None else n_steps
+    check_seed(seed, "seed")
+    n_runs = check_positive_int(s.noise_runs if n_runs is None else n_runs, "n_runs")
+    # the floors average the last and third quarters of the horizon: at least 4 steps
+    n_steps = check_positive_int(s.noise_steps if n_steps is None else n_steps, "n_steps", minimum=4)
     Q = s.Q if Q is None else Q
     Omega = s.Omega if Omega is None else Omega
     rng = np.random.default_rng(seed)
@@ -384,8 +411,10 @@ def bias_study(seed: int = 1, n_runs: int | None = None, n_steps: int | None = N
     ``se`` its standard error, ``std``, ``max_spread`` the worst final disagreement.
     """
     s = settings
-    n_runs = s.bias_runs if n_runs is None else n_runs
-    n_steps = s.n_steps if n_steps is None else n_steps
+    check_seed(seed, "seed")
+    # the standard error needs two schedules at least
+    n_runs = check_positive_int(s.bias_runs if n_runs is None else n_runs, "n_runs", minimum=2)
+    n_steps = check_positive_int(s.n_steps if n_steps is None else n_steps, "n_steps")
     Q = s.Q if Q is None else Q
     Omega = s.Omega if Omega is None else Omega
     rng = np.random.default_rng(seed)
@@ -432,6 +461,7 @@ def overconfidence(seed: int = 1, settings: KalmanConsensusSettings = SETTINGS,
     combination of the initial data can reach).
     """
     s = settings
+    check_seed(seed, "seed")
     res = fig1(seed, settings=s) if fig1_result is None else fig1_result
     xi0, P0 = fig1_initial(True, s)
     kinds = {"paper": dict(Q=s.Q, Omega=s.Omega, include_self=s.include_self),
@@ -487,6 +517,7 @@ def run(settings: KalmanConsensusSettings = SETTINGS, seed: int = 1, progress: b
         Show a progress bar over the studies.
     """
     s = settings
+    check_seed(seed, "seed")
     tasks = {
         "fig1": lambda: fig1(seed, settings=s),
         "union": lambda: switching_demo(union_sequence(), s),
@@ -505,8 +536,17 @@ def run(settings: KalmanConsensusSettings = SETTINGS, seed: int = 1, progress: b
 # --------------------------------------------------------------------------- plots
 
 
+def _check_agent(agent: object, name: str, n: int) -> int:
+    """A 1-based agent number in 1..n."""
+    agent = check_positive_int(agent, name)
+    if agent > n:
+        raise ValueError(f"{name} must be a 1-based agent number in 1..{n}; got {agent}")
+    return agent
+
+
 def plot_fig1(res: Fig1Result, axes=None, confident_agent: int = SETTINGS.confident_agent):
     """2 x 2 panels: states (top) and variances (bottom); equal (left) and confident (right)."""
+    _check_agent(confident_agent, "confident_agent", res.equal.xi.shape[-1])
     if axes is None:
         _, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True, layout="constrained")
     colors = agent_colors(res.equal.xi.shape[-1])
@@ -542,6 +582,14 @@ def plot_average(res: Fig1Result, axes=None):
 
 def plot_directed(A, layout, ax=None, highlight=(), title=None):
     """Draw a small directed graph; `highlight` edges (j, i) are drawn bold (the paper's double arrows)."""
+    A = check_adjacency(A, "A")
+    n = A.shape[0]
+    layout = as_matrix(layout, "layout", shape=(n, 2))
+    edges = float_array(highlight, "highlight")
+    if edges.size and (edges.ndim != 2 or edges.shape[1] != 2 or not np.all(np.isfinite(edges))
+                       or np.any(edges != np.round(edges)) or edges.min() < 0 or edges.max() >= n):
+        raise ValueError(f"highlight must be a sequence of edges (j, i) with agent indices in 0..{n - 1}; "
+                         f"got {highlight!r}")
     ax = new_axes(ax)
     hl = {(int(j), int(i)) for j, i in highlight}
     for i, j in zip(*np.nonzero(A)):
@@ -592,6 +640,7 @@ def plot_switching(demo: SwitchingDemo, axes=None, label=""):
 def plot_overconfidence(study: dict, axes=None, confident_agent: int = SETTINGS.confident_agent):
     """Believed (dashed) and actual (solid) variance of the confident agent and of agent 1, per variant."""
     variants = list(study["variants"].values())
+    _check_agent(confident_agent, "confident_agent", np.shape(variants[0]["actual"])[-1])
     if axes is None:
         _, axes = plt.subplots(1, len(variants), figsize=(10, 3.4), sharey=True, layout="constrained")
     for n, (ax, v) in enumerate(zip(axes, variants)):
