@@ -214,3 +214,71 @@ def test_process_noise_study_small_q_restores_position_ordering():
     df = S.process_noise_study(seed=0, q_values=(0.01,), n_runs=3, horizon=24.0)
     pos = df.set_index("law")["pos_std_m"]
     assert pos[S.ESTIMATION] < 0.5 * pos[S.CONVENTIONAL]
+
+
+# ---------------------------------------------------------------- bad input (issue 14)
+
+
+def _remark6_args(**override):
+    """Valid arguments of simulate_remark6 (1 run, 3 steps), with `override` spoiling one."""
+    s = S.setup()
+    x0, adj = S.random_initial_states(np.random.default_rng(0), s)
+    X0 = x0[None]
+    args = dict(rng=np.random.default_rng(1), x0=X0, adjacency=adj, s=s, Q=np.eye(s.m), R=np.eye(s.m), n_steps=3,
+                x_hat0=X0.reshape(1, -1))
+    return {**args, **override}
+
+
+_BAD_X0 = np.zeros((1, 8, 3))
+
+
+@pytest.mark.parametrize("fn", [S.fig2, S.fig3, S.process_noise_study])
+@pytest.mark.parametrize("arg, bad", [("seed", -1), ("seed", "0"), ("n_runs", 0), ("n_runs", -2), ("n_runs", 2.0),
+                                      ("n_runs", "3"), ("horizon", np.nan), ("horizon", np.inf), ("horizon", 0.0),
+                                      ("horizon", -1.0), ("horizon", "40"), ("horizon", 0.01)])
+def test_run_functions_name_bad_argument(fn, arg, bad):
+    with pytest.raises((TypeError, ValueError), match=arg):
+        fn(**{arg: bad})
+
+
+@pytest.mark.parametrize("bad", [(np.nan,), (-1.0,), (), "0.1", ((0.1, 0.2),)])
+def test_process_noise_study_names_bad_q_values(bad):
+    with pytest.raises((TypeError, ValueError), match="q_values"):
+        S.process_noise_study(q_values=bad, n_runs=1, horizon=1.0)
+
+
+@pytest.mark.parametrize("arg, bad", [
+    ("rng", -1), ("rng", "seed"), ("x0", np.full((1, 8, 4), np.nan)), ("x0", np.full((1, 8, 4), np.inf)),
+    ("x0", "x"), ("x0", _BAD_X0), ("n_steps", 0), ("n_steps", -1), ("n_steps", 2.0), ("n_steps", "3"),
+    ("x_hat0", np.full((1, 32), np.nan)), ("x_hat0", np.full((1, 32), np.inf)), ("x_hat0", "x"),
+    ("x_hat0", np.zeros((1, 31))), ("control_adjacency", np.ones((3, 3))), ("s", "setup"),
+])
+def test_simulate_remark6_names_bad_argument(arg, bad):
+    with pytest.raises((TypeError, ValueError), match=arg):
+        S.simulate_remark6(**_remark6_args(**{arg: bad}))
+
+
+def test_simulate_remark6_unchanged_by_checks():
+    """A seed is now accepted as `rng`; with a Generator the numbers are those of the same seed."""
+    a = S.simulate_remark6(**_remark6_args(rng=np.random.default_rng(5)))
+    b = S.simulate_remark6(**_remark6_args(rng=5))
+    np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: S.setup(n_agents=0), "n_agents"), (lambda: S.setup(n_agents=2.5), "n_agents"),
+    (lambda: S.estimator_step_seconds(2), "n_agents"), (lambda: S.estimator_step_seconds(4, repeat=0), "repeat"),
+    (lambda: S.estimator_step_seconds(4, plain_repeat=-1), "plain_repeat"), (lambda: S.run(seed=-1), "seed"),
+])
+def test_other_functions_name_bad_argument(call, name):
+    with pytest.raises((TypeError, ValueError), match=name):
+        call()
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: S.plot_theorem1(None, {}, agent=-1), "agent"), (lambda: S.plot_theorem1(None, {}, agent="0"), "agent"),
+    (lambda: S.fig3_table(None, every=0.0), "every"), (lambda: S.fig3_table(None, every=np.nan), "every"),
+])
+def test_plot_and_table_helpers_name_bad_argument(call, name):
+    with pytest.raises((TypeError, ValueError), match=name):
+        call()

@@ -177,3 +177,43 @@ def test_beyond_study_flags_unstable_large_teams():
 
 def test_ekf_step_seconds_is_positive():
     assert 0 < s.ekf_step_seconds(s.SETTINGS, repeat=1) < 10
+
+
+# ---------------------------------------------------------------- bad input (issue 14)
+
+
+@pytest.mark.parametrize("fn", [s.run_fig4, s.run_fig5, s.beyond_study, s.run, s.ekf_step_seconds])
+@pytest.mark.parametrize("bad", [-1, "1", 1.5])
+def test_seeded_functions_name_bad_seed(fn, bad):
+    with pytest.raises((TypeError, ValueError), match="seed"):
+        fn(seed=bad)
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: s.fig4_initial_state(-1), "rng"), (lambda: s.fig4_initial_state("rng"), "rng"),
+    (lambda: s.initial_estimates("rng", np.zeros((8, 4))), "rng"),
+    (lambda: s.initial_estimates(np.random.default_rng(0), np.full((8, 4), np.nan)), "X0"),
+    (lambda: s.initial_estimates(np.random.default_rng(0), np.zeros((8, 3))), "X0"),
+    (lambda: s.initial_estimates(np.random.default_rng(0), "X0"), "X0"),
+    (lambda: s.ekf_step_seconds(repeat=0), "repeat"),
+])
+def test_functions_name_bad_argument(call, name):
+    with pytest.raises((TypeError, ValueError), match=name):
+        call()
+
+
+def test_initial_estimates_unchanged_for_lists():
+    X0 = np.arange(32.0).reshape(8, 4)
+    a = s.initial_estimates(np.random.default_rng(3), X0)[0]
+    b = s.initial_estimates(np.random.default_rng(3), X0.tolist())[0]
+    np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: s.plot_fig6(None, run_index=-1), "run_index"), (lambda: s.plot_fig6(None, run_index=0.5), "run_index"),
+    (lambda: s.fig4_statistics(None, transient=-1.0), "transient"),
+    (lambda: s.fig4_statistics(None, transient=np.nan), "transient"),
+])
+def test_plot_and_statistics_helpers_name_bad_argument(call, name):
+    with pytest.raises((TypeError, ValueError), match=name):
+        call()

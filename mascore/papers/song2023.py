@@ -25,7 +25,15 @@ from matplotlib.ticker import FuncFormatter
 import pandas as pd
 
 from .. import distributed_kf as dkf
-from .._validation import check_generator, check_positive, check_positive_int
+from .._validation import (
+    check_adjacency,
+    check_generator,
+    check_positive,
+    check_positive_int,
+    check_seed,
+    float_array,
+    require_finite,
+)
 from .._progress import progress_bar
 from .._timing import median_time
 from ..agents import double_integrator
@@ -196,6 +204,8 @@ class RendezvousSetup:
 def setup(n_agents: int | None = None, settings: RendezvousSettings = SETTINGS) -> RendezvousSetup:
     """Table I model: double integrator, ``K = [rho1 I, rho2 I]``; `n_agents` overrides N."""
     st = settings
+    if n_agents is not None:
+        n_agents = check_positive_int(n_agents, "n_agents")
     agent = double_integrator(st.n, st.dt)
     return RendezvousSetup(
         A=agent.A, B=agent.B, K=rendezvous_gain(st.rho1, st.rho2, st.n),
@@ -216,6 +226,9 @@ def estimator_step_seconds(n_agents: int, repeat: int = 5, plain_repeat: int = 3
     dict
         ``structured_s``, ``plain_s`` (s per step) and ``speedup``.
     """
+    n_agents = check_positive_int(n_agents, "n_agents", minimum=3)  # a ring
+    check_positive_int(repeat, "repeat")
+    check_positive_int(plain_repeat, "plain_repeat")
     s = setup(n_agents)
     noise = np.eye(2 * s.n)
     model = dkf.team_filter_model(s.A, s.B, s.K, noise, noise, n_agents)
@@ -273,6 +286,18 @@ def _initial_estimates(rng: np.random.Generator, s: RendezvousSetup, x0: np.ndar
     return (x0 + rng.standard_normal(x0.shape) * std).reshape(x0.shape[0], -1)
 
 
+def _check_run_arguments(seed: object, n_runs: object, horizon: object, dt: float) -> None:
+    """Entry checks of :func:`fig2`, :func:`fig3` and :func:`process_noise_study` (``None`` = the setting)."""
+    check_seed(seed, "seed")
+    if n_runs is not None:
+        check_positive_int(n_runs, "n_runs")
+    if horizon is not None:
+        check_positive(horizon, "horizon", "s")
+        if int(round(horizon / dt)) < 1:
+            raise ValueError(f"horizon must be at least half a sampling time ({dt / 2:g} s) to give one step; "
+                             f"got {horizon!r}")
+
+
 # ----------------------------------------------------------------------------
 # Fig. 2
 # ----------------------------------------------------------------------------
@@ -315,6 +340,7 @@ def fig2(seed: int = 0, n_runs: int | None = None, horizon: float | None = None,
     statistics of both loops for free. `n_runs` and `horizon` (s) override
     ``settings.fig2_runs`` and ``settings.horizon``.
     """
+    _check_run_arguments(seed, n_runs, horizon, settings.dt)
     rng = np.random.default_rng([seed, 2])
     s = setup(settings=settings)
     n_runs = settings.fig2_runs if n_runs is None else n_runs
@@ -396,6 +422,7 @@ def fig3(seed: int = 0, n_runs: int | None = None, horizon: float | None = None,
     (:func:`simulate_remark6`). `n_runs` and `horizon` (s) override
     ``settings.fig3_runs`` and ``settings.horizon``.
     """
+    _check_run_arguments(seed, n_runs, horizon, settings.dt)
     rng = np.random.default_rng([seed, 3])
     s = setup(settings=settings)
     n_runs = settings.fig3_runs if n_runs is None else n_runs
@@ -472,7 +499,22 @@ def simulate_remark6(
     -------
     (T+1, R, N, 2n) true states.
     """
+    rng = check_generator(rng)
+    if not isinstance(s, RendezvousSetup):
+        raise TypeError(f"s must be a RendezvousSetup (see setup()); got {type(s).__name__}")
+    x0 = float_array(x0, "x0")
+    if x0.ndim != 3 or x0.shape[-1] != s.m or 0 in x0.shape:
+        raise ValueError(f"x0 must have shape (R, N, {s.m}) with R, N >= 1; got {x0.shape}")
+    require_finite(x0, "x0")
     n_runs, N, m = x0.shape
+    n_steps = check_positive_int(n_steps, "n_steps")
+    x_hat0 = float_array(x_hat0, "x_hat0")
+    if x_hat0.shape != (n_runs, N * m):
+        raise ValueError(f"x_hat0 must have shape (R, N 2n) = {(n_runs, N * m)} for x0 of shape {x0.shape}; "
+                         f"got {x_hat0.shape}")
+    require_finite(x_hat0, "x_hat0")
+    if control_adjacency is not None:
+        check_adjacency(control_adjacency, "control_adjacency", size=N)
     Lc = laplacian(complete_graph(N) if control_adjacency is None else control_adjacency)
     mask = sensing_mask(adjacency)
     model = dkf.team_filter_model(s.A, s.B, s.K, Q, R, N)
@@ -505,6 +547,12 @@ def process_noise_study(seed: int = 0, q_values: tuple | None = None, n_runs: in
     -------
     DataFrame with columns ``q``, ``law``, ``pos_std_m``, ``vel_std_mps``.
     """
+    _check_run_arguments(seed, n_runs, horizon, settings.dt)
+    if q_values is not None:
+        q = require_finite(float_array(q_values, "q_values"), "q_values")
+        if q.ndim != 1 or q.size == 0 or np.any(q < 0):
+            raise ValueError("q_values must be a non-empty 1-D sequence of process-noise levels >= 0; "
+                             f"got {q_values!r}")
     q_values = settings.process_noise_q if q_values is None else q_values
     n_runs = settings.process_noise_runs if n_runs is None else n_runs
     horizon = settings.process_noise_horizon if horizon is None else horizon
@@ -544,6 +592,7 @@ class RendezvousRun:
 
 def run(settings: RendezvousSettings = SETTINGS, seed: int = 0, progress: bool = False) -> RendezvousRun:
     """Fig. 2 (with Theorem 1 and the NEES), Fig. 3 (with Remark 6) and the process-noise study, once."""
+    check_seed(seed, "seed")
     r2 = fig2(seed, settings=settings)
     return RendezvousRun(settings, r2, theorem1(r2), fig3(seed, progress=progress, settings=settings),
                          process_noise_study(seed, settings=settings))
@@ -602,6 +651,9 @@ def plot_fig3(res: Fig3Result, axes=None, laws: tuple[str, ...] = (CONVENTIONAL,
 
 def plot_theorem1(res: Fig2Result, th: dict[str, np.ndarray], agent: int = 0, axes=None):
     """Theorem 1 made visible: ``min eig M_i`` for every agent and ``V`` (eq. (45)) of one agent."""
+    agent = check_positive_int(agent, "agent", minimum=0)
+    if agent >= res.setup.n_agents:
+        raise ValueError(f"agent must be an agent index in [0, {res.setup.n_agents - 1}]; got {agent}")
     if axes is None:
         _, axes = plt.subplots(1, 2, figsize=(9, 3.8), layout="constrained")
     e = res.estimation
@@ -723,6 +775,7 @@ def table1(result: RendezvousRun) -> pd.DataFrame:
 
 def fig3_table(result: RendezvousRun, every: float = 1.0) -> pd.DataFrame:
     """The curves of Fig. 3 (and of the Remark 6 figure) every `every` seconds."""
+    check_positive(every, "every", "s")
     r3 = result.fig3
     step = max(int(round(every / result.settings.dt)), 1)
     return pd.DataFrame({"time_s": r3.time, **{f"pos_std_m[{k}]": v for k, v in r3.pos_std.items()},

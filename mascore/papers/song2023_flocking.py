@@ -42,7 +42,14 @@ from ..flocking import (
     max_distance_from_centre,
     simulate_measured_flocking,
 )
-from .._validation import check_generator, check_positive, check_positive_int
+from .._validation import (
+    check_generator,
+    check_positive,
+    check_positive_int,
+    check_seed,
+    float_array,
+    require_finite,
+)
 from ..graphs import is_connected, proximity_graph
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors, plot_graph
@@ -244,6 +251,7 @@ def initial_states(
 
 def fig4_initial_state(rng: np.random.Generator, settings: FlockingSettings = SETTINGS) -> np.ndarray:
     """Fig. 4 initial state: rows of 4 agents (2 x 4 for N = 8), ``fig4_spacing`` apart, random velocities."""
+    rng = check_generator(rng)
     j = np.arange(settings.n_agents)
     p = settings.fig4_spacing * np.stack([j % 4, j // 4], axis=-1).astype(float)
     v = rng.uniform(-settings.v0_max, settings.v0_max, (settings.n_agents, settings.n_dim))
@@ -257,6 +265,11 @@ def initial_estimates(rng: np.random.Generator, X0: np.ndarray,
     ``X_hat0`` has shape ``(..., N, N, 2n)`` for ``X0`` ``(..., N, 2n)``;
     ``Sigma0 = I_N kron sigma0_agent``.
     """
+    rng = check_generator(rng)
+    X0 = require_finite(float_array(X0, "X0"), "X0")
+    m = 2 * settings.n_dim
+    if X0.ndim < 2 or X0.shape[-1] != m or X0.shape[-2] < 1:
+        raise ValueError(f"X0 must have shape (..., N, {m}) with N >= 1; got {X0.shape}")
     N = X0.shape[-2]
     std = np.sqrt(np.diag(settings.sigma0_agent))
     X_hat0 = X0[..., None, :, :] + std * rng.standard_normal((*X0.shape[:-2], N, N, 2 * settings.n_dim))
@@ -268,6 +281,7 @@ def initial_estimates(rng: np.random.Generator, X0: np.ndarray,
 
 def run_fig4(settings: FlockingSettings = SETTINGS, seed: int = 1) -> EstimatedFlockingRun:
     """The single run of Fig. 4: estimation-based flocking (case (iii)), ``R_fig4``, recording ``observer``."""
+    check_seed(seed, "seed")
     rng = np.random.default_rng([seed, 4])
     X0 = fig4_initial_state(rng, settings)
     X_hat0, Sigma0 = initial_estimates(rng, X0, settings)
@@ -324,6 +338,7 @@ def run_fig5(settings: FlockingSettings = SETTINGS, seed: int = 1, progress: boo
     three cases share their initial states (common random numbers) and draw
     their noise from independent streams.
     """
+    check_seed(seed, "seed")
     root = np.random.SeedSequence([seed, 5])
     init_ss, *case_ss = root.spawn(4)
     rng0 = np.random.default_rng(init_ss)
@@ -378,6 +393,7 @@ def beyond_study(settings: FlockingSettings = SETTINGS, seed: int = 1, progress:
         ``DivergenceError``, or ended with an agent farther than 10 R from
         the centre of mass; their numbers are then meaningless).
     """
+    check_seed(seed, "seed")
     points = [(settings.n_agents, r) for r in settings.beyond_sensing_ranges]
     points += [(N, settings.sensing_range) for N in settings.beyond_sizes if N != settings.n_agents]
     base = replace(settings, n_runs=settings.beyond_runs, t_final=settings.beyond_t_final)
@@ -421,6 +437,7 @@ class FlockingResult:
 
 def run(settings: FlockingSettings = SETTINGS, seed: int = 1, progress: bool = False) -> FlockingResult:
     """The flocking study once: Fig. 4's run, the Monte Carlo of Figs. 5-6, the sweep beyond the paper."""
+    check_seed(seed, "seed")
     parts = (("fig4", lambda: run_fig4(settings, seed)),
              ("fig5", lambda: run_fig5(settings, seed, progress=progress)),
              ("beyond", lambda: beyond_study(settings, seed, progress=progress)))
@@ -498,6 +515,9 @@ def plot_fig6(res: Fig5Result, settings: FlockingSettings = SETTINGS, run_index:
 
     Panels: (a) case (i), (b) case (iii) as in the paper, (c) case (ii) for reference.
     """
+    run_index = check_positive_int(run_index, "run_index", minimum=0)
+    if run_index >= res.final.shape[1]:
+        raise ValueError(f"run_index must be a run index in [0, {res.final.shape[1] - 1}]; got {run_index}")
     fig, axes = plt.subplots(1, 3, figsize=(7.5, 3.3), layout="constrained")
     for ax, c, letter in zip(axes, (0, 2, 1), "abc"):
         p = res.final[c, run_index, :, :2]
@@ -557,6 +577,7 @@ def fig4_statistics(run4: EstimatedFlockingRun, transient: float = SETTINGS.tran
     at that step. Errors in m; the statistical error is
     ``sqrt(trace Sigma_pos)`` of the observer's filter.
     """
+    check_positive(transient, "transient", "s", allow_zero=True)
     o, dt = run4.observer, run4.t[1] - run4.t[0]
     late = run4.t >= transient
     others = np.arange(run4.X.shape[-2]) != o
@@ -764,6 +785,8 @@ def ekf_step_seconds(settings: FlockingSettings = SETTINGS, seed: int = 0, repea
     after one warm-up call; median of `repeat` calls. This machine, reported
     only (never asserted).
     """
+    check_seed(seed, "seed")
+    check_positive_int(repeat, "repeat")
     rng = np.random.default_rng([seed, 7])
     X = initial_states(rng, 1, settings)[0]
     X_hat, Sigma0 = initial_estimates(rng, X, settings)
