@@ -252,3 +252,51 @@ def test_table1_view_is_labelled():
     view = paper.table1_view(table)
     assert list(view.index) == [1, 2, 3] and ("mean", "paper") in view.columns
     assert view.loc[1, ("RMS", "paper")] == "1.1985"
+
+
+# ---------------------------------------------------------------- bad input is refused by name (issue 14)
+
+_X0 = paper.X0_HAT + 0.5
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: paper.draw(-1), "seed"),
+    (lambda: paper.draw("1"), "seed"),
+    (lambda: paper.draw(1, 0), "n_runs"),
+    (lambda: paper.draw(1, -2), "n_runs"),
+    (lambda: paper.draw(1, 1.5), "n_runs"),
+    (lambda: paper.draw(1, "3"), "n_runs"),
+    (lambda: paper.simulate(seed=-1), "seed"),
+    (lambda: paper.simulate(n_runs=0), "n_runs"),
+    (lambda: paper.simulate(n_runs=1.5), "n_runs"),
+    (lambda: paper.simulate(n_runs="3"), "n_runs"),
+    (lambda: paper.simulate(draws="draws"), "draws"),
+    (lambda: paper.simulate(setting=0.05), "setting"),
+    (lambda: paper.simulate(adjacency="ring"), "adjacency"),
+    (lambda: paper.table1_study(seed=-1, n_runs=1), "seed"),
+    (lambda: paper.table1_study(seed=1, n_runs=0), "n_runs"),
+    (lambda: paper.run(seed=-1), "seed"),
+    (lambda: paper.run(seed="1"), "seed"),
+    (lambda: paper.noise_free_metrics(np.where(_X0 == _X0[0, 0], np.nan, _X0)), "x0"),
+    (lambda: paper.noise_free_metrics(np.where(_X0 == _X0[0, 0], np.inf, _X0)), "x0"),
+    (lambda: paper.noise_free_metrics("x0"), "x0"),
+    (lambda: paper.noise_free_metrics(_X0[:-1]), "x0"),
+    (lambda: paper.noise_free_metrics(_X0, adjacency=np.ones((3, 3)) - np.eye(3)), "adjacency"),
+    (lambda: paper.noise_free_metrics(_X0, c=-1.0), "c"),
+    (lambda: paper.noise_free_metrics(_X0, leader_shift=0.5), "leader_shift"),
+    (lambda: paper.noise_free_metrics(_X0, first_k=-1), "first_k"),
+    (lambda: paper.table1_readings(x0=_X0[:, :1]), "x0"),
+])
+def test_bad_input_is_refused_by_name(call, name):
+    with pytest.raises((ValueError, TypeError), match=rf"\b{name}\b"):
+        call()
+
+
+def test_bad_plot_arguments_are_refused_by_name():
+    run = paper.simulate(seed=1)
+    for agents in ((0, 1), (1, 5), (1.0, 2)):
+        with pytest.raises((ValueError, TypeError), match="agents"):
+            paper.plot_fig3_4(run, agents)
+    with pytest.raises((ValueError, TypeError), match="k_max"):
+        paper.plot_fig2(run, k_max=-1)
+    plt.close("all")

@@ -257,3 +257,52 @@ def test_reproduce_writes_ledger(tmp_path):
         assert (out / "tables" / f"{name}.csv").exists()
     verdicts = {c["id"]: c["verdict"] for c in json.loads((out / "claims.json").read_text())["claims"]}
     assert verdicts == {f"vlahakis/{k}": v_ for k, v_ in EXPECTED_VERDICTS.items()}
+
+
+# ---------------------------------------------------------------- bad input is refused by name (issue 14)
+
+_T = np.linspace(0.0, 1.0, 5)
+_SIG = np.exp(-_T)[:, None] * np.ones((1, 3))
+
+
+@pytest.mark.parametrize("call, name", [
+    *[(lambda bad=bad, f=f: f(bad), "Q2") for bad in (np.nan, np.inf, -1.0, "5")
+      for f in (v.design, v.as_printed_phi_interval)],
+    (lambda: v.as_printed_phi_interval(5.0, n_agents=2.5), "n_agents"),
+    (lambda: v.design(5.0, n_agents="5"), "n_agents"),
+    (lambda: v.phi_profile("5", "as-printed", [0.5]), "Q2"),
+    (lambda: v.phi_profile(5.0, "as-printed", [np.nan, 0.5]), "phis"),
+    (lambda: v.phi_profile(5.0, "as-printed", [0.5, np.inf]), "phis"),
+    (lambda: v.phi_profile(5.0, "as-printed", "phis"), "phis"),
+    (lambda: v.phi_profile(5.0, "as-printed", []), "phis"),
+    (lambda: v.phi_profile(5.0, "as-printed", np.ones((2, 2))), "phis"),
+    (lambda: v.profile_argmin("5", v.L_READING, (0.0, 1.0)), "Q2"),
+    (lambda: v.profile_argmin(5.0, v.L_READING, (0.0, np.nan)), "bounds"),
+    (lambda: v.profile_argmin(5.0, v.L_READING, (1.0, 0.0)), "bounds"),
+    (lambda: v.profile_argmin(5.0, v.L_READING, (0.0, 1.0, 2.0)), "bounds"),
+    (lambda: v.profile_argmin(5.0, v.L_READING, (0.0, 1.0), points=1), "points"),
+    (lambda: v.profile_argmin(5.0, v.L_READING, (0.0, 1.0), rounds=0), "rounds"),
+    (lambda: v.settling_time(np.where(_T == 0, np.nan, _T), _SIG, 0.05), "t"),
+    (lambda: v.settling_time(np.where(_T == 1, np.inf, _T), _SIG, 0.05), "t"),
+    (lambda: v.settling_time("t", _SIG, 0.05), "t"),
+    (lambda: v.settling_time(_T[::-1], _SIG, 0.05), "t"),
+    (lambda: v.settling_time(_T[:-1], _SIG, 0.05), "signal"),
+    (lambda: v.settling_time(_T, _SIG[:-1], 0.05), "signal"),
+    (lambda: v.settling_time(_T, _SIG[:, 0], 0.05), "signal"),
+    (lambda: v.settling_time(_T, np.where(_SIG == _SIG[0, 0], np.nan, _SIG), 0.05), "signal"),
+    (lambda: v.settling_time(_T, _SIG * np.inf, 0.05), "signal"),
+    (lambda: v.settling_time(_T, "signal", 0.05), "signal"),
+    *[(lambda bad=bad: v.settling_time(_T, _SIG, bad), "fraction") for bad in (np.nan, np.inf, 0.0, -0.5, "0.1")],
+    (lambda: v.run(seed=-1), "seed"),
+    (lambda: v.run(seed="1"), "seed"),
+    (lambda: v.structure_check(n_agents=4.5), "n_agents"),
+    (lambda: v.controller_comparison(n_agents="5"), "n_agents"),
+])
+def test_bad_input_is_refused_by_name(call, name):
+    with pytest.raises((ValueError, TypeError), match=rf"\b{name}\b"):
+        call()
+
+
+def test_zero_Q2_is_a_valid_limit():
+    """Q2 = 0 decouples the agents: only Phi = 0 is optimal (a documented limit, not an error)."""
+    assert v.as_printed_phi_interval(0.0) == (0.0, 0.0)

@@ -41,6 +41,14 @@ import pandas as pd
 from .. import set_membership as smf
 from .. import synchronization as sync
 from .._progress import progress_bar
+from .._validation import (
+    check_adjacency,
+    check_positive,
+    check_positive_int,
+    check_seed,
+    float_array,
+    require_finite,
+)
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors
 from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, setting
@@ -214,6 +222,8 @@ class Draw:
 
 def draw(seed: int, n_runs: int = 1, scenario: SetMembershipSettings = DEFAULTS) -> Draw:
     """Random draws of `n_runs` runs; run r uses ``SeedSequence(seed).spawn(n_runs)[r]``."""
+    seed = check_seed(seed, "seed")
+    n_runs = check_positive_int(n_runs, "n_runs")
     x0_hat, t_f = scenario.matrix("x0_hat"), scenario.t_f
     n_agents, n = x0_hat.shape
     p = len(scenario.C)
@@ -296,8 +306,15 @@ def simulate(
         Everything else: model, graph, initial conditions, horizon (default: the paper's).
     """
     s = scenario
+    if setting is not None and not isinstance(setting, DisturbanceSetting):
+        raise TypeError(f"setting must be a DisturbanceSetting (a Table 1 row) or None; got {type(setting).__name__}")
+    if draws is None:
+        seed = check_seed(seed, "seed")
+        n_runs = check_positive_int(n_runs, "n_runs")
+    elif not isinstance(draws, Draw):
+        raise TypeError(f"draws must be a Draw (see draw()) or None; got {type(draws).__name__}")
     setting = s.figure_setting if setting is None else setting
-    adjacency = s.matrix("adjacency") if adjacency is None else np.asarray(adjacency, dtype=float)
+    adjacency = s.matrix("adjacency") if adjacency is None else float_array(adjacency, "adjacency")
     des = design(s, adjacency)
     draws = draws if draws is not None else draw(seed, n_runs, s)
     A_, B_, C_, D_, G_, pin = (s.matrix(m) for m in ("A", "B", "C", "D", "G", "pinning"))
@@ -347,7 +364,8 @@ def table1_study(
         and the spread (mean, std, 5/50/95 % quantiles, min, max) over the runs.
     runs : the :class:`ClosedLoopRun` of each row.
     """
-    n_runs = scenario.n_runs if n_runs is None else n_runs
+    seed = check_seed(seed, "seed")
+    n_runs = scenario.n_runs if n_runs is None else check_positive_int(n_runs, "n_runs")
     draws = draw(seed, n_runs, scenario)
     rows, runs = [], []
     for i, s in enumerate(progress_bar(scenario.rows, enabled=progress, desc="Table 1")):
@@ -403,13 +421,20 @@ def noise_free_metrics(
     first_k : first time step of the average (0 in our reading)
     """
     s = scenario
-    adjacency = s.matrix("adjacency") if adjacency is None else np.asarray(adjacency, dtype=float)
+    x0 = _check_states(x0, "x0", s)
+    adjacency = (s.matrix("adjacency") if adjacency is None
+                 else check_adjacency(adjacency, "adjacency", size=s.n_agents))
+    c = None if c is None else check_positive(c, "c")
+    if isinstance(leader_shift, bool) or not isinstance(leader_shift, (int, np.integer)):
+        raise TypeError(f"leader_shift must be an integer (steps, may be negative); got "
+                        f"{type(leader_shift).__name__} {leader_shift!r}")
+    first_k = check_positive_int(first_k, "first_k", minimum=0)
     des = design(s)
     c = des.c if c is None else float(c)
     A_, B_ = s.matrix("A"), s.matrix("B")
     # A is orthogonal in the example, so A^T moves the leader back
     lead_op = np.linalg.matrix_power(A_ if leader_shift >= 0 else A_.T, abs(leader_shift))
-    x, lead, norms = np.asarray(x0, dtype=float), s.matrix("leader_x0"), []
+    x, lead, norms = x0, s.matrix("leader_x0"), []
     for _ in range(first_k + s.t_f + 1):
         norms.append(np.linalg.norm(x - lead))
         u = sync.local_control(x, lead_op @ lead, adjacency, s.matrix("pinning"), des.K, c)
@@ -417,6 +442,15 @@ def noise_free_metrics(
         lead = A_ @ lead
     d = np.array(norms[first_k:]) / s.mu_bar
     return float(d.mean()), float(np.sqrt((d**2).mean()))
+
+
+def _check_states(x0: object, name: str, s: SetMembershipSettings) -> np.ndarray:
+    """`x0` as a finite (N, n) float array, the shape of the settings' initial estimates."""
+    arr = float_array(x0, name)
+    want = np.shape(s.x0_hat)
+    if arr.shape != want:
+        raise ValueError(f"{name} must have shape (N, n) = {want} (one state per agent); got {arr.shape}")
+    return require_finite(arr, name)
 
 
 #: Name of the reversed-edges reading in :func:`table1_readings`.
@@ -431,7 +465,7 @@ def table1_readings(x0: np.ndarray | None = None, scenario: SetMembershipSetting
     """
     s = scenario
     x0_hat = s.matrix("x0_hat")
-    x0 = x0_hat + 0.5 * s.x0_box if x0 is None else np.asarray(x0, dtype=float)
+    x0 = x0_hat + 0.5 * s.x0_box if x0 is None else _check_states(x0, "x0", s)
     readings = [
         ("as printed (ours)", dict(x0=x0)),
         ("x_0 = xhat_0 (lower box corner)", dict(x0=x0_hat)),
@@ -502,6 +536,7 @@ def run(settings: SetMembershipSettings = DEFAULTS, seed: int = 1, progress: boo
     progress : bool
         Show progress bars.
     """
+    seed = check_seed(seed, "seed")
     if settings.figure_method not in smf.METHODS or settings.table_method not in smf.METHODS:
         raise ValueError(f"figure_method and table_method must be in {smf.METHODS}; got "
                          f"{settings.figure_method!r}, {settings.table_method!r}")
@@ -564,7 +599,7 @@ def plot_fig2(run: ClosedLoopRun, des: sync.SyncDesign | None = None, k_max: int
     """
     s = scenario
     des = des if des is not None else design(s)
-    k_max = s.t_f if k_max is None else k_max
+    k_max = s.t_f if k_max is None else check_positive_int(k_max, "k_max", minimum=0)
     fig = plt.figure(figsize=(8.0, 6.4), layout="constrained")
     top, bottom = fig.subfigures(2, 1)
     colors = agent_colors(s.n_agents)
@@ -598,6 +633,12 @@ def plot_fig2(run: ClosedLoopRun, des: sync.SyncDesign | None = None, k_max: int
 
 def plot_fig3_4(run: ClosedLoopRun, agents: tuple[int, int]) -> plt.Figure:
     """Figs. 3-4: errors e_{jk} of two agents (1-based) with the bounds +-sqrt(P_jj)."""
+    n = run.x.shape[2]
+    if len(agents) != 2:
+        raise ValueError(f"agents must be a pair of agent numbers (1-based); got {agents!r}")
+    for a in agents:
+        if check_positive_int(a, "agents") > n:
+            raise ValueError(f"agents must be agent numbers 1..{n} (1-based); got {a}")
     fig, axes = plt.subplots(2, 2, figsize=(8.0, 5.6), sharex=True, layout="constrained")
     for row, a in enumerate(agents):
         i = a - 1

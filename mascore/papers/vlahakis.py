@@ -50,7 +50,14 @@ import pandas as pd
 
 from .. import graphs, lqr, observers
 from .._progress import progress_bar
-from .._validation import check_generator
+from .._validation import (
+    check_generator,
+    check_positive,
+    check_positive_int,
+    check_seed,
+    float_array,
+    require_finite,
+)
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors
 from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, setting
@@ -197,9 +204,20 @@ def design(Q2: float, reading: str = "as-printed", trace_in: str = "transformed"
         Overrides ``settings.n_agents``.
     settings : ObserverSettings
     """
+    Q2 = _check_q2(Q2)
     if n_agents is not None:
-        settings = dataclasses.replace(settings, n_agents=n_agents)
-    return _design(settings, float(Q2), reading, trace_in)
+        settings = dataclasses.replace(settings, n_agents=_check_n_agents(n_agents))
+    return _design(settings, Q2, reading, trace_in)
+
+
+def _check_q2(Q2: object) -> float:
+    """`Q2` as a float: a finite weight >= 0 (0 decouples the agents, a meaningful limit)."""
+    return check_positive(Q2, "Q2", allow_zero=True)
+
+
+def _check_n_agents(n_agents: object) -> int | None:
+    """`n_agents` as an int (None keeps the settings'); the graph builders require at least 3."""
+    return None if n_agents is None else check_positive_int(n_agents, "n_agents")
 
 
 @lru_cache(maxsize=64)
@@ -251,7 +269,8 @@ def as_printed_phi_interval(Q2: float, n_agents: int | None = None,
         Every ``Phi`` in ``[lo, hi]`` (dimensionless) gives the optimum
         ``N trace(S_hat)``; no ``Phi`` outside does.
     """
-    lam = _lam(settings, n_agents)
+    Q2 = _check_q2(Q2)
+    lam = _lam(settings, _check_n_agents(n_agents))
     lam = lam[lam > 1e-9]
     r = 1 + lam * Q2 / settings.Q1
     root = np.sqrt(1 - 1 / r)
@@ -288,8 +307,13 @@ def phi_profile(Q2: float, reading: str, phis: np.ndarray, settings: ObserverSet
     (K,) ndarray
         ``min sum_i trace(S_i)`` in the coordinates of eq. (32) (``inf`` where a mode is unstable).
     """
+    Q2 = _check_q2(Q2)
+    phis = float_array(phis, "phis")
+    if phis.ndim > 1 or phis.size == 0:
+        raise ValueError(f"phis must be a non-empty 1-D array of coupling gains (K,); got shape {phis.shape}")
+    require_finite(phis, "phis")
     A, C, L, lam, G, noise = _mode_program(settings, Q2, reading)
-    phis = np.asarray(phis, dtype=float).ravel()
+    phis = phis.ravel()
     return observers.bound_at_fixed_phi(A, C, L, lam, G, noise, phis,
                                         what=f"fixed-Phi program of Example 1 ({reading}, Q2 = {Q2:g})")
 
@@ -302,6 +326,15 @@ def profile_argmin(Q2: float, reading: str, bounds: tuple[float, float], setting
     evaluates the profile on `points` gains and narrows the grid to the two
     cells around its minimum (final resolution ``width / (points / 2)^rounds``).
     """
+    Q2 = _check_q2(Q2)
+    b = float_array(bounds, "bounds")
+    if b.shape != (2,):
+        raise ValueError(f"bounds must be a pair (lo, hi); got shape {b.shape}")
+    require_finite(b, "bounds")
+    if not b[0] < b[1]:
+        raise ValueError(f"bounds must satisfy lo < hi; got {tuple(bounds)}")
+    points = check_positive_int(points, "points", minimum=2)
+    rounds = check_positive_int(rounds, "rounds")
     lo, hi = bounds
     for _ in range(rounds):
         grid = np.linspace(lo, hi, points)
@@ -329,7 +362,21 @@ def initial_errors(seed: int, settings: ObserverSettings = SETTINGS) -> np.ndarr
 
 
 def settling_time(t: np.ndarray, signal: np.ndarray, fraction: float) -> float:
-    """First time after which ``max_i |signal[:, i]|`` stays below `fraction` of its initial value."""
+    """First time after which ``max_i |signal[:, i]|`` stays below `fraction` of its initial value.
+
+    `t` is (T,), increasing; `signal` is (T, N) with finite entries; `fraction` is a finite number > 0.
+    """
+    t = float_array(t, "t")
+    if t.ndim != 1 or t.size == 0:
+        raise ValueError(f"t must be a non-empty 1-D array of times (T,); got shape {t.shape}")
+    require_finite(t, "t")
+    if np.any(np.diff(t) <= 0):
+        raise ValueError("t must be strictly increasing")
+    signal = float_array(signal, "signal")
+    if signal.ndim != 2 or signal.shape[0] != t.size or signal.shape[1] == 0:
+        raise ValueError(f"signal must have shape (T, N) = ({t.size}, N >= 1) to match t; got {signal.shape}")
+    require_finite(signal, "signal")
+    fraction = check_positive(fraction, "fraction")
     size = np.abs(signal).max(axis=1)
     above = np.nonzero(size > fraction * size[0])[0]
     if above.size == 0:
@@ -540,7 +587,7 @@ def _lmi_variants_table(s: ObserverSettings) -> pd.DataFrame:
 def structure_check(n_agents: int | None = None, settings: ObserverSettings = SETTINGS) -> dict:
     """Eqs. (13)-(16) against the dense centralized ARE (9) for all-to-all weights (11)."""
     s = settings
-    n_agents = s.n_agents if n_agents is None else n_agents
+    n_agents = s.n_agents if n_agents is None else check_positive_int(n_agents, "n_agents")
     A, Bbar, _ = s.arrays()
     w = s.lqr_weights()
     Lap = graphs.laplacian(graphs.complete_graph(n_agents))
@@ -555,6 +602,7 @@ def structure_check(n_agents: int | None = None, settings: ObserverSettings = SE
 def controller_comparison(n_agents: int | None = None, settings: ObserverSettings = SETTINGS) -> pd.DataFrame:
     """Costs of the centralized, top-down and bottom-up LQR on the graph (weights chosen here)."""
     s = settings
+    n_agents = _check_n_agents(n_agents)
     A, Bbar, _ = s.arrays()
     w = s.lqr_weights()
     adj = s.adjacency(n_agents)
@@ -673,6 +721,7 @@ def run(settings: ObserverSettings = SETTINGS, seed: int = 1, progress: bool = F
         Show a progress bar over the steps.
     """
     s = settings
+    check_seed(seed, "seed")
     if not set(PUBLISHED["Phi"]) <= set(s.Q2):
         raise ValueError(f"settings.Q2 must contain the printed cases {sorted(PUBLISHED['Phi'])}; got {s.Q2}")
     lo, hi, points = s.phi_grid
