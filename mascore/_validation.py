@@ -203,13 +203,13 @@ def check_probability(p: object, name: str) -> float:
 
 
 def check_adjacency(
-    A: ArrayLike, name: str = "adjacency", size: int | None = None, undirected: bool = False
+    A: ArrayLike, name: str = "adjacency", size: int | None = None, undirected: bool = False, why: str = ""
 ) -> np.ndarray:
     """Check a weighted adjacency matrix: square, finite, non-negative, no self-loops.
 
     ``A[i, j] > 0`` means agent i receives from agent j. A Laplacian passed by
     mistake (negative off-diagonal entries, positive diagonal) is named as such.
-    With `undirected`, `A` must be symmetric.
+    With `undirected`, `A` must be symmetric; `why` (the reason the caller needs it) goes into the message.
     """
     arr = check_square(A, name, size)
     if np.any(np.diag(arr) != 0):
@@ -219,18 +219,19 @@ def check_adjacency(
         raise ValueError(f"{name} must have a zero diagonal (no self-loops); got diagonal {np.diag(arr)}")
     if np.any(arr < 0):
         raise ValueError(f"{name} must have non-negative weights; smallest entry is {arr.min():.3g}")
-    if undirected and not np.allclose(arr, arr.T):
-        raise ValueError(f"{name} must be symmetric (an undirected graph) here")
+    if undirected and not np.allclose(arr, arr.T, atol=SYMMETRY_RTOL * max(1.0, float(np.abs(arr).max()))):
+        raise ValueError(f"{name} must be symmetric (an undirected graph){': ' + why if why else ' here'}")
     return arr
 
 
 def check_laplacian(
-    L: ArrayLike, name: str = "laplacian", size: int | None = None, undirected: bool = False
+    L: ArrayLike, name: str = "laplacian", size: int | None = None, undirected: bool = False, why: str = ""
 ) -> np.ndarray:
     """Check a graph Laplacian: square, finite, rows summing to zero, non-positive off-diagonal.
 
     An adjacency matrix passed by mistake is named as such, with the function to call.
-    With `undirected`, `L` must be symmetric (a theorem for undirected graphs needs it).
+    With `undirected`, `L` must be symmetric (a theorem for undirected graphs needs it); `why`
+    (the reason the caller needs it) goes into the message.
     """
     arr = check_square(L, name, size)
     off = arr - np.diag(np.diag(arr))
@@ -240,7 +241,8 @@ def check_laplacian(
             raise ValueError(f"{name} looks like an adjacency matrix; pass mascore.graphs.laplacian(A) instead")
         raise ValueError(f"{name} must be a graph Laplacian: rows summing to zero and off-diagonal entries <= 0")
     if undirected and not np.allclose(arr, arr.T, atol=SYMMETRY_RTOL * scale):
-        raise ValueError(f"{name} must be symmetric (an undirected graph) here; got a directed Laplacian")
+        raise ValueError(f"{name} must be symmetric (an undirected graph){': ' + why if why else ' here'}; "
+                         "got a directed Laplacian")
     return arr
 
 

@@ -212,14 +212,7 @@ def graph_union(adjacencies: Sequence[ArrayLike] | np.ndarray) -> np.ndarray:
     A : (N, N) ndarray
         Sum of the adjacency matrices (an edge is present if present once).
     """
-    stack = _float_array(adjacencies, "adjacencies")
-    if stack.ndim != 3 or stack.shape[1] != stack.shape[2] or stack.shape[0] == 0:
-        raise ValueError(
-            f"adjacencies must be a non-empty sequence of (N, N) matrices; got shape {stack.shape}"
-        )
-    for k, A in enumerate(stack):
-        _check_adjacency(A, f"adjacencies[{k}]")
-    return stack.sum(axis=0)
+    return _adjacency_stack(adjacencies).sum(axis=0)
 
 
 def unions_over_windows(adjacencies: Sequence[ArrayLike] | np.ndarray, window: int) -> np.ndarray:
@@ -230,14 +223,8 @@ def unions_over_windows(adjacencies: Sequence[ArrayLike] | np.ndarray, window: i
     unions : (ceil(T / window), N, N) ndarray
     """
     window = check_positive_int(window, "window")
-    stack = _float_array(adjacencies, "adjacencies")
-    if stack.ndim != 3 or stack.shape[1] != stack.shape[2] or stack.shape[0] == 0:
-        raise ValueError(
-            f"adjacencies must be a non-empty sequence of (N, N) matrices; got shape {stack.shape}"
-        )
-    for k, A in enumerate(stack):
-        _check_adjacency(A, f"adjacencies[{k}]")
-    return np.stack([graph_union(stack[k : k + window]) for k in range(0, len(stack), window)])
+    stack = _adjacency_stack(adjacencies)
+    return np.stack([stack[k : k + window].sum(axis=0) for k in range(0, len(stack), window)])
 
 
 def to_networkx(A: ArrayLike, directed: bool | None = None) -> nx.Graph:
@@ -279,3 +266,15 @@ def _check_adjacency(A: ArrayLike, name: str = "A") -> np.ndarray:
 
 def _check_n(n_agents: int, minimum: int = 1) -> int:
     return check_positive_int(n_agents, "n_agents", minimum)
+
+
+def _adjacency_stack(adjacencies: Sequence[ArrayLike] | np.ndarray) -> np.ndarray:
+    """A non-empty (T, N, N) stack of adjacency matrices, each checked (named ``adjacencies[k]``)."""
+    stack = _float_array(adjacencies, "adjacencies")
+    if stack.ndim != 3 or stack.shape[1] != stack.shape[2] or stack.shape[0] == 0:
+        raise ValueError(
+            f"adjacencies must be a non-empty sequence of (N, N) matrices; got shape {stack.shape}"
+        )
+    for k, A in enumerate(stack):
+        _check_adjacency(A, f"adjacencies[{k}]")
+    return stack

@@ -43,6 +43,7 @@ from ._validation import (
     check_square,
 )
 from ._validation import float_array as _float_array
+from .graphs import laplacian as _graph_laplacian
 from .kalman import symmetrize
 from .noise import psd_factor
 
@@ -180,26 +181,13 @@ def _spectrum(Lap: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
 
 def _undirected_laplacian(laplacian: ArrayLike, name: str, why: str) -> np.ndarray:
     """A symmetric graph Laplacian (an adjacency passed by mistake is named as such)."""
-    Lap = check_laplacian(_float_array(laplacian, name), name)
-    if Lap.shape[0] == 0:
-        raise ValueError(f"{name} must describe at least one agent; got shape {Lap.shape}")
-    scale = max(1.0, float(np.abs(Lap).max()))
-    if not np.allclose(Lap, Lap.T, atol=1e-12 * scale):
-        raise ValueError(f"{name} must be symmetric (an undirected graph): {why}; got a directed Laplacian")
-    if not np.allclose(Lap.sum(axis=1), 0, atol=1e-10 * scale):
-        raise ValueError(f"{name} rows must sum to zero")
-    return Lap
+    return check_laplacian(laplacian, name, undirected=True, why=why)
 
 
 def _undirected_adjacency(adjacency: ArrayLike, name: str = "adjacency") -> tuple[np.ndarray, np.ndarray]:
     """A symmetric adjacency (no self-loops, non-negative weights) and its Laplacian ``diag(A 1) - A``."""
-    Adj = check_adjacency(_float_array(adjacency, name), name)
-    if Adj.shape[0] == 0:
-        raise ValueError(f"{name} must describe at least one agent; got shape {Adj.shape}")
-    scale = max(1.0, float(np.abs(Adj).max()))
-    if not np.allclose(Adj, Adj.T, atol=1e-12 * scale):
-        raise ValueError(f"{name} must be symmetric (an undirected graph): {_WHY_SYMMETRIC}")
-    return Adj, np.diag(Adj.sum(axis=1)) - Adj
+    Adj = check_adjacency(adjacency, name, undirected=True, why=_WHY_SYMMETRIC)
+    return Adj, _graph_laplacian(Adj)
 
 
 def network_lqr_weights(
