@@ -19,7 +19,7 @@ export PYDEVD_DISABLE_FILE_VALIDATION := 1
 
 JOBS ?= 2
 
-.PHONY: help install book test reproduce lab bench captions lock clean
+.PHONY: help install book test test-min lint reproduce lab bench sync captions lock clean
 
 help:  ## list the targets
 	@grep -E '^[a-z]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/'
@@ -37,8 +37,23 @@ book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book in
 	env -u MPLBACKEND $(BIN)/jupyter-book build book --all -W -n --keep-going
 	@echo "Open book/_build/html/index.html"
 
-test: $(STAMP) $(RESULTS) book  ## build the book, then unit tests, published numbers, the rendered HTML and every notebook (nbmake)
-	$(HEADLESS) $(BIN)/python -m pytest -n $(JOBS) --nbmake tests notebooks
+test: $(STAMP) $(RESULTS) lint book  ## lint, build the book, then unit tests, doctests, published numbers, the rendered HTML and every notebook (nbmake)
+	$(HEADLESS) $(BIN)/python -m pytest -n $(JOBS) --nbmake --doctest-modules tests notebooks mascore
+
+lint: $(STAMP)  ## ruff on the package, the tests and the benchmarks
+	$(BIN)/ruff check mascore tests benchmarks
+
+# The lowest versions pyproject.toml admits for the core (numpy, scipy, networkx), tested with
+# the tests that need nothing else. `make test` does not run it; .ci/run does.
+MIN_VENV := .venv-min
+MIN_PINS := numpy==1.26.4 scipy==1.11.4 networkx==3.2.1
+MIN_TESTS := tests/test_core_minimal.py
+test-min:  ## the core alone on its minimum versions: install size, import times, core tests
+	@test -x $(MIN_VENV)/bin/python || $(PYTHON) -m venv $(MIN_VENV)
+	$(MIN_VENV)/bin/python -m pip install --quiet --disable-pip-version-check pip==$(PIP_VERSION)
+	$(MIN_VENV)/bin/python -m pip install --quiet $(MIN_PINS) pytest==9.2.0 "setuptools>=77" wheel
+	$(MIN_VENV)/bin/python -m pip install --quiet --no-deps --no-build-isolation -e .
+	$(MIN_VENV)/bin/python -m pytest -q -p no:cacheprovider $(MIN_TESTS)
 
 reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json into results/
 	@rm -f $(RESULTS)
@@ -55,16 +70,18 @@ lab: $(STAMP)  ## JupyterLab on notebooks/ with the project's environment
 bench: $(STAMP)  ## timing benchmarks (printed, and written to results/benchmarks/)
 	$(HEADLESS) $(BIN)/python -m benchmarks
 
-captions:  ## write the registry's figure captions into the notebooks' figure cells
+sync: $(STAMP)  ## write the API reference pages (book/api) and the registry's figure captions into the notebooks
 	$(BIN)/python -m mascore._booktools sync
+
+captions: sync
 
 lock:  ## regenerate requirements.lock from pyproject.toml in a scratch venv
 	rm -rf .lock-venv && $(PYTHON) -m venv .lock-venv
-	.lock-venv/bin/python -m pip install --quiet pip==$(PIP_VERSION) && .lock-venv/bin/python -m pip install --quiet ".[book,dev]" "setuptools>=77" wheel
+	.lock-venv/bin/python -m pip install --quiet pip==$(PIP_VERSION) && .lock-venv/bin/python -m pip install --quiet ".[book,dev,bench]" "setuptools>=77" wheel
 	echo '# Exact versions installed by the Makefile (regenerate with `make lock`).' > requirements.lock
 	.lock-venv/bin/python -m pip freeze --all --exclude-editable | grep -v -e '^mascore' -e '^pip==' >> requirements.lock
 	rm -rf .lock-venv
 
 clean:  ## remove the environment, the built book, results and caches
-	rm -rf $(VENV) book/_build results .pytest_cache .hypothesis
+	rm -rf $(VENV) $(MIN_VENV) book/_build results .pytest_cache .hypothesis
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -24,15 +24,24 @@ SUBMODULES = (
     # consensus and cooperative control
     "consensus", "rendezvous", "flocking", "synchronization", "lqr",
     # estimation
-    "sensing", "distributed_kf", "distributed_ekf", "ellipsoids", "set_membership", "observers",
+    "sensing", "distributed_kf", "distributed_ekf", "ellipsoids", "set_membership", "observers", "riccati",
+    # comparing the methods, errors
+    "compare", "sweep", "exceptions",
     # the papers' scenarios
     "papers",
 )
 
-__all__ = ["__version__", *SUBMODULES]
+#: Names exported from the package itself: the exceptions (cheap: no optional dependency).
+EXCEPTIONS = ("ConsensusBreakdownError", "DivergenceError", "IsolatedAgentError", "RiccatiError", "SolverError")
+
+__all__ = ["__version__", *EXCEPTIONS, *SUBMODULES]
 
 
-def __getattr__(name: str) -> ModuleType:
+def __getattr__(name: str) -> ModuleType | type:
+    if name in EXCEPTIONS:
+        from . import exceptions
+
+        return getattr(exceptions, name)
     if name in SUBMODULES:
         module = importlib.import_module(f".{name}", __name__)
         globals()[name] = module

@@ -1,6 +1,7 @@
 """Maintenance of the book: figure captions in the notebooks, checks of the rendered HTML.
 
-``python -m mascore._booktools sync [NOTEBOOK ...]`` writes, into every code cell
+``python -m mascore._booktools sync [NOTEBOOK ...]`` (``make sync``) writes the API reference pages
+``book/api/*.md`` from each module's ``__all__`` (:func:`write_api_pages`), and, into every code cell
 that draws a registered figure (``STUDY.draw("NAME", ...)`` or
 ``REGISTRY.study(...).draw("NAME", ...)``), the MyST-NB figure metadata of that
 figure: ``{"mystnb": {"figure": {"name": "fig-PAPER-NAME", "caption": ...}}}``,
@@ -22,7 +23,28 @@ from pathlib import Path
 from .ledger import PAPERS
 from .registry import PaperRegistry, Study, paper_registry
 
-__all__ = ["chapter_studies", "drawn_figures", "page_problems", "sync_notebook"]
+__all__ = [
+    "API_GROUPS",
+    "api_page",
+    "chapter_studies",
+    "drawn_figures",
+    "page_problems",
+    "public_objects",
+    "sync_notebook",
+    "write_api_pages",
+]
+
+#: The modules of the API reference, grouped as in the book's table of contents.
+API_GROUPS: dict[str, tuple[str, ...]] = {
+    "Shared building blocks": ("agents", "graphs", "noise", "kalman", "sensing"),
+    "Consensus and cooperative control": ("consensus", "rendezvous", "flocking", "synchronization", "lqr", "riccati"),
+    "Estimation": ("distributed_kf", "distributed_ekf", "ellipsoids", "set_membership", "observers"),
+    "Comparing the methods": ("compare", "sweep"),
+    "Reproduction and the book": ("registry", "ledger", "report", "reproduce", "plotting", "exceptions"),
+    "The papers' scenarios": (
+        "papers.song2023", "papers.song2023_flocking", "papers.ren2005", "papers.bhattacharjee2021", "papers.vlahakis",
+    ),
+}
 
 _DRAW = re.compile(r"""\.draw\(\s*["'](?P<name>[A-Za-z0-9_\-]+)["']""")
 
@@ -133,6 +155,71 @@ def page_problems(html: str) -> list[str]:
     return problems
 
 
+def public_objects(module: str) -> list[str]:
+    """Names of ``mascore.<module>.__all__`` that are classes or functions (what the API pages list)."""
+    import inspect
+
+    mod = importlib.import_module(f"mascore.{module}")
+    return [n for n in getattr(mod, "__all__", []) if inspect.isclass(getattr(mod, n)) or callable(getattr(mod, n))]
+
+
+def api_page(module: str) -> str:
+    """The MyST source of the API reference page of ``mascore.<module>``.
+
+    A summary table of the public classes and functions, then each one rendered from its
+    NumPy-style docstring (autodoc + numpydoc), in the order of the module's ``__all__``.
+    """
+    name = f"mascore.{module}"
+    objects = public_objects(module)
+    lines = [f"# `{name}`", "", "```{eval-rst}", f".. automodule:: {name}", "   :no-members:", ""]
+    if objects:
+        lines += [f".. currentmodule:: {name}", "", ".. autosummary::", "   :nosignatures:", ""]
+        lines += [f"   {o}" for o in objects]
+        lines += [""]
+        for o in objects:
+            lines += [f".. auto{'class' if _is_class(name, o) else 'function'}:: {o}", ""]
+    lines += ["```", ""]
+    return "\n".join(lines)
+
+
+def _is_class(module: str, name: str) -> bool:
+    import inspect
+
+    return inspect.isclass(getattr(importlib.import_module(module), name))
+
+
+def api_modules() -> list[str]:
+    """The modules of :data:`API_GROUPS` that exist in this checkout, in book order."""
+    import importlib.util
+
+    return [m for group in API_GROUPS.values() for m in group if importlib.util.find_spec(f"mascore.{m}")]
+
+
+def write_api_pages(folder: str | Path = "book/api") -> int:
+    """Write ``folder/<module>.md`` for every module of :data:`API_GROUPS` and the index page.
+
+    Returns the number of files that changed.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    pages = {f"{m}.md": api_page(m) for m in api_modules()}
+    index = ["# API reference", "",
+             "Every public class and function of the package, rendered from its docstring. Each page opens with",
+             "the module's summary; the examples are executed as doctests by `make test`.", ""]
+    for group, modules in API_GROUPS.items():
+        present = [m for m in modules if f"{m}.md" in pages]
+        if present:
+            index += [f"## {group}", ""] + [f"- [`mascore.{m}`]({m}.md)" for m in present] + [""]
+    pages["index.md"] = "\n".join(index)
+    changed = 0
+    for fname, text in pages.items():
+        path = folder / fname
+        if not path.exists() or path.read_text() != text:
+            path.write_text(text)
+            changed += 1
+    return changed
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m mascore._booktools sync [NOTEBOOK ...]`` (default: every notebook of a study)."""
     argv = sys.argv[1:] if argv is None else argv
@@ -140,6 +227,10 @@ def main(argv: list[str] | None = None) -> int:
         print(__doc__.splitlines()[0], "\nusage: python -m mascore._booktools sync [NOTEBOOK ...]", file=sys.stderr)
         return 2
     paths = [Path(p) for p in argv[1:]] or sorted(Path("notebooks").glob("*.ipynb"))
+    if len(argv) == 1:
+        n = write_api_pages("book/api")
+        if n:
+            print(f"book/api: {n} page(s) updated")
     for p in paths:
         n = sync_notebook(p)
         if n:

@@ -29,10 +29,19 @@ def progress_bar(iterable: Iterable[T], enabled: bool = True, **tqdm_kwargs) -> 
         Draw the bar (default) or not.
     **tqdm_kwargs
         Passed to ``tqdm`` (``desc``, ``unit``, ``leave``, ...).
+
+    Returns
+    -------
+    iterable
+        The tqdm wrapper, or `iterable` itself when disabled or when tqdm is not installed
+        (the bar is a convenience: the core runs without it).
     """
     if not enabled:
         return iterable
-    from tqdm import TqdmWarning
+    try:
+        from tqdm import TqdmWarning
+    except ModuleNotFoundError:  # tqdm is in the `plot` extra: without it, no bar
+        return iterable
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", TqdmWarning)

@@ -12,13 +12,16 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
 
-import networkx as nx
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import check_adjacency, check_positive, check_positive_int
 from ._validation import float_array as _float_array
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 __all__ = [
     "adjacency_from_edges",
@@ -238,6 +241,8 @@ def to_networkx(A: ArrayLike, directed: bool | None = None) -> nx.Graph:
         raise TypeError(f"directed must be True, False or None; got {directed!r}")
     if directed is None:
         directed = not np.allclose(A, A.T)
+    import networkx as nx  # only this converter needs networkx
+
     G = nx.DiGraph() if directed else nx.Graph()
     G.add_nodes_from(range(A.shape[0]))
     for i, j in zip(*np.nonzero(A)):

@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from ._optional import require
+
 __all__ = [
     "APPROX_FACTOR",
     "PAPERS",
@@ -281,7 +283,7 @@ def load_claims(results_dir: str | Path, papers: Iterable[str] = PAPERS, verify:
 
 def claims_table(records: Sequence[dict]):
     """A pandas DataFrame of claim records (full values, for analysis; see :func:`show_claims` to read)."""
-    import pandas as pd
+    pd = require("pandas", "this table")
 
     columns = ["id", "where", "paper_value", "value", "tolerance", "verdict", "note"]
     return pd.DataFrame([{k: r.get(k) for k in columns} for r in records], columns=columns)

@@ -9,12 +9,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-import matplotlib as mpl
-import matplotlib.pyplot as plt
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._optional import require
 from ._validation import as_matrix
+
+mpl = require("matplotlib", "mascore.plotting")
+plt = require("matplotlib.pyplot", "mascore.plotting")
 
 __all__ = [
     "STYLE",

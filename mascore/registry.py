@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ._optional import require
 from .ledger import PAPERS, Claim, format_value
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -211,7 +212,7 @@ def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | 
     Each claim is tagged with the study's name (``Claim.study``), so the report can
     link it to its chapter.
     """
-    import matplotlib.pyplot as plt
+    plt = require("matplotlib.pyplot", "drawing a registered figure")
 
     from .plotting import save_figure
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from ._optional import require
 from .ledger import PAPERS, VERDICTS
 from .registry import paper_registry
 
@@ -35,7 +36,7 @@ class MarkdownText:
 
 def verdict_summary(records: Sequence[dict]):
     """Claims per paper (rows, book order) and verdict (columns), with totals: a pandas DataFrame."""
-    import pandas as pd
+    pd = require("pandas", "this table")
 
     papers = [p for p in PAPERS if any(r["paper"] == p for r in records)]
     table = pd.DataFrame(0, index=pd.Index(papers), columns=list(VERDICTS))

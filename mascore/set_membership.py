@@ -40,16 +40,13 @@ then call the unchecked kernels of :mod:`mascore.ellipsoids`.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
-import cvxpy as cp
 import numpy as np
 from numpy.typing import ArrayLike
 
 from . import ellipsoids
-from ._solver import LMI_EPS, SolverError, solve
 from ._validation import as_matrix, check_square
 from ._validation import float_array as _float_array
 
@@ -147,7 +144,9 @@ def correct(
         new_c = np.empty_like(c)
         new_P = np.empty_like(P)
         L = np.empty((*batch, n, p))
-        sdp = _correction_sdp(n, p, D.shape[1])
+        from ._set_membership_sdp import correction_sdp
+
+        sdp = correction_sdp(n, p, D.shape[1])
         Rinv = np.linalg.inv(R)
         for idx in np.ndindex(*batch):
             E = _cholesky(P[idx], "correction", step, agent, idx, batch)
@@ -204,7 +203,9 @@ def predict(
         new_P, _ = ellipsoids._sum_min_trace(APA, GQG, ellipsoids._sqrt_trace(APA), sqrt_tr_GQG)
     else:
         new_P = np.empty_like(P)
-        sdp = _prediction_sdp(n, G.shape[1])
+        from ._set_membership_sdp import prediction_sdp
+
+        sdp = prediction_sdp(n, G.shape[1])
         Qinv = np.linalg.inv(Q)
         for idx in np.ndindex(*batch):
             E = _cholesky(P[idx], "prediction", step, agent, idx, batch)
@@ -441,84 +442,3 @@ def _cholesky(P, what, step, agent, idx, batch):
         return np.linalg.cholesky(P)
     except np.linalg.LinAlgError as exc:  # pragma: no cover - caught by _check_ellipsoid first
         raise ValueError(f"{_where(what, step, agent, idx, batch)}: shape matrix is not positive definite") from exc
-
-
-class _CorrectionSDP:
-    """Eqs. (6)-(7), compiled once for sizes (n, p, v)."""
-
-    def __init__(self, n: int, p: int, nv: int) -> None:
-        self.P = cp.Variable((n, n), symmetric=True, name="P_kk")
-        self.L = cp.Variable((n, p), name="L_k")
-        self.tau = cp.Variable(2, name="tau")
-        self.E = cp.Parameter((n, n), name="E_pred")
-        self.CE = cp.Parameter((p, n), name="CE_pred")
-        self.D = cp.Parameter((p, nv), name="D")
-        self.Rinv = cp.Parameter((nv, nv), symmetric=True, name="R_inv")
-        Pi = cp.hstack([np.zeros((n, 1)), self.E - self.L @ self.CE, -self.L @ self.D])  # eq. (7)
-        t1, t2 = self.tau[0], self.tau[1]
-        Theta = cp.bmat([
-            [cp.reshape(1 - t1 - t2, (1, 1), order="F"), np.zeros((1, n)), np.zeros((1, nv))],
-            [np.zeros((n, 1)), t1 * np.eye(n), np.zeros((n, nv))],
-            [np.zeros((nv, 1)), np.zeros((nv, n)), t2 * self.Rinv],
-        ])
-        M = cp.bmat([[self.P, -Pi], [-Pi.T, Theta]])  # minus the matrix of eq. (6)
-        self.problem = cp.Problem(
-            cp.Minimize(cp.trace(self.P)),
-            [0.5 * (M + M.T) >> 0, self.P >> LMI_EPS * np.eye(n), self.tau >= 0],
-        )
-        assert self.problem.is_dcp(dpp=True)
-
-    def __call__(self, E, C, D, Rinv, where):
-        self.E.value = E
-        self.CE.value = C @ E
-        self.D.value = D
-        self.Rinv.value = 0.5 * (Rinv + Rinv.T)
-        solve(self.problem, where)
-        P = self.P.value
-        return 0.5 * (P + P.T), np.asarray(self.L.value)
-
-
-class _PredictionSDP:
-    """Eq. (8), compiled once for sizes (n, w)."""
-
-    def __init__(self, n: int, nw: int) -> None:
-        self.P = cp.Variable((n, n), symmetric=True, name="P_pred")
-        self.tau = cp.Variable(2, name="tau")
-        self.AE = cp.Parameter((n, n), name="AE_corr")
-        self.G = cp.Parameter((n, nw), name="G_disturbance")
-        self.Qinv = cp.Parameter((nw, nw), symmetric=True, name="Q_inv")
-        Pi = cp.hstack([np.zeros((n, 1)), self.AE, self.G])
-        t3, t4 = self.tau[0], self.tau[1]
-        Psi = cp.bmat([
-            [cp.reshape(1 - t3 - t4, (1, 1), order="F"), np.zeros((1, n)), np.zeros((1, nw))],
-            [np.zeros((n, 1)), t3 * np.eye(n), np.zeros((n, nw))],
-            [np.zeros((nw, 1)), np.zeros((nw, n)), t4 * self.Qinv],
-        ])
-        M = cp.bmat([[self.P, -Pi], [-Pi.T, Psi]])
-        self.problem = cp.Problem(
-            cp.Minimize(cp.trace(self.P)),
-            [0.5 * (M + M.T) >> 0, self.P >> LMI_EPS * np.eye(n), self.tau >= 0],
-        )
-        assert self.problem.is_dcp(dpp=True)
-
-    def __call__(self, AE, G, Qinv, where):
-        self.AE.value = AE
-        self.G.value = G
-        self.Qinv.value = 0.5 * (Qinv + Qinv.T)
-        solve(self.problem, where)
-        P = self.P.value
-        return 0.5 * (P + P.T)
-
-
-@functools.lru_cache(maxsize=16)
-def _correction_sdp(n: int, p: int, nv: int) -> _CorrectionSDP:
-    return _CorrectionSDP(n, p, nv)
-
-
-@functools.lru_cache(maxsize=16)
-def _prediction_sdp(n: int, nw: int) -> _PredictionSDP:
-    return _PredictionSDP(n, nw)
-
-
-# re-exported for callers that catch it from here
-SolverError = SolverError
