@@ -63,16 +63,13 @@ def as_matrix(
         Expected shape; ``None`` in a slot accepts any size there.
     """
     arr = float_array(M, name)
+    expected = "" if shape is None else " of shape (" + ", ".join("any" if w is None else str(w) for w in shape) + ")"
     if arr.ndim != 2:
-        raise ValueError(f"{name} must be a 2-D array; got shape {arr.shape}")
+        raise ValueError(f"{name} must be a 2-D array{expected}; got shape {arr.shape}")
     if shape is not None:
         for got, want in zip(arr.shape, shape):
             if want is not None and got != want:
-                expected = tuple("any" if w is None else w for w in shape)
-                raise ValueError(
-                    f"Incompatible dimensions of {name}; expected {expected} "
-                    f"but found {arr.shape}"
-                )
+                raise ValueError(f"Incompatible dimensions of {name}; expected{expected[9:]} but found {arr.shape}")
     _check_finite(arr, name)
     return arr
 
