@@ -47,11 +47,12 @@ lint: $(STAMP)  ## ruff on the package, the tests and the benchmarks
 # the tests that need nothing else. `make test` does not run it; .ci/run does.
 MIN_VENV := .venv-min
 MIN_PINS := numpy==1.26.4 scipy==1.11.4 networkx==3.2.1
-MIN_TESTS := tests/test_core_minimal.py
+MIN_TESTS := tests/test_core_install.py tests/test_agents_noise.py tests/test_graphs.py tests/test_consensus.py \
+             tests/test_ellipsoids.py tests/test_sensing.py tests/test_distributed_kf.py
 test-min:  ## the core alone on its minimum versions: install size, import times, core tests
 	@test -x $(MIN_VENV)/bin/python || $(PYTHON) -m venv $(MIN_VENV)
 	$(MIN_VENV)/bin/python -m pip install --quiet --disable-pip-version-check pip==$(PIP_VERSION)
-	$(MIN_VENV)/bin/python -m pip install --quiet $(MIN_PINS) pytest==9.2.0 "setuptools>=77" wheel
+	$(MIN_VENV)/bin/python -m pip install --quiet $(MIN_PINS) $(shell grep -E "^(pytest|hypothesis)==" requirements.lock) "setuptools>=77" wheel
 	$(MIN_VENV)/bin/python -m pip install --quiet --no-deps --no-build-isolation -e .
 	$(MIN_VENV)/bin/python -m pytest -q -p no:cacheprovider $(MIN_TESTS)
 
