@@ -100,18 +100,26 @@ def adjacency_from_edges(
 def laplacian(A: ArrayLike) -> np.ndarray:
     """Graph Laplacian ``L = diag(A 1) - A`` (in-degree for directed graphs).
 
+    The one Laplacian builder of the package: every module that needs ``L`` calls it.
+
     Parameters
     ----------
-    A : (N, N) array_like
-        Non-negative adjacency matrix, ``A[i, j]`` the weight of ``j -> i``.
+    A : (N, N) or (..., N, N) array_like
+        Non-negative adjacency matrix, ``A[i, j]`` the weight of ``j -> i``, or a stack of
+        them (time steps, Monte Carlo runs), each checked.
 
     Returns
     -------
-    L : (N, N) ndarray
+    L : (N, N) or (..., N, N) ndarray
         Rows sum to zero; symmetric positive semidefinite when `A` is symmetric.
     """
-    A = _check_adjacency(A)
-    return np.diag(A.sum(axis=1)) - A
+    arr = _float_array(A, "A")
+    if arr.ndim > 2:
+        for idx in np.ndindex(*arr.shape[:-2]):
+            _check_adjacency(arr[idx], f"A[{', '.join(map(str, idx))}]")
+    else:
+        arr = _check_adjacency(arr)
+    return np.eye(arr.shape[-1]) * arr.sum(axis=-1)[..., None] - arr
 
 
 def ring_graph(n_agents: int) -> np.ndarray:
