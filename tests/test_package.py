@@ -58,3 +58,25 @@ def test_median_time_calls_once_to_warm_up_then_repeat_times_number():
     assert len(calls) == 1 + 3 * 2
     with pytest.raises(ValueError, match="repeat"):
         median_time(lambda: None, repeat=0)
+
+
+def test_readme_python_snippets_run():
+    """Every ```python block of the README runs as printed (the first thing a new user copies)."""
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", readme, flags=re.S)
+    assert blocks, "the README shows no Python snippet"
+    for block in blocks:
+        exec(compile(block, "README.md", "exec"), {})
+
+
+def test_exceptions_are_exported_from_the_package_and_subclass_builtins():
+    import mascore
+
+    for name, base in [("SolverError", RuntimeError), ("RiccatiError", ArithmeticError),
+                       ("IsolatedAgentError", ValueError), ("ConsensusBreakdownError", ValueError),
+                       ("DivergenceError", FloatingPointError)]:
+        exc = getattr(mascore, name)
+        assert issubclass(exc, base) and exc.__module__ == "mascore.exceptions"
