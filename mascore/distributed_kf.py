@@ -39,15 +39,16 @@ Implementation (the "structured" path)
   run, while the means carry a run axis.
 
 A plain implementation written straight from eqs. (29)-(34) with explicit
-``F_1``, ``F_2``, ``H_i`` and ``G_i`` (:func:`plain_estimation_based_step`)
-is kept as the reference for the tests and the benchmark, together with a
+``F_1``, ``F_2``, ``H_i`` and ``G_i`` (``mascore._kf_reference``) is the
+reference for the tests and the benchmark. This module also has a
 centralized Kalman filter over all agents' measurements
 (:func:`centralized_update`), the observability test of system (43) and the
 Lyapunov quantities of Theorem 1 (eqs. (45), (49)).
 
-Shapes: ``X̂`` is ``(R, N, N, m)`` (run, observer ``i``, target ``j``, state),
-reduced covariances are ``(B, N, M_r, M_r)`` per agent or ``(B, N M_r, N M_r)``
-augmented, with ``B`` either 1 (shared) or ``R``.
+Shapes: ``X̂`` is ``(runs, N, N, m)`` (run, observer ``i``, target ``j``,
+state), reduced covariances are ``(batch, N, M_r, M_r)`` per agent or
+``(batch, N M_r, N M_r)`` augmented, with ``batch`` either 1 (shared) or
+``runs``. (``B`` is always the agents' input matrix.)
 """
 
 from __future__ import annotations
@@ -58,17 +59,24 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_matrix, check_covariance, check_laplacian, check_positive, check_positive_int, check_square
-from .graphs import laplacian as graph_laplacian
-from ._validation import require_finite as _finite
+from ._masked_gain import masked_gain, observed_indices
+from ._validation import (
+    _ValueMemo,
+    as_matrix,
+    check_covariance,
+    check_laplacian,
+    check_positive,
+    check_positive_int,
+    check_square,
+)
 from ._validation import float_array as _float_array
-from ._validation import _ValueMemo
+from ._validation import require_finite as _finite
+from .graphs import laplacian as graph_laplacian
 from .kalman import _RecentArrays
 from .sensing import (
     _check_adjacency,
     _check_flag,
     _check_mask_values,
-    selection_matrices,
     sensing_mask,
     team_noise_covariance,
 )
@@ -86,8 +94,6 @@ __all__ = [
     "eb_predict",
     "eb_update",
     "agent_covariances",
-    "plain_estimation_based_step",
-    "plain_measurement_based_step",
     "centralized_predict",
     "centralized_update",
     "observable_agents",
@@ -278,7 +284,7 @@ def expand_covariance(P_r: ArrayLike, kron: int) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------
-# the per-agent measurement update (shared by both loops and by the EKF)
+# the per-agent measurement update (the masked gain of mascore._masked_gain, which the EKF also uses)
 # ----------------------------------------------------------------------------
 
 
@@ -326,7 +332,7 @@ def agent_update(
         raise ValueError("mask must include every agent itself (closed neighbourhoods); use sensing_mask(A)")
     try:
         d = np.repeat(S, m, axis=-1).astype(float)  # (..., N, mN)
-        KH = _masked_gain(Sig, d, R_team)
+        KH = masked_gain(Sig, d, R_team)
         lead = X.shape[:-3]
         innov = (Zt - X).reshape(*np.broadcast_shapes(lead, Zt.shape[:-3]), N, N * m, 1)
         X_post = X.reshape(*lead, N, N * m, 1) + KH @ innov
@@ -356,13 +362,13 @@ def mb_predict(
     Parameters
     ----------
     model : TeamFilterModel
-    X_hat : (R, N, N, m) array_like
+    X_hat : (runs, N, N, m) array_like
         Posterior team estimates of every agent, per Monte Carlo run.
-    Sigma : (B, N, M_r, M_r) array_like
-        Reduced posterior covariances ``Σ̄_i`` (``B`` = 1 or R).
-    laplacian : (N, N) or (B, N, N) array_like
+    Sigma : (batch, N, M_r, M_r) array_like
+        Reduced posterior covariances ``Σ̄_i`` (``batch`` = 1 or ``runs``).
+    laplacian : (N, N) or (batch, N, N) array_like
         Topology at step k.
-    KH_prev : (B, N, M_r, M_r) array_like, optional
+    KH_prev : (batch, N, M_r, M_r) array_like, optional
         Reduced ``G_i H_i`` of the update that produced `X_hat`. If given, the
         correlation between agent ``i``'s own measurement noise in its
         control (eq. (9)) and its posterior error is added (exact covariance);
@@ -370,8 +376,8 @@ def mb_predict(
 
     Returns
     -------
-    X_pred : (R, N, N, m) ndarray
-    Sigma_pred : (B, N, M_r, M_r) ndarray
+    X_pred : (runs, N, N, m) ndarray
+    Sigma_pred : (batch, N, M_r, M_r) ndarray
     """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
@@ -402,8 +408,8 @@ def _mb_predict(model, X_hat, Sig, L, KH_prev=None):
     # eq. (15): (I ⊗ BK) E[nu_bar nu_bar^T] (I ⊗ BK)^T + Q (block diagonal)
     Rr = model.R_r.reshape(N, mr, N, mr)
     # cov of (L_j ⊗ I) nu_j: sum_{l,l'} L_jl L_jl' R[l, l']
-    Cj = np.einsum("bjl,bjk,lakc->bjac", Lb, Lb, Rr)  # (B, N, mr, mr)
-    noise = model.BK_r @ Cj @ model.BK_r.T + model.Q_r  # (B, N, mr, mr)
+    Cj = np.einsum("bjl,bjk,lakc->bjac", Lb, Lb, Rr)  # (batch, N, mr, mr)
+    noise = model.BK_r @ Cj @ model.BK_r.T + model.Q_r  # (batch, N, mr, mr)
     blk = np.zeros((Lb.shape[0], N, mr, N, mr))
     blk[:, np.arange(N), :, np.arange(N), :] = np.moveaxis(noise, 1, 0)
     P = P + blk.reshape(Lb.shape[0], 1, Mr, Mr)
@@ -411,9 +417,9 @@ def _mb_predict(model, X_hat, Sig, L, KH_prev=None):
         KH = KH_prev
         # E[e_i nu_bar_i^T] = -KH_i R (L_i ⊗ I)^T, column block i of E[e_i nu_bar^T]
         RL = np.einsum("lakc,bik->bilac", Rr, Lb).reshape(Lb.shape[0], N, Mr, mr)  # R (L_i ⊗ I)^T
-        Xc = -(KH @ RL)  # (B, N, Mr, mr)
+        Xc = -(KH @ RL)  # (batch, N, Mr, mr)
         F1Xc = _F1_rows(model, Xc.reshape(*Xc.shape[:2], N, mr, mr), Lb[:, None]).reshape(Xc.shape)
-        corr = -(F1Xc @ model.BK_r.T)  # -F1 E[e_i nu_bar_i^T] BK^T, (B, N, Mr, mr)
+        corr = -(F1Xc @ model.BK_r.T)  # -F1 E[e_i nu_bar_i^T] BK^T, (batch, N, Mr, mr)
         full = np.zeros((*corr.shape[:2], Mr, N, mr))
         full[:, np.arange(N), :, np.arange(N), :] = np.moveaxis(corr, 1, 0)
         full = full.reshape(*corr.shape[:2], Mr, Mr)
@@ -428,12 +434,12 @@ def mb_update(
 
     Parameters
     ----------
-    X_pred : (R, N, N, m), Sigma_pred : (B, N, M_r, M_r)
-    Z : (R, N, N, m) measurements, mask : (N, N) or (B, N, N) sensing mask.
+    X_pred : (runs, N, N, m), Sigma_pred : (batch, N, M_r, M_r)
+    Z : (runs, N, N, m) measurements, mask : (N, N) or (batch, N, N) sensing mask.
 
     Returns
     -------
-    X_post, Sigma_post, KH : reduced ``G_i H_i`` of shape (B, N, M_r, M_r).
+    X_post, Sigma_post, KH : reduced ``G_i H_i`` of shape (batch, N, M_r, M_r).
     """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
@@ -450,8 +456,8 @@ def mb_update(
 
 
 def _mb_update(model, X_pred, Sig, Z, S):
-    """:func:`mb_update` without checks (`S` a (B, N, N) bool mask)."""
-    KH = _masked_gain(Sig, _mask_vec(model, S), model.R_r)
+    """:func:`mb_update` without checks (`S` a (batch, N, N) bool mask)."""
+    KH = masked_gain(Sig, _mask_vec(model, S), model.R_r)
     X_post = _apply_gain(model, X_pred, Z, KH)
     return X_post, _joseph(Sig, KH, model.R_r), KH
 
@@ -504,15 +510,15 @@ def eb_predict(
 
     Parameters
     ----------
-    X_hat : (R, N, N, m) array_like
-    Sigma : (B, N M_r, N M_r) array_like
+    X_hat : (runs, N, N, m) array_like
+    Sigma : (batch, N M_r, N M_r) array_like
         Reduced augmented covariance.
-    laplacian : (N, N) or (B, N, N) array_like
+    laplacian : (N, N) or (batch, N, N) array_like
 
     Returns
     -------
-    X_pred : (R, N, N, m)
-    Sigma_pred : (B, N M_r, N M_r)
+    X_pred : (runs, N, N, m)
+    Sigma_pred : (batch, N M_r, N M_r)
     """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
@@ -524,15 +530,42 @@ def eb_predict(
 
 
 def _eb_predict(model, X_hat, Sig, L):
-    """:func:`eb_predict` without checks."""
+    """:func:`eb_predict` without checks.
+
+    ``Σ^- = Φ Σ Φ^T + (1 1^T) ⊗ 𝒬`` one row block ``i`` at a time (it stays in
+    cache): ``(Φ Σ)[i] = F_1 Σ[i] + F_2 Σ`` with the sparse ``F_1 = I ⊗ A - L ⊗ BK``
+    (a few non-zeros per row) and the shared ``F_2 Σ`` (computed once, sparse
+    ``F_2``), then ``Σ^-[i] = (Φ Σ)[i] (I ⊗ F_1)^T + (Φ Σ)[i] (1 ⊗ F_2)^T + 1^T ⊗ 𝒬``:
+    the first term one matrix product over the ``N`` column blocks, the second
+    a ``M_r x M_r`` block added to each of them.
+    """
     N, mr, Mr = model.n_agents, model.m_r, model.M_r
     X_pred = _F1_means(model, X_hat, L)
     Lb = L if L.ndim == 3 else L[None]
-    P1 = _phi_rows(model, Sig, Lb)
-    P2 = _phi_rows(model, np.swapaxes(P1, -1, -2), Lb)
+    nb, C = Sig.shape[0], N * Mr
+    out = np.empty((nb, C, C))
     Qt = np.kron(np.eye(N), model.Q_r)
-    P2 = P2.reshape(Sig.shape[0], N, Mr, N, Mr) + Qt[None, None, :, None, :]
-    return X_pred, P2.reshape(Sig.shape[0], N * Mr, N * Mr)
+    for b in range(nb):
+        Lk = Lb[b if Lb.shape[0] > 1 else 0]
+        F1s, F2s, Phi = _phi_blocks(model, Lk)
+        if Phi is not None:  # a small team: two dense products are cheapest
+            out[b] = Phi @ Sig[b] @ Phi.T
+            out[b].reshape(N, Mr, N, Mr)[...] += Qt[None, :, None, :]
+            continue
+        F1t = F1s.toarray().T
+        K2t = np.swapaxes((Lk[:, None, :, None] * model.BK_r[None, :, None, :]).reshape(N, mr, Mr), -1, -2)
+        F2S = F2s @ Sig[b]  # F_2 Σ, (M_r, C), shared by every row block
+        S3 = Sig[b].reshape(N, Mr, C)
+        for i in range(N):
+            P1 = F1s @ S3[i]  # F_1 Σ[i]
+            P1 += F2S  # (Φ Σ)[i], eq. (34) (eq. (32) for the diagonal block)
+            P2 = out[b, i * Mr:(i + 1) * Mr].reshape(Mr * N, Mr)
+            np.matmul(P1.reshape(Mr * N, Mr), F1t, out=P2)  # (Φ Σ)[i] (I ⊗ F_1)^T
+            # (Φ Σ)[i] (1 ⊗ F_2)^T: column (j, α) sums BK[α, β] L_jl (Φ Σ)[i][:, (j, l, β)]
+            shared = np.matmul(np.swapaxes(P1.reshape(Mr, N, Mr), 0, 1), K2t)  # (N, Mr, mr)
+            shared = np.swapaxes(shared, 0, 1).reshape(Mr, Mr) + Qt
+            P2.reshape(Mr, N, Mr)[...] += shared[:, None, :]
+    return X_pred, out
 
 
 def eb_update(
@@ -546,9 +579,9 @@ def eb_update(
 
     Returns
     -------
-    X_post : (R, N, N, m)
-    Sigma_post : (B, N M_r, N M_r)
-    KH : (B, N, M_r, M_r) reduced ``G_i H_i``.
+    X_post : (runs, N, N, m)
+    Sigma_post : (batch, N M_r, N M_r)
+    KH : (batch, N, M_r, M_r) reduced ``G_i H_i``.
     """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
@@ -568,25 +601,51 @@ def eb_update(
 
 
 def _eb_update(model, X_pred, Sig, Z, S):
-    """:func:`eb_update` without checks (`S` a (B, N, N) bool mask)."""
+    """:func:`eb_update` without checks (`S` a (batch, N, N) bool mask).
+
+    ``Ψ = blockdiag(I - G_i H_i)`` and ``G_i H_i = W_i E_i^T`` has rank
+    ``q_i`` (``E_i`` selects the observed entries), so block ``(i, i')`` of
+    ``Ψ Σ Ψ^T`` is ``T - T[:, idx_i'] W_i'^T`` with ``T = Σ[i, i'] - W_i Σ[i, i'][idx_i, :]``:
+    ``O(N^2 M_r^2 q)`` work instead of the ``O(N^2 M_r^3)`` of dense products,
+    done one row block at a time (it stays in cache).
+    """
     N, Mr = model.n_agents, model.M_r
-    B = Sig.shape[0]
-    blocks = Sig.reshape(B, N, Mr, N, Mr)
-    diag = blocks[:, np.arange(N), :, np.arange(N), :]  # (N, B, Mr, Mr)
-    diag = np.moveaxis(diag, 0, 1)
-    KH = _masked_gain(diag, _mask_vec(model, S), model.R_r)
-    Psi = np.eye(Mr) - KH  # (B, N, Mr, Mr)
-    T = Psi @ Sig.reshape(B, N, Mr, N * Mr)  # rows
-    T = np.swapaxes(T.reshape(B, N * Mr, N * Mr), -1, -2)
-    T = (Psi @ T.reshape(B, N, Mr, N * Mr)).reshape(B, N, Mr, N, Mr)
-    KRK = KH @ model.R_r @ np.swapaxes(KH, -1, -2)
-    T[:, np.arange(N), :, np.arange(N), :] += np.moveaxis(KRK, 1, 0)
+    nb, C = Sig.shape[0], N * Mr
+    blocks = Sig.reshape(nb, N, Mr, N, Mr)
+    diag = np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)  # Σ_i^-, (batch, N, Mr, Mr)
+    d = _mask_vec(model, S)
+    KH = masked_gain(diag, d, model.R_r)  # G_i H_i, eqs. (17), (19)
+    KRK = KH @ model.R_r @ np.swapaxes(KH, -1, -2)  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
+    if C <= _DENSE_MAX:  # a small team: dense products of all row blocks at once are cheapest
+        Psi = np.eye(Mr) - KH  # (batch, N, Mr, Mr)
+        T = Psi @ Sig.reshape(nb, N, Mr, C)  # rows
+        T = np.swapaxes(T.reshape(nb, C, C), -1, -2)
+        T = (Psi @ T.reshape(nb, N, Mr, C)).reshape(nb, N, Mr, N, Mr)  # columns (by symmetry of Σ^-)
+        T[:, np.arange(N), :, np.arange(N), :] += np.moveaxis(KRK, 1, 0)
+        return _apply_gain(model, X_pred, Z, KH), T.reshape(nb, C, C), KH
+    idx, valid = observed_indices(d)  # (batch, N, q)
+    q = idx.shape[-1]
+    W = np.take_along_axis(KH, np.broadcast_to(idx[..., None, :], (*KH.shape[:-1], q)), axis=-1)  # (batch, N, Mr, q)
+    Wt = np.swapaxes(W, -1, -2)
+    out = np.empty((nb, C, C))
+    for b in range(nb):
+        S3 = Sig[b].reshape(N, Mr, C)
+        for i in range(N):
+            T = out[b, i * Mr:(i + 1) * Mr]
+            np.matmul(W[b, i], S3[i][idx[b, i]], out=T)
+            np.subtract(S3[i], T, out=T)  # rows: (I - G_i H_i) Σ[i]
+            Tc = T.reshape(Mr, N, Mr)
+            cols = np.take_along_axis(Tc, idx[b][None], axis=2)  # (Mr, N, q): T[:, (i', idx_i')]
+            corr = np.matmul(np.swapaxes(cols, 0, 1), Wt[b])  # (N, Mr, Mr)
+            Tv = np.swapaxes(Tc, 0, 1)
+            np.subtract(Tv, corr, out=Tv)  # columns: ... (I - G_i' H_i')^T
+            Tv[i] += KRK[b, i]
     X_post = _apply_gain(model, X_pred, Z, KH)
-    return X_post, _sym(T.reshape(B, N * Mr, N * Mr)), KH
+    return X_post, out, KH
 
 
 def agent_covariances(model: TeamFilterModel, Sigma: ArrayLike) -> np.ndarray:
-    """Diagonal blocks ``Σ̄_i`` of a reduced augmented covariance: ``(B, N, M_r, M_r)``."""
+    """Diagonal blocks ``Σ̄_i`` of a reduced augmented covariance: ``(batch, N, M_r, M_r)``."""
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
     Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr))
@@ -601,133 +660,6 @@ def _agent_covariances(model, Sig):
 
 
 # ----------------------------------------------------------------------------
-# plain reference implementations (straight from the equations)
-# ----------------------------------------------------------------------------
-
-
-def plain_estimation_based_step(
-    X_hat: ArrayLike,
-    Sigma: ArrayLike,
-    A: ArrayLike,
-    BK: ArrayLike,
-    Q: ArrayLike,
-    R: ArrayLike,
-    adjacency: ArrayLike,
-    z: list[np.ndarray],
-    adjacency_next: ArrayLike | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """One step of eqs. (14), (29)-(34), (16)-(20) with explicit dense matrices.
-
-    A loop over agent pairs, for tests and benchmarks only (``O(N^6 m^3)``).
-
-    Parameters
-    ----------
-    X_hat : (N, m N) array_like
-        Row ``i`` is ``X̂_i[k]``.
-    Sigma : (m N^2, m N^2) array_like
-        Full (unreduced) augmented covariance ``Σ[k]``.
-    A, BK, Q : (m, m) array_like
-    R : (m N, m N) array_like
-        Covariance of ``nu_i``.
-    adjacency : (N, N) array_like
-        Topology at step k (defines ``F_1``, ``F_2``).
-    z : list of N arrays
-        ``z_i[k+1]`` stacked as in eq. (3).
-    adjacency_next : (N, N) array_like, optional
-        Topology at k+1 (defines ``H_i[k+1]``); default `adjacency`.
-
-    Returns
-    -------
-    X_hat_next : (N, m N) ndarray
-    Sigma_next : (m N^2, m N^2) ndarray
-    """
-    X_hat, A, BK, Q, R, Adj, z = _check_plain_step(X_hat, A, BK, Q, R, adjacency, z)
-    N, m = X_hat.shape[0], A.shape[0]
-    M = m * N
-    Sig = check_covariance(_float_array(Sigma, "Sigma"), "Sigma", size=M * N)
-    if Sig.ndim != 2:
-        raise ValueError(f"Sigma must be the full ({M * N}, {M * N}) augmented covariance; got shape {Sig.shape}")
-    Adj_next = Adj if adjacency_next is None else _check_plain_adjacency(adjacency_next, N, "adjacency_next")
-    z = _check_plain_z(z, Adj_next, m)
-    L = graph_laplacian(Adj)
-    F1, F2 = _closed_loop_matrices(A, BK, L)
-    Qc = np.kron(np.eye(N), Q)
-    H = selection_matrices(Adj_next, m)
-    blk = lambda i: slice(i * M, (i + 1) * M)  # noqa: E731
-    # eq. (34) (eq. (32) for i = j)
-    F2S = F2 @ Sig @ F2.T
-    cross = [F1 @ Sig[blk(i), :] @ F2.T for i in range(N)]  # F_1 E[e_i e^T] F_2^T
-    Sig_pred = np.empty_like(Sig)
-    for i in range(N):
-        for j in range(N):  # F_2 E[e e_j^T] F_1^T = (F_1 E[e_j e^T] F_2^T)^T
-            Sig_pred[blk(i), blk(j)] = F1 @ Sig[blk(i), blk(j)] @ F1.T + F2S + cross[i] + cross[j].T + Qc
-    X_pred = X_hat @ F1.T  # eq. (14)
-    G, X_next = [], np.empty_like(X_hat)
-    for i in range(N):
-        P = Sig_pred[blk(i), blk(i)]
-        S_i = H[i] @ P @ H[i].T + H[i] @ R @ H[i].T  # eq. (17)
-        G.append(P @ H[i].T @ np.linalg.inv(S_i))  # eq. (19)
-        X_next[i] = X_pred[i] + G[i] @ (z[i] - H[i] @ X_pred[i])  # eqs. (16), (18)
-    Sig_next = np.empty_like(Sig)
-    for i in range(N):
-        for j in range(N):
-            P = Sig_pred[blk(i), blk(j)]
-            if i == j:
-                Sig_next[blk(i), blk(j)] = (np.eye(M) - G[i] @ H[i]) @ P  # eq. (20)
-            else:  # eq. (33)
-                Sig_next[blk(i), blk(j)] = (
-                    -G[i] @ H[i] @ P - P @ H[j].T @ G[j].T + G[i] @ H[i] @ P @ H[j].T @ G[j].T + P
-                )
-    return _finite_result("estimation-based step", X_next, 0.5 * (Sig_next + Sig_next.T))
-
-
-def plain_measurement_based_step(
-    X_hat: ArrayLike,
-    Sigma: ArrayLike,
-    A: ArrayLike,
-    BK: ArrayLike,
-    Q: ArrayLike,
-    R: ArrayLike,
-    adjacency: ArrayLike,
-    z: list[np.ndarray],
-) -> tuple[np.ndarray, np.ndarray]:
-    """One step of eqs. (14)-(20) per agent with dense matrices (reference).
-
-    Parameters
-    ----------
-    X_hat : (N, m N), Sigma : (N, m N, m N) per-agent covariances.
-
-    Returns
-    -------
-    X_hat_next : (N, m N), Sigma_next : (N, m N, m N)
-    """
-    X_hat, A, BK, Q, R, Adj, z = _check_plain_step(X_hat, A, BK, Q, R, adjacency, z)
-    N, m = X_hat.shape[0], A.shape[0]
-    z = _check_plain_z(z, Adj, m)
-    Sigma = check_covariance(_float_array(Sigma, "Sigma"), "Sigma", size=m * N)
-    if Sigma.shape != (N, m * N, m * N):
-        raise ValueError(f"Incompatible dimensions of Sigma; expected ({N}, {m * N}, {m * N}) but found {Sigma.shape}")
-    L = graph_laplacian(Adj)
-    F1, _ = _closed_loop_matrices(A, BK, L)
-    Qc = np.kron(np.eye(N), Q)
-    Ebar = np.zeros((m * N, m * N))
-    for i in range(N):
-        Li = np.kron(L[i:i + 1], np.eye(m))
-        Ebar[i * m:(i + 1) * m, i * m:(i + 1) * m] = Li @ R @ Li.T
-    IBK = np.kron(np.eye(N), BK)
-    H = selection_matrices(Adj, m)
-    X_next, S_next = np.empty_like(X_hat), np.empty((N, m * N, m * N))
-    for i in range(N):
-        P = F1 @ Sigma[i] @ F1.T + IBK @ Ebar @ IBK.T + Qc  # eq. (15)
-        x = F1 @ X_hat[i]  # eq. (14)
-        S_i = H[i] @ P @ H[i].T + H[i] @ R @ H[i].T
-        G = P @ H[i].T @ np.linalg.inv(S_i)
-        X_next[i] = x + G @ (z[i] - H[i] @ x)
-        S_next[i] = (np.eye(m * N) - G @ H[i]) @ P
-    return _finite_result("measurement-based step", X_next, 0.5 * (S_next + np.swapaxes(S_next, -1, -2)))
-
-
-# ----------------------------------------------------------------------------
 # centralized reference
 # ----------------------------------------------------------------------------
 
@@ -739,8 +671,8 @@ def centralized_predict(
 
     Parameters
     ----------
-    x : (R, N, m) team estimates, P : (B, M_r, M_r) reduced covariance,
-    U : (R, N, p) applied inputs, B : (m, p) input matrix.
+    x : (runs, N, m) team estimates, P : (batch, M_r, M_r) reduced covariance,
+    U : (runs, N, p) applied inputs, B : (m, p) input matrix.
     """
     model = _check_model(model)
     N, m, Mr = model.n_agents, model.m, model.M_r
@@ -776,8 +708,8 @@ def centralized_update(
 
     Parameters
     ----------
-    x_pred : (R, N, m), P_pred : (B, M_r, M_r) reduced, positive definite,
-    Z : (R, N, N, m), mask : (N, N) or (B, N, N).
+    x_pred : (runs, N, m), P_pred : (batch, M_r, M_r) reduced, positive definite,
+    Z : (runs, N, N, m), mask : (N, N) or (batch, N, N).
     """
     model = _check_model(model)
     N, m, Mr = model.n_agents, model.m, model.M_r
@@ -796,17 +728,17 @@ def centralized_update(
 
 
 def _centralized_update(model, x_pred, P_pred, Z, S):
-    """:func:`centralized_update` without checks (`S` a (B, N, N) bool mask)."""
+    """:func:`centralized_update` without checks (`S` a (batch, N, N) bool mask)."""
     N, m, k = model.n_agents, model.m, model.kron
     Mr = model.M_r
-    d = _mask_vec(model, S)  # (B, N, Mr)
+    d = _mask_vec(model, S)  # (batch, N, Mr)
     Dm = d[..., :, None] * d[..., None, :]
-    W = np.linalg.inv(Dm * model.R_r + np.eye(Mr) * (1 - d[..., None])) * Dm  # (B, N, Mr, Mr)
+    W = np.linalg.inv(Dm * model.R_r + np.eye(Mr) * (1 - d[..., None])) * Dm  # (batch, N, Mr, Mr)
     info = np.linalg.inv(P_pred) + W.sum(axis=1)
     P = _sym(np.linalg.inv(info))
     R_ = x_pred.shape[0]
     innov = (Z - x_pred[:, None]).reshape(R_, N, Mr, k)
-    total = (W @ innov).sum(axis=1)  # (R, Mr, k); W broadcasts over runs when B = 1
+    total = (W @ innov).sum(axis=1)  # (runs, Mr, k); W broadcasts over runs when batch = 1
     x = x_pred + (P @ total).reshape(R_, N, m)
     return x, P
 
@@ -952,11 +884,11 @@ def _lyapunov_v(e, P, kron):
 
 
 def team_nees(model: TeamFilterModel, X_true: ArrayLike, X_hat: ArrayLike, Sigma_i: ArrayLike) -> np.ndarray:
-    """NEES of every agent's team estimate: ``(R, N)``, chi-square with ``m N`` dof.
+    """NEES of every agent's team estimate: ``(runs, N)``, chi-square with ``m N`` dof.
 
     Parameters
     ----------
-    X_true : (R, N, m), X_hat : (R, N, N, m), Sigma_i : (B, N, M_r, M_r) positive definite
+    X_true : (runs, N, m), X_hat : (runs, N, N, m), Sigma_i : (batch, N, M_r, M_r) positive definite
     """
     model = _check_model(model)
     N, m, Mr = model.n_agents, model.m, model.M_r
@@ -978,7 +910,7 @@ def _team_nees(model, X_true, X_hat, Sigma_i):
 
 
 def f2_cross(model: TeamFilterModel, Sigma: ArrayLike, laplacian: ArrayLike) -> np.ndarray:
-    """``F_2 E[e e_i^T]`` for every agent ``i``: reduced, shape ``(B, N, M_r, M_r)``.
+    """``F_2 E[e e_i^T]`` for every agent ``i``: reduced, shape ``(batch, N, M_r, M_r)``.
 
     Used to form the map ``C_i = E[e e_i^T] Σ_i^{-1}`` of Lemma 1 without
     storing the augmented covariance: ``F_2 C_i = F_2 E[e e_i^T] Σ_i^{-1}``.
@@ -995,12 +927,12 @@ def _f2_cross(model, Sig, L):
     """:func:`f2_cross` without checks."""
     N, mr, Mr = model.n_agents, model.m_r, model.M_r
     Lb = L if L.ndim == 3 else L[None]
-    B = Sig.shape[0]
-    T = Sig.reshape(B, N, N, mr * N * Mr)
-    U = (Lb[:, None] @ T).reshape(B, N, N, mr, N * Mr)
-    Ud = U[:, np.arange(N), np.arange(N)]  # (B, N_j, mr, N*Mr): sum_l L_jl Σ[j, l]
-    F2S = (model.BK_r @ Ud).reshape(B, Mr, N, Mr)  # rows: F_2 Σ
-    return np.moveaxis(F2S, 2, 1)  # (B, N_i, Mr, Mr): column block i
+    nb = Sig.shape[0]
+    T = Sig.reshape(nb, N, N, mr * N * Mr)
+    U = (Lb[:, None] @ T).reshape(nb, N, N, mr, N * Mr)
+    Ud = U[:, np.arange(N), np.arange(N)]  # (batch, N_j, mr, N*Mr): sum_l L_jl Σ[j, l]
+    F2S = (model.BK_r @ Ud).reshape(nb, Mr, N, Mr)  # rows: F_2 Σ
+    return np.moveaxis(F2S, 2, 1)  # (batch, N_i, Mr, Mr): column block i
 
 
 def theorem1_min_eigenvalues(
@@ -1108,7 +1040,7 @@ def _check_model(model: object) -> TeamFilterModel:
 
 
 def _check_estimates(model: TeamFilterModel, X: ArrayLike, name: str) -> np.ndarray:
-    """Team estimates or measurements ``(R, N, N, m)``, finite."""
+    """Team estimates or measurements ``(runs, N, N, m)``, finite."""
     X = _float_array(X, name)
     N, m = model.n_agents, model.m
     if X.ndim != 4 or X.shape[1:] != (N, N, m):
@@ -1123,59 +1055,11 @@ def _check_covariances(P: ArrayLike, name: str, shape: tuple, definite: bool = F
     """
     P = _float_array(P, name)
     if P.ndim != len(shape) or any(w is not None and g != w for g, w in zip(P.shape, shape)) or P.shape[0] == 0:
-        want = tuple("B" if w is None else w for w in shape)
+        want = tuple("batch" if w is None else w for w in shape)
         raise ValueError(f"Incompatible dimensions of {name}; expected {want} but found {P.shape}".replace("'", ""))
     if definite or P not in _RECENT_COVARIANCES:
         check_covariance(P, name, definite=definite)
     return P
-
-
-def _check_plain_adjacency(adjacency: ArrayLike, N: int, name: str = "adjacency") -> np.ndarray:
-    Adj = _check_adjacency(adjacency, name)
-    if Adj.shape != (N, N):
-        raise ValueError(f"Incompatible dimensions of {name}; expected ({N}, {N}) for {N} agents but found {Adj.shape}")
-    sensing_mask(Adj)  # an isolated agent has no H_i: refused here, naming the agent
-    return Adj
-
-
-def _check_plain_step(X_hat, A, BK, Q, R, adjacency, z) -> tuple:
-    """Arguments of the plain reference steps (z is checked separately, against its topology)."""
-    A = check_square(_float_array(A, "A"), "A")
-    m = A.shape[0]
-    if m == 0:
-        raise ValueError("A must be at least 1 x 1 (an agent with no state)")
-    X_hat = _finite(_float_array(X_hat, "X_hat"), "X_hat")
-    if X_hat.ndim != 2 or X_hat.shape[0] == 0 or X_hat.shape[1] != m * X_hat.shape[0]:
-        raise ValueError(f"X_hat must have shape (N, {m} N) (row i: agent i's team estimate); got {X_hat.shape}")
-    N = X_hat.shape[0]
-    BK = check_square(_float_array(BK, "BK"), "BK", m)
-    Q = check_covariance(_float_array(Q, "Q"), "Q", size=m)
-    if Q.ndim != 2:
-        raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
-    R = team_noise_covariance(R, N, m)
-    check_covariance(R, "R", definite=True)
-    Adj = _check_plain_adjacency(adjacency, N)
-    return X_hat, A, BK, Q, R, Adj, z
-
-
-def _check_plain_z(z: object, Adj: np.ndarray, m: int) -> list[np.ndarray]:
-    """The stacked measurements ``z_i`` (eq. (3)) of every agent for topology `Adj`."""
-    N = Adj.shape[0]
-    if isinstance(z, (str, bytes)) or not hasattr(z, "__len__"):
-        raise TypeError(f"z must be a list of {N} measurement vectors (one per agent); got {type(z).__name__}")
-    if len(z) != N:
-        raise ValueError(f"z must hold {N} measurement vectors (one per agent); got {len(z)}")
-    sizes = m * (1 + np.count_nonzero(Adj > 0, axis=1))
-    out = []
-    for i, zi in enumerate(z):
-        zi = _finite(_float_array(zi, f"z[{i}]"), f"z[{i}]")
-        if zi.shape != (sizes[i],):
-            raise ValueError(
-                f"Incompatible dimensions of z[{i}]; expected ({sizes[i]},) (in this adjacency agent {i} senses "
-                f"{sizes[i] // m} agents of {m} states, itself included) but found {zi.shape}"
-            )
-        out.append(zi)
-    return out
 
 
 def _check_runs(X: np.ndarray, Y: np.ndarray, xname: str, yname: str) -> None:
@@ -1215,14 +1099,14 @@ def _remember_result(what: str, *arrays: np.ndarray, cov: int):
 
 
 def _check_laplacian(L: ArrayLike, N: int, name: str = "laplacian", any_batch: bool = False) -> np.ndarray:
-    """One Laplacian ``(N, N)`` or a batch ``(B, N, N)`` (``(..., N, N)`` with `any_batch`): finite, rows
+    """One Laplacian ``(N, N)`` or a batch ``(batch, N, N)`` (``(..., N, N)`` with `any_batch`): finite, rows
     summing to zero, off-diagonal entries <= 0.
 
     Directed graphs are allowed. An adjacency matrix passed by mistake is named as such.
     """
     L = _float_array(L, name)
     if (L.ndim < 2 or (L.ndim > 3 and not any_batch) or L.shape[-2:] != (N, N) or L.size == 0):
-        want = f"(..., {N}, {N})" if any_batch else f"({N}, {N}) or (B, {N}, {N})"
+        want = f"(..., {N}, {N})" if any_batch else f"({N}, {N}) or (batch, {N}, {N})"
         raise ValueError(f"Incompatible dimensions of {name}; expected {want} but found {L.shape}")
     key = L.tobytes()
     if _LAPLACIANS.store.get(key) == L.shape:  # a topology of a long run: checked once per distinct value
@@ -1244,23 +1128,17 @@ def _check_laplacian(L: ArrayLike, N: int, name: str = "laplacian", any_batch: b
 def _check_mask(mask: ArrayLike, N: int) -> np.ndarray:
     S = _check_mask_values(mask, "mask")
     if S.shape[-2:] != (N, N) or S.ndim not in (2, 3):
-        raise ValueError(f"Incompatible dimensions of mask; expected ({N}, {N}) or (B, {N}, {N}) but found {S.shape}")
+        raise ValueError(
+            f"Incompatible dimensions of mask; expected ({N}, {N}) or (batch, {N}, {N}) but found {S.shape}"
+        )
     if not np.all(S[..., np.arange(N), np.arange(N)]):
         raise ValueError("mask must include every agent itself (closed neighbourhoods); use sensing_mask(A)")
     return S if S.ndim == 3 else S[None]
 
 
 def _mask_vec(model: TeamFilterModel, S: np.ndarray) -> np.ndarray:
-    """(B, N, N) mask -> (B, N, M_r) 0/1 vectors ``diag(D_i)`` in reduced coordinates."""
+    """(batch, N, N) mask -> (batch, N, M_r) 0/1 vectors ``diag(D_i)`` in reduced coordinates."""
     return np.repeat(S, model.m_r, axis=-1).astype(float)
-
-
-def _masked_gain(Sig: np.ndarray, d: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """``G H = Σ D (D (Σ + R) D + I - D)^{-1} D`` for 0/1 diagonals ``d``."""
-    Dm = d[..., :, None] * d[..., None, :]
-    S_tilde = Dm * (Sig + R) + np.eye(Sig.shape[-1]) * (1.0 - d[..., None])
-    Y = np.linalg.solve(S_tilde, d[..., :, None] * Sig)  # S~^{-1} D Σ
-    return np.swapaxes(Y, -1, -2) * d[..., None, :]
 
 
 def _joseph(Sig: np.ndarray, KH: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -1288,7 +1166,7 @@ def _F1_means(model: TeamFilterModel, X_hat: ArrayLike, L: np.ndarray) -> np.nda
     N, m = model.n_agents, model.m
     if X.ndim != 4 or X.shape[1:] != (N, N, m):
         raise ValueError(f"Incompatible dimensions of X_hat; expected (R, {N}, {N}, {m}) but found {X.shape}")
-    Lx = L[:, None] if L.ndim == 3 else L  # (B,1,N,N) or (N,N)
+    Lx = L[:, None] if L.ndim == 3 else L  # (batch,1,N,N) or (N,N)
     LX = Lx @ X.reshape(X.shape[0], N, N, m) if L.ndim == 2 else np.matmul(Lx, X)
     return X @ model.A.T - LX @ model.BK.T
 
@@ -1305,28 +1183,47 @@ def _F1_rows(model: TeamFilterModel, T: np.ndarray, L: np.ndarray) -> np.ndarray
 
 
 def _F1_reduced(model: TeamFilterModel, L: np.ndarray) -> np.ndarray:
-    """Dense reduced ``F_1 = I_N ⊗ A_r - L ⊗ BK_r`` per topology: ``(B, M_r, M_r)`` from ``(B, N, N)``."""
-    N, mr, Mr = model.n_agents, model.m_r, model.M_r
+    """Dense reduced ``F_1 = I_N ⊗ A_r - L ⊗ BK_r`` per topology: ``(batch, M_r, M_r)`` from ``(batch, N, N)``."""
+    N, Mr = model.n_agents, model.M_r
     LBK = (L[..., :, None, :, None] * model.BK_r[:, None, :]).reshape(L.shape[0], Mr, Mr)
     return np.kron(np.eye(N), model.A_r)[None] - LBK
 
 
-def _phi_rows(model: TeamFilterModel, Sig: np.ndarray, L: np.ndarray) -> np.ndarray:
-    """Rows of ``Φ Σ`` with ``Φ = I ⊗ F_1 + 1 ⊗ F_2`` in tensor form.
+#: Augmented covariances up to this size (N M_r) are propagated with dense products, larger ones one row
+#: block at a time with the sparse F_1, F_2 (the crossover on one core is near N M_r = 256-512).
+_DENSE_MAX = 384
+#: Sparse Φ blocks of the topologies seen last (a run repeats a few topologies at every step).
+_PHI_CACHE: dict = {}
 
-    ``(Φ T)[i] = F_1 T[i] + F_2 T`` for every row block ``i`` (agent ``i``'s
-    error), where ``(F_2 T)[j] = BK sum_l L_jl T[j, l]``: one ``M_r x M_r``
-    product per row block plus a term shared by all of them. `L` is
-    ``(B, N, N)`` and `Sig` ``(B, N M_r, C)``.
+
+def _phi_blocks(model: TeamFilterModel, L: np.ndarray):
+    """Sparse ``F_1 = I ⊗ A - L ⊗ BK`` ``(M_r, M_r)``, ``F_2`` ``(M_r, N M_r)`` and, for a small team, the dense Φ.
+
+    ``Φ = I_N ⊗ F_1 + 1_N ⊗ F_2`` with ``(F_2 e)[j] = BK sum_l L_jl e[j, l]``: a
+    row of either block has about ``m_r (1 + nnz(L_j))`` non-zeros instead of
+    ``M_r``. Cached by value for the last topologies.
     """
-    B = Sig.shape[0]
+    key = (model.A_r.tobytes(), model.BK_r.tobytes(), L.tobytes(), L.shape)
+    hit = _PHI_CACHE.get(key)
+    if hit is not None:
+        return hit
+    from scipy import sparse
+
     N, mr, Mr = model.n_agents, model.m_r, model.M_r
-    C = Sig.shape[-1]
-    T = np.ascontiguousarray(Sig).reshape(B, N, N, mr * C)
-    F2T = (L[:, :, None, :] @ T).reshape(B, 1, N, mr, C)  # sum_l L_jl T[j, l], row block j
-    F2T = (model.BK_r @ F2T).reshape(B, 1, Mr, C)
-    out = _F1_reduced(model, L)[:, None] @ T.reshape(B, N, Mr, C) + F2T
-    return out.reshape(B, N * Mr, C)
+    F1 = sparse.csr_array(sparse.kron(sparse.identity(N), model.A_r) - sparse.kron(sparse.csr_array(L), model.BK_r))
+    j, l = np.nonzero(L)
+    a, b = np.nonzero(np.ones((mr, mr)))
+    rows = (j[:, None] * mr + a[None, :]).ravel()
+    cols = (j[:, None] * Mr + l[:, None] * mr + b[None, :]).ravel()
+    vals = (L[j, l][:, None] * model.BK_r[a, b][None, :]).ravel()
+    F2 = sparse.csr_array((vals, (rows, cols)), shape=(Mr, N * Mr))
+    Phi = None
+    if N * Mr <= _DENSE_MAX:
+        Phi = np.kron(np.eye(N), F1.toarray()) + np.kron(np.ones((N, 1)), F2.toarray())
+    if len(_PHI_CACHE) >= 64:
+        _PHI_CACHE.clear()
+    _PHI_CACHE[key] = out = (F1, F2, Phi)
+    return out
 
 
 def _observable(F: np.ndarray, H: np.ndarray, tol: float) -> bool:
@@ -1359,3 +1256,12 @@ def _orth_rows(M: np.ndarray, tol: float) -> np.ndarray:
         return Vt[:0]
     rank = int(np.sum(s > tol * max(1.0, s[0])))
     return Vt[:rank]
+
+
+def __getattr__(name: str):
+    """The plain reference steps moved to ``mascore._kf_reference``; resolved here for older callers."""
+    if name in ("plain_estimation_based_step", "plain_measurement_based_step"):
+        from . import _kf_reference
+
+        return getattr(_kf_reference, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

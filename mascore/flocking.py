@@ -67,8 +67,20 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import float_array as _float_array
-from ._validation import check_covariance, check_generator, check_positive, check_positive_int
+from . import _flocking_core as _core
+from ._flocking_core import DIVERGENCE_LIMIT, MAX_STEPS, DivergenceError, FlockingGains
+from ._flocking_core import check_dt as _check_dt
+from ._flocking_core import check_gains as _check_gains
+from ._flocking_core import check_pair_args as _pair_args
+from ._flocking_core import check_range as _check_range
+from ._flocking_core import check_steps as _check_steps
+from ._flocking_core import check_team as _check_team
+from ._flocking_core import check_vectors as _vectors
+from ._flocking_core import check_weights as _check_weights
+from ._flocking_core import finite_result as _finite_result
+from ._flocking_core import finite_where_input_is as _finite_where_input_is
+from ._flocking_core import float_array as _float_array
+from ._validation import check_generator, check_positive
 from .graphs import complete_graph, proximity_graph
 from .sensing import measure, team_noise_covariance
 
@@ -92,78 +104,12 @@ __all__ = [
 ]
 
 
-#: A simulated state component (m or m/s) larger than this means the closed loop diverged.
-DIVERGENCE_LIMIT = 1e7
-#: Largest number of steps of a simulation ("absurdly many" beyond).
-MAX_STEPS = 10_000_000
-
-
-class DivergenceError(FloatingPointError):
-    """The sampled closed loop blew up (raised instead of returning overflowed states).
-
-    With the fully-connected law every agent feels N - 1 springs and dampers,
-    so the loop gain grows with N; with the gains of Song et al. (2023),
-    Table I, and dt = 0.1 s the sampled loop is unstable from about N = 18.
-    """
-
-
-@dataclass(frozen=True)
-class FlockingGains:
-    """Gains of the augmented Cucker-Smale law, eq. (6).
-
-    Parameters
-    ----------
-    rho3 : float
-        Velocity-consensus gain (1/s), positive.
-    rho4 : float
-        Distance-keeping gain, positive.
-    rho5 : float
-        Radial damping gain of ``phi2`` (1/s), positive.
-    rho6 : float
-        Spring gain of ``phi2`` (1/s^2), positive.
-    beta : float
-        Communication decay rate of ``phi1``, ``0 <= beta`` (stable for
-        ``beta < 1/2``).
-    R : float
-        Spring rest length (m): the distance of two agents at rest, and for
-        N > 2 fully-connected agents the bound on every agent's distance from
-        the centre of mass (Sec. II-D).
-    min_distance : float
-        ``d_min`` (m) below which ``|p_ij|`` is replaced by ``d_min`` in the
-        denominators (see the module docstring). Positive.
-    """
-
-    rho3: float
-    rho4: float
-    rho5: float
-    rho6: float
-    beta: float
-    R: float
-    min_distance: float = 1e-6
-
-    def __post_init__(self) -> None:
-        for name in ("rho3", "rho4", "rho5", "rho6", "R", "min_distance", "beta"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-                raise TypeError(f"{name} must be a real number; got {type(value).__name__} {value!r}")
-        for name in ("rho3", "rho4", "rho5", "rho6", "R", "min_distance"):
-            value = getattr(self, name)
-            if not np.isfinite(value) or value <= 0:
-                raise ValueError(f"{name} must be a positive number; got {value!r}")
-        if not np.isfinite(self.beta) or self.beta < 0:
-            raise ValueError(f"beta must be a non-negative number; got {self.beta!r}")
-
-
 def phi1(p: ArrayLike, beta: float) -> np.ndarray:
     """Communication weight ``1 / (1 + |p|^2)^beta`` of eq. (6), shape ``(...)`` for ``p`` ``(..., n)``."""
     p = _vectors(p, "p")
     beta = check_positive(beta, "beta", allow_zero=True)
     with np.errstate(over="ignore"):
-        return _finite_result(_phi1(p, beta), "phi1", "p")
-
-
-def _phi1(p, beta):
-    return (1.0 + np.einsum("...i,...i->...", p, p)) ** (-beta)
+        return _finite_result(_core.phi1(p, beta), "phi1", "p")
 
 
 def phi2(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
@@ -180,12 +126,7 @@ def phi2(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
     """
     p, v = _pair_args(p, v, gains)
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_phi2(p, v, gains), "phi2", "p, v")
-
-
-def _phi2(p, v, gains):
-    de = np.maximum(np.sqrt(np.einsum("...i,...i->...", p, p)), gains.min_distance)
-    return gains.rho5 / (2 * de**2) * np.einsum("...i,...i->...", v, p) + gains.rho6 / (2 * de) * (de - gains.R)
+        return _finite_result(_core.phi2(p, v, gains), "phi2", "p, v")
 
 
 def pair_term(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
@@ -205,11 +146,7 @@ def pair_term(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
     """
     p, v = _pair_args(p, v, gains)
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_pair_term(p, v, gains), "pair_term", "p, v")
-
-
-def _pair_term(p, v, gains):
-    return -gains.rho3 * _phi1(p, gains.beta)[..., None] * v - gains.rho4 * _phi2(p, v, gains)[..., None] * p
+        return _finite_result(_core.pair_term(p, v, gains), "pair_term", "p, v")
 
 
 def pair_term_jacobian(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
@@ -222,32 +159,7 @@ def pair_term_jacobian(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.n
     """
     p, v = _pair_args(p, v, gains)
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_pair_term_jacobian(p, v, gains), "pair_term_jacobian", "p, v")
-
-
-def _pair_term_jacobian(p, v, gains):
-    n = p.shape[-1]
-    eye = np.eye(n)
-    d2 = np.einsum("...i,...i->...", p, p)
-    d = np.sqrt(d2)
-    far = (d > gains.min_distance)[..., None, None]
-    de = np.maximum(d, gains.min_distance)[..., None, None]
-    vp = np.einsum("...i,...i->...", v, p)[..., None, None]
-    ppT = p[..., :, None] * p[..., None, :]
-    pvT = p[..., :, None] * v[..., None, :]
-    vpT = v[..., :, None] * p[..., None, :]
-    f1 = _phi1(p, gains.beta)[..., None, None]
-    c5 = gains.rho4 * gains.rho5 / 2
-    c6 = gains.rho4 * gains.rho6 / 2
-    # term -rho3 phi1(p) v
-    dA_dp = 2 * gains.beta * gains.rho3 * f1 / (1 + d2[..., None, None]) * vpT
-    dA_dv = -gains.rho3 * f1 * eye
-    # term -c5 <v, p> p / de^2   (de = |p| when far, d_min otherwise)
-    dB_dp = -c5 * (vp / de**2 * eye + pvT / de**2 - np.where(far, 2 * vp / de**4 * ppT, 0.0))
-    dB_dv = -c5 * ppT / de**2
-    # term -c6 (1 - R / de) p
-    dC_dp = -c6 * (eye - gains.R / de * (eye - np.where(far, ppT / de**2, 0.0)))
-    return np.concatenate([dA_dp + dB_dp + dC_dp, dA_dv + dB_dv], axis=-1)
+        return _finite_result(_core.pair_term_jacobian(p, v, gains), "pair_term_jacobian", "p, v")
 
 
 def flocking_control(X: ArrayLike, gains: FlockingGains, adjacency: ArrayLike | None = None) -> np.ndarray:
@@ -271,12 +183,7 @@ def flocking_control(X: ArrayLike, gains: FlockingGains, adjacency: ArrayLike | 
     _check_gains(gains)
     weights = _check_weights(adjacency, X.shape[-2], "adjacency", X.shape[:-2])
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_flocking_control(X, gains, weights), "flocking_control", "X")
-
-
-def _flocking_control(X, gains, weights):
-    diff = X[..., :, None, :] - X[..., None, :, :]  # x_i - x_j
-    return _sum_pairs(diff, gains, weights, X.shape[-2])
+        return _finite_result(_core.flocking_control(X, gains, weights), "flocking_control", "X")
 
 
 def control_from_views(views: ArrayLike, gains: FlockingGains, adjacency: ArrayLike | None = None) -> np.ndarray:
@@ -305,15 +212,7 @@ def control_from_views(views: ArrayLike, gains: FlockingGains, adjacency: ArrayL
     _check_gains(gains)
     weights = _check_weights(adjacency, views.shape[-2], "adjacency", views.shape[:-3])
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_control_from_views(views, gains, weights), "control_from_views", "views")
-
-
-def _control_from_views(views, gains, weights):
-    N = views.shape[-2]
-    own = np.diagonal(views, axis1=-3, axis2=-2)  # (..., 2n, N)
-    own = np.moveaxis(own, -1, -2)  # (..., N, 2n): views[i, i]
-    diff = own[..., :, None, :] - views  # x_hat_{i,i} - x_hat_{i,j}
-    return _sum_pairs(diff, gains, weights, N)
+        return _finite_result(_core.control_from_views(views, gains, weights), "control_from_views", "views")
 
 
 def closed_loop_step(X: ArrayLike, dt: float, gains: FlockingGains) -> np.ndarray:
@@ -336,14 +235,7 @@ def closed_loop_step(X: ArrayLike, dt: float, gains: FlockingGains) -> np.ndarra
     dt = _check_dt(dt)
     _check_gains(gains)
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_closed_loop_step(X, dt, gains), "closed_loop_step", "X")
-
-
-def _closed_loop_step(X, dt, gains):
-    n = X.shape[-1] // 2
-    U = _flocking_control(X, gains, None)
-    p, v = X[..., :n], X[..., n:]
-    return np.concatenate([p + dt * v + 0.5 * dt**2 * U, v + dt * U], axis=-1)
+        return _finite_result(_core.closed_loop_step(X, dt, gains), "closed_loop_step", "X")
 
 
 def closed_loop_jacobian(X: ArrayLike, dt: float, gains: FlockingGains) -> np.ndarray:
@@ -367,24 +259,7 @@ def closed_loop_jacobian(X: ArrayLike, dt: float, gains: FlockingGains) -> np.nd
     dt = _check_dt(dt)
     _check_gains(gains)
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_closed_loop_jacobian(X, dt, gains), "closed_loop_jacobian", "X")
-
-
-def _closed_loop_jacobian(X, dt, gains):
-    N, m = X.shape[-2], X.shape[-1]
-    n = m // 2
-    # J(x_i - x_j) is even, so one evaluation per unordered pair i < j
-    iu, ju = np.triu_indices(N, 1)
-    diff = X[..., iu, :] - X[..., ju, :]
-    J = _pair_term_jacobian(diff[..., :n], diff[..., n:], gains)  # (..., P, n, 2n)
-    BJ = np.concatenate([0.5 * dt**2 * J, dt * J], axis=-2)  # B J: (..., P, 2n, 2n)
-    blocks = np.zeros((*X.shape[:-2], N, N, m, m))
-    blocks[..., iu, ju, :, :] = -BJ
-    blocks[..., ju, iu, :, :] = -BJ
-    A = np.block([[np.eye(n), dt * np.eye(n)], [np.zeros((n, n)), np.eye(n)]])
-    idx = np.arange(N)
-    blocks[..., idx, idx, :, :] = A - blocks.sum(axis=-3)
-    return np.swapaxes(blocks, -3, -2).reshape(*X.shape[:-2], N * m, N * m)
+        return _finite_result(_core.closed_loop_jacobian(X, dt, gains), "closed_loop_jacobian", "X")
 
 
 @dataclass(frozen=True)
@@ -457,7 +332,7 @@ def simulate_measured_flocking(
     n_steps = _check_steps(n_steps)
     dt = _check_dt(dt)
     _check_gains(gains)
-    Lq = _chol(Q, "Q", m)
+    Lq = _core.noise_factor(Q, "Q", m)
     team_noise_covariance(_float_array(R, "R"), N, m)  # validates R early
     if sensing_range is not None:
         sensing_range = _check_range(sensing_range, "use None for a fully connected network")
@@ -472,9 +347,9 @@ def simulate_measured_flocking(
         if k == n_steps:
             break
         views, _ = measure(rng, X, A_k, R, allow_isolated=True)  # eq. (2)
-        U = _control_from_views(views, gains, A_k)  # eq. (7)
-        X = _propagate(X, U, dt) + rng.standard_normal((*batch, N, m)) @ Lq.T
-        _check_divergence(X, k + 1, dt)
+        U = _core.control_from_views(views, gains, A_k)  # eq. (7)
+        X = _core.propagate(X, U, dt) + rng.standard_normal((*batch, N, m)) @ Lq.T
+        _core.check_divergence(X, k + 1, dt)
     t = dt * np.arange(n_steps + 1)
     return FlockingRun(t, np.moveaxis(Xs, 0, -3), np.moveaxis(As, 0, -3))
 
@@ -519,139 +394,4 @@ def max_distance_from_centre(X: ArrayLike) -> np.ndarray:
     with np.errstate(over="ignore", invalid="ignore"):
         out = np.linalg.norm(p - p.mean(axis=-2, keepdims=True), axis=-1).max(axis=-1)
     _finite_where_input_is(out, X, "max_distance_from_centre")
-    return out
-
-
-# ----------------------------------------------------------------------------- private
-
-
-def _sum_pairs(diff: np.ndarray, gains: FlockingGains, adjacency: np.ndarray | None, N: int) -> np.ndarray:
-    """sum_j a_ij g(x_i - x_j) on checked arguments; `adjacency` a float or boolean (..., N, N) array or None."""
-    n = diff.shape[-1] // 2
-    g = _pair_term(diff[..., :n], diff[..., n:], gains)  # (..., N, N, n)
-    if adjacency is None:
-        weights = (~np.eye(N, dtype=bool)).astype(float)
-    else:
-        weights = np.asarray(adjacency, dtype=float)
-        weights = weights * (~np.eye(N, dtype=bool))
-    return np.einsum("...ij,...ijk->...ik", weights, g)
-
-
-def _propagate(X: np.ndarray, U: np.ndarray, dt: float) -> np.ndarray:
-    n = U.shape[-1]
-    p, v = X[..., :n], X[..., n:]
-    return np.concatenate([p + dt * v + 0.5 * dt**2 * U, v + dt * U], axis=-1)
-
-
-def _check_divergence(X: np.ndarray, k: int, dt: float, what: str = "team state") -> None:
-    if not np.all(np.abs(X) < DIVERGENCE_LIMIT):
-        raise DivergenceError(
-            f"the closed loop diverged: the {what} exceeded {DIVERGENCE_LIMIT:g} at step {k} (t = {k * dt:g} s); "
-            "the sampled flocking law is unstable for these gains, dt and number of agents"
-        )
-
-
-def _check_team(X: ArrayLike, name: str, allow_nan: bool = False) -> np.ndarray:
-    X = _float_array(X, name)
-    if X.ndim < 2 or X.shape[-1] % 2 or X.shape[-1] == 0 or X.shape[-2] == 0:
-        raise ValueError(f"{name} must have shape (..., N, 2n) with rows [p_i; v_i]; got {X.shape}")
-    if allow_nan:
-        if np.any(np.isinf(X)):
-            raise ValueError(f"{name} contains infinite entries")
-    elif not np.all(np.isfinite(X)):
-        raise ValueError(f"{name} contains NaN or infinite entries")
-    return X
-
-
-def _finite_where_input_is(out: np.ndarray, X: np.ndarray, what: str) -> None:
-    """Overflow check of a statistic over the last two axes of X: finite wherever X[..., :, :] is."""
-    known = np.isfinite(X).all(axis=(-1, -2))
-    if not np.all(np.isfinite(out[known])):
-        raise ValueError(f"{what} overflowed although X is finite: X holds values too large for floating "
-                         "point; rescale it")
-
-
-def _chol(C: ArrayLike, name: str, size: int) -> np.ndarray:
-    C = check_covariance(_float_array(C, name), name, size=size)
-    w, V = np.linalg.eigh(C)
-    return V * np.sqrt(np.clip(w, 0, None))  # C = L L^T, works for semidefinite C
-
-
-def _check_steps(n_steps: int) -> int:
-    n_steps = check_positive_int(n_steps, "n_steps", minimum=1)
-    if n_steps > MAX_STEPS:
-        raise ValueError(f"n_steps = {n_steps} is more than MAX_STEPS = {MAX_STEPS}; run fewer steps")
-    return n_steps
-
-
-
-
-def _check_dt(dt: object) -> float:
-    if isinstance(dt, np.ndarray) and dt.ndim == 0:
-        dt = dt[()]
-    return check_positive(dt, "dt", "s")
-
-
-def _check_range(r: object, hint: str = "") -> float:
-    if isinstance(r, np.ndarray) and r.ndim == 0:
-        r = r[()]
-    if isinstance(r, (int, float, np.integer, np.floating)) and not isinstance(r, bool) and np.isinf(r) and hint:
-        raise ValueError(f"sensing_range must be a finite number > 0 m; got {r!r} ({hint})")
-    return check_positive(r, "sensing_range", "m")
-
-
-def _check_gains(gains: object) -> None:
-    if not isinstance(gains, FlockingGains):
-        raise TypeError(f"gains must be a mascore.flocking.FlockingGains; got {type(gains).__name__}")
-
-
-def _vectors(x: ArrayLike, name: str) -> np.ndarray:
-    x = _float_array(x, name)
-    if x.ndim < 1 or x.shape[-1] == 0:
-        raise ValueError(f"{name} must have shape (..., n) with n >= 1; got {x.shape}")
-    if not np.all(np.isfinite(x)):
-        raise ValueError(f"{name} contains NaN or infinite entries")
-    return x
-
-
-def _pair_args(p: ArrayLike, v: ArrayLike, gains: object) -> tuple[np.ndarray, np.ndarray]:
-    p, v = _vectors(p, "p"), _vectors(v, "v")
-    try:
-        np.broadcast_shapes(p.shape, v.shape)
-    except ValueError:
-        raise ValueError(f"v must have the shape of p {p.shape} (or broadcast against it); got {v.shape}") from None
-    if v.shape[-1] != p.shape[-1]:
-        raise ValueError(f"v must have the shape of p {p.shape}; got {v.shape}")
-    _check_gains(gains)
-    return p, v
-
-
-def _check_weights(adjacency: ArrayLike | None, N: int, name: str, batch: tuple = ()) -> np.ndarray | None:
-    """A (..., N, N) adjacency a_ij >= 0, finite (None passes through: fully connected)."""
-    if adjacency is None:
-        return None
-    A = _float_array(adjacency, name)
-    if A.ndim < 2 or A.shape[-2:] != (N, N):
-        raise ValueError(f"{name} must have shape (..., {N}, {N}); got {A.shape}")
-    if not np.all(np.isfinite(A)):
-        raise ValueError(f"{name} contains NaN or infinite entries")
-    if np.any(A < 0):
-        diag = np.diagonal(A, axis1=-2, axis2=-1)
-        if np.all(diag >= 0) and np.any(diag > 0) and np.allclose(A.sum(axis=-1), 0.0):
-            raise ValueError(f"{name} looks like a graph Laplacian (negative off-diagonal entries, rows summing "
-                             "to zero); pass the adjacency matrix instead (A = diag(diag(L)) - L)")
-        raise ValueError(f"{name} must have non-negative weights a_ij; smallest entry is {A.min():.3g}")
-    try:
-        np.broadcast_shapes(A.shape[:-2], batch)
-    except ValueError:
-        raise ValueError(f"{name} has batch axes {A.shape[:-2]} that do not match the team's {batch}") from None
-    return A
-
-
-def _finite_result(out, what: str, names: str):
-    """Return `out` (an array or a tuple of arrays) if finite; else name the overflow."""
-    arrays = out if isinstance(out, tuple) else (out,)
-    if not all(np.all(np.isfinite(a)) for a in arrays):
-        raise ValueError(f"{what} overflowed (NaN or inf in the result) although every input is finite: "
-                         f"{names} hold values too large for floating point; rescale them")
     return out

@@ -31,10 +31,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import check_generator, check_positive_int
 from ._validation import cached_covariance as _const_covariance
-from ._validation import require_finite as _finite
+from ._validation import check_generator, check_positive_int
 from ._validation import float_array as _float_array
+from ._validation import require_finite as _finite
 from .noise import _psd_factor, _sample_shape
 
 __all__ = [

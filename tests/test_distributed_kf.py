@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from mascore import _kf_reference as ref
 from mascore import distributed_kf as dk
 from mascore.agents import double_integrator
 from mascore.graphs import complete_graph, laplacian, path_graph, ring_graph, star_graph
@@ -22,7 +23,7 @@ def _model(N, reduce=True, Q=None, R=None):
 
 
 def _random_sigma(model, rng, B=1):
-    """A generic SPD reduced augmented covariance (B, N M_r, N M_r)."""
+    """A generic SPD reduced augmented covariance (batch, N M_r, N M_r)."""
     n = model.n_agents * model.M_r
     G = rng.normal(size=(B, n, n)) / np.sqrt(n)
     return G @ np.swapaxes(G, -1, -2) + 0.5 * np.eye(n)
@@ -41,10 +42,44 @@ def test_structured_estimation_based_step_equals_plain_eqs_29_34(reduce, graph):
     Xp, Sp = dk.eb_predict(model, Xh, Sig, laplacian(graph))
     Xn, Sn, _ = dk.eb_update(model, Xp, Sp, Z, S[0])
     z = [stacked_measurement(Z[0], S[0], i) for i in range(N)]
-    Xn2, Sn2 = dk.plain_estimation_based_step(
+    Xn2, Sn2 = ref.plain_estimation_based_step(
         Xh[0].reshape(N, -1), dk.expand_covariance(Sig[0], model.kron), AGENT.A, BK, np.eye(4), model.R, graph, z)
     np.testing.assert_allclose(Xn[0].reshape(N, -1), Xn2, atol=1e-10)
     np.testing.assert_allclose(dk.expand_covariance(Sn[0], model.kron), Sn2, atol=1e-10)
+
+
+@pytest.mark.parametrize("graph", [ring_graph(16), path_graph(14)])
+def test_sparse_row_block_recursion_equals_plain_eqs_29_34(graph):
+    """Large enough for the sparse F_1, F_2 and rank-q row-block path (N M_r > 384): still eqs. (29)-(34)."""
+    N = graph.shape[0]
+    model = _model(N)
+    assert N * model.M_r > dk._DENSE_MAX
+    rng = np.random.default_rng(5)
+    Sig = _random_sigma(model, rng)
+    Xh = rng.normal(size=(1, N, N, 4))
+    Z, S = measure(1, rng.normal(size=(1, N, 4)), graph, 2.0 * np.eye(4))
+    Xn, Sn, _ = dk.eb_update(model, *dk.eb_predict(model, Xh, Sig, laplacian(graph)), Z, S[0])
+    z = [stacked_measurement(Z[0], S[0], i) for i in range(N)]
+    Xn2, Sn2 = ref.plain_estimation_based_step(
+        Xh[0].reshape(N, -1), dk.expand_covariance(Sig[0], model.kron), AGENT.A, BK, np.eye(4), model.R, graph, z)
+    np.testing.assert_allclose(Xn[0].reshape(N, -1), Xn2, atol=1e-9)
+    np.testing.assert_allclose(dk.expand_covariance(Sn[0], model.kron), Sn2, atol=1e-9)
+
+
+def test_rank_q_gain_equals_masked_full_solve():
+    """The gathered q x q form of G H (mascore._masked_gain) == Σ D (D (Σ + R) D + I - D)^{-1} D."""
+    from mascore import _masked_gain as mg
+
+    rng = np.random.default_rng(6)
+    M = 60  # above the small-size shortcut
+    G = rng.normal(size=(3, M, M))
+    Sig = G @ np.swapaxes(G, -1, -2) / M + np.eye(M)
+    H = rng.normal(size=(M, M))
+    R = H @ H.T / M + np.eye(M)
+    d = (rng.random((3, M)) < 0.3).astype(float)
+    D = d[..., :, None] * d[..., None, :]
+    full = np.linalg.solve(D * (Sig + R) + np.eye(M) * (1 - d[..., None]), d[..., :, None] * Sig)
+    np.testing.assert_allclose(mg.masked_gain(Sig, d, R), np.swapaxes(full, -1, -2) * d[..., None, :], atol=1e-12)
 
 
 def test_structured_step_batched_over_topologies():
@@ -78,7 +113,7 @@ def test_measurement_based_step_equals_plain_eqs_14_20(reduce):
     Xp, Sp = dk.mb_predict(model, Xh, Si, laplacian(A))
     Xn, Sn, _ = dk.mb_update(model, Xp, Sp, Z, S[0])
     z = [stacked_measurement(Z[0], S[0], i) for i in range(N)]
-    Xn2, Sn2 = dk.plain_measurement_based_step(
+    Xn2, Sn2 = ref.plain_measurement_based_step(
         Xh[0].reshape(N, -1), dk.expand_covariance(Si[0], model.kron), AGENT.A, BK, np.eye(4), model.R, A, z)
     np.testing.assert_allclose(Xn[0].reshape(N, -1), Xn2, atol=1e-10)
     np.testing.assert_allclose(dk.expand_covariance(Sn[0], model.kron), Sn2, atol=1e-10)

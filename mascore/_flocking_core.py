@@ -1,0 +1,611 @@
+"""The flocking law's gains, unchecked kernels and argument checks (shared by two modules).
+
+:mod:`mascore.flocking` (the law, its Jacobian, the measured-flocking
+simulator) and :mod:`mascore.distributed_ekf` (the per-agent EKFs of the
+estimation-based flock) both run these kernels; this module is their common
+home, so that neither imports the other's private helpers. The public
+entry points, which check their arguments first, are in
+:mod:`mascore.flocking`; :class:`FlockingGains` and :class:`DivergenceError`
+are defined here and exported from there.
+
+Kernels take checked arrays (finite, the shapes documented) and return raw
+results; callers wrap them in ``np.errstate`` and :func:`finite_result`.
+Checks raise ``ValueError`` or ``TypeError`` naming the argument.
+
+Layouts: a team state is ``(..., N, 2n)`` with rows ``[p_i; v_i]``; the
+control Jacobian of :func:`control_jacobian` is ``(..., N, n, N, 2n)``
+(agent ``i``, acceleration component ``a``, agent ``j``, state component
+``b``), which reshapes without copying to the ``(nN, 2nN)`` matrix
+``dU/dX`` of the flattened team state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._validation import check_covariance, check_positive, check_positive_int, float_array
+
+__all__ = [
+    "DIVERGENCE_LIMIT",
+    "MAX_STEPS",
+    "DivergenceError",
+    "FlockingGains",
+    "phi1",
+    "phi2",
+    "pair_term",
+    "pair_term_jacobian",
+    "sum_pairs",
+    "flocking_control",
+    "control_from_views",
+    "closed_loop_step",
+    "propagate",
+    "control_jacobian",
+    "control_and_jacobian",
+    "closed_loop_jacobian",
+    "float_array",
+    "check_team",
+    "check_dt",
+    "check_range",
+    "check_steps",
+    "check_gains",
+    "check_vectors",
+    "check_pair_args",
+    "check_weights",
+    "check_divergence",
+    "noise_factor",
+    "finite_result",
+    "finite_where_input_is",
+]
+
+#: A simulated state component (m or m/s) larger than this means the closed loop diverged.
+DIVERGENCE_LIMIT = 1e7
+#: Largest number of steps of a simulation ("absurdly many" beyond).
+MAX_STEPS = 10_000_000
+
+
+class DivergenceError(FloatingPointError):
+    """The sampled closed loop blew up (raised instead of returning overflowed states).
+
+    With the fully-connected law every agent feels N - 1 springs and dampers,
+    so the loop gain grows with N; with the gains of Song et al. (2023),
+    Table I, and dt = 0.1 s the sampled loop is unstable from about N = 18.
+
+    Examples
+    --------
+    >>> issubclass(DivergenceError, FloatingPointError)
+    True
+    """
+
+
+DivergenceError.__module__ = "mascore.flocking"
+
+
+@dataclass(frozen=True)
+class FlockingGains:
+    """Gains of the augmented Cucker-Smale law, eq. (6).
+
+    Parameters
+    ----------
+    rho3 : float
+        Velocity-consensus gain (1/s), positive.
+    rho4 : float
+        Distance-keeping gain, positive.
+    rho5 : float
+        Radial damping gain of ``phi2`` (1/s), positive.
+    rho6 : float
+        Spring gain of ``phi2`` (1/s^2), positive.
+    beta : float
+        Communication decay rate of ``phi1``, ``0 <= beta`` (stable for
+        ``beta < 1/2``).
+    R : float
+        Spring rest length (m): the distance of two agents at rest, and for
+        N > 2 fully-connected agents the bound on every agent's distance from
+        the centre of mass (Sec. II-D).
+    min_distance : float
+        ``d_min`` (m) below which ``|p_ij|`` is replaced by ``d_min`` in the
+        denominators (see :mod:`mascore.flocking`). Positive.
+
+    Raises
+    ------
+    TypeError
+        If a gain is not a real number.
+    ValueError
+        If a gain is not finite and positive (``beta``: non-negative).
+
+    Examples
+    --------
+    >>> FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0).R
+    120.0
+    """
+
+    rho3: float
+    rho4: float
+    rho5: float
+    rho6: float
+    beta: float
+    R: float
+    min_distance: float = 1e-6
+
+    def __post_init__(self) -> None:
+        for name in ("rho3", "rho4", "rho5", "rho6", "R", "min_distance", "beta"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise TypeError(f"{name} must be a real number; got {type(value).__name__} {value!r}")
+        for name in ("rho3", "rho4", "rho5", "rho6", "R", "min_distance"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"{name} must be a positive number; got {value!r}")
+        if not np.isfinite(self.beta) or self.beta < 0:
+            raise ValueError(f"beta must be a non-negative number; got {self.beta!r}")
+
+
+FlockingGains.__module__ = "mascore.flocking"
+
+
+# ----------------------------------------------------------------------------- kernels
+
+
+def phi1(p: np.ndarray, beta: float) -> np.ndarray:
+    """``1 / (1 + |p|^2)^beta`` for checked ``p`` of shape ``(..., n)``; shape ``(...)``.
+
+    Examples
+    --------
+    >>> float(phi1(np.array([1.0, 0.0]), 1.0))
+    0.5
+    """
+    return (1.0 + np.einsum("...i,...i->...", p, p)) ** (-beta)
+
+
+def phi2(p: np.ndarray, v: np.ndarray, gains: FlockingGains) -> np.ndarray:
+    """Spring-damper weight of eq. (6) with ``|p|`` replaced by ``max(|p|, d_min)``; shape ``(...)``.
+
+    Examples
+    --------
+    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    >>> float(phi2(np.array([120.0, 0.0]), np.zeros(2), g))  # at rest length, at rest
+    0.0
+    """
+    de = np.maximum(np.sqrt(np.einsum("...i,...i->...", p, p)), gains.min_distance)
+    return gains.rho5 / (2 * de**2) * np.einsum("...i,...i->...", v, p) + gains.rho6 / (2 * de) * (de - gains.R)
+
+
+def pair_term(p: np.ndarray, v: np.ndarray, gains: FlockingGains) -> np.ndarray:
+    """``g = -rho3 phi1(p) v - rho4 phi2(p, v) p`` for ``p = p_ij``, ``v = v_ij``; shape ``(..., n)``.
+
+    Examples
+    --------
+    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    >>> pair_term(np.zeros(2), np.zeros(2), g)  # an agent with itself
+    array([0., 0.])
+    """
+    return -gains.rho3 * phi1(p, gains.beta)[..., None] * v - gains.rho4 * phi2(p, v, gains)[..., None] * p
+
+
+def pair_term_jacobian(p: np.ndarray, v: np.ndarray, gains: FlockingGains) -> np.ndarray:
+    """``[dg/dp, dg/dv]`` of :func:`pair_term`: shape ``(..., n, 2n)``, even in ``(p, v)``.
+
+    Examples
+    --------
+    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    >>> pair_term_jacobian(np.array([100.0, 0.0]), np.zeros(2), g).shape
+    (2, 4)
+    """
+    n = p.shape[-1]
+    eye = np.eye(n)
+    d2 = np.einsum("...i,...i->...", p, p)
+    d = np.sqrt(d2)
+    far = (d > gains.min_distance)[..., None, None]
+    de = np.maximum(d, gains.min_distance)[..., None, None]
+    vp = np.einsum("...i,...i->...", v, p)[..., None, None]
+    ppT = p[..., :, None] * p[..., None, :]
+    pvT = p[..., :, None] * v[..., None, :]
+    vpT = v[..., :, None] * p[..., None, :]
+    f1 = phi1(p, gains.beta)[..., None, None]
+    c5 = gains.rho4 * gains.rho5 / 2
+    c6 = gains.rho4 * gains.rho6 / 2
+    # term -rho3 phi1(p) v
+    dA_dp = 2 * gains.beta * gains.rho3 * f1 / (1 + d2[..., None, None]) * vpT
+    dA_dv = -gains.rho3 * f1 * eye
+    # term -c5 <v, p> p / de^2   (de = |p| when far, d_min otherwise)
+    dB_dp = -c5 * (vp / de**2 * eye + pvT / de**2 - np.where(far, 2 * vp / de**4 * ppT, 0.0))
+    dB_dv = -c5 * ppT / de**2
+    # term -c6 (1 - R / de) p
+    dC_dp = -c6 * (eye - gains.R / de * (eye - np.where(far, ppT / de**2, 0.0)))
+    return np.concatenate([dA_dp + dB_dp + dC_dp, dA_dv + dB_dv], axis=-1)
+
+
+def sum_pairs(diff: np.ndarray, gains: FlockingGains, adjacency: np.ndarray | None, N: int) -> np.ndarray:
+    """``sum_j a_ij g(x_i - x_j)`` from ``diff[..., i, j, :] = x_i - x_j`` (``None``: every ``j != i``).
+
+    Examples
+    --------
+    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    >>> sum_pairs(np.zeros((2, 2, 4)), g, None, 2)
+    array([[0., 0.],
+           [0., 0.]])
+    """
+    n = diff.shape[-1] // 2
+    g = pair_term(diff[..., :n], diff[..., n:], gains)  # (..., N, N, n)
+    if adjacency is None:
+        weights = (~np.eye(N, dtype=bool)).astype(float)
+    else:
+        weights = np.asarray(adjacency, dtype=float)
+        weights = weights * (~np.eye(N, dtype=bool))
+    return np.einsum("...ij,...ijk->...ik", weights, g)
+
+
+def flocking_control(X: np.ndarray, gains: FlockingGains, weights: np.ndarray | None) -> np.ndarray:
+    """Control ``(..., N, n)`` of every agent from the common team state ``X`` ``(..., N, 2n)``, eq. (6).
+
+    Examples
+    --------
+    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    >>> X = np.array([[0.0, 0, 0, 0], [120.0, 0, 0, 0]])  # at rest, at rest length
+    >>> float(np.abs(flocking_control(X, g, None)).max())
+    0.0
+    """
+    diff = X[..., :, None, :] - X[..., None, :, :]  # x_i - x_j
+    return sum_pairs(diff, gains, weights, X.shape[-2])
+
+
+def control_from_views(views: np.ndarray, gains: FlockingGains, weights: np.ndarray | None) -> np.ndarray:
+    """``u_i`` from agent ``i``'s own view ``views[..., i]`` ``(..., N, N, 2n)``, eq. (7) or (39); ``(..., N, n)``.
+
+    Examples
+    --------
+    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    >>> control_from_views(np.zeros((3, 3, 4)), g, None).shape
+    (3, 2)
+    """
+    N = views.shape[-2]
+    own = np.diagonal(views, axis1=-3, axis2=-2)  # (..., 2n, N)
+    own = np.moveaxis(own, -1, -2)  # (..., N, 2n): views[i, i]
+    diff = own[..., :, None, :] - views  # x_hat_{i,i} - x_hat_{i,j}
+    return sum_pairs(diff, gains, weights, N)
+
+
+def propagate(X: np.ndarray, U: np.ndarray, dt: float) -> np.ndarray:
+    """Double integrator of eq. (1): ``p + dt v + dt^2/2 u``, ``v + dt u``; shape of ``X``.
+
+    Examples
+    --------
+    >>> propagate(np.array([[0.0, 0.0, 1.0, 0.0]]), np.array([[2.0, 0.0]]), 0.5)
+    array([[0.75, 0.  , 2.  , 0.  ]])
+    """
+    n = U.shape[-1]
+    p, v = X[..., :n], X[..., n:]
+    return np.concatenate([p + dt * v + 0.5 * dt**2 * U, v + dt * U], axis=-1)
+
+
+def closed_loop_step(X: np.ndarray, dt: float, gains: FlockingGains) -> np.ndarray:
+    """``f'(X)`` of eq. (40): one step of every agent under the fully-connected law; shape of ``X``.
+
+    Examples
+    --------
+    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    >>> closed_loop_step(np.array([[0.0, 0.0, 1.0, 0.0]]), 0.1, g)  # one agent: no pair term
+    array([[0.1, 0. , 1. , 0. ]])
+    """
+    return propagate(X, flocking_control(X, gains, None), dt)
+
+
+def control_and_jacobian(X: np.ndarray, gains: FlockingGains, with_control: bool = True):
+    """Fully-connected control of every agent and its Jacobian, from one set of pair quantities.
+
+    Parameters
+    ----------
+    X : (..., N, 2n) ndarray
+        Checked team states.
+    gains : FlockingGains
+    with_control : bool
+        Also return the control (else ``None`` in its place).
+
+    Returns
+    -------
+    U : (..., N, n) ndarray or None
+        ``u_i = sum_{j != i} g(x_i - x_j)`` (m/s^2), as :func:`flocking_control`.
+    G : (..., N, n, N, 2n) ndarray
+        ``G[..., i, :, j, :] = du_i/dx_j``: ``-J(x_i - x_j)`` for ``j != i`` and
+        ``sum_{j != i} J(x_i - x_j)`` for ``j = i``, ``J`` the pair Jacobian of
+        :func:`pair_term_jacobian`. Written entry by entry into its final
+        layout from ``(..., N, N)`` arrays of pair scalars (no scatter):
+        ``J = s_I [I 0] + z_I [0 I] + v [c_vp p, 0]^T + p [c_pv v + c_pp p, c_pv p]^T``.
+
+    Examples
+    --------
+    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    >>> X = np.array([[0.0, 0, 1, 0], [100.0, 0, 0, 0], [50.0, 80, 0, 1]])
+    >>> U, G = control_and_jacobian(X, g)
+    >>> U.shape, G.shape, bool(np.allclose(G.sum(axis=-2), 0))  # translation invariance: sum_j du_i/dx_j = 0
+    ((3, 2), (3, 2, 3, 4), True)
+    """
+    N, m = X.shape[-2:]
+    n = m // 2
+    # components of x_i - x_j as (..., N, N) arrays: p[a], v[a]
+    p = [X[..., :, None, a] - X[..., None, :, a] for a in range(n)]
+    v = [X[..., :, None, n + a] - X[..., None, :, n + a] for a in range(n)]
+    d2 = p[0] * p[0]
+    vp = v[0] * p[0]
+    for a in range(1, n):
+        d2 += p[a] * p[a]
+        vp += v[a] * p[a]
+    d = np.sqrt(d2)
+    de = np.maximum(d, gains.min_distance)
+    f1 = (1.0 + d2) ** (-gains.beta)  # phi1
+    inv2 = 1.0 / de**2
+    c5 = gains.rho4 * gains.rho5 / 2
+    c6 = gains.rho4 * gains.rho6 / 2
+    s_I = -c5 * vp * inv2 - c6 * (1.0 - gains.R / de)  # identity part of dg/dp, = -rho4 phi2
+    c_vp = 2 * gains.beta * gains.rho3 * f1 / (1.0 + d2)  # v p^T
+    c_pv = -c5 * inv2  # p v^T in dg/dp, p p^T in dg/dv
+    c_pp = np.where(d > gains.min_distance, 2 * c5 * vp * inv2**2 - c6 * gains.R * inv2 / de, 0.0)  # p p^T
+    z_I = -gains.rho3 * f1  # identity part of dg/dv, = -rho3 phi1
+    U = None
+    if with_control:  # the pair term of eq. (6), g = -rho3 phi1 v - rho4 phi2 p = z_I v + s_I p (0 for j = i)
+        U = np.stack([(z_I * v[a] + s_I * p[a]).sum(axis=-1) for a in range(n)], -1)
+    diag = np.arange(N)
+    s_I[..., diag, diag] = 0.0  # the pair term of an agent with itself is zero (p = v = 0 there)
+    z_I[..., diag, diag] = 0.0
+    W1 = [c_vp * p[b] for b in range(n)]
+    W2 = [c_pv * v[b] + c_pp * p[b] for b in range(n)]
+    W3 = [c_pv * p[b] for b in range(n)]
+    G = np.empty((*X.shape[:-2], N, n, N, m))
+    for a in range(n):
+        for b in range(m):
+            if b < n:  # dg_a/dp_b
+                E = v[a] * W1[b]
+                E += p[a] * W2[b]
+                if a == b:
+                    E += s_I
+            else:  # dg_a/dv_b
+                E = p[a] * W3[b - n]
+                if a == b - n:
+                    E += z_I
+            np.negative(E, out=G[..., :, a, :, b])  # du_i/dx_j = -J(x_i - x_j), j != i
+            G[..., diag, a, diag, b] = E.sum(axis=-1)  # du_i/dx_i = sum_{j != i} J
+    return U, G
+
+
+def control_jacobian(X: np.ndarray, gains: FlockingGains) -> np.ndarray:
+    """``dU/dX`` of the fully-connected law, ``(..., N, n, N, 2n)`` (see :func:`control_and_jacobian`).
+
+    Examples
+    --------
+    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    >>> control_jacobian(np.zeros((1, 4)), g)  # one agent: no pair term
+    array([[[[0., 0., 0., 0.]],
+    <BLANKLINE>
+            [[0., 0., 0., 0.]]]])
+    """
+    return control_and_jacobian(X, gains, with_control=False)[1]
+
+
+def closed_loop_jacobian(X: np.ndarray, dt: float, gains: FlockingGains) -> np.ndarray:
+    """``F = dF'/dX`` of eq. (40) (eq. (38)): ``(..., 2nN, 2nN)``, written in its final layout.
+
+    Block ``(i, j)`` is ``delta_ij A + B du_i/dx_j`` with the double integrator
+    ``A = [[I, dt I], [0, I]]``, ``B = [dt^2/2 I; dt I]``.
+
+    Examples
+    --------
+    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    >>> closed_loop_jacobian(np.zeros((1, 2)), 0.5, g)  # one agent: A
+    array([[1. , 0.5],
+           [0. , 1. ]])
+    """
+    N, m = X.shape[-2:]
+    n = m // 2
+    G = control_jacobian(X, gains)  # (..., N, n, N, m)
+    F = np.empty((*X.shape[:-2], N, m, N, m))
+    np.multiply(G, 0.5 * dt**2, out=F[..., :n, :, :])
+    np.multiply(G, dt, out=F[..., n:, :, :])
+    A = np.block([[np.eye(n), dt * np.eye(n)], [np.zeros((n, n)), np.eye(n)]])
+    diag = np.arange(N)
+    F[..., diag, :, diag, :] += A
+    return F.reshape(*X.shape[:-2], N * m, N * m)
+
+
+# ----------------------------------------------------------------------------- checks
+
+
+def check_team(X: ArrayLike, name: str, allow_nan: bool = False) -> np.ndarray:
+    """A team state ``(..., N, 2n)`` as a float array, finite (NaN allowed with `allow_nan`).
+
+    Raises
+    ------
+    ValueError
+        Wrong shape, or non-finite entries.
+
+    Examples
+    --------
+    >>> check_team([[0.0, 0.0, 1.0, 0.0]], "X").shape
+    (1, 4)
+    """
+    X = float_array(X, name)
+    if X.ndim < 2 or X.shape[-1] % 2 or X.shape[-1] == 0 or X.shape[-2] == 0:
+        raise ValueError(f"{name} must have shape (..., N, 2n) with rows [p_i; v_i]; got {X.shape}")
+    if allow_nan:
+        if np.any(np.isinf(X)):
+            raise ValueError(f"{name} contains infinite entries")
+    elif not np.all(np.isfinite(X)):
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    return X
+
+
+def check_dt(dt: object) -> float:
+    """The sampling time ``dt`` (s), finite and > 0 (a 0-d array is accepted).
+
+    Examples
+    --------
+    >>> check_dt(np.array(0.1))
+    0.1
+    """
+    if isinstance(dt, np.ndarray) and dt.ndim == 0:
+        dt = dt[()]
+    return check_positive(dt, "dt", "s")
+
+
+def check_range(r: object, hint: str = "") -> float:
+    """The sensing range ``r`` (m), finite and > 0; `hint` is added to the message for ``inf``.
+
+    Examples
+    --------
+    >>> check_range(150)
+    150.0
+    """
+    if isinstance(r, np.ndarray) and r.ndim == 0:
+        r = r[()]
+    if isinstance(r, (int, float, np.integer, np.floating)) and not isinstance(r, bool) and np.isinf(r) and hint:
+        raise ValueError(f"sensing_range must be a finite number > 0 m; got {r!r} ({hint})")
+    return check_positive(r, "sensing_range", "m")
+
+
+def check_steps(n_steps: object) -> int:
+    """A number of steps, 1 to :data:`MAX_STEPS`.
+
+    Examples
+    --------
+    >>> check_steps(10)
+    10
+    """
+    n_steps = check_positive_int(n_steps, "n_steps", minimum=1)
+    if n_steps > MAX_STEPS:
+        raise ValueError(f"n_steps = {n_steps} is more than MAX_STEPS = {MAX_STEPS}; run fewer steps")
+    return n_steps
+
+
+def check_gains(gains: object) -> None:
+    """Raise ``TypeError`` unless `gains` is a :class:`FlockingGains`.
+
+    Examples
+    --------
+    >>> check_gains(FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0))
+    """
+    if not isinstance(gains, FlockingGains):
+        raise TypeError(f"gains must be a mascore.flocking.FlockingGains; got {type(gains).__name__}")
+
+
+def check_vectors(x: ArrayLike, name: str) -> np.ndarray:
+    """A finite ``(..., n)`` float array with ``n >= 1``.
+
+    Examples
+    --------
+    >>> check_vectors([1.0, 2.0], "p")
+    array([1., 2.])
+    """
+    x = float_array(x, name)
+    if x.ndim < 1 or x.shape[-1] == 0:
+        raise ValueError(f"{name} must have shape (..., n) with n >= 1; got {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    return x
+
+
+def check_pair_args(p: ArrayLike, v: ArrayLike, gains: object) -> tuple[np.ndarray, np.ndarray]:
+    """Relative position and velocity of a pair (broadcastable, same ``n``) and the gains.
+
+    Examples
+    --------
+    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    >>> [a.shape for a in check_pair_args([1.0, 0.0], [[0.0, 1.0]], g)]
+    [(2,), (1, 2)]
+    """
+    p, v = check_vectors(p, "p"), check_vectors(v, "v")
+    try:
+        np.broadcast_shapes(p.shape, v.shape)
+    except ValueError:
+        raise ValueError(f"v must have the shape of p {p.shape} (or broadcast against it); got {v.shape}") from None
+    if v.shape[-1] != p.shape[-1]:
+        raise ValueError(f"v must have the shape of p {p.shape}; got {v.shape}")
+    check_gains(gains)
+    return p, v
+
+
+def check_weights(adjacency: ArrayLike | None, N: int, name: str, batch: tuple = ()) -> np.ndarray | None:
+    """A ``(..., N, N)`` adjacency ``a_ij >= 0``, finite (``None`` passes through: fully connected).
+
+    A graph Laplacian passed by mistake is named as such.
+
+    Examples
+    --------
+    >>> check_weights(None, 3, "adjacency") is None
+    True
+    """
+    if adjacency is None:
+        return None
+    A = float_array(adjacency, name)
+    if A.ndim < 2 or A.shape[-2:] != (N, N):
+        raise ValueError(f"{name} must have shape (..., {N}, {N}); got {A.shape}")
+    if not np.all(np.isfinite(A)):
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    if np.any(A < 0):
+        diag = np.diagonal(A, axis1=-2, axis2=-1)
+        if np.all(diag >= 0) and np.any(diag > 0) and np.allclose(A.sum(axis=-1), 0.0):
+            raise ValueError(f"{name} looks like a graph Laplacian (negative off-diagonal entries, rows summing "
+                             "to zero); pass the adjacency matrix instead (A = diag(diag(L)) - L)")
+        raise ValueError(f"{name} must have non-negative weights a_ij; smallest entry is {A.min():.3g}")
+    try:
+        np.broadcast_shapes(A.shape[:-2], batch)
+    except ValueError:
+        raise ValueError(f"{name} has batch axes {A.shape[:-2]} that do not match the team's {batch}") from None
+    return A
+
+
+def check_divergence(X: np.ndarray, k: int, dt: float, what: str = "team state") -> None:
+    """Raise :class:`DivergenceError` if a component of `X` reaches :data:`DIVERGENCE_LIMIT` at step `k`.
+
+    Examples
+    --------
+    >>> check_divergence(np.zeros(3), 1, 0.1)
+    """
+    if not np.all(np.abs(X) < DIVERGENCE_LIMIT):
+        raise DivergenceError(
+            f"the closed loop diverged: the {what} exceeded {DIVERGENCE_LIMIT:g} at step {k} (t = {k * dt:g} s); "
+            "the sampled flocking law is unstable for these gains, dt and number of agents"
+        )
+
+
+def noise_factor(C: ArrayLike, name: str, size: int) -> np.ndarray:
+    """``L`` with ``C = L L^T`` for a checked (possibly semidefinite) ``(size, size)`` covariance `C`.
+
+    Examples
+    --------
+    >>> L = noise_factor(np.diag([4.0, 0.0]), "Q", 2)
+    >>> np.round(L @ L.T, 12)
+    array([[4., 0.],
+           [0., 0.]])
+    """
+    C = check_covariance(float_array(C, name), name, size=size)
+    w, V = np.linalg.eigh(C)
+    return V * np.sqrt(np.clip(w, 0, None))
+
+
+def finite_result(out, what: str, names: str):
+    """Return `out` (an array or a tuple of arrays, ``None`` entries skipped) if finite; else name the overflow.
+
+    Examples
+    --------
+    >>> finite_result(np.ones(2), "f", "x")
+    array([1., 1.])
+    """
+    arrays = out if isinstance(out, tuple) else (out,)
+    if not all(a is None or np.all(np.isfinite(a)) for a in arrays):
+        raise ValueError(f"{what} overflowed (NaN or inf in the result) although every input is finite: "
+                         f"{names} hold values too large for floating point; rescale them")
+    return out
+
+
+def finite_where_input_is(out: np.ndarray, X: np.ndarray, what: str) -> None:
+    """Overflow check of a statistic over the last two axes of `X`: finite wherever ``X[..., :, :]`` is.
+
+    Examples
+    --------
+    >>> finite_where_input_is(np.array([1.0, np.nan]), np.array([[[0.0]], [[np.nan]]]), "f")
+    """
+    known = np.isfinite(X).all(axis=(-1, -2))
+    if not np.all(np.isfinite(out[known])):
+        raise ValueError(f"{what} overflowed although X is finite: X holds values too large for floating "
+                         "point; rescale it")
