@@ -1256,12 +1256,3 @@ def _orth_rows(M: np.ndarray, tol: float) -> np.ndarray:
         return Vt[:0]
     rank = int(np.sum(s > tol * max(1.0, s[0])))
     return Vt[:rank]
-
-
-def __getattr__(name: str):
-    """The plain reference steps moved to ``mascore._kf_reference``; resolved here for older callers."""
-    if name in ("plain_estimation_based_step", "plain_measurement_based_step"):
-        from . import _kf_reference
-
-        return getattr(_kf_reference, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

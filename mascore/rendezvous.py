@@ -34,11 +34,13 @@ from ._validation import (
 from ._validation import cached_covariance as _const_covariance
 from ._validation import require_finite as _finite
 from ._validation import float_array as _float_array
+from .graphs import laplacian as graph_laplacian
 from .noise import _psd_factor
 from .sensing import _check_adjacency, _check_flag, _measure, sensing_mask, team_noise_covariance
 
 __all__ = [
     "MODES",
+    "RendezvousModel",
     "RendezvousResult",
     "simulate_rendezvous",
     "rendezvous_gain",
@@ -167,14 +169,109 @@ def team_spread(values: ArrayLike) -> np.ndarray:
     return np.sqrt(np.mean(np.sum(dev**2, axis=-1), axis=-1))
 
 
+@dataclass(frozen=True)
+class RendezvousModel:
+    """The rendezvous loop's model: identical agents, consensus gain and noise (Song et al. eqs. (1)-(4)).
+
+    Checked once when built, then passed to :func:`simulate_rendezvous` and
+    :func:`expected_spread` (instead of repeating the same nine arguments).
+
+    Parameters
+    ----------
+    A : (m, m) array_like
+        Agent state matrix, ``x_{k+1} = A x_k + B u_k + w_k`` (eq. (1)).
+    B : (m, p) array_like
+        Agent input matrix.
+    K : (p, m) array_like
+        Consensus gain of eq. (4), e.g. :func:`rendezvous_gain`.
+    Q : (m, m) array_like
+        Process-noise covariance of each agent, symmetric PSD (units of the state squared).
+    R : (m, m) or (m N, m N) array_like
+        Measurement-noise covariance: per sensed agent (the team covariance is then
+        ``I_N ⊗ R``) or the full covariance of one observer's noise vector; symmetric PSD.
+    dt : float
+        Sampling time (s), used for the time axis.
+
+    Raises
+    ------
+    ValueError
+        Shapes that do not fit together, a covariance that is not symmetric PSD, or a
+        non-positive `dt`.
+    TypeError
+        If `dt` is not a number.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, rendezvous
+    >>> agent = agents.double_integrator(2, 0.1)
+    >>> model = rendezvous.RendezvousModel(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.0, 2),
+    ...                                    Q=1e-4 * np.eye(4), R=0.04 * np.eye(4), dt=0.1)
+    >>> model.m, model.p
+    (4, 2)
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    K: np.ndarray
+    Q: np.ndarray
+    R: np.ndarray
+    dt: float
+
+    def __post_init__(self) -> None:
+        A = check_square(_float_array(self.A, "A"), "A")
+        m = A.shape[0]
+        B = as_matrix(_float_array(self.B, "B"), "B", (m, None))
+        K = as_matrix(_float_array(self.K, "K"), "K", (B.shape[1], m))
+        Q = check_covariance(_float_array(self.Q, "Q"), "Q", size=m)
+        if Q.ndim != 2:
+            raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
+        R = check_covariance(_float_array(self.R, "R"), "R")
+        if R.ndim != 2 or R.shape[0] % m:
+            raise ValueError(f"R must be ({m}, {m}) per sensed agent or (m N, m N) for the team; got {R.shape}")
+        dt = self.dt
+        if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)):
+            raise TypeError(f"dt must be a positive sampling time in seconds; got {type(dt).__name__} {dt!r}")
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive sampling time in seconds; got {dt!r}")
+        for name, value in (("A", A), ("B", B), ("K", K), ("Q", Q), ("R", R), ("dt", float(dt))):
+            object.__setattr__(self, name, value)
+
+    @property
+    def m(self) -> int:
+        """State dimension of one agent."""
+        return self.A.shape[0]
+
+    @property
+    def p(self) -> int:
+        """Input dimension of one agent."""
+        return self.B.shape[1]
+
+
+def _check_model(model: object) -> RendezvousModel:
+    if not isinstance(model, RendezvousModel):
+        raise TypeError(f"model must be a RendezvousModel(A, B, K, Q, R, dt); got {type(model).__name__}")
+    return model
+
+
+def _states(x0: ArrayLike, m: int) -> tuple[np.ndarray, bool]:
+    """x0 as (R, N, m) runs, and whether it was a single (N, m) run."""
+    x = np.array(_float_array(x0, "x0"), dtype=float)
+    single = x.ndim == 2
+    if single:
+        x = x[None]
+    if x.ndim != 3 or 0 in x.shape:
+        raise ValueError(f"x0 must have shape (N, m) for one run or (R, N, m) for R runs; got {x.shape}")
+    if x.shape[-1] != m:
+        raise ValueError(f"x0 must hold states of the model's size m = {m} on its last axis; got shape {x.shape}")
+    _finite(x, "x0")
+    return x, single
+
+
 def expected_spread(
+    model: RendezvousModel,
     x0: ArrayLike,
     adjacency: ArrayLike,
-    A: ArrayLike,
-    B: ArrayLike,
-    K: ArrayLike,
-    Q: ArrayLike,
-    R: ArrayLike,
     n_steps: int,
     mode: str,
 ) -> np.ndarray:
@@ -191,17 +288,20 @@ def expected_spread(
 
     Parameters
     ----------
-    x0 : (R, N, m) array_like
-        Initial states of R runs (known exactly).
+    model : RendezvousModel
+        Agents, gain and noise.
+    x0 : (N, m) or (R, N, m) array_like
+        Initial states of one run or of R runs (known exactly).
     adjacency : (N, N) or (R, N, N) array_like
         Fixed topology, shared or one per run.
-    A, B, K, Q, R, n_steps
-        As in :func:`simulate_rendezvous`.
+    n_steps : int
+        Number of steps T.
     mode : {"true", "measurement"}
+        Law (4) or law (5).
 
     Returns
     -------
-    (T+1, R, m) ndarray
+    (T+1, m) or (T+1, R, m) ndarray
         ``E[mean_i (x_ic - mean_j x_jc)^2]`` for every state component ``c``;
         the squared position spread of :func:`team_spread` is the sum over the
         position components (m^2), the velocity one over the velocity
@@ -209,23 +309,16 @@ def expected_spread(
     """
     if not isinstance(mode, str) or mode not in ("true", "measurement"):
         raise ValueError(f"mode must be 'true' or 'measurement' (linear laws with white noise); got {mode!r}")
-    x = _float_array(x0, "x0")
-    if x.ndim != 3 or 0 in x.shape:
-        raise ValueError(f"x0 must be a finite (R, N, m) array with R, N, m >= 1; got shape {x.shape}")
-    _finite(x, "x0")
+    model = _check_model(model)
+    x, single = _states(x0, model.m)
     n_runs, N, m = x.shape
-    A = check_square(_float_array(A, "A"), "A", m)
-    B = as_matrix(_float_array(B, "B"), "B", (m, None))
-    BK = B @ as_matrix(_float_array(K, "K"), "K", (B.shape[1], m))
-    Q = check_covariance(_float_array(Q, "Q"), "Q", size=m)
-    if Q.ndim != 2:
-        raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
+    A, BK, Q, R = model.A, model.B @ model.K, model.Q, model.R
     n_steps = check_positive_int(n_steps, "n_steps")
     Adj = _check_adjacency(adjacency)
     sensing_mask(Adj)  # isolated-agent check
     if Adj.shape[-1] != N or Adj.ndim not in (2, 3) or (Adj.ndim == 3 and Adj.shape[0] != n_runs):
         raise ValueError(f"adjacency must be ({N}, {N}) or ({n_runs}, {N}, {N}); got {Adj.shape}")
-    Lb = (np.eye(N) * Adj.sum(axis=-1)[..., None] - Adj).reshape(-1, N, N)  # (G, N, N), G = 1 or R
+    Lb = graph_laplacian(Adj).reshape(-1, N, N)  # (G, N, N), G = 1 or R
     Nm = N * m
     F1 = np.stack([dkf._closed_loop_matrices(A, BK, Lg)[0] for Lg in Lb])  # eq. (11), one per graph
     noise = np.broadcast_to(Q, (Lb.shape[0], N, m, m)).copy()
@@ -253,7 +346,7 @@ def expected_spread(
             "the expected spread overflowed (NaN or inf) over n_steps: the closed loop is unstable for these "
             "gains and dt, or the horizon is too long; use fewer steps or a stable gain"
         )
-    return out
+    return out[:, 0] if single else out
 
 
 #: Control laws / estimator loops understood by :func:`simulate_rendezvous`.
@@ -311,16 +404,12 @@ class RendezvousResult:
 
 def simulate_rendezvous(
     rng: np.random.Generator | int,
+    model: RendezvousModel,
     x0: ArrayLike,
     adjacency: ArrayLike,
-    A: ArrayLike,
-    B: ArrayLike,
-    K: ArrayLike,
-    Q: ArrayLike,
-    R: ArrayLike,
     n_steps: int,
     mode: str,
-    dt: float,
+    *,
     x_hat0: ArrayLike | None = None,
     P0: ArrayLike | None = None,
     exact_control_noise: bool = False,
@@ -335,16 +424,17 @@ def simulate_rendezvous(
     rng : numpy.random.Generator or int
         Source of process and measurement noise (two independent child
         streams, so every mode sees the same noise for the same seed).
-    x0 : (R, N, m) array_like
-        Initial true states of R runs.
+    model : RendezvousModel
+        Agents ``A, B``, consensus gain ``K`` (eq. (4)), noise covariances ``Q, R``, sampling time.
+    x0 : (N, m) or (R, N, m) array_like
+        Initial true states of one run, or of R Monte Carlo runs. With one run the
+        results carry no run axis (e.g. ``states`` is ``(T+1, N, m)``).
     adjacency : (N, N), (R, N, N) or, with `switching`, (T+1, N, N) array_like
         Sensing topology: fixed (one for all runs, or one per run), or the
         topology of every step ``k = 0..T`` shared by all runs. The control
         of step k uses graph k, the measurements of step k+1 use graph k+1.
         With one shared topology (fixed or switching) the filters'
         covariance recursion is computed once for all runs.
-    A, B : agent model (eq. (1)); K : (p, m) consensus gain (eq. (4)).
-    Q : (m, m) process-noise covariance; R : (m, m) or (m N, m N) measurement noise.
     n_steps : int
         Number of steps T.
     mode : {"true", "measurement", "measurement-filter", "estimation"}
@@ -352,12 +442,11 @@ def simulate_rendezvous(
         filter), eq. (5) with every agent also running the filter of
         eqs. (8)-(20), or eq. (21) on the agents' own estimates with the
         filter of eqs. (29)-(34).
-    dt : float
-        Sampling time (s), stored for the time axis.
-    x_hat0 : (R, N m) array_like
-        Common initial team estimate of all agents (filter modes).
+    x_hat0 : (N m,) or (R, N m) array_like
+        Common initial team estimate of all agents (filter modes), one per run.
     P0 : (m, m) or (m N, m N) array_like
-        Covariance of the initial estimate error (filter modes).
+        Covariance of the initial estimate error (filter modes): per agent, or the
+        full team covariance.
     exact_control_noise : bool
         "measurement-filter" only: add the correlation between an agent's own
         measurement noise in its control and its estimate that eq. (15)
@@ -379,23 +468,11 @@ def simulate_rendezvous(
     if not isinstance(mode, str) or mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}; got {mode!r}")
     rng = check_generator(rng)
-    x = np.array(_float_array(x0, "x0"), dtype=float)
-    if x.ndim != 3 or 0 in x.shape:
-        raise ValueError(f"x0 must have shape (R, N, m) with R, N, m >= 1; got {x.shape}")
+    model = _check_model(model)
+    x, single = _states(x0, model.m)
     n_runs, N, m = x.shape
-    if not np.all(np.isfinite(x)):
-        raise ValueError("x0 contains NaN or infinite entries")
-    A = check_square(_float_array(A, "A"), "A", m)  # agent model against the state dimension of x0
-    B = as_matrix(_float_array(B, "B"), "B", (m, None))
-    K = as_matrix(_float_array(K, "K"), "K", (B.shape[1], m))
-    Q = check_covariance(_float_array(Q, "Q"), "Q", size=m)
-    if Q.ndim != 2:
-        raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
+    A, B, K, Q, R, dt = model.A, model.B, model.K, model.Q, model.R, model.dt
     R_team = team_noise_covariance(R, N, m)
-    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)):
-        raise TypeError(f"dt must be a positive sampling time in seconds; got {type(dt).__name__} {dt!r}")
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive sampling time in seconds; got {dt!r}")
     n_steps = check_positive_int(n_steps, "n_steps")
     for flag, value in (("exact_control_noise", exact_control_noise), ("central", central),
                         ("progress", progress), ("switching", switching)):
@@ -407,17 +484,17 @@ def simulate_rendezvous(
             raise ValueError(f"with switching=True, adjacency must be ({n_steps + 1}, {N}, {N}); got {Adj.shape}")
     elif S.shape[-1] != N or S.ndim not in (2, 3) or (S.ndim == 3 and S.shape[0] != n_runs):
         raise ValueError(f"adjacency must be ({N}, {N}) or ({n_runs}, {N}, {N}); got {Adj.shape}")
-    Laps = np.diag(np.ones(N)) * Adj.sum(axis=-1)[..., None] - Adj
+    Laps = graph_laplacian(Adj)
 
     def topology(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Adjacency, sensing mask and Laplacian in force at step k."""
         return (Adj[k], S[k], Laps[k]) if switching else (Adj, S, Laps)
 
     filt = mode in ("measurement-filter", "estimation")
-    model = dkf.team_filter_model(A, B, K, Q, R, N) if filt else None
+    filter_model = dkf.team_filter_model(A, B, K, Q, R, N) if filt else None
     if mode == "estimation":
         for adj in np.unique(Adj.reshape(-1, N, N), axis=0):  # each distinct graph once
-            dkf.require_observable(model.A, model.BK, adj)
+            dkf.require_observable(filter_model.A, filter_model.BK, adj)
     proc_rng, meas_rng = rng.spawn(2)
     states = np.empty((n_steps + 1, n_runs, N, m))
     states[0] = x
@@ -426,27 +503,29 @@ def simulate_rendezvous(
         if x_hat0 is None or P0 is None:
             raise ValueError(f"mode {mode!r} needs x_hat0 and P0 (initial estimate and its covariance)")
         xh0 = _float_array(x_hat0, "x_hat0")
+        if single and xh0.shape == (N * m,):
+            xh0 = xh0[None]
         if xh0.shape != (n_runs, N * m):
             raise ValueError(f"Incompatible dimensions of x_hat0; expected ({n_runs}, {N * m}) but found {xh0.shape}")
         if not np.all(np.isfinite(xh0)):
             raise ValueError("x_hat0 contains NaN or infinite entries")
         X_hat = np.broadcast_to(xh0.reshape(n_runs, 1, N, m), (n_runs, N, N, m)).copy()
-        Sig_aug = dkf.eb_initial_covariance(model, P0, common=True)
-        Sig_i = dkf._agent_covariances(model, Sig_aug)
+        Sig_aug = dkf.eb_initial_covariance(filter_model, P0, common=True)
+        Sig_i = dkf._agent_covariances(filter_model, Sig_aug)
         nb = 1 if switching or Adj.ndim == 2 else n_runs
         Sig_aug = np.broadcast_to(Sig_aug, (nb, *Sig_aug.shape[1:])).copy()
         Sig_i = np.broadcast_to(Sig_i, (nb, *Sig_i.shape[1:])).copy()
         KH = np.zeros_like(Sig_i)
-        n = model.kron
-        pos = _position_index(model)
+        n = filter_model.kron
+        pos = _position_index(filter_model)
         out["pos_error"] = np.empty((n_steps + 1, n_runs, N))
         out["pos_std"] = np.empty((n_steps + 1, nb, N))
         out["nees"] = np.empty((n_steps + 1, n_runs, N))
         if nb == 1:
-            out["sigma_i"] = np.empty((n_steps + 1, N, model.M_r, model.M_r))
-            out["gains"] = np.zeros((n_steps + 1, N, model.M_r, model.M_r))
+            out["sigma_i"] = np.empty((n_steps + 1, N, filter_model.M_r, filter_model.M_r))
+            out["gains"] = np.zeros((n_steps + 1, N, filter_model.M_r, filter_model.M_r))
             if mode == "estimation":
-                out["f2_cross"] = np.empty((n_steps + 1, N, model.M_r, model.M_r))
+                out["f2_cross"] = np.empty((n_steps + 1, N, filter_model.M_r, filter_model.M_r))
         if central:
             xc = xh0.reshape(n_runs, N, m).copy()
             Pc = Sig_i[:, 0].copy()
@@ -459,12 +538,12 @@ def simulate_rendezvous(
             out["pos_error"][k] = np.sqrt(np.sum(err**2, axis=(-1, -2)))
             diag = np.diagonal(Sig_i, axis1=-2, axis2=-1)[..., pos]
             out["pos_std"][k] = np.sqrt(n * diag.sum(axis=-1))
-            out["nees"][k] = dkf._team_nees(model, x, X_hat, Sig_i)
+            out["nees"][k] = dkf._team_nees(filter_model, x, X_hat, Sig_i)
             if nb == 1:
                 out["sigma_i"][k] = Sig_i[0]
                 out["gains"][k] = KH[0]
                 if mode == "estimation":
-                    out["f2_cross"][k] = dkf._f2_cross(model, Sig_aug, topology(k)[2])[0]
+                    out["f2_cross"][k] = dkf._f2_cross(filter_model, Sig_aug, topology(k)[2])[0]
             if central:
                 out["central_pos_std"][k] = np.sqrt(n * np.diagonal(Pc, axis1=-2, axis2=-1)[..., pos].sum(-1))
                 out["central_pos_error"][k] = np.sqrt(np.sum((x - xc)[..., pos_slice] ** 2, axis=(-1, -2)))
@@ -483,21 +562,21 @@ def simulate_rendezvous(
             U = _consensus_control(X_hat, Lap, K)
         x_new = _propagate_team(proc_rng, x, U, A, B, Q)
         if filt and central:
-            xc, Pc = dkf._centralized_predict(model, xc, Pc, U, B)
+            xc, Pc = dkf._centralized_predict(filter_model, xc, Pc, U, B)
         if mode == "estimation":
-            X_hat, Sig_aug = dkf._eb_predict(model, X_hat, Sig_aug, Lap)
+            X_hat, Sig_aug = dkf._eb_predict(filter_model, X_hat, Sig_aug, Lap)
         elif mode == "measurement-filter":
-            X_hat, Sig_i = dkf._mb_predict(model, X_hat, Sig_i, Lap, KH if exact_control_noise else None)
+            X_hat, Sig_i = dkf._mb_predict(filter_model, X_hat, Sig_i, Lap, KH if exact_control_noise else None)
         x = x_new
         _, S_next, _ = topology(k + 1)
         Z, _ = _measure(meas_rng, x, S_next, R_team)
         if mode == "estimation":
-            X_hat, Sig_aug, KH = dkf._eb_update(model, X_hat, Sig_aug, Z, S_next[None] if S_next.ndim == 2 else S_next)
-            Sig_i = dkf._agent_covariances(model, Sig_aug)
+            X_hat, Sig_aug, KH = dkf._eb_update(filter_model, X_hat, Sig_aug, Z, S_next[None] if S_next.ndim == 2 else S_next)
+            Sig_i = dkf._agent_covariances(filter_model, Sig_aug)
         elif mode == "measurement-filter":
-            X_hat, Sig_i, KH = dkf._mb_update(model, X_hat, Sig_i, Z, S_next[None] if S_next.ndim == 2 else S_next)
+            X_hat, Sig_i, KH = dkf._mb_update(filter_model, X_hat, Sig_i, Z, S_next[None] if S_next.ndim == 2 else S_next)
         if filt and central:
-            xc, Pc = dkf._centralized_update(model, xc, Pc, Z, S_next[None] if S_next.ndim == 2 else S_next)
+            xc, Pc = dkf._centralized_update(filter_model, xc, Pc, Z, S_next[None] if S_next.ndim == 2 else S_next)
         states[k + 1] = x
         if filt:
             record(k + 1)
@@ -512,7 +591,10 @@ def simulate_rendezvous(
             "the simulation produced NaN or inf states: the closed loop diverged (unstable gains for this dt, "
             "or values beyond floating point); check K, dt and n_steps"
         )
-    return RendezvousResult(mode=mode, dt=float(dt), states=states, model=model, **out)
+    if single:  # one run in, no run axis out
+        states = states[:, 0]
+        out = {k: (v if v is None or k in ("sigma_i", "gains", "f2_cross") else v[:, 0]) for k, v in out.items()}
+    return RendezvousResult(mode=mode, dt=float(dt), states=states, model=filter_model, **out)
 
 
 def _position_index(model: dkf.TeamFilterModel) -> np.ndarray:

@@ -18,6 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mascore import agents, graphs, kalman, noise, sensing
+from mascore import _kf_reference as reference
 from mascore import distributed_kf as dk
 from mascore import rendezvous as rv
 
@@ -54,8 +55,9 @@ def baselines() -> dict[str, tuple]:
     Sig_i = np.broadcast_to(np.eye(model.M_r), (1, N, model.M_r, model.M_r)).copy()
     Sig_full = dk.expand_covariance(dk.eb_initial_covariance(model, np.eye(4), common=False)[0], model.kron)
     z_lists = [rng.normal(size=4 * len(s)) for s in sensing.neighbor_sets(A)]
-    res = rv.simulate_rendezvous(1, rng.normal(size=(1, N, 4)), A, AGENT.A, AGENT.B, K_GAIN, 0.1 * np.eye(4),
-                                 0.5 * np.eye(4), 3, "estimation", 0.1, x_hat0=np.zeros((1, 4 * N)), P0=np.eye(4))
+    rv_model = rv.RendezvousModel(AGENT.A, AGENT.B, K_GAIN, 0.1 * np.eye(4), 0.5 * np.eye(4), 0.1)
+    res = rv.simulate_rendezvous(1, rv_model, rng.normal(size=(1, N, 4)), A, 3, "estimation",
+                                 x_hat0=np.zeros((1, 4 * N)), P0=np.eye(4))
     x4, P4 = np.zeros(4), np.eye(4)
     H = np.eye(2, 4)
     return {
@@ -120,10 +122,10 @@ def baselines() -> dict[str, tuple]:
         "distributed_kf.eb_update": (dk.eb_update, dict(model=model, X_pred=X, Sigma_pred=Sig_aug + 0.1 * np.eye(
             Sig_aug.shape[-1]), Z=Z, mask=S)),
         "distributed_kf.agent_covariances": (dk.agent_covariances, dict(model=model, Sigma=Sig_aug)),
-        "distributed_kf.plain_estimation_based_step": (dk.plain_estimation_based_step, dict(
+        "distributed_kf.plain_estimation_based_step": (reference.plain_estimation_based_step, dict(
             X_hat=rng.normal(size=(N, 4 * N)), Sigma=Sig_full, A=AGENT.A, BK=BK, Q=np.eye(4), R=2.0 * np.eye(4 * N),
             adjacency=A, z=z_lists)),
-        "distributed_kf.plain_measurement_based_step": (dk.plain_measurement_based_step, dict(
+        "distributed_kf.plain_measurement_based_step": (reference.plain_measurement_based_step, dict(
             X_hat=rng.normal(size=(N, 4 * N)), Sigma=np.broadcast_to(np.eye(4 * N), (N, 4 * N, 4 * N)).copy(),
             A=AGENT.A, BK=BK, Q=np.eye(4), R=2.0 * np.eye(4 * N), adjacency=A, z=z_lists)),
         "distributed_kf.centralized_predict": (dk.centralized_predict, dict(model=model, x=rng.normal(size=(2, N, 4)),
@@ -147,13 +149,13 @@ def baselines() -> dict[str, tuple]:
                                                               inputs=np.ones((2, N, 2)), A=AGENT.A, B=AGENT.B,
                                                               Q=0.1 * np.eye(4))),
         "rendezvous.team_spread": (rv.team_spread, dict(values=rng.normal(size=(2, N, 2)))),
+        "rendezvous.RendezvousModel": (rv.RendezvousModel, dict(
+            A=AGENT.A, B=AGENT.B, K=K_GAIN, Q=0.1 * np.eye(4), R=0.5 * np.eye(4), dt=0.1)),
         "rendezvous.expected_spread": (rv.expected_spread, dict(
-            x0=rng.normal(size=(2, N, 4)), adjacency=A, A=AGENT.A, B=AGENT.B, K=K_GAIN, Q=0.1 * np.eye(4),
-            R=0.5 * np.eye(4), n_steps=4, mode="measurement")),
+            model=rv_model, x0=rng.normal(size=(2, N, 4)), adjacency=A, n_steps=4, mode="measurement")),
         "rendezvous.simulate_rendezvous": (rv.simulate_rendezvous, dict(
-            rng=1, x0=rng.normal(size=(1, N, 4)), adjacency=A, A=AGENT.A, B=AGENT.B, K=K_GAIN, Q=0.1 * np.eye(4),
-            R=0.5 * np.eye(4), n_steps=3, mode="estimation", dt=0.1, x_hat0=np.zeros((1, 4 * N)), P0=np.eye(4),
-            central=True)),
+            rng=1, model=rv_model, x0=rng.normal(size=(1, N, 4)), adjacency=A, n_steps=3, mode="estimation",
+            x_hat0=np.zeros((1, 4 * N)), P0=np.eye(4), central=True)),
     }
 
 
@@ -310,9 +312,8 @@ COVARIANCES = [
     ("distributed_kf.centralized_predict", "P", False), ("distributed_kf.centralized_update", "P_pred", True),
     ("distributed_kf.lyapunov_v", "Sigma_r", True), ("distributed_kf.team_nees", "Sigma_i", True),
     ("distributed_kf.f2_cross", "Sigma", False), ("distributed_kf.theorem1_min_eigenvalues", "Sigma_i", True),
-    ("rendezvous.propagate_team", "Q", False), ("rendezvous.expected_spread", "Q", False),
-    ("rendezvous.simulate_rendezvous", "Q", False), ("rendezvous.simulate_rendezvous", "R", False),
-    ("rendezvous.simulate_rendezvous", "P0", False),
+    ("rendezvous.propagate_team", "Q", False), ("rendezvous.RendezvousModel", "Q", False),
+    ("rendezvous.RendezvousModel", "R", False), ("rendezvous.simulate_rendezvous", "P0", False),
 ]
 
 
@@ -650,9 +651,9 @@ def test_kalman_filter_stays_symmetric_pd_over_ten_thousand_steps():
 
 @pytest.mark.parametrize("mode", ["estimation", "measurement-filter"])
 def test_team_filters_stay_symmetric_pd_over_ten_thousand_steps(mode):
-    res = rv.simulate_rendezvous(3, np.random.default_rng(1).normal(size=(1, 2, 4)), graphs.complete_graph(2),
-                                 AGENT.A, AGENT.B, K_GAIN, 0.01 * np.eye(4), 0.5 * np.eye(4), 10_000, mode, 0.1,
-                                 x_hat0=np.zeros((1, 8)), P0=np.eye(4), central=True)
+    model = rv.RendezvousModel(AGENT.A, AGENT.B, K_GAIN, 0.01 * np.eye(4), 0.5 * np.eye(4), 0.1)
+    res = rv.simulate_rendezvous(3, model, np.random.default_rng(1).normal(size=(1, 2, 4)), graphs.complete_graph(2),
+                                 10_000, mode, x_hat0=np.zeros((1, 8)), P0=np.eye(4), central=True)
     sig = res.sigma_i
     np.testing.assert_allclose(sig, np.swapaxes(sig, -1, -2), rtol=0, atol=1e-12 * np.abs(sig).max())
     assert np.linalg.eigvalsh(sig[::50]).min() > 0

@@ -8,13 +8,20 @@ from mascore import distributed_kf as dk
 from mascore.agents import double_integrator
 from mascore.graphs import complete_graph, laplacian, path_graph, ring_graph, star_graph
 from mascore.kalman import nees, nees_interval, update
-from mascore.rendezvous import consensus_control, rendezvous_gain, simulate_rendezvous
+from mascore.rendezvous import RendezvousModel, consensus_control, rendezvous_gain, simulate_rendezvous
 from mascore.sensing import IsolatedAgentError, measure, selection_matrices, stacked_measurement
 
 AGENT = double_integrator(2, 0.1)
 K = rendezvous_gain(0.5, 1.5, 2)
 BK = AGENT.B @ K
 
+
+
+def _rv(**changes) -> RendezvousModel:
+    """The rendezvous model of these tests (unit noise), with some entries changed."""
+    args = dict(A=AGENT.A, B=AGENT.B, K=K, Q=np.eye(4), R=np.eye(4), dt=0.1)
+    args.update(changes)
+    return RendezvousModel(**args)
 
 def _model(N, reduce=True, Q=None, R=None):
     Q = np.eye(4) if Q is None else Q
@@ -228,18 +235,16 @@ def test_require_observable_and_simulation_refuse_unobservable_graph():
         dk.require_observable(AGENT.A, BK, star_graph(4))
     x0 = np.zeros((1, 4, 4))
     with pytest.raises(ValueError, match="system \\(43\\)"):
-        simulate_rendezvous(0, x0, star_graph(4), AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), 5,
-                            "estimation", 0.1, x_hat0=np.zeros((1, 16)), P0=np.eye(4))
+        simulate_rendezvous(0, _rv(), x0, star_graph(4), 5, "estimation", x_hat0=np.zeros((1, 16)), P0=np.eye(4))
     # the measurement-based loop does not need (43)
-    simulate_rendezvous(0, x0, star_graph(4), AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), 2, "measurement", 0.1)
+    simulate_rendezvous(0, _rv(), x0, star_graph(4), 2, "measurement")
 
 
 def test_isolated_agent_raises():
     A = path_graph(4)
     A[3, 2] = A[2, 3] = 0
     with pytest.raises(IsolatedAgentError, match="agent 3"):
-        simulate_rendezvous(0, np.zeros((1, 4, 4)), A, AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), 2,
-                            "measurement", 0.1)
+        simulate_rendezvous(0, _rv(), np.zeros((1, 4, 4)), A, 2, "measurement")
 
 
 @pytest.mark.parametrize(
@@ -272,8 +277,7 @@ def test_bad_shapes_in_steps():
     with pytest.raises(ValueError, match="P0 is not of the form"):
         dk.eb_initial_covariance(model, np.array([[1.0, 0.5, 0, 0], [0.5, 1.0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]))
     with pytest.raises(ValueError, match="mode must be one of"):
-        simulate_rendezvous(0, np.zeros((1, 3, 4)), path_graph(3), AGENT.A, AGENT.B, K, np.eye(4), np.eye(4),
-                            2, "magic", 0.1)
+        simulate_rendezvous(0, _rv(), np.zeros((1, 3, 4)), path_graph(3), 2, "magic")
 
 
 @pytest.mark.parametrize(
@@ -284,34 +288,51 @@ def test_bad_shapes_in_steps():
         (dict(x_hat0=np.zeros((1, 3, 4))), "Incompatible dimensions of x_hat0"),
         (dict(P0=np.eye(3)), "Incompatible dimensions of P0"),
         (dict(P0=-np.eye(4)), "P0 must be positive semidefinite"),
-        (dict(A=np.eye(3)), "Incompatible dimensions of A"),
-        (dict(B=np.ones((3, 2))), "Incompatible dimensions of B"),
-        (dict(K=np.ones((2, 3))), "Incompatible dimensions of K"),
-        (dict(Q=np.diag([1.0, 1.0, 1.0, -1.0])), "Q must be positive semidefinite"),
-        (dict(R=np.diag([1.0, 1.0, 1.0, 0.0])), "R must be positive definite"),
+        (dict(x0=np.zeros((1, 3, 3))), "x0 must hold states of the model's size m = 4"),
+        (dict(model=dict(R=np.diag([1.0, 1.0, 1.0, 0.0]))), "R must be positive definite"),
         (dict(adjacency=ring_graph(4)), r"adjacency must be \(3, 3\)"),
-        (dict(dt=-0.1), "dt must be a positive sampling time"),
         (dict(n_steps=0), "n_steps must be an integer >= 1"),
     ],
 )
 def test_bad_simulation_input_is_named(kwargs, match):
     """Every bad argument of the estimation-based loop fails early, naming the argument."""
-    args = dict(rng=0, x0=np.zeros((1, 3, 4)), adjacency=path_graph(3), A=AGENT.A, B=AGENT.B, K=K,
-                Q=np.eye(4), R=np.eye(4), n_steps=2, mode="estimation", dt=0.1,
+    model = _rv(**kwargs.pop("model", {}))
+    args = dict(rng=0, model=model, x0=np.zeros((1, 3, 4)), adjacency=path_graph(3), n_steps=2, mode="estimation",
                 x_hat0=np.zeros((1, 12)), P0=np.eye(4))
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
         simulate_rendezvous(**args)
 
 
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(A=np.ones((3, 2))), "A must be square"),
+        (dict(B=np.ones((3, 2))), "Incompatible dimensions of B"),
+        (dict(K=np.ones((2, 3))), "Incompatible dimensions of K"),
+        (dict(Q=np.diag([1.0, 1.0, 1.0, -1.0])), "Q must be positive semidefinite"),
+        (dict(Q=np.eye(3)), "Incompatible dimensions of Q"),
+        (dict(R=np.eye(5)), "R must be"),
+        (dict(dt=-0.1), "dt must be a positive sampling time"),
+    ],
+)
+def test_bad_rendezvous_model_is_named(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        _rv(**kwargs)
+
+
+def test_rendezvous_model_must_be_a_model():
+    with pytest.raises(TypeError, match="model must be a RendezvousModel"):
+        simulate_rendezvous(0, (AGENT.A, AGENT.B), np.zeros((3, 4)), path_graph(3), 2, "true")
+
+
 def test_reduced_and_unreduced_simulations_agree():
     """The Kronecker reduction changes nothing but the cost."""
     x0 = np.random.default_rng(11).normal(scale=20, size=(2, 3, 4))
     xh0 = (x0 + 3.0).reshape(2, -1)
-    common = (x0, path_graph(3), AGENT.A, AGENT.B, K)
-    a = simulate_rendezvous(12, *common, np.eye(4), np.eye(4), 20, "estimation", 0.1, x_hat0=xh0, P0=9 * np.eye(4))
+    a = simulate_rendezvous(12, _rv(), x0, path_graph(3), 20, "estimation", x_hat0=xh0, P0=9 * np.eye(4))
     Q = np.diag([1.0, 1.0, 1.0, 1.0 + 1e-9])  # breaks the I_2 factor -> unreduced model
-    b = simulate_rendezvous(12, *common, Q, np.eye(4), 20, "estimation", 0.1, x_hat0=xh0, P0=9 * np.eye(4))
+    b = simulate_rendezvous(12, _rv(Q=Q), x0, path_graph(3), 20, "estimation", x_hat0=xh0, P0=9 * np.eye(4))
     assert a.model.kron == 2 and b.model.kron == 1
     np.testing.assert_allclose(a.states, b.states, atol=1e-6)
     np.testing.assert_allclose(a.nees, b.nees, rtol=1e-6)
@@ -325,8 +346,7 @@ def test_nees_consistent_over_monte_carlo(mode):
     x0 = np.broadcast_to(rng.normal(scale=30, size=(N, 4)), (n_runs, N, 4)).copy()
     P0 = np.diag([25.0, 25.0, 1.0, 1.0])
     xh0 = (x0 + rng.standard_normal(x0.shape) * np.sqrt(np.diag(P0))).reshape(n_runs, -1)
-    res = simulate_rendezvous(14, x0, path_graph(N), AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), 60, mode, 0.1,
-                              x_hat0=xh0, P0=P0)
+    res = simulate_rendezvous(14, _rv(), x0, path_graph(N), 60, mode, x_hat0=xh0, P0=P0)
     avg = res.nees[1:].mean(axis=1)  # (T, N)
     lo, hi = nees_interval(4 * N, n_runs)
     grand_lo, grand_hi = nees_interval(4 * N, n_runs * avg.shape[0] // 10)  # ~10-step correlation allowance
@@ -341,8 +361,7 @@ def test_estimation_based_covariance_needs_the_cross_terms():
     x0 = np.broadcast_to(rng.normal(scale=30, size=(N, 4)), (n_runs, N, 4)).copy()
     P0 = np.diag([25.0, 25.0, 1.0, 1.0])
     xh0 = (x0 + rng.standard_normal(x0.shape) * np.sqrt(np.diag(P0))).reshape(n_runs, -1)
-    res = simulate_rendezvous(16, x0, path_graph(N), AGENT.A, AGENT.B, K, np.eye(4), 4 * np.eye(4), 40,
-                              "estimation", 0.1, x_hat0=xh0, P0=P0)
+    res = simulate_rendezvous(16, _rv(R=4 * np.eye(4)), x0, path_graph(N), 40, "estimation", x_hat0=xh0, P0=P0)
     model = res.model
     # the naive covariance: eq. (15) recursion of every agent, ignoring F_2 e
     Si = dk.agent_covariances(model, dk.eb_initial_covariance(model, P0))
@@ -363,8 +382,8 @@ def test_theorem1_M_positive_along_run():
     N = 5
     rng = np.random.default_rng(17)
     x0 = rng.normal(scale=30, size=(1, N, 4))
-    res = simulate_rendezvous(18, x0, path_graph(N), AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), 80, "estimation",
-                              0.1, x_hat0=(x0 + 5).reshape(1, -1), P0=25 * np.eye(4))
+    res = simulate_rendezvous(18, _rv(), x0, path_graph(N), 80, "estimation", x_hat0=(x0 + 5).reshape(1, -1),
+                              P0=25 * np.eye(4))
     th = dk.theorem1_min_eigenvalues(res.model, laplacian(path_graph(N)), res.gains, res.sigma_i, res.f2_cross)
     assert th["min_eig"].shape == (80, N)
     assert th["min_eig"].min() > 0
@@ -410,10 +429,10 @@ def test_exact_control_noise_correlation_matches_monte_carlo_and_eq15_does_not()
 def test_switching_with_a_constant_sequence_is_the_fixed_topology_run():
     x0 = np.random.default_rng(21).normal(scale=20, size=(3, 4, 4))
     xh0 = (x0 + 2.0).reshape(3, -1)
-    args = (x0, AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), 15, "estimation", 0.1)
-    fixed = simulate_rendezvous(22, x0, ring_graph(4), *args[1:], x_hat0=xh0, P0=4 * np.eye(4))
+    fixed = simulate_rendezvous(22, _rv(), x0, ring_graph(4), 15, "estimation", x_hat0=xh0, P0=4 * np.eye(4))
     seq = np.broadcast_to(ring_graph(4), (16, 4, 4))
-    switched = simulate_rendezvous(22, x0, seq, *args[1:], x_hat0=xh0, P0=4 * np.eye(4), switching=True)
+    switched = simulate_rendezvous(22, _rv(), x0, seq, 15, "estimation", x_hat0=xh0, P0=4 * np.eye(4),
+                                   switching=True)
     np.testing.assert_array_equal(fixed.states, switched.states)
     np.testing.assert_array_equal(fixed.nees, switched.nees)
 
@@ -429,8 +448,7 @@ def test_nees_consistent_on_a_switching_topology(mode):
     xh0 = (x0 + rng.standard_normal(x0.shape) * np.sqrt(np.diag(P0))).reshape(n_runs, -1)
     graphs = np.array([path_graph(N), ring_graph(N), complete_graph(N)])
     seq = graphs[(np.arange(n_steps + 1) // 4) % 3]  # a new graph every 4 steps
-    res = simulate_rendezvous(24, x0, seq, AGENT.A, AGENT.B, K, np.eye(4), np.eye(4), n_steps, mode, 0.1,
-                              x_hat0=xh0, P0=P0, switching=True)
+    res = simulate_rendezvous(24, _rv(), x0, seq, n_steps, mode, x_hat0=xh0, P0=P0, switching=True)
     avg = res.nees[1:].mean(axis=1)  # (T, N)
     lo, hi = nees_interval(4 * N, n_runs)
     grand_lo, grand_hi = nees_interval(4 * N, n_runs * avg.shape[0] // 10)
@@ -440,5 +458,5 @@ def test_nees_consistent_on_a_switching_topology(mode):
 
 def test_switching_sequence_of_the_wrong_length_is_refused():
     with pytest.raises(ValueError, match="with switching=True, adjacency must be"):
-        simulate_rendezvous(0, np.zeros((1, 3, 4)), np.broadcast_to(path_graph(3), (4, 3, 3)), AGENT.A, AGENT.B,
-                            K, np.eye(4), np.eye(4), 5, "measurement", 0.1, switching=True)
+        simulate_rendezvous(0, _rv(), np.zeros((1, 3, 4)), np.broadcast_to(path_graph(3), (4, 3, 3)), 5,
+                            "measurement", switching=True)

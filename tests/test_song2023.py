@@ -12,7 +12,7 @@ from mascore.graphs import is_connected
 from mascore.ledger import VERDICTS
 from mascore.papers import song2023 as S
 from mascore.registry import paper_registry
-from mascore.rendezvous import expected_spread, simulate_rendezvous, team_spread
+from mascore.rendezvous import RendezvousModel, expected_spread, simulate_rendezvous, team_spread
 from mascore.reproduce import DEFAULT_SEED
 
 matplotlib.use("Agg")
@@ -118,8 +118,8 @@ def test_remark6_loop_with_the_sensing_graph_is_the_estimation_loop():
     X0 = np.repeat(x0[None], 3, axis=0)
     xh0 = S._initial_estimates(rng, s, X0)
     Q, R = np.eye(4), 10 * np.eye(4)
-    ref = simulate_rendezvous(np.random.default_rng(9), X0, A, s.A, s.B, s.K, Q, R, 30, "estimation", s.dt,
-                              x_hat0=xh0, P0=s.P0())
+    ref = simulate_rendezvous(np.random.default_rng(9), RendezvousModel(s.A, s.B, s.K, Q, R, s.dt), X0, A, 30,
+                              "estimation", x_hat0=xh0, P0=s.P0())
     ours = S.simulate_remark6(np.random.default_rng(9), X0, A, s, Q, R, 30, xh0, control_adjacency=A)
     np.testing.assert_allclose(ours, ref.states, rtol=1e-10, atol=1e-9)
     # the Remark 6 reading (complete control graph) is a different, still bounded loop
@@ -160,20 +160,36 @@ def test_expected_spread_is_zero_without_noise_and_matches_noise_free_run():
     x0 = np.random.default_rng(3).normal(scale=50, size=(2, 4, 4))
     A = np.ones((4, 4)) - np.eye(4)
     Z = np.zeros((4, 4))
-    run = simulate_rendezvous(0, x0, A, s.A, s.B, s.K, Z, np.eye(4), 30, "true", s.dt)
-    ex = expected_spread(x0, A, s.A, s.B, s.K, Z, np.eye(4), 30, "true")
+    model = RendezvousModel(s.A, s.B, s.K, Z, np.eye(4), s.dt)
+    run = simulate_rendezvous(0, model, x0, A, 30, "true")
+    ex = expected_spread(model, x0, A, 30, "true")
     np.testing.assert_allclose(np.sqrt(ex[..., :2].sum(-1)), team_spread(run.states[..., :2]), rtol=1e-9)
     with pytest.raises(ValueError, match="mode must be 'true' or 'measurement'"):
-        expected_spread(x0, A, s.A, s.B, s.K, Z, np.eye(4), 30, "estimation")
+        expected_spread(model, x0, A, 30, "estimation")
 
 
 def test_noise_free_true_state_law_reaches_rendezvous():
     """Eq. (4) with no noise: positions and velocities reach a common value (Sec. II.C)."""
     s = S.setup()
     x0, A = S.random_initial_states(np.random.default_rng(2), s)
-    res = simulate_rendezvous(0, x0[None], A, s.A, s.B, s.K, np.zeros((4, 4)), np.eye(4), 800, "true", s.dt)
-    assert team_spread(res.states[-1, 0, :, :2]) < 1e-3 * team_spread(res.states[0, 0, :, :2])
-    assert team_spread(res.states[-1, 0, :, 2:]) < 1e-3
+    model = RendezvousModel(s.A, s.B, s.K, np.zeros((4, 4)), np.eye(4), s.dt)
+    res = simulate_rendezvous(0, model, x0, A, 800, "true")  # one run: no run axis
+    assert res.states.shape == (801, *x0.shape)
+    assert team_spread(res.states[-1, :, :2]) < 1e-3 * team_spread(res.states[0, :, :2])
+    assert team_spread(res.states[-1, :, 2:]) < 1e-3
+
+
+def test_one_run_equals_the_first_of_a_batch_of_one():
+    """x0 of shape (N, m) is the same run as (1, N, m), without the run axis."""
+    s = S.setup(4)
+    x0, A = S.random_initial_states(np.random.default_rng(4), s)
+    model = RendezvousModel(s.A, s.B, s.K, 0.01 * np.eye(4), np.eye(4), s.dt)
+    xh0 = x0.reshape(-1) + 1.0
+    one = simulate_rendezvous(3, model, x0, A, 15, "estimation", x_hat0=xh0, P0=np.eye(4), central=True)
+    batch = simulate_rendezvous(3, model, x0[None], A, 15, "estimation", x_hat0=xh0[None], P0=np.eye(4), central=True)
+    for name in ("states", "pos_error", "pos_std", "nees", "central_pos_std", "central_pos_error"):
+        np.testing.assert_array_equal(getattr(one, name), getattr(batch, name)[:, 0])
+    np.testing.assert_array_equal(one.sigma_i, batch.sigma_i)
 
 
 @pytest.fixture(scope="module")

@@ -37,12 +37,14 @@ from .._validation import (
 from .._progress import progress_bar
 from .._timing import median_time
 from ..agents import double_integrator
+from .._kf_reference import plain_estimation_based_step
 from ..graphs import complete_graph, is_connected, laplacian, proximity_graph, ring_graph
 from ..kalman import nees_interval
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors, plot_graph, plot_trajectories
 from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, setting
 from ..rendezvous import (
+    RendezvousModel,
     RendezvousResult,
     consensus_control,
     expected_spread,
@@ -242,7 +244,7 @@ def estimator_step_seconds(n_agents: int, repeat: int = 5, plain_repeat: int = 3
     z = [stacked_measurement(Z[0], S[0], i) for i in range(n_agents)]
     structured = median_time(lambda: dkf.eb_update(model, *dkf.eb_predict(model, X_hat, Sig, L), Z, S[0]),
                              repeat=repeat)
-    plain = median_time(lambda: dkf.plain_estimation_based_step(
+    plain = median_time(lambda: plain_estimation_based_step(
         X_hat[0].reshape(n_agents, -1), Sig_full, s.A, model.BK, noise, model.R, adj, z), repeat=plain_repeat)
     return {"structured_s": structured, "plain_s": plain, "speedup": plain / structured}
 
@@ -349,9 +351,11 @@ def fig2(seed: int = 0, n_runs: int | None = None, horizon: float | None = None,
     X0 = np.broadcast_to(x0, (n_runs, *x0.shape)).copy()
     xh0 = _initial_estimates(rng, s, X0)
     Q, R = settings.fig2_q * np.eye(s.m), settings.fig2_r * np.eye(s.m)
-    common = dict(A=s.A, B=s.B, K=s.K, Q=Q, R=R, n_steps=n_steps, dt=s.dt, x_hat0=xh0, P0=s.P0())
-    est = simulate_rendezvous(np.random.default_rng([seed, 20]), X0, A, mode="estimation", central=True, **common)
-    meas = simulate_rendezvous(np.random.default_rng([seed, 21]), X0, A, mode="measurement-filter", **common)
+    model = RendezvousModel(s.A, s.B, s.K, Q, R, s.dt)
+    common = dict(n_steps=n_steps, x_hat0=xh0, P0=s.P0())
+    est = simulate_rendezvous(np.random.default_rng([seed, 20]), model, X0, A, mode="estimation", central=True,
+                              **common)
+    meas = simulate_rendezvous(np.random.default_rng([seed, 21]), model, X0, A, mode="measurement-filter", **common)
     return Fig2Result(s, A, est, meas, min(settings.converged_from, 0.5 * n_steps * s.dt))
 
 
@@ -430,8 +434,9 @@ def fig3(seed: int = 0, n_runs: int | None = None, horizon: float | None = None,
     X0, A = _random_topologies(rng, s, n_runs)
     xh0 = _initial_estimates(rng, s, X0)
     Q, R = settings.fig3_q * np.eye(s.m), settings.fig3_r * np.eye(s.m)
-    common = dict(A=s.A, B=s.B, K=s.K, Q=Q, R=R, n_steps=n_steps, dt=s.dt, progress=progress)
-    runs = {law: simulate_rendezvous(np.random.default_rng([seed, 30]), X0, A, mode=mode, **common,
+    model = RendezvousModel(s.A, s.B, s.K, Q, R, s.dt)
+    common = dict(n_steps=n_steps, progress=progress)
+    runs = {law: simulate_rendezvous(np.random.default_rng([seed, 30]), model, X0, A, mode=mode, **common,
                                      **({"x_hat0": xh0, "P0": s.P0()} if mode == "estimation" else {})).states
             for law, mode in ((CONVENTIONAL, "measurement"), (ESTIMATION, "estimation"), (TRUE_STATES, "true"))}
     runs[REMARK6] = simulate_remark6(np.random.default_rng([seed, 30]), X0, A, s, Q, R, n_steps, xh0,
@@ -441,7 +446,7 @@ def fig3(seed: int = 0, n_runs: int | None = None, horizon: float | None = None,
     vel_runs = {k: team_spread(x[..., n:]) for k, x in runs.items()}
     pos = {k: np.sqrt(np.mean(v**2, axis=1)) for k, v in pos_runs.items()}
     vel = {k: np.sqrt(np.mean(v**2, axis=1)) for k, v in vel_runs.items()}
-    exact = {law: expected_spread(X0, A, s.A, s.B, s.K, Q, R, n_steps, mode)
+    exact = {law: expected_spread(model, X0, A, n_steps, mode)
              for law, mode in ((CONVENTIONAL, "measurement"), (TRUE_STATES, "true"))}
     exact_pos = {k: np.sqrt(v[..., :n].sum(-1)) for k, v in exact.items()}
     exact_vel = {k: np.sqrt(v[..., n:].sum(-1)) for k, v in exact.items()}
@@ -565,8 +570,8 @@ def process_noise_study(seed: int = 0, q_values: tuple | None = None, n_runs: in
     rows = []
     for q in q_values:
         for mode, law in (("measurement", CONVENTIONAL), ("estimation", ESTIMATION)):
-            r = simulate_rendezvous(np.random.default_rng([seed, 40]), X0, A, s.A, s.B, s.K, q * np.eye(s.m),
-                                    settings.fig3_r * np.eye(s.m), n_steps, mode, s.dt,
+            model = RendezvousModel(s.A, s.B, s.K, q * np.eye(s.m), settings.fig3_r * np.eye(s.m), s.dt)
+            r = simulate_rendezvous(np.random.default_rng([seed, 40]), model, X0, A, n_steps, mode,
                                     x_hat0=xh0, P0=s.P0())
             rows.append({"q": q, "law": law,
                          "pos_std_m": float(np.sqrt(np.mean(team_spread(r.states[k0:, ..., : s.n]) ** 2))),
