@@ -994,6 +994,12 @@ def _continuous_topology(topology, n, t_final, t_eval, switch_times):
         graphs = np.stack([_check_topologies(topology(t), n, "topology(t)", stacked=False, states="xi0 and P0")
                            for t in breaks[:-1]])
         return breaks, graphs
+    if np.ndim(topology) == 3:
+        raise ValueError(
+            f"topology has shape {np.shape(topology)}: a stack of graphs needs its switching times in continuous "
+            "time; pass SwitchingTopology(times, graphs) (graphs[k] active from times[k]) or a callable t -> (n, n). "
+            "kalman_consensus_discrete takes one graph per step as a (K, n, n) array"
+        )
     g = _check_topologies(topology, n, "topology", stacked=False, states="xi0 and P0")
     return np.array([0.0, t_final]), g[None]
 

@@ -445,3 +445,12 @@ def test_error_covariance_identities():
     vec_a, vec_b = cs.error_covariance(P0[:, None, None] * np.eye(2), G, 0.0, 1e-6 * np.eye(2), include_self=False)
     np.testing.assert_allclose(vec_a[..., 1, 1], actual, rtol=1e-9)
     np.testing.assert_allclose(vec_a[..., 0, 1], 0.0, atol=1e-15)
+
+
+def test_continuous_run_refuses_a_graph_stack_and_names_switching_topology():
+    """A (K, n, n) stack is one graph per step in discrete time; continuous time needs the switching times."""
+    from mascore import graphs
+
+    stack = np.stack([graphs.ring_graph(4), graphs.path_graph(4)])
+    with pytest.raises(ValueError, match="SwitchingTopology"):
+        cs.kalman_consensus_continuous(np.arange(4.0), np.ones(4), stack, 2.0, 0.1, 0.1)
