@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import check_covariance, check_positive, check_positive_int, float_array
+from .exceptions import DivergenceError
 
 __all__ = [
     "DIVERGENCE_LIMIT",
@@ -66,21 +67,6 @@ DIVERGENCE_LIMIT = 1e7
 MAX_STEPS = 10_000_000
 
 
-class DivergenceError(FloatingPointError):
-    """The sampled closed loop blew up (raised instead of returning overflowed states).
-
-    With the fully-connected law every agent feels N - 1 springs and dampers,
-    so the loop gain grows with N; with the gains of Song et al. (2023),
-    Table I, and dt = 0.1 s the sampled loop is unstable from about N = 18.
-
-    Examples
-    --------
-    >>> issubclass(DivergenceError, FloatingPointError)
-    True
-    """
-
-
-DivergenceError.__module__ = "mascore.flocking"
 
 
 @dataclass(frozen=True)

@@ -8,10 +8,9 @@ from __future__ import annotations
 
 import functools
 
-import cvxpy as cp
 import numpy as np
 
-from ._solver import LMI_EPS, solve
+from ._solver import LMI_EPS, cp, solve
 
 __all__ = ["correction_sdp", "prediction_sdp"]
 

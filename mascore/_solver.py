@@ -1,39 +1,77 @@
 """Solver settings for every SDP/LMI in mascore, kept in one place.
 
 All convex programs are solved with Clarabel (an interior-point conic solver),
-never with cvxpy's default choice, and the status is always checked.
+never with cvxpy's default choice, and the status is always checked. The public
+functions that solve a program take ``solver_options`` (a dict passed to
+Clarabel through cvxpy, e.g. ``{"tol_gap_abs": 1e-7, "max_iter": 500}``) whose
+default is :data:`SOLVER_OPTIONS`.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import Any
 
-import cvxpy as cp
+from ._optional import require
+from .exceptions import SolverError
 
-__all__ = ["LMI_EPS", "SOLVER", "SOLVER_OPTIONS", "SolverError", "solve"]
+cp = require("cvxpy", "the SDPs and LMIs (set-membership method='sdp', the distributed observer, the bottom-up LQR)")
+
+__all__ = ["LMI_EPS", "SOLVER", "SOLVER_OPTIONS", "SolverError", "solve", "solver_options"]
 
 #: cvxpy solver used for every SDP/LMI.
 SOLVER = cp.CLARABEL
 
-#: Options passed to the solver.
+#: Default options passed to the solver (Clarabel's own defaults).
 SOLVER_OPTIONS: dict = {}
 
 #: Margin standing in for a strict LMI inequality (``X >> LMI_EPS * I``).
 LMI_EPS = 1e-9
 
 
-class SolverError(RuntimeError):
-    """A convex program was infeasible, unbounded or not solved to optimality."""
+def solver_options(options: Mapping[str, Any] | None) -> dict:
+    """Check `options` (a mapping of Clarabel settings, or None for :data:`SOLVER_OPTIONS`) and copy it.
+
+    Parameters
+    ----------
+    options : mapping or None
+        Solver settings by name, passed to ``cvxpy.Problem.solve``.
+
+    Returns
+    -------
+    dict
+        The options to pass.
+
+    Raises
+    ------
+    TypeError
+        If `options` is not a mapping with string keys.
+
+    Examples
+    --------
+    >>> from mascore._solver import solver_options
+    >>> solver_options({"max_iter": 200})
+    {'max_iter': 200}
+    """
+    if options is None:
+        return dict(SOLVER_OPTIONS)
+    if not isinstance(options, Mapping) or not all(isinstance(k, str) for k in options):
+        raise TypeError(f"solver_options must be a dict of Clarabel settings by name; got {options!r}")
+    return dict(options)
 
 
-def solve(problem: cp.Problem, what: str) -> float:
+def solve(problem: cp.Problem, what: str, options: Mapping[str, Any] | None = None) -> float:
     """Solve `problem` with :data:`SOLVER`; raise unless the status is optimal.
 
     Parameters
     ----------
     problem : cvxpy.Problem
+        The program.
     what : str
         Names the program in the error (e.g. ``"correction SDP, agent 2, step 14"``).
+    options : mapping, optional
+        Solver settings (default :data:`SOLVER_OPTIONS`).
 
     Returns
     -------
@@ -45,18 +83,21 @@ def solve(problem: cp.Problem, what: str) -> float:
     SolverError
         If the solver fails, the status is not ``optimal`` or the optimal value is not finite.
     TypeError
-        If `problem` is not a :class:`cvxpy.Problem` or `what` not a string.
+        If `problem` is not a :class:`cvxpy.Problem`, `what` not a string or `options` not a mapping.
     """
     if not isinstance(problem, cp.Problem):
         raise TypeError(f"problem must be a cvxpy.Problem; got {type(problem).__name__}")
     if not isinstance(what, str):
         raise TypeError(f"what must be a string naming the program; got {type(what).__name__}")
+    opts = solver_options(options)
     try:
-        value = problem.solve(solver=SOLVER, **SOLVER_OPTIONS)
+        value = problem.solve(solver=SOLVER, **opts)
     except cp.error.SolverError as exc:
         raise SolverError(f"{what}: the solver {SOLVER} failed: {exc}") from exc
     if problem.status != cp.OPTIMAL:
-        raise SolverError(f"{what}: solver status is {problem.status!r}, expected 'optimal'")
+        hint = (" (pass looser tolerances or more iterations in solver_options, e.g. "
+                "{'max_iter': 1000, 'tol_feas': 1e-7})") if problem.status == cp.OPTIMAL_INACCURATE else ""
+        raise SolverError(f"{what}: solver status is {problem.status!r}, expected 'optimal'{hint}")
     if value is None or not math.isfinite(float(value)):
         raise SolverError(f"{what}: the solver reported 'optimal' with a non-finite value {value!r}")
     return float(value)

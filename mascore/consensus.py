@@ -72,12 +72,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.integrate import solve_ivp
 
-from ._validation import float_array as _float_array
 from ._validation import cached_covariance, check_covariance, check_generator, check_positive, check_positive_int
+from ._validation import float_array as _float_array
+from .exceptions import ConsensusBreakdownError
 from .graphs import has_spanning_tree, unions_over_windows
 
 __all__ = [
-    "ConsensusBreakdownError",
     "ConsensusResult",
     "MAX_STEPS",
     "MAX_STORED",
@@ -108,16 +108,6 @@ ODE_MAX_EVALUATIONS = 1_000_000
 #: times :data:`ODE_MAX_EVALUATIONS` (``t_final = 1e300`` is refused in a fraction of a second).
 _ODE_PROJECTION_FACTOR = 10_000
 _ODE_CHECK_EVERY = 10_000
-
-
-class ConsensusBreakdownError(ValueError, FloatingPointError):
-    """The covariances of a Kalman consensus run left double precision (e.g. zero communication noise).
-
-    Raised with the step (or time) where ``P`` underflowed to zero, lost
-    positivity or overflowed, and what to change; a ``ValueError`` (the
-    arguments ask for more than floating point can hold) and a
-    ``FloatingPointError``.
-    """
 
 
 # --------------------------------------------------------------------------- results
@@ -976,6 +966,14 @@ def _integrate_em(xi, P, breaks, graphs, Q, Om, t_eval, include_self, gen, dt):
     return xs, Ps
 
 
+def _ndim(value) -> int | None:
+    """Number of axes of an array-like, or None for a ragged sequence (reported by the shape check)."""
+    try:
+        return np.ndim(value)
+    except ValueError:
+        return None
+
+
 def _continuous_topology(topology, n, t_final, t_eval, switch_times):
     if isinstance(topology, SwitchingTopology):
         if topology.n_agents != n:
@@ -994,7 +992,7 @@ def _continuous_topology(topology, n, t_final, t_eval, switch_times):
         graphs = np.stack([_check_topologies(topology(t), n, "topology(t)", stacked=False, states="xi0 and P0")
                            for t in breaks[:-1]])
         return breaks, graphs
-    if np.ndim(topology) == 3:
+    if _ndim(topology) == 3:
         raise ValueError(
             f"topology has shape {np.shape(topology)}: a stack of graphs needs its switching times in continuous "
             "time; pass SwitchingTopology(times, graphs) (graphs[k] active from times[k]) or a callable t -> (n, n). "

@@ -296,7 +296,7 @@ def simulate_estimation_based_flocking(
 
     Raises
     ------
-    mascore.flocking.DivergenceError
+    mascore.DivergenceError
         If the true state, an estimate or an estimated standard deviation
         exceeds ``DIVERGENCE_LIMIT`` (the sampled loop is unstable).
     """

@@ -68,7 +68,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import _flocking_core as _core
-from ._flocking_core import DIVERGENCE_LIMIT, MAX_STEPS, DivergenceError, FlockingGains
+from ._flocking_core import DIVERGENCE_LIMIT, MAX_STEPS, FlockingGains
 from ._flocking_core import check_dt as _check_dt
 from ._flocking_core import check_gains as _check_gains
 from ._flocking_core import check_pair_args as _pair_args
@@ -85,7 +85,6 @@ from .graphs import complete_graph, proximity_graph
 from .sensing import measure, team_noise_covariance
 
 __all__ = [
-    "DivergenceError",
     "DIVERGENCE_LIMIT",
     "MAX_STEPS",
     "FlockingGains",

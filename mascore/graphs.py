@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import check_adjacency, check_positive, check_positive_int
+from ._validation import check_adjacency, check_laplacian, check_positive, check_positive_int
 from ._validation import float_array as _float_array
 
 if TYPE_CHECKING:
@@ -30,6 +30,7 @@ __all__ = [
     "has_spanning_tree",
     "is_connected",
     "laplacian",
+    "laplacian_spectrum",
     "path_graph",
     "proximity_graph",
     "ring_graph",
@@ -121,6 +122,58 @@ def laplacian(A: ArrayLike) -> np.ndarray:
         arr = _check_adjacency(arr)
     return np.eye(arr.shape[-1]) * arr.sum(axis=-1)[..., None] - arr
 
+
+
+#: Why the network designs need an undirected graph (quoted in their errors).
+WHY_UNDIRECTED = ("the network designs split the loop into modes by the orthogonal eigenvectors of a "
+                  "symmetric Laplacian, which a directed graph does not have")
+
+
+def laplacian_spectrum(laplacian: ArrayLike, name: str = "laplacian") -> tuple[np.ndarray, np.ndarray]:
+    """Eigen-decomposition ``Lap = V diag(lam) V^T`` of a connected undirected graph's Laplacian.
+
+    The network designs (Vlahakis and Halikias) split the loop into one mode per eigenvalue.
+
+    Parameters
+    ----------
+    laplacian : (N, N) array_like
+        Symmetric Laplacian (rows sum to zero, non-positive off-diagonal).
+    name : str
+        Argument name used in the error messages (a caller that built the Laplacian from an
+        adjacency passes ``"adjacency"``).
+
+    Returns
+    -------
+    lam : (N,) ndarray
+        Eigenvalues in increasing order; ``lam[0]`` is set to exactly 0.
+    V : (N, N) ndarray
+        Orthonormal eigenvectors (columns).
+
+    Raises
+    ------
+    ValueError
+        If the matrix is not a symmetric Laplacian (a directed one, or an adjacency matrix
+        passed by mistake) or the graph is disconnected.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs
+    >>> lam, V = graphs.laplacian_spectrum(graphs.laplacian(graphs.ring_graph(4)))
+    >>> lam.round(6).tolist()
+    [0.0, 2.0, 2.0, 4.0]
+    """
+    Lap = check_laplacian(laplacian, name, undirected=True, why=WHY_UNDIRECTED)
+    N = Lap.shape[0]
+    scale = max(1.0, float(np.abs(Lap).max()))
+    lam, V = np.linalg.eigh(Lap)
+    if N > 1 and lam[1] <= 1e-9 * scale:
+        raise ValueError(
+            f"{name} describes a disconnected graph (second-smallest Laplacian eigenvalue {lam[1]:.2g}); "
+            "the network designs need a connected undirected graph"
+        )
+    lam[0] = 0.0
+    return lam, V
 
 def ring_graph(n_agents: int) -> np.ndarray:
     """Undirected cycle 0-1-...-(N-1)-0 (N >= 3)."""

@@ -31,69 +31,38 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import ArrayLike
 
-from ._validation import as_matrix as _matrix
-from ._validation import check_square as _square
 from ._validation import (
     as_matrix,
     check_adjacency,
     check_covariance,
     check_laplacian,
-    check_positive,
     check_positive_int,
-    check_square,
 )
+from ._validation import as_matrix as _matrix
+from ._validation import check_square as _square
 from ._validation import float_array as _float_array
+from .graphs import WHY_UNDIRECTED as _WHY_SYMMETRIC
 from .graphs import laplacian as _graph_laplacian
+from .graphs import laplacian_spectrum
 from .kalman import symmetrize
 from .noise import psd_factor
+from .riccati import is_stabilizable, solve_care, solve_dare
 
 __all__ = [
     "BottomUpLQR",
     "DistributedGain",
-    "RiccatiError",
     "TopDownLQR",
     "assemble_network_gain",
     "borrelli_keviczky_structure",
     "bottom_up_lqr",
     "centralized_network_cost",
     "centralized_network_lqr",
-    "is_controllable",
-    "laplacian_spectrum",
+    "dlqr",
     "lqr",
     "network_controller_cost",
     "network_lqr_weights",
     "top_down_lqr",
 ]
-
-#: Largest relative Riccati residual accepted from the solver.
-RICCATI_RTOL = 1e-8
-
-
-class RiccatiError(ArithmeticError):
-    """The algebraic Riccati equation has no stabilizing solution, or it was solved inaccurately."""
-
-
-def is_controllable(A: ArrayLike, B: ArrayLike, tol: float = 1e-9) -> bool:
-    """PBH test: ``rank [A - s I, B] = n`` at every eigenvalue ``s`` of `A`.
-
-    Parameters
-    ----------
-    A : (n, n) array_like
-    B : (n, m) array_like
-    tol : float
-        Relative singular-value threshold for the rank; finite, > 0.
-    """
-    A = _square(A, "A")
-    B = _matrix(B, "B", (A.shape[0], None))
-    check_positive(tol, "tol")
-    n = A.shape[0]
-    scale = max(1.0, np.linalg.norm(A, 2), np.linalg.norm(B, 2))
-    for s in np.linalg.eigvals(A):
-        sv = np.linalg.svd(np.hstack([A - s * np.eye(n), B]), compute_uv=False)
-        if sv[n - 1] <= tol * scale:
-            return False
-    return True
-
 
 def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Continuous-time infinite-horizon LQR, python-control's ``K, S, E = lqr(A, B, Q, R)``.
@@ -123,7 +92,7 @@ def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndar
         Bad shapes, non-symmetric or indefinite weights, or ``(A, B)`` not controllable.
     RiccatiError
         No stabilizing solution (e.g. ``(Q, A)`` has unobservable modes on the
-        imaginary axis) or a Riccati residual above :data:`RICCATI_RTOL`.
+        imaginary axis) or a Riccati residual above :data:`mascore.riccati.RICCATI_RTOL`.
     """
     A = _square(A, "A")
     n = A.shape[0]
@@ -131,52 +100,62 @@ def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndar
     m = B.shape[1]
     Q = _weight(Q, "Q", n)
     R = _weight(R, "R", m, definite=True)
-    if not is_controllable(A, B):
-        raise ValueError("(A, B) is not controllable: the LQR problem has no stabilizing solution")
-    return _care(A, B, Q, R)
+    if not is_stabilizable(A, B):
+        raise ValueError("(A, B) is not stabilizable (a mode with Re s >= 0 is uncontrollable): "
+                         "the LQR problem has no stabilizing solution")
+    return solve_care(A, B, Q, R)
 
 
-def laplacian_spectrum(laplacian: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-    """Eigen-decomposition ``Lap = V diag(lam) V^T`` of a connected undirected graph's Laplacian.
+def dlqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Discrete-time infinite-horizon LQR, python-control's ``K, S, E = dlqr(A, B, Q, R)``.
+
+    Minimizes ``sum_k (x_k^T Q x_k + u_k^T R u_k)`` for ``x_{k+1} = A x_k + B u_k``.
 
     Parameters
     ----------
-    laplacian : (N, N) array_like
-        Symmetric Laplacian (rows sum to zero, non-positive off-diagonal).
+    A : (n, n) array_like
+        State matrix.
+    B : (n, m) array_like
+        Input matrix; ``(A, B)`` must be stabilizable (every mode with ``|z| >= 1`` controllable).
+    Q : (n, n) array_like
+        State weight, symmetric positive semidefinite.
+    R : (m, m) array_like
+        Input weight, symmetric positive definite.
 
     Returns
     -------
-    lam : (N,) ndarray
-        Eigenvalues in increasing order; ``lam[0]`` is set to exactly 0.
-    V : (N, N) ndarray
-        Orthonormal eigenvectors (columns).
+    K : (m, n) ndarray
+        Optimal gain, ``u_k = -K x_k``, ``K = (R + B^T S B)^{-1} B^T S A``.
+    S : (n, n) ndarray
+        Stabilizing solution of the discrete-time algebraic Riccati equation.
+    E : (n,) ndarray
+        Closed-loop eigenvalues (of ``A - B K``), inside the unit circle.
 
     Raises
     ------
     ValueError
-        If the matrix is not a symmetric Laplacian (a directed one, or an adjacency
-        matrix passed by mistake) or the graph is disconnected.
+        Bad shapes, non-symmetric or indefinite weights, or ``(A, B)`` not stabilizable.
+    RiccatiError
+        No stabilizing solution or a Riccati residual above :data:`mascore.riccati.RICCATI_RTOL`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, lqr
+    >>> agent = agents.double_integrator(1, 0.1)           # position and velocity, dt = 0.1 s
+    >>> K, S, E = lqr.dlqr(agent.A, agent.B, np.eye(2), np.eye(1))
+    >>> bool(np.all(np.abs(E) < 1))
+    True
     """
-    return _spectrum(_undirected_laplacian(laplacian, "laplacian", _WHY_SYMMETRIC), "laplacian")
-
-
-#: Why the network functions need an undirected graph (quoted in their errors).
-_WHY_SYMMETRIC = ("the network designs split the loop into modes by the orthogonal eigenvectors of a "
-                  "symmetric Laplacian, which a directed graph does not have")
-
-
-def _spectrum(Lap: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """Eigen-decomposition of a checked symmetric Laplacian; `name` is the argument it came from."""
-    N = Lap.shape[0]
-    scale = max(1.0, float(np.abs(Lap).max()))
-    lam, V = np.linalg.eigh(Lap)
-    if N > 1 and lam[1] <= 1e-9 * scale:
-        raise ValueError(
-            f"{name} describes a disconnected graph (second-smallest Laplacian eigenvalue {lam[1]:.2g}); "
-            "the network designs need a connected undirected graph"
-        )
-    lam[0] = 0.0
-    return lam, V
+    A = _square(A, "A")
+    n = A.shape[0]
+    B = _matrix(B, "B", (n, None))
+    Q = _weight(Q, "Q", n)
+    R = _weight(R, "R", B.shape[1], definite=True)
+    if not is_stabilizable(A, B, discrete=True):
+        raise ValueError("(A, B) is not stabilizable (a mode with |z| >= 1 is uncontrollable): "
+                         "the LQR problem has no stabilizing solution")
+    return solve_dare(A, B, Q, R)
 
 
 def _undirected_laplacian(laplacian: ArrayLike, name: str, why: str) -> np.ndarray:
@@ -243,7 +222,7 @@ def centralized_network_lqr(
     laplacian_spectrum(laplacian)  # symmetric Laplacian of a connected graph, else ValueError
     Qt, Rt = network_lqr_weights(Q1, Q2, R, laplacian)
     N = Qt.shape[0] // A.shape[0]
-    return _care(np.kron(np.eye(N), A), np.kron(np.eye(N), B), Qt, Rt)
+    return solve_care(np.kron(np.eye(N), A), np.kron(np.eye(N), B), Qt, Rt)
 
 
 def borrelli_keviczky_structure(
@@ -272,8 +251,8 @@ def borrelli_keviczky_structure(
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
     N = _check_agents(n_agents)
     Rinv_Bt = np.linalg.solve(R, B.T)
-    _, P, _ = _care(A, B, Q1, R)  # eq. (14)
-    _, Pbar, _ = _care(A - B @ Rinv_Bt @ P, B, N * Q2, R)  # eq. (15), Pbar = -N P2~
+    _, P, _ = solve_care(A, B, Q1, R)  # eq. (14)
+    _, Pbar, _ = solve_care(A - B @ Rinv_Bt @ P, B, N * Q2, R)  # eq. (15), Pbar = -N P2~
     P2 = -Pbar / N
     ones = np.ones((N, N))
     P_network = np.kron(np.eye(N), P - N * P2) + np.kron(ones, P2)  # eq. (13)
@@ -363,7 +342,7 @@ def top_down_lqr(
     """
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
     Adj, Lap = _undirected_adjacency(adjacency)
-    lam, _ = _spectrum(Lap, "adjacency")
+    lam, _ = laplacian_spectrum(Lap, "adjacency")
     d_max = int(round(float((Adj > 0).sum(axis=1).max())))
     n_local = d_max + 1
     blocks = borrelli_keviczky_structure(A, B, Q1, Q2, R, n_local)
@@ -377,7 +356,13 @@ def top_down_lqr(
 
 
 def bottom_up_lqr(
-    A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike, adjacency: ArrayLike
+    A: ArrayLike,
+    B: ArrayLike,
+    Q1: ArrayLike,
+    Q2: ArrayLike,
+    R: ArrayLike,
+    adjacency: ArrayLike,
+    solver_options: dict | None = None,
 ) -> BottomUpLQR:
     """Bottom-up distributed LQR (eq. (18), Deshpande et al. 2011): ``U = -(I (x) K + Lap (x) Phi K) X``.
 
@@ -390,27 +375,57 @@ def bottom_up_lqr(
     and ``sum_i trace(P_i)`` is minimized; it is solved by
     :func:`mascore.observers.coupled_gain_lmi` on ``(A^T, B^T)``.
 
-    `adjacency` (N, N): symmetric (undirected), connected, non-negative weights, no self-loops.
+    Parameters
+    ----------
+    A : (n, n) array_like
+        Agent state matrix.
+    B : (n, m) array_like
+        Agent input matrix; ``(A, B)`` stabilizable.
+    Q1 : (n, n) array_like
+        Weight on each agent's own state (symmetric PSD).
+    Q2 : (n, n) array_like
+        Weight on the differences between neighbours (symmetric PSD).
+    R : (m, m) array_like
+        Input weight (symmetric positive definite).
+    adjacency : (N, N) array_like
+        Symmetric (undirected), connected, non-negative weights, no self-loops.
+    solver_options : dict, optional
+        Settings passed to the conic solver (Clarabel) by name; default Clarabel's own.
+
+    Returns
+    -------
+    BottomUpLQR
+        ``K_self = K``, ``K_coupling = Phi K``, ``Phi`` and the cost ``bound``.
 
     Raises
     ------
     ValueError
-        Bad input, uncontrollable ``(A, B)``, a directed or disconnected graph, self-loops,
+        Bad input, ``(A, B)`` not stabilizable, a directed or disconnected graph, self-loops,
         or a Laplacian passed as `adjacency`.
-    mascore._solver.SolverError
+    mascore.SolverError
         The program is infeasible or not solved to optimality.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, lqr
+    >>> A, B = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])
+    >>> ctrl = lqr.bottom_up_lqr(A, B, np.eye(2), 0.5 * np.eye(2), np.eye(1), graphs.ring_graph(4))
+    >>> ctrl.K_self.shape, ctrl.Phi.shape
+    ((1, 2), (1, 1))
     """
     from .observers import coupled_gain_lmi
 
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
     _, Lap = _undirected_adjacency(adjacency)
-    lam, _ = _spectrum(Lap, "adjacency")
-    K, _, _ = _care(A, B, Q1, R)
+    lam, _ = laplacian_spectrum(Lap, "adjacency")
+    K, _, _ = solve_care(A, B, Q1, R)
     Rinv = np.linalg.inv(R)
     # dual: process factor G_i with G_i G_i^T = Q1 + lam_i Q2, noise weight R^{-1}, gain K^T
     factors = [psd_factor(symmetrize(Q1 + l * Q2)) for l in lam]
     try:
         result = coupled_gain_lmi(A.T, B.T, K.T, lam, factors, [Rinv] * len(lam), trace_in="original",
+                                  solver_options=solver_options,
                                   what="bottom-up LQR program")
     except ValueError as exc:
         if "L2" not in str(exc):
@@ -475,27 +490,7 @@ def centralized_network_cost(
     """
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
     lam, _ = laplacian_spectrum(laplacian)
-    return float(sum(np.trace(_care(A, B, Q1 + l * Q2, R)[1]) for l in lam))
-
-
-def _care(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Stabilizing CARE solution with residual and stability checks (inputs already validated)."""
-    try:
-        S = sla.solve_continuous_are(A, B, Q, R)
-    except (np.linalg.LinAlgError, ValueError) as exc:
-        raise RiccatiError(f"the Riccati equation has no stabilizing solution: {exc}") from exc
-    S = (S + S.T) / 2
-    K = np.linalg.solve(R, B.T @ S)
-    residual = A.T @ S + S @ A - S @ B @ K + Q
-    scale = max(1.0, np.linalg.norm(Q), np.linalg.norm(A.T @ S), np.linalg.norm(S @ B @ K))
-    if np.linalg.norm(residual) > RICCATI_RTOL * scale:
-        raise RiccatiError(
-            f"Riccati residual {np.linalg.norm(residual) / scale:.2g} (relative) exceeds {RICCATI_RTOL:g}"
-        )
-    E = np.linalg.eigvals(A - B @ K)
-    if np.max(E.real) >= 0:
-        raise RiccatiError("the Riccati solution is not stabilizing (closed-loop eigenvalue in the right half-plane)")
-    return K, S, E
+    return float(sum(np.trace(solve_care(A, B, Q1 + l * Q2, R)[1]) for l in lam))
 
 
 def _check_agent(A, B, Q1, Q2, R, controllable: bool = True):
@@ -508,8 +503,9 @@ def _check_agent(A, B, Q1, Q2, R, controllable: bool = True):
     Q1 = _weight(Q1, "Q1", n)
     Q2 = _weight(Q2, "Q2", n)
     R = _weight(R, "R", B.shape[1], definite=True)
-    if controllable and not is_controllable(A, B):
-        raise ValueError("(A, B) is not controllable: the LQR problem has no stabilizing solution")
+    if controllable and not is_stabilizable(A, B):
+        raise ValueError("(A, B) is not stabilizable (a mode with Re s >= 0 is uncontrollable): "
+                         "the LQR problem has no stabilizing solution")
     return A, B, Q1, Q2, R
 
 

@@ -29,17 +29,21 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import cvxpy as cp
 import numpy as np
 import scipy.linalg as sla
 from numpy.typing import ArrayLike
 
+from ._optional import require
 from ._solver import SolverError, solve
+from ._validation import as_matrix, check_adjacency, check_covariance, check_laplacian
 from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
-from ._validation import as_matrix, check_covariance, check_square
 from ._validation import float_array as _float_array
-from .lqr import _care, _spectrum, _undirected_adjacency, _undirected_laplacian, is_controllable
+from .graphs import laplacian as graph_laplacian
+from .graphs import laplacian_spectrum
+from .riccati import is_controllable, solve_care
+
+cp = require("cvxpy", "mascore.observers (the LMI of eq. (55))")
 
 #: Why the observer functions need an undirected graph (quoted in their errors).
 _WHY_SYMMETRIC = ("the observer (42) is designed mode by mode on the orthogonal eigenvectors of a symmetric "
@@ -126,7 +130,7 @@ def min_energy_observer(
         Bad shapes or weights, ``(A, Bbar)`` not controllable or ``(A, C)`` not observable.
     """
     A, Bbar, C, Q, R = _check_observer(A, Bbar, C, Q, R)
-    K, S, E = _care(A.T, C.T, Bbar @ np.linalg.solve(R, Bbar.T), np.linalg.inv(Q))
+    K, S, E = solve_care(A.T, C.T, Bbar @ np.linalg.solve(R, Bbar.T), np.linalg.inv(Q))
     return MinEnergyObserver(L=K.T, S=S, cost=float(np.trace(S)), E=E)
 
 
@@ -199,6 +203,7 @@ def distributed_observer(
     adjacency: ArrayLike,
     reading: str = "as-printed",
     trace_in: str = "transformed",
+    solver_options: dict | None = None,
 ) -> DistributedObserver:
     """LQR-dual distributed observer by the bottom-up method (Sec. 4.2, eqs. (26)-(62)).
 
@@ -233,12 +238,16 @@ def distributed_observer(
     trace_in : {"transformed", "original"}
         Coordinates in which ``trace(S_i)`` is measured: ``x_hat`` as in
         eq. (57), or the agent's original ones.
+    solver_options : dict, optional
+        Settings passed to the conic solver (Clarabel) by name, e.g. ``{"max_iter": 500}``;
+        default Clarabel's own (``mascore._solver.SOLVER_OPTIONS``). A
+        :class:`mascore.SolverError` with status ``optimal_inaccurate`` is the cue to change them.
 
     Raises
     ------
     ValueError
         Bad input, uncontrollable/unobservable pair, a directed or disconnected graph, one agent.
-    mascore._solver.SolverError
+    mascore.SolverError
         The LMI program is infeasible or not solved to optimality.
 
     Notes
@@ -254,27 +263,27 @@ def distributed_observer(
     if not isinstance(reading, str) or reading not in READINGS:
         raise ValueError(f"reading must be one of {READINGS}; got {reading!r}")
     _check_trace_in(trace_in)
-    _, Lap = _undirected_adjacency(adjacency)
+    Lap = graph_laplacian(check_adjacency(adjacency, "adjacency", undirected=True, why=_WHY_SYMMETRIC))
     if Lap.shape[0] < 2:
         raise ValueError(
             "adjacency describes one agent: the distributed observer needs N >= 2 agents (one agent has no "
             "disagreement modes, so the coupling Phi is not determined); use min_energy_observer instead"
         )
-    lam, _ = _spectrum(Lap, "adjacency")
+    lam, _ = laplacian_spectrum(Lap, "adjacency")
     BRB = Bbar @ np.linalg.solve(R, Bbar.T)
     are_weight = Q1 if reading == "as-printed" else np.linalg.inv(Q1)
-    _, S, _ = _care(A.T, C.T, BRB, np.linalg.inv(are_weight))  # eq. (29)
+    _, S, _ = solve_care(A.T, C.T, BRB, np.linalg.inv(are_weight))  # eq. (29)
     L = S @ C.T @ Q1  # eq. (30)
     G = Bbar @ np.real(sla.sqrtm(np.linalg.inv(R)))
     noise = [Q1 + l * Q2 for l in lam]
-    res = coupled_gain_lmi(A, C, L, lam, [G] * len(lam), noise, trace_in=trace_in,
+    res = coupled_gain_lmi(A, C, L, lam, [G] * len(lam), noise, trace_in=trace_in, solver_options=solver_options,
                            what="distributed observer LMI (62)")
     Phi = res["Phi"]
     T = res["T"]
     tr = (lambda M: np.trace(T @ M @ T.T)) if trace_in == "transformed" else np.trace
     cost = _mode_costs(A, C, L, Phi, lam, BRB, noise, tr)
     local = _mode_costs(A, C, L, np.zeros_like(Phi), lam, BRB, noise, tr)
-    central = sum(tr(_care(A.T, C.T, BRB, np.linalg.inv(Qi))[1]) for Qi in noise)  # eq. (53)
+    central = sum(tr(solve_care(A.T, C.T, BRB, np.linalg.inv(Qi))[1]) for Qi in noise)  # eq. (53)
     absc = [np.max(np.linalg.eigvals(A - L @ (np.eye(m) + l * Phi) @ C).real) for l in lam]
     Tinv = np.linalg.inv(T)
     return DistributedObserver(
@@ -294,6 +303,7 @@ def coupled_gain_lmi(
     noise_weights: Sequence[ArrayLike],
     trace_in: str = "transformed",
     what: str = "coupled-gain LMI",
+    solver_options: dict | None = None,
 ) -> dict:
     """The LMI program (56)-(62) for the coupling ``Phi`` of gains ``L (I + lambda_i Phi)``.
 
@@ -325,6 +335,10 @@ def coupled_gain_lmi(
         Minimize the traces in the ``x_hat`` coordinates (as printed) or in the original ones.
     what : str
         Name used in solver errors.
+    solver_options : dict, optional
+        Settings passed to the conic solver (Clarabel) by name, e.g. ``{"max_iter": 500}``;
+        default Clarabel's own (``mascore._solver.SOLVER_OPTIONS``). A
+        :class:`mascore.SolverError` with status ``optimal_inaccurate`` is the cue to change them.
 
     Returns
     -------
@@ -396,7 +410,7 @@ def coupled_gain_lmi(
     # is flat in Y2 and the interior-point iterates drift; a tiny penalty on |Y2| picks the smallest
     # coupling among the optima. The reported bound is sum_i trace(Z_i) without it.
     problem = cp.Problem(cp.Minimize(objective + TIE_BREAK * cp.norm(Y2, "fro")), constraints)
-    solve(problem, what)
+    solve(problem, what, solver_options)
     bound = float(objective.value)
     Phi = np.linalg.solve(L2, np.linalg.solve(W2.value, Y2.value))
     return {
@@ -416,6 +430,7 @@ def bound_at_fixed_phi(
     Phi: ArrayLike,
     trace_in: str = "transformed",
     what: str = "fixed-Phi program (56)-(58)",
+    solver_options: dict | None = None,
 ) -> float | np.ndarray:
     """Optimum of the program (56)-(58) for *given* ``Phi``, written in ``S_i`` directly.
 
@@ -437,6 +452,10 @@ def bound_at_fixed_phi(
         ``(K, m, m)``, or ``(K,)`` when ``m = 1``.
     what : str
         Name used in solver errors.
+    solver_options : dict, optional
+        Settings passed to the conic solver (Clarabel) by name, e.g. ``{"max_iter": 500}``;
+        default Clarabel's own (``mascore._solver.SOLVER_OPTIONS``). A
+        :class:`mascore.SolverError` with status ``optimal_inaccurate`` is the cue to change them.
 
     Returns
     -------
@@ -449,7 +468,7 @@ def bound_at_fixed_phi(
     ------
     ValueError
         Bad shapes (as :func:`coupled_gain_lmi`).
-    mascore._solver.SolverError
+    mascore.SolverError
         The program is neither solved to optimality nor proved infeasible.
     """
     A, C, L, lam = _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in)
@@ -494,7 +513,7 @@ def bound_at_fixed_phi(
             out[j] = np.inf
             continue
         try:
-            out[j] = solve(problem, what)
+            out[j] = solve(problem, what, solver_options)
         except SolverError:
             if problem.status != cp.INFEASIBLE:
                 raise
@@ -559,7 +578,12 @@ def observer_error_matrix(
     m = C.shape[0]
     L = _matrix(L, "L", (n, m))
     Phi = as_matrix(np.atleast_2d(_float_array(Phi, "Phi")), "Phi", (m, m))
-    Lap = _undirected_laplacian(laplacian, "laplacian", _WHY_SYMMETRIC)
+    Lap = check_laplacian(laplacian, "laplacian", undirected=True, why=_WHY_SYMMETRIC)
+    return _error_matrix(A, L, C, Phi, Lap)
+
+
+def _error_matrix(A: np.ndarray, L: np.ndarray, C: np.ndarray, Phi: np.ndarray, Lap: np.ndarray) -> np.ndarray:
+    """``A_e = I_N (x) (A - L C) - Lap (x) L Phi C``, the one place it is built (arguments checked)."""
     return np.kron(np.eye(Lap.shape[0]), A - L @ C) - np.kron(Lap, L @ Phi @ C)
 
 
@@ -669,7 +693,7 @@ def simulate_network_observer(
     m = C.shape[0]
     L = _matrix(L, "L", (n, m))
     Phi = as_matrix(np.atleast_2d(_float_array(Phi, "Phi")), "Phi", (m, m))
-    Lap = _undirected_laplacian(laplacian, "laplacian", _WHY_SYMMETRIC)
+    Lap = check_laplacian(laplacian, "laplacian", undirected=True, why=_WHY_SYMMETRIC)
     N = Lap.shape[0]
     x0 = _matrix(x0, "x0", (N, n))
     x_hat0 = _matrix(x_hat0, "x_hat0", (N, n))
@@ -680,7 +704,7 @@ def simulate_network_observer(
     if np.any(dt <= 0):
         raise ValueError("t must be strictly increasing")
     I_N = np.eye(N)
-    A_obs = np.kron(I_N, A - L @ C) - np.kron(Lap, L @ Phi @ C)  # eq. (42), state term
+    A_obs = _error_matrix(A, L, C, Phi, Lap)  # eq. (42), state term (the error matrix A_e)
     B_obs = np.kron(I_N, L) + np.kron(Lap, L @ Phi)  # eq. (42), input term (acts on Y)
     Nn = N * n
     M = np.block([[np.kron(I_N, A), np.zeros((Nn, Nn))], [B_obs @ np.kron(I_N, C), A_obs]])

@@ -35,10 +35,10 @@ from ._validation import cached_covariance as _const_covariance
 from ._validation import check_generator, check_positive_int
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
+from .exceptions import IsolatedAgentError
 from .noise import _psd_factor, _sample_shape
 
 __all__ = [
-    "IsolatedAgentError",
     "sensing_mask",
     "neighbor_sets",
     "selection_matrix",
@@ -48,10 +48,6 @@ __all__ = [
     "measure",
     "stacked_measurement",
 ]
-
-
-class IsolatedAgentError(ValueError):
-    """An agent has no neighbour, so it cannot sense anyone but itself."""
 
 
 def sensing_mask(adjacency: ArrayLike, allow_isolated: bool = False) -> np.ndarray:

@@ -25,7 +25,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from mascore import ellipsoids as ell
-from mascore import graphs, lqr, observers
+from mascore import graphs, lqr, observers, riccati
 from mascore import set_membership as smf
 from mascore import synchronization as sync
 from mascore._solver import solve
@@ -117,9 +117,13 @@ BASE: dict[str, tuple] = {
                                                                adjacency=ADJ_RING_DIRECTED, pinning=PIN, K=A_SYNC,
                                                                c=1.5)),
     # lqr
-    "lqr.is_controllable": (lqr.is_controllable, dict(A=A_AG, B=B_AG, tol=1e-9)),
+    "riccati.is_controllable": (riccati.is_controllable, dict(A=A_AG, B=B_AG, tol=1e-9)),
+    "riccati.is_stabilizable": (riccati.is_stabilizable, dict(A=A_AG, B=B_AG, discrete=False, tol=1e-9)),
+    "riccati.care": (riccati.care, dict(A=A_AG, B=B_AG, Q=np.eye(2), R=[[1.0]])),
+    "riccati.dare": (riccati.dare, dict(A=0.5 * A_AG, B=B_AG, Q=np.eye(2), R=[[1.0]])),
+    "lqr.dlqr": (lqr.dlqr, dict(A=0.5 * A_AG, B=B_AG, Q=np.eye(2), R=[[1.0]])),
     "lqr.lqr": (lqr.lqr, dict(A=A_AG, B=B_AG, Q=np.eye(2), R=[[1.0]])),
-    "lqr.laplacian_spectrum": (lqr.laplacian_spectrum, dict(laplacian=LAP4)),
+    "graphs.laplacian_spectrum": (graphs.laplacian_spectrum, dict(laplacian=LAP4)),
     "lqr.network_lqr_weights": (lqr.network_lqr_weights, dict(Q1=np.eye(2), Q2=np.eye(2), R=[[1.0]], laplacian=LAP4)),
     "lqr.centralized_network_lqr": (lqr.centralized_network_lqr, dict(A=A_AG, B=B_AG, Q1=np.eye(2), Q2=np.eye(2),
                                                                       R=[[1.0]], laplacian=LAP4)),
@@ -326,12 +330,12 @@ SEMANTIC = [
     # lqr: the network designs need undirected graphs (Laplacian eigenvectors orthogonal)
     ("lqr.lqr", "R", [[0.0]], ValueError, "R must be positive definite"),
     ("lqr.lqr", "Q", INDEFINITE, ValueError, "Q must be positive semidefinite"),
-    ("lqr.is_controllable", "tol", 0.0, ValueError, "tol"),
-    ("lqr.laplacian_spectrum", "laplacian", RING4, ValueError, r"laplacian looks like an adjacency matrix; pass "
+    ("riccati.is_controllable", "tol", 0.0, ValueError, "tol"),
+    ("graphs.laplacian_spectrum", "laplacian", RING4, ValueError, r"laplacian looks like an adjacency matrix; pass "
                                                                 r"mascore.graphs.laplacian\(A\)"),
-    ("lqr.laplacian_spectrum", "laplacian", DIRECTED_LAP, ValueError,
+    ("graphs.laplacian_spectrum", "laplacian", DIRECTED_LAP, ValueError,
      r"laplacian must be symmetric \(an undirected graph\)"),
-    ("lqr.laplacian_spectrum", "laplacian", np.zeros((4, 4)), ValueError, "laplacian describes a disconnected graph"),
+    ("graphs.laplacian_spectrum", "laplacian", np.zeros((4, 4)), ValueError, "laplacian describes a disconnected graph"),
     ("lqr.network_lqr_weights", "laplacian", DIRECTED_LAP, ValueError, "laplacian must be symmetric"),
     ("lqr.network_lqr_weights", "Q2", INDEFINITE, ValueError, "Q2 must be positive semidefinite"),
     ("lqr.centralized_network_lqr", "laplacian", RING4, ValueError, "laplacian looks like an adjacency matrix"),
@@ -579,7 +583,7 @@ def test_random_directed_graphs_are_refused_where_a_symmetric_laplacian_is_neede
     adj[i, j] += 1.0  # one asymmetric weight
     Lap = graphs.laplacian(adj)
     with pytest.raises(ValueError, match="laplacian must be symmetric"):
-        lqr.laplacian_spectrum(Lap)
+        graphs.laplacian_spectrum(Lap)
     with pytest.raises(ValueError, match="laplacian must be symmetric"):
         lqr.assemble_network_gain(GAIN, Lap)
     with pytest.raises(ValueError, match="adjacency must be symmetric"):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from mascore import graphs, lqr
+from mascore import RiccatiError, graphs, lqr, riccati
 
 A = np.array([[0.0, 1.0], [-1.0, -0.1]])  # Example 1 agent
 B = np.array([[0.0], [1.0]])
@@ -37,7 +37,7 @@ def test_riccati_residual_and_stability(seed):
 
 
 def test_uncontrollable_pair_is_rejected():
-    with pytest.raises(ValueError, match="not controllable"):
+    with pytest.raises(ValueError, match="not stabilizable"):
         lqr.lqr(np.diag([1.0, 2.0]), [[1.0], [0.0]], np.eye(2), [[1.0]])
 
 
@@ -52,13 +52,13 @@ def test_bad_inputs_name_the_argument():
 
 def test_no_stabilizing_solution_raises():
     """Undamped oscillator with Q = 0: the imaginary-axis modes are unobservable in Q."""
-    with pytest.raises(lqr.RiccatiError):
+    with pytest.raises(RiccatiError):
         lqr.lqr([[0.0, 1.0], [-1.0, 0.0]], B, np.zeros((2, 2)), [[1.0]])
 
 
 def test_is_controllable():
-    assert lqr.is_controllable(A, B)
-    assert not lqr.is_controllable(np.eye(2), B)
+    assert riccati.is_controllable(A, B)
+    assert not riccati.is_controllable(np.eye(2), B)
 
 
 @pytest.mark.parametrize("n_agents", [2, 4, 6])
@@ -137,29 +137,30 @@ def test_disconnected_graph_is_rejected():
     with pytest.raises(ValueError, match="disconnected"):
         lqr.bottom_up_lqr(A, B, np.eye(2), np.eye(2), np.eye(1), adj)
     with pytest.raises(ValueError, match="symmetric"):
-        lqr.laplacian_spectrum(graphs.laplacian(np.triu(graphs.ring_graph(4))))
+        graphs.laplacian_spectrum(graphs.laplacian(np.triu(graphs.ring_graph(4))))
 
 
 #: Uncontrollable yet stabilizable agent: the mode -1 is untouched by B, so the Riccati equations
 #: still have stabilizing solutions and only an explicit controllability check rejects it.
 A_UNC, B_UNC = np.diag([-1.0, 1.0]), np.array([[0.0], [1.0]])
+A_UNS = np.eye(2)  # with B_UNC: the uncontrollable mode z = 1 is unstable, so not stabilizable
 
 
 def test_uncontrollable_agent_rejected_by_network_designs():
-    assert not lqr.is_controllable(A_UNC, B_UNC)
+    assert not riccati.is_controllable(A_UNC, B_UNC) and not riccati.is_stabilizable(A_UNS, B_UNC)
     w = (np.eye(2), np.eye(2), np.eye(1))
     ring = graphs.ring_graph(4)
     Lap = graphs.laplacian(ring)
-    with pytest.raises(ValueError, match=r"\(A, B\) is not controllable"):
-        lqr.top_down_lqr(A_UNC, B_UNC, *w, ring)
-    with pytest.raises(ValueError, match=r"\(A, B\) is not controllable"):
-        lqr.centralized_network_lqr(A_UNC, B_UNC, *w, Lap)
-    with pytest.raises(ValueError, match=r"\(A, B\) is not controllable"):
-        lqr.centralized_network_cost(A_UNC, B_UNC, *w, Lap)
-    with pytest.raises(ValueError, match=r"\(A, B\) is not controllable"):
-        lqr.borrelli_keviczky_structure(A_UNC, B_UNC, *w, 4)
-    with pytest.raises(ValueError, match=r"\(A, B\) is not controllable"):
-        lqr.bottom_up_lqr(A_UNC, B_UNC, *w, ring)
+    with pytest.raises(ValueError, match=r"\(A, B\) is not stabilizable"):
+        lqr.top_down_lqr(A_UNS, B_UNC, *w, ring)
+    with pytest.raises(ValueError, match=r"\(A, B\) is not stabilizable"):
+        lqr.centralized_network_lqr(A_UNS, B_UNC, *w, Lap)
+    with pytest.raises(ValueError, match=r"\(A, B\) is not stabilizable"):
+        lqr.centralized_network_cost(A_UNS, B_UNC, *w, Lap)
+    with pytest.raises(ValueError, match=r"\(A, B\) is not stabilizable"):
+        lqr.borrelli_keviczky_structure(A_UNS, B_UNC, *w, 4)
+    with pytest.raises(ValueError, match=r"\(A, B\) is not stabilizable"):
+        lqr.bottom_up_lqr(A_UNS, B_UNC, *w, ring)
     # evaluating a given stabilizing gain needs no controllability
     gain = lqr.DistributedGain(np.array([[0.0, 3.0]]), np.zeros((1, 2)))
     assert np.isfinite(lqr.network_controller_cost(A_UNC, B_UNC, *w, Lap, gain))
@@ -172,3 +173,72 @@ def test_centralized_network_lqr_rejects_disconnected_laplacian():
         lqr.centralized_network_lqr(A, B, np.eye(2), np.eye(2), np.eye(1), graphs.laplacian(adj))
     with pytest.raises(ValueError, match=r"laplacian looks like an adjacency matrix; pass mascore.graphs.laplacian\(A\)"):
         lqr.centralized_network_lqr(A, B, np.eye(2), np.eye(2), np.eye(1), graphs.ring_graph(4))
+
+
+# ---------------------------------------------------------------- discrete-time LQR and stabilizability
+
+
+def _random_stabilizable(rng, n, m):
+    A = rng.normal(size=(n, n)) / np.sqrt(n) * 1.2  # some modes outside the unit circle
+    B = rng.normal(size=(n, m))
+    return A, B
+
+
+@pytest.mark.parametrize("n,m", [(2, 1), (6, 2), (12, 3)])
+def test_dlqr_solves_the_dare_and_matches_scipy(n, m):
+    """K, S from dlqr satisfy the discrete ARE and equal scipy's DARE solution (independent solver)."""
+    rng = np.random.default_rng(n)
+    A, B = _random_stabilizable(rng, n, m)
+    Q, R = np.eye(n), np.diag(rng.uniform(0.5, 2.0, m))
+    K, S, E = lqr.dlqr(A, B, Q, R)
+    S_ref = sla.solve_discrete_are(A, B, Q, R)
+    np.testing.assert_allclose(S, S_ref, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(K, np.linalg.solve(R + B.T @ S_ref @ B, B.T @ S_ref @ A), rtol=1e-9, atol=1e-10)
+    residual = A.T @ S @ A - S - A.T @ S @ B @ K + Q
+    assert np.abs(residual).max() < 1e-8 * max(1.0, np.abs(S).max())
+    assert np.abs(E).max() < 1 and np.allclose(np.sort_complex(E), np.sort_complex(np.linalg.eigvals(A - B @ K)))
+
+
+@pytest.mark.parametrize("n,m", [(2, 1), (6, 2)])
+def test_dlqr_and_lqr_match_python_control(n, m):
+    control = pytest.importorskip("control")
+    rng = np.random.default_rng(10 + n)
+    A, B = _random_stabilizable(rng, n, m)
+    Q, R = np.eye(n), np.eye(m)
+    K, S, _ = lqr.dlqr(A, B, Q, R)
+    K_ref, S_ref, _ = control.dlqr(A, B, Q, R)
+    np.testing.assert_allclose(K, K_ref, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(S, S_ref, rtol=1e-8, atol=1e-10)
+    Kc, Sc, _ = lqr.lqr(A, B, Q, R)
+    Kc_ref, Sc_ref, _ = control.lqr(A, B, Q, R)
+    np.testing.assert_allclose(Kc, Kc_ref, rtol=1e-8, atol=1e-10)
+
+
+def test_dlqr_tends_to_lqr_as_the_sampling_time_shrinks():
+    """The discrete design for the plant sampled at dt, with weights Q dt and R dt, tends to the continuous one."""
+    from scipy.signal import cont2discrete
+
+    A = np.array([[0.0, 1.0], [2.0, -0.5]])
+    B = np.array([[0.0], [1.0]])
+    Kc, _, _ = lqr.lqr(A, B, np.eye(2), np.eye(1))
+    errors = []
+    for dt in (0.1, 0.01, 0.001):
+        Ad, Bd, *_ = cont2discrete((A, B, np.eye(2), np.zeros((2, 1))), dt)
+        Kd, _, _ = lqr.dlqr(Ad, Bd, np.eye(2) * dt, np.eye(1) * dt)
+        errors.append(np.abs(Kd - Kc).max())
+    assert errors[0] > errors[1] > errors[2] and errors[2] < 1e-2 * np.abs(Kc).max()
+
+
+def test_stabilizable_but_uncontrollable_pair_gets_an_lqr():
+    """A stable uncontrollable mode does not stop the LQR (stabilizability, not controllability, is needed)."""
+    A = np.diag([1.0, -3.0])
+    B = np.array([[1.0], [0.0]])
+    assert not riccati.is_controllable(A, B) and riccati.is_stabilizable(A, B)
+    K, _, E = lqr.lqr(A, B, np.eye(2), np.eye(1))
+    assert E.real.max() < 0
+    with pytest.raises(ValueError, match="not stabilizable"):
+        lqr.lqr(np.diag([1.0, 3.0]), B, np.eye(2), np.eye(1))
+    with pytest.raises(ValueError, match="not stabilizable"):
+        lqr.dlqr(np.diag([0.5, 1.5]), B, np.eye(2), np.eye(1))
+    K, _, E = lqr.dlqr(np.diag([1.5, 0.5]), B, np.eye(2), np.eye(1))
+    assert np.abs(E).max() < 1
