@@ -40,12 +40,12 @@ class _CorrectionSDP:
         )
         assert self.problem.is_dcp(dpp=True)
 
-    def __call__(self, E, C, D, Rinv, where):
+    def __call__(self, E, C, D, Rinv, where, options=None):
         self.E.value = E
         self.CE.value = C @ E
         self.D.value = D
         self.Rinv.value = 0.5 * (Rinv + Rinv.T)
-        solve(self.problem, where)
+        solve(self.problem, where, options)
         P = self.P.value
         return 0.5 * (P + P.T), np.asarray(self.L.value)
 
@@ -73,11 +73,11 @@ class _PredictionSDP:
         )
         assert self.problem.is_dcp(dpp=True)
 
-    def __call__(self, AE, G, Qinv, where):
+    def __call__(self, AE, G, Qinv, where, options=None):
         self.AE.value = AE
         self.G.value = G
         self.Qinv.value = 0.5 * (Qinv + Qinv.T)
-        solve(self.problem, where)
+        solve(self.problem, where, options)
         P = self.P.value
         return 0.5 * (P + P.T)
 

@@ -10,6 +10,7 @@ default is :data:`SOLVER_OPTIONS`.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 from typing import Any
 
@@ -91,7 +92,9 @@ def solve(problem: cp.Problem, what: str, options: Mapping[str, Any] | None = No
         raise TypeError(f"what must be a string naming the program; got {type(what).__name__}")
     opts = solver_options(options)
     try:
-        value = problem.solve(solver=SOLVER, **opts)
+        with warnings.catch_warnings():  # the status is checked below and reported in a SolverError
+            warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+            value = problem.solve(solver=SOLVER, **opts)
     except cp.error.SolverError as exc:
         raise SolverError(f"{what}: the solver {SOLVER} failed: {exc}") from exc
     if problem.status != cp.OPTIMAL:

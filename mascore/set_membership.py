@@ -70,7 +70,7 @@ Method = Literal["sdp", "closed_form"]
 def correct(
     center: ArrayLike, shape: ArrayLike, y: ArrayLike, C: ArrayLike, D: ArrayLike, R: ArrayLike,
     method: Method = "closed_form", step: int | None = None, agent: ArrayLike | None = None,
-    check_consistency: bool = True,
+    check_consistency: bool = True, solver_options: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Correction step: eqs. (2), (6)-(7).
 
@@ -91,6 +91,9 @@ def correct(
         array broadcast against the batch dimensions (e.g. ``np.arange(N)``).
     check_consistency : bool
         Raise if ``y`` is inconsistent with the prior ellipsoid (empty intersection).
+    solver_options : dict, optional
+        ``method="sdp"`` only: settings passed to the conic solver (Clarabel) by name;
+        default Clarabel's own.
 
     Returns
     -------
@@ -151,7 +154,7 @@ def correct(
         for idx in np.ndindex(*batch):
             E = _cholesky(P[idx], "correction", step, agent, idx, batch)
             where = _where("correction SDP eq. (6)", step, agent, idx, batch)
-            new_P[idx], L[idx] = sdp(E, C, D, Rinv, where)
+            new_P[idx], L[idx] = sdp(E, C, D, Rinv, where, solver_options)
             new_c[idx] = c[idx] + L[idx] @ (y[idx] - C @ c[idx])
     _check_result(new_P, "correction", step, agent, batch)
     return new_c, new_P, L
@@ -160,7 +163,7 @@ def correct(
 def predict(
     center: ArrayLike, shape: ArrayLike, A: ArrayLike, G: ArrayLike, Q: ArrayLike,
     B: ArrayLike | None = None, u: ArrayLike | None = None, method: Method = "closed_form",
-    step: int | None = None, agent: ArrayLike | None = None,
+    step: int | None = None, agent: ArrayLike | None = None, solver_options: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Prediction step: eqs. (4), (8).
 
@@ -171,7 +174,7 @@ def predict(
     A : (n, n), G : (n, w) disturbance matrix, Q : (w, w) positive definite
     B : (n, m), u : (..., m), optional
         Known input.
-    method, step, agent
+    method, step, agent, solver_options
         As in :func:`correct`.
 
     Returns
@@ -209,7 +212,8 @@ def predict(
         Qinv = np.linalg.inv(Q)
         for idx in np.ndindex(*batch):
             E = _cholesky(P[idx], "prediction", step, agent, idx, batch)
-            new_P[idx] = sdp(A @ E, G, Qinv, _where("prediction SDP eq. (8)", step, agent, idx, batch))
+            new_P[idx] = sdp(A @ E, G, Qinv, _where("prediction SDP eq. (8)", step, agent, idx, batch),
+                             solver_options)
     _check_result(new_P, "prediction", step, agent, batch)
     return new_c, new_P
 
@@ -237,7 +241,7 @@ class FilterHistory:
 def run_filter(
     x0_hat: ArrayLike, P0: ArrayLike, y: ArrayLike, A: ArrayLike, G: ArrayLike, C: ArrayLike,
     D: ArrayLike, Q: ArrayLike, R: ArrayLike, B: ArrayLike | None = None, u: ArrayLike | None = None,
-    method: Method = "closed_form", agent: ArrayLike | None = None,
+    method: Method = "closed_form", agent: ArrayLike | None = None, solver_options: dict | None = None,
 ) -> FilterHistory:
     """Algorithm 1 for open-loop data: correct with ``y[k]``, then predict, k = 0..T_f.
 
@@ -270,12 +274,13 @@ def run_filter(
                              f"{y.shape[0]}; got shape {u.shape}")
     out: dict[str, list] = {k: [] for k in ("cc", "pc", "cp", "pp", "L")}
     for k in range(y.shape[0]):
-        c, P, L = correct(c, P, y[k], C, D, R, method=method, step=k, agent=agent)
+        c, P, L = correct(c, P, y[k], C, D, R, method=method, step=k, agent=agent, solver_options=solver_options)
         out["cc"].append(c)
         out["pc"].append(P)
         out["L"].append(L)
         uk = None if u is None else u[k]
-        c, P = predict(c, P, A, G, Q, B=B, u=uk, method=method, step=k, agent=agent)
+        c, P = predict(c, P, A, G, Q, B=B, u=uk, method=method, step=k, agent=agent,
+                       solver_options=solver_options)
         out["cp"].append(c)
         out["pp"].append(P)
     return FilterHistory(np.array(out["cc"]), np.array(out["pc"]), np.array(out["cp"]),

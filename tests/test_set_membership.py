@@ -189,3 +189,17 @@ def test_cached_system_matrices_do_not_alias_the_callers_arrays():
     assert np.trace(P2) > np.trace(P1)
     with pytest.raises(ValueError, match="Q must be symmetric positive definite"):
         smf.predict(np.zeros(2), np.eye(2), A, G, -Qm)
+
+
+def test_solver_options_reach_the_solver_and_a_starved_solver_says_how_to_fix_it():
+    """solver_options is passed to Clarabel: one iteration cannot solve the SDP, and the error says what to change."""
+    from mascore import SolverError
+
+    args = (np.zeros(2), np.eye(2), np.array([0.1]), [[1.0, 0.0]], [[1.0]], [[1.0]])
+    c1, P1, _ = smf.correct(*args, method="sdp")
+    c2, P2, _ = smf.correct(*args, method="sdp", solver_options={"max_iter": 200, "tol_gap_rel": 1e-10})
+    np.testing.assert_allclose(P2, P1, atol=1e-6)
+    with pytest.raises(SolverError, match="correction SDP"):
+        smf.correct(*args, method="sdp", solver_options={"max_iter": 1})
+    with pytest.raises(TypeError, match="solver_options"):
+        smf.correct(*args, method="sdp", solver_options=["max_iter", 1])
