@@ -17,10 +17,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mascore import ConsensusBreakdownError
+from mascore import ConsensusBreakdownError, flocking
 from mascore import consensus as cs
 from mascore import distributed_ekf as dekf
-from mascore import flocking
 from mascore.flocking import FlockingGains
 from mascore.graphs import laplacian, ring_graph
 

@@ -17,8 +17,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mascore import agents, graphs, kalman, noise, sensing
 from mascore import _kf_reference as reference
+from mascore import agents, graphs, kalman, noise, sensing
 from mascore import distributed_kf as dk
 from mascore import rendezvous as rv
 

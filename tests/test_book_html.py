@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 from mascore._booktools import page_problems
-from mascore.registry import all_figures, paper_registry
 from mascore.ledger import PAPERS
+from mascore.registry import all_figures, paper_registry
 from mascore.report import ledger_label
 
 HTML = Path(__file__).resolve().parents[1] / "book" / "_build" / "html"

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from mascore import _solver, ellipsoids as el
+from mascore import _solver
+from mascore import ellipsoids as el
 from mascore import set_membership as smf
 from mascore._solver import SolverError
 
@@ -99,7 +100,7 @@ def test_run_filter_keeps_true_state_inside_and_shrinks():
     T, n_sys = 80, 50
     x = np.array([50.0, -50.0]) + rng.random((n_sys, 2))
     ys, xs = [], []
-    for k in range(T + 1):
+    for _ in range(T + 1):
         ys.append(x @ C.T + rng.uniform(-0.05, 0.05, (n_sys, 1)))
         xs.append(x)
         x = x @ A.T + rng.uniform(-0.05, 0.05, (n_sys, 2))
