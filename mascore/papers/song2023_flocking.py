@@ -34,8 +34,8 @@ import pandas as pd
 from .._progress import progress_bar
 from .._timing import median_time
 from ..distributed_ekf import EstimatedFlockingRun, ekf_flocking_step, simulate_estimation_based_flocking
+from ..exceptions import DivergenceError
 from ..flocking import (
-    DivergenceError,
     FlockingGains,
     FlockingRun,
     flock_spread,
