@@ -60,7 +60,20 @@ def adjacency_from_edges(
     Returns
     -------
     A : (N, N) ndarray
-        Weighted adjacency matrix with zero diagonal.
+        Weighted adjacency matrix with zero diagonal, ``A[i, j]`` the weight of ``j -> i``.
+
+    Raises
+    ------
+    ValueError
+        An agent index outside ``0..N-1``, a self-loop or a non-positive weight.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> graphs.adjacency_from_edges(3, [(0, 1), (1, 2, 0.5)], directed=True)
+    array([[0. , 0. , 0. ],
+           [1. , 0. , 0. ],
+           [0. , 0.5, 0. ]])
     """
     n_agents = _check_n(n_agents)
     if isinstance(edges, (str, bytes)):
@@ -113,6 +126,20 @@ def laplacian(A: ArrayLike) -> np.ndarray:
     -------
     L : (N, N) or (..., N, N) ndarray
         Rows sum to zero; symmetric positive semidefinite when `A` is symmetric.
+
+    Raises
+    ------
+    ValueError
+        A matrix that is not an adjacency (negative weights, self-loops; a Laplacian passed by
+        mistake is named as such).
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> graphs.laplacian(graphs.path_graph(3))
+    array([[ 1., -1.,  0.],
+           [-1.,  2., -1.],
+           [ 0., -1.,  1.]])
     """
     arr = _float_array(A, "A")
     if arr.ndim > 2:
@@ -176,27 +203,97 @@ def laplacian_spectrum(laplacian: ArrayLike, name: str = "laplacian") -> tuple[n
     return lam, V
 
 def ring_graph(n_agents: int) -> np.ndarray:
-    """Undirected cycle 0-1-...-(N-1)-0 (N >= 3)."""
+    """Undirected cycle 0-1-...-(N-1)-0.
+
+    Parameters
+    ----------
+    n_agents : int
+        Number of agents N >= 3.
+
+    Returns
+    -------
+    A : (N, N) ndarray
+        0/1 symmetric adjacency; every agent has two neighbours.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> graphs.ring_graph(4).sum(axis=1)
+    array([2., 2., 2., 2.])
+    """
     n_agents = _check_n(n_agents, minimum=3)
     idx = np.arange(n_agents)
     return adjacency_from_edges(n_agents, zip(idx, (idx + 1) % n_agents))
 
 
 def path_graph(n_agents: int) -> np.ndarray:
-    """Undirected path 0-1-...-(N-1)."""
+    """Undirected path 0-1-...-(N-1).
+
+    Parameters
+    ----------
+    n_agents : int
+        Number of agents N >= 1.
+
+    Returns
+    -------
+    A : (N, N) ndarray
+        0/1 symmetric adjacency; the two ends have one neighbour.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> graphs.path_graph(4).sum(axis=1)
+    array([1., 2., 2., 1.])
+    """
     n_agents = _check_n(n_agents)
     idx = np.arange(n_agents - 1)
     return adjacency_from_edges(n_agents, zip(idx, idx + 1))
 
 
 def complete_graph(n_agents: int) -> np.ndarray:
-    """Undirected complete graph on N agents."""
+    """Undirected complete graph on N agents.
+
+    Parameters
+    ----------
+    n_agents : int
+        Number of agents N >= 1.
+
+    Returns
+    -------
+    A : (N, N) ndarray
+        Ones off the diagonal, zeros on it.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> int(graphs.complete_graph(5).sum())
+    20
+    """
     n_agents = _check_n(n_agents)
     return np.ones((n_agents, n_agents)) - np.eye(n_agents)
 
 
 def star_graph(n_agents: int, center: int = 0) -> np.ndarray:
-    """Undirected star with hub `center`."""
+    """Undirected star with hub `center`.
+
+    Parameters
+    ----------
+    n_agents : int
+        Number of agents N >= 2.
+    center : int
+        Index of the hub, linked to every other agent.
+
+    Returns
+    -------
+    A : (N, N) ndarray
+        0/1 symmetric adjacency.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> graphs.star_graph(4).sum(axis=1)
+    array([3., 1., 1., 1.])
+    """
     n_agents = _check_n(n_agents)
     if isinstance(center, bool) or not isinstance(center, (int, np.integer)):
         raise TypeError(f"center must be an agent index (an int); got {type(center).__name__} {center!r}")
@@ -219,6 +316,14 @@ def proximity_graph(positions: ArrayLike, sensing_range: float) -> np.ndarray:
     -------
     A : (N, N) or (..., N, N) ndarray of float
         0/1 adjacency with zero diagonal.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> graphs.proximity_graph([[0.0, 0.0], [100.0, 0.0], [400.0, 0.0]], sensing_range=150.0)
+    array([[0., 1., 0.],
+           [1., 0., 0.],
+           [0., 0., 0.]])
     """
     p = _float_array(positions, "positions")
     if p.ndim < 2 or p.shape[-1] == 0:
@@ -239,10 +344,22 @@ def spanning_tree_roots(A: ArrayLike) -> np.ndarray:
 
     The graph contains a directed spanning tree iff this set is non-empty.
 
+    Parameters
+    ----------
+    A : (N, N) array_like
+        Adjacency, ``A[i, j] > 0`` when information flows ``j -> i``.
+
     Returns
     -------
     roots : (k,) ndarray of int
         Indices of all possible roots (sorted).
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> chain = graphs.adjacency_from_edges(3, [(0, 1), (1, 2)], directed=True)   # 0 -> 1 -> 2
+    >>> graphs.spanning_tree_roots(chain)
+    array([0])
     """
     A = _check_adjacency(A)
     n_agents = A.shape[0]
@@ -253,12 +370,50 @@ def spanning_tree_roots(A: ArrayLike) -> np.ndarray:
 
 
 def has_spanning_tree(A: ArrayLike) -> bool:
-    """True iff the directed graph of `A` contains a directed spanning tree."""
+    """Whether the directed graph of `A` contains a directed spanning tree.
+
+    The condition of the consensus theorems (Ren et al. 2005, Theorems 3.2 and 3.9).
+
+    Parameters
+    ----------
+    A : (N, N) array_like
+        Adjacency, ``A[i, j] > 0`` when information flows ``j -> i``.
+
+    Returns
+    -------
+    bool
+        True if some agent reaches every other agent.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> graphs.has_spanning_tree(graphs.adjacency_from_edges(3, [(0, 1), (0, 2)], directed=True))
+    True
+    >>> graphs.has_spanning_tree(graphs.adjacency_from_edges(3, [(0, 1), (2, 1)], directed=True))
+    False
+    """
     return spanning_tree_roots(A).size > 0
 
 
 def is_connected(A: ArrayLike) -> bool:
-    """True iff the undirected graph of ``A + A.T`` is connected."""
+    """Whether the undirected graph of ``A + A.T`` is connected.
+
+    Parameters
+    ----------
+    A : (N, N) array_like
+        Adjacency (directions are ignored).
+
+    Returns
+    -------
+    bool
+        True if every agent is reachable from every other ignoring directions.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> graphs.is_connected(graphs.path_graph(4)), graphs.is_connected(graphs.proximity_graph([[0.0], [9.0]], 1.0))
+    (True, False)
+    """
     A = _check_adjacency(A)
     return has_spanning_tree(A + A.T)
 
@@ -275,6 +430,14 @@ def graph_union(adjacencies: Sequence[ArrayLike] | np.ndarray) -> np.ndarray:
     -------
     A : (N, N) ndarray
         Sum of the adjacency matrices (an edge is present if present once).
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> a = graphs.adjacency_from_edges(3, [(0, 1)], directed=True)
+    >>> b = graphs.adjacency_from_edges(3, [(1, 2)], directed=True)
+    >>> graphs.has_spanning_tree(a), graphs.has_spanning_tree(graphs.graph_union([a, b]))
+    (False, True)
     """
     return _adjacency_stack(adjacencies).sum(axis=0)
 
@@ -282,9 +445,25 @@ def graph_union(adjacencies: Sequence[ArrayLike] | np.ndarray) -> np.ndarray:
 def unions_over_windows(adjacencies: Sequence[ArrayLike] | np.ndarray, window: int) -> np.ndarray:
     """Unions over consecutive, non-overlapping windows of `window` graphs.
 
+    Parameters
+    ----------
+    adjacencies : sequence of (N, N) array_like, or (T, N, N) array
+        One graph per step.
+    window : int
+        Number of consecutive graphs in each union (the last window may be shorter).
+
     Returns
     -------
     unions : (ceil(T / window), N, N) ndarray
+        The union of each window.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs
+    >>> steps = np.stack([graphs.path_graph(3)] * 5)
+    >>> graphs.unions_over_windows(steps, 2).shape
+    (3, 3, 3)
     """
     window = check_positive_int(window, "window")
     stack = _adjacency_stack(adjacencies)
@@ -294,8 +473,27 @@ def unions_over_windows(adjacencies: Sequence[ArrayLike] | np.ndarray, window: i
 def to_networkx(A: ArrayLike, directed: bool | None = None) -> nx.Graph:
     """Convert an adjacency matrix to a networkx graph for drawing.
 
-    Edges point in the direction information flows (``j -> i`` for
-    ``A[i, j] > 0``). `directed` defaults to "is `A` asymmetric".
+    Edges point in the direction information flows (``j -> i`` for ``A[i, j] > 0``).
+    networkx is imported only here.
+
+    Parameters
+    ----------
+    A : (N, N) array_like
+        Adjacency matrix.
+    directed : bool or None
+        Build a ``DiGraph`` (True) or a ``Graph`` (False); default: whether `A` is asymmetric.
+
+    Returns
+    -------
+    networkx.Graph or networkx.DiGraph
+        Nodes ``0..N-1`` and weighted edges.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> G = graphs.to_networkx(graphs.ring_graph(5))
+    >>> G.number_of_nodes(), G.number_of_edges()
+    (5, 5)
     """
     A = _check_adjacency(A)
     if directed is not None and not isinstance(directed, (bool, np.bool_)):
