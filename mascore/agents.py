@@ -31,10 +31,23 @@ class LTIAgent:
 
     Parameters
     ----------
-    A : (m, m) ndarray
+    A : (m, m) array_like
         State-transition matrix.
-    B : (m, p) ndarray
+    B : (m, p) array_like
         Input matrix.
+
+    Raises
+    ------
+    ValueError
+        A not square, or B with a different number of rows.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore.agents import LTIAgent
+    >>> agent = LTIAgent(A=[[1.0, 0.1], [0.0, 1.0]], B=[[0.0], [0.1]])
+    >>> agent.n_states, agent.n_inputs
+    (2, 1)
     """
 
     A: np.ndarray
@@ -50,16 +63,65 @@ class LTIAgent:
 
     @property
     def n_states(self) -> int:
-        """State dimension m."""
+        """State dimension m.
+
+        Returns
+        -------
+        int
+            Number of rows of ``A``.
+
+        Examples
+        --------
+        >>> from mascore import agents
+        >>> agents.double_integrator(2, 0.1).n_states
+        4
+        """
         return self.A.shape[0]
 
     @property
     def n_inputs(self) -> int:
-        """Input dimension p."""
+        """Input dimension p.
+
+        Returns
+        -------
+        int
+            Number of columns of ``B``.
+
+        Examples
+        --------
+        >>> from mascore import agents
+        >>> agents.double_integrator(2, 0.1).n_inputs
+        2
+        """
         return self.B.shape[1]
 
     def step(self, x: ArrayLike, u: ArrayLike) -> np.ndarray:
-        """One step for a state ``(..., m)`` and input ``(..., p)`` (batched, finite)."""
+        """One step ``A x + B u`` for a state ``(..., m)`` and an input ``(..., p)`` (batched).
+
+        Parameters
+        ----------
+        x : (..., m) array_like
+            Current state(s), finite.
+        u : (..., p) array_like
+            Input(s), finite; the batch axes broadcast against those of `x`.
+
+        Returns
+        -------
+        (..., m) ndarray
+            The next state(s).
+
+        Raises
+        ------
+        ValueError
+            Non-finite entries, wrong last dimensions or batch axes that do not broadcast.
+
+        Examples
+        --------
+        >>> from mascore import agents
+        >>> agent = agents.double_integrator(1, 0.5)           # position, velocity
+        >>> agent.step([0.0, 1.0], [2.0])                      # p + v dt + a dt^2 / 2, v + a dt
+        array([0.75, 2.  ])
+        """
         x = _finite(_float_array(x, "x"), "x")
         u = _finite(_float_array(u, "u"), "u")
         if x.ndim < 1 or x.shape[-1] != self.n_states:
@@ -72,7 +134,24 @@ class LTIAgent:
             raise ValueError(f"the batch axes of x {x.shape} and u {u.shape} do not broadcast") from None
 
     def team(self, n_agents: int) -> "LTIAgent":
-        """The stacked team ``(I_N kron A, I_N kron B)`` as one LTI system."""
+        """The stacked team ``(I_N kron A, I_N kron B)`` as one LTI system.
+
+        Parameters
+        ----------
+        n_agents : int
+            Number of identical agents N.
+
+        Returns
+        -------
+        LTIAgent
+            The team, with ``N m`` states and ``N p`` inputs.
+
+        Examples
+        --------
+        >>> from mascore import agents
+        >>> agents.double_integrator(2, 0.1).team(3).A.shape
+        (12, 12)
+        """
         return LTIAgent(*team_matrices(self.A, self.B, n_agents))
 
 
@@ -90,6 +169,22 @@ def double_integrator(n: int, dt: float) -> LTIAgent:
         Spatial dimension (2 for the plane).
     dt : float
         Sampling time (s), positive.
+
+    Returns
+    -------
+    LTIAgent
+        ``2n`` states, ``n`` inputs.
+
+    Examples
+    --------
+    >>> from mascore import agents
+    >>> agent = agents.double_integrator(1, 0.1)
+    >>> agent.A
+    array([[1. , 0.1],
+           [0. , 1. ]])
+    >>> agent.B
+    array([[0.005],
+           [0.1  ]])
     """
     n = check_positive_int(n, "n")
     check_positive(dt, "dt", "seconds (the sampling time)")
@@ -100,7 +195,33 @@ def double_integrator(n: int, dt: float) -> LTIAgent:
 
 
 def team_matrices(A: ArrayLike, B: ArrayLike, n_agents: int) -> tuple[np.ndarray, np.ndarray]:
-    """Block-diagonal team matrices ``(I_N kron A, I_N kron B)``."""
+    """Block-diagonal team matrices ``(I_N kron A, I_N kron B)``.
+
+    Parameters
+    ----------
+    A : (m, m) array_like
+        Agent state matrix.
+    B : (m, p) array_like
+        Agent input matrix.
+    n_agents : int
+        Number of agents N.
+
+    Returns
+    -------
+    A_team : (N m, N m) ndarray
+        ``I_N kron A``.
+    B_team : (N m, N p) ndarray
+        ``I_N kron B``.
+
+    Examples
+    --------
+    >>> from mascore import agents
+    >>> A_team, B_team = agents.team_matrices([[1.0]], [[0.5]], 3)
+    >>> B_team
+    array([[0.5, 0. , 0. ],
+           [0. , 0.5, 0. ],
+           [0. , 0. , 0.5]])
+    """
     A = check_square(_float_array(A, "A"), "A")
     B = as_matrix(_float_array(B, "B"), "B", (A.shape[0], None))
     n_agents = check_positive_int(n_agents, "n_agents")
@@ -109,7 +230,24 @@ def team_matrices(A: ArrayLike, B: ArrayLike, n_agents: int) -> tuple[np.ndarray
 
 
 def team_state(agent_states_: ArrayLike) -> np.ndarray:
-    """Stack per-agent states ``(..., N, m)`` into team vectors ``(..., N m)``."""
+    """Stack per-agent states ``(..., N, m)`` into team vectors ``(..., N m)``.
+
+    Parameters
+    ----------
+    agent_states_ : (..., N, m) array_like
+        One state per agent (leading axes kept).
+
+    Returns
+    -------
+    (..., N m) ndarray
+        Agent 0's state first, then agent 1's, ...
+
+    Examples
+    --------
+    >>> from mascore import agents
+    >>> agents.team_state([[1.0, 2.0], [3.0, 4.0]])
+    array([1., 2., 3., 4.])
+    """
     x = _finite(_float_array(agent_states_, "agent_states_"), "agent_states_")
     if x.ndim < 2:
         raise ValueError(f"agent_states_ (the per-agent states) must have shape (..., N, m); got {x.shape}")
@@ -117,7 +255,29 @@ def team_state(agent_states_: ArrayLike) -> np.ndarray:
 
 
 def agent_states(team: ArrayLike, n_states: int) -> np.ndarray:
-    """Split team vectors ``(..., N m)`` into per-agent states ``(..., N, m)``."""
+    """Split team vectors ``(..., N m)`` into per-agent states ``(..., N, m)``.
+
+    The inverse of :func:`team_state`.
+
+    Parameters
+    ----------
+    team : (..., N m) array_like
+        Team vectors.
+    n_states : int
+        State dimension m of one agent (must divide the last axis).
+
+    Returns
+    -------
+    (..., N, m) ndarray
+        One row per agent.
+
+    Examples
+    --------
+    >>> from mascore import agents
+    >>> agents.agent_states([1.0, 2.0, 3.0, 4.0], 2)
+    array([[1., 2.],
+           [3., 4.]])
+    """
     n_states = check_positive_int(n_states, "n_states")
     X = _finite(_float_array(team, "team"), "team")
     if X.ndim < 1:
