@@ -43,8 +43,7 @@ def psd_factor(M: ArrayLike, cholesky_first: bool = False) -> np.ndarray:
     Parameters
     ----------
     M : (..., m, m) array_like
-        Symmetric positive semidefinite matrices (checked; inner loops use the
-        unchecked ``_psd_factor``).
+        Symmetric positive semidefinite matrices (checked).
     cholesky_first : bool
         Return the lower Cholesky factor when ``M`` is positive definite and fall
         back to the eigenvector factor only when it is singular. By default the
@@ -55,6 +54,20 @@ def psd_factor(M: ArrayLike, cholesky_first: bool = False) -> np.ndarray:
     (..., m, m) ndarray
         ``F`` maps standard normal draws to draws of covariance ``M``
         (``x = F z``), also for singular ``M``.
+
+    Raises
+    ------
+    ValueError
+        ``M`` not square, not symmetric or not positive semidefinite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import noise
+    >>> M = np.array([[4.0, 2.0], [2.0, 1.0]])            # singular: rank one
+    >>> F = noise.psd_factor(M)
+    >>> bool(np.allclose(F @ F.T, M))
+    True
     """
     M = check_covariance(_float_array(M, "M"), "M")
     return _psd_factor(M, bool(cholesky_first))
@@ -79,6 +92,7 @@ def gaussian(
     Parameters
     ----------
     rng : numpy.random.Generator
+        Source of randomness (a seed is refused: pass ``np.random.default_rng(seed)``).
     cov : (m, m) array_like
         Symmetric positive semidefinite covariance.
     size : int or tuple of int
@@ -89,6 +103,15 @@ def gaussian(
     Returns
     -------
     (*size, m) ndarray
+        Independent draws.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import noise
+    >>> x = noise.gaussian(np.random.default_rng(0), np.diag([1.0, 4.0]), size=20000)
+    >>> np.round(np.var(x, axis=0), 1)
+    array([1., 4.])
     """
     rng = check_generator(rng)
     cov = _check_psd(cov, "cov")
@@ -105,9 +128,29 @@ def uniform_box(
 ) -> np.ndarray:
     """Samples uniform in the box ``low <= x <= high`` (componentwise).
 
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of randomness.
+    low : (m,) array_like
+        Lower corner.
+    high : (m,) array_like
+        Upper corner, ``high >= low`` componentwise.
+    size : int or tuple of int
+        Leading shape of the output.
+
     Returns
     -------
     (*size, m) ndarray
+        Independent draws.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import noise
+    >>> x = noise.uniform_box(np.random.default_rng(0), [-0.05, -0.05], [0.05, 0.05], size=1000)
+    >>> x.shape, bool(np.abs(x).max() <= 0.05)
+    ((1000, 2), True)
     """
     rng = check_generator(rng)
     low = as_vector(np.atleast_1d(_float_array(low, "low")), "low")
@@ -125,15 +168,32 @@ def uniform_ellipsoid(
 ) -> np.ndarray:
     """Samples uniform in ``E(c, P) = {x : (x - c)^T P^{-1} (x - c) <= 1}``.
 
+    The bounded noise the set-membership filter assumes (Bhattacharjee and Subbarao 2021).
+
     Parameters
     ----------
+    rng : numpy.random.Generator
+        Source of randomness.
     center : (m,) array_like
+        Centre ``c``.
     shape : (m, m) array_like
         Shape matrix P, symmetric positive semidefinite.
+    size : int or tuple of int
+        Leading shape of the output.
 
     Returns
     -------
     (*size, m) ndarray
+        Independent draws, all inside the ellipsoid.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids, noise
+    >>> P = np.diag([4.0, 1.0])
+    >>> x = noise.uniform_ellipsoid(np.random.default_rng(0), [1.0, 0.0], P, size=500)
+    >>> bool(ellipsoids.contains(x, [1.0, 0.0], P).all())
+    True
     """
     rng = check_generator(rng)
     P = _check_psd(shape, "shape")
