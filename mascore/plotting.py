@@ -49,18 +49,69 @@ STYLE = {
 
 
 def use_style() -> None:
-    """Apply the book's figure style to matplotlib's global rcParams."""
+    """Apply the book's figure style (:data:`STYLE`) to matplotlib's global rcParams.
+
+    Call it once per notebook, before drawing.
+
+    Examples
+    --------
+    >>> import matplotlib as mpl
+    >>> from mascore.plotting import STYLE, use_style
+    >>> use_style()
+    >>> all(mpl.rcParams[key] == value for key, value in STYLE.items() if not isinstance(value, (list, tuple)))
+    True
+    """
     mpl.rcParams.update(STYLE)
 
 
 def agent_colors(n_agents: int) -> list:
-    """N distinguishable colours, the same agent always getting the same one."""
+    """N distinguishable colours, the same agent always getting the same one.
+
+    Parameters
+    ----------
+    n_agents : int
+        Number of agents N (tab10 up to 10 agents, tab20 beyond, cycling).
+
+    Returns
+    -------
+    list of RGBA tuples
+        Colour of agent ``i`` at index ``i``.
+
+    Examples
+    --------
+    >>> from mascore.plotting import agent_colors
+    >>> colors = agent_colors(3)
+    >>> len(colors), len(colors[0])
+    (3, 4)
+    """
     cmap = plt.get_cmap("tab10" if n_agents <= 10 else "tab20")
     return [cmap(i % cmap.N) for i in range(n_agents)]
 
 
 def new_axes(ax: plt.Axes | None = None, **subplots_kw) -> plt.Axes:
-    """Return `ax`, or a fresh Axes in a new figure."""
+    """Return `ax`, or a fresh Axes in a new figure.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw on.
+    **subplots_kw
+        Passed to ``plt.subplots`` when a new figure is made (e.g. ``figsize``).
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        `ax` itself, or the new Axes.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.plotting import new_axes
+    >>> ax = new_axes(figsize=(3, 2))
+    >>> new_axes(ax) is ax
+    True
+    >>> plt.close("all")
+    """
     if ax is not None:
         return ax
     _, ax = plt.subplots(**subplots_kw)
@@ -76,14 +127,37 @@ def plot_trajectories(
     unit: str = "m",
     **line_kw,
 ) -> plt.Axes:
-    """Plot planar trajectories of a team.
+    """Plot planar trajectories of a team: one colour per agent, start and end marked.
 
     Parameters
     ----------
     positions : (T, N, 2) array_like
-        Positions over time (``unit``).
+        Positions over time (in `unit`).
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw on (default: a new figure).
     labels : sequence of str, optional
         Legend labels per agent (default "agent 1", ...).
+    marker_start, marker_end : str
+        Markers of the first and last positions.
+    unit : str
+        Unit of the positions, for the axis labels.
+    **line_kw
+        Passed to ``Axes.plot`` for the paths.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        The axes, with equal aspect and labelled ``x (unit)``, ``y (unit)``.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> import numpy as np
+    >>> from mascore.plotting import plot_trajectories
+    >>> ax = plot_trajectories(np.cumsum(np.ones((10, 3, 2)), axis=0))
+    >>> ax.get_xlabel()
+    'x (m)'
+    >>> plt.close("all")
     """
     p = np.asarray(positions, dtype=float)
     if p.ndim != 3 or p.shape[-1] != 2:
@@ -112,13 +186,35 @@ def plot_graph(
     Parameters
     ----------
     positions : (N, 2) array_like
-        Node positions (``unit``).
+        Node positions (in `unit`).
     A : (N, N) array_like
         Adjacency, ``A[i, j] > 0`` for the edge ``j -> i``.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw on (default: a new figure).
     sensing_range : float, optional
         Radius of a dashed circle drawn around each agent.
+    unit : str
+        Unit of the positions, for the axis labels.
     directed : bool, optional
         Draw arrows; defaults to "is `A` asymmetric".
+    node_labels : bool
+        Number the agents from 1.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        The axes.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore import graphs
+    >>> from mascore.plotting import plot_graph
+    >>> pos = [[0.0, 0.0], [100.0, 0.0], [50.0, 80.0]]
+    >>> ax = plot_graph(pos, graphs.proximity_graph(pos, 150.0), sensing_range=150.0)
+    >>> len(ax.patches)                                   # one sensing circle per agent
+    3
+    >>> plt.close("all")
     """
     p = as_matrix(positions, "positions", (None, 2))
     A = as_matrix(A, "A", (p.shape[0], p.shape[0]))
@@ -158,7 +254,41 @@ def plot_band(
     color=None,
     alpha: float = 0.25,
 ) -> plt.Axes:
-    """A time series with a shaded band (e.g. mean and a percentile range)."""
+    """A time series with a shaded band (e.g. a mean and a percentile range).
+
+    Parameters
+    ----------
+    t : (T,) array_like
+        Time axis.
+    center : (T,) array_like
+        The line.
+    low, high : (T,) array_like, optional
+        Lower and upper edge of the band (both or neither).
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw on (default: a new figure).
+    label : str, optional
+        Legend label of the line.
+    color : optional
+        Colour of line and band (default: the next colour of the cycle).
+    alpha : float
+        Opacity of the band.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        The axes.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> import numpy as np
+    >>> from mascore.plotting import plot_band
+    >>> t = np.linspace(0.0, 1.0, 5)
+    >>> ax = plot_band(t, t, t - 0.1, t + 0.1, label="mean")
+    >>> len(ax.lines), len(ax.collections)
+    (1, 1)
+    >>> plt.close("all")
+    """
     t = np.asarray(t, dtype=float)
     center = np.asarray(center, dtype=float)
     if center.shape != t.shape:
@@ -171,7 +301,30 @@ def plot_band(
 
 
 def save_figure(fig: plt.Figure, path: str | Path) -> Path:
-    """Save `fig` (creating folders) and close it; returns the path."""
+    """Save `fig` (creating folders) and close it.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure.
+    path : str or pathlib.Path
+        File to write; the format follows the suffix.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.plotting import save_figure
+    >>> fig, ax = plt.subplots()
+    >>> out = save_figure(fig, pathlib.Path(tempfile.mkdtemp()) / "sub" / "fig.png")
+    >>> out.exists()
+    True
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
