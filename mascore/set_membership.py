@@ -72,7 +72,7 @@ def correct(
     method: Method = "closed_form", step: int | None = None, agent: ArrayLike | None = None,
     check_consistency: bool = True, solver_options: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Correction step: eqs. (2), (6)-(7).
+    """Correction step: eqs. (2), (6)-(7): the smallest-trace ellipsoid holding the prior and the measurement set.
 
     Parameters
     ----------
@@ -82,13 +82,20 @@ def correct(
         Predicted shape ``P_{k|k-1}``, positive definite.
     y : (..., p) array_like
         Measurement ``y_k``.
-    C : (p, n), D : (p, v), R : (v, v) array_like
-        Output matrices and the output-disturbance shape (``R`` positive definite,
-        ``D R D^T`` positive definite for ``method="closed_form"``).
-    method : {"sdp", "closed_form"}
-    step, agent : optional
-        Time index and agent label(s) used in error messages; `agent` may be an
-        array broadcast against the batch dimensions (e.g. ``np.arange(N)``).
+    C : (p, n) array_like
+        Output matrix.
+    D : (p, v) array_like
+        Output-disturbance matrix (``D R D^T`` positive definite for ``method="closed_form"``).
+    R : (v, v) array_like
+        Shape of the output-disturbance ellipsoid, positive definite.
+    method : {"closed_form", "sdp"}
+        The closed form of the trace-optimal intersection (default) or the SDP of eq. (6)
+        solved with cvxpy/Clarabel (needs the ``sdp`` extra); both give the same ellipsoid.
+    step : int, optional
+        Time index, used in error messages.
+    agent : int or array_like, optional
+        Agent label(s) used in error messages; may be an array broadcast against the batch
+        dimensions (e.g. ``np.arange(N)``).
     check_consistency : bool
         Raise if ``y`` is inconsistent with the prior ellipsoid (empty intersection).
     solver_options : dict, optional
@@ -107,9 +114,21 @@ def correct(
     Raises
     ------
     ValueError
-        Non positive-definite prior shape, or empty intersection.
-    SolverError
+        Non positive-definite prior shape, bad shapes, or an empty intersection.
+    mascore.SolverError
         The SDP was not solved to optimality.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import set_membership as sm
+    >>> C, D, R = [[1.0, 0.0]], [[1.0]], [[0.04]]          # y = x_1 + v, |v| <= 0.2
+    >>> c, P, L = sm.correct(np.zeros(2), np.eye(2), [0.1], C, D, R)
+    >>> bool(np.trace(P) < 2.0)                           # the measurement shrinks the set
+    True
+    >>> cs, Ps, _ = sm.correct(np.zeros(2), np.eye(2), [0.1], C, D, R, method="sdp")
+    >>> bool(np.allclose(Ps, P, atol=1e-5))               # SDP and closed form agree
+    True
     """
     method = _check_method(method)
     c, P = _check_ellipsoid(center, shape, "correction", step, agent)
@@ -165,16 +184,31 @@ def predict(
     B: ArrayLike | None = None, u: ArrayLike | None = None, method: Method = "closed_form",
     step: int | None = None, agent: ArrayLike | None = None, solver_options: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Prediction step: eqs. (4), (8).
+    """Prediction step: eqs. (4), (8): the smallest-trace ellipsoid holding ``A E + G W (+ B u)``.
 
     Parameters
     ----------
-    center : (..., n), shape : (..., n, n)
-        Corrected ellipsoid ``E(x_hat_{k|k}, P_{k|k})``.
-    A : (n, n), G : (n, w) disturbance matrix, Q : (w, w) positive definite
-    B : (n, m), u : (..., m), optional
-        Known input.
-    method, step, agent, solver_options
+    center : (..., n) array_like
+        Corrected centre ``x_hat_{k|k}``.
+    shape : (..., n, n) array_like
+        Corrected shape ``P_{k|k}``, positive definite.
+    A : (n, n) array_like
+        State matrix.
+    G : (n, w) array_like
+        Disturbance matrix.
+    Q : (w, w) array_like
+        Shape of the process-disturbance ellipsoid, positive definite.
+    B : (n, m) array_like, optional
+        Input matrix (with `u`).
+    u : (..., m) array_like, optional
+        Known input (with `B`).
+    method : {"closed_form", "sdp"}
+        As in :func:`correct`.
+    step : int, optional
+        Time index, used in error messages.
+    agent : int or array_like, optional
+        Agent label(s), used in error messages.
+    solver_options : dict, optional
         As in :func:`correct`.
 
     Returns
@@ -183,6 +217,21 @@ def predict(
         ``A x_hat_{k|k} + B u_k``, eq. (4).
     shape : (..., n, n) ndarray
         ``P_{k+1|k}``.
+
+    Raises
+    ------
+    ValueError
+        Bad shapes, a non positive-definite shape, or only one of `B` and `u`.
+    mascore.SolverError
+        The SDP was not solved to optimality.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import set_membership as sm
+    >>> c, P = sm.predict(np.zeros(2), np.eye(2), A=[[1.0, 0.1], [0.0, 1.0]], G=np.eye(2), Q=0.01 * np.eye(2))
+    >>> bool(np.trace(P) > 2.0)                           # the disturbance grows the set
+    True
     """
     method = _check_method(method)
     c, P = _check_ellipsoid(center, shape, "prediction", step, agent)
@@ -222,13 +271,27 @@ def predict(
 class FilterHistory:
     """Output of :func:`run_filter` over k = 0..T_f.
 
-    Attributes
+    Parameters
     ----------
-    center_corr, shape_corr : (T_f + 1, ..., n), (T_f + 1, ..., n, n)
-        Correction ellipsoids ``E(x_hat_{k|k}, P_{k|k})``.
-    center_pred, shape_pred : same shapes
-        Prediction ellipsoids ``E(x_hat_{k+1|k}, P_{k+1|k})``.
-    gain : (T_f + 1, ..., n, p)
+    center_corr : (T_f + 1, ..., n) ndarray
+        Centres of the correction ellipsoids ``E(x_hat_{k|k}, P_{k|k})``.
+    shape_corr : (T_f + 1, ..., n, n) ndarray
+        Their shape matrices.
+    center_pred : (T_f + 1, ..., n) ndarray
+        Centres of the prediction ellipsoids ``E(x_hat_{k+1|k}, P_{k+1|k})``.
+    shape_pred : (T_f + 1, ..., n, n) ndarray
+        Their shape matrices.
+    gain : (T_f + 1, ..., n, p) ndarray
+        The correction gains ``L_k``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import set_membership as sm
+    >>> C, D, R = [[1.0, 0.0]], [[1.0]], [[0.04]]          # y = x_1 + v, |v| <= 0.2
+    >>> h = sm.run_filter(np.zeros(2), np.eye(2), np.zeros((5, 1)), np.eye(2), np.eye(2), C, D, 0.01 * np.eye(2), R)
+    >>> h.center_corr.shape, h.shape_corr.shape, h.gain.shape
+    ((5, 2), (5, 2, 2), (5, 2, 1))
     """
 
     center_corr: np.ndarray
@@ -245,18 +308,68 @@ def run_filter(
 ) -> FilterHistory:
     """Algorithm 1 for open-loop data: correct with ``y[k]``, then predict, k = 0..T_f.
 
-    Parameters
-    ----------
-    x0_hat : (..., n), P0 : (..., n, n)
-        Initial ellipsoid (Assumption 1.1).
-    y : (T_f + 1, ..., p)
-        Measurements.
-    u : (T_f + 1, ..., m), optional
-        Known inputs (with `B`; give both or neither).
-    Q, R : constant disturbance shapes (time-invariant here).
-
     The initial ellipsoid, the measurement array and the method are checked before the
     first step; each step then checks its data as :func:`correct` and :func:`predict` do.
+
+    Parameters
+    ----------
+    x0_hat : (..., n) array_like
+        Centre of the initial ellipsoid (Assumption 1.1).
+    P0 : (..., n, n) array_like
+        Its shape matrix, positive definite.
+    y : (T_f + 1, ..., p) array_like
+        Measurements.
+    A : (n, n) array_like
+        State matrix.
+    G : (n, w) array_like
+        Disturbance matrix.
+    C : (p, n) array_like
+        Output matrix.
+    D : (p, v) array_like
+        Output-disturbance matrix.
+    Q : (w, w) array_like
+        Shape of the process-disturbance ellipsoid (time-invariant).
+    R : (v, v) array_like
+        Shape of the output-disturbance ellipsoid (time-invariant).
+    B : (n, m) array_like, optional
+        Input matrix (with `u`).
+    u : (T_f + 1, ..., m) array_like, optional
+        Known inputs (with `B`; give both or neither).
+    method : {"closed_form", "sdp"}
+        As in :func:`correct`.
+    agent : int or array_like, optional
+        Agent label(s), used in error messages.
+    solver_options : dict, optional
+        As in :func:`correct`.
+
+    Returns
+    -------
+    FilterHistory
+        The correction and prediction ellipsoids and gains of every step.
+
+    Raises
+    ------
+    ValueError
+        Bad shapes, a non positive-definite shape, inconsistent data (empty intersection).
+    mascore.SolverError
+        An SDP was not solved to optimality (``method="sdp"``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids, noise
+    >>> from mascore import set_membership as sm
+    >>> rng = np.random.default_rng(1)
+    >>> A, G, C, D = np.array([[1.0, 0.1], [-0.1, 1.0]]), np.eye(2), [[1.0, 0.0]], [[1.0]]
+    >>> Q, R = 1e-4 * np.eye(2), [[0.01]]
+    >>> x = [np.array([0.5, 0.0])]
+    >>> for k in range(30):
+    ...     x.append(A @ x[-1] + noise.uniform_ellipsoid(rng, np.zeros(2), Q))
+    >>> x = np.array(x)
+    >>> y = x[:, :1] + noise.uniform_ellipsoid(rng, np.zeros(1), R, size=31)
+    >>> h = sm.run_filter(np.zeros(2), np.eye(2), y, A, G, C, D, Q, R)
+    >>> bool(ellipsoids.contains(x, h.center_corr, h.shape_corr).all())   # the set always holds the state
+    True
     """
     method = _check_method(method)
     P = ellipsoids._shape_matrix(P0, "P0")
