@@ -75,12 +75,22 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Ellipsoid:
-    """``E(c, P) = {x : (x - c)^T P^{-1} (x - c) <= 1}``.
+    """The ellipsoid ``E(c, P) = {x : (x - c)^T P^{-1} (x - c) <= 1}``.
 
     Parameters
     ----------
     center : (n,) array_like
-    shape : (n, n) array_like, symmetric positive definite
+        Centre ``c``.
+    shape : (n, n) array_like
+        Shape matrix ``P``, symmetric positive definite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> E = ell.Ellipsoid([0.0, 0.0], np.diag([4.0, 1.0]))    # semi-axes 2 and 1
+    >>> E.dim, E.trace, round(E.volume, 4)                    # area = pi * 2 * 1
+    (2, 5.0, 6.2832)
     """
 
     center: np.ndarray
@@ -96,25 +106,105 @@ class Ellipsoid:
 
     @property
     def dim(self) -> int:
-        """Dimension n of the space."""
+        """Dimension n of the space.
+
+        Returns
+        -------
+        int
+            Length of the centre.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import ellipsoids as ell
+        >>> ell.Ellipsoid(np.zeros(3), np.eye(3)).dim
+        3
+        """
         return self.center.shape[0]
 
     @property
     def trace(self) -> float:
-        """``trace(P)``: the sum of the squared semi-axis lengths."""
+        """``trace(P)``: the sum of the squared semi-axis lengths.
+
+        Returns
+        -------
+        float
+            The trace, the size measure the set-membership filter minimises.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import ellipsoids as ell
+        >>> ell.Ellipsoid(np.zeros(2), np.diag([4.0, 1.0])).trace
+        5.0
+        """
         return float(np.trace(self.shape))
 
     @property
     def volume(self) -> float:
-        """Lebesgue volume ``vol(unit ball) * sqrt(det P)``."""
+        """Lebesgue volume ``vol(unit ball) * sqrt(det P)``.
+
+        Returns
+        -------
+        float
+            The volume (area in the plane).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import ellipsoids as ell
+        >>> round(ell.Ellipsoid(np.zeros(2), np.eye(2)).volume, 6)        # the unit disc
+        3.141593
+        """
         return float(volume(self.shape))
 
     def contains(self, points: ArrayLike, rtol: float = 1e-9) -> np.ndarray:
-        """Boolean membership of points (..., n); see :func:`contains`."""
+        """Boolean membership of points; see :func:`contains`.
+
+        Parameters
+        ----------
+        points : (..., n) array_like
+            Points to test.
+        rtol : float
+            Relative tolerance on the quadratic form (finite, >= 0).
+
+        Returns
+        -------
+        (...,) bool ndarray
+            True where the point lies in the ellipsoid.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import ellipsoids as ell
+        >>> ell.Ellipsoid(np.zeros(2), np.diag([4.0, 1.0])).contains([[1.9, 0.0], [0.0, 1.1]])
+        array([ True, False])
+        """
         return contains(points, self.center, self.shape, rtol)
 
     def affine_image(self, M: ArrayLike, b: ArrayLike | None = None) -> "Ellipsoid":
-        """``{M x + b : x in E}`` (M must have full row rank to stay non-degenerate)."""
+        """The image ``{M x + b : x in E}`` (M must have full row rank to stay non-degenerate).
+
+        Parameters
+        ----------
+        M : (m, n) array_like
+            Linear map.
+        b : (m,) array_like, optional
+            Offset.
+
+        Returns
+        -------
+        Ellipsoid
+            ``E(M c + b, M P M^T)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import ellipsoids as ell
+        >>> E = ell.Ellipsoid(np.zeros(2), np.eye(2)).affine_image(2.0 * np.eye(2), b=[1.0, 0.0])
+        >>> E.center, E.trace
+        (array([1., 0.]), 8.0)
+        """
         c, P = affine_image(self.center, self.shape, M, b)
         return Ellipsoid(c, P)
 
@@ -126,16 +216,77 @@ class Ellipsoid:
         return Ellipsoid(c, P)
 
     def sample_boundary(self, rng: np.random.Generator, size: int) -> np.ndarray:
-        """`size` points on the boundary (directions uniform on the unit sphere)."""
+        """Points on the boundary (directions uniform on the unit sphere).
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+            Source of randomness.
+        size : int
+            Number of points.
+
+        Returns
+        -------
+        (size, n) ndarray
+            Points with ``(x - c)^T P^{-1} (x - c) = 1``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import ellipsoids as ell
+        >>> E = ell.Ellipsoid(np.zeros(2), np.diag([4.0, 1.0]))
+        >>> x = E.sample_boundary(np.random.default_rng(0), 5)
+        >>> np.round(ell.mahalanobis_sq(x, E.center, E.shape), 12)
+        array([1., 1., 1., 1., 1.])
+        """
         return sample_boundary(rng, self.center, self.shape, size)
 
     def sample_interior(self, rng: np.random.Generator, size: int) -> np.ndarray:
-        """`size` points uniform in the ellipsoid."""
+        """Points uniform in the ellipsoid.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+            Source of randomness.
+        size : int
+            Number of points.
+
+        Returns
+        -------
+        (size, n) ndarray
+            Points inside the ellipsoid.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import ellipsoids as ell
+        >>> E = ell.Ellipsoid(np.zeros(2), np.diag([4.0, 1.0]))
+        >>> bool(E.contains(E.sample_interior(np.random.default_rng(0), 100)).all())
+        True
+        """
         return sample_interior(rng, self.center, self.shape, size)
 
 
 def trace(shape: ArrayLike) -> np.ndarray:
-    """``trace(P)`` of one or a stack (..., n, n) of shape matrices (finite, square)."""
+    """``trace(P)`` of one or a stack of shape matrices.
+
+    Parameters
+    ----------
+    shape : (..., n, n) array_like
+        Shape matrices (finite, square).
+
+    Returns
+    -------
+    (...,) ndarray
+        Their traces.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> ell.trace(np.stack([np.eye(2), 2.0 * np.eye(2)]))
+    array([2., 4.])
+    """
     P = _float_array(shape, "shape")
     if P.ndim < 2 or P.shape[-1] != P.shape[-2]:
         raise ValueError(f"shape must be a square matrix or a stack (..., n, n); got shape {P.shape}")
@@ -144,10 +295,30 @@ def trace(shape: ArrayLike) -> np.ndarray:
 
 
 def volume(shape: ArrayLike) -> np.ndarray:
-    """Volume ``pi^(n/2) / Gamma(n/2 + 1) * sqrt(det P)`` of E(c, P); shape (...,).
+    """Volume ``pi^(n/2) / Gamma(n/2 + 1) * sqrt(det P)`` of E(c, P).
 
-    Raises ValueError unless every P of the stack (..., n, n) is symmetric positive
-    semidefinite (a singular P, a flat ellipsoid, has volume 0).
+    Parameters
+    ----------
+    shape : (..., n, n) array_like
+        Shape matrices, symmetric positive semidefinite (a singular P, a flat ellipsoid,
+        has volume 0).
+
+    Returns
+    -------
+    (...,) ndarray
+        Volumes.
+
+    Raises
+    ------
+    ValueError
+        A shape that is not symmetric positive semidefinite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> round(float(ell.volume(np.diag([4.0, 1.0]))), 4)               # pi * 2 * 1
+    6.2832
     """
     P = _float_array(shape, "shape")
     if P.ndim < 2 or P.shape[-1] != P.shape[-2]:
@@ -169,24 +340,54 @@ def contains(points: ArrayLike, center: ArrayLike, shape: ArrayLike, rtol: float
     Parameters
     ----------
     points : (..., n) array_like
-    center : (..., n) array_like, broadcast against `points`
-    shape : (..., n, n) array_like, symmetric positive definite (a negative definite or
-        singular `shape` is refused: it describes no ellipsoid of this convention)
+        Points to test.
+    center : (..., n) array_like
+        Centre, broadcast against `points`.
+    shape : (..., n, n) array_like
+        Shape, symmetric positive definite (a negative definite or singular `shape` is
+        refused: it describes no ellipsoid of this convention).
     rtol : float
         Accept ``(x - c)^T P^{-1} (x - c) <= 1 + rtol`` (round-off and solver tolerance); finite, >= 0.
 
     Returns
     -------
     (...,) bool ndarray
+        True where the point lies in the ellipsoid.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> ell.contains([[0.5, 0.5], [1.0, 1.0]], [0.0, 0.0], np.eye(2))
+    array([ True, False])
     """
     rtol = check_positive(rtol, "rtol", allow_zero=True)
     return mahalanobis_sq(points, center, shape) <= 1.0 + rtol
 
 
 def mahalanobis_sq(points: ArrayLike, center: ArrayLike, shape: ArrayLike) -> np.ndarray:
-    """``(x - c)^T P^{-1} (x - c)`` broadcast over leading dimensions; shape (...,).
+    """``(x - c)^T P^{-1} (x - c)`` broadcast over leading dimensions.
 
-    `points` (..., n) and `center` (..., n) finite, `shape` (..., n, n) symmetric positive definite.
+    Parameters
+    ----------
+    points : (..., n) array_like
+        Points ``x``, finite.
+    center : (..., n) array_like
+        Centre ``c``, finite.
+    shape : (..., n, n) array_like
+        ``P``, symmetric positive definite.
+
+    Returns
+    -------
+    (...,) ndarray
+        The quadratic form; at most 1 inside the ellipsoid.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> float(ell.mahalanobis_sq([2.0, 0.0], [0.0, 0.0], np.diag([4.0, 1.0])))
+    1.0
     """
     P = _shape_matrix(shape, "shape")
     n = P.shape[-1]
@@ -207,15 +408,28 @@ def affine_image(
     Parameters
     ----------
     center : (..., n) array_like
-    shape : (..., n, n) array_like, symmetric positive semidefinite
+        Centre ``c``.
+    shape : (..., n, n) array_like
+        Shape ``P``, symmetric positive semidefinite.
     M : (m, n) array_like
+        Linear map.
     b : (m,) array_like, optional
+        Offset.
 
     Returns
     -------
     center : (..., m) ndarray
+        ``M c + b``.
     shape : (..., m, m) ndarray
-        Symmetric; only positive semidefinite if M lacks full row rank.
+        ``M P M^T``: symmetric; only positive semidefinite if M lacks full row rank.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> c, P = ell.affine_image([1.0, 0.0], np.eye(2), [[1.0, 1.0]])       # project onto x_1 + x_2
+    >>> c, P
+    (array([1.]), array([[2.]]))
     """
     P = _shape_matrix(shape, "shape", definite=False)
     n = P.shape[-1]
@@ -241,9 +455,35 @@ def minkowski_sum(
     """Member of the outer family of ``E(c1, P1) + E(c2, P2)`` for parameter beta in (0, 1).
 
     ``E(c1 + c2, P1 / (1 - beta) + P2 / beta)`` contains the sum for every beta
-    (Schweppe 1968); beta broadcasts over the batch dimensions. `shape1` and `shape2`
-    must be symmetric positive semidefinite (an indefinite one is refused: the
-    result would be indefinite, no ellipsoid).
+    (Schweppe 1968); beta broadcasts over the batch dimensions.
+
+    Parameters
+    ----------
+    center1 : (..., n) array_like
+        Centre of the first ellipsoid.
+    shape1 : (..., n, n) array_like
+        Its shape, symmetric positive semidefinite.
+    center2 : (..., n) array_like
+        Centre of the second ellipsoid.
+    shape2 : (..., n, n) array_like
+        Its shape, symmetric positive semidefinite.
+    beta : (...,) array_like
+        Family parameter in (0, 1).
+
+    Returns
+    -------
+    center : (..., n) ndarray
+        ``c1 + c2``.
+    shape : (..., n, n) ndarray
+        ``P1 / (1 - beta) + P2 / beta``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> c, P = ell.minkowski_sum([1.0, 0.0], np.eye(2), [0.0, 1.0], np.eye(2), 0.5)
+    >>> c, np.diag(P)
+    (array([1., 1.]), array([4., 4.]))
     """
     P1 = _shape_matrix(shape1, "shape1", definite=False)
     n = P1.shape[-1]
@@ -271,16 +511,31 @@ def minkowski_sum_min_trace(
 
     Parameters
     ----------
-    center1, center2 : (..., n) array_like
-    shape1, shape2 : (..., n, n) array_like, positive semidefinite (either may be singular,
-        not both zero)
+    center1 : (..., n) array_like
+        Centre of the first ellipsoid.
+    shape1 : (..., n, n) array_like
+        Its shape, positive semidefinite (may be singular).
+    center2 : (..., n) array_like
+        Centre of the second ellipsoid.
+    shape2 : (..., n, n) array_like
+        Its shape, positive semidefinite (may be singular; not both zero).
 
     Returns
     -------
     center : (..., n) ndarray
+        ``c1 + c2``.
     shape : (..., n, n) ndarray
+        The optimal outer shape.
     beta : (...,) ndarray
         The optimal parameter (0 when ``trace(P2) = 0``, 1 when ``trace(P1) = 0``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> c, P, beta = ell.minkowski_sum_min_trace(np.zeros(2), 4.0 * np.eye(2), np.zeros(2), np.eye(2))
+    >>> float(np.trace(P)), float(beta)                    # (sqrt 8 + sqrt 2)^2 = 18, beta = 1/3
+    (18.0, 0.333...)
     """
     P1 = _shape_matrix(shape1, "shape1", definite=False)
     n = P1.shape[-1]
@@ -311,24 +566,43 @@ def intersection_gain_form(
     SDP's LMI and stays accurate as t -> 1.)
 
     With ``shrink=False`` the factor delta is dropped (``delta = 1``): the
-    result is then the gain-based outer bound ``(I - L C) P (I - L C)^T / (1 - t)
-    + L W L^T / t`` used by the correction SDP, eqs. (6)-(7), which does not use y
-    in the shape. With ``shrink=True`` it is Schweppe's tighter set.
+    result is then the gain-based outer bound used by the correction SDP, eqs. (6)-(7),
+    which does not use y in the shape. With ``shrink=True`` it is Schweppe's tighter set.
 
     Parameters
     ----------
-    center : (..., n), shape : (..., n, n)
-        Prior ellipsoid E(c, P), `shape` symmetric positive definite.
+    center : (..., n) array_like
+        Centre ``c`` of the prior ellipsoid.
+    shape : (..., n, n) array_like
+        Its shape matrix ``P``, symmetric positive definite.
     C : (p, n) array_like
+        Measurement matrix.
     y : (..., p) array_like
-    W : (p, p) array_like, symmetric positive definite (``D R D^T``)
-    t : (...,) array_like, strictly inside (0, 1): ``t = 0`` and ``t = 1`` are only limits
-        of the family (``W / t`` and ``P / (1 - t)`` are undefined there) and are refused.
+        Measurement.
+    W : (p, p) array_like
+        Shape of the measurement-noise set, symmetric positive definite (``D R D^T``).
+    t : (...,) array_like
+        Strictly inside (0, 1): ``t = 0`` and ``t = 1`` are only limits of the family
+        (``W / t`` and ``P / (1 - t)`` are undefined there) and are refused.
     shrink : bool
+        Multiply the shape by delta (Schweppe's set) or not (the SDP's bound).
 
     Returns
     -------
-    center : (..., n), shape : (..., n, n), gain L : (..., n, p)
+    center : (..., n) ndarray
+        ``c + L (y - C c)``.
+    shape : (..., n, n) ndarray
+        ``P_t`` (times delta with `shrink`).
+    gain : (..., n, p) ndarray
+        ``L``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> c, P, L = ell.intersection_gain_form(np.zeros(2), np.eye(2), [[1.0, 0.0]], [0.0], [[1.0]], 0.5)
+    >>> L.ravel()
+    array([0.5, 0. ])
     """
     c, P, C, y, W = _intersection_args(center, shape, C, y, W)
     t = _open_unit(t, "t")
@@ -359,9 +633,38 @@ def intersection_family(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Schweppe's outer ellipsoid of ``E(c, P) ∩ {x : |y - C x|_{W^{-1}} <= 1}`` for t in (0, 1).
 
-    Returns ``(center, shape)``; the shape includes the shrink factor delta and
-    is not positive definite when delta <= 0 (then the intersection is empty,
-    or a single point when delta = 0).
+    The shape includes the shrink factor delta and is not positive definite when
+    delta <= 0 (then the intersection is empty, or a single point when delta = 0).
+
+    Parameters
+    ----------
+    center : (..., n) array_like
+        Centre ``c`` of the prior ellipsoid.
+    shape : (..., n, n) array_like
+        Its shape matrix ``P``, symmetric positive definite.
+    C : (p, n) array_like
+        Measurement matrix.
+    y : (..., p) array_like
+        Measurement.
+    W : (p, p) array_like
+        Shape of the measurement-noise set, symmetric positive definite (``D R D^T``).
+    t : (...,) array_like
+        Family parameter, strictly inside (0, 1).
+
+    Returns
+    -------
+    center : (..., n) ndarray
+        Centre of the outer ellipsoid.
+    shape : (..., n, n) ndarray
+        Its shape, ``delta * P_t``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> c, P = ell.intersection_family(np.zeros(2), np.eye(2), [[1.0, 0.0]], [0.5], [[0.25]], 0.5)
+    >>> bool(ell.contains([0.4, 0.0], c, P))               # a point in both sets is in the outer ellipsoid
+    True
     """
     c, P, _ = intersection_gain_form(center, shape, C, y, W, t, shrink=True)
     return c, P
@@ -386,12 +689,45 @@ def intersection_min_trace(
     With ``shrink=True`` the factor delta(t) multiplies this function; the
     minimiser of the product is then found by a bounded golden-section search.
 
-    Arguments as in :func:`intersection_gain_form`; `tol` (finite, > 0) and `max_iter`
-    (integer >= 1) bound the Newton search.
+    Parameters
+    ----------
+    center : (..., n) array_like
+        Centre ``c`` of the prior ellipsoid.
+    shape : (..., n, n) array_like
+        Its shape matrix ``P``, symmetric positive definite.
+    C : (p, n) array_like
+        Measurement matrix.
+    y : (..., p) array_like
+        Measurement.
+    W : (p, p) array_like
+        Shape of the measurement-noise set, symmetric positive definite (``D R D^T``).
+    shrink : bool
+        As in :func:`intersection_gain_form`.
+    tol : float
+        Tolerance of the search on t (finite, > 0).
+    max_iter : int
+        Largest number of Newton steps (>= 1).
 
     Returns
     -------
-    center : (..., n), shape : (..., n, n), gain : (..., n, p), t : (...,)
+    center : (..., n) ndarray
+        Centre of the optimal member.
+    shape : (..., n, n) ndarray
+        Its shape.
+    gain : (..., n, p) ndarray
+        Its gain ``L``.
+    t : (...,) ndarray
+        The optimal parameter.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> c, P, L, t = ell.intersection_min_trace(np.zeros(2), np.eye(2), [[1.0, 0.0]], [0.1], [[0.04]])
+    >>> ts = np.linspace(0.01, 0.99, 99)                    # no member of the family has a smaller trace
+    >>> others = ell.intersection_gain_form(np.zeros(2), np.eye(2), [[1.0, 0.0]], [0.1], [[0.04]], ts[:, None])[1]
+    >>> bool(np.trace(P) <= np.trace(others, axis1=-2, axis2=-1).min() + 1e-12)
+    True
     """
     c, P, C, y, W = _intersection_args(center, shape, C, y, W)
     tol = check_positive(tol, "tol")
@@ -418,15 +754,41 @@ def _intersection_min_trace(c, P, C, y, W, shrink=False, tol=1e-13, max_iter=100
 def max_innovation_form(
     center: ArrayLike, shape: ArrayLike, C: ArrayLike, y: ArrayLike, W: ArrayLike, n_iter: int = 60,
 ) -> np.ndarray:
-    """``max_t nu^T (W / t + C P C^T / (1 - t))^{-1} nu``, nu = y - C c; shape (...,).
+    """``max_t nu^T (W / t + C P C^T / (1 - t))^{-1} nu``, with ``nu = y - C c``.
 
     This is the largest value of ``min_x q_t(x)`` over the intersection family;
     the intersection ``E(c, P) ∩ {x : |y - C x|_{W^{-1}} <= 1}`` is empty iff it
     exceeds 1. For one measurement (p = 1) the maximum is
     ``nu^2 / (sqrt(W) + sqrt(C P C^T))^2`` (the strip misses the projected
     ellipsoid); otherwise the concave function of t is maximised by bisection
-    on its derivative after a simultaneous diagonalisation (`n_iter` bisection steps, >= 1).
-    Arguments as in :func:`intersection_gain_form`.
+    on its derivative after a simultaneous diagonalisation.
+
+    Parameters
+    ----------
+    center : (..., n) array_like
+        Centre ``c`` of the prior ellipsoid.
+    shape : (..., n, n) array_like
+        Its shape matrix ``P``, symmetric positive definite.
+    C : (p, n) array_like
+        Measurement matrix.
+    y : (..., p) array_like
+        Measurement.
+    W : (p, p) array_like
+        Shape of the measurement-noise set, symmetric positive definite (``D R D^T``).
+    n_iter : int
+        Bisection steps (>= 1) for p > 1.
+
+    Returns
+    -------
+    (...,) ndarray
+        The maximum; above 1 means an empty intersection.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> float(ell.max_innovation_form(np.zeros(2), np.eye(2), [[1.0, 0.0]], [3.0], [[0.25]]))   # 3^2 / (0.5 + 1)^2
+    4.0
     """
     c, P, C, y, W = _intersection_args(center, shape, C, y, W)
     n_iter = check_positive_int(n_iter, "n_iter")
@@ -462,7 +824,32 @@ def intersection_is_empty(
 ) -> np.ndarray:
     """True where ``E(c, P) ∩ {x : (y - C x)^T W^{-1} (y - C x) <= 1}`` is empty.
 
-    Arguments as in :func:`intersection_gain_form`; `rtol` finite, >= 0.
+    Parameters
+    ----------
+    center : (..., n) array_like
+        Centre ``c`` of the prior ellipsoid.
+    shape : (..., n, n) array_like
+        Its shape matrix ``P``, symmetric positive definite.
+    C : (p, n) array_like
+        Measurement matrix.
+    y : (..., p) array_like
+        Measurement.
+    W : (p, p) array_like
+        Shape of the measurement-noise set, symmetric positive definite (``D R D^T``).
+    rtol : float
+        Relative tolerance of the test (finite, >= 0).
+
+    Returns
+    -------
+    (...,) bool ndarray
+        True where the measurement is inconsistent with the prior set.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> ell.intersection_is_empty(np.zeros(2), np.eye(2), [[1.0, 0.0]], [[0.5], [3.0]], [[0.25]])
+    array([False,  True])
     """
     rtol = check_positive(rtol, "rtol", allow_zero=True)
     return max_innovation_form(center, shape, C, y, W) > 1.0 + rtol
@@ -471,10 +858,31 @@ def intersection_is_empty(
 def sample_boundary(
     rng: np.random.Generator, center: ArrayLike, shape: ArrayLike, size: int | tuple[int, ...] = ()
 ) -> np.ndarray:
-    """Points ``c + E u`` with u uniform on the unit sphere (``P = E E^T``); shape (*size, n).
+    """Points ``c + E u`` with u uniform on the unit sphere (``P = E E^T``).
 
-    `rng`: a Generator or a non-negative integer seed; `shape` symmetric positive
-    semidefinite (n, n); `size`: an integer >= 1 or a tuple of them (``()``: one point).
+    Parameters
+    ----------
+    rng : numpy.random.Generator or int
+        Source of randomness (or a non-negative integer seed).
+    center : (n,) array_like
+        Centre.
+    shape : (n, n) array_like
+        Shape, symmetric positive semidefinite.
+    size : int or tuple of int
+        Leading shape of the output (``()``: one point).
+
+    Returns
+    -------
+    (*size, n) ndarray
+        Points on the boundary.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> x = ell.sample_boundary(np.random.default_rng(0), np.zeros(2), np.diag([4.0, 1.0]), size=3)
+    >>> np.round(ell.mahalanobis_sq(x, np.zeros(2), np.diag([4.0, 1.0])), 12)
+    array([1., 1., 1.])
     """
     rng, c, P, size = _sampling_args(rng, center, shape, size)
     u = rng.standard_normal((*size, P.shape[0]))
@@ -485,9 +893,31 @@ def sample_boundary(
 def sample_interior(
     rng: np.random.Generator, center: ArrayLike, shape: ArrayLike, size: int | tuple[int, ...] = ()
 ) -> np.ndarray:
-    """Points uniform in E(c, P); shape (*size, n). Same as :func:`mascore.noise.uniform_ellipsoid`.
+    """Points uniform in E(c, P); the same as :func:`mascore.noise.uniform_ellipsoid`.
 
-    Arguments as in :func:`sample_boundary`.
+    Parameters
+    ----------
+    rng : numpy.random.Generator or int
+        Source of randomness (or a non-negative integer seed).
+    center : (n,) array_like
+        Centre.
+    shape : (n, n) array_like
+        Shape, symmetric positive semidefinite.
+    size : int or tuple of int
+        Leading shape of the output (``()``: one point).
+
+    Returns
+    -------
+    (*size, n) ndarray
+        Points inside the ellipsoid.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import ellipsoids as ell
+    >>> x = ell.sample_interior(np.random.default_rng(0), np.zeros(2), np.eye(2), size=1000)
+    >>> bool(ell.contains(x, np.zeros(2), np.eye(2)).all())
+    True
     """
     rng, c, P, size = _sampling_args(rng, center, shape, size)
     return uniform_ellipsoid(rng, c, P, size)
