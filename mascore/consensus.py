@@ -117,7 +117,7 @@ _ODE_CHECK_EVERY = 10_000
 class ConsensusResult:
     """Trajectory of a consensus run.
 
-    Attributes
+    Parameters
     ----------
     t : (T,) ndarray
         Step indices (discrete time) or times in s (continuous time).
@@ -125,6 +125,14 @@ class ConsensusResult:
         Information states.
     P : (T, ..., n) or (T, ..., n, m, m) ndarray, or None
         Covariances (None for ordinary average consensus).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> run = consensus.kalman_consensus_discrete([0.0, 2.0], [1.0, 1.0], graphs.complete_graph(2), 0.0, 0.1, n_steps=3)
+    >>> run.t, run.scalar
+    (array([0, 1, 2, 3]), True)
     """
 
     t: np.ndarray
@@ -133,17 +141,41 @@ class ConsensusResult:
 
     @property
     def scalar(self) -> bool:
-        """True for a scalar information state (``xi`` has no ``m`` axis)."""
+        """True for a scalar information state (``xi`` has no ``m`` axis).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import consensus, graphs
+        >>> consensus.average_consensus([0.0, 1.0], graphs.complete_graph(2), n_steps=2).scalar
+        True
+        """
         return self.P is None or self.P.ndim == self.xi.ndim
 
     @property
     def spread(self) -> np.ndarray:
-        """Largest pairwise disagreement ``max_ij ||xi_i - xi_j||_inf`` at each time, shape (T, ...)."""
+        """Largest pairwise disagreement ``max_ij ||xi_i - xi_j||_inf`` at each time, shape (T, ...).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import consensus, graphs
+        >>> consensus.average_consensus([0.0, 1.0], graphs.complete_graph(2), n_steps=2).spread
+        array([1., 0., 0.])
+        """
         return spread(self.xi if not self.scalar else self.xi[..., None])
 
     @property
     def final_value(self) -> np.ndarray:
-        """Mean of the agents' final states, shape (...) or (..., m)."""
+        """Mean of the agents' final states, shape (...) or (..., m).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import consensus, graphs
+        >>> float(consensus.average_consensus([0.0, 1.0], graphs.complete_graph(2), n_steps=2).final_value)
+        0.5
+        """
         return self.xi[-1].mean(axis=-1 if self.scalar else -2)
 
 
@@ -160,6 +192,14 @@ class SwitchingTopology:
         Increasing switching times (s), ``times[0]`` the start.
     graphs : (S, n, n) array_like
         Adjacency matrices (``G[i, j] > 0``: ``i`` hears ``j``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> topo = consensus.SwitchingTopology([0.0, 1.0], [graphs.path_graph(3), graphs.ring_graph(3)])
+    >>> topo.n_agents
+    3
     """
 
     times: np.ndarray
@@ -181,11 +221,37 @@ class SwitchingTopology:
 
     @property
     def n_agents(self) -> int:
-        """Number of agents n."""
+        """Number of agents n.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import consensus, graphs
+        >>> consensus.SwitchingTopology([0.0], [graphs.path_graph(4)]).n_agents
+        4
+        """
         return self.graphs.shape[-1]
 
     def at(self, t: float) -> np.ndarray:
-        """The graph active at time `t`."""
+        """The graph active at time `t`.
+
+        Parameters
+        ----------
+        t : float
+            Time (s).
+
+        Returns
+        -------
+        (n, n) ndarray
+            ``graphs[k]`` with ``times[k] <= t < times[k+1]``.
+
+        Examples
+        --------
+        >>> from mascore import consensus, graphs
+        >>> topo = consensus.SwitchingTopology([0.0, 1.0], [graphs.path_graph(3), graphs.ring_graph(3)])
+        >>> int(topo.at(0.5).sum()), int(topo.at(2.0).sum())
+        (4, 6)
+        """
         if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) or not np.isfinite(t):
             raise ValueError(f"t must be a finite time (s); got {t!r}")
         k = int(np.searchsorted(self.times, t, side="right")) - 1
@@ -193,7 +259,32 @@ class SwitchingTopology:
 
     @classmethod
     def periodic(cls, graphs: ArrayLike, dwell: float, t_final: float, t0: float = 0.0) -> "SwitchingTopology":
-        """Cycle through `graphs`, each held for `dwell` s, from `t0` up to `t_final`."""
+        """Cycle through `graphs`, each held for `dwell` s, from `t0` up to `t_final`.
+
+        Parameters
+        ----------
+        graphs : (S, n, n) array_like
+            The graphs to cycle through.
+        dwell : float
+            Time each graph is held (s).
+        t_final : float
+            End of the schedule (s).
+        t0 : float
+            Start (s).
+
+        Returns
+        -------
+        SwitchingTopology
+            The schedule.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import consensus, graphs
+        >>> topo = consensus.SwitchingTopology.periodic(np.stack([graphs.path_graph(3), graphs.ring_graph(3)]), 0.5, 2.0)
+        >>> topo.times
+        array([0. , 0.5, 1. , 1.5])
+        """
         graphs = _check_topologies(graphs, None, "graphs", stacked=True)
         dwell = _positive(dwell, "dwell", "s")
         t_final = _finite_number(t_final, "t_final")
@@ -242,13 +333,24 @@ def kalman_consensus_step(
 
     Returns
     -------
-    xi_next, P_next : arrays of the shapes of `xi` and `P`
+    xi_next : ndarray
+        ``xi[k+1]``, the shape of `xi`.
+    P_next : ndarray
+        ``P[k+1]``, the shape of `P`.
 
     Raises
     ------
     ConsensusBreakdownError
         If ``P_next`` underflows to zero or the result overflows (e.g. ``Omega = 0``
         after a long run made ``P`` tiny).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> xi, P = consensus.kalman_consensus_step([0.0, 4.0], [1.0, 3.0], graphs.complete_graph(2), Q=0.0, Omega=0.0)
+    >>> np.round(xi, 3)                            # agent 0 (P = 1) is more confident: it moves less
+    array([0.571, 1.6  ])
     """
     scalar, xi_v, P_m = _as_state(xi, P, "xi", "P")
     n, m = xi_v.shape[-2], xi_v.shape[-1]
@@ -280,13 +382,17 @@ def kalman_consensus_discrete(
 
     Parameters
     ----------
-    xi0, P0 : initial states and covariances
-        Shapes as in :func:`kalman_consensus_step`.
+    xi0 : (..., n) or (..., n, m) array_like
+        Initial information states, as `xi` of :func:`kalman_consensus_step`.
+    P0 : (..., n) or (..., n, m, m) array_like
+        Initial covariances, as `P` of :func:`kalman_consensus_step`.
     topologies : (K, n, n) or (K, ..., n, n) array_like, (n, n) array_like, or callable
         ``g_ij[k]`` for ``k = 0..K-1``: a sequence (one graph per step, or one
         per step and batch member), a fixed graph, or a function ``k -> (n, n)``.
-    Q, Omega : covariances
-        As in :func:`kalman_consensus_step`.
+    Q : float, (m, m) or (n, m, m) array_like
+        Process-noise covariance, as in :func:`kalman_consensus_step`.
+    Omega : float, (m, m) or (n, n, m, m) array_like
+        Communication-noise covariance, as in :func:`kalman_consensus_step`.
     n_steps : int, optional
         Number of steps; defaults to ``K`` for a sequence, required otherwise.
     rng : numpy.random.Generator or int, optional
@@ -307,6 +413,15 @@ def kalman_consensus_discrete(
         and ``P`` shrinks geometrically (by about ``1 / (1 + d_i)`` a step): on
         a ring of 5 agents it leaves double precision at step 512. The message
         names the step; the states have agreed to machine precision long before.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> run = consensus.kalman_consensus_discrete([0.0, 2.0, 4.0], [1.0, 1.0, 1.0], graphs.path_graph(3),
+    ...                                         Q=0.01, Omega=0.1, n_steps=60)
+    >>> bool(run.spread[-1] < 1e-3 * run.spread[0]), run.xi.shape
+    (True, (61, 3))
     """
     scalar, xi, P = _as_state(xi0, P0, "xi0", "P0")
     n, m = xi.shape[-2], xi.shape[-1]
@@ -347,8 +462,12 @@ def consensus_matrix(
         Covariances ``P[k]``.
     G : (n, n) array_like
         Topology at step k.
-    Q, Omega : covariances
-        As in :func:`kalman_consensus_step`.
+    Q : float, (m, m) or (n, m, m) array_like
+        Process-noise covariance, as in :func:`kalman_consensus_step`.
+    Omega : float, (m, m) or (n, n, m, m) array_like
+        Communication-noise covariance, as in :func:`kalman_consensus_step`.
+    include_self : bool
+        Keep the ``g_ii = 1`` term.
 
     Returns
     -------
@@ -357,6 +476,14 @@ def consensus_matrix(
         diagonal block ``D_ii = I - sum_{j != i} D_ij``: block rows sum to the
         identity (row-stochastic with positive diagonal in the scalar case).
         The stacked state is ``xi.reshape(n*m)`` (agent-major).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> D = consensus.consensus_matrix([1.0, 2.0, 0.5], graphs.path_graph(3), Q=0.0, Omega=0.1)
+    >>> np.round(D.sum(axis=1), 12)                # row-stochastic
+    array([1., 1., 1.])
     """
     P_arr = _single_run_P(P, "P")
     scalar = P_arr.ndim == 1
@@ -409,9 +536,14 @@ def error_covariance(
     ----------
     P0 : (n,) or (n, m, m) array_like
         Initial covariances (a single run).
-    topologies, n_steps : as in :func:`kalman_consensus_discrete`
-    Q, Omega : covariances
-        As in :func:`kalman_consensus_step` (messages are noise-free).
+    topologies : (K, n, n) array_like, (n, n) array_like or callable
+        As in :func:`kalman_consensus_discrete`.
+    Q : float, (m, m) or (n, m, m) array_like
+        Process-noise covariance, as in :func:`kalman_consensus_step`.
+    Omega : float, (m, m) or (n, n, m, m) array_like
+        Communication-noise covariance (messages are noise-free).
+    n_steps : int, optional
+        As in :func:`kalman_consensus_discrete`.
     include_self : bool
         Keep the ``g_ii = 1`` term.
 
@@ -421,6 +553,14 @@ def error_covariance(
         Diagonal (blocks) of ``Phi[k] blockdiag(P0) Phi[k]^T``.
     believed : (K+1, n) or (K+1, n, m, m) ndarray
         ``P_i[k]`` of eq. (4).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> actual, believed = consensus.error_covariance([1.0, 1.0, 1.0], graphs.complete_graph(3), 0.0, 0.1, n_steps=5)
+    >>> bool(np.all(actual[-1] >= believed[-1]))    # correlated errors: the belief is optimistic
+    True
     """
     P_arr = _single_run_P(P0, "P0")
     scalar = P_arr.ndim == 1
@@ -525,6 +665,15 @@ def kalman_consensus_continuous(
         decay exponentially) or loses positivity in the ODE solution.
     RuntimeError
         If the Euler-Maruyama step `dt` is too large for eq. (1).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> run = consensus.kalman_consensus_continuous([0.0, 2.0, 4.0], [1.0, 1.0, 1.0], graphs.ring_graph(3),
+    ...                                           t_final=20.0, Q=0.01, Omega=0.1)
+    >>> bool(run.spread[-1] < 1e-3 * run.spread[0])
+    True
     """
     scalar, xi, P = _as_state(xi0, P0, "xi0", "P0")
     n, m = xi.shape[-2], xi.shape[-1]
@@ -580,7 +729,8 @@ def average_consensus(
     ----------
     xi0 : (..., n) array_like
         Scalar initial states (batch axes allowed).
-    topologies : as in :func:`kalman_consensus_discrete`
+    topologies : (K, n, n) array_like, (n, n) array_like or callable
+        As in :func:`kalman_consensus_discrete`.
     n_steps : int, optional
         Required unless `topologies` is a sequence.
     step_size : float, optional
@@ -592,6 +742,14 @@ def average_consensus(
     -------
     ConsensusResult
         With ``P = None``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> run = consensus.average_consensus([0.0, 3.0, 6.0], graphs.complete_graph(3), n_steps=20)
+    >>> np.round(run.xi[-1], 6)                    # everyone meets at the average
+    array([3., 3., 3.])
     """
     xi = _float_array(xi0, "xi0")
     if xi.ndim < 1 or xi.shape[-1] == 0:
@@ -631,12 +789,24 @@ def central_fusion(xi0: ArrayLike, P0: ArrayLike) -> tuple[np.ndarray, np.ndarra
     Parameters
     ----------
     xi0 : (..., n) or (..., n, m) array_like
+        The agents' estimates.
     P0 : (..., n) or (..., n, m, m) array_like
+        Their covariances (positive definite).
 
     Returns
     -------
     xi_f : (...) or (..., m) ndarray
+        The fused estimate.
     P_f : (...) or (..., m, m) ndarray
+        Its covariance.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> xi, P = consensus.central_fusion([0.0, 3.0], [1.0, 2.0])     # weights 1/P
+    >>> float(xi), round(float(P), 4)
+    (1.0, 0.6667)
     """
     scalar, xi, P = _as_state(xi0, P0, "xi0", "P0")
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
@@ -675,8 +845,11 @@ def random_pairings(
     n_steps : int
         Number of steps K.
     rng : numpy.random.Generator or int
-    max_duration, min_duration : int
-        Range of the epoch length (steps).
+        Source of randomness (or a non-negative integer seed).
+    max_duration : int
+        Longest epoch (steps).
+    min_duration : int
+        Shortest epoch (steps), at least 1.
     size : int, optional
         Number of independent schedules R (Monte Carlo runs).
 
@@ -684,6 +857,14 @@ def random_pairings(
     -------
     G : (K, n, n) or (K, R, n, n) ndarray of float
         Symmetric 0/1 adjacency, one perfect (or near-perfect) matching per step.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> G = consensus.random_pairings(4, n_steps=10, rng=np.random.default_rng(0))
+    >>> G.shape, bool(np.all(G.sum(axis=-1) == 1))     # everyone has exactly one partner
+    ((10, 4, 4), True)
     """
     gen = check_generator(rng)
     if isinstance(n_agents, (int, np.integer)) and not isinstance(n_agents, bool) and n_agents == 1:
@@ -720,7 +901,29 @@ def random_pairings(
 
 
 def periodic_sequence(graphs: ArrayLike, dwell: int, n_steps: int) -> np.ndarray:
-    """Cycle through `graphs`, each held for `dwell` steps: a (n_steps, n, n) sequence."""
+    """Cycle through `graphs`, each held for `dwell` steps.
+
+    Parameters
+    ----------
+    graphs : (S, n, n) array_like
+        The graphs to cycle through.
+    dwell : int
+        Steps each graph is held (>= 1).
+    n_steps : int
+        Length K of the sequence.
+
+    Returns
+    -------
+    (K, n, n) ndarray
+        One graph per step, for :func:`kalman_consensus_discrete`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> consensus.periodic_sequence(np.stack([graphs.path_graph(3), graphs.ring_graph(3)]), dwell=2, n_steps=5).shape
+    (5, 3, 3)
+    """
     graphs = _check_topologies(graphs, None, "graphs", stacked=True).astype(float)
     dwell = check_positive_int(dwell, "dwell", minimum=1)
     n_steps = _check_steps(n_steps)
@@ -741,6 +944,15 @@ def spanning_tree_windows(adjacencies: ArrayLike, window: int) -> np.ndarray:
     Returns
     -------
     (ceil(K / window),) ndarray of bool
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> a = graphs.adjacency_from_edges(3, [(0, 1)], directed=True)
+    >>> b = graphs.adjacency_from_edges(3, [(1, 2)], directed=True)
+    >>> consensus.spanning_tree_windows(np.stack([a, b, a, a]), window=2)
+    array([ True, False])
     """
     stack = _check_topologies(adjacencies, None, "adjacencies", stacked=True).astype(float)
     if stack.ndim != 3:
@@ -756,6 +968,29 @@ def union_condition_holds(adjacencies: ArrayLike, window: int, drop_partial: boo
     directed spanning tree ("infinitely many consecutive uniformly bounded
     intervals", checked over the horizon given). A trailing window shorter
     than `window` is ignored when `drop_partial` is True.
+
+    Parameters
+    ----------
+    adjacencies : (K, n, n) array_like
+        A switching sequence.
+    window : int
+        Window length (steps).
+    drop_partial : bool
+        Ignore a trailing window shorter than `window`.
+
+    Returns
+    -------
+    bool
+        Whether every window's union has a directed spanning tree.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> a = graphs.adjacency_from_edges(3, [(0, 1)], directed=True)
+    >>> b = graphs.adjacency_from_edges(3, [(1, 2)], directed=True)
+    >>> consensus.union_condition_holds(np.stack([a, b] * 4), window=2), consensus.union_condition_holds(np.stack([a] * 8), 2)
+    (True, False)
     """
     _check_bool(drop_partial, "drop_partial")
     ok = spanning_tree_windows(adjacencies, window)
@@ -771,10 +1006,19 @@ def spread(xi: ArrayLike) -> np.ndarray:
     Parameters
     ----------
     xi : (..., n, m) array_like
+        Information states, agents on the second-to-last axis.
 
     Returns
     -------
     (...) ndarray
+        The largest disagreement.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import consensus, graphs
+    >>> float(consensus.spread([[1.0], [4.0], [2.0]]))
+    3.0
     """
     xi = _float_array(xi, "xi")
     if xi.ndim < 2 or xi.shape[-2] == 0 or xi.shape[-1] == 0:
