@@ -54,12 +54,32 @@ from ..plotting import agent_colors
 from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, setting
 
 __all__ = [
-    "A", "ADJACENCY", "ALPHA", "B", "C", "C0", "D", "DEFAULTS", "G_DIST", "LEADER_X0", "MU", "N_AGENTS",
-    "P0", "P0_BOUND", "PINNING", "Q_BAR", "Q_RICCATI", "R0", "REGISTRY", "REVERSED", "SETTINGS", "STUDY", "T_F",
-    "TABLE1_PUBLISHED", "X0_BOX", "X0_HAT",
-    "ClosedLoopRun", "DisturbanceSetting", "Draw", "SetMembershipResult", "SetMembershipSettings",
-    "design", "draw", "ledger_claims", "noise_free_metrics", "plot_fig1", "plot_fig2", "plot_fig3_4",
-    "plot_fig5", "plot_fig6", "run", "simulate", "table1_readings", "table1_study", "table1_view",
+    "A",
+    "B",
+    "C",
+    "C0",
+    "D",
+    "G_DIST",
+    "N_AGENTS",
+    "P0",
+    "PINNING",
+    "REGISTRY",
+    "SETTINGS",
+    "STUDY",
+    "ClosedLoopRun",
+    "Draw",
+    "SetMembershipResult",
+    "SetMembershipSettings",
+    "design",
+    "draw",
+    "ledger_claims",
+    "plot_fig1",
+    "plot_fig2",
+    "plot_fig5",
+    "plot_fig6",
+    "run",
+    "simulate",
+    "table1_view",
 ]
 
 #: Table 1 as published: (mean, RMS) of |delta_bar_k| over k = 0..60, one pair per row.

@@ -33,22 +33,14 @@ from ..plotting import agent_colors, new_axes
 from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, setting
 
 __all__ = [
-    "CONFIDENT_AGENT",
-    "FIG1",
-    "FIG2_LAYOUT",
-    "FIG2_TREE",
-    "FIG3_LAYOUT",
     "REGISTRY",
     "SETTINGS",
     "STUDY",
-    "THEOREM",
     "Fig1Result",
     "KalmanConsensusResult",
     "KalmanConsensusSettings",
     "SwitchingDemo",
-    "bias_study",
     "claims",
-    "decay_rate",
     "fig1",
     "fig1_initial",
     "fig2_graph",
@@ -57,18 +49,11 @@ __all__ = [
     "fixed_graph_run",
     "no_union_sequence",
     "noise_continuous",
-    "noise_study",
     "overconfidence",
-    "plot_bias",
-    "plot_directed",
     "plot_fig1",
-    "plot_fig2_fig3",
-    "plot_overconfidence",
-    "plot_switching",
     "run",
     "switching_demo",
     "union_sequence",
-    "variant_label",
 ]
 
 

@@ -63,10 +63,7 @@ from ..plotting import agent_colors
 from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, setting
 
 __all__ = [
-    "EXAMPLE1",
-    "L_PRINTED",
     "L_READING",
-    "LMI_VARIANTS",
     "PAPER",
     "PUBLISHED",
     "REGISTRY",
@@ -76,20 +73,11 @@ __all__ = [
     "ObserverResult",
     "ObserverSettings",
     "as_printed_phi_interval",
-    "controller_comparison",
     "design",
     "fig12",
     "initial_errors",
     "ledger_claims",
-    "lmi_variants_table",
-    "phi_profile",
-    "plot_fig12",
-    "plot_phi_profile",
-    "profile_argmin",
-    "readings_table",
     "run",
-    "settling_time",
-    "structure_check",
 ]
 
 _GRAPHS: dict[str, Callable[[int], np.ndarray]] = {
