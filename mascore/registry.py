@@ -49,6 +49,7 @@ __all__ = [
     "FigureSpec",
     "PaperRegistry",
     "SettingsView",
+    "documented_settings",
     "Study",
     "TableSpec",
     "all_figures",
@@ -247,6 +248,57 @@ def setting(default: Any, *, source: str = "paper", where: str = "", unit: str =
     if source not in ("paper", "chosen", "derived"):
         raise ValueError(f"source must be 'paper', 'chosen' or 'derived'; got {source!r}")
     return field(default=default, metadata={"source": source, "where": where, "unit": unit, "note": note})
+
+
+def documented_settings(cls: type) -> type:
+    """Complete a settings dataclass's docstring from its :func:`setting` fields.
+
+    Appends a numpydoc Parameters section (one entry per field: its default with unit,
+    whether the paper gives it or we chose it, and the note) and an Examples section,
+    so the API reference shows every setting of a paper without a second copy of them.
+    Apply it above ``@dataclass``.
+
+    Parameters
+    ----------
+    cls : type
+        A dataclass whose fields were declared with :func:`setting`.
+
+    Returns
+    -------
+    type
+        `cls`, with its ``__doc__`` completed.
+
+    Raises
+    ------
+    TypeError
+        If `cls` is not a dataclass.
+
+    Examples
+    --------
+    >>> from mascore.papers.ren2005 import KalmanConsensusSettings
+    >>> "Omega : " in KalmanConsensusSettings.__doc__
+    True
+    """
+    if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)):
+        raise TypeError(f"documented_settings needs a dataclass; got {cls!r}")
+    lines = [(cls.__doc__ or cls.__name__).rstrip(), "", "Parameters", "----------"]
+    for f in dataclasses.fields(cls):
+        meta = f.metadata
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
+        value = format_value(default, max_items=6) + (f" {meta['unit']}" if meta.get("unit") else "")
+        origin = {"paper": "the paper", "chosen": "our choice", "derived": "derived"}.get(meta.get("source"), "")
+        if meta.get("where"):
+            origin += f", {meta['where']}"
+        lines += [f"{f.name} : default {value}", f"    {meta.get('note') or f.name} ({origin})." if origin
+                  else f"    {meta.get('note') or f.name}."]
+    first = dataclasses.fields(cls)[0].name
+    lines += ["", "Examples", "--------", ">>> import dataclasses",
+              f">>> from {cls.__module__} import {cls.__name__}",
+              f">>> settings = {cls.__name__}()",
+              f">>> changed = dataclasses.replace(settings, {first}=settings.{first})   # change any setting by name",
+              ">>> changed == settings", "True"]
+    cls.__doc__ = "\n".join(lines)
+    return cls
 
 
 @dataclass(frozen=True)

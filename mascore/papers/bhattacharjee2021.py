@@ -51,7 +51,7 @@ from .._validation import (
 )
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors
-from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, setting
+from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, documented_settings, setting
 
 __all__ = [
     "A",
@@ -109,6 +109,7 @@ class DisturbanceSetting:
         return self.r * np.eye(1)
 
 
+@documented_settings
 @dataclass(frozen=True)
 class SetMembershipSettings:
     """Every parameter of the example of Sec. 5: the paper's, and ours where it says nothing.

@@ -30,7 +30,7 @@ from .._validation import (as_matrix, check_adjacency, check_positive, check_pos
 from ..graphs import adjacency_from_edges, has_spanning_tree, is_connected, spanning_tree_roots
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors, new_axes
-from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, setting
+from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, documented_settings, setting
 
 __all__ = [
     "REGISTRY",
@@ -60,6 +60,7 @@ __all__ = [
 # --------------------------------------------------------------------------- settings
 
 
+@documented_settings
 @dataclass(frozen=True)
 class KalmanConsensusSettings:
     """Every parameter of the ren2005 runs: the paper's (Sec. II-C) and the ones we chose."""

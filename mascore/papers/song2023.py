@@ -42,7 +42,7 @@ from ..graphs import complete_graph, is_connected, laplacian, proximity_graph, r
 from ..kalman import nees_interval
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors, plot_graph, plot_trajectories
-from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, setting
+from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, documented_settings, setting
 from ..rendezvous import (
     RendezvousModel,
     RendezvousResult,
@@ -86,6 +86,7 @@ __all__ = [
 # ----------------------------------------------------------------------------
 
 
+@documented_settings
 @dataclass(frozen=True)
 class RendezvousSettings:
     """Every parameter of the rendezvous study (Table I, Sec. V.A and our choices).

@@ -53,7 +53,7 @@ from .._validation import (
 from ..graphs import is_connected, proximity_graph
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors, plot_graph
-from ..registry import FigureSpec, Study, TableSpec, setting
+from ..registry import FigureSpec, Study, TableSpec, documented_settings, setting
 from ..sensing import measure
 
 __all__ = [
@@ -76,6 +76,7 @@ __all__ = [
 ]
 
 
+@documented_settings
 @dataclass(frozen=True)
 class FlockingSettings:
     """Every parameter of the flocking study (Sec. V-B, Figs. 4-6, and the sweep beyond the paper).

@@ -60,7 +60,7 @@ from .._validation import (
 )
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors
-from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, setting
+from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, documented_settings, setting
 
 __all__ = [
     "L_READING",
@@ -89,6 +89,7 @@ _GRAPHS: dict[str, Callable[[int], np.ndarray]] = {
 FLAT_TOL = 1e-6
 
 
+@documented_settings
 @dataclass(frozen=True)
 class ObserverSettings:
     """Every parameter of the Example 1 run (Sec. 5) and of the checks beyond it."""
