@@ -119,7 +119,19 @@ class KalmanConsensusSettings:
 
     @property
     def fig1_xi0(self) -> np.ndarray:
-        """Initial meeting times as an array."""
+        """Initial meeting times as an array.
+
+        Returns
+        -------
+        (n,) ndarray
+            The meeting times (h).
+
+        Examples
+        --------
+        >>> from mascore.papers import ren2005
+        >>> ren2005.SETTINGS.fig1_xi0[:3]
+        array([1., 2., 3.])
+        """
         return np.asarray(self.xi0, dtype=float)
 
 
@@ -160,28 +172,92 @@ def fig2_graph() -> np.ndarray:
     The paper's drawing is lost in the text extraction; the text fixes that a
     spanning tree can be rooted at A5, A1 or A4. Ours: the cycle 1 -> 4 -> 5 -> 1
     (the possible roots) feeding 2, 3 and 6, with nothing flowing back.
+
+    Returns
+    -------
+    (6, 6) ndarray
+        Adjacency, ``A[i, j] > 0`` for ``j -> i``.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> from mascore.papers import ren2005
+    >>> (graphs.spanning_tree_roots(ren2005.fig2_graph()) + 1).tolist()    # 1-based, as in the paper
+    [1, 4, 5]
     """
     edges = [(0, 3), (3, 4), (4, 0), (4, 5), (0, 1), (1, 2), (5, 2)]
     return adjacency_from_edges(6, edges, directed=True)
 
 
 def fig3a_graph() -> np.ndarray:
-    """Fig. 3(a) redrawn: two leaders (agents 1 and 4 hear nobody); chains 1->2->3, 4->5->6, bridge 3->6."""
+    """Fig. 3(a) redrawn: two leaders (agents 1 and 4 hear nobody); chains 1->2->3, 4->5->6, bridge 3->6.
+
+    Returns
+    -------
+    (6, 6) ndarray
+        Adjacency, ``A[i, j] > 0`` for ``j -> i``.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> from mascore.papers import ren2005
+    >>> graphs.has_spanning_tree(ren2005.fig3a_graph())
+    False
+    """
     return adjacency_from_edges(6, [(0, 1), (1, 2), (3, 4), (4, 5), (2, 5)], directed=True)
 
 
 def fig3b_graph() -> np.ndarray:
-    """Fig. 3(b) redrawn: two isolated groups {1, 2, 3} and {4, 5, 6} (two-way chains)."""
+    """Fig. 3(b) redrawn: two isolated groups {1, 2, 3} and {4, 5, 6} (two-way chains).
+
+    Returns
+    -------
+    (6, 6) ndarray
+        Adjacency, ``A[i, j] > 0`` for ``j -> i``.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> from mascore.papers import ren2005
+    >>> graphs.has_spanning_tree(ren2005.fig3b_graph())
+    False
+    """
     return adjacency_from_edges(6, [(0, 1), (1, 2), (3, 4), (4, 5)], directed=False)
 
 
 def union_sequence() -> np.ndarray:
-    """Fig. 3(a) and Fig. 3(b) alternating: neither has a spanning tree, their union does."""
+    """Fig. 3(a) and Fig. 3(b) alternating: neither has a spanning tree, their union does.
+
+    Returns
+    -------
+    (2, 6, 6) ndarray
+        The two graphs, cycled by :func:`switching_demo`.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> from mascore.papers import ren2005
+    >>> graphs.has_spanning_tree(graphs.graph_union(ren2005.union_sequence()))
+    True
+    """
     return np.stack([fig3a_graph(), fig3b_graph()])
 
 
 def no_union_sequence() -> np.ndarray:
-    """Fig. 3(b) and Fig. 3(a) without its bridge 3->6: every union is two isolated groups."""
+    """Fig. 3(b) and Fig. 3(a) without its bridge 3->6: every union is two isolated groups.
+
+    Returns
+    -------
+    (2, 6, 6) ndarray
+        The two graphs, cycled by :func:`switching_demo`.
+
+    Examples
+    --------
+    >>> from mascore import graphs
+    >>> from mascore.papers import ren2005
+    >>> graphs.has_spanning_tree(graphs.graph_union(ren2005.no_union_sequence()))
+    False
+    """
     a = fig3a_graph()
     a[5, 2] = 0.0
     return np.stack([a, fig3b_graph()])
@@ -192,7 +268,28 @@ def no_union_sequence() -> np.ndarray:
 
 @dataclass(frozen=True)
 class Fig1Result:
-    """Both columns of Fig. 1 plus the equal-weight comparison, on the same pairings."""
+    """Both columns of Fig. 1 plus the equal-weight comparison, on the same pairings.
+
+    Parameters
+    ----------
+    pairings : (K, n, n) ndarray
+        The random one-to-one pairings, one graph per step.
+    equal : mascore.consensus.ConsensusResult
+        Left column: equal initial variances.
+    confident : mascore.consensus.ConsensusResult
+        Right column: agent 7 confident (small initial variance).
+    average : mascore.consensus.ConsensusResult
+        Ordinary average consensus on the same pairings (the comparison).
+    fused_confident : float
+        What a fusion centre would compute from the right column's initial data.
+
+    Examples
+    --------
+    >>> from mascore.papers import ren2005
+    >>> res = ren2005.fig1(seed=1)
+    >>> res.pairings.shape, res.confident.xi.shape
+    ((100, 10, 10), (101, 10))
+    """
 
     pairings: np.ndarray  # (K, n, n)
     equal: cs.ConsensusResult  # left column
@@ -202,7 +299,29 @@ class Fig1Result:
 
 
 def fig1_initial(confident: bool, settings: KalmanConsensusSettings = SETTINGS) -> tuple[np.ndarray, np.ndarray]:
-    """Initial times and variances of Fig. 1 (the confident agent at `P_confident` if `confident`)."""
+    """Initial times and variances of Fig. 1 (the confident agent at `P_confident` if `confident`).
+
+    Parameters
+    ----------
+    confident : bool
+        Right column (agent 7 confident) or left column (equal variances).
+    settings : KalmanConsensusSettings
+        The study's settings (default :data:`SETTINGS`).
+
+    Returns
+    -------
+    xi0 : (n,) ndarray
+        Initial meeting times (h).
+    P0 : (n,) ndarray
+        Initial variances (h²).
+
+    Examples
+    --------
+    >>> from mascore.papers import ren2005
+    >>> xi0, P0 = ren2005.fig1_initial(confident=True)
+    >>> float(P0[6]), float(P0[0])
+    (0.001, 1.0)
+    """
     xi0 = settings.fig1_xi0
     P0 = np.full(settings.n_agents, settings.P_equal)
     if confident:
@@ -228,6 +347,21 @@ def fig1(seed: int = 1, noise: bool | None = None, settings: KalmanConsensusSett
         False). The paper's Fig. 1 uses Omega = 0.1 in the weights; whether noise
         was also injected is not said.
     settings : KalmanConsensusSettings
+        The study's settings (default :data:`SETTINGS`).
+
+    Returns
+    -------
+    Fig1Result
+        Both columns of Fig. 1 and the equal-weight comparison.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore.papers import ren2005
+    >>> res = ren2005.fig1(seed=1)
+    >>> final = res.confident.xi[-1]
+    >>> bool(np.ptp(final) < 0.01), round(float(final.mean()), 1)   # all agree; the average 5.5 h is pulled to 7 h
+    (True, 5.8)
     """
     check_seed(seed, "seed")
     noise = settings.fig1_noise if noise is None else noise
@@ -248,7 +382,28 @@ def fig1(seed: int = 1, noise: bool | None = None, settings: KalmanConsensusSett
 
 @dataclass(frozen=True)
 class SwitchingDemo:
-    """Discrete and continuous runs on one switching sequence."""
+    """Discrete and continuous runs on one switching sequence.
+
+    Parameters
+    ----------
+    graphs : (S, n, n) ndarray
+        The graphs cycled through.
+    sequence : (K, n, n) ndarray
+        The discrete-time sequence (each graph held ``dwell_steps``).
+    union_ok : bool
+        Whether every window's union has a spanning tree.
+    discrete : mascore.consensus.ConsensusResult
+        Eqs. (4)-(5) on `sequence`.
+    continuous : mascore.consensus.ConsensusResult
+        Eqs. (1)-(3), each graph held ``dwell_time`` s.
+
+    Examples
+    --------
+    >>> from mascore.papers import ren2005
+    >>> demo = ren2005.switching_demo(ren2005.union_sequence())
+    >>> demo.union_ok, bool(demo.discrete.spread[-1] < 1e-3)
+    (True, True)
+    """
 
     graphs: np.ndarray  # (S, n, n) graphs cycled through
     sequence: np.ndarray  # (K, n, n) discrete sequence
@@ -269,7 +424,26 @@ def _check_graph_stack(graphs: np.ndarray, n: int) -> np.ndarray:
 
 
 def switching_demo(graphs: np.ndarray, settings: KalmanConsensusSettings = SETTINGS) -> SwitchingDemo:
-    """Kalman consensus, eqs. (1)-(3) and (4)-(5), while cycling through `graphs`."""
+    """Kalman consensus, eqs. (1)-(3) and (4)-(5), while cycling through `graphs`.
+
+    Parameters
+    ----------
+    graphs : (S, n, n) ndarray
+        The graphs to cycle through (e.g. :func:`union_sequence`).
+    settings : KalmanConsensusSettings
+        The study's settings (default :data:`SETTINGS`).
+
+    Returns
+    -------
+    SwitchingDemo
+        The discrete and continuous runs.
+
+    Examples
+    --------
+    >>> from mascore.papers import ren2005
+    >>> ren2005.switching_demo(ren2005.no_union_sequence()).union_ok
+    False
+    """
     s = settings
     xi0 = np.asarray(s.switch_xi0, dtype=float)
     graphs = _check_graph_stack(graphs, xi0.size)
@@ -284,7 +458,24 @@ def switching_demo(graphs: np.ndarray, settings: KalmanConsensusSettings = SETTI
 
 
 def fixed_graph_run(settings: KalmanConsensusSettings = SETTINGS) -> cs.ConsensusResult:
-    """Continuous-time Kalman consensus on the fixed Fig. 2 graph (it has a spanning tree)."""
+    """Continuous-time Kalman consensus on the fixed Fig. 2 graph (it has a spanning tree).
+
+    Parameters
+    ----------
+    settings : KalmanConsensusSettings
+        The study's settings (default :data:`SETTINGS`).
+
+    Returns
+    -------
+    mascore.consensus.ConsensusResult
+        The run, ``t_final`` s long.
+
+    Examples
+    --------
+    >>> from mascore.papers import ren2005
+    >>> bool(ren2005.fixed_graph_run().spread[-1] < 1e-3)
+    True
+    """
     s = settings
     xi0 = np.asarray(s.switch_xi0, dtype=float)
     return cs.kalman_consensus_continuous(xi0, np.full(xi0.size, s.switch_P0), fig2_graph(), s.t_final, s.Q,
@@ -358,12 +549,28 @@ def noise_continuous(seed: int = 1, settings: KalmanConsensusSettings = SETTINGS
     ``settings.noise_paths`` Euler-Maruyama paths of eqs. (1)-(3) (white noise of
     intensity Omega, step ``noise_dt``) next to the noise-free run (RK45).
 
+    Parameters
+    ----------
+    seed : int
+        Seed of the communication noise.
+    settings : KalmanConsensusSettings
+        The study's settings (default :data:`SETTINGS`).
+
     Returns
     -------
     dict
         ``t``; ``path``: the states of the first noisy path, (T, 6); ``rms`` and
         ``rms_quiet``: RMS disagreement with noise (mean over paths) and without;
         ``floor`` and ``floor_quiet``: their means over the second half.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> from mascore.papers import ren2005
+    >>> quick = dataclasses.replace(ren2005.SETTINGS, noise_paths=5, noise_t_final=5.0)
+    >>> out = ren2005.noise_continuous(seed=1, settings=quick)
+    >>> bool(out['floor'] > out['floor_quiet'])                 # noise leaves a disagreement floor
+    True
     """
     s = settings
     xi0 = np.asarray(s.switch_xi0, dtype=float)
@@ -436,6 +643,7 @@ def overconfidence(seed: int = 1, settings: KalmanConsensusSettings = SETTINGS,
     seed : int
         Seed of the Fig. 1 pairings (unused if `fig1_result` is given).
     settings : KalmanConsensusSettings
+        The study's settings.
     fig1_result : Fig1Result, optional
         The Fig. 1 run whose pairings to use (default: ``fig1(seed, settings=settings)``).
 
@@ -445,6 +653,15 @@ def overconfidence(seed: int = 1, settings: KalmanConsensusSettings = SETTINGS,
     keys ``"paper"`` and ``"ideal"`` (Q = 0, Omega = ``ideal_Omega``, no self term),
     and ``fused_variance``, the central-fusion variance (the smallest any
     combination of the initial data can reach).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore.papers import ren2005
+    >>> out = ren2005.overconfidence(seed=1)
+    >>> paper = out['variants']['paper']
+    >>> bool(np.all(paper['actual'][-1] >= paper['believed'][-1]))   # the agents believe they know more
+    True
     """
     s = settings
     check_seed(seed, "seed")
@@ -464,7 +681,37 @@ def overconfidence(seed: int = 1, settings: KalmanConsensusSettings = SETTINGS,
 
 @dataclass(frozen=True)
 class KalmanConsensusResult:
-    """Everything the figures, tables and claims of ren2005 are computed from (one seed)."""
+    """Everything the figures, tables and claims of ren2005 are computed from (one seed).
+
+    Parameters
+    ----------
+    settings : KalmanConsensusSettings
+        The settings of the run.
+    seed : int
+        The seed.
+    fig1 : Fig1Result
+        Fig. 1.
+    union : SwitchingDemo
+        Switching graphs whose unions have a spanning tree (Theorems 3.2, 3.9).
+    no_union : SwitchingDemo
+        Switching graphs whose unions do not.
+    fixed : mascore.consensus.ConsensusResult
+        The fixed Fig. 2 graph.
+    noise : dict
+        Discrete-time communication-noise study.
+    noise_continuous : dict
+        Continuous-time communication-noise study (:func:`noise_continuous`).
+    bias : dict
+        Bias of the consensus value against central fusion.
+    overconfidence : dict
+        Believed against actual variances (:func:`overconfidence`).
+
+    Examples
+    --------
+    >>> from mascore.papers import ren2005
+    >>> ren2005.KalmanConsensusResult.__dataclass_fields__.keys() >= {"fig1", "union", "bias"}
+    True
+    """
 
     settings: KalmanConsensusSettings
     seed: int
@@ -501,6 +748,18 @@ def run(settings: KalmanConsensusSettings = SETTINGS, seed: int = 1, progress: b
         starts its own generator from it).
     progress : bool
         Show a progress bar over the studies.
+
+    Returns
+    -------
+    KalmanConsensusResult
+        Every run the figures, tables and claims are computed from.
+
+    Examples
+    --------
+    >>> from mascore.papers import ren2005
+    >>> result = ren2005.run(seed=1)
+    >>> result.union.union_ok, result.no_union.union_ok
+    (True, False)
     """
     s = settings
     check_seed(seed, "seed")
@@ -531,7 +790,31 @@ def _check_agent(agent: object, name: str, n: int) -> int:
 
 
 def plot_fig1(res: Fig1Result, axes=None, confident_agent: int = SETTINGS.confident_agent):
-    """2 x 2 panels: states (top) and variances (bottom); equal (left) and confident (right)."""
+    """2 x 2 panels: states (top) and variances (bottom); equal (left) and confident (right).
+
+    Parameters
+    ----------
+    res : Fig1Result
+        The output of :func:`fig1`.
+    axes : (2, 2) array of matplotlib Axes, optional
+        Where to draw (default: a new figure).
+    confident_agent : int
+        The confident agent (1-based), highlighted.
+
+    Returns
+    -------
+    (2, 2) ndarray of matplotlib.axes.Axes
+        The panels.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.papers import ren2005
+    >>> axes = ren2005.plot_fig1(ren2005.fig1(seed=1))
+    >>> axes.shape
+    (2, 2)
+    >>> plt.close("all")
+    """
     _check_agent(confident_agent, "confident_agent", res.equal.xi.shape[-1])
     if axes is None:
         _, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True, layout="constrained")
@@ -973,7 +1256,25 @@ def _beyond_claims(result: KalmanConsensusResult) -> list[Claim]:
 
 
 def claims(result: KalmanConsensusResult) -> list[Claim]:
-    """The nine ledger claims of ren2005, from one :func:`run` (all qualitative: the paper prints no numbers)."""
+    """The nine ledger claims of ren2005, from one :func:`run` (all qualitative: the paper prints no numbers).
+
+    Parameters
+    ----------
+    result : KalmanConsensusResult
+        The output of :func:`run`.
+
+    Returns
+    -------
+    list of mascore.ledger.Claim
+        Each with its rule and computed verdict.
+
+    Examples
+    --------
+    >>> from mascore.papers import ren2005
+    >>> claims = ren2005.claims(ren2005.run(seed=1))   # doctest: +ELLIPSIS
+    >>> len(claims), sorted({c.verdict for c in claims})
+    (9, ['holds'])
+    """
     return [*_fig1_claims(result), _graph_claim(), *_theorem_claims(result), _noise_claim(result),
             *_beyond_claims(result)]
 
