@@ -123,17 +123,62 @@ class ObserverSettings:
                            note="controller comparison: R = r I")
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(A, Bbar, C)`` as float arrays."""
+        """``(A, Bbar, C)`` as float arrays.
+
+        Returns
+        -------
+        A : (n, n) ndarray
+            Agent state matrix.
+        Bbar : (n, q) ndarray
+            Disturbance input matrix.
+        C : (m, n) ndarray
+            Output matrix.
+
+        Examples
+        --------
+        >>> from mascore.papers import vlahakis
+        >>> [M.shape for M in vlahakis.SETTINGS.arrays()]
+        [(2, 2), (2, 1), (1, 2)]
+        """
         return (np.array(self.A, dtype=float), np.array(self.Bbar, dtype=float), np.array(self.C, dtype=float))
 
     def adjacency(self, n_agents: int | None = None) -> np.ndarray:
-        """Adjacency of the graph (``n_agents`` nodes, default the settings')."""
+        """Adjacency of the graph (``n_agents`` nodes, default the settings').
+
+        Parameters
+        ----------
+        n_agents : int, optional
+            Number of nodes (default ``self.n_agents``).
+
+        Returns
+        -------
+        (N, N) ndarray
+            Symmetric adjacency of ``self.graph``.
+
+        Examples
+        --------
+        >>> from mascore.papers import vlahakis
+        >>> vlahakis.SETTINGS.adjacency().sum(axis=1)              # the ring of Example 1
+        array([2., 2., 2., 2., 2.])
+        """
         if self.graph not in _GRAPHS:
             raise ValueError(f"graph must be one of {sorted(_GRAPHS)}; got {self.graph!r}")
         return _GRAPHS[self.graph](self.n_agents if n_agents is None else n_agents)
 
     def lqr_weights(self) -> dict[str, np.ndarray]:
-        """``Q1``, ``Q2``, ``R`` of the controller comparison."""
+        """``Q1``, ``Q2``, ``R`` of the controller comparison.
+
+        Returns
+        -------
+        dict of str to ndarray
+            The three weight matrices.
+
+        Examples
+        --------
+        >>> from mascore.papers import vlahakis
+        >>> sorted(vlahakis.SETTINGS.lqr_weights())
+        ['Q1', 'Q2', 'R']
+        """
         n, m = np.shape(self.Bbar)
         return {"Q1": self.lqr_q1 * np.eye(n), "Q2": self.lqr_q2 * np.eye(n), "R": self.lqr_r * np.eye(m)}
 
@@ -192,6 +237,19 @@ def design(Q2: float, reading: str = "as-printed", trace_in: str = "transformed"
     n_agents : int, optional
         Overrides ``settings.n_agents``.
     settings : ObserverSettings
+        The study's settings (default :data:`SETTINGS`).
+
+    Returns
+    -------
+    mascore.observers.DistributedObserver
+        The local gain L, the coupling Phi, the cost bound and the costs.
+
+    Examples
+    --------
+    >>> from mascore.papers import vlahakis
+    >>> obs = vlahakis.design(5.0)
+    >>> obs.L.shape, obs.Phi.shape
+    ((2, 1), (1, 1))
     """
     Q2 = _check_q2(Q2)
     if n_agents is not None:
@@ -251,12 +309,20 @@ def as_printed_phi_interval(Q2: float, n_agents: int | None = None,
     n_agents : int, optional
         Graph size; default that of `settings`.
     settings : ObserverSettings
+        The study's settings (default :data:`SETTINGS`).
 
     Returns
     -------
     (lo, hi) : tuple of float
         Every ``Phi`` in ``[lo, hi]`` (dimensionless) gives the optimum
         ``N trace(S_hat)``; no ``Phi`` outside does.
+
+    Examples
+    --------
+    >>> from mascore.papers import vlahakis
+    >>> lo, hi = vlahakis.as_printed_phi_interval(5.0)
+    >>> bool(lo < 0.5 < hi)                                 # Phi = Q2 / Q1 = 0.5 lies inside
+    True
     """
     Q2 = _check_q2(Q2)
     lam = _lam(settings, _check_n_agents(n_agents))
@@ -344,7 +410,28 @@ def _phi_is_free(program: tuple, phi: float, step: float, trace_in: str = "trans
 
 
 def initial_errors(seed: int, settings: ObserverSettings = SETTINGS) -> np.ndarray:
-    """Initial estimation errors (N, n): uniform in ``[-e, e]`` with ``e = settings.initial_error`` (our choice)."""
+    """Initial estimation errors, uniform in ``[-e, e]`` with ``e = settings.initial_error`` (our choice).
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the draw.
+    settings : ObserverSettings
+        The study's settings (default :data:`SETTINGS`).
+
+    Returns
+    -------
+    (N, n) ndarray
+        One error vector per agent.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore.papers import vlahakis
+    >>> e0 = vlahakis.initial_errors(seed=1)
+    >>> e0.shape, bool(np.abs(e0).max() <= 1.0)
+    ((5, 2), True)
+    """
     rng = check_generator(seed, "seed")
     n = len(settings.A)
     return rng.uniform(-settings.initial_error, settings.initial_error, size=(settings.n_agents, n))
@@ -377,17 +464,30 @@ def settling_time(t: np.ndarray, signal: np.ndarray, fraction: float) -> float:
 
 @dataclass(frozen=True)
 class Fig12Result:
-    """Position estimation errors of the agents for one ``Q2``.
+    """Position estimation errors of the agents for one ``Q2`` (Figs. 1-2).
 
-    Attributes
+    Parameters
     ----------
     Q2 : float
-    t : (T,) seconds
-    ours, paper : (T, N) position errors (m) with our design (the printed L, the
-        LMI's Phi) and with the printed L and Phi.
-    design : the design of ``ours``
-    settling : ``{ours,paper}_settling_s`` (1 % settling time of the disagreement, s) and
-        ``{ours,paper}_iae`` (integral of the largest absolute disagreement, m s)
+        Weight on the relative output error.
+    t : (T,) ndarray
+        Time (s).
+    ours : (T, N) ndarray
+        Position errors (m) with our design (the printed L, the LMI's Phi).
+    paper : (T, N) ndarray
+        Position errors (m) with the printed L and Phi.
+    design : mascore.observers.DistributedObserver
+        The design of `ours`.
+    settling : dict
+        ``{ours,paper}_settling_s`` (1 % settling time of the disagreement, s) and
+        ``{ours,paper}_iae`` (integral of the largest absolute disagreement, m s).
+
+    Examples
+    --------
+    >>> from mascore.papers import vlahakis
+    >>> first = vlahakis.fig12(seed=1)[0]
+    >>> first.Q2, first.ours.shape == first.paper.shape
+    (5.0, True)
     """
 
     Q2: float
@@ -399,7 +499,26 @@ class Fig12Result:
 
 
 def fig12(seed: int, settings: ObserverSettings = SETTINGS) -> tuple[Fig12Result, ...]:
-    """Figs. 1-2: position estimation errors for each ``Q2`` of `settings`."""
+    """Figs. 1-2: position estimation errors for each ``Q2`` of `settings`.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the initial errors.
+    settings : ObserverSettings
+        The study's settings (default :data:`SETTINGS`).
+
+    Returns
+    -------
+    tuple of Fig12Result
+        One per ``Q2`` (Fig. 1: Q2 = 5, Fig. 2: Q2 = 25).
+
+    Examples
+    --------
+    >>> from mascore.papers import vlahakis
+    >>> [r.Q2 for r in vlahakis.fig12(seed=1)]
+    [5.0, 25.0]
+    """
     s = settings
     A, _, C = s.arrays()
     t = np.arange(0.0, s.t_end + s.dt / 2, s.dt)
@@ -627,21 +746,48 @@ def _position_errors(res: Fig12Result, every: float = 0.02) -> pd.DataFrame:
 class ObserverResult:
     """Everything the figures, tables and claims of the study need (see :func:`run`).
 
-    Attributes
+    Parameters
     ----------
-    settings, seed : the run's settings and seed
-    designs : ``(reading, Q2) -> DistributedObserver`` (traces in the coordinates of eq. (32))
-    readings, variants : :func:`readings_table`, :func:`lmi_variants_table`
-    intervals : ``Q2 -> (lo, hi)``, the optimal Phi of the program as printed
-    n_trace_s_hat : ``N trace(S_hat)``, the optimum of the program as printed
-    gamma_at_printed : ``(reading, Q2) -> Gamma(printed Phi)``
-    gamma_at_lmi : ``Q2 -> Gamma(LMI's Phi)`` with the printed L
-    phi_argmin : ``Q2 -> argmin Gamma`` with the printed L (independent of the LMI)
-    printed_cost : ``Q2 ->`` cost (55) the printed L and Phi achieve
-    abscissas : label -> largest real part of the eigenvalues of ``A_e`` (1/s)
-    phi_grid, profile : the grid of Gamma(Phi) and ``(reading, Q2) -> Gamma`` on it
-    fig12 : Figs. 1-2 (:func:`fig12`)
-    structure, controllers : :func:`structure_check`, :func:`controller_comparison`
+    settings : ObserverSettings
+        The run's settings.
+    seed : int
+        The run's seed.
+    designs : dict
+        ``(reading, Q2) -> DistributedObserver`` (traces in the coordinates of eq. (32)).
+    readings : pandas.DataFrame
+        The table of readings of eqs. (29)-(30).
+    variants : pandas.DataFrame
+        The table of LMI variants.
+    intervals : dict
+        ``Q2 -> (lo, hi)``, the optimal Phi of the program as printed.
+    n_trace_s_hat : float
+        ``N trace(S_hat)``, the optimum of the program as printed.
+    gamma_at_printed : dict
+        ``(reading, Q2) -> Gamma(printed Phi)``.
+    gamma_at_lmi : dict
+        ``Q2 -> Gamma(LMI's Phi)`` with the printed L.
+    phi_argmin : dict
+        ``Q2 -> argmin Gamma`` with the printed L (independent of the LMI).
+    printed_cost : dict
+        ``Q2 ->`` cost (55) the printed L and Phi achieve.
+    abscissas : dict
+        Label -> largest real part of the eigenvalues of ``A_e`` (1/s).
+    phi_grid : ndarray
+        The grid of Phi values of the profiles.
+    profile : dict
+        ``(reading, Q2) -> Gamma`` on `phi_grid`.
+    fig12 : tuple of Fig12Result
+        Figs. 1-2 (:func:`fig12`).
+    structure : dict
+        The structure check of eq. (13).
+    controllers : pandas.DataFrame
+        The LQR controller comparison.
+
+    Examples
+    --------
+    >>> from mascore.papers import vlahakis
+    >>> sorted(vlahakis.ObserverResult.__dataclass_fields__)[:3]
+    ['abscissas', 'controllers', 'designs']
     """
 
     settings: ObserverSettings
@@ -708,6 +854,18 @@ def run(settings: ObserverSettings = SETTINGS, seed: int = 1, progress: bool = F
         Seed of the initial errors of Figs. 1-2 (the only random draw).
     progress : bool
         Show a progress bar over the steps.
+
+    Returns
+    -------
+    ObserverResult
+        Everything the figures, tables and claims need.
+
+    Examples
+    --------
+    >>> from mascore.papers import vlahakis
+    >>> result = vlahakis.run(seed=1)
+    >>> sorted(result.intervals)
+    [5.0, 25.0]
     """
     s = settings
     check_seed(seed, "seed")
@@ -965,7 +1123,25 @@ def _cost_claims(r: ObserverResult) -> list[Claim]:
 
 
 def ledger_claims(result: ObserverResult) -> list[Claim]:
-    """The ledger of the study, from the result alone."""
+    """The ledger of the study, from the result alone.
+
+    Parameters
+    ----------
+    result : ObserverResult
+        The output of :func:`run`.
+
+    Returns
+    -------
+    list of mascore.ledger.Claim
+        The claims with their computed verdicts.
+
+    Examples
+    --------
+    >>> from mascore.papers import vlahakis
+    >>> claims = vlahakis.ledger_claims(vlahakis.run(seed=1))
+    >>> len(claims)
+    12
+    """
     return [*_gain_claims(result), *_phi_j_claims(result), _interval_claim(result), *_behaviour_claims(result),
             *_cost_claims(result)]
 
