@@ -143,7 +143,14 @@ class RendezvousSettings:
 
     @property
     def n_steps(self) -> int:
-        """Number of steps of the horizon."""
+        """Number of steps of the horizon.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023
+        >>> song2023.SETTINGS.n_steps                                   # 40 s at dt = 0.1 s
+        400
+        """
         return int(round(self.horizon / self.dt))
 
 
@@ -197,7 +204,27 @@ class RendezvousSetup:
 
 
 def setup(n_agents: int | None = None, settings: RendezvousSettings = SETTINGS) -> RendezvousSetup:
-    """Table I model: double integrator, ``K = [rho1 I, rho2 I]``; `n_agents` overrides N."""
+    """Table I model: double integrator, ``K = [rho1 I, rho2 I]``; `n_agents` overrides N.
+
+    Parameters
+    ----------
+    n_agents : int, optional
+        Team size (default ``settings.n_agents``).
+    settings : RendezvousSettings
+        The study's settings (default :data:`SETTINGS`).
+
+    Returns
+    -------
+    RendezvousSetup
+        Agent matrices ``A, B``, gain ``K``, dimensions and the initial covariance.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> s = song2023.setup()
+    >>> s.K.shape, s.A.shape
+    ((2, 4), (4, 4))
+    """
     st = settings
     if n_agents is not None:
         n_agents = check_positive_int(n_agents, "n_agents")
@@ -216,10 +243,25 @@ def estimator_step_seconds(n_agents: int, repeat: int = 5, plain_repeat: int = 3
     ``eb_update``) and the one written straight from the equations
     (``plain_estimation_based_step``). This machine; reported, never asserted.
 
+    Parameters
+    ----------
+    n_agents : int
+        Team size (a ring, N >= 3).
+    repeat : int
+        Timed repeats of the structured step (median).
+    plain_repeat : int
+        Timed repeats of the plain step.
+
     Returns
     -------
     dict
         ``structured_s``, ``plain_s`` (s per step) and ``speedup``.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> sorted(song2023.estimator_step_seconds(4, repeat=1, plain_repeat=1))
+    ['plain_s', 'speedup', 'structured_s']
     """
     n_agents = check_positive_int(n_agents, "n_agents", minimum=3)  # a ring
     check_positive_int(repeat, "repeat")
@@ -300,7 +342,28 @@ def _check_run_arguments(seed: object, n_runs: object, horizon: object, dt: floa
 
 @dataclass(frozen=True)
 class Fig2Result:
-    """Fig. 2 scenario: one topology, Monte Carlo runs sharing the covariance recursion."""
+    """Fig. 2 scenario: one topology, Monte Carlo runs sharing the covariance recursion.
+
+    Parameters
+    ----------
+    setup : RendezvousSetup
+        The model of Table I (agent, gain, initial covariance).
+    adjacency : (N, N) ndarray
+        The fixed sensing topology.
+    estimation : mascore.rendezvous.RendezvousResult
+        The eq. (21) loop, all runs (run 0 is the one plotted).
+    measurement : mascore.rendezvous.RendezvousResult
+        The eq. (5) loop with the filters of eqs. (8)-(20).
+    converged_from : float
+        Start (s) of the window the steady-state statistics average over.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> r2 = song2023.fig2(seed=0, n_runs=3, horizon=4.0)           # a small run: 3 runs, 4 s
+    >>> r2.estimation.states.shape                                   # (T+1, runs, N, 4)
+    (41, 3, 8, 4)
+    """
 
     setup: RendezvousSetup
     adjacency: np.ndarray
@@ -309,14 +372,49 @@ class Fig2Result:
     converged_from: float
 
     def error_to_std_ratio(self, res: RendezvousResult | None = None) -> np.ndarray:
-        """Per agent: RMS position error over runs and converged time / mean sqrt(trace)."""
+        """Per agent: RMS position error over runs and converged time / mean sqrt(trace).
+
+        Parameters
+        ----------
+        res : mascore.rendezvous.RendezvousResult, optional
+            The loop to evaluate (default the estimation-based one).
+
+        Returns
+        -------
+        (N,) ndarray
+            Near 1 when the filter's covariance matches its actual error.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023
+        >>> song2023.fig2(seed=0, n_runs=3, horizon=4.0).error_to_std_ratio().shape
+        (8,)
+        """
         res = self.estimation if res is None else res
         k0 = int(round(self.converged_from / res.dt))
         rms = np.sqrt(np.mean(res.pos_error[k0:] ** 2, axis=(0, 1)))
         return rms / np.sqrt(np.mean(res.pos_std[k0:, 0] ** 2, axis=0))
 
     def nees_summary(self, res: RendezvousResult | None = None) -> dict[str, float]:
-        """Run-averaged NEES per (step, agent) against its 95 % chi-square interval."""
+        """Run-averaged NEES per (step, agent) against its 95 % chi-square interval.
+
+        Parameters
+        ----------
+        res : mascore.rendezvous.RendezvousResult, optional
+            The loop to evaluate (default the estimation-based one).
+
+        Returns
+        -------
+        dict of str to float
+            ``mean_nees``, ``dof``, the interval ``low`` and ``high``, and ``fraction_inside``.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023
+        >>> summary = song2023.fig2(seed=0, n_runs=3, horizon=4.0).nees_summary()
+        >>> summary["dof"]
+        32
+        """
         res = self.estimation if res is None else res
         n_runs, N = res.nees.shape[1:]
         dof = res.model.m * N
@@ -332,8 +430,30 @@ def fig2(seed: int = 0, n_runs: int | None = None, horizon: float | None = None,
 
     The covariance recursion is shared by all runs (fixed topology); the runs
     differ only in noise and initial estimate, which gives the NEES
-    statistics of both loops for free. `n_runs` and `horizon` (s) override
-    ``settings.fig2_runs`` and ``settings.horizon``.
+    statistics of both loops for free.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the initial states, estimates and noise.
+    n_runs : int, optional
+        Monte Carlo runs (default ``settings.fig2_runs``).
+    horizon : float, optional
+        Length of the run (s) (default ``settings.horizon``).
+    settings : RendezvousSettings
+        The study's settings (default :data:`SETTINGS`).
+
+    Returns
+    -------
+    Fig2Result
+        Both loops on the same topology and noise.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> r2 = song2023.fig2(seed=0, n_runs=3, horizon=4.0)           # a small run: 3 runs, 4 s
+    >>> r2.adjacency.shape
+    (8, 8)
     """
     _check_run_arguments(seed, n_runs, horizon, settings.dt)
     rng = np.random.default_rng([seed, 2])
@@ -353,7 +473,26 @@ def fig2(seed: int = 0, n_runs: int | None = None, horizon: float | None = None,
 
 
 def theorem1(res: Fig2Result) -> dict[str, np.ndarray]:
-    """Smallest eigenvalues of ``M_i[k+1]`` (eq. (49)) along the Fig. 2 run."""
+    """Smallest eigenvalues of ``M_i[k+1]`` (eq. (49)) along the Fig. 2 run.
+
+    Parameters
+    ----------
+    res : Fig2Result
+        The output of :func:`fig2`.
+
+    Returns
+    -------
+    dict
+        ``min_eig`` (T, N) and the scale-free ``min_eig_rel``; positive values mean the
+        Lyapunov function of Theorem 1 decreases.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> r2 = song2023.fig2(seed=0, n_runs=3, horizon=4.0)           # a small run: 3 runs, 4 s
+    >>> sorted(song2023.theorem1(r2))
+    ['min_eig', 'min_eig_rel']
+    """
     e = res.estimation
     return dkf.theorem1_min_eigenvalues(e.model, laplacian(res.adjacency), e.gains, e.sigma_i, e.f2_cross)
 
@@ -365,7 +504,34 @@ def theorem1(res: Fig2Result) -> dict[str, np.ndarray]:
 
 @dataclass(frozen=True)
 class Fig3Result:
-    """Fig. 3: RMS (over runs) of the team's position / velocity spread, per law (keys: :data:`LAWS`)."""
+    """Fig. 3: RMS (over runs) of the team's position / velocity spread, per law.
+
+    Parameters
+    ----------
+    time : (T+1,) ndarray
+        Time (s).
+    pos_std : dict of str to ndarray
+        Law -> RMS position spread over runs (m), ``(T+1,)``.
+    vel_std : dict of str to ndarray
+        Law -> RMS velocity spread over runs (m/s).
+    converged_from : float
+        Start (s) of the steady-state window.
+    pos_runs : dict of str to ndarray
+        Law -> position spread of every run, ``(T+1, runs)``.
+    vel_runs : dict of str to ndarray
+        Law -> velocity spread of every run.
+    exact_pos_runs : dict of str to ndarray
+        Law -> exact ``sqrt(E[spread^2])`` per run (laws (4) and (5) only).
+    exact_vel_runs : dict of str to ndarray
+        The same for the velocities.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> r3 = song2023.fig3(seed=0, n_runs=3, horizon=4.0)
+    >>> sorted(r3.pos_std) == sorted(song2023.LAWS)
+    True
+    """
 
     time: np.ndarray
     pos_std: dict[str, np.ndarray]   # law -> (T+1,) m
@@ -378,14 +544,58 @@ class Fig3Result:
     exact_vel_runs: dict[str, np.ndarray]  # law -> (T+1, R), m/s
 
     def paired_difference(self, a: str, b: str, which: str = "pos") -> tuple[float, float]:
-        """Mean and standard error over runs of (converged mean-square spread of `a` minus `b`)."""
+        """Mean and standard error over runs of (converged mean-square spread of `a` minus `b`).
+
+        Parameters
+        ----------
+        a : str
+            A law (a key of :data:`LAWS`).
+        b : str
+            The law compared with.
+        which : {"pos", "vel"}
+            Position or velocity spread.
+
+        Returns
+        -------
+        mean : float
+            Mean paired difference (m² or m²/s²).
+        stderr : float
+            Its standard error over runs.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023
+        >>> r3 = song2023.fig3(seed=0, n_runs=3, horizon=4.0)
+        >>> len(r3.paired_difference(song2023.ESTIMATION, song2023.CONVENTIONAL))
+        2
+        """
         data = self.pos_runs if which == "pos" else self.vel_runs
         k0 = np.searchsorted(self.time, self.converged_from)
         d = np.mean(data[a][k0:] ** 2, axis=0) - np.mean(data[b][k0:] ** 2, axis=0)
         return float(d.mean()), float(d.std(ddof=1) / np.sqrt(d.size))
 
     def z_vs_exact(self, law: str, which: str = "pos") -> float:
-        """Monte Carlo minus exact converged mean-square spread of `law`, in standard errors over runs."""
+        """Monte Carlo minus exact converged mean-square spread of `law`, in standard errors over runs.
+
+        Parameters
+        ----------
+        law : str
+            A law with an exact expectation (conventional or true states).
+        which : {"pos", "vel"}
+            Position or velocity spread.
+
+        Returns
+        -------
+        float
+            The z-score; within about 3 in magnitude when the simulation is right.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023
+        >>> r3 = song2023.fig3(seed=0, n_runs=3, horizon=4.0)
+        >>> bool(abs(r3.z_vs_exact(song2023.CONVENTIONAL)) < 4)
+        True
+        """
         mc = (self.pos_runs if which == "pos" else self.vel_runs)[law]
         ex = (self.exact_pos_runs if which == "pos" else self.exact_vel_runs)[law]
         k0 = np.searchsorted(self.time, self.converged_from)
@@ -395,8 +605,25 @@ class Fig3Result:
     def converged(self, which: str = "pos", exact: bool = False) -> dict[str, float]:
         """Time average of the RMS spread from `converged_from` on.
 
-        ``exact=True``: the same statistic from the exact expectations
-        (``sqrt(mean_runs E[spread^2])``), for the laws that have one.
+        Parameters
+        ----------
+        which : {"pos", "vel"}
+            Position (m) or velocity (m/s) spread.
+        exact : bool
+            The same statistic from the exact expectations
+            (``sqrt(mean_runs E[spread^2])``), for the laws that have one.
+
+        Returns
+        -------
+        dict of str to float
+            Law -> converged RMS spread.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023
+        >>> r3 = song2023.fig3(seed=0, n_runs=3, horizon=4.0)
+        >>> sorted(r3.converged(exact=True)) == sorted([song2023.CONVENTIONAL, song2023.TRUE_STATES])
+        True
         """
         if exact:
             runs = self.exact_pos_runs if which == "pos" else self.exact_vel_runs
@@ -416,8 +643,32 @@ def fig3(seed: int = 0, n_runs: int | None = None, horizon: float | None = None,
     share the initial states and the noise realizations (common random
     numbers). Two laws beyond the paper's two: ``"true states"`` (eq. (4)
     without measurement noise, a reference) and Remark 6's reading of eq. (21)
-    (:func:`simulate_remark6`). `n_runs` and `horizon` (s) override
-    ``settings.fig3_runs`` and ``settings.horizon``.
+    (:func:`simulate_remark6`).
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the initial states, topologies and noise.
+    n_runs : int, optional
+        Monte Carlo runs (default ``settings.fig3_runs``).
+    horizon : float, optional
+        Length of the runs (s) (default ``settings.horizon``).
+    progress : bool
+        Show progress bars.
+    settings : RendezvousSettings
+        The study's settings (default :data:`SETTINGS`).
+
+    Returns
+    -------
+    Fig3Result
+        The spreads of every law.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> r3 = song2023.fig3(seed=0, n_runs=3, horizon=4.0)
+    >>> float(r3.time[-1])
+    4.0
     """
     _check_run_arguments(seed, n_runs, horizon, settings.dt)
     rng = np.random.default_rng([seed, 3])
@@ -486,16 +737,42 @@ def simulate_remark6(
 
     Parameters
     ----------
-    x0 : (R, N, 2n) initial states; adjacency : (N, N) or (R, N, N) fixed sensing graphs.
+    rng : numpy.random.Generator
+        Source of process and measurement noise.
+    x0 : (R, N, 2n) ndarray
+        Initial states of R runs.
+    adjacency : (N, N) or (R, N, N) ndarray
+        Fixed sensing graphs.
     s : RendezvousSetup
-    Q, R : (2n, 2n) process and measurement noise per agent.
+        The model (:func:`setup`).
+    Q : (2n, 2n) ndarray
+        Process-noise covariance per agent.
+    R : (2n, 2n) ndarray
+        Measurement-noise covariance per sensed agent.
     n_steps : int
-    x_hat0 : (R, N 2n) common initial team estimate of every run.
-    control_adjacency : (N, N), optional
+        Number of steps T.
+    x_hat0 : (R, N 2n) ndarray
+        Common initial team estimate of every run.
+    control_adjacency : (N, N) ndarray, optional
+        Whose estimates each agent steers by (default: every agent's).
+    progress : bool
+        Show a progress bar.
 
     Returns
     -------
-    (T+1, R, N, 2n) true states.
+    (T+1, R, N, 2n) ndarray
+        The true states.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore.papers import song2023
+    >>> s = song2023.setup()
+    >>> x0, A = song2023.random_initial_states(np.random.default_rng(1), s)
+    >>> X = song2023.simulate_remark6(np.random.default_rng(2), x0[None], A, s, np.eye(4), np.eye(4), 10,
+    ...                               x0.reshape(1, -1))
+    >>> X.shape
+    (11, 1, 8, 4)
     """
     rng = check_generator(rng)
     if not isinstance(s, RendezvousSetup):
@@ -579,7 +856,27 @@ def process_noise_study(seed: int = 0, q_values: tuple | None = None, n_runs: in
 
 @dataclass(frozen=True)
 class RendezvousRun:
-    """Everything the figures, tables and claims of the rendezvous study need (:func:`run`)."""
+    """Everything the figures, tables and claims of the rendezvous study need (:func:`run`).
+
+    Parameters
+    ----------
+    settings : RendezvousSettings
+        The settings of the run.
+    fig2 : Fig2Result
+        Fig. 2, with the NEES of both loops.
+    theorem1 : dict
+        :func:`theorem1` on the Fig. 2 run.
+    fig3 : Fig3Result
+        Fig. 3, with Remark 6's reading.
+    process_noise : pandas.DataFrame
+        The process-noise study (spread against q for both laws).
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> sorted(song2023.RendezvousRun.__dataclass_fields__)
+    ['fig2', 'fig3', 'process_noise', 'settings', 'theorem1']
+    """
 
     settings: RendezvousSettings
     fig2: Fig2Result
@@ -589,7 +886,32 @@ class RendezvousRun:
 
 
 def run(settings: RendezvousSettings = SETTINGS, seed: int = 0, progress: bool = False) -> RendezvousRun:
-    """Fig. 2 (with Theorem 1 and the NEES), Fig. 3 (with Remark 6) and the process-noise study, once."""
+    """Fig. 2 (with Theorem 1 and the NEES), Fig. 3 (with Remark 6) and the process-noise study, once.
+
+    Parameters
+    ----------
+    settings : RendezvousSettings
+        The study's settings (default :data:`SETTINGS`).
+    seed : int
+        Seed of every random draw (each study starts its own generator from it).
+    progress : bool
+        Show progress bars.
+
+    Returns
+    -------
+    RendezvousRun
+        Everything the figures, tables and claims need.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> from mascore.papers import song2023
+    >>> quick = dataclasses.replace(song2023.SETTINGS, fig2_runs=2, fig3_runs=2, horizon=4.0, converged_from=2.0,
+    ...                             process_noise_runs=2, process_noise_horizon=4.0)
+    >>> result = song2023.run(quick, seed=0)
+    >>> float(result.fig3.time[-1])
+    4.0
+    """
     check_seed(seed, "seed")
     r2 = fig2(seed, settings=settings)
     return RendezvousRun(settings, r2, theorem1(r2), fig3(seed, progress=progress, settings=settings),
@@ -602,7 +924,30 @@ def run(settings: RendezvousSettings = SETTINGS, seed: int = 0, progress: bool =
 
 
 def plot_fig2(res: Fig2Result, axes=None):
-    """Song et al. 2023, Fig. 2 (a)-(d) from :func:`fig2` (run 0); the agents' legend below the panels."""
+    """Song et al. 2023, Fig. 2 (a)-(d) from :func:`fig2` (run 0); the agents' legend below the panels.
+
+    Parameters
+    ----------
+    res : Fig2Result
+        The output of :func:`fig2`.
+    axes : array of matplotlib Axes, optional
+        Four panels to draw on (default: a new figure).
+
+    Returns
+    -------
+    array of matplotlib.axes.Axes
+        The panels (a)-(d).
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.papers import song2023
+    >>> r2 = song2023.fig2(seed=0, n_runs=3, horizon=4.0)           # a small run: 3 runs, 4 s
+    >>> axes = song2023.plot_fig2(r2)                             # 2 x 2 panels
+    >>> axes.size
+    4
+    >>> plt.close("all")
+    """
     if axes is None:
         _, axes = plt.subplots(2, 2, figsize=(9, 7.8), layout="constrained")
     ax = np.asarray(axes).reshape(-1)
@@ -909,7 +1254,28 @@ def _theorem1_claims(r2: Fig2Result, th: dict[str, np.ndarray]) -> list[Claim]:
 
 
 def excess_removed(r3: Fig3Result, which: str) -> float:
-    """Share of the measurement-noise excess of the spread (over law (4)) that eq. (21) removes."""
+    """Share of the measurement-noise excess of the spread (over law (4)) that eq. (21) removes.
+
+    Parameters
+    ----------
+    r3 : Fig3Result
+        The output of :func:`fig3`.
+    which : {"pos", "vel"}
+        Position or velocity spread.
+
+    Returns
+    -------
+    float
+        ``(conventional - estimation) / (conventional - true states)`` of the converged
+        mean-square spreads: 1 removes all the excess, 0 none, negative adds to it.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> r3 = song2023.fig3(seed=0, n_runs=3, horizon=4.0)
+    >>> isinstance(song2023.excess_removed(r3, "vel"), float)
+    True
+    """
     c = r3.converged(which)
     return 1.0 - (c[ESTIMATION] ** 2 - c[TRUE_STATES] ** 2) / (c[CONVENTIONAL] ** 2 - c[TRUE_STATES] ** 2)
 
@@ -948,7 +1314,28 @@ def _fig3_claim(r3: Fig3Result, which: str, law: str) -> Claim:
 
 
 def claims(result: RendezvousRun) -> list[Claim]:
-    """The ledger claims of the rendezvous study, from :func:`run`'s result."""
+    """The ledger claims of the rendezvous study, from :func:`run`'s result.
+
+    Parameters
+    ----------
+    result : RendezvousRun
+        The output of :func:`run`.
+
+    Returns
+    -------
+    list of mascore.ledger.Claim
+        The claims, verdicts computed.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> from mascore.papers import song2023
+    >>> quick = dataclasses.replace(song2023.SETTINGS, fig2_runs=2, fig3_runs=2, horizon=4.0, converged_from=2.0,
+    ...                             process_noise_runs=2, process_noise_horizon=4.0)
+    >>> claims = song2023.claims(song2023.run(quick, seed=0))
+    >>> all(c.id.startswith("song2023/") for c in claims)
+    True
+    """
     r3 = result.fig3
     return [*_fig2_claims(result.fig2), *_theorem1_claims(result.fig2, result.theorem1),
             *(_fig3_claim(r3, which, law) for law in (ESTIMATION, REMARK6) for which in ("pos", "vel"))]
