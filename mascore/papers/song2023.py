@@ -930,12 +930,12 @@ def plot_fig2(res: Fig2Result, axes=None):
     ----------
     res : Fig2Result
         The output of :func:`fig2`.
-    axes : array of matplotlib Axes, optional
-        Four panels to draw on (default: a new figure).
+    axes : (2, 2) array of matplotlib Axes, optional
+        The four panels to draw on (default: a new figure).
 
     Returns
     -------
-    array of matplotlib.axes.Axes
+    (2, 2) ndarray of matplotlib.axes.Axes
         The panels (a)-(d).
 
     Examples
