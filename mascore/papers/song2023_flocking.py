@@ -137,34 +137,76 @@ class FlockingSettings:
 
     @property
     def gains(self) -> FlockingGains:
-        """The flocking gains of Table I (with ``d_min``)."""
+        """The flocking gains of Table I (with ``d_min``).
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023_flocking as flocking_paper
+        >>> flocking_paper.SETTINGS.gains.rho3
+        3.0
+        """
         return FlockingGains(rho3=self.rho3, rho4=self.rho4, rho5=self.rho5, rho6=self.rho6, beta=self.beta,
                              R=self.spring_length, min_distance=self.min_distance)
 
     @property
     def Q(self) -> np.ndarray:
-        """Process-noise covariance of one agent, ``(2n, 2n)``."""
+        """Process-noise covariance of one agent, ``(2n, 2n)``.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023_flocking as flocking_paper
+        >>> flocking_paper.SETTINGS.Q.shape
+        (4, 4)
+        """
         return self.process_noise * np.eye(2 * self.n_dim)
 
     @property
     def R_fig4(self) -> np.ndarray:
-        """Measurement-noise covariance per measured agent, Fig. 4."""
+        """Measurement-noise covariance per measured agent, Fig. 4.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023_flocking as flocking_paper
+        >>> flocking_paper.SETTINGS.R_fig4.shape
+        (4, 4)
+        """
         return self.measurement_noise_fig4 * np.eye(2 * self.n_dim)
 
     @property
     def R_fig5(self) -> np.ndarray:
-        """Measurement-noise covariance per measured agent, Figs. 5-6."""
+        """Measurement-noise covariance per measured agent, Figs. 5-6.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023_flocking as flocking_paper
+        >>> flocking_paper.SETTINGS.R_fig5.shape
+        (4, 4)
+        """
         return self.measurement_noise_fig5 * np.eye(2 * self.n_dim)
 
     @property
     def sigma0_agent(self) -> np.ndarray:
-        """Prior covariance of one agent's state, ``diag(sp^2 I_n, sv^2 I_n)``."""
+        """Prior covariance of one agent's state, ``diag(sp^2 I_n, sv^2 I_n)``.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023_flocking as flocking_paper
+        >>> flocking_paper.SETTINGS.sigma0_agent.diagonal()
+        array([100., 100.,   1.,   1.])
+        """
         n = self.n_dim
         return np.diag([self.sigma0_position**2] * n + [self.sigma0_velocity**2] * n)
 
     @property
     def n_steps(self) -> int:
-        """Number of steps of the horizon ``t_final``."""
+        """Number of steps of the horizon ``t_final``.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023_flocking as flocking_paper
+        >>> flocking_paper.SETTINGS.n_steps                      # 60 s at dt = 0.1 s
+        600
+        """
         return int(round(self.t_final / self.dt))
 
 
@@ -196,17 +238,42 @@ _STYLES = ({"ls": "-"}, {"ls": "--"}, {"ls": ":", "lw": 2.0})  # (ii) and (iii) 
 def initial_states(
     rng: np.random.Generator, n_runs: int, settings: FlockingSettings = SETTINGS, max_tries: int = 10_000
 ) -> np.ndarray:
-    """Random initial team states with a connected proximity graph, ``(n_runs, N, 2n)``.
+    """Random initial team states with a connected proximity graph.
 
     Positions uniform in a square of side ``box * sqrt(N / 8)`` (the paper's
     density for any N), redrawn until the graph of range ``sensing_range`` is
     connected; velocities uniform in ``[-v0_max, v0_max]`` per axis.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of randomness.
+    n_runs : int
+        Number of independent starts.
+    settings : FlockingSettings
+        The study's settings (default :data:`SETTINGS`).
+    max_tries : int
+        Largest number of draws per start.
+
+    Returns
+    -------
+    (n_runs, N, 2n) ndarray
+        Positions (m) then velocities (m/s) of every agent.
 
     Raises
     ------
     ValueError
         Bad `n_runs`, `max_tries` or settings, or no connected placement in
         `max_tries` draws (the sensing range is too short for the square).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs
+    >>> from mascore.papers import song2023_flocking as flocking_paper
+    >>> X0 = flocking_paper.initial_states(np.random.default_rng(0), 3)
+    >>> X0.shape, all(graphs.is_connected(graphs.proximity_graph(x[:, :2], 150.0)) for x in X0)
+    ((3, 8, 4), True)
     """
     rng = check_generator(rng)
     n_runs = check_positive_int(n_runs, "n_runs")
@@ -275,12 +342,14 @@ def run_fig4(settings: FlockingSettings = SETTINGS, seed: int = 1) -> EstimatedF
 class Fig5Result:
     """The three cases of Fig. 5 over the Monte Carlo runs.
 
-    Attributes
+    Parameters
     ----------
     t : (T+1,) ndarray
         Times (s).
-    std_p, std_v : (3, T+1) ndarrays
-        RMS over runs of the position (m) and velocity (m/s) spread, per case.
+    std_p : (3, T+1) ndarray
+        RMS over runs of the position spread (m), per case.
+    std_v : (3, T+1) ndarray
+        RMS over runs of the velocity spread (m/s), per case.
     final : (3, n_runs, N, 2n) ndarray
         Team states at the end, per case and run (Fig. 6).
     max_distance : (3, n_runs, T+1) ndarray
@@ -294,6 +363,17 @@ class Fig5Result:
         the paper's settings, but from about N = 18 agents with Table I gains.
     window : float
         Length (s) of the final window averaged by :meth:`settled`.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023_flocking as flocking_paper
+    >>> import dataclasses
+    >>> quick = dataclasses.replace(flocking_paper.SETTINGS, n_runs=2, t_final=4.0, beyond_sizes=(4,),
+    ...                             beyond_sensing_ranges=(150.0,), beyond_runs=1, beyond_t_final=2.0,
+    ...                             settled_window=2.0, transient=1.0)         # a small run
+    >>> result = flocking_paper.run(quick, seed=1)
+    >>> result.fig5.std_p.shape
+    (3, 41)
     """
 
     t: np.ndarray
@@ -307,7 +387,29 @@ class Fig5Result:
     window: float = SETTINGS.settled_window
 
     def settled(self, series: np.ndarray) -> np.ndarray:
-        """Time average of ``series[..., t]`` over the last ``window`` seconds."""
+        """Time average of ``series[..., t]`` over the last ``window`` seconds.
+
+        Parameters
+        ----------
+        series : (..., T+1) ndarray
+            A time series on :attr:`t`.
+
+        Returns
+        -------
+        (...) ndarray
+            Its average over the final window.
+
+        Examples
+        --------
+        >>> import dataclasses
+        >>> from mascore.papers import song2023_flocking as flocking_paper
+        >>> quick = dataclasses.replace(flocking_paper.SETTINGS, n_runs=2, t_final=4.0, beyond_sizes=(4,),
+        ...                             beyond_sensing_ranges=(150.0,), beyond_runs=1, beyond_t_final=2.0,
+        ...                             settled_window=2.0, transient=1.0)
+        >>> fig5 = flocking_paper.run(quick, seed=1).fig5
+        >>> fig5.settled(fig5.std_p).shape                       # one value per case
+        (3,)
+        """
         return series[..., self.t >= self.t[-1] - self.window].mean(axis=-1)
 
 
@@ -395,17 +497,29 @@ def beyond_study(settings: FlockingSettings = SETTINGS, seed: int = 1, progress:
 class FlockingResult:
     """Everything the flocking chapter shows, from one :func:`run`.
 
-    Attributes
+    Parameters
     ----------
     settings : FlockingSettings
-    fig4 : EstimatedFlockingRun
+        The settings of the run.
+    fig4 : mascore.distributed_ekf.EstimatedFlockingRun
         The single run of Fig. 4.
     fig5 : Fig5Result
         The Monte Carlo of Figs. 5-6.
     beyond : pandas.DataFrame
-        The sweep of :func:`beyond_study`.
+        The sweep beyond the paper (team size and sensing range).
     seconds : dict
         Wall time (s) of each part, this machine (reported, never asserted).
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023_flocking as flocking_paper
+    >>> import dataclasses
+    >>> quick = dataclasses.replace(flocking_paper.SETTINGS, n_runs=2, t_final=4.0, beyond_sizes=(4,),
+    ...                             beyond_sensing_ranges=(150.0,), beyond_runs=1, beyond_t_final=2.0,
+    ...                             settled_window=2.0, transient=1.0)         # a small run
+    >>> result = flocking_paper.run(quick, seed=1)
+    >>> sorted(result.seconds) == sorted(["fig4", "fig5", "beyond"])
+    True
     """
 
     settings: FlockingSettings
@@ -416,7 +530,33 @@ class FlockingResult:
 
 
 def run(settings: FlockingSettings = SETTINGS, seed: int = 1, progress: bool = False) -> FlockingResult:
-    """The flocking study once: Fig. 4's run, the Monte Carlo of Figs. 5-6, the sweep beyond the paper."""
+    """The flocking study once: Fig. 4's run, the Monte Carlo of Figs. 5-6, the sweep beyond the paper.
+
+    Parameters
+    ----------
+    settings : FlockingSettings
+        The study's settings (default :data:`SETTINGS`).
+    seed : int
+        Seed of every random draw.
+    progress : bool
+        Show progress bars.
+
+    Returns
+    -------
+    FlockingResult
+        Everything the figures, tables and claims need.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023_flocking as flocking_paper
+    >>> import dataclasses
+    >>> quick = dataclasses.replace(flocking_paper.SETTINGS, n_runs=2, t_final=4.0, beyond_sizes=(4,),
+    ...                             beyond_sensing_ranges=(150.0,), beyond_runs=1, beyond_t_final=2.0,
+    ...                             settled_window=2.0, transient=1.0)         # a small run
+    >>> result = flocking_paper.run(quick, seed=1)
+    >>> result.fig5.diverged
+    (False, False, False)
+    """
     check_seed(seed, "seed")
     parts = (("fig4", lambda: run_fig4(settings, seed)),
              ("fig5", lambda: run_fig5(settings, seed, progress=progress)),
@@ -476,7 +616,31 @@ def plot_fig4(run4: EstimatedFlockingRun, settings: FlockingSettings = SETTINGS)
 
 
 def plot_fig5(res: Fig5Result) -> plt.Figure:
-    """Song et al. 2023, Fig. 5 (a) position and (b) velocity RMS STD over time (legend below the panels)."""
+    """Song et al. 2023, Fig. 5 (a) position and (b) velocity RMS STD over time (legend below the panels).
+
+    Parameters
+    ----------
+    res : Fig5Result
+        The Monte Carlo of :func:`run`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.papers import song2023_flocking as flocking_paper
+    >>> import dataclasses
+    >>> quick = dataclasses.replace(flocking_paper.SETTINGS, n_runs=2, t_final=4.0, beyond_sizes=(4,),
+    ...                             beyond_sensing_ranges=(150.0,), beyond_runs=1, beyond_t_final=2.0,
+    ...                             settled_window=2.0, transient=1.0)         # a small run
+    >>> result = flocking_paper.run(quick, seed=1)
+    >>> len(flocking_paper.plot_fig5(result.fig5).axes) >= 2
+    True
+    >>> plt.close("all")
+    """
     fig, axes = plt.subplots(1, 2, figsize=(7.5, 3.4), layout="constrained")
     for ax, series, ylabel, title in ((axes[0], res.std_p, "RMS STD of positions (m)", "(a) position"),
                                       (axes[1], res.std_v, "RMS STD of velocities (m/s)", "(b) velocity")):
@@ -494,6 +658,33 @@ def plot_fig6(res: Fig5Result, settings: FlockingSettings = SETTINGS, run_index:
     """Song et al. 2023, Fig. 6: converged configurations of one run with the circle of radius R about the CoM.
 
     Panels: (a) case (i), (b) case (iii) as in the paper, (c) case (ii) for reference.
+
+    Parameters
+    ----------
+    res : Fig5Result
+        The Monte Carlo of :func:`run`.
+    settings : FlockingSettings
+        The study's settings (default :data:`SETTINGS`).
+    run_index : int
+        Which Monte Carlo run to draw.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.papers import song2023_flocking as flocking_paper
+    >>> import dataclasses
+    >>> quick = dataclasses.replace(flocking_paper.SETTINGS, n_runs=2, t_final=4.0, beyond_sizes=(4,),
+    ...                             beyond_sensing_ranges=(150.0,), beyond_runs=1, beyond_t_final=2.0,
+    ...                             settled_window=2.0, transient=1.0)         # a small run
+    >>> result = flocking_paper.run(quick, seed=1)
+    >>> len(flocking_paper.plot_fig6(result.fig5, quick).axes) >= 3
+    True
+    >>> plt.close("all")
     """
     run_index = check_positive_int(run_index, "run_index", minimum=0)
     if run_index >= res.final.shape[1]:
@@ -726,7 +917,29 @@ def _times_identity(x: float) -> str:
 
 
 def claims(result: FlockingResult) -> list[Claim]:
-    """The four flocking claims of the ledger, from one :func:`run`."""
+    """The four flocking claims of the ledger, from one :func:`run`.
+
+    Parameters
+    ----------
+    result : FlockingResult
+        The output of :func:`run`.
+
+    Returns
+    -------
+    list of mascore.ledger.Claim
+        The claims, verdicts computed.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023_flocking as flocking_paper
+    >>> import dataclasses
+    >>> quick = dataclasses.replace(flocking_paper.SETTINGS, n_runs=2, t_final=4.0, beyond_sizes=(4,),
+    ...                             beyond_sensing_ranges=(150.0,), beyond_runs=1, beyond_t_final=2.0,
+    ...                             settled_window=2.0, transient=1.0)         # a small run
+    >>> result = flocking_paper.run(quick, seed=1)
+    >>> len(flocking_paper.claims(result))
+    4
+    """
     st = result.settings
     return [fig4_claim(result.fig4, st), *fig5_claims(result.fig5, st), fig6_claim(result.fig5, st)]
 
@@ -764,6 +977,26 @@ def ekf_step_seconds(settings: FlockingSettings = SETTINGS, seed: int = 0, repea
     Jacobian) on a random start of :func:`initial_states` with Fig. 5 noise,
     after one warm-up call; median of `repeat` calls. This machine, reported
     only (never asserted).
+
+    Parameters
+    ----------
+    settings : FlockingSettings
+        The study's settings (default :data:`SETTINGS`).
+    seed : int
+        Seed of the random start.
+    repeat : int
+        Timed calls.
+
+    Returns
+    -------
+    float
+        Seconds per step.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023_flocking as flocking_paper
+    >>> flocking_paper.ekf_step_seconds(repeat=1) > 0
+    True
     """
     check_seed(seed, "seed")
     check_positive_int(repeat, "repeat")
