@@ -54,6 +54,7 @@ from ..plotting import agent_colors
 from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, documented_settings, setting
 
 __all__ = [
+    "DEFAULTS",
     "A",
     "B",
     "C",
@@ -171,27 +172,94 @@ class SetMembershipSettings:
             raise ValueError(f"figure_row must be 1..{len(TABLE1_PUBLISHED)}; got {self.figure_row}")
 
     def matrix(self, name: str) -> np.ndarray:
-        """Field `name` as a float array (``"A"``, ``"adjacency"``, ``"x0_hat"``, ...)."""
+        """Field `name` as a float array (``"A"``, ``"adjacency"``, ``"x0_hat"``, ...).
+
+        Parameters
+        ----------
+        name : str
+            A field holding a matrix or vector.
+
+        Returns
+        -------
+        ndarray
+            The field as floats.
+
+        Examples
+        --------
+        >>> from mascore.papers import bhattacharjee2021 as bs
+        >>> bs.DEFAULTS.matrix("A")
+        array([[ 0., -1.],
+               [ 1.,  0.]])
+        """
         return np.array(getattr(self, name), dtype=float)
 
     @property
     def n_agents(self) -> int:
+        """Number of followers N (one initial estimate each).
+
+        Returns
+        -------
+        int
+            ``len(x0_hat)``.
+
+        Examples
+        --------
+        >>> from mascore.papers import bhattacharjee2021 as bs
+        >>> bs.DEFAULTS.n_agents
+        4
+        """
         return len(self.x0_hat)
 
     @property
     def mu_bar(self) -> float:
-        """Normalization of Corollary 1, ``alpha sqrt(N) / (1 - mu)``."""
+        """Normalization of Corollary 1, ``alpha sqrt(N) / (1 - mu)``.
+
+        Returns
+        -------
+        float
+            ``mu_bar``.
+
+        Examples
+        --------
+        >>> from mascore.papers import bhattacharjee2021 as bs
+        >>> round(float(bs.DEFAULTS.mu_bar), 6)                # 1.1 * 2 / 0.1
+        22.0
+        """
         return sync.mu_bar(self.alpha, self.mu, self.n_agents)
 
     @property
     def rows(self) -> tuple[DisturbanceSetting, ...]:
-        """The Table 1 rows, each with the paper's published mean and RMS."""
+        """The Table 1 rows, each with the paper's published mean and RMS.
+
+        Returns
+        -------
+        tuple of DisturbanceSetting
+            Disturbance amplitudes and filter bounds per row.
+
+        Examples
+        --------
+        >>> from mascore.papers import bhattacharjee2021 as bs
+        >>> len(bs.DEFAULTS.rows)
+        3
+        """
         return tuple(DisturbanceSetting(aw, av, q, r, *pub) for aw, av, q, r, pub in
                      zip(self.alpha_w, self.alpha_v, self.q, self.r, TABLE1_PUBLISHED))
 
     @property
     def figure_setting(self) -> DisturbanceSetting:
-        """The Table 1 row simulated for Figs. 2-6."""
+        """The Table 1 row simulated for Figs. 2-6.
+
+        Returns
+        -------
+        DisturbanceSetting
+            Row ``figure_row`` (1-based, as printed) of :attr:`rows`.
+
+        Examples
+        --------
+        >>> from mascore.papers import bhattacharjee2021 as bs
+        >>> bs.DEFAULTS.figure_setting == bs.DEFAULTS.rows[bs.DEFAULTS.figure_row - 1]
+        True
+        """
         return self.rows[self.figure_row - 1]
 
 
@@ -224,7 +292,24 @@ SETTINGS = DEFAULTS.rows
 def design(scenario: SetMembershipSettings = DEFAULTS, adjacency: np.ndarray | None = None) -> sync.SyncDesign:
     """Lemma 2 for the example: P = Q = 0.1 I (B = I), K = A, c = 1.5, r = 1.
 
-    `adjacency` replaces the graph of the settings (Assumption 4 and the circle are checked).
+    Parameters
+    ----------
+    scenario : SetMembershipSettings
+        The example's settings (default :data:`DEFAULTS`).
+    adjacency : (N, N) ndarray, optional
+        Replaces the graph of the settings (Assumption 4 and the circle are checked).
+
+    Returns
+    -------
+    mascore.synchronization.SyncDesign
+        P, K, c, r and the checks of Lemma 2.
+
+    Examples
+    --------
+    >>> from mascore.papers import bhattacharjee2021 as bs
+    >>> d = bs.design()
+    >>> float(d.c), float(d.r)
+    (1.5, 1.0)
     """
     adjacency = scenario.matrix("adjacency") if adjacency is None else adjacency
     return sync.design_synchronization(scenario.matrix("A"), scenario.matrix("B"),
@@ -234,7 +319,24 @@ def design(scenario: SetMembershipSettings = DEFAULTS, adjacency: np.ndarray | N
 
 @dataclass(frozen=True)
 class Draw:
-    """Unit random draws of a batch of runs (scaled by a setting when simulated)."""
+    """Unit random draws of a batch of runs (scaled by a setting when simulated).
+
+    Parameters
+    ----------
+    x0 : (R, N, 2) ndarray
+        True initial states.
+    w_unit : (R, T, N, 2) ndarray
+        Process disturbances in the unit set.
+    v_unit : (R, T+1, N, 1) ndarray
+        Output disturbances in the unit set.
+
+    Examples
+    --------
+    >>> from mascore.papers import bhattacharjee2021 as bs
+    >>> d = bs.draw(seed=1, n_runs=2)
+    >>> d.x0.shape
+    (2, 4, 2)
+    """
 
     x0: np.ndarray  # (R, N, n) true initial states
     w_unit: np.ndarray  # (R, T_f, N, n) in [-1, 1]
@@ -242,7 +344,29 @@ class Draw:
 
 
 def draw(seed: int, n_runs: int = 1, scenario: SetMembershipSettings = DEFAULTS) -> Draw:
-    """Random draws of `n_runs` runs; run r uses ``SeedSequence(seed).spawn(n_runs)[r]``."""
+    """Random draws of `n_runs` runs; run r uses ``SeedSequence(seed).spawn(n_runs)[r]``.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the draws.
+    n_runs : int
+        Number of runs R.
+    scenario : SetMembershipSettings
+        The example's settings (default :data:`DEFAULTS`).
+
+    Returns
+    -------
+    Draw
+        Unit draws (initial states, disturbances), the same for every Table 1 row.
+
+    Examples
+    --------
+    >>> from mascore.papers import bhattacharjee2021 as bs
+    >>> import numpy as np
+    >>> np.array_equal(bs.draw(1, 3).x0[0], bs.draw(1, 1).x0[0])     # run 0 is the same draw in every study
+    True
+    """
     seed = check_seed(seed, "seed")
     n_runs = check_positive_int(n_runs, "n_runs")
     x0_hat, t_f = scenario.matrix("x0_hat"), scenario.t_f
@@ -261,15 +385,37 @@ def draw(seed: int, n_runs: int = 1, scenario: SetMembershipSettings = DEFAULTS)
 class ClosedLoopRun:
     """Trajectories of a batch of closed-loop runs, k = 0..T_f.
 
-    Attributes
+    Parameters
     ----------
-    k : (T+1,) time steps
-    x : (R, T+1, N, 2) true agent states;  leader : (T+1, 2) leader state
-    x0_hat : (N, 2) initial estimates
-    xhat : (R, T+1, N, 2) corrected centres;  P : (R, T+1, N, 2, 2) corrected shapes
-    xpred, Ppred : same shapes, the prior (predicted) ellipsoids each correction started from
-    u : (R, T, N, 2) control inputs
-    delta_norm : (R, T+1) |delta_k|;  delta_bar : (R, T+1) |delta_k| / mu_bar
+    k : (T+1,) ndarray
+        Time steps.
+    x : (R, T+1, N, 2) ndarray
+        True agent states.
+    leader : (T+1, 2) ndarray
+        Leader state.
+    x0_hat : (N, 2) ndarray
+        Initial estimates.
+    xhat : (R, T+1, N, 2) ndarray
+        Corrected centres.
+    P : (R, T+1, N, 2, 2) ndarray
+        Corrected shapes.
+    xpred : (R, T+1, N, 2) ndarray
+        Predicted centres each correction started from.
+    Ppred : (R, T+1, N, 2, 2) ndarray
+        Predicted shapes.
+    u : (R, T, N, 2) ndarray
+        Control inputs.
+    delta_norm : (R, T+1) ndarray
+        Norm of the synchronization error ``delta_k``.
+    delta_bar : (R, T+1) ndarray
+        The same divided by ``mu_bar`` (Corollary 1).
+
+    Examples
+    --------
+    >>> from mascore.papers import bhattacharjee2021 as bs
+    >>> run = bs.simulate(seed=1, n_runs=2)                     # the closed loop of Sec. 5, closed form
+    >>> run.x.shape, run.P.shape
+    ((2, 61, 4, 2), (2, 61, 4, 2, 2))
     """
 
     k: np.ndarray
@@ -286,22 +432,76 @@ class ClosedLoopRun:
 
     @property
     def error(self) -> np.ndarray:
-        """Estimation errors e_k = x_k - xhat_{k|k}; (R, T+1, N, 2)."""
+        """Estimation errors ``e_k = x_k - xhat_{k|k}``.
+
+        Returns
+        -------
+        (R, T+1, N, 2) ndarray
+            One error per run, step and agent.
+
+        Examples
+        --------
+        >>> from mascore.papers import bhattacharjee2021 as bs
+        >>> run = bs.simulate(seed=1, n_runs=2)                     # the closed loop of Sec. 5, closed form
+        >>> run.error.shape
+        (2, 61, 4, 2)
+        """
         return self.x - self.xhat
 
     @property
     def containment(self) -> np.ndarray:
-        """``e^T P^{-1} e`` for every run, step and agent; <= 1 means contained."""
+        """``e^T P^{-1} e`` for every run, step and agent; at most 1 means contained.
+
+        Returns
+        -------
+        (R, T+1, N) ndarray
+            The quadratic form of each error in its corrected ellipsoid.
+
+        Examples
+        --------
+        >>> from mascore.papers import bhattacharjee2021 as bs
+        >>> run = bs.simulate(seed=1, n_runs=2)                     # the closed loop of Sec. 5, closed form
+        >>> bool(run.containment.max() <= 1 + 1e-9)                # every state inside its set
+        True
+        """
         e = self.error
         return np.einsum("...i,...i->...", e, np.linalg.solve(self.P, e[..., None])[..., 0])
 
     @property
     def trace(self) -> np.ndarray:
-        """trace P_{k|k} for every run, step and agent; (R, T+1, N)."""
+        """``trace P_{k|k}`` for every run, step and agent.
+
+        Returns
+        -------
+        (R, T+1, N) ndarray
+            The size of each corrected ellipsoid.
+
+        Examples
+        --------
+        >>> from mascore.papers import bhattacharjee2021 as bs
+        >>> run = bs.simulate(seed=1, n_runs=2)                     # the closed loop of Sec. 5, closed form
+        >>> run.trace.shape
+        (2, 61, 4)
+        """
         return np.trace(self.P, axis1=-2, axis2=-1)
 
     def table1_metrics(self) -> tuple[np.ndarray, np.ndarray]:
-        """Mean and RMS of |delta_bar_k| over k = 0..T_f, per run (Table 1)."""
+        """Mean and RMS of ``|delta_bar_k|`` over k = 0..T_f, per run (Table 1).
+
+        Returns
+        -------
+        mean : (R,) ndarray
+            Time mean per run.
+        rms : (R,) ndarray
+            Time RMS per run.
+
+        Examples
+        --------
+        >>> from mascore.papers import bhattacharjee2021 as bs
+        >>> run = bs.simulate(seed=1, n_runs=2)                     # the closed loop of Sec. 5, closed form
+        >>> [m.shape for m in run.table1_metrics()]
+        [(2,), (2,)]
+        """
         return self.delta_bar.mean(axis=-1), np.sqrt((self.delta_bar**2).mean(axis=-1))
 
 
@@ -316,15 +516,34 @@ def simulate(
     ----------
     setting : DisturbanceSetting, optional
         Disturbance amplitudes and filter bounds (a Table 1 row; default: the figure row).
-    seed, n_runs : int
-        Random draws (see :func:`draw`); ignored if `draws` is given.
+    seed : int
+        Seed of the random draws (see :func:`draw`); ignored if `draws` is given.
+    n_runs : int
+        Number of runs R; ignored if `draws` is given.
     method : {"sdp", "closed_form"}
         Filter implementation (:mod:`mascore.set_membership`).
+    draws : Draw, optional
+        Draws to reuse (common random numbers across rows and filter paths).
+    progress : bool
+        Show a progress bar over the steps.
     adjacency : (N, N) array, optional
         Interaction graph (default: the settings', eq. (24)); any other must satisfy
         Assumption 4 and Lemma 2 with the example's circle (checked).
     scenario : SetMembershipSettings
         Everything else: model, graph, initial conditions, horizon (default: the paper's).
+
+    Returns
+    -------
+    ClosedLoopRun
+        States, estimates, ellipsoids and inputs of every run.
+
+    Examples
+    --------
+    >>> from mascore.papers import bhattacharjee2021 as bs
+    >>> closed_form = bs.simulate(seed=1, method="closed_form")
+    >>> sdp = bs.simulate(seed=1, method="sdp")                   # the same draw on the SDP path
+    >>> bool(abs(closed_form.P - sdp.P).max() < 1e-4)
+    True
     """
     s = scenario
     if setting is not None and not isinstance(setting, DisturbanceSetting):
@@ -410,6 +629,24 @@ def table1_view(table: pd.DataFrame) -> pd.DataFrame:
 
     Numbers as the book prints them (:func:`mascore.ledger.format_number`, five significant digits, as
     the paper's 1.1985); values in state units. Two header levels keep the columns narrow.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The Table 1 study (``SetMembershipResult.table``).
+
+    Returns
+    -------
+    pandas.DataFrame
+        The table as the chapter shows it.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> from mascore.papers import bhattacharjee2021 as bs
+    >>> result = bs.run(dataclasses.replace(bs.DEFAULTS, n_runs=3, figure_method="closed_form"), seed=1)
+    >>> bs.table1_view(result.table).shape[0]
+    3
     """
     def fmt(x: float) -> str:
         return format_number(x, 5)
@@ -513,15 +750,35 @@ def table1_readings(x0: np.ndarray | None = None, scenario: SetMembershipSetting
 class SetMembershipResult:
     """Everything the figures, tables and claims of the study need (see :func:`run`).
 
-    Attributes
+    Parameters
     ----------
-    settings : the settings of the run;  seed : its seed
-    design : Lemma 2's design (:class:`mascore.synchronization.SyncDesign`)
-    figure_run : run 0 of the figure row on ``settings.figure_method`` (Figs. 2-6)
-    figure_twin : the same draw on the other filter path (SDP <-> closed form)
-    table, runs : :func:`table1_study` (the graph as printed)
-    table_reversed : the same study with the edges of eq. (24) reversed
-    readings : :func:`table1_readings`
+    settings : SetMembershipSettings
+        The settings of the run.
+    seed : int
+        Its seed.
+    design : mascore.synchronization.SyncDesign
+        Lemma 2's design.
+    figure_run : ClosedLoopRun
+        Run 0 of the figure row on ``settings.figure_method`` (Figs. 2-6).
+    figure_twin : ClosedLoopRun
+        The same draw on the other filter path (SDP or closed form).
+    table : pandas.DataFrame
+        Table 1 (the graph as printed).
+    runs : tuple of ClosedLoopRun
+        The runs of each Table 1 row.
+    table_reversed : pandas.DataFrame
+        The same study with the edges of eq. (24) reversed.
+    readings : pandas.DataFrame
+        The two readings of the graph side by side.
+
+    Examples
+    --------
+    >>> from mascore.papers import bhattacharjee2021 as bs
+    >>> import dataclasses
+    >>> quick = dataclasses.replace(bs.DEFAULTS, n_runs=3, figure_method="closed_form")   # a small run
+    >>> result = bs.run(quick, seed=1)
+    >>> result.table.shape[0]                                  # the three rows of Table 1
+    3
     """
 
     settings: SetMembershipSettings
@@ -536,12 +793,42 @@ class SetMembershipResult:
 
     @property
     def sdp_run(self) -> ClosedLoopRun:
-        """The figure row's run 0 on the SDP path."""
+        """The figure row's run 0 on the SDP path.
+
+        Returns
+        -------
+        ClosedLoopRun
+            `figure_run` or `figure_twin`, whichever used the SDPs.
+
+        Examples
+        --------
+        >>> from mascore.papers import bhattacharjee2021 as bs
+        >>> import dataclasses
+        >>> quick = dataclasses.replace(bs.DEFAULTS, n_runs=3, figure_method="closed_form")   # a small run
+        >>> result = bs.run(quick, seed=1)
+        >>> bool(abs(result.sdp_run.P - result.closed_form_run.P).max() < 1e-4)   # the two paths agree
+        True
+        """
         return self.figure_run if self.settings.figure_method == "sdp" else self.figure_twin
 
     @property
     def closed_form_run(self) -> ClosedLoopRun:
-        """The figure row's run 0 on the closed-form path."""
+        """The figure row's run 0 on the closed-form path.
+
+        Returns
+        -------
+        ClosedLoopRun
+            `figure_run` or `figure_twin`, whichever used the closed form.
+
+        Examples
+        --------
+        >>> from mascore.papers import bhattacharjee2021 as bs
+        >>> import dataclasses
+        >>> quick = dataclasses.replace(bs.DEFAULTS, n_runs=3, figure_method="closed_form")   # a small run
+        >>> result = bs.run(quick, seed=1)
+        >>> result.closed_form_run.x.shape[0]
+        1
+        """
         return self.figure_twin if self.settings.figure_method == "sdp" else self.figure_run
 
 
@@ -556,6 +843,19 @@ def run(settings: SetMembershipSettings = DEFAULTS, seed: int = 1, progress: boo
         Seed of every random draw (run r of a study uses ``SeedSequence(seed).spawn(n)[r]``).
     progress : bool
         Show progress bars.
+
+    Returns
+    -------
+    SetMembershipResult
+        Everything the figures, tables and claims need.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> from mascore.papers import bhattacharjee2021 as bs
+    >>> result = bs.run(dataclasses.replace(bs.DEFAULTS, n_runs=3, figure_method="closed_form"), seed=1)
+    >>> float(result.design.c)
+    1.5
     """
     seed = check_seed(seed, "seed")
     if settings.figure_method not in smf.METHODS or settings.table_method not in smf.METHODS:
@@ -575,7 +875,28 @@ def run(settings: SetMembershipSettings = DEFAULTS, seed: int = 1, progress: boo
 
 
 def plot_fig1(des: sync.SyncDesign | None = None, scenario: SetMembershipSettings = DEFAULTS) -> plt.Figure:
-    """Fig. 1: (a) the interaction graph with the leader, (b) eigenvalues of Gamma in C(c0, r0)."""
+    """Fig. 1: (a) the interaction graph with the leader, (b) eigenvalues of Gamma in C(c0, r0).
+
+    Parameters
+    ----------
+    des : mascore.synchronization.SyncDesign, optional
+        The design (default :func:`design`).
+    scenario : SetMembershipSettings
+        The example's settings (default :data:`DEFAULTS`).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.papers import bhattacharjee2021 as bs
+    >>> len(bs.plot_fig1().axes)
+    2
+    >>> plt.close("all")
+    """
     des = des if des is not None else design(scenario)
     adjacency, pinning, n = scenario.matrix("adjacency"), scenario.matrix("pinning"), scenario.n_agents
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(8.0, 3.8), layout="constrained")
@@ -614,9 +935,34 @@ def plot_fig1(des: sync.SyncDesign | None = None, scenario: SetMembershipSetting
 
 def plot_fig2(run: ClosedLoopRun, des: sync.SyncDesign | None = None, k_max: int | None = None,
               scenario: SetMembershipSettings = DEFAULTS) -> plt.Figure:
-    """Fig. 2: (a) leader and agent states, (b) |delta_bar_k| with the bound of eq. (21), (c) |A_c^k|.
+    """Fig. 2: (a) leader and agent states, (b) ``|delta_bar_k|`` with the bound of eq. (21), (c) ``|A_c^k|``.
 
     Panel (a) shows the two state components side by side, under one panel letter.
+
+    Parameters
+    ----------
+    run : ClosedLoopRun
+        The run to draw (run 0).
+    des : mascore.synchronization.SyncDesign, optional
+        The design (default :func:`design`).
+    k_max : int, optional
+        Last step of panel (c).
+    scenario : SetMembershipSettings
+        The example's settings (default :data:`DEFAULTS`).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.papers import bhattacharjee2021 as bs
+    >>> run = bs.simulate(seed=1, n_runs=2)                     # the closed loop of Sec. 5, closed form
+    >>> len(bs.plot_fig2(run).axes) >= 3
+    True
+    >>> plt.close("all")
     """
     s = scenario
     des = des if des is not None else design(s)
@@ -678,7 +1024,27 @@ def plot_fig3_4(run: ClosedLoopRun, agents: tuple[int, int]) -> plt.Figure:
 
 
 def plot_fig5(run: ClosedLoopRun) -> plt.Figure:
-    """Fig. 5: estimation error norms |e_k| of the four agents."""
+    """Fig. 5: estimation error norms ``|e_k|`` of the four agents.
+
+    Parameters
+    ----------
+    run : ClosedLoopRun
+        The run to draw (run 0).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.papers import bhattacharjee2021 as bs
+    >>> run = bs.simulate(seed=1, n_runs=2)                     # the closed loop of Sec. 5, closed form
+    >>> len(bs.plot_fig5(run).axes)
+    1
+    >>> plt.close("all")
+    """
     fig, ax = plt.subplots(figsize=(6.4, 3.8), layout="constrained")
     n = run.x.shape[2]
     colors = agent_colors(n)
@@ -695,10 +1061,31 @@ _COINCIDENT = (("-", "o", 3.4), ("--", "s", 2.4), ("-.", "^", 1.6), (":", "x", 1
 
 
 def plot_fig6(run: ClosedLoopRun, scenario: SetMembershipSettings = DEFAULTS) -> plt.Figure:
-    """Fig. 6: trace of the correction shape matrices P_{k|k}^(i).
+    """Fig. 6: trace of the correction shape matrices ``P_{k|k}^(i)``.
 
     The four traces coincide (same P0, Q, R for every agent); each agent gets its own
     line style, width and staggered markers so that all four stay visible.
+
+    Parameters
+    ----------
+    run : ClosedLoopRun
+        The run to draw (run 0).
+    scenario : SetMembershipSettings
+        The example's settings (default :data:`DEFAULTS`).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.papers import bhattacharjee2021 as bs
+    >>> run = bs.simulate(seed=1, n_runs=2)                     # the closed loop of Sec. 5, closed form
+    >>> len(bs.plot_fig6(run).axes[0].lines) >= 4
+    True
+    >>> plt.close("all")
     """
     fig, ax = plt.subplots(figsize=(6.4, 3.8), layout="constrained")
     tr = run.trace[0]
@@ -910,7 +1297,27 @@ def _twins_claim(result: SetMembershipResult) -> Claim:
 
 
 def ledger_claims(result: SetMembershipResult) -> list[Claim]:
-    """The ledger of the study, computed from `result` alone (see :func:`run`)."""
+    """The ledger of the study, computed from `result` alone (see :func:`run`).
+
+    Parameters
+    ----------
+    result : SetMembershipResult
+        The output of :func:`run`.
+
+    Returns
+    -------
+    list of mascore.ledger.Claim
+        The claims with their computed verdicts.
+
+    Examples
+    --------
+    >>> from mascore.papers import bhattacharjee2021 as bs
+    >>> import dataclasses
+    >>> quick = dataclasses.replace(bs.DEFAULTS, n_runs=3, figure_method="closed_form")   # a small run
+    >>> result = bs.run(quick, seed=1)
+    >>> all(c.id.startswith("bhattacharjee2021/") for c in bs.ledger_claims(result))
+    True
+    """
     return [*_design_claims(result.design, result.settings), _fig6_claim(result), *_table1_claims(result),
             *_filter_claims(result)]
 
