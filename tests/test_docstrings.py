@@ -31,19 +31,6 @@ CHECKS = {
 
 BOOK_API = Path(__file__).resolve().parents[1] / "book" / "api"
 
-#: Public callables of the paper modules whose docstrings do not pass yet (one per line: the
-#: target and its missing checks). The list may only shrink: a new function must be documented,
-#: and an entry that passes must be removed (so the list stays the truth).
-PENDING_FILE = Path(__file__).resolve().parent / "data" / "docstrings_pending.txt"
-
-
-def _pending() -> dict[str, str]:
-    if not PENDING_FILE.exists():
-        return {}
-    rows = [line.split(" ", 1) for line in PENDING_FILE.read_text().splitlines() if line and not line.startswith("#")]
-    return {target: codes for target, codes in rows}
-
-
 def _targets(module: str) -> list[str]:
     mod = importlib.import_module(f"mascore.{module}")
     out = []
@@ -66,17 +53,8 @@ def _problems(target: str) -> list[str]:
 
 @pytest.mark.parametrize("module", api_modules())
 def test_public_docstrings_pass_numpydoc_validation(module):
-    pending = _pending()
-    problems = [p for target in _targets(module) if target not in pending for p in _problems(target)]
+    problems = [p for target in _targets(module) for p in _problems(target)]
     assert not problems, "\n".join(problems)
-
-
-def test_pending_list_only_holds_targets_that_still_fail():
-    """An entry of the pending list that now passes (or no longer exists) must be removed from it."""
-    pending = _pending()
-    existing = {t for module in api_modules() for t in _targets(module)}
-    stale = sorted(t for t in pending if t not in existing or not _problems(t))
-    assert not stale, "remove from tests/data/docstrings_pending.txt: " + ", ".join(stale)
 
 
 def test_validation_catches_a_function_without_sections(tmp_path, monkeypatch):
