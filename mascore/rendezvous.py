@@ -53,7 +53,28 @@ __all__ = [
 
 
 def rendezvous_gain(rho1: float, rho2: float, n: int) -> np.ndarray:
-    """``K = [rho_1 I_n, rho_2 I_n]`` of eq. (4), shape ``(n, 2n)``."""
+    """``K = [rho_1 I_n, rho_2 I_n]`` of eq. (4).
+
+    Parameters
+    ----------
+    rho1 : float
+        Position gain (1/s²), positive.
+    rho2 : float
+        Velocity gain (1/s), positive.
+    n : int
+        Spatial dimension.
+
+    Returns
+    -------
+    (n, 2n) ndarray
+        The consensus gain.
+
+    Examples
+    --------
+    >>> from mascore import rendezvous
+    >>> rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    array([[0.5, 1.5]])
+    """
     rho1 = check_positive(rho1, "rho1", "(a positive gain)")
     rho2 = check_positive(rho2, "rho2", "(a positive gain)")
     n = check_positive_int(n, "n")
@@ -77,6 +98,15 @@ def consensus_control(views: ArrayLike, laplacian: ArrayLike, K: ArrayLike) -> n
     Returns
     -------
     U : (..., N, p) ndarray
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous
+    >>> views = rendezvous.true_state_views(np.array([[0.0, 0.0], [1.0, 0.0]]))   # 1-D, [p, v]
+    >>> rendezvous.consensus_control(views, graphs.laplacian(graphs.path_graph(2)), [[1.0, 2.0]])
+    array([[ 1.],
+           [-1.]])
     """
     Y = _finite(_float_array(views, "views"), "views")
     if Y.ndim < 3 or Y.shape[-3] != Y.shape[-2] or Y.shape[-2] == 0 or Y.shape[-1] == 0:
@@ -100,7 +130,25 @@ def _consensus_control(Y: np.ndarray, L: np.ndarray, K: np.ndarray) -> np.ndarra
 
 
 def true_state_views(states: ArrayLike) -> np.ndarray:
-    """Views ``Y[i, j] = x_j`` for the noise-free law (4): ``(..., N, N, m)`` (`states` finite ``(..., N, m)``)."""
+    """Views ``Y[i, j] = x_j`` for the noise-free law (4).
+
+    Parameters
+    ----------
+    states : (..., N, m) array_like
+        True agent states, finite.
+
+    Returns
+    -------
+    (..., N, N, m) ndarray
+        Every agent sees every agent's true state.
+
+    Examples
+    --------
+    >>> from mascore import rendezvous
+    >>> rendezvous.true_state_views([[0.0], [1.0]])[:, :, 0]
+    array([[0., 1.],
+           [0., 1.]])
+    """
     x = _finite(_float_array(states, "states"), "states")
     if x.ndim < 2:
         raise ValueError(f"states must have shape (..., N, m); got {x.shape}")
@@ -125,9 +173,32 @@ def propagate_team(
 
     Parameters
     ----------
+    rng : numpy.random.Generator or int
+        Source of the process noise.
     states : (..., N, m) array_like
+        Current states.
     inputs : (..., N, p) array_like
-    A : (m, m), B : (m, p), Q : (m, m) symmetric PSD
+        Inputs.
+    A : (m, m) array_like
+        Agent state matrix.
+    B : (m, p) array_like
+        Agent input matrix.
+    Q : (m, m) array_like
+        Process-noise covariance, symmetric PSD.
+
+    Returns
+    -------
+    (..., N, m) ndarray
+        The next states.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous
+    >>> agent = agents.double_integrator(1, 0.1)
+    >>> x = rendezvous.propagate_team(0, np.zeros((3, 2)), np.ones((3, 1)), agent.A, agent.B, np.zeros((2, 2)))
+    >>> x[0]                                                    # no noise: p = dt^2 / 2, v = dt
+    array([0.005, 0.1  ])
     """
     rng = check_generator(rng)
     x = _finite(_float_array(states, "states"), "states")
@@ -156,11 +227,27 @@ def _propagate_team(rng, x, u, A, B, Q):
 
 
 def team_spread(values: ArrayLike) -> np.ndarray:
-    """Standard deviation of the agents about their mean, ``(...)``.
+    """Standard deviation of the agents about their mean.
 
     ``sqrt(mean_i ||y_i - mean_j y_j||^2)`` over the agent axis (``-2``) of
     ``(..., N, d)`` data, e.g. positions (m) or velocities (m/s). Song et al.
     (2023) Fig. 3 plots its root mean square over Monte Carlo runs.
+
+    Parameters
+    ----------
+    values : (..., N, d) array_like
+        One row per agent.
+
+    Returns
+    -------
+    (...) ndarray
+        The spread, in the unit of `values`.
+
+    Examples
+    --------
+    >>> from mascore import rendezvous
+    >>> float(rendezvous.team_spread([[0.0, 0.0], [2.0, 0.0]]))
+    1.0
     """
     y = _finite(_float_array(values, "values"), "values")
     if y.ndim < 2 or y.shape[-2] == 0:
@@ -239,12 +326,34 @@ class RendezvousModel:
 
     @property
     def m(self) -> int:
-        """State dimension of one agent."""
+        """State dimension of one agent.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> agent = agents.double_integrator(2, 0.1)
+        >>> model = rendezvous.RendezvousModel(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 2),
+        ...                                    Q=1e-4 * np.eye(4), R=0.01 * np.eye(4), dt=0.1)
+        >>> model.m
+        4
+        """
         return self.A.shape[0]
 
     @property
     def p(self) -> int:
-        """Input dimension of one agent."""
+        """Input dimension of one agent.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> agent = agents.double_integrator(2, 0.1)
+        >>> model = rendezvous.RendezvousModel(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 2),
+        ...                                    Q=1e-4 * np.eye(4), R=0.01 * np.eye(4), dt=0.1)
+        >>> model.p
+        2
+        """
         return self.B.shape[1]
 
 
@@ -306,6 +415,18 @@ def expected_spread(
         the squared position spread of :func:`team_spread` is the sum over the
         position components (m^2), the velocity one over the velocity
         components (m^2/s^2).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous
+    >>> agent = agents.double_integrator(2, 0.1)
+    >>> model = rendezvous.RendezvousModel(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 2),
+    ...                                    Q=1e-4 * np.eye(4), R=0.01 * np.eye(4), dt=0.1)
+    >>> x0 = np.random.default_rng(1).normal(scale=5.0, size=(4, 4))
+    >>> exact = rendezvous.expected_spread(model, x0, graphs.ring_graph(4), 50, "measurement")
+    >>> exact.shape                                             # (T+1, m)
+    (51, 4)
     """
     if not isinstance(mode, str) or mode not in ("true", "measurement"):
         raise ValueError(f"mode must be 'true' or 'measurement' (linear laws with white noise); got {mode!r}")
@@ -357,12 +478,16 @@ MODES = ("true", "measurement", "measurement-filter", "estimation")
 class RendezvousResult:
     """Output of :func:`simulate_rendezvous` (``T`` steps, ``R`` runs, ``N`` agents).
 
-    Attributes
+    With one run (``x0`` of shape ``(N, m)``) the run axis ``R`` is absent.
+
+    Parameters
     ----------
     mode : str
+        The control law and estimator loop (one of :data:`MODES`).
     dt : float
         Sampling time (s); ``time = dt * arange(T + 1)``.
-    states : (T+1, R, N, m) true agent states ``[p; v]``.
+    states : (T+1, R, N, m) ndarray
+        True agent states ``[p; v]``.
     pos_error : (T+1, R, N) or None
         ``sqrt(sum_j ||p_j - p̂_{i,j}||^2)`` (m): agent ``i``'s position error
         over the whole team (Song et al. Fig. 2(c)).
@@ -374,6 +499,7 @@ class RendezvousResult:
         The same statistic for the centralized Kalman filter over all
         measurements (applied inputs known): a lower bound.
     central_pos_error : (T+1, R) or None
+        Position error of the centralized filter (m).
     sigma_i : (T+1, N, M_r, M_r) or None
         Reduced ``Σ̄_i[k]`` (only when the covariance is shared, ``B = 1``).
     gains : (T+1, N, M_r, M_r) or None
@@ -381,6 +507,18 @@ class RendezvousResult:
     f2_cross : (T+1, N, M_r, M_r) or None
         ``F_2 E[e e_i^T]`` (estimation mode, ``B = 1``), for Theorem 1.
     model : TeamFilterModel or None
+        The team filter model (filter modes).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous
+    >>> agent = agents.double_integrator(2, 0.1)
+    >>> model = rendezvous.RendezvousModel(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 2),
+    ...                                    Q=1e-4 * np.eye(4), R=0.01 * np.eye(4), dt=0.1)
+    >>> run = rendezvous.simulate_rendezvous(0, model, np.zeros((4, 4)), graphs.ring_graph(4), 10, "true")
+    >>> run.states.shape, run.pos_error is None
+    ((11, 4, 4), True)
     """
 
     mode: str
@@ -398,7 +536,19 @@ class RendezvousResult:
 
     @property
     def time(self) -> np.ndarray:
-        """Time stamps (s), ``(T+1,)``."""
+        """Time stamps (s), ``(T+1,)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> agent = agents.double_integrator(2, 0.1)
+        >>> model = rendezvous.RendezvousModel(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 2),
+        ...                                    Q=1e-4 * np.eye(4), R=0.01 * np.eye(4), dt=0.1)
+        >>> run = rendezvous.simulate_rendezvous(0, model, np.zeros((4, 4)), graphs.ring_graph(4), 3, "true")
+        >>> run.time
+        array([0. , 0.1, 0.2, 0.3])
+        """
         return self.dt * np.arange(self.states.shape[0])
 
 
@@ -459,11 +609,30 @@ def simulate_rendezvous(
         Read `adjacency` as one graph per step (Theorem 1 assumes a fixed
         one; with "estimation" every graph must make system (43) observable).
 
+    Returns
+    -------
+    RendezvousResult
+        True states and, in the filter modes, the estimation errors, covariances and NEES.
+
     Raises
     ------
     ValueError
         Unknown mode, bad shapes, an isolated agent, or (mode "estimation") a
         topology for which system (43) is not observable.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous
+    >>> agent = agents.double_integrator(2, 0.1)
+    >>> model = rendezvous.RendezvousModel(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 2),
+    ...                                    Q=1e-4 * np.eye(4), R=0.01 * np.eye(4), dt=0.1)
+    >>> x0 = np.random.default_rng(1).normal(scale=5.0, size=(4, 4))      # one run, 4 agents
+    >>> run = rendezvous.simulate_rendezvous(2, model, x0, graphs.ring_graph(4), 300, "estimation",
+    ...                                      x_hat0=x0.ravel(), P0=np.eye(4), central=True)
+    >>> spread = rendezvous.team_spread(run.states[..., :2])
+    >>> bool(spread[-1] < 0.05 * spread[0]), bool(abs(run.nees[1:].mean() / 16 - 1) < 0.5)   # meets; NEES ~ 4N
+    (True, True)
     """
     if not isinstance(mode, str) or mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}; got {mode!r}")
