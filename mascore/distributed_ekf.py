@@ -96,13 +96,27 @@ def ekf_predict(
     dt : float
         Sampling time (s), finite and > 0.
     gains : FlockingGains
+        The flocking gains of eq. (6).
     Q_team : (2nN, 2nN) array_like
         Team process-noise covariance ``I_N kron Q`` (symmetric positive semidefinite).
 
     Returns
     -------
     X_pred : (..., N, 2n) ndarray
+        Predicted team estimates.
     Sigma_pred : (..., 2nN, 2nN) ndarray
+        Their covariances.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import distributed_ekf as dekf
+    >>> from mascore.flocking import FlockingGains
+    >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Song et al., Table I
+    >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents [p, v]
+    >>> X_pred, P_pred = dekf.ekf_predict(X, np.eye(12), 0.1, gains, 0.01 * np.eye(12))
+    >>> X_pred.shape, bool(np.allclose(P_pred, P_pred.T))
+    ((3, 4), True)
     """
     X_hat = _check_team(X_hat, "X_hat")
     M = X_hat.shape[-1] * X_hat.shape[-2]
@@ -137,9 +151,22 @@ def masked_update(
     Returns
     -------
     X_post : (..., N, 2n) ndarray
+        Updated team estimates.
     Sigma_post : (..., 2nN, 2nN) ndarray
         ``(I - G_i H_i) Sigma_i^-`` of eq. (20) (equal to the Joseph form for
         this optimal gain), symmetrized.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import distributed_ekf as dekf
+    >>> from mascore.flocking import FlockingGains
+    >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Song et al., Table I
+    >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents [p, v]
+    >>> seen = np.array([True, True, False])                  # agent 2 is out of range
+    >>> X_post, P_post = dekf.masked_update(X, 4.0 * np.eye(12), X + 0.5, seen, np.eye(12))
+    >>> bool(np.allclose(X_post[2], X[2])), bool(np.trace(P_post[:8, :8]) < 32.0)   # only the seen agents move
+    (True, True)
     """
     X_pred, Sigma_pred, z, observed, R = _update_args(X_pred, Sigma_pred, z, observed, R)
     with np.errstate(over="ignore", invalid="ignore"):
@@ -198,6 +225,7 @@ def ekf_flocking_step(
     dt : float
         Sampling time (s).
     gains : FlockingGains
+        The flocking gains of eq. (6).
     Q_team : (2nN, 2nN) array_like
         ``I_N kron Q``.
 
@@ -207,6 +235,19 @@ def ekf_flocking_step(
     U : (..., N, n) ndarray
         ``U[..., i]``: agent ``i``'s control (m/s^2).
     X_next, Sigma_next : predictions for the next step
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import distributed_ekf as dekf
+    >>> from mascore.flocking import FlockingGains
+    >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Song et al., Table I
+    >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents [p, v]
+    >>> X_i = np.broadcast_to(X, (3, 3, 4)).copy()             # every agent's team estimate
+    >>> P_i = np.broadcast_to(np.eye(12), (3, 12, 12)).copy()
+    >>> out = dekf.ekf_flocking_step(X_i, P_i, X_i, np.ones((3, 3), bool), np.eye(12), 0.1, gains, 0.01 * np.eye(12))
+    >>> [a.shape for a in out]
+    [(3, 3, 4), (3, 12, 12), (3, 2), (3, 3, 4), (3, 12, 12)]
     """
     X_pred, Sigma_pred, z, observed, R = _update_args(X_pred, Sigma_pred, z, observed, R)
     N, m = X_pred.shape[-2:]
@@ -224,10 +265,14 @@ def ekf_flocking_step(
 class EstimatedFlockingRun(FlockingRun):
     """Outcome of :func:`simulate_estimation_based_flocking`.
 
-    Attributes
+    Parameters
     ----------
-    t, X, adjacency
-        As in :class:`mascore.flocking.FlockingRun`.
+    t : (T+1,) ndarray
+        Time (s).
+    X : (..., T+1, N, 2n) ndarray
+        True states.
+    adjacency : (..., T+1, N, N) ndarray
+        The proximity graph at each step.
     observer : int
         Index of the agent whose filter is recorded.
     X_hat : (..., T+1, N, 2n) ndarray
@@ -238,6 +283,18 @@ class EstimatedFlockingRun(FlockingRun):
     rms_error : (..., T+1) ndarray
         Root-mean-square position error (m) over every estimating agent and
         every estimated agent, ``sqrt(mean_{i,j} |p_hat_{i,j} - p_j|^2)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import distributed_ekf as dekf
+    >>> from mascore.flocking import FlockingGains
+    >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Song et al., Table I
+    >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents [p, v]
+    >>> run = dekf.simulate_estimation_based_flocking(X, np.broadcast_to(X, (3, 3, 4)), np.eye(12), 20, 0.1, gains,
+    ...                                               0.01 * np.eye(4), np.eye(4), np.random.default_rng(0), 150.0)
+    >>> run.X_hat.shape, run.rms_error.shape
+    ((21, 3, 4), (21,))
     """
 
     observer: int
@@ -281,12 +338,14 @@ def simulate_estimation_based_flocking(
     dt : float
         Sampling time (s), finite and > 0.
     gains : FlockingGains
+        The flocking gains of eq. (6).
     Q : (2n, 2n) array_like
         Process-noise covariance of one agent (team: ``I_N kron Q``).
     R : (2n, 2n) or (2nN, 2nN) array_like
         Measurement-noise covariance per measured agent (team ``I_N kron R``)
         or the paper's full ``R`` (:func:`mascore.sensing.team_noise_covariance`).
     rng : numpy.random.Generator or int
+        Source of process and measurement noise.
     sensing_range : float
         ``r`` (m), finite and > 0.
     observer : int
@@ -294,11 +353,28 @@ def simulate_estimation_based_flocking(
     progress : bool
         Show a ``tqdm`` progress bar over the steps.
 
+    Returns
+    -------
+    EstimatedFlockingRun
+        True states, graphs and the observer's estimates, variances and the team RMS error.
+
     Raises
     ------
     mascore.DivergenceError
         If the true state, an estimate or an estimated standard deviation
         exceeds ``DIVERGENCE_LIMIT`` (the sampled loop is unstable).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import distributed_ekf as dekf
+    >>> from mascore.flocking import FlockingGains
+    >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Song et al., Table I
+    >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents [p, v]
+    >>> run = dekf.simulate_estimation_based_flocking(X, np.broadcast_to(X, (3, 3, 4)), np.eye(12), 50, 0.1, gains,
+    ...                                               0.01 * np.eye(4), np.eye(4), np.random.default_rng(0), 150.0)
+    >>> bool(run.rms_error[-1] < 3.0)                         # metres, with unit measurement noise
+    True
     """
     rng = check_generator(rng)
     X = _check_team(X0, "X0").copy()

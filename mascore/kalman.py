@@ -213,6 +213,16 @@ def predict(
     ------
     ValueError, TypeError
         A bad argument (named in the message), or a result that overflowed.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import kalman
+    >>> F = [[1.0, 0.1], [0.0, 1.0]]                           # position, velocity, dt = 0.1 s
+    >>> x, P = kalman.predict([0.0, 1.0], np.eye(2), F, 0.01 * np.eye(2))
+    >>> x, np.round(P, 3)
+    (array([0.1, 1. ]), array([[1.02, 0.1 ],
+           [0.1 , 1.01]]))
     """
     # model and state recognised by identity and bytes (see _RECENT_STATES), else checked in full
     last = _LAST_MODELS.get("p")
@@ -259,6 +269,19 @@ def kalman_gain(P: ArrayLike, H: ArrayLike, R: ArrayLike) -> np.ndarray:
     R : (q, q) or (..., q, q) array_like
         Measurement-noise covariance, symmetric positive semidefinite; the
         innovation covariance ``H P H^T + R`` must be invertible.
+
+    Returns
+    -------
+    (..., m, q) ndarray
+        The gain.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import kalman
+    >>> kalman.kalman_gain(np.eye(2), [[1.0, 0.0]], [[1.0]])       # equal prior and noise: gain 1/2
+    array([[0.5],
+           [0. ]])
     """
     P = _float_array(P, "P")
     if P.ndim < 2 or P.shape[-1] == 0:
@@ -315,6 +338,15 @@ def update(
     ------
     ValueError, TypeError
         A bad argument (named in the message), or a result that overflowed.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import kalman
+    >>> x, P = kalman.update([0.0, 1.0], np.eye(2), z=[2.0], H=[[1.0, 0.0]], R=[[1.0]])
+    >>> x, np.round(P, 3)                                     # halfway to the measurement, half the variance
+    (array([1., 1.]), array([[0.5, 0. ],
+           [0. , 1. ]]))
     """
     # model and state recognised by identity and bytes (see _RECENT_STATES), else checked in full
     last = _LAST_MODELS.get("u")
@@ -361,6 +393,13 @@ def nees(error: ArrayLike, P: ArrayLike) -> np.ndarray:
     (...) ndarray
         Chi-square distributed with m degrees of freedom for a consistent
         Gaussian filter.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import kalman
+    >>> float(kalman.nees([1.0, 2.0], np.diag([1.0, 4.0])))    # 1/1 + 4/4
+    2.0
     """
     e = _float_array(error, "error")
     if e.ndim < 1 or e.shape[-1] == 0:
@@ -399,6 +438,13 @@ def nees_interval(dof: int, n_runs: int, confidence: float = 0.95) -> tuple[floa
     -------
     (low, high) : tuple of float
         Bounds on the *average* NEES.
+
+    Examples
+    --------
+    >>> from mascore import kalman
+    >>> low, high = kalman.nees_interval(dof=4, n_runs=100)
+    >>> round(low, 2), round(high, 2)
+    (3.46, 4.57)
     """
     from scipy import stats
 
@@ -417,7 +463,25 @@ def nees_interval(dof: int, n_runs: int, confidence: float = 0.95) -> tuple[floa
 
 
 def symmetrize(P: ArrayLike) -> np.ndarray:
-    """``(P + P^T) / 2`` over the last two axes of a finite ``(..., n, n)`` array."""
+    """``(P + P^T) / 2`` over the last two axes.
+
+    Parameters
+    ----------
+    P : (..., n, n) array_like
+        Finite square matrices.
+
+    Returns
+    -------
+    (..., n, n) ndarray
+        Their symmetric parts.
+
+    Examples
+    --------
+    >>> from mascore import kalman
+    >>> kalman.symmetrize([[1.0, 2.0], [0.0, 1.0]])
+    array([[1., 1.],
+           [1., 1.]])
+    """
     P = _float_array(P, "P")
     if P.ndim < 2 or P.shape[-1] != P.shape[-2]:
         raise ValueError(f"P must be a (..., n, n) array of square matrices; got shape {P.shape}")
