@@ -66,6 +66,15 @@ def sensing_mask(adjacency: ArrayLike, allow_isolated: bool = False) -> np.ndarr
     -------
     S : (..., N, N) ndarray of bool
         ``S[..., i, j]`` is true iff ``j`` is in ``N̄_i`` (diagonal true).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, sensing
+    >>> sensing.sensing_mask(graphs.path_graph(3)).astype(int)
+    array([[1, 1, 0],
+           [1, 1, 1],
+           [0, 1, 1]])
     """
     A = _check_adjacency(adjacency)
     _check_flag(allow_isolated, "allow_isolated")
@@ -93,6 +102,7 @@ def neighbor_sets(adjacency: ArrayLike, allow_isolated: bool = False) -> list[np
     Parameters
     ----------
     adjacency : (N, N) array_like
+        Who senses whom, ``A[i, j] > 0`` when ``i`` senses ``j``.
     allow_isolated : bool
         See :func:`sensing_mask`.
 
@@ -100,6 +110,13 @@ def neighbor_sets(adjacency: ArrayLike, allow_isolated: bool = False) -> list[np
     -------
     list of N int arrays
         ``out[i]`` lists ``N̄_i = N_i ∪ {i}`` in increasing order.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, sensing
+    >>> [s.tolist() for s in sensing.neighbor_sets(graphs.path_graph(3))]
+    [[0, 1], [0, 1, 2], [1, 2]]
     """
     S = sensing_mask(adjacency, allow_isolated=allow_isolated)
     if S.ndim != 2:
@@ -124,6 +141,13 @@ def selection_matrix(neighbors: ArrayLike, n_agents: int, m: int) -> np.ndarray:
     -------
     H : (m d, m N) ndarray
         Block ``(l, j)`` is ``I_m`` if ``j = neighbors[l]``, else ``0``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, sensing
+    >>> sensing.selection_matrix([1], n_agents=2, m=1)
+    array([[0., 1.]])
     """
     n_agents = check_positive_int(n_agents, "n_agents")
     m = check_positive_int(m, "m")
@@ -142,7 +166,28 @@ def selection_matrix(neighbors: ArrayLike, n_agents: int, m: int) -> np.ndarray:
 
 
 def selection_matrices(adjacency: ArrayLike, m: int, allow_isolated: bool = False) -> list[np.ndarray]:
-    """``[H_1, ..., H_N]`` for one graph (eq. (3)), self included."""
+    """``[H_1, ..., H_N]`` for one graph (eq. (3)), self included.
+
+    Parameters
+    ----------
+    adjacency : (N, N) array_like
+        Who senses whom.
+    m : int
+        Agent state dimension (``2n``).
+    allow_isolated : bool
+        See :func:`sensing_mask`.
+
+    Returns
+    -------
+    list of N ndarrays
+        ``H_i`` of shape ``(m |N̄_i|, m N)``.
+
+    Examples
+    --------
+    >>> from mascore import graphs, sensing
+    >>> [H.shape for H in sensing.selection_matrices(graphs.path_graph(3), 2)]
+    [(4, 6), (6, 6), (4, 6)]
+    """
     m = check_positive_int(m, "m")
     sets = neighbor_sets(adjacency, allow_isolated=allow_isolated)
     n_agents = len(sets)
@@ -158,10 +203,22 @@ def team_noise_covariance(R: ArrayLike, n_agents: int, m: int) -> np.ndarray:
         Either the covariance per measured agent (the team covariance is then
         ``I_N ⊗ R``) or the full covariance of ``nu_i`` as in the paper, where
         ``nu_i ~ N(0, R)`` with ``R`` of size ``2nN``. Symmetric PSD.
+    n_agents : int
+        Team size N.
+    m : int
+        Agent state dimension.
 
     Returns
     -------
     (m N, m N) ndarray
+        The team covariance.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, sensing
+    >>> sensing.team_noise_covariance(np.eye(2), n_agents=3, m=2).shape
+    (6, 6)
     """
     n_agents = check_positive_int(n_agents, "n_agents")
     m = check_positive_int(m, "m")
@@ -185,6 +242,31 @@ def measurement_noise(
     ``out[..., i, j, :]`` is ``nu_ij``, agent ``i``'s noise on agent ``j``.
     Noise is drawn for every pair (sensed or not) so that a realization does
     not depend on the topology (common random numbers across variants).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator or int
+        Source of the noise.
+    R : (m, m) or (m N, m N) array_like
+        Measurement-noise covariance (see :func:`team_noise_covariance`).
+    shape : tuple of int
+        Leading shape (e.g. ``(runs,)``).
+    n_agents : int
+        Team size N.
+    m : int
+        Agent state dimension.
+
+    Returns
+    -------
+    (*shape, N, N, m) ndarray
+        One noise vector per observer and observed agent.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, sensing
+    >>> sensing.measurement_noise(np.random.default_rng(0), np.eye(2), (5,), 3, 2).shape
+    (5, 3, 3, 2)
     """
     rng = check_generator(rng)
     shape = _sample_shape(shape, "shape")
@@ -230,6 +312,15 @@ def measure(
         elsewhere (never NaN, so it is safe in masked matrix products).
     S : (..., N, N) ndarray of bool
         The sensing mask used.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, sensing
+    >>> x = np.zeros((3, 2))
+    >>> Z, S = sensing.measure(np.random.default_rng(0), x, graphs.path_graph(3), 0.01 * np.eye(2))
+    >>> Z.shape, bool(np.all(Z[~S] == 0))                    # unsensed entries hold zeros
+    ((3, 3, 2), True)
     """
     rng = check_generator(rng)
     x = _float_array(states, "states")
@@ -281,6 +372,15 @@ def stacked_measurement(Z: ArrayLike, mask: ArrayLike, agent: int) -> np.ndarray
     z_i : (m |N̄_i|,) ndarray
         ``[z_{i,x_j}]`` for ``j`` in ``N̄_i`` in increasing order; equals
         ``H_i (X + nu_i)`` with ``H_i`` from :func:`selection_matrix`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, sensing
+    >>> x = np.arange(6.0).reshape(3, 2)
+    >>> Z, S = sensing.measure(np.random.default_rng(0), x, graphs.path_graph(3), 0.0 * np.eye(2))
+    >>> sensing.stacked_measurement(Z, S, agent=0)              # agents 0 and 1, no noise
+    array([0., 1., 2., 3.])
     """
     Z = _finite(_float_array(Z, "Z"), "Z")
     mask = _check_mask_values(mask, "mask")
