@@ -76,6 +76,13 @@ class FigureSpec:
         What the figure shows and what to look for (MyST Markdown: ``$math$`` allowed).
     draw : callable
         ``draw(result) -> matplotlib.figure.Figure``.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> spec = song2023.REGISTRY.study("rendezvous").figure("fig2")
+    >>> spec.name, spec.number
+    ('fig2', 'Fig. 2')
     """
 
     name: str
@@ -88,7 +95,23 @@ class FigureSpec:
 class TableSpec:
     """A table of a study (written to ``results/PAPER/tables/NAME.csv``).
 
-    ``build(result) -> pandas.DataFrame``; `number` is the paper's table (``"Table 1"``) or ``""``.
+    Parameters
+    ----------
+    name : str
+        File stem; unique within the paper.
+    number : str
+        The paper's table (``"Table 1"``) or ``""`` beyond the paper.
+    caption : str
+        What the table shows.
+    build : callable
+        ``build(result) -> pandas.DataFrame``.
+
+    Examples
+    --------
+    >>> from mascore.papers import bhattacharjee2021
+    >>> spec = bhattacharjee2021.REGISTRY.study("set-membership").table("table1")
+    >>> spec.name, spec.number
+    ('table1', 'Table 1')
     """
 
     name: str
@@ -112,9 +135,19 @@ class Study:
         The default (paper-faithful) settings.
     run : callable
         ``run(settings, seed, progress=False) -> result``.
-    figures, tables : sequences of FigureSpec, TableSpec
+    figures : sequence of FigureSpec
+        The figures the study rebuilds.
+    tables : sequence of TableSpec
+        The tables.
     claims : callable
         ``claims(result) -> list[Claim]``.
+
+    Examples
+    --------
+    >>> from mascore.papers import vlahakis
+    >>> study = vlahakis.REGISTRY.study("distributed-observer")
+    >>> study.chapter
+    'vlahakis_distributed_observer'
     """
 
     name: str
@@ -126,28 +159,107 @@ class Study:
     claims: Callable[[Any], list[Claim]] = lambda result: []
 
     def figure(self, name: str) -> FigureSpec:
-        """The figure spec called `name` (``ValueError`` naming the choices otherwise)."""
+        """The figure spec called `name` (``ValueError`` naming the choices otherwise).
+
+        Parameters
+        ----------
+        name : str
+            A figure of the study.
+
+        Returns
+        -------
+        FigureSpec
+            Its spec.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023
+        >>> song2023.REGISTRY.study("rendezvous").figure("fig2").number
+        'Fig. 2'
+        """
         for spec in self.figures:
             if spec.name == name:
                 return spec
         raise ValueError(f"figure must be one of {[f.name for f in self.figures]}; got {name!r}")
 
     def table(self, name: str) -> TableSpec:
-        """The table spec called `name` (``ValueError`` naming the choices otherwise)."""
+        """The table spec called `name` (``ValueError`` naming the choices otherwise).
+
+        Parameters
+        ----------
+        name : str
+            A table of the study.
+
+        Returns
+        -------
+        TableSpec
+            Its spec.
+
+        Examples
+        --------
+        >>> from mascore.papers import bhattacharjee2021
+        >>> bhattacharjee2021.REGISTRY.study("set-membership").table("table1").number
+        'Table 1'
+        """
         for spec in self.tables:
             if spec.name == name:
                 return spec
         raise ValueError(f"table must be one of {[t.name for t in self.tables]}; got {name!r}")
 
     def draw(self, name: str, result: Any) -> "matplotlib.figure.Figure":
-        """Draw figure `name` from `result` (in the book's style)."""
+        """Draw figure `name` from `result` (in the book's style).
+
+        Parameters
+        ----------
+        name : str
+            A figure of the study.
+        result : object
+            The output of the study's ``run``.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            The figure.
+
+        Examples
+        --------
+        >>> import matplotlib.pyplot as plt
+        >>> from mascore.papers import ren2005
+        >>> study = ren2005.REGISTRY.study("kalman-consensus")
+        >>> fig = study.draw("fig1", ren2005.run(seed=1))
+        >>> len(fig.axes)
+        4
+        >>> plt.close("all")
+        """
         from .plotting import use_style
 
         use_style()
         return self.figure(name).draw(result)
 
     def build(self, name: str, result: Any) -> "pd.DataFrame":
-        """Build table `name` from `result`."""
+        """Build table `name` from `result`.
+
+        Parameters
+        ----------
+        name : str
+            A table of the study.
+        result : object
+            The output of the study's ``run``.
+
+        Returns
+        -------
+        pandas.DataFrame
+            The table.
+
+        Examples
+        --------
+        >>> import dataclasses
+        >>> from mascore.papers import bhattacharjee2021 as bs
+        >>> study = bs.REGISTRY.study("set-membership")
+        >>> result = study.run(dataclasses.replace(bs.DEFAULTS, n_runs=3, figure_method="closed_form"), 1)
+        >>> study.build("table1", result).shape[0]
+        3
+        """
         return self.table(name).build(result)
 
 
@@ -162,8 +274,15 @@ class PaperRegistry:
     citation : str
         Short author-year form used in captions (``"Song et al. 2023"``).
     studies : sequence of Study
+        One per chapter.
     errata : sequence of str
         Errata and readings we found, one Markdown sentence or two each (the report lists them).
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> [s.name for s in song2023.REGISTRY.studies]
+    ['rendezvous', 'flocking']
     """
 
     key: str
@@ -179,18 +298,70 @@ class PaperRegistry:
             raise ValueError(f"{self.key}: figure and table names must be unique; got {names}")
 
     def study(self, name: str) -> Study:
-        """The study called `name`."""
+        """The study called `name` (``ValueError`` naming the choices otherwise).
+
+        Parameters
+        ----------
+        name : str
+            A study of the paper.
+
+        Returns
+        -------
+        Study
+            The study.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023
+        >>> song2023.REGISTRY.study("flocking").chapter
+        'song2023_flocking'
+        """
         for s in self.studies:
             if s.name == name:
                 return s
         raise ValueError(f"study must be one of {[s.name for s in self.studies]}; got {name!r}")
 
     def figure_label(self, name: str) -> str:
-        """Cross-reference label of figure `name` in the book: ``fig-{key}-{name}``."""
+        """Cross-reference label of figure `name` in the book: ``fig-{key}-{name}``.
+
+        Parameters
+        ----------
+        name : str
+            A figure name.
+
+        Returns
+        -------
+        str
+            The label.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023
+        >>> song2023.REGISTRY.figure_label("fig2")
+        'fig-song2023-fig2'
+        """
         return f"fig-{self.key}-{name}"
 
     def full_caption(self, spec: FigureSpec | TableSpec) -> str:
-        """The caption as the book prints it: the paper's number first, then the spec's caption."""
+        """The caption as the book prints it: the paper's number first, then the spec's caption.
+
+        Parameters
+        ----------
+        spec : FigureSpec or TableSpec
+            A figure or table of one of the studies.
+
+        Returns
+        -------
+        str
+            The caption.
+
+        Examples
+        --------
+        >>> from mascore.papers import song2023
+        >>> spec = song2023.REGISTRY.study("rendezvous").figure("fig2")
+        >>> song2023.REGISTRY.full_caption(spec).startswith("Song et al. 2023, Fig. 2 (rebuilt).")
+        True
+        """
         if not spec.number:
             source = "Beyond the paper. "
         elif spec.number.startswith(("Fig", "Table")):
@@ -201,7 +372,24 @@ class PaperRegistry:
 
 
 def paper_registry(key: str) -> PaperRegistry:
-    """The :class:`PaperRegistry` declared as ``REGISTRY`` in ``mascore.papers.<key>``."""
+    """The :class:`PaperRegistry` declared as ``REGISTRY`` in ``mascore.papers.<key>``.
+
+    Parameters
+    ----------
+    key : str
+        One of :data:`mascore.ledger.PAPERS`.
+
+    Returns
+    -------
+    PaperRegistry
+        The paper's registry.
+
+    Examples
+    --------
+    >>> from mascore.registry import paper_registry
+    >>> paper_registry("vlahakis").citation
+    'Vlahakis and Halikias'
+    """
     if key not in PAPERS:
         raise ValueError(f"paper must be one of {', '.join(PAPERS)}; got {key!r}")
     return importlib.import_module(f"mascore.papers.{key}").REGISTRY
@@ -212,6 +400,32 @@ def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | 
 
     Each claim is tagged with the study's name (``Claim.study``), so the report can
     link it to its chapter.
+
+    Parameters
+    ----------
+    paper : PaperRegistry
+        The paper.
+    study : Study
+        One of its studies.
+    result : object
+        The output of ``study.run``.
+    out_dir : str or pathlib.Path
+        The paper's output folder (``figures/`` and ``tables/`` are created in it).
+
+    Returns
+    -------
+    list of mascore.ledger.Claim
+        The study's claims.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from mascore.papers import ren2005
+    >>> from mascore.registry import write_study
+    >>> study = ren2005.REGISTRY.study("kalman-consensus")
+    >>> claims = write_study(ren2005.REGISTRY, study, study.run(study.settings, 1), tempfile.mkdtemp())
+    >>> {c.study for c in claims}
+    {'kalman-consensus'}
     """
     plt = require("matplotlib.pyplot", "drawing a registered figure")
 
@@ -235,7 +449,8 @@ def setting(default: Any, *, source: str = "paper", where: str = "", unit: str =
 
     Parameters
     ----------
-    default : the value (use a tuple, not a list or array, to keep the dataclass frozen and hashable)
+    default : object
+        The value (use a tuple, not a list or array, to keep the dataclass frozen and hashable).
     source : {"paper", "chosen", "derived"}
         Given by the paper, chosen by us because the paper leaves it out, or derived from others.
     where : str
@@ -244,13 +459,28 @@ def setting(default: Any, *, source: str = "paper", where: str = "", unit: str =
         Physical unit, ``""`` if dimensionless.
     note : str
         One short phrase on what it is.
+
+    Returns
+    -------
+    dataclasses.Field
+        The field, its metadata read by :func:`show_settings` and :func:`documented_settings`.
+
+    Examples
+    --------
+    >>> from dataclasses import dataclass, fields
+    >>> from mascore.registry import setting
+    >>> @dataclass(frozen=True)
+    ... class Demo:
+    ...     dt: float = setting(0.1, source="paper", where="Table I", unit="s", note="sampling time")
+    >>> fields(Demo)[0].metadata["unit"]
+    's'
     """
     if source not in ("paper", "chosen", "derived"):
         raise ValueError(f"source must be 'paper', 'chosen' or 'derived'; got {source!r}")
     return field(default=default, metadata={"source": source, "where": where, "unit": unit, "note": note})
 
 
-def documented_settings(cls: type) -> type:
+def documented_settings(settings_class: type) -> type:
     """Complete a settings dataclass's docstring from its :func:`setting` fields.
 
     Appends a numpydoc Parameters section (one entry per field: its default with unit,
@@ -260,18 +490,18 @@ def documented_settings(cls: type) -> type:
 
     Parameters
     ----------
-    cls : type
+    settings_class : type
         A dataclass whose fields were declared with :func:`setting`.
 
     Returns
     -------
     type
-        `cls`, with its ``__doc__`` completed.
+        `settings_class`, with its ``__doc__`` completed.
 
     Raises
     ------
     TypeError
-        If `cls` is not a dataclass.
+        If `settings_class` is not a dataclass.
 
     Examples
     --------
@@ -279,10 +509,10 @@ def documented_settings(cls: type) -> type:
     >>> "Omega : " in KalmanConsensusSettings.__doc__
     True
     """
-    if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)):
-        raise TypeError(f"documented_settings needs a dataclass; got {cls!r}")
-    lines = [(cls.__doc__ or cls.__name__).rstrip(), "", "Parameters", "----------"]
-    for f in dataclasses.fields(cls):
+    if not (isinstance(settings_class, type) and dataclasses.is_dataclass(settings_class)):
+        raise TypeError(f"documented_settings needs a dataclass; got {settings_class!r}")
+    lines = [(settings_class.__doc__ or settings_class.__name__).rstrip(), "", "Parameters", "----------"]
+    for f in dataclasses.fields(settings_class):
         meta = f.metadata
         default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
         value = format_value(default, max_items=6) + (f" {meta['unit']}" if meta.get("unit") else "")
@@ -291,19 +521,32 @@ def documented_settings(cls: type) -> type:
             origin += f", {meta['where']}"
         lines += [f"{f.name} : default {value}", f"    {meta.get('note') or f.name} ({origin})." if origin
                   else f"    {meta.get('note') or f.name}."]
-    first = dataclasses.fields(cls)[0].name
+    first = dataclasses.fields(settings_class)[0].name
     lines += ["", "Examples", "--------", ">>> import dataclasses",
-              f">>> from {cls.__module__} import {cls.__name__}",
-              f">>> settings = {cls.__name__}()",
+              f">>> from {settings_class.__module__} import {settings_class.__name__}",
+              f">>> settings = {settings_class.__name__}()",
               f">>> changed = dataclasses.replace(settings, {first}=settings.{first})   # change any setting by name",
               ">>> changed == settings", "True"]
-    cls.__doc__ = "\n".join(lines)
-    return cls
+    settings_class.__doc__ = "\n".join(lines)
+    return settings_class
 
 
 @dataclass(frozen=True)
 class SettingsView:
-    """A settings dataclass laid out as a Markdown table (Jupyter shows it as such)."""
+    """A settings dataclass laid out as a Markdown table (Jupyter shows it as such).
+
+    Parameters
+    ----------
+    settings : dataclass instance
+        Settings declared with :func:`setting`.
+
+    Examples
+    --------
+    >>> from mascore.papers import ren2005
+    >>> from mascore.registry import SettingsView
+    >>> str(SettingsView(ren2005.SETTINGS)).splitlines()[0]
+    '| setting | value | from | note |'
+    """
 
     settings: Any
 
@@ -324,7 +567,30 @@ class SettingsView:
 
 
 def show_settings(settings: Any) -> SettingsView:
-    """Display a settings dataclass as a table: value with unit, whether the paper gives it, a note."""
+    """Display a settings dataclass as a table: value with unit, whether the paper gives it, a note.
+
+    Parameters
+    ----------
+    settings : dataclass instance
+        Settings declared with :func:`setting`.
+
+    Returns
+    -------
+    SettingsView
+        Shown as a Markdown table by Jupyter.
+
+    Raises
+    ------
+    TypeError
+        If `settings` is not a dataclass instance.
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> from mascore.registry import show_settings
+    >>> "sampling time" in str(show_settings(song2023.SETTINGS))
+    True
+    """
     if not dataclasses.is_dataclass(settings):
         raise TypeError(f"settings must be a dataclass instance; got {type(settings).__name__}")
     return SettingsView(settings)
@@ -335,7 +601,24 @@ def _cell(text: str) -> str:
 
 
 def all_figures(papers: Sequence[str] = PAPERS) -> list[tuple[PaperRegistry, Study, FigureSpec]]:
-    """Every registered figure as ``(paper, study, spec)``, in book order."""
+    """Every registered figure as ``(paper, study, spec)``, in book order.
+
+    Parameters
+    ----------
+    papers : sequence of str
+        Paper keys (default all).
+
+    Returns
+    -------
+    list of tuple
+        ``(PaperRegistry, Study, FigureSpec)`` per figure.
+
+    Examples
+    --------
+    >>> from mascore.registry import all_figures
+    >>> len(all_figures(["ren2005"])) > 0
+    True
+    """
     out = []
     for key in papers:
         reg = paper_registry(key)

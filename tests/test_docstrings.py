@@ -38,8 +38,9 @@ def _targets(module: str) -> list[str]:
         obj = getattr(mod, name)
         out.append(f"mascore.{module}.{name}")
         if inspect.isclass(obj):
+            fields = getattr(obj, "__dataclass_fields__", {})
             for attr, value in vars(obj).items():
-                if attr.startswith("_"):
+                if attr.startswith("_") or attr in fields:  # a field's default is data, not a method
                     continue
                 if inspect.isfunction(value) or isinstance(value, (classmethod, staticmethod, property)):
                     out.append(f"mascore.{module}.{name}.{attr}")
