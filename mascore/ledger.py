@@ -156,25 +156,69 @@ class Claim:
 
         Parameters
         ----------
+        id : str
+            ``PAPER/short-name``.
+        where : str
+            Where the paper states it.
+        statement : str
+            One sentence in our words.
         value : number, list or dict
             The measured quantity (or quantities) that decides the claim.
         holds : bool
             The condition evaluated on `value` by the caller's code.
+        note : str
+            Why, what reading we chose.
         rule : str
             The condition in words or symbols (``"max_ratio <= 1"``).
+        unit : str
+            Unit of `value`.
+
+        Returns
+        -------
+        Claim
+            With verdict ``"holds"`` or ``"fails"``.
+
+        Examples
+        --------
+        >>> from mascore.ledger import Claim
+        >>> Claim.qualitative("ren2005/demo", "Thm. 3.2", "They agree.", {"spread": 1e-9}, True,
+        ...                   rule="spread < 1e-6").verdict
+        'holds'
         """
         return cls(id, where, statement, None, value, None, note, unit=unit, rule=rule, holds=bool(holds))
 
     @property
     def deviation(self) -> float | None:
-        """Largest deviation from the paper (relative or absolute, as the tolerance), or None."""
+        """Largest deviation from the paper (relative or absolute, as the tolerance), or None.
+
+        Examples
+        --------
+        >>> from mascore.ledger import Claim
+        >>> c = Claim("ren2005/demo", "Sec. 2", "A demo number.", paper_value=2.0, value=2.01, tolerance={"rel": 0.01})
+        >>> round(c.deviation, 6)                                  # 0.5 % off
+        0.005
+        """
         if self.paper_value is None:
             return None
         kind = "rel" if "rel" in self.tolerance else "abs"
         return _worst_deviation(self.paper_value, self.value, kind)
 
     def to_dict(self) -> dict:
-        """The JSON record of REPRODUCTION.md (optional keys only when set)."""
+        """The JSON record of REPRODUCTION.md (optional keys only when set).
+
+        Returns
+        -------
+        dict
+            ``id``, ``where``, ``statement``, ``paper_value``, ``value``, ``tolerance``,
+            ``verdict``, ``note`` and the optional keys that are set.
+
+        Examples
+        --------
+        >>> from mascore.ledger import Claim
+        >>> c = Claim("ren2005/demo", "Sec. 2", "A demo number.", paper_value=2.0, value=2.01, tolerance={"rel": 0.01})
+        >>> c.to_dict()["verdict"]
+        'reproduces'
+        """
         record = asdict(self)
         out = {k: record[k] for k in _RECORD_KEYS}
         out |= {k: (list(record[k]) if k == "labels" else record[k]) for k in _OPTIONAL_KEYS if record[k]}
@@ -182,7 +226,25 @@ class Claim:
 
     @classmethod
     def from_dict(cls, record: dict) -> "Claim":
-        """Rebuild a claim from its JSON record, recomputing the verdict."""
+        """Rebuild a claim from its JSON record, recomputing the verdict.
+
+        Parameters
+        ----------
+        record : dict
+            A record of ``claims.json`` (:meth:`to_dict`).
+
+        Returns
+        -------
+        Claim
+            The claim, its verdict computed again from the numbers.
+
+        Examples
+        --------
+        >>> from mascore.ledger import Claim
+        >>> c = Claim("ren2005/demo", "Sec. 2", "A demo number.", paper_value=2.0, value=2.01, tolerance={"rel": 0.01})
+        >>> Claim.from_dict(c.to_dict()) == c
+        True
+        """
         keys = {k: record[k] for k in (*_RECORD_KEYS, *_OPTIONAL_KEYS) if k in record and k != "verdict"}
         if keys.get("paper_value") is None:
             keys["holds"] = record["verdict"] == "holds"
@@ -195,8 +257,36 @@ def write_claims(
 ) -> Path:
     """Write ``claims.json`` for one paper; returns the path written.
 
-    `files` maps the paper directory's figures and tables (relative paths) to their
-    SHA-256 (:func:`output_hashes`); :func:`verify_outputs` checks them later.
+    Parameters
+    ----------
+    claims : sequence of Claim
+        The paper's claims.
+    path : str or pathlib.Path
+        Where to write.
+    paper : str
+        Paper key.
+    seed : int
+        The seed of the run.
+    created_by : str
+        The command that produced it.
+    files : dict of str to str, optional
+        The paper directory's figures and tables (relative paths) and their SHA-256
+        (:func:`output_hashes`); :func:`verify_outputs` checks them later.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Examples
+    --------
+    >>> import json, pathlib, tempfile
+    >>> from mascore.ledger import Claim, verify_outputs, write_claims
+    >>> c = Claim("ren2005/demo", "Sec. 2", "A demo number.", paper_value=2.0, value=2.01, tolerance={"rel": 0.01})
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> path = write_claims([c], d / "claims.json", "ren2005", 1, "demo", files={})
+    >>> verify_outputs(d)["claims"][0]["verdict"]
+    'reproduces'
     """
     from . import __version__
 
@@ -220,7 +310,26 @@ def write_claims(
 
 
 def output_hashes(paper_dir: str | Path) -> dict[str, str]:
-    """SHA-256 of every file under ``paper_dir/figures`` and ``paper_dir/tables``, by relative path."""
+    """SHA-256 of every file under ``paper_dir/figures`` and ``paper_dir/tables``, by relative path.
+
+    Parameters
+    ----------
+    paper_dir : str or pathlib.Path
+        A paper's results folder.
+
+    Returns
+    -------
+    dict of str to str
+        Relative path -> hex digest.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> from mascore.ledger import output_hashes
+    >>> d = pathlib.Path(tempfile.mkdtemp()); (d / "tables").mkdir(); _ = (d / "tables" / "t.csv").write_text("a")
+    >>> list(output_hashes(d))
+    ['tables/t.csv']
+    """
     import hashlib
 
     paper_dir = Path(paper_dir)
@@ -230,6 +339,11 @@ def output_hashes(paper_dir: str | Path) -> dict[str, str]:
 
 def verify_outputs(paper_dir: str | Path) -> dict:
     """Read ``paper_dir/claims.json`` and check that the figures and tables beside it are its own.
+
+    Parameters
+    ----------
+    paper_dir : str or pathlib.Path
+        A paper's results folder.
 
     Returns
     -------
@@ -241,6 +355,20 @@ def verify_outputs(paper_dir: str | Path) -> dict:
     ValueError
         A figure or table is missing, extra or changed since the ledger was written
         (for example a run interrupted by hand or files copied in from another seed).
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> from mascore.ledger import Claim, verify_outputs, write_claims
+    >>> c = Claim("ren2005/demo", "Sec. 2", "A demo number.", paper_value=2.0, value=2.01, tolerance={"rel": 0.01})
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> _ = write_claims([c], d / "claims.json", "ren2005", 1, "demo", files={})
+    >>> (d / "figures").mkdir(); _ = (d / "figures" / "stray.png").write_bytes(b"x")
+    >>> try:
+    ...     verify_outputs(d)
+    ... except ValueError as exc:
+    ...     print("refused")
+    refused
     """
     paper_dir = Path(paper_dir)
     doc = json.loads((paper_dir / "claims.json").read_text())
@@ -263,6 +391,10 @@ def load_claims(results_dir: str | Path, papers: Iterable[str] = PAPERS, verify:
 
     Parameters
     ----------
+    results_dir : str or pathlib.Path
+        The results folder (``results/``).
+    papers : iterable of str
+        Paper keys to read.
     verify : bool
         Check first that each paper's figures and tables match its ledger
         (:func:`verify_outputs`; ``ValueError`` otherwise).
@@ -271,6 +403,16 @@ def load_claims(results_dir: str | Path, papers: Iterable[str] = PAPERS, verify:
     -------
     list of dict
         The claim records, each with an added ``paper`` key.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> from mascore.ledger import Claim, load_claims, write_claims
+    >>> c = Claim("ren2005/demo", "Sec. 2", "A demo number.", paper_value=2.0, value=2.01, tolerance={"rel": 0.01})
+    >>> root = pathlib.Path(tempfile.mkdtemp())
+    >>> _ = write_claims([c], root / "ren2005" / "claims.json", "ren2005", 1, "demo", files={})
+    >>> [r["paper"] for r in load_claims(root)]
+    ['ren2005']
     """
     records = []
     for paper in papers:
@@ -282,7 +424,25 @@ def load_claims(results_dir: str | Path, papers: Iterable[str] = PAPERS, verify:
 
 
 def claims_table(records: Sequence[dict]):
-    """A pandas DataFrame of claim records (full values, for analysis; see :func:`show_claims` to read)."""
+    """A pandas DataFrame of claim records (full values, for analysis; see :func:`show_claims` to read).
+
+    Parameters
+    ----------
+    records : sequence of dict
+        Claim records.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per claim.
+
+    Examples
+    --------
+    >>> from mascore.ledger import Claim, claims_table
+    >>> c = Claim("ren2005/demo", "Sec. 2", "A demo number.", paper_value=2.0, value=2.01, tolerance={"rel": 0.01})
+    >>> claims_table([c.to_dict()]).loc[0, "verdict"]
+    'reproduces'
+    """
     pd = require("pandas", "this table")
 
     columns = ["id", "where", "paper_value", "value", "tolerance", "verdict", "note"]
@@ -298,6 +458,18 @@ def format_number(x: float, digits: int = 4) -> str:
     Numbers from 1e-3 to below 1e6 are written out (``0.07681``, ``2.462``, ``136.4``,
     ``12,346``); smaller and larger ones as ``2.776 × 10⁻¹⁷``. Integers are written
     exactly. Trailing zeros are dropped.
+
+    Parameters
+    ----------
+    x : float
+        The number.
+    digits : int
+        Significant digits.
+
+    Returns
+    -------
+    str
+        The number as printed.
 
     Examples
     --------
@@ -334,6 +506,30 @@ def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = ""
     `labels` when given and cut after `max_items` entries (marked with an ellipsis),
     dicts as ``label = value`` pairs (underscores in labels read as spaces), ``None``
     as a dash.
+
+    Parameters
+    ----------
+    value : object
+        A number, list, dict or None.
+    digits : int
+        Significant digits of each number.
+    max_items : int
+        Entries shown of a list.
+    unit : str
+        Appended to numbers.
+    labels : sequence of str, optional
+        Names of a list's entries.
+
+    Returns
+    -------
+    str
+        The value as printed.
+
+    Examples
+    --------
+    >>> from mascore.ledger import format_value
+    >>> format_value([1.5, 2.25], labels=["mean", "rms"], unit="m")
+    'mean: 1.5; rms: 2.25 (m)'
     """
     suffix = f"\u00a0{unit}" if unit else ""
     if value is None:
@@ -371,6 +567,18 @@ class ClaimsView:
     """Claims laid out for reading: a numbered table, then the notes (shared paragraphs once).
 
     Jupyter shows it as Markdown (``_repr_markdown_``); ``str()`` gives the same text.
+
+    Parameters
+    ----------
+    records : tuple of dict
+        Claim records (:meth:`Claim.to_dict`).
+
+    Examples
+    --------
+    >>> from mascore.ledger import Claim, show_claims
+    >>> c = Claim("ren2005/demo", "Sec. 2", "A demo number.", paper_value=2.0, value=2.01, tolerance={"rel": 0.01})
+    >>> str(show_claims([c])).splitlines()[0].startswith("|")
+    True
     """
 
     records: tuple[dict, ...]
@@ -426,7 +634,25 @@ def _cell(text: str) -> str:
 
 
 def show_claims(claims: Iterable[Claim | dict]) -> ClaimsView:
-    """Claims (objects or ``claims.json`` records) as a :class:`ClaimsView` for display."""
+    """Claims (objects or ``claims.json`` records) as a :class:`ClaimsView` for display.
+
+    Parameters
+    ----------
+    claims : iterable of Claim or dict
+        The claims.
+
+    Returns
+    -------
+    ClaimsView
+        Shown as a numbered Markdown table by Jupyter.
+
+    Examples
+    --------
+    >>> from mascore.ledger import Claim, show_claims
+    >>> c = Claim("ren2005/demo", "Sec. 2", "A demo number.", paper_value=2.0, value=2.01, tolerance={"rel": 0.01})
+    >>> "reproduces" in str(show_claims([c]))
+    True
+    """
     return ClaimsView(tuple(c.to_dict() if isinstance(c, Claim) else dict(c) for c in claims))
 
 
