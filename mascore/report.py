@@ -23,7 +23,19 @@ ATTENTION = ("approximately", "does-not-reproduce", "fails")
 
 @dataclass(frozen=True)
 class MarkdownText:
-    """Markdown that Jupyter (and the book) renders; ``str()`` gives the text."""
+    """Markdown that Jupyter (and the book) renders; ``str()`` gives the text.
+
+    Parameters
+    ----------
+    text : str
+        The Markdown.
+
+    Examples
+    --------
+    >>> from mascore.report import MarkdownText
+    >>> str(MarkdownText("**bold**"))
+    '**bold**'
+    """
 
     text: str
 
@@ -35,7 +47,27 @@ class MarkdownText:
 
 
 def verdict_summary(records: Sequence[dict]):
-    """Claims per paper (rows, book order) and verdict (columns), with totals: a pandas DataFrame."""
+    """Claims per paper (rows, book order) and verdict (columns), with totals.
+
+    Parameters
+    ----------
+    records : sequence of dict
+        Claim records with a ``paper`` key.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Counts, with a total row and column.
+
+    Examples
+    --------
+    >>> from mascore.ledger import Claim
+    >>> ok = Claim("ren2005/a", "Sec. 2", "A number.", 2.0, 2.01, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
+    >>> off = Claim("ren2005/b", "Sec. 3", "Another.", 2.0, 3.0, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
+    >>> from mascore.report import verdict_summary
+    >>> int(verdict_summary([ok, off]).loc["ren2005", "reproduces"])
+    1
+    """
     pd = require("pandas", "this table")
 
     papers = [p for p in PAPERS if any(r["paper"] == p for r in records)]
@@ -54,7 +86,28 @@ def ledger_label(paper: str, study: str) -> str:
 
 
 def attention_list(records: Sequence[dict]) -> MarkdownText:
-    """A table of every claim that is approximate, does not reproduce or fails, linked to its ledger."""
+    """A table of every claim that is approximate, does not reproduce or fails, linked to its ledger.
+
+    Parameters
+    ----------
+    records : sequence of dict
+        Claim records with a ``paper`` key (:func:`mascore.ledger.load_claims`).
+
+    Returns
+    -------
+    MarkdownText
+        The table (or a sentence when every claim reproduces or holds).
+
+    Examples
+    --------
+    >>> from mascore.ledger import Claim
+    >>> ok = Claim("ren2005/a", "Sec. 2", "A number.", 2.0, 2.01, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
+    >>> off = Claim("ren2005/b", "Sec. 3", "Another.", 2.0, 3.0, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
+    >>> from mascore.report import attention_list
+    >>> text = str(attention_list([ok, off]))
+    >>> "Another." in text, "A number." in text
+    (True, False)
+    """
     rows = ["| verdict | where | claim |", "|---|---|---|"]
     for verdict in ATTENTION:
         for r in (r for r in records if r["verdict"] == verdict):
@@ -67,7 +120,24 @@ def attention_list(records: Sequence[dict]) -> MarkdownText:
 
 
 def errata_list(papers: Sequence[str] = PAPERS) -> MarkdownText:
-    """Per paper, the errata and readings its registry records, each paper in a collapsed dropdown."""
+    """Per paper, the errata and readings its registry records, each paper in a collapsed dropdown.
+
+    Parameters
+    ----------
+    papers : sequence of str
+        Paper keys (default all).
+
+    Returns
+    -------
+    MarkdownText
+        MyST dropdowns, one per paper.
+
+    Examples
+    --------
+    >>> from mascore.report import errata_list
+    >>> str(errata_list(["ren2005"])).startswith(":::")
+    True
+    """
     blocks = []
     for key in papers:
         reg = paper_registry(key)
