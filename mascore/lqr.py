@@ -72,10 +72,13 @@ def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndar
     Parameters
     ----------
     A : (n, n) array_like
+        State matrix.
     B : (n, m) array_like
-        ``(A, B)`` must be controllable.
-    Q : (n, n) array_like, symmetric positive semidefinite
-    R : (m, m) array_like, symmetric positive definite
+        Input matrix; ``(A, B)`` must be stabilizable.
+    Q : (n, n) array_like
+        State weight, symmetric positive semidefinite.
+    R : (m, m) array_like
+        Input weight, symmetric positive definite.
 
     Returns
     -------
@@ -93,6 +96,14 @@ def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndar
     RiccatiError
         No stabilizing solution (e.g. ``(Q, A)`` has unobservable modes on the
         imaginary axis) or a Riccati residual above :data:`mascore.riccati.RICCATI_RTOL`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import lqr
+    >>> K, S, E = lqr.lqr([[0.0, 1.0], [0.0, 0.0]], [[0.0], [1.0]], np.eye(2), np.eye(1))
+    >>> np.round(K, 4)                                           # [1, sqrt(3)]
+    array([[1.    , 1.7321]])
     """
     A = _square(A, "A")
     n = A.shape[0]
@@ -178,13 +189,31 @@ def network_lqr_weights(
     (``Q~_ii = Q1 + (N-1) Q2``, ``Q~_ij = -Q2``); with another graph it penalizes
     ``Q2`` only on the differences between neighbours.
 
-    `laplacian` must be symmetric (undirected): ``Q~`` weighs a quadratic cost and must
-    be symmetric itself.
+    Parameters
+    ----------
+    Q1 : (n, n) array_like
+        Weight on each agent's own state.
+    Q2 : (n, n) array_like
+        Weight on the differences between neighbours.
+    R : (m, m) array_like
+        Input weight.
+    laplacian : (N, N) array_like
+        Symmetric (undirected): ``Q~`` weighs a quadratic cost and must be symmetric itself.
 
     Returns
     -------
     Qt : (N n, N n) ndarray
+        ``I (x) Q1 + Lap (x) Q2``.
     Rt : (N m, N m) ndarray
+        ``I (x) R``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, lqr
+    >>> Qt, Rt = lqr.network_lqr_weights(np.eye(2), np.eye(2), np.eye(1), graphs.laplacian(graphs.ring_graph(3)))
+    >>> Qt.shape, Rt.shape
+    ((6, 6), (3, 3))
     """
     Lap = _undirected_laplacian(laplacian, "laplacian",
                                 "the cost weight I (x) Q1 + Lap (x) Q2 must be symmetric")
@@ -203,6 +232,21 @@ def centralized_network_lqr(
     This is the dense reference (cost ``O((N n)^3)``); use
     :func:`centralized_network_cost` for large N.
 
+    Parameters
+    ----------
+    A : (n, n) array_like
+        Agent state matrix.
+    B : (n, m) array_like
+        Agent input matrix.
+    Q1 : (n, n) array_like
+        Weight on each agent's own state (symmetric PSD).
+    Q2 : (n, n) array_like
+        Weight on the differences between neighbours (symmetric PSD).
+    R : (m, m) array_like
+        Input weight (symmetric positive definite).
+    laplacian : (N, N) array_like
+        Laplacian of a connected undirected graph.
+
     Returns
     -------
     K : (N m, N n) ndarray
@@ -217,6 +261,16 @@ def centralized_network_lqr(
     ValueError
         Bad shapes or weights, ``(A, B)`` not controllable, or `laplacian` not the
         Laplacian of a connected undirected graph.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, lqr
+    >>> A, B = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])      # double integrator
+    >>> w = dict(Q1=np.eye(2), Q2=0.5 * np.eye(2), R=np.eye(1))
+    >>> K, P, E = lqr.centralized_network_lqr(A, B, **w, laplacian=graphs.laplacian(graphs.ring_graph(4)))
+    >>> K.shape, bool(E.real.max() < 0)
+    ((4, 8), True)
     """
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
     laplacian_spectrum(laplacian)  # symmetric Laplacian of a connected graph, else ValueError
@@ -236,6 +290,21 @@ def borrelli_keviczky_structure(
     ``P - (N-1) P2~``, off-diagonal blocks ``P2~``; the gain has the two-block
     pattern (16).
 
+    Parameters
+    ----------
+    A : (n, n) array_like
+        Agent state matrix.
+    B : (n, m) array_like
+        Agent input matrix.
+    Q1 : (n, n) array_like
+        Weight on each agent's own state (symmetric PSD).
+    Q2 : (n, n) array_like
+        Weight on the differences between neighbours (symmetric PSD).
+    R : (m, m) array_like
+        Input weight (symmetric positive definite).
+    n_agents : int
+        Team size N.
+
     Returns
     -------
     dict
@@ -247,6 +316,18 @@ def borrelli_keviczky_structure(
     ValueError
         Bad shapes or weights, ``(A, B)`` not controllable, or `n_agents` not a positive integer
         (``TypeError`` for a float or another non-integer type).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, lqr
+    >>> A, B = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])      # double integrator
+    >>> w = dict(Q1=np.eye(2), Q2=0.5 * np.eye(2), R=np.eye(1))
+    >>> blocks = lqr.borrelli_keviczky_structure(A, B, **w, n_agents=3)
+    >>> Lap = graphs.laplacian(graphs.complete_graph(3))
+    >>> K, P, _ = lqr.centralized_network_lqr(A, B, **w, laplacian=Lap)
+    >>> bool(np.allclose(blocks["P_network"], P))            # the closed form equals the dense solution
+    True
     """
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
     N = _check_agents(n_agents)
@@ -265,9 +346,20 @@ def borrelli_keviczky_structure(
 class DistributedGain:
     """A network gain ``U = -(I_N (x) K_self + Lap (x) K_coupling) X``.
 
-    Attributes
+    Parameters
     ----------
-    K_self, K_coupling : (m, n) ndarray
+    K_self : (m, n) ndarray
+        Gain on the agent's own state.
+    K_coupling : (m, n) ndarray
+        Gain on the Laplacian-weighted neighbour states.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, lqr
+    >>> gain = lqr.DistributedGain(np.array([[1.0, 2.0]]), np.array([[0.5, 0.0]]))
+    >>> lqr.assemble_network_gain(gain, graphs.laplacian(graphs.path_graph(2))).shape
+    (2, 4)
     """
 
     K_self: np.ndarray
@@ -278,8 +370,12 @@ class DistributedGain:
 class TopDownLQR(DistributedGain):
     """Borrelli-Keviczky distributed LQR (eq. (17)).
 
-    Attributes
+    Parameters
     ----------
+    K_self : (m, n) ndarray
+        ``R^{-1} B^T P``.
+    K_coupling : (m, n) ndarray
+        ``-R^{-1} B^T P2~``.
     n_local : int
         ``N_L = d_max + 1``, size of the all-to-all problem the gain is taken from.
     lam : (N,) ndarray
@@ -289,6 +385,16 @@ class TopDownLQR(DistributedGain):
         Laplacian exceeds ``N_L / 2``.
     spectral_abscissa : float
         Largest real part of the closed-loop eigenvalues (negative: stable).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, lqr
+    >>> A, B = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])      # double integrator
+    >>> w = dict(Q1=np.eye(2), Q2=0.5 * np.eye(2), R=np.eye(1))
+    >>> ctrl = lqr.top_down_lqr(A, B, **w, adjacency=graphs.ring_graph(4))
+    >>> ctrl.n_local, bool(ctrl.spectral_abscissa < 0)                    # ring: degree 2, stable
+    (3, True)
     """
 
     n_local: int = 0
@@ -301,13 +407,28 @@ class TopDownLQR(DistributedGain):
 class BottomUpLQR(DistributedGain):
     """Deshpande et al. bottom-up distributed LQR (eq. (18)): ``K_coupling = Phi K``.
 
-    Attributes
+    Parameters
     ----------
+    K_self : (m, n) ndarray
+        ``K``, the node LQR gain.
+    K_coupling : (m, n) ndarray
+        ``Phi K``.
     Phi : (m, m) ndarray
+        The coupling found by the convex program.
     bound : float
         Optimal value of the convex program, an upper bound on the aggregate
         cost ``sum_i trace(P_i)`` (expected cost (7) for ``X(0) ~ N(0, I)``),
         traces taken in the agent's original coordinates.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, lqr
+    >>> A, B = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])      # double integrator
+    >>> w = dict(Q1=np.eye(2), Q2=0.5 * np.eye(2), R=np.eye(1))
+    >>> ctrl = lqr.bottom_up_lqr(A, B, **w, adjacency=graphs.ring_graph(4))
+    >>> bool(np.allclose(ctrl.K_coupling, ctrl.Phi @ ctrl.K_self))
+    True
     """
 
     Phi: np.ndarray | None = None
@@ -330,15 +451,39 @@ def top_down_lqr(
 
     Parameters
     ----------
+    A : (n, n) array_like
+        Agent state matrix.
+    B : (n, m) array_like
+        Agent input matrix.
+    Q1 : (n, n) array_like
+        Weight on each agent's own state (symmetric PSD).
+    Q2 : (n, n) array_like
+        Weight on the differences between neighbours (symmetric PSD).
+    R : (m, m) array_like
+        Input weight (symmetric positive definite).
     adjacency : (N, N) array_like
         Symmetric adjacency of a connected graph: non-negative weights, no self-loops
         (a self-loop would count in the degree ``d_max`` but not in the Laplacian).
+
+    Returns
+    -------
+    TopDownLQR
+        The gains, the condition of eq. (17) and the closed loop's spectral abscissa.
 
     Raises
     ------
     ValueError
         Bad shapes or weights, ``(A, B)`` not controllable, a directed or disconnected graph,
         self-loops, or a Laplacian passed as `adjacency`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, lqr
+    >>> A, B = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])      # double integrator
+    >>> w = dict(Q1=np.eye(2), Q2=0.5 * np.eye(2), R=np.eye(1))
+    >>> lqr.top_down_lqr(A, B, **w, adjacency=graphs.star_graph(5)).condition_holds
+    False
     """
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
     Adj, Lap = _undirected_adjacency(adjacency)
@@ -442,9 +587,28 @@ def bottom_up_lqr(
 def assemble_network_gain(gain: DistributedGain, laplacian: ArrayLike) -> np.ndarray:
     """The dense ``(N m, N n)`` matrix ``I (x) K_self + Lap (x) K_coupling``.
 
-    `gain` a :class:`DistributedGain` with finite ``K_self``, ``K_coupling`` of one shape (m, n);
-    `laplacian` (N, N) symmetric: the gain was designed mode by mode on the orthogonal
-    eigenvectors of an undirected graph's Laplacian, so a directed Laplacian is refused.
+    Parameters
+    ----------
+    gain : DistributedGain
+        Finite ``K_self`` and ``K_coupling`` of one shape (m, n).
+    laplacian : (N, N) array_like
+        Symmetric: the gain was designed mode by mode on the orthogonal eigenvectors of an
+        undirected graph's Laplacian, so a directed Laplacian is refused.
+
+    Returns
+    -------
+    (N m, N n) ndarray
+        ``U = -K X``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, lqr
+    >>> A, B = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])      # double integrator
+    >>> w = dict(Q1=np.eye(2), Q2=0.5 * np.eye(2), R=np.eye(1))
+    >>> ctrl = lqr.top_down_lqr(A, B, **w, adjacency=graphs.ring_graph(4))
+    >>> lqr.assemble_network_gain(ctrl, graphs.laplacian(graphs.ring_graph(4))).shape
+    (4, 8)
     """
     _check_gain(gain)
     Lap = _undirected_laplacian(laplacian, "laplacian", _WHY_SYMMETRIC)
@@ -461,7 +625,40 @@ def network_controller_cost(
     :func:`network_lqr_weights`; ``trace(P_K)`` is the expected cost (7) for
     ``X(0) ~ N(0, I)``. Returns ``inf`` (a defined value, not an error: the cost of an
     unstable loop is infinite) if the closed loop is not stable. ``(A, B)`` need not be
-    controllable (the gain is given); `laplacian` must be symmetric (undirected) and connected.
+    controllable (the gain is given).
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        Agent state matrix.
+    B : (n, m) array_like
+        Agent input matrix.
+    Q1 : (n, n) array_like
+        Weight on each agent's own state (symmetric PSD).
+    Q2 : (n, n) array_like
+        Weight on the differences between neighbours (symmetric PSD).
+    R : (m, m) array_like
+        Input weight (symmetric positive definite).
+    laplacian : (N, N) array_like
+        Laplacian of a connected undirected graph.
+    gain : DistributedGain
+        The controller.
+
+    Returns
+    -------
+    float
+        ``trace(P_K)``, or ``inf`` for an unstable loop.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, lqr
+    >>> A, B = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])      # double integrator
+    >>> w = dict(Q1=np.eye(2), Q2=0.5 * np.eye(2), R=np.eye(1))
+    >>> Lap = graphs.laplacian(graphs.ring_graph(5))
+    >>> td = lqr.top_down_lqr(A, B, **w, adjacency=graphs.ring_graph(5))
+    >>> bool(lqr.network_controller_cost(A, B, **w, laplacian=Lap, gain=td) >= lqr.centralized_network_cost(A, B, **w, laplacian=Lap))
+    True
     """
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R, controllable=False)
     _check_gain(gain, B.shape[1], A.shape[0])
@@ -481,6 +678,37 @@ def centralized_network_cost(
     A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike, laplacian: ArrayLike
 ) -> float:
     """Optimal aggregate cost ``trace(P~)`` of eq. (9), as ``sum_i trace(ARE(A, B, Q1 + lam_i Q2, R))``.
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        Agent state matrix.
+    B : (n, m) array_like
+        Agent input matrix.
+    Q1 : (n, n) array_like
+        Weight on each agent's own state (symmetric PSD).
+    Q2 : (n, n) array_like
+        Weight on the differences between neighbours (symmetric PSD).
+    R : (m, m) array_like
+        Input weight (symmetric positive definite).
+    laplacian : (N, N) array_like
+        Laplacian of a connected undirected graph.
+
+    Returns
+    -------
+    float
+        The optimal cost (one n-state Riccati equation per Laplacian mode).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, lqr
+    >>> A, B = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])      # double integrator
+    >>> w = dict(Q1=np.eye(2), Q2=0.5 * np.eye(2), R=np.eye(1))
+    >>> Lap = graphs.laplacian(graphs.ring_graph(5))
+    >>> K, P, E = lqr.centralized_network_lqr(A, B, **w, laplacian=Lap)
+    >>> bool(np.isclose(lqr.centralized_network_cost(A, B, **w, laplacian=Lap), np.trace(P)))   # modes = dense
+    True
 
     Raises
     ------
