@@ -83,14 +83,33 @@ def riccati_like(A: ArrayLike, B: ArrayLike, Q: ArrayLike, rtol: float = 1e-8) -
 
     Parameters
     ----------
-    A : (n, n), B : (n, m) with full column rank, Q : (n, n) positive definite
+    A : (n, n) array_like
+        Agent state matrix.
+    B : (n, m) array_like
+        Agent input matrix, full column rank.
+    Q : (n, n) array_like
+        Weight, positive definite.
     rtol : float
         Accepted residual relative to ``max(1, max |Q|)``; finite, > 0.
+
+    Returns
+    -------
+    (n, n) ndarray
+        P, symmetric positive definite.
 
     Raises
     ------
     ValueError
         B lacks full column rank, (A, B) not stabilizable, or no PD solution found.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import synchronization as sync
+    >>> P = sync.riccati_like(np.array([[0.0, -1.0], [1.0, 0.0]]), np.eye(2), 0.1 * np.eye(2))
+    >>> np.round(P, 6)                                         # B = I: P = Q (Bhattacharjee and Subbarao, Sec. 5)
+    array([[0.1, 0. ],
+           [0. , 0.1]])
     """
     A, B, Q = _check_system(A, B, Q)
     check_positive(rtol, "rtol")
@@ -127,8 +146,29 @@ def riccati_like(A: ArrayLike, B: ArrayLike, Q: ArrayLike, rtol: float = 1e-8) -
 def riccati_like_residual(A: ArrayLike, B: ArrayLike, Q: ArrayLike, P: ArrayLike) -> float:
     """Largest absolute entry of the left-hand side of eq. (16).
 
-    `A` (n, n), `B` (n, m) of full column rank, `Q` (n, n) symmetric positive definite,
-    `P` (n, n) symmetric positive definite (so that ``B^T P B`` is invertible).
+    Parameters
+    ----------
+    A : (n, n) array_like
+        Agent state matrix.
+    B : (n, m) array_like
+        Agent input matrix, full column rank.
+    Q : (n, n) array_like
+        Weight, symmetric positive definite.
+    P : (n, n) array_like
+        Candidate solution, symmetric positive definite (so that ``B^T P B`` is invertible).
+
+    Returns
+    -------
+    float
+        The residual (0 for the solution).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import synchronization as sync
+    >>> A, B, Q = np.array([[0.0, -1.0], [1.0, 0.0]]), np.eye(2), 0.1 * np.eye(2)
+    >>> sync.riccati_like_residual(A, B, Q, sync.riccati_like(A, B, Q)) < 1e-12
+    True
     """
     A, B, Q = _check_system(A, B, Q)
     P = _check_P(P, B)
@@ -142,9 +182,29 @@ def _residual(A, B, Q, P) -> float:
 
 
 def riccati_gain(A: ArrayLike, B: ArrayLike, P: ArrayLike) -> np.ndarray:
-    """``K = (B^T P B)^{-1} B^T P A`` of Lemma 2; shape (m, n).
+    """``K = (B^T P B)^{-1} B^T P A`` of Lemma 2.
 
-    `A` (n, n), `B` (n, m) of full column rank, `P` (n, n) symmetric positive definite.
+    Parameters
+    ----------
+    A : (n, n) array_like
+        Agent state matrix.
+    B : (n, m) array_like
+        Agent input matrix, full column rank.
+    P : (n, n) array_like
+        Symmetric positive definite.
+
+    Returns
+    -------
+    (m, n) ndarray
+        The gain: it minimizes ``(A x + B u)^T P (A x + B u)`` over ``u = -K x``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import synchronization as sync
+    >>> A = np.array([[0.0, -1.0], [1.0, 0.0]])
+    >>> bool(np.allclose(sync.riccati_gain(A, np.eye(2), np.eye(2)), A))   # B = I: K = A
+    True
     """
     A = _square(A, "A")
     B = _matrix(B, "B", (A.shape[0], None))
@@ -155,8 +215,32 @@ def riccati_gain(A: ArrayLike, B: ArrayLike, P: ArrayLike) -> np.ndarray:
 def lemma2_r(A: ArrayLike, B: ArrayLike, Q: ArrayLike, P: ArrayLike) -> float:
     """``r = sigma_max(Q^{-1/2} A^T P B (B^T P B)^{-1} B^T P A Q^{-1/2})^{-1/2}`` (Lemma 2).
 
-    Arguments as in :func:`riccati_like_residual`. Returns ``inf`` when the matrix is zero
-    (e.g. ``A = 0``): Lemma 2's condition ``r0 / c0 < r`` then holds for every circle.
+    Returns ``inf`` when the matrix is zero (e.g. ``A = 0``): Lemma 2's condition
+    ``r0 / c0 < r`` then holds for every circle.
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        Agent state matrix.
+    B : (n, m) array_like
+        Agent input matrix, full column rank.
+    Q : (n, n) array_like
+        Weight, symmetric positive definite.
+    P : (n, n) array_like
+        Solution of eq. (16), symmetric positive definite.
+
+    Returns
+    -------
+    float
+        Lemma 2's r.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import synchronization as sync
+    >>> A, B, Q = np.array([[0.0, -1.0], [1.0, 0.0]]), np.eye(2), 0.1 * np.eye(2)
+    >>> round(sync.lemma2_r(A, B, Q, sync.riccati_like(A, B, Q)), 6)
+    1.0
     """
     A, B, Q = _check_system(A, B, Q)
     P = _check_P(P, B)
@@ -171,9 +255,33 @@ def check_assumption4(adjacency: ArrayLike, pinning: ArrayLike) -> None:
     """Raise ValueError unless Assumption 4 holds.
 
     The interaction graph must contain a directed spanning tree and at least one
-    of its root nodes must be pinned to the leader (``g_root > 0``). `adjacency`
-    (N, N): finite, non-negative weights, no self-loops, directed allowed; `pinning`
-    (N,): finite, non-negative.
+    of its root nodes must be pinned to the leader (``g_root > 0``).
+
+    Parameters
+    ----------
+    adjacency : (N, N) array_like
+        Finite, non-negative weights, no self-loops, directed allowed.
+    pinning : (N,) array_like
+        Pinning gains, finite, non-negative.
+
+    Raises
+    ------
+    ValueError
+        No spanning tree, or no root pinned.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, synchronization as sync
+    >>> A, B, Q = np.array([[0.0, -1.0], [1.0, 0.0]]), np.eye(2), 0.1 * np.eye(2)      # eq. (23)
+    >>> ring = graphs.adjacency_from_edges(4, [(3, 0), (0, 1), (1, 2), (2, 3)], directed=True)   # eq. (24)
+    >>> pin = np.array([1.0, 0.0, 0.0, 0.0])                                            # agent 1 hears the leader
+    >>> sync.check_assumption4(ring, pin)                    # passes silently
+    >>> try:
+    ...     sync.check_assumption4(ring, np.zeros(4))
+    ... except ValueError:
+    ...     print("no agent hears the leader")
+    no agent hears the leader
     """
     Aadj, g = _check_graph(adjacency, pinning)
     roots = graphs.spanning_tree_roots(Aadj)
@@ -188,7 +296,31 @@ def check_assumption4(adjacency: ArrayLike, pinning: ArrayLike) -> None:
 
 
 def pinned_interaction_matrix(adjacency: ArrayLike, pinning: ArrayLike) -> np.ndarray:
-    """``Gamma = (I_N + D + G_pin)^{-1} (L + G_pin)`` of eq. (15); checks Assumption 4."""
+    """``Gamma = (I_N + D + G_pin)^{-1} (L + G_pin)`` of eq. (15); checks Assumption 4.
+
+    Parameters
+    ----------
+    adjacency : (N, N) array_like
+        Interaction graph.
+    pinning : (N,) array_like
+        Pinning gains.
+
+    Returns
+    -------
+    (N, N) ndarray
+        Gamma.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, synchronization as sync
+    >>> A, B, Q = np.array([[0.0, -1.0], [1.0, 0.0]]), np.eye(2), 0.1 * np.eye(2)      # eq. (23)
+    >>> ring = graphs.adjacency_from_edges(4, [(3, 0), (0, 1), (1, 2), (2, 3)], directed=True)   # eq. (24)
+    >>> pin = np.array([1.0, 0.0, 0.0, 0.0])                                            # agent 1 hears the leader
+    >>> Gamma = sync.pinned_interaction_matrix(ring, pin)
+    >>> bool(np.linalg.eigvals(Gamma).real.min() > 0)          # all eigenvalues in the right half-plane
+    True
+    """
     check_assumption4(adjacency, pinning)
     Aadj = np.asarray(adjacency, dtype=float)
     g = np.asarray(pinning, dtype=float)
@@ -200,7 +332,25 @@ def pinned_interaction_matrix(adjacency: ArrayLike, pinning: ArrayLike) -> np.nd
 def circle_contains(points: ArrayLike, c0: float, r0: float) -> np.ndarray:
     """Whether complex points lie in the open circle ``C(c0, r0)`` (``|z - c0| < r0``).
 
-    `points` finite (real or complex), `c0` a finite real centre, `r0` a finite radius > 0.
+    Parameters
+    ----------
+    points : array_like
+        Finite real or complex points.
+    c0 : float
+        Finite real centre.
+    r0 : float
+        Finite radius > 0.
+
+    Returns
+    -------
+    ndarray of bool
+        One entry per point.
+
+    Examples
+    --------
+    >>> from mascore import synchronization as sync
+    >>> sync.circle_contains([0.5, 1.5 + 0.1j], c0=2 / 3, r0=0.6)
+    array([ True, False])
     """
     z = _numeric(points, "points")
     c0 = _real(c0, "c0")
@@ -213,7 +363,33 @@ def closed_loop_matrices(
 ) -> tuple[np.ndarray, np.ndarray]:
     """``A_c = I_N (x) A - c Gamma (x) B K`` and ``B_c = c Gamma (x) B K`` (eq. (15)).
 
-    `A` (n, n), `B` (n, m), `K` (m, n), `Gamma` (N, N), all finite; `c` a finite real.
+    Parameters
+    ----------
+    A : (n, n) array_like
+        Agent state matrix.
+    B : (n, m) array_like
+        Agent input matrix.
+    K : (m, n) array_like
+        Control gain.
+    c : float
+        Coupling gain.
+    Gamma : (N, N) array_like
+        Pinned interaction matrix.
+
+    Returns
+    -------
+    A_c : (n N, n N) ndarray
+        Closed-loop matrix of the synchronization error.
+    B_c : (n N, n N) ndarray
+        How estimation errors enter it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import synchronization as sync
+    >>> Ac, Bc = sync.closed_loop_matrices(np.eye(2), np.eye(2), np.eye(2), 0.5, np.eye(3))
+    >>> bool(np.allclose(Ac + Bc, np.eye(6)))                  # A_c + B_c = I (x) A
+    True
     """
     A = _square(A, "A")
     n = A.shape[0]
@@ -226,7 +402,24 @@ def closed_loop_matrices(
 
 
 def spectral_radius(M: ArrayLike) -> float:
-    """``rho(M) = max |eig(M)|`` of a finite square (real or complex) matrix."""
+    """``rho(M) = max |eig(M)|`` of a finite square (real or complex) matrix.
+
+    Parameters
+    ----------
+    M : (n, n) array_like
+        The matrix.
+
+    Returns
+    -------
+    float
+        The spectral radius.
+
+    Examples
+    --------
+    >>> from mascore import synchronization as sync
+    >>> sync.spectral_radius([[0.0, -2.0], [2.0, 0.0]])
+    2.0
+    """
     M = _numeric(M, "M")
     if M.ndim != 2 or M.shape[0] != M.shape[1] or M.shape[0] == 0:
         raise ValueError(f"M must be a non-empty square matrix; got shape {M.shape}")
@@ -234,9 +427,31 @@ def spectral_radius(M: ArrayLike) -> float:
 
 
 def power_norms(M: ArrayLike, k_max: int) -> np.ndarray:
-    """Induced 2-norms ``|M^k|`` for k = 0..k_max; shape (k_max + 1,).
+    """Induced 2-norms ``|M^k|`` for k = 0..k_max.
 
-    `M` finite square; `k_max` an integer >= 1. Raises ValueError if ``|M^k|`` overflows.
+    Parameters
+    ----------
+    M : (n, n) array_like
+        Finite square matrix.
+    k_max : int
+        Last power (>= 1).
+
+    Returns
+    -------
+    (k_max + 1,) ndarray
+        The norms.
+
+    Raises
+    ------
+    ValueError
+        If ``|M^k|`` overflows.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import synchronization as sync
+    >>> sync.power_norms(0.5 * np.eye(2), 3)
+    array([1.   , 0.5  , 0.25 , 0.125])
     """
     M = _square(M, "M")
     k_max = check_positive_int(k_max, "k_max")
@@ -260,7 +475,27 @@ def fit_alpha(M: ArrayLike, mu: float, k_max: int | None = None) -> float:
 
     By default k_max is long enough that ``mu^k`` has fallen below 1e-12, beyond
     which the geometric decay at rate rho(M) < mu cannot catch up in practice.
-    `M` finite square, `mu` finite, `k_max` None or an integer >= 1.
+
+    Parameters
+    ----------
+    M : (n, n) array_like
+        Finite square matrix.
+    mu : float
+        The rate, ``rho(M) < mu < 1``.
+    k_max : int, optional
+        Last power checked.
+
+    Returns
+    -------
+    float
+        The smallest alpha.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import synchronization as sync
+    >>> round(sync.fit_alpha(np.array([[0.5, 1.0], [0.0, 0.5]]), mu=0.8), 3)
+    1.655
     """
     M = _square(M, "M")
     _real(mu, "mu")
@@ -275,9 +510,30 @@ def fit_alpha(M: ArrayLike, mu: float, k_max: int | None = None) -> float:
 
 
 def exponential_bound_ratio(M: ArrayLike, alpha: float, mu: float, k_max: int) -> float:
-    """``max_k |M^k| / (alpha mu^k)`` over k = 0..k_max (<= 1 iff the bound holds there).
+    """``max_k |M^k| / (alpha mu^k)`` over k = 0..k_max (at most 1 iff the bound holds there).
 
-    `M` finite square, `alpha` and `mu` finite > 0, `k_max` an integer >= 1.
+    Parameters
+    ----------
+    M : (n, n) array_like
+        Finite square matrix.
+    alpha : float
+        Constant of the bound, > 0.
+    mu : float
+        Rate of the bound, > 0.
+    k_max : int
+        Last power checked (>= 1).
+
+    Returns
+    -------
+    float
+        The largest ratio.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import synchronization as sync
+    >>> sync.exponential_bound_ratio(0.5 * np.eye(2), alpha=1.0, mu=0.5, k_max=10)
+    1.0
     """
     M = _square(M, "M")
     check_positive(alpha, "alpha")
@@ -295,7 +551,25 @@ def exponential_bound_ratio(M: ArrayLike, alpha: float, mu: float, k_max: int) -
 def mu_bar(alpha: float, mu: float, n_agents: int) -> float:
     """Normalization ``mu_bar = alpha sqrt(N) / (1 - mu)`` of Corollary 1.
 
-    `alpha` finite > 0, `mu` in (0, 1) (Corollary 1's decay rate), `n_agents` an integer >= 1.
+    Parameters
+    ----------
+    alpha : float
+        Constant of the exponential bound, > 0.
+    mu : float
+        Its rate, in (0, 1).
+    n_agents : int
+        Team size N.
+
+    Returns
+    -------
+    float
+        ``mu_bar``.
+
+    Examples
+    --------
+    >>> from mascore import synchronization as sync
+    >>> round(float(sync.mu_bar(1.1, 0.9, 4)), 6)
+    22.0
     """
     check_positive(alpha, "alpha")
     check_positive(mu, "mu")
@@ -306,9 +580,30 @@ def mu_bar(alpha: float, mu: float, n_agents: int) -> float:
 
 
 def bound_eq21(Bc: ArrayLike, G_dist: ArrayLike, p0: float, q_bar: float) -> float:
-    """Limit bound of eq. (21): ``|B_c| sqrt(p0) + |G| sqrt(q_bar)`` (G: disturbance matrix).
+    """Limit bound of eq. (21): ``|B_c| sqrt(p0) + |G| sqrt(q_bar)``.
 
-    `Bc`, `G_dist` finite matrices; `p0`, `q_bar` finite >= 0.
+    Parameters
+    ----------
+    Bc : array_like
+        ``B_c`` of eq. (15), finite.
+    G_dist : array_like
+        Disturbance matrix, finite.
+    p0 : float
+        Bound on the estimation error (finite, >= 0).
+    q_bar : float
+        Bound on the disturbance (finite, >= 0).
+
+    Returns
+    -------
+    float
+        The bound.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import synchronization as sync
+    >>> sync.bound_eq21(np.eye(2), np.eye(2), p0=4.0, q_bar=1.0)
+    3.0
     """
     Bc = _matrix(Bc, "Bc")
     G_dist = _matrix(G_dist, "G_dist")
@@ -322,12 +617,45 @@ def bound_eq21(Bc: ArrayLike, G_dist: ArrayLike, p0: float, q_bar: float) -> flo
 class SyncDesign:
     """Result of :func:`design_synchronization` (Lemma 2).
 
-    Attributes
+    Parameters
     ----------
-    P : (n, n) solution of eq. (16);  residual : its largest residual entry
-    K : (m, n) control gain;  c : coupling gain ``1 / c0``
-    r : Lemma 2's r;  c0, r0 : the circle;  Gamma : (N, N);  eigs : (N,) complex
-    in_circle : (N,) bool;  A_c, B_c : (nN, nN) of eq. (15);  rho : rho(A_c)
+    P : (n, n) ndarray
+        Solution of eq. (16).
+    residual : float
+        Its largest residual entry.
+    K : (m, n) ndarray
+        Control gain.
+    c : float
+        Coupling gain ``1 / c0``.
+    r : float
+        Lemma 2's r.
+    c0 : float
+        Centre of the circle.
+    r0 : float
+        Radius of the circle.
+    Gamma : (N, N) ndarray
+        Pinned interaction matrix of eq. (15).
+    eigs : (N,) complex ndarray
+        Eigenvalues of Gamma.
+    in_circle : (N,) bool ndarray
+        Which eigenvalues lie in ``C(c0, r0)``.
+    A_c : (n N, n N) ndarray
+        Closed-loop matrix of eq. (15).
+    B_c : (n N, n N) ndarray
+        Input matrix of eq. (15).
+    rho : float
+        Spectral radius of ``A_c``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, synchronization as sync
+    >>> A, B, Q = np.array([[0.0, -1.0], [1.0, 0.0]]), np.eye(2), 0.1 * np.eye(2)      # eq. (23)
+    >>> ring = graphs.adjacency_from_edges(4, [(3, 0), (0, 1), (1, 2), (2, 3)], directed=True)   # eq. (24)
+    >>> pin = np.array([1.0, 0.0, 0.0, 0.0])                                            # agent 1 hears the leader
+    >>> d = sync.design_synchronization(A, B, Q, ring, pin, c0=2 / 3, r0=0.6)
+    >>> float(d.c), round(float(d.r), 6), bool(d.rho < 1)
+    (1.5, 1.0, True)
     """
 
     P: np.ndarray
@@ -351,11 +679,44 @@ def design_synchronization(
 ) -> SyncDesign:
     """Lemma 2: P from eq. (16), K, c = 1/c0, after checking the circle conditions.
 
+    Parameters
+    ----------
+    A : (n, n) array_like
+        Agent state matrix.
+    B : (n, m) array_like
+        Agent input matrix, full column rank.
+    Q : (n, n) array_like
+        Weight of eq. (16), symmetric positive definite.
+    adjacency : (N, N) array_like
+        Interaction graph (directed allowed).
+    pinning : (N,) array_like
+        Pinning gains to the leader.
+    c0 : float
+        Centre of the circle that must hold the eigenvalues of Gamma.
+    r0 : float
+        Its radius.
+
+    Returns
+    -------
+    SyncDesign
+        The design and its checks.
+
     Raises
     ------
     ValueError
         Assumption 3 or 4 fails, an eigenvalue of Gamma lies outside C(c0, r0),
         or ``r0 / c0 >= r``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, synchronization as sync
+    >>> A, B, Q = np.array([[0.0, -1.0], [1.0, 0.0]]), np.eye(2), 0.1 * np.eye(2)      # eq. (23)
+    >>> ring = graphs.adjacency_from_edges(4, [(3, 0), (0, 1), (1, 2), (2, 3)], directed=True)   # eq. (24)
+    >>> pin = np.array([1.0, 0.0, 0.0, 0.0])                                            # agent 1 hears the leader
+    >>> d = sync.design_synchronization(A, B, Q, ring, pin, c0=2 / 3, r0=0.6)
+    >>> bool(d.in_circle.all()), bool(np.allclose(d.K, A))     # with B = I the gain is A
+    (True, True)
     """
     check_positive(c0, "c0")
     check_positive(r0, "r0")
@@ -381,21 +742,41 @@ def local_control(
 ) -> np.ndarray:
     """The law of Sec. 4.2 for all agents, batched.
 
+    The graph may be directed; it is checked (finite, non-negative, no self-loops) but
+    Assumption 4 is not required here (it is a property of the design, checked by
+    :func:`design_synchronization`). The constant `adjacency`, `pinning`, `K`, `c` are
+    checked once per distinct value; `xhat` and `x_leader` at every call.
+
     Parameters
     ----------
-    xhat : (..., N, n) corrected estimates ``xhat^{(i)}_{k|k}``
-    x_leader : (..., n) leader state ``x^{(0)}_k``
-    adjacency : (N, N);  pinning : (N,) gains g_i;  K : (m, n);  c : float
+    xhat : (..., N, n) array_like
+        Corrected estimates ``xhat^{(i)}_{k|k}``.
+    x_leader : (..., n) array_like
+        Leader state ``x^{(0)}_k``.
+    adjacency : (N, N) array_like
+        Interaction graph.
+    pinning : (N,) array_like
+        Pinning gains ``g_i``.
+    K : (m, n) array_like
+        Control gain.
+    c : float
+        Coupling gain.
 
     Returns
     -------
     (..., N, m) ndarray
         ``u^{(i)} = c (1 + d_i + g_i)^{-1} K eps^{(i)}``.
 
-    The graph may be directed; it is checked (finite, non-negative, no self-loops) but
-    Assumption 4 is not required here (it is a property of the design, checked by
-    :func:`design_synchronization`). The constant `adjacency`, `pinning`, `K`, `c` are
-    checked once per distinct value; `xhat` and `x_leader` at every call.
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, synchronization as sync
+    >>> A, B, Q = np.array([[0.0, -1.0], [1.0, 0.0]]), np.eye(2), 0.1 * np.eye(2)      # eq. (23)
+    >>> ring = graphs.adjacency_from_edges(4, [(3, 0), (0, 1), (1, 2), (2, 3)], directed=True)   # eq. (24)
+    >>> pin = np.array([1.0, 0.0, 0.0, 0.0])                                            # agent 1 hears the leader
+    >>> u = sync.local_control(np.zeros((4, 2)), np.zeros(2), ring, pin, A, 1.5)
+    >>> bool(np.all(u == 0))                                   # everyone on the leader: no input
+    True
     """
     g, K, Lp, one_d_g = _control_constants(adjacency, pinning, K, c)
     N, n = g.shape[0], K.shape[1]
