@@ -104,7 +104,26 @@ __all__ = [
 
 
 def phi1(p: ArrayLike, beta: float) -> np.ndarray:
-    """Communication weight ``1 / (1 + |p|^2)^beta`` of eq. (6), shape ``(...)`` for ``p`` ``(..., n)``."""
+    """Communication weight ``1 / (1 + |p|^2)^beta`` of eq. (6).
+
+    Parameters
+    ----------
+    p : (..., n) array_like
+        Relative position (m).
+    beta : float
+        Decay rate, >= 0.
+
+    Returns
+    -------
+    (...) ndarray
+        The weight, 1 at ``p = 0``.
+
+    Examples
+    --------
+    >>> from mascore import flocking
+    >>> float(flocking.phi1([3.0, 4.0], beta=0.5))            # 1 / sqrt(1 + 25)
+    0.19611613513818404
+    """
     p = _vectors(p, "p")
     beta = check_positive(beta, "beta", allow_zero=True)
     with np.errstate(over="ignore"):
@@ -116,12 +135,25 @@ def phi2(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
 
     Parameters
     ----------
-    p, v : (..., n) array_like
-        Relative position ``p_ij`` (m) and velocity ``v_ij`` (m/s).
+    p : (..., n) array_like
+        Relative position ``p_ij`` (m).
+    v : (..., n) array_like
+        Relative velocity ``v_ij`` (m/s).
+    gains : FlockingGains
+        The gains of eq. (6).
 
     Returns
     -------
     (...) ndarray
+        The weight.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import flocking
+    >>> gains = flocking.FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+    >>> float(flocking.phi2([120.0, 0.0], [0.0, 0.0], gains))       # at rest length, no relative motion
+    0.0
     """
     p, v = _pair_args(p, v, gains)
     with np.errstate(over="ignore", invalid="ignore"):
@@ -136,12 +168,26 @@ def pair_term(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
 
     Parameters
     ----------
-    p, v : (..., n) array_like
+    p : (..., n) array_like
+        Relative position (m).
+    v : (..., n) array_like
+        Relative velocity (m/s).
+    gains : FlockingGains
+        The gains of eq. (6).
 
     Returns
     -------
     (..., n) ndarray
         Acceleration (m/s^2).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import flocking
+    >>> gains = flocking.FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+    >>> g = flocking.pair_term(np.array([50.0, 0.0]), np.array([1.0, 0.0]), gains)
+    >>> bool(np.allclose(flocking.pair_term(-np.array([50.0, 0.0]), -np.array([1.0, 0.0]), gains), -g))   # odd
+    True
     """
     p, v = _pair_args(p, v, gains)
     with np.errstate(over="ignore", invalid="ignore"):
@@ -151,10 +197,30 @@ def pair_term(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
 def pair_term_jacobian(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
     """Analytic Jacobian of :func:`pair_term` with respect to ``[p; v]``.
 
+    Parameters
+    ----------
+    p : (..., n) array_like
+        Relative position (m).
+    v : (..., n) array_like
+        Relative velocity (m/s).
+    gains : FlockingGains
+        The gains of eq. (6).
+
     Returns
     -------
     (..., n, 2n) ndarray
         ``[dg/dp, dg/dv]``. Even in ``(p, v)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import flocking
+    >>> gains = flocking.FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+    >>> p, v, h = np.array([50.0, 10.0]), np.array([1.0, -1.0]), 1e-6
+    >>> J = flocking.pair_term_jacobian(p, v, gains)
+    >>> fd = (flocking.pair_term(p + [h, 0.0], v, gains) - flocking.pair_term(p - [h, 0.0], v, gains)) / (2 * h)
+    >>> bool(np.allclose(J[:, 0], fd, atol=1e-7))               # matches finite differences
+    True
     """
     p, v = _pair_args(p, v, gains)
     with np.errstate(over="ignore", invalid="ignore"):
@@ -169,6 +235,7 @@ def flocking_control(X: ArrayLike, gains: FlockingGains, adjacency: ArrayLike | 
     X : (..., N, 2n) array_like
         Team state, rows ``[p_i; v_i]``.
     gains : FlockingGains
+        The gains of eq. (6).
     adjacency : (N, N) or (..., N, N) array_like, optional
         ``a_ij``; ``None`` means fully connected (every ``j != i``), the law
         that eq. (40) applies to an estimate.
@@ -177,6 +244,16 @@ def flocking_control(X: ArrayLike, gains: FlockingGains, adjacency: ArrayLike | 
     -------
     U : (..., N, n) ndarray
         Accelerations (m/s^2).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import flocking
+    >>> gains = flocking.FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+    >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])   # [p, v] of 3 agents
+    >>> U = flocking.flocking_control(X, gains)
+    >>> U.shape, bool(np.allclose(U.sum(axis=0), 0))           # pairwise terms cancel in the sum
+    ((3, 2), True)
     """
     X = _check_team(X, "X")
     _check_gains(gains)
@@ -195,6 +272,7 @@ def control_from_views(views: ArrayLike, gains: FlockingGains, adjacency: ArrayL
         (eq. (39)) of agent ``j``'s state ``[p_j; v_j]``. Entries for ``j`` that
         agent ``i`` does not use (``a_ij = 0``) are ignored but must be finite.
     gains : FlockingGains
+        The gains of eq. (6).
     adjacency : (N, N) or (..., N, N) array_like, optional
         ``None``: every ``j != i`` (virtual fully-connected network, eq. (39)).
 
@@ -202,6 +280,16 @@ def control_from_views(views: ArrayLike, gains: FlockingGains, adjacency: ArrayL
     -------
     U : (..., N, n) ndarray
         ``U[..., i, :] = u_i`` computed by agent ``i`` from ``views[..., i]``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import flocking
+    >>> gains = flocking.FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+    >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])   # [p, v] of 3 agents
+    >>> views = np.broadcast_to(X, (3, 3, 4))                  # everyone sees the true states
+    >>> bool(np.allclose(flocking.control_from_views(views, gains), flocking.flocking_control(X, gains)))
+    True
     """
     views = _float_array(views, "views")
     if views.ndim < 3 or views.shape[-3] != views.shape[-2] or views.shape[-1] % 2 or 0 in views.shape[-3:]:
@@ -222,13 +310,25 @@ def closed_loop_step(X: ArrayLike, dt: float, gains: FlockingGains) -> np.ndarra
     Parameters
     ----------
     X : (..., N, 2n) array_like
+        Team states.
     dt : float
         Sampling time (s), finite and > 0.
     gains : FlockingGains
+        The gains of eq. (6).
 
     Returns
     -------
     (..., N, 2n) ndarray
+        The next team states.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import flocking
+    >>> gains = flocking.FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+    >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])   # [p, v] of 3 agents
+    >>> flocking.closed_loop_step(X, 0.1, gains).shape
+    (3, 4)
     """
     X = _check_team(X, "X")
     dt = _check_dt(dt)
@@ -243,9 +343,11 @@ def closed_loop_jacobian(X: ArrayLike, dt: float, gains: FlockingGains) -> np.nd
     Parameters
     ----------
     X : (..., N, 2n) array_like
+        Team states where the Jacobian is taken.
     dt : float
         Sampling time (s), finite and > 0.
     gains : FlockingGains
+        The gains of eq. (6).
 
     Returns
     -------
@@ -253,6 +355,19 @@ def closed_loop_jacobian(X: ArrayLike, dt: float, gains: FlockingGains) -> np.nd
         Block ``(i, j)`` (size 2n) is ``delta_ij A + B dU_i/dx_j`` where
         ``dU_i/dx_j = -J(x_i - x_j)`` for ``j != i`` and
         ``dU_i/dx_i = sum_{j != i} J(x_i - x_j)``, ``J`` the pair Jacobian.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import flocking
+    >>> gains = flocking.FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+    >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])   # [p, v] of 3 agents
+    >>> F = flocking.closed_loop_jacobian(X, 0.1, gains)
+    >>> h, e = 1e-6, np.zeros(12); e[0] = 1.0
+    >>> fd = (flocking.closed_loop_step(X + h * e.reshape(3, 4), 0.1, gains)
+    ...       - flocking.closed_loop_step(X - h * e.reshape(3, 4), 0.1, gains)).ravel() / (2 * h)
+    >>> bool(np.allclose(F[:, 0], fd, atol=1e-6))
+    True
     """
     X = _check_team(X, "X")
     dt = _check_dt(dt)
@@ -265,7 +380,7 @@ def closed_loop_jacobian(X: ArrayLike, dt: float, gains: FlockingGains) -> np.nd
 class FlockingRun:
     """Outcome of a flocking simulation.
 
-    Attributes
+    Parameters
     ----------
     t : (T+1,) ndarray
         Times (s).
@@ -273,6 +388,16 @@ class FlockingRun:
         True team states.
     adjacency : (..., T+1, N, N) ndarray of bool
         Proximity graph of the true positions at each step (who measures whom).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import flocking
+    >>> gains = flocking.FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+    >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])   # [p, v] of 3 agents
+    >>> run = flocking.simulate_measured_flocking(X, 20, 0.1, gains, 0.01 * np.eye(4), np.eye(4), 0, 150.0)
+    >>> run.X.shape, run.adjacency.shape
+    ((21, 3, 4), (21, 3, 3))
     """
 
     t: np.ndarray
@@ -305,12 +430,14 @@ def simulate_measured_flocking(
     dt : float
         Sampling time (s), finite and > 0.
     gains : FlockingGains
+        The gains of eq. (6).
     Q : (2n, 2n) array_like
         Process-noise covariance of one agent.
     R : (2n, 2n) or (2nN, 2nN) array_like
         Measurement-noise covariance: per measured agent (team ``I_N kron R``)
         or the paper's full ``R`` (see :func:`mascore.sensing.team_noise_covariance`).
     rng : numpy.random.Generator or int
+        Source of process and measurement noise.
     sensing_range : float or None
         ``r`` (m) of the proximity graph (case (i) of Fig. 5), finite and > 0;
         ``None`` for a fixed fully-connected network (case (ii)).
@@ -323,6 +450,17 @@ def simulate_measured_flocking(
     ------
     DivergenceError
         If a state component exceeds ``DIVERGENCE_LIMIT`` (unstable sampled loop).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import flocking
+    >>> gains = flocking.FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+    >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])   # [p, v] of 3 agents
+    >>> run = flocking.simulate_measured_flocking(X, 600, 0.1, gains, 0.01 * np.eye(4), np.eye(4), 0, 150.0)
+    >>> std_p, std_v = flocking.flock_spread(run.X[-1])
+    >>> bool(std_v < 1.0)                                       # velocities agree
+    True
     """
     rng = check_generator(rng)
     X = _check_team(X0, "X0").copy()
@@ -369,6 +507,13 @@ def flock_spread(X: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     -------
     std_p, std_v : (...) ndarrays
         In m and m/s.
+
+    Examples
+    --------
+    >>> from mascore import flocking
+    >>> std_p, std_v = flocking.flock_spread([[0.0, 0.0, 1.0, 0.0], [2.0, 0.0, 1.0, 0.0]])
+    >>> float(std_p), float(std_v)
+    (1.0, 0.0)
     """
     X = _check_team(X, "X", allow_nan=True)
     n = X.shape[-1] // 2
@@ -386,6 +531,22 @@ def max_distance_from_centre(X: ArrayLike) -> np.ndarray:
 
     A NaN entry of `X` marks a missing state (a diverged run's placeholder) and
     gives NaN for that team; infinite entries are refused.
+
+    Parameters
+    ----------
+    X : (..., N, 2n) array_like
+        Team states.
+
+    Returns
+    -------
+    (...) ndarray
+        The largest distance (m).
+
+    Examples
+    --------
+    >>> from mascore import flocking
+    >>> float(flocking.max_distance_from_centre([[0.0, 0.0, 0.0, 0.0], [2.0, 0.0, 0.0, 0.0]]))
+    1.0
     """
     X = _check_team(X, "X", allow_nan=True)
     n = X.shape[-1] // 2
