@@ -118,14 +118,40 @@ class TeamFilterModel:
     per-axis Kronecker factors (``A = A_r ⊗ I_kron`` etc.); ``kron = 1`` means
     no reduction.
 
-    Attributes
+    Parameters
     ----------
-    A : (m, m) agent transition matrix.
-    BK : (m, m) product of the input matrix and the consensus gain.
-    Q : (m, m) per-agent process-noise covariance.
-    R : (m N, m N) covariance of one observer's noise vector ``nu_i``.
-    n_agents : N.
-    kron : Kronecker factor used by the structured recursions.
+    A : (m, m) ndarray
+        Agent transition matrix.
+    BK : (m, m) ndarray
+        Product of the input matrix and the consensus gain.
+    Q : (m, m) ndarray
+        Per-agent process-noise covariance.
+    R : (m N, m N) ndarray
+        Covariance of one observer's noise vector ``nu_i``.
+    n_agents : int
+        N.
+    kron : int
+        Kronecker factor used by the structured recursions.
+    A_r : ndarray
+        Reduced ``A`` (``A = A_r ⊗ I_kron``).
+    BK_r : ndarray
+        Reduced ``BK``.
+    Q_r : ndarray
+        Reduced ``Q``.
+    R_r : ndarray
+        Reduced ``R``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> model.n_agents, model.kron
+    (3, 1)
     """
 
     A: np.ndarray
@@ -141,17 +167,56 @@ class TeamFilterModel:
 
     @property
     def m(self) -> int:
-        """Agent state dimension."""
+        """Agent state dimension.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous, sensing
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+        >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+        >>> model.m
+        2
+        """
         return self.A.shape[0]
 
     @property
     def m_r(self) -> int:
-        """Reduced agent state dimension ``m / kron``."""
+        """Reduced agent state dimension ``m / kron``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous, sensing
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+        >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+        >>> model.m_r
+        2
+        """
         return self.A_r.shape[0]
 
     @property
     def M_r(self) -> int:
-        """Reduced team state dimension ``N m_r``."""
+        """Reduced team state dimension ``N m_r``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous, sensing
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+        >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+        >>> model.M_r                                               # N m_r
+        6
+        """
         return self.n_agents * self.m_r
 
 
@@ -184,6 +249,22 @@ def team_filter_model(
     reduce : bool
         Look for a factor ``A = A_r ⊗ I_k`` shared by ``A, BK, Q, R`` (true by
         default); ``False`` forces the unreduced recursion.
+
+    Returns
+    -------
+    TeamFilterModel
+        The validated model with its Kronecker factor.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, rendezvous
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(2, 0.1)                       # planar: the x and y axes decouple
+    >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 2), np.eye(4),
+    ...                               np.eye(4), n_agents=5)
+    >>> model.kron, model.M_r                                   # the recursions run on one axis
+    (2, 10)
     """
     A = check_square(_float_array(A, "A"), "A")
     m = A.shape[0]
@@ -227,6 +308,19 @@ def closed_loop_matrices(A: ArrayLike, BK: ArrayLike, laplacian: ArrayLike) -> t
     F1 : (m N, m N) ndarray
     F2 : (m N, m N^2) ndarray
         ``L' = diag(L_1 ⊗ I_m, ..., L_N ⊗ I_m)`` with ``L_i`` the i-th row.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> F1, F2 = dkf.closed_loop_matrices(agent.A, agent.B @ K, Lap)
+    >>> F1.shape, F2.shape
+    ((6, 6), (6, 18))
     """
     A = check_square(_float_array(A, "A"), "A")
     BK = check_square(_float_array(BK, "BK"), "BK", A.shape[0])
@@ -250,8 +344,33 @@ def _closed_loop_matrices(A: np.ndarray, BK: np.ndarray, L: np.ndarray) -> tuple
 def reduce_covariance(P: ArrayLike, kron: int, name: str = "P") -> np.ndarray:
     """``P̄`` with ``P = P̄ ⊗ I_kron`` over the last two axes (error if not of that form).
 
-    `P` is a covariance (or a stack of them): finite, symmetric, positive
-    semidefinite, of a size divisible by `kron`; `name` names it in messages.
+    Parameters
+    ----------
+    P : (..., n, n) array_like
+        A covariance (or a stack of them): finite, symmetric, positive semidefinite, of a
+        size divisible by `kron`.
+    kron : int
+        The Kronecker factor.
+    name : str
+        Names `P` in error messages.
+
+    Returns
+    -------
+    (..., n / kron, n / kron) ndarray
+        The reduced covariance.
+
+    Raises
+    ------
+    ValueError
+        `P` is not of the form ``P̄ ⊗ I_kron``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import distributed_kf as dkf
+    >>> dkf.reduce_covariance(np.kron([[2.0, 1.0], [1.0, 2.0]], np.eye(2)), kron=2)
+    array([[2., 1.],
+           [1., 2.]])
     """
     if not isinstance(name, str):
         raise TypeError(f"name must be a string (the argument name used in messages); got {name!r}")
@@ -271,7 +390,28 @@ def reduce_covariance(P: ArrayLike, kron: int, name: str = "P") -> np.ndarray:
 
 
 def expand_covariance(P_r: ArrayLike, kron: int) -> np.ndarray:
-    """``P_r ⊗ I_kron`` over the last two axes (`P_r` a finite ``(..., n, n)`` array, `kron` >= 1)."""
+    """``P_r ⊗ I_kron`` over the last two axes.
+
+    Parameters
+    ----------
+    P_r : (..., n, n) array_like
+        Reduced covariance, finite.
+    kron : int
+        Kronecker factor, >= 1.
+
+    Returns
+    -------
+    (..., n kron, n kron) ndarray
+        The full covariance; :func:`reduce_covariance` undoes it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import distributed_kf as dkf
+    >>> P = dkf.expand_covariance([[2.0, 1.0], [1.0, 2.0]], kron=2)
+    >>> P.shape, bool(np.allclose(dkf.reduce_covariance(P, 2), [[2.0, 1.0], [1.0, 2.0]]))
+    ((4, 4), True)
+    """
     kron = check_positive_int(kron, "kron")
     P_r = _finite(_float_array(P_r, "P_r"), "P_r")
     if P_r.ndim < 2 or P_r.shape[-1] != P_r.shape[-2]:
@@ -314,6 +454,23 @@ def agent_update(
         Joseph form, equal to eq. (20) at the optimal gain.
     KH : (..., N, m N, m N) ndarray
         ``G_i H_i`` embedded in the team space (zero columns for unsensed agents).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), path, np.eye(2))           # one run
+    >>> Sigma0 = dkf.eb_initial_covariance(model, np.eye(2))
+    >>> X_pred, Sigma_pred = dkf.eb_predict(model, np.zeros((1, 3, 3, 2)), Sigma0, Lap)
+    >>> X_post, Sigma_post, KH = dkf.eb_update(model, X_pred, Sigma_pred, Z, mask)
+    >>> X, Sig, KH = dkf.agent_update(X_pred, np.broadcast_to(np.eye(6), (1, 3, 6, 6)), Z, mask, np.eye(2))
+    >>> bool(np.all(np.trace(Sig, axis1=-2, axis2=-1) < 6.0))   # every agent's uncertainty shrinks
+    True
     """
     X = _finite(_float_array(X_pred, "X_pred"), "X_pred")
     if X.ndim < 3 or X.shape[-3] != X.shape[-2] or X.shape[-1] == 0 or X.shape[-2] == 0:
@@ -362,6 +519,7 @@ def mb_predict(
     Parameters
     ----------
     model : TeamFilterModel
+        The team model (:func:`team_filter_model`).
     X_hat : (runs, N, N, m) array_like
         Posterior team estimates of every agent, per Monte Carlo run.
     Sigma : (batch, N, M_r, M_r) array_like
@@ -378,6 +536,23 @@ def mb_predict(
     -------
     X_pred : (runs, N, N, m) ndarray
     Sigma_pred : (batch, N, M_r, M_r) ndarray
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), path, np.eye(2))           # one run
+    >>> Sigma0 = dkf.eb_initial_covariance(model, np.eye(2))
+    >>> X_pred, Sigma_pred = dkf.eb_predict(model, np.zeros((1, 3, 3, 2)), Sigma0, Lap)
+    >>> X_post, Sigma_post, KH = dkf.eb_update(model, X_pred, Sigma_pred, Z, mask)
+    >>> X, Sig = dkf.mb_predict(model, X_post, dkf.agent_covariances(model, Sigma_post), Lap)
+    >>> Sig.shape
+    (1, 3, 6, 6)
     """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
@@ -434,12 +609,43 @@ def mb_update(
 
     Parameters
     ----------
-    X_pred : (runs, N, N, m), Sigma_pred : (batch, N, M_r, M_r)
-    Z : (runs, N, N, m) measurements, mask : (N, N) or (batch, N, N) sensing mask.
+    model : TeamFilterModel
+        The team model (:func:`team_filter_model`).
+    X_pred : (runs, N, N, m) array_like
+        Predicted team estimates.
+    Sigma_pred : (batch, N, M_r, M_r) array_like
+        Reduced predicted covariances.
+    Z : (runs, N, N, m) array_like
+        Measurements (:func:`mascore.sensing.measure`).
+    mask : (N, N) or (batch, N, N) array_like of bool
+        Sensing mask.
 
     Returns
     -------
-    X_post, Sigma_post, KH : reduced ``G_i H_i`` of shape (batch, N, M_r, M_r).
+    X_post : (runs, N, N, m) ndarray
+        Updated estimates.
+    Sigma_post : (batch, N, M_r, M_r) ndarray
+        Reduced updated covariances.
+    KH : (batch, N, M_r, M_r) ndarray
+        Reduced ``G_i H_i``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), path, np.eye(2))           # one run
+    >>> Sigma0 = dkf.eb_initial_covariance(model, np.eye(2))
+    >>> X_pred, Sigma_pred = dkf.eb_predict(model, np.zeros((1, 3, 3, 2)), Sigma0, Lap)
+    >>> X_post, Sigma_post, KH = dkf.eb_update(model, X_pred, Sigma_pred, Z, mask)
+    >>> X, Sig = dkf.mb_predict(model, X_post, dkf.agent_covariances(model, Sigma_post), Lap)
+    >>> X2, Sig2, KH2 = dkf.mb_update(model, X, Sig, Z, mask)
+    >>> bool(np.allclose(Sig2, np.swapaxes(Sig2, -1, -2)))
+    True
     """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
@@ -472,6 +678,8 @@ def eb_initial_covariance(model: TeamFilterModel, P0: ArrayLike, common: bool = 
 
     Parameters
     ----------
+    model : TeamFilterModel
+        The team model (:func:`team_filter_model`).
     P0 : (m, m) or (m N, m N) array_like
         Covariance of one agent's initial team-estimate error (per agent block
         or full).
@@ -481,6 +689,23 @@ def eb_initial_covariance(model: TeamFilterModel, P0: ArrayLike, common: bool = 
         Assumption 2 that makes Lemma 1's ``e[0] = C_i[0] e_i[0]`` exact with
         ``C_i[0] = 1_N ⊗ I``). False: independent initial errors,
         ``Σ[0] = I_N ⊗ P0``.
+
+    Returns
+    -------
+    (1, N M_r, N M_r) ndarray
+        The reduced augmented covariance.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> dkf.eb_initial_covariance(model, np.eye(2)).shape         # common start: 1 1^T (x) P0
+    (1, 18, 18)
     """
     model = _check_model(model)
     _check_flag(common, "common")
@@ -510,15 +735,37 @@ def eb_predict(
 
     Parameters
     ----------
+    model : TeamFilterModel
+        The team model (:func:`team_filter_model`).
     X_hat : (runs, N, N, m) array_like
+        Updated team estimates of every agent.
     Sigma : (batch, N M_r, N M_r) array_like
         Reduced augmented covariance.
     laplacian : (N, N) or (batch, N, N) array_like
+        Topology at step k.
 
     Returns
     -------
-    X_pred : (runs, N, N, m)
-    Sigma_pred : (batch, N M_r, N M_r)
+    X_pred : (runs, N, N, m) ndarray
+        Predicted estimates.
+    Sigma_pred : (batch, N M_r, N M_r) ndarray
+        Predicted augmented covariance.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), path, np.eye(2))           # one run
+    >>> Sigma0 = dkf.eb_initial_covariance(model, np.eye(2))
+    >>> X_pred, Sigma_pred = dkf.eb_predict(model, np.zeros((1, 3, 3, 2)), Sigma0, Lap)
+    >>> X_post, Sigma_post, KH = dkf.eb_update(model, X_pred, Sigma_pred, Z, mask)
+    >>> Sigma_pred.shape
+    (1, 18, 18)
     """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
@@ -577,11 +824,43 @@ def eb_update(
     eq. (33) for ``i != j`` (measurement noises of different agents are
     independent) and the Joseph form of eq. (20) for ``i = j``.
 
+    Parameters
+    ----------
+    model : TeamFilterModel
+        The team model (:func:`team_filter_model`).
+    X_pred : (runs, N, N, m) array_like
+        Predicted team estimates.
+    Sigma_pred : (batch, N M_r, N M_r) array_like
+        Predicted augmented covariance.
+    Z : (runs, N, N, m) array_like
+        Measurements.
+    mask : (N, N) or (batch, N, N) array_like of bool
+        Sensing mask.
+
     Returns
     -------
-    X_post : (runs, N, N, m)
-    Sigma_post : (batch, N M_r, N M_r)
-    KH : (batch, N, M_r, M_r) reduced ``G_i H_i``.
+    X_post : (runs, N, N, m) ndarray
+        Updated estimates.
+    Sigma_post : (batch, N M_r, N M_r) ndarray
+        Updated augmented covariance.
+    KH : (batch, N, M_r, M_r) ndarray
+        Reduced ``G_i H_i``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), path, np.eye(2))           # one run
+    >>> Sigma0 = dkf.eb_initial_covariance(model, np.eye(2))
+    >>> X_pred, Sigma_pred = dkf.eb_predict(model, np.zeros((1, 3, 3, 2)), Sigma0, Lap)
+    >>> X_post, Sigma_post, KH = dkf.eb_update(model, X_pred, Sigma_pred, Z, mask)
+    >>> bool(np.allclose(Sigma_post, np.swapaxes(Sigma_post, -1, -2)))
+    True
     """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
@@ -645,7 +924,36 @@ def _eb_update(model, X_pred, Sig, Z, S):
 
 
 def agent_covariances(model: TeamFilterModel, Sigma: ArrayLike) -> np.ndarray:
-    """Diagonal blocks ``Σ̄_i`` of a reduced augmented covariance: ``(batch, N, M_r, M_r)``."""
+    """Diagonal blocks ``Σ̄_i`` of a reduced augmented covariance.
+
+    Parameters
+    ----------
+    model : TeamFilterModel
+        The team model (:func:`team_filter_model`).
+    Sigma : (batch, N M_r, N M_r) array_like
+        Reduced augmented covariance.
+
+    Returns
+    -------
+    (batch, N, M_r, M_r) ndarray
+        Each agent's own covariance.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), path, np.eye(2))           # one run
+    >>> Sigma0 = dkf.eb_initial_covariance(model, np.eye(2))
+    >>> X_pred, Sigma_pred = dkf.eb_predict(model, np.zeros((1, 3, 3, 2)), Sigma0, Lap)
+    >>> X_post, Sigma_post, KH = dkf.eb_update(model, X_pred, Sigma_pred, Z, mask)
+    >>> dkf.agent_covariances(model, Sigma_post).shape
+    (1, 3, 6, 6)
+    """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
     Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr))
@@ -671,8 +979,36 @@ def centralized_predict(
 
     Parameters
     ----------
-    x : (runs, N, m) team estimates, P : (batch, M_r, M_r) reduced covariance,
-    U : (runs, N, p) applied inputs, B : (m, p) input matrix.
+    model : TeamFilterModel
+        The team model (:func:`team_filter_model`).
+    x : (runs, N, m) array_like
+        Team estimates.
+    P : (batch, M_r, M_r) array_like
+        Reduced covariance.
+    U : (runs, N, p) array_like
+        Applied inputs.
+    B : (m, p) array_like
+        Input matrix.
+
+    Returns
+    -------
+    x_pred : (runs, N, m) ndarray
+        Predicted estimates.
+    P_pred : (batch, M_r, M_r) ndarray
+        Predicted covariance.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> x, P = dkf.centralized_predict(model, np.zeros((1, 3, 2)), np.eye(6)[None], np.zeros((1, 3, 1)), agent.B)
+    >>> x.shape, P.shape
+    ((1, 3, 2), (1, 6, 6))
     """
     model = _check_model(model)
     N, m, Mr = model.n_agents, model.m, model.M_r
@@ -708,8 +1044,40 @@ def centralized_update(
 
     Parameters
     ----------
-    x_pred : (runs, N, m), P_pred : (batch, M_r, M_r) reduced, positive definite,
-    Z : (runs, N, N, m), mask : (N, N) or (batch, N, N).
+    model : TeamFilterModel
+        The team model (:func:`team_filter_model`).
+    x_pred : (runs, N, m) array_like
+        Predicted team estimates.
+    P_pred : (batch, M_r, M_r) array_like
+        Reduced predicted covariance, positive definite.
+    Z : (runs, N, N, m) array_like
+        Every agent's measurements.
+    mask : (N, N) or (batch, N, N) array_like of bool
+        Sensing mask.
+
+    Returns
+    -------
+    x : (runs, N, m) ndarray
+        Updated estimates.
+    P : (batch, M_r, M_r) ndarray
+        Updated covariance: a lower bound of every agent's.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), path, np.eye(2))           # one run
+    >>> Sigma0 = dkf.eb_initial_covariance(model, np.eye(2))
+    >>> X_pred, Sigma_pred = dkf.eb_predict(model, np.zeros((1, 3, 3, 2)), Sigma0, Lap)
+    >>> X_post, Sigma_post, KH = dkf.eb_update(model, X_pred, Sigma_pred, Z, mask)
+    >>> x, P = dkf.centralized_update(model, np.zeros((1, 3, 2)), np.eye(6)[None], Z, mask)
+    >>> bool(np.trace(P[0]) < 6.0)
+    True
     """
     model = _check_model(model)
     N, m, Mr = model.n_agents, model.m, model.M_r
@@ -765,7 +1133,10 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
 
     Parameters
     ----------
-    A, BK : (m, m) array_like
+    A : (m, m) array_like
+        Agent transition matrix.
+    BK : (m, m) array_like
+        Input matrix times consensus gain.
     adjacency : (N, N) array_like
         Fixed topology (defines ``F_1`` and ``H_i``).
     tol : float
@@ -774,6 +1145,18 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
     Returns
     -------
     (N,) ndarray of bool
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> dkf.observable_agents(agent.A, agent.B @ K, graphs.star_graph(4))   # leaves see twin leaves
+    array([ True, False, False, False])
     """
     A = check_square(_float_array(A, "A"), "A")
     BK = check_square(_float_array(BK, "BK"), "BK", A.shape[0])
@@ -831,7 +1214,37 @@ def _graph_observability(A, BK, L, S, tol) -> np.ndarray | None:
 
 
 def require_observable(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike) -> None:
-    """Raise ``ValueError`` naming the agents for which system (43) is unobservable."""
+    """Raise ``ValueError`` naming the agents for which system (43) is unobservable.
+
+    Parameters
+    ----------
+    A : (m, m) array_like
+        Agent transition matrix.
+    BK : (m, m) array_like
+        Input matrix times consensus gain.
+    adjacency : (N, N) array_like
+        Sensing graph.
+
+    Raises
+    ------
+    ValueError
+        Naming the agents whose filter cannot estimate the team.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> try:
+    ...     dkf.require_observable(agent.A, agent.B @ K, graphs.star_graph(4))
+    ... except ValueError as exc:
+    ...     print(str(exc)[:22])
+    system (43) (F_1, H_i)
+    """
     Adj = _check_adjacency(adjacency)
     if Adj.ndim != 2:
         raise ValueError(f"adjacency must be a single (N, N) topology here; got shape {Adj.shape}")
@@ -858,6 +1271,18 @@ def lyapunov_v(error: ArrayLike, Sigma_r: ArrayLike, kron: int = 1) -> np.ndarra
         Reduced covariance ``Σ̄_i`` (``Σ_i = Σ̄_i ⊗ I_kron``).
     kron : int
         Kronecker factor of the model.
+
+    Returns
+    -------
+    (...) ndarray
+        ``V``, chi-square distributed with ``M`` dof for a consistent filter.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import distributed_kf as dkf
+    >>> float(dkf.lyapunov_v(np.ones(6), np.eye(6)))
+    6.0
     """
     kron = check_positive_int(kron, "kron")
     e = _finite(_float_array(error, "error"), "error")
@@ -888,7 +1313,35 @@ def team_nees(model: TeamFilterModel, X_true: ArrayLike, X_hat: ArrayLike, Sigma
 
     Parameters
     ----------
-    X_true : (runs, N, m), X_hat : (runs, N, N, m), Sigma_i : (batch, N, M_r, M_r) positive definite
+    model : TeamFilterModel
+        The team model (:func:`team_filter_model`).
+    X_true : (runs, N, m) array_like
+        True states.
+    X_hat : (runs, N, N, m) array_like
+        Every agent's team estimate.
+    Sigma_i : (batch, N, M_r, M_r) array_like
+        Their reduced covariances, positive definite.
+
+    Returns
+    -------
+    (runs, N) ndarray
+        The NEES of each agent's estimate.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), path, np.eye(2))           # one run
+    >>> Sigma0 = dkf.eb_initial_covariance(model, np.eye(2))
+    >>> X_pred, Sigma_pred = dkf.eb_predict(model, np.zeros((1, 3, 3, 2)), Sigma0, Lap)
+    >>> X_post, Sigma_post, KH = dkf.eb_update(model, X_pred, Sigma_pred, Z, mask)
+    >>> dkf.team_nees(model, np.zeros((1, 3, 2)), X_post, dkf.agent_covariances(model, Sigma_post)).shape
+    (1, 3)
     """
     model = _check_model(model)
     N, m, Mr = model.n_agents, model.m, model.M_r
@@ -914,6 +1367,36 @@ def f2_cross(model: TeamFilterModel, Sigma: ArrayLike, laplacian: ArrayLike) -> 
 
     Used to form the map ``C_i = E[e e_i^T] Σ_i^{-1}`` of Lemma 1 without
     storing the augmented covariance: ``F_2 C_i = F_2 E[e e_i^T] Σ_i^{-1}``.
+
+    Parameters
+    ----------
+    model : TeamFilterModel
+        The team model (:func:`team_filter_model`).
+    Sigma : (batch, N M_r, N M_r) array_like
+        Reduced augmented covariance.
+    laplacian : (N, N) or (batch, N, N) array_like
+        Topology.
+
+    Returns
+    -------
+    (batch, N, M_r, M_r) ndarray
+        ``F_2 E[e e_i^T]`` per agent.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), path, np.eye(2))           # one run
+    >>> Sigma0 = dkf.eb_initial_covariance(model, np.eye(2))
+    >>> X_pred, Sigma_pred = dkf.eb_predict(model, np.zeros((1, 3, 3, 2)), Sigma0, Lap)
+    >>> X_post, Sigma_post, KH = dkf.eb_update(model, X_pred, Sigma_pred, Z, mask)
+    >>> dkf.f2_cross(model, Sigma_post, Lap).shape
+    (1, 3, 6, 6)
     """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
@@ -955,10 +1438,16 @@ def theorem1_min_eigenvalues(
 
     Parameters
     ----------
-    laplacian : (N, N) fixed topology.
-    KH : (T+1, N, M_r, M_r) reduced ``G_i H_i[k]`` (entry 0 unused).
-    Sigma_i : (T+1, N, M_r, M_r) reduced posterior ``Σ̄_i[k]``.
-    F2_cross : (T+1, N, M_r, M_r) ``F_2 E[e e_i^T]`` from :func:`f2_cross`.
+    model : TeamFilterModel
+        The team model.
+    laplacian : (N, N) array_like
+        Fixed topology.
+    KH : (T+1, N, M_r, M_r) array_like
+        Reduced ``G_i H_i[k]`` (entry 0 unused).
+    Sigma_i : (T+1, N, M_r, M_r) array_like
+        Reduced posterior ``Σ̄_i[k]``.
+    F2_cross : (T+1, N, M_r, M_r) array_like
+        ``F_2 E[e e_i^T]`` from :func:`f2_cross`.
 
     Returns
     -------
@@ -966,6 +1455,13 @@ def theorem1_min_eigenvalues(
         ``min_eig`` (T, N): smallest eigenvalue of ``M_i[k+1]``;
         ``min_eig_rel`` (T, N): smallest eigenvalue of
         ``Σ_i^{1/2} M_i Σ_i^{1/2}`` (scale-free, at most 1).
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> r = song2023.fig2(seed=0, n_runs=2, horizon=4.0)
+    >>> sorted(song2023.theorem1(r))                                # via this function
+    ['min_eig', 'min_eig_rel']
     """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
