@@ -79,7 +79,27 @@ READINGS = ("as-printed", "inverse-weight-are")
 
 
 def is_observable(A: ArrayLike, C: ArrayLike) -> bool:
-    """PBH test of observability of ``(A, C)`` (controllability of ``(A^T, C^T)``)."""
+    """PBH test of observability of ``(A, C)`` (controllability of ``(A^T, C^T)``).
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        State matrix.
+    C : (m, n) array_like
+        Output matrix.
+
+    Returns
+    -------
+    bool
+        True if ``(A, C)`` is observable.
+
+    Examples
+    --------
+    >>> from mascore import observers
+    >>> observers.is_observable([[0.0, 1.0], [0.0, 0.0]], [[1.0, 0.0]]), observers.is_observable(
+    ...     [[0.0, 1.0], [0.0, 0.0]], [[0.0, 1.0]])
+    (True, False)
+    """
     A = _square(A, "A")
     C = _matrix(C, "C", (None, A.shape[0]))
     return is_controllable(A.T, C.T)
@@ -89,7 +109,7 @@ def is_observable(A: ArrayLike, C: ArrayLike) -> bool:
 class MinEnergyObserver:
     """Minimum-energy observer, eqs. (23)-(25).
 
-    Attributes
+    Parameters
     ----------
     L : (n, m) ndarray
         Gain ``L = S C^T Q``.
@@ -99,6 +119,15 @@ class MinEnergyObserver:
         Optimal cost ``trace(S)`` (eq. (25)).
     E : (n,) ndarray
         Eigenvalues of ``A - L C``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, observers
+    >>> A, Bbar, C = np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])  # Example 1
+    >>> me = observers.min_energy_observer(A, Bbar, C, np.eye(1), np.eye(1))
+    >>> bool(me.E.real.max() < 0), bool(np.isclose(me.cost, np.trace(me.S)))
+    (True, True)
     """
 
     L: np.ndarray
@@ -115,19 +144,34 @@ def min_energy_observer(
     Parameters
     ----------
     A : (n, n) array_like
+        Agent state matrix.
     Bbar : (n, q) array_like
         Disturbance input; ``(A, Bbar)`` must be controllable.
     C : (m, n) array_like
         ``(A, C)`` must be observable.
-    Q : (m, m) array_like, symmetric positive definite
-        Weight on the measurement noise (large: trust the measurements).
-    R : (q, q) array_like, symmetric positive definite
-        Weight on the disturbance (large: trust the model).
+    Q : (m, m) array_like
+        Weight on the measurement noise, symmetric positive definite (large: trust the measurements).
+    R : (q, q) array_like
+        Weight on the disturbance, symmetric positive definite (large: trust the model).
+
+    Returns
+    -------
+    MinEnergyObserver
+        Gain, ARE solution, cost and closed-loop eigenvalues.
 
     Raises
     ------
     ValueError
         Bad shapes or weights, ``(A, Bbar)`` not controllable or ``(A, C)`` not observable.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, observers
+    >>> A, Bbar, C = np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])  # Example 1
+    >>> me = observers.min_energy_observer(A, Bbar, C, np.eye(1), np.eye(1))
+    >>> me.L.shape
+    (2, 1)
     """
     A, Bbar, C, Q, R = _check_observer(A, Bbar, C, Q, R)
     K, S, E = solve_care(A.T, C.T, Bbar @ np.linalg.solve(R, Bbar.T), np.linalg.inv(Q))
@@ -138,7 +182,7 @@ def min_energy_observer(
 class DistributedObserver:
     """Result of :func:`distributed_observer` (Vlahakis and Halikias, Sec. 4.2).
 
-    Attributes
+    Parameters
     ----------
     L : (n, m) ndarray
         Local gain in the agent's original coordinates.
@@ -157,8 +201,14 @@ class DistributedObserver:
         Laplacian eigenvalues.
     T : (n, n) ndarray
         Coordinate change ``x_hat = T x`` of eqs. (27) and (32).
-    A_hat, Bbar_hat, C_hat, L_hat : ndarray
-        The agent in the ``x_hat`` coordinates (eqs. (33)-(34)); ``L_hat = [0; L2]``.
+    A_hat : (n, n) ndarray
+        The agent in the ``x_hat`` coordinates (eqs. (33)-(34)).
+    Bbar_hat : (n, q) ndarray
+        Its disturbance input there.
+    C_hat : (m, n) ndarray
+        Its output matrix there, ``(0 C2)``.
+    L_hat : (n, m) ndarray
+        The gain there, ``[0; L2]``.
     spectral_abscissa : float
         Largest real part of the eigenvalues of ``A_e``.
     disagreement_abscissa : float
@@ -168,6 +218,16 @@ class DistributedObserver:
         Which reading of eqs. (29)-(30) produced ``L``.
     trace_in : str
         Coordinates of the traces (``"transformed"``: ``x_hat``, as in eq. (57)).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, observers
+    >>> A, Bbar, C = np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])  # Example 1
+    >>> obs = observers.distributed_observer(A, Bbar, C, 10.0 * np.eye(1), 5.0 * np.eye(1), np.eye(1),
+    ...                                     graphs.ring_graph(5))
+    >>> obs.L.shape, obs.Phi.shape, bool(obs.bound >= obs.centralized_cost)
+    ((2, 1), (1, 1), True)
     """
 
     L: np.ndarray
@@ -189,7 +249,23 @@ class DistributedObserver:
 
     @property
     def hurwitz(self) -> bool:
-        """True if ``A_e`` is Hurwitz (all estimation errors decay)."""
+        """True if ``A_e`` is Hurwitz (all estimation errors decay).
+
+        Returns
+        -------
+        bool
+            ``spectral_abscissa < 0``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs, observers
+        >>> A, Bbar, C = np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])  # Example 1
+        >>> obs = observers.distributed_observer(A, Bbar, C, 10.0 * np.eye(1), 5.0 * np.eye(1), np.eye(1),
+        ...                                     graphs.ring_graph(5))
+        >>> obs.hurwitz
+        True
+        """
         return self.spectral_abscissa < 0
 
 
@@ -243,6 +319,11 @@ def distributed_observer(
         default Clarabel's own (``mascore._solver.SOLVER_OPTIONS``). A
         :class:`mascore.SolverError` with status ``optimal_inaccurate`` is the cue to change them.
 
+    Returns
+    -------
+    DistributedObserver
+        The gains ``L`` and ``Phi``, the cost bound, the achieved and reference costs.
+
     Raises
     ------
     ValueError
@@ -254,8 +335,19 @@ def distributed_observer(
     -----
     With several outputs (``m >= 2``) the program is often degenerate and
     Clarabel stops at 'optimal_inaccurate' (gap about 5e-8 instead of 1e-8),
-    which :func:`mascore._solver.solve` rejects; single-output agents, such as
-    Example 1, solve cleanly for the graphs and weights we tried.
+    which is refused with a :class:`mascore.SolverError` (pass looser tolerances in
+    `solver_options` to accept it); single-output agents, such as Example 1, solve
+    cleanly for the graphs and weights we tried.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, observers
+    >>> A, Bbar, C = np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])
+    >>> obs = observers.distributed_observer(A, Bbar, C, Q1=10.0 * np.eye(1), Q2=5.0 * np.eye(1), R=np.eye(1),
+    ...                                      adjacency=graphs.ring_graph(5))
+    >>> obs.hurwitz, bool(obs.centralized_cost <= obs.cost <= obs.local_cost)
+    (True, True)
     """
     A, Bbar, C, Q1, R = _check_observer(A, Bbar, C, Q1, R, qname="Q1")
     m = C.shape[0]
@@ -322,9 +414,12 @@ def coupled_gain_lmi(
 
     Parameters
     ----------
-    A : (n, n), C : (m, n) with full row rank ``m < n``, L : (n, m)
-        Agent and local gain; ``L2`` (the part of ``T L`` on the output
-        coordinates) must be invertible.
+    A : (n, n) array_like
+        Agent state matrix.
+    C : (m, n) array_like
+        Output matrix, full row rank ``m < n``.
+    L : (n, m) array_like
+        Local gain; ``L2`` (the part of ``T L`` on the output coordinates) must be invertible.
     lam : (N,) array_like
         Laplacian eigenvalues (>= 0).
     process_factors : sequence of N (n, q_i) arrays
@@ -346,6 +441,18 @@ def coupled_gain_lmi(
         ``Phi`` (m, m), ``bound`` (float), ``T`` (n, n) with ``x_hat = T x``,
         ``W`` (list of the W_i per distinct lambda, in ``x_hat`` scaled to unit
         diagonal of the first mode's ``Phi = 0`` Lyapunov solution), ``lam_unique``, ``multiplicity``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, observers
+    >>> A, Bbar, C = np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])  # Example 1
+    >>> obs = observers.distributed_observer(A, Bbar, C, 10.0 * np.eye(1), 5.0 * np.eye(1), np.eye(1),
+    ...                                     graphs.ring_graph(5))
+    >>> res = observers.coupled_gain_lmi(A, C, obs.L, obs.lam, [Bbar] * 5,
+    ...                                  [10.0 * np.eye(1) + l * 5.0 * np.eye(1) for l in obs.lam])
+    >>> res["lam_unique"].size                                   # one LMI block per distinct eigenvalue
+    3
     """
     A, C, L, lam = _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in)
     n, m = L.shape
@@ -470,6 +577,19 @@ def bound_at_fixed_phi(
         Bad shapes (as :func:`coupled_gain_lmi`).
     mascore.SolverError
         The program is neither solved to optimality nor proved infeasible.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, observers
+    >>> A, Bbar, C = np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])  # Example 1
+    >>> obs = observers.distributed_observer(A, Bbar, C, 10.0 * np.eye(1), 5.0 * np.eye(1), np.eye(1),
+    ...                                     graphs.ring_graph(5))
+    >>> G = [Bbar] * 5
+    >>> Rw = [10.0 * np.eye(1) + l * 5.0 * np.eye(1) for l in obs.lam]
+    >>> at_lmi = observers.bound_at_fixed_phi(A, C, obs.L, obs.lam, G, Rw, obs.Phi)
+    >>> bool(np.isclose(at_lmi, obs.bound, rtol=1e-4))          # the LMI's Phi attains its bound
+    True
     """
     A, C, L, lam = _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in)
     n, m = L.shape
@@ -565,12 +685,39 @@ def observer_error_matrix(
 ) -> np.ndarray:
     """``A_e = I_N (x) (A - L C) - Lap (x) L Phi C`` (Example 1; error form of eq. (42)).
 
-    `laplacian` (N, N) must be symmetric (an undirected graph): the gains ``L``, ``Phi``
-    and the error analysis come from the mode decomposition by its orthogonal eigenvectors.
+    Parameters
+    ----------
+    A : (n, n) array_like
+        Agent state matrix.
+    L : (n, m) array_like
+        Local gain.
+    C : (m, n) array_like
+        Output matrix.
+    Phi : (m, m) array_like or float
+        Coupling gain.
+    laplacian : (N, N) array_like
+        Must be symmetric (an undirected graph).
 
     Returns
     -------
     (N n, N n) ndarray
+        ``A_e``.
+
+    Notes
+    -----
+    `laplacian` must be symmetric: the gains ``L``, ``Phi``
+    and the error analysis come from the mode decomposition by its orthogonal eigenvectors.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, observers
+    >>> A, Bbar, C = np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])  # Example 1
+    >>> obs = observers.distributed_observer(A, Bbar, C, 10.0 * np.eye(1), 5.0 * np.eye(1), np.eye(1),
+    ...                                     graphs.ring_graph(5))
+    >>> Ae = observers.observer_error_matrix(A, obs.L, C, obs.Phi, graphs.laplacian(graphs.ring_graph(5)))
+    >>> Ae.shape, bool(np.linalg.eigvals(Ae).real.max() < 0)
+    ((10, 10), True)
     """
     A = _square(A, "A")
     n = A.shape[0]
@@ -593,6 +740,7 @@ def simulate_estimation_errors(A_e: ArrayLike, e0: ArrayLike, t: ArrayLike) -> n
     Parameters
     ----------
     A_e : (N n, N n) array_like
+        Error matrix (:func:`observer_error_matrix`).
     e0 : (N, n) array_like
         Initial estimation error of each agent.
     t : (T,) array_like
@@ -601,6 +749,19 @@ def simulate_estimation_errors(A_e: ArrayLike, e0: ArrayLike, t: ArrayLike) -> n
     Returns
     -------
     (T, N, n) ndarray
+        The errors on the grid.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, observers
+    >>> A, Bbar, C = np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])  # Example 1
+    >>> obs = observers.distributed_observer(A, Bbar, C, 10.0 * np.eye(1), 5.0 * np.eye(1), np.eye(1),
+    ...                                     graphs.ring_graph(5))
+    >>> Ae = observers.observer_error_matrix(A, obs.L, C, obs.Phi, graphs.laplacian(graphs.ring_graph(5)))
+    >>> e = observers.simulate_estimation_errors(Ae, np.ones((5, 2)), np.linspace(0.0, 20.0, 201))
+    >>> bool(np.abs(e[-1]).max() < 1e-3 * np.abs(e[0]).max())
+    True
     """
     A_e = _square(A_e, "A_e")
     e0 = _matrix(e0, "e0")
@@ -665,8 +826,10 @@ def simulate_network_observer(
         Laplacian of an undirected graph (symmetric, rows sum to zero): ``L`` and ``Phi``
         come from the mode decomposition by its orthogonal eigenvectors, which a directed
         graph does not have, so a directed Laplacian is refused.
-    x0, x_hat0 : (N, n) array_like
-        True states and estimates at ``t[0]``.
+    x0 : (N, n) array_like
+        True states at ``t[0]``.
+    x_hat0 : (N, n) array_like
+        Estimates at ``t[0]``.
     t : (T,) array_like
         Increasing time grid, seconds (need not be uniform).
     Bbar : (n, q) array_like, optional
@@ -677,8 +840,10 @@ def simulate_network_observer(
 
     Returns
     -------
-    X, X_hat : (T, N, n) ndarray
-        True states and estimates on the grid.
+    X : (T, N, n) ndarray
+        True states on the grid.
+    X_hat : (T, N, n) ndarray
+        Estimates on the grid.
 
     Raises
     ------
@@ -686,6 +851,19 @@ def simulate_network_observer(
         Bad shapes, a `laplacian` that is not the Laplacian of an undirected graph (an
         adjacency, a directed Laplacian), a grid that is not 1-D and increasing, or
         `disturbance` without `Bbar`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, observers
+    >>> A, Bbar, C = np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])  # Example 1
+    >>> obs = observers.distributed_observer(A, Bbar, C, 10.0 * np.eye(1), 5.0 * np.eye(1), np.eye(1),
+    ...                                     graphs.ring_graph(5))
+    >>> t = np.linspace(0.0, 20.0, 201)
+    >>> X, Xh = observers.simulate_network_observer(A, C, obs.L, obs.Phi, graphs.laplacian(graphs.ring_graph(5)),
+    ...                                              np.ones((5, 2)), np.zeros((5, 2)), t)
+    >>> bool(np.abs(X[-1] - Xh[-1]).max() < 1e-3)
+    True
     """
     A = _square(A, "A")
     n = A.shape[0]
@@ -741,7 +919,25 @@ def simulate_network_observer(
 
 
 def disagreement(errors: ArrayLike) -> np.ndarray:
-    """Errors minus their mean over the agents (axis -2 of a finite (..., N, n) array)."""
+    """Errors minus their mean over the agents (axis -2).
+
+    Parameters
+    ----------
+    errors : (..., N, n) array_like
+        Estimation errors, finite.
+
+    Returns
+    -------
+    (..., N, n) ndarray
+        The disagreement part (zero when every agent has the same error).
+
+    Examples
+    --------
+    >>> from mascore import observers
+    >>> observers.disagreement([[1.0, 0.0], [3.0, 0.0]])
+    array([[-1.,  0.],
+           [ 1.,  0.]])
+    """
     errors = _float_array(errors, "errors")
     if errors.ndim < 2 or errors.shape[-2] == 0:
         raise ValueError(f"errors must be an array (..., N, n) with N >= 1 agents; got shape {errors.shape}")
@@ -761,11 +957,22 @@ def achieved_cost(
 
     Parameters
     ----------
-    A : (n, n), Bbar : (n, q), C : (m, n), R : (q, q) positive definite, L : (n, m) array_like
+    A : (n, n) array_like
+        Agent state matrix.
+    Bbar : (n, q) array_like
+        Disturbance input matrix.
+    C : (m, n) array_like
+        Output matrix.
+    R : (q, q) array_like
+        Disturbance weight, positive definite.
+    L : (n, m) array_like
+        Local gain.
     Phi : (m, m) array_like or float
+        Coupling gain.
     lam : (N,) array_like
         Laplacian eigenvalues.
-    noise_weights : sequence of N (m, m) positive definite arrays
+    noise_weights : sequence of N (m, m) arrays
+        ``Q_i``, positive definite.
     T : (n, n) array_like, optional
         Measure ``trace(T S_i T^T)`` (e.g. ``DistributedObserver.T``, the
         coordinates of eq. (32)); default: the agent's original coordinates.
@@ -775,6 +982,18 @@ def achieved_cost(
     float
         ``inf`` (a defined value: the cost of an unstable mode is infinite) if some mode
         is not Hurwitz.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, observers
+    >>> A, Bbar, C = np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])  # Example 1
+    >>> obs = observers.distributed_observer(A, Bbar, C, 10.0 * np.eye(1), 5.0 * np.eye(1), np.eye(1),
+    ...                                     graphs.ring_graph(5))
+    >>> Rw = [10.0 * np.eye(1) + l * 5.0 * np.eye(1) for l in obs.lam]
+    >>> cost = observers.achieved_cost(A, Bbar, C, np.eye(1), obs.L, obs.Phi, obs.lam, Rw, T=obs.T)
+    >>> bool(np.isclose(cost, obs.cost))
+    True
     """
     A = _square(A, "A")
     n = A.shape[0]
