@@ -36,13 +36,13 @@ def run() -> pd.DataFrame:
             "case": f"observer design (LMI (62) by modes), ring N = {N}",
             "N": N,
             "lmi_blocks": N // 2 + 1,
-            "median_s": median_time(lambda: observers.distributed_observer(
+            "median_s": median_time(lambda adj=adj: observers.distributed_observer(
                 E["A"], E["Bbar"], E["C"], E["Q1"], 5.0, E["R"], adj, reading=vl.L_READING), repeat=repeat),
             "Phi": design.Phi.item(),
             "hurwitz": design.hurwitz,
         })
         rows.append({"case": f"dense network ARE (40), {2 * N} states", "N": N, "lmi_blocks": 0,
-                     "median_s": median_time(lambda: _dense_are(N), repeat=max(repeat, 3)),
+                     "median_s": median_time(lambda N=N: _dense_are(N), repeat=max(repeat, 3)),
                      "Phi": np.nan, "hurwitz": np.nan})
     return pd.DataFrame(rows)
 

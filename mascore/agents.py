@@ -13,8 +13,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import as_matrix, check_positive, check_positive_int, check_square
-from ._validation import require_finite as _finite
 from ._validation import float_array as _float_array
+from ._validation import require_finite as _finite
 
 __all__ = [
     "LTIAgent",
@@ -133,7 +133,7 @@ class LTIAgent:
         except ValueError:
             raise ValueError(f"the batch axes of x {x.shape} and u {u.shape} do not broadcast") from None
 
-    def team(self, n_agents: int) -> "LTIAgent":
+    def team(self, n_agents: int) -> LTIAgent:
         """The stacked team ``(I_N kron A, I_N kron B)`` as one LTI system.
 
         Parameters

@@ -258,7 +258,7 @@ class SwitchingTopology:
         return self.graphs[max(k, 0)]
 
     @classmethod
-    def periodic(cls, graphs: ArrayLike, dwell: float, t_final: float, t0: float = 0.0) -> "SwitchingTopology":
+    def periodic(cls, graphs: ArrayLike, dwell: float, t_final: float, t0: float = 0.0) -> SwitchingTopology:
         """Cycle through `graphs`, each held for `dwell` s, from `t0` up to `t_final`.
 
         Parameters

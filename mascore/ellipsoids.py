@@ -182,7 +182,7 @@ class Ellipsoid:
         """
         return contains(points, self.center, self.shape, rtol)
 
-    def affine_image(self, M: ArrayLike, b: ArrayLike | None = None) -> "Ellipsoid":
+    def affine_image(self, M: ArrayLike, b: ArrayLike | None = None) -> Ellipsoid:
         """The image ``{M x + b : x in E}`` (M must have full row rank to stay non-degenerate).
 
         Parameters
@@ -208,7 +208,7 @@ class Ellipsoid:
         c, P = affine_image(self.center, self.shape, M, b)
         return Ellipsoid(c, P)
 
-    def __add__(self, other: "Ellipsoid") -> "Ellipsoid":
+    def __add__(self, other: Ellipsoid) -> Ellipsoid:
         """Trace-optimal outer ellipsoid of the Minkowski sum."""
         if not isinstance(other, Ellipsoid):
             return NotImplemented

@@ -151,7 +151,7 @@ class Claim:
     def qualitative(
         cls, id: str, where: str, statement: str, value: Any, holds: bool | np.bool_, note: str = "",
         *, rule: str = "", unit: str = "",
-    ) -> "Claim":
+    ) -> Claim:
         """A claim without a published number, decided by a measured condition.
 
         Parameters
@@ -225,7 +225,7 @@ class Claim:
         return out
 
     @classmethod
-    def from_dict(cls, record: dict) -> "Claim":
+    def from_dict(cls, record: dict) -> Claim:
         """Rebuild a claim from its JSON record, recomputing the verdict.
 
         Parameters

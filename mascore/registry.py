@@ -88,7 +88,7 @@ class FigureSpec:
     name: str
     number: str
     caption: str
-    draw: Callable[[Any], "matplotlib.figure.Figure"]
+    draw: Callable[[Any], matplotlib.figure.Figure]
 
 
 @dataclass(frozen=True)
@@ -117,7 +117,7 @@ class TableSpec:
     name: str
     number: str
     caption: str
-    build: Callable[[Any], "pd.DataFrame"]
+    build: Callable[[Any], pd.DataFrame]
 
 
 @dataclass(frozen=True)
@@ -206,7 +206,7 @@ class Study:
                 return spec
         raise ValueError(f"table must be one of {[t.name for t in self.tables]}; got {name!r}")
 
-    def draw(self, name: str, result: Any) -> "matplotlib.figure.Figure":
+    def draw(self, name: str, result: Any) -> matplotlib.figure.Figure:
         """Draw figure `name` from `result` (in the book's style).
 
         Parameters
@@ -236,7 +236,7 @@ class Study:
         use_style()
         return self.figure(name).draw(result)
 
-    def build(self, name: str, result: Any) -> "pd.DataFrame":
+    def build(self, name: str, result: Any) -> pd.DataFrame:
         """Build table `name` from `result`.
 
         Parameters

@@ -32,8 +32,8 @@ from ._validation import (
     check_square,
 )
 from ._validation import cached_covariance as _const_covariance
-from ._validation import require_finite as _finite
 from ._validation import float_array as _float_array
+from ._validation import require_finite as _finite
 from .graphs import laplacian as graph_laplacian
 from .noise import _psd_factor
 from .sensing import _check_adjacency, _check_flag, _measure, sensing_mask, team_noise_covariance

@@ -39,16 +39,14 @@ from numpy.typing import ArrayLike
 
 from . import graphs
 from ._validation import as_matrix as _matrix
-from ._validation import check_square as _square
 from ._validation import (
-    as_matrix,
     as_vector,
     check_adjacency,
     check_covariance,
     check_positive,
     check_positive_int,
-    check_square,
 )
+from ._validation import check_square as _square
 from ._validation import float_array as _float_array
 
 __all__ = [

@@ -85,6 +85,7 @@ def baselines() -> dict[str, tuple]:
         # graphs
         "graphs.adjacency_from_edges": (graphs.adjacency_from_edges, dict(n_agents=3, edges=[(0, 1), (1, 2, 0.5)])),
         "graphs.laplacian": (graphs.laplacian, dict(A=A)),
+        "graphs.laplacian_spectrum": (graphs.laplacian_spectrum, dict(laplacian=graphs.laplacian(graphs.ring_graph(4)))),
         "graphs.ring_graph": (graphs.ring_graph, dict(n_agents=4)),
         "graphs.path_graph": (graphs.path_graph, dict(n_agents=4)),
         "graphs.complete_graph": (graphs.complete_graph, dict(n_agents=4)),

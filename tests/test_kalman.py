@@ -22,7 +22,7 @@ def test_matches_filterpy_over_a_run():
     kf.F, kf.B, kf.H, kf.Q, kf.R = model.A, model.B, H, Q, R
     kf.x, kf.P = np.zeros(4), 10 * np.eye(4)
     x, P = np.zeros(4), 10 * np.eye(4)
-    for k in range(30):
+    for _ in range(30):
         u = rng.standard_normal(2)
         z = rng.standard_normal(2)
         kf.predict(u=u)

@@ -25,8 +25,15 @@ import pandas as pd
 
 from .. import consensus as cs
 from .._progress import progress_bar
-from .._validation import (as_matrix, check_adjacency, check_positive, check_positive_int, check_seed,
-                           float_array, require_finite)
+from .._validation import (
+    as_matrix,
+    check_adjacency,
+    check_positive,
+    check_positive_int,
+    check_seed,
+    float_array,
+    require_finite,
+)
 from ..graphs import adjacency_from_edges, has_spanning_tree, is_connected, spanning_tree_roots
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors, new_axes

@@ -21,10 +21,13 @@ from dataclasses import dataclass, fields
 
 import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib.ticker import FuncFormatter
 import pandas as pd
+from matplotlib.ticker import FuncFormatter
 
 from .. import distributed_kf as dkf
+from .._kf_reference import plain_estimation_based_step
+from .._progress import progress_bar
+from .._timing import median_time
 from .._validation import (
     check_adjacency,
     check_generator,
@@ -34,10 +37,7 @@ from .._validation import (
     float_array,
     require_finite,
 )
-from .._progress import progress_bar
-from .._timing import median_time
 from ..agents import double_integrator
-from .._kf_reference import plain_estimation_based_step
 from ..graphs import complete_graph, is_connected, laplacian, proximity_graph, ring_graph
 from ..kalman import nees_interval
 from ..ledger import Claim, format_number

@@ -33,6 +33,14 @@ import pandas as pd
 
 from .._progress import progress_bar
 from .._timing import median_time
+from .._validation import (
+    check_generator,
+    check_positive,
+    check_positive_int,
+    check_seed,
+    float_array,
+    require_finite,
+)
 from ..distributed_ekf import EstimatedFlockingRun, ekf_flocking_step, simulate_estimation_based_flocking
 from ..exceptions import DivergenceError
 from ..flocking import (
@@ -41,14 +49,6 @@ from ..flocking import (
     flock_spread,
     max_distance_from_centre,
     simulate_measured_flocking,
-)
-from .._validation import (
-    check_generator,
-    check_positive,
-    check_positive_int,
-    check_seed,
-    float_array,
-    require_finite,
 )
 from ..graphs import is_connected, proximity_graph
 from ..ledger import Claim, format_number

@@ -567,7 +567,7 @@ def plot_fig12(res: Fig12Result, axes=None) -> plt.Figure:
     return fig
 
 
-def plot_phi_profile(result: "ObserverResult") -> plt.Figure:
+def plot_phi_profile(result: ObserverResult) -> plt.Figure:
     """Gamma(Phi) for both local gains: (a) as printed, flat on the optimal interval; (b) the printed L."""
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), layout="constrained")
     phis = result.phi_grid
@@ -968,7 +968,6 @@ def _closest(variants: pd.DataFrame, Q2: float) -> str:
 
 def _shared_lmi_notes(r: ObserverResult) -> str:
     """The two paragraphs shared word for word by the Phi and J claims."""
-    s = r.settings
     ivals = " and ".join(f"[{_fmt(lo)}, {_fmt(hi)}] (Q2 = {Q2:g})" for Q2, (lo, hi) in r.intervals.items())
     mixed = [r.designs[(L_READING, Q2)] for Q2 in PUBLISHED["Phi"]]
     trend = mixed[1].Phi.item() > mixed[0].Phi.item() and mixed[1].bound < mixed[0].bound
@@ -993,7 +992,7 @@ def _shared_lmi_notes(r: ObserverResult) -> str:
 
 
 def _phi_j_claims(r: ObserverResult) -> list[Claim]:
-    s, shared = r.settings, _shared_lmi_notes(r)
+    shared = _shared_lmi_notes(r)
     claims = []
     for Q2, tag in ((5.0, "5"), (25.0, "25")):
         d, dp = r.designs[(L_READING, Q2)], r.designs[("as-printed", Q2)]
