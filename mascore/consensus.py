@@ -56,7 +56,7 @@ pay the checks once, then call unchecked private kernels.
 * Zero communication noise (``Omega`` singular) is accepted, but every message
   then counts as exact and ``P`` shrinks geometrically: after a few hundred
   steps it underflows double precision. The runs then raise
-  :class:`ConsensusBreakdownError`, naming the step, instead of returning NaN.
+  :class:`~mascore.exceptions.ConsensusBreakdownError`, naming the step, instead of returning NaN.
 * Horizons are bounded: at most :data:`MAX_STEPS` steps (discrete time and
   Euler-Maruyama) and at most :data:`ODE_MAX_EVALUATIONS` right-hand-side
   evaluations of the ODE solver; a longer run raises a ``ValueError`` naming
@@ -1441,7 +1441,7 @@ def _min_variance(P):
 
 
 def _check_trajectory(xs, Ps, Om, unit, who, times=None):
-    """Raise :class:`ConsensusBreakdownError` at the first row of (xs, Ps) that is not finite or has P_ii <= 0.
+    """Raise :class:`~mascore.exceptions.ConsensusBreakdownError` at the first row of (xs, Ps) that is not finite or has P_ii <= 0.
 
     xs : (T, ..., n, m), Ps : (T, ..., n, m, m) in vector form; `unit` is "step" or "time".
     """

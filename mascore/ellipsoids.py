@@ -873,7 +873,7 @@ def sample_boundary(
 
     Returns
     -------
-    (*size, n) ndarray
+    (size..., n) ndarray
         Points on the boundary.
 
     Examples
@@ -908,7 +908,7 @@ def sample_interior(
 
     Returns
     -------
-    (*size, n) ndarray
+    (size..., n) ndarray
         Points inside the ellipsoid.
 
     Examples

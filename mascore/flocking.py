@@ -14,8 +14,8 @@ damped spring of rest length ``R`` along the line of sight. ``a_ij`` is the
 adjacency of the proximity graph (eq. (6)/(7)) or 1 for every ``j != i`` (the
 fully-connected law, and eq. (39) when evaluated on an estimate).
 
-Conventions
------------
+Conventions of the flocking functions
+-------------------------------------
 * A team state is an array ``X`` of shape ``(..., N, 2n)`` whose row ``i`` is
   ``x_i = [p_i; v_i]`` (m, m/s). Flattening the last two axes gives the paper's
   ``X = [x_1; ...; x_N]`` of eq. (3); leading axes are Monte Carlo runs (or
@@ -46,8 +46,8 @@ blows up). In the paper's scenarios no two agents (nor two estimates) come
 closer than a few metres (closest pair over 20 Monte Carlo runs of the three
 cases of Fig. 5: about 7 m), so the regularisation is never active there.
 
-Input checks
-------------
+Input checks of the flocking functions
+--------------------------------------
 Every public function checks its arguments (finite entries, shapes, ``dt > 0``,
 a :class:`FlockingGains`, non-negative adjacency weights -- a graph Laplacian
 passed by mistake is named as such) and raises a ``ValueError`` or

@@ -102,7 +102,7 @@ def gaussian(
 
     Returns
     -------
-    (*size, m) ndarray
+    (size..., m) ndarray
         Independent draws.
 
     Examples
@@ -141,7 +141,7 @@ def uniform_box(
 
     Returns
     -------
-    (*size, m) ndarray
+    (size..., m) ndarray
         Independent draws.
 
     Examples
@@ -183,7 +183,7 @@ def uniform_ellipsoid(
 
     Returns
     -------
-    (*size, m) ndarray
+    (size..., m) ndarray
         Independent draws, all inside the ellipsoid.
 
     Examples

@@ -317,7 +317,7 @@ def distributed_observer(
     solver_options : dict, optional
         Settings passed to the conic solver (Clarabel) by name, e.g. ``{"max_iter": 500}``;
         default Clarabel's own (``mascore._solver.SOLVER_OPTIONS``). A
-        :class:`mascore.SolverError` with status ``optimal_inaccurate`` is the cue to change them.
+        :class:`~mascore.exceptions.SolverError` with status ``optimal_inaccurate`` is the cue to change them.
 
     Returns
     -------
@@ -335,7 +335,7 @@ def distributed_observer(
     -----
     With several outputs (``m >= 2``) the program is often degenerate and
     Clarabel stops at 'optimal_inaccurate' (gap about 5e-8 instead of 1e-8),
-    which is refused with a :class:`mascore.SolverError` (pass looser tolerances in
+    which is refused with a :class:`~mascore.exceptions.SolverError` (pass looser tolerances in
     `solver_options` to accept it); single-output agents, such as Example 1, solve
     cleanly for the graphs and weights we tried.
 
@@ -433,7 +433,7 @@ def coupled_gain_lmi(
     solver_options : dict, optional
         Settings passed to the conic solver (Clarabel) by name, e.g. ``{"max_iter": 500}``;
         default Clarabel's own (``mascore._solver.SOLVER_OPTIONS``). A
-        :class:`mascore.SolverError` with status ``optimal_inaccurate`` is the cue to change them.
+        :class:`~mascore.exceptions.SolverError` with status ``optimal_inaccurate`` is the cue to change them.
 
     Returns
     -------
@@ -562,7 +562,7 @@ def bound_at_fixed_phi(
     solver_options : dict, optional
         Settings passed to the conic solver (Clarabel) by name, e.g. ``{"max_iter": 500}``;
         default Clarabel's own (``mascore._solver.SOLVER_OPTIONS``). A
-        :class:`mascore.SolverError` with status ``optimal_inaccurate`` is the cue to change them.
+        :class:`~mascore.exceptions.SolverError` with status ``optimal_inaccurate`` is the cue to change them.
 
     Returns
     -------

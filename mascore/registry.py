@@ -519,8 +519,8 @@ def documented_settings(settings_class: type) -> type:
         origin = {"paper": "the paper", "chosen": "our choice", "derived": "derived"}.get(meta.get("source"), "")
         if meta.get("where"):
             origin += f", {meta['where']}"
-        lines += [f"{f.name} : default {value}", f"    {meta.get('note') or f.name} ({origin})." if origin
-                  else f"    {meta.get('note') or f.name}."]
+        note = (meta.get("note") or f.name).replace("|", "\\|")  # |x| would read as an rST substitution
+        lines += [f"{f.name} : default {value}", f"    {note} ({origin})." if origin else f"    {note}."]
     first = dataclasses.fields(settings_class)[0].name
     lines += ["", "Examples", "--------", ">>> import dataclasses",
               f">>> from {settings_class.__module__} import {settings_class.__name__}",

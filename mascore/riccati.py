@@ -2,7 +2,7 @@
 
 :func:`care` and :func:`dare` return the optimal gain, the stabilizing solution and the
 closed-loop eigenvalues, after checking the arguments and before returning the
-relative Riccati residual and the closed-loop stability (a :class:`mascore.RiccatiError`
+relative Riccati residual and the closed-loop stability (a :class:`~mascore.exceptions.RiccatiError`
 otherwise). :func:`is_stabilizable` is the test a stabilizing solution needs; it looks
 only at the modes that need stabilizing (``Re s >= 0``, or ``|z| >= 1`` in discrete time),
 one rank test each, instead of one per eigenvalue.

@@ -60,7 +60,7 @@ def sensing_mask(adjacency: ArrayLike, allow_isolated: bool = False) -> np.ndarr
         leading axes (time steps, Monte Carlo runs) are kept.
     allow_isolated : bool
         If false (default), an agent without any neighbour raises
-        :class:`IsolatedAgentError` naming the agent.
+        :class:`~mascore.exceptions.IsolatedAgentError` naming the agent.
 
     Returns
     -------
@@ -237,7 +237,7 @@ def team_noise_covariance(R: ArrayLike, n_agents: int, m: int) -> np.ndarray:
 def measurement_noise(
     rng: np.random.Generator | int, R: ArrayLike, shape: tuple[int, ...], n_agents: int, m: int
 ) -> np.ndarray:
-    """Draw ``nu_i`` for every observer: shape ``(*shape, N, N, m)``.
+    """Draw ``nu_i`` for every observer: shape ``(shape..., N, N, m)``.
 
     ``out[..., i, j, :]`` is ``nu_ij``, agent ``i``'s noise on agent ``j``.
     Noise is drawn for every pair (sensed or not) so that a realization does
@@ -258,7 +258,7 @@ def measurement_noise(
 
     Returns
     -------
-    (*shape, N, N, m) ndarray
+    (shape..., N, N, m) ndarray
         One noise vector per observer and observed agent.
 
     Examples
@@ -369,8 +369,8 @@ def stacked_measurement(Z: ArrayLike, mask: ArrayLike, agent: int) -> np.ndarray
 
     Returns
     -------
-    z_i : (m |N̄_i|,) ndarray
-        ``[z_{i,x_j}]`` for ``j`` in ``N̄_i`` in increasing order; equals
+    z_i : (m d_i,) ndarray
+        ``[z_{i,x_j}]`` for ``j`` in ``N̄_i`` (``d_i`` agents) in increasing order; equals
         ``H_i (X + nu_i)`` with ``H_i`` from :func:`selection_matrix`.
 
     Examples

@@ -26,7 +26,7 @@ Settings the paper leaves out (chosen here, see :class:`SetMembershipSettings`):
 * Fig. 6's "about 1.5" is compared with trace P_{k|k} at k = T_f averaged over agents.
 * Graph: the Laplacian of eq. (24) as printed. The reading with reversed edges
   (adjacency transposed) fits Table 1's means better and its RMS values worse; it is
-  computed alongside (:func:`table1_readings`, table ``table1_edges_reversed``)
+  computed alongside (``table1_readings``, table ``table1_edges_reversed``)
   and quoted in the notes, never used for a verdict.
 """
 
@@ -711,7 +711,7 @@ def _check_states(x0: object, name: str, s: SetMembershipSettings) -> np.ndarray
     return require_finite(arr, name)
 
 
-#: Name of the reversed-edges reading in :func:`table1_readings`.
+#: Name of the reversed-edges reading in ``table1_readings``.
 REVERSED = "edges reversed (adjacency transposed)"
 
 
