@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -519,8 +520,8 @@ def documented_settings(settings_class: type) -> type:
         origin = {"paper": "the paper", "chosen": "our choice", "derived": "derived"}.get(meta.get("source"), "")
         if meta.get("where"):
             origin += f", {meta['where']}"
-        note = (meta.get("note") or f.name).replace("|", "\\|")  # |x| would read as an rST substitution
-        lines += [f"{f.name} : default {value}", f"    {note} ({origin})." if origin else f"    {note}."]
+        text = f"{meta.get('note') or f.name} ({origin})." if origin else f"{meta.get('note') or f.name}."
+        lines += [f"{f.name} : default {_rst(value)}", f"    {_rst(text)}"]
     first = dataclasses.fields(settings_class)[0].name
     lines += ["", "Examples", "--------", ">>> import dataclasses",
               f">>> from {settings_class.__module__} import {settings_class.__name__}",
@@ -625,3 +626,8 @@ def all_figures(papers: Sequence[str] = PAPERS) -> list[tuple[PaperRegistry, Stu
         out += [(reg, s, f) for s in reg.studies for f in s.figures]
     return out
 
+
+def _rst(text: str) -> str:
+    """MyST text of a setting as reStructuredText: ``$x$`` as :math:`x`, ``|x|`` not a substitution."""
+    text = text.replace("|", "\\|")
+    return re.sub(r"\$([^$]+)\$", lambda m: ":math:`" + m.group(1).replace("\\|", "|") + "`", text)
