@@ -37,7 +37,7 @@ book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book in
 	env -u MPLBACKEND $(BIN)/jupyter-book build book --all -W -n --keep-going
 	@echo "Open book/_build/html/index.html"
 
-test: $(STAMP) $(RESULTS) lint book  ## lint, build the book, then unit tests, doctests, published numbers, the rendered HTML and every notebook (nbmake)
+test: $(STAMP) lint $(RESULTS) book  ## lint, build the book, then unit tests, doctests, published numbers, the rendered HTML and every notebook (nbmake)
 	$(HEADLESS) $(BIN)/python -m pytest -n $(JOBS) --nbmake --doctest-modules tests notebooks mascore
 
 lint: $(STAMP)  ## ruff on the package, the tests and the benchmarks

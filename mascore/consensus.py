@@ -1441,7 +1441,8 @@ def _min_variance(P):
 
 
 def _check_trajectory(xs, Ps, Om, unit, who, times=None):
-    """Raise :class:`~mascore.exceptions.ConsensusBreakdownError` at the first row of (xs, Ps) that is not finite or has P_ii <= 0.
+    """Raise :class:`~mascore.exceptions.ConsensusBreakdownError` at the first row of (xs, Ps) that is not finite
+    or has P_ii <= 0.
 
     xs : (T, ..., n, m), Ps : (T, ..., n, m, m) in vector form; `unit` is "step" or "time".
     """

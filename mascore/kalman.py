@@ -559,6 +559,12 @@ def run_filter(
 
 def _predict(x, P, F, Q, B=None, u=None):
     """:func:`predict` without checks."""
+    if x.ndim == 1 and P.ndim == 2 and F.ndim == 2:  # one filter: plain matrix products, less call overhead
+        # a NaN/inf input surfaces as a non-finite result, which the caller refuses by name
+        with np.errstate(invalid="ignore", over="ignore"):
+            x_pred = F @ x if u is None else F @ x + B @ u
+            P_pred = F @ P @ F.T + Q
+        return x_pred, 0.5 * (P_pred + P_pred.T)
     x_pred = np.einsum("...ij,...j->...i", F, x)
     if u is not None:
         x_pred = x_pred + np.einsum("...ij,...j->...i", B, u)
@@ -575,6 +581,14 @@ def _gain(P, H, R):
 
 def _update(x, P, z, H, R):
     """:func:`update` without checks."""
+    if x.ndim == 1 and P.ndim == 2 and H.ndim == 2 and R.ndim == 2:  # one filter
+        HP = H @ P
+        K = np.linalg.solve(HP @ H.T + R, HP).T  # K^T = S^{-1} H P (S, P symmetric)
+        with np.errstate(invalid="ignore", over="ignore"):  # as in _predict
+            x_post = x + K @ (z - H @ x)
+        I_KH = np.eye(x.shape[0]) - K @ H
+        P_post = I_KH @ P @ I_KH.T + K @ R @ K.T
+        return x_post, 0.5 * (P_post + P_post.T)
     K = _gain(P, H, R)
     innovation = z - np.einsum("...ij,...j->...i", H, x)
     x_post = x + np.einsum("...ij,...j->...i", K, innovation)
