@@ -558,7 +558,7 @@ def mb_predict(
     N, Mr = model.n_agents, model.M_r
     L = _check_laplacian(laplacian, N)
     X = _check_estimates(model, X_hat, "X_hat")
-    Sig = _check_covariances(Sigma, "Sigma", (None, N, Mr, Mr))
+    Sig = _check_covariances(Sigma, "Sigma", (None, N, Mr, Mr), kron=model.kron)
     _check_batch(L, Sig, "laplacian", "Sigma", X)
     KH = None
     if KH_prev is not None:
@@ -650,7 +650,7 @@ def mb_update(
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
     X = _check_estimates(model, X_pred, "X_pred")
-    Sig = _check_covariances(Sigma_pred, "Sigma_pred", (None, N, Mr, Mr))
+    Sig = _check_covariances(Sigma_pred, "Sigma_pred", (None, N, Mr, Mr), kron=model.kron)
     Zt = _check_estimates(model, Z, "Z")
     S = _check_mask(mask, N)
     if S.shape[0] not in (1, Sig.shape[0]):
@@ -771,7 +771,7 @@ def eb_predict(
     N, Mr = model.n_agents, model.M_r
     L = _check_laplacian(laplacian, N)
     X = _check_estimates(model, X_hat, "X_hat")
-    Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr))
+    Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr), kron=model.kron)
     _check_batch(L, Sig, "laplacian", "Sigma", X)
     return _remember_result("estimation-based prediction", *_eb_predict(model, X, Sig, L), cov=1)
 
@@ -865,7 +865,7 @@ def eb_update(
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
     X = _check_estimates(model, X_pred, "X_pred")
-    Sig = _check_covariances(Sigma_pred, "Sigma_pred", (None, N * Mr, N * Mr))
+    Sig = _check_covariances(Sigma_pred, "Sigma_pred", (None, N * Mr, N * Mr), kron=model.kron)
     Zt = _check_estimates(model, Z, "Z")
     S = _check_mask(mask, N)
     if S.shape[0] not in (1, Sig.shape[0]):
@@ -956,7 +956,7 @@ def agent_covariances(model: TeamFilterModel, Sigma: ArrayLike) -> np.ndarray:
     """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
-    Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr))
+    Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr), kron=model.kron)
     return _agent_covariances(model, Sig)
 
 
@@ -1014,8 +1014,8 @@ def centralized_predict(
     N, m, Mr = model.n_agents, model.m, model.M_r
     x = _finite(_float_array(x, "x"), "x")
     if x.ndim != 3 or x.shape[1:] != (N, m):
-        raise ValueError(f"Incompatible dimensions of x; expected (R, {N}, {m}) but found {x.shape}")
-    P = _check_covariances(P, "P", (None, Mr, Mr))
+        raise ValueError(f"Incompatible dimensions of x; expected (runs, {N}, {m}) but found {x.shape}")
+    P = _check_covariances(P, "P", (None, Mr, Mr), kron=model.kron)
     B = as_matrix(_float_array(B, "B"), "B", (m, None))
     U = _finite(_float_array(U, "U"), "U")
     if U.shape != (x.shape[0], N, B.shape[1]):
@@ -1083,8 +1083,8 @@ def centralized_update(
     N, m, Mr = model.n_agents, model.m, model.M_r
     x_pred = _finite(_float_array(x_pred, "x_pred"), "x_pred")
     if x_pred.ndim != 3 or x_pred.shape[1:] != (N, m):
-        raise ValueError(f"Incompatible dimensions of x_pred; expected (R, {N}, {m}) but found {x_pred.shape}")
-    P_pred = _check_covariances(P_pred, "P_pred", (None, Mr, Mr), definite=True)
+        raise ValueError(f"Incompatible dimensions of x_pred; expected (runs, {N}, {m}) but found {x_pred.shape}")
+    P_pred = _check_covariances(P_pred, "P_pred", (None, Mr, Mr), definite=True, kron=model.kron)
     Zt = _check_estimates(model, Z, "Z")
     S = _check_mask(mask, N)
     if Zt.shape[0] != x_pred.shape[0]:
@@ -1347,10 +1347,10 @@ def team_nees(model: TeamFilterModel, X_true: ArrayLike, X_hat: ArrayLike, Sigma
     N, m, Mr = model.n_agents, model.m, model.M_r
     X_true = _finite(_float_array(X_true, "X_true"), "X_true")
     if X_true.ndim != 3 or X_true.shape[1:] != (N, m):
-        raise ValueError(f"Incompatible dimensions of X_true; expected (R, {N}, {m}) but found {X_true.shape}")
+        raise ValueError(f"Incompatible dimensions of X_true; expected (runs, {N}, {m}) but found {X_true.shape}")
     X = _check_estimates(model, X_hat, "X_hat")
     _check_runs(X_true, X, "X_true", "X_hat")
-    Sig = _check_covariances(Sigma_i, "Sigma_i", (None, N, Mr, Mr), definite=True)
+    Sig = _check_covariances(Sigma_i, "Sigma_i", (None, N, Mr, Mr), definite=True, kron=model.kron)
     if Sig.shape[0] not in (1, X.shape[0]):
         raise ValueError(f"Sigma_i has batch {Sig.shape[0]} but X_hat has {X.shape[0]} runs")
     return _team_nees(model, X_true, X, Sig)
@@ -1401,7 +1401,7 @@ def f2_cross(model: TeamFilterModel, Sigma: ArrayLike, laplacian: ArrayLike) -> 
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
     L = _check_laplacian(laplacian, N)
-    Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr))
+    Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr), kron=model.kron)
     _check_batch(L, Sig, "laplacian", "Sigma")
     return _f2_cross(model, Sig, L)
 
@@ -1469,7 +1469,7 @@ def theorem1_min_eigenvalues(
     if L.ndim != 2:
         raise ValueError(f"laplacian must be a single fixed ({N}, {N}) topology here; got shape {L.shape}")
     KH = _finite(_float_array(KH, "KH"), "KH")
-    Sig = _check_covariances(Sigma_i, "Sigma_i", (None, N, Mr, Mr), definite=True)
+    Sig = _check_covariances(Sigma_i, "Sigma_i", (None, N, Mr, Mr), definite=True, kron=model.kron)
     F2C_all = _finite(_float_array(F2_cross, "F2_cross"), "F2_cross")
     if Sig.shape[0] < 2:
         raise ValueError(f"Sigma_i must hold at least two steps (T+1 >= 2); got shape {Sig.shape}")
@@ -1540,19 +1540,28 @@ def _check_estimates(model: TeamFilterModel, X: ArrayLike, name: str) -> np.ndar
     X = _float_array(X, name)
     N, m = model.n_agents, model.m
     if X.ndim != 4 or X.shape[1:] != (N, N, m):
-        raise ValueError(f"Incompatible dimensions of {name}; expected (R, {N}, {N}, {m}) but found {X.shape}")
+        raise ValueError(f"Incompatible dimensions of {name}; expected (runs, {N}, {N}, {m}) but found {X.shape}")
     return _finite(X, name)
 
 
-def _check_covariances(P: ArrayLike, name: str, shape: tuple, definite: bool = False) -> np.ndarray:
+def _check_covariances(P: ArrayLike, name: str, shape: tuple, definite: bool = False, kron: int = 1) -> np.ndarray:
     """A stack of covariances of the given shape (None: any batch size >= 1), symmetric PSD (or PD).
 
     A covariance that one of this module's steps returned (unmodified) is recognised without a scan.
+    The error says what to do for the two common slips: a missing batch axis, and a full covariance
+    where the model works on the reduced one (``kron > 1``).
     """
     P = _float_array(P, name)
     if P.ndim != len(shape) or any(w is not None and g != w for g, w in zip(P.shape, shape)) or P.shape[0] == 0:
         want = tuple("batch" if w is None else w for w in shape)
-        raise ValueError(f"Incompatible dimensions of {name}; expected {want} but found {P.shape}".replace("'", ""))
+        hint = ""
+        if P.ndim == len(shape) - 1 and P.shape == tuple(shape[1:]):
+            hint = f"; add the leading batch axis ({name}[None]) for one run"
+        elif kron > 1 and P.ndim >= 2 and P.shape[-1] == kron * shape[-1]:
+            hint = (f"; this model works on the reduced covariance (its Kronecker factor is {kron}): "
+                    f"pass mascore.distributed_kf.reduce_covariance({name}, {kron})")
+        raise ValueError(f"Incompatible dimensions of {name}; expected {want} but found {P.shape}".replace("'", "")
+                         + hint)
     if definite or P not in _RECENT_COVARIANCES:
         check_covariance(P, name, definite=definite)
     return P
@@ -1649,7 +1658,7 @@ def _apply_gain(model: TeamFilterModel, X_pred: ArrayLike, Z: ArrayLike, KH: np.
     Zt = np.asarray(Z, dtype=float)
     N, m, k, Mr = model.n_agents, model.m, model.kron, model.M_r
     if X.ndim != 4 or X.shape[1:] != (N, N, m):
-        raise ValueError(f"Incompatible dimensions of X_pred; expected (R, {N}, {N}, {m}) but found {X.shape}")
+        raise ValueError(f"Incompatible dimensions of X_pred; expected (runs, {N}, {N}, {m}) but found {X.shape}")
     if Zt.shape != X.shape:
         raise ValueError(f"Incompatible dimensions of Z; expected {X.shape} but found {Zt.shape}")
     innov = (Zt - X).reshape(X.shape[0], N, Mr, k)
@@ -1661,7 +1670,7 @@ def _F1_means(model: TeamFilterModel, X_hat: ArrayLike, L: np.ndarray) -> np.nda
     X = np.asarray(X_hat, dtype=float)
     N, m = model.n_agents, model.m
     if X.ndim != 4 or X.shape[1:] != (N, N, m):
-        raise ValueError(f"Incompatible dimensions of X_hat; expected (R, {N}, {N}, {m}) but found {X.shape}")
+        raise ValueError(f"Incompatible dimensions of X_hat; expected (runs, {N}, {N}, {m}) but found {X.shape}")
     Lx = L[:, None] if L.ndim == 3 else L  # (batch,1,N,N) or (N,N)
     LX = Lx @ X.reshape(X.shape[0], N, N, m) if L.ndim == 2 else np.matmul(Lx, X)
     return X @ model.A.T - LX @ model.BK.T

@@ -460,3 +460,15 @@ def test_switching_sequence_of_the_wrong_length_is_refused():
     with pytest.raises(ValueError, match="with switching=True, adjacency must be"):
         simulate_rendezvous(0, _rv(), np.zeros((1, 3, 4)), np.broadcast_to(path_graph(3), (4, 3, 3)), 5,
                             "measurement", switching=True)
+
+
+def test_covariance_shape_errors_say_what_to_do():
+    """A full covariance for a reduced model names reduce_covariance; a missing batch axis says to add it."""
+    planar = double_integrator(2, 0.1)
+    model = dk.team_filter_model(planar.A, planar.B, rendezvous_gain(0.5, 1.5, 2), np.eye(4), np.eye(4), 3)
+    Lap = laplacian(path_graph(3))
+    X = np.zeros((1, 3, 3, 4))
+    with pytest.raises(ValueError, match=r"reduce_covariance\(Sigma, 2\)"):
+        dk.mb_predict(model, X, np.broadcast_to(np.eye(12), (1, 3, 12, 12)).copy(), Lap)
+    with pytest.raises(ValueError, match=r"add the leading batch axis \(Sigma\[None\]\)"):
+        dk.mb_predict(model, X, np.broadcast_to(np.eye(6), (3, 6, 6)).copy(), Lap)
