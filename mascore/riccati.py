@@ -1,9 +1,11 @@
 """Algebraic Riccati equations, solved and checked: the kernel of every LQR gain and LQR-dual observer.
 
-:func:`care` and :func:`dare` return the optimal gain, the stabilizing solution and the
-closed-loop eigenvalues, after checking the arguments and before returning the
-relative Riccati residual and the closed-loop stability (a :class:`~mascore.exceptions.RiccatiError`
-otherwise). :func:`is_stabilizable` is the test a stabilizing solution needs; it looks
+:func:`care` and :func:`dare` check their arguments, solve the equation, and return the
+optimal gain, the stabilizing solution and the closed-loop eigenvalues only after checking
+the relative Riccati residual and the closed-loop stability (a
+:class:`~mascore.exceptions.RiccatiError` otherwise). ``solve_care`` and ``solve_dare`` are
+the same solvers without the argument checks, for the modules of this package that have
+checked them already (the network designs solve one equation per Laplacian mode). :func:`is_stabilizable` is the test a stabilizing solution needs; it looks
 only at the modes that need stabilizing (``Re s >= 0``, or ``|z| >= 1`` in discrete time),
 one rank test each, instead of one per eigenvalue.
 
