@@ -5,7 +5,8 @@ optimal gain, the stabilizing solution and the closed-loop eigenvalues only afte
 the relative Riccati residual and the closed-loop stability (a
 :class:`~mascore.exceptions.RiccatiError` otherwise). ``solve_care`` and ``solve_dare`` are
 the same solvers without the argument checks, for the modules of this package that have
-checked them already (the network designs solve one equation per Laplacian mode). :func:`is_stabilizable` is the test a stabilizing solution needs; it looks
+checked them already (the network designs solve one equation per Laplacian mode).
+:func:`is_stabilizable` is the test a stabilizing solution needs; it looks
 only at the modes that need stabilizing (``Re s >= 0``, or ``|z| >= 1`` in discrete time),
 one rank test each, instead of one per eigenvalue.
 
