@@ -38,6 +38,7 @@ from ._optional import require
 
 __all__ = [
     "APPROX_FACTOR",
+    "LEDGERS",
     "PAPERS",
     "VERDICTS",
     "Claim",
@@ -63,6 +64,9 @@ VERDICTS = ("reproduces", "approximately", "does-not-reproduce", "holds", "fails
 
 #: Paper keys, in book order.
 PAPERS = ("song2023", "ren2005", "bhattacharjee2021", "vlahakis")
+
+#: Ledger keys: the papers, and the cross-method comparison (``compare/...`` claims, :mod:`mascore.compare`).
+LEDGERS = (*PAPERS, "compare")
 
 _RECORD_KEYS = ("id", "where", "statement", "paper_value", "value", "tolerance", "verdict", "note")
 _OPTIONAL_KEYS = ("unit", "labels", "rule", "band_reason", "study")
@@ -132,8 +136,8 @@ class Claim:
     verdict: str = field(default="", init=False)
 
     def __post_init__(self) -> None:
-        if "/" not in self.id or self.id.split("/")[0] not in PAPERS:
-            raise ValueError(f"claim id must look like 'PAPER/short-name' with PAPER in {PAPERS}; got {self.id!r}")
+        if "/" not in self.id or self.id.split("/")[0] not in LEDGERS:
+            raise ValueError(f"claim id must look like 'PAPER/short-name' with PAPER in {LEDGERS}; got {self.id!r}")
         object.__setattr__(self, "value", _jsonable(self.value))
         object.__setattr__(self, "paper_value", _jsonable(self.paper_value))
         if self.labels is not None:
@@ -290,8 +294,8 @@ def write_claims(
     """
     from . import __version__
 
-    if paper not in PAPERS:
-        raise ValueError(f"paper must be one of {PAPERS}; got {paper!r}")
+    if paper not in LEDGERS:
+        raise ValueError(f"paper must be one of {LEDGERS}; got {paper!r}")
     ids = [c.id for c in claims]
     if len(set(ids)) != len(ids):
         raise ValueError(f"duplicate claim ids: {sorted({i for i in ids if ids.count(i) > 1})}")

@@ -176,8 +176,39 @@ def _out_argument(text: str) -> Path:
     return path
 
 
+def _compare(args: argparse.Namespace) -> int:
+    """``mascore compare``: the sweep, then the summary, headline table, figures and claims under ``out/compare``."""
+    import os
+
+    from . import compare
+
+    workers = (os.cpu_count() or 1) if args.workers is None else args.workers
+    if workers < 0:
+        print(f"mascore: --workers must be >= 0; got {workers}", file=sys.stderr)
+        return 2
+    start = time.perf_counter()
+    table, summary = compare.run_compare(args.grid, args.out, workers=workers, scheduler=args.scheduler,
+                                         seed=args.seed)
+    elapsed = time.perf_counter() - start
+    folder = args.out / "compare"
+    summary.to_csv(folder / f"summary-{args.grid}-{args.seed}.csv", index=False)
+    claims = compare.compare_claims(summary)
+    write_claims(claims, folder / "claims.json", "compare", args.seed,
+                 created_by=f"mascore compare --grid {args.grid} --seed {args.seed}")
+    where = args.scheduler or (f"{workers} local workers" if workers else "this process")
+    print(compare.headline(summary).to_string(index=False))
+    held = sum(c.verdict == "holds" for c in claims)
+    print(f"compare: {len(table['cell'].unique())} cells, {len(table)} runs in {elapsed:.1f} s on {where}; "
+          f"{held} of {len(claims)} claims hold -> {folder}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Command-line entry point, ``python -m mascore reproduce PAPER|all [--out DIR] [--seed S]``.
+    """Command-line entry point: ``python -m mascore reproduce PAPER|all`` and ``python -m mascore compare``.
+
+    ``reproduce PAPER|all [--out DIR] [--seed S]`` rebuilds the papers;
+    ``compare [--grid quick|full] [--out DIR] [--workers K] [--scheduler ADDRESS] [--seed S]``
+    runs the cross-method sweep (:mod:`mascore.compare`).
 
     Parameters
     ----------
@@ -210,7 +241,17 @@ def main(argv: list[str] | None = None) -> int:
                      help="results directory (default: results/)")
     rep.add_argument("--seed", type=_seed_argument, default=DEFAULT_SEED,
                      help=f"random seed, a non-negative integer (default: {DEFAULT_SEED})")
+    cmp = sub.add_parser("compare", help="run the cross-method comparison sweep (Dask) and write its claims")
+    cmp.add_argument("--grid", choices=["quick", "full"], default="quick", help="which sweep (default: quick)")
+    cmp.add_argument("--out", type=_out_argument, default=Path("results"),
+                     help="results directory (default: results/); the sweep resumes from its table there")
+    cmp.add_argument("--workers", type=int, default=None,
+                     help="local Dask worker processes (default: one per core; 0 runs in this process)")
+    cmp.add_argument("--scheduler", default=None, help="address of a running Dask scheduler, e.g. tcp://HOST:8786")
+    cmp.add_argument("--seed", type=_seed_argument, default=0, help="the sweep's base seed (default: 0)")
     args = parser.parse_args(argv)
+    if args.command == "compare":
+        return _compare(args)
 
     papers = available_papers() if args.paper == "all" else [args.paper]
     failed = False

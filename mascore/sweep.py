@@ -1,0 +1,350 @@
+"""Parameter sweeps: a grid of cells, each seeded from its coordinates, run serially or on Dask.
+
+A sweep is a list of **cells**, dictionaries of coordinates such as
+``{"method": "song-eb", "n_agents": 8, "noise": "gaussian", "dropout": 0.1, "block": 3}``,
+usually built as the union of a few :class:`Grid` products. A task maps one cell to
+a list of result rows. :func:`run_sweep` runs the cells that are not yet in
+the output table and appends each cell's rows to it as soon as they arrive, so an
+interrupted sweep resumes where it stopped; the table is finally rewritten
+sorted by cell, so the same sweep gives the same file however and wherever it ran.
+
+Randomness comes only from :func:`cell_seed`: a ``numpy.random.SeedSequence``
+built from the sweep's base seed and the values of the cell's **seed axes**.
+Leaving an axis out of the seed axes (for example the method) gives every value
+of that axis the same random numbers: common random numbers.
+
+The cells run serially in this process (``workers=0``), on a local Dask cluster
+of worker processes (``workers=K``), or on any Dask cluster given by its
+scheduler address (``scheduler="tcp://HOST:8786"``). Dask's nanny starts each
+worker with one BLAS thread, so a cell computes the same floating-point numbers
+in a worker as in a serial run with ``OMP_NUM_THREADS=1``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._progress import progress_bar
+from ._validation import check_positive_int
+
+__all__ = ["Grid", "cell_id", "cell_seed", "demo_task", "run_sweep"]
+
+#: The column holding each row's cell identifier.
+CELL_COLUMN = "cell"
+
+
+@dataclass(frozen=True)
+class Grid:
+    """The Cartesian product of named axes.
+
+    Parameters
+    ----------
+    axes : mapping of str to sequence
+        Axis name to its values (numbers, strings or booleans), in order.
+
+    Examples
+    --------
+    >>> from mascore.sweep import Grid
+    >>> grid = Grid({"method": ["a", "b"], "seed": [0, 1, 2]})
+    >>> len(grid), grid.cells()[4]
+    (6, {'method': 'b', 'seed': 1})
+    """
+
+    axes: Mapping[str, Sequence[Any]]
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.axes, Mapping) or not self.axes:
+            raise ValueError(f"axes must be a non-empty mapping of axis name to values; got {self.axes!r}")
+        for name, values in self.axes.items():
+            if not isinstance(name, str) or not name.isidentifier() or name == CELL_COLUMN:
+                raise ValueError(f"axis names must be identifiers other than {CELL_COLUMN!r}; got {name!r}")
+            if isinstance(values, (str, bytes)) or not isinstance(values, Iterable) or len(list(values)) == 0:
+                raise ValueError(f"axis {name!r} must be a non-empty sequence of values; got {values!r}")
+            for v in values:
+                if not isinstance(v, (str, bool, int, float, np.integer, np.floating)):
+                    raise TypeError(f"axis {name!r}: values must be numbers, strings or booleans; got {v!r}")
+
+    def __len__(self) -> int:
+        """Number of cells.
+
+        Returns
+        -------
+        int
+            The product of the axis lengths.
+
+        Examples
+        --------
+        >>> from mascore.sweep import Grid
+        >>> len(Grid({"n": [4, 8], "p": [0.0, 0.1, 0.3]}))
+        6
+        """
+        return int(np.prod([len(list(v)) for v in self.axes.values()]))
+
+    def cells(self) -> list[dict[str, Any]]:
+        """Every cell of the product, the last axis varying fastest.
+
+        Returns
+        -------
+        list of dict
+            One dictionary of coordinates per cell.
+
+        Examples
+        --------
+        >>> from mascore.sweep import Grid
+        >>> Grid({"n": [4, 8], "p": [0.0]}).cells()
+        [{'n': 4, 'p': 0.0}, {'n': 8, 'p': 0.0}]
+        """
+        names = list(self.axes)
+        return [dict(zip(names, _plain(values))) for values in itertools.product(*self.axes.values())]
+
+
+def _plain(values: Iterable[Any]) -> tuple:
+    """NumPy scalars as Python ones (stable text and hashing)."""
+    return tuple(v.item() if isinstance(v, np.generic) else v for v in values)
+
+
+def cell_id(cell: Mapping[str, Any]) -> str:
+    """A cell's identifier: its coordinates as sorted, compact JSON.
+
+    Parameters
+    ----------
+    cell : mapping of str to number, str or bool
+        The cell's coordinates.
+
+    Returns
+    -------
+    str
+        The same text for the same coordinates, whatever their order.
+
+    Examples
+    --------
+    >>> from mascore.sweep import cell_id
+    >>> cell_id({"seed": 3, "method": "local"})
+    '{"method":"local","seed":3}'
+    """
+    if not isinstance(cell, Mapping):
+        raise TypeError(f"cell must be a mapping of axis name to value; got {type(cell).__name__}")
+    return json.dumps(dict(zip(cell, _plain(cell.values()))), sort_keys=True, separators=(",", ":"))
+
+
+def cell_seed(cell: Mapping[str, Any], seed_axes: Sequence[str], base_seed: int = 0) -> np.random.SeedSequence:
+    """The seed of a cell, from its coordinates on `seed_axes` only.
+
+    Parameters
+    ----------
+    cell : mapping of str to value
+        The cell's coordinates.
+    seed_axes : sequence of str
+        The axes whose values choose the random numbers. Axes not listed share
+        their random numbers (common random numbers across, e.g., methods).
+    base_seed : int
+        The sweep's seed, a non-negative integer.
+
+    Returns
+    -------
+    numpy.random.SeedSequence
+        Pass it to ``numpy.random.default_rng``.
+
+    Raises
+    ------
+    KeyError
+        A seed axis is not a coordinate of the cell.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore.sweep import cell_seed
+    >>> a = cell_seed({"method": "x", "block": 2}, ["block"], 7)
+    >>> b = cell_seed({"method": "y", "block": 2}, ["block"], 7)
+    >>> np.random.default_rng(a).random() == np.random.default_rng(b).random()   # same block, same draws
+    True
+    """
+    if isinstance(base_seed, bool) or not isinstance(base_seed, (int, np.integer)) or base_seed < 0:
+        raise ValueError(f"base_seed must be a non-negative integer; got {base_seed!r}")
+    if isinstance(seed_axes, str):
+        raise TypeError(f"seed_axes must be a sequence of axis names, not the string {seed_axes!r}")
+    missing = [a for a in seed_axes if a not in cell]
+    if missing:
+        raise KeyError(f"seed axes {missing} are not coordinates of the cell {cell_id(cell)}")
+    text = cell_id({a: cell[a] for a in seed_axes})
+    digest = hashlib.sha256(text.encode()).digest()
+    words = [int.from_bytes(digest[i:i + 4], "little") for i in range(0, 16, 4)]
+    return np.random.SeedSequence([int(base_seed), *words])
+
+
+def run_sweep(
+    cells: Sequence[Mapping[str, Any]],
+    task: Callable[[dict[str, Any]], list[dict[str, Any]]],
+    out: str | Path,
+    *,
+    workers: int = 0,
+    scheduler: str | None = None,
+    progress: bool = True,
+    sort_by: Sequence[str] | None = None,
+):
+    """Run `task` on every cell not yet in `out`; return the whole table.
+
+    Parameters
+    ----------
+    cells : sequence of mapping
+        The cells (see :meth:`Grid.cells`); duplicates are run once.
+    task : callable
+        ``task(cell) -> list of row dicts``. It must be importable by the
+        workers (a module-level function) and derive all randomness from the
+        cell (:func:`cell_seed`). Each row gets the cell's coordinates and the
+        ``cell`` identifier added.
+    out : str or pathlib.Path
+        CSV file of the table. Rows of cells already in it are kept and those
+        cells are skipped (resume); new rows are appended as cells finish.
+    workers : int
+        0 runs the cells in this process; ``K >= 1`` starts a local Dask
+        cluster of K single-threaded worker processes for the sweep.
+    scheduler : str, optional
+        Address of a running Dask scheduler (``"tcp://127.0.0.1:8786"``);
+        overrides `workers`.
+    progress : bool
+        Show a progress bar counting cells.
+    sort_by : sequence of str, optional
+        Columns the final table is sorted by (default: the cell identifier,
+        then the row order within each cell).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Every row of every cell in `cells` (and of cells already in `out`).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from mascore.sweep import Grid, run_sweep
+    >>> from mascore.sweep import demo_task
+    >>> out = Path(tempfile.mkdtemp()) / "demo.csv"
+    >>> table = run_sweep(Grid({"scale": [1.0, 2.0], "block": [0, 1]}).cells(), demo_task, out, progress=False)
+    >>> len(table), list(table.columns)[:3]
+    (4, ['block', 'cell', 'scale'])
+    """
+    import pandas as pd
+
+    if not callable(task):
+        raise TypeError(f"task must be callable, cell -> list of row dicts; got {type(task).__name__}")
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 0:
+        raise ValueError(f"workers must be a non-negative integer (0 = run in this process); got {workers!r}")
+    if scheduler is not None and (not isinstance(scheduler, str) or "://" not in scheduler):
+        raise ValueError(f"scheduler must be an address such as 'tcp://127.0.0.1:8786'; got {scheduler!r}")
+    out = Path(out)
+    todo: dict[str, dict] = {}
+    for cell in cells:
+        todo.setdefault(cell_id(cell), dict(cell))
+    done = _done_cells(out)
+    pending = [(cid, cell) for cid, cell in todo.items() if cid not in done]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    bar = progress_bar(range(len(todo)), enabled=progress, desc="sweep", unit="cell", initial=len(todo) - len(pending),
+                       total=len(todo))
+    bar_update = getattr(bar, "update", lambda n: None)
+    for rows in _results(pending, task, workers, scheduler):
+        _append(out, rows)
+        bar_update(1)
+    getattr(bar, "close", lambda: None)()
+    table = pd.read_csv(out, keep_default_na=False, na_values=[""])
+    table["_order"] = np.arange(len(table))
+    keys = list(sort_by) if sort_by else [CELL_COLUMN]
+    table = table.sort_values([*keys, "_order"], kind="stable").drop(columns="_order")
+    table = table[sorted(table.columns)].reset_index(drop=True)
+    table.to_csv(out, index=False)
+    return table[table[CELL_COLUMN].isin(list(todo) + list(done))].reset_index(drop=True)
+
+
+def _done_cells(out: Path) -> set[str]:
+    """Cell identifiers already in the table at `out` (none if it does not exist)."""
+    if not out.exists() or out.stat().st_size == 0:
+        return set()
+    import pandas as pd
+
+    return set(pd.read_csv(out, usecols=[CELL_COLUMN])[CELL_COLUMN])
+
+
+def _append(out: Path, rows: list[dict]) -> None:
+    """Append one cell's rows to the CSV, with the header when the file is new."""
+    import pandas as pd
+
+    frame = pd.DataFrame(rows)
+    if out.exists() and out.stat().st_size > 0:
+        columns = list(pd.read_csv(out, nrows=0).columns)
+        if sorted(columns) != sorted(frame.columns):
+            raise ValueError(f"the rows of this cell have columns {sorted(frame.columns)}, but {out} has {columns}; "
+                             "write to a new file")
+        frame[columns].to_csv(out, mode="a", header=False, index=False)
+    else:
+        frame[sorted(frame.columns)].to_csv(out, index=False)
+
+
+def _labelled(task: Callable, cid: str, cell: dict) -> list[dict]:
+    """Run the task on one cell and label its rows with the cell."""
+    rows = task(dict(cell))
+    if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
+        raise TypeError(f"task must return a non-empty list of row dicts; cell {cid} gave {type(rows).__name__}")
+    return [{**row, **cell, CELL_COLUMN: cid} for row in rows]
+
+
+def _results(pending: list[tuple[str, dict]], task: Callable, workers: int, scheduler: str | None):
+    """Yield each pending cell's labelled rows, in completion order."""
+    if not pending:
+        return
+    if scheduler is None and workers == 0:
+        for cid, cell in pending:
+            yield _labelled(task, cid, cell)
+        return
+    from ._optional import require
+
+    distributed = require("distributed", "sweeps on Dask (run_sweep with workers or scheduler)")
+    if scheduler is not None:
+        client = distributed.Client(scheduler, set_as_default=False)
+        cluster = None
+    else:
+        workers = check_positive_int(workers, "workers")
+        cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                           dashboard_address=None, silence_logs=40)
+        client = distributed.Client(cluster, set_as_default=False)
+    try:
+        futures = [client.submit(_labelled, task, cid, cell, key=f"cell-{i}-{hashlib.sha1(cid.encode()).hexdigest()}",
+                                 pure=False)
+                   for i, (cid, cell) in enumerate(pending)]
+        for future in distributed.as_completed(futures, loop=client.loop):
+            yield future.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def demo_task(cell: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """A tiny task for examples and tests: two draws scaled by the cell's ``scale``.
+
+    Parameters
+    ----------
+    cell : mapping
+        Coordinates with ``scale`` (a number) and ``block`` (the seed axis).
+
+    Returns
+    -------
+    list of dict
+        One row ``{"value": ...}``: the mean of two standard normal draws from
+        :func:`cell_seed` on ``block`` (so cells of equal ``block`` share them), times ``scale``.
+
+    Examples
+    --------
+    >>> from mascore.sweep import demo_task
+    >>> demo_task({"scale": 2.0, "block": 0})[0]["value"] == 2 * demo_task({"scale": 1.0, "block": 0})[0]["value"]
+    True
+    """
+    draws = np.random.default_rng(cell_seed(cell, ["block"])).standard_normal(2)
+    return [{"value": float(cell["scale"] * draws.mean())}]
