@@ -26,22 +26,24 @@ arguments and names the one at fault.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
+import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
+from ._conic import ConicProgram, clarabel, solve, svec, svec_size, sym_basis
 from ._optional import require
-from ._solver import SolverError, solve
+from ._solver import SolverError
 from ._validation import as_matrix, check_adjacency, check_covariance, check_laplacian
 from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
 from .graphs import laplacian as graph_laplacian
 from .graphs import laplacian_spectrum
-from .riccati import is_controllable, solve_care
+from .riccati import RICCATI_RTOL, is_controllable, solve_care
 
 cp = require("cvxpy", "mascore.observers (the LMI of eq. (55))")
 
@@ -368,15 +370,15 @@ def distributed_observer(
     L = S @ C.T @ Q1  # eq. (30)
     G = Bbar @ np.real(sla.sqrtm(np.linalg.inv(R)))
     noise = [Q1 + l * Q2 for l in lam]
-    res = coupled_gain_lmi(A, C, L, lam, [G] * len(lam), noise, trace_in=trace_in, solver_options=solver_options,
-                           what="distributed observer LMI (62)")
+    res = _coupled_gain(A, C, L, lam, [G] * len(lam), noise, trace_in, "distributed observer LMI (62)",
+                        solver_options)
     Phi = res["Phi"]
     T = res["T"]
-    tr = (lambda M: np.trace(T @ M @ T.T)) if trace_in == "transformed" else np.trace
-    cost = _mode_costs(A, C, L, Phi, lam, BRB, noise, tr)
-    local = _mode_costs(A, C, L, np.zeros_like(Phi), lam, BRB, noise, tr)
-    central = sum(tr(solve_care(A.T, C.T, BRB, np.linalg.inv(Qi))[1]) for Qi in noise)  # eq. (53)
-    absc = [np.max(np.linalg.eigvals(A - L @ (np.eye(m) + l * Phi) @ C).real) for l in lam]
+    T_tr = T if trace_in == "transformed" else None
+    cost = _mode_costs(A, C, L, Phi, lam, BRB, noise, T_tr)
+    local = _mode_costs(A, C, L, np.zeros_like(Phi), lam, BRB, noise, T_tr)
+    central = _centralized_cost(A, C, BRB, noise, T_tr)  # eq. (53)
+    absc = np.linalg.eigvals(A - L @ (np.eye(m) + lam[:, None, None] * Phi) @ C).real.max(axis=1)
     Tinv = np.linalg.inv(T)
     return DistributedObserver(
         L=L, Phi=Phi, bound=res["bound"], cost=cost, centralized_cost=float(central), local_cost=local,
@@ -410,7 +412,9 @@ def coupled_gain_lmi(
     ``W_i L_hat Phi = (0; W2 L2 Phi)`` a single linear variable ``Y2`` (eq. (60));
     the Schur complement gives eq. (61) and the slack ``Z_i >= W_i^{-1}``
     eq. (62). Modes with equal ``lambda`` share their variables (the program is
-    separable given ``W2`` and ``Y2``), weighted by their multiplicity.
+    separable given ``W2`` and ``Y2``), weighted by their multiplicity. The conic data are
+    assembled with numpy and handed to Clarabel directly (the very data cvxpy would build for
+    the same program, without its compilation, which cost ~70 times the solve for large graphs).
 
     Parameters
     ----------
@@ -454,7 +458,13 @@ def coupled_gain_lmi(
     >>> res["lam_unique"].size                                   # one LMI block per distinct eigenvalue
     3
     """
-    A, C, L, lam = _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in)
+    A, C, L, lam, factors, noise = _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in)
+    return _coupled_gain(A, C, L, lam, factors, noise, trace_in, what, solver_options)
+
+
+def _coupled_gain(A: np.ndarray, C: np.ndarray, L: np.ndarray, lam: np.ndarray, factors: Sequence[np.ndarray],
+                  noise: Sequence[np.ndarray], trace_in: str, what: str, solver_options: dict | None) -> dict:
+    """:func:`coupled_gain_lmi` on arguments already checked (float arrays of matching shapes)."""
     n, m = L.shape
     n1 = n - m
     T = _node_coordinates(C, L)
@@ -463,11 +473,11 @@ def coupled_gain_lmi(
     # Diagonal scaling (keeps the block structure; Phi is unchanged): unit diagonal for the Phi = 0
     # Lyapunov solution of the first mode, which conditions the program near its optimum.
     k0 = int(np.argmin(lam))
-    G0 = T @ as_matrix(process_factors[k0], f"process_factors[{k0}]", (n, None))
+    G0 = T @ factors[k0]
     Ac0 = A_hat - L_hat @ C_hat
     D = np.ones(n)
     if np.max(np.linalg.eigvals(Ac0).real) < 0:
-        Q0 = np.atleast_2d(np.asarray(noise_weights[k0], dtype=float))
+        Q0 = noise[k0]
         S0 = sla.solve_continuous_lyapunov(Ac0, -(G0 @ G0.T + L_hat @ np.linalg.solve(Q0, L_hat.T)))
         if np.all(np.diag(S0) > 0):
             D = np.sqrt(np.diag(S0))
@@ -484,47 +494,134 @@ def coupled_gain_lmi(
             groups[-1].append(int(i))
         else:
             groups.append([int(i)])
-    W2 = cp.Variable((m, m), symmetric=True)
-    Y2 = cp.Variable((m, m))
-    Y = cp.vstack([np.zeros((n1, m)), Y2])
     # trace of S in the requested coordinates: S_hat = Ds S Ds, S_orig = Tinv S Tinv^T
     weight = Tinv.T @ Tinv if trace_in == "original" else np.diag(D**2)
-    constraints, objective, Ws = [], 0, []
+    modes = []
     for g in groups:
         k = g[0]
-        li = float(lam[k])
-        G = T @ as_matrix(process_factors[k], f"process_factors[{k}]", (n, None))
-        Qi = check_covariance(np.atleast_2d(noise_weights[k]), f"noise_weights[{k}]", m, definite=True)
-        W1 = cp.Variable((n1, n1), symmetric=True)
-        W = cp.bmat([[W1, np.zeros((n1, m))], [np.zeros((m, n1)), W2]])
-        Z = cp.Variable((n, n), symmetric=True)
-        Psi = W @ Ac - li * Y @ C_hat
-        Psi = Psi + Psi.T  # eq. (60)
-        WL = W @ L_hat + li * Y
-        q = G.shape[1]
-        lmi1 = cp.bmat([  # eq. (61)
-            [Psi, W @ G, WL],
-            [(W @ G).T, -np.eye(q), np.zeros((q, m))],
-            [WL.T, np.zeros((m, q)), -Qi],
-        ])
-        lmi1 = (lmi1 + lmi1.T) / 2
-        lmi2 = cp.bmat([[Z, np.eye(n)], [np.eye(n), W]])  # eq. (62): Z >= W^{-1}
-        lmi2 = (lmi2 + lmi2.T) / 2
-        constraints += [lmi1 << -STRICT_MARGIN * np.eye(n + q + m), lmi2 >> 0]
-        objective = objective + len(g) * cp.trace(weight @ Z)
-        Ws.append(W)
-    # Tie-break: when Phi barely changes the bound (e.g. the lambda = 0 mode pins W2) the optimal face
-    # is flat in Y2 and the interior-point iterates drift; a tiny penalty on |Y2| picks the smallest
-    # coupling among the optima. The reported bound is sum_i trace(Z_i) without it.
-    problem = cp.Problem(cp.Minimize(objective + TIE_BREAK * cp.norm(Y2, "fro")), constraints)
-    solve(problem, what, solver_options)
-    bound = float(objective.value)
-    Phi = np.linalg.solve(L2, np.linalg.solve(W2.value, Y2.value))
+        modes.append((float(lam[k]), len(g), T @ factors[k], noise[k]))
+    program, unpack = _lmi_program(Ac, C_hat, L_hat, weight, modes)
+    solve(program, what, solver_options)
+    W2, Y2, Ws, bound = unpack(program.x)
+    Phi = np.linalg.solve(L2, np.linalg.solve(W2, Y2))
     return {
-        "Phi": Phi, "bound": bound, "T": T_coords, "W": [W.value for W in Ws],
+        "Phi": Phi, "bound": bound, "T": T_coords, "W": Ws,
         "lam_unique": np.array([lam[g[0]] for g in groups]),
         "multiplicity": np.array([len(g) for g in groups]),
     }
+
+
+def _lmi_program(Ac: np.ndarray, C_hat: np.ndarray, L_hat: np.ndarray, weight: np.ndarray,
+                 modes: Sequence[tuple[float, int, np.ndarray, np.ndarray]]) -> tuple[ConicProgram, Callable]:
+    """Clarabel's data for the LMI program (56)-(62), assembled block by block.
+
+    Parameters
+    ----------
+    Ac : (n, n) ndarray
+        ``A_hat - L_hat C_hat`` in the scaled coordinates of :func:`coupled_gain_lmi`.
+    C_hat : (m, n) ndarray
+        ``(0 C2)``.
+    L_hat : (n, m) ndarray
+        ``(0; L2)``.
+    weight : (n, n) ndarray
+        The objective is ``sum_i multiplicity_i trace(weight Z_i)``.
+    modes : sequence of (lambda_i, multiplicity_i, G_i, Q_i)
+        One entry per distinct Laplacian eigenvalue: the eigenvalue, how many modes share it,
+        the process factor ``G_i`` (n, q_i) and the noise weight ``Q_i`` (m, m).
+
+    Returns
+    -------
+    program : ConicProgram
+        ``min sum_i multiplicity_i trace(weight Z_i) + TIE_BREAK |Y2|_F`` subject to, per mode,
+        eq. (61) with the margin :data:`STRICT_MARGIN` and eq. (62).
+    unpack : callable
+        ``unpack(x) -> (W2, Y2, [W_i], bound)`` from a solution ``x`` (``bound`` without the tie-break).
+
+    Notes
+    -----
+    The variables and rows are laid out as cvxpy lays out the same program written with
+    ``cvxpy.Variable`` (``Z_i`` for all modes, the epigraph variable of ``|Y2|_F``, ``Y2``, then
+    ``W_i1`` with ``W2`` after the first; rows: the second-order cone, then eqs. (61) and (62)
+    mode by mode), so Clarabel sees the very data the modelling layer would hand it. Each
+    matrix inequality ``M(x) = M_0 + sum_j x_j M_j >= 0`` becomes ``s = svec(M(x))``, that is
+    ``b = svec(M_0)`` and column ``j`` of ``A`` equal to ``-svec(M_j)``.
+    """
+    n, m = L_hat.shape
+    n1 = n - m
+    sn, s1, sm = svec_size(n), svec_size(n1), svec_size(m)
+    K = len(modes)
+    # columns: Z_1..Z_K, t, Y2 (column-major), W_11, W2, W_21, ..., W_K1
+    z0, t_col = 0, K * sn
+    y_cols = t_col + 1 + np.arange(m * m)
+    w_start = t_col + 1 + m * m
+    w2_cols = w_start + s1 + np.arange(sm)
+    w1_cols = [w_start + s1 * i + (sm if i else 0) + np.arange(s1) for i in range(K)]
+    nx = w_start + K * s1 + sm
+    # basis of the local variables: W = diag(W1, W2) and Y = (0; Y2)
+    EW = np.zeros((s1 + sm, n, n))
+    EW[:s1, :n1, :n1] = sym_basis(n1)
+    EW[s1:, n1:, n1:] = sym_basis(m)
+    EY = np.zeros((m * m, n, m))
+    a, b = np.arange(m * m) % m, np.arange(m * m) // m
+    EY[np.arange(m * m), n1 + a, b] = 1.0
+    EZ = sym_basis(n)
+    WAc, WL, YC = EW @ Ac, EW @ L_hat, EY @ C_hat
+    # eq. (62): [[Z, I], [I, W]] >= 0
+    lmi2 = np.zeros((sn + s1 + sm, 2 * n, 2 * n))
+    lmi2[:sn, :n, :n] = EZ
+    lmi2[sn:, n:, n:] = EW
+    A2 = -svec(lmi2).T
+    b2 = svec(np.block([[np.zeros((n, n)), np.eye(n)], [np.eye(n), np.zeros((n, n))]]))
+    c = np.zeros(nx)
+    c[t_col] = TIE_BREAK
+    trace_Z = np.einsum("ij,pji->p", weight, EZ)
+    # ||Y2||_F <= t: s = (t, vec Y2) in the second-order cone (rows 0..m^2, b = 0)
+    r = 1 + m * m
+    rows, cols, vals, offsets = [np.arange(r)], [np.r_[t_col, y_cols]], [-np.ones(r)], [np.zeros(r)]
+    cones = [clarabel.SecondOrderConeT(r)]
+    for i, (li, mult, G, Qi) in enumerate(modes):
+        q = G.shape[1]
+        k = n + q + m
+        # eq. (61): linear part in (W_i1, W2) and in Y2, constant part diag(0, -I, -Q_i)
+        M = np.zeros((s1 + sm + m * m, k, k))
+        MW, MY = M[: s1 + sm], M[s1 + sm:]
+        MW[:, :n, :n] = WAc + WAc.transpose(0, 2, 1)
+        MW[:, :n, n:n + q] = EW @ G
+        MW[:, :n, n + q:] = WL
+        MY[:, :n, :n] = -li * (YC + YC.transpose(0, 2, 1))
+        MY[:, :n, n + q:] = li * EY
+        M[:, n:, :n] = M[:, :n, n:].transpose(0, 2, 1)
+        M0 = np.zeros((k, k))
+        M0[n:n + q, n:n + q] = -np.eye(q)
+        M0[n + q:, n + q:] = -(Qi + Qi.T) / 2
+        # eq. (61) with margin: -STRICT_MARGIN I - lmi >= 0
+        A1 = svec(M).T
+        b1 = svec(-STRICT_MARGIN * np.eye(k) - M0)
+        c[z0 + i * sn: z0 + (i + 1) * sn] = mult * trace_Z
+        for Ablk, local in ((A1, np.r_[w1_cols[i], w2_cols, y_cols]),
+                            (A2, np.r_[z0 + i * sn + np.arange(sn), w1_cols[i], w2_cols])):
+            rr, cc = np.nonzero(Ablk)
+            rows.append(r + rr)
+            cols.append(local[cc])
+            vals.append(Ablk[rr, cc])
+            r += Ablk.shape[0]
+        offsets += [b1, b2]
+        cones += [clarabel.PSDTriangleConeT(k), clarabel.PSDTriangleConeT(2 * n)]
+    A = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(r, nx))
+    b = np.concatenate(offsets)
+    z_cols = [z0 + i * sn + np.arange(sn) for i in range(K)]
+    mults = np.array([mode[1] for mode in modes], dtype=float)
+
+    def unpack(x: np.ndarray):
+        W2 = np.tensordot(x[w2_cols], sym_basis(m), 1)
+        Y2 = x[y_cols].reshape(m, m, order="F")
+        W = np.zeros((K, n, n))
+        W[:, :n1, :n1] = np.tensordot(x[np.array(w1_cols)], sym_basis(n1), 1)
+        W[:, n1:, n1:] = W2
+        bound = float(sum(mult * (trace_Z @ x[z]) for mult, z in zip(mults, z_cols)))
+        return W2, Y2, list(W), bound
+
+    return ConicProgram(c, A, b, cones), unpack
 
 
 def bound_at_fixed_phi(
@@ -591,7 +688,7 @@ def bound_at_fixed_phi(
     >>> bool(np.isclose(at_lmi, obs.bound, rtol=1e-4))          # the LMI's Phi attains its bound
     True
     """
-    A, C, L, lam = _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in)
+    A, C, L, lam, _, _ = _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in)
     n, m = L.shape
     phis = _float_array(Phi, "Phi")
     single = phis.ndim == 0 or phis.shape == (m, m)
@@ -642,7 +739,11 @@ def bound_at_fixed_phi(
 
 
 def _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in):
-    """Validate the inputs shared by the mode programs (56)-(62); returns ``A, C, L, lam`` as arrays."""
+    """Validate the inputs shared by the mode programs (56)-(62).
+
+    Returns ``A, C, L, lam`` as arrays and the lists of process factors (n, q_i) and noise
+    weights (m, m) as float arrays.
+    """
     A = _square(A, "A")
     n = A.shape[0]
     C = _matrix(C, "C", (None, n))
@@ -651,12 +752,13 @@ def _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in):
     _check_sequence(process_factors, "process_factors", lam.size)
     _check_sequence(noise_weights, "noise_weights", lam.size)
     m = C.shape[0]
+    factors, noise = [], []
     for k in range(lam.size):
-        _matrix(process_factors[k], f"process_factors[{k}]", (n, None))
-        check_covariance(np.atleast_2d(_float_array(noise_weights[k], f"noise_weights[{k}]")),
-                         f"noise_weights[{k}]", m, definite=True)
+        factors.append(_matrix(process_factors[k], f"process_factors[{k}]", (n, None)))
+        noise.append(check_covariance(np.atleast_2d(_float_array(noise_weights[k], f"noise_weights[{k}]")),
+                                      f"noise_weights[{k}]", m, definite=True))
     _check_trace_in(trace_in)
-    return A, C, L, lam
+    return A, C, L, lam, factors, noise
 
 
 def _node_coordinates(C: np.ndarray, L: np.ndarray) -> np.ndarray:
@@ -1008,26 +1110,77 @@ def achieved_cost(
     noise = [check_covariance(np.atleast_2d(_float_array(q, f"noise_weights[{k}]")), f"noise_weights[{k}]", m,
                               definite=True)
              for k, q in enumerate(noise_weights)]
-    if T is None:
-        tr = np.trace
-    else:
+    if T is not None:
         T = _matrix(T, "T", (n, n))
-        tr = lambda M: np.trace(T @ M @ T.T)  # noqa: E731
-    return _mode_costs(A, C, L, Phi, lam, Bbar @ np.linalg.solve(R, Bbar.T), noise, tr)
+    return _mode_costs(A, C, L, Phi, lam, Bbar @ np.linalg.solve(R, Bbar.T), noise, T)
 
 
-def _mode_costs(A, C, L, Phi, lam, BRB, noise, tr) -> float:
-    """sum_i tr(S_i), S_i from eq. (57) with equality; inf if a mode is unstable."""
+#: Largest state dimension for which a stack of Lyapunov equations is solved as one batch of
+#: Kronecker systems (``n^2 x n^2``); larger ones go one by one to Bartels-Stewart.
+_KRON_MAX = 8
+
+
+def _lyapunov_stack(Acl: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """``S_k`` with ``Acl_k S_k + S_k Acl_k^T + M_k = 0`` for stacks ``Acl``, ``M`` of shape (K, n, n)."""
+    K, n, _ = Acl.shape
+    if n > _KRON_MAX:
+        return np.stack([sla.solve_continuous_lyapunov(a, -q) for a, q in zip(Acl, M)])
+    eye = np.eye(n)
+    # row-major vec: vec(Acl S) = (Acl (x) I) vec(S), vec(S Acl^T) = (I (x) Acl) vec(S)
+    op = np.einsum("kij,ab->kiajb", Acl, eye) + np.einsum("ij,kab->kiajb", eye, Acl)
+    return np.linalg.solve(op.reshape(K, n * n, n * n), -M.reshape(K, n * n, 1)).reshape(K, n, n)
+
+
+def _traces(S: np.ndarray, T: np.ndarray | None) -> list[float]:
+    """``trace(S_k)``, or ``trace(T S_k T^T)``, for a stack ``S`` (K, n, n)."""
+    if T is not None:
+        S = T @ S @ T.T
+    return np.trace(S, axis1=1, axis2=2).tolist()
+
+
+def _mode_costs(A, C, L, Phi, lam, BRB, noise, T=None) -> float:
+    """sum_i trace(S_i) (or trace(T S_i T^T)), S_i from eq. (57) with equality; inf if a mode is unstable."""
     m = C.shape[0]
-    total = 0.0
-    for li, Qi in zip(lam, noise):
-        Li = L @ (np.eye(m) + li * Phi)
-        Ai = A - Li @ C
-        if np.max(np.linalg.eigvals(Ai).real) >= 0:
-            return float("inf")
-        Si = sla.solve_continuous_lyapunov(Ai, -(BRB + Li @ np.linalg.solve(Qi, Li.T)))
-        total += float(tr(Si))
-    return total
+    Li = L @ (np.eye(m) + np.asarray(lam)[:, None, None] * Phi)  # (N, n, m): the gain of each mode
+    Ai = A - Li @ C
+    if np.max(np.linalg.eigvals(Ai).real) >= 0:
+        return float("inf")
+    S = _lyapunov_stack(Ai, BRB + Li @ np.linalg.solve(np.stack(noise), Li.transpose(0, 2, 1)))
+    return float(sum(_traces(S, T)))
+
+
+def _centralized_cost(A, C, BRB, noise, T=None) -> float:
+    """sum_i trace(S_i) (or trace(T S_i T^T)) of the mode AREs (53): ``A S + S A^T - S C^T Q_i C S + BRB = 0``.
+
+    All modes at once: the stable invariant subspace of each Hamiltonian from one batched
+    eigen-decomposition, polished by one Newton (Kleinman) step. A mode whose solution fails the
+    checks of :func:`mascore.riccati.solve_care` (relative residual, stabilizing) is solved again by
+    :func:`~mascore.riccati.solve_care`, which raises if it has no stabilizing solution.
+    """
+    n = A.shape[0]
+    K = len(noise)
+    G = C.T @ np.stack(noise) @ C  # (K, n, n): C^T Q_i C
+    H = np.empty((K, 2 * n, 2 * n))
+    H[:, :n, :n], H[:, :n, n:], H[:, n:, :n], H[:, n:, n:] = A.T, -G, -BRB, -A
+    with np.errstate(all="ignore"):
+        try:
+            w, V = np.linalg.eig(H)
+            U = np.take_along_axis(V, np.argsort(w.real, axis=1)[:, None, :n], axis=2)
+            S = np.linalg.solve(U[:, :n].transpose(0, 2, 1), U[:, n:].transpose(0, 2, 1)).real  # (U2 U1^-1)^T
+            S = (S + S.transpose(0, 2, 1)) / 2
+            S = S + _lyapunov_stack(A - S @ G, A @ S + S @ A.T - S @ G @ S + BRB)  # Newton step
+            S = (S + S.transpose(0, 2, 1)) / 2
+        except np.linalg.LinAlgError:  # a singular U1 or Newton step: every mode falls back below
+            S = np.full((K, n, n), np.nan)
+        SGS = S @ G @ S
+        residual = np.linalg.norm(A @ S + S @ A.T - SGS + BRB, axis=(1, 2))
+        scale = np.maximum.reduce([np.ones(K), np.full(K, np.linalg.norm(BRB)), np.linalg.norm(A @ S, axis=(1, 2)),
+                                   np.linalg.norm(SGS, axis=(1, 2))])
+        good = residual <= RICCATI_RTOL * scale
+        good[good] = np.linalg.eigvals(A.T - G[good] @ S[good]).real.max(axis=1) < 0
+    for k in np.flatnonzero(~good):
+        S[k] = solve_care(A.T, C.T, BRB, np.linalg.inv(noise[k]))[1]
+    return float(sum(_traces(S, T)))
 
 
 def _check_observer(A, Bbar, C, Q, R, qname="Q"):
