@@ -56,13 +56,14 @@ test-min:  ## the core alone on its minimum versions: install size, import times
 	$(MIN_VENV)/bin/python -m pip install --quiet --no-deps --no-build-isolation -e .
 	$(MIN_VENV)/bin/python -m pytest -q -p no:cacheprovider $(MIN_TESTS)
 
-reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json into results/
+reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json, and the quick comparison, into results/
 	@rm -f $(RESULTS)
 	@$(MAKE) --no-print-directory $(RESULTS)
 
 # book and test reuse results/ while no source file of the package has changed since.
 $(RESULTS): $(STAMP) $(wildcard mascore/*.py mascore/papers/*.py)
 	$(HEADLESS) $(BIN)/python -m mascore reproduce all --out results
+	$(HEADLESS) $(BIN)/python -m mascore compare --grid quick --out results --workers $(JOBS)
 	@touch $(RESULTS)
 
 lab: $(STAMP)  ## JupyterLab on notebooks/ with the project's environment

@@ -25,6 +25,8 @@ SUBMODULES = (
     "consensus", "rendezvous", "flocking", "synchronization", "lqr",
     # estimation
     "sensing", "distributed_kf", "distributed_ekf", "ellipsoids", "set_membership", "observers", "riccati",
+    # comparing the methods, sweeps on Dask
+    "compare", "sweep",
     # errors
     "exceptions",
     # the papers' scenarios

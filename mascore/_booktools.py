@@ -39,6 +39,7 @@ API_GROUPS: dict[str, tuple[str, ...]] = {
     "Shared building blocks": ("agents", "graphs", "noise", "kalman", "sensing"),
     "Consensus and cooperative control": ("consensus", "rendezvous", "flocking", "synchronization", "lqr", "riccati"),
     "Estimation": ("distributed_kf", "distributed_ekf", "ellipsoids", "set_membership", "observers"),
+    "Comparing the methods": ("compare", "sweep"),
     "Reproduction and the book": ("registry", "ledger", "report", "reproduce", "plotting", "exceptions"),
     "The papers' scenarios": (
         "papers.song2023", "papers.song2023_flocking", "papers.ren2005", "papers.bhattacharjee2021", "papers.vlahakis",

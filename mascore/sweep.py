@@ -255,11 +255,12 @@ def run_sweep(
         bar_update(1)
     getattr(bar, "close", lambda: None)()
     table = pd.read_csv(out, keep_default_na=False, na_values=[""])
-    table["_order"] = np.arange(len(table))
-    keys = list(sort_by) if sort_by else [CELL_COLUMN]
-    table = table.sort_values([*keys, "_order"], kind="stable").drop(columns="_order")
-    table = table[sorted(table.columns)].reset_index(drop=True)
-    table.to_csv(out, index=False)
+    if pending:  # rewrite in canonical order; a finished table is only read (readers may share it)
+        table["_order"] = np.arange(len(table))
+        keys = list(sort_by) if sort_by else [CELL_COLUMN]
+        table = table.sort_values([*keys, "_order"], kind="stable").drop(columns="_order")
+        table = table[sorted(table.columns)].reset_index(drop=True)
+        table.to_csv(out, index=False)
     return table[table[CELL_COLUMN].isin(list(todo) + list(done))].reset_index(drop=True)
 
 

@@ -1,0 +1,251 @@
+"""The comparison benchmark (mascore.compare) and the sweep engine (mascore.sweep).
+
+Sweeps give the same table serially, on a local Dask cluster and on a scheduler with two
+workers started here; an interrupted sweep resumes; the ledger claims recompute from the
+table; every method's metrics agree with an independent computation on a tiny case.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import scipy.linalg as sla
+
+from mascore import compare, consensus, sweep
+from mascore.reproduce import main, results_dir
+
+CPU = "cpu_s"  # the only column that depends on the machine and the moment
+
+
+def _small_cells() -> list[dict]:
+    """A slice of the quick grid: every team method at N = 4, a drop-out cell, the shared task."""
+    cells = [c for c in compare.grid_cells("quick") if c["block"] == 0 and c["n_agents"] in (4, 8)
+             and (c["study"] in ("scaling", "shared") or c["dropout"] == 0.3)]
+    return [c for c in cells if c["n_agents"] == 4 or c["study"] != "scaling"]
+
+
+def _without_cpu(table: pd.DataFrame) -> pd.DataFrame:
+    return table.drop(columns=[CPU]).reset_index(drop=True)
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory):
+    out = tmp_path_factory.mktemp("serial") / "table.csv"
+    return sweep.run_sweep(_small_cells(), compare.run_cell, out, progress=False), out
+
+
+def test_grid_cells_cover_the_studies_with_100_seeds():
+    cells = compare.grid_cells("quick")
+    studies = {c["study"] for c in cells}
+    assert studies == {"scaling", "dropout", "noise", "wrong-q", "shared"}
+    blocks = {c["block"] for c in cells}
+    assert len(blocks) * compare.SETTINGS.runs >= 100
+    assert {c["method"] for c in cells if c["task"] == "team"} == set(compare.TEAM_METHODS)
+    assert len({sweep.cell_id(c) for c in cells}) == len(cells)
+
+
+def test_cell_seed_depends_only_on_the_seed_axes():
+    a = {"task": "team", "method": "local", "n_agents": 4, "noise": "gaussian", "block": 0, "dropout": 0.0}
+    same = {**a, "method": "song-eb", "dropout": 0.3}
+    other = {**a, "block": 1}
+    draw = lambda c: np.random.default_rng(sweep.cell_seed(c, compare.SEED_AXES)).random(3)  # noqa: E731
+    np.testing.assert_array_equal(draw(a), draw(same))
+    assert not np.allclose(draw(a), draw(other))
+    assert not np.allclose(draw(a), np.random.default_rng(sweep.cell_seed(a, compare.SEED_AXES, 1)).random(3))
+
+
+def test_same_seed_same_numbers_byte_for_byte():
+    one = compare.simulate_team("song-eb", 4, 3, runs=5, dropout=0.1)
+    two = compare.simulate_team("song-eb", 4, 3, runs=5, dropout=0.1)
+    for key in one:
+        if key != CPU:
+            assert one[key].tobytes() == two[key].tobytes(), key
+
+
+def test_local_cluster_gives_the_serial_table(serial, tmp_path):
+    table, _ = serial
+    parallel = sweep.run_sweep(_small_cells(), compare.run_cell, tmp_path / "t.csv", workers=2, progress=False)
+    pd.testing.assert_frame_equal(_without_cpu(parallel), _without_cpu(table), check_exact=True)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_scheduler_and_two_workers_give_the_serial_table(serial, tmp_path):
+    table, _ = serial
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    procs = [subprocess.Popen([*dask, "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        for _ in range(2):
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1", "--nworkers", "1",
+                 "--no-dashboard", "--host", "127.0.0.1"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        from distributed import Client
+
+        with Client(address, timeout=60) as client:
+            client.wait_for_workers(2, timeout=60)
+        remote = sweep.run_sweep(_small_cells(), compare.run_cell, tmp_path / "t.csv", scheduler=address,
+                                 progress=False)
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in procs:
+            p.wait(timeout=30)
+    pd.testing.assert_frame_equal(_without_cpu(remote), _without_cpu(table), check_exact=True)
+
+
+def _failing_task(cell):
+    if cell["method"] == "vlahakis":
+        raise KeyboardInterrupt("interrupted")
+    return compare.run_cell(cell)
+
+
+def test_an_interrupted_sweep_resumes(serial, tmp_path):
+    table, _ = serial
+    out = tmp_path / "t.csv"
+    with pytest.raises(KeyboardInterrupt):
+        sweep.run_sweep(_small_cells(), _failing_task, out, progress=False)
+    partial = pd.read_csv(out)
+    assert 0 < partial["cell"].nunique() < len(_small_cells())
+    kept = partial.set_index(["cell", "run"])[CPU]
+    resumed = sweep.run_sweep(_small_cells(), compare.run_cell, out, progress=False)
+    pd.testing.assert_frame_equal(_without_cpu(resumed), _without_cpu(table), check_exact=True)
+    again = resumed.set_index(["cell", "run"]).loc[kept.index, CPU]
+    np.testing.assert_array_equal(again.to_numpy(), kept.to_numpy())  # the finished cells were not rerun
+
+
+def test_run_sweep_refuses_bad_arguments(tmp_path):
+    cells = sweep.Grid({"scale": [1.0], "block": [0]}).cells()
+    with pytest.raises(ValueError, match="workers"):
+        sweep.run_sweep(cells, sweep.demo_task, tmp_path / "t.csv", workers=-1)
+    with pytest.raises(ValueError, match="scheduler"):
+        sweep.run_sweep(cells, sweep.demo_task, tmp_path / "t.csv", scheduler="localhost")
+    with pytest.raises(TypeError, match="task"):
+        sweep.run_sweep(cells, "demo", tmp_path / "t.csv")
+    with pytest.raises(ValueError, match="axis"):
+        sweep.Grid({"scale": []})
+    with pytest.raises(KeyError, match="block"):
+        sweep.cell_seed({"scale": 1.0}, ["block"])
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"method": "kalman"}, "method"), ({"noise": "cauchy"}, "noise"), ({"dropout": 1.0}, "dropout"),
+    ({"q_scale": 0.0}, "q_scale"), ({"n_agents": 2}, "n_agents"), ({"runs": 0}, "runs"),
+])
+def test_simulate_team_refuses_bad_arguments(kwargs, match):
+    args = {"method": "local", "n_agents": 4, "seed": 0, **kwargs}
+    with pytest.raises(ValueError, match=match):
+        compare.simulate_team(args.pop("method"), args.pop("n_agents"), args.pop("seed"), **args)
+
+
+# ---------------------------------------------------------------------------- independent checks
+
+
+def test_local_filter_matches_the_dare_and_its_rmse_matches_its_covariance():
+    """The local Kalman filter's covariance reaches the DARE's; its RMSE and NEES agree with it."""
+    s = compare.SETTINGS
+    team = compare._team(4, "gaussian", 1.0, s)
+    est = compare._Local(team, np.zeros((1, 4, 4)))
+    for _ in range(300):
+        est.update(np.zeros((1, 4, 4, 4)), np.ones((1, 4, 4), bool))
+        est.predict(np.zeros((1, 4, 2)))
+    prior = sla.solve_discrete_are(team.A.T, np.eye(4), team.Q, team.R)
+    np.testing.assert_allclose(est.P, prior, rtol=1e-8)
+    posterior = prior - prior @ np.linalg.solve(prior + team.R, prior)
+    m = compare.simulate_team("local", 8, 11, runs=100)
+    predicted = np.sqrt(np.trace(posterior[:2, :2]))
+    assert abs(m["rmse_own"].mean() / predicted - 1) < 0.03
+    assert abs(m["nees_own"].mean() - 1) < 0.05
+
+
+def test_centralized_covariance_matches_the_team_dare():
+    """Steady-state own covariance of the centralized filter = DARE of the team with every measurement."""
+    s = compare.SETTINGS
+    N = 4
+    team = compare._team(N, "gaussian", 1.0, s)
+    est = compare._Centralized(team, np.zeros((1, N, 4)))
+    S = (team.adjacency > 0) | np.eye(N, dtype=bool)
+    for _ in range(300):
+        est.update(np.zeros((1, N, N, 4)), S[None])
+        est.predict(np.zeros((1, N, 2)))
+    A = np.kron(np.eye(N), team.A)
+    H = np.vstack([np.kron(np.eye(N)[j], np.eye(4)) for i in range(N) for j in range(N) if S[i, j]])
+    R = np.kron(np.eye(H.shape[0] // 4), team.R)
+    prior = sla.solve_discrete_are(A.T, H.T, np.kron(np.eye(N), team.Q), R)
+    own = compare._Centralized.own_cov.fget(est)[0]
+    prior_own = np.stack([prior[4 * i:4 * i + 4, 4 * i:4 * i + 4] for i in range(N)])
+    est.update(np.zeros((1, N, N, 4)), S[None])  # back to the posterior for comparison
+    post = prior - prior @ H.T @ np.linalg.solve(H @ prior @ H.T + R, H @ prior)
+    post_own = np.stack([post[4 * i:4 * i + 4, 4 * i:4 * i + 4] for i in range(N)])
+    np.testing.assert_allclose(own, prior_own, rtol=1e-7)
+    np.testing.assert_allclose(compare._Centralized.own_cov.fget(est)[0], post_own, rtol=1e-7)
+
+
+def test_set_membership_contains_the_truth_under_bounded_noise():
+    m = compare.simulate_team("set-membership", 4, 5, noise="uniform", runs=20)
+    assert m["containment"].min() == 1.0
+
+
+def test_centralized_lower_bounds_and_cooperation_ordering():
+    c = compare.simulate_team("centralized", 6, 2, runs=40)
+    for method in ("local", "song-mb", "song-eb", "vlahakis", "set-membership"):
+        other = compare.simulate_team(method, 6, 2, runs=40)
+        assert np.mean(other["rmse_own"] / c["rmse_own"]) > 1.0, method
+
+
+def test_shared_task_central_fusion_and_ren_kc():
+    best = compare.simulate_shared("central-fusion", 5, 1, runs=400)
+    ren = compare.simulate_shared("ren-kc", 5, 1, runs=400)
+    none = compare.simulate_shared("no-fusion", 5, 1, runs=400)
+    assert abs(best["nees_own"].mean() - 1) < 0.1  # the fused covariance is honest
+    assert abs(none["nees_own"].mean() - 1) < 0.1
+    assert best["rmse_own"].mean() <= ren["rmse_own"].mean() <= 1.05 * best["rmse_own"].mean()
+    # the same priors through the package's central fusion, independently
+    xi, P = consensus.central_fusion(np.array([[0.0, 1.0], [2.0, 0.0]]), np.array([np.eye(2), 3 * np.eye(2)]))
+    np.testing.assert_allclose(xi, [0.5, 0.75])
+
+
+def test_floats_per_step_counts_messages():
+    assert compare.floats_per_step("centralized", 8) == 24.0
+    assert compare.floats_per_step("song-eb", 64) == 0.0
+    with pytest.raises(ValueError, match="method"):
+        compare.floats_per_step("unknown", 8)
+
+
+def test_summary_ratio_is_one_for_the_bound(serial):
+    table, _ = serial
+    s = compare.summarize(table)
+    bound = s[s["method"].isin(["centralized", "central-fusion"])]
+    np.testing.assert_allclose(bound["ratio_mean"], 1.0)
+    assert (s.groupby(["study", "method", "n_agents", "noise", "dropout", "q_scale"])["n"].max()
+            == compare.SETTINGS.runs).all()
+
+
+def test_claims_recompute_from_the_table():
+    """The ledger written by `mascore compare` is what the table's summary gives."""
+    out = results_dir()
+    if not (out / "compare" / "table-quick-0.csv").exists():
+        pytest.skip("the quick sweep has not been run (make reproduce)")
+    assert main(["compare", "--grid", "quick", "--out", str(out), "--workers", "0"]) == 0
+    written = json.loads((out / "compare" / "claims.json").read_text())["claims"]
+    table = pd.read_csv(out / "compare" / "table-quick-0.csv")
+    again = [c.to_dict() for c in compare.compare_claims(compare.summarize(table))]
+    assert [c["id"] for c in written] == [c["id"] for c in again]
+    for w, a in zip(written, again):
+        assert w["verdict"] == a["verdict"] == "holds", w["id"]
+        assert json.dumps(w["value"], sort_keys=True) == json.dumps(a["value"], sort_keys=True)
