@@ -46,8 +46,8 @@ from __future__ import annotations
 import functools
 import time
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -759,7 +759,8 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "n_agents",
     Parameters
     ----------
     table : pandas.DataFrame
-        Rows of :func:`run_cell` with their cell coordinates (the sweep's table).
+        Rows of :func:`run_cell` with their cell coordinates and ``cell`` identifier
+        (the sweep's table).
     by : sequence of str
         Grouping columns.
 
@@ -776,7 +777,7 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "n_agents",
     >>> from mascore.compare import run_cell, summarize
     >>> cell = {"study": "scaling", "task": "team", "n_agents": 4, "noise": "gaussian", "dropout": 0.0,
     ...         "q_scale": 1.0, "block": 0}
-    >>> rows = [{**r, **cell, "method": m} for m in ("centralized", "local")
+    >>> rows = [{**r, **cell, "method": m, "cell": m} for m in ("centralized", "local")
     ...         for r in run_cell({**cell, "method": m})]
     >>> s = summarize(pd.DataFrame(rows))
     >>> bool((s.set_index("method").loc["local", "ratio_mean"] > 1.0))      # no cooperation costs accuracy
