@@ -248,3 +248,35 @@ def test_claims_recompute_from_the_table():
     for w, a in zip(written, again):
         assert w["verdict"] == a["verdict"] == "holds", w["id"]
         assert json.dumps(w["value"], sort_keys=True) == json.dumps(a["value"], sort_keys=True)
+
+
+def test_vlahakis_rmse_matches_its_error_covariance():
+    """The discretized observer's own-position RMSE = the steady error covariance from a Lyapunov equation.
+
+    Per axis and agent the error is ``e = [e_p, e_v]``; the correction subtracts
+    ``G [(e_p,i + nu_ii) + Phi sum_j a_ij (e_p,i - e_p,j + nu_ii - nu_ij)]`` with ``G = dt L``, and the
+    prediction is ``e <- A e + w`` (each agent knows the input it applied).
+    """
+    s = compare.SETTINGS
+    N = 5
+    L, Phi = compare._vlahakis_gains(N, s.q_vel, s.r, s.dt)
+    G = s.dt * L                                          # (2, 1)
+    C = np.array([[1.0, 0.0]])
+    A = np.array([[1.0, s.dt], [0.0, 1.0]])
+    adjacency = compare.graphs.ring_graph(N)
+    lap = compare.graphs.laplacian(adjacency)
+    M = np.eye(2 * N) - np.kron(np.eye(N) + Phi * lap, G @ C)
+    deg = adjacency.sum(1)
+    noise = np.kron(np.diag(s.r * ((1 + Phi * deg) ** 2 + Phi**2 * (adjacency**2).sum(1))), G @ G.T)
+    Q = np.kron(np.eye(N), np.diag([s.q_pos, s.q_vel]))
+    P_post = sla.solve_discrete_lyapunov(M @ np.kron(np.eye(N), A), M @ Q @ M.T + noise)
+    predicted = np.sqrt(2 * np.mean(np.diag(P_post)[::2]))  # two axes
+    m = compare.simulate_team("vlahakis", N, 4, runs=100)
+    assert abs(np.sqrt(np.mean(m["rmse_own"] ** 2)) / predicted - 1) < 0.03
+
+
+@pytest.mark.parametrize("method", ["centralized", "song-eb"])
+def test_kalman_type_filters_are_consistent_on_the_baseline(method):
+    """Mean own-state NEES per dof over 100 runs: within 10 % of 1 (the filters' covariances are honest)."""
+    m = compare.simulate_team(method, 5, 8, runs=100)
+    assert abs(m["nees_own"].mean() - 1) < 0.1
