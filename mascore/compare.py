@@ -63,6 +63,7 @@ __all__ = [
     "SHARED_METHODS",
     "TEAM_METHODS",
     "BenchmarkSettings",
+    "cell_cost",
     "compare_claims",
     "fitted_slopes",
     "floats_per_step",
@@ -863,8 +864,39 @@ def run_compare(
 
     folder = Path(out) / "compare"
     table = run_sweep(grid_cells(grid), functools.partial(run_cell, base_seed=seed),
-                      folder / f"table-{grid}-{seed}.csv", workers=workers, scheduler=scheduler, progress=progress)
+                      folder / f"table-{grid}-{seed}.csv", workers=workers, scheduler=scheduler, progress=progress,
+                      cost=cell_cost)
     return table, summarize(table)
+
+
+def cell_cost(cell: Mapping[str, Any]) -> float:
+    """A rough relative run time of a cell, to start the longest cells first on a cluster.
+
+    Parameters
+    ----------
+    cell : mapping
+        Coordinates with ``task``, ``method``, ``n_agents`` and ``dropout``.
+
+    Returns
+    -------
+    float
+        Proportional to the flops of one step for a block of runs: the whole-team
+        filters grow like ``N^3``-``N^4`` (and keep one covariance per run when links drop),
+        the per-agent ones like ``N``.
+
+    Examples
+    --------
+    >>> from mascore.compare import cell_cost
+    >>> base = {"task": "team", "n_agents": 32, "dropout": 0.0}
+    >>> cell_cost({**base, "method": "song-eb"}) > cell_cost({**base, "method": "local"})
+    True
+    """
+    if cell["task"] != "team":
+        return 1.0
+    n = float(cell["n_agents"])
+    whole_team = {"song-eb": n**4, "song-mb": n**3.5, "centralized": n**3}
+    per_run = 20.0 if cell["dropout"] > 0 and cell["method"] in whole_team else 1.0
+    return whole_team.get(cell["method"], 50.0 * n) * per_run
 
 
 def fitted_slopes(summary) -> dict[str, float]:

@@ -189,6 +189,7 @@ def run_sweep(
     scheduler: str | None = None,
     progress: bool = True,
     sort_by: Sequence[str] | None = None,
+    cost: Callable[[dict[str, Any]], float] | None = None,
 ):
     """Run `task` on every cell not yet in `out`; return the whole table.
 
@@ -215,6 +216,10 @@ def run_sweep(
     sort_by : sequence of str, optional
         Columns the final table is sorted by (default: the cell identifier,
         then the row order within each cell).
+    cost : callable, optional
+        ``cost(cell) -> float``, a rough estimate of a cell's run time: the cells are
+        started in decreasing order of cost (longest first), so that on a cluster
+        no worker is left with one long cell at the end. The table does not depend on it.
 
     Returns
     -------
@@ -246,6 +251,8 @@ def run_sweep(
         todo.setdefault(cell_id(cell), dict(cell))
     done = _done_cells(out)
     pending = [(cid, cell) for cid, cell in todo.items() if cid not in done]
+    if cost is not None:
+        pending.sort(key=lambda item: -float(cost(item[1])))
     out.parent.mkdir(parents=True, exist_ok=True)
     bar = progress_bar(range(len(todo)), enabled=progress, desc="sweep", unit="cell", initial=len(todo) - len(pending),
                        total=len(todo))
@@ -317,7 +324,7 @@ def _results(pending: list[tuple[str, dict]], task: Callable, workers: int, sche
         client = distributed.Client(cluster, set_as_default=False)
     try:
         futures = [client.submit(_labelled, task, cid, cell, key=f"cell-{i}-{hashlib.sha1(cid.encode()).hexdigest()}",
-                                 pure=False)
+                                 pure=False, priority=len(pending) - i)  # in the order given: longest first
                    for i, (cid, cell) in enumerate(pending)]
         for future in distributed.as_completed(futures, loop=client.loop):
             yield future.result()
