@@ -278,7 +278,8 @@ def closed_loop_step(X: np.ndarray, dt: float, gains: FlockingGains) -> np.ndarr
     return propagate(X, flocking_control(X, gains, None), dt)
 
 
-def control_and_jacobian(X: np.ndarray, gains: FlockingGains, with_control: bool = True):
+def control_and_jacobian(X: np.ndarray, gains: FlockingGains, with_control: bool = True,
+                         out: np.ndarray | None = None, scale: float = 1.0):
     """Fully-connected control of every agent and its Jacobian, from one set of pair quantities.
 
     Parameters
@@ -288,6 +289,10 @@ def control_and_jacobian(X: np.ndarray, gains: FlockingGains, with_control: bool
     gains : FlockingGains
     with_control : bool
         Also return the control (else ``None`` in its place).
+    out : (..., N, n, N, 2n) ndarray, optional
+        Where to write ``G`` (C-contiguous).
+    scale : float
+        Return ``scale * G`` instead of ``G`` (the control is not scaled).
 
     Returns
     -------
@@ -297,8 +302,10 @@ def control_and_jacobian(X: np.ndarray, gains: FlockingGains, with_control: bool
         ``G[..., i, :, j, :] = du_i/dx_j``: ``-J(x_i - x_j)`` for ``j != i`` and
         ``sum_{j != i} J(x_i - x_j)`` for ``j = i``, ``J`` the pair Jacobian of
         :func:`pair_term_jacobian`. Written entry by entry into its final
-        layout from ``(..., N, N)`` arrays of pair scalars (no scatter):
-        ``J = s_I [I 0] + z_I [0 I] + v [c_vp p, 0]^T + p [c_pv v + c_pp p, c_pv p]^T``.
+        layout from ``(..., r, N)`` arrays of pair scalars (no scatter), ``r``
+        rows at a time (temporaries of at most ~64 kB: fresh large temporaries
+        cost page faults): ``J = s_I [I 0] + z_I [0 I] + v [c_vp p, 0]^T + p [c_pv v + c_pp p, c_pv p]^T``,
+        each entry symmetric in ``(i, j)``.
 
     Examples
     --------
@@ -310,49 +317,106 @@ def control_and_jacobian(X: np.ndarray, gains: FlockingGains, with_control: bool
     """
     N, m = X.shape[-2:]
     n = m // 2
-    # components of x_i - x_j as (..., N, N) arrays: p[a], v[a]
-    p = [X[..., :, None, a] - X[..., None, :, a] for a in range(n)]
-    v = [X[..., :, None, n + a] - X[..., None, :, n + a] for a in range(n)]
+    batch = X.shape[:-2]
+    U = np.empty((*batch, N, n)) if with_control else None
+    G = np.empty((*batch, N, n, N, m)) if out is None else out
+    Xt = np.ascontiguousarray(np.moveaxis(X, -1, -2))  # (..., m, N)
+    rows = max(1, min(N, _PAIR_BLOCK // max(1, int(np.prod(batch, dtype=np.int64)) * N)))
+    for i0 in range(0, N, rows):
+        _control_and_jacobian_rows(Xt, gains, i0, min(N, i0 + rows), U, G, scale)
+    return U, G
+
+
+#: Pair scalars per temporary array of :func:`control_and_jacobian` (8192 doubles = 64 kB).
+_PAIR_BLOCK = 8192
+
+
+def _control_and_jacobian_rows(Xt, gains, i0, i1, U, G, scale=1.0):
+    """Rows ``i0:i1`` (agents ``i``) of :func:`control_and_jacobian`, from ``Xt = X^T`` ``(..., m, N)``."""
+    m, N = Xt.shape[-2:]
+    n = m // 2
+    batch = Xt.shape[:-2]
+    r = i1 - i0
+    # components of x_i - x_j as (..., r, N) arrays: p[a], v[a]
+    p = [Xt[..., a, i0:i1, None] - Xt[..., a, None, :] for a in range(n)]
+    v = [Xt[..., n + a, i0:i1, None] - Xt[..., n + a, None, :] for a in range(n)]
     d2 = p[0] * p[0]
     vp = v[0] * p[0]
+    t = np.empty(d2.shape)
     for a in range(1, n):
-        d2 += p[a] * p[a]
-        vp += v[a] * p[a]
-    d = np.sqrt(d2)
-    de = np.maximum(d, gains.min_distance)
-    f1 = (1.0 + d2) ** (-gains.beta)  # phi1
-    inv2 = 1.0 / de**2
+        d2 += np.multiply(p[a], p[a], out=t)
+        vp += np.multiply(v[a], p[a], out=t)
+    dmin = gains.min_distance
+    de = np.sqrt(d2)
+    ii = np.arange(r)
+    jj = ii + i0  # the pairs (i, i) of an agent with itself
+    de[..., ii, jj] = 1.0  # any finite value there (p = v = 0)
+    near = de <= dmin  # distinct agents closer than d_min: |p| replaced by d_min, the p p^T term dropped
+    any_near = bool(near.any())
+    if any_near:
+        np.maximum(de, dmin, out=de)
+    f1 = np.log1p(d2)
+    f1 *= -gains.beta
+    np.exp(f1, out=f1)  # phi1 = (1 + |p|^2)^(-beta)
+    one_d2 = d2
+    one_d2 += 1.0
     c5 = gains.rho4 * gains.rho5 / 2
     c6 = gains.rho4 * gains.rho6 / 2
-    s_I = -c5 * vp * inv2 - c6 * (1.0 - gains.R / de)  # identity part of dg/dp, = -rho4 phi2
-    c_vp = 2 * gains.beta * gains.rho3 * f1 / (1.0 + d2)  # v p^T
-    c_pv = -c5 * inv2  # p v^T in dg/dp, p p^T in dg/dv
-    c_pp = np.where(d > gains.min_distance, 2 * c5 * vp * inv2**2 - c6 * gains.R * inv2 / de, 0.0)  # p p^T
-    z_I = -gains.rho3 * f1  # identity part of dg/dv, = -rho3 phi1
-    U = None
-    if with_control:  # the pair term of eq. (6), g = -rho3 phi1 v - rho4 phi2 p = z_I v + s_I p (0 for j = i)
-        U = np.stack([(z_I * v[a] + s_I * p[a]).sum(axis=-1) for a in range(n)], -1)
-    diag = np.arange(N)
-    s_I[..., diag, diag] = 0.0  # the pair term of an agent with itself is zero (p = v = 0 there)
-    z_I[..., diag, diag] = 0.0
-    W1 = [c_vp * p[b] for b in range(n)]
-    W2 = [c_pv * v[b] + c_pp * p[b] for b in range(n)]
-    W3 = [c_pv * p[b] for b in range(n)]
-    G = np.empty((*X.shape[:-2], N, n, N, m))
-    for a in range(n):
-        for b in range(m):
-            if b < n:  # dg_a/dp_b
-                E = v[a] * W1[b]
-                E += p[a] * W2[b]
+    # pair scalars with the signs of -J (G = -J off the diagonal), times `scale`: J = s_I [I 0] + z_I [0 I]
+    #   + v [c_vp p, 0]^T + p [c_pv v + c_pp p, c_pv p]^T, and -s_I = c5 <v,p>/de^2 + c6 (1 - R/de) = rho4 phi2
+    k = scale
+    inv2 = np.multiply(de, de)
+    np.divide(k, inv2, out=inv2)  # k / de^2
+    r_de = np.divide(k * c6 * gains.R, de, out=de)  # k c6 R / de
+    t1 = np.multiply(vp, inv2, out=vp)  # k <v,p> / de^2
+    ns_I = np.multiply(t1, c5)
+    ns_I += k * c6
+    ns_I -= r_de  # -k s_I
+    nc_pp = np.multiply(t1, -2.0 * c5)
+    nc_pp += r_de
+    nc_pp *= inv2
+    nc_pp *= 1.0 / k  # -k c_pp
+    if any_near:
+        nc_pp[near] = 0.0
+    nc_pv = np.multiply(inv2, c5, out=t1)  # -k c_pv
+    nz_I = np.multiply(f1, k * gains.rho3, out=f1)  # -k z_I = k rho3 phi1
+    nc_vp = np.multiply(nz_I, -2.0 * gains.beta, out=inv2)
+    nc_vp /= one_d2  # -k c_vp
+    ns_I[..., ii, jj] = 0.0  # the pair term of an agent with itself is zero (p = v = 0 there)
+    nz_I[..., ii, jj] = 0.0
+    if U is not None:  # the pair term of eq. (6), g = -rho3 phi1 v - rho4 phi2 p = -(nz_I v + ns_I p) / k
+        for a in range(n):
+            Ua = U[..., i0:i1, a]
+            Ua[...] = np.einsum("...ij,...ij->...i", nz_I, v[a])
+            Ua += np.einsum("...ij,...ij->...i", ns_I, p[a])
+            Ua *= -1.0 / k
+    Gr = G[..., i0:i1, :, :, :]
+    # the diagonal blocks du_i/dx_i = sum_{j != i} J(x_i - x_j), as a strided view of G
+    st = G.strides
+    D = np.lib.stride_tricks.as_strided(G[..., i0:i1, :, i0:i1, :], (*batch, r, n, m),
+                                        (*st[:-4], st[-4] + st[-2], st[-3], st[-1]))
+    t2 = np.empty(t.shape)
+    for b in range(n):  # each entry of -J computed in contiguous arrays, then written once into its slot of G
+        A_b = np.multiply(nc_vp, p[b])  # -c_vp p_b
+        B_b = np.multiply(nc_pv, v[b])
+        B_b += np.multiply(nc_pp, p[b], out=t)  # -(c_pv v_b + c_pp p_b)
+        C_b = np.multiply(nc_pv, p[b])  # -c_pv p_b
+        for a in range(n):
+            np.multiply(v[a], A_b, out=t)  # du_a/dp_b = -J
+            t += np.multiply(p[a], B_b, out=t2)
+            if a == b:
+                t += ns_I
+            np.copyto(Gr[..., :, a, :, b], t)
+            np.negative(t.sum(axis=-1), out=D[..., a, b])  # (the entries (i, i) of t are zero)
+            if a <= b:  # du_a/dv_b = -J, symmetric in (a, b)
+                np.multiply(p[a], C_b, out=t)
                 if a == b:
-                    E += s_I
-            else:  # dg_a/dv_b
-                E = p[a] * W3[b - n]
-                if a == b - n:
-                    E += z_I
-            np.negative(E, out=G[..., :, a, :, b])  # du_i/dx_j = -J(x_i - x_j), j != i
-            G[..., diag, a, diag, b] = E.sum(axis=-1)  # du_i/dx_i = sum_{j != i} J
-    return U, G
+                    t += nz_I
+                np.copyto(Gr[..., :, a, :, n + b], t)
+                np.negative(t.sum(axis=-1), out=D[..., a, n + b])
+                if a < b:
+                    np.copyto(Gr[..., :, b, :, n + a], t)
+                    D[..., b, n + a] = D[..., a, n + b]
 
 
 def control_jacobian(X: np.ndarray, gains: FlockingGains) -> np.ndarray:

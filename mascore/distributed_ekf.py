@@ -19,17 +19,18 @@ Batched update and prediction
 -----------------------------
 ``H_i`` has a size that changes with the neighbourhood, which would force a
 Python loop over agents. The update gathers each filter's ``q_i`` observed
-entries instead (index lists padded to a common length, a padded slot
-changing nothing), factors the ``q x q`` innovation covariance and subtracts
-the rank-``q`` correction (:mod:`mascore._masked_gain`, shared with
-:mod:`mascore.distributed_kf`): ``O(M^2 q)`` per filter instead of the
-``O(M^3)`` of a full ``M x M`` solve, and exactly the update with ``H_i``
-(tested against :func:`mascore.kalman.update` with the explicit ``H_i``). The
-prediction uses ``F = I kron A + (I kron B) G`` with the control Jacobian
-``G = dU/dX`` (``nN x 2nN``, written in its final layout): ``F P F^T`` costs
-``1.5 M^3`` instead of ``4 M^3``. All N filters (and all Monte Carlo runs)
-advance chunk by chunk, each chunk's update and prediction running while its
-covariances are in cache.
+rows ``H_i Sigma`` instead, factors the ``q_i x q_i`` innovation covariance
+(LAPACK), solves ``V = L^{-1} H_i Sigma`` and subtracts the rank-``q_i``
+correction ``V^T V`` in place (BLAS, no ``M x M`` temporary): ``O(M^2 q)``
+per filter instead of the ``O(M^3)`` of a full ``M x M`` solve, and exactly the
+update with ``H_i`` (tested against :func:`mascore.kalman.update` with the
+explicit ``H_i``). The prediction uses ``F = I kron A + (I kron B) G`` with the
+control Jacobian ``G = dU/dX`` (``nN x 2nN``, written in its final layout):
+``F P F^T`` costs ``1.5 M^3`` (two matrix products) instead of ``4 M^3``, every
+product by ``A`` or ``B`` being a scaled addition of rows or column blocks, and
+one transpose making the result exactly symmetric. All N filters (and all Monte
+Carlo runs) advance chunk by chunk, each chunk's update and prediction running
+while its covariances are in cache, with work arrays reused between calls.
 
 Shapes: team states are ``(..., N, 2n)`` (rows ``[p_j; v_j]``), covariances
 ``(..., 2nN, 2nN)`` in the matching flattened order; leading axes are the
@@ -52,10 +53,15 @@ raises instead of returning NaN or inf.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.linalg.blas import dgemm as _dgemm
+from scipy.linalg.blas import dtrsm as _dtrsm
+from scipy.linalg.blas import dtrsv as _dtrsv
+from scipy.linalg.lapack import dpotrf as _dpotrf
 
 from . import _flocking_core as _core
 from ._flocking_core import FlockingGains
@@ -66,7 +72,6 @@ from ._flocking_core import check_steps as _check_steps
 from ._flocking_core import check_team as _check_team
 from ._flocking_core import finite_result as _finite_result
 from ._flocking_core import float_array as _float_array
-from ._masked_gain import masked_update as _masked_update
 from ._progress import progress_bar
 from ._validation import SYMMETRY_RTOL, cached_covariance, check_covariance, check_generator, check_positive_int
 from .flocking import FlockingRun
@@ -465,16 +470,27 @@ def _check_sigma(S, name, M, batch, of):
     if S.ndim < 2 or S.shape[-2:] != (M, M):
         raise ValueError(f"Incompatible dimensions of {name}; expected (..., {M}, {M}) but found {S.shape}")
     _check_batch(S.shape[:-2], batch, name, of)
-    scale = float(np.abs(S).max())
+    flat = S.reshape(-1, M, M)
+    chunks = _chunks(flat.shape[0], M)  # chunk by chunk: no temporaries of the size of S
+    scale = float(np.max([[flat[ch].max(), -flat[ch].min()] for ch in chunks], initial=0.0))  # max |S|
     if not np.isfinite(scale):
         raise ValueError(f"{name} contains NaN or infinite entries")
     tol = SYMMETRY_RTOL * max(1.0, scale)
-    if float(np.abs(S - np.swapaxes(S, -1, -2)).max()) > tol:
-        raise ValueError(f"{name} must be symmetric")
-    try:
-        np.linalg.cholesky(S + tol * np.eye(M))
-    except np.linalg.LinAlgError:
-        check_covariance(S, name)  # raises, with the smallest eigenvalue
+    if chunks:
+        T = np.empty((chunks[0].stop, M, M))
+        diag = np.arange(M)
+    for ch in chunks:
+        blk, Tc = flat[ch], T[: ch.stop - ch.start]
+        _transpose_into(blk, Tc)
+        Tc -= blk
+        if not max(float(Tc.max()), -float(Tc.min())) <= tol:
+            raise ValueError(f"{name} must be symmetric")
+        np.copyto(Tc, blk)
+        Tc[:, diag, diag] += tol
+        try:
+            np.linalg.cholesky(Tc)
+        except np.linalg.LinAlgError:
+            check_covariance(S, name)  # raises, with the smallest eigenvalue
     return S
 
 
@@ -489,7 +505,7 @@ def _chunks(K, M):
 
 
 def _flat(batch, X, Sigma, z=None, observed=None):
-    """Broadcast to the common batch and flatten it: (K, N, m), (K, M, M), (K, N, m), (K, M) mask."""
+    """Broadcast to the common batch and flatten it: (K, N, m), (K, M, M), (K, N, m), (K, N) mask."""
     N, m = X.shape[-2:]
     M = N * m
     X = np.broadcast_to(X, (*batch, N, m)).reshape(-1, N, m)
@@ -497,100 +513,253 @@ def _flat(batch, X, Sigma, z=None, observed=None):
     if z is None:
         return X, Sigma
     z = np.broadcast_to(z, (*batch, N, m)).reshape(-1, N, m)
-    d = np.repeat(np.broadcast_to(observed, (*batch, N)).reshape(-1, N), m, axis=-1).astype(float)
-    return X, Sigma, z, d
+    observed = np.broadcast_to(observed, (*batch, N)).reshape(-1, N)
+    return X, Sigma, z, observed
 
 
-def _update_chunk(X, P, z, d, R):
-    """Eqs. (16)-(20) for a chunk of filters: (c, N, m), (c, M, M), (c, N, m), (c, M) -> X_post, P_post."""
+def _gemm_into(alpha, V, beta, P):
+    """``P <- beta P + alpha V^T V`` in place for a C-contiguous symmetric ``(M, M)`` `P` and ``(q, M)`` `V`.
+
+    One BLAS call on ``P^T`` (Fortran order, the same memory): no ``M x M`` temporary and no extra pass.
+    """
+    Pt = P.T
+    out = _dgemm(alpha, V.T, V.T, beta=beta, c=Pt, trans_b=1, overwrite_c=1)
+    if out is not Pt:  # pragma: no cover  (BLAS worked on a copy)
+        P[...] = out.T
+
+
+def _update_rows(X, P, z, observed, R, scale, work=None):
+    """Eqs. (16)-(20) for a chunk of filters, the covariances updated in place.
+
+    `X` ``(c, N, m)``, `P` ``(c, M, M)`` (C-contiguous, overwritten by ``scale * Sigma_post``),
+    `z` ``(c, N, m)``, `observed` ``(c, N)`` bool. The observed rows ``H Sigma`` and the innovation
+    covariances ``S = H (Sigma + R) H^T`` of the chunk are gathered at once (index lists padded to a common
+    length, the padding unused); then per filter, with its own ``q_i`` entries: ``S = L L^T`` (LAPACK),
+    ``V = L^{-1} H Sigma`` solved in place and ``V^T V`` subtracted in place (BLAS, no ``M x M``
+    temporary), ``O(q_i^3 + q_i^2 M + q_i M^2)`` flops.
+    Returns the updated states ``(c, N, m)``.
+    """
     c, N, m = X.shape
-    x = X.reshape(c, N * m)
-    x_post, P_post = _masked_update(x, P, z.reshape(c, N * m) - x, d, R)
-    return x_post.reshape(c, N, m), P_post
+    M = N * m
+    x = X.reshape(c, M)
+    counts = observed.sum(axis=-1)
+    qa = int(counts.max()) if c else 0
+    if qa == 0:  # nothing observed in this chunk
+        if scale != 1.0:
+            P *= scale
+        return X + 0.0
+    agents = np.argsort(~observed, axis=-1, kind="stable")[:, :qa]  # observed agents first, in order
+    idx = (agents[..., None] * m + np.arange(m)).reshape(c, qa * m)  # (c, q) observed state indices (padded)
+    gather = ((np.arange(c) * M)[:, None] + idx).reshape(-1)
+    Ct = None if work is None else work.rows[: gather.size * M].reshape(gather.size, M)
+    Ct = np.take(P.reshape(c * M, M), gather, axis=0, out=Ct).reshape(c, qa * m, M)  # H Sigma, (c, q, M)
+    q_max = qa * m
+    rows = (np.arange(c) * (q_max * M))[:, None, None] + (np.arange(q_max) * M)[None, :, None]
+    S = np.take(Ct, rows + idx[:, None, :])  # H Sigma H^T, (c, q, q)
+    pairs = idx[:, :, None] * M + idx[:, None, :]  # flat (row, column) indices of the observed block
+    S += np.take(R, pairs)  # eq. (17); only the leading q_k x q_k block of filter k is used
+    flat = (np.arange(c) * M)[:, None] + idx
+    nu = np.take(z, flat) - np.take(x, flat)  # H (z - X), eq. (16)
+    a = np.zeros(nu.shape)  # L^{-1} nu, zero in the padding
+    q = counts * m
+    for k in range(c):  # per filter, with its own q_k observed entries
+        qk = q[k]
+        if qk == 0:
+            if scale != 1.0:
+                P[k] *= scale
+            continue
+        L, info = _dpotrf(S[k, :qk, :qk], lower=1)  # S = L L^T (S symmetric: its C order is its F order)
+        if info != 0:
+            raise np.linalg.LinAlgError("innovation covariance is not positive definite")
+        V = Ct[k, :qk]  # H Sigma, overwritten by V = L^{-1} H Sigma (V^T = (H Sigma)^T L^{-T}, in place)
+        Vt = V.T
+        if _dtrsm(1.0, L, Vt, side=1, lower=1, trans_a=1, overwrite_b=1) is not Vt:  # pragma: no cover
+            raise RuntimeError("dtrsm did not work in place")
+        a[k, :qk] = _dtrsv(L, nu[k, :qk], lower=1)  # L^{-1} nu
+        _gemm_into(-scale, V, scale, P[k])  # eq. (20): Sigma - V^T V (times scale), in place
+    x_post = x + np.einsum("kqm,kq->km", Ct, a)  # eq. (18): X + Sigma H^T S^{-1} nu = X + V^T L^{-1} nu
+    return x_post.reshape(c, N, m)
 
 
-def _predict_chunk(X, P, dt, gains, Q_team, out=None):
-    """Eqs. (38), (40) for a chunk of filters, using the rank of ``F - I kron A``.
+def _column_blocks(A, N, n):
+    """Views of the position and velocity columns of ``A (..., N*2n)`` (agent-major), each ``(..., N[, n])``.
 
-    ``F = I kron A + (I kron B) G`` with ``G = dU/dX`` (``nN x 2nN``, from
-    :func:`mascore._flocking_core.control_and_jacobian` in its final layout).
-    With ``Y = G P`` and ``Z = Y G^T`` (``1.5 M^3`` flops for ``M = 2nN``,
-    instead of ``4 M^3`` for ``F P F^T`` with a dense ``F``):
-    ``T = F P = A P + B Y``, ``W = T G^T = F Y^T = A Y^T + B Z`` and
-    ``F P F^T = F T^T = A T^T + B W^T``. The products by the double
-    integrator's ``A`` and ``B`` are scaled additions of contiguous rows; the
-    result is symmetrized.
+    For ``n = 2`` the pairs of columns are viewed as complex numbers, so that an operation on a block runs one
+    strided loop over the agents instead of one loop of length 2 per agent.
+    """
+    if n == 2:
+        Ac = A.view(np.complex128).reshape(*A.shape[:-1], N, 2)
+        return Ac[..., 0], Ac[..., 1]
+    A5 = A.reshape(*A.shape[:-1], N, 2, n)
+    return A5[..., 0, :], A5[..., 1, :]
+
+
+def _pair_view(A, N, n):
+    """``A (..., N*n)`` as ``(..., N)`` complex pairs (``n = 2``) or ``(..., N, n)`` reals."""
+    if n == 2:
+        return A.view(np.complex128)
+    return A.reshape(*A.shape[:-1], N, n)
+
+
+def _strip(M):
+    """Rows per strip of a blocked transpose: a strip of ``M``-long rows spans a few pages (TLB friendly)."""
+    return max(8, min(64, 4096 // M))
+
+
+def _transpose_into(A, T):
+    """``T = A^T`` for stacks of square matrices, in row strips."""
+    M = A.shape[-1]
+    b = _strip(M)
+    for s in range(0, M, b):
+        np.copyto(T[:, :, s:s + b], np.swapaxes(A[:, s:s + b, :], -1, -2))
+
+
+def _symmetrize_sum(A, T):
+    """``A <- A + A^T`` in place (exactly symmetric), through the work array `T` of `A`'s shape."""
+    _transpose_into(A, T)
+    A += T
+
+
+class _Scratch:
+    """Work arrays of one chunk of filters, kept between calls (per thread).
+
+    Fresh large temporaries are expensive: the allocator returns freed memory to the system and the next
+    first touch page-faults, so the kernels write into these instead.
+    """
+
+    def __init__(self, c, N, m):
+        n, M = m // 2, N * m
+        self.key = (c, N, m)
+        self.G = np.empty((c, N, n, N, m))
+        self.Y = np.empty((c, N * n, M))
+        self.Z = np.empty((c, N * n, N * n))
+        self.T = np.empty((c, M, M))
+        self.half = np.empty(c * M * M // 2)
+        self.rows = np.empty(c * M * M)
+
+    def buffer(self, like):
+        """A contiguous temporary of the shape and type of `like` (at most half a chunk of covariances)."""
+        size = like.size * like.itemsize // 8
+        return self.half[:size].view(like.dtype).reshape(like.shape)
+
+
+_local = threading.local()
+
+
+def _scratch(c, N, m):
+    """This thread's work arrays for chunks of `c` filters (reallocated when the sizes change)."""
+    work = getattr(_local, "work", None)
+    if work is None or work.key != (c, N, m):
+        _local.work = None  # free the old arrays first
+        work = _local.work = _Scratch(c, N, m)
+    return work
+
+
+def _block_diagonal(Q, N, m):
+    """The ``(N, m, m)`` diagonal blocks of `Q` if it is block diagonal (e.g. ``I_N kron Q``), else ``None``."""
+    Q6 = Q.reshape(N, m, N, m)
+    ar = np.arange(N)
+    blocks = Q6[ar, :, ar, :].copy()
+    off = Q6.copy()
+    off[ar, :, ar, :] = 0.0
+    return blocks if not np.any(off) else None
+
+
+def _add_noise(S, Q, Qblocks, N, m, scale=1.0):
+    """``S += scale Q`` for a chunk ``(c, M, M)``; only the diagonal blocks when `Q` is block diagonal."""
+    if Qblocks is None:
+        S += Q if scale == 1.0 else scale * Q
+    else:
+        s0, s1, s2 = S.strides
+        blocks = np.lib.stride_tricks.as_strided(S, (S.shape[0], N, m, m), (s0, m * (s1 + s2), s1, s2))
+        blocks += Qblocks if scale == 1.0 else scale * Qblocks
+
+
+def _predict_half(X, Ph, dt, gains, Q, Qblocks, out, work):
+    """Eqs. (38), (40) for a chunk of filters from ``Ph = Sigma / 2`` (overwritten), using the rank of ``F - I kron A``.
+
+    ``F = A' + B' G`` with ``A' = I kron A``, ``B' = I kron B`` (the double integrator) and the control
+    Jacobian ``G = dU/dX`` (``nN x 2nN``, from :func:`mascore._flocking_core.control_and_jacobian`, scaled
+    by ``dt``). With ``Y = G Sigma`` and ``Z = Y G^T`` (``1.5 M^3`` flops for ``M = 2nN``, two BLAS calls
+    per filter),
+
+        F Sigma F^T = X + X^T,   X = [A' Sigma/2 + B' (Y + Z C^T / 2)] A'^T,   C = A'^{-1} B',
+
+    (``X`` carries half of ``A' Sigma A'^T`` and of ``B' Z B'^T`` and all of ``B' Y A'^T``). Every product by
+    ``A'``, ``B'`` or ``C`` is a scaled addition of contiguous rows or of column blocks; the one transpose
+    makes the result exactly symmetric (rounding would otherwise accumulate over long runs).
 
     Returns
     -------
     U : (c, N, n) every agent's control from each filter's estimate
     X_next : (c, N, m)
-    P_next : (c, M, M), written into `out` if given
+    out : (c, M, M) the predicted covariances ``F Sigma F^T + Q`` (may be `Ph` itself)
     """
     c, N, m = X.shape
     n, M, nN = m // 2, N * m, N * m // 2
-    h = 0.5 * dt**2
-    U, G = _core.control_and_jacobian(X, gains)  # eq. (39) on every agent, and dU/dX
+    U, G = _core.control_and_jacobian(X, gains, out=work.G[:c], scale=dt)  # eq. (39), and dt dU/dX
     X_next = _core.propagate(X, U, dt)  # eq. (40)
     G = G.reshape(c, nN, M)
-    Y = G @ P  # (c, nN, M)
-    Z = Y @ np.swapaxes(G, -1, -2)  # (c, nN, nN), = G P G^T
-    T = _apply_AB(P, Y, dt, h, N, n)  # F P, (c, M, M)
-    W = _apply_AB(_transposed(Y), Z, dt, h, N, n)  # F Y^T = T G^T, (c, M, nN)
-    S = _apply_AB(_transposed(T), _transposed(W), dt, h, N, n, out=out)  # F T^T = F P F^T
-    S += Q_team  # eq. (40)
-    S += np.swapaxes(S, -1, -2)  # symmetrize (rounding would otherwise accumulate over long runs)
-    S *= 0.5
-    return U, X_next, S
-
-
-def _transposed(A):
-    """The contiguous transpose of a stack of matrices."""
-    out = np.empty((*A.shape[:-2], A.shape[-1], A.shape[-2]))
-    np.copyto(out, np.swapaxes(A, -1, -2))
-    return out
-
-
-def _apply_AB(P, Y, dt, h, N, n, out=None):
-    """``(I kron A) P + (I kron B) Y`` for the double integrator on contiguous ``(c, 2nN, K)``, ``(c, nN, K)``.
-
-    Rows are (agent, [p; v], axis): the p rows become ``p + dt v + dt^2/2 y`` and
-    the v rows ``v + dt y``.
-    """
-    c, K = P.shape[0], P.shape[-1]
-    P4 = P.reshape(c, N, 2, n * K)
-    Y3 = Y.reshape(c, N, n * K)
-    T = np.empty((c, N, 2, n * K)) if out is None else out.reshape(c, N, 2, n * K)
-    np.multiply(P4[:, :, 1], dt, out=T[:, :, 0])
-    T[:, :, 0] += P4[:, :, 0]
-    T[:, :, 0] += h * Y3
-    np.multiply(Y3, dt, out=T[:, :, 1])
-    T[:, :, 1] += P4[:, :, 1]
-    return T.reshape(c, 2 * n * N, K)
+    Y = np.matmul(G, Ph, out=work.Y[:c])  # dt G Sigma / 2
+    Z = np.matmul(Y, np.swapaxes(G, -1, -2), out=work.Z[:c])  # dt^2 G Sigma G^T / 2
+    # Y <- Y + dt Z C^T / 2 (positions: -dt^2/2 Z dt / 2, velocities: dt Z dt / 2), with Z = G Sigma G^T
+    Yp, Yv = _column_blocks(Y, N, n)
+    Zc = _pair_view(Z, N, n)
+    tz = work.buffer(Zc)
+    np.multiply(Zc, -0.25 * dt, out=tz)
+    Yp += tz
+    np.multiply(Zc, 0.5, out=tz)
+    Yv += tz
+    # rows: W = A' Sigma/2 + B' (2 Y / dt): positions p + dt (v + y), velocities v + 2 y
+    P4 = Ph.reshape(c, N, 2, n * M)
+    Y3 = Y.reshape(c, N, n * M)
+    t = work.buffer(Y3)
+    np.add(P4[:, :, 1], Y3, out=t)
+    np.add(t, Y3, out=P4[:, :, 1])
+    t *= dt
+    P4[:, :, 0] += t
+    # columns: X = W A'^T (position columns + dt velocity columns)
+    Wp, Wv = _column_blocks(Ph, N, n)
+    tc = work.buffer(Wv)
+    np.multiply(Wv, dt, out=tc)
+    Wp += tc
+    _add_noise(Ph, Q, Qblocks, N, m, 0.5)  # eq. (40): Q / 2 in X, Q in X + X^T
+    if out is not Ph and not np.shares_memory(out, Ph):
+        np.copyto(out, Ph)
+    _symmetrize_sum(out, work.T[:c])  # X + X^T = F Sigma F^T + Q, exactly symmetric
+    return U, X_next, out
 
 
 def _predict(X_hat, Sigma, dt, gains, Q_team):
     """Eqs. (38), (40) on checked arrays: ``(..., N, 2n)``, ``(..., M, M)`` (batches broadcast)."""
     batch = np.broadcast_shapes(X_hat.shape[:-2], Sigma.shape[:-2])
     X, P = _flat(batch, X_hat, Sigma)
-    X_next, P_next = np.empty(X.shape), np.empty(P.shape)
-    for ch in _chunks(*P.shape[:2]):
-        _, X_next[ch], _ = _predict_chunk(X[ch], P[ch], dt, gains, Q_team, out=P_next[ch])
     N, m = X_hat.shape[-2:]
+    X_next, P_next = np.empty(X.shape), np.empty(P.shape)
+    chunks = _chunks(*P.shape[:2])
+    work = _scratch(chunks[0].stop if chunks else 1, N, m)
+    Qblocks = _block_diagonal(Q_team, N, m)
+    for ch in chunks:
+        Ph = np.multiply(P[ch], 0.5, out=P_next[ch])
+        _, X_next[ch], _ = _predict_half(X[ch], Ph, dt, gains, Q_team, Qblocks, P_next[ch], work)
     return X_next.reshape(*batch, N, m), P_next.reshape(*batch, N * m, N * m)
 
 
 def _update(X_pred, Sigma, z, observed, R):
     """Eqs. (16)-(20) on checked arrays (batches broadcast); the covariance symmetrized."""
     batch = np.broadcast_shapes(X_pred.shape[:-2], Sigma.shape[:-2], z.shape[:-2], observed.shape[:-1])
-    X, P, Z, d = _flat(batch, X_pred, Sigma, z, observed)
+    X, P, Z, obs = _flat(batch, X_pred, Sigma, z, observed)
     X_post, P_post = np.empty(X.shape), np.empty(P.shape)
-    for ch in _chunks(*P.shape[:2]):
-        X_post[ch], Pc = _update_chunk(X[ch], P[ch], Z[ch], d[ch], R)
-        np.add(Pc, np.swapaxes(Pc, -1, -2), out=P_post[ch])
-        P_post[ch] *= 0.5
     N, m = X_pred.shape[-2:]
-    return X_post.reshape(*batch, N, m), P_post.reshape(*batch, N * m, N * m)
+    M = N * m
+    chunks = _chunks(*P.shape[:2])
+    work = _scratch(chunks[0].stop if chunks else 1, N, m)
+    for ch in chunks:
+        Pc = P_post[ch]
+        np.copyto(Pc, P[ch])
+        X_post[ch] = _update_rows(X[ch], Pc, Z[ch], obs[ch], R, 0.5, work)  # Sigma_post / 2
+        _symmetrize_sum(Pc, work.T[: Pc.shape[0]])  # (Sigma_post + Sigma_post^T) / 2
+    return X_post.reshape(*batch, N, m), P_post.reshape(*batch, M, M)
 
 
 def _step(X_pred, Sigma, z, observed, R, dt, gains, Q_team, in_place=False, predict=True):
@@ -610,30 +779,38 @@ def _step(X_pred, Sigma, z, observed, R, dt, gains, Q_team, in_place=False, pred
     N, m = X_pred.shape[-2:]
     M = N * m
     batch = np.broadcast_shapes(X_pred.shape[:-2], Sigma.shape[:-2], z.shape[:-2], observed.shape[:-1])
-    X, P, Z, d = _flat(batch, X_pred, Sigma, z, observed)
+    X, P, Z, obs = _flat(batch, X_pred, Sigma, z, observed)
     if in_place:  # Sigma_next goes into Sigma itself
         P = Sigma.reshape(-1, M, M)
-        if not np.shares_memory(P, Sigma) or P.shape[0] != X.shape[0]:
+        if not np.shares_memory(P, Sigma) or P.shape[0] != X.shape[0] or not P.flags.c_contiguous:
             raise ValueError("in_place needs Sigma as a contiguous array of the full batch shape")
     K = X.shape[0]
     own = np.arange(K) % N  # filter k is agent k % N's
     n = m // 2
     X_post, U, X_next = np.empty(X.shape), np.empty((K, n)), np.empty(X.shape)
+    chunks = _chunks(K, M)
+    work = _scratch(chunks[0].stop if chunks else 1, N, m)
+    if predict:
+        Qblocks = _block_diagonal(Q_team, N, m)
     if in_place:
         P_next, diag = P, np.empty((K, M))
     else:
         P_post, P_next = np.empty(P.shape), np.empty(P.shape)
-    for ch in _chunks(K, M):
-        X_post[ch], Pc = _update_chunk(X[ch], P[ch], Z[ch], d[ch], R)  # eqs. (16)-(20)
-        if in_place:
-            diag[ch] = np.diagonal(Pc, axis1=-2, axis2=-1)
+    for ch in chunks:
+        if in_place:  # Sigma_post / 2 (the prediction's input), or Sigma_post on the last step
+            X_post[ch] = _update_rows(X[ch], P[ch], Z[ch], obs[ch], R, 0.5 if predict else 1.0, work)  # (16)-(20)
+            diag[ch] = np.diagonal(P[ch], axis1=-2, axis2=-1)
+            if predict:
+                diag[ch] *= 2.0
+            Ph = P[ch]
         else:
-            P_post[ch] = Pc
+            np.copyto(P_post[ch], P[ch])
+            X_post[ch] = _update_rows(X[ch], P_post[ch], Z[ch], obs[ch], R, 1.0, work)  # eqs. (16)-(20)
+            if predict:
+                Ph = np.multiply(P_post[ch], 0.5, out=P_next[ch])
         if not predict:
-            if in_place:
-                P_next[ch] = Pc
             continue
-        U_all, X_next[ch], _ = _predict_chunk(X_post[ch], Pc, dt, gains, Q_team, out=P_next[ch])  # eqs. (38)-(40)
+        U_all, X_next[ch], _ = _predict_half(X_post[ch], Ph, dt, gains, Q_team, Qblocks, P_next[ch], work)  # (38)-(40)
         U[ch] = U_all[np.arange(U_all.shape[0]), own[ch]]  # eq. (39): agent i's control from its own estimate
     shape = (*batch, N, m)
     if in_place:
