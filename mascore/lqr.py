@@ -41,6 +41,7 @@ from ._validation import (
 from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
+from .exceptions import RiccatiError
 from .graphs import WHY_UNDIRECTED as _WHY_SYMMETRIC
 from .graphs import laplacian as _graph_laplacian
 from .graphs import laplacian_spectrum
@@ -111,10 +112,7 @@ def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndar
     m = B.shape[1]
     Q = _weight(Q, "Q", n)
     R = _weight(R, "R", m, definite=True)
-    if not is_stabilizable(A, B):
-        raise ValueError("(A, B) is not stabilizable (a mode with Re s >= 0 is uncontrollable): "
-                         "the LQR problem has no stabilizing solution")
-    return solve_care(A, B, Q, R)
+    return _solved(solve_care, A, B, Q, R, discrete=False)
 
 
 def dlqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -163,10 +161,23 @@ def dlqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.nda
     B = _matrix(B, "B", (n, None))
     Q = _weight(Q, "Q", n)
     R = _weight(R, "R", B.shape[1], definite=True)
-    if not is_stabilizable(A, B, discrete=True):
-        raise ValueError("(A, B) is not stabilizable (a mode with |z| >= 1 is uncontrollable): "
-                         "the LQR problem has no stabilizing solution")
-    return solve_dare(A, B, Q, R)
+    return _solved(solve_dare, A, B, Q, R, discrete=True)
+
+
+def _solved(solver, A, B, Q, R, discrete: bool):
+    """Solve the Riccati equation; test stabilizability only when no stabilizing solution came out.
+
+    A stabilizing solution (residual and closed-loop eigenvalues checked by `solver`) exists only for
+    a stabilizable pair, so the test, one SVD per unstable mode, is needed only to explain a failure.
+    """
+    try:
+        return solver(A, B, Q, R)
+    except RiccatiError:
+        if not is_stabilizable(A, B, discrete=discrete):
+            unstable = "|z| >= 1" if discrete else "Re s >= 0"
+            raise ValueError(f"(A, B) is not stabilizable (a mode with {unstable} is uncontrollable): "
+                             "the LQR problem has no stabilizing solution") from None
+        raise
 
 
 def _undirected_laplacian(laplacian: ArrayLike, name: str, why: str) -> np.ndarray:
