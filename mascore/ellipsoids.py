@@ -807,7 +807,7 @@ def _max_innovation_form(c, P, C, y, W, n_iter=60):
     z2 = np.einsum("...ji,...j->...i", V, np.einsum("...ij,...j->...i", Fi, nu)) ** 2
     # g(t) = sum z2 * t (1 - t) / ((1 - t) + sig t); g'(t) changes sign once (g concave)
     lo = np.zeros(sig.shape[:-1])
-    hi = np.ones(sig.shape[:-1])
+    hi = np.full(sig.shape[:-1], 1.0 - _T_MIN)  # t = 1 exactly is 0/0 when a direction is unmeasured (sig = 0)
     for _ in range(n_iter):
         mid = 0.5 * (lo + hi)
         tt = mid[..., None]
@@ -972,11 +972,12 @@ def _min_trace_one_measurement(c, P, C, y, W):
     g = P @ C0  # (..., n)
     s = g @ C0  # (...,)
     w = W[..., 0, 0]
-    if not (s > 0).all():
-        raise ValueError("prior shape matrix is not positive definite (C P C^T <= 0)")
+    if not (s >= 0).all():
+        raise ValueError("prior shape matrix is not positive semidefinite (C P C^T < 0)")
     if not (w > 0).all():
         raise ValueError("measurement shape W = D R D^T must be positive definite")
-    b = np.einsum("...i,...i->...", g, g) / s
+    informative = s > 0  # C = 0 measures nothing: the gain is zero and the prior is kept (t -> 0)
+    b = np.einsum("...i,...i->...", g, g) / np.where(informative, s, 1.0)
     a = np.maximum(P.trace(axis1=-2, axis2=-1) - b, 0.0)
     mu1 = s / w - 1.0
     with np.errstate(divide="ignore", invalid="ignore"):
