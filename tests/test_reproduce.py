@@ -101,6 +101,8 @@ def test_a_failed_run_leaves_the_previous_output_untouched(tmp_path, fake):
 
 def test_sigint_during_a_run_keeps_the_previous_output(tmp_path):
     script = FAKE + textwrap.dedent(f'''
+        import signal
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # a background job inherits SIGINT ignored
         import mascore.papers.ren2005 as module
         from mascore.reproduce import reproduce_paper
         module.REGISTRY = registry()
