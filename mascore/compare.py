@@ -809,7 +809,7 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "n_agents",
         row["floats"] = float(g["floats"].iloc[0])
         row["cpu_us"] = float(g.drop_duplicates("cell")["cpu_us"].median())
         out.append(row)
-    return pd.DataFrame(out)
+    return pd.DataFrame(out).sort_values(by, kind="stable", ignore_index=True)  # N numerically, not as text
 
 
 def _mean_ci(x: np.ndarray) -> tuple[float, float]:
@@ -963,8 +963,8 @@ def headline(summary):
                        else f"contains {r['containment_mean']:.3f}" if np.isfinite(r["containment_mean"]) else "n/a")
         rows.append({"method": m, "RMSE ratio": f"{r['ratio_mean']:.3f} [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]",
                      "consistency": consistency, "floats/step": r["floats"],
-                     "CPU µs/agent/step": round(r["cpu_us"], 1), "CPU slope in N": round(slopes.get(m, np.nan), 2)})
-    return pd.DataFrame(rows)
+                     "CPU µs/agent/step": round(r["cpu_us"], 2), "CPU slope in N": round(slopes.get(m, np.nan), 2)})
+    return pd.DataFrame(rows).set_index("method")
 
 
 def compare_claims(summary) -> list:
@@ -1098,7 +1098,10 @@ def plot_pareto(summary):
     ax.set_yscale("log")
     ax.set_xlabel("floats sent per agent per step + 1 (log scale; points of one method: N = "
                   + ", ".join(map(str, sizes)) + ")")
-    ax.set_ylabel("own-position RMSE / centralized")
+    ax.set_ylabel("own-position RMSE / centralized (log scale)")
+    _plain_ticks(ax)
+    top = float(base["ratio_hi"].max())
+    ax.set_yticks([t for t in (1, 1.25, 1.5, 2, 3, 4, 6, 8) if t <= top * 1.05])
     ax.axhline(1.0, color="0.5", lw=0.8, ls="--")
     ax.legend(fontsize=8, ncol=2)
     fig.tight_layout()
@@ -1133,6 +1136,8 @@ def plot_cost(summary):
         ax.loglog(g["n_agents"], g["cpu_us"], "o-", color=f"C{i}", label=f"{m} (slope {slopes[m]:.2f})")
     ax.set_xlabel("team size N")
     ax.set_ylabel("CPU per agent per step and run (µs)")
+    ax.set_xticks(sorted(base["n_agents"].unique()))
+    _plain_ticks(ax)
     ax.legend(fontsize=8)
     fig.tight_layout()
     return fig
@@ -1183,6 +1188,16 @@ def plot_robustness(summary):
     axes[-1].legend(fontsize=7)
     fig.tight_layout()
     return fig
+
+
+def _plain_ticks(ax) -> None:
+    """Tick labels as plain numbers (1, 2, 4, 16) on log axes, not powers of ten."""
+    from matplotlib.ticker import FuncFormatter
+
+    fmt = FuncFormatter(lambda v, _: f"{v:g}")
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_formatter(fmt)
+        axis.set_minor_formatter(FuncFormatter(lambda v, _: ""))
 
 
 def _concat(*frames):
