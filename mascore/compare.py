@@ -1166,7 +1166,7 @@ def plot_robustness(summary):
     plt = _plt()
     team = summary[(summary["task"] == "team") & (summary["n_agents"] == 8)]
     base = team[team["study"] == "scaling"]
-    fig, axes = plt.subplots(1, 3, figsize=(11, 3.8), sharey=True)
+    fig, axes = plt.subplots(1, 3, figsize=(11, 4.2), sharey=True)
     panels = (("dropout", "dropout", "link drop-out probability"), ("noise", "noise", "noise distribution"),
               ("wrong-q", "q_scale", "filter Q / true Q"))
     for ax, (study, col, label) in zip(axes, panels):
@@ -1182,11 +1182,17 @@ def plot_robustness(summary):
                 ax.set_xticks(np.arange(len(g)), g["noise"])
         if col == "q_scale":
             ax.set_xscale("log")
+            ax.set_xticks(sorted(frame[col].unique().tolist() + [1.0]))
+            ax.xaxis.set_major_formatter("{x:g}")
         ax.set_xlabel(label)
-    axes[0].set_ylabel("own-position RMSE (m)")
+    axes[0].set_ylabel("own-position RMSE (m, log scale)")
     axes[0].set_yscale("log")
-    axes[-1].legend(fontsize=7)
-    fig.tight_layout()
+    axes[0].set_yticks([0.03, 0.04, 0.05, 0.07, 0.1, 0.15])
+    axes[0].yaxis.set_major_formatter("{x:g}")
+    axes[0].yaxis.set_minor_formatter("")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9, frameon=False)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     return fig
 
 
