@@ -16,18 +16,30 @@ positive (semi)definite covariances) and raises a ``ValueError``/``TypeError``
 that names the argument; a result that is not finite (an overflow) raises too.
 :func:`predict` and :func:`update` are called in long loops, so they pay each
 full check once: the constant matrices (``F``, ``Q``, ``B``, ``H``, ``R``) are
-checked once per distinct value (remembered by their bytes), and the mean and
-covariance that one of these two functions returned are recognised when they
-come back as the next call's arguments (the same objects, still holding the
-same bytes: an array modified in place is checked again). What remains per call
-is a few comparisons and the NaN/inf test of the result;
-``benchmarks/bench_validation.py`` measures it against the unchecked kernels
-:func:`_predict` and :func:`_update`, which compute the same numbers.
+checked once per distinct value (remembered by their bytes), and a mean and
+covariance that passed the full check, or that one of these two functions
+returned, are recognised when they come back as a later call's arguments (the
+same objects, still holding the same bytes: an array modified in place is
+checked again). What remains per call is a few comparisons and the NaN/inf test
+of the result; ``benchmarks/bench_validation.py`` measures it against the
+unchecked kernels :func:`_predict` and :func:`_update`, which compute the same
+numbers.
+
+How the step is computed
+------------------------
+One filter runs on plain matrix products (``ndarray.dot``) and one LAPACK call
+for the gain; a batch runs on products of stacks (no einsum) and one stacked
+inverse of the innovation covariances. The Joseph form's left product
+``(I - K H) P`` is formed as ``P - K (H P)`` from the ``H P`` already at hand
+(the same rounding-error bound, ``n^2 q`` instead of ``n^3`` flops); its right
+factor ``(I - K H)^T`` is formed explicitly, and the result is symmetrized.
 """
 
 from __future__ import annotations
 
 import math
+import threading
+from collections import deque
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -85,14 +97,14 @@ class _RecentArrays:
 
 # A long run calls predict and update with the state the previous call returned and with the same
 # model matrices. Both are recognised cheaply, so that the run pays each full check once:
-# * _RECENT_STATES holds the last few (x, P) results, finite and P symmetric PSD, with their bytes: an
-#   argument that *is* one of them (identity) and still holds the same bytes (not modified in place)
-#   needs no scan;
+# * _RECENT_STATES holds the last few (x, P) pairs that passed the full check or were returned as results,
+#   finite and P symmetric PSD, with their bytes: an argument pair that *is* one of them (identity) and still
+#   holds the same bytes (not modified in place) needs no scan; a recognised pair moves to the front;
 # * _LAST_MODELS holds, per step kind, the last checked model matrices with their bytes (same test);
 #   other model matrices go through the value-keyed memos of _const_finite and _const_covariance.
-_RECENT_STATES: list[tuple] = []
-_NO_STATE = (object(), object(), b"", b"")  # matches no argument
 _N_RECENT = 8
+_RECENT_STATES: deque[tuple] = deque(maxlen=_N_RECENT)
+_NO_STATE = (object(), object(), b"", b"")  # matches no argument
 _MAX_REMEMBERED_BYTES = 1 << 22
 _LAST_MODELS: dict[str, tuple] = {}
 #: Results up to this many bytes are tested for NaN/inf by a Python sum over their bytes (no numpy call).
@@ -100,10 +112,18 @@ _SMALL_BYTES = 2048
 
 
 def _recognised_state(x: object, P: object) -> bool:
-    """True if (x, P) is a result of :func:`predict`/:func:`update`, unmodified since."""
-    for ox, oP, xb, Pb in _RECENT_STATES:
-        if ox is x and oP is P:
-            return x.tobytes() == xb and P.tobytes() == Pb
+    """True if (x, P) passed the checks or is a result of :func:`predict`/:func:`update`, unmodified since.
+
+    A recognised pair moves to the front (least recently used pairs are forgotten first).
+    """
+    for i, item in enumerate(_RECENT_STATES):
+        if item[0] is x and item[1] is P:
+            if x.tobytes() != item[2] or P.tobytes() != item[3]:
+                return False
+            if i:
+                del _RECENT_STATES[i]
+                _RECENT_STATES.appendleft(item)
+            return True
     return False
 
 
@@ -148,19 +168,35 @@ def _checked_state(x: ArrayLike, P: ArrayLike, xname: str = "x", Pname: str = "P
     return x, P
 
 
-def _checked_result(x: np.ndarray, P: np.ndarray, what: str, fresh: tuple) -> tuple[np.ndarray, np.ndarray]:
+def _remember(x: np.ndarray, P: np.ndarray, xb: bytes, Pb: bytes) -> None:
+    """Remember (x, P), finite and P symmetric PSD, with their bytes (see _RECENT_STATES)."""
+    if len(xb) + len(Pb) <= _MAX_REMEMBERED_BYTES:
+        _RECENT_STATES.appendleft((x, P, xb, Pb))
+
+
+def _checked_state_remembered(x: ArrayLike, P: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_checked_state`, then remember the pair: passed again unmodified, it is not checked again."""
+    x, P = _checked_state(x, P)
+    _remember(x, P, x.tobytes(), P.tobytes())
+    return x, P
+
+
+def _checked_result(x: np.ndarray, P: np.ndarray, what: str, fresh: tuple, ok: bool | None = None) -> tuple:
     """Refuse a non-finite result, naming the cause; remember a finite one as a checked state.
 
     `fresh` holds ``(array, name)`` pairs of inputs that change at every step (a
     measurement, an input) and were not scanned: a NaN or inf in them reaches
-    the result, so they are scanned only when the result is not finite.
+    the result, so they are scanned only when the result is not finite. `ok`,
+    if given, is a quick test already made (False may be a false alarm: an
+    overflow of the test itself; then the exact test decides).
     """
     xb, Pb = x.tobytes(), P.tobytes()
-    # NaN/inf anywhere makes a sum NaN/inf; so does an overflow of the sum itself (then the exact test decides)
-    if len(xb) + len(Pb) <= _SMALL_BYTES:
-        ok = math.isfinite(sum(memoryview(xb + Pb).cast("d")))
-    else:
-        ok = math.isfinite(x.sum()) and math.isfinite(P.sum())
+    if ok is None:
+        # NaN/inf anywhere makes a sum NaN/inf; so does an overflow of the sum itself (then the exact test decides)
+        if len(xb) + len(Pb) <= _SMALL_BYTES:
+            ok = math.isfinite(sum(memoryview(xb + Pb).cast("d")))
+        else:
+            ok = math.isfinite(x.sum()) and math.isfinite(P.sum())
     if not ok and not (np.isfinite(x).all() and np.isfinite(P).all()):
         for arr, name in fresh:
             _finite(arr, name)
@@ -168,9 +204,7 @@ def _checked_result(x: np.ndarray, P: np.ndarray, what: str, fresh: tuple) -> tu
             f"the {what} overflowed (NaN or inf in the result) although every input is finite: "
             "the values are too large to be represented in floating point; rescale the problem"
         )
-    if len(xb) + len(Pb) <= _MAX_REMEMBERED_BYTES:
-        _RECENT_STATES.insert(0, (x, P, xb, Pb))
-        del _RECENT_STATES[_N_RECENT:]
+    _remember(x, P, xb, Pb)
     return x, P
 
 
@@ -231,7 +265,7 @@ def predict(
         F, Q, B = _check_predict_model(F, Q, B)
     r = _RECENT_STATES[0] if _RECENT_STATES else _NO_STATE  # the usual case: the last result comes back
     if (x is not r[0] or P is not r[1] or x.tobytes() != r[2] or P.tobytes() != r[3]) and not _recognised_state(x, P):
-        x, P = _checked_state(x, P)
+        x, P = _checked_state_remembered(x, P)
     m = x.shape[-1]
     if F.shape[-1] != m:
         raise ValueError(f"Incompatible dimensions of F; expected (..., {m}, {m}) for x of shape {x.shape} "
@@ -239,7 +273,16 @@ def predict(
     if Q.shape[-1] != m:
         raise ValueError(f"Incompatible dimensions of Q; expected (..., {m}, {m}) for x of shape {x.shape} "
                          f"but found {Q.shape}")
-    if u is not None or B is not None:
+    if u is None and B is None:
+        if x.ndim == 1 and P.ndim == 2 and F.ndim == 2 and Q.ndim == 2:  # one filter: the quickest path
+            x, P, ok = _predict_one(x, P, F, Q, None, None)
+            if ok:  # remember the result (as _checked_result does)
+                xb, Pb = x.tobytes(), P.tobytes()
+                if len(xb) + len(Pb) <= _MAX_REMEMBERED_BYTES:
+                    _RECENT_STATES.appendleft((x, P, xb, Pb))
+                return x, P
+            return _checked_result(x, P, "prediction", (), ok)
+    else:
         if u is None or B is None:
             raise ValueError("B and u must be given together (B alone or u alone cannot form B u)")
         u = _float_array(u, "u")  # scanned only if the result is not finite (a NaN in u reaches x_pred)
@@ -248,13 +291,14 @@ def predict(
                 f"Incompatible dimensions of B {B.shape} and u {u.shape}; expected B ({m}, p) and u (..., p)"
             )
     try:
-        out = _predict(x, P, F, Q, B, u)
+        one = x.ndim == 1 and P.ndim == 2 and F.ndim == 2 and Q.ndim == 2 and (u is None or (u.ndim == 1 and B.ndim == 2))
+        out = (_predict_one if one else _predict_stack)(x, P, F, Q, B, u)
     except ValueError as exc:  # leading (batch) axes that do not broadcast
         raise ValueError(
             f"the batch axes of x {x.shape}, P {P.shape}, F {F.shape}, Q {Q.shape}"
             f"{'' if u is None else f', u {u.shape}'} do not broadcast ({exc})"
         ) from None
-    return _checked_result(*out, "prediction", () if u is None else ((u, "u"),))
+    return _checked_result(out[0], out[1], "prediction", () if u is None else ((u, "u"),), out[2])
 
 
 def kalman_gain(P: ArrayLike, H: ArrayLike, R: ArrayLike) -> np.ndarray:
@@ -354,7 +398,7 @@ def update(
         H, R = _check_update_model(H, R)
     r = _RECENT_STATES[0] if _RECENT_STATES else _NO_STATE  # the usual case: the last result comes back
     if (x is not r[0] or P is not r[1] or x.tobytes() != r[2] or P.tobytes() != r[3]) and not _recognised_state(x, P):
-        x, P = _checked_state(x, P)
+        x, P = _checked_state_remembered(x, P)
     m = x.shape[-1]
     if type(z) is not _ND or z.dtype is not _F64:
         z = _float_array(z, "z")  # scanned only if the result is not finite (a NaN in z reaches x_post)
@@ -368,14 +412,22 @@ def update(
             f"Incompatible dimensions of R; expected (..., {z.shape[-1]}, {z.shape[-1]}) for z of shape {z.shape} "
             f"but found {R.shape}"
         )
+    if x.ndim == 1 and P.ndim == 2 and H.ndim == 2 and R.ndim == 2 and z.ndim == 1:  # one filter: the quickest path
+        x, P, ok = _update_one(x, P, z, H, R)
+        if ok:  # remember the result (as _checked_result does)
+            xb, Pb = x.tobytes(), P.tobytes()
+            if len(xb) + len(Pb) <= _MAX_REMEMBERED_BYTES:
+                _RECENT_STATES.appendleft((x, P, xb, Pb))
+            return x, P
+        return _checked_result(x, P, "measurement update", ((z, "z"),), ok)
     try:
-        out = _update(x, P, z, H, R)
+        out = _update_stack(x, P, z, H, R)
     except ValueError as exc:  # leading (batch) axes that do not broadcast
         raise ValueError(
             f"the batch axes of x {x.shape}, P {P.shape}, z {z.shape}, H {H.shape}, R {R.shape} "
             f"do not broadcast ({exc})"
         ) from None
-    return _checked_result(*out, "measurement update", ((z, "z"),))
+    return _checked_result(out[0], out[1], "measurement update", ((z, "z"),), out[2])
 
 
 def nees(error: ArrayLike, P: ArrayLike) -> np.ndarray:
@@ -557,19 +609,89 @@ def run_filter(
 # ----------------------------------------------------------------------------
 
 
+#: A NaN/inf input or an overflow surfaces as a non-finite result, which the caller refuses by name: no warning
+#: on the way (as a decorator, np.errstate costs half of what the context manager does).
+_quiet = np.errstate(invalid="ignore", over="ignore")
+
+
 def _predict(x, P, F, Q, B=None, u=None):
     """:func:`predict` without checks."""
-    if x.ndim == 1 and P.ndim == 2 and F.ndim == 2:  # one filter: plain matrix products, less call overhead
-        # a NaN/inf input surfaces as a non-finite result, which the caller refuses by name
-        with np.errstate(invalid="ignore", over="ignore"):
-            x_pred = F @ x if u is None else F @ x + B @ u
-            P_pred = F @ P @ F.T + Q
-        return x_pred, 0.5 * (P_pred + P_pred.T)
-    x_pred = np.einsum("...ij,...j->...i", F, x)
+    if x.ndim == 1 and P.ndim == 2 and F.ndim == 2 and Q.ndim == 2 and (u is None or (u.ndim == 1 and B.ndim == 2)):
+        return _predict_one(x, P, F, Q, B, u)[:2]
+    return _predict_stack(x, P, F, Q, B, u)[:2]
+
+
+@_quiet
+def _predict_stack(x, P, F, Q, B, u):
+    """:func:`_predict` with batch axes (products on stacks, no einsum), and whether the result is finite."""
+    Ft = np.swapaxes(F, -1, -2)
+    x_pred = x @ Ft if F.ndim == 2 else (F @ x[..., None])[..., 0]
     if u is not None:
-        x_pred = x_pred + np.einsum("...ij,...j->...i", B, u)
-    P_pred = F @ P @ np.swapaxes(F, -1, -2) + Q
-    return x_pred, _symmetrize(P_pred)
+        x_pred = x_pred + (u @ B.T if B.ndim == 2 else (B @ u[..., None])[..., 0])
+    P_pred = _mm(_mm(F, P, 0), np.ascontiguousarray(Ft), 1)  # a contiguous right factor: faster stacked products
+    P_out = _symmetrize_fresh(_add_into(P_pred, Q))
+    return x_pred, P_out, _finite_test(x_pred, P_out)
+
+
+#: Temporaries of the stacked kernels from this many bytes on are kept for the next call (per thread, per
+#: shape): fresh memory of that size comes from the system, and its page faults cost as much as the products.
+_SCRATCH_MIN_BYTES = 1 << 20
+_SCRATCH_MAX_BYTES = 1 << 25
+_SCRATCH_TOTAL_BYTES = 1 << 26
+_SCRATCH = threading.local()
+
+
+def _mm(a, b, slot):
+    """``a @ b`` on stacks; a large product goes into a kept temporary (`slot` tells apart those alive at once).
+
+    The result is scratch: it must not leave the kernel.
+    """
+    if a.ndim == 2:
+        batch = b.shape[:-2]
+    elif b.ndim == 2 or a.shape[:-2] == b.shape[:-2]:
+        batch = a.shape[:-2]
+    else:
+        batch = np.broadcast_shapes(a.shape[:-2], b.shape[:-2])
+    shape = (*batch, a.shape[-2], b.shape[-1])
+    nbytes = 8 * math.prod(shape)
+    if nbytes < _SCRATCH_MIN_BYTES or nbytes > _SCRATCH_MAX_BYTES or a.dtype != _F64 or b.dtype != _F64:
+        return a @ b
+    pool = getattr(_SCRATCH, "pool", None)
+    if pool is None:
+        pool = _SCRATCH.pool = {}
+    key = (slot, shape)
+    out = pool.get(key)
+    if out is None:
+        if len(pool) >= 8 or nbytes + sum(buf.nbytes for buf in pool.values()) > _SCRATCH_TOTAL_BYTES:
+            pool.clear()
+        out = pool[key] = np.empty(shape)
+    return np.matmul(a, b, out=out)
+
+
+def _add_into(A, B):
+    """``A + B``, in A's storage when the shapes allow."""
+    if B.ndim <= A.ndim and (A.shape[A.ndim - B.ndim:] == B.shape or np.broadcast_shapes(A.shape, B.shape) == A.shape):
+        A += B
+        return A
+    return A + B
+
+
+def _finite_test(x, P):
+    """False if x or P holds NaN/inf (or if the test itself overflows: then the exact test decides)."""
+    return math.isfinite(np.vdot(x, x) + np.vdot(P, P))
+
+
+@_quiet
+def _predict_one(x, P, F, Q, B, u):
+    """One filter (x (m,), P, F, Q (m, m), u (p,) or None): the prediction and whether it is finite."""
+    x_pred = F.dot(x) if u is None else F.dot(x) + B.dot(u)
+    P_pred = F.dot(P).dot(F.T)
+    P_pred += Q
+    P_out = P_pred.T.copy()  # (P + P^T) / 2; a contiguous copy of P^T adds faster than the transposed view
+    P_out += P_pred
+    P_out *= 0.5
+    # NaN/inf anywhere makes this NaN/inf; so does an overflow of the squares (then the exact test decides)
+    return x_pred, P_out, math.isfinite(x_pred.dot(x_pred) + np.vdot(P_out, P_out))  # _finite_test, inlined
 
 
 def _gain(P, H, R):
@@ -579,22 +701,105 @@ def _gain(P, H, R):
     return np.swapaxes(np.linalg.solve(S, H @ P), -1, -2)
 
 
+_LAPACK = None
+_EYES: dict[int, np.ndarray] = {}
+
+
+def _solve_one(S: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``S^{-1} B`` for one (q, q) system, through LAPACK without numpy's gufunc overhead.
+
+    Small q: posv (Cholesky; gesv, what np.linalg.solve calls, if S is not numerically positive
+    definite). From q = 16 on, the LU inverse and one matrix
+    product are quicker than gesv's triangular solves with many right-hand sides (the gain's
+    rounding differs at the eps * cond(S) level; the Joseph form is insensitive to it to first order).
+    """
+    global _LAPACK
+    if _LAPACK is None:
+        from scipy.linalg import lapack
+
+        _LAPACK = lapack
+    if S.shape[0] < 16:
+        X, info = _LAPACK.dposv(S, B)[1:]  # Cholesky: S is positive definite (R is)
+        if info:  # not numerically: LU with pivoting decides
+            X, info = _LAPACK.dgesv(S, B)[2:]
+    else:
+        lu, piv, info = _LAPACK.dgetrf(S)
+        if not info:
+            Si, info = _LAPACK.dgetri(lu, piv)
+            X = Si.dot(B)
+    if info:
+        raise np.linalg.LinAlgError("Singular matrix")
+    return X
+
+
+def _eye(m: int) -> np.ndarray:
+    I = _EYES.get(m)
+    if I is None:
+        I = np.eye(m)
+        I.flags.writeable = False
+        if len(_EYES) < 64:
+            _EYES[m] = I
+    return I
+
+
 def _update(x, P, z, H, R):
     """:func:`update` without checks."""
-    if x.ndim == 1 and P.ndim == 2 and H.ndim == 2 and R.ndim == 2:  # one filter
-        HP = H @ P
-        K = np.linalg.solve(HP @ H.T + R, HP).T  # K^T = S^{-1} H P (S, P symmetric)
-        with np.errstate(invalid="ignore", over="ignore"):  # as in _predict
-            x_post = x + K @ (z - H @ x)
-        I_KH = np.eye(x.shape[0]) - K @ H
-        P_post = I_KH @ P @ I_KH.T + K @ R @ K.T
-        return x_post, 0.5 * (P_post + P_post.T)
-    K = _gain(P, H, R)
-    innovation = z - np.einsum("...ij,...j->...i", H, x)
-    x_post = x + np.einsum("...ij,...j->...i", K, innovation)
-    I_KH = np.eye(x.shape[-1]) - K @ H
-    P_post = I_KH @ P @ np.swapaxes(I_KH, -1, -2) + K @ R @ np.swapaxes(K, -1, -2)
-    return x_post, _symmetrize(P_post)
+    if x.ndim == 1 and P.ndim == 2 and H.ndim == 2 and R.ndim == 2 and z.ndim == 1:
+        return _update_one(x, P, z, H, R)[:2]
+    return _update_stack(x, P, z, H, R)[:2]
+
+
+@_quiet
+def _update_stack(x, P, z, H, R):
+    """:func:`_update` with batch axes (products on stacks, no einsum), and whether the result is finite.
+
+    Few large temporaries, reused in place (as in :func:`_predict_stack`).
+    """
+    Ht = np.ascontiguousarray(np.swapaxes(H, -1, -2))
+    HP = H @ P
+    # K^T = S^{-1} H P (S, P symmetric); on stacks of small matrices the inverse and a product are quicker than
+    # np.linalg.solve (whose triangular solves with many right-hand sides are slow)
+    KT = np.linalg.inv(_add_into(HP @ Ht, R)) @ HP
+    K = np.swapaxes(KT, -1, -2)
+    innovation = z - (x @ Ht if H.ndim == 2 else (H @ x[..., None])[..., 0])
+    x_post = x + (innovation[..., None, :] @ KT)[..., 0, :]
+    # Joseph form (I - K H) P (I - K H)^T + K R K^T, as in _update_one: (I - K H) P = P - K (H P), and
+    # (I - K H)^T = I - H^T K^T formed contiguous
+    At = _mm(Ht, KT, 2)
+    np.subtract(_eye(x.shape[-1]), At, out=At)
+    AP = _mm(K, HP, 3)
+    AP = np.subtract(P, AP, out=AP) if AP.shape == np.broadcast_shapes(AP.shape, P.shape) else P - AP
+    P_post = _mm(AP, At, 4)
+    P_post = _add_into(P_post, _mm(K @ R, KT, 3))
+    P_out = _symmetrize_fresh(P_post)
+    return x_post, P_out, _finite_test(x_post, P_out)
+
+
+@_quiet
+def _update_one(x, P, z, H, R):
+    """One filter (x (m,), z (q,), P, H, R matrices): the Joseph update and whether it is finite."""
+    HP = H.dot(P)
+    S = HP.dot(H.T)
+    S += R
+    K = _solve_one(S, HP).T  # K^T = S^{-1} H P (S, P symmetric)
+    x_post = x + K.dot(z - H.dot(x))
+    # Joseph form (I - K H) P (I - K H)^T + K R K^T, its left product (I - K H) P formed as P - K (H P) from
+    # the H P at hand (the same rounding error bound, eps |K| |H| |P|, with n^2 q instead of n^3 flops)
+    AP = P - K.dot(HP)
+    P_post = AP.dot((_eye(x.shape[0]) - K.dot(H)).T)
+    P_post += K.dot(R).dot(K.T)
+    P_out = P_post.T.copy()  # (P + P^T) / 2; a contiguous copy of P^T adds faster than the transposed view
+    P_out += P_post
+    P_out *= 0.5
+    return x_post, P_out, math.isfinite(x_post.dot(x_post) + np.vdot(P_out, P_out))  # as in _predict_one
+
+
+def _symmetrize_fresh(P):
+    """``(P + P^T) / 2`` of a freshly computed array (a contiguous copy of P^T adds faster than the view)."""
+    out = np.swapaxes(P, -1, -2).copy()
+    out += P
+    out *= 0.5
+    return out
 
 
 def _symmetrize(P):
