@@ -54,6 +54,8 @@ state), reduced covariances are ``(batch, N, M_r, M_r)`` per agent or
 from __future__ import annotations
 
 import math
+import sys
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -779,18 +781,18 @@ def eb_predict(
 def _eb_predict(model, X_hat, Sig, L):
     """:func:`eb_predict` without checks.
 
-    ``Σ^- = Φ Σ Φ^T + (1 1^T) ⊗ 𝒬`` one row block ``i`` at a time (it stays in
-    cache): ``(Φ Σ)[i] = F_1 Σ[i] + F_2 Σ`` with the sparse ``F_1 = I ⊗ A - L ⊗ BK``
-    (a few non-zeros per row) and the shared ``F_2 Σ`` (computed once, sparse
-    ``F_2``), then ``Σ^-[i] = (Φ Σ)[i] (I ⊗ F_1)^T + (Φ Σ)[i] (1 ⊗ F_2)^T + 1^T ⊗ 𝒬``:
-    the first term one matrix product over the ``N`` column blocks, the second
-    a ``M_r x M_r`` block added to each of them.
+    ``Σ^- = Φ Σ Φ^T + (1 1^T) ⊗ 𝒬`` tile by tile: with ``G_i = Σ[i] F_2^T = (F_2 Σ[:, i])^T``
+    (``F_2 Σ`` computed once with the sparse ``F_2``) and ``H = F_2 Σ F_2^T``, tile ``(i, i')`` is
+    ``(F_1 Σ_ii' + (F_2 Σ)_i') F_1^T + F_1 G_i + H + 𝒬``. Σ^- is symmetric, so only the tiles
+    ``i' >= i`` of row block ``i`` are computed (two products with ``F_1``, half the work of the whole
+    row) and written transposed into column block ``i`` while still in cache; the work arrays are
+    reused from step to step (see :func:`_eb_predict_rows`).
     """
-    N, mr, Mr = model.n_agents, model.m_r, model.M_r
+    N, Mr = model.n_agents, model.M_r
     X_pred = _F1_means(model, X_hat, L)
     Lb = L if L.ndim == 3 else L[None]
     nb, C = Sig.shape[0], N * Mr
-    out = np.empty((nb, C, C))
+    out = np.empty((nb, C, C)) if C <= _DENSE_MAX else _RESULTS.empty((nb, C, C))
     Qt = np.kron(np.eye(N), model.Q_r)
     for b in range(nb):
         Lk = Lb[b if Lb.shape[0] > 1 else 0]
@@ -799,20 +801,44 @@ def _eb_predict(model, X_hat, Sig, L):
             out[b] = Phi @ Sig[b] @ Phi.T
             out[b].reshape(N, Mr, N, Mr)[...] += Qt[None, :, None, :]
             continue
-        F1t = F1s.toarray().T
-        K2t = np.swapaxes((Lk[:, None, :, None] * model.BK_r[None, :, None, :]).reshape(N, mr, Mr), -1, -2)
-        F2S = F2s @ Sig[b]  # F_2 Σ, (M_r, C), shared by every row block
-        S3 = Sig[b].reshape(N, Mr, C)
-        for i in range(N):
-            P1 = F1s @ S3[i]  # F_1 Σ[i]
-            P1 += F2S  # (Φ Σ)[i], eq. (34) (eq. (32) for the diagonal block)
-            P2 = out[b, i * Mr:(i + 1) * Mr].reshape(Mr * N, Mr)
-            np.matmul(P1.reshape(Mr * N, Mr), F1t, out=P2)  # (Φ Σ)[i] (I ⊗ F_1)^T
-            # (Φ Σ)[i] (1 ⊗ F_2)^T: column (j, α) sums BK[α, β] L_jl (Φ Σ)[i][:, (j, l, β)]
-            shared = np.matmul(np.swapaxes(P1.reshape(Mr, N, Mr), 0, 1), K2t)  # (N, Mr, mr)
-            shared = np.swapaxes(shared, 0, 1).reshape(Mr, Mr) + Qt
-            P2.reshape(Mr, N, Mr)[...] += shared[:, None, :]
+        _eb_predict_rows(model, Sig[b], Lk, Qt, out[b])
     return X_pred, out
+
+
+def _eb_predict_rows(model, Sb, Lk, Qt, ob):
+    """Σ^- of one topology into `ob` ``(C, C)``, upper block triangle and mirror (see :func:`_eb_predict`)."""
+    N, Mr = model.n_agents, model.M_r
+    C = N * Mr
+    F1, F1t, F2s, K2t = _phi_dense(model, Lk)
+    F1s = _phi_blocks(model, Lk)[0]
+    work = _work(5 * Mr * C)
+    X, P, Q = work[:Mr * C], work[Mr * C:2 * Mr * C], work[2 * Mr * C:3 * Mr * C]
+    F2S = work[3 * Mr * C:4 * Mr * C].reshape(Mr, C)
+    F2S[...] = 0.0
+    # F_2 Σ, shared by every row block: (Φ Σ)[i] = F_1 Σ[i] + F_2 Σ
+    _csr_addmul(F2s, Sb if Sb.flags.c_contiguous else np.ascontiguousarray(Sb), F2S)
+    F2S3 = F2S.reshape(Mr, N, Mr)
+    # H = F_2 Σ F_2^T: column (j, α) sums BK[α, β] L_jl (F_2 Σ)[:, (j, l, β)]
+    H = np.swapaxes(np.matmul(np.swapaxes(F2S3, 0, 1), K2t), 0, 1).reshape(Mr, Mr)
+    # the part of tile (i, i') shared by the whole row block: F_1 G_i + H + 𝒬, G_i = (F_2 Σ)[:, i]^T
+    shared = np.matmul(F1, F2S3.transpose(1, 2, 0), out=work[4 * Mr * C:].reshape(N, Mr, Mr))
+    shared += H + Qt
+    o4 = ob.reshape(N, Mr, N, Mr)
+    for i in range(N):
+        n, c0 = N - i, i * Mr
+        Xi = X[:Mr * n * Mr].reshape(Mr, n * Mr)
+        np.copyto(Xi, Sb[c0:c0 + Mr, c0:])  # Σ_ii', i' >= i
+        Pi = P[:Mr * n * Mr].reshape(Mr, n * Mr)
+        np.copyto(Pi, F2S[:, c0:])
+        _csr_addmul(F1s, Xi, Pi)  # (Φ Σ)_ii' = F_1 Σ_ii' + (F_2 Σ)_i', eq. (34) (eq. (32) for i' = i)
+        Qi = Q[:Mr * n * Mr].reshape(Mr * n, Mr)
+        Q3 = Qi.reshape(Mr, n, Mr)
+        np.copyto(Q3, shared[i][:, None, :])
+        # tile (i, i') = (Φ Σ)_ii' F_1^T + shared (BLAS adds the product to the preset)
+        _gemm_acc(Pi.reshape(Mr * n, Mr), F1t, Qi)
+        np.copyto(o4[i, :, i:, :], Q3)
+        if n > 1:  # tile (i', i) = tile (i, i')^T
+            np.copyto(o4[i + 1:, :, i, :], Q3[:, 1:, :].transpose(1, 2, 0))
 
 
 def eb_update(
@@ -882,20 +908,26 @@ def eb_update(
 def _eb_update(model, X_pred, Sig, Z, S):
     """:func:`eb_update` without checks (`S` a (batch, N, N) bool mask).
 
-    ``Ψ = blockdiag(I - G_i H_i)`` and ``G_i H_i = W_i E_i^T`` has rank
-    ``q_i`` (``E_i`` selects the observed entries), so block ``(i, i')`` of
-    ``Ψ Σ Ψ^T`` is ``T - T[:, idx_i'] W_i'^T`` with ``T = Σ[i, i'] - W_i Σ[i, i'][idx_i, :]``:
-    ``O(N^2 M_r^2 q)`` work instead of the ``O(N^2 M_r^3)`` of dense products,
-    done one row block at a time (it stays in cache).
+    ``Ψ = blockdiag(I - G_i H_i)`` and ``G_i H_i = W_i E_i^T`` has rank ``q_i``
+    (``E_i`` selects the observed entries ``idx_i``), so tile ``(i, i')`` of
+    ``Ψ Σ Ψ^T`` is ``Σ_ii' - W_i V_ii' - Σ[i, idx_i'] W_i'^T`` with
+    ``V_ii' = Σ[idx_i, i'] - Σ[idx_i, idx_i'] W_i'^T`` (all ``V`` computed once from the
+    ``N q`` observed rows): ``O(N^2 M_r^2 q)`` work instead of the ``O(N^2 M_r^3)`` of dense
+    products, one pass over Σ^- with one small batched product per row block.
     """
     N, Mr = model.n_agents, model.M_r
     nb, C = Sig.shape[0], N * Mr
     blocks = Sig.reshape(nb, N, Mr, N, Mr)
-    diag = np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)  # Σ_i^-, (batch, N, Mr, Mr)
+    if C <= _DENSE_MAX:
+        diag = np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)  # Σ_i^-, (batch, N, Mr, Mr)
+    else:  # the same, in a reused work array
+        diag = _work(nb * N * Mr * Mr, slot=2).reshape(nb, N, Mr, Mr)
+        for i in range(N):
+            diag[:, i] = blocks[:, i, :, i, :]
     d = _mask_vec(model, S)
     KH = masked_gain(diag, d, model.R_r)  # G_i H_i, eqs. (17), (19)
-    KRK = KH @ model.R_r @ np.swapaxes(KH, -1, -2)  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
     if C <= _DENSE_MAX:  # a small team: dense products of all row blocks at once are cheapest
+        KRK = KH @ model.R_r @ np.swapaxes(KH, -1, -2)  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
         Psi = np.eye(Mr) - KH  # (batch, N, Mr, Mr)
         T = Psi @ Sig.reshape(nb, N, Mr, C)  # rows
         T = np.swapaxes(T.reshape(nb, C, C), -1, -2)
@@ -906,21 +938,43 @@ def _eb_update(model, X_pred, Sig, Z, S):
     q = idx.shape[-1]
     W = np.take_along_axis(KH, np.broadcast_to(idx[..., None, :], (*KH.shape[:-1], q)), axis=-1)  # (batch, N, Mr, q)
     Wt = np.swapaxes(W, -1, -2)
-    out = np.empty((nb, C, C))
+    Rq = model.R_r[idx[..., :, None], idx[..., None, :]]  # R on the observed entries (padding: W is zero there)
+    out = _RESULTS.empty((nb, C, C))
     for b in range(nb):
-        S3 = Sig[b].reshape(N, Mr, C)
-        for i in range(N):
-            T = out[b, i * Mr:(i + 1) * Mr]
-            np.matmul(W[b, i], S3[i][idx[b, i]], out=T)
-            np.subtract(S3[i], T, out=T)  # rows: (I - G_i H_i) Σ[i]
-            Tc = T.reshape(Mr, N, Mr)
-            cols = np.take_along_axis(Tc, idx[b][None], axis=2)  # (Mr, N, q): T[:, (i', idx_i')]
-            corr = np.matmul(np.swapaxes(cols, 0, 1), Wt[b])  # (N, Mr, Mr)
-            Tv = np.swapaxes(Tc, 0, 1)
-            np.subtract(Tv, corr, out=Tv)  # columns: ... (I - G_i' H_i')^T
-            Tv[i] += KRK[b, i]
+        bi = b if idx.shape[0] > 1 else 0  # one mask for all covariances
+        _eb_update_rows(Sig[b], idx[bi], W[b], Wt[b], Rq[bi], out[b])
     X_post = _apply_gain(model, X_pred, Z, KH)
     return X_post, out, KH
+
+
+def _eb_update_rows(Sb, idx, W, Wt, Rq, ob):
+    """``Ψ Σ^- Ψ^T + blockdiag(G_i H_i R H_i^T G_i^T)`` of one covariance into `ob` (see :func:`_eb_update`)."""
+    N, Mr, q = W.shape
+    C, Nq = N * Mr, N * q
+    cidx = (np.arange(N)[:, None] * Mr + idx).ravel()  # observed rows/columns (i, idx_i) of Σ^-
+    work = _work(2 * Nq * C + Nq * Nq + 4 * N * Mr * q, slot=1)
+    R = np.take(Sb, cidx, axis=0, out=work[:Nq * C].reshape(Nq, C))  # the observed rows, (N q, C)
+    Rc = np.take(R, cidx, axis=1, out=work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq))
+    # V_i[:, i'] = Σ[idx_i, i'] - Σ[idx_i, idx_i'] W_i'^T: the rows of (I - G_i H_i) Σ^- that meet W_i'
+    Vt = np.matmul(Rc.reshape(Nq, N, q).transpose(1, 0, 2), Wt,
+                   out=work[Nq * C + Nq * Nq:2 * Nq * C + Nq * Nq].reshape(N, Nq, Mr))
+    np.subtract(R.reshape(Nq, N, Mr).transpose(1, 0, 2), Vt, out=Vt)  # Vt[i', (i, k)] = V_i[k, i']
+    # tile (i, i') = Σ_ii' - [W_i, Σ[i, idx_i']] [V_ii'; W_i'^T]: one batched product over i' per row block,
+    # with Σ[i, idx_i'] = Σ[idx_i', i]^T (Σ^- is symmetric) taken from the observed rows
+    rest = work[2 * Nq * C + Nq * Nq:]
+    Ab = rest[:N * Mr * 2 * q].reshape(N, Mr, 2 * q)
+    Bb = rest[N * Mr * 2 * q:].reshape(N, 2 * q, Mr)
+    Bb[:, q:, :] = Wt
+    R3 = R.reshape(N, q, C)
+    for i in range(N):
+        rows = slice(i * Mr, (i + 1) * Mr)
+        Ab[:, :, :q] = W[i]
+        Ab[:, :, q:] = R3[:, :, rows].transpose(0, 2, 1)
+        Bb[:, :q, :] = Vt[:, i * q:(i + 1) * q]
+        O = ob[rows]
+        np.matmul(Ab, Bb, out=O.reshape(Mr, N, Mr).transpose(1, 0, 2))
+        np.subtract(Sb[rows], O, out=O)
+        O[:, rows] += W[i] @ Rq[i] @ Wt[i]  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
 
 
 def agent_covariances(model: TeamFilterModel, Sigma: ArrayLike) -> np.ndarray:
@@ -1729,6 +1783,108 @@ def _phi_blocks(model: TeamFilterModel, L: np.ndarray):
         _PHI_CACHE.clear()
     _PHI_CACHE[key] = out = (F1, F2, Phi)
     return out
+
+
+#: Dense F_1, F_1^T and the F_2 factors of the topologies seen last (row-block path).
+_PHI_DENSE: dict = {}
+
+
+def _phi_dense(model: TeamFilterModel, L: np.ndarray):
+    """Dense ``F_1`` and ``F_1^T`` ``(M_r, M_r)``, sparse ``F_2`` and ``K2t[j] = (L_j ⊗ BK)^T`` ``(N, M_r, m_r)``.
+
+    Column block ``j`` of ``X F_2^T`` is ``X[:, j] @ K2t[j]`` for ``X`` of shape ``(M_r, N M_r)``.
+    Cached by value like :func:`_phi_blocks`.
+    """
+    key = (model.A_r.tobytes(), model.BK_r.tobytes(), L.tobytes(), L.shape)
+    hit = _PHI_DENSE.get(key)
+    if hit is not None:
+        return hit
+    N, mr, Mr = model.n_agents, model.m_r, model.M_r
+    F1s, F2s, _ = _phi_blocks(model, L)
+    F1 = F1s.toarray()
+    K2 = (L[:, None, :, None] * model.BK_r[None, :, None, :]).reshape(N, mr, Mr)
+    K2t = np.ascontiguousarray(np.swapaxes(K2, -1, -2))
+    if len(_PHI_DENSE) >= 64:
+        _PHI_DENSE.clear()
+    _PHI_DENSE[key] = out = (F1, F1.T, F2s, K2t)
+    return out
+
+
+def _csr_addmul(A, X: np.ndarray, Y: np.ndarray) -> None:
+    """``Y += A X`` for a CSR matrix `A` and C-contiguous `X`, `Y` (in place, no temporary)."""
+    try:  # the kernel behind ``csr @ dense``, here with a preset, reused output
+        from scipy.sparse._sparsetools import csr_matvecs
+    except ImportError:  # pragma: no cover - private scipy API
+        Y += A @ X
+        return
+    csr_matvecs(A.shape[0], A.shape[1], X.shape[1], A.indptr, A.indices, A.data, X.ravel(), Y.ravel())
+
+
+def _gemm_acc(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> None:
+    """``C += A @ B`` in place for C-contiguous `C` (BLAS ``dgemm`` with ``beta = 1`` on the transposes)."""
+    from scipy.linalg.blas import dgemm
+
+    Ct = C.T  # Fortran-contiguous: Ct += B^T A^T
+    r = dgemm(1.0, B.T, A.T, 1.0, Ct, overwrite_c=1)
+    if r.ctypes.data != Ct.ctypes.data:  # pragma: no cover - dgemm had to copy
+        Ct[...] = r
+
+
+class _ResultPool:
+    """Recycles the large covariance arrays the row-block steps return, once the caller has dropped them.
+
+    A step of a long run returns ``Σ`` of ``8 (N M_r)^2`` bytes (33 MB at N = 32) and the previous one
+    is dropped by then: fresh memory of that size costs a page fault per page at first touch (and on a
+    fragmented machine a transparent-huge-page compaction stall), more than the step's arithmetic. An
+    array is handed out again only when nothing but the pool refers to it (no variable, view or
+    buffer of the caller's); otherwise a fresh one is allocated. At most `n` arrays of at most
+    `max_bytes` together are kept.
+    """
+
+    def __init__(self, n: int = 3, max_bytes: int = 1 << 28, min_bytes: int = 1 << 20) -> None:
+        self._arrs: list[np.ndarray] = []
+        self._n, self._max, self._min = n, max_bytes, min_bytes
+        self._lock = threading.Lock()
+        probe = [np.empty(1)]
+        self._free = sys.getrefcount(probe[0])  # the count of an array only the pool refers to
+
+    def empty(self, shape: tuple) -> np.ndarray:
+        size = math.prod(shape)
+        if size * 8 < self._min or size * 8 > self._max:
+            return np.empty(shape)
+        with self._lock:
+            arrs = self._arrs
+            for k in range(len(arrs)):
+                if arrs[k].shape == shape and sys.getrefcount(arrs[k]) == self._free:
+                    a = arrs.pop(k)
+                    arrs.append(a)  # most recently used last
+                    return a
+            a = np.empty(shape)
+            arrs.append(a)
+            while len(arrs) > self._n or sum(x.nbytes for x in arrs) > self._max:
+                arrs.pop(0)
+            return a
+
+
+_RESULTS = _ResultPool()
+
+
+_WORK = threading.local()
+
+
+def _work(size: int, slot: int = 0) -> np.ndarray:
+    """A flat float work array of at least `size` entries, reused between calls (per thread and slot).
+
+    Fresh memory of this size costs a page fault per 4 kB at first touch; the row-block recursions run
+    with the same sizes at every step.
+    """
+    arrs = getattr(_WORK, "arrs", None)
+    if arrs is None:
+        arrs = _WORK.arrs = {}
+    a = arrs.get(slot)
+    if a is None or a.size < size:
+        a = arrs[slot] = np.empty(size)
+    return a[:size]
 
 
 def _observable(F: np.ndarray, H: np.ndarray, tol: float) -> bool:
