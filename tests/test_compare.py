@@ -44,7 +44,7 @@ def serial(tmp_path_factory):
 def test_grid_cells_cover_the_studies_with_100_seeds():
     cells = compare.grid_cells("quick")
     studies = {c["study"] for c in cells}
-    assert studies == {"scaling", "dropout", "noise", "wrong-q", "shared"}
+    assert studies == {"scaling", "graph", "dropout", "noise", "wrong-q", "shared"}
     blocks = {c["block"] for c in cells}
     assert len(blocks) * compare.SETTINGS.runs >= 100
     assert {c["method"] for c in cells if c["task"] == "team"} == set(compare.TEAM_METHODS)
@@ -259,7 +259,7 @@ def test_vlahakis_rmse_matches_its_error_covariance():
     """
     s = compare.SETTINGS
     N = 5
-    L, Phi = compare._vlahakis_gains(N, s.q_vel, s.r, s.dt)
+    L, Phi = compare._vlahakis_gains(compare.graphs.ring_graph(N).tobytes(), N, s.q_vel, s.r, s.dt)
     G = s.dt * L                                          # (2, 1)
     C = np.array([[1.0, 0.0]])
     A = np.array([[1.0, s.dt], [0.0, 1.0]])
