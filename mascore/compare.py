@@ -1007,8 +1007,9 @@ def headline(summary):
     -------
     pandas.DataFrame
         Team methods at N = 8 on the baseline: RMSE ratio to the centralized
-        filter with its 95 % interval, NEES per dof (or containment), floats
-        sent per step, and the CPU slope in N.
+        filter with its 95 % interval, NEES per dof (or containment), the
+        control performance (steady-state RMS distance of the agents to their
+        centroid, m), floats sent per step, CPU per agent and step, and the CPU slope in N.
 
     Examples
     --------
@@ -1028,7 +1029,7 @@ def headline(summary):
         consistency = (f"NEES {r['nees_own_mean']:.2f}" if np.isfinite(r["nees_own_mean"])
                        else f"contains {r['containment_mean']:.3f}" if np.isfinite(r["containment_mean"]) else "n/a")
         rows.append({"method": m, "RMSE ratio": f"{r['ratio_mean']:.3f} [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]",
-                     "consistency": consistency, "floats/step": r["floats"],
+                     "consistency": consistency, "spread (m)": round(r["spread_mean"], 3), "floats/step": r["floats"],
                      "CPU µs/agent/step": round(r["cpu_us"], 2), "CPU slope in N": round(slopes.get(m, np.nan), 2)})
     return pd.DataFrame(rows).set_index("method")
 
