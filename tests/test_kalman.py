@@ -140,3 +140,26 @@ def test_run_filter_refuses_bad_input_by_name():
                       ("z", np.zeros((4, 2)))):
         with pytest.raises(ValueError, match=name):
             kalman.run_filter(**(good | {name: bad}))
+
+
+@pytest.mark.parametrize("equal", [True, False])
+def test_batch_with_shared_covariance_equals_a_loop_of_filters(equal):
+    """The shared-covariance shortcut of a batch (one covariance and gain) gives what each filter gives alone."""
+    rng = np.random.default_rng(3)
+    n, q, B = 6, 3, 5
+    F = np.eye(n) + 0.05 * rng.standard_normal((n, n))
+    G = rng.standard_normal((n, n))
+    Q, H, R = 0.1 * G @ G.T + 0.01 * np.eye(n), rng.standard_normal((q, n)), np.eye(q)
+    P0 = np.broadcast_to(2.0 * np.eye(n), (B, n, n)).copy()
+    if not equal:
+        P0[0] *= 3.0
+    X, Z = rng.standard_normal((B, n)), rng.standard_normal((2, B, q))
+    x, P = X, P0
+    for z in Z:
+        x, P = kalman.update(*kalman.predict(x, P, F, Q), z, H, R)
+    for b in range(B):
+        xb, Pb = X[b], P0[b]
+        for z in Z:
+            xb, Pb = kalman.update(*kalman.predict(xb, Pb, F, Q), z[b], H, R)
+        np.testing.assert_allclose(x[b], xb, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(P[b], Pb, rtol=1e-12, atol=1e-13)
