@@ -63,6 +63,7 @@ reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json, a
 # book and test reuse results/ while no source file of the package has changed since.
 $(RESULTS): $(STAMP) $(wildcard mascore/*.py mascore/papers/*.py)
 	$(HEADLESS) $(BIN)/python -m mascore reproduce all --out results
+	rm -rf results/compare  # the package changed: no cell of an older table is reused
 	$(HEADLESS) $(BIN)/python -m mascore compare --grid quick --out results --workers $(JOBS)
 	@touch $(RESULTS)
 

@@ -205,6 +205,7 @@ def run_sweep(
     out : str or pathlib.Path
         CSV file of the table. Rows of cells already in it are kept and those
         cells are skipped (resume); new rows are appended as cells finish.
+        Delete the file when the task's code has changed: its rows are not recomputed.
     workers : int
         0 runs the cells in this process; ``K >= 1`` starts a local Dask
         cluster of K single-threaded worker processes for the sweep.
