@@ -307,10 +307,4 @@ def solve(problem: Any, what: str, options: Mapping[str, Any] | None = None) -> 
     value = problem.solve(options)
     if problem.status == "solver_error":
         raise SolverError(f"{what}: the solver {_solver.SOLVER} failed: Clarabel stopped without a solution")
-    if problem.status != "optimal":
-        hint = (" (pass looser tolerances or more iterations in solver_options, e.g. "
-                "{'max_iter': 1000, 'tol_feas': 1e-7})") if problem.status == "optimal_inaccurate" else ""
-        raise SolverError(f"{what}: solver status is {problem.status!r}, expected 'optimal'{hint}")
-    if value is None or not math.isfinite(value):
-        raise SolverError(f"{what}: the solver reported 'optimal' with a non-finite value {value!r}")
-    return value
+    return _solver.optimal_value(what, problem.status, value)

@@ -19,7 +19,7 @@ from .exceptions import SolverError
 
 cp = require("cvxpy", "the SDPs and LMIs (set-membership method='sdp', the distributed observer, the bottom-up LQR)")
 
-__all__ = ["LMI_EPS", "SOLVER", "SOLVER_OPTIONS", "SolverError", "solve", "solver_options"]
+__all__ = ["LMI_EPS", "SOLVER", "SOLVER_OPTIONS", "SolverError", "optimal_value", "solve", "solver_options"]
 
 #: cvxpy solver used for every SDP/LMI.
 SOLVER = cp.CLARABEL
@@ -97,10 +97,41 @@ def solve(problem: cp.Problem, what: str, options: Mapping[str, Any] | None = No
             value = problem.solve(solver=SOLVER, **opts)
     except cp.error.SolverError as exc:
         raise SolverError(f"{what}: the solver {SOLVER} failed: {exc}") from exc
-    if problem.status != cp.OPTIMAL:
+    return optimal_value(what, problem.status, value)
+
+
+def optimal_value(what: str, status: str, value: float | None) -> float:
+    """`value` if `status` is ``"optimal"`` and the value finite; a :class:`SolverError` naming `what` otherwise.
+
+    Parameters
+    ----------
+    what : str
+        Names the program in the error.
+    status : str
+        The solver status, in cvxpy's words (``"optimal"``, ``"optimal_inaccurate"``, ``"infeasible"``, ...).
+    value : float or None
+        The reported optimal value.
+
+    Returns
+    -------
+    float
+        The optimal value.
+
+    Raises
+    ------
+    SolverError
+        If the status is not ``optimal`` (with a hint for ``optimal_inaccurate``) or the value not finite.
+
+    Examples
+    --------
+    >>> from mascore._solver import optimal_value
+    >>> optimal_value("toy", "optimal", 2.0)
+    2.0
+    """
+    if status != cp.OPTIMAL:
         hint = (" (pass looser tolerances or more iterations in solver_options, e.g. "
-                "{'max_iter': 1000, 'tol_feas': 1e-7})") if problem.status == cp.OPTIMAL_INACCURATE else ""
-        raise SolverError(f"{what}: solver status is {problem.status!r}, expected 'optimal'{hint}")
+                "{'max_iter': 1000, 'tol_feas': 1e-7})") if status == cp.OPTIMAL_INACCURATE else ""
+        raise SolverError(f"{what}: solver status is {status!r}, expected 'optimal'{hint}")
     if value is None or not math.isfinite(float(value)):
         raise SolverError(f"{what}: the solver reported 'optimal' with a non-finite value {value!r}")
     return float(value)
