@@ -53,8 +53,9 @@ from typing import Any
 
 import numpy as np
 
-from . import consensus, graphs, rendezvous, set_membership
+from . import consensus, graphs, kalman, rendezvous, set_membership
 from . import distributed_kf as dkf
+from ._validation import check_positive, check_positive_int, check_probability
 from .agents import double_integrator
 from .sweep import Grid, cell_seed
 
@@ -242,18 +243,19 @@ def floats_per_step(method: str, n_agents: int, degree: float = 2.0) -> float:
 
 
 def _check_n_agents(n_agents: object) -> int:
-    if isinstance(n_agents, bool) or not isinstance(n_agents, (int, np.integer)) or n_agents < 3:
-        raise ValueError(f"n_agents must be an integer >= 3 (a ring); got {n_agents!r}")
-    return int(n_agents)
+    return check_positive_int(n_agents, "n_agents", minimum=3)
 
 
-def _check_common(noise: object, dropout: object, q_scale: object) -> None:
+def _check_run(n_agents: object, noise: object, dropout: object, q_scale: object, runs: object,
+               settings: BenchmarkSettings) -> tuple[int, int]:
+    """The arguments of a simulation, checked: ``(n_agents, runs)``."""
+    n_agents = _check_n_agents(n_agents)
     if noise not in NOISES:
         raise ValueError(f"noise must be one of {NOISES}; got {noise!r}")
-    if isinstance(dropout, bool) or not isinstance(dropout, (int, float)) or not 0.0 <= dropout < 1.0:
-        raise ValueError(f"dropout must be a probability in [0, 1); got {dropout!r}")
-    if isinstance(q_scale, bool) or not isinstance(q_scale, (int, float)) or not q_scale > 0:
-        raise ValueError(f"q_scale must be a positive number (the filters' Q over the true Q); got {q_scale!r}")
+    if check_probability(dropout, "dropout") >= 1.0:
+        raise ValueError("dropout must be below 1 (every link lost at every step leaves nothing to compare)")
+    check_positive(q_scale, "q_scale", "(the filters' Q over the true Q)")
+    return n_agents, check_positive_int(settings.runs if runs is None else runs, "runs")
 
 
 # --------------------------------------------------------------------------------------------
@@ -354,27 +356,36 @@ class _Centralized(_Estimator):
 
     @property
     def own_cov(self):
-        N, mr = self.t.N, self.model.m_r
-        blocks = self.P.reshape(self.P.shape[0], N, mr, N, mr)[:, np.arange(N), :, np.arange(N), :]
-        return np.kron(np.moveaxis(blocks, 0, 1), np.eye(self.model.kron))
+        return _own_blocks(self.P, self.model)
+
+
+def _own_blocks(P: np.ndarray, model: dkf.TeamFilterModel) -> np.ndarray:
+    """Agent i's own ``(4, 4)`` covariance from reduced team covariances: ``(B, N, 4, 4)``.
+
+    `P` is ``(B, N m_r, N m_r)`` (one team covariance) or ``(B, N, N m_r, N m_r)`` (agent i's own
+    team covariance, for each i); block ``(i, i)`` of the matrix of agent i is expanded to the full state.
+    """
+    N, mr = model.n_agents, model.m_r
+    blocks = P.reshape(*P.shape[:-2], N, mr, N, mr)[..., np.arange(N), :, np.arange(N), :]  # (N, ..., mr, mr)
+    blocks = np.moveaxis(blocks, 0, -3)
+    if P.ndim == 4:  # (B, N agents, N blocks, mr, mr): agent i's block i
+        blocks = blocks[:, np.arange(N), np.arange(N)]
+    return dkf.expand_covariance(blocks, model.kron)
 
 
 class _Local(_Estimator):
+    """A Kalman filter per agent on its own state (:mod:`mascore.kalman`); one covariance serves all agents."""
+
     def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
         super().__init__(team, x_hat0)
         self.P = team.P0.copy()
 
     def update(self, Z, S):
-        R, N = self.own.shape[:2]
-        z_own = Z[:, np.arange(N), np.arange(N)]
-        G = self.P @ np.linalg.inv(self.P + self.t.R)
-        self.own = self.own + (z_own - self.own) @ G.T
-        I_G = np.eye(4) - G
-        self.P = I_G @ self.P @ I_G.T + G @ self.t.R @ G.T
+        N = self.own.shape[1]
+        self.own, self.P = kalman.update(self.own, self.P, Z[:, np.arange(N), np.arange(N)], np.eye(4), self.t.R)
 
     def predict(self, U):
-        self.own = self.own @ self.t.A.T + U @ self.t.B.T
-        self.P = self.t.A @ self.P @ self.t.A.T + self.t.Q_filter
+        self.own, self.P = kalman.predict(self.own, self.P, self.t.A, self.t.Q_filter, self.t.B, U)
 
     @property
     def own_cov(self):
@@ -395,7 +406,7 @@ class _Song(_Estimator):
         self.Sig = Sig_aug if self.eb else dkf._agent_covariances(self.model, Sig_aug)
 
     def update(self, Z, S):
-        if S.shape[0] != self.Sig.shape[0] and self.Sig.shape[0] == 1 and S.shape[0] > 1:
+        if self.Sig.shape[0] == 1 and S.shape[0] > 1:  # links drop: one covariance per run from now on
             self.Sig = np.broadcast_to(self.Sig, (S.shape[0], *self.Sig.shape[1:])).copy()
         kernel = dkf._eb_update if self.eb else dkf._mb_update
         self.X, self.Sig, _ = kernel(self.model, self.X, self.Sig, Z, S)
@@ -411,10 +422,7 @@ class _Song(_Estimator):
 
     @property
     def own_cov(self):
-        Sig_i = dkf._agent_covariances(self.model, self.Sig) if self.eb else self.Sig
-        N, mr = self.t.N, self.model.m_r
-        blocks = Sig_i.reshape(Sig_i.shape[0], N, N, mr, N, mr)[:, np.arange(N), np.arange(N), :, np.arange(N), :]
-        return np.kron(np.moveaxis(blocks, 0, 1), np.eye(self.model.kron))
+        return _own_blocks(dkf._agent_covariances(self.model, self.Sig) if self.eb else self.Sig, self.model)
 
 
 @functools.lru_cache(maxsize=16)
@@ -562,11 +570,7 @@ def simulate_team(
     >>> bool(0.5 < m["nees_own"].mean() < 1.5)          # a correct Kalman filter is consistent
     True
     """
-    _check_n_agents(n_agents)
-    _check_common(noise, dropout, q_scale)
-    runs = settings.runs if runs is None else runs
-    if isinstance(runs, bool) or not isinstance(runs, (int, np.integer)) or runs < 1:
-        raise ValueError(f"runs must be a positive integer; got {runs!r}")
+    n_agents, runs = _check_run(n_agents, noise, dropout, q_scale, runs, settings)
     if method not in TEAM_METHODS:
         raise ValueError(f"method must be one of {TEAM_METHODS}; got {method!r}")
     team = _team(int(n_agents), noise, float(q_scale), settings, graph)
@@ -680,11 +684,9 @@ def simulate_shared(
     >>> bool(best["rmse_own"].mean() <= ren["rmse_own"].mean())
     True
     """
-    _check_n_agents(n_agents)
-    _check_common(noise, dropout, 1.0)
+    n_agents, runs = _check_run(n_agents, noise, dropout, 1.0, runs, settings)
     if method not in SHARED_METHODS:
         raise ValueError(f"method must be one of {SHARED_METHODS}; got {method!r}")
-    runs = settings.runs if runs is None else runs
     start = time.thread_time()
     init_rng, _, _, drop_rng = np.random.default_rng(seed).spawn(4)
     N = int(n_agents)
