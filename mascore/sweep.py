@@ -225,7 +225,7 @@ def run_sweep(
     Returns
     -------
     pandas.DataFrame
-        Every row of every cell in `cells` (and of cells already in `out`).
+        The whole table at `out`: every row of every cell in `cells`, and of cells already there.
 
     Examples
     --------
@@ -269,7 +269,7 @@ def run_sweep(
         table = table.sort_values([*keys, "_order"], kind="stable").drop(columns="_order")
         table = table[sorted(table.columns)].reset_index(drop=True)
         table.to_csv(out, index=False)
-    return table[table[CELL_COLUMN].isin(list(todo) + list(done))].reset_index(drop=True)
+    return table
 
 
 def _done_cells(out: Path) -> set[str]:
