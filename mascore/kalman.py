@@ -280,9 +280,7 @@ def predict(
         if x.ndim == 1 and P.ndim == 2 and F.ndim == 2 and Q.ndim == 2:  # one filter: the quickest path
             x, P, ok = _predict_one(x, P, F, Q, None, None)
             if ok:  # remember the result (as _checked_result does)
-                xb, Pb = x.tobytes(), P.tobytes()
-                if len(xb) + len(Pb) <= _MAX_REMEMBERED_BYTES:
-                    _RECENT_STATES.appendleft((x, P, xb, Pb))
+                _remember(x, P, x.tobytes(), P.tobytes())
                 return x, P
             return _checked_result(x, P, "prediction", (), ok)
     else:
@@ -418,9 +416,7 @@ def update(
     if x.ndim == 1 and P.ndim == 2 and H.ndim == 2 and R.ndim == 2 and z.ndim == 1:  # one filter: the quickest path
         x, P, ok = _update_one(x, P, z, H, R)
         if ok:  # remember the result (as _checked_result does)
-            xb, Pb = x.tobytes(), P.tobytes()
-            if len(xb) + len(Pb) <= _MAX_REMEMBERED_BYTES:
-                _RECENT_STATES.appendleft((x, P, xb, Pb))
+            _remember(x, P, x.tobytes(), P.tobytes())
             return x, P
         return _checked_result(x, P, "measurement update", ((z, "z"),), ok)
     try:
