@@ -15,7 +15,10 @@ __all__ = [
     "cached_covariance",
     "cached_finite",
     "float_array",
+    "finite_result",
+    "frozen_copy",
     "require_finite",
+    "symmetric_part",
     "check_adjacency",
     "check_covariance",
     "check_generator",
@@ -29,6 +32,9 @@ __all__ = [
 
 #: Relative tolerance used for symmetry and positive-(semi)definiteness checks.
 SYMMETRY_RTOL = 1e-8
+
+#: Most time steps one simulation call accepts (a larger request is refused, not run).
+MAX_STEPS = 10_000_000
 
 
 def as_vector(x: ArrayLike, name: str, size: int | None = None) -> np.ndarray:
@@ -283,6 +289,47 @@ def require_finite(arr: np.ndarray, name: str) -> np.ndarray:
     if not np.isfinite(arr).all():
         raise ValueError(f"{name} contains NaN or infinite entries")
     return arr
+
+
+def finite_result(what: str, *arrays: np.ndarray) -> np.ndarray | tuple[np.ndarray, ...]:
+    """Refuse NaN/inf in a result computed from checked, finite input (an overflow), naming the computation.
+
+    Parameters
+    ----------
+    what : str
+        The computation, as the message names it (``"Kalman update"``).
+    *arrays : ndarray
+        Its results.
+
+    Returns
+    -------
+    ndarray or tuple of ndarray
+        The one array, or the tuple of arrays, unchanged.
+
+    Raises
+    ------
+    ValueError
+        If any entry is NaN or infinite.
+    """
+    for arr in arrays:
+        if not np.isfinite(arr).all():
+            raise ValueError(
+                f"the {what} produced NaN or inf from finite input: the values overflow floating point "
+                "(rescale the problem) or the covariances are too close to singular"
+            )
+    return arrays if len(arrays) != 1 else arrays[0]
+
+
+def symmetric_part(M: np.ndarray) -> np.ndarray:
+    """``(M + M^T) / 2`` over the last two axes (a plain kernel: no checks)."""
+    return 0.5 * (M + np.swapaxes(M, -1, -2))
+
+
+def frozen_copy(arr: np.ndarray) -> np.ndarray:
+    """A read-only float copy of `arr`: what a checked model stores, so no later change slips past its check."""
+    out = np.array(arr, dtype=float, copy=True)
+    out.setflags(write=False)
+    return out
 
 
 class _ValueMemo:
