@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -75,15 +74,12 @@ def svec_size(k: int) -> int:
     return k * (k + 1) // 2
 
 
-@lru_cache(maxsize=64)
 def _svec_index(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rows, columns and scale of the entries of ``svec`` for side `k` (Clarabel's order)."""
+    """Rows, columns and scale of the entries of ``svec`` for side `k` (Clarabel's order), computed afresh."""
     rows, cols = np.triu_indices(k)
     order = np.lexsort((rows, cols))  # by column, then row: Clarabel's upper triangle
     rows, cols = rows[order], cols[order]
     scale = np.where(rows == cols, 1.0, math.sqrt(2.0))
-    for arr in (rows, cols, scale):
-        arr.flags.writeable = False  # shared by the cache
     return rows, cols, scale
 
 

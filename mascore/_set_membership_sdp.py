@@ -1,12 +1,16 @@
-"""The SDPs of the set-membership filter, eqs. (6)-(8), compiled once per size with cvxpy.
+"""The SDPs of the set-membership filter, eqs. (6)-(8), built with cvxpy ``Parameter`` s.
 
 Kept apart from :mod:`mascore.set_membership` so that its closed form runs without
 importing cvxpy: this module is imported only when ``method="sdp"``.
+
+No module-level cache: :func:`correction_sdp` and :func:`prediction_sdp` build a new program
+each call; the owner (:class:`mascore.set_membership.SetMembershipModel`) keeps it and reuses
+it, step after step. A program holds its parameter values and solution between
+``__call__`` and return, so one object must not be solved from two threads at once
+(one model per thread).
 """
 
 from __future__ import annotations
-
-import functools
 
 import numpy as np
 
@@ -82,11 +86,11 @@ class _PredictionSDP:
         return 0.5 * (P + P.T)
 
 
-@functools.lru_cache(maxsize=16)
 def correction_sdp(n: int, p: int, nv: int) -> _CorrectionSDP:
+    """A new compiled correction SDP, eqs. (6)-(7), for state size `n`, `p` outputs, `nv` disturbances."""
     return _CorrectionSDP(n, p, nv)
 
 
-@functools.lru_cache(maxsize=16)
 def prediction_sdp(n: int, nw: int) -> _PredictionSDP:
+    """A new compiled prediction SDP, eq. (8), for state size `n` and `nw` disturbances."""
     return _PredictionSDP(n, nw)
