@@ -21,7 +21,8 @@ Each step comes in two interchangeable implementations, selected with ``method=`
     ``Psi = diag(1 - tau_3 - tau_4, tau_3 I, tau_4 Q^{-1})``. The LMIs are the
     S-procedure certificates that ``x - x_hat`` stays in ``E(0, P)`` whenever
     ``|z| <= 1`` and ``v^T R^{-1} v <= 1`` (or ``w^T Q^{-1} w <= 1``). Each program
-    is compiled once per problem size with cvxpy ``Parameter`` s and reused.
+    is built with cvxpy ``Parameter`` s once per :class:`SetMembershipModel` and reused
+    by that model, step after step.
 
 ``"closed_form"``
     The fast twins. By a Schur complement the LMI reads
@@ -33,26 +34,39 @@ Each step comes in two interchangeable implementations, selected with ``method=`
     (:func:`mascore.ellipsoids.minkowski_sum_min_trace`). Both are vectorized
     over any leading batch dimensions (agents, Monte Carlo runs).
 
-Errors name the step (correction/prediction, time k) and the agent. The public functions check
-their arguments once at entry (the constant system matrices once per distinct value, cached) and
-then call the unchecked kernels of :mod:`mascore.ellipsoids`.
+Errors name the step (correction/prediction, time k) and the agent.
+
+Checked model, plain steps
+--------------------------
+:class:`SetMembershipModel` checks the constant system matrices of eq. (1) once, at
+construction (shapes, finiteness, symmetry, definiteness), derives ``D R D^T`` and
+``G Q G^T`` and stores read-only copies; its :meth:`~SetMembershipModel.correct`,
+:meth:`~SetMembershipModel.predict` and :meth:`~SetMembershipModel.run` check only the data
+of each call (centre, shape, measurement, input) and the result. The functions
+:func:`correct`, :func:`predict` and :func:`run_filter` take the plain arrays and check every
+argument in full on every call (they build a model each time): for many steps with the
+same system, build the model once. No state is shared between models; a model is safe
+to use from several threads with ``method="closed_form"``; with ``method="sdp"`` it owns
+the compiled cvxpy programs, which must not be solved from two threads at once (one
+model per thread).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Literal, NamedTuple
+from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from . import ellipsoids
-from ._validation import as_matrix, check_square
+from ._validation import as_matrix, check_square, frozen_copy
 from ._validation import float_array as _float_array
 
 __all__ = [
     "METHODS",
     "FilterHistory",
+    "SetMembershipModel",
     "correct",
     "predict",
     "run_filter",
@@ -73,6 +87,11 @@ def correct(
     check_consistency: bool = True, solver_options: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Correction step: eqs. (2), (6)-(7): the smallest-trace ellipsoid holding the prior and the measurement set.
+
+    Checks every argument in full on every call, the system matrices included (with
+    ``method="sdp"`` the program is also built anew): for many steps with the same
+    `C`, `D`, `R`, build a :class:`SetMembershipModel` once and call its
+    :meth:`~SetMembershipModel.correct`.
 
     Parameters
     ----------
@@ -132,51 +151,8 @@ def correct(
     """
     method = _check_method(method)
     c, P = _check_ellipsoid(center, shape, "correction", step, agent)
-    n = c.shape[-1]
-    C, D, R, W, W_error = _cached(_correction_system, n, ("C", "D", "R"), C, D, R)
-    p = C.shape[0]
-    y = _float_array(y, "y")
-    if y.shape[-1:] != (p,):
-        raise ValueError(f"y must have last dimension {p} (rows of C); got shape {y.shape}")
-    if not np.isfinite(y).all():
-        raise ValueError(f"{_where('correction', step, agent, None, ())}: y has NaN/inf entries")
-    batch = c.shape[:-1]
-    if P.shape[:-2] != batch or y.shape[:-1] != batch:
-        batch = np.broadcast_shapes(batch, P.shape[:-2], y.shape[:-1])
-        c, P, y = (np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n)),
-                   np.broadcast_to(y, (*batch, p)))
-    if check_consistency:
-        if W_error is not None:
-            raise ValueError(W_error)
-        q = ellipsoids._max_innovation_form(c, P, C, y, W)
-        bad = q > 1.0 + CONSISTENCY_RTOL
-        if bad.any():
-            idx = tuple(int(i) for i in np.argwhere(bad)[0]) if bad.ndim else ()
-            raise ValueError(
-                f"{_where('correction', step, agent, idx, batch)}: measurement y = {y[idx]} is "
-                f"inconsistent with the prior ellipsoid (empty intersection; the innovation form "
-                f"max_t nu^T S_t^-1 nu = {float(q[idx]):.6g} > 1)"
-            )
-    if method == "closed_form":
-        try:
-            new_c, new_P, L, _ = ellipsoids._intersection_min_trace(c, P, C, y, W)
-        except ValueError as exc:
-            raise ValueError(f"{_where('correction', step, agent, None, batch)}: {exc}") from exc
-    else:
-        new_c = np.empty_like(c)
-        new_P = np.empty_like(P)
-        L = np.empty((*batch, n, p))
-        from ._set_membership_sdp import correction_sdp
-
-        sdp = correction_sdp(n, p, D.shape[1])
-        Rinv = np.linalg.inv(R)
-        for idx in np.ndindex(*batch):
-            E = _cholesky(P[idx], "correction", step, agent, idx, batch)
-            where = _where("correction SDP eq. (6)", step, agent, idx, batch)
-            new_P[idx], L[idx] = sdp(E, C, D, Rinv, where, solver_options)
-            new_c[idx] = c[idx] + L[idx] @ (y[idx] - C @ c[idx])
-    _check_result(new_P, "correction", step, agent, batch)
-    return new_c, new_P, L
+    model = SetMembershipModel(C=C, D=D, R=R, n=c.shape[-1])
+    return model._correct(c, P, y, method, step, agent, check_consistency, solver_options)
 
 
 def predict(
@@ -185,6 +161,11 @@ def predict(
     step: int | None = None, agent: ArrayLike | None = None, solver_options: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Prediction step: eqs. (4), (8): the smallest-trace ellipsoid holding ``A E + G W (+ B u)``.
+
+    Checks every argument in full on every call, the system matrices included (with
+    ``method="sdp"`` the program is also built anew): for many steps with the same
+    `A`, `G`, `Q`, `B`, build a :class:`SetMembershipModel` once and call its
+    :meth:`~SetMembershipModel.predict`.
 
     Parameters
     ----------
@@ -235,36 +216,10 @@ def predict(
     """
     method = _check_method(method)
     c, P = _check_ellipsoid(center, shape, "prediction", step, agent)
-    n = c.shape[-1]
     if (B is None) != (u is None):
         raise ValueError("give both B and u, or neither")
-    A, G, Q, GQG, sqrt_tr_GQG, B = _cached(_prediction_system, n, ("A", "G", "Q", "B"), A, G, Q,
-                                           *(() if B is None else (B,)))
-    batch = c.shape[:-1]
-    if P.shape[:-2] != batch:
-        batch = np.broadcast_shapes(batch, P.shape[:-2])
-        c, P = np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n))
-    new_c = c @ A.T
-    if B is not None:
-        u = _float_array(u, "u")
-        if u.shape[-1:] != B.shape[1:] or not np.isfinite(u).all():
-            raise ValueError(f"u must be finite with last dimension {B.shape[1]} (columns of B); got shape {u.shape}")
-        new_c = new_c + u @ B.T
-    if method == "closed_form":  # trace-optimal Minkowski sum of E(0, A P A^T) and E(0, G Q G^T)
-        APA = A @ P @ A.T
-        new_P, _ = ellipsoids._sum_min_trace(APA, GQG, ellipsoids._sqrt_trace(APA), sqrt_tr_GQG)
-    else:
-        new_P = np.empty_like(P)
-        from ._set_membership_sdp import prediction_sdp
-
-        sdp = prediction_sdp(n, G.shape[1])
-        Qinv = np.linalg.inv(Q)
-        for idx in np.ndindex(*batch):
-            E = _cholesky(P[idx], "prediction", step, agent, idx, batch)
-            new_P[idx] = sdp(A @ E, G, Qinv, _where("prediction SDP eq. (8)", step, agent, idx, batch),
-                             solver_options)
-    _check_result(new_P, "prediction", step, agent, batch)
-    return new_c, new_P
+    model = SetMembershipModel(A=A, G=G, Q=Q, B=B, n=c.shape[-1])
+    return model._predict(c, P, u, method, step, agent, solver_options)
 
 
 @dataclass(frozen=True)
@@ -308,8 +263,11 @@ def run_filter(
 ) -> FilterHistory:
     """Algorithm 1 for open-loop data: correct with ``y[k]``, then predict, k = 0..T_f.
 
-    The initial ellipsoid, the measurement array and the method are checked before the
-    first step; each step then checks its data as :func:`correct` and :func:`predict` do.
+    Checks every argument in full on every call (the system matrices through a
+    :class:`SetMembershipModel` built for the call); :meth:`SetMembershipModel.run` runs
+    the same filter on a model checked once. The initial ellipsoid, the measurement array
+    and the method are checked before the first step; each step then checks its
+    measurement, input and result.
 
     Parameters
     ----------
@@ -372,6 +330,334 @@ def run_filter(
     True
     """
     method = _check_method(method)
+    c, P, y, u = _check_run_data(x0_hat, P0, y, B, u)
+    model = SetMembershipModel(A=A, G=G, C=C, D=D, Q=Q, R=R, B=B, n=P.shape[-1])
+    return model._run(c, P, y, u, method, agent, solver_options)
+
+
+@dataclass(frozen=True, eq=False)
+class SetMembershipModel:
+    """The system of eq. (1), checked once: the filter's constant matrices, stored read-only.
+
+    Give the motion part (`A`, `G`, `Q`, optionally `B`) for :meth:`predict`, the
+    measurement part (`C`, `D`, `R`) for :meth:`correct`, both for :meth:`run`. The
+    constructor checks every matrix (shape, finiteness, symmetry, definiteness),
+    derives ``D R D^T`` and ``G Q G^T`` and keeps read-only copies, so that a later change
+    to the caller's arrays cannot reach the filter; the methods then check only the data
+    of each call (centre, shape, measurement, input) and the result.
+
+    Parameters
+    ----------
+    A : (n, n) array_like, optional
+        State matrix.
+    G : (n, w) array_like, optional
+        Disturbance matrix (with `A` and `Q`).
+    C : (p, n) array_like, optional
+        Output matrix.
+    D : (p, v) array_like, optional
+        Output-disturbance matrix (with `C` and `R`).
+    Q : (w, w) array_like, optional
+        Shape of the process-disturbance ellipsoid, positive definite.
+    R : (v, v) array_like, optional
+        Shape of the output-disturbance ellipsoid, positive definite.
+    B : (n, m) array_like, optional
+        Input matrix (then :meth:`predict` needs `u`).
+    n : int, optional
+        State size (default: from `A`, else from the columns of `C`).
+
+    Notes
+    -----
+    With ``method="closed_form"`` a model holds no mutable state and may be shared between
+    threads. With ``method="sdp"`` it compiles its cvxpy programs on first use and reuses
+    them; a cvxpy program keeps its parameter values while it is solved, so one model must
+    not run SDP steps from two threads at once: give each thread its own model.
+
+    Raises
+    ------
+    ValueError
+        A matrix of the wrong shape, with NaN/inf entries, not symmetric positive definite
+        (`Q`, `R`), or a part given incompletely; the message names the matrix.
+    TypeError
+        A matrix that is not an array of real numbers.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import set_membership as sm
+    >>> model = sm.SetMembershipModel(A=[[1.0, 0.1], [0.0, 1.0]], G=np.eye(2), C=[[1.0, 0.0]], D=[[1.0]],
+    ...                               Q=0.01 * np.eye(2), R=[[0.04]])
+    >>> c, P, L = model.correct(np.zeros(2), np.eye(2), [0.1])
+    >>> c, P = model.predict(c, P)
+    >>> model.A.flags.writeable                                  # read-only: checked once, cannot change
+    False
+    """
+
+    A: np.ndarray | None = None
+    G: np.ndarray | None = None
+    C: np.ndarray | None = None
+    D: np.ndarray | None = None
+    Q: np.ndarray | None = None
+    R: np.ndarray | None = None
+    B: np.ndarray | None = None
+    n: int | None = None
+    W: np.ndarray | None = field(init=False, repr=False, default=None)  #: D R D^T
+    W_error: str | None = field(init=False, repr=False, default=None)  #: why W cannot serve the consistency test
+    GQG: np.ndarray | None = field(init=False, repr=False, default=None)  #: G Q G^T
+    sqrt_tr_GQG: np.ndarray | None = field(init=False, repr=False, default=None)  #: sqrt(trace(G Q G^T))
+    _programs: dict = field(init=False, repr=False, default_factory=dict)  #: compiled SDPs (method="sdp")
+
+    def __post_init__(self) -> None:
+        motion = (self.A, self.G, self.Q)
+        measurement = (self.C, self.D, self.R)
+        if any(m is not None for m in motion) and any(m is None for m in motion):
+            raise ValueError("give A, G and Q together (the motion part of the model)")
+        if any(m is not None for m in measurement) and any(m is None for m in measurement):
+            raise ValueError("give C, D and R together (the measurement part of the model)")
+        if self.B is not None and self.A is None:
+            raise ValueError("B needs the motion part A, G, Q")
+        if self.A is None and self.C is None:
+            raise ValueError("give the motion part (A, G, Q) or the measurement part (C, D, R), or both")
+        n = self.n
+        if n is None:
+            n = (check_square(self.A, "A") if self.A is not None else as_matrix(self.C, "C", (None, None))).shape[1]
+        set_ = object.__setattr__
+        set_(self, "n", int(n))
+        if self.A is not None:
+            A = check_square(self.A, "A", n)
+            G = as_matrix(self.G, "G (disturbance matrix)", (n, None))
+            Q = _check_pd_small(self.Q, "Q", G.shape[1])
+            GQG = G @ Q @ G.T
+            set_(self, "A", frozen_copy(A))
+            set_(self, "G", frozen_copy(G))
+            set_(self, "Q", frozen_copy(Q))
+            set_(self, "GQG", frozen_copy(GQG))
+            set_(self, "sqrt_tr_GQG", frozen_copy(ellipsoids._sqrt_trace(GQG)))
+            if self.B is not None:
+                set_(self, "B", frozen_copy(as_matrix(self.B, "B", (n, None))))
+        if self.C is not None:
+            C = as_matrix(self.C, "C", (None, n))
+            p = C.shape[0]
+            D = as_matrix(self.D, "D", (p, None))
+            R = _check_pd_small(self.R, "R", D.shape[1])
+            W = D @ R @ D.T
+            try:
+                _check_pd_small(W, "D R D^T (needed to test the consistency of y)", p)
+            except ValueError as exc:
+                set_(self, "W_error", str(exc))
+            for name, value in (("C", C), ("D", D), ("R", R), ("W", W)):
+                set_(self, name, frozen_copy(value))
+
+    def correct(
+        self, center: ArrayLike, shape: ArrayLike, y: ArrayLike, method: Method = "closed_form",
+        step: int | None = None, agent: ArrayLike | None = None, check_consistency: bool = True,
+        solver_options: dict | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Correction step, eqs. (2), (6)-(7), with this model's `C`, `D`, `R` (see :func:`correct`).
+
+        Checks `center`, `shape` (positive definite), `y` and the result; the matrices were
+        checked at construction.
+
+        Parameters
+        ----------
+        center : (..., n) array_like
+            Predicted centre ``x_hat_{k|k-1}``.
+        shape : (..., n, n) array_like
+            Predicted shape ``P_{k|k-1}``, positive definite.
+        y : (..., p) array_like
+            Measurement ``y_k``.
+        method, step, agent, check_consistency, solver_options
+            As in :func:`correct`.
+
+        Returns
+        -------
+        center : (..., n) ndarray
+        shape : (..., n, n) ndarray
+        gain : (..., n, p) ndarray
+            As in :func:`correct`.
+        """
+        method = _check_method(method)
+        c, P = self._ellipsoid(center, shape, "correction", step, agent, self.C)
+        return self._correct(c, P, y, method, step, agent, check_consistency, solver_options)
+
+    def predict(
+        self, center: ArrayLike, shape: ArrayLike, u: ArrayLike | None = None, method: Method = "closed_form",
+        step: int | None = None, agent: ArrayLike | None = None, solver_options: dict | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Prediction step, eqs. (4), (8), with this model's `A`, `G`, `Q` (and `B`) (see :func:`predict`).
+
+        Parameters
+        ----------
+        center : (..., n) array_like
+            Corrected centre ``x_hat_{k|k}``.
+        shape : (..., n, n) array_like
+            Corrected shape ``P_{k|k}``, positive definite.
+        u : (..., m) array_like, optional
+            Known input, exactly when the model has `B`.
+        method, step, agent, solver_options
+            As in :func:`predict`.
+
+        Returns
+        -------
+        center : (..., n) ndarray
+        shape : (..., n, n) ndarray
+            As in :func:`predict`.
+        """
+        method = _check_method(method)
+        c, P = self._ellipsoid(center, shape, "prediction", step, agent, self.A)
+        if (self.B is None) != (u is None):
+            raise ValueError("give both B and u, or neither")
+        return self._predict(c, P, u, method, step, agent, solver_options)
+
+    def run(
+        self, x0_hat: ArrayLike, P0: ArrayLike, y: ArrayLike, u: ArrayLike | None = None,
+        method: Method = "closed_form", agent: ArrayLike | None = None, solver_options: dict | None = None,
+    ) -> FilterHistory:
+        """Algorithm 1 for open-loop data with this model (see :func:`run_filter`).
+
+        Parameters
+        ----------
+        x0_hat : (..., n) array_like
+            Centre of the initial ellipsoid.
+        P0 : (..., n, n) array_like
+            Its shape matrix, positive definite (checked in full once).
+        y : (T_f + 1, ..., p) array_like
+            Measurements.
+        u : (T_f + 1, ..., m) array_like, optional
+            Known inputs, exactly when the model has `B`.
+        method, agent, solver_options
+            As in :func:`run_filter`.
+
+        Returns
+        -------
+        FilterHistory
+        """
+        method = _check_method(method)
+        if self.A is None or self.C is None:
+            raise ValueError("run needs both parts of the model: A, G, Q and C, D, R")
+        c, P, y, u = _check_run_data(x0_hat, P0, y, self.B, u)
+        if P.shape[-1] != self.n:
+            raise ValueError(f"P0 must be ({self.n}, {self.n}) like the model's A; got {P.shape}")
+        return self._run(c, P, y, u, method, agent, solver_options)
+
+    # -- the steps on checked data (the public methods and functions check first)
+
+    def _ellipsoid(self, center, shape, what, step, agent, part):
+        if part is None:
+            raise ValueError(f"this model has no {'C, D, R' if what == 'correction' else 'A, G, Q'}: "
+                             f"it cannot run the {what} step")
+        c, P = _check_ellipsoid(center, shape, what, step, agent)
+        if c.shape[-1] != self.n:
+            raise ValueError(f"{_where(what, step, agent, None, ())}: center has size {c.shape[-1]} but the "
+                             f"model's state has size {self.n}")
+        return c, P
+
+    def _program(self, key, build, *sizes):
+        """This model's compiled SDP `key` (built on first use, then reused; not for concurrent use)."""
+        sdp = self._programs.get(key)
+        if sdp is None:
+            sdp = self._programs[key] = build(*sizes)
+        return sdp
+
+    def _correct(self, c, P, y, method, step, agent, check_consistency, solver_options):
+        """Eqs. (2), (6)-(7) on a checked ellipsoid `c`, `P` (`y` checked here)."""
+        if self.C is None:
+            raise ValueError("this model has no C, D, R: it cannot run the correction step")
+        C, D, R, W, W_error = self.C, self.D, self.R, self.W, self.W_error
+        n = self.n
+        p = C.shape[0]
+        y = _float_array(y, "y")
+        if y.shape[-1:] != (p,):
+            raise ValueError(f"y must have last dimension {p} (rows of C); got shape {y.shape}")
+        if not np.isfinite(y).all():
+            raise ValueError(f"{_where('correction', step, agent, None, ())}: y has NaN/inf entries")
+        batch = c.shape[:-1]
+        if P.shape[:-2] != batch or y.shape[:-1] != batch:
+            batch = np.broadcast_shapes(batch, P.shape[:-2], y.shape[:-1])
+            c, P, y = (np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n)),
+                       np.broadcast_to(y, (*batch, p)))
+        if check_consistency:
+            if W_error is not None:
+                raise ValueError(W_error)
+            q = ellipsoids._max_innovation_form(c, P, C, y, W)
+            bad = q > 1.0 + CONSISTENCY_RTOL
+            if bad.any():
+                idx = tuple(int(i) for i in np.argwhere(bad)[0]) if bad.ndim else ()
+                raise ValueError(
+                    f"{_where('correction', step, agent, idx, batch)}: measurement y = {y[idx]} is "
+                    f"inconsistent with the prior ellipsoid (empty intersection; the innovation form "
+                    f"max_t nu^T S_t^-1 nu = {float(q[idx]):.6g} > 1)"
+                )
+        if method == "closed_form":
+            try:
+                new_c, new_P, L, _ = ellipsoids._intersection_min_trace(c, P, C, y, W)
+            except ValueError as exc:
+                raise ValueError(f"{_where('correction', step, agent, None, batch)}: {exc}") from exc
+        else:
+            new_c = np.empty_like(c)
+            new_P = np.empty_like(P)
+            L = np.empty((*batch, n, p))
+            from ._set_membership_sdp import correction_sdp
+
+            sdp = self._program("correction", correction_sdp, n, p, D.shape[1])
+            Rinv = np.linalg.inv(R)
+            for idx in np.ndindex(*batch):
+                E = _cholesky(P[idx], "correction", step, agent, idx, batch)
+                where = _where("correction SDP eq. (6)", step, agent, idx, batch)
+                new_P[idx], L[idx] = sdp(E, C, D, Rinv, where, solver_options)
+                new_c[idx] = c[idx] + L[idx] @ (y[idx] - C @ c[idx])
+        _check_result(new_P, "correction", step, agent, batch)
+        return new_c, new_P, L
+
+    def _predict(self, c, P, u, method, step, agent, solver_options):
+        """Eqs. (4), (8) on a checked ellipsoid `c`, `P` (`u` checked here)."""
+        if self.A is None:
+            raise ValueError("this model has no A, G, Q: it cannot run the prediction step")
+        A, G, Q, GQG, sqrt_tr_GQG, B = self.A, self.G, self.Q, self.GQG, self.sqrt_tr_GQG, self.B
+        n = self.n
+        batch = c.shape[:-1]
+        if P.shape[:-2] != batch:
+            batch = np.broadcast_shapes(batch, P.shape[:-2])
+            c, P = np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n))
+        new_c = c @ A.T
+        if B is not None:
+            u = _float_array(u, "u")
+            if u.shape[-1:] != B.shape[1:] or not np.isfinite(u).all():
+                raise ValueError(f"u must be finite with last dimension {B.shape[1]} (columns of B); got shape {u.shape}")
+            new_c = new_c + u @ B.T
+        if method == "closed_form":  # trace-optimal Minkowski sum of E(0, A P A^T) and E(0, G Q G^T)
+            APA = A @ P @ A.T
+            new_P, _ = ellipsoids._sum_min_trace(APA, GQG, ellipsoids._sqrt_trace(APA), sqrt_tr_GQG)
+        else:
+            new_P = np.empty_like(P)
+            from ._set_membership_sdp import prediction_sdp
+
+            sdp = self._program("prediction", prediction_sdp, n, G.shape[1])
+            Qinv = np.linalg.inv(Q)
+            for idx in np.ndindex(*batch):
+                E = _cholesky(P[idx], "prediction", step, agent, idx, batch)
+                new_P[idx] = sdp(A @ E, G, Qinv, _where("prediction SDP eq. (8)", step, agent, idx, batch),
+                                 solver_options)
+        _check_result(new_P, "prediction", step, agent, batch)
+        return new_c, new_P
+
+    def _run(self, c, P, y, u, method, agent, solver_options):
+        """Algorithm 1 on checked data: correct with ``y[k]``, then predict, k = 0..T_f."""
+        out: dict[str, list] = {k: [] for k in ("cc", "pc", "cp", "pp", "L")}
+        for k in range(y.shape[0]):
+            c, P, L = self._correct(c, P, y[k], method, k, agent, True, solver_options)
+            out["cc"].append(c)
+            out["pc"].append(P)
+            out["L"].append(L)
+            uk = None if u is None else u[k]
+            c, P = self._predict(c, P, uk, method, k, agent, solver_options)
+            out["cp"].append(c)
+            out["pp"].append(P)
+        return FilterHistory(np.array(out["cc"]), np.array(out["pc"]), np.array(out["cp"]),
+                             np.array(out["pp"]), np.array(out["L"]))
+
+
+def _check_run_data(x0_hat, P0, y, B, u):
+    """The initial ellipsoid, the measurements and the inputs of :func:`run_filter`, checked."""
     P = ellipsoids._shape_matrix(P0, "P0")
     c = ellipsoids._points(x0_hat, "x0_hat", P.shape[-1])
     y = _float_array(y, "y")
@@ -385,19 +671,7 @@ def run_filter(
         if u.ndim < 1 or u.shape[0] < y.shape[0]:
             raise ValueError(f"u must have one input per measurement, shape (T_f + 1, ..., m) with T_f + 1 = "
                              f"{y.shape[0]}; got shape {u.shape}")
-    out: dict[str, list] = {k: [] for k in ("cc", "pc", "cp", "pp", "L")}
-    for k in range(y.shape[0]):
-        c, P, L = correct(c, P, y[k], C, D, R, method=method, step=k, agent=agent, solver_options=solver_options)
-        out["cc"].append(c)
-        out["pc"].append(P)
-        out["L"].append(L)
-        uk = None if u is None else u[k]
-        c, P = predict(c, P, A, G, Q, B=B, u=uk, method=method, step=k, agent=agent,
-                       solver_options=solver_options)
-        out["cp"].append(c)
-        out["pp"].append(P)
-    return FilterHistory(np.array(out["cc"]), np.array(out["pc"]), np.array(out["cp"]),
-                         np.array(out["pp"]), np.array(out["L"]))
+    return c, P, y, u
 
 
 # --------------------------------------------------------------------------- private
@@ -473,75 +747,6 @@ def _check_result(P, what, step, agent, batch):
         np.linalg.cholesky(P)
     except np.linalg.LinAlgError:
         _require_pd(P, what, step, agent, "the new shape matrix")
-
-
-class _CorrectionSystem(NamedTuple):
-    C: np.ndarray
-    D: np.ndarray
-    R: np.ndarray
-    W: np.ndarray  #: D R D^T
-    W_error: str | None  #: why W cannot serve the consistency test (not positive definite), if so
-
-
-class _PredictionSystem(NamedTuple):
-    A: np.ndarray
-    G: np.ndarray
-    Q: np.ndarray
-    GQG: np.ndarray  #: G Q G^T
-    sqrt_tr_GQG: np.ndarray  #: sqrt(trace(G Q G^T))
-    B: np.ndarray | None  #: input matrix, if any
-
-
-def _correction_system(n: int, C: np.ndarray, D: np.ndarray, R: np.ndarray) -> _CorrectionSystem:
-    C = as_matrix(C, "C", (None, n))
-    p = C.shape[0]
-    D = as_matrix(D, "D", (p, None))
-    R = _check_pd_small(R, "R", D.shape[1])
-    W = D @ R @ D.T
-    try:
-        _check_pd_small(W, "D R D^T (needed to test the consistency of y)", p)
-        W_error = None
-    except ValueError as exc:
-        W_error = str(exc)
-    return _CorrectionSystem(*_frozen(C, D, R, W), W_error)
-
-
-def _prediction_system(
-    n: int, A: np.ndarray, G: np.ndarray, Q: np.ndarray, B: np.ndarray | None = None
-) -> _PredictionSystem:
-    A = check_square(A, "A", n)
-    G = as_matrix(G, "G (disturbance matrix)", (n, None))
-    Q = _check_pd_small(Q, "Q", G.shape[1])
-    if B is not None:
-        B = _frozen(as_matrix(B, "B", (n, None)))[0]
-    GQG = G @ Q @ G.T
-    return _PredictionSystem(*_frozen(A, G, Q, GQG), ellipsoids._sqrt_trace(GQG), B)
-
-
-def _frozen(*arrays: np.ndarray) -> list[np.ndarray]:
-    """Read-only copies (cached values must not alias the caller's arrays)."""
-    out = [np.array(a, dtype=float) for a in arrays]
-    for a in out:
-        a.setflags(write=False)
-    return out
-
-
-_CACHE: dict = {}
-
-
-def _cached(build, n: int, names: tuple[str, ...], *matrices: ArrayLike):
-    """``build(n, *matrices)``: validate and derive from the (usually constant) system matrices once per
-    distinct value; later calls with equal matrices (compared by value) return the cached result.
-    `names` name the matrices in the error raised for one that is not an array of numbers."""
-    arrays = [_float_array(M, name) for M, name in zip(matrices, names)]
-    key = (build, n, *[(a.shape, a.tobytes()) for a in arrays])
-    hit = _CACHE.get(key)
-    if hit is None:
-        hit = build(n, *arrays)
-        if len(_CACHE) > 512:
-            _CACHE.clear()
-        _CACHE[key] = hit
-    return hit
 
 
 def _check_pd_small(M, name, size):
