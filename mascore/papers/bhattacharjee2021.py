@@ -566,12 +566,13 @@ def simulate(
     c = np.broadcast_to(s.matrix("x0_hat"), x.shape).copy()
     P = np.broadcast_to(s.matrix("P0"), (*x.shape, x.shape[-1])).copy()
     leader = s.matrix("leader_x0")
+    model = smf.SetMembershipModel(A=A_, G=G_, C=C_, D=D_, Q=setting.Q, R=setting.R, B=B_)  # checked once
     xs, xh, Ps, us, ls, xp, Pp = [], [], [], [], [], [], []
     for k in progress_bar(range(t_f + 1), enabled=progress, desc=f"closed loop ({method})", leave=False):
         y = x @ C_.T + v[:, k] @ D_.T
         xp.append(c)
         Pp.append(P)
-        c, P, _ = smf.correct(c, P, y, C_, D_, setting.R, method=method, step=k, agent=agent)
+        c, P, _ = model.correct(c, P, y, method=method, step=k, agent=agent)
         xs.append(x)
         xh.append(c)
         Ps.append(P)
@@ -580,7 +581,7 @@ def simulate(
             break
         u = sync.local_control(c, leader, adjacency, pin, des.K, des.c)
         x = x @ A_.T + u @ B_.T + w[:, k] @ G_.T
-        c, P = smf.predict(c, P, A_, G_, setting.Q, B=B_, u=u, method=method, step=k, agent=agent)
+        c, P = model.predict(c, P, u=u, method=method, step=k, agent=agent)
         leader = A_ @ leader
         us.append(u)
     x, xhat, P = np.stack(xs, 1), np.stack(xh, 1), np.stack(Ps, 1)
