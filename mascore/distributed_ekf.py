@@ -30,31 +30,35 @@ control Jacobian ``G = dU/dX`` (``nN x 2nN``, written in its final layout):
 product by ``A`` or ``B`` being a scaled addition of rows or column blocks, and
 one transpose making the result exactly symmetric. All N filters (and all Monte
 Carlo runs) advance chunk by chunk, each chunk's update and prediction running
-while its covariances are in cache, with work arrays reused between calls.
+while its covariances are in cache, with the filter's work arrays reused between calls.
 
 Shapes: team states are ``(..., N, 2n)`` (rows ``[p_j; v_j]``), covariances
 ``(..., 2nN, 2nN)`` in the matching flattened order; leading axes are the
 estimating agent and Monte Carlo runs.
 
-Input checks
-------------
-The public functions check every argument and raise a ``ValueError`` or
-``TypeError`` naming it: finite states, ``dt > 0``, covariances symmetric
-positive semidefinite (``R`` definite). The constant matrices (``Q_team``,
-``R``) are checked once per distinct value; a covariance that changes every
-step (``Sigma``) is checked by one Cholesky factorisation of
-``Sigma + 1e-8 max(1, max|Sigma|) I`` (the tolerance of
-:func:`mascore._validation.check_covariance`, a few times cheaper than its
-eigenvalues). The simulator checks once and then runs unchecked kernels. One
-agent (``N = 1``) and an isolated agent (observing only itself) are defined: the
-update then uses the agent's own measurement only. A result that overflows
-raises instead of returning NaN or inf.
+Checked model, owned work arrays
+--------------------------------
+:class:`EKFModel` checks the constant data once, at construction (``dt > 0``, a
+:class:`FlockingGains`, ``I_N kron Q`` symmetric positive semidefinite, ``R``
+definite, sizes) and keeps read-only copies. :class:`FlockingEKF` checks a prior
+in full once (finite estimates; covariances symmetric positive semidefinite by one
+Cholesky factorisation of ``Sigma + 1e-8 max(1, max|Sigma|) I``, the tolerance of
+:func:`mascore._validation.check_covariance`), owns a copy of the covariances that it
+overwrites in place and the work arrays of the kernels; each call checks only its
+measurements and the finiteness of the result (a result that overflows raises,
+naming the inputs, instead of returning NaN or inf). Nothing is kept at module level:
+independent filters run in parallel threads. :func:`ekf_predict`,
+:func:`masked_update` and :func:`ekf_flocking_step` take plain arrays and check every
+argument in full on every call, then run the same filter. Errors are ``ValueError``
+or ``TypeError`` naming the argument. One agent (``N = 1``) and an isolated agent
+(observing only itself) are defined: the update then uses the agent's own
+measurement only.
 """
 
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -70,15 +74,24 @@ from ._flocking_core import check_gains as _check_gains
 from ._flocking_core import check_range as _check_range
 from ._flocking_core import check_steps as _check_steps
 from ._flocking_core import check_team as _check_team
-from ._flocking_core import finite_result as _finite_result
 from ._flocking_core import float_array as _float_array
 from ._progress import progress_bar
-from ._validation import SYMMETRY_RTOL, cached_covariance, check_covariance, check_generator, check_positive_int
+from ._validation import (
+    SYMMETRY_RTOL,
+    check_covariance,
+    check_generator,
+    check_positive_int,
+    finite_result,
+    frozen_copy,
+)
 from .flocking import FlockingRun
 from .graphs import proximity_graph
 from .sensing import measure, team_noise_covariance
 
 __all__ = [
+    "EKFModel",
+    "EKFStep",
+    "FlockingEKF",
     "ekf_predict",
     "masked_update",
     "ekf_flocking_step",
@@ -87,10 +100,358 @@ __all__ = [
 ]
 
 
+class EKFModel:
+    """The constant data of the agents' EKFs, checked once: team size, ``dt``, gains, ``I_N kron Q``, ``R``.
+
+    The constructor checks every argument (``dt > 0``, a :class:`FlockingGains`,
+    covariances finite, symmetric, positive semidefinite -- ``R`` definite -- and of
+    the team's size) and stores read-only copies (:func:`mascore._validation.frozen_copy`),
+    so no later change to the caller's arrays can slip past the check. The prediction
+    part (`dt`, `gains`, `Q_team`) and the measurement part (`R`) may be given alone
+    (for :meth:`FlockingEKF.predict` or :meth:`FlockingEKF.update` only); a model holds no
+    mutable state and may be shared between filters and threads.
+
+    Parameters
+    ----------
+    n_agents : int
+        Team size ``N`` (>= 1).
+    dt : float, optional
+        Sampling time (s), finite and > 0 (with `gains` and `Q_team`).
+    gains : FlockingGains, optional
+        The flocking gains of eq. (6).
+    Q_team : (2nN, 2nN) array_like, optional
+        Team process-noise covariance ``I_N kron Q`` (symmetric positive semidefinite).
+    R : (2nN, 2nN) array_like, optional
+        Measurement-noise covariance of ``nu_i`` (symmetric positive definite).
+    state_dim : int, optional
+        ``2n``, the size of one agent's state (default: from the covariances' size).
+
+    Raises
+    ------
+    ValueError, TypeError
+        Naming the argument that is refused.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import distributed_ekf as dekf
+    >>> from mascore.flocking import FlockingGains
+    >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Song et al., Table I
+    >>> model = dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12))
+    >>> model.state_dim, model.R.flags.writeable
+    (4, False)
+    """
+
+    __slots__ = ("n_agents", "state_dim", "dt", "gains", "Q_team", "R", "Q_blocks")
+
+    def __init__(
+        self, n_agents: int, dt: float | None = None, gains: FlockingGains | None = None,
+        Q_team: ArrayLike | None = None, R: ArrayLike | None = None, state_dim: int | None = None,
+    ) -> None:
+        N = check_positive_int(n_agents, "n_agents")
+        motion = any(v is not None for v in (dt, gains, Q_team))  # then each of them is checked (None refused)
+        if not motion and R is None:
+            raise ValueError("give the prediction part (dt, gains, Q_team), the measurement part (R), or both")
+        M = None if state_dim is None else N * check_positive_int(state_dim, "state_dim")
+        Q = Qb = None
+        if motion:
+            dt = _check_dt(dt)
+            _check_gains(gains)
+            Q = _constant_covariance(Q_team, "Q_team", M)
+            M = Q.shape[0]
+        if R is not None:
+            R = _constant_covariance(R, "R", M, definite=True)
+            M = R.shape[0]
+        if M % N or (M // N) % 2:
+            raise ValueError(f"Q_team and R must be (2nN, 2nN) for N = n_agents = {N}; got ({M}, {M})")
+        m = M // N
+        if Q is not None:
+            Qb = _block_diagonal(Q, N, m)
+        put = object.__setattr__
+        for name, value in (("n_agents", N), ("state_dim", m), ("dt", dt), ("gains", gains),
+                            ("Q_team", None if Q is None else frozen_copy(Q)),
+                            ("R", None if R is None else frozen_copy(R)),
+                            ("Q_blocks", None if Qb is None else frozen_copy(Qb))):
+            put(self, name, value)
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"EKFModel is frozen: build a new model instead of setting {name}")
+
+    def __repr__(self) -> str:
+        return (f"EKFModel(n_agents={self.n_agents}, state_dim={self.state_dim}, dt={self.dt!r}, "
+                f"gains={self.gains!r}, Q_team={'given' if self.Q_team is not None else None}, "
+                f"R={'given' if self.R is not None else None})")
+
+
+class EKFStep(NamedTuple):
+    """Result of :meth:`FlockingEKF.step`.
+
+    Parameters
+    ----------
+    X_post : (..., N, N, 2n) ndarray
+        Updated estimates (read-only).
+    U : (..., N, n) ndarray or None
+        ``U[..., i]``: agent ``i``'s control from its own updated estimate, eq. (39) (m/s^2);
+        ``None`` without prediction.
+    X_next : (..., N, N, 2n) ndarray or None
+        Predicted estimates for the next step (read-only); ``None`` without prediction.
+    variance : (..., N, 2nN) ndarray
+        Diagonal of the updated covariances ``Sigma_post``.
+    """
+
+    X_post: np.ndarray
+    U: np.ndarray | None
+    X_next: np.ndarray | None
+    variance: np.ndarray
+
+
+class FlockingEKF:
+    """A bank of the agents' EKFs of the team state that owns its covariances and work arrays.
+
+    The prior is checked in full once, here (finite estimates, covariances symmetric
+    positive semidefinite, shapes); the filter keeps its own copy of the covariances
+    and overwrites it in place at every step, with work arrays allocated once and passed
+    to the kernels as ``out=``. :meth:`step` (update, own control, prediction, chunk by
+    chunk while the covariances are in cache) is the fast path of
+    :func:`simulate_estimation_based_flocking`; :meth:`update` and :meth:`predict` run the
+    two halves separately. Each call checks only its measurements and the finiteness of
+    the result (raising a ``ValueError`` that names the inputs).
+
+    Parameters
+    ----------
+    model : EKFModel
+        The checked constant data.
+    X_hat : (..., N, 2n) array_like
+        Prior estimates of the team, one per filter (leading axes: filters, runs). For
+        :meth:`step` the last leading axis is the estimating agent: ``(..., N, N, 2n)``.
+    Sigma : (2nN, 2nN) or (..., 2nN, 2nN) array_like
+        Their covariances, broadcast against `X_hat`'s leading axes.
+
+    Notes
+    -----
+    No state is shared between filters, so independent filters run in parallel threads.
+    One filter object is not for concurrent use: its state and work arrays change at
+    every call. :attr:`X_hat` and :attr:`Sigma` are read-only views of the filter's state,
+    changed by the next call (copy them to keep them); on an error the state is undefined.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import distributed_ekf as dekf
+    >>> from mascore.flocking import FlockingGains
+    >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Song et al., Table I
+    >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents [p, v]
+    >>> ekf = dekf.FlockingEKF(dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12)),
+    ...                        np.broadcast_to(X, (3, 3, 4)), np.eye(12))
+    >>> out = ekf.step(X + 0.1, np.ones((3, 3), bool))      # everyone sees everyone
+    >>> out.U.shape, ekf.X_hat.shape, ekf.Sigma.shape
+    ((3, 2), (3, 3, 4), (3, 12, 12))
+    """
+
+    def __init__(self, model: EKFModel, X_hat: ArrayLike, Sigma: ArrayLike) -> None:
+        if not isinstance(model, EKFModel):
+            raise TypeError(f"model must be a mascore.distributed_ekf.EKFModel; got {type(model).__name__}")
+        X_hat = _check_team(X_hat, "X_hat")
+        N, m = model.n_agents, model.state_dim
+        if X_hat.shape[-2:] != (N, m):
+            raise ValueError(f"X_hat must have shape (..., {N}, {m}) to match the model; got {X_hat.shape}")
+        Sigma = _check_sigma(Sigma, "Sigma", N * m, X_hat.shape[:-2], "X_hat")
+        self._adopt(model, X_hat, Sigma)
+
+    @classmethod
+    def _from_checked(cls, model: EKFModel, X_hat: np.ndarray, Sigma: np.ndarray) -> FlockingEKF:
+        """A filter from a prior already checked in full by the caller (no second check)."""
+        self = cls.__new__(cls)
+        self._adopt(model, X_hat, Sigma)
+        return self
+
+    def _adopt(self, model, X_hat, Sigma):
+        N, m = model.n_agents, model.state_dim
+        M = N * m
+        batch = np.broadcast_shapes(X_hat.shape[:-2], Sigma.shape[:-2])
+        self._model = model
+        self._batch = batch
+        self._X = frozen_copy(np.broadcast_to(X_hat, (*batch, N, m)))
+        self._P = np.array(np.broadcast_to(Sigma, (*batch, M, M)), dtype=float, order="C")  # owned, in place
+        self._chunks = _chunks(int(np.prod(batch, dtype=np.int64)), M)
+        self._work = _Scratch(self._chunks[0].stop if self._chunks else 1, N, m)
+
+    @property
+    def model(self) -> EKFModel:
+        """The checked model."""
+        return self._model
+
+    @property
+    def X_hat(self) -> np.ndarray:
+        """``(..., N, 2n)`` current estimates (read-only; predicted after :meth:`step` or :meth:`predict`)."""
+        return self._X
+
+    @property
+    def Sigma(self) -> np.ndarray:
+        """``(..., 2nN, 2nN)`` current covariances (a read-only view, overwritten by the next call)."""
+        view = self._P.view()
+        view.flags.writeable = False
+        return view
+
+    def update(self, z: ArrayLike, observed: ArrayLike) -> np.ndarray:
+        """Kalman update with the states of the `observed` agents, eqs. (16)-(20), in place.
+
+        Parameters
+        ----------
+        z : (..., N, 2n) array_like
+            Measured states (eq. (2)), broadcast to the filters; rows of unobserved agents are
+            ignored (they must be finite).
+        observed : (..., N) array_like of bool
+            Which agents' states are in ``z_i`` (eq. (3)).
+
+        Returns
+        -------
+        X_post : (..., N, 2n) ndarray
+            Updated estimates (read-only; also :attr:`X_hat`). :attr:`Sigma` becomes
+            ``(I - G_i H_i) Sigma_i^-`` of eq. (20), symmetrized.
+        """
+        model = self._need("update", model_R=True)
+        Z, obs = self._measurements(z, observed)
+        X, P = self._flat()
+        X_post = np.empty(X.shape)
+        with np.errstate(over="ignore", invalid="ignore"):
+            for ch in self._chunks:
+                Pc = P[ch]
+                X_post[ch] = _update_rows(X[ch], Pc, Z[ch], obs[ch], model.R, 0.5, self._work)  # Sigma_post / 2
+                _symmetrize_sum(Pc, self._work.T[: Pc.shape[0]])  # (Sigma_post + Sigma_post^T) / 2
+        _finite_all("EKF update (inputs X_hat, Sigma, z)", self._P, X_post)
+        self._X = _read_only(X_post.reshape(self._X.shape))
+        return self._X
+
+    def predict(self) -> tuple[np.ndarray, np.ndarray]:
+        """EKF time update through the fully-connected flocking dynamics, eqs. (38), (40), in place.
+
+        Returns
+        -------
+        X_pred : (..., N, 2n) ndarray
+            Predicted estimates (read-only; also :attr:`X_hat`); :attr:`Sigma` becomes
+            ``F Sigma F^T + I_N kron Q``.
+        U : (..., N, n) ndarray
+            The control of every agent that each estimate implies (eq. (39) on the
+            estimate, fully connected), m/s^2.
+        """
+        model = self._need("predict")
+        X, P = self._flat()
+        N, m = model.n_agents, model.state_dim
+        X_next, U = np.empty(X.shape), np.empty((X.shape[0], N, m // 2))
+        with np.errstate(over="ignore", invalid="ignore"):
+            for ch in self._chunks:
+                Ph = np.multiply(P[ch], 0.5, out=P[ch])
+                U[ch], X_next[ch], _ = _predict_half(X[ch], Ph, model, Ph, self._work)
+        _finite_all("EKF prediction (inputs X_hat, Sigma)", self._P, X_next, U)
+        self._X = _read_only(X_next.reshape(self._X.shape))
+        return self._X, U.reshape(*self._batch, N, m // 2)
+
+    def step(self, z: ArrayLike, observed: ArrayLike, predict: bool = True,
+             posterior_out: np.ndarray | None = None) -> EKFStep:
+        """One step of every agent's filter and control: eqs. (16)-(20), (39), then (38), (40).
+
+        The update and the prediction of each chunk of filters run while its covariances are
+        in cache, overwriting them in place; the filter then holds the predictions (with
+        `predict`) or the updates (without).
+
+        Parameters
+        ----------
+        z : (..., N, N, 2n) array_like
+            ``z[..., i, j]``: agent ``i``'s measurement of agent ``j`` (eq. (2)).
+        observed : (..., N, N) array_like of bool
+            Sensing mask, ``observed[..., i, j]`` iff ``j`` in ``N_i bar``.
+        predict : bool
+            Also apply the control and predict (``False`` on a last step).
+        posterior_out : (..., N, 2nN, 2nN) ndarray, optional
+            Where to write the updated covariances ``Sigma_post`` (C-contiguous, of the
+            filters' full shape); by default only their diagonal is returned.
+
+        Returns
+        -------
+        EKFStep
+            ``(X_post, U, X_next, variance)``.
+        """
+        model = self._need("step", model_R=True, motion=bool(predict))
+        N, m = model.n_agents, model.state_dim
+        M, n = N * m, m // 2
+        if len(self._batch) < 1 or self._batch[-1] != N:
+            raise ValueError(f"step needs one filter per agent: X_hat of shape (..., {N}, {N}, {m}); "
+                             f"got {(*self._batch, N, m)}")
+        Z, obs = self._measurements(z, observed)
+        X, P = self._flat()
+        K = X.shape[0]
+        post = None
+        if posterior_out is not None:
+            post = posterior_out.reshape(-1, M, M)
+            if (posterior_out.shape != self._P.shape or not np.shares_memory(post, posterior_out)
+                    or not posterior_out.flags.writeable):
+                raise ValueError(f"posterior_out must be a writeable array of shape {self._P.shape}")
+        own = np.arange(K) % N  # filter k is agent k % N's
+        X_post, diag = np.empty(X.shape), np.empty((K, M))
+        U, X_next = (np.empty((K, n)), np.empty(X.shape)) if predict else (None, None)
+        scale = 0.5 if predict else 1.0  # the prediction starts from Sigma_post / 2
+        work = self._work
+        with np.errstate(over="ignore", invalid="ignore"):
+            for ch in self._chunks:
+                Ph = P[ch]
+                X_post[ch] = _update_rows(X[ch], Ph, Z[ch], obs[ch], model.R, scale, work)  # eqs. (16)-(20)
+                diag[ch] = np.diagonal(Ph, axis1=-2, axis2=-1)
+                if post is not None:
+                    np.multiply(Ph, 1.0 / scale, out=post[ch])
+                if not predict:
+                    continue
+                diag[ch] *= 2.0
+                U_all, X_next[ch], _ = _predict_half(X_post[ch], Ph, model, Ph, work)  # eqs. (38)-(40)
+                U[ch] = U_all[np.arange(U_all.shape[0]), own[ch]]  # eq. (39): agent i's control, own estimate
+        outs = (X_post, diag) + ((U, X_next) if predict else ()) + ((post,) if post is not None else ())
+        _finite_all("EKF step (inputs X_hat, Sigma, z)", self._P, *outs)
+        X_post = _read_only(X_post.reshape(*self._batch, N, m))
+        if predict:
+            X_next = self._X = _read_only(X_next.reshape(*self._batch, N, m))
+            U = U.reshape(*self._batch, n)
+        else:
+            self._X = X_post
+        return EKFStep(X_post, U, X_next, diag.reshape(*self._batch, M))
+
+    # -- helpers (checks of the per-call data, results)
+
+    def _need(self, what, model_R=False, motion=True):
+        model = self._model
+        if model_R and model.R is None:
+            raise ValueError(f"{what} needs a model with R (the measurement-noise covariance)")
+        if what != "update" and motion and model.Q_team is None:
+            raise ValueError(f"{what} needs a model with dt, gains and Q_team")
+        return model
+
+    def _flat(self):
+        M = self._model.n_agents * self._model.state_dim
+        return self._X.reshape(-1, *self._X.shape[-2:]), self._P.reshape(-1, M, M)
+
+    def _measurements(self, z, observed):
+        N, m = self._model.n_agents, self._model.state_dim
+        z, observed = _check_measurements(z, observed, N, m)
+        batch = self._batch
+        for name, got in (("z", z.shape[:-2]), ("observed", observed.shape[:-1])):
+            try:
+                ok = np.broadcast_shapes(got, batch) == batch
+            except ValueError:
+                ok = False
+            if not ok:
+                raise ValueError(f"{name} has batch axes {got} that do not broadcast to the filters' {batch}")
+        Z = np.broadcast_to(z, (*batch, N, m)).reshape(-1, N, m)
+        obs = np.broadcast_to(observed, (*batch, N)).reshape(-1, N)
+        return Z, obs
+
+
 def ekf_predict(
     X_hat: ArrayLike, Sigma: ArrayLike, dt: float, gains: FlockingGains, Q_team: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray]:
     """EKF time update through the fully-connected flocking dynamics, eqs. (38), (40).
+
+    Checks every argument in full on every call (the covariances by a Cholesky
+    factorisation, ``Q_team`` by its eigenvalues), then runs :meth:`FlockingEKF.predict`;
+    for many steps build an :class:`EKFModel` and a :class:`FlockingEKF` once.
 
     Parameters
     ----------
@@ -124,19 +485,20 @@ def ekf_predict(
     ((3, 4), True)
     """
     X_hat = _check_team(X_hat, "X_hat")
-    M = X_hat.shape[-1] * X_hat.shape[-2]
-    Sigma = _check_sigma(Sigma, "Sigma", M, X_hat.shape[:-2], "X_hat")
-    dt = _check_dt(dt)
-    _check_gains(gains)
-    Q_team = _constant_covariance(Q_team, "Q_team", M)
-    with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_predict(X_hat, Sigma, dt, gains, Q_team), "ekf_predict", "X_hat, Sigma")
+    N, m = X_hat.shape[-2:]
+    Sigma = _check_sigma(Sigma, "Sigma", N * m, X_hat.shape[:-2], "X_hat")
+    ekf = FlockingEKF._from_checked(EKFModel(N, dt, gains, Q_team, state_dim=m), X_hat, Sigma)
+    X_pred, _ = ekf.predict()
+    return np.array(X_pred), ekf._P
 
 
 def masked_update(
     X_pred: ArrayLike, Sigma_pred: ArrayLike, z: ArrayLike, observed: ArrayLike, R: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray]:
     """Kalman update with the states of the `observed` agents, eqs. (16)-(20).
+
+    Checks every argument in full on every call, then runs :meth:`FlockingEKF.update`;
+    for many steps build an :class:`EKFModel` and a :class:`FlockingEKF` once.
 
     Parameters
     ----------
@@ -173,30 +535,16 @@ def masked_update(
     >>> bool(np.allclose(X_post[2], X[2])), bool(np.trace(P_post[:8, :8]) < 32.0)   # only the seen agents move
     (True, True)
     """
-    X_pred, Sigma_pred, z, observed, R = _update_args(X_pred, Sigma_pred, z, observed, R)
-    with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_update(X_pred, Sigma_pred, z, observed, R), "masked_update", "X_pred, Sigma_pred, z")
-
-
-def _update_args(X_pred, Sigma_pred, z, observed, R):
-    """Check the arguments of :func:`masked_update`."""
     X_pred = _check_team(X_pred, "X_pred")
     N, m = X_pred.shape[-2:]
-    M = N * m
-    batch = X_pred.shape[:-2]
-    Sigma_pred = _check_sigma(Sigma_pred, "Sigma_pred", M, batch, "X_pred")
-    z = _check_team(z, "z")
-    if z.shape[-2:] != (N, m):
-        raise ValueError(f"Incompatible dimensions of z; expected (..., {N}, {m}) but found {z.shape}")
-    _check_batch(z.shape[:-2], batch, "z", "X_pred")
-    if isinstance(observed, (str, bytes)) or observed is None:
-        raise TypeError(f"observed must be a boolean array (..., {N}); got {type(observed).__name__}")
-    observed = np.asarray(observed)
-    if observed.dtype != bool or observed.ndim < 1 or observed.shape[-1] != N:
-        raise ValueError(f"observed must be a boolean array (..., {N}); got {observed.dtype} {observed.shape}")
-    _check_batch(observed.shape[:-1], batch, "observed", "X_pred")
-    R = _constant_covariance(R, "R", M, definite=True)
-    return X_pred, Sigma_pred, z, observed, R
+    Sigma_pred = _check_sigma(Sigma_pred, "Sigma_pred", N * m, X_pred.shape[:-2], "X_pred")
+    z, observed = _check_measurements(z, observed, N, m)
+    batch = _common_batch(X_pred, Sigma_pred, z, observed)
+    R = _float_array(R, "R")
+    ekf = FlockingEKF._from_checked(EKFModel(N, R=R, state_dim=m), np.broadcast_to(X_pred, (*batch, N, m)),
+                                    Sigma_pred)
+    X_post = ekf.update(z, observed)
+    return np.array(X_post), ekf._P
 
 
 def ekf_flocking_step(
@@ -210,6 +558,11 @@ def ekf_flocking_step(
     Q_team: ArrayLike,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """One step of every agent's filter and control, batched over agents (and runs).
+
+    Checks every argument in full on every call (the covariances by a Cholesky
+    factorisation, ``R`` and ``Q_team`` by their eigenvalues), then runs
+    :meth:`FlockingEKF.step`; for many steps build an :class:`EKFModel` and a
+    :class:`FlockingEKF` once: their step checks only the measurements and the result.
 
     Update with the current measurements (eqs. (16)-(20)), control of each agent
     on its own updated estimate (eq. (39)), prediction to the next step
@@ -254,16 +607,18 @@ def ekf_flocking_step(
     >>> [a.shape for a in out]
     [(3, 3, 4), (3, 12, 12), (3, 2), (3, 3, 4), (3, 12, 12)]
     """
-    X_pred, Sigma_pred, z, observed, R = _update_args(X_pred, Sigma_pred, z, observed, R)
+    X_pred = _check_team(X_pred, "X_pred")
     N, m = X_pred.shape[-2:]
     if X_pred.ndim < 3 or X_pred.shape[-3] != N:
         raise ValueError(f"X_pred must have shape (..., N, N, 2n) (one team estimate per agent); got {X_pred.shape}")
-    dt = _check_dt(dt)
-    _check_gains(gains)
-    Q_team = _constant_covariance(Q_team, "Q_team", N * m)
-    with np.errstate(over="ignore", invalid="ignore"):
-        out = _step(X_pred, Sigma_pred, z, observed, R, dt, gains, Q_team)
-    return _finite_result(out, "ekf_flocking_step", "X_pred, Sigma_pred, z")
+    Sigma_pred = _check_sigma(Sigma_pred, "Sigma_pred", N * m, X_pred.shape[:-2], "X_pred")
+    z, observed = _check_measurements(z, observed, N, m)
+    batch = _common_batch(X_pred, Sigma_pred, z, observed)
+    model = EKFModel(N, dt, gains, Q_team, _float_array(R, "R"), state_dim=m)
+    ekf = FlockingEKF._from_checked(model, np.broadcast_to(X_pred, (*batch, N, m)), Sigma_pred)
+    Sigma_post = np.empty(ekf._P.shape)
+    out = ekf.step(z, observed, posterior_out=Sigma_post)
+    return np.array(out.X_post), Sigma_post, out.U, np.array(out.X_next), ekf._P
 
 
 @dataclass(frozen=True)
@@ -387,7 +742,7 @@ def simulate_estimation_based_flocking(
     n = m // 2
     M = N * m
     batch = X.shape[:-2]
-    X_hat = _float_array(X_hat0, "X_hat0").copy()
+    X_hat = _float_array(X_hat0, "X_hat0")
     if X_hat.shape != (*batch, N, N, m) or not np.all(np.isfinite(X_hat)):
         raise ValueError(f"X_hat0 must be finite with shape {(*batch, N, N, m)} (one team estimate per agent, "
                          f"to match X0 of shape {X.shape}); got {X_hat.shape}")
@@ -407,9 +762,9 @@ def simulate_estimation_based_flocking(
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be True or False; got {type(progress).__name__} {progress!r}")
     Lq = _core.noise_factor(Q, "Q", m)
-    Q_team = np.kron(np.eye(N), Lq @ Lq.T)
-    R_team = check_covariance(team_noise_covariance(_float_array(R, "R"), N, m), "R", definite=True)
-    Sigma = np.broadcast_to(Sigma0, (*batch, N, M, M)).copy()
+    model = EKFModel(N, dt, gains, np.kron(np.eye(N), Lq @ Lq.T), team_noise_covariance(_float_array(R, "R"), N, m),
+                     state_dim=m)  # checked once: Q_team, R (definite)
+    ekf = FlockingEKF._from_checked(model, X_hat, Sigma0)  # owns a copy of the covariances, overwritten in place
 
     Xs = np.empty((n_steps + 1, *X.shape))
     As = np.empty((n_steps + 1, *batch, N, N), dtype=bool)
@@ -419,11 +774,10 @@ def simulate_estimation_based_flocking(
     pos_idx = (np.arange(N)[:, None] * m + np.arange(n)[None, :])  # (N, n) flat indices of positions
     for k in progress_bar(range(n_steps + 1), enabled=progress, desc="EKF flocking", leave=False):
         A_k = proximity_graph(X[..., :n], sensing_range).astype(bool)
-        z, observed = measure(rng, X, A_k, R_team, allow_isolated=True)  # eqs. (2)-(3)
+        z, observed = measure(rng, X, A_k, model.R, allow_isolated=True)  # eqs. (2)-(3)
         last = k == n_steps
-        # eqs. (16)-(20), then (unless last) eq. (39) and eqs. (38), (40); Sigma is overwritten in place
-        X_hat, U, X_next, diag = _step(X_hat, Sigma, z, observed, R_team, dt, gains, Q_team,
-                                      in_place=True, predict=not last)
+        # eqs. (16)-(20), then (unless last) eq. (39) and eqs. (38), (40); the covariances overwritten in place
+        X_hat, U, X_next, diag = ekf.step(z, observed, predict=not last)
         Xs[k], As[k] = X, A_k
         X_obs[k] = X_hat[..., observer, :, :]
         var_obs[k] = diag[..., observer, :][..., pos_idx].sum(-1)
@@ -431,10 +785,10 @@ def simulate_estimation_based_flocking(
         if last:
             break
         X = _core.propagate(X, U, dt) + rng.standard_normal((*batch, N, m)) @ Lq.T  # eq. (1)
-        X_hat = X_next
         _core.check_divergence(X, k + 1, dt)
-        _core.check_divergence(X_hat, k + 1, dt, "estimate")
-        _core.check_divergence(np.sqrt(np.abs(np.diagonal(Sigma, axis1=-2, axis2=-1))), k + 1, dt, "estimated std")
+        _core.check_divergence(X_next, k + 1, dt, "estimate")
+        _core.check_divergence(np.sqrt(np.abs(np.diagonal(ekf.Sigma, axis1=-2, axis2=-1))), k + 1, dt,
+                               "estimated std")
     t = dt * np.arange(n_steps + 1)
     mv = lambda a, nd: np.moveaxis(a, 0, a.ndim - nd - 1)  # noqa: E731  (put time after the batch axes)
     return EstimatedFlockingRun(
@@ -453,11 +807,52 @@ def _check_batch(got, batch, name, of):
 
 
 def _constant_covariance(C, name, size, definite=False):
-    """A constant (size, size) covariance, checked once per distinct value."""
+    """A constant ``(size, size)`` covariance (any square size if `size` is None), checked in full."""
     C = _float_array(C, name)
-    if C.shape != (size, size):
-        raise ValueError(f"Incompatible dimensions of {name}; expected ({size}, {size}) but found {C.shape}")
-    return cached_covariance(C, name, size=size, definite=definite)
+    if C.ndim != 2 or C.shape[0] != C.shape[1] or (size is not None and C.shape[0] != size):
+        want = "(M, M)" if size is None else f"({size}, {size})"
+        raise ValueError(f"Incompatible dimensions of {name}; expected {want} but found {C.shape}")
+    return check_covariance(C, name, definite=definite)
+
+
+def _check_measurements(z, observed, N, m):
+    """Measured team states ``(..., N, m)`` (finite) and a boolean mask ``(..., N)``."""
+    z = _check_team(z, "z")
+    if z.shape[-2:] != (N, m):
+        raise ValueError(f"Incompatible dimensions of z; expected (..., {N}, {m}) but found {z.shape}")
+    if isinstance(observed, (str, bytes)) or observed is None:
+        raise TypeError(f"observed must be a boolean array (..., {N}); got {type(observed).__name__}")
+    observed = np.asarray(observed)
+    if observed.dtype != bool or observed.ndim < 1 or observed.shape[-1] != N:
+        raise ValueError(f"observed must be a boolean array (..., {N}); got {observed.dtype} {observed.shape}")
+    return z, observed
+
+
+def _common_batch(X, Sigma, z, observed):
+    """The broadcast leading axes of the arguments of the plain-array functions (named if they clash)."""
+    batch = np.broadcast_shapes(X.shape[:-2], Sigma.shape[:-2])
+    _check_batch(z.shape[:-2], batch, "z", "X_pred")
+    _check_batch(observed.shape[:-1], batch, "observed", "X_pred")
+    return np.broadcast_shapes(batch, z.shape[:-2], observed.shape[:-1])
+
+
+def _read_only(a):
+    """`a` (a fresh array of the filter) marked read-only."""
+    a.flags.writeable = False
+    return a
+
+
+def _finite_all(what, *arrays):
+    """Raise (through :func:`mascore._validation.finite_result`) if an array holds NaN or inf.
+
+    A finite sum proves every entry finite; only when it is not (NaN, inf, or an overflowing
+    sum of finite entries) are the entries tested one by one.
+    """
+    for a in arrays:
+        with np.errstate(over="ignore", invalid="ignore"):
+            total = a.sum()
+        if not np.isfinite(total):
+            finite_result(what, a)
 
 
 def _check_sigma(S, name, M, batch, of):
@@ -502,19 +897,6 @@ _CHUNK_BYTES = 1 << 20
 def _chunks(K, M):
     c = max(1, _CHUNK_BYTES // (8 * M * M))
     return [slice(s, min(s + c, K)) for s in range(0, K, c)]
-
-
-def _flat(batch, X, Sigma, z=None, observed=None):
-    """Broadcast to the common batch and flatten it: (K, N, m), (K, M, M), (K, N, m), (K, N) mask."""
-    N, m = X.shape[-2:]
-    M = N * m
-    X = np.broadcast_to(X, (*batch, N, m)).reshape(-1, N, m)
-    Sigma = np.broadcast_to(Sigma, (*batch, M, M)).reshape(-1, M, M)
-    if z is None:
-        return X, Sigma
-    z = np.broadcast_to(z, (*batch, N, m)).reshape(-1, N, m)
-    observed = np.broadcast_to(observed, (*batch, N)).reshape(-1, N)
-    return X, Sigma, z, observed
 
 
 def _gemm_into(alpha, V, beta, P):
@@ -621,7 +1003,7 @@ def _symmetrize_sum(A, T):
 
 
 class _Scratch:
-    """Work arrays of one chunk of filters, kept between calls (per thread).
+    """Work arrays of one chunk of filters, owned by one :class:`FlockingEKF` and kept between its calls.
 
     Fresh large temporaries are expensive: the allocator returns freed memory to the system and the next
     first touch page-faults, so the kernels write into these instead.
@@ -641,18 +1023,6 @@ class _Scratch:
         """A contiguous temporary of the shape and type of `like` (at most half a chunk of covariances)."""
         size = like.size * like.itemsize // 8
         return self.half[:size].view(like.dtype).reshape(like.shape)
-
-
-_local = threading.local()
-
-
-def _scratch(c, N, m):
-    """This thread's work arrays for chunks of `c` filters (reallocated when the sizes change)."""
-    work = getattr(_local, "work", None)
-    if work is None or work.key != (c, N, m):
-        _local.work = None  # free the old arrays first
-        work = _local.work = _Scratch(c, N, m)
-    return work
 
 
 def _block_diagonal(Q, N, m):
@@ -675,7 +1045,7 @@ def _add_noise(S, Q, Qblocks, N, m, scale=1.0):
         blocks += Qblocks if scale == 1.0 else scale * Qblocks
 
 
-def _predict_half(X, Ph, dt, gains, Q, Qblocks, out, work):
+def _predict_half(X, Ph, model, out, work):
     """Eqs. (38), (40) for a chunk of filters from ``Ph = Sigma / 2`` (overwritten), using the rank of ``F - I kron A``.
 
     ``F = A' + B' G`` with ``A' = I kron A``, ``B' = I kron B`` (the double integrator) and the control
@@ -697,7 +1067,8 @@ def _predict_half(X, Ph, dt, gains, Q, Qblocks, out, work):
     """
     c, N, m = X.shape
     n, M, nN = m // 2, N * m, N * m // 2
-    U, G = _core.control_and_jacobian(X, gains, out=work.G[:c], scale=dt)  # eq. (39), and dt dU/dX
+    dt = model.dt
+    U, G = _core.control_and_jacobian(X, model.gains, out=work.G[:c], scale=dt)  # eq. (39), and dt dU/dX
     X_next = _core.propagate(X, U, dt)  # eq. (40)
     G = G.reshape(c, nN, M)
     Y = np.matmul(G, Ph, out=work.Y[:c])  # dt G Sigma / 2
@@ -723,99 +1094,8 @@ def _predict_half(X, Ph, dt, gains, Q, Qblocks, out, work):
     tc = work.buffer(Wv)
     np.multiply(Wv, dt, out=tc)
     Wp += tc
-    _add_noise(Ph, Q, Qblocks, N, m, 0.5)  # eq. (40): Q / 2 in X, Q in X + X^T
+    _add_noise(Ph, model.Q_team, model.Q_blocks, N, m, 0.5)  # eq. (40): Q / 2 in X, Q in X + X^T
     if out is not Ph and not np.shares_memory(out, Ph):
         np.copyto(out, Ph)
     _symmetrize_sum(out, work.T[:c])  # X + X^T = F Sigma F^T + Q, exactly symmetric
     return U, X_next, out
-
-
-def _predict(X_hat, Sigma, dt, gains, Q_team):
-    """Eqs. (38), (40) on checked arrays: ``(..., N, 2n)``, ``(..., M, M)`` (batches broadcast)."""
-    batch = np.broadcast_shapes(X_hat.shape[:-2], Sigma.shape[:-2])
-    X, P = _flat(batch, X_hat, Sigma)
-    N, m = X_hat.shape[-2:]
-    X_next, P_next = np.empty(X.shape), np.empty(P.shape)
-    chunks = _chunks(*P.shape[:2])
-    work = _scratch(chunks[0].stop if chunks else 1, N, m)
-    Qblocks = _block_diagonal(Q_team, N, m)
-    for ch in chunks:
-        Ph = np.multiply(P[ch], 0.5, out=P_next[ch])
-        _, X_next[ch], _ = _predict_half(X[ch], Ph, dt, gains, Q_team, Qblocks, P_next[ch], work)
-    return X_next.reshape(*batch, N, m), P_next.reshape(*batch, N * m, N * m)
-
-
-def _update(X_pred, Sigma, z, observed, R):
-    """Eqs. (16)-(20) on checked arrays (batches broadcast); the covariance symmetrized."""
-    batch = np.broadcast_shapes(X_pred.shape[:-2], Sigma.shape[:-2], z.shape[:-2], observed.shape[:-1])
-    X, P, Z, obs = _flat(batch, X_pred, Sigma, z, observed)
-    X_post, P_post = np.empty(X.shape), np.empty(P.shape)
-    N, m = X_pred.shape[-2:]
-    M = N * m
-    chunks = _chunks(*P.shape[:2])
-    work = _scratch(chunks[0].stop if chunks else 1, N, m)
-    for ch in chunks:
-        Pc = P_post[ch]
-        np.copyto(Pc, P[ch])
-        X_post[ch] = _update_rows(X[ch], Pc, Z[ch], obs[ch], R, 0.5, work)  # Sigma_post / 2
-        _symmetrize_sum(Pc, work.T[: Pc.shape[0]])  # (Sigma_post + Sigma_post^T) / 2
-    return X_post.reshape(*batch, N, m), P_post.reshape(*batch, M, M)
-
-
-def _step(X_pred, Sigma, z, observed, R, dt, gains, Q_team, in_place=False, predict=True):
-    """Update, own control and prediction of every agent's filter, one chunk of filters at a time.
-
-    Checked arrays: `X_pred` ``(..., N, N, m)`` (filter ``i`` of each run is
-    agent ``i``'s), `Sigma` ``(..., N, M, M)``, `z` ``(..., N, N, m)``,
-    `observed` ``(..., N, N)``.
-
-    Returns ``(X_post, Sigma_post, U, X_next, Sigma_next)`` as
-    :func:`ekf_flocking_step`; with `in_place` (`Sigma` a writeable array of
-    the full batch shape) ``Sigma_next`` overwrites `Sigma`, ``Sigma_post`` is
-    not kept, and ``(X_post, U, X_next, diag(Sigma_post))`` is returned
-    (``U``, ``X_next`` ``None`` without `predict`; `Sigma` then holds
-    ``Sigma_post``).
-    """
-    N, m = X_pred.shape[-2:]
-    M = N * m
-    batch = np.broadcast_shapes(X_pred.shape[:-2], Sigma.shape[:-2], z.shape[:-2], observed.shape[:-1])
-    X, P, Z, obs = _flat(batch, X_pred, Sigma, z, observed)
-    if in_place:  # Sigma_next goes into Sigma itself
-        P = Sigma.reshape(-1, M, M)
-        if not np.shares_memory(P, Sigma) or P.shape[0] != X.shape[0] or not P.flags.c_contiguous:
-            raise ValueError("in_place needs Sigma as a contiguous array of the full batch shape")
-    K = X.shape[0]
-    own = np.arange(K) % N  # filter k is agent k % N's
-    n = m // 2
-    X_post, U, X_next = np.empty(X.shape), np.empty((K, n)), np.empty(X.shape)
-    chunks = _chunks(K, M)
-    work = _scratch(chunks[0].stop if chunks else 1, N, m)
-    if predict:
-        Qblocks = _block_diagonal(Q_team, N, m)
-    if in_place:
-        P_next, diag = P, np.empty((K, M))
-    else:
-        P_post, P_next = np.empty(P.shape), np.empty(P.shape)
-    for ch in chunks:
-        if in_place:  # Sigma_post / 2 (the prediction's input), or Sigma_post on the last step
-            X_post[ch] = _update_rows(X[ch], P[ch], Z[ch], obs[ch], R, 0.5 if predict else 1.0, work)  # (16)-(20)
-            diag[ch] = np.diagonal(P[ch], axis1=-2, axis2=-1)
-            if predict:
-                diag[ch] *= 2.0
-            Ph = P[ch]
-        else:
-            np.copyto(P_post[ch], P[ch])
-            X_post[ch] = _update_rows(X[ch], P_post[ch], Z[ch], obs[ch], R, 1.0, work)  # eqs. (16)-(20)
-            if predict:
-                Ph = np.multiply(P_post[ch], 0.5, out=P_next[ch])
-        if not predict:
-            continue
-        U_all, X_next[ch], _ = _predict_half(X_post[ch], Ph, dt, gains, Q_team, Qblocks, P_next[ch], work)  # (38)-(40)
-        U[ch] = U_all[np.arange(U_all.shape[0]), own[ch]]  # eq. (39): agent i's control from its own estimate
-    shape = (*batch, N, m)
-    if in_place:
-        if not predict:
-            return X_post.reshape(shape), None, None, diag.reshape(*batch, M)
-        return X_post.reshape(shape), U.reshape(*batch, n), X_next.reshape(shape), diag.reshape(*batch, M)
-    return (X_post.reshape(shape), P_post.reshape(*batch, M, M), U.reshape(*batch, n), X_next.reshape(shape),
-            P_next.reshape(*batch, M, M))
