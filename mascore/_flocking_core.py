@@ -1,19 +1,17 @@
-"""The flocking law's gains, unchecked kernels and argument checks (shared by two modules).
+"""What :mod:`mascore.flocking` and :mod:`mascore.distributed_ekf` share: gains, checks, shared kernels.
 
-:mod:`mascore.flocking` (the law, its Jacobian, the measured-flocking
-simulator) and :mod:`mascore.distributed_ekf` (the per-agent EKFs of the
-estimation-based flock) both run these kernels; this module is their common
-home, so that neither imports the other's private helpers. The public
-entry points, which check their arguments first, are in
-:mod:`mascore.flocking`; :class:`FlockingGains` and :class:`DivergenceError`
-are defined here and exported from there.
-
-Kernels take checked arrays (finite, the shapes documented) and return raw
-results; callers wrap them in ``np.errstate`` and :func:`finite_result`.
-Checks raise ``ValueError`` or ``TypeError`` naming the argument.
+Only what has no public twin lives here: :class:`FlockingGains` (exported from
+:mod:`mascore.flocking`), the argument checks, the double integrator
+(:func:`propagate`), the fused control and Jacobian of the fully-connected law
+(:func:`control_and_jacobian`, the EKF's prediction kernel), the divergence test
+and the noise factor. The flocking law itself (``phi1``, ``phi2``, the pair term,
+the controls, the closed loop and its Jacobian) has one implementation, the public
+functions of :mod:`mascore.flocking`, which check their arguments at the boundary
+and then run plain code. Checks raise ``ValueError`` or ``TypeError`` naming the
+argument.
 
 Layouts: a team state is ``(..., N, 2n)`` with rows ``[p_i; v_i]``; the
-control Jacobian of :func:`control_jacobian` is ``(..., N, n, N, 2n)``
+control Jacobian of :func:`control_and_jacobian` is ``(..., N, n, N, 2n)``
 (agent ``i``, acceleration component ``a``, agent ``j``, state component
 ``b``), which reshapes without copying to the ``(nN, 2nN)`` matrix
 ``dU/dX`` of the flattened team state.
@@ -26,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import check_covariance, check_positive, check_positive_int, float_array
+from ._validation import MAX_STEPS, check_covariance, check_positive, check_positive_int, float_array
 from .exceptions import DivergenceError
 
 __all__ = [
@@ -34,18 +32,8 @@ __all__ = [
     "MAX_STEPS",
     "DivergenceError",
     "FlockingGains",
-    "phi1",
-    "phi2",
-    "pair_term",
-    "pair_term_jacobian",
-    "sum_pairs",
-    "flocking_control",
-    "control_from_views",
-    "closed_loop_step",
     "propagate",
-    "control_jacobian",
     "control_and_jacobian",
-    "closed_loop_jacobian",
     "float_array",
     "check_team",
     "check_dt",
@@ -57,16 +45,11 @@ __all__ = [
     "check_weights",
     "check_divergence",
     "noise_factor",
-    "finite_result",
     "finite_where_input_is",
 ]
 
 #: A simulated state component (m or m/s) larger than this means the closed loop diverged.
 DIVERGENCE_LIMIT = 1e7
-#: Largest number of steps of a simulation ("absurdly many" beyond).
-MAX_STEPS = 10_000_000
-
-
 
 
 @dataclass(frozen=True)
@@ -131,126 +114,7 @@ class FlockingGains:
 FlockingGains.__module__ = "mascore.flocking"
 
 
-# ----------------------------------------------------------------------------- kernels
-
-
-def phi1(p: np.ndarray, beta: float) -> np.ndarray:
-    """``1 / (1 + |p|^2)^beta`` for checked ``p`` of shape ``(..., n)``; shape ``(...)``.
-
-    Examples
-    --------
-    >>> float(phi1(np.array([1.0, 0.0]), 1.0))
-    0.5
-    """
-    return (1.0 + np.einsum("...i,...i->...", p, p)) ** (-beta)
-
-
-def phi2(p: np.ndarray, v: np.ndarray, gains: FlockingGains) -> np.ndarray:
-    """Spring-damper weight of eq. (6) with ``|p|`` replaced by ``max(|p|, d_min)``; shape ``(...)``.
-
-    Examples
-    --------
-    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
-    >>> float(phi2(np.array([120.0, 0.0]), np.zeros(2), g))  # at rest length, at rest
-    0.0
-    """
-    de = np.maximum(np.sqrt(np.einsum("...i,...i->...", p, p)), gains.min_distance)
-    return gains.rho5 / (2 * de**2) * np.einsum("...i,...i->...", v, p) + gains.rho6 / (2 * de) * (de - gains.R)
-
-
-def pair_term(p: np.ndarray, v: np.ndarray, gains: FlockingGains) -> np.ndarray:
-    """``g = -rho3 phi1(p) v - rho4 phi2(p, v) p`` for ``p = p_ij``, ``v = v_ij``; shape ``(..., n)``.
-
-    Examples
-    --------
-    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
-    >>> pair_term(np.zeros(2), np.zeros(2), g)  # an agent with itself
-    array([0., 0.])
-    """
-    return -gains.rho3 * phi1(p, gains.beta)[..., None] * v - gains.rho4 * phi2(p, v, gains)[..., None] * p
-
-
-def pair_term_jacobian(p: np.ndarray, v: np.ndarray, gains: FlockingGains) -> np.ndarray:
-    """``[dg/dp, dg/dv]`` of :func:`pair_term`: shape ``(..., n, 2n)``, even in ``(p, v)``.
-
-    Examples
-    --------
-    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
-    >>> pair_term_jacobian(np.array([100.0, 0.0]), np.zeros(2), g).shape
-    (2, 4)
-    """
-    n = p.shape[-1]
-    eye = np.eye(n)
-    d2 = np.einsum("...i,...i->...", p, p)
-    d = np.sqrt(d2)
-    far = (d > gains.min_distance)[..., None, None]
-    de = np.maximum(d, gains.min_distance)[..., None, None]
-    vp = np.einsum("...i,...i->...", v, p)[..., None, None]
-    ppT = p[..., :, None] * p[..., None, :]
-    pvT = p[..., :, None] * v[..., None, :]
-    vpT = v[..., :, None] * p[..., None, :]
-    f1 = phi1(p, gains.beta)[..., None, None]
-    c5 = gains.rho4 * gains.rho5 / 2
-    c6 = gains.rho4 * gains.rho6 / 2
-    # term -rho3 phi1(p) v
-    dA_dp = 2 * gains.beta * gains.rho3 * f1 / (1 + d2[..., None, None]) * vpT
-    dA_dv = -gains.rho3 * f1 * eye
-    # term -c5 <v, p> p / de^2   (de = |p| when far, d_min otherwise)
-    dB_dp = -c5 * (vp / de**2 * eye + pvT / de**2 - np.where(far, 2 * vp / de**4 * ppT, 0.0))
-    dB_dv = -c5 * ppT / de**2
-    # term -c6 (1 - R / de) p
-    dC_dp = -c6 * (eye - gains.R / de * (eye - np.where(far, ppT / de**2, 0.0)))
-    return np.concatenate([dA_dp + dB_dp + dC_dp, dA_dv + dB_dv], axis=-1)
-
-
-def sum_pairs(diff: np.ndarray, gains: FlockingGains, adjacency: np.ndarray | None, N: int) -> np.ndarray:
-    """``sum_j a_ij g(x_i - x_j)`` from ``diff[..., i, j, :] = x_i - x_j`` (``None``: every ``j != i``).
-
-    Examples
-    --------
-    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
-    >>> sum_pairs(np.zeros((2, 2, 4)), g, None, 2)
-    array([[0., 0.],
-           [0., 0.]])
-    """
-    n = diff.shape[-1] // 2
-    g = pair_term(diff[..., :n], diff[..., n:], gains)  # (..., N, N, n)
-    if adjacency is None:
-        weights = (~np.eye(N, dtype=bool)).astype(float)
-    else:
-        weights = np.asarray(adjacency, dtype=float)
-        weights = weights * (~np.eye(N, dtype=bool))
-    return np.einsum("...ij,...ijk->...ik", weights, g)
-
-
-def flocking_control(X: np.ndarray, gains: FlockingGains, weights: np.ndarray | None) -> np.ndarray:
-    """Control ``(..., N, n)`` of every agent from the common team state ``X`` ``(..., N, 2n)``, eq. (6).
-
-    Examples
-    --------
-    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
-    >>> X = np.array([[0.0, 0, 0, 0], [120.0, 0, 0, 0]])  # at rest, at rest length
-    >>> float(np.abs(flocking_control(X, g, None)).max())
-    0.0
-    """
-    diff = X[..., :, None, :] - X[..., None, :, :]  # x_i - x_j
-    return sum_pairs(diff, gains, weights, X.shape[-2])
-
-
-def control_from_views(views: np.ndarray, gains: FlockingGains, weights: np.ndarray | None) -> np.ndarray:
-    """``u_i`` from agent ``i``'s own view ``views[..., i]`` ``(..., N, N, 2n)``, eq. (7) or (39); ``(..., N, n)``.
-
-    Examples
-    --------
-    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
-    >>> control_from_views(np.zeros((3, 3, 4)), g, None).shape
-    (3, 2)
-    """
-    N = views.shape[-2]
-    own = np.diagonal(views, axis1=-3, axis2=-2)  # (..., 2n, N)
-    own = np.moveaxis(own, -1, -2)  # (..., N, 2n): views[i, i]
-    diff = own[..., :, None, :] - views  # x_hat_{i,i} - x_hat_{i,j}
-    return sum_pairs(diff, gains, weights, N)
+# ----------------------------------------------------------------------------- shared kernels
 
 
 def propagate(X: np.ndarray, U: np.ndarray, dt: float) -> np.ndarray:
@@ -264,18 +128,6 @@ def propagate(X: np.ndarray, U: np.ndarray, dt: float) -> np.ndarray:
     n = U.shape[-1]
     p, v = X[..., :n], X[..., n:]
     return np.concatenate([p + dt * v + 0.5 * dt**2 * U, v + dt * U], axis=-1)
-
-
-def closed_loop_step(X: np.ndarray, dt: float, gains: FlockingGains) -> np.ndarray:
-    """``f'(X)`` of eq. (40): one step of every agent under the fully-connected law; shape of ``X``.
-
-    Examples
-    --------
-    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
-    >>> closed_loop_step(np.array([[0.0, 0.0, 1.0, 0.0]]), 0.1, g)  # one agent: no pair term
-    array([[0.1, 0. , 1. , 0. ]])
-    """
-    return propagate(X, flocking_control(X, gains, None), dt)
 
 
 def control_and_jacobian(X: np.ndarray, gains: FlockingGains, with_control: bool = True,
@@ -297,11 +149,11 @@ def control_and_jacobian(X: np.ndarray, gains: FlockingGains, with_control: bool
     Returns
     -------
     U : (..., N, n) ndarray or None
-        ``u_i = sum_{j != i} g(x_i - x_j)`` (m/s^2), as :func:`flocking_control`.
+        ``u_i = sum_{j != i} g(x_i - x_j)`` (m/s^2), as :func:`mascore.flocking.flocking_control`.
     G : (..., N, n, N, 2n) ndarray
         ``G[..., i, :, j, :] = du_i/dx_j``: ``-J(x_i - x_j)`` for ``j != i`` and
         ``sum_{j != i} J(x_i - x_j)`` for ``j = i``, ``J`` the pair Jacobian of
-        :func:`pair_term_jacobian`. Written entry by entry into its final
+        :func:`mascore.flocking.pair_term_jacobian`. Written entry by entry into its final
         layout from ``(..., r, N)`` arrays of pair scalars (no scatter), ``r``
         rows at a time (temporaries of at most ~64 kB: fresh large temporaries
         cost page faults): ``J = s_I [I 0] + z_I [0 I] + v [c_vp p, 0]^T + p [c_pv v + c_pp p, c_pv p]^T``,
@@ -417,45 +269,6 @@ def _control_and_jacobian_rows(Xt, gains, i0, i1, U, G, scale=1.0):
                 if a < b:
                     np.copyto(Gr[..., :, b, :, n + a], t)
                     D[..., b, n + a] = D[..., a, n + b]
-
-
-def control_jacobian(X: np.ndarray, gains: FlockingGains) -> np.ndarray:
-    """``dU/dX`` of the fully-connected law, ``(..., N, n, N, 2n)`` (see :func:`control_and_jacobian`).
-
-    Examples
-    --------
-    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
-    >>> control_jacobian(np.zeros((1, 4)), g)  # one agent: no pair term
-    array([[[[0., 0., 0., 0.]],
-    <BLANKLINE>
-            [[0., 0., 0., 0.]]]])
-    """
-    return control_and_jacobian(X, gains, with_control=False)[1]
-
-
-def closed_loop_jacobian(X: np.ndarray, dt: float, gains: FlockingGains) -> np.ndarray:
-    """``F = dF'/dX`` of eq. (40) (eq. (38)): ``(..., 2nN, 2nN)``, written in its final layout.
-
-    Block ``(i, j)`` is ``delta_ij A + B du_i/dx_j`` with the double integrator
-    ``A = [[I, dt I], [0, I]]``, ``B = [dt^2/2 I; dt I]``.
-
-    Examples
-    --------
-    >>> g = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
-    >>> closed_loop_jacobian(np.zeros((1, 2)), 0.5, g)  # one agent: A
-    array([[1. , 0.5],
-           [0. , 1. ]])
-    """
-    N, m = X.shape[-2:]
-    n = m // 2
-    G = control_jacobian(X, gains)  # (..., N, n, N, m)
-    F = np.empty((*X.shape[:-2], N, m, N, m))
-    np.multiply(G, 0.5 * dt**2, out=F[..., :n, :, :])
-    np.multiply(G, dt, out=F[..., n:, :, :])
-    A = np.block([[np.eye(n), dt * np.eye(n)], [np.zeros((n, n)), np.eye(n)]])
-    diag = np.arange(N)
-    F[..., diag, :, diag, :] += A
-    return F.reshape(*X.shape[:-2], N * m, N * m)
 
 
 # ----------------------------------------------------------------------------- checks
@@ -631,21 +444,6 @@ def noise_factor(C: ArrayLike, name: str, size: int) -> np.ndarray:
     C = check_covariance(float_array(C, name), name, size=size)
     w, V = np.linalg.eigh(C)
     return V * np.sqrt(np.clip(w, 0, None))
-
-
-def finite_result(out, what: str, names: str):
-    """Return `out` (an array or a tuple of arrays, ``None`` entries skipped) if finite; else name the overflow.
-
-    Examples
-    --------
-    >>> finite_result(np.ones(2), "f", "x")
-    array([1., 1.])
-    """
-    arrays = out if isinstance(out, tuple) else (out,)
-    if not all(a is None or np.all(np.isfinite(a)) for a in arrays):
-        raise ValueError(f"{what} overflowed (NaN or inf in the result) although every input is finite: "
-                         f"{names} hold values too large for floating point; rescale them")
-    return out
 
 
 def finite_where_input_is(out: np.ndarray, X: np.ndarray, what: str) -> None:

@@ -51,8 +51,10 @@ Input checks of the flocking functions
 Every public function checks its arguments (finite entries, shapes, ``dt > 0``,
 a :class:`FlockingGains`, non-negative adjacency weights -- a graph Laplacian
 passed by mistake is named as such) and raises a ``ValueError`` or
-``TypeError`` naming the argument; the simulators then loop over unchecked
-private kernels. A self-loop ``a_ii`` is accepted and ignored: the pair term
+``TypeError`` naming the argument, then runs plain code: each step of the law has
+one implementation, these functions (the gains are a checked frozen
+:class:`FlockingGains`, so a call checks only the states), and the simulator calls
+them too. A self-loop ``a_ii`` is accepted and ignored: the pair term
 of an agent with itself is exactly zero. One agent (``N = 1``) or an isolated
 agent feels no pair term: its control is zero. A result that overflows (inputs
 too large for floating point) raises instead of returning NaN or inf.
@@ -77,10 +79,9 @@ from ._flocking_core import check_steps as _check_steps
 from ._flocking_core import check_team as _check_team
 from ._flocking_core import check_vectors as _vectors
 from ._flocking_core import check_weights as _check_weights
-from ._flocking_core import finite_result as _finite_result
 from ._flocking_core import finite_where_input_is as _finite_where_input_is
 from ._flocking_core import float_array as _float_array
-from ._validation import check_generator, check_positive
+from ._validation import check_generator, check_positive, finite_result
 from .graphs import complete_graph, proximity_graph
 from .sensing import measure, team_noise_covariance
 
@@ -127,7 +128,7 @@ def phi1(p: ArrayLike, beta: float) -> np.ndarray:
     p = _vectors(p, "p")
     beta = check_positive(beta, "beta", allow_zero=True)
     with np.errstate(over="ignore"):
-        return _finite_result(_core.phi1(p, beta), "phi1", "p")
+        return finite_result("phi1 of p", _phi1_of(np.einsum("...i,...i->...", p, p), beta))
 
 
 def phi2(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
@@ -157,7 +158,7 @@ def phi2(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
     """
     p, v = _pair_args(p, v, gains)
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_core.phi2(p, v, gains), "phi2", "p, v")
+        return finite_result("phi2 of p, v", _phi2_of(p, v, gains))
 
 
 def pair_term(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
@@ -191,7 +192,7 @@ def pair_term(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
     """
     p, v = _pair_args(p, v, gains)
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_core.pair_term(p, v, gains), "pair_term", "p, v")
+        return finite_result("pair_term of p, v", _pair_terms(p, v, gains))
 
 
 def pair_term_jacobian(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.ndarray:
@@ -223,8 +224,30 @@ def pair_term_jacobian(p: ArrayLike, v: ArrayLike, gains: FlockingGains) -> np.n
     True
     """
     p, v = _pair_args(p, v, gains)
+    n = p.shape[-1]
+    eye = np.eye(n)
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_core.pair_term_jacobian(p, v, gains), "pair_term_jacobian", "p, v")
+        d2 = np.einsum("...i,...i->...", p, p)
+        d = np.sqrt(d2)
+        far = (d > gains.min_distance)[..., None, None]
+        de = np.maximum(d, gains.min_distance)[..., None, None]
+        vp = np.einsum("...i,...i->...", v, p)[..., None, None]
+        ppT = p[..., :, None] * p[..., None, :]
+        pvT = p[..., :, None] * v[..., None, :]
+        vpT = v[..., :, None] * p[..., None, :]
+        f1 = _phi1_of(np.einsum("...i,...i->...", p, p), gains.beta)[..., None, None]
+        c5 = gains.rho4 * gains.rho5 / 2
+        c6 = gains.rho4 * gains.rho6 / 2
+        # term -rho3 phi1(p) v
+        dA_dp = 2 * gains.beta * gains.rho3 * f1 / (1 + d2[..., None, None]) * vpT
+        dA_dv = -gains.rho3 * f1 * eye
+        # term -c5 <v, p> p / de^2   (de = |p| when far, d_min otherwise)
+        dB_dp = -c5 * (vp / de**2 * eye + pvT / de**2 - np.where(far, 2 * vp / de**4 * ppT, 0.0))
+        dB_dv = -c5 * ppT / de**2
+        # term -c6 (1 - R / de) p
+        dC_dp = -c6 * (eye - gains.R / de * (eye - np.where(far, ppT / de**2, 0.0)))
+        J = np.concatenate([dA_dp + dB_dp + dC_dp, dA_dv + dB_dv], axis=-1)
+    return finite_result("pair_term_jacobian of p, v", J)
 
 
 def flocking_control(X: ArrayLike, gains: FlockingGains, adjacency: ArrayLike | None = None) -> np.ndarray:
@@ -259,7 +282,7 @@ def flocking_control(X: ArrayLike, gains: FlockingGains, adjacency: ArrayLike | 
     _check_gains(gains)
     weights = _check_weights(adjacency, X.shape[-2], "adjacency", X.shape[:-2])
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_core.flocking_control(X, gains, weights), "flocking_control", "X")
+        return finite_result("flocking_control of X", _sum_pairs(_differences(X), gains, weights, X.shape[-2]))
 
 
 def control_from_views(views: ArrayLike, gains: FlockingGains, adjacency: ArrayLike | None = None) -> np.ndarray:
@@ -298,8 +321,11 @@ def control_from_views(views: ArrayLike, gains: FlockingGains, adjacency: ArrayL
         raise ValueError("views contains NaN or infinite entries")
     _check_gains(gains)
     weights = _check_weights(adjacency, views.shape[-2], "adjacency", views.shape[:-3])
+    N = views.shape[-2]
+    own = np.moveaxis(np.diagonal(views, axis1=-3, axis2=-2), -1, -2)  # (..., N, 2n): views[i, i]
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_core.control_from_views(views, gains, weights), "control_from_views", "views")
+        diff = own[..., :, None, :] - views  # x_hat_{i,i} - x_hat_{i,j}
+        return finite_result("control_from_views of views", _sum_pairs(diff, gains, weights, N))
 
 
 def closed_loop_step(X: ArrayLike, dt: float, gains: FlockingGains) -> np.ndarray:
@@ -334,7 +360,8 @@ def closed_loop_step(X: ArrayLike, dt: float, gains: FlockingGains) -> np.ndarra
     dt = _check_dt(dt)
     _check_gains(gains)
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_core.closed_loop_step(X, dt, gains), "closed_loop_step", "X")
+        U = _sum_pairs(_differences(X), gains, None, X.shape[-2])  # the fully-connected law
+        return finite_result("closed_loop_step of X", _core.propagate(X, U, dt))
 
 
 def closed_loop_jacobian(X: ArrayLike, dt: float, gains: FlockingGains) -> np.ndarray:
@@ -372,8 +399,17 @@ def closed_loop_jacobian(X: ArrayLike, dt: float, gains: FlockingGains) -> np.nd
     X = _check_team(X, "X")
     dt = _check_dt(dt)
     _check_gains(gains)
+    N, m = X.shape[-2:]
+    n = m // 2
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite_result(_core.closed_loop_jacobian(X, dt, gains), "closed_loop_jacobian", "X")
+        G = _core.control_and_jacobian(X, gains, with_control=False)[1]  # (..., N, n, N, m), du_i/dx_j
+        F = np.empty((*X.shape[:-2], N, m, N, m))
+        np.multiply(G, 0.5 * dt**2, out=F[..., :n, :, :])
+        np.multiply(G, dt, out=F[..., n:, :, :])
+        A = np.block([[np.eye(n), dt * np.eye(n)], [np.zeros((n, n)), np.eye(n)]])
+        diag = np.arange(N)
+        F[..., diag, :, diag, :] += A
+    return finite_result("closed_loop_jacobian of X", F.reshape(*X.shape[:-2], N * m, N * m))
 
 
 @dataclass(frozen=True)
@@ -484,7 +520,7 @@ def simulate_measured_flocking(
         if k == n_steps:
             break
         views, _ = measure(rng, X, A_k, R, allow_isolated=True)  # eq. (2)
-        U = _core.control_from_views(views, gains, A_k)  # eq. (7)
+        U = control_from_views(views, gains, A_k)  # eq. (7)
         X = _core.propagate(X, U, dt) + rng.standard_normal((*batch, N, m)) @ Lq.T
         _core.check_divergence(X, k + 1, dt)
     t = dt * np.arange(n_steps + 1)
@@ -555,3 +591,40 @@ def max_distance_from_centre(X: ArrayLike) -> np.ndarray:
         out = np.linalg.norm(p - p.mean(axis=-2, keepdims=True), axis=-1).max(axis=-1)
     _finite_where_input_is(out, X, "max_distance_from_centre")
     return out
+
+
+# ----------------------------------------------------------------------------- the law's plain math (checked input)
+
+
+def _phi1_of(d2: np.ndarray, beta: float) -> np.ndarray:
+    """``phi1`` from the squared distance ``d2 = |p|^2``."""
+    return (1.0 + d2) ** (-beta)
+
+
+def _phi2_of(p: np.ndarray, v: np.ndarray, gains: FlockingGains) -> np.ndarray:
+    """``phi2(p, v)`` of eq. (6) with ``|p|`` replaced by ``max(|p|, d_min)``, for checked `p`, `v` ``(..., n)``."""
+    de = np.maximum(np.sqrt(np.einsum("...i,...i->...", p, p)), gains.min_distance)
+    return gains.rho5 / (2 * de**2) * np.einsum("...i,...i->...", v, p) + gains.rho6 / (2 * de) * (de - gains.R)
+
+
+def _pair_terms(p: np.ndarray, v: np.ndarray, gains: FlockingGains) -> np.ndarray:
+    """``g = -rho3 phi1(p) v - rho4 phi2(p, v) p`` for checked `p`, `v` ``(..., n)`` (every pair at once)."""
+    f1 = _phi1_of(np.einsum("...i,...i->...", p, p), gains.beta)
+    return -gains.rho3 * f1[..., None] * v - gains.rho4 * _phi2_of(p, v, gains)[..., None] * p
+
+
+def _differences(X: np.ndarray) -> np.ndarray:
+    """``x_i - x_j`` of a team state ``(..., N, 2n)``: ``(..., N, N, 2n)``."""
+    return X[..., :, None, :] - X[..., None, :, :]
+
+
+def _sum_pairs(diff: np.ndarray, gains: FlockingGains, adjacency: np.ndarray | None, N: int) -> np.ndarray:
+    """``sum_j a_ij g(x_i - x_j)`` from ``diff[..., i, j, :] = x_i - x_j`` (``None``: every ``j != i``)."""
+    n = diff.shape[-1] // 2
+    g = _pair_terms(diff[..., :n], diff[..., n:], gains)  # (..., N, N, n)
+    if adjacency is None:
+        weights = (~np.eye(N, dtype=bool)).astype(float)
+    else:
+        weights = np.asarray(adjacency, dtype=float)
+        weights = weights * (~np.eye(N, dtype=bool))
+    return np.einsum("...ij,...ijk->...ik", weights, g)
