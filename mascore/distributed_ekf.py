@@ -152,18 +152,24 @@ class EKFModel:
         motion = any(v is not None for v in (dt, gains, Q_team))  # then each of them is checked (None refused)
         if not motion and R is None:
             raise ValueError("give the prediction part (dt, gains, Q_team), the measurement part (R), or both")
-        M = None if state_dim is None else N * check_positive_int(state_dim, "state_dim")
+        if state_dim is not None and check_positive_int(state_dim, "state_dim") % 2:
+            raise ValueError(f"state_dim must be even (2n: positions and velocities); got {state_dim}")
+        M = None if state_dim is None else N * state_dim
         Q = Qb = None
-        if motion:
-            dt = _check_dt(dt)
-            _check_gains(gains)
-            Q = _constant_covariance(Q_team, "Q_team", M)
-            M = Q.shape[0]
-        if R is not None:
-            R = _constant_covariance(R, "R", M, definite=True)
-            M = R.shape[0]
-        if M % N or (M // N) % 2:
-            raise ValueError(f"Q_team and R must be (2nN, 2nN) for N = n_agents = {N}; got ({M}, {M})")
+        for name, given, C, definite in (("Q_team", motion, Q_team, False), ("R", R is not None, R, True)):
+            if not given:
+                continue
+            if name == "Q_team":
+                dt = _check_dt(dt)
+                _check_gains(gains)
+            C = _constant_covariance(C, name, M, definite=definite)
+            if M is None and (C.shape[0] % N or (C.shape[0] // N) % 2):
+                raise ValueError(f"{name} must be (2nN, 2nN) for N = n_agents = {N}; got {C.shape}")
+            M = C.shape[0]
+            if name == "Q_team":
+                Q = C
+            else:
+                R = C
         m = M // N
         if Q is not None:
             Qb = _block_diagonal(Q, N, m)

@@ -201,3 +201,138 @@ def test_ekf_flocking_step_equals_its_parts():
         np.testing.assert_allclose(U[i], flocking.flocking_control(ref_X[i], GAINS)[i], atol=1e-12)
     np.testing.assert_allclose(X_next, flocking.closed_loop_step(ref_X, 0.1, GAINS))
     np.testing.assert_allclose(S_next, dekf.ekf_predict(ref_X, ref_S, 0.1, GAINS, Q)[1])
+
+
+# ----------------------------------------------------------------------------- checked model, owned filter
+
+
+def _ekf_case(seed, N=4, runs=2):
+    rng = np.random.default_rng(seed)
+    M = 4 * N
+    X = _team(rng, (runs,), N)
+    X_hat = X[:, None] + rng.standard_normal((runs, N, N, 4))
+    return rng, X, X_hat, M
+
+
+def _run_ekf(seed, n_steps=20, N=4):
+    """An independent filter bank: its own model, filter and measurements; every output of every step."""
+    rng, X, X_hat, M = _ekf_case(seed, N)
+    model = dekf.EKFModel(N, 0.1, GAINS, 0.01 * np.eye(M), np.eye(M))
+    ekf = dekf.FlockingEKF(model, X_hat, 4.0 * np.eye(M))
+    out = []
+    for k in range(n_steps):
+        observed = rng.random((2, N, N)) < 0.7
+        z = X[:, None] + rng.standard_normal((2, N, N, 4))
+        step = ekf.step(z, observed, predict=k < n_steps - 1)
+        out += [a.copy() for a in step if a is not None] + [ekf.Sigma.copy()]
+    return out
+
+
+def test_eight_threads_give_the_serial_results_byte_for_byte():
+    """No hidden shared state: 8 threads, each with its own model and filter (20 steps), reproduce a serial run."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    seeds = list(range(8))
+    serial = [_run_ekf(s) for s in seeds]
+    with ThreadPoolExecutor(max_workers=8) as pool:
+        threaded = list(pool.map(_run_ekf, seeds))
+    for a, b in zip(serial, threaded):
+        assert len(a) == len(b)
+        for x, y in zip(a, b):
+            assert x.shape == y.shape and x.tobytes() == y.tobytes()
+
+
+def test_filter_object_equals_the_plain_array_functions():
+    """FlockingEKF.update/predict/step give exactly what masked_update, ekf_predict and ekf_flocking_step give."""
+    rng, X, X_hat, M = _ekf_case(1)
+    N = 4
+    Sigma = np.broadcast_to(_spd(rng, M), (2, N, M, M)).copy()
+    observed = rng.random((2, N, N)) < 0.7
+    z = X[:, None] + rng.standard_normal((2, N, N, 4))
+    model = dekf.EKFModel(N, 0.1, GAINS, 0.01 * np.eye(M), np.eye(M))
+    ekf = dekf.FlockingEKF(model, X_hat, Sigma)
+    X_post = ekf.update(z, observed)
+    ref_X, ref_S = dekf.masked_update(X_hat, Sigma, z, observed, np.eye(M))
+    np.testing.assert_array_equal(X_post, ref_X)
+    np.testing.assert_array_equal(ekf.Sigma, ref_S)
+    X_next, U = ekf.predict()
+    ref = dekf.ekf_predict(ref_X, ref_S, 0.1, GAINS, 0.01 * np.eye(M))
+    np.testing.assert_array_equal(X_next, ref[0])
+    np.testing.assert_array_equal(ekf.Sigma, ref[1])
+    assert U.shape == (2, N, N, 2)
+    ekf2 = dekf.FlockingEKF(model, X_hat, Sigma)
+    post = np.empty(ekf2.Sigma.shape)
+    step = ekf2.step(z, observed, posterior_out=post)
+    whole = dekf.ekf_flocking_step(X_hat, Sigma, z, observed, np.eye(M), 0.1, GAINS, 0.01 * np.eye(M))
+    for got, want in zip((step.X_post, post, step.U, step.X_next, ekf2.Sigma), whole):
+        np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(step.variance, np.diagonal(post, axis1=-2, axis2=-1))
+
+
+def test_model_and_filter_arrays_are_read_only_copies():
+    """Changing the caller's arrays after construction cannot reach the filter; the stored ones refuse writes."""
+    rng, X, X_hat, M = _ekf_case(2)
+    N = 4
+    Q, R, Sigma0 = 0.01 * np.eye(M), np.eye(M), 4.0 * np.eye(M)
+    model = dekf.EKFModel(N, 0.1, GAINS, Q, R)
+    ekf = dekf.FlockingEKF(model, X_hat, Sigma0)
+    ref = dekf.FlockingEKF(dekf.EKFModel(N, 0.1, GAINS, Q.copy(), R.copy()), X_hat.copy(), Sigma0.copy())
+    Q[0, 0] = R[0, 0] = -5.0  # the caller's arrays, spoiled after the check
+    Sigma0[:] = np.nan
+    X_hat[:] = np.nan
+    for arr in (model.Q_team, model.R, ekf.X_hat, ekf.Sigma):
+        assert not arr.flags.writeable
+        with pytest.raises(ValueError, match="read-only"):
+            arr[..., 0, 0] = 1.0
+    with pytest.raises(AttributeError):
+        model.dt = 1.0
+    observed = np.ones((2, N, N), bool)
+    z = X[:, None] + rng.standard_normal((2, N, N, 4))
+    got, want = ekf.step(z, observed), ref.step(z, observed)
+    for a, b in zip(got, want):
+        np.testing.assert_array_equal(a, b)
+    for arr in (got.X_post, got.X_next):
+        assert not arr.flags.writeable
+
+
+@pytest.mark.parametrize("kwargs, exc, name", [
+    (dict(n_agents=0), ValueError, "n_agents"),
+    (dict(dt=-0.1), ValueError, "dt"),
+    (dict(gains={"rho3": 1.0}), TypeError, "gains"),
+    (dict(Q_team=np.eye(12)), ValueError, "Q_team"),
+    (dict(Q_team=-np.eye(16)), ValueError, "Q_team"),
+    (dict(R=np.zeros((16, 16))), ValueError, "R"),
+    (dict(R="R"), TypeError, "R"),
+    (dict(R=np.full((16, 16), np.nan)), ValueError, "R"),
+    (dict(Q_team=None), TypeError, "Q_team"),
+    (dict(state_dim=3), ValueError, "state_dim"),
+    (dict(Q_team=np.eye(12), R=None), ValueError, "Q_team"),
+])
+def test_bad_model_arguments_are_refused_by_name(kwargs, exc, name):
+    args = dict(n_agents=4, dt=0.1, gains=GAINS, Q_team=0.01 * np.eye(16), R=np.eye(16))
+    args.update(kwargs)
+    with pytest.raises(exc, match=name):
+        dekf.EKFModel(**args)
+
+
+def test_filter_checks_its_prior_once_and_each_call_its_measurements():
+    rng, X, X_hat, M = _ekf_case(3)
+    N = 4
+    model = dekf.EKFModel(N, 0.1, GAINS, 0.01 * np.eye(M), np.eye(M))
+    with pytest.raises(ValueError, match="Sigma"):
+        dekf.FlockingEKF(model, X_hat, -np.eye(M))
+    with pytest.raises(ValueError, match="X_hat"):
+        dekf.FlockingEKF(model, X_hat[..., :3, :], np.eye(M))
+    with pytest.raises(TypeError, match="model"):
+        dekf.FlockingEKF("model", X_hat, np.eye(M))
+    ekf = dekf.FlockingEKF(model, X_hat, np.eye(M))
+    z = X[:, None] + np.zeros((2, N, N, 4))
+    with pytest.raises(ValueError, match="z contains NaN"):
+        ekf.step(np.full_like(z, np.nan), np.ones((2, N, N), bool))
+    with pytest.raises(ValueError, match="observed"):
+        ekf.step(z, np.ones((2, N, N)))
+    with pytest.raises(ValueError, match="z has batch axes"):
+        ekf.step(np.broadcast_to(z, (3, 2, N, N, 4)), np.ones((2, N, N), bool))
+    no_R = dekf.FlockingEKF(dekf.EKFModel(N, 0.1, GAINS, 0.01 * np.eye(M)), X_hat, np.eye(M))
+    with pytest.raises(ValueError, match="needs a model with R"):
+        no_R.update(z, np.ones((2, N, N), bool))

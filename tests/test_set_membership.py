@@ -204,3 +204,107 @@ def test_solver_options_reach_the_solver_and_a_starved_solver_says_how_to_fix_it
         smf.correct(*args, method="sdp", solver_options={"max_iter": 1})
     with pytest.raises(TypeError, match="solver_options"):
         smf.correct(*args, method="sdp", solver_options=["max_iter", 1])
+
+
+# --------------------------------------------------------------------------- checked model
+
+
+def _model(**kw):
+    args = dict(A=[[1.0, 0.1], [0.0, 1.0]], G=np.eye(2), C=[[1.0, 0.0]], D=[[1.0]], Q=1e-3 * np.eye(2), R=[[0.04]])
+    args.update(kw)
+    return smf.SetMembershipModel(**args)
+
+
+def _run_model(seed, method, n_steps=4):
+    """An independent filter: its own model (and compiled SDPs), a few steps, every output."""
+    rng = np.random.default_rng(seed)
+    model = _model()
+    c, P = np.zeros(2), np.eye(2)
+    out = []
+    for k in range(n_steps):
+        c, P, L = model.correct(c, P, rng.uniform(-0.1, 0.1, 1), method=method, step=k)
+        c, P = model.predict(c, P, method=method, step=k)
+        out += [c, P, L]
+    return out
+
+
+@pytest.mark.parametrize("method", smf.METHODS)
+def test_eight_threads_give_the_serial_results_byte_for_byte(method):
+    """No module-level state: 8 threads, one model each, reproduce a serial run exactly (both methods)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    seeds = list(range(8))
+    serial = [_run_model(s, method) for s in seeds]
+    with ThreadPoolExecutor(max_workers=8) as pool:
+        threaded = list(pool.map(lambda s: _run_model(s, method), seeds))
+    for a, b in zip(serial, threaded):
+        for x, y in zip(a, b):
+            assert x.shape == y.shape and x.tobytes() == y.tobytes()
+
+
+@pytest.mark.parametrize("method", smf.METHODS)
+def test_model_methods_equal_the_plain_functions(method):
+    A_, G_, C_, D_, Q_, R_ = [[1.0, 0.1], [0.0, 1.0]], np.eye(2), [[1.0, 0.0]], [[1.0]], 1e-3 * np.eye(2), [[0.04]]
+    model = _model()
+    got = model.correct(np.zeros(2), np.eye(2), [0.05], method=method)
+    want = smf.correct(np.zeros(2), np.eye(2), [0.05], C_, D_, R_, method=method)
+    for a, b in zip(got, want):
+        np.testing.assert_array_equal(a, b)
+    got = model.predict(got[0], got[1], method=method)
+    want = smf.predict(want[0], want[1], A_, G_, Q_, method=method)
+    for a, b in zip(got, want):
+        np.testing.assert_array_equal(a, b)
+    y = np.array([[0.05], [0.0], [-0.02]])
+    h1 = model.run(np.zeros(2), np.eye(2), y, method=method)
+    h2 = smf.run_filter(np.zeros(2), np.eye(2), y, A_, G_, C_, D_, Q_, R_, method=method)
+    for f in ("center_corr", "shape_corr", "center_pred", "shape_pred", "gain"):
+        np.testing.assert_array_equal(getattr(h1, f), getattr(h2, f))
+
+
+def test_model_arrays_are_read_only_copies():
+    A_ = np.array([[1.0, 0.1], [0.0, 1.0]])
+    R_ = np.array([[0.04]])
+    model = _model(A=A_, R=R_)
+    ref = _model()
+    A_[0, 0] = 50.0  # the caller's arrays, changed after the check, cannot reach the model
+    R_[0, 0] = -1.0
+    for name in ("A", "G", "C", "D", "Q", "R", "W", "GQG"):
+        arr = getattr(model, name)
+        assert not arr.flags.writeable
+        with pytest.raises(ValueError, match="read-only"):
+            arr[0, 0] = 1.0
+    with pytest.raises(AttributeError):
+        model.A = np.eye(2)
+    a = model.predict(*model.correct(np.zeros(2), np.eye(2), [0.05])[:2])
+    b = ref.predict(*ref.correct(np.zeros(2), np.eye(2), [0.05])[:2])
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(x, y)
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    (dict(R=[[-1.0]]), ValueError, "R must be symmetric positive definite"),
+    (dict(Q=-np.eye(2)), ValueError, "Q must be symmetric positive definite"),
+    (dict(C=[[1.0, 0.0, 0.0]]), ValueError, "Incompatible dimensions of C"),
+    (dict(A=np.eye(3)), ValueError, "G"),
+    (dict(A="A"), TypeError, "A"),
+    (dict(D=[[np.nan]]), ValueError, "D"),
+    (dict(Q=None), ValueError, "A, G and Q together"),
+    (dict(B=np.eye(3)), ValueError, "B"),
+])
+def test_bad_model_arguments_are_refused_by_name(kwargs, exc, match):
+    with pytest.raises(exc, match=match):
+        _model(**kwargs)
+
+
+def test_model_checks_each_call_and_its_parts():
+    model = _model(B=np.eye(2))
+    with pytest.raises(ValueError, match="give both B and u"):
+        model.predict(np.zeros(2), np.eye(2))
+    with pytest.raises(ValueError, match="center has size 3"):
+        model.correct(np.zeros(3), np.eye(3), [0.0])
+    with pytest.raises(ValueError, match="shape matrix is not symmetric positive definite"):
+        model.correct(np.zeros(2), -np.eye(2), [0.0])
+    measurement_only = smf.SetMembershipModel(C=[[1.0, 0.0]], D=[[1.0]], R=[[0.04]])
+    assert measurement_only.n == 2
+    with pytest.raises(ValueError, match="no A, G, Q"):
+        measurement_only.predict(np.zeros(2), np.eye(2))
