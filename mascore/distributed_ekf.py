@@ -813,12 +813,23 @@ def _check_batch(got, batch, name, of):
 
 
 def _constant_covariance(C, name, size, definite=False):
-    """A constant ``(size, size)`` covariance (any square size if `size` is None), checked in full."""
+    """A constant ``(size, size)`` covariance (any square size if `size` is None), checked in full.
+
+    Finite, symmetric and positive semidefinite by one Cholesky factorisation (:func:`_check_sigma`),
+    definite (`definite`) by a second one of the matrix itself; a failure is reported by
+    :func:`mascore._validation.check_covariance`, with the smallest eigenvalue.
+    """
     C = _float_array(C, name)
     if C.ndim != 2 or C.shape[0] != C.shape[1] or (size is not None and C.shape[0] != size):
         want = "(M, M)" if size is None else f"({size}, {size})"
         raise ValueError(f"Incompatible dimensions of {name}; expected {want} but found {C.shape}")
-    return check_covariance(C, name, definite=definite)
+    C = _check_sigma(C, name, C.shape[0], (), name)
+    if definite:
+        try:
+            np.linalg.cholesky(C)
+        except np.linalg.LinAlgError:
+            check_covariance(C, name, definite=True)  # raises, with the smallest eigenvalue
+    return C
 
 
 def _check_measurements(z, observed, N, m):
