@@ -203,6 +203,19 @@ class EKFStep(NamedTuple):
         Predicted estimates for the next step (read-only); ``None`` without prediction.
     variance : (..., N, 2nN) ndarray
         Diagonal of the updated covariances ``Sigma_post``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import distributed_ekf as dekf
+    >>> from mascore.flocking import FlockingGains
+    >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Song et al., Table I
+    >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0]])   # 2 agents [p, v]
+    >>> ekf = dekf.FlockingEKF(dekf.EKFModel(2, 0.1, gains, 0.01 * np.eye(8), np.eye(8)),
+    ...                        np.broadcast_to(X, (2, 2, 4)), np.eye(8))
+    >>> X_post, U, X_next, variance = ekf.step(X, np.ones((2, 2), bool), predict=False)   # a last step
+    >>> U is None and X_next is None, variance.shape
+    (True, (2, 8))
     """
 
     X_post: np.ndarray
@@ -284,17 +297,56 @@ class FlockingEKF:
 
     @property
     def model(self) -> EKFModel:
-        """The checked model."""
+        """The checked model.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import distributed_ekf as dekf
+        >>> from mascore.flocking import FlockingGains
+        >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+        >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents
+        >>> model = dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12))
+        >>> ekf = dekf.FlockingEKF(model, np.broadcast_to(X, (3, 3, 4)), np.eye(12))
+        >>> ekf.model is model
+        True
+        """
         return self._model
 
     @property
     def X_hat(self) -> np.ndarray:
-        """``(..., N, 2n)`` current estimates (read-only; predicted after :meth:`step` or :meth:`predict`)."""
+        """``(..., N, 2n)`` current estimates (read-only; predicted after :meth:`step` or :meth:`predict`).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import distributed_ekf as dekf
+        >>> from mascore.flocking import FlockingGains
+        >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+        >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents
+        >>> model = dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12))
+        >>> ekf = dekf.FlockingEKF(model, np.broadcast_to(X, (3, 3, 4)), np.eye(12))
+        >>> ekf.X_hat.shape, ekf.X_hat.flags.writeable
+        ((3, 3, 4), False)
+        """
         return self._X
 
     @property
     def Sigma(self) -> np.ndarray:
-        """``(..., 2nN, 2nN)`` current covariances (a read-only view, overwritten by the next call)."""
+        """``(..., 2nN, 2nN)`` current covariances (a read-only view, overwritten by the next call).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import distributed_ekf as dekf
+        >>> from mascore.flocking import FlockingGains
+        >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+        >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents
+        >>> model = dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12))
+        >>> ekf = dekf.FlockingEKF(model, np.broadcast_to(X, (3, 3, 4)), np.eye(12))
+        >>> ekf.Sigma.shape, ekf.Sigma.flags.writeable
+        ((3, 12, 12), False)
+        """
         view = self._P.view()
         view.flags.writeable = False
         return view
@@ -315,6 +367,20 @@ class FlockingEKF:
         X_post : (..., N, 2n) ndarray
             Updated estimates (read-only; also :attr:`X_hat`). :attr:`Sigma` becomes
             ``(I - G_i H_i) Sigma_i^-`` of eq. (20), symmetrized.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import distributed_ekf as dekf
+        >>> from mascore.flocking import FlockingGains
+        >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+        >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents
+        >>> model = dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12))
+        >>> ekf = dekf.FlockingEKF(model, np.broadcast_to(X, (3, 3, 4)), np.eye(12))
+        >>> seen = np.array([True, True, False])               # agent 2 is out of range
+        >>> X_post = ekf.update(X + 0.5, seen)
+        >>> bool(np.all(X_post[:, 2] == X[2])), bool(np.trace(ekf.Sigma[0]) < 12.0)   # only the seen agents move
+        (True, True)
         """
         model = self._need("update", model_R=True)
         Z, obs = self._measurements(z, observed)
@@ -340,6 +406,19 @@ class FlockingEKF:
         U : (..., N, n) ndarray
             The control of every agent that each estimate implies (eq. (39) on the
             estimate, fully connected), m/s^2.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import distributed_ekf as dekf
+        >>> from mascore.flocking import FlockingGains
+        >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+        >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents
+        >>> model = dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12))
+        >>> ekf = dekf.FlockingEKF(model, np.broadcast_to(X, (3, 3, 4)), np.eye(12))
+        >>> X_pred, U = ekf.predict()
+        >>> X_pred.shape, U.shape
+        ((3, 3, 4), (3, 3, 2))
         """
         model = self._need("predict")
         X, P = self._flat()
@@ -377,6 +456,19 @@ class FlockingEKF:
         -------
         EKFStep
             ``(X_post, U, X_next, variance)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import distributed_ekf as dekf
+        >>> from mascore.flocking import FlockingGains
+        >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+        >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents
+        >>> model = dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12))
+        >>> ekf = dekf.FlockingEKF(model, np.broadcast_to(X, (3, 3, 4)), np.eye(12))
+        >>> out = ekf.step(X + 0.1, np.ones((3, 3), bool))     # everyone sees everyone
+        >>> out.U.shape, out.variance.shape, bool(np.all(out.X_next == ekf.X_hat))
+        ((3, 2), (3, 12), True)
         """
         model = self._need("step", model_R=True, motion=bool(predict))
         N, m = model.n_agents, model.state_dim

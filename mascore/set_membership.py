@@ -474,6 +474,16 @@ class SetMembershipModel:
         shape : (..., n, n) ndarray
         gain : (..., n, p) ndarray
             As in :func:`correct`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import set_membership as sm
+        >>> model = sm.SetMembershipModel(A=[[1.0, 0.1], [0.0, 1.0]], G=np.eye(2), C=[[1.0, 0.0]], D=[[1.0]],
+        ...                               Q=0.01 * np.eye(2), R=[[0.04]])
+        >>> c, P, L = model.correct(np.zeros(2), np.eye(2), [0.1])
+        >>> bool(np.trace(P) < 2.0)                           # the measurement shrinks the set
+        True
         """
         method = _check_method(method)
         c, P = self._ellipsoid(center, shape, "correction", step, agent, self.C)
@@ -501,6 +511,16 @@ class SetMembershipModel:
         center : (..., n) ndarray
         shape : (..., n, n) ndarray
             As in :func:`predict`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import set_membership as sm
+        >>> model = sm.SetMembershipModel(A=[[1.0, 0.1], [0.0, 1.0]], G=np.eye(2), C=[[1.0, 0.0]], D=[[1.0]],
+        ...                               Q=0.01 * np.eye(2), R=[[0.04]])
+        >>> c, P = model.predict(np.zeros(2), np.eye(2))
+        >>> bool(np.trace(P) > 2.0)                           # the disturbance grows the set
+        True
         """
         method = _check_method(method)
         c, P = self._ellipsoid(center, shape, "prediction", step, agent, self.A)
@@ -530,6 +550,16 @@ class SetMembershipModel:
         Returns
         -------
         FilterHistory
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import set_membership as sm
+        >>> model = sm.SetMembershipModel(A=[[1.0, 0.1], [0.0, 1.0]], G=np.eye(2), C=[[1.0, 0.0]], D=[[1.0]],
+        ...                               Q=0.01 * np.eye(2), R=[[0.04]])
+        >>> h = model.run(np.zeros(2), np.eye(2), np.zeros((5, 1)))
+        >>> h.center_corr.shape, h.shape_pred.shape
+        ((5, 2), (5, 2, 2))
         """
         method = _check_method(method)
         if self.A is None or self.C is None:
