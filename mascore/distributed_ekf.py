@@ -490,20 +490,24 @@ class FlockingEKF:
         U, X_next = (np.empty((K, n)), np.empty(X.shape)) if predict else (None, None)
         scale = 0.5 if predict else 1.0  # the prediction starts from Sigma_post / 2
         work = self._work
+        sums = np.empty(len(self._chunks))  # of each chunk's new covariances, while they are in cache
         with np.errstate(over="ignore", invalid="ignore"):
-            for ch in self._chunks:
+            for i, ch in enumerate(self._chunks):
                 Ph = P[ch]
                 X_post[ch] = _update_rows(X[ch], Ph, Z[ch], obs[ch], model.R, scale, work)  # eqs. (16)-(20)
                 diag[ch] = np.diagonal(Ph, axis1=-2, axis2=-1)
                 if post is not None:
                     np.multiply(Ph, 1.0 / scale, out=post[ch])
-                if not predict:
-                    continue
-                diag[ch] *= 2.0
-                U_all, X_next[ch], _ = _predict_half(X_post[ch], Ph, model, Ph, work)  # eqs. (38)-(40)
-                U[ch] = U_all[np.arange(U_all.shape[0]), own[ch]]  # eq. (39): agent i's control, own estimate
+                if predict:
+                    diag[ch] *= 2.0
+                    U_all, X_next[ch], _ = _predict_half(X_post[ch], Ph, model, Ph, work)  # eqs. (38)-(40)
+                    U[ch] = U_all[np.arange(U_all.shape[0]), own[ch]]  # eq. (39): agent i's control, own estimate
+                sums[i] = Ph.sum()
+        what = "EKF step (inputs X_hat, Sigma, z)"
+        if not np.isfinite(sums).all():  # a finite sum proves the chunk finite; else test the entries
+            finite_result(what, self._P)
         outs = (X_post, diag) + ((U, X_next) if predict else ()) + ((post,) if post is not None else ())
-        _finite_all("EKF step (inputs X_hat, Sigma, z)", self._P, *outs)
+        _finite_all(what, *outs)
         X_post = _read_only(X_post.reshape(*self._batch, N, m))
         if predict:
             X_next = self._X = _read_only(X_next.reshape(*self._batch, N, m))

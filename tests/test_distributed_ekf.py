@@ -336,3 +336,11 @@ def test_filter_checks_its_prior_once_and_each_call_its_measurements():
     no_R = dekf.FlockingEKF(dekf.EKFModel(N, 0.1, GAINS, 0.01 * np.eye(M)), X_hat, np.eye(M))
     with pytest.raises(ValueError, match="needs a model with R"):
         no_R.update(z, np.ones((2, N, N), bool))
+
+
+def test_an_overflowing_step_raises_naming_its_inputs():
+    rng, X, X_hat, M = _ekf_case(4)
+    N = 4
+    ekf = dekf.FlockingEKF(dekf.EKFModel(N, 10.0, GAINS, 0.01 * np.eye(M), np.eye(M)), X_hat, 1e307 * np.eye(M))
+    with pytest.raises(ValueError, match=r"EKF step \(inputs X_hat, Sigma, z\) produced NaN or inf"):
+        ekf.step(X[:, None] + np.zeros((2, N, N, 4)), np.zeros((2, N, N), bool))
