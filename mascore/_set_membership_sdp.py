@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._solver import LMI_EPS, cp, solve
+from ._validation import symmetric_part
 
 __all__ = ["correction_sdp", "prediction_sdp"]
 
@@ -48,10 +49,10 @@ class _CorrectionSDP:
         self.E.value = E
         self.CE.value = C @ E
         self.D.value = D
-        self.Rinv.value = 0.5 * (Rinv + Rinv.T)
+        self.Rinv.value = symmetric_part(Rinv)
         solve(self.problem, where, options)
         P = self.P.value
-        return 0.5 * (P + P.T), np.asarray(self.L.value)
+        return symmetric_part(P), np.asarray(self.L.value)
 
 
 class _PredictionSDP:
@@ -80,10 +81,10 @@ class _PredictionSDP:
     def __call__(self, AE, G, Qinv, where, options=None):
         self.AE.value = AE
         self.G.value = G
-        self.Qinv.value = 0.5 * (Qinv + Qinv.T)
+        self.Qinv.value = symmetric_part(Qinv)
         solve(self.problem, where, options)
         P = self.P.value
-        return 0.5 * (P + P.T)
+        return symmetric_part(P)
 
 
 def correction_sdp(n: int, p: int, nv: int) -> _CorrectionSDP:

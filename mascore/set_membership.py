@@ -60,7 +60,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import ellipsoids
-from ._validation import as_matrix, check_square, frozen_copy
+from ._validation import as_matrix, check_square, frozen_copy, symmetric_part
 from ._validation import float_array as _float_array
 
 __all__ = [
@@ -762,7 +762,7 @@ def _require_pd(P, what, step, agent, label):
             ok = False
     if ok:
         return
-    eig = np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2)))[..., 0]
+    eig = np.linalg.eigvalsh(symmetric_part(P))[..., 0]
     bad = (eig <= 0) | asym | ~np.isfinite(eig)
     batch = bad.shape
     idx = tuple(int(i) for i in np.argwhere(bad)[0]) if bad.ndim else ()
