@@ -17,8 +17,6 @@ match its ledger is detected (:func:`mascore.ledger.verify_outputs`).
 from __future__ import annotations
 
 import argparse
-import importlib
-import importlib.util
 import shutil
 import sys
 import tempfile
@@ -26,8 +24,8 @@ import time
 from pathlib import Path
 
 from ._progress import progress_bar
-from .ledger import PAPERS, Claim, output_hashes, write_claims
-from .registry import write_study
+from .ledger import Claim, output_hashes, write_claims
+from .registry import paper_keys, paper_registry, write_study
 
 __all__ = ["DEFAULT_SEED", "available_papers", "main", "reproduce_paper", "results_dir"]
 
@@ -68,12 +66,12 @@ def results_dir() -> Path:
 
 
 def available_papers() -> list[str]:
-    """Paper keys whose scenario module is present, in book order.
+    """The keys of every paper, in book order (discovered: :func:`mascore.registry.paper_keys`).
 
     Returns
     -------
     list of str
-        A subset of :data:`mascore.ledger.PAPERS`.
+        The keys.
 
     Examples
     --------
@@ -81,7 +79,7 @@ def available_papers() -> list[str]:
     >>> available_papers()
     ['song2023', 'ren2005', 'bhattacharjee2021', 'vlahakis']
     """
-    return [p for p in PAPERS if importlib.util.find_spec(f"mascore.papers.{p}") is not None]
+    return list(paper_keys())
 
 
 def reproduce_paper(
@@ -93,7 +91,7 @@ def reproduce_paper(
     Parameters
     ----------
     paper : str
-        One of :data:`mascore.ledger.PAPERS`.
+        One of :func:`mascore.registry.paper_keys`.
     out : str or pathlib.Path
         Results root; files go to ``out/PAPER/``, which is replaced as a whole.
     seed : int
@@ -122,14 +120,14 @@ def reproduce_paper(
     >>> sorted({c.verdict for c in claims})
     ['holds']
     """
-    if paper not in PAPERS:
-        raise ValueError(f"paper must be one of {', '.join(PAPERS)} or 'all'; got {paper!r}")
+    if paper not in paper_keys():
+        raise ValueError(f"paper must be one of {', '.join(paper_keys())} or 'all'; got {paper!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer; got {seed!r}")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"out must be a directory; {str(out)!r} is a file")
-    registry = importlib.import_module(f"mascore.papers.{paper}").REGISTRY
+    registry = paper_registry(paper)
     out.mkdir(parents=True, exist_ok=True)
     final = out / paper
     staging = Path(tempfile.mkdtemp(prefix=f".{paper}-incomplete-", dir=out))
@@ -236,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--version", action="version", version=f"mascore {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     rep = sub.add_parser("reproduce", help="rebuild a paper's figures, tables and claims.json")
-    rep.add_argument("paper", choices=[*PAPERS, "all"])
+    rep.add_argument("paper", choices=[*paper_keys(), "all"])
     rep.add_argument("--out", type=_out_argument, default=Path("results"),
                      help="results directory (default: results/)")
     rep.add_argument("--seed", type=_seed_argument, default=DEFAULT_SEED,

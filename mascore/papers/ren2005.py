@@ -43,6 +43,8 @@ __all__ = [
     "REGISTRY",
     "SETTINGS",
     "STUDY",
+    "FIGURES",
+    "TABLES",
     "Fig1Result",
     "KalmanConsensusResult",
     "KalmanConsensusSettings",
@@ -1288,7 +1290,7 @@ def claims(result: KalmanConsensusResult) -> list[Claim]:
 
 # --------------------------------------------------------------------------- registry
 
-_FIGURES = (
+FIGURES = (
     FigureSpec(
         "fig1", "Fig. 1",
         "The meet-for-dinner example: ten agents, paired at random for calls of 1 to 5 steps, run eqs. (4)-(5) "
@@ -1358,7 +1360,7 @@ _FIGURES = (
         _draw_overconfidence),
 )
 
-_TABLES = (
+TABLES = (
     TableSpec("fig1_final", "", "Fig. 1: initial and final meeting times and variances per agent.", _fig1_table),
     TableSpec("theorem_spreads", "", "Theorem demos: whether the union condition holds and the final spread of the agents' values, per sequence.", _theorems_table),
     TableSpec("noise_floors", "", "Communication noise: RMS floors and log-log slopes per variant.", _noise_table),
@@ -1368,7 +1370,7 @@ _TABLES = (
 )
 
 #: The one study of the chapter ``ren2005_kalman_consensus``.
-STUDY = Study("kalman-consensus", "ren2005_kalman_consensus", SETTINGS, run, _FIGURES, _TABLES, claims)
+STUDY = Study("kalman-consensus", "ren2005_kalman_consensus", SETTINGS, run, FIGURES, TABLES, claims)
 
 #: Errata and readings, for the reproduction report.
 ERRATA = (
@@ -1391,4 +1393,4 @@ ERRATA = (
 )
 
 #: The paper's registry: one study, its figures, tables and claims.
-REGISTRY = PaperRegistry("ren2005", "Ren, Beard and Kingston 2005", studies=(STUDY,), errata=ERRATA)
+REGISTRY = PaperRegistry("ren2005", "Ren, Beard and Kingston 2005", studies=(STUDY,), errata=ERRATA, position=2)

@@ -69,6 +69,8 @@ __all__ = [
     "REGISTRY",
     "SETTINGS",
     "STUDY",
+    "FIGURES",
+    "TABLES",
     "Fig12Result",
     "ObserverResult",
     "ObserverSettings",
@@ -76,7 +78,7 @@ __all__ = [
     "design",
     "fig12",
     "initial_errors",
-    "ledger_claims",
+    "claims",
     "run",
 ]
 
@@ -1121,7 +1123,7 @@ def _cost_claims(r: ObserverResult) -> list[Claim]:
     return [ordering, structure, bottom_up]
 
 
-def ledger_claims(result: ObserverResult) -> list[Claim]:
+def claims(result: ObserverResult) -> list[Claim]:
     """The ledger of the study, from the result alone.
 
     Parameters
@@ -1137,7 +1139,7 @@ def ledger_claims(result: ObserverResult) -> list[Claim]:
     Examples
     --------
     >>> from mascore.papers import vlahakis
-    >>> claims = vlahakis.ledger_claims(vlahakis.run(seed=1))
+    >>> claims = vlahakis.claims(vlahakis.run(seed=1))
     >>> len(claims)
     12
     """
@@ -1165,7 +1167,7 @@ def _fig12_caption(k: int, Q2: float, level: str) -> str:
             "is linear up to 0.1 s and logarithmic after. " + _FIG_LOOK[k])
 
 
-_FIGURES = (
+FIGURES = (
     FigureSpec("fig1", "Fig. 1", _fig12_caption(1, 5.0, "low"), lambda r: plot_fig12(r.fig12[0])),
     FigureSpec("fig2", "Fig. 2", _fig12_caption(2, 25.0, "high"), lambda r: plot_fig12(r.fig12[1])),
     FigureSpec(
@@ -1180,7 +1182,7 @@ _FIGURES = (
         plot_phi_profile),
 )
 
-_TABLES = (
+TABLES = (
     TableSpec("example1_readings", "",
               "Example 1 under each reading of eqs. (29)-(30) (as printed; the mixed convention that gives the "
               "printed L) with the traces in the coordinates of eq. (32) or the original ones: L, Φ (empty where "
@@ -1203,11 +1205,11 @@ _TABLES = (
 )
 
 #: The chapter's study: Example 1, Figs. 1-2 and the LQR checks.
-STUDY = Study("distributed-observer", "vlahakis_distributed_observer", SETTINGS, run, _FIGURES, _TABLES,
-              ledger_claims)
+STUDY = Study("distributed-observer", "vlahakis_distributed_observer", SETTINGS, run, FIGURES, TABLES,
+              claims)
 
 REGISTRY = PaperRegistry(
-    "vlahakis", "Vlahakis and Halikias", studies=(STUDY,),
+    "vlahakis", "Vlahakis and Halikias", studies=(STUDY,), position=4,
     errata=(
         "**How the printed $L$ arises.** Eqs. (29)-(30) as printed give $L = [2.055;\\,2.111]$ (position, "
         "velocity), with poles $-1.077 \\pm 1.468j$. The printed $L = [2.6004;\\,22.8051]$ is, to every printed "
