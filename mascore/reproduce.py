@@ -17,6 +17,7 @@ match its ledger is detected (:func:`mascore.ledger.verify_outputs`).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import shutil
 import sys
 import tempfile
@@ -185,12 +186,14 @@ def _compare(args: argparse.Namespace) -> int:
         print(f"mascore: --workers must be >= 0; got {workers}", file=sys.stderr)
         return 2
     start = time.perf_counter()
-    table, summary = compare.run_compare(args.grid, args.out, workers=workers, scheduler=args.scheduler,
-                                         seed=args.seed)
+    study = compare.STUDY
+    result = study.run(dataclasses.replace(study.settings, grid=args.grid), args.seed, progress=True, out=args.out,
+                       workers=workers, scheduler=args.scheduler)
+    table, summary = result.table, result.summary
     elapsed = time.perf_counter() - start
     folder = args.out / "compare"
     summary.to_csv(folder / f"summary-{args.grid}-{args.seed}.csv", index=False)
-    claims = compare.compare_claims(summary)
+    claims = study.claims(result)
     write_claims(claims, folder / "claims.json", "compare", args.seed,
                  created_by=f"mascore compare --grid {args.grid} --seed {args.seed}")
     where = args.scheduler or (f"{workers} local workers" if workers else "this process")

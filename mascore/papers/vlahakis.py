@@ -42,7 +42,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -225,8 +224,7 @@ def design(Q2: float, reading: str = "as-printed", trace_in: str = "transformed"
            n_agents: int | None = None, settings: ObserverSettings = SETTINGS) -> observers.DistributedObserver:
     """Distributed observer of Example 1 for one ``Q2`` and one reading of eqs. (29)-(30).
 
-    Cached (the tables, the figures and the claims reuse the same designs): do
-    not modify the arrays of the result.
+    Computed at each call (a few milliseconds; nothing is cached).
 
     Parameters
     ----------
@@ -269,7 +267,6 @@ def _check_n_agents(n_agents: object) -> int | None:
     return None if n_agents is None else check_positive_int(n_agents, "n_agents")
 
 
-@lru_cache(maxsize=64)
 def _design(s: ObserverSettings, Q2: float, reading: str, trace_in: str) -> observers.DistributedObserver:
     A, Bbar, C = s.arrays()
     return observers.distributed_observer(A, Bbar, C, s.Q1, Q2, s.R, s.adjacency(), reading=reading,
@@ -610,10 +607,9 @@ def readings_table(settings: ObserverSettings = SETTINGS) -> pd.DataFrame:
     empty and ``Phi_free_low``/``Phi_free_high`` give the optimal interval
     (closed form, :func:`as_printed_phi_interval`).
     """
-    return _readings_table(settings).copy()
+    return _readings_table(settings)
 
 
-@lru_cache(maxsize=4)
 def _readings_table(s: ObserverSettings) -> pd.DataFrame:
     rows = []
     for reading in observers.READINGS:
@@ -658,10 +654,9 @@ def lmi_variants_table(settings: ObserverSettings = SETTINGS) -> pd.DataFrame:
     A reading whose program is infeasible or not solved to optimality is
     recorded as such.
     """
-    return _lmi_variants_table(settings).copy()
+    return _lmi_variants_table(settings)
 
 
-@lru_cache(maxsize=4)
 def _lmi_variants_table(s: ObserverSettings) -> pd.DataFrame:
     from .._solver import SolverError
 
