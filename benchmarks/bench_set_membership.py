@@ -24,7 +24,7 @@ def _step(c, P, y, method, Q, R):
 
 
 def run() -> pd.DataFrame:
-    s = paper.SETTINGS[0]
+    s = paper.ROWS[0]
     rng = np.random.default_rng(0)
     c1, P1 = np.array([50.0, -50.0]), paper.P0
     y1 = np.array([50.4])
