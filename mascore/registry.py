@@ -94,7 +94,9 @@ class FigureSpec:
     caption : str
         What the figure shows and what to look for (MyST Markdown: ``$math$`` allowed).
     draw : callable
-        ``draw(result) -> matplotlib.figure.Figure``.
+        ``draw(result) -> matplotlib.figure.Figure``: draws from the result alone (everything
+        it shows is computed by the study's ``run``), and returns the figure (:meth:`Study.draw`
+        refuses anything else).
 
     Examples
     --------
@@ -253,7 +255,12 @@ class Study:
         from .plotting import use_style
 
         use_style()
-        return self.figure(name).draw(result)
+        fig = self.figure(name).draw(result)
+        figure_class = require("matplotlib.figure", "drawing a registered figure").Figure
+        if not isinstance(fig, figure_class):
+            raise TypeError(f"{self.name}: figure {name!r} must be drawn as a matplotlib Figure; "
+                            f"its draw returned {type(fig).__name__}")
+        return fig
 
     def build(self, name: str, result: Any) -> pd.DataFrame:
         """Build table `name` from `result`.
