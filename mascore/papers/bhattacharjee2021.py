@@ -772,6 +772,10 @@ class SetMembershipResult:
         The same study with the edges of eq. (24) reversed.
     readings : pandas.DataFrame
         The two readings of the graph side by side.
+    bound : float
+        The bound of eq. (21) on the normalized disagreement error (Fig. 2 (b)).
+    power_norms : ndarray
+        ``||A_c^k||`` for ``k = 0..t_f`` (Fig. 2 (c)).
 
     Examples
     --------
@@ -792,6 +796,8 @@ class SetMembershipResult:
     runs: tuple[ClosedLoopRun, ...]
     table_reversed: pd.DataFrame
     readings: pd.DataFrame
+    bound: float
+    power_norms: np.ndarray
 
     @property
     def sdp_run(self) -> ClosedLoopRun:
@@ -869,8 +875,10 @@ def run(settings: SetMembershipSettings = SETTINGS, seed: int = 1, progress: boo
     figure_twin = simulate(method=twin_method, **kw)
     table, runs = table1_study(seed, progress=progress, scenario=settings)
     table_reversed, _ = table1_study(seed, adjacency=settings.matrix("adjacency").T, scenario=settings)
-    return SetMembershipResult(settings, int(seed), design(settings), figure_run, figure_twin, table,
-                               tuple(runs), table_reversed, table1_readings(scenario=settings))
+    des = design(settings)
+    return SetMembershipResult(settings, int(seed), des, figure_run, figure_twin, table,
+                               tuple(runs), table_reversed, table1_readings(scenario=settings),
+                               *_fig2_bounds(des, settings))
 
 
 # ---------------------------------------------------------------- figures
@@ -935,8 +943,15 @@ def plot_fig1(des: sync.SyncDesign | None = None, scenario: SetMembershipSetting
     return fig
 
 
+def _fig2_bounds(des: sync.SyncDesign, s: SetMembershipSettings, k_max: int | None = None) -> tuple[float, np.ndarray]:
+    """The bound of eq. (21) and ``||A_c^k||`` for ``k = 0..k_max`` (default ``t_f``): what Fig. 2 (b), (c) draw."""
+    k_max = s.t_f if k_max is None else k_max
+    return float(sync.bound_eq21(des.B_c, s.matrix("G"), s.p0, s.q_bar)), sync.power_norms(des.A_c, k_max)
+
+
 def plot_fig2(run: ClosedLoopRun, des: sync.SyncDesign | None = None, k_max: int | None = None,
-              scenario: SetMembershipSettings = SETTINGS) -> plt.Figure:
+              scenario: SetMembershipSettings = SETTINGS, bounds: tuple[float, np.ndarray] | None = None
+              ) -> plt.Figure:
     """Fig. 2: (a) leader and agent states, (b) ``|delta_bar_k|`` with the bound of eq. (21), (c) ``|A_c^k|``.
 
     Panel (a) shows the two state components side by side, under one panel letter.
@@ -951,6 +966,10 @@ def plot_fig2(run: ClosedLoopRun, des: sync.SyncDesign | None = None, k_max: int
         Last step of panel (c).
     scenario : SetMembershipSettings
         The example's settings (default :data:`SETTINGS`).
+    bounds : (float, ndarray), optional
+        The bound of eq. (21) and ``||A_c^k||`` for ``k = 0..k_max`` at least, as the study's
+        run keeps them (:attr:`SetMembershipResult.bound`, :attr:`SetMembershipResult.power_norms`);
+        computed from `des` if not given.
 
     Returns
     -------
@@ -967,8 +986,10 @@ def plot_fig2(run: ClosedLoopRun, des: sync.SyncDesign | None = None, k_max: int
     >>> plt.close("all")
     """
     s = scenario
-    des = des if des is not None else design(s)
     k_max = s.t_f if k_max is None else check_positive_int(k_max, "k_max", minimum=0)
+    if bounds is None:
+        bounds = _fig2_bounds(des if des is not None else design(s), s, k_max)
+    bound, norms = bounds
     fig = plt.figure(figsize=(8.0, 6.4), layout="constrained")
     top, bottom = fig.subfigures(2, 1)
     colors = agent_colors(s.n_agents)
@@ -983,7 +1004,6 @@ def plot_fig2(run: ClosedLoopRun, des: sync.SyncDesign | None = None, k_max: int
     top.suptitle("(a) true states of the leader and the agents", fontsize="medium")
     top.legend(*axes_a[0].get_legend_handles_labels(), loc="outside right center")  # beside, not over, the data
     ax_b, ax_c = bottom.subplots(1, 2)
-    bound = sync.bound_eq21(des.B_c, s.matrix("G"), s.p0, s.q_bar)
     ax_b.plot(run.k, run.delta_bar[0], label=r"$|\bar\delta_k|$")
     ax_b.axhline(bound, color="k", ls=":", label=f"bound of eq. (21) = {bound:.3f}")
     ax_b.set_xlabel("time step k")
@@ -991,7 +1011,7 @@ def plot_fig2(run: ClosedLoopRun, des: sync.SyncDesign | None = None, k_max: int
     ax_b.set_title("(b) normalized global disagreement error")
     ax_b.legend(loc="upper right")
     kk = np.arange(k_max + 1)
-    ax_c.semilogy(kk, sync.power_norms(des.A_c, k_max), label=r"$\|A_c^k\|$")
+    ax_c.semilogy(kk, norms[: k_max + 1], label=r"$\|A_c^k\|$")
     ax_c.semilogy(kk, s.alpha * s.mu**kk, "k--", label=rf"$\alpha\mu^k$ = {s.alpha:g} $\cdot$ {s.mu:g}$^k$")
     ax_c.set_xlabel("time step k")
     ax_c.set_ylabel("induced 2-norm")
@@ -1342,7 +1362,7 @@ FIGURES = (
         "disagreement $\\lvert\\bar\\delta_k\\rvert = \\lvert\\delta_k\\rvert/\\bar\\mu$, $\\bar\\mu = 22$, and the "
         "conservative limit 2.462 of eq. (21) (dotted): look for the curve settling far below the line. "
         "(c) $\\lVert A_c^k\\rVert$ under the bound $1.1 \\cdot 0.9^k$ (dashed) at every step.",
-        lambda r: plot_fig2(r.figure_run, r.design, scenario=r.settings)),
+        lambda r: plot_fig2(r.figure_run, r.design, scenario=r.settings, bounds=(r.bound, r.power_norms))),
     FigureSpec(
         "fig3", "Fig. 3",
         "Estimation errors $e_{jk}$ of agents 1 (top) and 2 (bottom), components $j = 1, 2$, with the extent "

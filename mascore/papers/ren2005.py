@@ -714,6 +714,9 @@ class KalmanConsensusResult:
         Bias of the consensus value against central fusion.
     overconfidence : dict
         Believed against actual variances (:func:`overconfidence`).
+    noise_free_rms : ndarray
+        RMS disagreement of the noise-free Fig. 1 run (equal variances) per step, the
+        reference line of the noise figure.
 
     Examples
     --------
@@ -732,6 +735,7 @@ class KalmanConsensusResult:
     noise_continuous: dict  # noise_continuous
     bias: dict  # "paper", "Q0", "ideal" -> bias_study
     overconfidence: dict  # overconfidence
+    noise_free_rms: np.ndarray  # _rms_disagreement of fig1.equal
 
 
 def _noise_variants(s: KalmanConsensusSettings) -> dict[str, dict]:
@@ -784,7 +788,8 @@ def run(settings: KalmanConsensusSettings = SETTINGS, seed: int = 1, progress: b
     out = {name: task() for name, task in progress_bar(list(tasks.items()), enabled=progress, desc="ren2005",
                                                        unit="study", leave=False)}
     return KalmanConsensusResult(settings=s, seed=seed, **out,
-                                 overconfidence=overconfidence(seed, s, fig1_result=out["fig1"]))
+                                 overconfidence=overconfidence(seed, s, fig1_result=out["fig1"]),
+                                 noise_free_rms=_rms_disagreement(out["fig1"].equal.xi))
 
 
 # --------------------------------------------------------------------------- plots
@@ -977,7 +982,7 @@ def _draw_noise(result: KalmanConsensusResult) -> plt.Figure:
     fig, ax = plt.subplots(figsize=(8, 3.6), layout="constrained")
     for key, st in result.noise.items():
         ax.semilogy(st["rms"], label=variant_label(st["Q"], st["Omega"], paper=key == "paper"))
-    ax.semilogy(_rms_disagreement(result.fig1.equal.xi), "k:", label="no noise (the Fig. 1 run)")
+    ax.semilogy(result.noise_free_rms, "k:", label="no noise (the Fig. 1 run)")
     ax.set_xlabel("step k")
     ax.set_ylabel("RMS disagreement (h)")
     fig.legend(loc="outside right upper")
