@@ -244,10 +244,12 @@ class Study:
 
         Examples
         --------
+        >>> import dataclasses
         >>> import matplotlib.pyplot as plt
         >>> from mascore.papers import ren2005
         >>> study = ren2005.REGISTRY.study("kalman-consensus")
-        >>> fig = study.draw("fig1", ren2005.run(seed=1))
+        >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50)  # fewer runs
+        >>> fig = study.draw("fig1", study.run(fewer, 1))
         >>> len(fig.axes)
         4
         >>> plt.close("all")
@@ -569,11 +571,12 @@ def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | 
 
     Examples
     --------
-    >>> import tempfile
+    >>> import dataclasses, tempfile
     >>> from mascore.papers import ren2005
     >>> from mascore.registry import write_study
     >>> study = ren2005.REGISTRY.study("kalman-consensus")
-    >>> claims = write_study(ren2005.REGISTRY, study, study.run(study.settings, 1), tempfile.mkdtemp())
+    >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50)  # fewer runs
+    >>> claims = write_study(ren2005.REGISTRY, study, study.run(fewer, 1), tempfile.mkdtemp())
     >>> {c.study for c in claims}
     {'kalman-consensus'}
     """

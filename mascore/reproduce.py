@@ -115,11 +115,17 @@ def reproduce_paper(
 
     Examples
     --------
+    ``make reproduce`` (and ``make test``, first) calls it for every paper:
+
     >>> import tempfile
     >>> from mascore.reproduce import reproduce_paper
-    >>> claims = reproduce_paper("ren2005", out=tempfile.mkdtemp(), progress=False)
-    >>> sorted({c.verdict for c in claims})
+    >>> claims = reproduce_paper("ren2005", out=tempfile.mkdtemp(), progress=False)  # doctest: +SKIP
+    >>> sorted({c.verdict for c in claims})  # doctest: +SKIP
     ['holds']
+    >>> reproduce_paper("ren2006", out=tempfile.mkdtemp())
+    Traceback (most recent call last):
+    ...
+    ValueError: paper must be one of song2023, ren2005, bhattacharjee2021, vlahakis or 'all'; got 'ren2006'
     """
     if paper not in paper_keys():
         raise ValueError(f"paper must be one of {', '.join(paper_keys())} or 'all'; got {paper!r}")

@@ -863,6 +863,8 @@ def run(settings: ObserverSettings = SETTINGS, seed: int = 1, progress: bool = F
     >>> result = vlahakis.run(seed=1)
     >>> sorted(result.intervals)
     [5.0, 25.0]
+    >>> len(vlahakis.claims(result))                      # the ledger, from the result alone
+    12
     """
     s = settings
     check_seed(seed, "seed")
@@ -1133,10 +1135,11 @@ def claims(result: ObserverResult) -> list[Claim]:
 
     Examples
     --------
+    The run's example (:func:`run`) computes them; the study calls the same function:
+
     >>> from mascore.papers import vlahakis
-    >>> claims = vlahakis.claims(vlahakis.run(seed=1))
-    >>> len(claims)
-    12
+    >>> vlahakis.STUDY.claims is vlahakis.claims
+    True
     """
     return [*_gain_claims(result), *_phi_j_claims(result), _interval_claim(result), *_behaviour_claims(result),
             *_cost_claims(result)]
