@@ -284,7 +284,7 @@ class Study:
         >>> import dataclasses
         >>> from mascore.papers import bhattacharjee2021 as bs
         >>> study = bs.REGISTRY.study("set-membership")
-        >>> result = study.run(dataclasses.replace(bs.SETTINGS, n_runs=3, figure_method="closed_form"), 1)
+        >>> result = study.run(dataclasses.replace(bs.SETTINGS, n_runs=3, t_f=10, figure_method="closed_form"), 1)
         >>> study.build("table1", result).shape[0]
         3
         """

@@ -646,7 +646,7 @@ def table1_view(table: pd.DataFrame) -> pd.DataFrame:
     --------
     >>> import dataclasses
     >>> from mascore.papers import bhattacharjee2021 as bs
-    >>> result = bs.run(dataclasses.replace(bs.SETTINGS, n_runs=3, figure_method="closed_form"), seed=1)
+    >>> result = bs.run(dataclasses.replace(bs.SETTINGS, n_runs=3, t_f=10, figure_method="closed_form"), seed=1)
     >>> bs.table1_view(result.table).shape[0]
     3
     """
@@ -781,7 +781,7 @@ class SetMembershipResult:
     --------
     >>> from mascore.papers import bhattacharjee2021 as bs
     >>> import dataclasses
-    >>> quick = dataclasses.replace(bs.SETTINGS, n_runs=3, figure_method="closed_form")   # a small run
+    >>> quick = dataclasses.replace(bs.SETTINGS, n_runs=3, t_f=10, figure_method="closed_form")   # a small run
     >>> result = bs.run(quick, seed=1)
     >>> result.table.shape[0]                                  # the three rows of Table 1
     3
@@ -812,7 +812,7 @@ class SetMembershipResult:
         --------
         >>> from mascore.papers import bhattacharjee2021 as bs
         >>> import dataclasses
-        >>> quick = dataclasses.replace(bs.SETTINGS, n_runs=3, figure_method="closed_form")   # a small run
+        >>> quick = dataclasses.replace(bs.SETTINGS, n_runs=3, t_f=10, figure_method="closed_form")   # a small run
         >>> result = bs.run(quick, seed=1)
         >>> bool(abs(result.sdp_run.P - result.closed_form_run.P).max() < 1e-4)   # the two paths agree
         True
@@ -832,7 +832,7 @@ class SetMembershipResult:
         --------
         >>> from mascore.papers import bhattacharjee2021 as bs
         >>> import dataclasses
-        >>> quick = dataclasses.replace(bs.SETTINGS, n_runs=3, figure_method="closed_form")   # a small run
+        >>> quick = dataclasses.replace(bs.SETTINGS, n_runs=3, t_f=10, figure_method="closed_form")   # a small run
         >>> result = bs.run(quick, seed=1)
         >>> result.closed_form_run.x.shape[0]
         1
@@ -861,7 +861,7 @@ def run(settings: SetMembershipSettings = SETTINGS, seed: int = 1, progress: boo
     --------
     >>> import dataclasses
     >>> from mascore.papers import bhattacharjee2021 as bs
-    >>> result = bs.run(dataclasses.replace(bs.SETTINGS, n_runs=3, figure_method="closed_form"), seed=1)
+    >>> result = bs.run(dataclasses.replace(bs.SETTINGS, n_runs=3, t_f=10, figure_method="closed_form"), seed=1)
     >>> float(result.design.c)
     1.5
     """
@@ -1335,7 +1335,7 @@ def claims(result: SetMembershipResult) -> list[Claim]:
     --------
     >>> from mascore.papers import bhattacharjee2021 as bs
     >>> import dataclasses
-    >>> quick = dataclasses.replace(bs.SETTINGS, n_runs=3, figure_method="closed_form")   # a small run
+    >>> quick = dataclasses.replace(bs.SETTINGS, n_runs=3, t_f=10, figure_method="closed_form")   # a small run
     >>> result = bs.run(quick, seed=1)
     >>> all(c.id.startswith("bhattacharjee2021/") for c in bs.claims(result))
     True
