@@ -294,6 +294,9 @@ def write_claims(
     if paper not in ledger_keys():
         raise ValueError(f"paper must be one of {ledger_keys()}; got {paper!r}")
     ids = [c.id for c in claims]
+    foreign = [i for i in ids if not i.startswith(f"{paper}/")]
+    if foreign:
+        raise ValueError(f"the claims of the {paper} ledger must have ids '{paper}/...'; got {foreign}")
     if len(set(ids)) != len(ids):
         raise ValueError(f"duplicate claim ids: {sorted({i for i in ids if ids.count(i) > 1})}")
     path = Path(path)
