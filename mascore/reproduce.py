@@ -181,6 +181,17 @@ def _out_argument(text: str) -> Path:
     return path
 
 
+class _PaperChoices:
+    """The choices of ``reproduce PAPER``: the discovered papers and ``all``, looked up only when needed
+    (``mascore compare`` and ``--version`` do not import the papers)."""
+
+    def __contains__(self, value: object) -> bool:
+        return value == "all" or value in paper_keys()
+
+    def __iter__(self):
+        return iter([*paper_keys(), "all"])
+
+
 def _compare(args: argparse.Namespace) -> int:
     """``mascore compare``: the sweep, then the summary, headline table, figures and claims under ``out/compare``."""
     import os
@@ -243,7 +254,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--version", action="version", version=f"mascore {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     rep = sub.add_parser("reproduce", help="rebuild a paper's figures, tables and claims.json")
-    rep.add_argument("paper", choices=[*paper_keys(), "all"])
+    rep.add_argument("paper", choices=_PaperChoices(), metavar="PAPER",
+                     help="a paper's key (a module of mascore.papers; a wrong key lists them) or 'all'")
     rep.add_argument("--out", type=_out_argument, default=Path("results"),
                      help="results directory (default: results/)")
     rep.add_argument("--seed", type=_seed_argument, default=DEFAULT_SEED,
