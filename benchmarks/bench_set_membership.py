@@ -26,7 +26,7 @@ def _step(model, c, P, y, method):
 
 
 def run() -> pd.DataFrame:
-    s = paper.SETTINGS[0]
+    s = paper.ROWS[0]
     rng = np.random.default_rng(0)
     c1, P1 = np.array([50.0, -50.0]), paper.P0
     y1 = np.array([50.4])

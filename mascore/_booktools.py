@@ -20,11 +20,11 @@ import re
 import sys
 from pathlib import Path
 
-from .ledger import PAPERS
-from .registry import PaperRegistry, Study, paper_registry
+from .registry import PaperRegistry, Study, paper_registries, study_modules
 
 __all__ = [
     "API_GROUPS",
+    "api_groups",
     "api_page",
     "chapter_studies",
     "drawn_figures",
@@ -34,17 +34,18 @@ __all__ = [
     "write_api_pages",
 ]
 
-#: The modules of the API reference, grouped as in the book's table of contents.
+#: The modules of the API reference, grouped as in the book's table of contents; the papers' modules
+#: are not listed here but discovered (:func:`api_groups`).
 API_GROUPS: dict[str, tuple[str, ...]] = {
     "Shared building blocks": ("agents", "graphs", "noise", "kalman", "sensing"),
     "Consensus and cooperative control": ("consensus", "rendezvous", "flocking", "synchronization", "lqr", "riccati"),
     "Estimation": ("distributed_kf", "distributed_ekf", "ellipsoids", "set_membership", "observers"),
     "Comparing the methods": ("compare", "sweep"),
     "Reproduction and the book": ("registry", "ledger", "report", "reproduce", "plotting", "exceptions"),
-    "The papers' scenarios": (
-        "papers.song2023", "papers.song2023_flocking", "papers.ren2005", "papers.bhattacharjee2021", "papers.vlahakis",
-    ),
 }
+
+#: The group of the papers' study modules in the API reference.
+PAPERS_GROUP = "The papers' scenarios"
 
 _DRAW = re.compile(r"""\.draw\(\s*["'](?P<name>[A-Za-z0-9_\-]+)["']""")
 
@@ -52,10 +53,7 @@ _DRAW = re.compile(r"""\.draw\(\s*["'](?P<name>[A-Za-z0-9_\-]+)["']""")
 def chapter_studies() -> dict[str, tuple[PaperRegistry, Study]]:
     """Notebook stem -> (paper, study) for every registered study."""
     out = {}
-    for key in PAPERS:
-        if not hasattr(importlib.import_module(f"mascore.papers.{key}"), "REGISTRY"):
-            continue  # a paper module not (yet) on the registry
-        reg = paper_registry(key)
+    for reg in paper_registries():
         for study in reg.studies:
             out[study.chapter] = (reg, study)
     return out
@@ -188,15 +186,21 @@ def _is_class(module: str, name: str) -> bool:
     return inspect.isclass(getattr(importlib.import_module(module), name))
 
 
+def api_groups() -> dict[str, tuple[str, ...]]:
+    """:data:`API_GROUPS` and, last, the papers' study modules in book order (:func:`mascore.registry.study_modules`)."""
+    papers = tuple(m.__name__.removeprefix("mascore.") for m in study_modules())
+    return {**API_GROUPS, PAPERS_GROUP: papers}
+
+
 def api_modules() -> list[str]:
-    """The modules of :data:`API_GROUPS` that exist in this checkout, in book order."""
+    """The modules of :func:`api_groups` that exist in this checkout, in book order."""
     import importlib.util
 
-    return [m for group in API_GROUPS.values() for m in group if importlib.util.find_spec(f"mascore.{m}")]
+    return [m for group in api_groups().values() for m in group if importlib.util.find_spec(f"mascore.{m}")]
 
 
 def write_api_pages(folder: str | Path = "book/api") -> int:
-    """Write ``folder/<module>.md`` for every module of :data:`API_GROUPS` and the index page.
+    """Write ``folder/<module>.md`` for every module of :func:`api_groups` and the index page.
 
     Returns the number of files that changed.
     """
@@ -206,7 +210,7 @@ def write_api_pages(folder: str | Path = "book/api") -> int:
     index = ["# API reference", "",
              "Every public class and function of the package, rendered from its docstring. Each page opens with",
              "the module's summary; the examples are executed as doctests by `make test`.", ""]
-    for group, modules in API_GROUPS.items():
+    for group, modules in api_groups().items():
         present = [m for m in modules if f"{m}.md" in pages]
         if present:
             index += [f"## {group}", ""] + [f"- [`mascore.{m}`]({m}.md)" for m in present] + [""]

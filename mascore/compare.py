@@ -47,7 +47,7 @@ from __future__ import annotations
 import functools
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -57,17 +57,24 @@ from . import consensus, graphs, kalman, rendezvous, set_membership
 from . import distributed_kf as dkf
 from ._validation import check_positive, check_positive_int, check_probability
 from .agents import double_integrator
+from .registry import FigureSpec, PaperRegistry, Study, TableSpec
 from .sweep import Grid, cell_seed
 
 __all__ = [
+    "FIGURES",
     "GRAPHS",
+    "REGISTRY",
     "SEED_AXES",
     "SETTINGS",
     "SHARED_METHODS",
+    "STUDY",
+    "TABLES",
     "TEAM_METHODS",
     "BenchmarkSettings",
+    "CompareResult",
     "benchmark_graph",
     "cell_cost",
+    "claims",
     "compare_claims",
     "fitted_slopes",
     "floats_per_step",
@@ -76,6 +83,7 @@ __all__ = [
     "plot_cost",
     "plot_pareto",
     "plot_robustness",
+    "run",
     "run_cell",
     "run_compare",
     "simulate_shared",
@@ -130,6 +138,9 @@ class BenchmarkSettings:
         Range of the agents' prior variances in the shared task (m²), drawn log-uniformly.
     runs : int
         Monte Carlo runs per cell (one block of seeds).
+    grid : {"quick", "full"}
+        The sweep :func:`run` makes (:func:`grid_cells`): ``"quick"`` for the book and the
+        published ledger, ``"full"`` for the command line.
 
     Examples
     --------
@@ -154,9 +165,10 @@ class BenchmarkSettings:
     shared_steps: int = 30
     shared_var: tuple[float, float] = (0.5, 5.0)
     runs: int = 50
+    grid: str = "quick"
 
 
-#: The settings used by the chapter and the CLI.
+#: The settings used by the chapter and the CLI (the study's settings, :data:`STUDY`).
 SETTINGS = BenchmarkSettings()
 
 
@@ -425,9 +437,8 @@ class _Song(_Estimator):
         return _own_blocks(dkf._agent_covariances(self.model, self.Sig) if self.eb else self.Sig, self.model)
 
 
-@functools.lru_cache(maxsize=16)
-def _vlahakis_gains(graph: bytes, n_agents: int, q_vel: float, r: float, dt: float) -> tuple[np.ndarray, float]:
-    """Per-axis observer gain ``L`` (2, 1) and coupling ``Phi``, designed once per graph (its adjacency's bytes).
+def _vlahakis_gains(adjacency: np.ndarray, q_vel: float, r: float, dt: float) -> tuple[np.ndarray, float]:
+    """Per-axis observer gain ``L`` (2, 1) and coupling ``Phi`` for the graph `adjacency` (a few ms: one per run).
 
     The weights read the noise as continuous-time intensities: disturbance
     ``q_vel / dt`` on the velocity (``R = dt / q_vel``), measurement ``r dt``
@@ -438,7 +449,7 @@ def _vlahakis_gains(graph: bytes, n_agents: int, q_vel: float, r: float, dt: flo
     A = np.array([[0.0, 1.0], [0.0, 0.0]])
     obs = observers.distributed_observer(A, np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]]),
                                          Q1=np.eye(1) / (r * dt), Q2=np.eye(1) / (2 * r * dt), R=np.eye(1) * dt / q_vel,
-                                         adjacency=np.frombuffer(graph).reshape(n_agents, n_agents))
+                                         adjacency=adjacency)
     L, Phi = obs.L, float(obs.Phi[0, 0])
     Ad = np.array([[1.0, dt], [0.0, 1.0]])
     C = np.array([[1.0, 0.0]])
@@ -454,8 +465,7 @@ class _Vlahakis(_Estimator):
     def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
         super().__init__(team, x_hat0)
         s = team.s
-        L, Phi = _vlahakis_gains(team.adjacency.tobytes(), team.N, s.q_vel / (team.Q_filter[2, 2] / team.Q[2, 2]),
-                                 s.r, s.dt)
+        L, Phi = _vlahakis_gains(team.adjacency, s.q_vel / (team.Q_filter[2, 2] / team.Q[2, 2]), s.r, s.dt)
         self.gain = s.dt * np.kron(L, np.eye(2))  # (4, 2): per-axis gain on [p; v]
         self.Phi = Phi
 
@@ -778,7 +788,7 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     return cells
 
 
-def run_cell(cell: Mapping[str, Any], base_seed: int = 0) -> list[dict[str, Any]]:
+def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSettings = SETTINGS) -> list[dict[str, Any]]:
     """Run one cell of a sweep: one row of metrics per Monte Carlo run.
 
     Parameters
@@ -788,6 +798,8 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0) -> list[dict[str, Any]
         (``graph`` may be left out: a ring).
     base_seed : int
         The sweep's seed.
+    settings : BenchmarkSettings
+        The benchmark's settings.
 
     Returns
     -------
@@ -807,19 +819,19 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0) -> list[dict[str, Any]
     common = {"noise": cell["noise"], "dropout": float(cell["dropout"])}
     if cell["task"] == "team":
         metrics = simulate_team(cell["method"], int(cell["n_agents"]), seed, q_scale=float(cell["q_scale"]),
-                                graph=cell.get("graph", "ring"), **common)
+                                graph=cell.get("graph", "ring"), settings=settings, **common)
     else:
-        metrics = simulate_shared(cell["method"], int(cell["n_agents"]), seed, **common)
+        metrics = simulate_shared(cell["method"], int(cell["n_agents"]), seed, settings=settings, **common)
         metrics.update(rmse_view=np.full_like(metrics["rmse_own"], np.nan), containment=metrics["rmse_own"] * np.nan,
                        spread=metrics["rmse_own"] * np.nan)
-    adjacency = benchmark_graph(cell.get("graph", "ring"), int(cell["n_agents"]))
+    adjacency = benchmark_graph(cell.get("graph", "ring"), int(cell["n_agents"]), settings)
     floats = floats_per_step(cell["method"], int(cell["n_agents"]), degree=float(adjacency.sum(1).mean()))
     runs = len(metrics["rmse_own"])
     return [{"run": r, "floats": floats, **{k: float(v[r]) for k, v in metrics.items()}} for r in range(runs)]
 
 
 def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n_agents", "noise", "dropout",
-                                         "q_scale")):
+                                         "q_scale"), settings: BenchmarkSettings = SETTINGS):
     """Means and 95 % confidence intervals per group, with the ratio to the bound.
 
     The ratio of a method's RMSE to the bound's (``centralized`` or
@@ -834,6 +846,8 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
         (the sweep's table).
     by : sequence of str
         Grouping columns.
+    settings : BenchmarkSettings
+        The benchmark's settings (its step counts give the CPU per step).
 
     Returns
     -------
@@ -865,7 +879,7 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
     ref = bound.set_index(keys)["rmse_own"].rename("bound_rmse")
     t = t.join(ref, on=keys)
     t["ratio"] = t["rmse_own"] / t["bound_rmse"]
-    steps = np.where(t["task"] == "team", SETTINGS.n_steps, SETTINGS.shared_steps)
+    steps = np.where(t["task"] == "team", settings.n_steps, settings.shared_steps)
     t["cpu_us"] = 1e6 * t["cpu_s"] / (t["n_agents"] * steps * t.groupby("cell")["run"].transform("size"))
     out = []
     for key, g in t.groupby(by, sort=False, dropna=False):
@@ -932,13 +946,92 @@ def run_compare(
     >>> from mascore import compare
     >>> table, summary = compare.run_compare("quick", tempfile.mkdtemp(), progress=False)  # doctest: +SKIP
     """
+    result = run(replace(SETTINGS, grid=grid), seed, progress, out=out, workers=workers, scheduler=scheduler)
+    return result.table, result.summary
+
+
+@dataclass(frozen=True, eq=False)
+class CompareResult:
+    """The comparison's sweep, once: its table and summary (see :func:`run`).
+
+    Parameters
+    ----------
+    settings : BenchmarkSettings
+        The run's settings (``settings.grid`` is the sweep).
+    seed : int
+        The sweep's base seed.
+    table : pandas.DataFrame
+        One row per Monte Carlo run and cell.
+    summary : pandas.DataFrame
+        :func:`summarize` of the table.
+    slopes : dict
+        Method -> fitted CPU slope in N (:func:`fitted_slopes`).
+    phi : dict
+        ``"N = n"`` -> the coupling gain the Vlahakis observer's LMI chooses on the ring of each size.
+
+    Examples
+    --------
+    >>> from mascore.compare import CompareResult
+    >>> sorted(CompareResult.__dataclass_fields__)[:3]
+    ['phi', 'seed', 'settings']
+    """
+
+    settings: BenchmarkSettings
+    seed: int
+    table: Any
+    summary: Any
+    slopes: dict
+    phi: dict
+
+
+def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = False, *,
+        out: str | Path | None = None, workers: int = 0, scheduler: str | None = None) -> CompareResult:
+    """The comparison's study: the sweep ``settings.grid`` (resuming from `out`), its summary, slopes and gains.
+
+    Parameters
+    ----------
+    settings : BenchmarkSettings
+        The benchmark and the sweep (default :data:`SETTINGS`, the quick grid).
+    seed : int
+        The sweep's base seed (the published ledger's is 0).
+    progress : bool
+        Progress bar over cells.
+    out : str or pathlib.Path, optional
+        Results folder; the table goes to ``out/compare/table-GRID-SEED.csv`` and a later
+        run resumes from it. Default: a temporary folder (nothing is kept).
+    workers : int
+        0: serially in this process; K: a local Dask cluster of K processes.
+    scheduler : str, optional
+        Address of a running Dask scheduler (overrides `workers`).
+
+    Returns
+    -------
+    CompareResult
+        Everything the figures, tables and claims need.
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> result = compare.run(seed=0)  # doctest: +SKIP
+    >>> result.summary["study"].unique().tolist()  # doctest: +SKIP
+    ['dropout', 'graph', 'noise', 'scaling', 'shared', 'wrong-q']
+    """
+    import tempfile
+
     from .sweep import run_sweep
 
-    folder = Path(out) / "compare"
-    table = run_sweep(grid_cells(grid), functools.partial(run_cell, base_seed=seed),
-                      folder / f"table-{grid}-{seed}.csv", workers=workers, scheduler=scheduler, progress=progress,
-                      cost=cell_cost)
-    return table, summarize(table)
+    if settings.grid not in ("quick", "full"):
+        raise ValueError(f"settings.grid must be 'quick' or 'full'; got {settings.grid!r}")
+    with tempfile.TemporaryDirectory(prefix="mascore-compare-") as scratch:
+        folder = Path(scratch if out is None else out) / "compare"
+        table = run_sweep(grid_cells(settings.grid), functools.partial(run_cell, base_seed=seed, settings=settings),
+                          folder / f"table-{settings.grid}-{seed}.csv", workers=workers, scheduler=scheduler,
+                          progress=progress, cost=cell_cost)
+    summary = summarize(table, settings=settings)
+    sizes = sorted(summary.loc[summary["study"] == "scaling", "n_agents"].unique())
+    phi = {f"N = {n}": _vlahakis_gains(graphs.ring_graph(int(n)), settings.q_vel, settings.r, settings.dt)[1]
+           for n in sizes}
+    return CompareResult(settings, int(seed), table, summary, fitted_slopes(summary), phi)
 
 
 def cell_cost(cell: Mapping[str, Any]) -> float:
@@ -1039,13 +1132,16 @@ def headline(summary):
     return pd.DataFrame(rows).set_index("method")
 
 
-def compare_claims(summary) -> list:
+def compare_claims(summary, phi: dict | None = None) -> list:
     """The comparison's claims (``compare/...``), with verdicts computed from the summary.
 
     Parameters
     ----------
     summary : pandas.DataFrame
         Output of :func:`summarize` on a sweep that holds every study of :func:`grid_cells`.
+    phi : dict, optional
+        The Vlahakis observer's coupling gain per ring size (:attr:`CompareResult.phi`);
+        designed here from :data:`SETTINGS` if not given.
 
     Returns
     -------
@@ -1123,8 +1219,9 @@ def compare_claims(summary) -> list:
         "a local Kalman filter's (within 3 %): the neighbours' measurements of agent i are never sent to i. "
         "What they buy is the estimate of the others, without any communication.",
         gain, all(abs(v - 1) < 0.03 for v in gain.values()), rule="|RMSE / RMSE_local - 1| < 0.03"))
-    phi = {f"N = {n}": _vlahakis_gains(graphs.ring_graph(n).tobytes(), n, SETTINGS.q_vel, SETTINGS.r, SETTINGS.dt)[1]
-           for n in sorted(base["n_agents"].unique())}
+    if phi is None:
+        phi = {f"N = {n}": _vlahakis_gains(graphs.ring_graph(n), SETTINGS.q_vel, SETTINGS.r, SETTINGS.dt)[1]
+               for n in sorted(base["n_agents"].unique())}
     vl = float(b8.loc["vlahakis", "rmse_own_mean"] / b8.loc["local", "rmse_own_mean"])
     claims.append(Claim.qualitative(
         "compare/vlahakis-no-coupling", where,
@@ -1200,13 +1297,15 @@ def plot_pareto(summary):
     return fig
 
 
-def plot_cost(summary):
+def plot_cost(summary, slopes: dict | None = None):
     """CPU per agent per step against team size, log-log, with the fitted slopes.
 
     Parameters
     ----------
     summary : pandas.DataFrame
         Output of :func:`summarize`.
+    slopes : dict, optional
+        Method -> CPU slope in N (:attr:`CompareResult.slopes`); fitted here if not given.
 
     Returns
     -------
@@ -1223,7 +1322,7 @@ def plot_cost(summary):
     ['local (slope 1.00)']
     """
     plt = _plt()
-    slopes = fitted_slopes(summary)
+    slopes = fitted_slopes(summary) if slopes is None else slopes
     base = summary[summary["study"] == "scaling"]
     fig, ax = plt.subplots(figsize=(7, 4.2))
     for i, m in enumerate(TEAM_METHODS):
@@ -1319,3 +1418,56 @@ def _order(col: str):
     if col == "noise":
         return lambda s: s.map({n: i for i, n in enumerate(NOISES)})
     return None
+
+
+# --------------------------------------------------------------------------------------------
+# the comparison as a study (the same contract as the papers' modules)
+
+
+def claims(result: CompareResult) -> list:
+    """The comparison's ledger (``compare/...`` claims), from `result` alone (:func:`compare_claims`).
+
+    Parameters
+    ----------
+    result : CompareResult
+        The output of :func:`run`.
+
+    Returns
+    -------
+    list of mascore.ledger.Claim
+        The claims with their computed verdicts.
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> [c.id for c in compare.claims(compare.run())][:1]  # doctest: +SKIP
+    ['compare/centralized-bound']
+    """
+    return compare_claims(result.summary, phi=result.phi)
+
+
+FIGURES = (
+    FigureSpec("pareto", "", "Accuracy against communication: each method's own-position RMSE over the centralized "
+               "filter's (run by run, with 95 % intervals) against the floats it sends per agent and step, for "
+               "N = 4, 8 and 16 on the ring.", lambda r: plot_pareto(r.summary)),
+    FigureSpec("cost", "", "CPU time per agent, step and run against the team size, log-log, with each method's "
+               "fitted slope: the whole-team filters grow much faster than the per-agent ones.",
+               lambda r: plot_cost(r.summary, r.slopes)),
+    FigureSpec("robustness", "", "Own-position RMSE at N = 8 under link drop-outs, other noise distributions and a "
+               "wrong process-noise covariance in the filters, beside the baseline.",
+               lambda r: plot_robustness(r.summary)),
+)
+
+TABLES = (
+    TableSpec("headline", "", "Per team method at N = 8: RMSE ratio to the centralized filter, consistency, "
+              "control spread, floats sent and CPU per agent and step, and the CPU slope in N.",
+              lambda r: headline(r.summary).reset_index()),
+    TableSpec("summary", "", "Means and 95 % intervals of every metric per condition of the sweep, with the "
+              "ratio to the bound.", lambda r: r.summary),
+)
+
+#: The chapter "Comparing the methods": the sweep, its figures, tables and ledger.
+STUDY = Study("compare", "comparing_methods", SETTINGS, run, FIGURES, TABLES, claims)
+
+#: The comparison's registry: its ledger is ``results/compare/claims.json`` (``python -m mascore compare``).
+REGISTRY = PaperRegistry("compare", "Comparing the methods", studies=(STUDY,), position=5)

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -38,8 +39,6 @@ from ._optional import require
 
 __all__ = [
     "APPROX_FACTOR",
-    "LEDGERS",
-    "PAPERS",
     "VERDICTS",
     "Claim",
     "ClaimsView",
@@ -62,11 +61,8 @@ PAPER_DIGITS = 6
 #: Allowed verdicts.
 VERDICTS = ("reproduces", "approximately", "does-not-reproduce", "holds", "fails")
 
-#: Paper keys, in book order.
-PAPERS = ("song2023", "ren2005", "bhattacharjee2021", "vlahakis")
-
-#: Ledger keys: the papers, and the cross-method comparison (``compare/...`` claims, :mod:`mascore.compare`).
-LEDGERS = (*PAPERS, "compare")
+#: A claim id: the ledger's key (a paper, :func:`mascore.registry.ledger_keys`), a slash, a short name.
+_CLAIM_ID = re.compile(r"[a-z][a-z0-9_]*/\S+")
 
 _RECORD_KEYS = ("id", "where", "statement", "paper_value", "value", "tolerance", "verdict", "note")
 _OPTIONAL_KEYS = ("unit", "labels", "rule", "band_reason", "study")
@@ -136,8 +132,8 @@ class Claim:
     verdict: str = field(default="", init=False)
 
     def __post_init__(self) -> None:
-        if "/" not in self.id or self.id.split("/")[0] not in LEDGERS:
-            raise ValueError(f"claim id must look like 'PAPER/short-name' with PAPER in {LEDGERS}; got {self.id!r}")
+        if not isinstance(self.id, str) or not _CLAIM_ID.fullmatch(self.id):
+            raise ValueError(f"claim id must look like 'PAPER/short-name' with PAPER a ledger's key; got {self.id!r}")
         object.__setattr__(self, "value", _jsonable(self.value))
         object.__setattr__(self, "paper_value", _jsonable(self.paper_value))
         if self.labels is not None:
@@ -268,7 +264,7 @@ def write_claims(
     path : str or pathlib.Path
         Where to write.
     paper : str
-        Paper key.
+        The ledger's key, one of :func:`mascore.registry.ledger_keys`.
     seed : int
         The seed of the run.
     created_by : str
@@ -293,10 +289,14 @@ def write_claims(
     'reproduces'
     """
     from . import __version__
+    from .registry import ledger_keys
 
-    if paper not in LEDGERS:
-        raise ValueError(f"paper must be one of {LEDGERS}; got {paper!r}")
+    if paper not in ledger_keys():
+        raise ValueError(f"paper must be one of {ledger_keys()}; got {paper!r}")
     ids = [c.id for c in claims]
+    foreign = [i for i in ids if not i.startswith(f"{paper}/")]
+    if foreign:
+        raise ValueError(f"the claims of the {paper} ledger must have ids '{paper}/...'; got {foreign}")
     if len(set(ids)) != len(ids):
         raise ValueError(f"duplicate claim ids: {sorted({i for i in ids if ids.count(i) > 1})}")
     path = Path(path)
@@ -390,15 +390,15 @@ def verify_outputs(paper_dir: str | Path) -> dict:
     return doc
 
 
-def load_claims(results_dir: str | Path, papers: Iterable[str] = PAPERS, verify: bool = True) -> list[dict]:
+def load_claims(results_dir: str | Path, papers: Iterable[str] | None = None, verify: bool = True) -> list[dict]:
     """Read every ``results_dir/PAPER/claims.json`` that exists.
 
     Parameters
     ----------
     results_dir : str or pathlib.Path
         The results folder (``results/``).
-    papers : iterable of str
-        Paper keys to read.
+    papers : iterable of str, optional
+        Paper keys to read (default every paper, :func:`mascore.registry.paper_keys`).
     verify : bool
         Check first that each paper's figures and tables match its ledger
         (:func:`verify_outputs`; ``ValueError`` otherwise).
@@ -418,6 +418,10 @@ def load_claims(results_dir: str | Path, papers: Iterable[str] = PAPERS, verify:
     >>> [r["paper"] for r in load_claims(root)]
     ['ren2005']
     """
+    if papers is None:
+        from .registry import paper_keys
+
+        papers = paper_keys()
     records = []
     for paper in papers:
         path = Path(results_dir) / paper / "claims.json"

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import pkgutil
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -40,13 +41,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ._optional import require
-from .ledger import PAPERS, Claim, format_value
+from .ledger import Claim, format_value
 
 if TYPE_CHECKING:  # pragma: no cover
     import matplotlib.figure
     import pandas as pd
 
 __all__ = [
+    "COMPARISON_MODULES",
+    "STUDY_CONTRACT",
     "FigureSpec",
     "PaperRegistry",
     "SettingsView",
@@ -54,11 +57,26 @@ __all__ = [
     "Study",
     "TableSpec",
     "all_figures",
+    "comparison_registries",
+    "ledger_keys",
+    "paper_keys",
+    "paper_registries",
     "paper_registry",
     "setting",
     "show_settings",
+    "study_modules",
     "write_study",
 ]
+
+#: What every study module of :mod:`mascore.papers` exports (:func:`study_modules`): the default
+#: settings, ``run(settings=SETTINGS, seed=1, progress=False)``, ``claims(result)``, the figure and
+#: table specs, and the :class:`Study` made of them. A paper module (its name is the paper's key)
+#: also exports ``REGISTRY``, its :class:`PaperRegistry`.
+STUDY_CONTRACT = ("SETTINGS", "run", "claims", "FIGURES", "TABLES", "STUDY")
+
+#: Modules outside :mod:`mascore.papers` that declare a ``REGISTRY`` of their own: the comparisons,
+#: whose ledgers follow the papers' (``results/compare/claims.json``).
+COMPARISON_MODULES = ("mascore.compare",)
 
 
 @dataclass(frozen=True)
@@ -76,7 +94,9 @@ class FigureSpec:
     caption : str
         What the figure shows and what to look for (MyST Markdown: ``$math$`` allowed).
     draw : callable
-        ``draw(result) -> matplotlib.figure.Figure``.
+        ``draw(result) -> matplotlib.figure.Figure``: draws from the result alone (everything
+        it shows is computed by the study's ``run``), and returns the figure (:meth:`Study.draw`
+        refuses anything else).
 
     Examples
     --------
@@ -224,10 +244,12 @@ class Study:
 
         Examples
         --------
+        >>> import dataclasses
         >>> import matplotlib.pyplot as plt
         >>> from mascore.papers import ren2005
         >>> study = ren2005.REGISTRY.study("kalman-consensus")
-        >>> fig = study.draw("fig1", ren2005.run(seed=1))
+        >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50)  # fewer runs
+        >>> fig = study.draw("fig1", study.run(fewer, 1))
         >>> len(fig.axes)
         4
         >>> plt.close("all")
@@ -235,7 +257,12 @@ class Study:
         from .plotting import use_style
 
         use_style()
-        return self.figure(name).draw(result)
+        fig = self.figure(name).draw(result)
+        figure_class = require("matplotlib.figure", "drawing a registered figure").Figure
+        if not isinstance(fig, figure_class):
+            raise TypeError(f"{self.name}: figure {name!r} must be drawn as a matplotlib Figure; "
+                            f"its draw returned {type(fig).__name__}")
+        return fig
 
     def build(self, name: str, result: Any) -> pd.DataFrame:
         """Build table `name` from `result`.
@@ -257,7 +284,7 @@ class Study:
         >>> import dataclasses
         >>> from mascore.papers import bhattacharjee2021 as bs
         >>> study = bs.REGISTRY.study("set-membership")
-        >>> result = study.run(dataclasses.replace(bs.DEFAULTS, n_runs=3, figure_method="closed_form"), 1)
+        >>> result = study.run(dataclasses.replace(bs.SETTINGS, n_runs=3, t_f=10, figure_method="closed_form"), 1)
         >>> study.build("table1", result).shape[0]
         3
         """
@@ -271,13 +298,17 @@ class PaperRegistry:
     Parameters
     ----------
     key : str
-        One of :data:`mascore.ledger.PAPERS`.
+        The paper's key: the name of its module ``mascore.papers.<key>`` and of its
+        results folder (lower-case letters, digits and underscores).
     citation : str
         Short author-year form used in captions (``"Song et al. 2023"``).
     studies : sequence of Study
         One per chapter.
     errata : sequence of str
         Errata and readings we found, one Markdown sentence or two each (the report lists them).
+    position : int
+        Place of the paper in the book's table of contents (``book/_toc.yml``); the reports,
+        ledgers and :func:`paper_keys` list the papers in this order.
 
     Examples
     --------
@@ -290,10 +321,12 @@ class PaperRegistry:
     citation: str
     studies: tuple[Study, ...]
     errata: tuple[str, ...] = ()
+    position: int = 0
 
     def __post_init__(self) -> None:
-        if self.key not in PAPERS:
-            raise ValueError(f"key must be one of {PAPERS}; got {self.key!r}")
+        if not isinstance(self.key, str) or not re.fullmatch(r"[a-z][a-z0-9_]*", self.key):
+            raise ValueError(f"key must be a module name of lower-case letters, digits and underscores; "
+                             f"got {self.key!r}")
         names = [f.name for s in self.studies for f in (*s.figures, *s.tables)]
         if len(set(names)) != len(names):
             raise ValueError(f"{self.key}: figure and table names must be unique; got {names}")
@@ -372,13 +405,130 @@ class PaperRegistry:
         return source + spec.caption
 
 
+def study_modules() -> list:
+    """Every study module of :mod:`mascore.papers`, in book order (papers by position, then their studies).
+
+    A study module is one that exports ``STUDY`` (and the rest of :data:`STUDY_CONTRACT`);
+    nothing is listed by hand: a new module with a study is found here.
+
+    Returns
+    -------
+    list of module
+        The modules, each once.
+
+    Examples
+    --------
+    >>> from mascore.registry import study_modules
+    >>> [m.__name__.rsplit(".", 1)[1] for m in study_modules()][:2]
+    ['song2023', 'song2023_flocking']
+    """
+    import mascore.papers as package
+
+    modules = [importlib.import_module(f"{package.__name__}.{info.name}")
+               for info in pkgutil.iter_modules(package.__path__) if not info.name.startswith("_")]
+    with_study = {id(m.STUDY): m for m in modules if isinstance(getattr(m, "STUDY", None), Study)}
+    ordered = [with_study.pop(id(s)) for reg in paper_registries() for s in reg.studies if id(s) in with_study]
+    return ordered + sorted(with_study.values(), key=lambda m: m.__name__)  # a study on no registry: last
+
+
+def paper_registries() -> tuple[PaperRegistry, ...]:
+    """The registries of every paper, discovered in :mod:`mascore.papers`, in book order.
+
+    A paper is a module ``mascore.papers.<key>`` that exports ``REGISTRY``, a
+    :class:`PaperRegistry` whose key is the module's name; papers are ordered by
+    :attr:`PaperRegistry.position`.
+
+    Returns
+    -------
+    tuple of PaperRegistry
+        One per paper.
+
+    Raises
+    ------
+    ValueError
+        If a registry's key is not its module's name, or two papers share a position.
+
+    Examples
+    --------
+    >>> from mascore.registry import paper_registries
+    >>> [reg.key for reg in paper_registries()]
+    ['song2023', 'ren2005', 'bhattacharjee2021', 'vlahakis']
+    """
+    import mascore.papers as package
+
+    found = []
+    for info in pkgutil.iter_modules(package.__path__):
+        if info.name.startswith("_"):
+            continue
+        reg = getattr(importlib.import_module(f"{package.__name__}.{info.name}"), "REGISTRY", None)
+        if isinstance(reg, PaperRegistry):
+            if reg.key != info.name:
+                raise ValueError(f"mascore.papers.{info.name}: REGISTRY.key must be the module's name; got {reg.key!r}")
+            found.append(reg)
+    positions = [reg.position for reg in found]
+    if len(set(positions)) != len(positions):
+        raise ValueError(f"papers must have distinct positions; got {dict((r.key, r.position) for r in found)}")
+    return tuple(sorted(found, key=lambda reg: reg.position))
+
+
+def paper_keys() -> tuple[str, ...]:
+    """The keys of every paper, in book order (:func:`paper_registries`).
+
+    Returns
+    -------
+    tuple of str
+        The keys; each names a module ``mascore.papers.<key>`` and a folder ``results/<key>``.
+
+    Examples
+    --------
+    >>> from mascore.registry import paper_keys
+    >>> paper_keys()
+    ('song2023', 'ren2005', 'bhattacharjee2021', 'vlahakis')
+    """
+    return tuple(reg.key for reg in paper_registries())
+
+
+def comparison_registries() -> tuple[PaperRegistry, ...]:
+    """The registries of the comparisons (:data:`COMPARISON_MODULES`), whose ledgers follow the papers'.
+
+    Returns
+    -------
+    tuple of PaperRegistry
+        One per comparison.
+
+    Examples
+    --------
+    >>> from mascore.registry import comparison_registries
+    >>> [reg.key for reg in comparison_registries()]
+    ['compare']
+    """
+    return tuple(importlib.import_module(name).REGISTRY for name in COMPARISON_MODULES)
+
+
+def ledger_keys() -> tuple[str, ...]:
+    """Every ledger's key: the papers', in book order, then the comparisons'.
+
+    Returns
+    -------
+    tuple of str
+        The keys; each ledger is ``results/<key>/claims.json`` and its claim ids start with ``<key>/``.
+
+    Examples
+    --------
+    >>> from mascore.registry import ledger_keys
+    >>> ledger_keys()
+    ('song2023', 'ren2005', 'bhattacharjee2021', 'vlahakis', 'compare')
+    """
+    return (*paper_keys(), *(reg.key for reg in comparison_registries()))
+
+
 def paper_registry(key: str) -> PaperRegistry:
-    """The :class:`PaperRegistry` declared as ``REGISTRY`` in ``mascore.papers.<key>``.
+    """The :class:`PaperRegistry` of a paper (``REGISTRY`` of ``mascore.papers.<key>``) or a comparison.
 
     Parameters
     ----------
     key : str
-        One of :data:`mascore.ledger.PAPERS`.
+        One of :func:`ledger_keys`.
 
     Returns
     -------
@@ -391,9 +541,10 @@ def paper_registry(key: str) -> PaperRegistry:
     >>> paper_registry("vlahakis").citation
     'Vlahakis and Halikias'
     """
-    if key not in PAPERS:
-        raise ValueError(f"paper must be one of {', '.join(PAPERS)}; got {key!r}")
-    return importlib.import_module(f"mascore.papers.{key}").REGISTRY
+    for reg in (*paper_registries(), *comparison_registries()):
+        if reg.key == key:
+            return reg
+    raise ValueError(f"paper must be one of {', '.join(ledger_keys())}; got {key!r}")
 
 
 def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | Path) -> list[Claim]:
@@ -420,11 +571,12 @@ def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | 
 
     Examples
     --------
-    >>> import tempfile
+    >>> import dataclasses, tempfile
     >>> from mascore.papers import ren2005
     >>> from mascore.registry import write_study
     >>> study = ren2005.REGISTRY.study("kalman-consensus")
-    >>> claims = write_study(ren2005.REGISTRY, study, study.run(study.settings, 1), tempfile.mkdtemp())
+    >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50)  # fewer runs
+    >>> claims = write_study(ren2005.REGISTRY, study, study.run(fewer, 1), tempfile.mkdtemp())
     >>> {c.study for c in claims}
     {'kalman-consensus'}
     """
@@ -601,13 +753,13 @@ def _cell(text: str) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ")
 
 
-def all_figures(papers: Sequence[str] = PAPERS) -> list[tuple[PaperRegistry, Study, FigureSpec]]:
+def all_figures(papers: Sequence[str] | None = None) -> list[tuple[PaperRegistry, Study, FigureSpec]]:
     """Every registered figure as ``(paper, study, spec)``, in book order.
 
     Parameters
     ----------
-    papers : sequence of str
-        Paper keys (default all).
+    papers : sequence of str, optional
+        Paper keys (default all, :func:`paper_keys`).
 
     Returns
     -------
@@ -621,7 +773,7 @@ def all_figures(papers: Sequence[str] = PAPERS) -> list[tuple[PaperRegistry, Stu
     True
     """
     out = []
-    for key in papers:
+    for key in paper_keys() if papers is None else papers:
         reg = paper_registry(key)
         out += [(reg, s, f) for s in reg.studies for f in s.figures]
     return out

@@ -12,8 +12,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ._optional import require
-from .ledger import PAPERS, VERDICTS
-from .registry import paper_registry
+from .ledger import VERDICTS
+from .registry import paper_keys, paper_registry
 
 __all__ = ["MarkdownText", "attention_list", "errata_list", "verdict_summary"]
 
@@ -70,7 +70,7 @@ def verdict_summary(records: Sequence[dict]):
     """
     pd = require("pandas", "this table")
 
-    papers = [p for p in PAPERS if any(r["paper"] == p for r in records)]
+    papers = [p for p in paper_keys() if any(r["paper"] == p for r in records)]
     table = pd.DataFrame(0, index=pd.Index(papers), columns=list(VERDICTS))
     for r in records:
         table.loc[r["paper"], r["verdict"]] += 1
@@ -119,13 +119,13 @@ def attention_list(records: Sequence[dict]) -> MarkdownText:
     return MarkdownText("\n".join(rows) if len(rows) > 2 else "Every claim reproduces or holds.")
 
 
-def errata_list(papers: Sequence[str] = PAPERS) -> MarkdownText:
+def errata_list(papers: Sequence[str] | None = None) -> MarkdownText:
     """Per paper, the errata and readings its registry records, each paper in a collapsed dropdown.
 
     Parameters
     ----------
-    papers : sequence of str
-        Paper keys (default all).
+    papers : sequence of str, optional
+        Paper keys (default all, :func:`mascore.registry.paper_keys`).
 
     Returns
     -------
@@ -139,7 +139,7 @@ def errata_list(papers: Sequence[str] = PAPERS) -> MarkdownText:
     True
     """
     blocks = []
-    for key in papers:
+    for key in paper_keys() if papers is None else papers:
         reg = paper_registry(key)
         if reg.errata:
             items = "\n".join(f"- {e}" for e in reg.errata)

@@ -17,8 +17,7 @@ match its ledger is detected (:func:`mascore.ledger.verify_outputs`).
 from __future__ import annotations
 
 import argparse
-import importlib
-import importlib.util
+import dataclasses
 import shutil
 import sys
 import tempfile
@@ -26,8 +25,8 @@ import time
 from pathlib import Path
 
 from ._progress import progress_bar
-from .ledger import PAPERS, Claim, output_hashes, write_claims
-from .registry import write_study
+from .ledger import Claim, output_hashes, write_claims
+from .registry import paper_keys, paper_registry, write_study
 
 __all__ = ["DEFAULT_SEED", "available_papers", "main", "reproduce_paper", "results_dir"]
 
@@ -68,12 +67,12 @@ def results_dir() -> Path:
 
 
 def available_papers() -> list[str]:
-    """Paper keys whose scenario module is present, in book order.
+    """The keys of every paper, in book order (discovered: :func:`mascore.registry.paper_keys`).
 
     Returns
     -------
     list of str
-        A subset of :data:`mascore.ledger.PAPERS`.
+        The keys.
 
     Examples
     --------
@@ -81,7 +80,7 @@ def available_papers() -> list[str]:
     >>> available_papers()
     ['song2023', 'ren2005', 'bhattacharjee2021', 'vlahakis']
     """
-    return [p for p in PAPERS if importlib.util.find_spec(f"mascore.papers.{p}") is not None]
+    return list(paper_keys())
 
 
 def reproduce_paper(
@@ -93,7 +92,7 @@ def reproduce_paper(
     Parameters
     ----------
     paper : str
-        One of :data:`mascore.ledger.PAPERS`.
+        One of :func:`mascore.registry.paper_keys`.
     out : str or pathlib.Path
         Results root; files go to ``out/PAPER/``, which is replaced as a whole.
     seed : int
@@ -116,20 +115,26 @@ def reproduce_paper(
 
     Examples
     --------
+    ``make reproduce`` (and ``make test``, first) calls it for every paper:
+
     >>> import tempfile
     >>> from mascore.reproduce import reproduce_paper
-    >>> claims = reproduce_paper("ren2005", out=tempfile.mkdtemp(), progress=False)
-    >>> sorted({c.verdict for c in claims})
+    >>> claims = reproduce_paper("ren2005", out=tempfile.mkdtemp(), progress=False)  # doctest: +SKIP
+    >>> sorted({c.verdict for c in claims})  # doctest: +SKIP
     ['holds']
+    >>> reproduce_paper("ren2006", out=tempfile.mkdtemp())
+    Traceback (most recent call last):
+    ...
+    ValueError: paper must be one of song2023, ren2005, bhattacharjee2021, vlahakis or 'all'; got 'ren2006'
     """
-    if paper not in PAPERS:
-        raise ValueError(f"paper must be one of {', '.join(PAPERS)} or 'all'; got {paper!r}")
+    if paper not in paper_keys():
+        raise ValueError(f"paper must be one of {', '.join(paper_keys())} or 'all'; got {paper!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer; got {seed!r}")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"out must be a directory; {str(out)!r} is a file")
-    registry = importlib.import_module(f"mascore.papers.{paper}").REGISTRY
+    registry = paper_registry(paper)
     out.mkdir(parents=True, exist_ok=True)
     final = out / paper
     staging = Path(tempfile.mkdtemp(prefix=f".{paper}-incomplete-", dir=out))
@@ -176,6 +181,17 @@ def _out_argument(text: str) -> Path:
     return path
 
 
+class _PaperChoices:
+    """The choices of ``reproduce PAPER``: the discovered papers and ``all``, looked up only when needed
+    (``mascore compare`` and ``--version`` do not import the papers)."""
+
+    def __contains__(self, value: object) -> bool:
+        return value == "all" or value in paper_keys()
+
+    def __iter__(self):
+        return iter([*paper_keys(), "all"])
+
+
 def _compare(args: argparse.Namespace) -> int:
     """``mascore compare``: the sweep, then the summary, headline table, figures and claims under ``out/compare``."""
     import os
@@ -187,12 +203,14 @@ def _compare(args: argparse.Namespace) -> int:
         print(f"mascore: --workers must be >= 0; got {workers}", file=sys.stderr)
         return 2
     start = time.perf_counter()
-    table, summary = compare.run_compare(args.grid, args.out, workers=workers, scheduler=args.scheduler,
-                                         seed=args.seed)
+    study = compare.STUDY
+    result = study.run(dataclasses.replace(study.settings, grid=args.grid), args.seed, progress=True, out=args.out,
+                       workers=workers, scheduler=args.scheduler)
+    table, summary = result.table, result.summary
     elapsed = time.perf_counter() - start
     folder = args.out / "compare"
     summary.to_csv(folder / f"summary-{args.grid}-{args.seed}.csv", index=False)
-    claims = compare.compare_claims(summary)
+    claims = study.claims(result)
     write_claims(claims, folder / "claims.json", "compare", args.seed,
                  created_by=f"mascore compare --grid {args.grid} --seed {args.seed}")
     where = args.scheduler or (f"{workers} local workers" if workers else "this process")
@@ -236,7 +254,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--version", action="version", version=f"mascore {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     rep = sub.add_parser("reproduce", help="rebuild a paper's figures, tables and claims.json")
-    rep.add_argument("paper", choices=[*PAPERS, "all"])
+    rep.add_argument("paper", choices=_PaperChoices(), metavar="PAPER",
+                     help="a paper's key (a module of mascore.papers; a wrong key lists them) or 'all'")
     rep.add_argument("--out", type=_out_argument, default=Path("results"),
                      help="results directory (default: results/)")
     rep.add_argument("--seed", type=_seed_argument, default=DEFAULT_SEED,

@@ -16,7 +16,6 @@ from mascore import synchronization as sync  # noqa: E402
 from mascore.ledger import show_claims  # noqa: E402
 from mascore.papers import bhattacharjee2021 as paper  # noqa: E402
 from mascore.registry import paper_registry, show_settings  # noqa: E402
-from mascore.reproduce import reproduce_paper  # noqa: E402
 
 REQUIRED = [
     "lemma2-r", "coupling-gain-c", "bound-eq21", "fig2c-Ac-bound", "fig6-trace-limit",
@@ -32,9 +31,9 @@ def test_settings_follow_the_paper():
     assert np.array_equal(graphs.laplacian(paper.ADJACENCY),
                           [[1, 0, 0, -1], [-1, 1, 0, 0], [0, -1, 1, 0], [0, 0, -1, 1]])
     assert np.array_equal(paper.G_DIST, np.eye(2)) and np.array_equal(paper.PINNING, [1, 0, 0, 0])
-    assert [(s.paper_mean, s.paper_rms) for s in paper.SETTINGS] == [(0.3706, 1.1985), (0.4219, 1.2052), (0.4730, 1.2124)]
+    assert [(s.paper_mean, s.paper_rms) for s in paper.ROWS] == [(0.3706, 1.1985), (0.4219, 1.2052), (0.4730, 1.2124)]
     # Assumption 2.2: the uniform boxes lie inside the ellipsoidal bounds Q, R
-    for s in paper.SETTINGS:
+    for s in paper.ROWS:
         assert 2 * s.alpha_w**2 <= s.q and s.alpha_v**2 <= s.r
 
 
@@ -51,8 +50,8 @@ def test_global_error_system_eq14():
     """delta_{k+1} = A_c delta_k + B_c e_k + (I (x) G) w_k along a simulated trajectory."""
     des = paper.design()
     draws = paper.draw(2, 2)
-    run = paper.simulate(paper.SETTINGS[2], draws=draws)
-    s = paper.SETTINGS[2]
+    run = paper.simulate(paper.ROWS[2], draws=draws)
+    s = paper.ROWS[2]
     delta = (run.x - run.leader[None, :, None, :]).reshape(2, paper.T_F + 1, -1)
     e = run.error.reshape(2, paper.T_F + 1, -1)
     w = (s.alpha_w * draws.w_unit) @ paper.G_DIST.T
@@ -65,7 +64,7 @@ def test_containment_and_eq22_bound_over_seeds():
     des = paper.design()
     bound = sync.bound_eq21(des.B_c, paper.G_DIST, paper.P0_BOUND, paper.Q_BAR)
     mbar = sync.mu_bar(paper.ALPHA, paper.MU, paper.N_AGENTS)
-    for s in paper.SETTINGS:
+    for s in paper.ROWS:
         run = paper.simulate(s, seed=9, n_runs=20)
         assert run.containment.max() <= 1 + 1e-9
         k = run.k
@@ -126,10 +125,9 @@ def test_fig6_trace_settles():
 
 
 @pytest.fixture(scope="module")
-def reproduced(tmp_path_factory):
-    out = tmp_path_factory.mktemp("results")
-    claims = reproduce_paper("bhattacharjee2021", out, seed=1)
-    return out / "bhattacharjee2021", claims
+def reproduced(published):
+    """The published results (results/bhattacharjee2021, seed 1), reproduced by `make test` before pytest."""
+    return published("bhattacharjee2021")
 
 
 @pytest.mark.slow
@@ -171,7 +169,7 @@ def test_ledger_verdicts_are_the_documented_ones(reproduced):
 @pytest.fixture(scope="module")
 def cheap():
     """The study on cheap settings (few seeds, a shorter horizon): what the figures and claims need."""
-    settings = dataclasses.replace(paper.DEFAULTS, n_runs=4, t_f=30)
+    settings = dataclasses.replace(paper.SETTINGS, n_runs=4, t_f=30)
     return paper.run(settings, seed=3)
 
 
@@ -179,7 +177,7 @@ def test_registry_declares_the_study():
     reg = paper_registry("bhattacharjee2021")
     assert reg is paper.REGISTRY and [s.name for s in reg.studies] == ["set-membership"]
     study = reg.study("set-membership")
-    assert study.chapter == "bhattacharjee2021_set_membership" and study.settings == paper.DEFAULTS
+    assert study.chapter == "bhattacharjee2021_set_membership" and study.settings == paper.SETTINGS
     assert [(f.name, f.number) for f in study.figures] == [(f"fig{i}", f"Fig. {i}") for i in range(1, 7)]
     assert [t.name for t in study.tables] == ["table1", "table1_edges_reversed", "table1_readings"]
     errata = " ".join(reg.errata)
@@ -187,9 +185,9 @@ def test_registry_declares_the_study():
 
 
 def test_settings_object_is_the_one_source():
-    """Module constants come from DEFAULTS, the run reads the settings it is given, and the table shows them."""
-    d = paper.DEFAULTS
-    assert paper.SETTINGS == d.rows and paper.T_F == d.t_f and np.array_equal(paper.X0_HAT, d.matrix("x0_hat"))
+    """Module constants come from SETTINGS, the run reads the settings it is given, and the table shows them."""
+    d = paper.SETTINGS
+    assert paper.ROWS == d.rows and paper.T_F == d.t_f and np.array_equal(paper.X0_HAT, d.matrix("x0_hat"))
     assert np.array_equal(paper.P0, 2 * np.eye(2)) and (d.alpha, d.mu, d.p0, d.q_bar) == (1.1, 0.9, 2.0, 0.1)
     with pytest.raises(ValueError, match="one entry per Table 1 row"):
         dataclasses.replace(d, q=(0.1, 1.0))

@@ -16,8 +16,7 @@ from pathlib import Path
 import pytest
 
 from mascore._booktools import page_problems
-from mascore.ledger import PAPERS
-from mascore.registry import all_figures, paper_registry
+from mascore.registry import all_figures, paper_registries
 from mascore.report import ledger_label
 
 HTML = Path(__file__).resolve().parents[1] / "book" / "_build" / "html"
@@ -79,7 +78,7 @@ def test_registered_figure_is_on_its_chapter_page(reg, study, spec):
     assert not problems, problems
 
 
-STUDIES = [(paper_registry(p), s) for p in PAPERS for s in paper_registry(p).studies]
+STUDIES = [(reg, s) for reg in paper_registries() for s in reg.studies]
 
 
 @pytest.mark.parametrize("reg,study", STUDIES, ids=[f"{r.key}-{s.name}" for r, s in STUDIES])

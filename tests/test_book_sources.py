@@ -9,8 +9,7 @@ from pathlib import Path
 import pytest
 
 from mascore._booktools import chapter_studies, drawn_figures
-from mascore.ledger import PAPERS
-from mascore.registry import paper_registry
+from mascore.registry import paper_keys, paper_registry
 from mascore.report import ledger_label
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -22,7 +21,16 @@ def _cells(chapter: str) -> list[dict]:
 
 
 def test_every_paper_is_registered():
-    assert {reg.key for reg, _ in CHAPTERS.values()} == set(PAPERS)
+    assert {reg.key for reg, _ in CHAPTERS.values()} == set(paper_keys())
+
+
+def test_papers_are_in_the_order_of_the_table_of_contents():
+    """Each study's chapter is in book/_toc.yml, and the papers' order (their positions) is the book's."""
+    toc = re.findall(r"file:\s*notebooks/(\w+)", (ROOT / "book" / "_toc.yml").read_text())
+    missing = sorted(set(CHAPTERS) - set(toc))
+    assert not missing, f"chapters missing from book/_toc.yml: {missing}"
+    in_book = [CHAPTERS[c][0].key for c in toc if c in CHAPTERS]
+    assert list(dict.fromkeys(in_book)) == list(paper_keys())
 
 
 @pytest.mark.parametrize("chapter", sorted(CHAPTERS))
@@ -64,12 +72,12 @@ def test_bibliography_entries_are_complete():
     bib = (ROOT / "book" / "references.bib").read_text()
     years = re.findall(r"year\s*=\s*\{([^}]*)\}", bib)
     assert years and all(re.fullmatch(r"\d{4}", y) for y in years), years
-    for key in PAPERS:
+    for key in paper_keys():
         assert f"{{{key}," in bib
 
 
 def test_registry_captions_are_stated():
-    for key in PAPERS:
+    for key in paper_keys():
         reg = paper_registry(key)
         for study in reg.studies:
             for spec in (*study.figures, *study.tables):

@@ -259,7 +259,7 @@ def test_vlahakis_rmse_matches_its_error_covariance():
     """
     s = compare.SETTINGS
     N = 5
-    L, Phi = compare._vlahakis_gains(compare.graphs.ring_graph(N).tobytes(), N, s.q_vel, s.r, s.dt)
+    L, Phi = compare._vlahakis_gains(compare.graphs.ring_graph(N), s.q_vel, s.r, s.dt)
     G = s.dt * L                                          # (2, 1)
     C = np.array([[1.0, 0.0]])
     A = np.array([[1.0, s.dt], [0.0, 1.0]])

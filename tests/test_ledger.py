@@ -113,3 +113,11 @@ def test_show_claims_numbers_claims_states_them_and_prints_a_shared_note_once():
     assert "First statement." in rows[0] and "**reproduces**" in rows[0] and "within 0.1" in rows[0]
     assert "**fails**" in rows[1] and "Decided by:* max < 1" in rows[1]
     assert text.count(shared) == 1 and "Claims 1, 2." in text and "Claim 1.* own a" in text
+
+
+def test_write_claims_refuses_an_unknown_ledger_or_a_foreign_claim(tmp_path):
+    claim = Claim("vlahakis/a", "w", "s", 2.0, 2.0, {"abs": 0.1})
+    with pytest.raises(ValueError, match="paper must be one of"):
+        ledger.write_claims([claim], tmp_path / "claims.json", "vlahakis2", 1, "cmd")
+    with pytest.raises(ValueError, match="ids 'ren2005/...'"):
+        ledger.write_claims([claim], tmp_path / "claims.json", "ren2005", 1, "cmd")

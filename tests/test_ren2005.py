@@ -11,7 +11,6 @@ from mascore import consensus as cs
 from mascore.graphs import has_spanning_tree, is_connected, spanning_tree_roots
 from mascore.papers import ren2005 as ren
 from mascore.registry import paper_registry, show_settings
-from mascore.reproduce import reproduce_paper
 
 matplotlib.use("Agg")
 
@@ -154,14 +153,15 @@ def test_run_reuses_the_fig1_pairings_and_the_bias_runs(cheap_result):
 
 
 @pytest.mark.slow
-def test_reproduce_writes_figures_tables_and_claims(tmp_path):
-    claims = reproduce_paper("ren2005", tmp_path, seed=1)
-    out = tmp_path / "ren2005"
+def test_reproduce_writes_figures_tables_and_claims(published):
+    """The published results (results/ren2005, seed 1); the chapter's run and claims give the same ledger."""
+    out, claims = published("ren2005")
     for spec in ren.STUDY.figures:
         assert (out / "figures" / f"{spec.name}.png").stat().st_size > 0
     for spec in ren.STUDY.tables:
         assert (out / "tables" / f"{spec.name}.csv").exists()
     doc = json.loads((out / "claims.json").read_text())
+    assert doc["seed"] == 1
     ids = {c["id"] for c in doc["claims"]}
     required = {"fig1-consensus-equal", "fig1-confident-agent-dominates", "fig2-fig3-graphs",
                 "thm32-continuous-consensus",

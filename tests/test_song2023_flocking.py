@@ -153,13 +153,10 @@ def test_tables_and_write_study(cheap_result, tmp_path):
     assert isinstance(pd.read_csv(tmp_path / "tables" / "fig5_fig6_flocking.csv"), pd.DataFrame)
 
 
-@pytest.mark.slow
-def test_full_study_verdicts():
-    """The published run (50 runs x 3 cases, seed 1): every flocking claim holds."""
-    from mascore.reproduce import DEFAULT_SEED
-
-    result = s.FLOCKING_STUDY.run(s.FLOCKING_STUDY.settings, DEFAULT_SEED)
-    claims = s.FLOCKING_STUDY.claims(result)
+def test_full_study_verdicts(published):
+    """The published run (50 runs x 3 cases, seed 1, in results/song2023): every flocking claim holds."""
+    _, claims = published("song2023")
+    claims = [c for c in claims if c.study == "flocking"]
     assert [c.id for c in claims] == list(CLAIM_IDS)
     assert {c.verdict for c in claims} == {"holds"}, [(c.id, c.verdict, c.value) for c in claims]
     frac = claims[3].value["runs within R (fraction)"]

@@ -46,7 +46,7 @@ def result():
 
 @pytest.fixture(scope="module")
 def claims(result):
-    return {c.id.split("/")[1]: c for c in v.ledger_claims(result)}
+    return {c.id.split("/")[1]: c for c in v.claims(result)}
 
 
 # ---------------------------------------------------------------- the registry
@@ -67,7 +67,7 @@ def test_settings_document_every_field():
     for f in dataclasses.fields(v.ObserverSettings):
         assert f.metadata["source"] in ("paper", "chosen", "derived"), f.name
         assert f.metadata["where"], f.name
-    assert hash(v.SETTINGS) == hash(v.ObserverSettings())  # frozen and hashable (the designs are cached on it)
+    assert hash(v.SETTINGS) == hash(v.ObserverSettings())  # frozen and hashable
     assert v.EXAMPLE1["Q1"] == v.SETTINGS.Q1 and v.EXAMPLE1["Q2"] == v.SETTINGS.Q2
 
 
@@ -244,13 +244,13 @@ def test_errata_numbers_match_the_run(result):
 
 
 @pytest.mark.slow
-def test_reproduce_writes_ledger(tmp_path):
-    from mascore.reproduce import reproduce_paper
-
-    claims = reproduce_paper("vlahakis", tmp_path, seed=1)
-    assert set(REQUIRED) <= {c.id for c in claims}
-    assert {c.study for c in claims} == {"distributed-observer"}
-    out = tmp_path / "vlahakis"
+def test_reproduce_writes_ledger(published, claims):
+    """The published results (results/vlahakis, seed 1) hold the run's claims, figures and tables."""
+    out, published_claims = published("vlahakis")
+    assert set(REQUIRED) <= {c.id for c in published_claims}
+    assert {c.study for c in published_claims} == {"distributed-observer"}
+    assert [c.to_dict() for c in claims.values()] == [{k: v for k, v in c.to_dict().items() if k != "study"}
+                                                      for c in published_claims]
     for name in ("fig1", "fig2", "phi-profile"):
         assert (out / "figures" / f"{name}.png").exists()
     for name in ("example1_readings", "example1_lmi_variants", "lqr_costs", "fig1_position_errors"):

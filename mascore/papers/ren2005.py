@@ -43,6 +43,8 @@ __all__ = [
     "REGISTRY",
     "SETTINGS",
     "STUDY",
+    "FIGURES",
+    "TABLES",
     "Fig1Result",
     "KalmanConsensusResult",
     "KalmanConsensusSettings",
@@ -712,6 +714,9 @@ class KalmanConsensusResult:
         Bias of the consensus value against central fusion.
     overconfidence : dict
         Believed against actual variances (:func:`overconfidence`).
+    noise_free_rms : ndarray
+        RMS disagreement of the noise-free Fig. 1 run (equal variances) per step, the
+        reference line of the noise figure.
 
     Examples
     --------
@@ -730,6 +735,7 @@ class KalmanConsensusResult:
     noise_continuous: dict  # noise_continuous
     bias: dict  # "paper", "Q0", "ideal" -> bias_study
     overconfidence: dict  # overconfidence
+    noise_free_rms: np.ndarray  # _rms_disagreement of fig1.equal
 
 
 def _noise_variants(s: KalmanConsensusSettings) -> dict[str, dict]:
@@ -763,8 +769,10 @@ def run(settings: KalmanConsensusSettings = SETTINGS, seed: int = 1, progress: b
 
     Examples
     --------
+    >>> import dataclasses
     >>> from mascore.papers import ren2005
-    >>> result = ren2005.run(seed=1)
+    >>> fewer = dataclasses.replace(ren2005.SETTINGS, noise_runs=20, noise_paths=4, bias_runs=50)  # fewer runs
+    >>> result = ren2005.run(fewer, seed=1)
     >>> result.union.union_ok, result.no_union.union_ok
     (True, False)
     """
@@ -782,7 +790,8 @@ def run(settings: KalmanConsensusSettings = SETTINGS, seed: int = 1, progress: b
     out = {name: task() for name, task in progress_bar(list(tasks.items()), enabled=progress, desc="ren2005",
                                                        unit="study", leave=False)}
     return KalmanConsensusResult(settings=s, seed=seed, **out,
-                                 overconfidence=overconfidence(seed, s, fig1_result=out["fig1"]))
+                                 overconfidence=overconfidence(seed, s, fig1_result=out["fig1"]),
+                                 noise_free_rms=_rms_disagreement(out["fig1"].equal.xi))
 
 
 # --------------------------------------------------------------------------- plots
@@ -975,7 +984,7 @@ def _draw_noise(result: KalmanConsensusResult) -> plt.Figure:
     fig, ax = plt.subplots(figsize=(8, 3.6), layout="constrained")
     for key, st in result.noise.items():
         ax.semilogy(st["rms"], label=variant_label(st["Q"], st["Omega"], paper=key == "paper"))
-    ax.semilogy(_rms_disagreement(result.fig1.equal.xi), "k:", label="no noise (the Fig. 1 run)")
+    ax.semilogy(result.noise_free_rms, "k:", label="no noise (the Fig. 1 run)")
     ax.set_xlabel("step k")
     ax.set_ylabel("RMS disagreement (h)")
     fig.legend(loc="outside right upper")
@@ -1277,8 +1286,10 @@ def claims(result: KalmanConsensusResult) -> list[Claim]:
 
     Examples
     --------
+    >>> import dataclasses
     >>> from mascore.papers import ren2005
-    >>> claims = ren2005.claims(ren2005.run(seed=1))   # doctest: +ELLIPSIS
+    >>> fewer = dataclasses.replace(ren2005.SETTINGS, noise_runs=20, noise_paths=4, bias_runs=50)  # fewer runs
+    >>> claims = ren2005.claims(ren2005.run(fewer, seed=1))
     >>> len(claims), sorted({c.verdict for c in claims})
     (9, ['holds'])
     """
@@ -1288,7 +1299,7 @@ def claims(result: KalmanConsensusResult) -> list[Claim]:
 
 # --------------------------------------------------------------------------- registry
 
-_FIGURES = (
+FIGURES = (
     FigureSpec(
         "fig1", "Fig. 1",
         "The meet-for-dinner example: ten agents, paired at random for calls of 1 to 5 steps, run eqs. (4)-(5) "
@@ -1358,7 +1369,7 @@ _FIGURES = (
         _draw_overconfidence),
 )
 
-_TABLES = (
+TABLES = (
     TableSpec("fig1_final", "", "Fig. 1: initial and final meeting times and variances per agent.", _fig1_table),
     TableSpec("theorem_spreads", "", "Theorem demos: whether the union condition holds and the final spread of the agents' values, per sequence.", _theorems_table),
     TableSpec("noise_floors", "", "Communication noise: RMS floors and log-log slopes per variant.", _noise_table),
@@ -1368,7 +1379,7 @@ _TABLES = (
 )
 
 #: The one study of the chapter ``ren2005_kalman_consensus``.
-STUDY = Study("kalman-consensus", "ren2005_kalman_consensus", SETTINGS, run, _FIGURES, _TABLES, claims)
+STUDY = Study("kalman-consensus", "ren2005_kalman_consensus", SETTINGS, run, FIGURES, TABLES, claims)
 
 #: Errata and readings, for the reproduction report.
 ERRATA = (
@@ -1391,4 +1402,4 @@ ERRATA = (
 )
 
 #: The paper's registry: one study, its figures, tables and claims.
-REGISTRY = PaperRegistry("ren2005", "Ren, Beard and Kingston 2005", studies=(STUDY,), errata=ERRATA)
+REGISTRY = PaperRegistry("ren2005", "Ren, Beard and Kingston 2005", studies=(STUDY,), errata=ERRATA, position=2)

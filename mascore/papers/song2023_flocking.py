@@ -73,6 +73,9 @@ __all__ = [
     "claims",
     "ekf_step_seconds",
     "FLOCKING_STUDY",
+    "STUDY",
+    "FIGURES",
+    "TABLES",
 ]
 
 
@@ -1015,7 +1018,7 @@ def ekf_step_seconds(settings: FlockingSettings = SETTINGS, seed: int = 0, repea
 # ----------------------------------------------------------------------------- the study
 
 
-_FIGURES = (
+FIGURES = (
     FigureSpec(
         "fig4", "Fig. 4",
         "One run of estimation-based flocking ($Q = I$, $R = I$, 2 x 4 grid start), seen by agent 1's filter: "
@@ -1057,7 +1060,7 @@ _FIGURES = (
     ),
 )
 
-_TABLES = (
+TABLES = (
     TableSpec("fig5_fig6_flocking", "",
               "Per case of Fig. 5: settled RMS STDs (last 20 s) and the farthest agent from the centre of mass "
               "at the end (Fig. 6), over the 50 runs.", settled_table),
@@ -1068,7 +1071,10 @@ _TABLES = (
 
 #: The book's flocking chapter (``notebooks/song2023_flocking.ipynb``); ``REGISTRY`` of
 #: :mod:`mascore.papers.song2023` holds it beside the rendezvous study.
-FLOCKING_STUDY = Study("flocking", "song2023_flocking", SETTINGS, run, _FIGURES, _TABLES, claims)
+STUDY = Study("flocking", "song2023_flocking", SETTINGS, run, FIGURES, TABLES, claims)
+
+#: The flocking study under the name the chapter uses (its paper's registry is in :mod:`mascore.papers.song2023`).
+FLOCKING_STUDY = STUDY
 
 
 #: Errata and readings of the flocking part, for the report (appended to song2023's registry).

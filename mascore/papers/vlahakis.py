@@ -42,7 +42,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -69,6 +68,8 @@ __all__ = [
     "REGISTRY",
     "SETTINGS",
     "STUDY",
+    "FIGURES",
+    "TABLES",
     "Fig12Result",
     "ObserverResult",
     "ObserverSettings",
@@ -76,7 +77,7 @@ __all__ = [
     "design",
     "fig12",
     "initial_errors",
-    "ledger_claims",
+    "claims",
     "run",
 ]
 
@@ -223,8 +224,7 @@ def design(Q2: float, reading: str = "as-printed", trace_in: str = "transformed"
            n_agents: int | None = None, settings: ObserverSettings = SETTINGS) -> observers.DistributedObserver:
     """Distributed observer of Example 1 for one ``Q2`` and one reading of eqs. (29)-(30).
 
-    Cached (the tables, the figures and the claims reuse the same designs): do
-    not modify the arrays of the result.
+    Computed at each call (a few milliseconds; nothing is cached).
 
     Parameters
     ----------
@@ -267,7 +267,6 @@ def _check_n_agents(n_agents: object) -> int | None:
     return None if n_agents is None else check_positive_int(n_agents, "n_agents")
 
 
-@lru_cache(maxsize=64)
 def _design(s: ObserverSettings, Q2: float, reading: str, trace_in: str) -> observers.DistributedObserver:
     A, Bbar, C = s.arrays()
     return observers.distributed_observer(A, Bbar, C, s.Q1, Q2, s.R, s.adjacency(), reading=reading,
@@ -608,10 +607,9 @@ def readings_table(settings: ObserverSettings = SETTINGS) -> pd.DataFrame:
     empty and ``Phi_free_low``/``Phi_free_high`` give the optimal interval
     (closed form, :func:`as_printed_phi_interval`).
     """
-    return _readings_table(settings).copy()
+    return _readings_table(settings)
 
 
-@lru_cache(maxsize=4)
 def _readings_table(s: ObserverSettings) -> pd.DataFrame:
     rows = []
     for reading in observers.READINGS:
@@ -656,10 +654,9 @@ def lmi_variants_table(settings: ObserverSettings = SETTINGS) -> pd.DataFrame:
     A reading whose program is infeasible or not solved to optimality is
     recorded as such.
     """
-    return _lmi_variants_table(settings).copy()
+    return _lmi_variants_table(settings)
 
 
-@lru_cache(maxsize=4)
 def _lmi_variants_table(s: ObserverSettings) -> pd.DataFrame:
     from .._solver import SolverError
 
@@ -866,6 +863,8 @@ def run(settings: ObserverSettings = SETTINGS, seed: int = 1, progress: bool = F
     >>> result = vlahakis.run(seed=1)
     >>> sorted(result.intervals)
     [5.0, 25.0]
+    >>> len(vlahakis.claims(result))                      # the ledger, from the result alone
+    12
     """
     s = settings
     check_seed(seed, "seed")
@@ -1121,7 +1120,7 @@ def _cost_claims(r: ObserverResult) -> list[Claim]:
     return [ordering, structure, bottom_up]
 
 
-def ledger_claims(result: ObserverResult) -> list[Claim]:
+def claims(result: ObserverResult) -> list[Claim]:
     """The ledger of the study, from the result alone.
 
     Parameters
@@ -1136,10 +1135,11 @@ def ledger_claims(result: ObserverResult) -> list[Claim]:
 
     Examples
     --------
+    The run's example (:func:`run`) computes them; the study calls the same function:
+
     >>> from mascore.papers import vlahakis
-    >>> claims = vlahakis.ledger_claims(vlahakis.run(seed=1))
-    >>> len(claims)
-    12
+    >>> vlahakis.STUDY.claims is vlahakis.claims
+    True
     """
     return [*_gain_claims(result), *_phi_j_claims(result), _interval_claim(result), *_behaviour_claims(result),
             *_cost_claims(result)]
@@ -1165,7 +1165,7 @@ def _fig12_caption(k: int, Q2: float, level: str) -> str:
             "is linear up to 0.1 s and logarithmic after. " + _FIG_LOOK[k])
 
 
-_FIGURES = (
+FIGURES = (
     FigureSpec("fig1", "Fig. 1", _fig12_caption(1, 5.0, "low"), lambda r: plot_fig12(r.fig12[0])),
     FigureSpec("fig2", "Fig. 2", _fig12_caption(2, 25.0, "high"), lambda r: plot_fig12(r.fig12[1])),
     FigureSpec(
@@ -1180,7 +1180,7 @@ _FIGURES = (
         plot_phi_profile),
 )
 
-_TABLES = (
+TABLES = (
     TableSpec("example1_readings", "",
               "Example 1 under each reading of eqs. (29)-(30) (as printed; the mixed convention that gives the "
               "printed L) with the traces in the coordinates of eq. (32) or the original ones: L, Φ (empty where "
@@ -1203,11 +1203,11 @@ _TABLES = (
 )
 
 #: The chapter's study: Example 1, Figs. 1-2 and the LQR checks.
-STUDY = Study("distributed-observer", "vlahakis_distributed_observer", SETTINGS, run, _FIGURES, _TABLES,
-              ledger_claims)
+STUDY = Study("distributed-observer", "vlahakis_distributed_observer", SETTINGS, run, FIGURES, TABLES,
+              claims)
 
 REGISTRY = PaperRegistry(
-    "vlahakis", "Vlahakis and Halikias", studies=(STUDY,),
+    "vlahakis", "Vlahakis and Halikias", studies=(STUDY,), position=4,
     errata=(
         "**How the printed $L$ arises.** Eqs. (29)-(30) as printed give $L = [2.055;\\,2.111]$ (position, "
         "velocity), with poles $-1.077 \\pm 1.468j$. The printed $L = [2.6004;\\,22.8051]$ is, to every printed "
