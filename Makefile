@@ -37,10 +37,8 @@ book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book in
 	env -u MPLBACKEND $(BIN)/jupyter-book build book --all -W -n --keep-going
 	@echo "Open book/_build/html/index.html"
 
-# The book build executes every notebook (execute_notebooks: force, allow_errors: false, -W), so pytest
-# does not run them again; the tests read the ledgers of results/ instead of rerunning the studies.
-test: $(STAMP) lint $(RESULTS) book  ## lint, build the book (it executes every notebook), then unit tests, doctests, published numbers and the rendered HTML
-	$(HEADLESS) $(BIN)/python -m pytest -n $(JOBS) --doctest-modules tests mascore
+test: $(STAMP) lint $(RESULTS) book  ## lint, build the book, then unit tests, doctests, published numbers, the rendered HTML and every notebook (nbmake)
+	$(HEADLESS) $(BIN)/python -m pytest -n $(JOBS) --nbmake --doctest-modules tests notebooks mascore
 
 lint: $(STAMP)  ## ruff on the package, the tests and the benchmarks
 	$(BIN)/ruff check mascore tests benchmarks

@@ -1,6 +1,6 @@
 """Notebooks are committed clean: valid nbformat 4.5 with cell ids, no outputs, in the book.
 
-The book build (`make book`, run by `make test`) executes them; these checks keep what is committed
+nbmake (run by `make test`) executes them; these checks keep what is committed
 small, diffable and loadable by future nbformat versions.
 """
 
