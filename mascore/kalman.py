@@ -294,18 +294,49 @@ def predict(
     (array([0.1, 1. ]), array([[1.02, 0.1 ],
            [0.1 , 1.01]]))
     """
-    if isinstance(F, LinearGaussianModel):
+    if isinstance(F, LinearGaussianModel):  # checked when built: only what changes per call is checked below
         if B is not None or (Q is not None and u is not None):
             raise TypeError("with a LinearGaussianModel, call predict(x, P, model, u=None): F, Q and B are the "
                             "model's")
-        return _predict_step(x, P, F.F, F.Q, F.B, Q if u is None else u)
-    x, P = _checked_state(x, P)
-    F, Q, B = _checked_dynamics(F, Q, B, x.shape)
-    if (u is None) != (B is None):
-        raise ValueError("B and u must be given together (B alone or u alone cannot form B u)")
+        F, Q, B, u = F.F, F.Q, F.B, (Q if u is None else u)
+        if type(x) is not _ND or x.dtype is not _F64:
+            x = _float_array(x, "x")
+        if type(P) is not _ND or P.dtype is not _F64:
+            P = _float_array(P, "P")
+    else:  # plain arrays: every argument checked in full
+        x, P = _checked_state(x, P)
+        F, Q, B = _checked_dynamics(F, Q, B, x.shape)
+        if (u is None) != (B is None):
+            raise ValueError("B and u must be given together (B alone or u alone cannot form B u)")
+        if u is not None:
+            u = _finite(_float_array(u, "u"), "u")
+    m = F.shape[-1]
+    if x.ndim == 0 or x.shape[-1] != m:
+        raise ValueError(f"Incompatible dimensions of x; expected (..., {m}) for F of shape {F.shape} "
+                         f"but found {x.shape}")
+    if P.shape[-2:] != (m, m):
+        raise ValueError(f"Incompatible dimensions of P; expected (..., {m}, {m}) for F of shape {F.shape} "
+                         f"but found {P.shape}")
     if u is not None:
-        u = _finite(_float_array(u, "u"), "u")
-    return _predict_step(x, P, F, Q, B, u)
+        if B is None:
+            raise ValueError("an input u needs an input matrix B; this model has none")
+        u = _float_array(u, "u")
+        if u.ndim == 0 or B.shape[-1] != u.shape[-1]:
+            raise ValueError(f"Incompatible dimensions of u; expected (..., {B.shape[-1]}) for B of shape {B.shape} "
+                             f"but found {u.shape}")
+    if x.ndim == 1 and P.ndim == 2 and F.ndim == 2 and Q.ndim == 2 and (u is None or (u.ndim == 1 and B.ndim == 2)):
+        x_pred, P_pred, ok = _predict_one(x, P, F, Q, B, u)
+    else:
+        try:
+            x_pred, P_pred, ok = _predict_stack(x, P, F, Q, B, u)
+        except ValueError as exc:  # leading (batch) axes that do not broadcast
+            raise ValueError(
+                f"the batch axes of x {x.shape}, P {P.shape}, F {F.shape}, Q {Q.shape}"
+                f"{'' if u is None else f', u {u.shape}'} do not broadcast ({exc})"
+            ) from None
+    if not ok:  # NaN/inf passed in is named; else an overflow (or a false alarm of the quick test)
+        finite_result("Kalman prediction", x_pred, P_pred, inputs=((x, "x"), (P, "P"), (u, "u")))
+    return x_pred, P_pred
 
 
 def update(
@@ -352,61 +383,23 @@ def update(
     (array([1., 1.]), array([[0.5, 0. ],
            [0. , 1. ]]))
     """
-    if isinstance(H, LinearGaussianModel):
+    if isinstance(H, LinearGaussianModel):  # checked when built: only what changes per call is checked below
         if R is not None:
             raise TypeError("with a LinearGaussianModel, call update(x, P, z, model): H and R are the model's")
-        return _update_step(x, P, z, H.H, H.R, H._eye)
-    x, P = _checked_state(x, P)
-    z = _finite(_float_array(z, "z"), "z")
-    if z.ndim < 1:
-        raise ValueError(f"z must be a (..., q) array of measurements; got shape {z.shape}")
-    H, R = _checked_measurement(H, R, x.shape[-1], f"x of shape {x.shape} and z of shape {z.shape}", z.shape[-1])
-    return _update_step(x, P, z, H, R, np.eye(x.shape[-1]))
-
-
-def _predict_step(x, P, F, Q, B, u) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`predict` on checked F, Q, B: the shapes of x, P and u, the kernel, and a finite result."""
-    if type(x) is not _ND or x.dtype is not _F64:
-        x = _float_array(x, "x")
-    if type(P) is not _ND or P.dtype is not _F64:
-        P = _float_array(P, "P")
-    m = F.shape[-1]
-    if x.ndim == 0 or x.shape[-1] != m:
-        raise ValueError(f"Incompatible dimensions of x; expected (..., {m}) for F of shape {F.shape} "
-                         f"but found {x.shape}")
-    if P.shape[-2:] != (m, m):
-        raise ValueError(f"Incompatible dimensions of P; expected (..., {m}, {m}) for F of shape {F.shape} "
-                         f"but found {P.shape}")
-    if u is not None:
-        if B is None:
-            raise ValueError("an input u needs an input matrix B; this model has none")
-        u = _float_array(u, "u")
-        if u.ndim == 0 or B.shape[-1] != u.shape[-1]:
-            raise ValueError(f"Incompatible dimensions of u; expected (..., {B.shape[-1]}) for B of shape {B.shape} "
-                             f"but found {u.shape}")
-    if x.ndim == 1 and P.ndim == 2 and F.ndim == 2 and Q.ndim == 2 and (u is None or (u.ndim == 1 and B.ndim == 2)):
-        x_pred, P_pred, ok = _predict_one(x, P, F, Q, B, u)
-    else:
-        try:
-            x_pred, P_pred, ok = _predict_stack(x, P, F, Q, B, u)
-        except ValueError as exc:  # leading (batch) axes that do not broadcast
-            raise ValueError(
-                f"the batch axes of x {x.shape}, P {P.shape}, F {F.shape}, Q {Q.shape}"
-                f"{'' if u is None else f', u {u.shape}'} do not broadcast ({exc})"
-            ) from None
-    if not ok:  # NaN/inf passed in is named; else an overflow (or a false alarm of the quick test)
-        finite_result("Kalman prediction", x_pred, P_pred, inputs=((x, "x"), (P, "P"), (u, "u")))
-    return x_pred, P_pred
-
-
-def _update_step(x, P, z, H, R, I) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`update` on checked H, R (I: the identity of size m): the shapes of x, P, z, the kernel, a finite result."""
-    if type(x) is not _ND or x.dtype is not _F64:
-        x = _float_array(x, "x")
-    if type(P) is not _ND or P.dtype is not _F64:
-        P = _float_array(P, "P")
-    if type(z) is not _ND or z.dtype is not _F64:
-        z = _float_array(z, "z")
+        H, R, I = H.H, H.R, H._eye
+        if type(x) is not _ND or x.dtype is not _F64:
+            x = _float_array(x, "x")
+        if type(P) is not _ND or P.dtype is not _F64:
+            P = _float_array(P, "P")
+        if type(z) is not _ND or z.dtype is not _F64:
+            z = _float_array(z, "z")
+    else:  # plain arrays: every argument checked in full
+        x, P = _checked_state(x, P)
+        z = _finite(_float_array(z, "z"), "z")
+        if z.ndim < 1:
+            raise ValueError(f"z must be a (..., q) array of measurements; got shape {z.shape}")
+        H, R = _checked_measurement(H, R, x.shape[-1], f"x of shape {x.shape} and z of shape {z.shape}", z.shape[-1])
+        I = np.eye(x.shape[-1])
     q, m = H.shape[-2:]
     if x.ndim == 0 or x.shape[-1] != m:
         raise ValueError(f"Incompatible dimensions of x; expected (..., {m}) for H of shape {H.shape} "
@@ -430,7 +423,7 @@ def _update_step(x, P, z, H, R, I) -> tuple[np.ndarray, np.ndarray]:
             f"the batch axes of x {x.shape}, P {P.shape}, z {z.shape}, H {H.shape}, R {R.shape} "
             f"do not broadcast ({exc})"
         ) from None
-    if not ok:
+    if not ok:  # NaN/inf passed in is named; else an overflow (or a false alarm of the quick test)
         finite_result("Kalman update", x_post, P_post, inputs=((x, "x"), (P, "P"), (z, "z")))
     return x_post, P_post
 
