@@ -148,12 +148,28 @@ class LinearGaussianModel:
 
     @property
     def n_states(self) -> int:
-        """m, the length of the state."""
+        """m, the length of the state.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import kalman
+        >>> kalman.LinearGaussianModel(np.eye(4), np.eye(4), np.eye(2, 4), np.eye(2)).n_states
+        4
+        """
         return self.F.shape[-1]
 
     @property
     def n_measurements(self) -> int:
-        """q, the length of a measurement."""
+        """q, the length of a measurement.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import kalman
+        >>> kalman.LinearGaussianModel(np.eye(4), np.eye(4), np.eye(2, 4), np.eye(2)).n_measurements
+        2
+        """
         return self.H.shape[-2]
 
     def check_state(self, x: ArrayLike, P: ArrayLike, names: tuple[str, str] = ("x", "P")) -> tuple[np.ndarray, np.ndarray]:
@@ -178,6 +194,17 @@ class LinearGaussianModel:
         ------
         ValueError, TypeError
             A bad mean or covariance, named in the message.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import kalman
+        >>> model = kalman.LinearGaussianModel(np.eye(2), 0.1 * np.eye(2), [[1.0, 0.0]], [[1.0]])
+        >>> x, P = model.check_state([0.0, 1.0], np.eye(2))
+        >>> model.check_state([0.0, 1.0], [[1.0, 2.0], [2.0, 1.0]])
+        Traceback (most recent call last):
+        ...
+        ValueError: P must be positive semidefinite; smallest eigenvalue is -1
         """
         x, P = _checked_state(x, P, *names)
         if x.shape[-1] != self.n_states:
