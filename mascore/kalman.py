@@ -320,6 +320,10 @@ def predict(
     >>> x, np.round(P, 3)
     (array([0.1, 1. ]), array([[1.02, 0.1 ],
            [0.1 , 1.01]]))
+    >>> model = kalman.LinearGaussianModel(F, 0.01 * np.eye(2), H=[[1.0, 0.0]], R=[[0.5]])  # checked once
+    >>> x2, P2 = kalman.predict([0.0, 1.0], np.eye(2), model)
+    >>> bool(np.array_equal(x2, x) and np.array_equal(P2, P))
+    True
     """
     if isinstance(F, LinearGaussianModel):  # checked when built: only what changes per call is checked below
         if B is not None or (Q is not None and u is not None):
@@ -408,7 +412,10 @@ def update(
     >>> x, P = kalman.update([0.0, 1.0], np.eye(2), z=[2.0], H=[[1.0, 0.0]], R=[[1.0]])
     >>> x, np.round(P, 3)                                     # halfway to the measurement, half the variance
     (array([1., 1.]), array([[0.5, 0. ],
-           [0. , 1. ]]))
+           [0. , 1. ]]))    >>> model = kalman.LinearGaussianModel(np.eye(2), np.zeros((2, 2)), H=[[1.0, 0.0]], R=[[1.0]])
+    >>> x2, P2 = kalman.update([0.0, 1.0], np.eye(2), [2.0], model)
+    >>> bool(np.array_equal(x2, x) and np.array_equal(P2, P))
+    True
     """
     if isinstance(H, LinearGaussianModel):  # checked when built: only what changes per call is checked below
         if R is not None:
