@@ -412,7 +412,8 @@ def update(
     >>> x, P = kalman.update([0.0, 1.0], np.eye(2), z=[2.0], H=[[1.0, 0.0]], R=[[1.0]])
     >>> x, np.round(P, 3)                                     # halfway to the measurement, half the variance
     (array([1., 1.]), array([[0.5, 0. ],
-           [0. , 1. ]]))    >>> model = kalman.LinearGaussianModel(np.eye(2), np.zeros((2, 2)), H=[[1.0, 0.0]], R=[[1.0]])
+           [0. , 1. ]]))
+    >>> model = kalman.LinearGaussianModel(np.eye(2), np.zeros((2, 2)), H=[[1.0, 0.0]], R=[[1.0]])
     >>> x2, P2 = kalman.update([0.0, 1.0], np.eye(2), [2.0], model)
     >>> bool(np.array_equal(x2, x) and np.array_equal(P2, P))
     True
