@@ -1134,10 +1134,12 @@ def _integrate_ode(xi, P, breaks, graphs, Q, Om, t_eval, include_self, rtol, ato
     split = xi.size
     t_final = breaks[-1]
     count = [0]
+    latest = [breaks[0], None]  # where the solver last evaluated eqs. (1)-(3): what a failure reports
     zero_noise = bool(np.any(np.linalg.eigvalsh(Om) <= 0))
 
     def fun(_t, y, g):
         count[0] += 1
+        latest[0], latest[1] = _t, y
         if count[0] % _ODE_CHECK_EVERY == 0:
             _ode_budget(count[0], _t, t_final, y[split:].reshape(P.shape), zero_noise)
         dxi, dP, _ = _rhs(y[:split].reshape(xi.shape), y[split:].reshape(P.shape), g, Q, Om, include_self)
@@ -1153,8 +1155,10 @@ def _integrate_ode(xi, P, breaks, graphs, Q, Om, t_eval, include_self, rtol, ato
         pts = np.unique(np.append(t_eval[sel], t1))  # always end on t1 to hand the state on
         sol = solve_ivp(fun, (t0, t1), y, method="RK45", t_eval=pts, args=(g.astype(float),),
                         rtol=rtol, atol=atol)
-        if not sol.success:
-            raise RuntimeError(f"ODE solver failed on [{t0}, {t1}]: {sol.message}")
+        if not sol.success:  # e.g. a step below the spacing of floating-point numbers: a stiff run
+            P_now = (y if latest[1] is None else latest[1])[split:].reshape(P.shape)
+            _ode_out_of_reach(count[0], latest[0], t_final, P_now, zero_noise,
+                              f"the solver stopped ({sol.message.rstrip('.')})")
         out[sel] = sol.y[:, np.searchsorted(pts, t_eval[sel])].T
         y = sol.y[:, -1]
     return out[:, :split].reshape((-1,) + xi.shape), symmetric_part(out[:, split:].reshape((-1,) + P.shape))
@@ -1166,13 +1170,18 @@ def _ode_budget(count, t, t_final, P, zero_noise):
     projected = count * t_final / t if t > 0 else np.inf
     if count < limit and projected <= _ODE_PROJECTION_FACTOR * limit:
         return
-    with np.errstate(invalid="ignore"):
-        p_min = _min_variance(P)
     reach = (f"at its pace so far it would need about {projected:.3g}" if count < limit
              else f"it has used {count}")
+    _ode_out_of_reach(count, t, t_final, P, zero_noise, f"{reach} evaluations (ODE_MAX_EVALUATIONS = {limit})")
+
+
+def _ode_out_of_reach(count, t, t_final, P, zero_noise, why):
+    """Raise the ValueError of a continuous run the ODE solver cannot finish (`why`: the budget, or its failure)."""
+    with np.errstate(invalid="ignore"):
+        p_min = _min_variance(P)
     raise ValueError(
         f"t_final = {t_final:.4g} s is out of reach of the ODE solver: after {count} evaluations of eqs. (1)-(3) "
-        f"it is at t = {t:.4g} s, and {reach} evaluations (ODE_MAX_EVALUATIONS = {limit}). Either t_final is "
+        f"it is at t = {t:.4g} s, and {why}. Either t_final is "
         f"far longer than the time the run takes to settle, or the equations are stiff (smallest variance now "
         f"{p_min:.3g}"
         + ("; with zero communication noise (singular Omega) P collapses and the rates P_i / P_j explode); "
