@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import check_covariance, check_square
+from ._validation import check_covariance, check_square, finite_result
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .distributed_kf import closed_loop_matrices
@@ -68,7 +68,7 @@ def plain_estimation_based_step(
     Adj_next = Adj if adjacency_next is None else _check_plain_adjacency(adjacency_next, N, "adjacency_next")
     z = _check_plain_z(z, Adj_next, m)
     out = plain_estimation_based_kernel(X_hat, Sig, A, BK, Q, R, Adj, z, Adj_next)
-    return _finite_result("estimation-based step", *out)
+    return finite_result("estimation-based step", *out)
 
 
 def plain_estimation_based_kernel(X_hat, Sig, A, BK, Q, R, Adj, z, Adj_next):
@@ -163,17 +163,7 @@ def plain_measurement_based_step(
         G = P @ H[i].T @ np.linalg.inv(S_i)
         X_next[i] = x + G @ (z[i] - H[i] @ x)
         S_next[i] = (np.eye(m * N) - G @ H[i]) @ P
-    return _finite_result("measurement-based step", X_next, 0.5 * (S_next + np.swapaxes(S_next, -1, -2)))
-
-
-def _finite_result(what: str, *arrays: np.ndarray):
-    """Refuse NaN/inf in a result computed from checked, finite input (an overflow): name the computation."""
-    if not all(np.all(np.isfinite(a)) for a in arrays):
-        raise ValueError(
-            f"the {what} produced NaN or inf from finite input: the values overflow floating point "
-            "(rescale the problem) or the covariances are too close to singular"
-        )
-    return arrays
+    return finite_result("measurement-based step", X_next, 0.5 * (S_next + np.swapaxes(S_next, -1, -2)))
 
 
 def _check_plain_adjacency(adjacency: ArrayLike, N: int, name: str = "adjacency") -> np.ndarray:

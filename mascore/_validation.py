@@ -6,14 +6,14 @@ what was expected, so that bad input never travels on into NaNs.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
 __all__ = [
     "as_matrix",
     "as_vector",
-    "cached_covariance",
-    "cached_finite",
     "float_array",
     "finite_result",
     "frozen_copy",
@@ -26,6 +26,7 @@ __all__ = [
     "check_positive",
     "check_positive_int",
     "check_seed",
+    "check_steps",
     "check_probability",
     "check_square",
 ]
@@ -126,11 +127,17 @@ def check_covariance(
             f"Incompatible dimensions of {name}; expected ({size}, {size}) "
             f"but found {arr.shape[-2:]}"
         )
-    _check_finite(arr, name)
-    scale = max(1.0, float(np.max(np.abs(arr)))) if arr.size else 1.0
-    if arr.size and float(np.max(np.abs(arr - np.swapaxes(arr, -1, -2)))) > SYMMETRY_RTOL * scale:
+    if not arr.size:  # (..., 0, 0): no eigenvalue, read as 0
+        if definite:
+            raise ValueError(f"{name} must be positive definite; smallest eigenvalue is 0")
+        return arr
+    largest = float(abs(arr).max())  # NaN or inf anywhere makes it NaN or inf: the finiteness test too
+    if not math.isfinite(largest):
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    scale = max(1.0, largest)
+    if float(abs(arr - arr.swapaxes(-1, -2)).max()) > SYMMETRY_RTOL * scale:
         raise ValueError(f"{name} must be symmetric")
-    eig_min = float(np.min(np.linalg.eigvalsh(arr))) if arr.size else 0.0
+    eig_min = float(np.linalg.eigvalsh(arr).min())
     if definite and eig_min <= 0:
         raise ValueError(
             f"{name} must be positive definite; smallest eigenvalue is {eig_min:.3g}"
@@ -182,6 +189,14 @@ def check_positive_int(n: object, name: str, minimum: int = 1) -> int:
     if n < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}; got {n}")
     return int(n)
+
+
+def check_steps(n_steps: object, name: str = "n_steps") -> int:
+    """Return `n_steps` as an int from 1 to :data:`MAX_STEPS` (a longer run is refused, not started)."""
+    n_steps = check_positive_int(n_steps, name)
+    if n_steps > MAX_STEPS:
+        raise ValueError(f"{name} = {n_steps} is more than MAX_STEPS = {MAX_STEPS}; run fewer steps (in chunks)")
+    return n_steps
 
 
 def check_positive(x: object, name: str, unit: str = "", allow_zero: bool = False) -> float:
@@ -291,8 +306,14 @@ def require_finite(arr: np.ndarray, name: str) -> np.ndarray:
     return arr
 
 
-def finite_result(what: str, *arrays: np.ndarray) -> np.ndarray | tuple[np.ndarray, ...]:
-    """Refuse NaN/inf in a result computed from checked, finite input (an overflow), naming the computation.
+def finite_result(
+    what: str,
+    *arrays: np.ndarray,
+    inputs: tuple[tuple[np.ndarray | None, str], ...] = (),
+    advice: str = "the values overflow floating point (rescale the problem) or the covariances are too close "
+    "to singular",
+) -> np.ndarray | tuple[np.ndarray, ...]:
+    """Refuse NaN/inf in a result, naming the input that held it, else the computation (an overflow).
 
     Parameters
     ----------
@@ -300,6 +321,13 @@ def finite_result(what: str, *arrays: np.ndarray) -> np.ndarray | tuple[np.ndarr
         The computation, as the message names it (``"Kalman update"``).
     *arrays : ndarray
         Its results.
+    inputs : tuple of (ndarray or None, str)
+        ``(array, name)`` pairs of inputs that were not scanned for NaN/inf
+        (a step's state, a fresh measurement): scanned, in order, only when a
+        result is not finite, and the first holding NaN/inf is named. None
+        entries are skipped.
+    advice : str
+        What the overflow message says to do.
 
     Returns
     -------
@@ -313,10 +341,10 @@ def finite_result(what: str, *arrays: np.ndarray) -> np.ndarray | tuple[np.ndarr
     """
     for arr in arrays:
         if not np.isfinite(arr).all():
-            raise ValueError(
-                f"the {what} produced NaN or inf from finite input: the values overflow floating point "
-                "(rescale the problem) or the covariances are too close to singular"
-            )
+            for value, name in inputs:
+                if value is not None:
+                    require_finite(value, name)
+            raise ValueError(f"the {what} produced NaN or inf from finite input: {advice}")
     return arrays if len(arrays) != 1 else arrays[0]
 
 
@@ -325,65 +353,11 @@ def symmetric_part(M: np.ndarray) -> np.ndarray:
     return 0.5 * (M + np.swapaxes(M, -1, -2))
 
 
-def frozen_copy(arr: np.ndarray) -> np.ndarray:
-    """A read-only float copy of `arr`: what a checked model stores, so no later change slips past its check."""
+def frozen_copy(arr: ArrayLike) -> np.ndarray:
+    """A read-only float copy of `arr`: what a checked model stores, so no later change slips past its check.
+
+    The copy is returned as a view of read-only memory, so its ``writeable`` flag cannot be set back.
+    """
     out = np.array(arr, dtype=float, copy=True)
     out.setflags(write=False)
-    return out
-
-
-class _ValueMemo:
-    """Values that already passed a check, keyed by their bytes (the tag says which shapes were checked).
-
-    Keyed by value, an array modified in place after it was stored is simply not
-    recognised any more. Bounded: cleared when it would hold more than
-    `max_entries` keys or `max_total_bytes` bytes; a key longer than
-    `max_key_bytes` is never stored (that value is checked every time).
-    """
-
-    __slots__ = ("store", "_max_entries", "_max_key", "_max_total", "_total")
-
-    def __init__(self, max_entries: int = 512, max_key_bytes: int = 1 << 22, max_total_bytes: int = 1 << 26) -> None:
-        self.store: dict[bytes, object] = {}
-        self._max_entries = max_entries
-        self._max_key = max_key_bytes
-        self._max_total = max_total_bytes
-        self._total = 0
-
-    def put(self, key: bytes, tag: object) -> None:
-        n = len(key)
-        if n > self._max_key:
-            return
-        if len(self.store) >= self._max_entries or self._total + n > self._max_total:
-            self.store.clear()
-            self._total = 0
-        self.store[key] = tag
-        self._total += n
-
-
-#: Constant matrices checked once per distinct value: F, H, B (finite) and Q, R (covariances).
-_FINITE_CONSTANTS = _ValueMemo()
-_COVARIANCE_CONSTANTS = _ValueMemo()
-
-
-def cached_finite(M: ArrayLike, name: str) -> np.ndarray:
-    """A constant matrix as a float array, its finiteness checked once per distinct value."""
-    arr = float_array(M, name)
-    key = arr.tobytes()
-    if _FINITE_CONSTANTS.store.get(key) != arr.shape:
-        require_finite(arr, name)
-        _FINITE_CONSTANTS.put(key, arr.shape)
-    return arr
-
-
-def cached_covariance(M: ArrayLike, name: str, size: int | None = None, definite: bool = False) -> np.ndarray:
-    """A constant covariance (Q, R): :func:`check_covariance` once per distinct value."""
-    arr = float_array(M, name)
-    key = arr.tobytes()
-    got = _COVARIANCE_CONSTANTS.store.get(key)
-    if got != (True, arr.shape) and (definite or got != (False, arr.shape)):
-        check_covariance(arr, name, size=size, definite=definite)
-        _COVARIANCE_CONSTANTS.put(key, (definite, arr.shape))
-    elif size is not None and arr.shape[-1] != size:
-        raise ValueError(f"Incompatible dimensions of {name}; expected ({size}, {size}) but found {arr.shape[-2:]}")
-    return arr
+    return out.view()

@@ -72,8 +72,17 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.integrate import solve_ivp
 
-from ._validation import cached_covariance, check_covariance, check_generator, check_positive, check_positive_int
+from ._validation import (
+    MAX_STEPS,
+    check_covariance,
+    check_generator,
+    check_positive,
+    check_positive_int,
+    check_steps,
+    symmetric_part,
+)
 from ._validation import float_array as _float_array
+from ._validation import require_finite as _finite
 from .exceptions import ConsensusBreakdownError
 from .graphs import has_spanning_tree, unions_over_windows
 
@@ -98,8 +107,8 @@ __all__ = [
 ]
 
 
-#: Largest number of steps of a discrete run or of an Euler-Maruyama integration ("absurdly many" beyond).
-MAX_STEPS = 10_000_000
+# MAX_STEPS (from mascore._validation): the largest number of steps of a discrete run or of an Euler-Maruyama
+# integration ("absurdly many" beyond).
 #: Largest number of stored numbers in a returned trajectory (8 bytes each: 2 GB).
 MAX_STORED = 250_000_000
 #: Largest number of right-hand-side evaluations of the ODE solver in one continuous run.
@@ -286,7 +295,7 @@ class SwitchingTopology:
         array([0. , 0.5, 1. , 1.5])
         """
         graphs = _check_topologies(graphs, None, "graphs", stacked=True)
-        dwell = _positive(dwell, "dwell", "s")
+        dwell = check_positive(dwell, "dwell", "s")
         t_final = _finite_number(t_final, "t_final")
         t0 = _finite_number(t0, "t0")
         if t_final <= t0:
@@ -677,7 +686,7 @@ def kalman_consensus_continuous(
     """
     scalar, xi, P = _as_state(xi0, P0, "xi0", "P0")
     n, m = xi.shape[-2], xi.shape[-1]
-    t_final = _positive(t_final, "t_final", "s")
+    t_final = check_positive(t_final, "t_final", "s")
     Q_, Om = _expand_Q(Q, n, m), _expand_omega(Omega, n, m)
     if t_eval is None:
         t_eval = np.linspace(0.0, t_final, 201)
@@ -696,9 +705,9 @@ def kalman_consensus_continuous(
         if switch_times.ndim != 1 or not np.all(np.isfinite(switch_times)):
             raise ValueError(f"switch_times must be a finite 1-D sequence of times; got shape {switch_times.shape}")
     _check_bool(include_self, "include_self")
-    rtol = _positive(rtol, "rtol")
-    atol = _positive(atol, "atol")
-    dt = _positive(dt, "dt", "s")
+    rtol = check_positive(rtol, "rtol")
+    atol = check_positive(atol, "atol")
+    dt = check_positive(dt, "dt", "s")
     gen = None if rng is None else check_generator(rng)
     if gen is not None and t_eval[-1] / dt > MAX_STEPS:
         raise ValueError(f"t_final / dt = {t_eval[-1] / dt:.3g} Euler-Maruyama steps is more than MAX_STEPS = "
@@ -756,7 +765,7 @@ def average_consensus(
         raise ValueError(f"xi0 must have shape (..., n) with at least one agent; got shape {xi.shape}")
     _finite(xi, "xi0")
     if step_size is not None:
-        step_size = _positive(step_size, "step_size")
+        step_size = check_positive(step_size, "step_size")
     n = xi.shape[-1]
     graph_at, n_steps = _discrete_topology(topologies, n, n_steps, xi.shape[:-1], "xi0")
     _check_storage(n_steps, xi.size, "n_steps")
@@ -871,7 +880,7 @@ def random_pairings(
         raise ValueError("n_agents must be an integer >= 2: one agent has nobody to pair with "
                          "(its graph would be empty at every step); got 1")
     n_agents = check_positive_int(n_agents, "n_agents", minimum=2)
-    n_steps = _check_steps(n_steps)
+    n_steps = check_steps(n_steps)
     min_duration = check_positive_int(min_duration, "min_duration", minimum=1)
     if isinstance(max_duration, bool) or not isinstance(max_duration, (int, np.integer)):
         raise TypeError(f"max_duration must be an integer >= min_duration ({min_duration}); "
@@ -926,7 +935,7 @@ def periodic_sequence(graphs: ArrayLike, dwell: int, n_steps: int) -> np.ndarray
     """
     graphs = _check_topologies(graphs, None, "graphs", stacked=True).astype(float)
     dwell = check_positive_int(dwell, "dwell", minimum=1)
-    n_steps = _check_steps(n_steps)
+    n_steps = check_steps(n_steps)
     _check_storage(n_steps, graphs[0].size, "n_steps")
     return graphs[(np.arange(n_steps) // dwell) % graphs.shape[0]]
 
@@ -1056,17 +1065,13 @@ def _sqrt_psd(M: np.ndarray) -> np.ndarray:
     return np.einsum("...ab,...b,...cb->...ac", V, np.sqrt(np.clip(w, 0.0, None)), V)
 
 
-def _sym(M: np.ndarray) -> np.ndarray:
-    return 0.5 * (M + np.swapaxes(M, -1, -2))
-
-
 def _covariance_update(P, g, S, Q, include_self):
     """Eq. (4): P_i+ = [(P_i + Q)^-1 + sum_j g_ij S_ij]^-1 (g_ii = 1 if include_self)."""
     info = _inv(P + Q) + np.einsum("...ij,...ijab->...iab", g, S)
     if include_self:
         n = P.shape[-3]
         info = info + S[..., np.arange(n), np.arange(n), :, :]
-    return _sym(_inv(info))
+    return symmetric_part(_inv(info))
 
 
 def _step(xi, P, g, Q, Om, gen, include_self):
@@ -1112,7 +1117,7 @@ def _rhs(xi, P, g, Q, Om, include_self):
     info = A + S_self if include_self else A  # sum_j g_ij (P_j + Omega_ij)^-1 with g_ii = 1
     dP = Q - mat(mat(P, info), P)  # eq. (1)
     # eqs. (2)-(3): sum_j g_ij K_ij (xi_j - xi_i) = P_i [sum_j g_ij S_ij xi_j - (sum_j g_ij S_ij) xi_i]
-    return vec(P, b - vec(A, xi)), (dP if m == 1 else _sym(dP)), S
+    return vec(P, b - vec(A, xi)), (dP if m == 1 else symmetric_part(dP)), S
 
 
 def _matvec(M: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -1129,10 +1134,12 @@ def _integrate_ode(xi, P, breaks, graphs, Q, Om, t_eval, include_self, rtol, ato
     split = xi.size
     t_final = breaks[-1]
     count = [0]
+    latest = [breaks[0], None]  # where the solver last evaluated eqs. (1)-(3): what a failure reports
     zero_noise = bool(np.any(np.linalg.eigvalsh(Om) <= 0))
 
     def fun(_t, y, g):
         count[0] += 1
+        latest[0], latest[1] = _t, y
         if count[0] % _ODE_CHECK_EVERY == 0:
             _ode_budget(count[0], _t, t_final, y[split:].reshape(P.shape), zero_noise)
         dxi, dP, _ = _rhs(y[:split].reshape(xi.shape), y[split:].reshape(P.shape), g, Q, Om, include_self)
@@ -1148,11 +1155,13 @@ def _integrate_ode(xi, P, breaks, graphs, Q, Om, t_eval, include_self, rtol, ato
         pts = np.unique(np.append(t_eval[sel], t1))  # always end on t1 to hand the state on
         sol = solve_ivp(fun, (t0, t1), y, method="RK45", t_eval=pts, args=(g.astype(float),),
                         rtol=rtol, atol=atol)
-        if not sol.success:
-            raise RuntimeError(f"ODE solver failed on [{t0}, {t1}]: {sol.message}")
+        if not sol.success:  # e.g. a step below the spacing of floating-point numbers: a stiff run
+            P_now = (y if latest[1] is None else latest[1])[split:].reshape(P.shape)
+            _ode_out_of_reach(count[0], latest[0], t_final, P_now, zero_noise,
+                              f"the solver stopped ({sol.message.rstrip('.')})")
         out[sel] = sol.y[:, np.searchsorted(pts, t_eval[sel])].T
         y = sol.y[:, -1]
-    return out[:, :split].reshape((-1,) + xi.shape), _sym(out[:, split:].reshape((-1,) + P.shape))
+    return out[:, :split].reshape((-1,) + xi.shape), symmetric_part(out[:, split:].reshape((-1,) + P.shape))
 
 
 def _ode_budget(count, t, t_final, P, zero_noise):
@@ -1161,13 +1170,18 @@ def _ode_budget(count, t, t_final, P, zero_noise):
     projected = count * t_final / t if t > 0 else np.inf
     if count < limit and projected <= _ODE_PROJECTION_FACTOR * limit:
         return
-    with np.errstate(invalid="ignore"):
-        p_min = _min_variance(P)
     reach = (f"at its pace so far it would need about {projected:.3g}" if count < limit
              else f"it has used {count}")
+    _ode_out_of_reach(count, t, t_final, P, zero_noise, f"{reach} evaluations (ODE_MAX_EVALUATIONS = {limit})")
+
+
+def _ode_out_of_reach(count, t, t_final, P, zero_noise, why):
+    """Raise the ValueError of a continuous run the ODE solver cannot finish (`why`: the budget, or its failure)."""
+    with np.errstate(invalid="ignore"):
+        p_min = _min_variance(P)
     raise ValueError(
         f"t_final = {t_final:.4g} s is out of reach of the ODE solver: after {count} evaluations of eqs. (1)-(3) "
-        f"it is at t = {t:.4g} s, and {reach} evaluations (ODE_MAX_EVALUATIONS = {limit}). Either t_final is "
+        f"it is at t = {t:.4g} s, and {why}. Either t_final is "
         f"far longer than the time the run takes to settle, or the equations are stiff (smallest variance now "
         f"{p_min:.3g}"
         + ("; with zero communication noise (singular Omega) P collapses and the rates P_i / P_j explode); "
@@ -1199,7 +1213,7 @@ def _integrate_em(xi, P, breaks, graphs, Q, Om, t_eval, include_self, gen, dt):
         else:
             u = np.einsum("ij,...ijab,...ijb->...ia", g * off, SL, dW)
         xi = xi + dxi * h + np.einsum("...iab,...ib->...ia", P, u)
-        P = _sym(P + dP * h)
+        P = symmetric_part(P + dP * h)
         if np.any(np.diagonal(P, axis1=-2, axis2=-1) <= 0) or not np.all(np.isfinite(xi)):
             raise RuntimeError(f"Euler-Maruyama step dt = {dt} is too large for eq. (1): the covariance lost "
                                f"positive definiteness at t = {t + h:.4g} s; use a smaller dt")
@@ -1250,7 +1264,7 @@ def _discrete_topology(topologies, n, n_steps, batch, states="xi0 and P0"):
     if callable(topologies):
         if n_steps is None:
             raise ValueError("n_steps is required when topologies is a function of k")
-        n_steps = _check_steps(n_steps)
+        n_steps = check_steps(n_steps)
         return (lambda k: _check_topologies(topologies(k), n, f"topologies({k})", stacked=False, states=states)), \
             n_steps
     arr = _float_array(topologies, "topologies")
@@ -1258,12 +1272,12 @@ def _discrete_topology(topologies, n, n_steps, batch, states="xi0 and P0"):
         g = _check_topologies(arr, n, "topologies", stacked=False, states=states)
         if n_steps is None:
             raise ValueError("n_steps is required when topologies is a single (n, n) graph")
-        return (lambda k: g), _check_steps(n_steps)
+        return (lambda k: g), check_steps(n_steps)
     g = _check_topologies(arr, n, "topologies", stacked=True, states=states)
     _check_batch(g.shape[1:-2], batch, "topologies")
     if n_steps is None:
         n_steps = g.shape[0]
-    n_steps = _check_steps(n_steps)
+    n_steps = check_steps(n_steps)
     if n_steps > g.shape[0]:
         raise ValueError(f"topologies holds {g.shape[0]} graphs but n_steps = {n_steps}")
     return (lambda k: g[k]), n_steps
@@ -1280,13 +1294,6 @@ def _check_batch(graph_batch, state_batch, name):
         ) from None
 
 
-def _check_steps(n_steps, name="n_steps"):
-    n_steps = check_positive_int(n_steps, name, minimum=1)
-    if n_steps > MAX_STEPS:
-        raise ValueError(f"{name} = {n_steps} is more than MAX_STEPS = {MAX_STEPS}; run fewer steps (in chunks)")
-    return n_steps
-
-
 def _check_storage(n_rows, per_row, name):
     """Refuse a trajectory of more than :data:`MAX_STORED` numbers (``n_rows + 1`` rows of `per_row`)."""
     total = (int(n_rows) + 1) * int(per_row)
@@ -1297,19 +1304,6 @@ def _check_storage(n_rows, per_row, name):
         )
 
 
-
-
-def _finite(arr, name):
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains NaN or infinite entries")
-    return arr
-
-
-def _positive(x, name, unit=""):
-    """A finite number > 0 (numpy 0-d arrays accepted), as a float."""
-    if isinstance(x, np.ndarray) and x.ndim == 0:
-        x = x[()]
-    return check_positive(x, name, unit)
 
 
 def _finite_number(x, name):
@@ -1342,8 +1336,7 @@ def _check_topologies(G, n, name, stacked, states="the states"):
     if n is not None and arr.shape[-1] != n:
         raise ValueError(f"{name} is a graph on {arr.shape[-1]} agents; expected {n}, the number of agents in "
                          f"{states} (shape {arr.shape})")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains NaN or infinite entries")
+    _finite(arr, name)
     diag = np.diagonal(arr, axis1=-2, axis2=-1)
     if np.any(arr < 0):
         if np.all(diag >= 0) and np.any(diag > 0) and np.allclose(arr.sum(axis=-1), 0.0):
@@ -1420,7 +1413,7 @@ def _expand_Q(Q, n, m):
         raise ValueError(
             f"Incompatible dimensions of Q; expected a scalar, ({m}, {m}) or ({n}, {m}, {m}); got {Q.shape}"
         )
-    return cached_covariance(Q, "Q")
+    return check_covariance(Q, "Q")
 
 
 def _expand_omega(Omega, n, m):
@@ -1431,7 +1424,7 @@ def _expand_omega(Omega, n, m):
         raise ValueError(
             f"Incompatible dimensions of Omega; expected a scalar, ({m}, {m}) or ({n}, {n}, {m}, {m}); got {Om.shape}"
         )
-    return cached_covariance(Om, "Omega")
+    return check_covariance(Om, "Omega")
 
 
 def _min_variance(P):

@@ -50,6 +50,7 @@ from ._validation import (
     check_generator,
     check_positive,
     check_positive_int,
+    finite_result,
 )
 from ._validation import float_array as _float_array
 from .noise import psd_factor, uniform_ellipsoid
@@ -291,7 +292,7 @@ def trace(shape: ArrayLike) -> np.ndarray:
     if P.ndim < 2 or P.shape[-1] != P.shape[-2]:
         raise ValueError(f"shape must be a square matrix or a stack (..., n, n); got shape {P.shape}")
     _require_finite(P, "shape")
-    return _finite_result(np.trace(P, axis1=-2, axis2=-1), "trace")
+    return finite_result("trace", np.trace(P, axis1=-2, axis2=-1))
 
 
 def volume(shape: ArrayLike) -> np.ndarray:
@@ -331,7 +332,7 @@ def volume(shape: ArrayLike) -> np.ndarray:
         raise ValueError("shape must be symmetric positive semidefinite to have a volume")
     n = P.shape[-1]
     unit = math.pi ** (n / 2) / math.gamma(n / 2 + 1)
-    return _finite_result(unit * np.sqrt(np.prod(np.clip(eig, 0.0, None), axis=-1)), "volume")
+    return finite_result("volume", unit * np.sqrt(np.prod(np.clip(eig, 0.0, None), axis=-1)))
 
 
 def contains(points: ArrayLike, center: ArrayLike, shape: ArrayLike, rtol: float = 1e-9) -> np.ndarray:
@@ -397,7 +398,7 @@ def mahalanobis_sq(points: ArrayLike, center: ArrayLike, shape: ArrayLike) -> np
     d = x - c
     P, d = np.broadcast_arrays(P, d[..., None])
     sol = np.linalg.solve(P, d[..., :1])[..., 0]
-    return _finite_result(np.einsum("...i,...i->...", d[..., 0], sol), "Mahalanobis form")
+    return finite_result("Mahalanobis form", np.einsum("...i,...i->...", d[..., 0], sol))
 
 
 def affine_image(
@@ -445,8 +446,8 @@ def affine_image(
             raise ValueError(f"b must have shape ({M.shape[0]},) (one entry per row of M); got {b.shape}")
         new_c = new_c + as_vector(b, "b", M.shape[0])
     new_P = M @ P @ M.T
-    return _finite_result(new_c, "affine image (center)"), _finite_result(
-        0.5 * (new_P + np.swapaxes(new_P, -1, -2)), "affine image (shape)")
+    return (finite_result("affine image (center)", new_c),
+            finite_result("affine image (shape)", 0.5 * (new_P + np.swapaxes(new_P, -1, -2))))
 
 
 def minkowski_sum(
@@ -496,7 +497,7 @@ def minkowski_sum(
     beta = beta[..., None, None]
     c = c1 + c2
     P = P1 / (1 - beta) + P2 / beta
-    return _finite_result(c, "Minkowski sum (center)"), _finite_result(P, "Minkowski sum (shape)")
+    return finite_result("Minkowski sum (center)", c), finite_result("Minkowski sum (shape)", P)
 
 
 def minkowski_sum_min_trace(
@@ -545,7 +546,7 @@ def minkowski_sum_min_trace(
     _broadcast(center1=c1.shape[:-1], shape1=P1.shape[:-2], center2=c2.shape[:-1], shape2=P2.shape[:-2])
     P, beta = _sum_min_trace(P1, P2, _sqrt_trace(P1), _sqrt_trace(P2))
     c = c1 + c2
-    return (_finite_result(c, "Minkowski sum (center)"), _finite_result(P, "Minkowski sum (shape)"),
+    return (finite_result("Minkowski sum (center)", c), finite_result("Minkowski sum (shape)", P),
             beta)
 
 
@@ -608,8 +609,8 @@ def intersection_gain_form(
     t = _open_unit(t, "t")
     _broadcast(center=c.shape[:-1], shape=P.shape[:-2], y=y.shape[:-1], W=W.shape[:-2], t=t.shape)
     new_c, Pt, L = _gain_form(c, P, C, y, W, t, shrink)
-    return (_finite_result(new_c, "intersection (center)"), _finite_result(Pt, "intersection (shape)"),
-            _finite_result(L, "intersection (gain)"))
+    return (finite_result("intersection (center)", new_c), finite_result("intersection (shape)", Pt),
+            finite_result("intersection (gain)", L))
 
 
 def _gain_form(c, P, C, y, W, t, shrink):
@@ -733,8 +734,8 @@ def intersection_min_trace(
     tol = check_positive(tol, "tol")
     max_iter = check_positive_int(max_iter, "max_iter")
     new_c, new_P, L, t = _intersection_min_trace(c, P, C, y, W, bool(shrink), tol, max_iter)
-    return (_finite_result(new_c, "intersection (center)"), _finite_result(new_P, "intersection (shape)"),
-            _finite_result(L, "intersection (gain)"), t)
+    return (finite_result("intersection (center)", new_c), finite_result("intersection (shape)", new_P),
+            finite_result("intersection (gain)", L), t)
 
 
 def _intersection_min_trace(c, P, C, y, W, shrink=False, tol=1e-13, max_iter=100):
@@ -792,7 +793,7 @@ def max_innovation_form(
     """
     c, P, C, y, W = _intersection_args(center, shape, C, y, W)
     n_iter = check_positive_int(n_iter, "n_iter")
-    return _finite_result(_max_innovation_form(c, P, C, y, W, n_iter), "innovation form")
+    return finite_result("innovation form", _max_innovation_form(c, P, C, y, W, n_iter))
 
 
 def _max_innovation_form(c, P, C, y, W, n_iter=60):
@@ -1132,13 +1133,3 @@ def _sampling_args(rng, center, shape, size):
     else:
         size = (check_positive_int(size, "size"),)
     return rng, c, P, size
-
-
-def _finite_result(arr: np.ndarray, what: str) -> np.ndarray:
-    """Return `arr`, or raise if finite input overflowed to NaN/inf."""
-    if not np.isfinite(arr).all():
-        raise ValueError(
-            f"the {what} overflowed (NaN or inf in the result) although every input is finite: "
-            "the values are too large to be represented; rescale the problem"
-        )
-    return arr

@@ -33,7 +33,6 @@ from numpy.typing import ArrayLike
 
 from ._validation import (
     as_matrix,
-    cached_covariance,
     check_adjacency,
     check_covariance,
     check_laplacian,
@@ -111,8 +110,8 @@ def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndar
     n = A.shape[0]
     B = _matrix(B, "B", (n, None))
     m = B.shape[1]
-    Q = cached_covariance(np.atleast_2d(_float_array(Q, "Q")), "Q", n)  # weights: checked once per value
-    R = cached_covariance(np.atleast_2d(_float_array(R, "R")), "R", m, definite=True)
+    Q = _weight(Q, "Q", n)
+    R = _weight(R, "R", m, definite=True)
     return _solved(solve_care, A, B, Q, R, discrete=False)
 
 
@@ -160,8 +159,8 @@ def dlqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.nda
     A = _square(A, "A")
     n = A.shape[0]
     B = _matrix(B, "B", (n, None))
-    Q = cached_covariance(np.atleast_2d(_float_array(Q, "Q")), "Q", n)
-    R = cached_covariance(np.atleast_2d(_float_array(R, "R")), "R", B.shape[1], definite=True)
+    Q = _weight(Q, "Q", n)
+    R = _weight(R, "R", B.shape[1], definite=True)
     return _solved(solve_dare, A, B, Q, R, discrete=True)
 
 

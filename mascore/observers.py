@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike
 from ._conic import ConicProgram, clarabel, solve, svec, svec_size, sym_basis
 from ._optional import require
 from ._solver import SolverError
-from ._validation import as_matrix, check_adjacency, check_covariance, check_laplacian
+from ._validation import as_matrix, check_adjacency, check_covariance, check_laplacian, finite_result
 from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
@@ -882,7 +882,7 @@ def simulate_estimation_errors(A_e: ArrayLike, e0: ArrayLike, t: ArrayLike) -> n
     out[0] = e0.ravel()
     for k in range(1, t.size):
         out[k] = step @ out[k - 1]
-    _finite_result(out, "estimation errors")
+    finite_result("estimation errors", out, advice=_GROWTH_ADVICE)
     return out.reshape(t.size, *e0.shape)
 
 
@@ -1016,7 +1016,7 @@ def simulate_network_observer(
     for k in range(1, t.size):
         Fz, Fd = steps[float(dt[0] if uniform else dt[k - 1])]
         z[k] = Fz @ z[k - 1] + Fd @ D[k - 1]
-    _finite_result(z, "simulated states")
+    finite_result("simulated states", z, advice=_GROWTH_ADVICE)
     return z[:, :Nn].reshape(t.size, N, n), z[:, Nn:].reshape(t.size, N, n)
 
 
@@ -1221,12 +1221,10 @@ def _check_sequence(seq, name: str, size: int) -> None:
         raise ValueError(f"{name} needs one entry per eigenvalue in lam ({size}); got {len(seq)}")
 
 
+#: What an overflow of a simulated error or state calls for (the message of :func:`_validation.finite_result`).
+_GROWTH_ADVICE = "the error matrix grows too fast over this horizon; shorten t or rescale"
+
+
 def _check_trace_in(trace_in) -> None:
     if not isinstance(trace_in, str) or trace_in not in ("transformed", "original"):
         raise ValueError(f"trace_in must be 'transformed' or 'original'; got {trace_in!r}")
-
-
-def _finite_result(arr: np.ndarray, what: str) -> None:
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"the {what} overflowed (NaN or inf) although every input is finite: the error "
-                         "matrix grows too fast over this horizon; shorten t or rescale")

@@ -31,8 +31,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import cached_covariance as _const_covariance
-from ._validation import check_generator, check_positive_int
+from ._validation import check_covariance, check_generator, check_positive_int
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .exceptions import IsolatedAgentError
@@ -224,10 +223,10 @@ def team_noise_covariance(R: ArrayLike, n_agents: int, m: int) -> np.ndarray:
     m = check_positive_int(m, "m")
     R = _float_array(R, "R")
     if R.ndim == 2 and R.shape == (m, m):
-        _const_covariance(R, "R", size=m)  # checked once per distinct value (a constant of long runs)
+        check_covariance(R, "R", size=m)
         return np.kron(np.eye(n_agents), R)
     if R.ndim == 2 and R.shape == (m * n_agents, m * n_agents):
-        return _const_covariance(R, "R", size=m * n_agents)
+        return check_covariance(R, "R", size=m * n_agents)
     raise ValueError(
         f"Incompatible dimensions of R; expected ({m}, {m}) per measured agent or "
         f"({m * n_agents}, {m * n_agents}) for the team, but found {R.shape}"

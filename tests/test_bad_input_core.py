@@ -2,8 +2,8 @@
 
 kalman, noise, agents, graphs, sensing, distributed_kf and rendezvous: every public function refuses a
 spoiled argument with a ``ValueError``/``TypeError`` whose message names the argument, never returns
-NaN/inf from finite valid input, and the constant-matrix / returned-state recognition of the Kalman step
-never lets a modified argument through unchecked.
+NaN/inf from finite valid input, and a Kalman step never lets a modified argument through unchecked (the
+plain-array steps check in full on every call; a model's matrices are read-only copies).
 """
 
 from __future__ import annotations
@@ -563,12 +563,15 @@ def test_random_noise_draws_are_finite(seed, size):
 
 
 def test_overflow_is_refused_not_returned():
-    with pytest.raises(ValueError, match="overflowed"):
+    with pytest.raises(ValueError, match="Kalman prediction produced NaN or inf from finite input: the values overflow"):
         kalman.predict(np.full(2, 1e300), np.eye(2), 1e10 * np.eye(2), np.eye(2))
+    model = kalman.LinearGaussianModel(1e10 * np.eye(2), np.eye(2), np.eye(2), np.eye(2))
+    with pytest.raises(ValueError, match="Kalman prediction produced NaN or inf from finite input: the values overflow"):
+        kalman.predict(np.full(2, 1e300), np.eye(2), model)
 
 
 # ----------------------------------------------------------------------------
-# the speed path (values recognised by identity and bytes) never skips a check it should not
+# a modified argument is never let through unchecked
 # ----------------------------------------------------------------------------
 
 
@@ -619,15 +622,29 @@ def test_returned_team_covariance_modified_in_place_is_checked_again():
                      BASELINES["distributed_kf.eb_update"][1]["mask"])
 
 
-def test_checked_functions_give_the_kernels_numbers():
+def test_model_path_gives_the_plain_array_path_numbers():
+    """The two forms of the step (model checked once, arrays checked every call) give the same bits."""
     F, Q, H, R = AGENT.A, 0.1 * np.eye(4), np.eye(2, 4), np.eye(2)
+    model = kalman.LinearGaussianModel(F, Q, H, R)
     zs = np.random.default_rng(3).normal(size=(50, 2))
     a = b = (np.zeros(4), 10.0 * np.eye(4))
     for z in zs:
         a = kalman.update(*kalman.predict(*a, F, Q), z, H, R)
-        b = kalman._update(*kalman._predict(*b, F, Q), z, H, R)
+        b = kalman.update(*kalman.predict(*b, model), z, model)
     np.testing.assert_array_equal(a[0], b[0])
     np.testing.assert_array_equal(a[1], b[1])
+
+
+def test_model_step_names_a_nan_input():
+    """With a model only shapes are checked per call; a NaN passed in is named by the result's finiteness test."""
+    model = kalman.LinearGaussianModel(AGENT.A, 0.1 * np.eye(4), np.eye(2, 4), np.eye(2), B=AGENT.B)
+    x, P = np.zeros(4), np.eye(4)
+    for arg, call in (("x", lambda: kalman.predict(np.array([0, np.nan, 0, 0]), P, model)),
+                      ("P", lambda: kalman.update(x, np.diag([1.0, np.inf, 1.0, 1.0]), np.ones(2), model)),
+                      ("z", lambda: kalman.update(x, P, np.array([1.0, np.nan]), model)),
+                      ("u", lambda: kalman.predict(x, P, model, np.array([np.nan, 0.0])))):
+        with pytest.raises(ValueError, match=rf"^{arg} contains NaN or infinite entries"):
+            call()
 
 
 # ----------------------------------------------------------------------------
