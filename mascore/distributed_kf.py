@@ -995,7 +995,7 @@ class TeamFilter:
         if X.ndim != 4 or X.shape[1:] != (N, N, m) or X.shape[0] == 0:
             raise ValueError(f"Incompatible dimensions of x_hat0; expected (runs, {N * m}) or (runs, {N}, {N}, {m}) "
                              f"but found {X.shape}")
-        X = _finite(np.array(X, dtype=float), "x_hat0")
+        X = _finite(np.array(X, dtype=float, order="C"), "x_hat0")
         if (P0 is None) == (Sigma0 is None):
             raise ValueError("give the initial covariance as P0 (per agent or team) or as Sigma0 (reduced), not both")
         if P0 is not None:
@@ -1012,9 +1012,13 @@ class TeamFilter:
 
     @classmethod
     def _from_checked(cls, model, mode, L, X, Sig, KH=None, exact_control_noise=False) -> TeamFilter:
-        """A filter on arguments the caller has checked (the plain-array functions), on copies of them."""
+        """A filter on arguments the caller has checked (the plain-array functions).
+
+        The steps never write into `X` (they make new estimates) but may update the covariance in
+        place: that one is copied.
+        """
         self = cls.__new__(cls)
-        self._init(model, mode, L, np.array(X, dtype=float), np.array(Sig, dtype=float),
+        self._init(model, mode, L, X, np.array(Sig, dtype=float),
                    None if KH is None else np.array(KH, dtype=float), exact_control_noise)
         return self
 
@@ -1581,7 +1585,7 @@ class CentralizedFilter:
         if x.ndim != 3 or x.shape[1:] != (N, m) or x.shape[0] == 0:
             raise ValueError(f"Incompatible dimensions of x_hat0; expected (runs, {N * m}) or (runs, {N}, {m}) "
                              f"but found {x.shape}")
-        x = _finite(np.array(x, dtype=float), "x_hat0")
+        x = _finite(np.array(x, dtype=float, order="C"), "x_hat0")
         batch = check_positive_int(batch, "batch")
         P0 = _finite(_float_array(P0, "P0"), "P0")
         if P0.shape == (m, m):
