@@ -677,3 +677,12 @@ def test_no_module_level_memory_or_private_scipy():
         for banned in ("_sparsetools", "getrefcount", "threading", "_ValueMemo", "_RecentArrays", "cached_"):
             assert banned not in text, (module.__name__, banned)
     assert not [k for k, v in vars(dk).items() if isinstance(v, dict) and not k.startswith("__")]
+
+
+def test_rendezvous_model_keeps_read_only_copies():
+    Q = np.eye(4)
+    model = _rv(Q=Q)
+    Q[0, 0] = -1.0  # the caller's array, changed after the check
+    assert model.Q[0, 0] == 1.0
+    with pytest.raises(ValueError, match="read-only"):
+        model.R[0, 0] = -1.0
