@@ -558,6 +558,11 @@ def mb_predict(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Prediction of the measurement-based loop, eqs. (14)-(15).
 
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`TeamFilter`. In a loop, build the filter once,
+    ``TeamFilter(model, laplacian, x_hat0, P0, mode="mb")``, and call its :meth:`~TeamFilter.predict`: the fast path.
+
     Parameters
     ----------
     model : TeamFilterModel
@@ -619,6 +624,11 @@ def mb_update(
     model: TeamFilterModel, X_pred: ArrayLike, Sigma_pred: ArrayLike, Z: ArrayLike, mask: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Update of every agent's filter (eqs. (16)-(20)) in reduced form.
+
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`TeamFilter`. In a loop, build the filter once,
+    ``TeamFilter(..., mode="mb")``, and call its :meth:`~TeamFilter.update`: the fast path.
 
     Parameters
     ----------
@@ -738,6 +748,11 @@ def eb_predict(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Prediction of the estimation-based loop: eq. (14) and eqs. (32), (34).
 
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`TeamFilter`. In a loop, build the filter once,
+    ``TeamFilter(model, laplacian, x_hat0, P0)``, and call its :meth:`~TeamFilter.predict`: the fast path.
+
     ``Σ^- = Φ Σ Φ^T + (1 1^T) ⊗ 𝒬`` with ``Φ = I_N ⊗ F_1 + 1_N ⊗ F_2``
     (every block ``(i, j)`` of this is eq. (34); ``i = j`` gives eq. (32)),
     computed in tensor form (see module docstring).
@@ -793,6 +808,11 @@ def eb_update(
     model: TeamFilterModel, X_pred: ArrayLike, Sigma_pred: ArrayLike, Z: ArrayLike, mask: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Update of the estimation-based loop: eqs. (16)-(20) and (33).
+
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`TeamFilter`. In a loop, build the filter once,
+    ``TeamFilter(model, laplacian, x_hat0, P0)``, and call its :meth:`~TeamFilter.update`: the fast path.
 
     ``Σ_ij = (I - G_i H_i) Σ_ij^- (I - G_j H_j)^T + δ_ij G_i H_i R H_i^T G_i^T``:
     eq. (33) for ``i != j`` (measurement noises of different agents are
@@ -1723,6 +1743,11 @@ def centralized_predict(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Centralized prediction with the applied inputs known exactly.
 
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`CentralizedFilter`. In a loop, build the filter once,
+    ``CentralizedFilter(model, B, x_hat0, P0)``, and call its :meth:`~CentralizedFilter.predict`: the fast path.
+
     Parameters
     ----------
     model : TeamFilterModel
@@ -1784,6 +1809,11 @@ def centralized_update(
     model: TeamFilterModel, x_pred: ArrayLike, P_pred: ArrayLike, Z: ArrayLike, mask: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray]:
     """Centralized update with *all* agents' measurements (information form).
+
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`CentralizedFilter`. In a loop, build the filter once,
+    ``CentralizedFilter(model, B, x_hat0, P0)``, and call its :meth:`~CentralizedFilter.update`: the fast path.
 
     ``P^{-1} = P^-^{-1} + sum_i H_i^T (H_i R H_i^T)^{-1} H_i``,
     ``x = x^- + P sum_i H_i^T (H_i R H_i^T)^{-1} (z_i - H_i x^-)``.
