@@ -1017,7 +1017,8 @@ class TeamFilter:
                              f"but found {X.shape}")
         X = _finite(np.array(X, dtype=float, order="C"), "x_hat0")
         if (P0 is None) == (Sigma0 is None):
-            raise ValueError("give the initial covariance as P0 (per agent or team) or as Sigma0 (reduced), not both")
+            raise ValueError("give the initial covariance as exactly one of P0 (per agent or team) and Sigma0 "
+                             "(reduced, with its batch axis)")
         if P0 is not None:
             Sig = eb_initial_covariance(model, P0, common=common)
             if mode == "mb":
@@ -1026,7 +1027,7 @@ class TeamFilter:
             Sig = np.broadcast_to(Sig, (nb, *Sig.shape[1:])).copy()
         else:
             shape = (None, N * Mr, N * Mr) if mode == "eb" else (None, N, Mr, Mr)
-            Sig = np.array(_check_covariances(Sigma0, "Sigma0", shape, kron=model.kron), dtype=float)
+            Sig = np.array(_check_covariances(Sigma0, "Sigma0", shape, kron=model.kron), dtype=float, order="C")
         _check_batch(L, Sig, "laplacian", "Sigma0" if P0 is None else "P0", X)
         self._init(model, mode, L, X, Sig, None, exact_control_noise)
 
@@ -1035,10 +1036,10 @@ class TeamFilter:
         """A filter on arguments the caller has checked (the plain-array functions).
 
         The steps never write into `X` (they make new estimates) but may update the covariance in
-        place: that one is copied.
+        place: that one is copied (C-ordered, as the in-place row-block steps need).
         """
         self = cls.__new__(cls)
-        self._init(model, mode, L, X, np.array(Sig, dtype=float),
+        self._init(model, mode, L, X, np.array(Sig, dtype=float, order="C"),
                    None if KH is None else np.array(KH, dtype=float), exact_control_noise)
         return self
 
