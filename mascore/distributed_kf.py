@@ -213,6 +213,10 @@ class TeamFilterModel:
         object.__setattr__(self, "n_agents", n_agents)
         object.__setattr__(self, "kron", kron)
 
+    def __reduce__(self) -> tuple:
+        # pickle and copy rebuild through the constructor: the copy is checked and read-only too
+        return (type(self), (self.A, self.BK, self.Q, self.R, self.n_agents, self.kron))
+
     @property
     def m(self) -> int:
         """Agent state dimension.

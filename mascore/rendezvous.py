@@ -312,6 +312,10 @@ class RendezvousModel:
             object.__setattr__(self, name, frozen_copy(value))
         object.__setattr__(self, "dt", float(dt))
 
+    def __reduce__(self) -> tuple:
+        # pickle and copy rebuild through the constructor: the copy is checked and read-only too
+        return (type(self), (self.A, self.B, self.K, self.Q, self.R, self.dt))
+
     @property
     def m(self) -> int:
         """State dimension of one agent.

@@ -702,3 +702,15 @@ def test_an_initial_covariance_of_any_memory_layout_gives_the_same_run():
         runs.append(_run(f, meas[:3]))
     for x, y in zip(*runs):
         assert x.tobytes() == y.tobytes()
+
+
+def test_pickled_and_copied_models_stay_checked_and_read_only():
+    import copy
+    import pickle
+
+    for model in (_model(3), _rv()):
+        for clone in (pickle.loads(pickle.dumps(model)), copy.deepcopy(model), copy.copy(model)):
+            assert type(clone) is type(model) and clone is not model
+            for name in ("A", "Q", "R"):
+                assert not getattr(clone, name).flags.writeable
+                np.testing.assert_array_equal(getattr(clone, name), getattr(model, name))
