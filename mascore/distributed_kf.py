@@ -884,6 +884,9 @@ def eb_update(
 def agent_covariances(model: TeamFilterModel, Sigma: ArrayLike) -> np.ndarray:
     """Diagonal blocks ``Σ̄_i`` of a reduced augmented covariance.
 
+    Checks the covariance in full on every call (an eigenvalue test); a :class:`TeamFilter`
+    gives the same from its own state without one: :meth:`TeamFilter.agent_covariances`.
+
     Parameters
     ----------
     model : TeamFilterModel
@@ -2092,6 +2095,9 @@ def _lyapunov_v(e, P, kron):
 def team_nees(model: TeamFilterModel, X_true: ArrayLike, X_hat: ArrayLike, Sigma_i: ArrayLike) -> np.ndarray:
     """NEES of every agent's team estimate: ``(runs, N)``, chi-square with ``m N`` dof.
 
+    Checks the covariance in full on every call (an eigenvalue test); a :class:`TeamFilter`
+    gives the same from its own state without one: :meth:`TeamFilter.nees`.
+
     Parameters
     ----------
     model : TeamFilterModel
@@ -2145,6 +2151,9 @@ def _team_nees(model, X_true, X_hat, Sigma_i):
 
 def f2_cross(model: TeamFilterModel, Sigma: ArrayLike, laplacian: ArrayLike) -> np.ndarray:
     """``F_2 E[e e_i^T]`` for every agent ``i``: reduced, shape ``(batch, N, M_r, M_r)``.
+
+    Checks the covariance in full on every call (an eigenvalue test); a :class:`TeamFilter`
+    gives the same from its own state without one: :meth:`TeamFilter.f2_cross`.
 
     Used to form the map ``C_i = E[e e_i^T] Σ_i^{-1}`` of Lemma 1 without
     storing the augmented covariance: ``F_2 C_i = F_2 E[e e_i^T] Σ_i^{-1}``.
