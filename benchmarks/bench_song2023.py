@@ -1,15 +1,17 @@
 """One estimation-based filter step (Song et al. 2023, eqs. (14), (29)-(34), (16)-(20)) against N.
 
-Compares the structured recursion (``mascore.distributed_kf._eb_predict`` +
-``_eb_update``, what :func:`mascore.rendezvous.simulate_rendezvous` runs at
+Compares the structured recursion through the public object users call
+(:class:`mascore.distributed_kf.TeamFilter` on a checked model: ``predict()`` +
+``update(Z, mask)``, what :func:`mascore.rendezvous.simulate_rendezvous` runs at
 every step: sparse ``F_1``, ``F_2`` in the cross-covariance recursion, the
 Kronecker factor of the double integrator, rank-q updates one row block at a
-time) with the plain one written straight from the equations
-(``mascore._kf_reference.plain_estimation_based_kernel``: dense ``F_1``,
-``F_2``, ``H_i``, ``G_i`` and a loop over agent pairs). Both advance the full
-augmented covariance of all ``N`` agents' whole-team estimates (size
-``2nN^2``) and all N estimates for one topology (a ring, Q = R = I), without
-their input checks; the repeats of the two are interleaved, medians.
+time, in place in the filter's own arrays, with the per-step shape and mask
+checks and the finiteness test of the result) with the plain one written
+straight from the equations (``mascore._kf_reference.plain_estimation_based_kernel``:
+dense ``F_1``, ``F_2``, ``H_i``, ``G_i`` and a loop over agent pairs, no checks).
+Both advance the full augmented covariance of all ``N`` agents' whole-team
+estimates (size ``2nN^2``) and all N estimates for one topology (a ring,
+Q = R = I); the repeats of the two are interleaved, medians.
 """
 
 from __future__ import annotations
@@ -38,18 +40,20 @@ def _case(N: int):
     rng = np.random.default_rng(N)
     adj = ring_graph(N)
     L = laplacian(adj)
-    Sig = dkf.eb_initial_covariance(model, s.P0(), common=False)
     X_hat = rng.normal(size=(1, N, N, 2 * s.n))
     Z, S = measure(rng, rng.normal(size=(1, N, 2 * s.n)), adj, noise)
-    structured = (model, X_hat, Sig, L, Z, S[0][None])
+    team = dkf.TeamFilter(model, L, X_hat, s.P0(), common=False)  # P0 checked here, once
+    structured = (team, Z, S[0])
     z = [stacked_measurement(Z[0], S[0], i) for i in range(N)]
     plain = (X_hat[0].reshape(N, -1), None, s.A, model.BK, noise, model.R, adj, z, adj)
     return structured, plain, model
 
 
-def _structured(model, X_hat, Sig, L, Z, S) -> float:
+def _structured(team: dkf.TeamFilter, Z: np.ndarray, S: np.ndarray) -> float:
+    """One step of the public filter object (the state advances; every step costs the same)."""
     t = time.perf_counter()
-    dkf._eb_update(model, *dkf._eb_predict(model, X_hat, Sig, L), Z, S)
+    team.predict()
+    team.update(Z, S)
     return time.perf_counter() - t
 
 
@@ -70,15 +74,15 @@ def run(sizes=SIZES) -> pd.DataFrame:
     """Milliseconds per estimator step for each N, structured vs plain (plain: 1 repeat at N = 64)."""
     rows = []
     for N in sizes:
-        (model, X_hat, Sig, L, Z, S), plain, _ = _case(N)
-        Sig_full = dkf.expand_covariance(Sig[0], model.kron)
+        (team, Z, S), plain, model = _case(N)
+        Sig_full = dkf.expand_covariance(team.Sigma[0], model.kron)  # the initial covariance, full size
         need_gb = 5 * Sig_full.nbytes / 1e9  # the plain step holds about five augmented covariances
         plain_repeat = 0 if need_gb > 0.6 * _memory_gb() else (5 if N <= 16 else (3 if N <= 32 else 1))
         repeat = max(plain_repeat, 5 if N <= 32 else 3)
-        _structured(model, X_hat, Sig, L, Z, S)  # warm-up
+        _structured(team, Z, S)  # warm-up
         ts, tp = [], []
         for r in range(repeat):
-            ts.append(_structured(model, X_hat, Sig, L, Z, S))
+            ts.append(_structured(team, Z, S))
             if r < plain_repeat:
                 tp.append(_plain(plain, Sig_full))
         del Sig_full

@@ -1,23 +1,21 @@
-"""The Kalman gain and update of a filter that observes a subset of its state, in rank-q form.
+"""The Kalman gain of a filter that observes a subset of its state, in rank-q form.
 
-Shared by the linear team filters (:mod:`mascore.distributed_kf`) and the
-per-agent EKFs (:mod:`mascore.distributed_ekf`) of Song et al. (2023): agent
-``i`` measures the states of its closed neighbourhood, so its measurement
-matrix ``H_i`` selects ``q_i`` entries of the team state (eq. (3)) and
-``H_i^T H_i = D_i`` is a diagonal 0/1 mask. With ``R`` the covariance of the
-whole noise vector ``nu_i`` (``H_i R H_i^T`` that of the measured part), the
-gain of eq. (19) embedded in the team space is
+Used by the linear team filters of Song et al. (2023)
+(:mod:`mascore.distributed_kf`): agent ``i`` measures the states of its closed
+neighbourhood, so its measurement matrix ``H_i`` selects ``q_i`` entries of the
+team state (eq. (3)) and ``H_i^T H_i = D_i`` is a diagonal 0/1 mask. With ``R``
+the covariance of the whole noise vector ``nu_i`` (``H_i R H_i^T`` that of the
+measured part), the gain of eq. (19) embedded in the team space is
 
     G_i H_i = Sigma H_i^T S_i^{-1} H_i,   S_i = H_i (Sigma + R) H_i^T      (eq. (17))
 
 Here ``H_i`` is never formed: the ``q_i`` observed indices are gathered
-(``C = Sigma H_i^T``, ``M x q``; ``S_i``, ``q x q``), ``S_i`` is factored
-(Cholesky, ``S_i = L L^T``) and the update subtracts the rank-``q`` correction
-``(L^{-1} C^T)^T (L^{-1} C^T)``: ``O(M^2 q)`` work instead of the ``O(M^3)``
-of a full ``M x M`` solve. Filters with different numbers of observed
-entries are batched by padding the index lists to the largest ``q``: a padded
-slot has a zero column in ``C`` and a unit diagonal entry in ``S``, so it
-changes nothing (``S`` is ``blockdiag(S_i, I)`` up to a permutation).
+(``C = Sigma H_i^T``, ``M x q``; ``S_i``, ``q x q``) and ``C S_i^{-1}`` is one
+``q x q`` solve: ``O(M q^2)`` work instead of the ``O(M^3)`` of a full
+``M x M`` solve. Filters with different numbers of observed entries are
+batched by padding the index lists to the largest ``q``: a padded slot has a
+zero column in ``C`` and a unit diagonal entry in ``S``, so it changes nothing
+(``S`` is ``blockdiag(S_i, I)`` up to a permutation).
 
 All functions take checked arrays; the masks are 0/1 float arrays ``d`` of
 shape ``(..., M)`` (``diag(D_i)``).
@@ -27,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["observed_indices", "innovation_factors", "masked_gain", "masked_update"]
+__all__ = ["observed_indices", "innovation_factors", "masked_gain"]
 
 #: Up to this many states the gain uses one masked ``M x M`` solve (cheaper than gathering at that size).
 _SMALL = 48
@@ -140,61 +138,3 @@ def masked_gain(Sigma: np.ndarray, d: np.ndarray, R: np.ndarray) -> np.ndarray:
     np.put_along_axis(out, np.broadcast_to(cols[..., None, :], W.shape), W, axis=-1)
     return out[..., :M]
 
-
-def masked_update(
-    X: np.ndarray, Sigma: np.ndarray, innovation: np.ndarray, d: np.ndarray, R: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Kalman update of eqs. (16)-(20) with a 0/1 observation mask, rank-q form.
-
-    Parameters
-    ----------
-    X : (..., M) ndarray
-        Predicted states.
-    Sigma : (..., M, M) ndarray
-        Predicted covariances, symmetric.
-    innovation : (..., M) ndarray
-        ``z - X`` on the observed entries (other entries are ignored).
-    d : (..., M) ndarray
-        0/1 masks ``diag(H^T H)``.
-    R : (M, M) ndarray
-        Measurement-noise covariance of the whole vector ``nu``, positive definite.
-
-    Returns
-    -------
-    X_post : (..., M) ndarray
-        ``X + G (z - H X)``.
-    Sigma_post : (..., M, M) ndarray
-        ``(I - G H) Sigma`` of eq. (20) as ``Sigma - V^T V`` with
-        ``V = L^{-1} H Sigma`` and ``S = L L^T`` (symmetric to rounding).
-
-    Examples
-    --------
-    >>> x, P = masked_update(np.zeros(2), np.eye(2), np.array([2.0, 5.0]), np.array([1.0, 0.0]), np.eye(2))
-    >>> x, P
-    (array([1., 0.]), array([[0.5, 0. ],
-           [0. , 1. ]]))
-    """
-    idx, valid = observed_indices(d)
-    if idx.shape[-1] == 0:  # nothing observed anywhere
-        return X + 0.0, Sigma + 0.0
-    Ct, S = _innovation_factors_rows(Sigma, R, idx, valid)
-    Linv = np.linalg.inv(np.linalg.cholesky(S))  # S = L L^T, q x q
-    Vt = Linv @ Ct  # (..., q, M): L^{-1} H Sigma
-    nu = np.take_along_axis(innovation, idx, axis=-1) * valid  # H (z - X), eq. (16)
-    a = (Linv @ nu[..., None])[..., 0]  # L^{-1} nu
-    X_post = X + np.einsum("...qm,...q->...m", Vt, a)  # eq. (18): X + Sigma H^T S^{-1} nu
-    Sigma_post = np.ascontiguousarray(np.swapaxes(Vt, -1, -2)) @ Vt  # (a copy: gemm beats numpy's syrk here)
-    np.subtract(Sigma, Sigma_post, out=Sigma_post)  # eq. (20): Sigma - Sigma H^T S^{-1} H Sigma
-    return X_post, Sigma_post
-
-
-def _innovation_factors_rows(Sigma, R, idx, valid):
-    """:func:`innovation_factors` with ``C^T = H Sigma`` gathered as rows (a symmetric `Sigma`)."""
-    Ct = np.take_along_axis(Sigma, idx[..., :, None], axis=-2)
-    Ct *= valid[..., :, None]
-    S = np.take_along_axis(Ct, idx[..., None, :], axis=-1)
-    S *= valid[..., None, :]
-    S += R[idx[..., :, None], idx[..., None, :]] * (valid[..., :, None] * valid[..., None, :])
-    diag = np.arange(idx.shape[-1])
-    S[..., diag, diag] += 1.0 - valid
-    return Ct, S

@@ -357,18 +357,19 @@ class _Centralized(_Estimator):
     def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
         super().__init__(team, x_hat0)
         self.model = dkf.team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N)
-        P = np.kron(np.eye(team.N), dkf.reduce_covariance(team.P0, self.model.kron))
-        self.P = P[None]
+        self.filter = dkf.CentralizedFilter(self.model, team.B, x_hat0, team.P0)
 
     def update(self, Z, S):
-        self.own, self.P = dkf._centralized_update(self.model, self.own, self.P, Z, S)
+        self.filter.update(Z, S)
+        self.own = self.filter.x_hat
 
     def predict(self, U):
-        self.own, self.P = dkf._centralized_predict(self.model, self.own, self.P, U, self.t.B)
+        self.filter.predict(U)
+        self.own = self.filter.x_hat
 
     @property
     def own_cov(self):
-        return _own_blocks(self.P, self.model)
+        return _own_blocks(self.filter.P, self.model)
 
 
 def _own_blocks(P: np.ndarray, model: dkf.TeamFilterModel) -> np.ndarray:
@@ -412,29 +413,24 @@ class _Song(_Estimator):
         self.eb = estimation_based
         self.link_borne = not estimation_based
         self.model = dkf.team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N)
-        R, N, m = x_hat0.shape
-        self.X = np.broadcast_to(x_hat0[:, None], (R, N, N, m)).copy()
-        Sig_aug = dkf.eb_initial_covariance(self.model, team.P0, common=True)
-        self.Sig = Sig_aug if self.eb else dkf._agent_covariances(self.model, Sig_aug)
+        R, N, m = x_hat0.shape  # one common initial estimate; links dropping per run split the covariance
+        self.filter = dkf.TeamFilter(self.model, team.laplacian, x_hat0.reshape(R, N * m), team.P0,
+                                     mode="eb" if estimation_based else "mb")
 
     def update(self, Z, S):
-        if self.Sig.shape[0] == 1 and S.shape[0] > 1:  # links drop: one covariance per run from now on
-            self.Sig = np.broadcast_to(self.Sig, (S.shape[0], *self.Sig.shape[1:])).copy()
-        kernel = dkf._eb_update if self.eb else dkf._mb_update
-        self.X, self.Sig, _ = kernel(self.model, self.X, self.Sig, Z, S)
+        self.filter.update(Z, S)
         N = self.t.N
-        self.own = self.X[:, np.arange(N), np.arange(N)]
+        self.own = self.filter.X_hat[:, np.arange(N), np.arange(N)]
 
     def views(self, Z, S):
-        return self.X if self.eb else Z
+        return self.filter.X_hat if self.eb else Z
 
     def predict(self, U):
-        kernel = dkf._eb_predict if self.eb else dkf._mb_predict
-        self.X, self.Sig = kernel(self.model, self.X, self.Sig, self.t.laplacian)
+        self.filter.predict()
 
     @property
     def own_cov(self):
-        return _own_blocks(dkf._agent_covariances(self.model, self.Sig) if self.eb else self.Sig, self.model)
+        return _own_blocks(self.filter.agent_covariances(), self.model)
 
 
 def _vlahakis_gains(adjacency: np.ndarray, q_vel: float, r: float, dt: float) -> tuple[np.ndarray, float]:
@@ -612,7 +608,7 @@ def simulate_team(
             view = fresh
         if k >= s.steady_from:
             _accumulate(acc, est, x, view, nominal | eye)
-        U = rendezvous._consensus_control(view, team.laplacian, team.K)
+        U = rendezvous.consensus_control(view, team.laplacian, team.K)
         tic = time.thread_time()
         est.predict(U)
         cpu += time.thread_time() - tic

@@ -38,6 +38,19 @@ Implementation (the "structured" path)
   fixed topology one ``Σ`` (batch axis of length 1) serves every Monte Carlo
   run, while the means carry a run axis.
 
+Checked once, then stepped
+--------------------------
+:class:`TeamFilterModel` checks ``A``, ``BK``, ``Q``, ``R`` when it is built and
+keeps read-only copies. :class:`TeamFilter` (and :class:`CentralizedFilter`)
+checks the initial state once and then owns it: a step checks only what
+changes (shapes, mask values) and tests its result for NaN/inf. It keeps the
+``Φ`` blocks of its topology and its work arrays, and updates a large
+augmented covariance in place; filters share nothing, so independent filters
+may run in parallel threads. The plain-array functions (:func:`eb_predict`,
+:func:`eb_update`, :func:`mb_predict`, ...) run the same steps on a filter
+built for the call, after checking every argument in full on every call
+(an eigenvalue test of the covariance): convenient for one step, slow in a loop.
+
 A plain implementation written straight from eqs. (29)-(34) with explicit
 ``F_1``, ``F_2``, ``H_i`` and ``G_i`` (``mascore._kf_reference``) is the
 reference for the tests and the benchmark. This module also has a
@@ -53,28 +66,26 @@ state), reduced covariances are ``(batch, N, M_r, M_r)`` per agent or
 
 from __future__ import annotations
 
-import math
-import sys
-import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ._masked_gain import masked_gain, observed_indices
 from ._validation import (
-    _ValueMemo,
     as_matrix,
     check_covariance,
     check_laplacian,
     check_positive,
     check_positive_int,
     check_square,
+    finite_result,
+    frozen_copy,
+    symmetric_part,
 )
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .graphs import laplacian as graph_laplacian
-from .kalman import _RecentArrays
 from .sensing import (
     _check_adjacency,
     _check_flag,
@@ -86,6 +97,8 @@ from .sensing import (
 __all__ = [
     "TeamFilterModel",
     "team_filter_model",
+    "TeamFilter",
+    "CentralizedFilter",
     "closed_loop_matrices",
     "reduce_covariance",
     "expand_covariance",
@@ -114,34 +127,41 @@ __all__ = [
 
 @dataclass(frozen=True)
 class TeamFilterModel:
-    """What every agent knows (Assumption 1): ``A``, ``BK``, ``Q``, ``R``.
+    """What every agent knows (Assumption 1): ``A``, ``BK``, ``Q``, ``R``, checked once when built.
 
-    Build it with :func:`team_filter_model`. The ``*_r`` fields are the
-    per-axis Kronecker factors (``A = A_r ⊗ I_kron`` etc.); ``kron = 1`` means
-    no reduction.
+    Build it with :func:`team_filter_model` (which also finds the Kronecker factor) or
+    directly. The constructor checks everything once (shapes, finiteness, symmetry,
+    definiteness, the Kronecker form) and stores read-only copies, so no later change
+    can slip past the check: writing into ``model.R_r`` raises. The ``*_r`` fields are
+    the per-axis Kronecker factors (``A = A_r ⊗ I_kron`` etc.), derived from the full
+    matrices; ``kron = 1`` means no reduction.
 
     Parameters
     ----------
-    A : (m, m) ndarray
+    A : (m, m) array_like
         Agent transition matrix.
-    BK : (m, m) ndarray
+    BK : (m, m) array_like
         Product of the input matrix and the consensus gain.
-    Q : (m, m) ndarray
-        Per-agent process-noise covariance.
-    R : (m N, m N) ndarray
-        Covariance of one observer's noise vector ``nu_i``.
+    Q : (m, m) array_like
+        Per-agent process-noise covariance, symmetric positive semidefinite.
+    R : (m N, m N) array_like
+        Covariance of one observer's noise vector ``nu_i``, symmetric positive definite.
     n_agents : int
-        N.
+        N >= 2.
     kron : int
-        Kronecker factor used by the structured recursions.
-    A_r : ndarray
-        Reduced ``A`` (``A = A_r ⊗ I_kron``).
-    BK_r : ndarray
-        Reduced ``BK``.
-    Q_r : ndarray
-        Reduced ``Q``.
-    R_r : ndarray
-        Reduced ``R``.
+        Kronecker factor used by the structured recursions: ``A``, ``BK``, ``Q`` and
+        ``R`` must all be of the form ``X_r ⊗ I_kron``.
+
+    Attributes
+    ----------
+    A_r, BK_r, Q_r, R_r : ndarray
+        The reduced matrices (read-only views of the full ones).
+
+    Raises
+    ------
+    ValueError
+        Shapes that do not fit together, non-finite entries, a covariance that is not
+        symmetric positive (semi)definite, or a matrix not of the form ``X_r ⊗ I_kron``.
 
     Examples
     --------
@@ -151,9 +171,10 @@ class TeamFilterModel:
     >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
     >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
     >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
-    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
     >>> model.n_agents, model.kron
     (3, 1)
+    >>> model.R_r.flags.writeable                               # checked once, then read-only
+    False
     """
 
     A: np.ndarray
@@ -161,11 +182,40 @@ class TeamFilterModel:
     Q: np.ndarray
     R: np.ndarray
     n_agents: int
-    kron: int
-    A_r: np.ndarray
-    BK_r: np.ndarray
-    Q_r: np.ndarray
-    R_r: np.ndarray
+    kron: int = 1
+    A_r: np.ndarray = field(init=False, repr=False, compare=False)
+    BK_r: np.ndarray = field(init=False, repr=False, compare=False)
+    Q_r: np.ndarray = field(init=False, repr=False, compare=False)
+    R_r: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        A = check_square(_float_array(self.A, "A"), "A")
+        m = A.shape[0]
+        BK = check_square(_float_array(self.BK, "BK"), "BK", m)
+        Q = check_covariance(_float_array(self.Q, "Q"), "Q", size=m)
+        if Q.ndim != 2:
+            raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
+        n_agents = check_positive_int(self.n_agents, "n_agents", minimum=2)
+        R = check_covariance(_float_array(self.R, "R"), "R", size=m * n_agents, definite=True)
+        if R.ndim != 2:
+            raise ValueError(f"R must be a single ({m * n_agents}, {m * n_agents}) matrix; got shape {R.shape}")
+        kron = check_positive_int(self.kron, "kron")
+        if m % kron:
+            raise ValueError(f"kron must divide the agent state size m = {m}; got kron={kron}")
+        full = {"A": _read_only(A), "BK": _read_only(BK), "Q": _read_only(Q), "R": _read_only(R)}
+        for name, M in full.items():
+            red = _kron_factor(M, kron)
+            if red is None:
+                raise ValueError(f"{name} is not of the form {name}_r ⊗ I_{kron} (kron={kron}); "
+                                 "build the model with team_filter_model, which finds the factor")
+            object.__setattr__(self, name, M)
+            object.__setattr__(self, f"{name}_r", red)  # a view of the read-only copy: read-only too
+        object.__setattr__(self, "n_agents", n_agents)
+        object.__setattr__(self, "kron", kron)
+
+    def __reduce__(self) -> tuple:
+        # pickle and copy rebuild through the constructor: the copy is checked and read-only too
+        return (type(self), (self.A, self.BK, self.Q, self.R, self.n_agents, self.kron))
 
     @property
     def m(self) -> int:
@@ -179,7 +229,6 @@ class TeamFilterModel:
         >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
         >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
         >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
         >>> model.m
         2
         """
@@ -197,7 +246,6 @@ class TeamFilterModel:
         >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
         >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
         >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
         >>> model.m_r
         2
         """
@@ -215,7 +263,6 @@ class TeamFilterModel:
         >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
         >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
         >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
         >>> model.M_r                                               # N m_r
         6
         """
@@ -286,11 +333,8 @@ def team_filter_model(
             if m % k == 0 and all(_kron_factor(X, k) is not None for X in (A, BK, Q, R_team)):
                 kron = k
                 break
-    return TeamFilterModel(
-        A=A, BK=BK, Q=Q, R=R_team, n_agents=int(n_agents), kron=kron,
-        A_r=_kron_factor(A, kron), BK_r=_kron_factor(BK, kron),
-        Q_r=_kron_factor(Q, kron), R_r=_kron_factor(R_team, kron),
-    )
+    return TeamFilterModel(A=A, BK=BK, Q=Q, R=R_team, n_agents=int(n_agents), kron=kron)
+
 
 
 def closed_loop_matrices(A: ArrayLike, BK: ArrayLike, laplacian: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -501,7 +545,7 @@ def agent_update(
             f"the leading (batch) axes of X_pred {X.shape}, Sigma_pred {Sig.shape}, Z {Zt.shape} and "
             f"mask {S.shape} do not broadcast"
         ) from None
-    return _finite_result("agent update", X_post.reshape(*X_post.shape[:-3], N, N, m), Sig_post, KH)
+    return finite_result("agent update", X_post.reshape(*X_post.shape[:-3], N, N, m), Sig_post, KH)
 
 
 # ----------------------------------------------------------------------------
@@ -517,6 +561,11 @@ def mb_predict(
     KH_prev: ArrayLike | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Prediction of the measurement-based loop, eqs. (14)-(15).
+
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`TeamFilter`. In a loop, build the filter once,
+    ``TeamFilter(model, laplacian, x_hat0, P0, mode="mb")``, and call its :meth:`~TeamFilter.predict`: the fast path.
 
     Parameters
     ----------
@@ -569,45 +618,21 @@ def mb_predict(
             raise ValueError(
                 f"Incompatible dimensions of KH_prev; expected {Sig.shape} (as Sigma) but found {KH.shape}"
             )
-    return _remember_result("measurement-based prediction", *_mb_predict(model, X, Sig, L, KH), cov=1)
+    filt = TeamFilter._from_checked(model, "mb", L, X, Sig, KH, exact_control_noise=KH is not None)
+    filt.predict()
+    return filt._X, filt._Sig
 
-
-def _mb_predict(model, X_hat, Sig, L, KH_prev=None):
-    """:func:`mb_predict` without checks."""
-    N = model.n_agents
-    X_pred = _F1_means(model, X_hat, L)
-    Mr, mr = model.M_r, model.m_r
-    Lb = L if L.ndim == 3 else L[None]
-    # F_1 Σ_i F_1^T via the tensor form
-    T = _F1_rows(model, Sig.reshape(*Sig.shape[:2], N, mr, Mr), Lb[:, None])
-    T = np.swapaxes(T.reshape(*Sig.shape), -1, -2)
-    P = _F1_rows(model, T.reshape(*Sig.shape[:2], N, mr, Mr), Lb[:, None]).reshape(*Sig.shape)
-    # eq. (15): (I ⊗ BK) E[nu_bar nu_bar^T] (I ⊗ BK)^T + Q (block diagonal)
-    Rr = model.R_r.reshape(N, mr, N, mr)
-    # cov of (L_j ⊗ I) nu_j: sum_{l,l'} L_jl L_jl' R[l, l']
-    Cj = np.einsum("bjl,bjk,lakc->bjac", Lb, Lb, Rr)  # (batch, N, mr, mr)
-    noise = model.BK_r @ Cj @ model.BK_r.T + model.Q_r  # (batch, N, mr, mr)
-    blk = np.zeros((Lb.shape[0], N, mr, N, mr))
-    blk[:, np.arange(N), :, np.arange(N), :] = np.moveaxis(noise, 1, 0)
-    P = P + blk.reshape(Lb.shape[0], 1, Mr, Mr)
-    if KH_prev is not None:
-        KH = KH_prev
-        # E[e_i nu_bar_i^T] = -KH_i R (L_i ⊗ I)^T, column block i of E[e_i nu_bar^T]
-        RL = np.einsum("lakc,bik->bilac", Rr, Lb).reshape(Lb.shape[0], N, Mr, mr)  # R (L_i ⊗ I)^T
-        Xc = -(KH @ RL)  # (batch, N, Mr, mr)
-        F1Xc = _F1_rows(model, Xc.reshape(*Xc.shape[:2], N, mr, mr), Lb[:, None]).reshape(Xc.shape)
-        corr = -(F1Xc @ model.BK_r.T)  # -F1 E[e_i nu_bar_i^T] BK^T, (batch, N, Mr, mr)
-        full = np.zeros((*corr.shape[:2], Mr, N, mr))
-        full[:, np.arange(N), :, np.arange(N), :] = np.moveaxis(corr, 1, 0)
-        full = full.reshape(*corr.shape[:2], Mr, Mr)
-        P = P + full + np.swapaxes(full, -1, -2)
-    return X_pred, _sym(P)
 
 
 def mb_update(
     model: TeamFilterModel, X_pred: ArrayLike, Sigma_pred: ArrayLike, Z: ArrayLike, mask: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Update of every agent's filter (eqs. (16)-(20)) in reduced form.
+
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`TeamFilter`. In a loop, build the filter once,
+    ``TeamFilter(..., mode="mb")``, and call its :meth:`~TeamFilter.update`: the fast path.
 
     Parameters
     ----------
@@ -660,14 +685,10 @@ def mb_update(
     _check_runs(X, Zt, "X_pred", "Z")
     if Sig.shape[0] not in (1, X.shape[0]):
         raise ValueError(f"Sigma_pred has batch {Sig.shape[0]} but X_pred has {X.shape[0]} runs")
-    return _remember_result("measurement-based update", *_mb_update(model, X, Sig, Zt, S), cov=1)
+    filt = TeamFilter._from_checked(model, "mb", None, X, Sig)
+    filt.update(Zt, S)
+    return filt._X, filt._Sig, filt._KH
 
-
-def _mb_update(model, X_pred, Sig, Z, S):
-    """:func:`mb_update` without checks (`S` a (batch, N, N) bool mask)."""
-    KH = masked_gain(Sig, _mask_vec(model, S), model.R_r)
-    X_post = _apply_gain(model, X_pred, Z, KH)
-    return X_post, _joseph(Sig, KH, model.R_r), KH
 
 
 # ----------------------------------------------------------------------------
@@ -723,13 +744,18 @@ def eb_initial_covariance(model: TeamFilterModel, P0: ArrayLike, common: bool = 
     P0 = check_covariance(P0, "P0", size=m * N)
     P0r = reduce_covariance(P0, model.kron, "P0")
     outer = np.ones((N, N)) if common else np.eye(N)
-    return _RECENT_COVARIANCES.remember(np.kron(outer, P0r)[None])
+    return np.kron(outer, P0r)[None]
 
 
 def eb_predict(
     model: TeamFilterModel, X_hat: ArrayLike, Sigma: ArrayLike, laplacian: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray]:
     """Prediction of the estimation-based loop: eq. (14) and eqs. (32), (34).
+
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`TeamFilter`. In a loop, build the filter once,
+    ``TeamFilter(model, laplacian, x_hat0, P0)``, and call its :meth:`~TeamFilter.predict`: the fast path.
 
     ``Σ^- = Φ Σ Φ^T + (1 1^T) ⊗ 𝒬`` with ``Φ = I_N ⊗ F_1 + 1_N ⊗ F_2``
     (every block ``(i, j)`` of this is eq. (34); ``i = j`` gives eq. (32)),
@@ -775,76 +801,22 @@ def eb_predict(
     X = _check_estimates(model, X_hat, "X_hat")
     Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr), kron=model.kron)
     _check_batch(L, Sig, "laplacian", "Sigma", X)
-    return _remember_result("estimation-based prediction", *_eb_predict(model, X, Sig, L), cov=1)
+    filt = TeamFilter._from_checked(model, "eb", L, X, Sig)
+    filt.predict()
+    return filt._X, filt._Sig
 
 
-def _eb_predict(model, X_hat, Sig, L):
-    """:func:`eb_predict` without checks.
-
-    ``Σ^- = Φ Σ Φ^T + (1 1^T) ⊗ 𝒬`` tile by tile: with ``G_i = Σ[i] F_2^T = (F_2 Σ[:, i])^T``
-    (``F_2 Σ`` computed once with the sparse ``F_2``) and ``H = F_2 Σ F_2^T``, tile ``(i, i')`` is
-    ``(F_1 Σ_ii' + (F_2 Σ)_i') F_1^T + F_1 G_i + H + 𝒬``. Σ^- is symmetric, so only the tiles
-    ``i' >= i`` of row block ``i`` are computed (two products with ``F_1``, half the work of the whole
-    row) and written transposed into column block ``i`` while still in cache; the work arrays are
-    reused from step to step (see :func:`_eb_predict_rows`).
-    """
-    N, Mr = model.n_agents, model.M_r
-    X_pred = _F1_means(model, X_hat, L)
-    Lb = L if L.ndim == 3 else L[None]
-    nb, C = Sig.shape[0], N * Mr
-    out = np.empty((nb, C, C)) if C <= _DENSE_MAX else _RESULTS.empty((nb, C, C))
-    Qt = np.kron(np.eye(N), model.Q_r)
-    for b in range(nb):
-        Lk = Lb[b if Lb.shape[0] > 1 else 0]
-        F1s, F2s, Phi = _phi_blocks(model, Lk)
-        if Phi is not None:  # a small team: two dense products are cheapest
-            out[b] = Phi @ Sig[b] @ Phi.T
-            out[b].reshape(N, Mr, N, Mr)[...] += Qt[None, :, None, :]
-            continue
-        _eb_predict_rows(model, Sig[b], Lk, Qt, out[b])
-    return X_pred, out
-
-
-def _eb_predict_rows(model, Sb, Lk, Qt, ob):
-    """Σ^- of one topology into `ob` ``(C, C)``, upper block triangle and mirror (see :func:`_eb_predict`)."""
-    N, Mr = model.n_agents, model.M_r
-    C = N * Mr
-    F1, F1t, F2s, K2t = _phi_dense(model, Lk)
-    F1s = _phi_blocks(model, Lk)[0]
-    work = _work(5 * Mr * C)
-    X, P, Q = work[:Mr * C], work[Mr * C:2 * Mr * C], work[2 * Mr * C:3 * Mr * C]
-    F2S = work[3 * Mr * C:4 * Mr * C].reshape(Mr, C)
-    F2S[...] = 0.0
-    # F_2 Σ, shared by every row block: (Φ Σ)[i] = F_1 Σ[i] + F_2 Σ
-    _csr_addmul(F2s, Sb if Sb.flags.c_contiguous else np.ascontiguousarray(Sb), F2S)
-    F2S3 = F2S.reshape(Mr, N, Mr)
-    # H = F_2 Σ F_2^T: column (j, α) sums BK[α, β] L_jl (F_2 Σ)[:, (j, l, β)]
-    H = np.swapaxes(np.matmul(np.swapaxes(F2S3, 0, 1), K2t), 0, 1).reshape(Mr, Mr)
-    # the part of tile (i, i') shared by the whole row block: F_1 G_i + H + 𝒬, G_i = (F_2 Σ)[:, i]^T
-    shared = np.matmul(F1, F2S3.transpose(1, 2, 0), out=work[4 * Mr * C:].reshape(N, Mr, Mr))
-    shared += H + Qt
-    o4 = ob.reshape(N, Mr, N, Mr)
-    for i in range(N):
-        n, c0 = N - i, i * Mr
-        Xi = X[:Mr * n * Mr].reshape(Mr, n * Mr)
-        np.copyto(Xi, Sb[c0:c0 + Mr, c0:])  # Σ_ii', i' >= i
-        Pi = P[:Mr * n * Mr].reshape(Mr, n * Mr)
-        np.copyto(Pi, F2S[:, c0:])
-        _csr_addmul(F1s, Xi, Pi)  # (Φ Σ)_ii' = F_1 Σ_ii' + (F_2 Σ)_i', eq. (34) (eq. (32) for i' = i)
-        Qi = Q[:Mr * n * Mr].reshape(Mr * n, Mr)
-        Q3 = Qi.reshape(Mr, n, Mr)
-        np.copyto(Q3, shared[i][:, None, :])
-        # tile (i, i') = (Φ Σ)_ii' F_1^T + shared (BLAS adds the product to the preset)
-        _gemm_acc(Pi.reshape(Mr * n, Mr), F1t, Qi)
-        np.copyto(o4[i, :, i:, :], Q3)
-        if n > 1:  # tile (i', i) = tile (i, i')^T
-            np.copyto(o4[i + 1:, :, i, :], Q3[:, 1:, :].transpose(1, 2, 0))
 
 
 def eb_update(
     model: TeamFilterModel, X_pred: ArrayLike, Sigma_pred: ArrayLike, Z: ArrayLike, mask: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Update of the estimation-based loop: eqs. (16)-(20) and (33).
+
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`TeamFilter`. In a loop, build the filter once,
+    ``TeamFilter(model, laplacian, x_hat0, P0)``, and call its :meth:`~TeamFilter.update`: the fast path.
 
     ``Σ_ij = (I - G_i H_i) Σ_ij^- (I - G_j H_j)^T + δ_ij G_i H_i R H_i^T G_i^T``:
     eq. (33) for ``i != j`` (measurement noises of different agents are
@@ -902,83 +874,18 @@ def eb_update(
     _check_runs(X, Zt, "X_pred", "Z")
     if Sig.shape[0] not in (1, X.shape[0]):
         raise ValueError(f"Sigma_pred has batch {Sig.shape[0]} but X_pred has {X.shape[0]} runs")
-    return _remember_result("estimation-based update", *_eb_update(model, X, Sig, Zt, S), cov=1)
+    filt = TeamFilter._from_checked(model, "eb", None, X, Sig)
+    filt.update(Zt, S)
+    return filt._X, filt._Sig, filt._KH
 
 
-def _eb_update(model, X_pred, Sig, Z, S):
-    """:func:`eb_update` without checks (`S` a (batch, N, N) bool mask).
-
-    ``Ψ = blockdiag(I - G_i H_i)`` and ``G_i H_i = W_i E_i^T`` has rank ``q_i``
-    (``E_i`` selects the observed entries ``idx_i``), so tile ``(i, i')`` of
-    ``Ψ Σ Ψ^T`` is ``Σ_ii' - W_i V_ii' - Σ[i, idx_i'] W_i'^T`` with
-    ``V_ii' = Σ[idx_i, i'] - Σ[idx_i, idx_i'] W_i'^T`` (all ``V`` computed once from the
-    ``N q`` observed rows): ``O(N^2 M_r^2 q)`` work instead of the ``O(N^2 M_r^3)`` of dense
-    products, one pass over Σ^- with one small batched product per row block.
-    """
-    N, Mr = model.n_agents, model.M_r
-    nb, C = Sig.shape[0], N * Mr
-    blocks = Sig.reshape(nb, N, Mr, N, Mr)
-    if C <= _DENSE_MAX:
-        diag = np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)  # Σ_i^-, (batch, N, Mr, Mr)
-    else:  # the same, in a reused work array
-        diag = _work(nb * N * Mr * Mr, slot=2).reshape(nb, N, Mr, Mr)
-        for i in range(N):
-            diag[:, i] = blocks[:, i, :, i, :]
-    d = _mask_vec(model, S)
-    KH = masked_gain(diag, d, model.R_r)  # G_i H_i, eqs. (17), (19)
-    if C <= _DENSE_MAX:  # a small team: dense products of all row blocks at once are cheapest
-        KRK = KH @ model.R_r @ np.swapaxes(KH, -1, -2)  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
-        Psi = np.eye(Mr) - KH  # (batch, N, Mr, Mr)
-        T = Psi @ Sig.reshape(nb, N, Mr, C)  # rows
-        T = np.swapaxes(T.reshape(nb, C, C), -1, -2)
-        T = (Psi @ T.reshape(nb, N, Mr, C)).reshape(nb, N, Mr, N, Mr)  # columns (by symmetry of Σ^-)
-        T[:, np.arange(N), :, np.arange(N), :] += np.moveaxis(KRK, 1, 0)
-        return _apply_gain(model, X_pred, Z, KH), T.reshape(nb, C, C), KH
-    idx, valid = observed_indices(d)  # (batch, N, q)
-    q = idx.shape[-1]
-    W = np.take_along_axis(KH, np.broadcast_to(idx[..., None, :], (*KH.shape[:-1], q)), axis=-1)  # (batch, N, Mr, q)
-    Wt = np.swapaxes(W, -1, -2)
-    Rq = model.R_r[idx[..., :, None], idx[..., None, :]]  # R on the observed entries (padding: W is zero there)
-    out = _RESULTS.empty((nb, C, C))
-    for b in range(nb):
-        bi = b if idx.shape[0] > 1 else 0  # one mask for all covariances
-        _eb_update_rows(Sig[b], idx[bi], W[b], Wt[b], Rq[bi], out[b])
-    X_post = _apply_gain(model, X_pred, Z, KH)
-    return X_post, out, KH
-
-
-def _eb_update_rows(Sb, idx, W, Wt, Rq, ob):
-    """``Ψ Σ^- Ψ^T + blockdiag(G_i H_i R H_i^T G_i^T)`` of one covariance into `ob` (see :func:`_eb_update`)."""
-    N, Mr, q = W.shape
-    C, Nq = N * Mr, N * q
-    cidx = (np.arange(N)[:, None] * Mr + idx).ravel()  # observed rows/columns (i, idx_i) of Σ^-
-    work = _work(2 * Nq * C + Nq * Nq + 4 * N * Mr * q, slot=1)
-    R = np.take(Sb, cidx, axis=0, out=work[:Nq * C].reshape(Nq, C))  # the observed rows, (N q, C)
-    Rc = np.take(R, cidx, axis=1, out=work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq))
-    # V_i[:, i'] = Σ[idx_i, i'] - Σ[idx_i, idx_i'] W_i'^T: the rows of (I - G_i H_i) Σ^- that meet W_i'
-    Vt = np.matmul(Rc.reshape(Nq, N, q).transpose(1, 0, 2), Wt,
-                   out=work[Nq * C + Nq * Nq:2 * Nq * C + Nq * Nq].reshape(N, Nq, Mr))
-    np.subtract(R.reshape(Nq, N, Mr).transpose(1, 0, 2), Vt, out=Vt)  # Vt[i', (i, k)] = V_i[k, i']
-    # tile (i, i') = Σ_ii' - [W_i, Σ[i, idx_i']] [V_ii'; W_i'^T]: one batched product over i' per row block,
-    # with Σ[i, idx_i'] = Σ[idx_i', i]^T (Σ^- is symmetric) taken from the observed rows
-    rest = work[2 * Nq * C + Nq * Nq:]
-    Ab = rest[:N * Mr * 2 * q].reshape(N, Mr, 2 * q)
-    Bb = rest[N * Mr * 2 * q:].reshape(N, 2 * q, Mr)
-    Bb[:, q:, :] = Wt
-    R3 = R.reshape(N, q, C)
-    for i in range(N):
-        rows = slice(i * Mr, (i + 1) * Mr)
-        Ab[:, :, :q] = W[i]
-        Ab[:, :, q:] = R3[:, :, rows].transpose(0, 2, 1)
-        Bb[:, :q, :] = Vt[:, i * q:(i + 1) * q]
-        O = ob[rows]
-        np.matmul(Ab, Bb, out=O.reshape(Mr, N, Mr).transpose(1, 0, 2))
-        np.subtract(Sb[rows], O, out=O)
-        O[:, rows] += W[i] @ Rq[i] @ Wt[i]  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
 
 
 def agent_covariances(model: TeamFilterModel, Sigma: ArrayLike) -> np.ndarray:
     """Diagonal blocks ``Σ̄_i`` of a reduced augmented covariance.
+
+    Checks the covariance in full on every call (an eigenvalue test); a :class:`TeamFilter`
+    gives the same from its own state without one: :meth:`TeamFilter.agent_covariances`.
 
     Parameters
     ----------
@@ -1014,11 +921,824 @@ def agent_covariances(model: TeamFilterModel, Sigma: ArrayLike) -> np.ndarray:
     return _agent_covariances(model, Sig)
 
 
-def _agent_covariances(model, Sig):
-    """:func:`agent_covariances` without checks."""
-    N, Mr = model.n_agents, model.M_r
-    blocks = Sig.reshape(Sig.shape[0], N, Mr, N, Mr)
-    return np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)
+# ----------------------------------------------------------------------------
+# the whole-team filters: one object per run of filters, owning its state and work arrays
+# ----------------------------------------------------------------------------
+
+#: The two loops of Song et al.: ``"eb"`` estimation-based (augmented covariance, eqs. (29)-(34)),
+#: ``"mb"`` measurement-based (every agent's own covariance, eqs. (14)-(20)).
+FILTER_MODES = ("eb", "mb")
+
+
+class TeamFilter:
+    """Every agent's whole-team Kalman filter, for the whole team (and Monte Carlo runs) at once.
+
+    The fast path of Song et al.'s filters: the model was checked when it was built,
+    the initial covariance is checked in full here, once; a step checks only what
+    changes per call (shapes and mask values) and tests its result for NaN/inf,
+    naming the input at fault. The filter holds its state (estimates, covariance,
+    gains), the ``Φ`` blocks derived from the topology (recomputed only when the
+    topology changes) and its work arrays, reused from step to step: the augmented
+    covariance of a large team is updated in place. Filters share nothing, so
+    independent filters may run in different threads.
+
+    Parameters
+    ----------
+    model : TeamFilterModel
+        The team model (:func:`team_filter_model`).
+    laplacian : (N, N) or (batch, N, N) array_like
+        Topology of the control law (eq. (11)): one for all runs, or one per covariance
+        batch entry. Change it with the `laplacian` argument of :meth:`predict`.
+    x_hat0 : (runs, N m) or (runs, N, N, m) array_like
+        Initial estimates, per Monte Carlo run: one common team estimate of all agents,
+        or every agent's own (``x_hat0[r, i, j]`` = agent i's estimate of agent j).
+    P0 : (m, m) or (m N, m N) array_like, optional
+        Covariance of one agent's initial team-estimate error, per agent block or full
+        (see :func:`eb_initial_covariance`). Give `P0` or `Sigma0`.
+    mode : {"eb", "mb"}
+        Estimation-based loop (augmented covariance ``(batch, N M_r, N M_r)``,
+        eqs. (29)-(34)) or measurement-based loop (each agent's own covariance
+        ``(batch, N, M_r, M_r)``, eqs. (14)-(20)).
+    Sigma0 : ndarray, optional
+        The initial reduced covariance itself, of the mode's shape (with its batch
+        axis); checked in full (symmetric positive semidefinite).
+    common : bool
+        With `P0`: all agents start from the same estimate (``Σ[0] = 1 1^T ⊗ P0``) or from
+        independent ones (``I_N ⊗ P0``).
+    exact_control_noise : bool
+        ``"mb"`` only: add the correlation between an agent's own measurement noise in its
+        control and its posterior error, which eq. (15) neglects (see :func:`mb_predict`).
+
+    Raises
+    ------
+    ValueError
+        Bad shapes, non-finite entries, a covariance that is not symmetric PSD, a
+        Laplacian that is not one, batches that do not fit together.
+    TypeError
+        `model` is not a :class:`TeamFilterModel`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3)
+    >>> filt = dkf.TeamFilter(model, graphs.laplacian(path), np.zeros((1, 6)), P0=np.eye(2))
+    >>> for k in range(5):
+    ...     filt.predict()
+    ...     Z, mask = sensing.measure(k, np.zeros((1, 3, 2)), path, np.eye(2))
+    ...     filt.update(Z, mask[0])
+    >>> filt.Sigma.shape, filt.X_hat.shape                      # (batch, N M_r, N M_r), (runs, N, N, m)
+    ((1, 18, 18), (1, 3, 3, 2))
+    """
+
+    def __init__(
+        self,
+        model: TeamFilterModel,
+        laplacian: ArrayLike,
+        x_hat0: ArrayLike,
+        P0: ArrayLike | None = None,
+        *,
+        mode: str = "eb",
+        Sigma0: ArrayLike | None = None,
+        common: bool = True,
+        exact_control_noise: bool = False,
+    ) -> None:
+        model = _check_model(model)
+        if not isinstance(mode, str) or mode not in FILTER_MODES:
+            raise ValueError(f"mode must be one of {FILTER_MODES}; got {mode!r}")
+        _check_flag(common, "common")
+        _check_flag(exact_control_noise, "exact_control_noise")
+        if exact_control_noise and mode != "mb":
+            raise ValueError("exact_control_noise applies to the measurement-based loop (mode='mb') only")
+        N, m, Mr = model.n_agents, model.m, model.M_r
+        L = _check_laplacian(laplacian, N)
+        X = _float_array(x_hat0, "x_hat0")
+        if X.ndim == 2 and X.shape[1] == N * m:
+            X = np.broadcast_to(X.reshape(X.shape[0], 1, N, m), (X.shape[0], N, N, m))
+        if X.ndim != 4 or X.shape[1:] != (N, N, m) or X.shape[0] == 0:
+            raise ValueError(f"Incompatible dimensions of x_hat0; expected (runs, {N * m}) or (runs, {N}, {N}, {m}) "
+                             f"but found {X.shape}")
+        X = _finite(np.array(X, dtype=float, order="C"), "x_hat0")
+        if (P0 is None) == (Sigma0 is None):
+            raise ValueError("give the initial covariance as exactly one of P0 (per agent or team) and Sigma0 "
+                             "(reduced, with its batch axis)")
+        if P0 is not None:
+            Sig = eb_initial_covariance(model, P0, common=common)
+            if mode == "mb":
+                Sig = _agent_covariances(model, Sig)
+            nb = L.shape[0] if L.ndim == 3 else 1
+            Sig = np.broadcast_to(Sig, (nb, *Sig.shape[1:])).copy()
+        else:
+            shape = (None, N * Mr, N * Mr) if mode == "eb" else (None, N, Mr, Mr)
+            Sig = np.array(_check_covariances(Sigma0, "Sigma0", shape, kron=model.kron), dtype=float, order="C")
+        _check_batch(L, Sig, "laplacian", "Sigma0" if P0 is None else "P0", X)
+        self._init(model, mode, L, X, Sig, None, exact_control_noise)
+
+    @classmethod
+    def _from_checked(cls, model, mode, L, X, Sig, KH=None, exact_control_noise=False) -> TeamFilter:
+        """A filter on arguments the caller has checked (the plain-array functions).
+
+        The steps never write into `X` (they make new estimates) but may update the covariance in
+        place: that one is copied (C-ordered, as the in-place row-block steps need).
+        """
+        self = cls.__new__(cls)
+        self._init(model, mode, L, X, np.array(Sig, dtype=float, order="C"),
+                   None if KH is None else np.array(KH, dtype=float), exact_control_noise)
+        return self
+
+    def _init(self, model, mode, L, X, Sig, KH, exact_control_noise) -> None:
+        self._model, self._mode, self._exact = model, mode, exact_control_noise
+        self._X, self._Sig = X, Sig
+        N, Mr = model.n_agents, model.M_r
+        self._KH = np.zeros((Sig.shape[0], N, Mr, Mr)) if KH is None else KH
+        self._work: dict[int, np.ndarray] = {}
+        self._Qt = np.kron(np.eye(N), model.Q_r)
+        self._set_topology(L)
+
+    # ------------------------------------------------------------------ state
+
+    @property
+    def model(self) -> TeamFilterModel:
+        """The team model.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
+        >>> filt.model is model
+        True
+        """
+        return self._model
+
+    @property
+    def mode(self) -> str:
+        """``"eb"`` (estimation-based) or ``"mb"`` (measurement-based).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2),
+        ...                mode="mb").mode
+        'mb'
+        """
+        return self._mode
+
+    @property
+    def laplacian(self) -> np.ndarray:
+        """The topology in force, ``(N, N)`` or ``(batch, N, N)`` (read-only).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
+        >>> filt.laplacian.diagonal()
+        array([1., 2., 1.])
+        """
+        return self._L
+
+    @property
+    def X_hat(self) -> np.ndarray:
+        """Every agent's team estimate, ``(runs, N, N, m)`` (a read-only view, replaced by the next step).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.ones((2, 6)), P0=np.eye(2))
+        >>> filt.X_hat.shape
+        (2, 3, 3, 2)
+        """
+        return _view(self._X)
+
+    @property
+    def Sigma(self) -> np.ndarray:
+        """The reduced covariance: ``(batch, N M_r, N M_r)`` (``"eb"``) or ``(batch, N, M_r, M_r)`` (``"mb"``).
+
+        A read-only view of the filter's own array, which the next step may overwrite in
+        place: copy it to keep it.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
+        >>> filt.Sigma.shape
+        (1, 18, 18)
+        """
+        return _view(self._Sig)
+
+    @property
+    def KH(self) -> np.ndarray:
+        """Reduced ``G_i H_i`` of the last update, ``(batch, N, M_r, M_r)`` (zero before the first update).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
+        >>> float(np.abs(filt.KH).max())
+        0.0
+        """
+        return _view(self._KH)
+
+    def agent_covariances(self) -> np.ndarray:
+        """Each agent's own reduced covariance ``Σ̄_i``, ``(batch, N, M_r, M_r)`` (a new array).
+
+        Returns
+        -------
+        (batch, N, M_r, M_r) ndarray
+            The diagonal blocks of the augmented covariance (``"eb"``) or the state itself (``"mb"``).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
+        >>> filt.agent_covariances().shape
+        (1, 3, 6, 6)
+        """
+        return _agent_covariances(self._model, self._Sig) if self._mode == "eb" else self._Sig.copy()
+
+    def nees(self, X_true: ArrayLike) -> np.ndarray:
+        """NEES of every agent's team estimate against the true states (see :func:`team_nees`).
+
+        Parameters
+        ----------
+        X_true : (runs, N, m) array_like
+            True states.
+
+        Returns
+        -------
+        (runs, N) ndarray
+            ``e_i^T Σ_i^{-1} e_i``, chi-square with ``m N`` dof for a consistent filter.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2),
+        ...                       common=False)
+        >>> filt.nees(np.ones((1, 3, 2)))                             # unit errors, unit covariance: 6 each
+        array([[6., 6., 6.]])
+        """
+        model = self._model
+        N, m = model.n_agents, model.m
+        x = _finite(_float_array(X_true, "X_true"), "X_true")
+        if x.shape != (self._X.shape[0], N, m):
+            raise ValueError(f"Incompatible dimensions of X_true; expected ({self._X.shape[0]}, {N}, {m}) "
+                             f"but found {x.shape}")
+        Sig_i = _agent_covariances(model, self._Sig) if self._mode == "eb" else self._Sig
+        return _team_nees(model, x, self._X, Sig_i)
+
+    def f2_cross(self, laplacian: ArrayLike | None = None) -> np.ndarray:
+        """``F_2 E[e e_i^T]`` of the current augmented covariance (``"eb"`` only; see :func:`f2_cross`).
+
+        Parameters
+        ----------
+        laplacian : (N, N) or (batch, N, N) array_like, optional
+            The topology defining ``F_2``; default the one in force.
+
+        Returns
+        -------
+        (batch, N, M_r, M_r) ndarray
+            ``F_2 E[e e_i^T]`` per agent.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
+        >>> filt.f2_cross().shape
+        (1, 3, 6, 6)
+        """
+        if self._mode != "eb":
+            raise ValueError("f2_cross needs the augmented covariance of the estimation-based loop (mode='eb')")
+        L = self._L if laplacian is None else _check_laplacian(laplacian, self._model.n_agents)
+        _check_batch(L, self._Sig, "laplacian", "Sigma")
+        return _f2_cross(self._model, self._Sig, L)
+
+    # ------------------------------------------------------------------ steps
+
+    def predict(self, laplacian: ArrayLike | None = None) -> None:
+        """Prediction of every agent's estimate and of the covariance: eqs. (14)-(15) or (14), (32), (34).
+
+        Parameters
+        ----------
+        laplacian : (N, N) or (batch, N, N) array_like, optional
+            Topology of this step's control (switching topologies); default the one in
+            force. It stays in force for the next steps.
+
+        Raises
+        ------
+        ValueError
+            A bad Laplacian, or a prediction that overflows to NaN/inf.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
+        >>> filt.predict(graphs.laplacian(graphs.ring_graph(3)))   # this step's topology
+        >>> bool(np.trace(filt.Sigma[0]) > 18.0)                     # the uncertainty grows
+        True
+        """
+        if laplacian is not None:
+            L = _check_laplacian(laplacian, self._model.n_agents)
+            if L.shape != self._L.shape or not np.array_equal(L, self._L):
+                _check_batch(L, self._Sig, "laplacian", "Sigma", self._X)
+                self._set_topology(L)
+        if self._mode == "eb":
+            self._eb_predict()
+            what = "estimation-based prediction"
+        else:
+            self._mb_predict()
+            what = "measurement-based prediction"
+        _finite_state(what, self._X, self._Sig, diagonal_only=self._mode == "eb" and self._rows)
+
+    def update(self, Z: ArrayLike, mask: ArrayLike) -> None:
+        """Every agent's Kalman update with its own measurements: eqs. (16)-(20) and (33).
+
+        Parameters
+        ----------
+        Z : (runs, N, N, m) array_like
+            Measurements (:func:`mascore.sensing.measure`; unsensed entries are ignored).
+        mask : (N, N) or (batch, N, N) array_like of bool
+            Sensing mask (closed neighbourhoods). A mask per run while the covariance is
+            shared (batch 1) gives every run its own covariance from then on.
+
+        Raises
+        ------
+        ValueError
+            Bad shapes or mask values, or NaN/inf in the result (naming `Z` when it holds them).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous, sensing
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> path = graphs.path_graph(3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(path), np.zeros((1, 6)), P0=np.eye(2))
+        >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), path, np.eye(2))
+        >>> filt.update(Z, mask[0])
+        >>> bool(np.trace(filt.Sigma[0]) < 18.0)                     # the uncertainty shrinks
+        True
+        """
+        model = self._model
+        N, m = model.n_agents, model.m
+        Zt = _float_array(Z, "Z")
+        if Zt.shape != self._X.shape:
+            raise ValueError(f"Incompatible dimensions of Z; expected {self._X.shape} (runs, {N}, {N}, {m}) "
+                             f"but found {Zt.shape}")
+        S = _check_mask(mask, N)
+        nb = self._Sig.shape[0]
+        if S.shape[0] > 1 and nb == 1 and self._L is not None and self._L.ndim == 2 and S.shape[0] == self._X.shape[0]:
+            # masks per run (dropped links): from now on every run has its own covariance
+            nb = S.shape[0]
+            self._Sig = np.broadcast_to(self._Sig, (nb, *self._Sig.shape[1:])).copy()
+            self._KH = np.broadcast_to(self._KH, (nb, *self._KH.shape[1:])).copy()
+        if S.shape[0] not in (1, nb):
+            raise ValueError(
+                f"mask has {S.shape[0]} topologies but the covariance has batch {nb}: the covariance batch must "
+                "match the topology batch (pass the topology mask, not the per-run measurement mask)"
+            )
+        if self._mode == "eb":
+            self._eb_update(Zt, S)
+            what = "estimation-based update"
+        else:
+            self._mb_update(Zt, S)
+            what = "measurement-based update"
+        if not np.isfinite(self._X).all():
+            _finite(Zt, "Z")
+        _finite_state(what, self._X, self._Sig, self._KH)
+
+    # ------------------------------------------------------------------ kernels
+
+    def _set_topology(self, L: np.ndarray | None) -> None:
+        """Store the (checked) topology and, for the estimation-based loop, its ``Φ`` blocks.
+
+        ``None``: a filter made for one update (the plain-array update functions) needs none.
+        """
+        model = self._model
+        C = model.n_agents * model.M_r
+        self._rows = C > _DENSE_MAX
+        self._L, self._blocks = None, None
+        if L is None:
+            return
+        self._L = frozen_copy(L)
+        if self._mode == "eb":
+            Lb = self._L if self._L.ndim == 3 else self._L[None]
+            self._blocks = [_phi_blocks(model, Lk, self._rows) for Lk in Lb]
+
+    def _buffer(self, slot: int, size: int) -> np.ndarray:
+        """A flat work array of at least `size` floats, owned by this filter (grown when needed)."""
+        a = self._work.get(slot)
+        if a is None or a.size < size:
+            a = self._work[slot] = np.empty(size)
+        return a[:size]
+
+    def _mb_predict(self) -> None:
+        """Eqs. (14)-(15) in tensor form (and the exact control-noise correlation if asked)."""
+        model, L, Sig = self._model, self._L, self._Sig
+        N, Mr, mr = model.n_agents, model.M_r, model.m_r
+        self._X = _F1_means(model, self._X, L)
+        Lb = L if L.ndim == 3 else L[None]
+        # F_1 Σ_i F_1^T via the tensor form
+        T = _F1_rows(model, Sig.reshape(*Sig.shape[:2], N, mr, Mr), Lb[:, None])
+        T = np.swapaxes(T.reshape(*Sig.shape), -1, -2)
+        P = _F1_rows(model, T.reshape(*Sig.shape[:2], N, mr, Mr), Lb[:, None]).reshape(*Sig.shape)
+        # eq. (15): (I ⊗ BK) E[nu_bar nu_bar^T] (I ⊗ BK)^T + Q (block diagonal)
+        Rr = model.R_r.reshape(N, mr, N, mr)
+        # cov of (L_j ⊗ I) nu_j: sum_{l,l'} L_jl L_jl' R[l, l']
+        Cj = np.einsum("bjl,bjk,lakc->bjac", Lb, Lb, Rr)  # (batch, N, mr, mr)
+        noise = model.BK_r @ Cj @ model.BK_r.T + model.Q_r  # (batch, N, mr, mr)
+        blk = np.zeros((Lb.shape[0], N, mr, N, mr))
+        blk[:, np.arange(N), :, np.arange(N), :] = np.moveaxis(noise, 1, 0)
+        P = P + blk.reshape(Lb.shape[0], 1, Mr, Mr)
+        if self._exact:
+            KH = self._KH
+            # E[e_i nu_bar_i^T] = -KH_i R (L_i ⊗ I)^T, column block i of E[e_i nu_bar^T]
+            RL = np.einsum("lakc,bik->bilac", Rr, Lb).reshape(Lb.shape[0], N, Mr, mr)  # R (L_i ⊗ I)^T
+            Xc = -(KH @ RL)  # (batch, N, Mr, mr)
+            F1Xc = _F1_rows(model, Xc.reshape(*Xc.shape[:2], N, mr, mr), Lb[:, None]).reshape(Xc.shape)
+            corr = -(F1Xc @ model.BK_r.T)  # -F1 E[e_i nu_bar_i^T] BK^T, (batch, N, Mr, mr)
+            full = np.zeros((*corr.shape[:2], Mr, N, mr))
+            full[:, np.arange(N), :, np.arange(N), :] = np.moveaxis(corr, 1, 0)
+            full = full.reshape(*corr.shape[:2], Mr, Mr)
+            P = P + full + np.swapaxes(full, -1, -2)
+        self._Sig = symmetric_part(P)
+
+    def _mb_update(self, Z: np.ndarray, S: np.ndarray) -> None:
+        """Eqs. (16)-(20), Joseph form, all agents and runs at once."""
+        model, Sig = self._model, self._Sig
+        KH = masked_gain(Sig, _mask_vec(model, S), model.R_r)
+        self._X = _apply_gain(model, self._X, Z, KH)
+        self._Sig, self._KH = _joseph(Sig, KH, model.R_r), KH
+
+    def _eb_predict(self) -> None:
+        """``Σ^- = Φ Σ Φ^T + (1 1^T) ⊗ 𝒬``: dense products for a small team, else row blocks in place.
+
+        Row blocks: with ``G_i = Σ[i] F_2^T = (F_2 Σ[:, i])^T`` (``F_2 Σ`` computed once with
+        the sparse ``F_2``) and ``H = F_2 Σ F_2^T``, tile ``(i, i')`` is
+        ``(F_1 Σ_ii' + (F_2 Σ)_i') F_1^T + F_1 G_i + H + 𝒬``. Σ^- is symmetric, so only the
+        tiles ``i' >= i`` of row block ``i`` are computed (two products with ``F_1``) and
+        written transposed into column block ``i``. Row block ``i`` reads only the tiles
+        ``i' >= i`` of Σ, which no earlier row block wrote: the recursion runs in place.
+        """
+        model, Sig = self._model, self._Sig
+        N, Mr = model.n_agents, model.M_r
+        self._X = _F1_means(model, self._X, self._L)
+        blocks, Qt = self._blocks, self._Qt
+        one = len(blocks) == 1
+        if not self._rows:  # a small team: two dense products are cheapest
+            out = np.empty_like(Sig)
+            for b in range(Sig.shape[0]):
+                Phi = blocks[0 if one else b][0]
+                out[b] = Phi @ Sig[b] @ Phi.T
+                out[b].reshape(N, Mr, N, Mr)[...] += Qt[None, :, None, :]
+            self._Sig = out
+            return
+        for b in range(Sig.shape[0]):
+            self._eb_predict_rows(Sig[b], blocks[0 if one else b])
+
+    def _eb_predict_rows(self, Sb: np.ndarray, blk: tuple) -> None:
+        """Σ^- of one topology, in place in `Sb` ``(C, C)`` (see :meth:`_eb_predict`)."""
+        model, Qt = self._model, self._Qt
+        N, Mr = model.n_agents, model.M_r
+        C = N * Mr
+        F1aug, F1, F1t, F2s, K2t = blk
+        work = self._buffer(0, 3 * Mr * C + N * Mr * Mr)
+        XP, Q = work[:2 * Mr * C], work[2 * Mr * C:3 * Mr * C]
+        # F_2 Σ, shared by every row block: (Φ Σ)[i] = F_1 Σ[i] + F_2 Σ
+        F2S = F2s @ Sb
+        F2S3 = F2S.reshape(Mr, N, Mr)
+        # H = F_2 Σ F_2^T: column (j, α) sums BK[α, β] L_jl (F_2 Σ)[:, (j, l, β)]
+        H = np.swapaxes(np.matmul(np.swapaxes(F2S3, 0, 1), K2t), 0, 1).reshape(Mr, Mr)
+        # the part of tile (i, i') shared by the whole row block: F_1 G_i + H + 𝒬, G_i = (F_2 Σ)[:, i]^T
+        shared = np.matmul(F1, F2S3.transpose(1, 2, 0), out=work[3 * Mr * C:].reshape(N, Mr, Mr))
+        shared += H + Qt
+        o4 = Sb.reshape(N, Mr, N, Mr)
+        for i in range(N):
+            n, c0 = N - i, i * Mr
+            XPi = XP[:2 * Mr * n * Mr].reshape(2 * Mr, n * Mr)
+            np.copyto(XPi[:Mr], Sb[c0:c0 + Mr, c0:])  # Σ_ii', i' >= i (read before anything is written there)
+            np.copyto(XPi[Mr:], F2S[:, c0:])
+            # (Φ Σ)_ii' = (F_2 Σ)_i' + F_1 Σ_ii' (eq. (34); eq. (32) for i' = i): [F_1, I] has its identity
+            # entry first in every row, so the sparse product adds F_1's terms to (F_2 Σ)_i' in order
+            Pi = F1aug @ XPi
+            Qi = Q[:Mr * n * Mr].reshape(Mr * n, Mr)
+            Q3 = Qi.reshape(Mr, n, Mr)
+            np.copyto(Q3, shared[i][:, None, :])
+            # tile (i, i') = (Φ Σ)_ii' F_1^T + shared (BLAS adds the product to the preset)
+            _gemm_acc(Pi.reshape(Mr * n, Mr), F1t, Qi)
+            np.copyto(o4[i, :, i:, :], Q3)
+            if n > 1:  # tile (i', i) = tile (i, i')^T
+                np.copyto(o4[i + 1:, :, i, :], Q3[:, 1:, :].transpose(1, 2, 0))
+
+    def _eb_update(self, Z: np.ndarray, S: np.ndarray) -> None:
+        """Eqs. (16)-(20) and (33) on the augmented covariance.
+
+        ``Ψ = blockdiag(I - G_i H_i)`` and ``G_i H_i = W_i E_i^T`` has rank ``q_i``
+        (``E_i`` selects the observed entries ``idx_i``), so tile ``(i, i')`` of
+        ``Ψ Σ Ψ^T`` is ``Σ_ii' - W_i V_ii' - Σ[i, idx_i'] W_i'^T`` with
+        ``V_ii' = Σ[idx_i, i'] - Σ[idx_i, idx_i'] W_i'^T`` (all ``V`` computed once from the
+        ``N q`` observed rows): ``O(N^2 M_r^2 q)`` work instead of the ``O(N^2 M_r^3)`` of dense
+        products, one pass over Σ^- (in place) with one small batched product per row block.
+        """
+        model, Sig = self._model, self._Sig
+        N, Mr = model.n_agents, model.M_r
+        nb, C = Sig.shape[0], N * Mr
+        blocks = Sig.reshape(nb, N, Mr, N, Mr)
+        if not self._rows:
+            diag = np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)  # Σ_i^-, (batch, N, Mr, Mr)
+        else:  # the same, in a work array
+            diag = self._buffer(1, nb * N * Mr * Mr).reshape(nb, N, Mr, Mr)
+            for i in range(N):
+                diag[:, i] = blocks[:, i, :, i, :]
+        d = _mask_vec(model, S)
+        KH = masked_gain(diag, d, model.R_r)  # G_i H_i, eqs. (17), (19)
+        if not self._rows:  # a small team: dense products of all row blocks at once are cheapest
+            KRK = KH @ model.R_r @ np.swapaxes(KH, -1, -2)  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
+            Psi = np.eye(Mr) - KH  # (batch, N, Mr, Mr)
+            T = Psi @ Sig.reshape(nb, N, Mr, C)  # rows
+            T = np.swapaxes(T.reshape(nb, C, C), -1, -2)
+            T = (Psi @ T.reshape(nb, N, Mr, C)).reshape(nb, N, Mr, N, Mr)  # columns (by symmetry of Σ^-)
+            T[:, np.arange(N), :, np.arange(N), :] += np.moveaxis(KRK, 1, 0)
+            self._X = _apply_gain(model, self._X, Z, KH)
+            self._Sig, self._KH = T.reshape(nb, C, C), KH
+            return
+        idx, valid = observed_indices(d)  # (batch, N, q)
+        q = idx.shape[-1]
+        W = np.take_along_axis(KH, np.broadcast_to(idx[..., None, :], (*KH.shape[:-1], q)), axis=-1)  # (b, N, Mr, q)
+        Wt = np.swapaxes(W, -1, -2)
+        Rq = model.R_r[idx[..., :, None], idx[..., None, :]]  # R on the observed entries (padding: W is zero there)
+        for b in range(nb):
+            bi = b if idx.shape[0] > 1 else 0  # one mask for all covariances
+            self._eb_update_rows(Sig[b], idx[bi], W[b], Wt[b], Rq[bi])
+        self._X = _apply_gain(model, self._X, Z, KH)
+        self._KH = KH
+
+    def _eb_update_rows(self, Sb: np.ndarray, idx: np.ndarray, W: np.ndarray, Wt: np.ndarray,
+                        Rq: np.ndarray) -> None:
+        """``Ψ Σ^- Ψ^T + blockdiag(G_i H_i R H_i^T G_i^T)`` of one covariance, in place in `Sb`."""
+        N, Mr, q = W.shape
+        C, Nq = N * Mr, N * q
+        cidx = (np.arange(N)[:, None] * Mr + idx).ravel()  # observed rows/columns (i, idx_i) of Σ^-
+        work = self._buffer(2, 2 * Nq * C + Nq * Nq + 4 * N * Mr * q + Mr * C)
+        R = np.take(Sb, cidx, axis=0, out=work[:Nq * C].reshape(Nq, C))  # the observed rows, (N q, C)
+        Rc = np.take(R, cidx, axis=1, out=work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq))
+        # V_i[:, i'] = Σ[idx_i, i'] - Σ[idx_i, idx_i'] W_i'^T: the rows of (I - G_i H_i) Σ^- that meet W_i'
+        Vt = np.matmul(Rc.reshape(Nq, N, q).transpose(1, 0, 2), Wt,
+                       out=work[Nq * C + Nq * Nq:2 * Nq * C + Nq * Nq].reshape(N, Nq, Mr))
+        np.subtract(R.reshape(Nq, N, Mr).transpose(1, 0, 2), Vt, out=Vt)  # Vt[i', (i, k)] = V_i[k, i']
+        # tile (i, i') = Σ_ii' - [W_i, Σ[i, idx_i']] [V_ii'; W_i'^T]: one batched product over i' per row block,
+        # with Σ[i, idx_i'] = Σ[idx_i', i]^T (Σ^- is symmetric) taken from the observed rows
+        rest = work[2 * Nq * C + Nq * Nq:]
+        Ab = rest[:N * Mr * 2 * q].reshape(N, Mr, 2 * q)
+        Bb = rest[N * Mr * 2 * q:4 * N * Mr * q].reshape(N, 2 * q, Mr)
+        O = rest[4 * N * Mr * q:].reshape(Mr, C)
+        O3 = O.reshape(Mr, N, Mr).transpose(1, 0, 2)
+        Bb[:, q:, :] = Wt
+        R3 = R.reshape(N, q, C)
+        for i in range(N):
+            rows = slice(i * Mr, (i + 1) * Mr)
+            Ab[:, :, :q] = W[i]
+            Ab[:, :, q:] = R3[:, :, rows].transpose(0, 2, 1)
+            Bb[:, :q, :] = Vt[:, i * q:(i + 1) * q]
+            np.matmul(Ab, Bb, out=O3)
+            Si = Sb[rows]  # row block i of Σ^-: read here only, so it is overwritten with its update
+            np.subtract(Si, O, out=Si)
+            Si[:, rows] += W[i] @ Rq[i] @ Wt[i]  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
+
+
+class CentralizedFilter:
+    """The centralized Kalman filter over all agents' measurements, applied inputs known (the reference).
+
+    Holds the team estimate and its reduced covariance; :meth:`predict` and
+    :meth:`update` run :func:`centralized_predict` and :func:`centralized_update`
+    without re-checking the state this filter produced (the model, `B` and `P0` are
+    checked here, once).
+
+    Parameters
+    ----------
+    model : TeamFilterModel
+        The team model (:func:`team_filter_model`).
+    B : (m, p) array_like
+        Input matrix of one agent.
+    x_hat0 : (runs, N m) or (runs, N, m) array_like
+        Initial team estimate, per run.
+    P0 : (m, m) or (m N, m N) array_like
+        Covariance of the initial estimate error, per agent or of the team; positive definite.
+    batch : int
+        Number of covariances kept (1: shared by all runs, or one per run).
+
+    Raises
+    ------
+    ValueError
+        Bad shapes or values, or `P0` not positive definite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> agent = agents.double_integrator(1, 0.1)
+    >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+    ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> central = dkf.CentralizedFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+    >>> central.predict(np.zeros((1, 3, 1)))
+    >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), graphs.path_graph(3), np.eye(2))
+    >>> central.update(Z, mask[0])
+    >>> central.x_hat.shape, central.P.shape
+    ((1, 3, 2), (1, 6, 6))
+    """
+
+    def __init__(self, model: TeamFilterModel, B: ArrayLike, x_hat0: ArrayLike, P0: ArrayLike,
+                 batch: int = 1) -> None:
+        model = _check_model(model)
+        N, m = model.n_agents, model.m
+        B = as_matrix(_float_array(B, "B"), "B", (m, None))
+        x = _float_array(x_hat0, "x_hat0")
+        if x.ndim == 2 and x.shape[1] == N * m:
+            x = x.reshape(x.shape[0], N, m)
+        if x.ndim != 3 or x.shape[1:] != (N, m) or x.shape[0] == 0:
+            raise ValueError(f"Incompatible dimensions of x_hat0; expected (runs, {N * m}) or (runs, {N}, {m}) "
+                             f"but found {x.shape}")
+        x = _finite(np.array(x, dtype=float, order="C"), "x_hat0")
+        batch = check_positive_int(batch, "batch")
+        P0 = _finite(_float_array(P0, "P0"), "P0")
+        if P0.shape == (m, m):
+            P = np.kron(np.eye(N), reduce_covariance(check_covariance(P0, "P0", definite=True), model.kron, "P0"))
+        elif P0.shape == (m * N, m * N):
+            P = reduce_covariance(check_covariance(P0, "P0", definite=True), model.kron, "P0")
+        else:
+            raise ValueError(f"Incompatible dimensions of P0; expected ({m}, {m}) per agent or ({m * N}, {m * N}) "
+                             f"but found {P0.shape}")
+        self._model, self._B, self._x = model, frozen_copy(B), x
+        self._P = np.broadcast_to(P, (batch, *P.shape)).copy()
+
+    @property
+    def x_hat(self) -> np.ndarray:
+        """Team estimates ``(runs, N, m)`` (a read-only view, replaced by the next step).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> dkf.CentralizedFilter(model, agent.B, np.ones((1, 6)), np.eye(2)).x_hat[0, 0]
+        array([1., 1.])
+        """
+        return _view(self._x)
+
+    @property
+    def P(self) -> np.ndarray:
+        """Reduced covariance ``(batch, M_r, M_r)`` (a read-only view, replaced by the next step).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> dkf.CentralizedFilter(model, agent.B, np.ones((1, 6)), np.eye(2), batch=2).P.shape
+        (2, 6, 6)
+        """
+        return _view(self._P)
+
+    def predict(self, U: ArrayLike) -> None:
+        """Prediction with the applied inputs.
+
+        Parameters
+        ----------
+        U : (runs, N, p) array_like
+            The inputs every agent applied.
+
+        Raises
+        ------
+        ValueError
+            Bad shape of `U`, or NaN/inf in the result (naming `U` when it holds them).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = dkf.CentralizedFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> central.predict(np.ones((1, 3, 1)))                    # p = dt^2 / 2, v = dt
+        >>> central.x_hat[0, 0]
+        array([0.005, 0.1  ])
+        """
+        model, B = self._model, self._B
+        Ut = _float_array(U, "U")
+        if Ut.shape != (self._x.shape[0], model.n_agents, B.shape[1]):
+            raise ValueError(f"Incompatible dimensions of U; expected ({self._x.shape[0]}, {model.n_agents}, "
+                             f"{B.shape[1]}) but found {Ut.shape}")
+        self._x, self._P = _centralized_predict(model, self._x, self._P, Ut, B)
+        if not np.isfinite(self._x).all():
+            _finite(Ut, "U")
+        _finite_state("centralized prediction", self._x, self._P)
+
+    def update(self, Z: ArrayLike, mask: ArrayLike) -> None:
+        """Update with every agent's measurements (information form).
+
+        Parameters
+        ----------
+        Z : (runs, N, N, m) array_like
+            Every agent's measurements.
+        mask : (N, N) or (batch, N, N) array_like of bool
+            Sensing mask; a mask per run gives every run its own covariance.
+
+        Raises
+        ------
+        ValueError
+            Bad shapes or mask values, or NaN/inf in the result (naming `Z` when it holds them).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous, sensing
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = dkf.CentralizedFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), graphs.path_graph(3), np.eye(2))
+        >>> central.update(Z, mask[0])
+        >>> bool(np.trace(central.P[0]) < 6.0)
+        True
+        """
+        model = self._model
+        N, m = model.n_agents, model.m
+        Zt = _float_array(Z, "Z")
+        if Zt.shape != (self._x.shape[0], N, N, m):
+            raise ValueError(f"Incompatible dimensions of Z; expected ({self._x.shape[0]}, {N}, {N}, {m}) "
+                             f"but found {Zt.shape}")
+        S = _check_mask(mask, N)
+        if S.shape[0] not in (1, self._x.shape[0]) or self._P.shape[0] not in (1, S.shape[0], self._x.shape[0]):
+            raise ValueError(f"mask has batch {S.shape[0]} but there are {self._x.shape[0]} runs and "
+                             f"{self._P.shape[0]} covariances")
+        self._x, self._P = _centralized_update(model, self._x, self._P, Zt, S)
+        if not np.isfinite(self._x).all():
+            _finite(Zt, "Z")
+        _finite_state("centralized update", self._x, self._P)
 
 
 # ----------------------------------------------------------------------------
@@ -1030,6 +1750,11 @@ def centralized_predict(
     model: TeamFilterModel, x: ArrayLike, P: ArrayLike, U: ArrayLike, B: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray]:
     """Centralized prediction with the applied inputs known exactly.
+
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`CentralizedFilter`. In a loop, build the filter once,
+    ``CentralizedFilter(model, B, x_hat0, P0)``, and call its :meth:`~CentralizedFilter.predict`: the fast path.
 
     Parameters
     ----------
@@ -1076,7 +1801,7 @@ def centralized_predict(
         raise ValueError(
             f"Incompatible dimensions of U; expected ({x.shape[0]}, {N}, {B.shape[1]}) but found {U.shape}"
         )
-    return _remember_result("centralized prediction", *_centralized_predict(model, x, P, U, B), cov=1)
+    return finite_result("centralized prediction", *_centralized_predict(model, x, P, U, B))
 
 
 def _centralized_predict(model, x, P, U, B):
@@ -1085,13 +1810,18 @@ def _centralized_predict(model, x, P, U, B):
     x_pred = x @ model.A.T + U @ B.T
     T = (model.A_r @ P.reshape(P.shape[0], N, mr, N * mr)).reshape(P.shape)
     T = (model.A_r @ np.swapaxes(T, -1, -2).reshape(P.shape[0], N, mr, N * mr)).reshape(P.shape)
-    return x_pred, _sym(T + np.kron(np.eye(N), model.Q_r))
+    return x_pred, symmetric_part(T + np.kron(np.eye(N), model.Q_r))
 
 
 def centralized_update(
     model: TeamFilterModel, x_pred: ArrayLike, P_pred: ArrayLike, Z: ArrayLike, mask: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray]:
     """Centralized update with *all* agents' measurements (information form).
+
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`CentralizedFilter`. In a loop, build the filter once,
+    ``CentralizedFilter(model, B, x_hat0, P0)``, and call its :meth:`~CentralizedFilter.update`: the fast path.
 
     ``P^{-1} = P^-^{-1} + sum_i H_i^T (H_i R H_i^T)^{-1} H_i``,
     ``x = x^- + P sum_i H_i^T (H_i R H_i^T)^{-1} (z_i - H_i x^-)``.
@@ -1146,7 +1876,7 @@ def centralized_update(
     for name, b in (("mask", S.shape[0]), ("Z", Zt.shape[0])):
         if P_pred.shape[0] not in (1, b) and b != 1:
             raise ValueError(f"{name} has batch {b} but P_pred has {P_pred.shape[0]}")
-    return _remember_result("centralized update", *_centralized_update(model, x_pred, P_pred, Zt, S), cov=1)
+    return finite_result("centralized update", *_centralized_update(model, x_pred, P_pred, Zt, S))
 
 
 def _centralized_update(model, x_pred, P_pred, Z, S):
@@ -1157,7 +1887,7 @@ def _centralized_update(model, x_pred, P_pred, Z, S):
     Dm = d[..., :, None] * d[..., None, :]
     W = np.linalg.inv(Dm * model.R_r + np.eye(Mr) * (1 - d[..., None])) * Dm  # (batch, N, Mr, Mr)
     info = np.linalg.inv(P_pred) + W.sum(axis=1)
-    P = _sym(np.linalg.inv(info))
+    P = symmetric_part(np.linalg.inv(info))
     R_ = x_pred.shape[0]
     innov = (Z - x_pred[:, None]).reshape(R_, N, Mr, k)
     total = (W @ innov).sum(axis=1)  # (runs, Mr, k); W broadcasts over runs when batch = 1
@@ -1365,6 +2095,9 @@ def _lyapunov_v(e, P, kron):
 def team_nees(model: TeamFilterModel, X_true: ArrayLike, X_hat: ArrayLike, Sigma_i: ArrayLike) -> np.ndarray:
     """NEES of every agent's team estimate: ``(runs, N)``, chi-square with ``m N`` dof.
 
+    Checks the covariance in full on every call (an eigenvalue test); a :class:`TeamFilter`
+    gives the same from its own state without one: :meth:`TeamFilter.nees`.
+
     Parameters
     ----------
     model : TeamFilterModel
@@ -1418,6 +2151,9 @@ def _team_nees(model, X_true, X_hat, Sigma_i):
 
 def f2_cross(model: TeamFilterModel, Sigma: ArrayLike, laplacian: ArrayLike) -> np.ndarray:
     """``F_2 E[e e_i^T]`` for every agent ``i``: reduced, shape ``(batch, N, M_r, M_r)``.
+
+    Checks the covariance in full on every call (an eigenvalue test); a :class:`TeamFilter`
+    gives the same from its own state without one: :meth:`TeamFilter.f2_cross`.
 
     Used to form the map ``C_i = E[e e_i^T] Σ_i^{-1}`` of Lemma 1 without
     storing the augmented covariance: ``F_2 C_i = F_2 E[e e_i^T] Σ_i^{-1}``.
@@ -1542,10 +2278,10 @@ def theorem1_min_eigenvalues(
     root = np.linalg.cholesky(Sig[:-1])
     rel = np.swapaxes(root, -1, -2) @ M @ root
     out = {
-        "min_eig": np.linalg.eigvalsh(_sym(M))[..., 0],
-        "min_eig_rel": np.linalg.eigvalsh(_sym(rel))[..., 0],
+        "min_eig": np.linalg.eigvalsh(symmetric_part(M))[..., 0],
+        "min_eig_rel": np.linalg.eigvalsh(symmetric_part(rel))[..., 0],
     }
-    _finite_result("Theorem 1 eigenvalue computation", *out.values())
+    finite_result("Theorem 1 eigenvalue computation", *out.values())
     return out
 
 
@@ -1571,14 +2307,27 @@ def _kron_factor(M: np.ndarray, k: int) -> np.ndarray | None:
     return None
 
 
-def _sym(P: np.ndarray) -> np.ndarray:
-    return 0.5 * (P + np.swapaxes(P, -1, -2))
+def _read_only(arr: np.ndarray) -> np.ndarray:
+    """A read-only copy of `arr`, handed out as a view (so its write flag cannot be set back)."""
+    return frozen_copy(arr)[...]
 
 
-#: Covariances returned by the public steps (symmetric PSD by construction), recognised when fed back.
-_RECENT_COVARIANCES = _RecentArrays(n=16)
-#: Laplacians already checked, by value (the topologies of a run are few and repeat at every step).
-_LAPLACIANS = _ValueMemo(max_entries=256, max_key_bytes=1 << 22, max_total_bytes=1 << 25)
+def _view(arr: np.ndarray) -> np.ndarray:
+    """A read-only view of a filter's state array."""
+    v = arr.view()
+    v.flags.writeable = False
+    return v
+
+
+def _finite_state(what: str, *arrays: np.ndarray, diagonal_only: bool = False) -> None:
+    """:func:`mascore._validation.finite_result` on a step's results (estimates first, covariance second).
+
+    With `diagonal_only` the covariance is tested on its diagonal only: the update that follows
+    every prediction tests all of it (a NaN of the prediction stays in place through the update).
+    """
+    if diagonal_only:
+        arrays = (arrays[0], np.diagonal(arrays[1], axis1=-2, axis2=-1), *arrays[2:])
+    finite_result(what, *arrays)
 
 
 def _check_model(model: object) -> TeamFilterModel:
@@ -1599,9 +2348,8 @@ def _check_estimates(model: TeamFilterModel, X: ArrayLike, name: str) -> np.ndar
 
 
 def _check_covariances(P: ArrayLike, name: str, shape: tuple, definite: bool = False, kron: int = 1) -> np.ndarray:
-    """A stack of covariances of the given shape (None: any batch size >= 1), symmetric PSD (or PD).
+    """A stack of covariances of the given shape (None: any batch size >= 1), symmetric PSD (or PD), checked in full.
 
-    A covariance that one of this module's steps returned (unmodified) is recognised without a scan.
     The error says what to do for the two common slips: a missing batch axis, and a full covariance
     where the model works on the reduced one (``kron > 1``).
     """
@@ -1616,9 +2364,7 @@ def _check_covariances(P: ArrayLike, name: str, shape: tuple, definite: bool = F
                     f"pass mascore.distributed_kf.reduce_covariance({name}, {kron})")
         raise ValueError(f"Incompatible dimensions of {name}; expected {want} but found {P.shape}".replace("'", "")
                          + hint)
-    if definite or P not in _RECENT_COVARIANCES:
-        check_covariance(P, name, definite=definite)
-    return P
+    return check_covariance(P, name, definite=definite)
 
 
 def _check_runs(X: np.ndarray, Y: np.ndarray, xname: str, yname: str) -> None:
@@ -1639,24 +2385,6 @@ def _check_batch(L: np.ndarray, Sig: np.ndarray, lname: str, sname: str, X: np.n
         raise ValueError(f"{sname} has batch {Sig.shape[0]} but there are {X.shape[0]} runs")
 
 
-def _finite_result(what: str, *arrays: np.ndarray):
-    """Refuse NaN/inf in a result computed from checked, finite input (an overflow): name the computation."""
-    for arr in arrays:  # a sum is NaN/inf if any entry is (or if it overflows: then the exact test decides)
-        if not math.isfinite(arr.sum()) and not np.all(np.isfinite(arr)):
-            raise ValueError(
-                f"the {what} produced NaN or inf from finite input: the values overflow floating point "
-                "(rescale the problem) or the covariances are too close to singular"
-            )
-    return arrays if len(arrays) > 1 else arrays[0]
-
-
-def _remember_result(what: str, *arrays: np.ndarray, cov: int):
-    """:func:`_finite_result`, then remember ``arrays[cov]`` (a PSD covariance) as checked."""
-    _finite_result(what, *arrays)
-    _RECENT_COVARIANCES.remember(arrays[cov])
-    return arrays
-
-
 def _check_laplacian(L: ArrayLike, N: int, name: str = "laplacian", any_batch: bool = False) -> np.ndarray:
     """One Laplacian ``(N, N)`` or a batch ``(batch, N, N)`` (``(..., N, N)`` with `any_batch`): finite, rows
     summing to zero, off-diagonal entries <= 0.
@@ -1667,20 +2395,17 @@ def _check_laplacian(L: ArrayLike, N: int, name: str = "laplacian", any_batch: b
     if (L.ndim < 2 or (L.ndim > 3 and not any_batch) or L.shape[-2:] != (N, N) or L.size == 0):
         want = f"(..., {N}, {N})" if any_batch else f"({N}, {N}) or (batch, {N}, {N})"
         raise ValueError(f"Incompatible dimensions of {name}; expected {want} but found {L.shape}")
-    key = L.tobytes()
-    if _LAPLACIANS.store.get(key) == L.shape:  # a topology of a long run: checked once per distinct value
-        return L
     _finite(L, name)
-    off = L * (1.0 - np.eye(N))
-    scale = max(1.0, float(np.abs(L).max()))
-    if np.any(off > 1e-8 * scale) or not np.allclose(L.sum(axis=-1), 0, atol=1e-8 * scale):
+    tol = 1e-8 * max(1.0, float(np.abs(L).max()))
+    off = L.copy()
+    off[..., np.arange(N), np.arange(N)] = 0.0
+    if off.max() > tol or np.abs(L.sum(axis=-1)).max() > tol:
         if np.all(L >= 0) and np.all(L[..., np.arange(N), np.arange(N)] == 0):
             raise ValueError(f"{name} looks like an adjacency matrix; pass mascore.graphs.laplacian(A) instead")
         raise ValueError(
             f"{name} must be a graph Laplacian: rows summing to zero and off-diagonal entries <= 0 "
             "(pass mascore.graphs.laplacian(A))"
         )
-    _LAPLACIANS.put(key, L.shape)
     return L
 
 
@@ -1703,28 +2428,19 @@ def _mask_vec(model: TeamFilterModel, S: np.ndarray) -> np.ndarray:
 def _joseph(Sig: np.ndarray, KH: np.ndarray, R: np.ndarray) -> np.ndarray:
     Psi = np.eye(Sig.shape[-1]) - KH
     KHt = np.swapaxes(KH, -1, -2)
-    return _sym(Psi @ Sig @ np.swapaxes(Psi, -1, -2) + KH @ R @ KHt)
+    return symmetric_part(Psi @ Sig @ np.swapaxes(Psi, -1, -2) + KH @ R @ KHt)
 
 
-def _apply_gain(model: TeamFilterModel, X_pred: ArrayLike, Z: ArrayLike, KH: np.ndarray) -> np.ndarray:
+def _apply_gain(model: TeamFilterModel, X_pred: np.ndarray, Z: np.ndarray, KH: np.ndarray) -> np.ndarray:
     """``X̂_i = X̂_i^- + G_i H_i (Z_i - X̂_i^-)`` with the reduced gain on the Kronecker axes."""
-    X = np.asarray(X_pred, dtype=float)
-    Zt = np.asarray(Z, dtype=float)
-    N, m, k, Mr = model.n_agents, model.m, model.kron, model.M_r
-    if X.ndim != 4 or X.shape[1:] != (N, N, m):
-        raise ValueError(f"Incompatible dimensions of X_pred; expected (runs, {N}, {N}, {m}) but found {X.shape}")
-    if Zt.shape != X.shape:
-        raise ValueError(f"Incompatible dimensions of Z; expected {X.shape} but found {Zt.shape}")
-    innov = (Zt - X).reshape(X.shape[0], N, Mr, k)
-    return X + (KH @ innov).reshape(X.shape)
+    N, k, Mr = model.n_agents, model.kron, model.M_r
+    innov = (Z - X_pred).reshape(X_pred.shape[0], N, Mr, k)
+    return X_pred + (KH @ innov).reshape(X_pred.shape)
 
 
-def _F1_means(model: TeamFilterModel, X_hat: ArrayLike, L: np.ndarray) -> np.ndarray:
+def _F1_means(model: TeamFilterModel, X: np.ndarray, L: np.ndarray) -> np.ndarray:
     """``F_1 X̂_i`` for every run and agent: ``A x̂_{i,j} - BK sum_l L_jl x̂_{i,l}`` (eq. (14))."""
-    X = np.asarray(X_hat, dtype=float)
     N, m = model.n_agents, model.m
-    if X.ndim != 4 or X.shape[1:] != (N, N, m):
-        raise ValueError(f"Incompatible dimensions of X_hat; expected (runs, {N}, {N}, {m}) but found {X.shape}")
     Lx = L[:, None] if L.ndim == 3 else L  # (batch,1,N,N) or (N,N)
     LX = Lx @ X.reshape(X.shape[0], N, N, m) if L.ndim == 2 else np.matmul(Lx, X)
     return X @ model.A.T - LX @ model.BK.T
@@ -1741,83 +2457,55 @@ def _F1_rows(model: TeamFilterModel, T: np.ndarray, L: np.ndarray) -> np.ndarray
     return model.A_r @ T - model.BK_r @ LT
 
 
-def _F1_reduced(model: TeamFilterModel, L: np.ndarray) -> np.ndarray:
-    """Dense reduced ``F_1 = I_N ⊗ A_r - L ⊗ BK_r`` per topology: ``(batch, M_r, M_r)`` from ``(batch, N, N)``."""
+def _agent_covariances(model: TeamFilterModel, Sig: np.ndarray) -> np.ndarray:
+    """Diagonal blocks of reduced augmented covariances ``(batch, N M_r, N M_r)`` -> ``(batch, N, M_r, M_r)``."""
     N, Mr = model.n_agents, model.M_r
-    LBK = (L[..., :, None, :, None] * model.BK_r[:, None, :]).reshape(L.shape[0], Mr, Mr)
-    return np.kron(np.eye(N), model.A_r)[None] - LBK
+    blocks = Sig.reshape(Sig.shape[0], N, Mr, N, Mr)
+    return np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)
 
 
 #: Augmented covariances up to this size (N M_r) are propagated with dense products, larger ones one row
 #: block at a time with the sparse F_1, F_2 (the crossover on one core is near N M_r = 256-512).
 _DENSE_MAX = 384
-#: Sparse Φ blocks of the topologies seen last (a run repeats a few topologies at every step).
-_PHI_CACHE: dict = {}
 
 
-def _phi_blocks(model: TeamFilterModel, L: np.ndarray):
-    """Sparse ``F_1 = I ⊗ A - L ⊗ BK`` ``(M_r, M_r)``, ``F_2`` ``(M_r, N M_r)`` and, for a small team, the dense Φ.
+def _phi_blocks(model: TeamFilterModel, L: np.ndarray, rows: bool) -> tuple:
+    """What the estimation-based prediction needs of one topology ``L`` ``(N, N)``.
 
-    ``Φ = I_N ⊗ F_1 + 1_N ⊗ F_2`` with ``(F_2 e)[j] = BK sum_l L_jl e[j, l]``: a
-    row of either block has about ``m_r (1 + nnz(L_j))`` non-zeros instead of
-    ``M_r``. Cached by value for the last topologies.
+    ``Φ = I_N ⊗ F_1 + 1_N ⊗ F_2`` with ``F_1 = I ⊗ A - L ⊗ BK`` and ``(F_2 e)[j] = BK sum_l L_jl e[j, l]``:
+    a row of either block has about ``m_r (1 + nnz(L_j))`` non-zeros instead of ``M_r``.
+
+    Returns ``(Φ,)`` dense for a small team; for the row-block path ``(F1aug, F_1, F_1^T, F_2, K2t)``:
+    ``F1aug = [F_1, I]`` sparse ``(M_r, 2 M_r)`` with the identity entry first in every row, dense
+    ``F_1`` and ``F_1^T``, sparse ``F_2`` ``(M_r, N M_r)`` and ``K2t[j] = (L_j ⊗ BK)^T`` ``(N, M_r, m_r)``
+    (column block ``j`` of ``X F_2^T`` is ``X[:, j] @ K2t[j]`` for ``X`` of shape ``(M_r, N M_r)``).
     """
-    key = (model.A_r.tobytes(), model.BK_r.tobytes(), L.tobytes(), L.shape)
-    hit = _PHI_CACHE.get(key)
-    if hit is not None:
-        return hit
     from scipy import sparse
 
     N, mr, Mr = model.n_agents, model.m_r, model.M_r
     F1 = sparse.csr_array(sparse.kron(sparse.identity(N), model.A_r) - sparse.kron(sparse.csr_array(L), model.BK_r))
     j, l = np.nonzero(L)
     a, b = np.nonzero(np.ones((mr, mr)))
-    rows = (j[:, None] * mr + a[None, :]).ravel()
+    rws = (j[:, None] * mr + a[None, :]).ravel()
     cols = (j[:, None] * Mr + l[:, None] * mr + b[None, :]).ravel()
     vals = (L[j, l][:, None] * model.BK_r[a, b][None, :]).ravel()
-    F2 = sparse.csr_array((vals, (rows, cols)), shape=(Mr, N * Mr))
-    Phi = None
-    if N * Mr <= _DENSE_MAX:
-        Phi = np.kron(np.eye(N), F1.toarray()) + np.kron(np.ones((N, 1)), F2.toarray())
-    if len(_PHI_CACHE) >= 64:
-        _PHI_CACHE.clear()
-    _PHI_CACHE[key] = out = (F1, F2, Phi)
-    return out
-
-
-#: Dense F_1, F_1^T and the F_2 factors of the topologies seen last (row-block path).
-_PHI_DENSE: dict = {}
-
-
-def _phi_dense(model: TeamFilterModel, L: np.ndarray):
-    """Dense ``F_1`` and ``F_1^T`` ``(M_r, M_r)``, sparse ``F_2`` and ``K2t[j] = (L_j ⊗ BK)^T`` ``(N, M_r, m_r)``.
-
-    Column block ``j`` of ``X F_2^T`` is ``X[:, j] @ K2t[j]`` for ``X`` of shape ``(M_r, N M_r)``.
-    Cached by value like :func:`_phi_blocks`.
-    """
-    key = (model.A_r.tobytes(), model.BK_r.tobytes(), L.tobytes(), L.shape)
-    hit = _PHI_DENSE.get(key)
-    if hit is not None:
-        return hit
-    N, mr, Mr = model.n_agents, model.m_r, model.M_r
-    F1s, F2s, _ = _phi_blocks(model, L)
-    F1 = F1s.toarray()
+    F2 = sparse.csr_array((vals, (rws, cols)), shape=(Mr, N * Mr))
+    if not rows:
+        return (np.kron(np.eye(N), F1.toarray()) + np.kron(np.ones((N, 1)), F2.toarray()),)
+    counts = np.diff(F1.indptr)
+    indptr = np.concatenate([[0], np.cumsum(counts + 1)]).astype(F1.indptr.dtype)
+    first = indptr[:-1]
+    rest = np.ones(indptr[-1], dtype=bool)
+    rest[first] = False
+    indices = np.empty(indptr[-1], dtype=F1.indices.dtype)
+    data = np.empty(indptr[-1])
+    indices[first], data[first] = Mr + np.arange(Mr), 1.0
+    indices[rest], data[rest] = F1.indices, F1.data
+    F1aug = sparse.csr_array((data, indices, indptr), shape=(Mr, 2 * Mr))
+    F1d = F1.toarray()
     K2 = (L[:, None, :, None] * model.BK_r[None, :, None, :]).reshape(N, mr, Mr)
     K2t = np.ascontiguousarray(np.swapaxes(K2, -1, -2))
-    if len(_PHI_DENSE) >= 64:
-        _PHI_DENSE.clear()
-    _PHI_DENSE[key] = out = (F1, F1.T, F2s, K2t)
-    return out
-
-
-def _csr_addmul(A, X: np.ndarray, Y: np.ndarray) -> None:
-    """``Y += A X`` for a CSR matrix `A` and C-contiguous `X`, `Y` (in place, no temporary)."""
-    try:  # the kernel behind ``csr @ dense``, here with a preset, reused output
-        from scipy.sparse._sparsetools import csr_matvecs
-    except ImportError:  # pragma: no cover - private scipy API
-        Y += A @ X
-        return
-    csr_matvecs(A.shape[0], A.shape[1], X.shape[1], A.indptr, A.indices, A.data, X.ravel(), Y.ravel())
+    return F1aug, F1d, F1d.T, F2, K2t
 
 
 def _gemm_acc(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> None:
@@ -1828,63 +2516,6 @@ def _gemm_acc(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> None:
     r = dgemm(1.0, B.T, A.T, 1.0, Ct, overwrite_c=1)
     if r.ctypes.data != Ct.ctypes.data:  # pragma: no cover - dgemm had to copy
         Ct[...] = r
-
-
-class _ResultPool:
-    """Recycles the large covariance arrays the row-block steps return, once the caller has dropped them.
-
-    A step of a long run returns ``Σ`` of ``8 (N M_r)^2`` bytes (33 MB at N = 32) and the previous one
-    is dropped by then: fresh memory of that size costs a page fault per page at first touch (and on a
-    fragmented machine a transparent-huge-page compaction stall), more than the step's arithmetic. An
-    array is handed out again only when nothing but the pool refers to it (no variable, view or
-    buffer of the caller's); otherwise a fresh one is allocated. At most `n` arrays of at most
-    `max_bytes` together are kept.
-    """
-
-    def __init__(self, n: int = 3, max_bytes: int = 1 << 28, min_bytes: int = 1 << 20) -> None:
-        self._arrs: list[np.ndarray] = []
-        self._n, self._max, self._min = n, max_bytes, min_bytes
-        self._lock = threading.Lock()
-        probe = [np.empty(1)]
-        self._free = sys.getrefcount(probe[0])  # the count of an array only the pool refers to
-
-    def empty(self, shape: tuple) -> np.ndarray:
-        size = math.prod(shape)
-        if size * 8 < self._min or size * 8 > self._max:
-            return np.empty(shape)
-        with self._lock:
-            arrs = self._arrs
-            for k in range(len(arrs)):
-                if arrs[k].shape == shape and sys.getrefcount(arrs[k]) == self._free:
-                    a = arrs.pop(k)
-                    arrs.append(a)  # most recently used last
-                    return a
-            a = np.empty(shape)
-            arrs.append(a)
-            while len(arrs) > self._n or sum(x.nbytes for x in arrs) > self._max:
-                arrs.pop(0)
-            return a
-
-
-_RESULTS = _ResultPool()
-
-
-_WORK = threading.local()
-
-
-def _work(size: int, slot: int = 0) -> np.ndarray:
-    """A flat float work array of at least `size` entries, reused between calls (per thread and slot).
-
-    Fresh memory of this size costs a page fault per 4 kB at first touch; the row-block recursions run
-    with the same sizes at every step.
-    """
-    arrs = getattr(_WORK, "arrs", None)
-    if arrs is None:
-        arrs = _WORK.arrs = {}
-    a = arrs.get(slot)
-    if a is None or a.size < size:
-        a = arrs[slot] = np.empty(size)
-    return a[:size]
 
 
 def _observable(F: np.ndarray, H: np.ndarray, tol: float) -> bool:

@@ -30,8 +30,8 @@ from ._validation import (
     check_positive,
     check_positive_int,
     check_square,
+    frozen_copy,
 )
-from ._validation import cached_covariance as _const_covariance
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .graphs import laplacian as graph_laplacian
@@ -120,11 +120,6 @@ def consensus_control(views: ArrayLike, laplacian: ArrayLike, K: ArrayLike) -> n
         raise ValueError(
             f"the leading (batch) axes of laplacian {L.shape} and views {Y.shape} do not broadcast"
         ) from None
-    return _consensus_control(Y, L, K)
-
-
-def _consensus_control(Y: np.ndarray, L: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """:func:`consensus_control` without checks."""
     weighted = np.einsum("...ij,...ijm->...im", L, Y)
     return -weighted @ K.T
 
@@ -152,11 +147,6 @@ def true_state_views(states: ArrayLike) -> np.ndarray:
     x = _finite(_float_array(states, "states"), "states")
     if x.ndim < 2:
         raise ValueError(f"states must have shape (..., N, m); got {x.shape}")
-    return _true_state_views(x)
-
-
-def _true_state_views(x: np.ndarray) -> np.ndarray:
-    """:func:`true_state_views` without checks."""
     N = x.shape[-2]
     return np.broadcast_to(x[..., None, :, :], (*x.shape[:-1][:-1], N, N, x.shape[-1]))
 
@@ -210,18 +200,13 @@ def propagate_team(
     m = x.shape[-1]
     A = check_square(_float_array(A, "A"), "A", m)
     B = as_matrix(_float_array(B, "B"), "B", (m, u.shape[-1]))
-    Q = _const_covariance(Q, "Q", size=m)
+    Q = check_covariance(_float_array(Q, "Q"), "Q", size=m)
     if Q.ndim != 2:
         raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
     try:
         np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
     except ValueError:
         raise ValueError(f"the leading axes of states {x.shape} and inputs {u.shape} do not broadcast") from None
-    return _propagate_team(rng, x, u, A, B, Q)
-
-
-def _propagate_team(rng, x, u, A, B, Q):
-    """:func:`propagate_team` without checks."""
     w = rng.standard_normal(x.shape) @ _psd_factor(Q, cholesky_first=True).T
     return x @ A.T + u @ B.T + w
 
@@ -261,7 +246,9 @@ class RendezvousModel:
     """The rendezvous loop's model: identical agents, consensus gain and noise (Song et al. eqs. (1)-(4)).
 
     Checked once when built, then passed to :func:`simulate_rendezvous` and
-    :func:`expected_spread` (instead of repeating the same nine arguments).
+    :func:`expected_spread` (instead of repeating the same nine arguments). The
+    model keeps read-only copies of its matrices: changing the arrays it was built
+    from, or writing into ``model.Q``, cannot bypass the check.
 
     Parameters
     ----------
@@ -321,8 +308,13 @@ class RendezvousModel:
             raise TypeError(f"dt must be a positive sampling time in seconds; got {type(dt).__name__} {dt!r}")
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive sampling time in seconds; got {dt!r}")
-        for name, value in (("A", A), ("B", B), ("K", K), ("Q", Q), ("R", R), ("dt", float(dt))):
-            object.__setattr__(self, name, value)
+        for name, value in (("A", A), ("B", B), ("K", K), ("Q", Q), ("R", R)):
+            object.__setattr__(self, name, frozen_copy(value))
+        object.__setattr__(self, "dt", float(dt))
+
+    def __reduce__(self) -> tuple:
+        # pickle and copy rebuild through the constructor: the copy is checked and read-only too
+        return (type(self), (self.A, self.B, self.K, self.Q, self.R, self.dt))
 
     @property
     def m(self) -> int:
@@ -441,7 +433,7 @@ def expected_spread(
         raise ValueError(f"adjacency must be ({N}, {N}) or ({n_runs}, {N}, {N}); got {Adj.shape}")
     Lb = graph_laplacian(Adj).reshape(-1, N, N)  # (G, N, N), G = 1 or R
     Nm = N * m
-    F1 = np.stack([dkf._closed_loop_matrices(A, BK, Lg)[0] for Lg in Lb])  # eq. (11), one per graph
+    F1 = np.stack([dkf.closed_loop_matrices(A, BK, Lg)[0] for Lg in Lb])  # eq. (11), one per graph
     noise = np.broadcast_to(Q, (Lb.shape[0], N, m, m)).copy()
     if mode == "measurement":
         Rr = team_noise_covariance(R, N, m).reshape(N, m, N, m)
@@ -668,6 +660,7 @@ def simulate_rendezvous(
     states = np.empty((n_steps + 1, n_runs, N, m))
     states[0] = x
     out: dict[str, np.ndarray | None] = {}
+    team = central_filter = None
     if filt:
         if x_hat0 is None or P0 is None:
             raise ValueError(f"mode {mode!r} needs x_hat0 and P0 (initial estimate and its covariance)")
@@ -678,13 +671,10 @@ def simulate_rendezvous(
             raise ValueError(f"Incompatible dimensions of x_hat0; expected ({n_runs}, {N * m}) but found {xh0.shape}")
         if not np.all(np.isfinite(xh0)):
             raise ValueError("x_hat0 contains NaN or infinite entries")
-        X_hat = np.broadcast_to(xh0.reshape(n_runs, 1, N, m), (n_runs, N, N, m)).copy()
-        Sig_aug = dkf.eb_initial_covariance(filter_model, P0, common=True)
-        Sig_i = dkf._agent_covariances(filter_model, Sig_aug)
-        nb = 1 if switching or Adj.ndim == 2 else n_runs
-        Sig_aug = np.broadcast_to(Sig_aug, (nb, *Sig_aug.shape[1:])).copy()
-        Sig_i = np.broadcast_to(Sig_i, (nb, *Sig_i.shape[1:])).copy()
-        KH = np.zeros_like(Sig_i)
+        # one covariance for a shared topology (fixed or switching), else one per run's fixed graph
+        team = dkf.TeamFilter(filter_model, topology(0)[2], xh0, P0, mode="eb" if mode == "estimation" else "mb",
+                              exact_control_noise=exact_control_noise and mode == "measurement-filter")
+        nb = team.Sigma.shape[0]
         n = filter_model.kron
         pos = _position_index(filter_model)
         out["pos_error"] = np.empty((n_steps + 1, n_runs, N))
@@ -696,56 +686,51 @@ def simulate_rendezvous(
             if mode == "estimation":
                 out["f2_cross"] = np.empty((n_steps + 1, N, filter_model.M_r, filter_model.M_r))
         if central:
-            xc = xh0.reshape(n_runs, N, m).copy()
-            Pc = Sig_i[:, 0].copy()
+            central_filter = dkf.CentralizedFilter(filter_model, B, xh0, P0, batch=nb)
             out["central_pos_std"] = np.empty((n_steps + 1, nb))
             out["central_pos_error"] = np.empty((n_steps + 1, n_runs))
 
         def record(k: int) -> None:
-            e = x[:, None] - X_hat
+            Sig_i = team.agent_covariances()
+            e = x[:, None] - team.X_hat
             err = e[..., pos_slice]
             out["pos_error"][k] = np.sqrt(np.sum(err**2, axis=(-1, -2)))
             diag = np.diagonal(Sig_i, axis1=-2, axis2=-1)[..., pos]
             out["pos_std"][k] = np.sqrt(n * diag.sum(axis=-1))
-            out["nees"][k] = dkf._team_nees(filter_model, x, X_hat, Sig_i)
+            out["nees"][k] = team.nees(x)
             if nb == 1:
                 out["sigma_i"][k] = Sig_i[0]
-                out["gains"][k] = KH[0]
+                out["gains"][k] = team.KH[0]
                 if mode == "estimation":
-                    out["f2_cross"][k] = dkf._f2_cross(filter_model, Sig_aug, topology(k)[2])[0]
+                    out["f2_cross"][k] = team.f2_cross(topology(k)[2])[0]
             if central:
+                Pc, xc = central_filter.P, central_filter.x_hat
                 out["central_pos_std"][k] = np.sqrt(n * np.diagonal(Pc, axis1=-2, axis2=-1)[..., pos].sum(-1))
                 out["central_pos_error"][k] = np.sqrt(np.sum((x - xc)[..., pos_slice] ** 2, axis=(-1, -2)))
 
         pos_slice = slice(0, m // 2)
         record(0)
-    # the loop runs on the unchecked kernels: every argument was checked above
     Z, _ = _measure(meas_rng, x, topology(0)[1], R_team)
     for k in progress_bar(range(n_steps), enabled=progress, desc=f"rendezvous ({mode})", leave=False):
         Lap = topology(k)[2]
         if mode == "true":
-            U = _consensus_control(_true_state_views(x), Lap, K)
+            U = consensus_control(true_state_views(x), Lap, K)
         elif mode in ("measurement", "measurement-filter"):
-            U = _consensus_control(Z, Lap, K)
+            U = consensus_control(Z, Lap, K)
         else:
-            U = _consensus_control(X_hat, Lap, K)
-        x_new = _propagate_team(proc_rng, x, U, A, B, Q)
-        if filt and central:
-            xc, Pc = dkf._centralized_predict(filter_model, xc, Pc, U, B)
-        if mode == "estimation":
-            X_hat, Sig_aug = dkf._eb_predict(filter_model, X_hat, Sig_aug, Lap)
-        elif mode == "measurement-filter":
-            X_hat, Sig_i = dkf._mb_predict(filter_model, X_hat, Sig_i, Lap, KH if exact_control_noise else None)
+            U = consensus_control(team.X_hat, Lap, K)
+        x_new = propagate_team(proc_rng, x, U, A, B, Q)
+        if central_filter is not None:
+            central_filter.predict(U)
+        if filt:
+            team.predict(Lap if switching else None)
         x = x_new
         _, S_next, _ = topology(k + 1)
         Z, _ = _measure(meas_rng, x, S_next, R_team)
-        if mode == "estimation":
-            X_hat, Sig_aug, KH = dkf._eb_update(filter_model, X_hat, Sig_aug, Z, S_next[None] if S_next.ndim == 2 else S_next)
-            Sig_i = dkf._agent_covariances(filter_model, Sig_aug)
-        elif mode == "measurement-filter":
-            X_hat, Sig_i, KH = dkf._mb_update(filter_model, X_hat, Sig_i, Z, S_next[None] if S_next.ndim == 2 else S_next)
-        if filt and central:
-            xc, Pc = dkf._centralized_update(filter_model, xc, Pc, Z, S_next[None] if S_next.ndim == 2 else S_next)
+        if filt:
+            team.update(Z, S_next)
+        if central_filter is not None:
+            central_filter.update(Z, S_next)
         states[k + 1] = x
         if filt:
             record(k + 1)

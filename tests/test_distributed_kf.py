@@ -472,3 +472,245 @@ def test_covariance_shape_errors_say_what_to_do():
         dk.mb_predict(model, X, np.broadcast_to(np.eye(12), (1, 3, 12, 12)).copy(), Lap)
     with pytest.raises(ValueError, match=r"add the leading batch axis \(Sigma\[None\]\)"):
         dk.mb_predict(model, X, np.broadcast_to(np.eye(6), (3, 6, 6)).copy(), Lap)
+
+
+# ---------------------------------------------------------------------------- checked models, filter objects
+
+
+def _ring_filter(N, seed, mode="eb"):
+    """A TeamFilter on a ring with random initial estimates, and `steps` of measurements for it."""
+    model = _model(N)
+    rng = np.random.default_rng(seed)
+    ring = ring_graph(N)
+    team = dk.TeamFilter(model, laplacian(ring), rng.normal(size=(2, N * 4)), np.diag([4.0, 4.0, 1.0, 1.0]),
+                         mode=mode)
+    meas = [measure(rng, rng.normal(size=(2, N, 4)), ring, 2.0 * np.eye(4)) for _ in range(20)]
+    return team, meas
+
+
+def _run(team, meas):
+    for Z, S in meas:
+        team.predict()
+        team.update(Z, S[0])
+    return team.X_hat.copy(), team.Sigma.copy(), team.KH.copy()
+
+
+@pytest.mark.parametrize("mode", ["eb", "mb"])
+def test_independent_filters_in_8_threads_equal_a_serial_run(mode):
+    """Filters share no state (no module caches, pools or thread-local buffers): 8 threads, byte-identical."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    N = 16  # the row-block path with its in-place updates and work arrays (N M_r = 512 > 384)
+    serial = [_run(*_ring_filter(N, seed, mode)) for seed in range(8)]
+    jobs = [_ring_filter(N, seed, mode) for seed in range(8)]
+    with ThreadPoolExecutor(max_workers=8) as pool:
+        threaded = list(pool.map(lambda job: _run(*job), jobs))
+    for a, b in zip(serial, threaded):
+        for x, y in zip(a, b):
+            assert x.tobytes() == y.tobytes()
+
+
+@pytest.mark.parametrize("N", [4, 16])
+def test_team_filter_equals_the_plain_array_functions(N):
+    """One path: the object's steps and eb_predict/eb_update (checked in full) give the same bytes."""
+    team, meas = _ring_filter(N, 3)
+    X, Sig = team.X_hat.copy(), team.Sigma.copy()
+    for Z, S in meas[:3]:
+        X, Sig = dk.eb_predict(team.model, X, Sig, team.laplacian)
+        X, Sig, KH = dk.eb_update(team.model, X, Sig, Z, S[0])
+        team.predict()
+        team.update(Z, S[0])
+        assert team.X_hat.tobytes() == X.tobytes() and team.Sigma.tobytes() == Sig.tobytes()
+        assert team.KH.tobytes() == KH.tobytes()
+
+
+def test_measurement_based_filter_with_exact_control_noise_equals_mb_predict():
+    N = 5
+    model = _model(N)
+    rng = np.random.default_rng(8)
+    A = path_graph(N)
+    team = dk.TeamFilter(model, laplacian(A), rng.normal(size=(1, N * 4)), np.eye(4), mode="mb",
+                         exact_control_noise=True)
+    Z, S = measure(rng, rng.normal(size=(1, N, 4)), A, 2.0 * np.eye(4))
+    team.update(Z, S[0])
+    X, Sig = dk.mb_predict(model, team.X_hat, team.Sigma, laplacian(A), team.KH)
+    team.predict()
+    assert team.X_hat.tobytes() == X.tobytes() and team.Sigma.tobytes() == Sig.tobytes()
+
+
+def test_model_arrays_are_read_only_and_copied():
+    """The hole of the value caches: R_r changed in place after the check. Now refused, and the arrays the
+    model was built from are copied (changing them later cannot reach the model)."""
+    R = 2.0 * np.eye(4)
+    model = dk.team_filter_model(AGENT.A, AGENT.B, K, np.eye(4), R, 4)
+    for name in ("A", "BK", "Q", "R", "A_r", "BK_r", "Q_r", "R_r"):
+        arr = getattr(model, name)
+        with pytest.raises(ValueError, match="read-only"):
+            arr[0, 0] = -5.0
+        with pytest.raises(ValueError):
+            arr.setflags(write=True)
+    R[:] = -1.0  # the caller's array: the model keeps its checked copy
+    assert model.R_r[0, 0] == 2.0
+    team, meas = _ring_filter(4, 1)
+    for Z, S in meas[:5]:
+        team.predict()
+        team.update(Z, S[0])
+    assert np.linalg.eigvalsh(team.Sigma[0]).min() > 0
+    with pytest.raises(ValueError, match="read-only"):
+        team.Sigma[0, 0, 0] = 0.0  # the state the filter hands out cannot be written either
+
+
+def test_model_constructor_checks_everything():
+    A = AGENT.A
+    with pytest.raises(ValueError, match="R must be positive definite"):
+        dk.TeamFilterModel(A, BK, np.eye(4), np.zeros((12, 12)), 3)
+    with pytest.raises(ValueError, match="Q must be positive semidefinite"):
+        dk.TeamFilterModel(A, BK, -np.eye(4), np.eye(12), 3)
+    with pytest.raises(ValueError, match="Incompatible dimensions of R"):
+        dk.TeamFilterModel(A, BK, np.eye(4), np.eye(8), 3)
+    with pytest.raises(ValueError, match="BK contains NaN"):
+        dk.TeamFilterModel(A, np.full((4, 4), np.nan), np.eye(4), np.eye(12), 3)
+    with pytest.raises(ValueError, match=r"Q is not of the form Q_r ⊗ I_2"):
+        dk.TeamFilterModel(A, BK, np.diag([1.0, 2.0, 1.0, 1.0]), np.eye(12), 3, kron=2)
+    model = dk.TeamFilterModel(A, BK, np.eye(4), np.eye(12), 3, kron=2)
+    assert model.R_r.shape == (6, 6) and model.M_r == 6
+
+
+def test_initial_covariance_checked_in_full_once_and_named():
+    model = _model(3)
+    L = laplacian(path_graph(3))
+    with pytest.raises(ValueError, match="P0 must be positive semidefinite"):
+        dk.TeamFilter(model, L, np.zeros((1, 12)), np.diag([1.0, 1.0, -1.0, -1.0]))
+    bad = np.eye(18)[None]
+    bad[0, 0, 0] = -1.0
+    with pytest.raises(ValueError, match="Sigma0 must be positive semidefinite"):
+        dk.TeamFilter(model, L, np.zeros((1, 12)), Sigma0=bad)
+    with pytest.raises(ValueError, match="exactly one of P0"):
+        dk.TeamFilter(model, L, np.zeros((1, 12)))
+    with pytest.raises(ValueError, match="x_hat0 contains NaN"):
+        dk.TeamFilter(model, L, np.full((1, 12), np.nan), np.eye(4))
+    with pytest.raises(ValueError, match="laplacian looks like an adjacency"):
+        dk.TeamFilter(model, path_graph(3), np.zeros((1, 12)), np.eye(4))
+
+
+def test_a_step_checks_shapes_and_names_a_non_finite_input():
+    team, meas = _ring_filter(4, 2)
+    Z, S = meas[0]
+    team.predict()
+    with pytest.raises(ValueError, match="Incompatible dimensions of Z"):
+        team.update(Z[:, :3], S[0])
+    with pytest.raises(ValueError, match="mask must include every agent itself"):
+        team.update(Z, np.zeros((4, 4), bool))
+    bad = Z.copy()
+    bad[0, 1, 1, 0] = np.nan
+    with pytest.raises(ValueError, match="Z contains NaN"):
+        team.update(bad, S[0])
+    with pytest.raises(ValueError, match="laplacian looks like an adjacency"):
+        team.predict(ring_graph(4))
+
+
+def test_switching_laplacian_in_predict_equals_a_filter_built_on_it():
+    team, meas = _ring_filter(4, 4)
+    other, _ = _ring_filter(4, 4)
+    L2 = laplacian(complete_graph(4))
+    other.predict(L2)
+    fresh = dk.TeamFilter(team.model, L2, team.X_hat, Sigma0=team.Sigma)
+    fresh.predict()
+    assert other.Sigma.tobytes() == fresh.Sigma.tobytes() and other.X_hat.tobytes() == fresh.X_hat.tobytes()
+    np.testing.assert_array_equal(other.laplacian, L2)
+
+
+def test_per_run_masks_give_every_run_its_own_covariance():
+    """Dropped links: a mask per run splits the shared covariance; each run then equals its own filter."""
+    team, meas = _ring_filter(4, 5)
+    Z, S = meas[0]
+    masks = np.stack([S[0], np.eye(4, dtype=bool) | S[0]])
+    masks[1, 0, 1] = masks[1, 1, 0] = False
+    single, _ = _ring_filter(4, 5)
+    team.predict()
+    team.update(Z, masks)
+    single.predict()
+    single.update(Z, masks[1])
+    assert team.Sigma.shape[0] == 2
+    assert team.Sigma[1].tobytes() == single.Sigma[0].tobytes()
+
+
+def test_memory_held_after_a_run_is_small():
+    """No module-level memory: after 20 steps at N = 26 (augmented covariance 14.6 MB) the package holds
+    under 10 MB beyond the caller's results: the filter's work arrays while it lives, nothing once the
+    caller drops it; the plain functions keep nothing either."""
+    import gc
+    import tracemalloc
+
+    _run(*_ring_filter(16, 0))  # first use of the row-block path imports scipy.sparse and BLAS: not counted
+    N = 26
+    model = _model(N)
+    rng = np.random.default_rng(9)
+    ring = ring_graph(N)
+    meas = [measure(rng, rng.normal(size=(1, N, 4)), ring, 2.0 * np.eye(4)) for _ in range(20)]
+    gc.collect()
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        team = dk.TeamFilter(model, laplacian(ring), rng.normal(size=(1, N * 4)), np.eye(4))
+        for Z, S in meas:
+            team.predict()
+            team.update(Z, S[0])
+        gc.collect()
+        alive = tracemalloc.get_traced_memory()[0] - base
+        assert alive - team.Sigma.nbytes - team.X_hat.nbytes - team.KH.nbytes < 10e6  # the work arrays
+        X, Sig = team.X_hat.copy(), team.Sigma.copy()
+        del team
+        for Z, S in meas[:2]:  # the plain functions too (slow: an eigenvalue check of Sigma per call)
+            X, Sig, _ = dk.eb_update(model, *dk.eb_predict(model, X, Sig, laplacian(ring)), Z, S[0])
+        gc.collect()
+        held = tracemalloc.get_traced_memory()[0] - base - X.nbytes - Sig.nbytes
+    finally:
+        tracemalloc.stop()
+    assert Sig.nbytes > 14e6
+    assert held < 10e6
+
+
+def test_no_module_level_memory_or_private_scipy():
+    """Regression guard for the removed machinery (value caches, reference-count pool, thread-local pools)."""
+    import inspect
+
+    import mascore.rendezvous as rv
+
+    for module in (dk, rv):
+        text = inspect.getsource(module)
+        for banned in ("_sparsetools", "getrefcount", "threading", "_ValueMemo", "_RecentArrays", "cached_"):
+            assert banned not in text, (module.__name__, banned)
+    assert not [k for k, v in vars(dk).items() if isinstance(v, dict) and not k.startswith("__")]
+
+
+def test_rendezvous_model_keeps_read_only_copies():
+    Q = np.eye(4)
+    model = _rv(Q=Q)
+    Q[0, 0] = -1.0  # the caller's array, changed after the check
+    assert model.Q[0, 0] == 1.0
+    with pytest.raises(ValueError, match="read-only"):
+        model.R[0, 0] = -1.0
+
+
+def test_an_initial_covariance_of_any_memory_layout_gives_the_same_run():
+    """The row-block steps work in place on a C-ordered copy: a Fortran-ordered Sigma0 changes nothing."""
+    team, meas = _ring_filter(16, 6)
+    runs = []
+    for Sig in (team.Sigma.copy(), np.asfortranarray(team.Sigma)):
+        f = dk.TeamFilter(team.model, team.laplacian, team.X_hat, Sigma0=Sig)
+        runs.append(_run(f, meas[:3]))
+    for x, y in zip(*runs):
+        assert x.tobytes() == y.tobytes()
+
+
+def test_pickled_and_copied_models_stay_checked_and_read_only():
+    import copy
+    import pickle
+
+    for model in (_model(3), _rv()):
+        for clone in (pickle.loads(pickle.dumps(model)), copy.deepcopy(model), copy.copy(model)):
+            assert type(clone) is type(model) and clone is not model
+            for name in ("A", "Q", "R"):
+                assert not getattr(clone, name).flags.writeable
+                np.testing.assert_array_equal(getattr(clone, name), getattr(model, name))

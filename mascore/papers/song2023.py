@@ -242,8 +242,8 @@ def estimator_step_seconds(n_agents: int, repeat: int = 5, plain_repeat: int = 3
 
     Both advance all ``n_agents`` whole-team estimates and the full augmented
     covariance (eqs. (14), (29)-(34), (16)-(20)) once, on a ring with Q = R = I:
-    the structured path (:func:`mascore.distributed_kf.eb_predict` +
-    ``eb_update``) and the one written straight from the equations
+    the structured path (:class:`mascore.distributed_kf.TeamFilter`: ``predict`` +
+    ``update`` on a checked model) and the one written straight from the equations
     (``plain_estimation_based_step``). This machine; reported, never asserted.
 
     Parameters
@@ -280,8 +280,13 @@ def estimator_step_seconds(n_agents: int, repeat: int = 5, plain_repeat: int = 3
     Z, S = measure(rng, rng.normal(size=(1, n_agents, 2 * s.n)), adj, noise)
     Sig_full = dkf.expand_covariance(Sig[0], model.kron)
     z = [stacked_measurement(Z[0], S[0], i) for i in range(n_agents)]
-    structured = median_time(lambda: dkf.eb_update(model, *dkf.eb_predict(model, X_hat, Sig, L), Z, S[0]),
-                             repeat=repeat)
+    team = dkf.TeamFilter(model, L, X_hat, s.P0(), common=False)
+
+    def step() -> None:
+        team.predict()
+        team.update(Z, S[0])
+
+    structured = median_time(step, repeat=repeat)
     plain = median_time(lambda: plain_estimation_based_step(
         X_hat[0].reshape(n_agents, -1), Sig_full, s.A, model.BK, noise, model.R, adj, z), repeat=plain_repeat)
     return {"structured_s": structured, "plain_s": plain, "speedup": plain / structured}
@@ -797,17 +802,16 @@ def simulate_remark6(
     mask = sensing_mask(adjacency)
     model = dkf.team_filter_model(s.A, s.B, s.K, Q, R, N)
     proc_rng, meas_rng = rng.spawn(2)
-    X_hat = np.broadcast_to(x_hat0.reshape(n_runs, 1, N, m), (n_runs, N, N, m)).copy()
-    Sig = dkf.eb_initial_covariance(model, s.P0(), common=True)
-    Sig = np.broadcast_to(Sig, (1 if mask.ndim == 2 else n_runs, *Sig.shape[1:])).copy()
+    # one covariance for a shared graph; a graph per run gives every run its own at the first update
+    team = dkf.TeamFilter(model, Lc, x_hat0, s.P0(), common=True)
     states = np.empty((n_steps + 1, *x0.shape))
     states[0] = x = x0
     measure(meas_rng, x, adjacency, R)  # the draw simulate_rendezvous makes at k = 0 (same noise streams)
     for k in progress_bar(range(n_steps), enabled=progress, desc="rendezvous (Remark 6)", leave=False):
-        x = propagate_team(proc_rng, x, consensus_control(X_hat, Lc, s.K), s.A, s.B, Q)
-        X_hat, Sig = dkf.eb_predict(model, X_hat, Sig, Lc)
+        x = propagate_team(proc_rng, x, consensus_control(team.X_hat, Lc, s.K), s.A, s.B, Q)
+        team.predict()
         Z, _ = measure(meas_rng, x, adjacency, R)
-        X_hat, Sig, _ = dkf.eb_update(model, X_hat, Sig, Z, mask)
+        team.update(Z, mask)
         states[k + 1] = x
     return states
 
