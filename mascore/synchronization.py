@@ -24,8 +24,8 @@ Graphs may be directed (the paper's example is a directed ring pinned at one
 agent): nothing here uses a Laplacian eigen-decomposition. What the theory needs
 is checked instead: Assumption 4 (a directed spanning tree with a pinned root)
 wherever Gamma is formed. Every public function checks its arguments and names
-the one at fault; :func:`local_control`, called once per time step, checks the
-constant graph and gains once per distinct value (cached).
+the one at fault; :class:`SynchronizationLaw` checks the constant graph and gains
+once, when it is built, and then each call checks only the estimates it is given.
 """
 
 from __future__ import annotations
@@ -45,6 +45,8 @@ from ._validation import (
     check_covariance,
     check_positive,
     check_positive_int,
+    frozen_copy,
+    require_finite,
 )
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
@@ -60,6 +62,7 @@ __all__ = [
     "fit_alpha",
     "lemma2_r",
     "local_control",
+    "SynchronizationLaw",
     "mu_bar",
     "pinned_interaction_matrix",
     "power_norms",
@@ -735,15 +738,92 @@ def design_synchronization(
                       Gamma=Gamma, eigs=eigs, in_circle=inside, A_c=Ac, B_c=Bc, rho=spectral_radius(Ac))
 
 
-def local_control(
-    xhat: ArrayLike, x_leader: ArrayLike, adjacency: ArrayLike, pinning: ArrayLike, K: ArrayLike, c: float
-) -> np.ndarray:
-    """The law of Sec. 4.2 for all agents, batched.
+class SynchronizationLaw:
+    """The law of Sec. 4.2 on a fixed graph and gain, checked once.
 
     The graph may be directed; it is checked (finite, non-negative, no self-loops) but
     Assumption 4 is not required here (it is a property of the design, checked by
-    :func:`design_synchronization`). The constant `adjacency`, `pinning`, `K`, `c` are
-    checked once per distinct value; `xhat` and `x_leader` at every call.
+    :func:`design_synchronization`). The constructor checks `adjacency`, `pinning`,
+    `K` and `c` and keeps read-only copies; a call checks only the shapes and
+    finiteness of `xhat` and `x_leader`. Safe to share between threads.
+
+    Parameters
+    ----------
+    adjacency : (N, N) array_like
+        Interaction graph (``a_ij > 0``: agent i hears agent j).
+    pinning : (N,) array_like
+        Pinning gains ``g_i >= 0`` (``g_i > 0``: agent i hears the leader).
+    K : (m, n) array_like
+        Control gain.
+    c : float
+        Coupling gain, ``c >= 0`` (dimensionless).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, synchronization as sync
+    >>> ring = graphs.adjacency_from_edges(4, [(3, 0), (0, 1), (1, 2), (2, 3)], directed=True)   # eq. (24)
+    >>> law = sync.SynchronizationLaw(ring, [1.0, 0.0, 0.0, 0.0], np.eye(2), 1.5)
+    >>> law(np.zeros((4, 2)), np.ones(2))[0]                  # c (1 + d_1 + g_1)^-1 = 1.5 / 3
+    array([0.5, 0.5])
+    """
+
+    __slots__ = ("g", "K", "c", "_Lp", "_scale")
+
+    def __init__(self, adjacency: ArrayLike, pinning: ArrayLike, K: ArrayLike, c: float) -> None:
+        c = _real(c, "c")
+        if c < 0:
+            raise ValueError(f"c (the coupling gain) must be >= 0; got {c}")
+        Aadj, g = _check_graph(adjacency, pinning)
+        K = _matrix(K, "K")
+        self.g, self.K, self.c = frozen_copy(g), frozen_copy(K), c
+        self._Lp = frozen_copy(graphs.laplacian(Aadj) + np.diag(g))  # L + diag(g)
+        self._scale = frozen_copy(c / (1.0 + Aadj.sum(axis=1) + g))  # c / (1 + d_i + g_i)
+
+    def __call__(self, xhat: ArrayLike, x_leader: ArrayLike) -> np.ndarray:
+        """The inputs of all agents, batched.
+
+        Parameters
+        ----------
+        xhat : (..., N, n) array_like
+            Corrected estimates ``xhat^{(i)}_{k|k}``.
+        x_leader : (..., n) array_like
+            Leader state ``x^{(0)}_k``.
+
+        Returns
+        -------
+        (..., N, m) ndarray
+            ``u^{(i)} = c (1 + d_i + g_i)^{-1} K eps^{(i)}``.
+        """
+        N, n = self.g.shape[0], self.K.shape[1]
+        xhat = _float_array(xhat, "xhat")
+        if xhat.ndim < 2 or xhat.shape[-2:] != (N, n):
+            raise ValueError(f"xhat must have shape (..., N, n) = (..., {N}, {n}); got {xhat.shape}")
+        x_leader = _float_array(x_leader, "x_leader")
+        if x_leader.ndim < 1 or x_leader.shape[-1] != n:
+            raise ValueError(f"x_leader must have shape (..., n) = (..., {n}); got {x_leader.shape}")
+        if x_leader.ndim > 1:
+            try:
+                np.broadcast_shapes(xhat.shape[:-2], x_leader.shape[:-1])
+            except ValueError:
+                raise ValueError(f"the batch dimensions of xhat {xhat.shape} and x_leader {x_leader.shape} "
+                                 "do not broadcast") from None
+        eps = -(self._Lp @ xhat) + self.g[:, None] * x_leader[..., None, :]
+        u = self._scale[:, None] * (eps @ self.K.T)
+        if not np.isfinite(u).all():
+            require_finite(xhat, "xhat")
+            require_finite(x_leader, "x_leader")
+            raise ValueError("the control overflowed (NaN or inf) although every input is finite; rescale the problem")
+        return u
+
+
+def local_control(
+    xhat: ArrayLike, x_leader: ArrayLike, adjacency: ArrayLike, pinning: ArrayLike, K: ArrayLike, c: float
+) -> np.ndarray:
+    """The law of Sec. 4.2 for all agents, batched (plain arrays, checked in full on every call).
+
+    In a loop, build :class:`SynchronizationLaw` once and call it: the same numbers,
+    the constant arguments checked once.
 
     Parameters
     ----------
@@ -758,7 +838,7 @@ def local_control(
     K : (m, n) array_like
         Control gain.
     c : float
-        Coupling gain.
+        Coupling gain, ``c >= 0``.
 
     Returns
     -------
@@ -776,29 +856,7 @@ def local_control(
     >>> bool(np.all(u == 0))                                   # everyone on the leader: no input
     True
     """
-    g, K, Lp, one_d_g = _control_constants(adjacency, pinning, K, c)
-    N, n = g.shape[0], K.shape[1]
-    xhat = _float_array(xhat, "xhat")
-    if xhat.ndim < 2 or xhat.shape[-2:] != (N, n):
-        raise ValueError(f"xhat must have shape (..., N, n) = (..., {N}, {n}); got {xhat.shape}")
-    x_leader = _float_array(x_leader, "x_leader")
-    if x_leader.ndim < 1 or x_leader.shape[-1] != n:
-        raise ValueError(f"x_leader must have shape (..., n) = (..., {n}); got {x_leader.shape}")
-    if not math.isfinite(xhat.sum()) and not np.isfinite(xhat).all():
-        raise ValueError("xhat contains NaN or infinite entries")
-    if not math.isfinite(x_leader.sum()) and not np.isfinite(x_leader).all():
-        raise ValueError("x_leader contains NaN or infinite entries")
-    if x_leader.ndim > 1:
-        try:
-            np.broadcast_shapes(xhat.shape[:-2], x_leader.shape[:-1])
-        except ValueError:
-            raise ValueError(f"the batch dimensions of xhat {xhat.shape} and x_leader {x_leader.shape} "
-                             "do not broadcast") from None
-    eps = -(Lp @ xhat) + g[:, None] * x_leader[..., None, :]
-    u = (c / one_d_g)[:, None] * (eps @ K.T)
-    if not math.isfinite(u.sum()) and not np.isfinite(u).all():
-        raise ValueError("the control overflowed (NaN or inf) although every input is finite; rescale the problem")
-    return u
+    return SynchronizationLaw(adjacency, pinning, K, c)(xhat, x_leader)
 
 
 def _check_stabilizable(A: np.ndarray, B: np.ndarray) -> None:
@@ -863,32 +921,6 @@ def _check_graph(adjacency, pinning):
     if np.any(g < 0):
         raise ValueError(f"pinning gains must be non-negative; got {g.tolist()}")
     return Aadj, g
-
-
-_CONTROL_CACHE: dict = {}
-
-
-def _control_constants(adjacency, pinning, K, c):
-    """For :func:`local_control`, checked once per distinct value (cached): pinning gains ``g``,
-    gain ``K``, ``L + diag(g)`` and ``1 + d + g`` (read-only copies)."""
-    arrays = [_float_array(adjacency, "adjacency"), _float_array(pinning, "pinning"), _float_array(K, "K")]
-    if type(c) is not float:
-        _real(c, "c")
-    key = (*[(a.shape, a.tobytes()) for a in arrays], c)  # a NaN c never hits (NaN != NaN) and is refused
-    hit = _CONTROL_CACHE.get(key)
-    if hit is None:
-        _real(c, "c")
-        Aadj, g = _check_graph(arrays[0], arrays[1])
-        K = _matrix(arrays[2], "K")
-        Aadj, g, K = (np.array(a, dtype=float) for a in (Aadj, g, K))  # copies: the caller may modify theirs
-        d = Aadj.sum(axis=1)
-        hit = (g, K, graphs.laplacian(Aadj) + np.diag(g), 1.0 + d + g)
-        for a in hit:
-            a.setflags(write=False)
-        if len(_CONTROL_CACHE) > 64:
-            _CONTROL_CACHE.clear()
-        _CONTROL_CACHE[key] = hit
-    return hit
 
 
 def _finite_float(x: float, what: str) -> float:

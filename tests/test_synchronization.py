@@ -161,3 +161,35 @@ def test_assumption3_checked():
         sync.riccati_like(A_EX, np.array([[1.0, 2.0], [2.0, 4.0]]), np.eye(2))
     with pytest.raises(ValueError, match="not stabilizable"):
         sync.riccati_like(np.diag([2.0, 0.5]), np.array([[0.0], [1.0]]), np.eye(2))
+
+
+def test_synchronization_law_equals_the_plain_function_and_is_read_only():
+    """The checked law gives the plain function's numbers; its arrays cannot be changed, nor through the caller's."""
+    ring = graphs.adjacency_from_edges(4, [(3, 0), (0, 1), (1, 2), (2, 3)], directed=True)
+    pin = np.array([1.0, 0.0, 0.0, 0.0])
+    K = np.array([[0.3, -0.2], [0.1, 0.4]])
+    rng = np.random.default_rng(3)
+    xhat, lead = rng.normal(size=(5, 4, 2)), rng.normal(size=2)
+    law = sync.SynchronizationLaw(ring, pin, K, 1.5)
+    expected = sync.local_control(xhat, lead, ring, pin, K, 1.5)
+    K[0, 0] = 99.0  # the caller's array changes after construction: the law keeps its copy
+    pin[1] = 5.0
+    np.testing.assert_array_equal(law(xhat, lead), expected)
+    with pytest.raises(ValueError):
+        law.K[0, 0] = 1.0
+    with pytest.raises(ValueError, match="c"):
+        sync.SynchronizationLaw(ring, [1.0, 0, 0, 0], K, -1.0)
+
+
+def test_synchronization_law_from_threads_equals_serial():
+    """Eight threads sharing one law give the serial results bit for bit."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    ring = graphs.adjacency_from_edges(4, [(3, 0), (0, 1), (1, 2), (2, 3)], directed=True)
+    law = sync.SynchronizationLaw(ring, [1.0, 0.0, 0.0, 0.0], np.eye(2), 1.5)
+    inputs = [np.random.default_rng(s).normal(size=(200, 4, 2)) for s in range(8)]
+    serial = [law(x, np.zeros(2)) for x in inputs]
+    with ThreadPoolExecutor(8) as pool:
+        threaded = list(pool.map(lambda x: law(x, np.zeros(2)), inputs))
+    for a, b in zip(serial, threaded):
+        assert a.tobytes() == b.tobytes()

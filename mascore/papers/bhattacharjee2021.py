@@ -569,6 +569,7 @@ def simulate(
     P = np.broadcast_to(s.matrix("P0"), (*x.shape, x.shape[-1])).copy()
     leader = s.matrix("leader_x0")
     model = smf.SetMembershipModel(A=A_, G=G_, C=C_, D=D_, Q=setting.Q, R=setting.R, B=B_)  # checked once
+    law = sync.SynchronizationLaw(adjacency, pin, des.K, des.c)
     xs, xh, Ps, us, ls, xp, Pp = [], [], [], [], [], [], []
     for k in progress_bar(range(t_f + 1), enabled=progress, desc=f"closed loop ({method})", leave=False):
         y = x @ C_.T + v[:, k] @ D_.T
@@ -581,7 +582,7 @@ def simulate(
         ls.append(leader)
         if k == t_f:
             break
-        u = sync.local_control(c, leader, adjacency, pin, des.K, des.c)
+        u = law(c, leader)
         x = x @ A_.T + u @ B_.T + w[:, k] @ G_.T
         c, P = model.predict(c, P, u=u, method=method, step=k, agent=agent)
         leader = A_ @ leader
@@ -695,10 +696,11 @@ def noise_free_metrics(
     A_, B_ = s.matrix("A"), s.matrix("B")
     # A is orthogonal in the example, so A^T moves the leader back
     lead_op = np.linalg.matrix_power(A_ if leader_shift >= 0 else A_.T, abs(leader_shift))
+    law = sync.SynchronizationLaw(adjacency, s.matrix("pinning"), des.K, c)
     x, lead, norms = x0, s.matrix("leader_x0"), []
     for _ in range(first_k + s.t_f + 1):
         norms.append(np.linalg.norm(x - lead))
-        u = sync.local_control(x, lead_op @ lead, adjacency, s.matrix("pinning"), des.K, c)
+        u = law(x, lead_op @ lead)
         x = x @ A_.T + u @ B_.T
         lead = A_ @ lead
     d = np.array(norms[first_k:]) / s.mu_bar
