@@ -15,6 +15,7 @@ __all__ = [
     "as_matrix",
     "as_vector",
     "float_array",
+    "graph_adjacency",
     "finite_result",
     "frozen_copy",
     "require_finite",
@@ -278,11 +279,14 @@ _F64 = np.dtype(float)
 def float_array(value: object, name: str) -> np.ndarray:
     """`value` as a float array.
 
-    Lists, ints and bools are converted; a string, None, a complex or ragged
-    array is a ``TypeError`` that names `name`.
+    Lists, ints and bools are converted; a networkx graph (or a list of graphs)
+    is read as its adjacency matrix (a stack), see :func:`graph_adjacency`; a
+    string, None, a complex or ragged array is a ``TypeError`` that names `name`.
     """
     if type(value) is _ND and value.dtype is _F64:
         return value
+    if _is_graph(value) or (isinstance(value, (list, tuple)) and value and all(map(_is_graph, value))):
+        return graph_adjacency(value)
     if value is None or isinstance(value, (str, bytes)):
         raise TypeError(f"{name} must be an array of real numbers; got {type(value).__name__} {value!r}")
     try:
@@ -361,3 +365,44 @@ def frozen_copy(arr: ArrayLike) -> np.ndarray:
     out = np.array(arr, dtype=float, copy=True)
     out.setflags(write=False)
     return out.view()
+
+
+# ---------------------------------------------------------------- networkx graphs where an adjacency is expected
+
+
+def _is_graph(value: object) -> bool:
+    """Whether `value` is a networkx graph (duck-typed, so networkx is imported only by its user)."""
+    return type(value).__module__.startswith("networkx") and hasattr(value, "is_directed") and hasattr(value, "adj")
+
+
+def graph_adjacency(graph: object) -> np.ndarray:
+    """The adjacency matrix of a networkx graph (or the ``(T, N, N)`` stack of a list of graphs), mascore's convention.
+
+    Agent ``i`` is the i-th node of ``sorted(graph.nodes)`` (the nodes ``0..N-1`` of
+    every networkx generator), or of ``graph.nodes`` if they do not sort. An edge
+    ``j -> i`` with attribute ``weight`` (default 1) gives ``A[i, j] = weight`` (agent
+    ``i`` receives from ``j``); an undirected edge gives both entries. Every mascore
+    argument that expects an adjacency accepts a graph, through :func:`float_array`.
+
+    Examples
+    --------
+    >>> import networkx as nx
+    >>> from mascore._validation import graph_adjacency
+    >>> graph_adjacency(nx.DiGraph([(0, 1)]))            # 0 -> 1: agent 1 hears agent 0
+    array([[0., 0.],
+           [1., 0.]])
+    """
+    if isinstance(graph, (list, tuple)):
+        mats = [graph_adjacency(g) for g in graph]
+        if len({m.shape for m in mats}) > 1:
+            raise ValueError(f"the graphs of a sequence must have the same number of nodes; got {[m.shape[0] for m in mats]}")
+        return np.stack(mats)
+    import networkx as nx
+
+    nodes = list(graph.nodes)
+    try:
+        nodes = sorted(nodes)
+    except TypeError:
+        pass
+    M = nx.to_numpy_array(graph, nodelist=nodes, weight="weight", dtype=float)  # M[u, v]: edge u -> v
+    return np.ascontiguousarray(M.T)

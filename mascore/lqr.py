@@ -37,6 +37,7 @@ from ._validation import (
     check_covariance,
     check_laplacian,
     check_positive_int,
+    frozen_copy,
 )
 from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
@@ -65,35 +66,47 @@ __all__ = [
     "top_down_lqr",
 ]
 
-def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Continuous-time infinite-horizon LQR, python-control's ``K, S, E = lqr(A, B, Q, R)``.
+def lqr(*args: object, N: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Continuous-time infinite-horizon LQR, python-control's ``K, S, E = lqr(A, B, Q, R[, N])``.
 
-    Minimizes ``int_0^inf (x^T Q x + u^T R u) dt`` for ``x' = A x + B u``.
+    Call as ``lqr(A, B, Q, R)``, ``lqr(A, B, Q, R, N)``, ``lqr(sys, Q, R)`` or
+    ``lqr(sys, Q, R, N)`` (``N`` may also be passed by keyword), as python-control
+    does. ``sys`` is any state-space object with attributes ``A``, ``B`` and ``dt``
+    (a python-control ``StateSpace``, no import needed): ``dt`` 0 or None is
+    continuous time; a discrete-time ``sys`` (``dt > 0`` or True) is passed on to
+    :func:`dlqr`, like python-control.
+
+    Minimizes ``int_0^inf (x^T Q x + u^T R u + 2 x^T N u) dt`` for ``x' = A x + B u``.
+    ``Q`` and ``R`` are *cost weights* (not covariances): ``Q`` in (cost unit)/(state
+    unit)^2 per second, ``R`` in (cost unit)/(input unit)^2 per second.
 
     Parameters
     ----------
     A : (n, n) array_like
-        State matrix.
+        State matrix (1/s).
     B : (n, m) array_like
         Input matrix; ``(A, B)`` must be stabilizable.
     Q : (n, n) array_like
-        State weight, symmetric positive semidefinite.
+        State cost weight, symmetric positive semidefinite.
     R : (m, m) array_like
-        Input weight, symmetric positive definite.
+        Input cost weight, symmetric positive definite.
+    N : (n, m) array_like, optional
+        Cross weight of ``2 x^T N u``; ``[[Q, N], [N^T, R]]`` must be positive semidefinite.
 
     Returns
     -------
     K : (m, n) ndarray
-        Optimal gain, ``u = -K x``, ``K = R^{-1} B^T S``.
+        Optimal gain, ``u = -K x``, ``K = R^{-1} (B^T S + N^T)``.
     S : (n, n) ndarray
-        Stabilizing solution of ``A^T S + S A - S B R^{-1} B^T S + Q = 0``.
+        Stabilizing solution of ``A^T S + S A - (S B + N) R^{-1} (B^T S + N^T) + Q = 0``.
     E : (n,) ndarray
         Closed-loop eigenvalues (of ``A - B K``).
 
     Raises
     ------
     ValueError
-        Bad shapes, non-symmetric or indefinite weights, or ``(A, B)`` not controllable.
+        Bad shapes, non-symmetric or indefinite weights, ``(A, B)`` not stabilizable,
+        or entries so large that the Riccati equation overflows (the argument is named).
     RiccatiError
         No stabilizing solution (e.g. ``(Q, A)`` has unobservable modes on the
         imaginary axis) or a Riccati residual above :data:`mascore.riccati.RICCATI_RTOL`.
@@ -105,36 +118,42 @@ def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndar
     >>> K, S, E = lqr.lqr([[0.0, 1.0], [0.0, 0.0]], [[0.0], [1.0]], np.eye(2), np.eye(1))
     >>> np.round(K, 4)                                           # [1, sqrt(3)]
     array([[1.    , 1.7321]])
+    >>> import control                                           # doctest: +SKIP
+    >>> K, S, E = lqr.lqr(control.ss([[0, 1], [0, 0]], [[0], [1]], np.eye(2), 0), np.eye(2), np.eye(1))  # doctest: +SKIP
     """
-    A = _square(A, "A")
-    n = A.shape[0]
-    B = _matrix(B, "B", (n, None))
-    m = B.shape[1]
-    Q = _weight(Q, "Q", n)
-    R = _weight(R, "R", m, definite=True)
-    return _solved(solve_care, A, B, Q, R, discrete=False)
+    A, B, Q, R, N, dt = _lqr_args("lqr", args, N)
+    discrete = dt is not None and (dt is True or dt != 0)  # python-control: dt = True or > 0 is discrete time
+    return _solve_lqr(A, B, Q, R, N, discrete=discrete)
 
 
-def dlqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Discrete-time infinite-horizon LQR, python-control's ``K, S, E = dlqr(A, B, Q, R)``.
+def dlqr(*args: object, N: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Discrete-time infinite-horizon LQR, python-control's ``K, S, E = dlqr(A, B, Q, R[, N])``.
 
-    Minimizes ``sum_k (x_k^T Q x_k + u_k^T R u_k)`` for ``x_{k+1} = A x_k + B u_k``.
+    Call as ``dlqr(A, B, Q, R[, N])`` or ``dlqr(sys, Q, R[, N])`` with a discrete-time
+    state-space ``sys`` (attributes ``A``, ``B``, ``dt``, e.g. a python-control
+    ``StateSpace`` with ``dt > 0`` or True); a continuous-time ``sys`` is refused.
+
+    Minimizes ``sum_k (x_k^T Q x_k + u_k^T R u_k + 2 x_k^T N u_k)`` for
+    ``x_{k+1} = A x_k + B u_k``. ``Q`` and ``R`` are *cost weights* per step (not
+    covariances): (cost unit)/(state unit)^2 and (cost unit)/(input unit)^2.
 
     Parameters
     ----------
     A : (n, n) array_like
-        State matrix.
+        State matrix (dimensionless, one sampling period).
     B : (n, m) array_like
         Input matrix; ``(A, B)`` must be stabilizable (every mode with ``|z| >= 1`` controllable).
     Q : (n, n) array_like
-        State weight, symmetric positive semidefinite.
+        State cost weight, symmetric positive semidefinite.
     R : (m, m) array_like
-        Input weight, symmetric positive definite.
+        Input cost weight, symmetric positive definite.
+    N : (n, m) array_like, optional
+        Cross weight of ``2 x^T N u``; ``[[Q, N], [N^T, R]]`` must be positive semidefinite.
 
     Returns
     -------
     K : (m, n) ndarray
-        Optimal gain, ``u_k = -K x_k``, ``K = (R + B^T S B)^{-1} B^T S A``.
+        Optimal gain, ``u_k = -K x_k``, ``K = (R + B^T S B)^{-1} (B^T S A + N^T)``.
     S : (n, n) ndarray
         Stabilizing solution of the discrete-time algebraic Riccati equation.
     E : (n,) ndarray
@@ -143,7 +162,8 @@ def dlqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.nda
     Raises
     ------
     ValueError
-        Bad shapes, non-symmetric or indefinite weights, or ``(A, B)`` not stabilizable.
+        Bad shapes, non-symmetric or indefinite weights, ``(A, B)`` not stabilizable,
+        a continuous-time ``sys``, or entries so large that the Riccati equation overflows.
     RiccatiError
         No stabilizing solution or a Riccati residual above :data:`mascore.riccati.RICCATI_RTOL`.
 
@@ -156,12 +176,74 @@ def dlqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike) -> tuple[np.nda
     >>> bool(np.all(np.abs(E) < 1))
     True
     """
+    A, B, Q, R, N, dt = _lqr_args("dlqr", args, N)
+    if dt is not None and dt is not True and dt == 0:
+        raise ValueError("sys is a continuous-time system (dt = 0): use lqr, or discretize it first")
+    return _solve_lqr(A, B, Q, R, N, discrete=True)
+
+
+def _is_system(obj: object) -> bool:
+    """A state-space system, duck-typed like python-control's ``StateSpace`` (``A``, ``B``, ``dt``)."""
+    return all(hasattr(obj, name) for name in ("A", "B", "dt")) and not isinstance(obj, np.ndarray)
+
+
+def _lqr_args(fname: str, args: tuple, N: ArrayLike | None):
+    """``(A, B, Q, R, N, dt)`` from python-control's call forms ``(A, B, Q, R[, N])`` / ``(sys, Q, R[, N])``."""
+    if args and _is_system(args[0]):
+        sys, rest, dt = args[0], args[1:], args[0].dt
+        A, B = _float_array(sys.A, "sys.A"), _float_array(sys.B, "sys.B")
+        names = "sys, Q, R[, N]"
+    else:
+        rest, dt = args[2:], None
+        if len(args) < 2:
+            raise TypeError(f"{fname}() takes (A, B, Q, R[, N]) or (sys, Q, R[, N]); got {len(args)} argument(s)")
+        A, B = args[:2]
+        names = "A, B, Q, R[, N]"
+    if len(rest) not in (2, 3) or (len(rest) == 3 and N is not None):
+        raise TypeError(f"{fname}() takes ({names}) with N given once; got {len(args)} positional argument(s)")
+    Q, R = rest[:2]
+    if len(rest) == 3:
+        N = rest[2]
+    return A, B, Q, R, N, dt
+
+
+def _solve_lqr(A, B, Q, R, N, discrete: bool):
     A = _square(A, "A")
     n = A.shape[0]
     B = _matrix(B, "B", (n, None))
+    m = B.shape[1]
     Q = _weight(Q, "Q", n)
-    R = _weight(R, "R", B.shape[1], definite=True)
-    return _solved(solve_dare, A, B, Q, R, discrete=True)
+    R = _weight(R, "R", m, definite=True)
+    _check_scale(("A", A), ("B", B), ("Q", Q), ("R", R))
+    if N is None:
+        return _solved(solve_dare if discrete else solve_care, A, B, Q, R, discrete=discrete)
+    N = _matrix(np.atleast_2d(_float_array(N, "N")), "N", (n, m))
+    _check_scale(("N", N))
+    # x^T Q x + u^T R u + 2 x^T N u = x^T (Q - N R^-1 N^T) x + v^T R v with v = u + R^-1 N^T x
+    RinvNt = np.linalg.solve(R, N.T)
+    Qt = symmetrize(Q - N @ RinvNt)
+    scale = max(1.0, float(np.abs(Q).max()))
+    if float(np.linalg.eigvalsh(Qt).min()) < -1e-10 * scale:
+        raise ValueError("N: the cost weight [[Q, N], [N^T, R]] must be positive semidefinite "
+                         "(Q - N R^-1 N^T has a negative eigenvalue)")
+    At = A - B @ RinvNt
+    Kt, S, E = _solved(solve_dare if discrete else solve_care, At, B, Qt, R, discrete=discrete)
+    return Kt + RinvNt, S, E
+
+
+#: Entries beyond this magnitude square to inf in the Riccati equation: such an input is refused by name.
+_OVERFLOW = 1e150
+
+
+def _check_scale(*named: tuple[str, np.ndarray]) -> None:
+    """Refuse (naming it) an input whose entries overflow floating point once squared."""
+    for name, M in named:
+        big = float(np.abs(M).max()) if M.size else 0.0
+        if big > _OVERFLOW:
+            raise ValueError(
+                f"{name} has entries of magnitude {big:.3g}: the Riccati equation overflows floating point; "
+                f"rescale the problem (units of time, state or input) so that {name} is moderate"
+            )
 
 
 def _solved(solver, A, B, Q, R, discrete: bool):
@@ -375,6 +457,13 @@ class DistributedGain:
 
     K_self: np.ndarray
     K_coupling: np.ndarray
+
+    def __post_init__(self) -> None:
+        # checked once when built (finite (m, n) blocks of one shape), kept as read-only copies
+        Ks = as_matrix(_float_array(self.K_self, "K_self"), "K_self")
+        Kc = as_matrix(_float_array(self.K_coupling, "K_coupling"), "K_coupling", Ks.shape)
+        object.__setattr__(self, "K_self", frozen_copy(Ks))
+        object.__setattr__(self, "K_coupling", frozen_copy(Kc))
 
 
 @dataclass(frozen=True)
