@@ -595,7 +595,7 @@ def ekf_predict(
 
 
 def masked_update(
-    X_pred: ArrayLike, Sigma_pred: ArrayLike, z: ArrayLike, observed: ArrayLike, R: ArrayLike
+    X_pred: ArrayLike, Sigma_pred: ArrayLike, z: ArrayLike, observed: ArrayLike, R: ArrayLike, *, agent: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray]:
     """Kalman update with the states of the `observed` agents, eqs. (16)-(20).
 
@@ -613,9 +613,14 @@ def masked_update(
         that are not observed are ignored (they must be finite).
     observed : (..., N) array_like of bool
         The closed neighbourhood ``N_i bar``: which agents' states are in
-        ``z_i = H_i (X + nu_i)`` (eq. (3)).
+        ``z_i = H_i (X + nu_i)`` (eq. (3)). It always holds the agent itself:
+        ``observed[..., agent]`` must be True.
     R : (2nN, 2nN) array_like
-        Measurement-noise covariance of ``nu_i`` (the paper's ``R``).
+        Measurement-noise covariance of ``nu_i`` (the paper's ``R``; m^2 and m^2/s^2
+        on the position and velocity entries), symmetric positive definite.
+    agent : int or (...) array_like of int
+        Keyword only: the agent ``i`` running the filter, one for all filters or one
+        per filter (e.g. ``np.arange(N)`` for a batch of one filter per agent).
 
     Returns
     -------
@@ -632,8 +637,8 @@ def masked_update(
     >>> from mascore.flocking import FlockingGains
     >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Song et al., Table I
     >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents [p, v]
-    >>> seen = np.array([True, True, False])                  # agent 2 is out of range
-    >>> X_post, P_post = dekf.masked_update(X, 4.0 * np.eye(12), X + 0.5, seen, np.eye(12))
+    >>> seen = np.array([True, True, False])                  # agent 0's view: agent 2 is out of range
+    >>> X_post, P_post = dekf.masked_update(X, 4.0 * np.eye(12), X + 0.5, seen, np.eye(12), agent=0)
     >>> bool(np.allclose(X_post[2], X[2])), bool(np.trace(P_post[:8, :8]) < 32.0)   # only the seen agents move
     (True, True)
     """
@@ -642,6 +647,7 @@ def masked_update(
     Sigma_pred = _check_sigma(Sigma_pred, "Sigma_pred", N * m, X_pred.shape[:-2], "X_pred")
     z, observed = _check_measurements(z, observed, N, m)
     batch = _common_batch(X_pred, Sigma_pred, z, observed)
+    _check_self_observed(observed, agent, N, batch)
     R = _float_array(R, "R")
     ekf = FlockingEKF._from_checked(EKFModel(N, R=R, state_dim=m), np.broadcast_to(X_pred, (*batch, N, m)),
                                     Sigma_pred)
@@ -939,6 +945,28 @@ def _check_measurements(z, observed, N, m):
     if observed.dtype != bool or observed.ndim < 1 or observed.shape[-1] != N:
         raise ValueError(f"observed must be a boolean array (..., {N}); got {observed.dtype} {observed.shape}")
     return z, observed
+
+
+def _check_self_observed(observed: np.ndarray, agent: object, N: int, batch: tuple) -> None:
+    """``observed[..., agent]`` is True: an agent's closed neighbourhood holds the agent itself."""
+    if isinstance(agent, (bool, np.bool_, str, bytes)) or agent is None:
+        raise TypeError(f"agent must be an agent index (int) or an array of them; got {type(agent).__name__} {agent!r}")
+    idx = np.asarray(agent)
+    if idx.dtype.kind not in "iu":
+        raise TypeError(f"agent must be an agent index (int) or an integer array; got dtype {idx.dtype}")
+    if np.any(idx < 0) or np.any(idx >= N):
+        raise ValueError(f"agent must index one of the N = {N} agents (0..{N - 1}); got {agent!r}")
+    try:
+        idx = np.broadcast_to(idx, batch)
+    except ValueError:
+        raise ValueError(f"agent {idx.shape} must be one index or one per filter, shape {batch}") from None
+    own = np.take_along_axis(np.broadcast_to(observed, (*batch, N)), idx[..., None], axis=-1)[..., 0]
+    if not np.all(own):
+        where = tuple(int(v) for v in np.argwhere(~own)[0])
+        raise ValueError(
+            f"observed must hold the agent itself (its closed neighbourhood N_i bar contains i): observed[..., agent] "
+            f"is False{' at batch index ' + str(where) if where else ''}"
+        )
 
 
 def _common_batch(X, Sigma, z, observed):

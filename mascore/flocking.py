@@ -535,9 +535,10 @@ def flock_spread(X: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     Parameters
     ----------
     X : (..., N, 2n) array_like
-        Team states; a NaN entry marks a missing state (e.g. the placeholder of
-        a diverged run) and gives NaN statistics for that team. Infinite
-        entries are refused.
+        Team states (m, m/s); a team whose entries are *all* NaN marks a missing
+        team (the placeholder of a diverged run) and gives NaN statistics for
+        that team. A team with only some NaN entries, or any infinite entry, is
+        refused (``ValueError`` naming `X`).
 
     Returns
     -------
@@ -551,7 +552,7 @@ def flock_spread(X: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     >>> float(std_p), float(std_v)
     (1.0, 0.0)
     """
-    X = _check_team(X, "X", allow_nan=True)
+    X = _check_missing_teams(_check_team(X, "X", allow_nan=True))
     n = X.shape[-1] // 2
     with np.errstate(over="ignore", invalid="ignore"):
         dev = X - X.mean(axis=-2, keepdims=True)
@@ -565,8 +566,9 @@ def flock_spread(X: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
 def max_distance_from_centre(X: ArrayLike) -> np.ndarray:
     """Largest distance (m) of an agent from the centre of mass, shape ``(...)``.
 
-    A NaN entry of `X` marks a missing state (a diverged run's placeholder) and
-    gives NaN for that team; infinite entries are refused.
+    A team of `X` whose entries are all NaN marks a missing team (a diverged
+    run's placeholder) and gives NaN for that team; a team with only some NaN
+    entries, or an infinite entry, is refused.
 
     Parameters
     ----------
@@ -584,13 +586,27 @@ def max_distance_from_centre(X: ArrayLike) -> np.ndarray:
     >>> float(flocking.max_distance_from_centre([[0.0, 0.0, 0.0, 0.0], [2.0, 0.0, 0.0, 0.0]]))
     1.0
     """
-    X = _check_team(X, "X", allow_nan=True)
+    X = _check_missing_teams(_check_team(X, "X", allow_nan=True))
     n = X.shape[-1] // 2
     p = X[..., :n]
     with np.errstate(over="ignore", invalid="ignore"):
         out = np.linalg.norm(p - p.mean(axis=-2, keepdims=True), axis=-1).max(axis=-1)
     _finite_where_input_is(out, X, "max_distance_from_centre")
     return out
+
+
+def _check_missing_teams(X: np.ndarray) -> np.ndarray:
+    """Refuse a team ``X[..., :, :]`` with some but not all entries NaN (only a whole team may be missing)."""
+    nan = np.isnan(X)
+    if nan.any():
+        partial = nan.any(axis=(-1, -2)) & ~nan.all(axis=(-1, -2))
+        if partial.any():
+            where = tuple(int(v) for v in np.argwhere(partial)[0])
+            raise ValueError(
+                f"X contains NaN entries in team {where if where else '(the only one)'} beside finite ones: only a "
+                "team whose entries are all NaN is read as missing (a diverged run's placeholder)"
+            )
+    return X
 
 
 # ----------------------------------------------------------------------------- the law's plain math (checked input)

@@ -531,7 +531,13 @@ def nees(error: ArrayLike, P: ArrayLike) -> np.ndarray:
     -------
     (...) ndarray
         Chi-square distributed with m degrees of freedom for a consistent
-        Gaussian filter.
+        Gaussian filter (dimensionless).
+
+    Raises
+    ------
+    ValueError
+        Bad shapes, NaN/inf, a `P` that is not symmetric positive definite, or a
+        NEES beyond floating point (``e^T P^{-1} e > 1e308``: rescale the units).
 
     Examples
     --------
@@ -555,7 +561,15 @@ def nees(error: ArrayLike, P: ArrayLike) -> np.ndarray:
         np.broadcast_shapes(e.shape[:-1], P.shape[:-2])
     except ValueError:
         raise ValueError(f"the batch axes of error {e.shape} and P {P.shape} do not broadcast") from None
-    return np.einsum("...i,...i->...", e, np.linalg.solve(P, e[..., None])[..., 0])
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = np.einsum("...i,...i->...", e, np.linalg.solve(P, e[..., None])[..., 0])
+    if not np.isfinite(out).all():
+        raise ValueError(
+            f"the NEES overflows floating point (beyond 1e308): error has entries up to {float(np.abs(e).max()):.3g} "
+            f"for a covariance P whose diagonal is down to {float(np.diagonal(P, axis1=-2, axis2=-1).min()):.3g}; "
+            "rescale the state units (the NEES is unit-free)"
+        )
+    return out
 
 
 def nees_interval(dof: int, n_runs: int, confidence: float = 0.95) -> tuple[float, float]:

@@ -654,9 +654,13 @@ class SetMembershipModel:
             if u.shape[-1:] != B.shape[1:] or not np.isfinite(u).all():
                 raise ValueError(f"u must be finite with last dimension {B.shape[1]} (columns of B); got shape {u.shape}")
             new_c = new_c + u @ B.T
-        if method == "closed_form":  # trace-optimal Minkowski sum of E(0, A P A^T) and E(0, G Q G^T)
+        with np.errstate(over="ignore", invalid="ignore"):
             APA = A @ P @ A.T
-            new_P, _ = ellipsoids._sum_min_trace(APA, GQG, ellipsoids._sqrt_trace(APA), sqrt_tr_GQG)
+        _check_overflow(new_c, APA, A, P, step, agent)
+        if method == "closed_form":  # trace-optimal Minkowski sum of E(0, A P A^T) and E(0, G Q G^T)
+            with np.errstate(over="ignore", invalid="ignore"):
+                new_P, _ = ellipsoids._sum_min_trace(APA, GQG, ellipsoids._sqrt_trace(APA), sqrt_tr_GQG)
+            _check_overflow(new_c, new_P, A, P, step, agent)
         else:
             new_P = np.empty_like(P)
             from ._set_membership_sdp import prediction_sdp
@@ -769,6 +773,18 @@ def _require_pd(P, what, step, agent, label):
     raise ValueError(
         f"{_where(what, step, agent, idx, batch)}: {label} is not symmetric positive definite "
         f"(smallest eigenvalue {float(eig[idx]):.3g})"
+    )
+
+
+def _check_overflow(c, P, A, P_prior, step, agent):
+    """Refuse a prediction that overflowed floating point, naming A and the prior shape (not a NaN shape)."""
+    if np.isfinite(c).all() and np.isfinite(P).all():
+        return
+    where = "" if step is None else f" at step {step}"
+    raise ValueError(
+        f"the prediction{where} overflowed floating point (A P A^T is beyond 1e308): A has entries up to "
+        f"{float(np.abs(A).max()):.3g} and the shape up to {float(np.abs(P_prior).max()):.3g}; rescale A or the "
+        "state units"
     )
 
 

@@ -30,7 +30,7 @@ def test_masked_update_equals_update_with_selection_matrix():
     R = sensing.team_noise_covariance(2.0 * np.eye(m), N, m)
     X_pred = _team(rng, (N,), N)  # one prior per agent
     Sigma = np.stack([_spd(rng, M, 5.0) for _ in range(N)])
-    X_post, Sigma_post = dekf.masked_update(X_pred, Sigma, Z, S, R)
+    X_post, Sigma_post = dekf.masked_update(X_pred, Sigma, Z, S, R, agent=np.arange(N))
     for i, H in enumerate(sensing.selection_matrices(A, m)):
         z_i = sensing.stacked_measurement(Z, S, i)
         x_ref, P_ref = kalman.update(X_pred[i].ravel(), Sigma[i], z_i, H, H @ R @ H.T)
@@ -47,7 +47,7 @@ def test_masked_update_with_correlated_R_equals_selection_form():
     observed = np.array([True, False, True])
     H = sensing.selection_matrix(np.flatnonzero(observed), N, m)
     x, P, z = rng.standard_normal((N, m)), _spd(rng, M, 3.0), rng.standard_normal((N, m))
-    X_post, P_post = dekf.masked_update(x, P, z, observed, R)
+    X_post, P_post = dekf.masked_update(x, P, z, observed, R, agent=0)
     x_ref, P_ref = kalman.update(x.ravel(), P, H @ z.ravel(), H, H @ R @ H.T)
     np.testing.assert_allclose(X_post.ravel(), x_ref, atol=1e-10)
     np.testing.assert_allclose(P_post, P_ref, atol=1e-10)
@@ -61,13 +61,33 @@ def test_unobserved_rows_of_z_are_ignored_and_unobserved_everything_is_identity(
     observed = np.array([True, True, False, False])
     z2 = z.copy()
     z2[2:] = 1e6
-    a = dekf.masked_update(x, P, z, observed, np.eye(M))
-    b = dekf.masked_update(x, P, z2, observed, np.eye(M))
+    a = dekf.masked_update(x, P, z, observed, np.eye(M), agent=1)
+    b = dekf.masked_update(x, P, z2, observed, np.eye(M), agent=1)
     np.testing.assert_allclose(a[0], b[0])
     np.testing.assert_allclose(a[1], b[1])
-    none = dekf.masked_update(x, P, z, np.zeros(N, bool), np.eye(M))
-    np.testing.assert_allclose(none[0], x)
-    np.testing.assert_allclose(none[1], P)
+    with pytest.raises(ValueError, match="observed must hold the agent itself"):
+        dekf.masked_update(x, P, z, np.zeros(N, bool), np.eye(M), agent=0)
+
+
+def test_masked_update_refuses_a_mask_without_the_agent_itself():
+    """Regression: N_i bar always contains i; a mask that leaves the agent out is refused (keyword `agent`)."""
+    rng = np.random.default_rng(4)
+    N, m = 3, 4
+    M = N * m
+    x, P, z = rng.standard_normal((N, m)), _spd(rng, M), rng.standard_normal((N, m))
+    observed = np.array([False, True, True])
+    with pytest.raises(ValueError, match="observed must hold the agent itself"):
+        dekf.masked_update(x, P, z, observed, np.eye(M), agent=0)
+    dekf.masked_update(x, P, z, observed, np.eye(M), agent=1)
+    with pytest.raises(TypeError, match="agent"):
+        dekf.masked_update(x, P, z, observed, np.eye(M))
+    with pytest.raises(ValueError, match="agent must index"):
+        dekf.masked_update(x, P, z, observed, np.eye(M), agent=3)
+    S = np.ones((N, N), bool)
+    S[2, 2] = False  # one filter per agent: agent 2's row leaves agent 2 out
+    with pytest.raises(ValueError, match=r"batch index \(2,\)"):
+        dekf.masked_update(np.broadcast_to(x, (N, N, m)), np.broadcast_to(P, (N, M, M)), z, S, np.eye(M),
+                           agent=np.arange(N))
 
 
 def test_batched_update_equals_loop():
@@ -79,10 +99,11 @@ def test_batched_update_equals_loop():
     P = np.stack([[_spd(rng, M) for _ in range(N)] for _ in range(2)])
     z = rng.standard_normal((2, N, N, m))
     obs = rng.random((2, N, N)) < 0.5
-    X_b, P_b = dekf.masked_update(x, P, z, obs, np.eye(M))
+    obs[:, np.arange(N), np.arange(N)] = True  # row i is agent i's closed neighbourhood
+    X_b, P_b = dekf.masked_update(x, P, z, obs, np.eye(M), agent=np.arange(N))
     for r in range(2):
         for i in range(N):
-            X_l, P_l = dekf.masked_update(x[r, i], P[r, i], z[r, i], obs[r, i], np.eye(M))
+            X_l, P_l = dekf.masked_update(x[r, i], P[r, i], z[r, i], obs[r, i], np.eye(M), agent=i)
             np.testing.assert_allclose(X_b[r, i], X_l, atol=1e-12)
             np.testing.assert_allclose(P_b[r, i], P_l, atol=1e-12)
 
@@ -123,7 +144,7 @@ def test_ekf_consistent_on_model_matched_system():
     observed = np.array([True, True, False])
     for _ in range(40):
         z = X + rng.standard_normal((runs, N, m))
-        X_hat, Sigma = dekf.masked_update(X_hat, Sigma, z, observed, R)
+        X_hat, Sigma = dekf.masked_update(X_hat, Sigma, z, observed, R, agent=1)
         X = flocking.closed_loop_step(X, dt, GAINS) + rng.multivariate_normal(np.zeros(M), Q, runs).reshape(runs, N, m)
         X_hat, Sigma = dekf.ekf_predict(X_hat, Sigma, dt, GAINS, Q)
     avg = kalman.nees((X - X_hat).reshape(runs, M), Sigma).mean()
@@ -168,11 +189,11 @@ def test_bad_inputs_raise():
     M = N * m
     x, P, z = np.zeros((N, m)), np.eye(M), np.zeros((N, m))
     with pytest.raises(ValueError, match="observed must be a boolean"):
-        dekf.masked_update(x, P, z, np.ones(N), np.eye(M))
+        dekf.masked_update(x, P, z, np.ones(N), np.eye(M), agent=0)
     with pytest.raises(ValueError, match="Sigma_pred"):
-        dekf.masked_update(x, np.eye(M - 1), z, np.ones(N, bool), np.eye(M))
+        dekf.masked_update(x, np.eye(M - 1), z, np.ones(N, bool), np.eye(M), agent=0)
     with pytest.raises(ValueError, match="R must be positive definite"):
-        dekf.masked_update(x, P, z, np.ones(N, bool), np.zeros((M, M)))
+        dekf.masked_update(x, P, z, np.ones(N, bool), np.zeros((M, M)), agent=0)
     with pytest.raises(ValueError, match="Q_team"):
         dekf.ekf_predict(x, P, 0.1, GAINS, np.eye(4))
     with pytest.raises(ValueError, match="X_hat0 must be finite"):
@@ -194,7 +215,7 @@ def test_ekf_flocking_step_equals_its_parts():
     Sigma = np.broadcast_to(4 * np.eye(M), (N, M, M)).copy()
     Q = np.eye(M)
     X_post, S_post, U, X_next, S_next = dekf.ekf_flocking_step(X_pred, Sigma, Z, S, np.eye(M), 0.1, GAINS, Q)
-    ref_X, ref_S = dekf.masked_update(X_pred, Sigma, Z, S, np.eye(M))
+    ref_X, ref_S = dekf.masked_update(X_pred, Sigma, Z, S, np.eye(M), agent=np.arange(N))
     np.testing.assert_allclose(X_post, ref_X)
     np.testing.assert_allclose(U, flocking.control_from_views(ref_X, GAINS))
     for i in range(N):  # agent i's own control from its own estimate, fully connected
@@ -248,11 +269,12 @@ def test_filter_object_equals_the_plain_array_functions():
     N = 4
     Sigma = np.broadcast_to(_spd(rng, M), (2, N, M, M)).copy()
     observed = rng.random((2, N, N)) < 0.7
+    observed[:, np.arange(N), np.arange(N)] = True  # row i is agent i's closed neighbourhood
     z = X[:, None] + rng.standard_normal((2, N, N, 4))
     model = dekf.EKFModel(N, 0.1, GAINS, 0.01 * np.eye(M), np.eye(M))
     ekf = dekf.FlockingEKF(model, X_hat, Sigma)
     X_post = ekf.update(z, observed)
-    ref_X, ref_S = dekf.masked_update(X_hat, Sigma, z, observed, np.eye(M))
+    ref_X, ref_S = dekf.masked_update(X_hat, Sigma, z, observed, np.eye(M), agent=np.arange(N))
     np.testing.assert_array_equal(X_post, ref_X)
     np.testing.assert_array_equal(ekf.Sigma, ref_S)
     X_next, U = ekf.predict()

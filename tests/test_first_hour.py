@@ -1,0 +1,150 @@
+"""A researcher's first hour: the confirmed defects and the ecosystem (networkx, python-control), each pinned."""
+
+from __future__ import annotations
+
+import networkx as nx
+import numpy as np
+import pytest
+
+from mascore import flocking, graphs, kalman, lqr, rendezvous, sensing
+from mascore import set_membership as sm
+from mascore.exceptions import RiccatiError
+
+control = pytest.importorskip("control")
+
+A2 = np.array([[0.0, 1.0], [-1.0, -0.5]])
+B2 = np.array([[0.0], [1.0]])
+
+
+# --------------------------------------------------------------------------- confirmed defects
+
+
+def test_distributed_gain_checks_its_blocks_when_built():
+    with pytest.raises(TypeError, match="K_self"):
+        lqr.DistributedGain("abc", [[1, 2], [3]])
+    with pytest.raises(TypeError, match="K_coupling"):
+        lqr.DistributedGain([[1.0, 2.0]], [[1, 2], [3]])
+    with pytest.raises(ValueError, match="K_coupling"):
+        lqr.DistributedGain([[1.0, 2.0]], [[1.0, 2.0, 3.0]])
+    with pytest.raises(ValueError, match="K_self"):
+        lqr.DistributedGain([[np.nan, 2.0]], [[1.0, 2.0]])
+    Ks = np.array([[1.0, 2.0]])
+    gain = lqr.DistributedGain(Ks, [[0.5, 0.0]])
+    Ks[0, 0] = 99.0  # the gain keeps its own read-only copy
+    assert gain.K_self[0, 0] == 1.0 and not gain.K_self.flags.writeable
+
+
+@pytest.mark.parametrize("solve", [lqr.lqr, lqr.dlqr])
+@pytest.mark.parametrize("which", ["A", "B", "Q", "R"])
+def test_lqr_names_an_argument_that_overflows(solve, which):
+    args = dict(A=0.5 * A2, B=B2, Q=np.eye(2), R=np.eye(1))
+    args[which] = 1e300 * args[which]
+    with pytest.raises(ValueError, match=f"^{which} has entries of magnitude"):
+        solve(args["A"], args["B"], args["Q"], args["R"])
+
+
+def test_set_membership_predict_overflow_names_A_instead_of_a_nan_shape():
+    with pytest.raises(ValueError, match="A has entries up to 1e\\+300"):
+        sm.predict(np.zeros(2), np.eye(2), A=1e300 * np.array([[1.0, 0.1], [0.0, 1.0]]), G=np.eye(2),
+                   Q=0.01 * np.eye(2))
+
+
+def test_flock_statistics_refuse_partial_nan_and_keep_missing_teams():
+    X = np.array([[0.0, 0.0, 1.0, 0.0], [2.0, 0.0, 1.0, 0.0]])
+    bad = X.copy()
+    bad[0, 0] = np.nan
+    for f in (flocking.flock_spread, flocking.max_distance_from_centre):
+        with pytest.raises(ValueError, match="X contains NaN"):
+            f(bad)
+        with pytest.raises(ValueError, match=r"team \(1,\)"):
+            f(np.stack([X, bad]))
+    std_p, _ = flocking.flock_spread(np.stack([X, np.full_like(X, np.nan)]))  # a whole missing team: NaN
+    assert std_p[0] == 1.0 and np.isnan(std_p[1])
+
+
+def test_nees_overflow_is_refused_not_inf():
+    with pytest.raises(ValueError, match="NEES overflows"):
+        kalman.nees([1e300, 0.0], np.eye(2))
+    assert float(kalman.nees([1e100, 0.0], np.eye(2))) == pytest.approx(1e200)
+
+
+# --------------------------------------------------------------------------- python-control
+
+
+@pytest.mark.parametrize("cross", [False, True])
+def test_lqr_and_dlqr_match_python_control(cross):
+    rng = np.random.default_rng(0)
+    A, B = rng.standard_normal((3, 3)), rng.standard_normal((3, 2))
+    Q, R = np.eye(3), np.diag([1.0, 2.0])
+    extra = (0.1 * rng.standard_normal((3, 2)),) if cross else ()
+    for ours, theirs in ((lqr.lqr, control.lqr), (lqr.dlqr, control.dlqr)):
+        K, S, E = ours(A, B, Q, R, *extra)
+        Kc, Sc, Ec = theirs(A, B, Q, R, *extra)
+        np.testing.assert_allclose(K, Kc, rtol=1e-7, atol=1e-9)
+        np.testing.assert_allclose(S, Sc, rtol=1e-7, atol=1e-9)
+        np.testing.assert_allclose(np.sort_complex(E), np.sort_complex(Ec), rtol=1e-7, atol=1e-9)
+
+
+def test_lqr_accepts_a_state_space_system_and_N_by_keyword():
+    rng = np.random.default_rng(1)
+    A, B = rng.standard_normal((3, 3)), rng.standard_normal((3, 1))
+    N = 0.05 * rng.standard_normal((3, 1))
+    sys_c = control.ss(A, B, np.eye(3), 0)
+    sys_d = control.ss(A, B, np.eye(3), 0, 0.1)
+    np.testing.assert_allclose(lqr.lqr(sys_c, np.eye(3), np.eye(1), N=N)[0],
+                               control.lqr(sys_c, np.eye(3), np.eye(1), N)[0], rtol=1e-7)
+    np.testing.assert_allclose(lqr.dlqr(sys_d, np.eye(3), np.eye(1), N)[0],
+                               control.dlqr(sys_d, np.eye(3), np.eye(1), N)[0], rtol=1e-7)
+    # a discrete-time system given to lqr is solved in discrete time, as python-control does
+    np.testing.assert_allclose(lqr.lqr(sys_d, np.eye(3), np.eye(1))[0],
+                               control.lqr(sys_d, np.eye(3), np.eye(1))[0], rtol=1e-7)
+    with pytest.raises(ValueError, match="continuous-time"):
+        lqr.dlqr(sys_c, np.eye(3), np.eye(1))
+    with pytest.raises(TypeError, match="N given once"):
+        lqr.lqr(A, B, np.eye(3), np.eye(1), N, N=N)
+    with pytest.raises(ValueError, match="N: the cost weight"):
+        lqr.lqr(A, B, np.eye(3), np.eye(1), 10 * np.ones((3, 1)))
+    with pytest.raises(ValueError, match="Incompatible dimensions of N"):
+        lqr.lqr(A, B, np.eye(3), np.eye(1), np.ones((2, 1)))
+
+
+def test_lqr_still_raises_riccati_error_for_an_ill_posed_problem():
+    with pytest.raises((RiccatiError, ValueError)):
+        lqr.lqr([[0.0, 1.0], [-1.0, 0.0]], B2, np.zeros((2, 2)), [[1.0]])
+
+
+# --------------------------------------------------------------------------- networkx
+
+
+def test_networkx_graphs_are_accepted_where_an_adjacency_is():
+    G = nx.connected_watts_strogatz_graph(6, 2, 0.3, seed=3)
+    A = nx.to_numpy_array(G, nodelist=range(6))
+    np.testing.assert_array_equal(graphs.laplacian(G), graphs.laplacian(A))
+    assert graphs.is_connected(G) == graphs.is_connected(A)
+    np.testing.assert_array_equal(sensing.sensing_mask(G), sensing.sensing_mask(A))
+    D = nx.DiGraph([(0, 1), (1, 2)])  # 0 -> 1 -> 2: agent 1 hears 0, agent 2 hears 1
+    np.testing.assert_array_equal(graphs.laplacian(D), [[0, 0, 0], [-1, 1, 0], [0, -1, 1]])
+    W = nx.Graph()
+    W.add_edge(1, 0, weight=2.5)
+    np.testing.assert_array_equal(graphs.laplacian(W), [[2.5, -2.5], [-2.5, 2.5]])
+    stack = [nx.cycle_graph(4), nx.path_graph(4)]
+    assert graphs.graph_union(stack).shape == (4, 4)
+    with pytest.raises(ValueError, match="self-loops"):
+        graphs.laplacian(nx.Graph([(0, 0), (0, 1)]))
+
+
+def test_graph_round_trip_through_to_networkx():
+    A = graphs.adjacency_from_edges(4, [(0, 1), (1, 2, 2.0), (3, 0)], directed=True)
+    np.testing.assert_array_equal(graphs.laplacian(graphs.to_networkx(A)), graphs.laplacian(A))
+
+
+def test_rendezvous_takes_a_networkx_graph():
+    from mascore import agents
+
+    di = agents.double_integrator(2, 0.1)
+    model = rendezvous.RendezvousModel(di.A, di.B, rendezvous.rendezvous_gain(0.5, 1.5, 2), Q=1e-4 * np.eye(4),
+                                       R=0.01 * np.eye(4), dt=0.1)
+    x0 = np.random.default_rng(1).normal(size=(5, 4))
+    a = rendezvous.simulate_rendezvous(0, model, x0, nx.cycle_graph(5), 5, "true")
+    b = rendezvous.simulate_rendezvous(0, model, x0, graphs.ring_graph(5), 5, "true")
+    np.testing.assert_array_equal(a.states, b.states)
