@@ -19,6 +19,7 @@ from ._validation import require_finite as _finite
 __all__ = [
     "LTIAgent",
     "double_integrator",
+    "zoh",
     "team_matrices",
     "team_state",
     "agent_states",
@@ -32,14 +33,24 @@ class LTIAgent:
     Parameters
     ----------
     A : (m, m) array_like
-        State-transition matrix.
+        State-transition matrix (over one sampling period).
     B : (m, p) array_like
         Input matrix.
+    dt : float, optional
+        Sampling time (s) the agent was discretized with. A model built from the
+        agent (e.g. :meth:`mascore.rendezvous.RendezvousModel.from_agent`) takes its
+        time base from here, and refuses a ``dt`` that contradicts it.
+    A_c, B_c : array_like, optional
+        The continuous-time agent ``x' = A_c x + B_c u`` that ``(A, B)`` samples with a
+        zero-order hold over `dt` (both or neither, and only with `dt`); then
+        ``A == expm(A_c dt)`` and ``B == int_0^dt expm(A_c s) ds B_c`` are checked.
+        :meth:`from_continuous` computes ``(A, B)`` from them.
 
     Raises
     ------
     ValueError
-        A not square, or B with a different number of rows.
+        A not square, B with a different number of rows, a non-positive `dt`, or
+        ``(A, B)`` that is not the zero-order-hold sampling of ``(A_c, B_c)`` over `dt`.
 
     Examples
     --------
@@ -52,6 +63,9 @@ class LTIAgent:
 
     A: np.ndarray
     B: np.ndarray
+    dt: float | None = None
+    A_c: np.ndarray | None = None
+    B_c: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         A = check_square(_float_array(self.A, "A"), "A")
@@ -60,6 +74,57 @@ class LTIAgent:
         B = as_matrix(_float_array(self.B, "B"), "B", (A.shape[0], None))
         object.__setattr__(self, "A", A)
         object.__setattr__(self, "B", B)
+        if self.dt is not None:
+            object.__setattr__(self, "dt", check_positive(self.dt, "dt", "seconds (the sampling time)"))
+        if (self.A_c is None) != (self.B_c is None):
+            raise ValueError("give both A_c and B_c (the continuous-time agent), or neither")
+        if self.A_c is not None:
+            if self.dt is None:
+                raise ValueError("A_c and B_c need dt, the sampling time (s) that (A, B) samples them with")
+            A_c = check_square(_float_array(self.A_c, "A_c"), "A_c", A.shape[0])
+            B_c = as_matrix(_float_array(self.B_c, "B_c"), "B_c", B.shape)
+            Ad, Bd = zoh(A_c, B_c, self.dt)
+            for name, given, sampled in (("A", A, Ad), ("B", B, Bd)):
+                if not np.allclose(given, sampled, rtol=1e-8, atol=1e-10 * max(1.0, float(np.abs(sampled).max()))):
+                    raise ValueError(
+                        f"{name} is not the zero-order-hold sampling of (A_c, B_c) over dt = {self.dt:g} s "
+                        f"(largest difference {float(np.abs(given - sampled).max()):.3g}): the time base contradicts "
+                        f"the matrices; use LTIAgent.from_continuous(A_c, B_c, dt)"
+                    )
+            object.__setattr__(self, "A_c", A_c)
+            object.__setattr__(self, "B_c", B_c)
+
+    @classmethod
+    def from_continuous(cls, A_c: ArrayLike, B_c: ArrayLike, dt: float) -> LTIAgent:
+        """The agent ``x' = A_c x + B_c u`` sampled with a zero-order hold over `dt` (s).
+
+        Parameters
+        ----------
+        A_c : (m, m) array_like
+            Continuous-time state matrix (1/s).
+        B_c : (m, p) array_like
+            Continuous-time input matrix.
+        dt : float
+            Sampling time (s), positive.
+
+        Returns
+        -------
+        LTIAgent
+            ``A = expm(A_c dt)``, ``B = int_0^dt expm(A_c s) ds B_c``, carrying `dt`,
+            `A_c` and `B_c`.
+
+        Examples
+        --------
+        >>> from mascore.agents import LTIAgent
+        >>> agent = LTIAgent.from_continuous([[0.0, 1.0], [0.0, -1.0]], [[0.0], [1.0]], 0.1)   # damped cart
+        >>> agent.dt, agent.A.round(4).tolist()
+        (0.1, [[1.0, 0.0952], [0.0, 0.9048]])
+        """
+        dt = check_positive(dt, "dt", "seconds (the sampling time)")
+        A_c = check_square(_float_array(A_c, "A_c"), "A_c")
+        B_c = as_matrix(_float_array(B_c, "B_c"), "B_c", (A_c.shape[0], None))
+        A, B = zoh(A_c, B_c, dt)
+        return cls(A, B, dt, A_c, B_c)
 
     @property
     def n_states(self) -> int:
@@ -152,7 +217,45 @@ class LTIAgent:
         >>> agents.double_integrator(2, 0.1).team(3).A.shape
         (12, 12)
         """
-        return LTIAgent(*team_matrices(self.A, self.B, n_agents))
+        return LTIAgent(*team_matrices(self.A, self.B, n_agents), dt=self.dt)
+
+
+def zoh(A_c: ArrayLike, B_c: ArrayLike, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Zero-order-hold sampling ``(expm(A_c dt), int_0^dt expm(A_c s) ds B_c)`` of a continuous-time agent.
+
+    Parameters
+    ----------
+    A_c : (m, m) array_like
+        Continuous-time state matrix (1/s).
+    B_c : (m, p) array_like
+        Continuous-time input matrix.
+    dt : float
+        Sampling time (s), positive.
+
+    Returns
+    -------
+    A : (m, m) ndarray
+    B : (m, p) ndarray
+
+    Examples
+    --------
+    >>> from mascore import agents
+    >>> A, B = agents.zoh([[0.0, 1.0], [0.0, 0.0]], [[0.0], [1.0]], 0.1)      # the double integrator
+    >>> B.round(4).tolist()
+    [[0.005], [0.1]]
+    """
+    from scipy.linalg import expm
+
+    dt = check_positive(dt, "dt", "seconds (the sampling time)")
+    A_c = check_square(_float_array(A_c, "A_c"), "A_c")
+    B_c = as_matrix(_float_array(B_c, "B_c"), "B_c", (A_c.shape[0], None))
+    m, p = B_c.shape
+    block = np.zeros((m + p, m + p))
+    block[:m, :m], block[:m, m:] = A_c * dt, B_c * dt
+    E = expm(block)
+    if not np.all(np.isfinite(E)):
+        raise ValueError(f"expm(A_c dt) overflows floating point for dt = {dt:g} s: A_c is too large for this dt")
+    return E[:m, :m], E[:m, m:]
 
 
 def double_integrator(n: int, dt: float) -> LTIAgent:
@@ -173,7 +276,7 @@ def double_integrator(n: int, dt: float) -> LTIAgent:
     Returns
     -------
     LTIAgent
-        ``2n`` states, ``n`` inputs.
+        ``2n`` states, ``n`` inputs, carrying `dt`.
 
     Examples
     --------
@@ -191,7 +294,7 @@ def double_integrator(n: int, dt: float) -> LTIAgent:
     eye = np.eye(n)
     A = np.block([[eye, dt * eye], [np.zeros((n, n)), eye]])
     B = np.vstack([0.5 * dt**2 * eye, dt * eye])
-    return LTIAgent(A, B)
+    return LTIAgent(A, B, dt=float(dt))
 
 
 def team_matrices(A: ArrayLike, B: ArrayLike, n_agents: int) -> tuple[np.ndarray, np.ndarray]:

@@ -26,6 +26,7 @@ if TYPE_CHECKING:
 __all__ = [
     "adjacency_from_edges",
     "complete_graph",
+    "connected_components",
     "graph_union",
     "has_spanning_tree",
     "is_connected",
@@ -33,6 +34,7 @@ __all__ = [
     "laplacian_spectrum",
     "path_graph",
     "proximity_graph",
+    "require_connected",
     "ring_graph",
     "spanning_tree_roots",
     "star_graph",
@@ -416,6 +418,78 @@ def is_connected(A: ArrayLike) -> bool:
     """
     A = _check_adjacency(A)
     return has_spanning_tree(A + A.T)
+
+
+def connected_components(A: ArrayLike) -> list[np.ndarray]:
+    """The connected components of the undirected graph of ``A + A.T`` (directions ignored).
+
+    Parameters
+    ----------
+    A : (N, N) array_like or networkx graph
+        Adjacency, ``A[i, j] > 0`` when information flows ``j -> i``.
+
+    Returns
+    -------
+    list of ndarray of int
+        The agents of each component (sorted), in order of their smallest agent; one
+        component iff :func:`is_connected`.
+
+    Examples
+    --------
+    >>> import networkx as nx
+    >>> from mascore import graphs
+    >>> [c.tolist() for c in graphs.connected_components(nx.union(nx.path_graph(2), nx.path_graph([2, 3, 4])))]
+    [[0, 1], [2, 3, 4]]
+    """
+    A = _check_adjacency(A)
+    S = (A + A.T) > 0
+    out = [np.flatnonzero(S[:, j]) for j in range(A.shape[0])]
+    seen = np.zeros(A.shape[0], bool)
+    comps = []
+    for root in range(A.shape[0]):
+        if seen[root]:
+            continue
+        comp = {root}
+        queue = deque([root])
+        while queue:
+            for nxt in out[queue.popleft()]:
+                if int(nxt) not in comp:
+                    comp.add(int(nxt))
+                    queue.append(int(nxt))
+        idx = np.array(sorted(comp), dtype=int)
+        seen[idx] = True
+        comps.append(idx)
+    return comps
+
+
+def require_connected(A: ArrayLike, why: str, name: str = "adjacency") -> None:
+    """Raise ``ValueError`` naming the components if the graph of `A` is not connected.
+
+    Parameters
+    ----------
+    A : (N, N) array_like or networkx graph
+        Adjacency (directions ignored).
+    why : str
+        What needs the connected graph; it goes into the message.
+    name : str
+        Argument name used in the message.
+
+    Examples
+    --------
+    >>> import networkx as nx
+    >>> from mascore import graphs
+    >>> try:
+    ...     graphs.require_connected(nx.union(nx.path_graph(2), nx.path_graph([2, 3])), "rendezvous")
+    ... except ValueError as exc:
+    ...     print(exc)
+    adjacency is a disconnected graph (2 components: [[0, 1], [2, 3]]); rendezvous needs a connected one
+    """
+    comps = connected_components(A)
+    if len(comps) > 1:
+        shown = [c.tolist() for c in comps[:6]]
+        more = ", ..." if len(comps) > 6 else ""
+        raise ValueError(f"{name} is a disconnected graph ({len(comps)} components: {str(shown)[:-1]}{more}]); "
+                         f"{why} needs a connected one")
 
 
 def graph_union(adjacencies: Sequence[ArrayLike] | np.ndarray) -> np.ndarray:

@@ -34,7 +34,9 @@ from ._validation import (
 )
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
+from .agents import LTIAgent
 from .graphs import laplacian as graph_laplacian
+from .graphs import require_connected
 from .noise import _psd_factor
 from .sensing import _check_adjacency, _check_flag, _measure, sensing_mask, team_noise_covariance
 
@@ -264,13 +266,17 @@ class RendezvousModel:
         Measurement-noise covariance: per sensed agent (the team covariance is then
         ``I_N ⊗ R``) or the full covariance of one observer's noise vector; symmetric PSD.
     dt : float
-        Sampling time (s), used for the time axis.
+        Sampling time (s) that ``A`` and ``B`` were discretized with; it gives the time
+        axis. Build the model with :meth:`from_agent` to take it from the agent
+        (e.g. :func:`mascore.agents.double_integrator`) instead of repeating it. A
+        double-integrator ``A = [[I, h I], [0, I]]`` with ``h != dt`` is refused (the
+        time axis would be wrong).
 
     Raises
     ------
     ValueError
-        Shapes that do not fit together, a covariance that is not symmetric PSD, or a
-        non-positive `dt`.
+        Shapes that do not fit together, a covariance that is not symmetric PSD, a
+        non-positive `dt`, or a `dt` that contradicts ``A``.
     TypeError
         If `dt` is not a number.
 
@@ -308,9 +314,62 @@ class RendezvousModel:
             raise TypeError(f"dt must be a positive sampling time in seconds; got {type(dt).__name__} {dt!r}")
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive sampling time in seconds; got {dt!r}")
+        _check_time_base(A, B, float(dt))
         for name, value in (("A", A), ("B", B), ("K", K), ("Q", Q), ("R", R)):
             object.__setattr__(self, name, frozen_copy(value))
         object.__setattr__(self, "dt", float(dt))
+
+    @classmethod
+    def from_agent(
+        cls, agent: LTIAgent, K: ArrayLike, Q: ArrayLike, R: ArrayLike, dt: float | None = None
+    ) -> RendezvousModel:
+        """The model of a team of copies of `agent`, on the agent's own time base.
+
+        Parameters
+        ----------
+        agent : mascore.agents.LTIAgent
+            The discrete-time agent, carrying its sampling time ``agent.dt`` (as
+            :func:`mascore.agents.double_integrator` and
+            :meth:`mascore.agents.LTIAgent.from_continuous` build it).
+        K, Q, R : array_like
+            As in the class (gain; process- and measurement-noise *covariances*).
+        dt : float, optional
+            Only for an agent without ``dt``; a `dt` different from ``agent.dt`` is refused.
+
+        Returns
+        -------
+        RendezvousModel
+
+        Raises
+        ------
+        ValueError
+            A `dt` that contradicts ``agent.dt`` (or no time base at all).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, rendezvous
+        >>> agent = agents.double_integrator(2, 0.05)
+        >>> model = rendezvous.RendezvousModel.from_agent(agent, rendezvous.rendezvous_gain(0.5, 1.0, 2),
+        ...                                               Q=1e-4 * np.eye(4), R=0.04 * np.eye(4))
+        >>> model.dt
+        0.05
+        >>> try:
+        ...     rendezvous.RendezvousModel.from_agent(agent, model.K, model.Q, model.R, dt=0.1)
+        ... except ValueError as exc:
+        ...     print(str(exc)[:46])
+        dt = 0.1 s contradicts the agent's sampling ti
+        """
+        if not isinstance(agent, LTIAgent):
+            raise TypeError(f"agent must be a mascore.agents.LTIAgent; got {type(agent).__name__}")
+        if agent.dt is None:
+            if dt is None:
+                raise ValueError("the agent carries no sampling time (agent.dt is None): pass dt, the sampling "
+                                 "time (s) its A and B were discretized with")
+        elif dt is not None and not np.isclose(check_positive(dt, "dt", "seconds"), agent.dt, rtol=1e-9, atol=0):
+            raise ValueError(f"dt = {dt!r} s contradicts the agent's sampling time agent.dt = {agent.dt!r} s that its "
+                             "A and B were discretized with: leave dt out, or rebuild the agent with this dt")
+        return cls(agent.A, agent.B, K, Q, R, agent.dt if agent.dt is not None else dt)
 
     def __reduce__(self) -> tuple:
         # pickle and copy rebuild through the constructor: the copy is checked and read-only too
@@ -347,6 +406,26 @@ class RendezvousModel:
         2
         """
         return self.B.shape[1]
+
+
+def _check_time_base(A: np.ndarray, B: np.ndarray, dt: float) -> None:
+    """Refuse a double integrator ``A = [[I, h I], [0, I]]`` sampled with ``h`` other than `dt`."""
+    m = A.shape[0]
+    if m % 2:
+        return
+    n = m // 2
+    eye = np.eye(n)
+    h = A[0, n]
+    if h <= 0 or not np.array_equal(A[:n, :n], eye) or not np.array_equal(A[n:, n:], eye) or np.any(A[n:, :n]):
+        return
+    if not np.allclose(A[:n, n:], h * eye, rtol=1e-12, atol=0):
+        return
+    if not np.isclose(h, dt, rtol=1e-9, atol=0):
+        raise ValueError(
+            f"dt = {dt:g} s contradicts A: A is a double integrator sampled with h = {h:g} s (A[:n, n:] = h I), so "
+            f"the time axis would be wrong by a factor {dt / h:g}; pass dt = {h:g}, or build A with dt "
+            "(RendezvousModel.from_agent(agents.double_integrator(n, dt), ...) takes dt from the agent)"
+        )
 
 
 def _check_model(model: object) -> RendezvousModel:
@@ -500,6 +579,10 @@ class RendezvousResult:
         ``F_2 E[e e_i^T]`` (estimation mode, ``B = 1``), for Theorem 1.
     model : TeamFilterModel or None
         The team filter model (filter modes).
+    estimates : (T+1, R, N, N, m) ndarray or None
+        With ``return_estimates=True`` (filter modes): ``estimates[k, r, i, j]`` is
+        agent ``i``'s estimate ``x̂_{i,j}`` of agent ``j``'s state after the update of
+        step ``k`` (m, m/s), so ``states[k, r, j] - estimates[k, r, i, j]`` is its error.
 
     Examples
     --------
@@ -525,6 +608,7 @@ class RendezvousResult:
     gains: np.ndarray | None = None
     f2_cross: np.ndarray | None = None
     model: dkf.TeamFilterModel | None = None
+    estimates: np.ndarray | None = None
 
     @property
     def time(self) -> np.ndarray:
@@ -558,6 +642,7 @@ def simulate_rendezvous(
     central: bool = False,
     progress: bool = False,
     switching: bool = False,
+    return_estimates: bool = False,
 ) -> RendezvousResult:
     """Closed-loop rendezvous on a fixed or switching topology, batched over Monte Carlo runs.
 
@@ -600,6 +685,25 @@ def simulate_rendezvous(
     switching : bool
         Read `adjacency` as one graph per step (Theorem 1 assumes a fixed
         one; with "estimation" every graph must make system (43) observable).
+    return_estimates : bool
+        Filter modes: also keep every agent's team estimate at every step in
+        ``result.estimates``, ``(T+1, R, N, N, m)`` floats (``8 (T+1) R N^2 m`` bytes).
+
+    The loop of mode "estimation", written out with the public objects (what this
+    function runs; the "Apply it to your own system" chapter runs it and checks
+    it against this function)::
+
+        proc_rng, meas_rng = np.random.default_rng(seed).spawn(2)
+        x, L = x0[None], graphs.laplacian(adjacency)                         # one run: (1, N, m)
+        team = distributed_kf.TeamFilter(distributed_kf.team_filter_model(A, B, K, Q, R, N), L,
+                                         x_hat0[None], P0, mode="eb")       # every agent's x̂_i(0)
+        Z, S = sensing.measure(meas_rng, x, adjacency, R)                    # step 0 (law (5) uses it)
+        for k in range(n_steps):
+            U = consensus_control(team.X_hat, L, K)     # eq. (21): u_i from agent i's own estimates
+            x = propagate_team(proc_rng, x, U, A, B, Q) # eq. (1)
+            team.predict()                              # eqs. (29), (30), (32), (34)
+            Z, S = sensing.measure(meas_rng, x, adjacency, R)   # eq. (2): z_{i,x_j} = x_j + nu_ij
+            team.update(Z, S)                           # eqs. (31), (33)
 
     Returns
     -------
@@ -610,7 +714,8 @@ def simulate_rendezvous(
     ------
     ValueError
         Unknown mode, bad shapes, an isolated agent, or (mode "estimation") a
-        topology for which system (43) is not observable.
+        disconnected graph (named as such) or a topology for which system (43) is
+        not observable.
 
     Examples
     --------
@@ -636,7 +741,7 @@ def simulate_rendezvous(
     R_team = team_noise_covariance(R, N, m)
     n_steps = check_positive_int(n_steps, "n_steps")
     for flag, value in (("exact_control_noise", exact_control_noise), ("central", central),
-                        ("progress", progress), ("switching", switching)):
+                        ("progress", progress), ("switching", switching), ("return_estimates", return_estimates)):
         _check_flag(value, flag)
     Adj = _check_adjacency(adjacency)
     S = sensing_mask(Adj)  # raises on isolated agents
@@ -655,6 +760,8 @@ def simulate_rendezvous(
     filter_model = dkf.team_filter_model(A, B, K, Q, R, N) if filt else None
     if mode == "estimation":
         for adj in np.unique(Adj.reshape(-1, N, N), axis=0):  # each distinct graph once
+            require_connected(adj, "mode 'estimation' (every agent estimates the whole team, system (43) "
+                              "observable)", "adjacency" if Adj.ndim == 2 else "a graph of adjacency")
             dkf.require_observable(filter_model.A, filter_model.BK, adj)
     proc_rng, meas_rng = rng.spawn(2)
     states = np.empty((n_steps + 1, n_runs, N, m))
@@ -680,6 +787,8 @@ def simulate_rendezvous(
         out["pos_error"] = np.empty((n_steps + 1, n_runs, N))
         out["pos_std"] = np.empty((n_steps + 1, nb, N))
         out["nees"] = np.empty((n_steps + 1, n_runs, N))
+        if return_estimates:
+            out["estimates"] = np.empty((n_steps + 1, n_runs, N, N, m))
         if nb == 1:
             out["sigma_i"] = np.empty((n_steps + 1, N, filter_model.M_r, filter_model.M_r))
             out["gains"] = np.zeros((n_steps + 1, N, filter_model.M_r, filter_model.M_r))
@@ -698,6 +807,8 @@ def simulate_rendezvous(
             diag = np.diagonal(Sig_i, axis1=-2, axis2=-1)[..., pos]
             out["pos_std"][k] = np.sqrt(n * diag.sum(axis=-1))
             out["nees"][k] = team.nees(x)
+            if return_estimates:
+                out["estimates"][k] = team.X_hat
             if nb == 1:
                 out["sigma_i"][k] = Sig_i[0]
                 out["gains"][k] = team.KH[0]

@@ -82,6 +82,7 @@ def baselines() -> dict[str, tuple]:
         "agents.team_matrices": (agents.team_matrices, dict(A=AGENT.A, B=AGENT.B, n_agents=3)),
         "agents.team_state": (agents.team_state, dict(agent_states_=rng.normal(size=(3, 4)))),
         "agents.agent_states": (agents.agent_states, dict(team=rng.normal(size=12), n_states=4)),
+        "agents.zoh": (agents.zoh, dict(A_c=[[0.0, 1.0], [0.0, -1.0]], B_c=[[0.0], [1.0]], dt=0.1)),
         # graphs
         "graphs.adjacency_from_edges": (graphs.adjacency_from_edges, dict(n_agents=3, edges=[(0, 1), (1, 2, 0.5)])),
         "graphs.laplacian": (graphs.laplacian, dict(A=A)),
@@ -94,6 +95,8 @@ def baselines() -> dict[str, tuple]:
         "graphs.spanning_tree_roots": (graphs.spanning_tree_roots, dict(A=A)),
         "graphs.has_spanning_tree": (graphs.has_spanning_tree, dict(A=A)),
         "graphs.is_connected": (graphs.is_connected, dict(A=A)),
+        "graphs.connected_components": (graphs.connected_components, dict(A=A)),
+        "graphs.require_connected": (graphs.require_connected, dict(A=A, why="the test")),
         "graphs.graph_union": (graphs.graph_union, dict(adjacencies=[A, graphs.complete_graph(N)])),
         "graphs.unions_over_windows": (graphs.unions_over_windows, dict(adjacencies=np.stack([A, A, A]), window=2)),
         "graphs.to_networkx": (graphs.to_networkx, dict(A=A)),
@@ -363,6 +366,7 @@ LAPLACIAN_ARGS = [("distributed_kf.closed_loop_matrices", "laplacian"), ("distri
                   ("distributed_kf.theorem1_min_eigenvalues", "laplacian"),
                   ("rendezvous.consensus_control", "laplacian")]
 ADJACENCY_ARGS = [("graphs.laplacian", "A"), ("graphs.spanning_tree_roots", "A"), ("graphs.is_connected", "A"),
+                  ("graphs.connected_components", "A"), ("graphs.require_connected", "A"),
                   ("graphs.has_spanning_tree", "A"), ("graphs.to_networkx", "A"),
                   ("sensing.sensing_mask", "adjacency"), ("sensing.neighbor_sets", "adjacency"),
                   ("sensing.selection_matrices", "adjacency"), ("sensing.measure", "adjacency"),

@@ -148,3 +148,85 @@ def test_rendezvous_takes_a_networkx_graph():
     a = rendezvous.simulate_rendezvous(0, model, x0, nx.cycle_graph(5), 5, "true")
     b = rendezvous.simulate_rendezvous(0, model, x0, graphs.ring_graph(5), 5, "true")
     np.testing.assert_array_equal(a.states, b.states)
+
+
+# --------------------------------------------------------------------------- rendezvous: estimates, time base, graph
+
+
+def _rendezvous_case(dt=0.1):
+    from mascore import agents
+
+    agent = agents.double_integrator(2, dt)
+    K = rendezvous.rendezvous_gain(0.5, 1.5, 2)
+    return agent, K, 1e-4 * np.eye(4), 0.01 * np.eye(4)
+
+
+def test_the_written_out_loop_is_simulate_rendezvous():
+    """The loop of simulate_rendezvous's docstring (and the apply chapter), run by hand, gives its states and estimates."""
+    from mascore import distributed_kf
+
+    agent, K, Q, R = _rendezvous_case()
+    model = rendezvous.RendezvousModel.from_agent(agent, K, Q, R)
+    N, T = 5, 15
+    adjacency = nx.cycle_graph(N)
+    x0 = np.random.default_rng(1).normal(scale=5.0, size=(N, 4))
+    run = rendezvous.simulate_rendezvous(7, model, x0, adjacency, T, "estimation", x_hat0=x0.ravel(), P0=np.eye(4),
+                                         return_estimates=True)
+    proc_rng, meas_rng = np.random.default_rng(7).spawn(2)
+    x, L = x0[None], graphs.laplacian(adjacency)
+    team = distributed_kf.TeamFilter(distributed_kf.team_filter_model(agent.A, agent.B, K, Q, R, N), L,
+                                     x0.ravel()[None], np.eye(4), mode="eb")
+    Z, S = sensing.measure(meas_rng, x, adjacency, R)
+    estimates = [team.X_hat.copy()]
+    for _ in range(T):
+        U = rendezvous.consensus_control(team.X_hat, L, K)
+        x = rendezvous.propagate_team(proc_rng, x, U, agent.A, agent.B, Q)
+        team.predict()
+        Z, S = sensing.measure(meas_rng, x, adjacency, R)
+        team.update(Z, S)
+        estimates.append(team.X_hat.copy())
+    assert run.estimates.shape == (T + 1, N, N, 4)
+    np.testing.assert_array_equal(run.states[-1], x[0])
+    np.testing.assert_array_equal(run.estimates, np.array(estimates)[:, 0])
+    # the error statistics are those of the returned estimates
+    err = run.states[:, None, :, :2] - run.estimates[..., :2]
+    np.testing.assert_allclose(run.pos_error, np.sqrt((err**2).sum(axis=(-1, -2))), rtol=1e-12)
+    assert rendezvous.simulate_rendezvous(7, model, x0, adjacency, 3, "estimation", x_hat0=x0.ravel(),
+                                          P0=np.eye(4)).estimates is None
+
+
+def test_rendezvous_model_refuses_a_dt_that_contradicts_A():
+    agent, K, Q, R = _rendezvous_case(dt=0.05)
+    with pytest.raises(ValueError, match=r"dt = 0.1 s contradicts A: .* h = 0.05 s"):
+        rendezvous.RendezvousModel(agent.A, agent.B, K, Q, R, 0.1)
+    assert rendezvous.RendezvousModel(agent.A, agent.B, K, Q, R, 0.05).dt == 0.05
+    assert rendezvous.RendezvousModel.from_agent(agent, K, Q, R).dt == 0.05
+    with pytest.raises(ValueError, match="contradicts the agent's sampling time"):
+        rendezvous.RendezvousModel.from_agent(agent, K, Q, R, dt=0.1)
+    from mascore.agents import LTIAgent
+
+    with pytest.raises(ValueError, match="carries no sampling time"):
+        rendezvous.RendezvousModel.from_agent(LTIAgent(agent.A, agent.B), K, Q, R)
+
+
+def test_lti_agent_checks_its_continuous_time_origin():
+    from mascore.agents import LTIAgent
+
+    A_c, B_c = [[0.0, 1.0], [0.0, -2.0]], [[0.0], [1.0]]
+    agent = LTIAgent.from_continuous(A_c, B_c, 0.05)
+    assert agent.dt == 0.05
+    LTIAgent(agent.A, agent.B, dt=0.05, A_c=A_c, B_c=B_c)  # consistent: accepted
+    with pytest.raises(ValueError, match="A is not the zero-order-hold sampling"):
+        LTIAgent(agent.A, agent.B, dt=0.1, A_c=A_c, B_c=B_c)
+    with pytest.raises(ValueError, match="both A_c and B_c"):
+        LTIAgent(agent.A, agent.B, dt=0.05, A_c=A_c)
+
+
+def test_a_disconnected_graph_is_named_as_such():
+    agent, K, Q, R = _rendezvous_case()
+    model = rendezvous.RendezvousModel.from_agent(agent, K, Q, R)
+    split = nx.union(nx.path_graph(3), nx.path_graph([3, 4, 5]))
+    x0 = np.zeros((6, 4))
+    with pytest.raises(ValueError, match=r"disconnected graph \(2 components: \[\[0, 1, 2\], \[3, 4, 5\]\]\)"):
+        rendezvous.simulate_rendezvous(0, model, x0, split, 3, "estimation", x_hat0=x0.ravel(), P0=np.eye(4))
+    assert [c.tolist() for c in graphs.connected_components(split)] == [[0, 1, 2], [3, 4, 5]]
