@@ -66,7 +66,10 @@ __all__ = [
     "top_down_lqr",
 ]
 
-def lqr(*args: object, N: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def lqr(
+    A: ArrayLike, B: ArrayLike | None = None, Q: ArrayLike | None = None, R: ArrayLike | None = None,
+    N: ArrayLike | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Continuous-time infinite-horizon LQR, python-control's ``K, S, E = lqr(A, B, Q, R[, N])``.
 
     Call as ``lqr(A, B, Q, R)``, ``lqr(A, B, Q, R, N)``, ``lqr(sys, Q, R)`` or
@@ -121,12 +124,15 @@ def lqr(*args: object, N: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarr
     >>> import control                                           # doctest: +SKIP
     >>> K, S, E = lqr.lqr(control.ss([[0, 1], [0, 0]], [[0], [1]], np.eye(2), 0), np.eye(2), np.eye(1))  # doctest: +SKIP
     """
-    A, B, Q, R, N, dt = _lqr_args("lqr", args, N)
+    A, B, Q, R, N, dt = _lqr_args("lqr", A, B, Q, R, N)
     discrete = dt is not None and (dt is True or dt != 0)  # python-control: dt = True or > 0 is discrete time
     return _solve_lqr(A, B, Q, R, N, discrete=discrete)
 
 
-def dlqr(*args: object, N: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def dlqr(
+    A: ArrayLike, B: ArrayLike | None = None, Q: ArrayLike | None = None, R: ArrayLike | None = None,
+    N: ArrayLike | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Discrete-time infinite-horizon LQR, python-control's ``K, S, E = dlqr(A, B, Q, R[, N])``.
 
     Call as ``dlqr(A, B, Q, R[, N])`` or ``dlqr(sys, Q, R[, N])`` with a discrete-time
@@ -176,7 +182,7 @@ def dlqr(*args: object, N: ArrayLike | None = None) -> tuple[np.ndarray, np.ndar
     >>> bool(np.all(np.abs(E) < 1))
     True
     """
-    A, B, Q, R, N, dt = _lqr_args("dlqr", args, N)
+    A, B, Q, R, N, dt = _lqr_args("dlqr", A, B, Q, R, N)
     if dt is not None and dt is not True and dt == 0:
         raise ValueError("sys is a continuous-time system (dt = 0): use lqr, or discretize it first")
     return _solve_lqr(A, B, Q, R, N, discrete=True)
@@ -187,23 +193,29 @@ def _is_system(obj: object) -> bool:
     return all(hasattr(obj, name) for name in ("A", "B", "dt")) and not isinstance(obj, np.ndarray)
 
 
-def _lqr_args(fname: str, args: tuple, N: ArrayLike | None):
-    """``(A, B, Q, R, N, dt)`` from python-control's call forms ``(A, B, Q, R[, N])`` / ``(sys, Q, R[, N])``."""
-    if args and _is_system(args[0]):
-        sys, rest, dt = args[0], args[1:], args[0].dt
+def _lqr_args(fname: str, A, B, Q, R, N):
+    """``(A, B, Q, R, N, dt)`` from python-control's call forms ``(A, B, Q, R[, N])`` / ``(sys, Q, R[, N])``.
+
+    With a system first, the positional slots after it hold ``Q, R[, N]`` (python-control's order);
+    ``Q=``, ``R=``, ``N=`` by keyword work too.
+    """
+    if _is_system(A):
+        sys, dt = A, A.dt
+        if B is not None:  # (sys, Q, R[, N]) positionally: shift the slots
+            rest = [v for v in (Q, R) if v is not None]
+            if not rest:
+                raise TypeError(f"{fname}(sys, Q, R[, N]) needs R")
+            if len(rest) == 2 and N is not None:
+                raise TypeError(f"{fname}(sys, Q, R[, N]): N given twice")
+            Q, R, N = B, rest[0], (rest[1] if len(rest) == 2 else N)
         A, B = _float_array(sys.A, "sys.A"), _float_array(sys.B, "sys.B")
-        names = "sys, Q, R[, N]"
     else:
-        rest, dt = args[2:], None
-        if len(args) < 2:
-            raise TypeError(f"{fname}() takes (A, B, Q, R[, N]) or (sys, Q, R[, N]); got {len(args)} argument(s)")
-        A, B = args[:2]
-        names = "A, B, Q, R[, N]"
-    if len(rest) not in (2, 3) or (len(rest) == 3 and N is not None):
-        raise TypeError(f"{fname}() takes ({names}) with N given once; got {len(args)} positional argument(s)")
-    Q, R = rest[:2]
-    if len(rest) == 3:
-        N = rest[2]
+        dt = None
+        if B is None:
+            raise TypeError(f"{fname}() takes (A, B, Q, R[, N]) or (sys, Q, R[, N]); B is missing")
+    for name, value in (("Q", Q), ("R", R)):
+        if value is None:
+            raise TypeError(f"{fname}() needs the cost weight {name}")
     return A, B, Q, R, N, dt
 
 

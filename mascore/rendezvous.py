@@ -689,6 +689,20 @@ def simulate_rendezvous(
         Filter modes: also keep every agent's team estimate at every step in
         ``result.estimates``, ``(T+1, R, N, N, m)`` floats (``8 (T+1) R N^2 m`` bytes).
 
+    Returns
+    -------
+    RendezvousResult
+        True states and, in the filter modes, the estimation errors, covariances and NEES.
+
+    Raises
+    ------
+    ValueError
+        Unknown mode, bad shapes, an isolated agent, or (mode "estimation") a
+        disconnected graph (named as such) or a topology for which system (43) is
+        not observable.
+
+    Notes
+    -----
     The loop of mode "estimation", written out with the public objects (what this
     function runs; the "Apply it to your own system" chapter runs it and checks
     it against this function)::
@@ -704,18 +718,6 @@ def simulate_rendezvous(
             team.predict()                              # eqs. (29), (30), (32), (34)
             Z, S = sensing.measure(meas_rng, x, adjacency, R)   # eq. (2): z_{i,x_j} = x_j + nu_ij
             team.update(Z, S)                           # eqs. (31), (33)
-
-    Returns
-    -------
-    RendezvousResult
-        True states and, in the filter modes, the estimation errors, covariances and NEES.
-
-    Raises
-    ------
-    ValueError
-        Unknown mode, bad shapes, an isolated agent, or (mode "estimation") a
-        disconnected graph (named as such) or a topology for which system (43) is
-        not observable.
 
     Examples
     --------

@@ -57,6 +57,7 @@ __all__ = [
     "check_assumption4",
     "circle_contains",
     "closed_loop_matrices",
+    "default_circle",
     "design_synchronization",
     "exponential_bound_ratio",
     "fit_alpha",
@@ -323,8 +324,7 @@ def pinned_interaction_matrix(adjacency: ArrayLike, pinning: ArrayLike) -> np.nd
     True
     """
     check_assumption4(adjacency, pinning)
-    Aadj = np.asarray(adjacency, dtype=float)
-    g = np.asarray(pinning, dtype=float)
+    Aadj, g = _check_graph(adjacency, pinning)  # arrays (a networkx graph becomes its adjacency)
     L = graphs.laplacian(Aadj)
     d = Aadj.sum(axis=1)
     return (L + np.diag(g)) / (1.0 + d + g)[:, None]
@@ -674,28 +674,75 @@ class SyncDesign:
     rho: float
 
 
+def default_circle(adjacency: ArrayLike, pinning: ArrayLike) -> tuple[float, float]:
+    """The circle ``C(c0, r0)`` of Lemma 2 computed from the spectrum of Gamma: smallest ``r0 / c0``.
+
+    Lemma 2 needs every eigenvalue ``lambda_i`` of Gamma (eq. (15)) inside ``C(c0, r0)``
+    and ``r0 / c0 < r``; the circle here minimizes ``r0 / c0 = max_i |lambda_i / c0 - 1|``
+    (a convex problem in ``1 / c0``), so it is the one most likely to pass the second
+    test. For real eigenvalues in ``[a, b]`` it is ``c0 = (a + b) / 2``, ``r0 = (b - a) / 2``.
+    ``r0`` is enlarged by a relative ``1e-6`` so the eigenvalues lie strictly inside.
+
+    Parameters
+    ----------
+    adjacency : (N, N) array_like or networkx graph
+        Interaction graph (directed allowed).
+    pinning : (N,) array_like
+        Pinning gains to the leader (dimensionless, >= 0).
+
+    Returns
+    -------
+    c0, r0 : float
+        Centre and radius (dimensionless, like the eigenvalues of Gamma).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import graphs, synchronization as sync
+    >>> ring = graphs.adjacency_from_edges(4, [(3, 0), (0, 1), (1, 2), (2, 3)], directed=True)   # eq. (24)
+    >>> c0, r0 = sync.default_circle(ring, [1.0, 0.0, 0.0, 0.0])
+    >>> round(c0, 3), round(r0 / c0, 3)                  # the paper's C(2/3, 0.6) has r0 / c0 = 0.9
+    (0.542, 0.844)
+    """
+    from scipy.optimize import minimize_scalar
+
+    eigs = np.linalg.eigvals(pinned_interaction_matrix(adjacency, pinning))
+    ratio = lambda inv_c0: float(np.max(np.abs(inv_c0 * eigs - 1.0)))  # noqa: E731
+    hi = float(np.min(2.0 * eigs.real / np.abs(eigs) ** 2))  # beyond it some |s lambda - 1| >= 1
+    best = minimize_scalar(ratio, bounds=(0.0, hi), method="bounded", options={"xatol": 1e-12 * hi})
+    c0 = 1.0 / float(best.x)
+    r0 = float(np.max(np.abs(eigs - c0))) * (1.0 + 1e-6) + 1e-12 * c0
+    return c0, r0
+
+
 def design_synchronization(
     A: ArrayLike, B: ArrayLike, Q: ArrayLike, adjacency: ArrayLike, pinning: ArrayLike,
-    c0: float, r0: float,
+    c0: float | None = None, r0: float | None = None,
 ) -> SyncDesign:
     """Lemma 2: P from eq. (16), K, c = 1/c0, after checking the circle conditions.
+
+    Without `c0` and `r0` the circle is computed from the spectrum of Gamma by
+    :func:`default_circle` (the smallest ``r0 / c0``); pass both to override it
+    (the paper's example uses ``C(2/3, 0.6)``), or `c0` alone to get the smallest
+    radius about that centre.
 
     Parameters
     ----------
     A : (n, n) array_like
-        Agent state matrix.
+        Agent state matrix (discrete time, one sampling period).
     B : (n, m) array_like
         Agent input matrix, full column rank.
     Q : (n, n) array_like
-        Weight of eq. (16), symmetric positive definite.
-    adjacency : (N, N) array_like
-        Interaction graph (directed allowed).
+        Weight of the Riccati-like equation (16), symmetric positive definite: a
+        design weight (not a covariance), in (cost unit)/(state unit)^2.
+    adjacency : (N, N) array_like or networkx graph
+        Interaction graph (directed allowed), dimensionless weights.
     pinning : (N,) array_like
-        Pinning gains to the leader.
-    c0 : float
-        Centre of the circle that must hold the eigenvalues of Gamma.
-    r0 : float
-        Its radius.
+        Pinning gains to the leader (dimensionless, >= 0).
+    c0 : float, optional
+        Centre of the circle that must hold the eigenvalues of Gamma (dimensionless).
+    r0 : float, optional
+        Its radius (only with `c0`).
 
     Returns
     -------
@@ -718,7 +765,19 @@ def design_synchronization(
     >>> d = sync.design_synchronization(A, B, Q, ring, pin, c0=2 / 3, r0=0.6)
     >>> bool(d.in_circle.all()), bool(np.allclose(d.K, A))     # with B = I the gain is A
     (True, True)
+    >>> auto = sync.design_synchronization(A, B, Q, ring, pin)  # circle from the spectrum of Gamma
+    >>> bool(auto.r0 / auto.c0 < d.r0 / d.c0), bool(auto.rho < 1)
+    (True, True)
     """
+    if c0 is None:
+        if r0 is not None:
+            raise ValueError("r0 was given without c0: pass both (the circle C(c0, r0)), c0 alone, or neither "
+                             "(the circle is then computed from the spectrum of Gamma)")
+        c0, r0 = default_circle(adjacency, pinning)
+    elif r0 is None:
+        check_positive(c0, "c0")
+        eigs0 = np.linalg.eigvals(pinned_interaction_matrix(adjacency, pinning))
+        r0 = float(np.max(np.abs(eigs0 - c0))) * (1.0 + 1e-6) + 1e-12 * c0
     check_positive(c0, "c0")
     check_positive(r0, "r0")
     P = riccati_like(A, B, Q)

@@ -100,8 +100,10 @@ def test_lqr_accepts_a_state_space_system_and_N_by_keyword():
                                control.lqr(sys_d, np.eye(3), np.eye(1))[0], rtol=1e-7)
     with pytest.raises(ValueError, match="continuous-time"):
         lqr.dlqr(sys_c, np.eye(3), np.eye(1))
-    with pytest.raises(TypeError, match="N given once"):
-        lqr.lqr(A, B, np.eye(3), np.eye(1), N, N=N)
+    np.testing.assert_allclose(lqr.lqr(sys_c, Q=np.eye(3), R=np.eye(1), N=N)[0],
+                               control.lqr(sys_c, np.eye(3), np.eye(1), N)[0], rtol=1e-7)
+    with pytest.raises(TypeError, match="N given twice"):
+        lqr.lqr(sys_c, np.eye(3), np.eye(1), N, N=N)
     with pytest.raises(ValueError, match="N: the cost weight"):
         lqr.lqr(A, B, np.eye(3), np.eye(1), 10 * np.ones((3, 1)))
     with pytest.raises(ValueError, match="Incompatible dimensions of N"):
@@ -230,3 +232,31 @@ def test_a_disconnected_graph_is_named_as_such():
     with pytest.raises(ValueError, match=r"disconnected graph \(2 components: \[\[0, 1, 2\], \[3, 4, 5\]\]\)"):
         rendezvous.simulate_rendezvous(0, model, x0, split, 3, "estimation", x_hat0=x0.ravel(), P0=np.eye(4))
     assert [c.tolist() for c in graphs.connected_components(split)] == [[0, 1, 2], [3, 4, 5]]
+
+
+# --------------------------------------------------------------------------- synchronization design without a grid search
+
+
+def test_default_circle_is_the_smallest_ratio_and_the_design_uses_it():
+    from mascore import synchronization as sync
+
+    ring = graphs.adjacency_from_edges(4, [(3, 0), (0, 1), (1, 2), (2, 3)], directed=True)
+    pin = [1.0, 0.0, 0.0, 0.0]
+    c0, r0 = sync.default_circle(ring, pin)
+    eigs = np.linalg.eigvals(sync.pinned_interaction_matrix(ring, pin))
+    assert sync.circle_contains(eigs, c0, r0).all()
+    centres = np.linspace(0.2, 2.0, 20001)  # brute force over the centre: no circle has a smaller r0 / c0
+    best = np.min(np.max(np.abs(eigs[None] - centres[:, None]), axis=1) / centres)
+    assert r0 / c0 <= best * (1 + 1e-5)
+    A, Q = np.array([[0.0, -1.0], [1.0, 0.0]]), 0.1 * np.eye(2)
+    d = sync.design_synchronization(A, np.eye(2), Q, ring, pin)
+    assert (d.c0, d.r0) == (c0, r0) and d.c == pytest.approx(1 / c0) and d.rho < 1
+    d_c0 = sync.design_synchronization(A, np.eye(2), Q, ring, pin, c0=2 / 3)  # smallest radius about c0
+    assert d_c0.in_circle.all() and d_c0.r0 < 0.6
+    with pytest.raises(ValueError, match="r0 was given without c0"):
+        sync.design_synchronization(A, np.eye(2), Q, ring, pin, r0=0.6)
+    # real spectrum [a, b]: the circle is ((a + b) / 2, (b - a) / 2)
+    path = nx.path_graph(3)
+    c0, r0 = sync.default_circle(path, [1.0, 0.0, 0.0])
+    lam = np.sort(np.linalg.eigvals(sync.pinned_interaction_matrix(path, [1.0, 0.0, 0.0])).real)
+    assert c0 == pytest.approx((lam[0] + lam[-1]) / 2, rel=1e-6) and r0 == pytest.approx((lam[-1] - lam[0]) / 2, rel=1e-5)
