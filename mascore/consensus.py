@@ -61,6 +61,11 @@ pay the checks once, then call unchecked private kernels.
   Euler-Maruyama) and at most :data:`ODE_MAX_EVALUATIONS` right-hand-side
   evaluations of the ODE solver; a longer run raises a ``ValueError`` naming
   ``n_steps`` or ``t_final`` instead of hanging.
+
+Units: time in s (``t``, ``dt``, ``t_final``, dwell times); the consensus states ``xi`` in the
+user's state unit; ``Q`` and ``Omega`` are noise *covariances* per step, in (state unit)^2 (in the
+continuous-time functions, intensities in (state unit)^2/s); the filters' ``P`` in (state unit)^2;
+adjacency weights and gains in 1/s (continuous time) or dimensionless (per step).
 """
 
 from __future__ import annotations
@@ -330,9 +335,11 @@ def kalman_consensus_step(
     G : (n, n) or (..., n, n) array_like
         Topology at step k (``G[i, j] > 0``: ``i`` hears ``j``), zero diagonal.
     Q : float, (m, m) or (n, m, m) array_like
-        Process-noise covariance of the consensus value (per agent if (n, m, m)).
+        Process-noise covariance of the consensus value per step (per agent if (n, m, m)), in
+        (state unit)^2.
     Omega : float, (m, m) or (n, n, m, m) array_like
-        Communication-noise covariance ``Omega_ij`` (common or per link).
+        Communication-noise covariance ``Omega_ij`` of a received state (common or per link), in
+        (state unit)^2.
     rng : numpy.random.Generator or int, optional
         If given, communication noise ``nu_ij ~ N(0, Omega_ij)`` is drawn and
         added to every received state; if None the messages are noise-free
@@ -399,9 +406,9 @@ def kalman_consensus_discrete(
         ``g_ij[k]`` for ``k = 0..K-1``: a sequence (one graph per step, or one
         per step and batch member), a fixed graph, or a function ``k -> (n, n)``.
     Q : float, (m, m) or (n, m, m) array_like
-        Process-noise covariance, as in :func:`kalman_consensus_step`.
+        Process-noise covariance per step, in (state unit)^2, as in :func:`kalman_consensus_step`.
     Omega : float, (m, m) or (n, n, m, m) array_like
-        Communication-noise covariance, as in :func:`kalman_consensus_step`.
+        Communication-noise covariance, in (state unit)^2, as in :func:`kalman_consensus_step`.
     n_steps : int, optional
         Number of steps; defaults to ``K`` for a sequence, required otherwise.
     rng : numpy.random.Generator or int, optional
@@ -472,9 +479,9 @@ def consensus_matrix(
     G : (n, n) array_like
         Topology at step k.
     Q : float, (m, m) or (n, m, m) array_like
-        Process-noise covariance, as in :func:`kalman_consensus_step`.
+        Process-noise covariance per step, in (state unit)^2, as in :func:`kalman_consensus_step`.
     Omega : float, (m, m) or (n, n, m, m) array_like
-        Communication-noise covariance, as in :func:`kalman_consensus_step`.
+        Communication-noise covariance, in (state unit)^2, as in :func:`kalman_consensus_step`.
     include_self : bool
         Keep the ``g_ii = 1`` term.
 
@@ -548,9 +555,9 @@ def error_covariance(
     topologies : (K, n, n) array_like, (n, n) array_like or callable
         As in :func:`kalman_consensus_discrete`.
     Q : float, (m, m) or (n, m, m) array_like
-        Process-noise covariance, as in :func:`kalman_consensus_step`.
+        Process-noise covariance per step, in (state unit)^2, as in :func:`kalman_consensus_step`.
     Omega : float, (m, m) or (n, n, m, m) array_like
-        Communication-noise covariance (messages are noise-free).
+        Communication-noise covariance, in (state unit)^2 (messages are noise-free).
     n_steps : int, optional
         As in :func:`kalman_consensus_discrete`.
     include_self : bool
@@ -645,9 +652,11 @@ def kalman_consensus_continuous(
         when the pace so far shows the horizon is out of reach); with noise
         ``t_final / dt`` may be at most :data:`MAX_STEPS`.
     Q : float, (m, m) or (n, m, m) array_like
-        Process-noise intensity (the paper assumes Q > 0; Q = 0 is accepted).
+        Process-noise intensity: the covariance per unit time of the continuous-time white noise on the
+        information state, in (state unit)^2/s (the paper assumes Q > 0; Q = 0 is accepted).
     Omega : float, (m, m) or (n, n, m, m) array_like
-        Communication-noise intensity.
+        Communication-noise intensity: the covariance per unit time of the noise on each received
+        state, in (state unit)^2/s.
     t_eval : (T,) array_like, optional
         Output times in ``[0, t_final]``; default 201 points.
     switch_times : sequence of float, optional

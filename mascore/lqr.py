@@ -297,11 +297,12 @@ def network_lqr_weights(
     Parameters
     ----------
     Q1 : (n, n) array_like
-        Weight on each agent's own state.
+        Cost weight on each agent's own state (symmetric PSD), not a covariance; (cost unit)/(state unit)^2/s.
     Q2 : (n, n) array_like
-        Weight on the differences between neighbours.
+        Cost weight on the differences between neighbours (symmetric PSD), not a covariance;
+        (cost unit)/(state unit)^2/s.
     R : (m, m) array_like
-        Input weight.
+        Input cost weight (symmetric positive definite), not a covariance; (cost unit)/(input unit)^2/s.
     laplacian : (N, N) array_like
         Symmetric (undirected): ``Q~`` weighs a quadratic cost and must be symmetric itself.
 
@@ -344,11 +345,12 @@ def centralized_network_lqr(
     B : (n, m) array_like
         Agent input matrix.
     Q1 : (n, n) array_like
-        Weight on each agent's own state (symmetric PSD).
+        Cost weight on each agent's own state (symmetric PSD), not a covariance; (cost unit)/(state unit)^2/s.
     Q2 : (n, n) array_like
-        Weight on the differences between neighbours (symmetric PSD).
+        Cost weight on the differences between neighbours (symmetric PSD), not a covariance;
+        (cost unit)/(state unit)^2/s.
     R : (m, m) array_like
-        Input weight (symmetric positive definite).
+        Input cost weight (symmetric positive definite), not a covariance; (cost unit)/(input unit)^2/s.
     laplacian : (N, N) array_like
         Laplacian of a connected undirected graph.
 
@@ -402,11 +404,12 @@ def borrelli_keviczky_structure(
     B : (n, m) array_like
         Agent input matrix.
     Q1 : (n, n) array_like
-        Weight on each agent's own state (symmetric PSD).
+        Cost weight on each agent's own state (symmetric PSD), not a covariance; (cost unit)/(state unit)^2/s.
     Q2 : (n, n) array_like
-        Weight on the differences between neighbours (symmetric PSD).
+        Cost weight on the differences between neighbours (symmetric PSD), not a covariance;
+        (cost unit)/(state unit)^2/s.
     R : (m, m) array_like
-        Input weight (symmetric positive definite).
+        Input cost weight (symmetric positive definite), not a covariance; (cost unit)/(input unit)^2/s.
     n_agents : int
         Team size N.
 
@@ -568,11 +571,12 @@ def top_down_lqr(
     B : (n, m) array_like
         Agent input matrix.
     Q1 : (n, n) array_like
-        Weight on each agent's own state (symmetric PSD).
+        Cost weight on each agent's own state (symmetric PSD), not a covariance; (cost unit)/(state unit)^2/s.
     Q2 : (n, n) array_like
-        Weight on the differences between neighbours (symmetric PSD).
+        Cost weight on the differences between neighbours (symmetric PSD), not a covariance;
+        (cost unit)/(state unit)^2/s.
     R : (m, m) array_like
-        Input weight (symmetric positive definite).
+        Input cost weight (symmetric positive definite), not a covariance; (cost unit)/(input unit)^2/s.
     adjacency : (N, N) array_like
         Symmetric adjacency of a connected graph: non-negative weights, no self-loops
         (a self-loop would count in the degree ``d_max`` but not in the Laplacian).
@@ -639,11 +643,12 @@ def bottom_up_lqr(
     B : (n, m) array_like
         Agent input matrix; ``(A, B)`` stabilizable.
     Q1 : (n, n) array_like
-        Weight on each agent's own state (symmetric PSD).
+        Cost weight on each agent's own state (symmetric PSD), not a covariance; (cost unit)/(state unit)^2/s.
     Q2 : (n, n) array_like
-        Weight on the differences between neighbours (symmetric PSD).
+        Cost weight on the differences between neighbours (symmetric PSD), not a covariance;
+        (cost unit)/(state unit)^2/s.
     R : (m, m) array_like
-        Input weight (symmetric positive definite).
+        Input cost weight (symmetric positive definite), not a covariance; (cost unit)/(input unit)^2/s.
     adjacency : (N, N) array_like
         Symmetric (undirected), connected, non-negative weights, no self-loops.
     solver_options : dict, optional
@@ -746,11 +751,12 @@ def network_controller_cost(
     B : (n, m) array_like
         Agent input matrix.
     Q1 : (n, n) array_like
-        Weight on each agent's own state (symmetric PSD).
+        Cost weight on each agent's own state (symmetric PSD), not a covariance; (cost unit)/(state unit)^2/s.
     Q2 : (n, n) array_like
-        Weight on the differences between neighbours (symmetric PSD).
+        Cost weight on the differences between neighbours (symmetric PSD), not a covariance;
+        (cost unit)/(state unit)^2/s.
     R : (m, m) array_like
-        Input weight (symmetric positive definite).
+        Input cost weight (symmetric positive definite), not a covariance; (cost unit)/(input unit)^2/s.
     laplacian : (N, N) array_like
         Laplacian of a connected undirected graph.
     gain : DistributedGain
@@ -799,11 +805,12 @@ def centralized_network_cost(
     B : (n, m) array_like
         Agent input matrix.
     Q1 : (n, n) array_like
-        Weight on each agent's own state (symmetric PSD).
+        Cost weight on each agent's own state (symmetric PSD), not a covariance; (cost unit)/(state unit)^2/s.
     Q2 : (n, n) array_like
-        Weight on the differences between neighbours (symmetric PSD).
+        Cost weight on the differences between neighbours (symmetric PSD), not a covariance;
+        (cost unit)/(state unit)^2/s.
     R : (m, m) array_like
-        Input weight (symmetric positive definite).
+        Input cost weight (symmetric positive definite), not a covariance; (cost unit)/(input unit)^2/s.
     laplacian : (N, N) array_like
         Laplacian of a connected undirected graph.
 

@@ -152,9 +152,12 @@ def min_energy_observer(
     C : (m, n) array_like
         ``(A, C)`` must be observable.
     Q : (m, m) array_like
-        Weight on the measurement noise, symmetric positive definite (large: trust the measurements).
+        Cost weight on the measurement noise ``n`` in the minimum-energy cost (20), symmetric positive
+        definite (large: trust the measurements). A weight, not a covariance: in the Kalman-Bucy reading it is
+        the *inverse* measurement-noise intensity, in 1/(output unit)^2 (``L = S C^T Q``).
     R : (q, q) array_like
-        Weight on the disturbance, symmetric positive definite (large: trust the model).
+        Cost weight on the disturbance ``d`` in cost (20), symmetric positive definite (large: trust the
+        model). A weight, not a covariance: the *inverse* disturbance intensity, in 1/(disturbance unit)^2.
 
     Returns
     -------
@@ -301,7 +304,8 @@ def distributed_observer(
         Weights on the absolute and on the relative output errors (eq. (38));
         ``Q1`` positive definite, ``Q2`` positive semidefinite.
     R : (q, q) array_like
-        Weight on the disturbance, positive definite.
+        Cost weight on the disturbance ``d`` in cost (20) (the inverse disturbance intensity, not a
+        covariance), positive definite, in 1/(disturbance unit)^2.
     adjacency : (N, N) array_like
         Symmetric adjacency of a connected undirected graph of N >= 2 agents (non-negative
         weights, no self-loops). One agent is refused: it has no disagreement modes
@@ -1066,7 +1070,8 @@ def achieved_cost(
     C : (m, n) array_like
         Output matrix.
     R : (q, q) array_like
-        Disturbance weight, positive definite.
+        Cost weight on the disturbance (the inverse disturbance intensity, not a covariance), positive
+        definite, in 1/(disturbance unit)^2.
     L : (n, m) array_like
         Local gain.
     Phi : (m, m) array_like or float

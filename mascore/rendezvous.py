@@ -176,7 +176,8 @@ def propagate_team(
     B : (m, p) array_like
         Agent input matrix.
     Q : (m, m) array_like
-        Process-noise covariance, symmetric PSD.
+        Process-noise covariance, symmetric PSD, in (state unit)^2: m^2 and m^2/s^2 on the position and
+        velocity entries.
 
     Returns
     -------
@@ -261,7 +262,7 @@ class RendezvousModel:
     K : (p, m) array_like
         Consensus gain of eq. (4), e.g. :func:`rendezvous_gain`.
     Q : (m, m) array_like
-        Process-noise covariance of each agent, symmetric PSD (units of the state squared).
+        Process-noise covariance of each agent, symmetric PSD, in (state unit)^2 (m^2, m^2/s^2).
     R : (m, m) or (m N, m N) array_like
         Measurement-noise covariance: per sensed agent (the team covariance is then
         ``I_N ⊗ R``) or the full covariance of one observer's noise vector; symmetric PSD.

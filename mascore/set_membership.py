@@ -49,6 +49,11 @@ same system, build the model once. No state is shared between models; a model is
 to use from several threads with ``method="closed_form"``; with ``method="sdp"`` it owns
 the compiled cvxpy programs, which must not be solved from two threads at once (one
 model per thread).
+
+Units: the state ``x`` and output ``y`` in the user's units; every ellipsoid shape matrix (``P``,
+and the disturbance bounds ``Q`` and ``R``, which are *shapes*, not covariances) in the unit of its
+vector squared: the semi-axes of ``E(c, P)`` are the square roots of the eigenvalues of ``P``.
+Time is the step index ``k`` (discrete time).
 """
 
 from __future__ import annotations
@@ -106,7 +111,8 @@ def correct(
     D : (p, v) array_like
         Output-disturbance matrix (``D R D^T`` positive definite for ``method="closed_form"``).
     R : (v, v) array_like
-        Shape of the output-disturbance ellipsoid, positive definite.
+        Shape matrix of the output-disturbance ellipsoid ``{v : v^T R^{-1} v <= 1}``, positive definite: a
+        set bound, not a covariance, in (output unit)^2.
     method : {"closed_form", "sdp"}
         The closed form of the trace-optimal intersection (default) or the SDP of eq. (6)
         solved with cvxpy/Clarabel (needs the ``sdp`` extra); both give the same ellipsoid.
@@ -178,7 +184,8 @@ def predict(
     G : (n, w) array_like
         Disturbance matrix.
     Q : (w, w) array_like
-        Shape of the process-disturbance ellipsoid, positive definite.
+        Shape matrix of the process-disturbance ellipsoid ``{w : w^T Q^{-1} w <= 1}``, positive definite: a
+        set bound, not a covariance, in (disturbance unit)^2.
     B : (n, m) array_like, optional
         Input matrix (with `u`).
     u : (..., m) array_like, optional
@@ -286,9 +293,11 @@ def run_filter(
     D : (p, v) array_like
         Output-disturbance matrix.
     Q : (w, w) array_like
-        Shape of the process-disturbance ellipsoid (time-invariant).
+        Shape matrix of the process-disturbance ellipsoid ``{w : w^T Q^{-1} w <= 1}`` (time-invariant): a
+        set bound, not a covariance, in (disturbance unit)^2.
     R : (v, v) array_like
-        Shape of the output-disturbance ellipsoid (time-invariant).
+        Shape matrix of the output-disturbance ellipsoid ``{v : v^T R^{-1} v <= 1}`` (time-invariant): a
+        set bound, not a covariance, in (output unit)^2.
     B : (n, m) array_like, optional
         Input matrix (with `u`).
     u : (T_f + 1, ..., m) array_like, optional
@@ -357,9 +366,11 @@ class SetMembershipModel:
     D : (p, v) array_like, optional
         Output-disturbance matrix (with `C` and `R`).
     Q : (w, w) array_like, optional
-        Shape of the process-disturbance ellipsoid, positive definite.
+        Shape matrix of the process-disturbance ellipsoid ``{w : w^T Q^{-1} w <= 1}``, positive definite: a
+        set bound, not a covariance, in (disturbance unit)^2.
     R : (v, v) array_like, optional
-        Shape of the output-disturbance ellipsoid, positive definite.
+        Shape matrix of the output-disturbance ellipsoid ``{v : v^T R^{-1} v <= 1}``, positive definite: a
+        set bound, not a covariance, in (output unit)^2.
     B : (n, m) array_like, optional
         Input matrix (then :meth:`predict` needs `u`).
     n : int, optional

@@ -26,6 +26,11 @@ is checked instead: Assumption 4 (a directed spanning tree with a pinned root)
 wherever Gamma is formed. Every public function checks its arguments and names
 the one at fault; :class:`SynchronizationLaw` checks the constant graph and gains
 once, when it is built, and then each call checks only the estimates it is given.
+
+Units: discrete time, step index ``k``; ``A``, ``B``, ``K`` map one step (``K`` in (input unit)/(state
+unit)); ``Q`` of eq. (16) is a design *weight* (not a covariance) in 1/(state unit)^2 like ``P``;
+``Gamma``, the coupling ``c``, the circle ``C(c0, r0)``, Lemma 2's ``r``, the pinning gains and the
+adjacency weights are dimensionless.
 """
 
 from __future__ import annotations
@@ -90,7 +95,8 @@ def riccati_like(A: ArrayLike, B: ArrayLike, Q: ArrayLike, rtol: float = 1e-8) -
     B : (n, m) array_like
         Agent input matrix, full column rank.
     Q : (n, n) array_like
-        Weight, positive definite.
+        Design weight of the Riccati-like equation (16), positive definite: a weight, not a covariance,
+        in the units of ``P`` (x^T P x is unit-free: 1/(state unit)^2).
     rtol : float
         Accepted residual relative to ``max(1, max |Q|)``; finite, > 0.
 
@@ -155,7 +161,8 @@ def riccati_like_residual(A: ArrayLike, B: ArrayLike, Q: ArrayLike, P: ArrayLike
     B : (n, m) array_like
         Agent input matrix, full column rank.
     Q : (n, n) array_like
-        Weight, symmetric positive definite.
+        Design weight of the Riccati-like equation (16), symmetric positive definite: a weight, not a
+        covariance, in 1/(state unit)^2 like ``P``.
     P : (n, n) array_like
         Candidate solution, symmetric positive definite (so that ``B^T P B`` is invertible).
 
@@ -227,7 +234,8 @@ def lemma2_r(A: ArrayLike, B: ArrayLike, Q: ArrayLike, P: ArrayLike) -> float:
     B : (n, m) array_like
         Agent input matrix, full column rank.
     Q : (n, n) array_like
-        Weight, symmetric positive definite.
+        Design weight of the Riccati-like equation (16), symmetric positive definite: a weight, not a
+        covariance, in 1/(state unit)^2 like ``P``.
     P : (n, n) array_like
         Solution of eq. (16), symmetric positive definite.
 
