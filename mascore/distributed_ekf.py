@@ -97,6 +97,7 @@ __all__ = [
     "ekf_flocking_step",
     "EstimatedFlockingRun",
     "simulate_estimation_based_flocking",
+    "nees_against_q",
 ]
 
 
@@ -751,6 +752,9 @@ class EstimatedFlockingRun(FlockingRun):
     rms_error : (..., T+1) ndarray
         Root-mean-square position error (m) over every estimating agent and
         every estimated agent, ``sqrt(mean_{i,j} |p_hat_{i,j} - p_j|^2)``.
+    nees : (..., T+1) ndarray or None
+        With ``record_nees=True``: the observer's NEES ``e^T Sigma^{-1} e`` of its
+        updated team estimate (dimensionless; ``2nN`` on average for a consistent filter).
 
     Examples
     --------
@@ -769,6 +773,7 @@ class EstimatedFlockingRun(FlockingRun):
     X_hat: np.ndarray
     position_variance: np.ndarray
     rms_error: np.ndarray
+    nees: np.ndarray | None = None
 
 
 def simulate_estimation_based_flocking(
@@ -784,6 +789,9 @@ def simulate_estimation_based_flocking(
     sensing_range: float,
     observer: int = 0,
     progress: bool = False,
+    *,
+    Q_filter: ArrayLike | None = None,
+    record_nees: bool = False,
 ) -> EstimatedFlockingRun:
     """Estimation-based flocking over a virtual fully-connected network, Sec. III-B.
 
@@ -808,10 +816,12 @@ def simulate_estimation_based_flocking(
     gains : FlockingGains
         The flocking gains of eq. (6).
     Q : (2n, 2n) array_like
-        Process-noise covariance of one agent (team: ``I_N kron Q``).
+        Process-noise covariance of one agent (team: ``I_N kron Q``), in m^2 and m^2/s^2
+        on the position and velocity entries: the noise the agents move with and, unless
+        `Q_filter` is given, the one the filters assume.
     R : (2n, 2n) or (2nN, 2nN) array_like
         Measurement-noise covariance per measured agent (team ``I_N kron R``)
-        or the paper's full ``R`` (:func:`mascore.sensing.team_noise_covariance`).
+        or the paper's full ``R`` (:func:`mascore.sensing.team_noise_covariance`), in m^2, m^2/s^2.
     rng : numpy.random.Generator or int
         Source of process and measurement noise.
     sensing_range : float
@@ -820,6 +830,13 @@ def simulate_estimation_based_flocking(
         Agent whose estimate and covariance are recorded (0-based).
     progress : bool
         Show a ``tqdm`` progress bar over the steps.
+    Q_filter : (2n, 2n) array_like, optional
+        Keyword only: the process-noise covariance the filters *assume* (default `Q`).
+        With the EKF it is a tuning knob: the linearization error of eq. (38) is not
+        in the model, and at small `Q` the filter is overconfident unless `Q_filter`
+        is inflated (:func:`nees_against_q`).
+    record_nees : bool
+        Keyword only: also record the observer's NEES at every step (``run.nees``).
 
     Returns
     -------
@@ -869,8 +886,11 @@ def simulate_estimation_based_flocking(
     sensing_range = _check_range(sensing_range)
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be True or False; got {type(progress).__name__} {progress!r}")
+    if not isinstance(record_nees, (bool, np.bool_)):
+        raise TypeError(f"record_nees must be True or False; got {type(record_nees).__name__} {record_nees!r}")
     Lq = _core.noise_factor(Q, "Q", m)
-    model = EKFModel(N, dt, gains, np.kron(np.eye(N), Lq @ Lq.T), team_noise_covariance(_float_array(R, "R"), N, m),
+    Lf = Lq if Q_filter is None else _core.noise_factor(Q_filter, "Q_filter", m)
+    model = EKFModel(N, dt, gains, np.kron(np.eye(N), Lf @ Lf.T), team_noise_covariance(_float_array(R, "R"), N, m),
                      state_dim=m)  # checked once: Q_team, R (definite)
     ekf = FlockingEKF._from_checked(model, X_hat, Sigma0)  # owns a copy of the covariances, overwritten in place
 
@@ -879,17 +899,22 @@ def simulate_estimation_based_flocking(
     X_obs = np.empty((n_steps + 1, *batch, N, m))
     var_obs = np.empty((n_steps + 1, *batch, N))
     rms = np.empty((n_steps + 1, *batch))
+    nees = np.empty((n_steps + 1, *batch)) if record_nees else None
+    post = np.empty((*batch, N, M, M)) if record_nees else None  # the updated covariances, for the NEES
     pos_idx = (np.arange(N)[:, None] * m + np.arange(n)[None, :])  # (N, n) flat indices of positions
     for k in progress_bar(range(n_steps + 1), enabled=progress, desc="EKF flocking", leave=False):
         A_k = proximity_graph(X[..., :n], sensing_range).astype(bool)
         z, observed = measure(rng, X, A_k, model.R, allow_isolated=True)  # eqs. (2)-(3)
         last = k == n_steps
         # eqs. (16)-(20), then (unless last) eq. (39) and eqs. (38), (40); the covariances overwritten in place
-        X_hat, U, X_next, diag = ekf.step(z, observed, predict=not last)
+        X_hat, U, X_next, diag = ekf.step(z, observed, predict=not last, posterior_out=post)
         Xs[k], As[k] = X, A_k
         X_obs[k] = X_hat[..., observer, :, :]
         var_obs[k] = diag[..., observer, :][..., pos_idx].sum(-1)
         rms[k] = np.sqrt(np.mean(np.sum((X_hat[..., :n] - X[..., None, :, :n]) ** 2, axis=-1), axis=(-1, -2)))
+        if nees is not None:  # the observer's updated estimate against its updated covariance
+            e = (X - X_obs[k]).reshape(*batch, M)
+            nees[k] = np.einsum("...i,...i->...", e, np.linalg.solve(post[..., observer, :, :], e[..., None])[..., 0])
         if last:
             break
         X = _core.propagate(X, U, dt) + rng.standard_normal((*batch, N, m)) @ Lq.T  # eq. (1)
@@ -900,8 +925,98 @@ def simulate_estimation_based_flocking(
     t = dt * np.arange(n_steps + 1)
     mv = lambda a, nd: np.moveaxis(a, 0, a.ndim - nd - 1)  # noqa: E731  (put time after the batch axes)
     return EstimatedFlockingRun(
-        t, mv(Xs, 2), mv(As, 2), int(observer), mv(X_obs, 2), mv(var_obs, 1), mv(rms, 0)
+        t, mv(Xs, 2), mv(As, 2), int(observer), mv(X_obs, 2), mv(var_obs, 1), mv(rms, 0),
+        None if nees is None else mv(nees, 0),
     )
+
+
+def nees_against_q(
+    q_values: ArrayLike,
+    X0: ArrayLike,
+    X_hat0: ArrayLike,
+    Sigma0: ArrayLike,
+    n_steps: int,
+    dt: float,
+    gains: FlockingGains,
+    R: ArrayLike,
+    sensing_range: float,
+    seed: int,
+    q_true: float | None = None,
+    transient: int = 0,
+    observer: int = 0,
+) -> np.ndarray:
+    """The EKF's consistency against its process-noise covariance ``Q = q I``: mean NEES / dof per `q`.
+
+    Runs :func:`simulate_estimation_based_flocking` once per value of `q` (the same
+    seed, so the same noise draws where the noise is the same) and averages the
+    observer's NEES over the runs and the steps after `transient`, divided by its
+    ``2nN`` degrees of freedom: 1 is consistent, above 1 overconfident (the filter's
+    covariance is too small for its errors), below 1 pessimistic.
+
+    Parameters
+    ----------
+    q_values : (K,) array_like
+        Process-noise levels ``q`` (m^2 on positions, m^2/s^2 on velocities), > 0.
+    X0, X_hat0, Sigma0 : array_like
+        Initial states, priors and their covariance, as in
+        :func:`simulate_estimation_based_flocking` (``X0`` ``(runs, N, 2n)``).
+    n_steps : int
+        Steps per run.
+    dt : float
+        Sampling time (s).
+    gains : FlockingGains
+        Flocking gains of eq. (6).
+    R : (2n, 2n) or (2nN, 2nN) array_like
+        Measurement-noise covariance (m^2, m^2/s^2).
+    sensing_range : float
+        ``r`` (m).
+    seed : int
+        Seed of the noise (one generator per `q`, all from this seed).
+    q_true : float, optional
+        The agents' true process noise ``q_true I``; the filters assume ``q I``. By
+        default the truth follows ``q`` too (a model-matched filter at every ``q``).
+    transient : int
+        Steps left out at the start of each run (the prior's transient).
+    observer : int
+        The agent whose filter is scored (0-based).
+
+    Returns
+    -------
+    (K,) ndarray
+        Mean NEES / ``2nN`` for each `q`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import distributed_ekf as dekf
+    >>> from mascore.flocking import FlockingGains
+    >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
+    >>> X = np.array([[[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]]])  # one run
+    >>> ratio = dekf.nees_against_q([0.01, 1.0], X, np.broadcast_to(X[:, None], (1, 3, 3, 4)), np.eye(12), 30,
+    ...                             0.1, gains, np.eye(4), 150.0, seed=0)
+    >>> ratio.shape
+    (2,)
+    """
+    q = _float_array(q_values, "q_values")
+    if q.ndim != 1 or q.size == 0 or not np.all(np.isfinite(q)) or np.any(q <= 0):
+        raise ValueError(f"q_values must be a non-empty 1-D array of finite values > 0; got {q_values!r}")
+    seed = check_positive_int(seed, "seed", minimum=0)
+    transient = check_positive_int(transient, "transient", minimum=0)
+    if transient >= n_steps if isinstance(n_steps, (int, np.integer)) else False:
+        raise ValueError(f"transient must be below n_steps = {n_steps}; got {transient}")
+    if q_true is not None and not (isinstance(q_true, (int, float, np.integer, np.floating))
+                                   and np.isfinite(q_true) and q_true > 0):
+        raise ValueError(f"q_true must be a finite number > 0 (m^2, m^2/s^2) or None; got {q_true!r}")
+    m = _float_array(X0, "X0").shape[-1]
+    out = np.empty(q.size)
+    for idx, qk in enumerate(q):
+        truth = qk if q_true is None else float(q_true)
+        run = simulate_estimation_based_flocking(
+            X0, X_hat0, Sigma0, n_steps, dt, gains, truth * np.eye(m), R, np.random.default_rng(seed), sensing_range,
+            observer, Q_filter=qk * np.eye(m), record_nees=True)
+        dof = run.X.shape[-2] * run.X.shape[-1]
+        out[idx] = float(np.mean(run.nees[..., transient:])) / dof
+    return out
 
 
 # ----------------------------------------------------------------------------- private

@@ -260,3 +260,50 @@ def test_default_circle_is_the_smallest_ratio_and_the_design_uses_it():
     c0, r0 = sync.default_circle(path, [1.0, 0.0, 0.0])
     lam = np.sort(np.linalg.eigvals(sync.pinned_interaction_matrix(path, [1.0, 0.0, 0.0])).real)
     assert c0 == pytest.approx((lam[0] + lam[-1]) / 2, rel=1e-6) and r0 == pytest.approx((lam[-1] - lam[0]) / 2, rel=1e-5)
+
+
+# --------------------------------------------------------------------------- EKF flocking: Q is a tuning knob
+
+
+def _flock_case():
+    from mascore.flocking import FlockingGains
+
+    gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    X = np.array([[[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]]])
+    X = X + np.random.default_rng(0).normal(size=(3, 3, 4))  # three runs
+    X_hat0 = X[:, None] + np.random.default_rng(1).normal(size=(3, 3, 3, 4))
+    return gains, X, X_hat0, np.eye(12)
+
+
+def test_recording_the_nees_changes_nothing_else_and_q_filter_defaults_to_q():
+    from mascore import distributed_ekf as dekf
+
+    gains, X, X_hat0, S0 = _flock_case()
+    args = (X, X_hat0, S0, 30, 0.1, gains, 0.01 * np.eye(4), np.eye(4))
+    a = dekf.simulate_estimation_based_flocking(*args, np.random.default_rng(5), 150.0)
+    b = dekf.simulate_estimation_based_flocking(*args, np.random.default_rng(5), 150.0, record_nees=True,
+                                                Q_filter=0.01 * np.eye(4))
+    assert a.nees is None and b.nees.shape == (3, 31)
+    for name in ("X", "X_hat", "position_variance", "rms_error"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    # the recorded NEES is kalman.nees of the observer's error against its updated covariance at the last step
+    assert np.all(b.nees > 0) and np.all(np.isfinite(b.nees))
+
+
+def test_nees_against_q_shows_the_knob():
+    from mascore import distributed_ekf as dekf
+
+    gains, X, X_hat0, S0 = _flock_case()
+    q = [1e-3, 1e-1]
+    # model-matched at every q: far overconfident at q = 1e-3 (linearization error not in Q), consistent at 0.1
+    ratio = dekf.nees_against_q(q, X, X_hat0, S0, 60, 0.1, gains, np.eye(4), 150.0, seed=2, transient=10)
+    assert ratio.shape == (2,) and ratio[0] > 10 * ratio[1] and 0.5 < ratio[1] < 2
+    # the truth at 1e-3, the filter told 0.1: inflating the assumed Q removes the overconfidence
+    tuned = dekf.nees_against_q(q, X, X_hat0, S0, 60, 0.1, gains, np.eye(4), 150.0, seed=2, q_true=1e-3, transient=10)
+    assert tuned[0] == ratio[0] and tuned[1] < 2
+    np.testing.assert_array_equal(ratio, dekf.nees_against_q(q, X, X_hat0, S0, 60, 0.1, gains, np.eye(4), 150.0,
+                                                             seed=2, transient=10))  # the seed fixes it
+    with pytest.raises(ValueError, match="q_values"):
+        dekf.nees_against_q([0.0], X, X_hat0, S0, 10, 0.1, gains, np.eye(4), 150.0, seed=2)
+    with pytest.raises(ValueError, match="q_true"):
+        dekf.nees_against_q([1.0], X, X_hat0, S0, 10, 0.1, gains, np.eye(4), 150.0, seed=2, q_true=-1.0)
