@@ -307,3 +307,30 @@ def test_nees_against_q_shows_the_knob():
         dekf.nees_against_q([0.0], X, X_hat0, S0, 10, 0.1, gains, np.eye(4), 150.0, seed=2)
     with pytest.raises(ValueError, match="q_true"):
         dekf.nees_against_q([1.0], X, X_hat0, S0, 10, 0.1, gains, np.eye(4), 150.0, seed=2, q_true=-1.0)
+
+
+def test_networkx_graphs_work_across_the_modules():
+    """One conversion point (float_array) serves every module that takes an adjacency."""
+    from mascore import consensus, observers
+    from mascore import synchronization as sync
+    from mascore.flocking import FlockingGains
+
+    G = nx.cycle_graph(4)
+    A = graphs.ring_graph(4)
+    gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    X = np.random.default_rng(0).normal(scale=50.0, size=(4, 4))
+    np.testing.assert_array_equal(flocking.flocking_control(X, gains, adjacency=G),
+                                  flocking.flocking_control(X, gains, adjacency=A))
+    A_di, B_di = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])
+    w = dict(Q1=np.eye(2), Q2=0.5 * np.eye(2), R=np.eye(1))
+    np.testing.assert_array_equal(lqr.top_down_lqr(A_di, B_di, **w, adjacency=G).K_coupling,
+                                  lqr.top_down_lqr(A_di, B_di, **w, adjacency=A).K_coupling)
+    pin = [1.0, 0.0, 0.0, 0.0]
+    np.testing.assert_array_equal(sync.pinned_interaction_matrix(G, pin), sync.pinned_interaction_matrix(A, pin))
+    law_nx, law = sync.SynchronizationLaw(G, pin, np.eye(2), 1.0), sync.SynchronizationLaw(A, pin, np.eye(2), 1.0)
+    np.testing.assert_array_equal(law_nx(X[:, :2], [0.0, 0.0]), law(X[:, :2], [0.0, 0.0]))
+    assert consensus.union_condition_holds([G, G], window=1) == consensus.union_condition_holds(np.stack([A, A]), 1)
+    C = np.array([[1.0, 0.0]])
+    a = observers.distributed_observer([[0.0, 1.0], [-1.0, -0.1]], np.eye(2), C, np.eye(1), 0.5 * np.eye(1), np.eye(2), G)
+    b = observers.distributed_observer([[0.0, 1.0], [-1.0, -0.1]], np.eye(2), C, np.eye(1), 0.5 * np.eye(1), np.eye(2), A)
+    np.testing.assert_allclose(a.L, b.L)
