@@ -755,6 +755,9 @@ class EstimatedFlockingRun(FlockingRun):
     nees : (..., T+1) ndarray or None
         With ``record_nees=True``: the observer's NEES ``e^T Sigma^{-1} e`` of its
         updated team estimate (dimensionless; ``2nN`` on average for a consistent filter).
+    estimates : (..., T+1, N, N, 2n) ndarray or None
+        With ``return_estimates=True``: every agent's updated team estimate,
+        ``estimates[..., k, i, j]`` agent ``i``'s estimate of agent ``j`` (m, m/s).
 
     Examples
     --------
@@ -774,6 +777,7 @@ class EstimatedFlockingRun(FlockingRun):
     position_variance: np.ndarray
     rms_error: np.ndarray
     nees: np.ndarray | None = None
+    estimates: np.ndarray | None = None
 
 
 def simulate_estimation_based_flocking(
@@ -792,6 +796,7 @@ def simulate_estimation_based_flocking(
     *,
     Q_filter: ArrayLike | None = None,
     record_nees: bool = False,
+    return_estimates: bool = False,
 ) -> EstimatedFlockingRun:
     """Estimation-based flocking over a virtual fully-connected network, Sec. III-B.
 
@@ -837,6 +842,9 @@ def simulate_estimation_based_flocking(
         is inflated (:func:`nees_against_q`).
     record_nees : bool
         Keyword only: also record the observer's NEES at every step (``run.nees``).
+    return_estimates : bool
+        Keyword only: also keep every agent's updated team estimate at every step
+        (``run.estimates``, ``8 (T+1) N^2 2n`` bytes per run).
 
     Returns
     -------
@@ -886,8 +894,9 @@ def simulate_estimation_based_flocking(
     sensing_range = _check_range(sensing_range)
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be True or False; got {type(progress).__name__} {progress!r}")
-    if not isinstance(record_nees, (bool, np.bool_)):
-        raise TypeError(f"record_nees must be True or False; got {type(record_nees).__name__} {record_nees!r}")
+    for flag, value in (("record_nees", record_nees), ("return_estimates", return_estimates)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{flag} must be True or False; got {type(value).__name__} {value!r}")
     Lq = _core.noise_factor(Q, "Q", m)
     Lf = Lq if Q_filter is None else _core.noise_factor(Q_filter, "Q_filter", m)
     model = EKFModel(N, dt, gains, np.kron(np.eye(N), Lf @ Lf.T), team_noise_covariance(_float_array(R, "R"), N, m),
@@ -901,6 +910,7 @@ def simulate_estimation_based_flocking(
     rms = np.empty((n_steps + 1, *batch))
     nees = np.empty((n_steps + 1, *batch)) if record_nees else None
     post = np.empty((*batch, N, M, M)) if record_nees else None  # the updated covariances, for the NEES
+    X_all = np.empty((n_steps + 1, *batch, N, N, m)) if return_estimates else None
     pos_idx = (np.arange(N)[:, None] * m + np.arange(n)[None, :])  # (N, n) flat indices of positions
     for k in progress_bar(range(n_steps + 1), enabled=progress, desc="EKF flocking", leave=False):
         A_k = proximity_graph(X[..., :n], sensing_range).astype(bool)
@@ -910,6 +920,8 @@ def simulate_estimation_based_flocking(
         X_hat, U, X_next, diag = ekf.step(z, observed, predict=not last, posterior_out=post)
         Xs[k], As[k] = X, A_k
         X_obs[k] = X_hat[..., observer, :, :]
+        if X_all is not None:
+            X_all[k] = X_hat
         var_obs[k] = diag[..., observer, :][..., pos_idx].sum(-1)
         rms[k] = np.sqrt(np.mean(np.sum((X_hat[..., :n] - X[..., None, :, :n]) ** 2, axis=-1), axis=(-1, -2)))
         if nees is not None:  # the observer's updated estimate against its updated covariance
@@ -926,7 +938,7 @@ def simulate_estimation_based_flocking(
     mv = lambda a, nd: np.moveaxis(a, 0, a.ndim - nd - 1)  # noqa: E731  (put time after the batch axes)
     return EstimatedFlockingRun(
         t, mv(Xs, 2), mv(As, 2), int(observer), mv(X_obs, 2), mv(var_obs, 1), mv(rms, 0),
-        None if nees is None else mv(nees, 0),
+        None if nees is None else mv(nees, 0), None if X_all is None else mv(X_all, 3),
     )
 
 

@@ -283,7 +283,11 @@ def test_recording_the_nees_changes_nothing_else_and_q_filter_defaults_to_q():
     a = dekf.simulate_estimation_based_flocking(*args, np.random.default_rng(5), 150.0)
     b = dekf.simulate_estimation_based_flocking(*args, np.random.default_rng(5), 150.0, record_nees=True,
                                                 Q_filter=0.01 * np.eye(4))
-    assert a.nees is None and b.nees.shape == (3, 31)
+    assert a.nees is None and b.nees.shape == (3, 31) and a.estimates is None
+    c = dekf.simulate_estimation_based_flocking(*args, np.random.default_rng(5), 150.0, return_estimates=True)
+    assert c.estimates.shape == (3, 31, 3, 3, 4)
+    np.testing.assert_array_equal(c.estimates[:, :, 0], a.X_hat)  # the observer's row is the recorded X_hat
+    np.testing.assert_array_equal(c.X, a.X)
     for name in ("X", "X_hat", "position_variance", "rms_error"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
     # the recorded NEES is kalman.nees of the observer's error against its updated covariance at the last step
