@@ -561,6 +561,15 @@ class _NetworkFilter:
         -------
         x_pred, P_pred : ndarray
             The predictions, same shapes.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel([[1.0]], [[0.5]], [[[1.0]]] * 2, [[[1.0]]] * 2, graphs.path_graph(2))
+        >>> x, P = fusion.MeasurementForwardingFilter(model).predict(np.ones((2, 1)), np.ones((2, 1, 1)))
+        >>> P[:, 0, 0]                                             # 1 + Q
+        array([1.5, 1.5])
         """
         x, P = self._check_xP(x, P)
         return kalman.predict(x, P, self.model._kf)
@@ -586,6 +595,15 @@ class _NetworkFilter:
         ------
         ValueError
             A bad shape, a NaN or inf in `x`, `P` or `z`, or a result that overflowed.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 2, [[[1.0]]] * 2, graphs.path_graph(2))
+        >>> x, P = fusion.MeasurementForwardingFilter(model).update(np.zeros((2, 1)), np.ones((2, 1, 1)), [3.0, 0.0])
+        >>> x[:, 0], P[:, 0, 0]                                    # both hear both: information 1 + 2
+        (array([1., 1.]), array([0.33333333, 0.33333333]))
         """
         x, P = self._check_xP(x, P)
         z = self.model._check_z(z)
@@ -620,7 +638,20 @@ class _NetworkFilter:
         x : (K, ..., N, n) ndarray
             Corrected means after each step (``(K, ..., n)`` for the centralized filter).
         P : (K, ..., N, n, n) ndarray
-            Corrected covariances.
+            Corrected covariances. Their leading axes are those of `P0` and `x0`, not of `z`:
+            the covariances do not depend on the data, so runs that share an initial state
+            share them.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel(np.eye(2), 0.01 * np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
+        ...                                   graphs.ring_graph(3))
+        >>> x_true, z = model.simulate(np.zeros(2), np.eye(2), 50, rng=0, n_runs=10)   # the same data for all
+        >>> x, P = fusion.ConsensusOnInformationFilter(model, 2).run(np.zeros(2), np.eye(2), z)
+        >>> x.shape, P.shape                                       # (K, runs, N, n); P shared by the runs
+        ((50, 10, 3, 2), (50, 3, 2, 2))
         """
         x, P = self.model.check_state(x0, P0, ("x0", "P0"), per_agent=self._per_agent)
         z = require_finite(self.model._check_z(z), "z")
@@ -1076,7 +1107,7 @@ def _ci_weights(infos: np.ndarray, criterion: str) -> np.ndarray:
 class FilterCost:
     """Floats sent and flops per agent per step of one filter, with the formulas.
 
-    Attributes
+    Parameters
     ----------
     method : str
         The filter.
