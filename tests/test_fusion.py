@@ -307,7 +307,8 @@ def test_covariance_intersection_weights_minimize_the_criterion(criterion):
 def _filters(model):
     return [fusion.CentralizedFilter(model), fusion.MeasurementForwardingFilter(model),
             fusion.ConsensusOnInformationFilter(model, 3), fusion.ConsensusOnInformationFilter(model, 3, "N"),
-            fusion.InformationConsensusFilter(model, 4), fusion.DiffusionKalmanFilter(model)]
+            fusion.InformationConsensusFilter(model, 4), fusion.DiffusionKalmanFilter(model),
+            fusion.CovarianceIntersectionFilter(model)]
 
 
 def _run_all(seed):
@@ -420,6 +421,8 @@ _Z = np.zeros(_MODEL.n_measurements)
     (lambda: fusion.DiffusionKalmanFilter(_MODEL, np.ones((5, 5)) / 5), ValueError, "weights must be zero where"),
     (lambda: fusion.DiffusionKalmanFilter(_MODEL, 2 * _MODEL.weights), ValueError, "rows summing to 1"),
     (lambda: fusion.DiffusionKalmanFilter("model"), TypeError, "model must be a SensorNetworkModel"),
+    (lambda: fusion.CovarianceIntersectionFilter(_MODEL, "max"), ValueError, "criterion must be"),
+    (lambda: fusion.CovarianceIntersectionFilter(_MODEL, measurements="all"), ValueError, "measurements must be"),
     (lambda: fusion.MeasurementForwardingFilter(_MODEL).update(_X[:4], _P, _Z), ValueError, "dimensions of x"),
     (lambda: fusion.MeasurementForwardingFilter(_MODEL).update(_X, _P[..., :1], _Z), ValueError, "dimensions of P"),
     (lambda: fusion.MeasurementForwardingFilter(_MODEL).update(_X, _P, np.zeros(4)), ValueError, "dimensions of z"),
@@ -466,3 +469,42 @@ def test_cost_model_counts():
         assert more.floats_sent > costs[m].floats_sent and more.flops > costs[m].flops
         assert fusion.filter_cost(m, n, q, d + 1, L).flops > costs[m].flops
     assert all(c.flops > 0 and c.floats_formula and c.flops_formula for c in costs.values())
+
+
+def _evaluate(formula, **values):
+    """A formula string of :class:`FilterCost` as Python: juxtaposition is a product, ^ a power."""
+    import re
+
+    expr = re.sub(r"(?<=[\w)])\s+(?=[\w(])", "*", formula.replace("^", "**"))
+    return eval(expr, {}, values)  # noqa: S307 (our own formula strings)
+
+
+@pytest.mark.parametrize("method", fusion._COST_METHODS)
+def test_cost_formulas_give_the_counted_numbers(method):
+    for n, q, d, L, N in ((4, 2, 3, 5, 10), (1, 0, 0, 0, 1), (6, 3, 7, 2, 20)):
+        c = fusion.filter_cost(method, n, q, d, L, n_agents=N)
+        values = dict(n=n, q=q, d=d, L=L, N=N)
+        assert _evaluate(c.floats_formula, **values) == pytest.approx(c.floats_sent, rel=1e-12)
+        assert _evaluate(c.flops_formula, **values) == pytest.approx(c.flops, rel=1e-12)
+
+
+@pytest.mark.parametrize("criterion", ["trace", "det", None])
+@pytest.mark.parametrize("measurements", ["neighbourhood", "own"])
+def test_covariance_intersection_filter_is_consistent(criterion, measurements):
+    """Hu, Xie and Zhang (2012): CI diffusion keeps every P_i >= E[e_i e_i^T] (exact), whatever the weights."""
+    model = _model()
+    filt = fusion.CovarianceIntersectionFilter(model, criterion, measurements)
+    C, P = _exact_error_covariance(filt, model, n_steps=8)
+    assert _min_margin(P, C) >= -1e-10
+
+
+def test_covariance_intersection_filter_batches_equal_single_runs():
+    """Weights from covariances with batch axes (a search per element) = the shared-covariance path."""
+    model = _model()
+    filt = fusion.CovarianceIntersectionFilter(model)
+    _, z = model.simulate(X0, P0, 5, rng=4, n_runs=2)
+    x1, P1 = filt.run(X0, P0, z)
+    x2, P2 = filt.run(np.broadcast_to(X0, (2, 5, 2)), np.broadcast_to(P0, (2, 5, 2, 2)), z)
+    assert P2.shape == (5, 2, 5, 2, 2)
+    np.testing.assert_allclose(x2, x1, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(P2, np.broadcast_to(P1[:, None], P2.shape), rtol=1e-12, atol=1e-14)
