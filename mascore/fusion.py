@@ -40,6 +40,23 @@ that holds a NaN or inf). Filters hold no estimates and no caches: a filter
 object is immutable and safe to share between threads. Randomness
 (:meth:`SensorNetworkModel.simulate`) comes only from the generator passed in.
 
+References
+----------
+- Battistelli, G., Chisci, L. (2014). Kullback-Leibler average, consensus on probability densities, and
+  distributed state estimation with guaranteed stability. Automatica 50(3), 707-718.
+- Battistelli, G., Chisci, L., Mugnai, G., Farina, A., Graziano, A. (2015). Consensus-based linear and
+  nonlinear filtering. IEEE Trans. Automatic Control 60(5), 1410-1415.
+- Kamal, A. T., Farrell, J. A., Roy-Chowdhury, A. K. (2013). Information weighted consensus filters and
+  their application in distributed camera networks. IEEE Trans. Automatic Control 58(12), 3112-3125.
+- Cattivelli, F. S., Sayed, A. H. (2010). Diffusion strategies for distributed Kalman filtering and
+  smoothing. IEEE Trans. Automatic Control 55(9), 2069-2084.
+- Hu, J., Xie, L., Zhang, C. (2012). Diffusion Kalman filtering based on covariance intersection. IEEE
+  Trans. Signal Processing 60(2), 891-902.
+- Julier, S. J., Uhlmann, J. K. (1997). A non-divergent estimation algorithm in the presence of unknown
+  correlations. Proc. American Control Conference, 2369-2373.
+- Xiao, L., Boyd, S., Lall, S. (2005). A scheme for robust distributed sensor fusion based on average
+  consensus. Proc. IPSN, 63-70 (Metropolis weights).
+
 Consensus weights are Metropolis weights (:func:`metropolis_weights`), symmetric
 and doubly stochastic; L consensus steps are applied as the precomputed power
 ``W^L`` (the same numbers as L rounds, up to rounding).
@@ -767,7 +784,7 @@ class MeasurementForwardingFilter(_NetworkFilter):
 
 
 class DiffusionKalmanFilter(_NetworkFilter):
-    """The diffusion Kalman filter of Cattivelli and Sayed (2010), Algorithm 1 (its information form, Alg. 2).
+    """The diffusion Kalman filter of Cattivelli and Sayed (2010), computed in information form.
 
     Step 1, incremental update: agent i corrects its prediction with the
     measurements of ``N_i ∪ {i}`` (the update of :class:`MeasurementForwardingFilter`),
@@ -775,7 +792,7 @@ class DiffusionKalmanFilter(_NetworkFilter):
     over ``l in N_i ∪ {i}``, with convex weights (``sum_l c_{l,i} = 1``). The
     covariance returned is the paper's ``P_i`` of step 1: it is **not** the
     error covariance of the diffused estimate ``x_i`` (Cattivelli and Sayed
-    analyse the diffused error separately, their Sec. V); compare it with the
+    analyse the diffused estimate's error separately); compare it with the
     error, do not take it as a bound. On a complete graph it equals the
     centralized filter (from a common prior). Each agent sends its ``q_i``
     measurement numbers and its ``n``-vector ``psi_i`` per step.
@@ -824,7 +841,7 @@ class ConsensusOnInformationFilter(_NetworkFilter):
     """Consensus on information (CI) of Battistelli and Chisci (2014); the hybrid HCMCI of Battistelli et al. (2015).
 
     Per step, with ``Omega_i- = P_i-^{-1}`` and ``q_i- = Omega_i- x_i-``
-    (Battistelli, Chisci, Mugnai, Farina and Graziano 2015, Table I, HCMCI)::
+    (the HCMCI of Battistelli, Chisci, Mugnai, Farina and Graziano 2015)::
 
         prior pair:    (Omega_i, q_i)^0 = (Omega_i-, q_i-)
         novelty pair:  (dOmega_i, dq_i)^0 = (H_i^T R_i^{-1} H_i, H_i^T R_i^{-1} z_i)
@@ -833,11 +850,11 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         P_i+ = Omega_i+^{-1},  x_i+ = P_i+ q_i+.
 
     With ``novelty_weight`` ``w = 1`` this is CI (Battistelli and Chisci 2014,
-    Automatica 50, Table 1: local correction, then L steps on the information
+    local correction, then L steps on the information
     pair; consensus is linear, so mixing the two pairs separately is the same).
     CI is consistent for every ``L >= 0`` (``L = 0``: each agent's local filter):
     a convex combination of consistent information pairs is consistent whatever
-    their correlation (the covariance-intersection argument, their Theorem 1),
+    their correlation (the covariance-intersection argument of the paper),
     so ``P_i+ >= E[e_i e_i^T]`` in the PSD sense. As ``L -> inf`` on a connected
     graph CI tends to the centralized filter with every ``R_i`` multiplied by N
     (each agent keeps 1/N of the team's measurement information).
@@ -905,7 +922,7 @@ class ConsensusOnInformationFilter(_NetworkFilter):
 
 
 class InformationConsensusFilter(_NetworkFilter):
-    """The information consensus filter (ICF) of Kamal, Farrell and Roy-Chowdhury (2013), Algorithm 1.
+    """The information-weighted consensus filter (ICF) of Kamal, Farrell and Roy-Chowdhury (2013).
 
     Per step, with ``J_i- = P_i-^{-1}``::
 
@@ -916,7 +933,7 @@ class InformationConsensusFilter(_NetworkFilter):
     The prior's 1/N weighting accounts for the agents' priors being (in the
     limit) the same information; as ``K -> inf`` on a connected graph, from a
     common prior, each agent's estimate tends to the centralized one (the
-    paper's Sec. IV). For finite K it need not be consistent. (It is the
+    paper's convergence result). For finite K it need not be consistent. (It is the
     HCMCI form of :class:`ConsensusOnInformationFilter` with ``w = N`` and the
     consensus matrix ``I - eps L`` in place of Metropolis weights.)
 
@@ -984,7 +1001,7 @@ class CovarianceIntersectionFilter(_NetworkFilter):
 
     Step 1, incremental update: agent i corrects its prediction with the
     measurements of ``N_i ∪ {i}`` (``measurements="neighbourhood"``, as Hu, Xie
-    and Zhang, IEEE TSP 60(2), Algorithm 1) or with its own only (``"own"``),
+    and Zhang) or with its own only (``"own"``),
     giving ``(psi_i, P_i)``. Step 2: agent i fuses the estimates
     ``(psi_j, P_j)``, ``j in N_i ∪ {i}``, by :func:`covariance_intersection`
     (Julier and Uhlmann 1997) with weights minimizing the trace or the
@@ -1069,7 +1086,7 @@ def covariance_intersection(means: ArrayLike, covs: ArrayLike, weights: str | Ar
     ``P^{-1} = sum_k w_k P_k^{-1}``, ``x = P sum_k w_k P_k^{-1} x_k`` with ``w`` on
     the simplex. If each ``P_k`` bounds its estimate's error covariance, then
     ``P >= E[e e^T]`` (PSD) for *every* joint error covariance with those
-    marginals (Julier and Uhlmann 1997, Sec. 3; Chen, Arambel and Mehra 2002).
+    marginals (Julier and Uhlmann 1997; Chen, Arambel and Mehra 2002).
     The weights minimize ``trace(P)`` or ``det(P)`` (both convex in w).
 
     Parameters
