@@ -567,6 +567,17 @@ class _NetworkFilter:
     def __setattr__(self, name: str, value: object) -> None:
         raise AttributeError(f"a {type(self).__name__} is frozen (cannot set {name!r}); build a new filter")
 
+    def __reduce__(self) -> tuple:
+        return (type(self), (self.model, *self._args()))
+
+    def __repr__(self) -> str:
+        args = "".join(f", {a!r}" for a in self._args() if not isinstance(a, np.ndarray))
+        return f"{type(self).__name__}({self.model!r}{args})"
+
+    def _args(self) -> tuple:
+        """The constructor's arguments after the model (pickling, repr)."""
+        return ()
+
     def predict(self, x: ArrayLike, P: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Time update of every agent: ``x- = F x``, ``P- = F P F^T + Q`` (:func:`mascore.kalman.predict`).
 
@@ -820,6 +831,9 @@ class DiffusionKalmanFilter(_NetworkFilter):
     __slots__ = ("_S", "weights")
     _what = "diffusion Kalman update"
 
+    def _args(self) -> tuple:
+        return (self.weights,)
+
     def __init__(self, model: SensorNetworkModel, weights: str | ArrayLike = "metropolis") -> None:
         super().__init__(model)
         if isinstance(weights, str):
@@ -897,6 +911,9 @@ class ConsensusOnInformationFilter(_NetworkFilter):
     __slots__ = ("n_consensus", "novelty_weight", "_WL", "_SL")
     _what = "consensus-on-information update"
 
+    def _args(self) -> tuple:
+        return (self.n_consensus, self.novelty_weight)
+
     def __init__(self, model: SensorNetworkModel, n_consensus: int, novelty_weight: float | str = 1.0) -> None:
         super().__init__(model)
         L = check_positive_int(n_consensus, "n_consensus", minimum=0)
@@ -967,6 +984,9 @@ class InformationConsensusFilter(_NetworkFilter):
 
     __slots__ = ("n_iterations", "rate", "_WK", "_SK")
     _what = "information consensus (ICF) update"
+
+    def _args(self) -> tuple:
+        return (self.n_iterations, self.rate)
 
     def __init__(self, model: SensorNetworkModel, n_iterations: int, rate: float | None = None) -> None:
         super().__init__(model)
@@ -1043,6 +1063,9 @@ class CovarianceIntersectionFilter(_NetworkFilter):
 
     __slots__ = ("criterion", "measurements", "_S", "_hood")
     _what = "covariance-intersection diffusion update"
+
+    def _args(self) -> tuple:
+        return (self.criterion, self.measurements)
 
     def __init__(self, model: SensorNetworkModel, criterion: str | None = "trace",
                  measurements: str = "neighbourhood") -> None:

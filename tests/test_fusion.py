@@ -508,3 +508,14 @@ def test_covariance_intersection_filter_batches_equal_single_runs():
     assert P2.shape == (5, 2, 5, 2, 2)
     np.testing.assert_allclose(x2, x1, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(P2, np.broadcast_to(P1[:, None], P2.shape), rtol=1e-12, atol=1e-14)
+
+
+def test_filters_pickle_to_equal_filters():
+    """Filters go to worker processes (Dask sweeps) and back: same class, same parameters, same results."""
+    model = _model()
+    _, z = model.simulate(X0, P0, 5, rng=6)
+    for filt in _filters(model):
+        again = pickle.loads(pickle.dumps(filt))
+        assert type(again) is type(filt) and repr(again) == repr(filt)
+        a, b = filt.run(X0, P0, z), again.run(X0, P0, z)
+        assert all(u.tobytes() == v.tobytes() for u, v in zip(a, b))
