@@ -519,3 +519,31 @@ def test_filters_pickle_to_equal_filters():
         assert type(again) is type(filt) and repr(again) == repr(filt)
         a, b = filt.run(X0, P0, z), again.run(X0, P0, z)
         assert all(u.tobytes() == v.tobytes() for u, v in zip(a, b))
+
+
+def test_error_covariance_equals_the_independent_computation_and_monte_carlo():
+    """fusion.error_covariance (stepwise) = the harness above (whole runs) for every filter; = Monte Carlo within 10%."""
+    model = _model()
+    for filt in _filters(model):
+        C, P = fusion.error_covariance(filt, P0, 8)
+        C_ref, P_ref = _exact_error_covariance(filt, model, n_steps=8)
+        np.testing.assert_allclose(C, C_ref, rtol=1e-10, atol=1e-14)
+        np.testing.assert_allclose(P, np.broadcast_to(P_ref, P.shape), rtol=1e-12, atol=1e-15)
+    filt = fusion.ConsensusOnInformationFilter(model, 2)
+    x_true, z = model.simulate(np.zeros(2), P0, 8, rng=12, n_runs=20000)
+    x, _ = filt.run(np.zeros(2), P0, z)
+    e = x_true[1:, :, None, :] - x
+    C, _ = fusion.error_covariance(filt, P0, 8)
+    np.testing.assert_allclose(np.einsum("kmia,kmia->kia", e, e) / e.shape[1], np.einsum("kiaa->kia", C), rtol=0.1)
+
+
+def test_error_covariance_with_a_conservative_initial_covariance():
+    """P0 larger than the true initial error covariance: the filter stays consistent (CI), P0_true is used."""
+    model = _model()
+    C, P = fusion.error_covariance(fusion.ConsensusOnInformationFilter(model, 1), 4 * P0, 10, P0_true=P0)
+    C1, _ = fusion.error_covariance(fusion.ConsensusOnInformationFilter(model, 1), 4 * P0, 10)
+    assert _min_margin(P, C) > _min_margin(P, C1) >= -1e-10
+    with pytest.raises(ValueError, match="P0_true"):
+        fusion.error_covariance(fusion.ConsensusOnInformationFilter(model, 1), np.broadcast_to(P0, (5, 2, 2)), 3)
+    with pytest.raises(TypeError, match="filt must be a filter"):
+        fusion.error_covariance(model, P0, 3)
