@@ -877,8 +877,10 @@ class ConsensusOnInformationFilter(_NetworkFilter):
 
     With ``w = N`` (``novelty_weight="N"``, HCMCI) the novelty is rescaled so
     that ``L -> inf`` gives the centralized filter itself. Consistency then holds
-    if ``w * max_j [W^L]_ij <= 1`` over sensing agents j (the measurement part of
-    the argument above); with ``w = N`` that is only in the limit.
+    if ``w [W^L]_ij <= 1`` for every agent i and every sensing agent j (the
+    measurement part of the argument above: agent j's noise enters agent i's
+    information ``w [W^L]_ij`` times and its variance ``(w [W^L]_ij)^2`` times);
+    with ``w = N`` that holds only in the limit.
 
     Parameters
     ----------
@@ -988,7 +990,7 @@ class InformationConsensusFilter(_NetworkFilter):
     _what = "information consensus (ICF) update"
 
     def _args(self) -> tuple:
-        return (self.n_iterations, self.rate)
+        return (self.n_iterations, self.rate or None)  # rate 0: a graph without links (the default)
 
     def __init__(self, model: SensorNetworkModel, n_iterations: int, rate: float | None = None) -> None:
         super().__init__(model)

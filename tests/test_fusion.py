@@ -547,3 +547,28 @@ def test_error_covariance_with_a_conservative_initial_covariance():
         fusion.error_covariance(fusion.ConsensusOnInformationFilter(model, 1), np.broadcast_to(P0, (5, 2, 2)), 3)
     with pytest.raises(TypeError, match="filt must be a filter"):
         fusion.error_covariance(model, P0, 3)
+
+
+def test_one_agent_and_a_graph_without_links():
+    """N = 1: every filter is the centralized one. No links: forwarding, CI, diffusion and CI-diffusion are the
+    local filter (CI with L = 0); HCMCI and ICF are not (they count their own measurement N times)."""
+    one = fusion.SensorNetworkModel(F, Q, [np.eye(2)], [np.eye(2)], np.zeros((1, 1)))
+    _, z = one.simulate(X0, P0, 10, rng=1)
+    xc, Pc = fusion.CentralizedFilter(one).run(X0, P0, z)
+    for filt in _filters(one):
+        x, P = filt.run(X0, P0, z)
+        np.testing.assert_allclose(x.reshape(xc.shape), xc, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(P.reshape(Pc.shape), Pc, rtol=1e-10, atol=1e-12)
+    apart = _model(np.zeros((5, 5)))
+    _, z = apart.simulate(X0, P0, 10, rng=1)
+    local = fusion.ConsensusOnInformationFilter(apart, 0).run(X0, P0, z)
+    for filt in _filters(apart)[1:]:
+        again = pickle.loads(pickle.dumps(filt))
+        assert repr(again) == repr(filt)
+        x, P = filt.run(X0, P0, z)
+        if isinstance(filt, fusion.InformationConsensusFilter) or getattr(filt, "novelty_weight", 1) > 1:
+            np.testing.assert_allclose(np.linalg.inv(P[0]), np.linalg.inv(F @ P0 @ F.T + Q) + 5 * apart.information_matrices,
+                                       rtol=1e-10)
+            continue
+        np.testing.assert_allclose(x, local[0], rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(P, local[1], rtol=1e-10, atol=1e-12)
