@@ -621,8 +621,11 @@ class _NetworkFilter:
 
         Returns
         -------
-        x_post, P_post : ndarray
-            Corrected means and covariances, same shapes as `x` and `P`.
+        x_post : ndarray
+            Corrected means; their batch axes are those of `x`, `P` and `z` broadcast.
+        P_post : ndarray
+            Corrected covariances; their batch axes are those of `P` (and `x`): the
+            covariances do not depend on the data.
 
         Raises
         ------
