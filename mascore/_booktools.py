@@ -39,7 +39,7 @@ __all__ = [
 API_GROUPS: dict[str, tuple[str, ...]] = {
     "Shared building blocks": ("agents", "graphs", "noise", "kalman", "sensing"),
     "Consensus and cooperative control": ("consensus", "rendezvous", "flocking", "synchronization", "lqr", "riccati"),
-    "Estimation": ("distributed_kf", "distributed_ekf", "ellipsoids", "set_membership", "observers"),
+    "Estimation": ("distributed_kf", "distributed_ekf", "fusion", "ellipsoids", "set_membership", "observers"),
     "Comparing the methods": ("compare", "sweep"),
     "Reproduction and the book": ("registry", "ledger", "report", "reproduce", "plotting", "exceptions"),
 }
