@@ -28,6 +28,7 @@ __all__ = [
     "api_page",
     "chapter_studies",
     "drawn_figures",
+    "measure_page",
     "page_problems",
     "public_objects",
     "sync_notebook",
@@ -153,6 +154,97 @@ def page_problems(html: str) -> list[str]:
 
     Scan().feed(html)
     return problems
+
+
+#: Measures a page as the reader sees it, once MathJax has typeset it: the text column's width,
+#: every display equation and table wider than it, cells showing NaN, and how much each figure's
+#: image is shrunk. Written as JSON into ``<pre id="mascore-measure">`` for ``--dump-dom``.
+_MEASURE_JS = r"""
+(async () => {
+  const out = {};
+  try {
+    if (document.readyState !== "complete") { await new Promise((ok) => window.addEventListener("load", ok)); }
+    if (window.MathJax && MathJax.startup) { await MathJax.startup.promise; }
+    const article = document.querySelector("article.bd-article") || document.body;
+    const cs = getComputedStyle(article);
+    const column = article.clientWidth - parseFloat(cs.paddingLeft) - parseFloat(cs.paddingRight);
+    out.column = column;
+    const label = (el) => (el.closest("[id]") ? el.closest("[id]").id + ": " : "") +
+                          el.textContent.replace(/\s+/g, " ").trim().slice(0, 80);
+    out.equations = [];
+    for (const el of document.querySelectorAll('mjx-container[display="true"]')) {
+      const math = el.querySelector("mjx-math") || el;
+      const w = math.getBoundingClientRect().width;
+      if (w > column + 1) out.equations.push({width: Math.round(w), what: label(el.closest(".math") || el)});
+    }
+    out.tables = []; out.nan = [];
+    for (const t of document.querySelectorAll("article table")) {
+      const w = t.getBoundingClientRect().width;
+      const head = t.querySelector("tr") ? t.querySelector("tr").textContent.replace(/\s+/g, " ").trim().slice(0, 80) : "";
+      if (w > column + 1) out.tables.push({width: Math.round(w), what: head});
+      for (const c of t.querySelectorAll("td, th")) {
+        const text = c.textContent.trim();
+        if (/^(nan|NaN|<NA>|None|NaT)$/.test(text)) out.nan.push(head);
+      }
+    }
+    out.images = [];
+    for (const img of document.querySelectorAll("article figure img")) {
+      if (!img.naturalWidth) continue;
+      const fig = img.closest("figure");
+      out.images.push({id: fig ? fig.id : "", natural: img.naturalWidth, shown: Math.round(img.getBoundingClientRect().width)});
+    }
+  } catch (e) { out.error = String(e); }
+  const pre = document.createElement("pre");
+  pre.id = "mascore-measure";
+  pre.textContent = JSON.stringify(out);
+  document.body.appendChild(pre);
+})();
+"""
+
+
+def chromium() -> str | None:
+    """Path of a Chromium (or Chrome) executable, or None."""
+    import shutil
+
+    for name in ("chromium", "chromium-browser", "google-chrome", "chrome"):
+        if shutil.which(name):
+            return shutil.which(name)
+    return None
+
+
+def measure_page(path: str | Path, width: int = 1280, browser: str | None = None) -> dict:
+    """Render one built page in headless Chromium at `width` px, offline, and measure it.
+
+    Returns a dict with ``column`` (width of the text column, px), ``equations`` and
+    ``tables`` (those wider than the column: width and what they start with), ``nan``
+    (tables with a cell showing NaN or None) and ``images`` (natural and shown width of
+    every figure's image).
+    """
+    import subprocess
+    import tempfile
+
+    path = Path(path)
+    browser = browser or chromium()
+    if browser is None:
+        raise FileNotFoundError("no chromium on the PATH (apt-get install -y chromium)")
+    probe = path.with_name(f".measure-{path.name}")  # beside the page, so its relative links resolve
+    probe.write_text(path.read_text().replace("</body>", f"<script>{_MEASURE_JS}</script></body>", 1))
+    try:
+        with tempfile.TemporaryDirectory() as profile:
+            dom = subprocess.run(
+                [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--no-first-run", f"--user-data-dir={profile}",
+                 f"--window-size={width},2000", "--virtual-time-budget=20000", "--dump-dom", probe.resolve().as_uri()],
+                capture_output=True, text=True, timeout=180, check=False,
+            ).stdout
+    finally:
+        probe.unlink(missing_ok=True)
+    m = re.search(r'<pre id="mascore-measure"[^>]*>(.*?)</pre>', dom, re.S)
+    if not m:
+        raise RuntimeError(f"{path.name}: the page was not measured (no result in Chromium's DOM)")
+    import html as html_module
+
+    return json.loads(html_module.unescape(m.group(1)))
 
 
 def public_objects(module: str) -> list[str]:

@@ -31,9 +31,10 @@ __all__ = [
     "use_style",
 ]
 
-#: Width (inches) of the book's text column at the figures' 100 dpi: about 690 px at 1280 px. A wider
+#: Width (inches) of the book's figures at 100 dpi: a figure's image is 660 px wide at most in the
+#: text column of a 1280 px window. A wider
 #: figure would be shrunk by the browser, and its 10 pt tick labels with it (below 9 px at 13 in).
-COLUMN_WIDTH = 6.8
+COLUMN_WIDTH = 6.5
 
 #: rcParams of the book's figures. ``figure.hooks`` fits every pyplot figure to the column
 #: (:func:`fit_to_column`), so a figure drawn wider keeps its fonts readable.
@@ -100,7 +101,7 @@ def fit_to_column(fig: plt.Figure, width: float = COLUMN_WIDTH) -> plt.Figure:
     >>> from mascore.plotting import fit_to_column
     >>> fig = fit_to_column(plt.figure(figsize=(13.6, 4.0)))
     >>> [round(float(v), 2) for v in fig.get_size_inches()]
-    [6.8, 2.83]
+    [6.5, 2.76]
     >>> plt.close("all")
     """
     w, h = fig.get_size_inches()
