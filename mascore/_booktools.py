@@ -30,6 +30,7 @@ __all__ = [
     "drawn_figures",
     "measure_page",
     "page_problems",
+    "plain_text",
     "public_objects",
     "sync_notebook",
     "write_api_pages",
@@ -67,27 +68,48 @@ def drawn_figures(cell_source: str) -> list[str]:
     return _DRAW.findall(cell_source)
 
 
+def plain_text(markup: str) -> str:
+    """A caption as plain text, for an image's alt text: math without TeX, no Markdown markup.
+
+    Examples
+    --------
+    >>> plain_text(r"Errors for $Q_2 = 5$ and $\\Phi$ of eq. (62), *not* {numref}`fig-x`.")
+    'Errors for Q_2 = 5 and Phi of eq. (62), not the figure fig-x.'
+    """
+    text = re.sub(r"\{numref\}`([^`]*)`", r"the figure \1", markup)
+    text = re.sub(r"\{[a-z:]+\}`([^`]*)`", r"\1", text)
+    text = re.sub(r"\$([^$]*)\$", lambda m: re.sub(r"\\([A-Za-z]+)", r"\1", m.group(1)).replace("{", "").replace("}", ""),
+                  text)
+    text = re.sub(r"\\[,;:!]", " ", text).replace("*", "").replace("`", "")
+    return " ".join(text.split())
+
+
 def sync_notebook(path: str | Path) -> int:
-    """Write the registry's figure metadata into the notebook's figure cells; returns cells changed."""
+    """Write the registry's figure metadata into the notebook's figure cells; returns cells changed.
+
+    Every figure cell (registered or captioned by hand) also gets its caption, as plain text, as the
+    image's alt text (``{"mystnb": {"image": {"alt": ...}}}``).
+    """
     path = Path(path)
     chapters = chapter_studies()
-    if path.stem not in chapters:
-        return 0
-    reg, study = chapters[path.stem]
+    reg, study = chapters.get(path.stem, (None, None))
     nb = json.loads(path.read_text())
     changed = 0
     for cell in nb["cells"]:
         if cell["cell_type"] != "code":
             continue
-        names = drawn_figures("".join(cell["source"]))
-        if not names:
-            continue
+        names = drawn_figures("".join(cell["source"])) if study is not None else []
         if len(names) > 1:
             raise ValueError(f"{path.name}: one registered figure per cell, found {names}")
-        spec = study.figure(names[0])
-        meta = {"name": reg.figure_label(spec.name), "caption": reg.full_caption(spec)}
-        if cell["metadata"].get("mystnb", {}).get("figure") != meta:
-            cell["metadata"].setdefault("mystnb", {})["figure"] = meta
+        if names:
+            spec = study.figure(names[0])
+            meta = {"name": reg.figure_label(spec.name), "caption": reg.full_caption(spec)}
+            if cell["metadata"].get("mystnb", {}).get("figure") != meta:
+                cell["metadata"].setdefault("mystnb", {})["figure"] = meta
+                changed += 1
+        figure = cell["metadata"].get("mystnb", {}).get("figure")
+        if figure and cell["metadata"]["mystnb"].get("image") != {"alt": plain_text(figure["caption"])}:
+            cell["metadata"]["mystnb"]["image"] = {"alt": plain_text(figure["caption"])}
             changed += 1
     if changed:
         path.write_text(json.dumps(nb, indent=1, ensure_ascii=False) + "\n")

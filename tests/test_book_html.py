@@ -58,8 +58,11 @@ def figure_problems(html: str, label: str, caption_start: str) -> list[str]:
     caption = re.search(r"<figcaption>(.*?)</figcaption>", block, re.S)
     text = html_module.unescape(re.sub(r"<[^>]+>", "", caption.group(1))) if caption else ""
     text = text.translate(SMART_QUOTES)
-    if not re.search(r"Fig\. \d+", text):
-        problems.append(f"figure {label} has no numbered caption")
+    if not re.match(r"\s*Figure \d+\.\d+", text):
+        problems.append(f"figure {label} has no caption numbered in its chapter ('Figure 4.2')")
+    alt = re.search(r'<img[^>]*\balt="(?P<alt>[^"]*)"', block)
+    if not alt or not alt["alt"].strip() or re.search(r"\.(png|svg|jpe?g)$", alt["alt"].strip()):
+        problems.append(f"figure {label}: the image's alt text is not its caption")
     if " ".join(caption_start.split()) not in " ".join(text.split()):
         problems.append(f"figure {label}: caption does not start as registered ({caption_start!r})")
     return problems

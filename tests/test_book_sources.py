@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from mascore._booktools import chapter_studies, drawn_figures
+from mascore._booktools import chapter_studies, drawn_figures, plain_text
 from mascore.ledger import PAPERS
 from mascore.registry import paper_registry
 from mascore.report import ledger_label
@@ -48,6 +48,8 @@ def test_every_figure_cell_has_a_unique_label_and_a_caption(chapter):
         meta = cell["metadata"].get("mystnb", {}).get("figure")
         if meta:
             assert meta.get("caption", "").strip(), f"{chapter}: figure {meta.get('name')} without caption"
+            alt = cell["metadata"]["mystnb"].get("image", {}).get("alt")
+            assert alt == plain_text(meta["caption"]), f"{chapter}: alt text of {meta['name']} is not its caption: `make sync`"
             labels.append(meta["name"])
     assert len(labels) == len(set(labels)), f"{chapter}: duplicate figure labels"
     assert all(label.startswith("fig-") for label in labels)
