@@ -78,6 +78,7 @@ def plain_text(markup: str) -> str:
     """
     text = re.sub(r"\{numref\}`([^`]*)`", r"the figure \1", markup)
     text = re.sub(r"\{[a-z:]+\}`([^`]*)`", r"\1", text)
+    text = re.sub(r"\\(?:mathcal|mathbb|mathrm|mathbf|operatorname|boldsymbol|left|right|[bB]ig)\b\s*", "", text)
     text = re.sub(r"\$([^$]*)\$", lambda m: re.sub(r"\\([A-Za-z]+)", r"\1", m.group(1)).replace("{", "").replace("}", ""),
                   text)
     text = re.sub(r"\\[,;:!]", " ", text).replace("*", "").replace("`", "")
