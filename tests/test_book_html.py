@@ -2,9 +2,12 @@
 
 `make test` builds the book first (`make book`), then runs these checks: every
 registered figure of every paper is an image with its numbered caption in its
-chapter, every chapter shows its ledger table, no page shows raw LaTeX, an
-error or stderr block, or loads anything from the network. The last tests show
-that each check fails on a page with a figure removed or a formula broken.
+chapter, numbered in its chapter and with its caption as alt text, every chapter
+shows its ledger table, no page shows raw LaTeX, an error or stderr block, or loads
+anything from the network. In headless Chromium at 1280 px (offline), no display
+equation or table is wider than the text column, no table cell shows NaN, and no
+figure is shrunk below legibility. Tests at the end show that each check fails on
+a page with a figure removed, a formula broken or the layout overflowing.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from mascore._booktools import page_problems
+from mascore._booktools import chromium, measure_page, page_problems
 from mascore.ledger import PAPERS
 from mascore.registry import all_figures, paper_registry
 from mascore.report import ledger_label
@@ -159,3 +162,57 @@ def test_every_image_of_a_chapter_is_a_captioned_figure():
         outside = re.sub(r"<figure.*?</figure>", "", html, flags=re.S)
         bare = re.findall(r'<img[^>]*src="(?!data:image/svg)[^"]*_images/[^"]*"', outside)
         assert not bare, f"{study.chapter}: {len(bare)} image(s) without a numbered caption"
+
+
+# ---------------------------------------------------------------- the pages as a reader sees them, at 1280 px
+
+#: The style's tick labels are 10 pt at 100 dpi, 13.9 px per em (digits 10 px high): an image shown at
+#: less than 90 % of its width puts them under 9 px.
+MIN_IMAGE_SCALE = 0.9
+READ_PAGES = sorted({*(HTML / "notebooks").glob("*.html"), HTML / "notation.html", HTML / "intro.html",
+                     HTML / "bibliography.html"}) if HTML.exists() else []
+READ_PAGES = [p for p in READ_PAGES if p.exists() and not p.name.startswith(".")]
+
+
+def _browser() -> str:
+    browser = chromium()
+    if browser is None:
+        pytest.skip("chromium is not installed here (apt-get install -y chromium; .ci/run installs it)")
+    return browser
+
+
+def layout_problems(m: dict) -> list[str]:
+    """What overflows the text column, shows NaN or is shrunk, in the measures of :func:`measure_page`."""
+    if "error" in m:
+        return [f"the page could not be measured: {m['error']}"]
+    out = [f"display equation {e['width']} px wide in a {m['column']:.0f} px column: {e['what']}" for e in m["equations"]]
+    out += [f"table {t['width']} px wide in a {m['column']:.0f} px column: {t['what']}" for t in m["tables"]]
+    out += [f"a table cell shows NaN/None: {head}" for head in sorted(set(m["nan"]))]
+    out += [f"figure {i['id']} shrunk to {i['shown'] / i['natural']:.0%} of its width (tick labels under 9 px)"
+            for i in m["images"] if i["shown"] < MIN_IMAGE_SCALE * i["natural"]]
+    return out
+
+
+@pytest.mark.parametrize("path", READ_PAGES, ids=lambda p: p.relative_to(HTML).as_posix())
+def test_page_fits_its_column_at_1280px(path):
+    """No display equation or table wider than the column, no NaN cell, no figure shrunk (headless Chromium)."""
+    problems = layout_problems(measure_page(path, browser=_browser()))
+    assert not problems, "\n".join(problems)
+
+
+def test_layout_check_fails_on_wide_math_tables_nan_and_shrunk_figures():
+    path = HTML / "notebooks" / "building_blocks.html"
+    wide_math = "\\[" + " + ".join(f"x_{{{i}}}^{{2}}" for i in range(80)) + "\\]"
+    bad = ('<div class="math notranslate nohighlight">' + wide_math + "</div>"
+           "<table><tr>" + "<td>wide_column_name_without_breaks_anywhere</td>" * 30 + "</tr>"
+           "<tr><td>NaN</td></tr></table>"
+           '<figure id="fig-shrunk"><img src="data:image/svg+xml;utf8,'
+           "%3Csvg xmlns='http://www.w3.org/2000/svg' width='2000' height='10'%3E%3C/svg%3E\"></figure>")
+    probe = path.with_name(".layout-selftest.html")
+    probe.write_text(path.read_text().replace('<article class="bd-article">', '<article class="bd-article">' + bad, 1))
+    try:
+        problems = "\n".join(layout_problems(measure_page(probe, browser=_browser())))
+    finally:
+        probe.unlink(missing_ok=True)
+    assert "display equation" in problems and "table" in problems and "NaN" in problems, problems
+    assert "fig-shrunk" in problems, problems
