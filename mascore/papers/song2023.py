@@ -969,7 +969,7 @@ def plot_fig2(res: Fig2Result, axes=None):
         _plain_log(a)
     ax[2].sharey(ax[3])
     handles = ax[2].get_lines() + ax[3].get_lines()[-1:]
-    ax[0].figure.legend(handles=handles, loc="outside lower center", ncol=9, fontsize="small",
+    ax[0].figure.legend(handles=handles, loc="outside lower center", ncol=5, fontsize="small",
                         handlelength=1.5, columnspacing=1.0)
     return axes
 
@@ -988,7 +988,7 @@ def plot_fig3(res: Fig3Result, axes=None, laws: tuple[str, ...] = (CONVENTIONAL,
         ax.set_ylabel(f"RMS STD ({unit})")
         ax.set_title(f"{title} STD over {n_runs} runs")
         ax.axvspan(res.converged_from, res.time[-1], color="0.92", zorder=0)
-    axes[0].figure.legend(handles=axes[0].get_lines(), loc="outside lower center", ncol=len(laws))
+    axes[0].figure.legend(handles=axes[0].get_lines(), loc="outside lower center", ncol=min(len(laws), 2))
     return axes
 
 
