@@ -216,3 +216,35 @@ def test_layout_check_fails_on_wide_math_tables_nan_and_shrunk_figures():
         probe.unlink(missing_ok=True)
     assert "display equation" in problems and "table" in problems and "NaN" in problems, problems
     assert "fig-shrunk" in problems, problems
+
+
+def _next_page(path: Path) -> str:
+    """The page the 'Next' button of a page leads to."""
+    m = re.search(r'<a[^>]*class="right-next"[^>]*href="([^"#]+)', path.read_text()) or \
+        re.search(r'<a[^>]*href="([^"#]+)"[^>]*class="right-next"', path.read_text())
+    assert m, f"{path.name}: no 'Next' link"
+    return (path.parent / m.group(1)).resolve().relative_to(HTML.resolve()).as_posix()
+
+
+def test_the_bibliography_comes_before_the_api_reference():
+    assert _next_page(HTML / "notebooks" / "performance.html") == "bibliography.html"
+    assert _next_page(HTML / "bibliography.html").startswith("api/")
+
+
+def test_performance_met_column_says_met_missed_or_reported_only():
+    html = (HTML / "notebooks" / "performance.html").read_text()
+    table = re.search(r"<table[^>]*dataframe.*?</table>", html, re.S).group(0)
+    header = [html_module.unescape(re.sub(r"<[^>]+>", "", h)).strip() for h in re.findall(r"<th[^>]*>(.*?)</th>", table, re.S)]
+    assert "met" in header, header
+    cells = {html_module.unescape(c).strip() for c in re.findall(r"<td>([^<]*)</td>", table)}
+    assert "NO" not in cells and "yes" not in cells and "reported only" in cells, sorted(cells)[:20]
+
+
+@pytest.mark.parametrize("name", ["py-modindex.html", "genindex.html", "notation.html"])
+def test_every_image_of_the_index_pages_exists(name):
+    path = HTML / name
+    if not path.exists():
+        pytest.skip(f"{name} is not built")
+    srcs = re.findall(r'<img[^>]*src="([^"]+)"', path.read_text())
+    missing = [s for s in srcs if not s.startswith("data:") and not (path.parent / s.split("?")[0]).exists()]
+    assert not missing, missing
