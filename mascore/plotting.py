@@ -277,9 +277,25 @@ def plot_graph(
         if sensing_range is not None:
             ax.add_patch(plt.Circle(p[i], sensing_range, fill=False, ls="--", lw=0.8, color=color))
         ax.plot(*p[i], "o", color=color, ms=9, zorder=2)
-        if node_labels:
-            ax.annotate(str(i + 1), p[i], ha="center", va="center", fontsize=7, color="white", zorder=3)
+    if node_labels:
+        _node_labels(ax, p, colors)
     return _plane_axes(ax, unit)
+
+
+def _node_labels(ax: plt.Axes, p: np.ndarray, colors: list) -> None:
+    """Number the agents inside their markers; an agent crowded by a neighbour gets its number
+    beside the marker, on the side away from that neighbour, so that no number is covered."""
+    ax.autoscale_view()
+    span = max(np.ptp(ax.get_xlim()), np.ptp(ax.get_ylim()))
+    d = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.diag(np.full(len(p), np.inf))
+    for i, color in enumerate(colors):
+        j = int(np.argmin(d[i]))
+        if len(p) > 1 and d[i, j] < 0.08 * span:
+            away = (p[i] - p[j]) / max(d[i, j], 1e-12)
+            ax.annotate(str(i + 1), p[i], xytext=11 * away, textcoords="offset points", ha="center", va="center",
+                        fontsize=8, fontweight="bold", color=color, zorder=3)
+        else:
+            ax.annotate(str(i + 1), p[i], ha="center", va="center", fontsize=7, color="white", zorder=3)
 
 
 def _plane_axes(ax: plt.Axes, unit: str) -> plt.Axes:
