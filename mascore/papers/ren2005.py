@@ -832,8 +832,8 @@ def plot_fig1(res: Fig1Result, axes=None, confident_agent: int = SETTINGS.confid
         for i, c in enumerate(colors):
             axes[0, col].plot(result.t, result.xi[:, i], color=c, lw=1.0)
             axes[1, col].semilogy(result.t, result.P[:, i], color=c, lw=1.0)
-        axes[0, col].set_title(f"({'ab'[col]}) meeting times, {title}")
-        axes[1, col].set_title(f"({'cd'[col]}) variances, {title}")
+        axes[0, col].set_title(f"({'ab'[col]}) meeting times,\n{title}", fontsize="small")
+        axes[1, col].set_title(f"({'cd'[col]}) variances,\n{title}", fontsize="small")
         axes[0, col].set_ylabel("meeting time $\\xi_i$ (h)")
         axes[1, col].set_ylabel("variance $P_i$ (h$^2$)")
         axes[1, col].set_xlabel("step k")
