@@ -17,6 +17,7 @@ from ._validation import as_matrix
 
 mpl = require("matplotlib", "mascore.plotting")
 plt = require("matplotlib.pyplot", "mascore.plotting")
+from matplotlib.layout_engine import ConstrainedLayoutEngine, TightLayoutEngine  # noqa: E402  (after the check)
 
 __all__ = [
     "COLUMN_WIDTH",
@@ -80,7 +81,8 @@ def fit_to_column(fig: plt.Figure, width: float = COLUMN_WIDTH) -> plt.Figure:
     The fonts keep their size, so they are read at their size in the book instead of
     being shrunk with the image. The height shrinks by the square root of the width's
     factor (panels side by side stay tall enough); the figure's layout engine (constrained,
-    or tight by the style's ``figure.autolayout``) fits the labels to the new size.
+    or tight by the style's ``figure.autolayout``) fits the labels to the new size, after
+    breaking any Axes title wider than its Axes into two lines.
     :func:`use_style` runs it on every figure pyplot creates (rcParams ``figure.hooks``).
 
     Parameters
@@ -101,13 +103,50 @@ def fit_to_column(fig: plt.Figure, width: float = COLUMN_WIDTH) -> plt.Figure:
     >>> from mascore.plotting import fit_to_column
     >>> fig = fit_to_column(plt.figure(figsize=(13.6, 4.0)))
     >>> [round(float(v), 2) for v in fig.get_size_inches()]
-    [6.5, 2.76]
+    [6.5, 2.77]
     >>> plt.close("all")
     """
     w, h = fig.get_size_inches()
     if w > width:
         fig.set_size_inches(width, h * np.sqrt(width / w))
+    engine = fig.get_layout_engine()
+    if type(engine) is ConstrainedLayoutEngine:
+        fig.set_layout_engine(_TitleWrappingConstrained(**engine.get(), compress=engine._compress))
+    elif type(engine) is TightLayoutEngine:
+        fig.set_layout_engine(_TitleWrappingTight(**engine.get()))
     return fig
+
+
+def _wrap_titles(fig: plt.Figure) -> None:
+    """Break an Axes title (or x label) wider than its Axes into two lines, at the space (outside math) nearest
+    its middle: a figure narrowed to the column would otherwise run neighbouring titles together."""
+    renderer = fig._get_renderer()
+    for ax in fig.findobj(mpl.axes.Axes):
+        width = ax.get_window_extent(renderer).width
+        for title in (ax.title, getattr(ax, "_left_title", None), getattr(ax, "_right_title", None), ax.xaxis.label):
+            text = title.get_text() if title is not None else ""
+            if not text or "\n" in text or title.get_window_extent(renderer).width <= 1.02 * width:
+                continue
+            spaces = [i for i, c in enumerate(text) if c == " " and text[:i].count("$") % 2 == 0]
+            if spaces:
+                cut = min(spaces, key=lambda i: abs(i - len(text) / 2))
+                title.set_text(text[:cut] + "\n" + text[cut + 1:])
+
+
+class _TitleWrappingConstrained(ConstrainedLayoutEngine):
+    """The constrained layout, after :func:`_wrap_titles`."""
+
+    def execute(self, fig):
+        _wrap_titles(fig)
+        return super().execute(fig)
+
+
+class _TitleWrappingTight(TightLayoutEngine):
+    """The tight layout, after :func:`_wrap_titles`."""
+
+    def execute(self, fig):
+        _wrap_titles(fig)
+        return super().execute(fig)
 
 
 def agent_colors(n_agents: int) -> list:
