@@ -125,7 +125,7 @@ def _wrap_titles(fig: plt.Figure) -> None:
         width = ax.get_window_extent(renderer).width
         for title in (ax.title, getattr(ax, "_left_title", None), getattr(ax, "_right_title", None), ax.xaxis.label):
             text = title.get_text() if title is not None else ""
-            if not text or "\n" in text or title.get_window_extent(renderer).width <= 1.02 * width:
+            if not text or "\n" in text or title.get_window_extent(renderer).width <= 0.95 * width:
                 continue
             spaces = [i for i, c in enumerate(text) if c == " " and text[:i].count("$") % 2 == 0]
             if spaces:
