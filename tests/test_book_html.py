@@ -248,3 +248,13 @@ def test_every_image_of_the_index_pages_exists(name):
     srcs = re.findall(r'<img[^>]*src="([^"]+)"', path.read_text())
     missing = [s for s in srcs if not s.startswith("data:") and not (path.parent / s.split("?")[0]).exists()]
     assert not missing, missing
+
+
+@pytest.mark.parametrize("path", sorted((HTML / "api").glob("*.html")) if HTML.exists() else [],
+                         ids=lambda p: p.name)
+def test_api_pages_show_formulas_as_math_not_code(path):
+    """A docstring's ``x_{k+1} = A x_k`` is rendered by MathJax, not shown as code with its braces."""
+    code = [html_module.unescape(re.sub(r"<[^>]+>", "", c))
+            for c in re.findall(r'<code class="docutils literal[^"]*">(.*?)</code>', path.read_text(), re.S)]
+    tex = [c for c in code if re.search(r"[_^]\{|\\[A-Za-z]+", c)]
+    assert not tex, tex[:5]
