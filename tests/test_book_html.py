@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from mascore._booktools import chromium, measure_page, page_problems
+from mascore._booktools import page_problems
 from mascore.ledger import PAPERS
 from mascore.registry import all_figures, paper_registry
 from mascore.report import ledger_label
@@ -175,6 +175,8 @@ READ_PAGES = [p for p in READ_PAGES if p.exists() and not p.name.startswith(".")
 
 
 def _browser() -> str:
+    from mascore._booktools import chromium
+
     browser = chromium()
     if browser is None:
         pytest.skip("chromium is not installed here (apt-get install -y chromium; .ci/run installs it)")
@@ -196,6 +198,8 @@ def layout_problems(m: dict) -> list[str]:
 @pytest.mark.parametrize("path", READ_PAGES, ids=lambda p: p.relative_to(HTML).as_posix())
 def test_page_fits_its_column_at_1280px(path):
     """No display equation or table wider than the column, no NaN cell, no figure shrunk (headless Chromium)."""
+    from mascore._booktools import measure_page
+
     problems = layout_problems(measure_page(path, browser=_browser()))
     assert not problems, "\n".join(problems)
 
@@ -210,6 +214,8 @@ def test_layout_check_fails_on_wide_math_tables_nan_and_shrunk_figures():
            "%3Csvg xmlns='http://www.w3.org/2000/svg' width='2000' height='10'%3E%3C/svg%3E\"></figure>")
     probe = path.with_name(".layout-selftest.html")
     probe.write_text(path.read_text().replace('<article class="bd-article">', '<article class="bd-article">' + bad, 1))
+    from mascore._booktools import measure_page
+
     try:
         problems = "\n".join(layout_problems(measure_page(probe, browser=_browser())))
     finally:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from mascore._booktools import chapter_studies, drawn_figures, plain_text
+from mascore._booktools import chapter_studies, drawn_figures
 from mascore.ledger import PAPERS
 from mascore.registry import paper_registry
 from mascore.report import ledger_label
@@ -43,6 +43,8 @@ def test_each_registered_figure_is_drawn_once_with_the_registry_caption(chapter)
 
 @pytest.mark.parametrize("chapter", sorted(CHAPTERS))
 def test_every_figure_cell_has_a_unique_label_and_a_caption(chapter):
+    from mascore._booktools import plain_text
+
     labels = []
     for cell in _cells(chapter):
         meta = cell["metadata"].get("mystnb", {}).get("figure")
