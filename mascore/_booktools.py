@@ -180,8 +180,8 @@ def page_problems(html: str) -> list[str]:
 
 
 #: Measures a page as the reader sees it, once MathJax has typeset it: the text column's width,
-#: every display equation and table wider than it, cells showing NaN, and how much each figure's
-#: image is shrunk. Written as JSON into ``<pre id="mascore-measure">`` for ``--dump-dom``.
+#: formulas MathJax reports as errors, every display equation and table wider than it, cells
+#: showing NaN, and how much each figure's image is shrunk. Written as JSON into ``<pre id="mascore-measure">`` for ``--dump-dom``.
 _MEASURE_JS = r"""
 (async () => {
   const out = {};
@@ -199,6 +199,10 @@ _MEASURE_JS = r"""
       const math = el.querySelector("mjx-math") || el;
       const w = math.getBoundingClientRect().width;
       if (w > column + 1) out.equations.push({width: Math.round(w), what: label(el.closest(".math") || el)});
+    }
+    out.math_errors = [];
+    for (const el of document.querySelectorAll("mjx-merror")) {
+      out.math_errors.push((el.getAttribute("data-mjx-error") || el.textContent).slice(0, 120));
     }
     out.tables = []; out.nan = [];
     for (const t of document.querySelectorAll("article table")) {
@@ -238,7 +242,8 @@ def chromium() -> str | None:
 def measure_page(path: str | Path, width: int = 1280, browser: str | None = None) -> dict:
     """Render one built page in headless Chromium at `width` px, offline, and measure it.
 
-    Returns a dict with ``column`` (width of the text column, px), ``equations`` and
+    Returns a dict with ``column`` (width of the text column, px), ``math_errors`` (formulas
+    MathJax could not typeset), ``equations`` and
     ``tables`` (those wider than the column: width and what they start with), ``nan``
     (tables with a cell showing NaN or None) and ``images`` (natural and shown width of
     every figure's image).

@@ -187,7 +187,8 @@ def layout_problems(m: dict) -> list[str]:
     """What overflows the text column, shows NaN or is shrunk, in the measures of :func:`measure_page`."""
     if "error" in m:
         return [f"the page could not be measured: {m['error']}"]
-    out = [f"display equation {e['width']} px wide in a {m['column']:.0f} px column: {e['what']}" for e in m["equations"]]
+    out = [f"MathJax cannot typeset a formula: {e}" for e in m.get("math_errors", [])]
+    out += [f"display equation {e['width']} px wide in a {m['column']:.0f} px column: {e['what']}" for e in m["equations"]]
     out += [f"table {t['width']} px wide in a {m['column']:.0f} px column: {t['what']}" for t in m["tables"]]
     out += [f"a table cell shows NaN/None: {head}" for head in sorted(set(m["nan"]))]
     out += [f"figure {i['id']} shrunk to {i['shown'] / i['natural']:.0%} of its width (tick labels under 9 px)"
@@ -197,7 +198,8 @@ def layout_problems(m: dict) -> list[str]:
 
 @pytest.mark.parametrize("path", READ_PAGES, ids=lambda p: p.relative_to(HTML).as_posix())
 def test_page_fits_its_column_at_1280px(path):
-    """No display equation or table wider than the column, no NaN cell, no figure shrunk (headless Chromium)."""
+    """No formula MathJax rejects, no display equation or table wider than the column, no NaN cell, no
+    figure shrunk (headless Chromium)."""
     from mascore._booktools import measure_page
 
     problems = layout_problems(measure_page(path, browser=_browser()))
@@ -208,6 +210,7 @@ def test_layout_check_fails_on_wide_math_tables_nan_and_shrunk_figures():
     path = HTML / "notebooks" / "building_blocks.html"
     wide_math = "\\[" + " + ".join(f"x_{{{i}}}^{{2}}" for i in range(80)) + "\\]"
     bad = ('<div class="math notranslate nohighlight">' + wide_math + "</div>"
+           '<div class="math notranslate nohighlight">\\[\\begin{split}x \\tag{1}\\end{split}\\]</div>'
            "<table><tr>" + "<td>wide_column_name_without_breaks_anywhere</td>" * 30 + "</tr>"
            "<tr><td>NaN</td></tr></table>"
            '<figure id="fig-shrunk"><img src="data:image/svg+xml;utf8,'
@@ -221,6 +224,7 @@ def test_layout_check_fails_on_wide_math_tables_nan_and_shrunk_figures():
     finally:
         probe.unlink(missing_ok=True)
     assert "display equation" in problems and "table" in problems and "NaN" in problems, problems
+    assert "MathJax cannot typeset" in problems, problems
     assert "fig-shrunk" in problems, problems
 
 
