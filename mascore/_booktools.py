@@ -181,7 +181,8 @@ def page_problems(html: str) -> list[str]:
 
 #: Measures a page as the reader sees it, once MathJax has typeset it: the text column's width,
 #: formulas MathJax reports as errors, every display equation and table wider than it, cells
-#: showing NaN, and how much each figure's image is shrunk. Written as JSON into ``<pre id="mascore-measure">`` for ``--dump-dom``.
+#: showing NaN, and how much each figure's image is shrunk. Written as JSON into
+#: ``<pre id="mascore-measure">`` for ``--dump-dom``.
 _MEASURE_JS = r"""
 (async () => {
   const out = {};
