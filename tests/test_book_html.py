@@ -268,3 +268,11 @@ def test_api_pages_show_formulas_as_math_not_code(path):
             for c in re.findall(r'<code class="docutils literal[^"]*">(.*?)</code>', path.read_text(), re.S)]
     tex = [c for c in code if re.search(r"[_^]\{|\\[A-Za-z]+", c)]
     assert not tex, tex[:5]
+
+
+@pytest.mark.parametrize("chapter", sorted({s.chapter for _, s in STUDIES} | {"building_blocks", "apply_your_system"}))
+def test_a_tagged_equation_has_one_number(chapter):
+    """An equation that carries the paper's number (``\\tag``) gets no second, Sphinx number beside it."""
+    blocks = re.findall(r'<div class="[^"]*\bmath\b[^"]*"[^>]*>(.*?)</div>', _page(chapter), re.S)
+    double = [b[:80] for b in blocks if 'class="eqno"' in b and "\\tag" in b]
+    assert not double, double
