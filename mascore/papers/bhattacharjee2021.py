@@ -942,6 +942,16 @@ def plot_fig1(des: sync.SyncDesign | None = None, scenario: SetMembershipSetting
     ax2.set_aspect("equal")
     ax2.set_ylim(-1.0, 0.95)
     ax2.legend(loc="lower center", fontsize=7)
+    # The leftmost eigenvalue sits close to the circle: a zoom shows on which side.
+    left = des.eigs[np.argmin(des.eigs.real)]
+    zoom = ax2.inset_axes([0.06, 0.68, 0.26, 0.3])
+    zoom.plot(des.c0 + des.r0 * np.cos(th), des.r0 * np.sin(th), "k--", lw=1)
+    zoom.plot(des.eigs.real, des.eigs.imag, "x", ms=7, mew=1.5, color="C3")
+    zoom.set(xlim=(left.real - 0.04, left.real + 0.04), ylim=(left.imag - 0.04, left.imag + 0.04),
+             xticks=[], yticks=[])
+    zoom.grid(False)
+    zoom.spines[["top", "right"]].set_visible(True)
+    ax2.indicate_inset_zoom(zoom, edgecolor="0.4")
     ax2.set_title(r"(b) eigenvalues of $\Gamma$")
     return fig
 
@@ -1355,7 +1365,7 @@ FIGURES = (
         "(a) The interaction graph of eq. (24): the directed ring 1 → 2 → 3 → 4 → 1 (an arrow from $j$ to $i$: "
         "agent $i$ hears agent $j$), with agent 1 pinned to the leader, node 0. (b) The eigenvalues $\\Lambda_i$ "
         "of $\\Gamma$ (eq. (15)) and the circle $C(c_0, r_0)$, $c_0 = 2/3$, $r_0 = 0.6$ of Lemma 2. Look for all "
-        "four crosses inside the dashed circle: Lemma 2's condition, which gives the coupling gain $c = 1/c_0 = 1.5$.",
+        "four crosses inside the dashed circle (the inset zooms on the leftmost, just inside): Lemma 2's condition, which gives the coupling gain $c = 1/c_0 = 1.5$.",
         lambda r: plot_fig1(r.design, r.settings)),
     FigureSpec(
         "fig2", "Fig. 2",

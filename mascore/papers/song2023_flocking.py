@@ -1026,8 +1026,10 @@ FIGURES = (
         "(c) true and (d) estimated trajectories (markers at the end: ▲ agent 1, ● its neighbours, "
         "□ and dashed lines its non-neighbours at the end); (e) agent 1's position error of every other agent "
         "and (f) its statistical error $\\sqrt{\\operatorname{tr}\\Sigma_{1,p_j}}$. Look for: (d) follows (c) "
-        "closely; the errors and the statistical error of an agent sit near 1 m while it is in range, rise to "
-        "a bounded 5-6 m while it is out of range, and drop at once when it comes back.",
+        "closely; the errors and the statistical error of an agent sit near 1 m while it is in range; while it "
+        "is out of range the statistical error (f) rises to a bounded plateau of about 5 m, and the actual "
+        "error (e) swings well above that plateau (the ledger gives its peak); both drop at once when the "
+        "agent comes back.",
         lambda result: plot_fig4(result.fig4, result.settings),
     ),
     FigureSpec(
