@@ -308,58 +308,22 @@ class SensorNetworkModel:
 
     @property
     def n_agents(self) -> int:
-        """N, the number of agents.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2)] * 4, [np.eye(2)] * 4,
-        ...                           graphs.ring_graph(4)).n_agents
-        4
-        """
+        """N, the number of agents."""
         return self.adjacency.shape[0]
 
     @property
     def n_states(self) -> int:
-        """n, the length of the state.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2)] * 4, [np.eye(2)] * 4,
-        ...                           graphs.ring_graph(4)).n_states
-        2
-        """
+        """n, the length of the state."""
         return self.F.shape[0]
 
     @property
     def measurement_sizes(self) -> tuple[int, ...]:
-        """``(q_1, ..., q_N)``, the length of each agent's measurement.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2), np.zeros((0, 2))], [np.eye(2), None],
-        ...                           graphs.path_graph(2)).measurement_sizes
-        (2, 0)
-        """
+        """``(q_1, ..., q_N)``, the length of each agent's measurement."""
         return tuple(h.shape[0] for h in self.H)
 
     @property
     def n_measurements(self) -> int:
-        """``sum q_i``, the length of the stacked measurement ``z``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2), np.zeros((0, 2))], [np.eye(2), None],
-        ...                           graphs.path_graph(2)).n_measurements
-        2
-        """
+        """``sum q_i``, the length of the stacked measurement ``z``."""
         return self.H_stacked.shape[0]
 
     def agent_measurement(self, z: ArrayLike, i: int) -> np.ndarray:

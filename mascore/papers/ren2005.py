@@ -134,12 +134,6 @@ class KalmanConsensusSettings:
         -------
         (n,) ndarray
             The meeting times (h).
-
-        Examples
-        --------
-        >>> from mascore.papers import ren2005
-        >>> ren2005.SETTINGS.fig1_xi0[:3]
-        array([1., 2., 3.])
         """
         return np.asarray(self.xi0, dtype=float)
 

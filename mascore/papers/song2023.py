@@ -146,14 +146,7 @@ class RendezvousSettings:
 
     @property
     def n_steps(self) -> int:
-        """Number of steps of the horizon.
-
-        Examples
-        --------
-        >>> from mascore.papers import song2023
-        >>> song2023.SETTINGS.n_steps                                   # 40 s at dt = 0.1 s
-        400
-        """
+        """Number of steps of the horizon."""
         return int(round(self.horizon / self.dt))
 
 
