@@ -24,7 +24,7 @@ SUBMODULES = (
     # consensus and cooperative control
     "consensus", "rendezvous", "flocking", "synchronization", "lqr",
     # estimation
-    "sensing", "distributed_kf", "distributed_ekf", "ellipsoids", "set_membership", "observers", "riccati",
+    "sensing", "distributed_kf", "distributed_ekf", "fusion", "ellipsoids", "set_membership", "observers", "riccati",
     # comparing the methods, sweeps on Dask
     "compare", "sweep",
     # errors

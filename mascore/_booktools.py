@@ -28,7 +28,9 @@ __all__ = [
     "api_page",
     "chapter_studies",
     "drawn_figures",
+    "measure_page",
     "page_problems",
+    "plain_text",
     "public_objects",
     "sync_notebook",
     "write_api_pages",
@@ -39,7 +41,7 @@ __all__ = [
 API_GROUPS: dict[str, tuple[str, ...]] = {
     "Shared building blocks": ("agents", "graphs", "noise", "kalman", "sensing"),
     "Consensus and cooperative control": ("consensus", "rendezvous", "flocking", "synchronization", "lqr", "riccati"),
-    "Estimation": ("distributed_kf", "distributed_ekf", "ellipsoids", "set_membership", "observers"),
+    "Estimation": ("distributed_kf", "distributed_ekf", "fusion", "ellipsoids", "set_membership", "observers"),
     "Comparing the methods": ("compare", "sweep"),
     "Reproduction and the book": ("registry", "ledger", "report", "reproduce", "plotting", "exceptions"),
 }
@@ -64,27 +66,49 @@ def drawn_figures(cell_source: str) -> list[str]:
     return _DRAW.findall(cell_source)
 
 
+def plain_text(markup: str) -> str:
+    """A caption as plain text, for an image's alt text: math without TeX, no Markdown markup.
+
+    Examples
+    --------
+    >>> plain_text(r"Errors for $Q_2 = 5$ and $\\Phi$ of eq. (62), *not* {numref}`fig-x`.")
+    'Errors for Q_2 = 5 and Phi of eq. (62), not the figure fig-x.'
+    """
+    text = re.sub(r"\{numref\}`([^`]*)`", r"the figure \1", markup)
+    text = re.sub(r"\{[a-z:]+\}`([^`]*)`", r"\1", text)
+    text = re.sub(r"\\(?:mathcal|mathbb|mathrm|mathbf|operatorname|boldsymbol|left|right|[bB]ig)\b\s*", "", text)
+    text = re.sub(r"\$([^$]*)\$", lambda m: re.sub(r"\\([A-Za-z]+)", r"\1", m.group(1)).replace("{", "").replace("}", ""),
+                  text)
+    text = re.sub(r"\\[,;:!]", " ", text).replace("*", "").replace("`", "")
+    return " ".join(text.split())
+
+
 def sync_notebook(path: str | Path) -> int:
-    """Write the registry's figure metadata into the notebook's figure cells; returns cells changed."""
+    """Write the registry's figure metadata into the notebook's figure cells; returns cells changed.
+
+    Every figure cell (registered or captioned by hand) also gets its caption, as plain text, as the
+    image's alt text (``{"mystnb": {"image": {"alt": ...}}}``).
+    """
     path = Path(path)
     chapters = chapter_studies()
-    if path.stem not in chapters:
-        return 0
-    reg, study = chapters[path.stem]
+    reg, study = chapters.get(path.stem, (None, None))
     nb = json.loads(path.read_text())
     changed = 0
     for cell in nb["cells"]:
         if cell["cell_type"] != "code":
             continue
-        names = drawn_figures("".join(cell["source"]))
-        if not names:
-            continue
+        names = drawn_figures("".join(cell["source"])) if study is not None else []
         if len(names) > 1:
             raise ValueError(f"{path.name}: one registered figure per cell, found {names}")
-        spec = study.figure(names[0])
-        meta = {"name": reg.figure_label(spec.name), "caption": reg.full_caption(spec)}
-        if cell["metadata"].get("mystnb", {}).get("figure") != meta:
-            cell["metadata"].setdefault("mystnb", {})["figure"] = meta
+        if names:
+            spec = study.figure(names[0])
+            meta = {"name": reg.figure_label(spec.name), "caption": reg.full_caption(spec)}
+            if cell["metadata"].get("mystnb", {}).get("figure") != meta:
+                cell["metadata"].setdefault("mystnb", {})["figure"] = meta
+                changed += 1
+        figure = cell["metadata"].get("mystnb", {}).get("figure")
+        if figure and cell["metadata"]["mystnb"].get("image") != {"alt": plain_text(figure["caption"])}:
+            cell["metadata"]["mystnb"]["image"] = {"alt": plain_text(figure["caption"])}
             changed += 1
     if changed:
         path.write_text(json.dumps(nb, indent=1, ensure_ascii=False) + "\n")
@@ -151,6 +175,103 @@ def page_problems(html: str) -> list[str]:
 
     Scan().feed(html)
     return problems
+
+
+#: Measures a page as the reader sees it, once MathJax has typeset it: the text column's width,
+#: formulas MathJax reports as errors, every display equation and table wider than it, cells
+#: showing NaN, and how much each figure's image is shrunk. Written as JSON into
+#: ``<pre id="mascore-measure">`` for ``--dump-dom``.
+_MEASURE_JS = r"""
+(async () => {
+  const out = {};
+  try {
+    if (document.readyState !== "complete") { await new Promise((ok) => window.addEventListener("load", ok)); }
+    if (window.MathJax && MathJax.startup) { await MathJax.startup.promise; }
+    const article = document.querySelector("article.bd-article") || document.body;
+    const cs = getComputedStyle(article);
+    const column = article.clientWidth - parseFloat(cs.paddingLeft) - parseFloat(cs.paddingRight);
+    out.column = column;
+    const label = (el) => (el.closest("[id]") ? el.closest("[id]").id + ": " : "") +
+                          el.textContent.replace(/\s+/g, " ").trim().slice(0, 80);
+    out.equations = [];
+    for (const el of document.querySelectorAll('mjx-container[display="true"]')) {
+      const math = el.querySelector("mjx-math") || el;
+      const w = math.getBoundingClientRect().width;
+      if (w > column + 1) out.equations.push({width: Math.round(w), what: label(el.closest(".math") || el)});
+    }
+    out.math_errors = [];
+    for (const el of document.querySelectorAll("mjx-merror")) {
+      out.math_errors.push((el.getAttribute("data-mjx-error") || el.textContent).slice(0, 120));
+    }
+    out.tables = []; out.nan = [];
+    for (const t of document.querySelectorAll("article table")) {
+      const w = t.getBoundingClientRect().width;
+      const head = t.querySelector("tr") ? t.querySelector("tr").textContent.replace(/\s+/g, " ").trim().slice(0, 80) : "";
+      if (w > column + 1) out.tables.push({width: Math.round(w), what: head});
+      for (const c of t.querySelectorAll("td, th")) {
+        const text = c.textContent.trim();
+        if (/^(nan|NaN|<NA>|None|NaT)$/.test(text)) out.nan.push(head);
+      }
+    }
+    out.images = [];
+    for (const img of document.querySelectorAll("article figure img")) {
+      if (!img.naturalWidth) continue;
+      const fig = img.closest("figure");
+      out.images.push({id: fig ? fig.id : "", natural: img.naturalWidth, shown: Math.round(img.getBoundingClientRect().width)});
+    }
+  } catch (e) { out.error = String(e); }
+  const pre = document.createElement("pre");
+  pre.id = "mascore-measure";
+  pre.textContent = JSON.stringify(out);
+  document.body.appendChild(pre);
+})();
+"""
+
+
+def chromium() -> str | None:
+    """Path of a Chromium (or Chrome) executable, or None."""
+    import shutil
+
+    for name in ("chromium", "chromium-browser", "google-chrome", "chrome"):
+        if shutil.which(name):
+            return shutil.which(name)
+    return None
+
+
+def measure_page(path: str | Path, width: int = 1280, browser: str | None = None) -> dict:
+    """Render one built page in headless Chromium at `width` px, offline, and measure it.
+
+    Returns a dict with ``column`` (width of the text column, px), ``math_errors`` (formulas
+    MathJax could not typeset), ``equations`` and
+    ``tables`` (those wider than the column: width and what they start with), ``nan``
+    (tables with a cell showing NaN or None) and ``images`` (natural and shown width of
+    every figure's image).
+    """
+    import subprocess
+    import tempfile
+
+    path = Path(path)
+    browser = browser or chromium()
+    if browser is None:
+        raise FileNotFoundError("no chromium on the PATH (apt-get install -y chromium)")
+    probe = path.with_name(f".measure-{path.name}")  # beside the page, so its relative links resolve
+    probe.write_text(path.read_text().replace("</body>", f"<script>{_MEASURE_JS}</script></body>", 1))
+    try:
+        with tempfile.TemporaryDirectory() as profile:
+            dom = subprocess.run(
+                [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--no-first-run", f"--user-data-dir={profile}",
+                 f"--window-size={width},2000", "--virtual-time-budget=20000", "--dump-dom", probe.resolve().as_uri()],
+                capture_output=True, text=True, timeout=180, check=False,
+            ).stdout
+    finally:
+        probe.unlink(missing_ok=True)
+    m = re.search(r'<pre id="mascore-measure"[^>]*>(.*?)</pre>', dom, re.S)
+    if not m:
+        raise RuntimeError(f"{path.name}: the page was not measured (no result in Chromium's DOM)")
+    import html as html_module
+
+    return json.loads(html_module.unescape(m.group(1)))
 
 
 def public_objects(module: str) -> list[str]:

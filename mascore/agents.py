@@ -134,12 +134,6 @@ class LTIAgent:
         -------
         int
             Number of rows of ``A``.
-
-        Examples
-        --------
-        >>> from mascore import agents
-        >>> agents.double_integrator(2, 0.1).n_states
-        4
         """
         return self.A.shape[0]
 
@@ -151,12 +145,6 @@ class LTIAgent:
         -------
         int
             Number of columns of ``B``.
-
-        Examples
-        --------
-        >>> from mascore import agents
-        >>> agents.double_integrator(2, 0.1).n_inputs
-        2
         """
         return self.B.shape[1]
 

@@ -1389,8 +1389,9 @@ def plot_robustness(summary):
     axes[0].yaxis.set_major_formatter("{x:g}")
     axes[0].yaxis.set_minor_formatter("")
     handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9, frameon=False)
-    fig.tight_layout(rect=(0, 0.07, 1, 1))
+    ncol = (len(labels) + 1) // 2  # two rows, so that the legend is no wider than the column
+    fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=9, frameon=False)
+    fig.tight_layout(rect=(0, 0.13 if ncol < len(labels) else 0.07, 1, 1))
     return fig
 
 

@@ -155,41 +155,17 @@ class ConsensusResult:
 
     @property
     def scalar(self) -> bool:
-        """True for a scalar information state (``xi`` has no ``m`` axis).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import consensus, graphs
-        >>> consensus.average_consensus([0.0, 1.0], graphs.complete_graph(2), n_steps=2).scalar
-        True
-        """
+        """True for a scalar information state (``xi`` has no ``m`` axis)."""
         return self.P is None or self.P.ndim == self.xi.ndim
 
     @property
     def spread(self) -> np.ndarray:
-        """Largest pairwise disagreement ``max_ij ||xi_i - xi_j||_inf`` at each time, shape (T, ...).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import consensus, graphs
-        >>> consensus.average_consensus([0.0, 1.0], graphs.complete_graph(2), n_steps=2).spread
-        array([1., 0., 0.])
-        """
+        """Largest pairwise disagreement ``max_ij ||xi_i - xi_j||_inf`` at each time, shape (T, ...)."""
         return spread(self.xi if not self.scalar else self.xi[..., None])
 
     @property
     def final_value(self) -> np.ndarray:
-        """Mean of the agents' final states, shape (...) or (..., m).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import consensus, graphs
-        >>> float(consensus.average_consensus([0.0, 1.0], graphs.complete_graph(2), n_steps=2).final_value)
-        0.5
-        """
+        """Mean of the agents' final states, shape (...) or (..., m)."""
         return self.xi[-1].mean(axis=-1 if self.scalar else -2)
 
 
@@ -235,15 +211,7 @@ class SwitchingTopology:
 
     @property
     def n_agents(self) -> int:
-        """Number of agents n.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import consensus, graphs
-        >>> consensus.SwitchingTopology([0.0], [graphs.path_graph(4)]).n_agents
-        4
-        """
+        """Number of agents n."""
         return self.graphs.shape[-1]
 
     def at(self, t: float) -> np.ndarray:

@@ -298,56 +298,17 @@ class FlockingEKF:
 
     @property
     def model(self) -> EKFModel:
-        """The checked model.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import distributed_ekf as dekf
-        >>> from mascore.flocking import FlockingGains
-        >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
-        >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents
-        >>> model = dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12))
-        >>> ekf = dekf.FlockingEKF(model, np.broadcast_to(X, (3, 3, 4)), np.eye(12))
-        >>> ekf.model is model
-        True
-        """
+        """The checked model."""
         return self._model
 
     @property
     def X_hat(self) -> np.ndarray:
-        """``(..., N, 2n)`` current estimates (read-only; predicted after :meth:`step` or :meth:`predict`).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import distributed_ekf as dekf
-        >>> from mascore.flocking import FlockingGains
-        >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
-        >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents
-        >>> model = dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12))
-        >>> ekf = dekf.FlockingEKF(model, np.broadcast_to(X, (3, 3, 4)), np.eye(12))
-        >>> ekf.X_hat.shape, ekf.X_hat.flags.writeable
-        ((3, 3, 4), False)
-        """
+        """``(..., N, 2n)`` current estimates (read-only; predicted after :meth:`step` or :meth:`predict`)."""
         return self._X
 
     @property
     def Sigma(self) -> np.ndarray:
-        """``(..., 2nN, 2nN)`` current covariances (a read-only view, overwritten by the next call).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import distributed_ekf as dekf
-        >>> from mascore.flocking import FlockingGains
-        >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)   # Table I
-        >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])  # 3 agents
-        >>> model = dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12))
-        >>> ekf = dekf.FlockingEKF(model, np.broadcast_to(X, (3, 3, 4)), np.eye(12))
-        >>> ekf.Sigma.shape, ekf.Sigma.flags.writeable
-        ((3, 12, 12), False)
-        """
+        """``(..., 2nN, 2nN)`` current covariances (a read-only view, overwritten by the next call)."""
         view = self._P.view()
         view.flags.writeable = False
         return view

@@ -219,53 +219,17 @@ class TeamFilterModel:
 
     @property
     def m(self) -> int:
-        """Agent state dimension.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, graphs, rendezvous, sensing
-        >>> from mascore import distributed_kf as dkf
-        >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
-        >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
-        >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> model.m
-        2
-        """
+        """Agent state dimension."""
         return self.A.shape[0]
 
     @property
     def m_r(self) -> int:
-        """Reduced agent state dimension ``m / kron``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, graphs, rendezvous, sensing
-        >>> from mascore import distributed_kf as dkf
-        >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
-        >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
-        >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> model.m_r
-        2
-        """
+        """Reduced agent state dimension ``m / kron``."""
         return self.A_r.shape[0]
 
     @property
     def M_r(self) -> int:
-        """Reduced team state dimension ``N m_r``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, graphs, rendezvous, sensing
-        >>> from mascore import distributed_kf as dkf
-        >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
-        >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
-        >>> model = dkf.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> model.M_r                                               # N m_r
-        6
-        """
+        """Reduced team state dimension ``N m_r``."""
         return self.n_agents * self.m_r
 
 
@@ -1063,74 +1027,22 @@ class TeamFilter:
 
     @property
     def model(self) -> TeamFilterModel:
-        """The team model.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, graphs, rendezvous
-        >>> from mascore import distributed_kf as dkf
-        >>> agent = agents.double_integrator(1, 0.1)
-        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
-        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
-        >>> filt.model is model
-        True
-        """
+        """The team model."""
         return self._model
 
     @property
     def mode(self) -> str:
-        """``"eb"`` (estimation-based) or ``"mb"`` (measurement-based).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, graphs, rendezvous
-        >>> from mascore import distributed_kf as dkf
-        >>> agent = agents.double_integrator(1, 0.1)
-        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
-        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2),
-        ...                mode="mb").mode
-        'mb'
-        """
+        """``"eb"`` (estimation-based) or ``"mb"`` (measurement-based)."""
         return self._mode
 
     @property
     def laplacian(self) -> np.ndarray:
-        """The topology in force, ``(N, N)`` or ``(batch, N, N)`` (read-only).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, graphs, rendezvous
-        >>> from mascore import distributed_kf as dkf
-        >>> agent = agents.double_integrator(1, 0.1)
-        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
-        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
-        >>> filt.laplacian.diagonal()
-        array([1., 2., 1.])
-        """
+        """The topology in force, ``(N, N)`` or ``(batch, N, N)`` (read-only)."""
         return self._L
 
     @property
     def X_hat(self) -> np.ndarray:
-        """Every agent's team estimate, ``(runs, N, N, m)`` (a read-only view, replaced by the next step).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, graphs, rendezvous
-        >>> from mascore import distributed_kf as dkf
-        >>> agent = agents.double_integrator(1, 0.1)
-        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
-        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.ones((2, 6)), P0=np.eye(2))
-        >>> filt.X_hat.shape
-        (2, 3, 3, 2)
-        """
+        """Every agent's team estimate, ``(runs, N, N, m)`` (a read-only view, replaced by the next step)."""
         return _view(self._X)
 
     @property
@@ -1139,37 +1051,12 @@ class TeamFilter:
 
         A read-only view of the filter's own array, which the next step may overwrite in
         place: copy it to keep it.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, graphs, rendezvous
-        >>> from mascore import distributed_kf as dkf
-        >>> agent = agents.double_integrator(1, 0.1)
-        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
-        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
-        >>> filt.Sigma.shape
-        (1, 18, 18)
         """
         return _view(self._Sig)
 
     @property
     def KH(self) -> np.ndarray:
-        """Reduced ``G_i H_i`` of the last update, ``(batch, N, M_r, M_r)`` (zero before the first update).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, graphs, rendezvous
-        >>> from mascore import distributed_kf as dkf
-        >>> agent = agents.double_integrator(1, 0.1)
-        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
-        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
-        >>> float(np.abs(filt.KH).max())
-        0.0
-        """
+        """Reduced ``G_i H_i`` of the last update, ``(batch, N, M_r, M_r)`` (zero before the first update)."""
         return _view(self._KH)
 
     def agent_covariances(self) -> np.ndarray:
@@ -1628,36 +1515,12 @@ class CentralizedFilter:
 
     @property
     def x_hat(self) -> np.ndarray:
-        """Team estimates ``(runs, N, m)`` (a read-only view, replaced by the next step).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, rendezvous
-        >>> from mascore import distributed_kf as dkf
-        >>> agent = agents.double_integrator(1, 0.1)
-        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
-        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> dkf.CentralizedFilter(model, agent.B, np.ones((1, 6)), np.eye(2)).x_hat[0, 0]
-        array([1., 1.])
-        """
+        """Team estimates ``(runs, N, m)`` (a read-only view, replaced by the next step)."""
         return _view(self._x)
 
     @property
     def P(self) -> np.ndarray:
-        """Reduced covariance ``(batch, M_r, M_r)`` (a read-only view, replaced by the next step).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, rendezvous
-        >>> from mascore import distributed_kf as dkf
-        >>> agent = agents.double_integrator(1, 0.1)
-        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
-        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> dkf.CentralizedFilter(model, agent.B, np.ones((1, 6)), np.eye(2), batch=2).P.shape
-        (2, 6, 6)
-        """
+        """Reduced covariance ``(batch, M_r, M_r)`` (a read-only view, replaced by the next step)."""
         return _view(self._P)
 
     def predict(self, U: ArrayLike) -> None:

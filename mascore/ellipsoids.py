@@ -113,13 +113,6 @@ class Ellipsoid:
         -------
         int
             Length of the centre.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import ellipsoids as ell
-        >>> ell.Ellipsoid(np.zeros(3), np.eye(3)).dim
-        3
         """
         return self.center.shape[0]
 
@@ -131,13 +124,6 @@ class Ellipsoid:
         -------
         float
             The trace, the size measure the set-membership filter minimises.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import ellipsoids as ell
-        >>> ell.Ellipsoid(np.zeros(2), np.diag([4.0, 1.0])).trace
-        5.0
         """
         return float(np.trace(self.shape))
 
@@ -149,13 +135,6 @@ class Ellipsoid:
         -------
         float
             The volume (area in the plane).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import ellipsoids as ell
-        >>> round(ell.Ellipsoid(np.zeros(2), np.eye(2)).volume, 6)        # the unit disc
-        3.141593
         """
         return float(volume(self.shape))
 

@@ -148,28 +148,12 @@ class LinearGaussianModel:
 
     @property
     def n_states(self) -> int:
-        """m, the length of the state.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import kalman
-        >>> kalman.LinearGaussianModel(np.eye(4), np.eye(4), np.eye(2, 4), np.eye(2)).n_states
-        4
-        """
+        """m, the length of the state."""
         return self.F.shape[-1]
 
     @property
     def n_measurements(self) -> int:
-        """q, the length of a measurement.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import kalman
-        >>> kalman.LinearGaussianModel(np.eye(4), np.eye(4), np.eye(2, 4), np.eye(2)).n_measurements
-        2
-        """
+        """q, the length of a measurement."""
         return self.H.shape[-2]
 
     def check_state(self, x: ArrayLike, P: ArrayLike, names: tuple[str, str] = ("x", "P")) -> tuple[np.ndarray, np.ndarray]:

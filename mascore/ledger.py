@@ -189,15 +189,7 @@ class Claim:
 
     @property
     def deviation(self) -> float | None:
-        """Largest deviation from the paper (relative or absolute, as the tolerance), or None.
-
-        Examples
-        --------
-        >>> from mascore.ledger import Claim
-        >>> c = Claim("ren2005/demo", "Sec. 2", "A demo number.", paper_value=2.0, value=2.01, tolerance={"rel": 0.01})
-        >>> round(c.deviation, 6)                                  # 0.5 % off
-        0.005
-        """
+        """Largest deviation from the paper (relative or absolute, as the tolerance), or None."""
         if self.paper_value is None:
             return None
         kind = "rel" if "rel" in self.tolerance else "abs"

@@ -260,16 +260,6 @@ class DistributedObserver:
         -------
         bool
             ``spectral_abscissa < 0``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs, observers
-        >>> A, Bbar, C = np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])  # Example 1
-        >>> obs = observers.distributed_observer(A, Bbar, C, 10.0 * np.eye(1), 5.0 * np.eye(1), np.eye(1),
-        ...                                     graphs.ring_graph(5))
-        >>> obs.hurwitz
-        True
         """
         return self.spectral_abscissa < 0
 

@@ -17,10 +17,13 @@ from ._validation import as_matrix
 
 mpl = require("matplotlib", "mascore.plotting")
 plt = require("matplotlib.pyplot", "mascore.plotting")
+from matplotlib.layout_engine import ConstrainedLayoutEngine, TightLayoutEngine  # noqa: E402  (after the check)
 
 __all__ = [
+    "COLUMN_WIDTH",
     "STYLE",
     "agent_colors",
+    "fit_to_column",
     "new_axes",
     "plot_band",
     "plot_graph",
@@ -29,7 +32,13 @@ __all__ = [
     "use_style",
 ]
 
-#: rcParams of the book's figures.
+#: Width (inches) of the book's figures at 100 dpi: a figure's image is 660 px wide at most in the
+#: text column of a 1280 px window. A wider
+#: figure would be shrunk by the browser, and its 10 pt tick labels with it (below 9 px at 13 in).
+COLUMN_WIDTH = 6.5
+
+#: rcParams of the book's figures. ``figure.hooks`` fits every pyplot figure to the column
+#: (:func:`fit_to_column`), so a figure drawn wider keeps its fonts readable.
 STYLE = {
     "figure.figsize": (6.4, 4.0),
     "figure.dpi": 100,
@@ -45,6 +54,8 @@ STYLE = {
     "legend.frameon": False,
     "lines.linewidth": 1.4,
     "image.cmap": "viridis",
+    "figure.autolayout": True,  # tight layout unless a figure asks for another (e.g. constrained)
+    "figure.hooks": ["mascore.plotting:fit_to_column"],
 }
 
 
@@ -62,6 +73,80 @@ def use_style() -> None:
     True
     """
     mpl.rcParams.update(STYLE)
+
+
+def fit_to_column(fig: plt.Figure, width: float = COLUMN_WIDTH) -> plt.Figure:
+    """Narrow a figure wider than the book's text column to the column's width.
+
+    The fonts keep their size, so they are read at their size in the book instead of
+    being shrunk with the image. The height shrinks by the square root of the width's
+    factor (panels side by side stay tall enough); the figure's layout engine (constrained,
+    or tight by the style's ``figure.autolayout``) fits the labels to the new size, after
+    breaking any Axes title wider than its Axes into two lines.
+    :func:`use_style` runs it on every figure pyplot creates (rcParams ``figure.hooks``).
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure (typically still empty, just created).
+    width : float
+        Largest width in inches (default :data:`COLUMN_WIDTH`).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        `fig`, resized in place.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.plotting import fit_to_column
+    >>> fig = fit_to_column(plt.figure(figsize=(13.6, 4.0)))
+    >>> [round(float(v), 2) for v in fig.get_size_inches()]
+    [6.5, 2.77]
+    >>> plt.close("all")
+    """
+    w, h = fig.get_size_inches()
+    if w > width:
+        fig.set_size_inches(width, h * np.sqrt(width / w))
+    engine = fig.get_layout_engine()
+    if type(engine) is ConstrainedLayoutEngine:
+        fig.set_layout_engine(_TitleWrappingConstrained(**engine.get(), compress=engine._compress))
+    elif type(engine) is TightLayoutEngine:
+        fig.set_layout_engine(_TitleWrappingTight(**engine.get()))
+    return fig
+
+
+def _wrap_titles(fig: plt.Figure) -> None:
+    """Break an Axes title (or x label) wider than its Axes into two lines, at the space (outside math) nearest
+    its middle: a figure narrowed to the column would otherwise run neighbouring titles together."""
+    renderer = fig._get_renderer()
+    for ax in fig.findobj(mpl.axes.Axes):
+        width = ax.get_window_extent(renderer).width
+        for title in (ax.title, getattr(ax, "_left_title", None), getattr(ax, "_right_title", None), ax.xaxis.label):
+            text = title.get_text() if title is not None else ""
+            if not text or "\n" in text or title.get_window_extent(renderer).width <= 0.95 * width:
+                continue
+            spaces = [i for i, c in enumerate(text) if c == " " and text[:i].count("$") % 2 == 0]
+            if spaces:
+                cut = min(spaces, key=lambda i: abs(i - len(text) / 2))
+                title.set_text(text[:cut] + "\n" + text[cut + 1:])
+
+
+class _TitleWrappingConstrained(ConstrainedLayoutEngine):
+    """The constrained layout, after :func:`_wrap_titles`."""
+
+    def execute(self, fig):
+        _wrap_titles(fig)
+        return super().execute(fig)
+
+
+class _TitleWrappingTight(TightLayoutEngine):
+    """The tight layout, after :func:`_wrap_titles`."""
+
+    def execute(self, fig):
+        _wrap_titles(fig)
+        return super().execute(fig)
 
 
 def agent_colors(n_agents: int) -> list:
@@ -231,9 +316,25 @@ def plot_graph(
         if sensing_range is not None:
             ax.add_patch(plt.Circle(p[i], sensing_range, fill=False, ls="--", lw=0.8, color=color))
         ax.plot(*p[i], "o", color=color, ms=9, zorder=2)
-        if node_labels:
-            ax.annotate(str(i + 1), p[i], ha="center", va="center", fontsize=7, color="white", zorder=3)
+    if node_labels:
+        _node_labels(ax, p, colors)
     return _plane_axes(ax, unit)
+
+
+def _node_labels(ax: plt.Axes, p: np.ndarray, colors: list) -> None:
+    """Number the agents inside their markers; an agent crowded by a neighbour gets its number
+    beside the marker, on the side away from that neighbour, so that no number is covered."""
+    ax.autoscale_view()
+    span = max(np.ptp(ax.get_xlim()), np.ptp(ax.get_ylim()))
+    d = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.diag(np.full(len(p), np.inf))
+    for i, color in enumerate(colors):
+        j = int(np.argmin(d[i]))
+        if len(p) > 1 and d[i, j] < 0.08 * span:
+            away = (p[i] - p[j]) / max(d[i, j], 1e-12)
+            ax.annotate(str(i + 1), p[i], xytext=11 * away, textcoords="offset points", ha="center", va="center",
+                        fontsize=8, fontweight="bold", color=color, zorder=3)
+        else:
+            ax.annotate(str(i + 1), p[i], ha="center", va="center", fontsize=7, color="white", zorder=3)
 
 
 def _plane_axes(ax: plt.Axes, unit: str) -> plt.Axes:

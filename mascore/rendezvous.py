@@ -378,34 +378,12 @@ class RendezvousModel:
 
     @property
     def m(self) -> int:
-        """State dimension of one agent.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, graphs, rendezvous
-        >>> agent = agents.double_integrator(2, 0.1)
-        >>> model = rendezvous.RendezvousModel(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 2),
-        ...                                    Q=1e-4 * np.eye(4), R=0.01 * np.eye(4), dt=0.1)
-        >>> model.m
-        4
-        """
+        """State dimension of one agent."""
         return self.A.shape[0]
 
     @property
     def p(self) -> int:
-        """Input dimension of one agent.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, graphs, rendezvous
-        >>> agent = agents.double_integrator(2, 0.1)
-        >>> model = rendezvous.RendezvousModel(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 2),
-        ...                                    Q=1e-4 * np.eye(4), R=0.01 * np.eye(4), dt=0.1)
-        >>> model.p
-        2
-        """
+        """Input dimension of one agent."""
         return self.B.shape[1]
 
 
@@ -613,19 +591,7 @@ class RendezvousResult:
 
     @property
     def time(self) -> np.ndarray:
-        """Time stamps (s), ``(T+1,)``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import agents, graphs, rendezvous
-        >>> agent = agents.double_integrator(2, 0.1)
-        >>> model = rendezvous.RendezvousModel(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 2),
-        ...                                    Q=1e-4 * np.eye(4), R=0.01 * np.eye(4), dt=0.1)
-        >>> run = rendezvous.simulate_rendezvous(0, model, np.zeros((4, 4)), graphs.ring_graph(4), 3, "true")
-        >>> run.time
-        array([0. , 0.1, 0.2, 0.3])
-        """
+        """Time stamps (s), ``(T+1,)``."""
         return self.dt * np.arange(self.states.shape[0])
 
 

@@ -875,11 +875,11 @@ class SynchronizationLaw:
             except ValueError:
                 raise ValueError(f"the batch dimensions of xhat {xhat.shape} and x_leader {x_leader.shape} "
                                  "do not broadcast") from None
+        require_finite(xhat, "xhat")
+        require_finite(x_leader, "x_leader")
         eps = -(self._Lp @ xhat) + self.g[:, None] * x_leader[..., None, :]
         u = self._scale[:, None] * (eps @ self.K.T)
         if not np.isfinite(u).all():
-            require_finite(xhat, "xhat")
-            require_finite(x_leader, "x_leader")
             raise ValueError("the control overflowed (NaN or inf) although every input is finite; rescale the problem")
         return u
 

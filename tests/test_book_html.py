@@ -2,9 +2,12 @@
 
 `make test` builds the book first (`make book`), then runs these checks: every
 registered figure of every paper is an image with its numbered caption in its
-chapter, every chapter shows its ledger table, no page shows raw LaTeX, an
-error or stderr block, or loads anything from the network. The last tests show
-that each check fails on a page with a figure removed or a formula broken.
+chapter, numbered in its chapter and with its caption as alt text, every chapter
+shows its ledger table, no page shows raw LaTeX, an error or stderr block, or loads
+anything from the network. In headless Chromium at 1280 px (offline), no display
+equation or table is wider than the text column, no table cell shows NaN, and no
+figure is shrunk below legibility. Tests at the end show that each check fails on
+a page with a figure removed, a formula broken or the layout overflowing.
 """
 
 from __future__ import annotations
@@ -57,8 +60,11 @@ def figure_problems(html: str, label: str, caption_start: str) -> list[str]:
     caption = re.search(r"<figcaption>(.*?)</figcaption>", block, re.S)
     text = html_module.unescape(re.sub(r"<[^>]+>", "", caption.group(1))) if caption else ""
     text = text.translate(SMART_QUOTES)
-    if not re.search(r"Fig\. \d+", text):
-        problems.append(f"figure {label} has no numbered caption")
+    if not re.match(r"\s*Figure \d+\.\d+", text):
+        problems.append(f"figure {label} has no caption numbered in its chapter ('Figure 4.2')")
+    alt = re.search(r'<img[^>]*\balt="(?P<alt>[^"]*)"', block)
+    if not alt or not alt["alt"].strip() or re.search(r"\.(png|svg|jpe?g)$", alt["alt"].strip()):
+        problems.append(f"figure {label}: the image's alt text is not its caption")
     if " ".join(caption_start.split()) not in " ".join(text.split()):
         problems.append(f"figure {label}: caption does not start as registered ({caption_start!r})")
     return problems
@@ -155,3 +161,117 @@ def test_every_image_of_a_chapter_is_a_captioned_figure():
         outside = re.sub(r"<figure.*?</figure>", "", html, flags=re.S)
         bare = re.findall(r'<img[^>]*src="(?!data:image/svg)[^"]*_images/[^"]*"', outside)
         assert not bare, f"{study.chapter}: {len(bare)} image(s) without a numbered caption"
+
+
+# ---------------------------------------------------------------- the pages as a reader sees them, at 1280 px
+
+#: The style's tick labels are 10 pt at 100 dpi, 13.9 px per em (digits 10 px high): an image shown at
+#: less than 90 % of its width puts them under 9 px.
+MIN_IMAGE_SCALE = 0.9
+READ_PAGES = sorted({*(HTML / "notebooks").glob("*.html"), HTML / "notation.html", HTML / "intro.html",
+                     HTML / "bibliography.html"}) if HTML.exists() else []
+READ_PAGES = [p for p in READ_PAGES if p.exists() and not p.name.startswith(".")]
+
+
+def _browser() -> str:
+    from mascore._booktools import chromium
+
+    browser = chromium()
+    if browser is None:
+        pytest.skip("chromium is not installed here (apt-get install -y chromium; .ci/run installs it)")
+    return browser
+
+
+def layout_problems(m: dict) -> list[str]:
+    """What overflows the text column, shows NaN or is shrunk, in the measures of :func:`measure_page`."""
+    if "error" in m:
+        return [f"the page could not be measured: {m['error']}"]
+    out = [f"MathJax cannot typeset a formula: {e}" for e in m.get("math_errors", [])]
+    out += [f"display equation {e['width']} px wide in a {m['column']:.0f} px column: {e['what']}" for e in m["equations"]]
+    out += [f"table {t['width']} px wide in a {m['column']:.0f} px column: {t['what']}" for t in m["tables"]]
+    out += [f"a table cell shows NaN/None: {head}" for head in sorted(set(m["nan"]))]
+    out += [f"figure {i['id']} shrunk to {i['shown'] / i['natural']:.0%} of its width (tick labels under 9 px)"
+            for i in m["images"] if i["shown"] < MIN_IMAGE_SCALE * i["natural"]]
+    return out
+
+
+@pytest.mark.parametrize("path", READ_PAGES, ids=lambda p: p.relative_to(HTML).as_posix())
+def test_page_fits_its_column_at_1280px(path):
+    """No formula MathJax rejects, no display equation or table wider than the column, no NaN cell, no
+    figure shrunk (headless Chromium)."""
+    from mascore._booktools import measure_page
+
+    problems = layout_problems(measure_page(path, browser=_browser()))
+    assert not problems, "\n".join(problems)
+
+
+def test_layout_check_fails_on_wide_math_tables_nan_and_shrunk_figures():
+    path = HTML / "notebooks" / "building_blocks.html"
+    wide_math = "\\[" + " + ".join(f"x_{{{i}}}^{{2}}" for i in range(80)) + "\\]"
+    bad = ('<div class="math notranslate nohighlight">' + wide_math + "</div>"
+           '<div class="math notranslate nohighlight">\\[\\begin{split}x \\tag{1}\\end{split}\\]</div>'
+           "<table><tr>" + "<td>wide_column_name_without_breaks_anywhere</td>" * 30 + "</tr>"
+           "<tr><td>NaN</td></tr></table>"
+           '<figure id="fig-shrunk"><img src="data:image/svg+xml;utf8,'
+           "%3Csvg xmlns='http://www.w3.org/2000/svg' width='2000' height='10'%3E%3C/svg%3E\"></figure>")
+    probe = path.with_name(".layout-selftest.html")
+    probe.write_text(path.read_text().replace('<article class="bd-article">', '<article class="bd-article">' + bad, 1))
+    from mascore._booktools import measure_page
+
+    try:
+        problems = "\n".join(layout_problems(measure_page(probe, browser=_browser())))
+    finally:
+        probe.unlink(missing_ok=True)
+    assert "display equation" in problems and "table" in problems and "NaN" in problems, problems
+    assert "MathJax cannot typeset" in problems, problems
+    assert "fig-shrunk" in problems, problems
+
+
+def _next_page(path: Path) -> str:
+    """The page the 'Next' button of a page leads to."""
+    m = re.search(r'<a[^>]*class="right-next"[^>]*href="([^"#]+)', path.read_text()) or \
+        re.search(r'<a[^>]*href="([^"#]+)"[^>]*class="right-next"', path.read_text())
+    assert m, f"{path.name}: no 'Next' link"
+    return (path.parent / m.group(1)).resolve().relative_to(HTML.resolve()).as_posix()
+
+
+def test_the_bibliography_comes_before_the_api_reference():
+    assert _next_page(HTML / "notebooks" / "performance.html") == "bibliography.html"
+    assert _next_page(HTML / "bibliography.html").startswith("api/")
+
+
+def test_performance_met_column_says_met_missed_or_reported_only():
+    html = (HTML / "notebooks" / "performance.html").read_text()
+    table = re.search(r"<table[^>]*dataframe.*?</table>", html, re.S).group(0)
+    header = [html_module.unescape(re.sub(r"<[^>]+>", "", h)).strip() for h in re.findall(r"<th[^>]*>(.*?)</th>", table, re.S)]
+    assert "met" in header, header
+    cells = {html_module.unescape(c).strip() for c in re.findall(r"<td>([^<]*)</td>", table)}
+    assert "NO" not in cells and "yes" not in cells and "reported only" in cells, sorted(cells)[:20]
+
+
+@pytest.mark.parametrize("name", ["py-modindex.html", "genindex.html", "notation.html"])
+def test_every_image_of_the_index_pages_exists(name):
+    path = HTML / name
+    if not path.exists():
+        pytest.skip(f"{name} is not built")
+    srcs = re.findall(r'<img[^>]*src="([^"]+)"', path.read_text())
+    missing = [s for s in srcs if not s.startswith("data:") and not (path.parent / s.split("?")[0]).exists()]
+    assert not missing, missing
+
+
+@pytest.mark.parametrize("path", sorted((HTML / "api").glob("*.html")) if HTML.exists() else [],
+                         ids=lambda p: p.name)
+def test_api_pages_show_formulas_as_math_not_code(path):
+    """A docstring's ``x_{k+1} = A x_k`` is rendered by MathJax, not shown as code with its braces."""
+    code = [html_module.unescape(re.sub(r"<[^>]+>", "", c))
+            for c in re.findall(r'<code class="docutils literal[^"]*">(.*?)</code>', path.read_text(), re.S)]
+    tex = [c for c in code if re.search(r"[_^]\{|\\[A-Za-z]+", c)]
+    assert not tex, tex[:5]
+
+
+@pytest.mark.parametrize("chapter", sorted({s.chapter for _, s in STUDIES} | {"building_blocks", "apply_your_system"}))
+def test_a_tagged_equation_has_one_number(chapter):
+    """An equation that carries the paper's number (``\\tag``) gets no second, Sphinx number beside it."""
+    blocks = re.findall(r'<div class="[^"]*\bmath\b[^"]*"[^>]*>(.*?)</div>', _page(chapter), re.S)
+    double = [b[:80] for b in blocks if 'class="eqno"' in b and "\\tag" in b]
+    assert not double, double

@@ -51,11 +51,15 @@ def test_each_registered_figure_is_drawn_once_with_the_registry_caption(chapter)
 
 @pytest.mark.parametrize("chapter", sorted(CHAPTERS))
 def test_every_figure_cell_has_a_unique_label_and_a_caption(chapter):
+    from mascore._booktools import plain_text
+
     labels = []
     for cell in _cells(chapter):
         meta = cell["metadata"].get("mystnb", {}).get("figure")
         if meta:
             assert meta.get("caption", "").strip(), f"{chapter}: figure {meta.get('name')} without caption"
+            alt = cell["metadata"]["mystnb"].get("image", {}).get("alt")
+            assert alt == plain_text(meta["caption"]), f"{chapter}: alt text of {meta['name']} is not its caption: `make sync`"
             labels.append(meta["name"])
     assert len(labels) == len(set(labels)), f"{chapter}: duplicate figure labels"
     assert all(label.startswith("fig-") for label in labels)
@@ -82,3 +86,50 @@ def test_registry_captions_are_stated():
         for study in reg.studies:
             for spec in (*study.figures, *study.tables):
                 assert len(spec.caption.split()) >= 8, f"{key}/{spec.name}: caption too short to say what to look for"
+
+
+# ---------------------------------------------------------------- numbers the code produces are not typed
+
+#: A measured time or speed ratio typed into prose: a number with a unit of computing time, an
+#: "Nx" ratio or "N times faster", or seconds next to a word of measurement (takes, took, wall,
+#: CPU, timed, measured). Simulated durations ("30 s", "sampled at 0.1 s") are settings, not timings.
+TYPED_TIMING = re.compile(
+    r"\b\d+(?:\.\d+)?\s*(?:ms|µs|us|ns)\b"
+    r"|\b\d+(?:\.\d+)?x\b(?!\s*\d)"
+    r"|\b\d+(?:\.\d+)?\s+times\s+(?:faster|slower)"
+    r"|\b(?:takes?|took|wall|CPU|timed|measured)\b[^.|]{0,60}?\b\d+(?:\.\d+)?\s*s\b"
+    r"|\|\s*\d+(?:\.\d+)?\s*s\s*\|",
+    re.I,
+)
+#: Words of the workshop, not of the book: an issue, a claim's slug, the date of a measurement.
+WORKSHOP_WORDS = re.compile(r"\bof the issue\b|\bthe issue's\b|\(claim `|\bclaim `[a-z0-9-]+`|\b\d{1,2} (?:Jan|Feb|Mar|Apr|May|"
+                            r"Jun|Jul|Aug|Sep|Oct|Nov|Dec)[a-z]* 20\d\d\b|\b20\d\d-\d\d-\d\d\b")
+
+
+def _markdown_cells():
+    for path in sorted((ROOT / "notebooks").glob("*.ipynb")):
+        for i, cell in enumerate(json.loads(path.read_text())["cells"]):
+            if cell["cell_type"] == "markdown":
+                text = re.sub(r"\{glue(?::\w+)?\}`[^`]*`", "", "".join(cell["source"]))  # computed numbers
+                yield f"{path.stem}[{i}]", text
+
+
+def prose_problems(where: str, text: str) -> list[str]:
+    """Timings or ratios typed into a Markdown cell, and words of the workshop."""
+    out = [f"{where}: typed timing {m.group(0)!r}: compute it (glue or a computed Markdown cell)"
+           for m in TYPED_TIMING.finditer(text)]
+    out += [f"{where}: workshop words {m.group(0)!r}" for m in WORKSHOP_WORDS.finditer(text)]
+    return out
+
+
+def test_no_timing_or_ratio_is_typed_into_the_prose():
+    problems = [p for where, text in _markdown_cells() for p in prose_problems(where, text)]
+    assert not problems, "\n".join(problems)
+
+
+def test_prose_check_fails_on_typed_timings():
+    assert prose_problems("x", "the design takes 0.32 s for N = 5")
+    assert prose_problems("x", "3.6 ms per design") and prose_problems("x", "47x the plain recursion")
+    assert prose_problems("x", "| 32 | 0.40 s | 3.0 s |") and prose_problems("x", "ten times faster, 8 times faster")
+    assert prose_problems("x", "measured on 23 Nov 2026") and prose_problems("x", "(claim `fig5-error`)")
+    assert not prose_problems("x", "sampled at 0.1 s, simulated for 30 s on 2 x 2 blocks, {glue:text}`t_ms` ms")

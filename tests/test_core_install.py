@@ -18,7 +18,7 @@ import pytest
 #: Modules a user of the filters, consensus and closed forms imports (no extra needed).
 CORE_MODULES = (
     "agents", "graphs", "noise", "kalman", "sensing", "consensus", "rendezvous", "flocking",
-    "synchronization", "lqr", "distributed_kf", "distributed_ekf", "ellipsoids", "set_membership",
+    "synchronization", "lqr", "distributed_kf", "distributed_ekf", "fusion", "ellipsoids", "set_membership",
 )
 #: Optional packages (and slow-to-import parts of required ones) that the core must not load.
 HEAVY = ("cvxpy", "clarabel", "matplotlib", "pandas", "tqdm", "dask", "distributed", "scipy.stats", "networkx")

@@ -1,4 +1,4 @@
-"""Every public class and function is documented the numpydoc way, with an Examples section.
+"""Every public class and function is documented the numpydoc way, with an Examples section (properties without).
 
 The public objects are those of each API module's ``__all__`` (the ones the book's API
 reference pages show, :data:`mascore._booktools.API_GROUPS`), plus the public methods and
@@ -49,7 +49,9 @@ def _targets(module: str) -> list[str]:
 
 def _problems(target: str) -> list[str]:
     result = numpydoc_validate.validate(target)
-    return [f"{target}: {code} {msg}" for code, msg in result["errors"] if code in CHECKS]
+    is_property = result["type"] == "property"  # a property is data: its summary says what it is, no example
+    return [f"{target}: {code} {msg}" for code, msg in result["errors"]
+            if code in CHECKS and not (is_property and code == "EX01")]
 
 
 @pytest.mark.parametrize("module", api_modules())

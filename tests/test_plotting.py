@@ -35,3 +35,39 @@ def test_band_and_bad_shapes():
     with pytest.raises(ValueError, match="A"):
         plotting.plot_graph(np.zeros((3, 2)), np.zeros((2, 2)))
     plt.close("all")
+
+
+def test_figures_fit_the_book_column_with_legible_ticks():
+    """A figure drawn wider than the column is narrowed, fonts kept: its tick labels render at 9 px or more."""
+    plotting.use_style()
+    for layout in ("constrained", None):
+        fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), layout=layout)
+        assert fig.get_size_inches()[0] == pytest.approx(plotting.COLUMN_WIDTH)
+        fig.canvas.draw()
+        png_width = fig.get_size_inches()[0] * fig.dpi
+        shown = min(1.0, 660 / png_width)  # the text column holds 660 px of image at 1280 px
+        tick_px = axes[0].get_xticklabels()[0].get_fontsize() * fig.dpi / 72 * shown
+        assert 0.72 * tick_px >= 9, f"digits {0.72 * tick_px:.1f} px high"
+        plt.close(fig)
+
+
+def test_long_titles_wrap_instead_of_running_together():
+    plotting.use_style()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3), layout="constrained")
+    for ax in axes:
+        ax.set_title("(a) a title far too long to fit over a panel half the column wide, $x_{k+1}$ kept")
+    fig.canvas.draw()
+    assert all("\n" in ax.get_title() for ax in axes)
+    assert all(ax.get_title().count("$") == 2 and "$x_{k+1}$" in ax.get_title() for ax in axes)
+    plt.close(fig)
+
+
+def test_crowded_agents_keep_their_numbers_visible():
+    plotting.use_style()
+    pos = np.array([[0.0, 0.0], [5.0, 0.0], [300.0, 300.0]])
+    ax = plotting.plot_graph(pos, graphs.proximity_graph(pos, 50.0), sensing_range=50.0)
+    offsets = {t.get_text(): t.get_position() for t in ax.texts}
+    assert set(offsets) == {"1", "2", "3"}
+    crowded = [t for t in ax.texts if t.get_text() in "12"]
+    assert all(t.get_anncoords() == "offset points" for t in crowded)  # beside the marker, not under it
+    plt.close("all")

@@ -203,12 +203,6 @@ class SetMembershipSettings:
         -------
         int
             ``len(x0_hat)``.
-
-        Examples
-        --------
-        >>> from mascore.papers import bhattacharjee2021 as bs
-        >>> bs.SETTINGS.n_agents
-        4
         """
         return len(self.x0_hat)
 
@@ -220,12 +214,6 @@ class SetMembershipSettings:
         -------
         float
             ``mu_bar``.
-
-        Examples
-        --------
-        >>> from mascore.papers import bhattacharjee2021 as bs
-        >>> round(float(bs.SETTINGS.mu_bar), 6)                # 1.1 * 2 / 0.1
-        22.0
         """
         return sync.mu_bar(self.alpha, self.mu, self.n_agents)
 
@@ -237,12 +225,6 @@ class SetMembershipSettings:
         -------
         tuple of DisturbanceSetting
             Disturbance amplitudes and filter bounds per row.
-
-        Examples
-        --------
-        >>> from mascore.papers import bhattacharjee2021 as bs
-        >>> len(bs.SETTINGS.rows)
-        3
         """
         return tuple(DisturbanceSetting(aw, av, q, r, *pub) for aw, av, q, r, pub in
                      zip(self.alpha_w, self.alpha_v, self.q, self.r, TABLE1_PUBLISHED))
@@ -255,12 +237,6 @@ class SetMembershipSettings:
         -------
         DisturbanceSetting
             Row ``figure_row`` (1-based, as printed) of :attr:`rows`.
-
-        Examples
-        --------
-        >>> from mascore.papers import bhattacharjee2021 as bs
-        >>> bs.SETTINGS.figure_setting == bs.SETTINGS.rows[bs.SETTINGS.figure_row - 1]
-        True
         """
         return self.rows[self.figure_row - 1]
 
@@ -440,13 +416,6 @@ class ClosedLoopRun:
         -------
         (R, T+1, N, 2) ndarray
             One error per run, step and agent.
-
-        Examples
-        --------
-        >>> from mascore.papers import bhattacharjee2021 as bs
-        >>> run = bs.simulate(seed=1, n_runs=2)                     # the closed loop of Sec. 5, closed form
-        >>> run.error.shape
-        (2, 61, 4, 2)
         """
         return self.x - self.xhat
 
@@ -458,13 +427,6 @@ class ClosedLoopRun:
         -------
         (R, T+1, N) ndarray
             The quadratic form of each error in its corrected ellipsoid.
-
-        Examples
-        --------
-        >>> from mascore.papers import bhattacharjee2021 as bs
-        >>> run = bs.simulate(seed=1, n_runs=2)                     # the closed loop of Sec. 5, closed form
-        >>> bool(run.containment.max() <= 1 + 1e-9)                # every state inside its set
-        True
         """
         e = self.error
         return np.einsum("...i,...i->...", e, np.linalg.solve(self.P, e[..., None])[..., 0])
@@ -477,13 +439,6 @@ class ClosedLoopRun:
         -------
         (R, T+1, N) ndarray
             The size of each corrected ellipsoid.
-
-        Examples
-        --------
-        >>> from mascore.papers import bhattacharjee2021 as bs
-        >>> run = bs.simulate(seed=1, n_runs=2)                     # the closed loop of Sec. 5, closed form
-        >>> run.trace.shape
-        (2, 61, 4)
         """
         return np.trace(self.P, axis1=-2, axis2=-1)
 
@@ -810,15 +765,6 @@ class SetMembershipResult:
         -------
         ClosedLoopRun
             `figure_run` or `figure_twin`, whichever used the SDPs.
-
-        Examples
-        --------
-        >>> from mascore.papers import bhattacharjee2021 as bs
-        >>> import dataclasses
-        >>> quick = dataclasses.replace(bs.SETTINGS, n_runs=3, t_f=10, figure_method="closed_form")   # a small run
-        >>> result = bs.run(quick, seed=1)
-        >>> bool(abs(result.sdp_run.P - result.closed_form_run.P).max() < 1e-4)   # the two paths agree
-        True
         """
         return self.figure_run if self.settings.figure_method == "sdp" else self.figure_twin
 
@@ -830,15 +776,6 @@ class SetMembershipResult:
         -------
         ClosedLoopRun
             `figure_run` or `figure_twin`, whichever used the closed form.
-
-        Examples
-        --------
-        >>> from mascore.papers import bhattacharjee2021 as bs
-        >>> import dataclasses
-        >>> quick = dataclasses.replace(bs.SETTINGS, n_runs=3, t_f=10, figure_method="closed_form")   # a small run
-        >>> result = bs.run(quick, seed=1)
-        >>> result.closed_form_run.x.shape[0]
-        1
         """
         return self.figure_twin if self.settings.figure_method == "sdp" else self.figure_run
 
@@ -942,6 +879,16 @@ def plot_fig1(des: sync.SyncDesign | None = None, scenario: SetMembershipSetting
     ax2.set_aspect("equal")
     ax2.set_ylim(-1.0, 0.95)
     ax2.legend(loc="lower center", fontsize=7)
+    # The leftmost eigenvalue sits close to the circle: a zoom shows on which side.
+    left = des.eigs[np.argmin(des.eigs.real)]
+    zoom = ax2.inset_axes([0.06, 0.68, 0.26, 0.3])
+    zoom.plot(des.c0 + des.r0 * np.cos(th), des.r0 * np.sin(th), "k--", lw=1)
+    zoom.plot(des.eigs.real, des.eigs.imag, "x", ms=7, mew=1.5, color="C3")
+    zoom.set(xlim=(left.real - 0.04, left.real + 0.04), ylim=(left.imag - 0.04, left.imag + 0.04),
+             xticks=[], yticks=[])
+    zoom.grid(False)
+    zoom.spines[["top", "right"]].set_visible(True)
+    ax2.indicate_inset_zoom(zoom, edgecolor="0.4")
     ax2.set_title(r"(b) eigenvalues of $\Gamma$")
     return fig
 
@@ -1355,7 +1302,7 @@ FIGURES = (
         "(a) The interaction graph of eq. (24): the directed ring 1 → 2 → 3 → 4 → 1 (an arrow from $j$ to $i$: "
         "agent $i$ hears agent $j$), with agent 1 pinned to the leader, node 0. (b) The eigenvalues $\\Lambda_i$ "
         "of $\\Gamma$ (eq. (15)) and the circle $C(c_0, r_0)$, $c_0 = 2/3$, $r_0 = 0.6$ of Lemma 2. Look for all "
-        "four crosses inside the dashed circle: Lemma 2's condition, which gives the coupling gain $c = 1/c_0 = 1.5$.",
+        "four crosses inside the dashed circle (the inset zooms on the leftmost, just inside): Lemma 2's condition, which gives the coupling gain $c = 1/c_0 = 1.5$.",
         lambda r: plot_fig1(r.design, r.settings)),
     FigureSpec(
         "fig2", "Fig. 2",

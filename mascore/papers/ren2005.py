@@ -134,12 +134,6 @@ class KalmanConsensusSettings:
         -------
         (n,) ndarray
             The meeting times (h).
-
-        Examples
-        --------
-        >>> from mascore.papers import ren2005
-        >>> ren2005.SETTINGS.fig1_xi0[:3]
-        array([1., 2., 3.])
         """
         return np.asarray(self.xi0, dtype=float)
 
@@ -841,13 +835,16 @@ def plot_fig1(res: Fig1Result, axes=None, confident_agent: int = SETTINGS.confid
         for i, c in enumerate(colors):
             axes[0, col].plot(result.t, result.xi[:, i], color=c, lw=1.0)
             axes[1, col].semilogy(result.t, result.P[:, i], color=c, lw=1.0)
-        axes[0, col].set_title(f"({'ab'[col]}) meeting times, {title}")
-        axes[1, col].set_title(f"({'cd'[col]}) variances, {title}")
+        axes[0, col].set_title(f"({'ab'[col]}) meeting times,\n{title}", fontsize="small")
+        axes[1, col].set_title(f"({'cd'[col]}) variances,\n{title}", fontsize="small")
         axes[0, col].set_ylabel("meeting time $\\xi_i$ (h)")
         axes[1, col].set_ylabel("variance $P_i$ (h$^2$)")
         axes[1, col].set_xlabel("step k")
     axes[0, 1].axhline(res.fused_confident, color="k", ls=":", lw=1, label="central fusion")
     axes[0, 1].legend(loc="upper right")
+    agents = axes[0, 0].get_lines()[:len(colors)]  # ten lines a panel: a key below the panels
+    axes[0, 0].figure.legend(agents, [f"agent {i + 1}" for i in range(len(colors))], loc="outside lower center",
+                             ncol=5, fontsize="small")
     return axes
 
 
@@ -858,10 +855,11 @@ def plot_average(res: Fig1Result, axes=None):
     for ax, (result, title) in zip(axes, ((res.average, "(a) average consensus"),
                                           (res.confident, "(b) Kalman consensus, agent 7 confident"))):
         for i, c in enumerate(agent_colors(result.xi.shape[-1])):
-            ax.plot(result.t, result.xi[:, i], color=c, lw=1)
+            ax.plot(result.t, result.xi[:, i], color=c, lw=1, label=f"agent {i + 1}")
         ax.set_title(f"{title}: agrees on {format_number(float(result.final_value), 3)}")
         ax.set_xlabel("step k")
     axes[0].set_ylabel("meeting time $\\xi_i$ (h)")
+    axes[0].figure.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncol=5, fontsize="small")
     return axes
 
 

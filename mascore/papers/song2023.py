@@ -146,14 +146,7 @@ class RendezvousSettings:
 
     @property
     def n_steps(self) -> int:
-        """Number of steps of the horizon.
-
-        Examples
-        --------
-        >>> from mascore.papers import song2023
-        >>> song2023.SETTINGS.n_steps                                   # 40 s at dt = 0.1 s
-        400
-        """
+        """Number of steps of the horizon."""
         return int(round(self.horizon / self.dt))
 
 
@@ -976,7 +969,7 @@ def plot_fig2(res: Fig2Result, axes=None):
         _plain_log(a)
     ax[2].sharey(ax[3])
     handles = ax[2].get_lines() + ax[3].get_lines()[-1:]
-    ax[0].figure.legend(handles=handles, loc="outside lower center", ncol=9, fontsize="small",
+    ax[0].figure.legend(handles=handles, loc="outside lower center", ncol=5, fontsize="small",
                         handlelength=1.5, columnspacing=1.0)
     return axes
 
@@ -995,7 +988,7 @@ def plot_fig3(res: Fig3Result, axes=None, laws: tuple[str, ...] = (CONVENTIONAL,
         ax.set_ylabel(f"RMS STD ({unit})")
         ax.set_title(f"{title} STD over {n_runs} runs")
         ax.axvspan(res.converged_from, res.time[-1], color="0.92", zorder=0)
-    axes[0].figure.legend(handles=axes[0].get_lines(), loc="outside lower center", ncol=len(laws))
+    axes[0].figure.legend(handles=axes[0].get_lines(), loc="outside lower center", ncol=min(len(laws), 2))
     return axes
 
 
@@ -1032,9 +1025,12 @@ def plot_nees(res: Fig2Result, axes=None):
     ax = axes
     ns = res.nees_summary()
     e = res.estimation
-    ax.axhspan(ns["low"], ns["high"], color="0.85", zorder=0)
-    for i, c in enumerate(agent_colors(res.setup.n_agents)):
-        ax.plot(e.time[1:], e.nees[1:, :, i].mean(axis=1), color=c, lw=0.6)
+    ax.axhspan(ns["low"], ns["high"], color="0.85", zorder=0, label="95 % interval")
+    per_agent = e.nees[1:].mean(axis=1)  # (T, N): each agent's NEES averaged over the runs
+    ax.fill_between(e.time[1:], per_agent.min(axis=1), per_agent.max(axis=1), color="C0", alpha=0.35, lw=0,
+                    label="range over the agents")
+    ax.plot(e.time[1:], per_agent.mean(axis=1), color="C0", lw=1.0, label="mean over the agents")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0))  # beside the data, not over it
     ax.set_xlabel("time (s)")
     ax.set_ylabel("NEES averaged over the runs")
     ax.set_title(f"estimation-based loop, {e.nees.shape[1]} runs, dof = {ns['dof']}")
@@ -1067,16 +1063,19 @@ FIGURES = (
         "□ end); (c) each agent's position error over the whole team, "
         "$\\sqrt{\\sum_j \\lVert p_j - \\hat p_{i,j}\\rVert^2}$; (d) the statistical error "
         "$\\sqrt{\\mathrm{tr}\\,\\Sigma_{i,p}}$, with a centralized Kalman filter over all measurements as the "
-        "bound (dashed). Look for: the errors fall and settle, (c) and (d) are of the same size (the paper's "
-        "'similar'), and no agent's curve in (d) goes below the dashed bound.",
+        "bound (dashed). Look for: the statistical errors (d) fall and settle; the actual errors (c) of this one "
+        "run fall from their start but keep swinging widely about the level of (d), as one draw of a random "
+        "error does, so (c) and (d) are of the same size (the paper's 'similar'); no agent's curve in (d) goes "
+        "below the dashed bound.",
         lambda result: _figure(plot_fig2, result.fig2, shape=(2, 2), figsize=(9, 7.8)),
     ),
     FigureSpec(
         "nees", "",
-        "Normalized estimation error squared $e_i^T \\Sigma_i^{-1} e_i$ of every agent's team estimate "
-        "(one colour per agent), averaged over the 50 runs of the Fig. 2 topology, with the 95 % interval of "
-        "that average (grey band, $2nN = 32$ degrees of freedom). Look for: the curves stay inside the band "
-        "about 95 % of the time, so the covariances of eqs. (29)-(34) match the actual errors.",
+        "Normalized estimation error squared $e_i^T \\Sigma_i^{-1} e_i$ of every agent's team estimate, "
+        "averaged over the 50 runs of the Fig. 2 topology: the range over the eight agents (blue band) and "
+        "their mean (line), with the 95 % interval of a run average (grey band, $2nN = 32$ degrees of "
+        "freedom). Look for: the agents' values stay inside the grey band about 95 % of the time, so the "
+        "covariances of eqs. (29)-(34) match the actual errors.",
         lambda result: _figure(plot_nees, result.fig2, shape=(1, 1), figsize=(9, 3.4)),
     ),
     FigureSpec(

@@ -140,76 +140,34 @@ class FlockingSettings:
 
     @property
     def gains(self) -> FlockingGains:
-        """The flocking gains of Table I (with ``d_min``).
-
-        Examples
-        --------
-        >>> from mascore.papers import song2023_flocking as flocking_paper
-        >>> flocking_paper.SETTINGS.gains.rho3
-        3.0
-        """
+        """The flocking gains of Table I (with ``d_min``)."""
         return FlockingGains(rho3=self.rho3, rho4=self.rho4, rho5=self.rho5, rho6=self.rho6, beta=self.beta,
                              R=self.spring_length, min_distance=self.min_distance)
 
     @property
     def Q(self) -> np.ndarray:
-        """Process-noise covariance of one agent, ``(2n, 2n)``.
-
-        Examples
-        --------
-        >>> from mascore.papers import song2023_flocking as flocking_paper
-        >>> flocking_paper.SETTINGS.Q.shape
-        (4, 4)
-        """
+        """Process-noise covariance of one agent, ``(2n, 2n)``."""
         return self.process_noise * np.eye(2 * self.n_dim)
 
     @property
     def R_fig4(self) -> np.ndarray:
-        """Measurement-noise covariance per measured agent, Fig. 4.
-
-        Examples
-        --------
-        >>> from mascore.papers import song2023_flocking as flocking_paper
-        >>> flocking_paper.SETTINGS.R_fig4.shape
-        (4, 4)
-        """
+        """Measurement-noise covariance per measured agent, Fig. 4."""
         return self.measurement_noise_fig4 * np.eye(2 * self.n_dim)
 
     @property
     def R_fig5(self) -> np.ndarray:
-        """Measurement-noise covariance per measured agent, Figs. 5-6.
-
-        Examples
-        --------
-        >>> from mascore.papers import song2023_flocking as flocking_paper
-        >>> flocking_paper.SETTINGS.R_fig5.shape
-        (4, 4)
-        """
+        """Measurement-noise covariance per measured agent, Figs. 5-6."""
         return self.measurement_noise_fig5 * np.eye(2 * self.n_dim)
 
     @property
     def sigma0_agent(self) -> np.ndarray:
-        """Prior covariance of one agent's state, ``diag(sp^2 I_n, sv^2 I_n)``.
-
-        Examples
-        --------
-        >>> from mascore.papers import song2023_flocking as flocking_paper
-        >>> flocking_paper.SETTINGS.sigma0_agent.diagonal()
-        array([100., 100.,   1.,   1.])
-        """
+        """Prior covariance of one agent's state, ``diag(sp^2 I_n, sv^2 I_n)``."""
         n = self.n_dim
         return np.diag([self.sigma0_position**2] * n + [self.sigma0_velocity**2] * n)
 
     @property
     def n_steps(self) -> int:
-        """Number of steps of the horizon ``t_final``.
-
-        Examples
-        --------
-        >>> from mascore.papers import song2023_flocking as flocking_paper
-        >>> flocking_paper.SETTINGS.n_steps                      # 60 s at dt = 0.1 s
-        600
-        """
+        """Number of steps of the horizon ``t_final``."""
         return int(round(self.t_final / self.dt))
 
 
@@ -1026,8 +984,10 @@ FIGURES = (
         "(c) true and (d) estimated trajectories (markers at the end: ▲ agent 1, ● its neighbours, "
         "□ and dashed lines its non-neighbours at the end); (e) agent 1's position error of every other agent "
         "and (f) its statistical error $\\sqrt{\\operatorname{tr}\\Sigma_{1,p_j}}$. Look for: (d) follows (c) "
-        "closely; the errors and the statistical error of an agent sit near 1 m while it is in range, rise to "
-        "a bounded 5-6 m while it is out of range, and drop at once when it comes back.",
+        "closely; the errors and the statistical error of an agent sit near 1 m while it is in range; while it "
+        "is out of range the statistical error (f) rises to a bounded plateau of about 5 m, and the actual "
+        "error (e) swings well above that plateau (the ledger gives its peak); both drop at once when the "
+        "agent comes back.",
         lambda result: plot_fig4(result.fig4, result.settings),
     ),
     FigureSpec(

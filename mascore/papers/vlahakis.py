@@ -1150,11 +1150,12 @@ def claims(result: ObserverResult) -> list[Claim]:
 _FIG_LOOK = {
     1: "Look for the fast pole (about −23 rad/s) removing most of each error within 0.2 s, then a small common "
        "tail that decays slowly (the pole near −0.26 rad/s of the printed $L$, the 'slowest pole being near the "
-       "origin' of Sec. 5). The panels differ only in $\\Phi$: with the larger printed $\\Phi$ (b) the errors "
-       "agree a little sooner.",
+       "origin' of Sec. 5). The panels differ only in $\\Phi$, and so little that they look alike: the table "
+       "under Fig. 2 measures the difference (with the larger printed $\\Phi$ (b) the errors agree a little "
+       "sooner).",
     2: "Look for the errors agreeing much sooner than for $Q_2 = 5$ (the previous figure): most of the "
        "disagreement is gone within 0.05 s, while the small common tail decays as slowly. The panels differ "
-       "only in $\\Phi$.",
+       "only in $\\Phi$ and look alike; the table below measures the difference.",
 }
 
 

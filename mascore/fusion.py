@@ -1,0 +1,1470 @@
+"""The field's standard distributed filters and fusion rules, on one sensor network.
+
+N agents track one common target ``x[k+1] = F x[k] + w[k]``, ``w ~ N(0, Q)``;
+agent i senses ``z_i[k] = H_i x[k] + v_i[k]``, ``v_i ~ N(0, R_i)`` (``q_i``
+numbers; ``q_i = 0`` for an agent that does not sense), the noises independent
+across agents and time. A :class:`SensorNetworkModel` holds this sensing and an
+undirected communication graph, checked once; every filter below is built on
+the same model, so every method sees exactly the same sensing.
+
+=====================================  ==========================================================
+:class:`CentralizedFilter`             all measurements at one node: the bound (Kalman 1960)
+:class:`MeasurementForwardingFilter`   own and neighbours' measurements, one hop (exact local KF)
+:class:`ConsensusOnInformationFilter`  L consensus steps on the information pair (Battistelli and
+                                       Chisci 2014); with ``novelty_weight="N"`` the hybrid HCMCI
+                                       of Battistelli et al. (2015)
+:class:`InformationConsensusFilter`    information-weighted consensus (Kamal, Farrell and
+                                       Roy-Chowdhury 2013)
+:class:`DiffusionKalmanFilter`         incremental update, then diffusion of the estimates
+                                       (Cattivelli and Sayed 2010)
+:class:`CovarianceIntersectionFilter`  incremental update, then covariance intersection of the
+                                       neighbours' estimates (Hu, Xie and Zhang 2012)
+:func:`covariance_intersection`        fusion under unknown correlation (Julier and Uhlmann 1997)
+:func:`error_covariance`               a filter's exact error covariance (no Monte Carlo)
+:func:`filter_cost`                    floats sent and flops per agent per step
+=====================================  ==========================================================
+
+Shapes: every distributed filter's state is ``x`` of shape ``(..., N, n)`` and
+``P`` of shape ``(..., N, n, n)`` (agent i's mean and covariance in row i; the
+leading axes are independent runs, e.g. Monte Carlo); the centralized filter's is
+``(..., n)``, ``(..., n, n)``. A measurement is the stacked vector
+``z = (z_1, ..., z_N)`` of shape ``(..., sum q_i)``. Units are those of the
+state and the measurements; the filters add none.
+
+Each filter has ``predict(x, P)`` (``x- = F x``, ``P- = F P F^T + Q``, by
+:func:`mascore.kalman.predict`), ``update(x, P, z)`` (the correction with its
+communication round(s)) and ``run(x0, P0, z)``. The model is checked once, when
+it is built (shapes, finite entries, symmetric positive (semi)definite
+covariances, a symmetric graph) and keeps read-only copies; a step checks only
+the shapes of what it is given and that its result is finite (naming the input
+that holds a NaN or inf). Filters hold no estimates and no caches: a filter
+object is immutable and safe to share between threads. Randomness
+(:meth:`SensorNetworkModel.simulate`) comes only from the generator passed in.
+
+References
+----------
+- Battistelli, G., Chisci, L. (2014). Kullback-Leibler average, consensus on probability densities, and
+  distributed state estimation with guaranteed stability. Automatica 50(3), 707-718.
+- Battistelli, G., Chisci, L., Mugnai, G., Farina, A., Graziano, A. (2015). Consensus-based linear and
+  nonlinear filtering. IEEE Trans. Automatic Control 60(5), 1410-1415.
+- Kamal, A. T., Farrell, J. A., Roy-Chowdhury, A. K. (2013). Information weighted consensus filters and
+  their application in distributed camera networks. IEEE Trans. Automatic Control 58(12), 3112-3125.
+- Cattivelli, F. S., Sayed, A. H. (2010). Diffusion strategies for distributed Kalman filtering and
+  smoothing. IEEE Trans. Automatic Control 55(9), 2069-2084.
+- Hu, J., Xie, L., Zhang, C. (2012). Diffusion Kalman filtering based on covariance intersection. IEEE
+  Trans. Signal Processing 60(2), 891-902.
+- Julier, S. J., Uhlmann, J. K. (1997). A non-divergent estimation algorithm in the presence of unknown
+  correlations. Proc. American Control Conference, 2369-2373.
+- Xiao, L., Boyd, S., Lall, S. (2005). A scheme for robust distributed sensor fusion based on average
+  consensus. Proc. IPSN, 63-70 (Metropolis weights).
+
+Consensus weights are Metropolis weights (:func:`metropolis_weights`), symmetric
+and doubly stochastic; L consensus steps are applied as the precomputed power
+``W^L`` (the same numbers as L rounds, up to rounding).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from . import kalman
+from ._validation import (
+    as_matrix,
+    check_adjacency,
+    check_covariance,
+    check_generator,
+    check_positive,
+    check_positive_int,
+    check_square,
+    finite_result,
+    float_array,
+    frozen_copy,
+    require_finite,
+    symmetric_part,
+)
+
+__all__ = [
+    "SensorNetworkModel",
+    "CentralizedFilter",
+    "MeasurementForwardingFilter",
+    "ConsensusOnInformationFilter",
+    "InformationConsensusFilter",
+    "DiffusionKalmanFilter",
+    "CovarianceIntersectionFilter",
+    "covariance_intersection",
+    "error_covariance",
+    "metropolis_weights",
+    "FilterCost",
+    "filter_cost",
+]
+
+
+# --------------------------------------------------------------------------------------------
+# graph weights
+
+
+def metropolis_weights(adjacency: ArrayLike) -> np.ndarray:
+    """Metropolis consensus weights of an undirected graph (Xiao, Boyd and Lall 2005).
+
+    ``W[i, j] = 1 / (1 + max(d_i, d_j))`` for each neighbour j of i,
+    ``W[i, i] = 1 - sum_j W[i, j]``, 0 elsewhere; ``d_i`` is the number of
+    neighbours of i. W is symmetric and doubly stochastic, so ``W^L -> 11^T / N``
+    on a connected graph.
+
+    Parameters
+    ----------
+    adjacency : (N, N) array_like
+        Symmetric adjacency (``adjacency[i, j] > 0``: i and j communicate); weights
+        other than zero/non-zero are ignored.
+
+    Returns
+    -------
+    (N, N) ndarray
+        The weights.
+
+    Raises
+    ------
+    ValueError
+        `adjacency` not a symmetric, non-negative matrix with a zero diagonal.
+
+    Examples
+    --------
+    >>> from mascore import fusion, graphs
+    >>> fusion.metropolis_weights(graphs.path_graph(3))
+    array([[0.66666667, 0.33333333, 0.        ],
+           [0.33333333, 0.33333333, 0.33333333],
+           [0.        , 0.33333333, 0.66666667]])
+    """
+    A = check_adjacency(float_array(adjacency, "adjacency"), "adjacency", undirected=True,
+                        why="Metropolis weights are defined on undirected graphs")
+    return _metropolis(A > 0)
+
+
+def _metropolis(links: np.ndarray) -> np.ndarray:
+    deg = links.sum(axis=1)
+    W = np.where(links, 1.0 / (1.0 + np.maximum(deg[:, None], deg[None, :])), 0.0)
+    W[np.diag_indices_from(W)] = 1.0 - W.sum(axis=1)
+    return W
+
+
+# --------------------------------------------------------------------------------------------
+# the model
+
+
+class SensorNetworkModel:
+    """A common target sensed by N agents on an undirected graph, checked once, when it is built.
+
+    ``x[k+1] = F x[k] + w[k]``, ``w ~ N(0, Q)``; agent i measures
+    ``z_i[k] = H_i x[k] + v_i[k]``, ``v_i ~ N(0, R_i)``, independent across agents
+    and steps. The constructor checks every matrix and keeps read-only copies; the
+    filters built on the model check only the per-step arrays.
+
+    Parameters
+    ----------
+    F : (n, n) array_like
+        State-transition matrix, finite.
+    Q : (n, n) array_like
+        Process-noise covariance, symmetric positive semidefinite.
+    H : sequence of N (q_i, n) array_like
+        Measurement matrices; ``q_i = 0`` (an array of shape ``(0, n)``) for an
+        agent that does not sense. At least one agent must sense.
+    R : sequence of N (q_i, q_i) array_like
+        Measurement-noise covariances, symmetric positive definite (``(0, 0)`` or
+        None for an agent that does not sense).
+    adjacency : (N, N) array_like
+        Undirected communication graph (``adjacency[i, j] > 0``: i and j exchange
+        messages), symmetric, no self-loops. It need not be connected, but the
+        consensus filters approach the centralized one only on a connected graph.
+
+    Attributes
+    ----------
+    F, Q : ndarray (read-only)
+        The dynamics.
+    H, R : tuple of ndarray (read-only)
+        Each agent's sensing.
+    adjacency : (N, N) ndarray (read-only)
+        The graph.
+    H_stacked, R_stacked : ndarray (read-only)
+        ``H = [H_1; ...; H_N]`` of shape ``(sum q_i, n)`` and ``R = blockdiag(R_i)``:
+        the centralized measurement model.
+    information_matrices : (N, n, n) ndarray (read-only)
+        ``H_i^T R_i^{-1} H_i`` (zero for an agent that does not sense).
+    weights : (N, N) ndarray (read-only)
+        The Metropolis weights of the graph (:func:`metropolis_weights`).
+
+    Raises
+    ------
+    ValueError, TypeError
+        A bad matrix, named in the message (``H[2]``, ``R[0]``, ``adjacency``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import fusion, graphs
+    >>> F = [[1.0, 0.1], [0.0, 1.0]]                                      # position, velocity; dt = 0.1 s
+    >>> H = [[[1.0, 0.0]], np.zeros((0, 2)), [[1.0, 0.0]]]                # agent 1 does not sense
+    >>> R = [[[0.5]], None, [[2.0]]]
+    >>> model = fusion.SensorNetworkModel(F, 0.01 * np.eye(2), H, R, graphs.path_graph(3))
+    >>> model
+    SensorNetworkModel(N = 3 agents, n = 2 states, q = (1, 0, 1) measurements)
+    >>> model.information_matrices[:, 0, 0]                                # 1 / R_i
+    array([2. , 0. , 0.5])
+    """
+
+    __slots__ = ("F", "Q", "H", "R", "adjacency", "H_stacked", "R_stacked", "information_matrices", "weights",
+                 "_kf", "_owner", "_Rinv", "_neighbourhood", "_sqrt_Q", "_sqrt_R", "_slices")
+
+    def __init__(self, F: ArrayLike, Q: ArrayLike, H: Sequence[ArrayLike], R: Sequence[ArrayLike],
+                 adjacency: ArrayLike) -> None:
+        F = check_square(F, "F")
+        n = F.shape[0]
+        Q = check_covariance(Q, "Q", size=n)
+        A = check_adjacency(float_array(adjacency, "adjacency"), "adjacency", undirected=True,
+                            why="the consensus weights and the information exchange are symmetric")
+        N = A.shape[0]
+        if isinstance(H, np.ndarray) and H.ndim == 3:
+            H = list(H)
+        if isinstance(R, np.ndarray) and R.ndim == 3:
+            R = list(R)
+        for name, seq in (("H", H), ("R", R)):
+            if isinstance(seq, (str, bytes, np.ndarray)) or not hasattr(seq, "__len__"):
+                raise TypeError(f"{name} must be a sequence of N = {N} matrices (one per agent); got "
+                                f"{type(seq).__name__}")
+            if len(seq) != N:
+                raise ValueError(f"{name} must hold one matrix per agent: N = {N} (the adjacency's size); got "
+                                 f"{len(seq)}")
+        Hs, Rs = [], []
+        for i in range(N):
+            Hi = as_matrix(H[i], f"H[{i}]", (None, n))
+            q = Hi.shape[0]
+            if q == 0:
+                if R[i] is not None and float_array(R[i], f"R[{i}]").size:
+                    raise ValueError(f"R[{i}] must be empty (shape (0, 0)) or None: agent {i} has no measurement "
+                                     f"(H[{i}] has 0 rows)")
+                Ri = np.zeros((0, 0))
+            else:
+                if R[i] is None:
+                    raise TypeError(f"R[{i}] must be a ({q}, {q}) covariance for H[{i}] of shape {Hi.shape}; "
+                                    "got None")
+                Ri = check_covariance(float_array(R[i], f"R[{i}]"), f"R[{i}]", size=q, definite=True)
+            Hs.append(Hi)
+            Rs.append(Ri)
+        sizes = [h.shape[0] for h in Hs]
+        total = sum(sizes)
+        if total == 0:
+            raise ValueError("no agent senses (every H[i] has 0 rows): at least one measurement is needed")
+        H_st = np.concatenate(Hs, axis=0)
+        R_st = np.zeros((total, total))
+        Rinv = np.zeros((total, total))
+        owner = np.zeros((N, total))
+        slices, start = [], 0
+        info = np.zeros((N, n, n))
+        for i, (Hi, Ri) in enumerate(zip(Hs, Rs)):
+            sl = slice(start, start + sizes[i])
+            slices.append(sl)
+            start += sizes[i]
+            if sizes[i]:
+                R_st[sl, sl] = Ri
+                Ri_inv = symmetric_part(np.linalg.inv(Ri))
+                Rinv[sl, sl] = Ri_inv
+                owner[i, sl] = 1.0
+                info[i] = symmetric_part(Hi.T @ Ri_inv @ Hi)
+        finite_result("model's information matrices", info, Rinv, advice="R is too close to singular")
+        links = A > 0
+        put = object.__setattr__
+        put(self, "F", frozen_copy(F))
+        put(self, "Q", frozen_copy(Q))
+        put(self, "H", tuple(frozen_copy(h) for h in Hs))
+        put(self, "R", tuple(frozen_copy(r) for r in Rs))
+        put(self, "adjacency", frozen_copy(A))
+        put(self, "H_stacked", frozen_copy(H_st))
+        put(self, "R_stacked", frozen_copy(R_st))
+        put(self, "information_matrices", frozen_copy(info))
+        put(self, "weights", frozen_copy(_metropolis(links)))
+        put(self, "_kf", kalman.LinearGaussianModel(F, Q, H_st, R_st))
+        put(self, "_owner", frozen_copy(owner))
+        put(self, "_Rinv", frozen_copy(Rinv))
+        put(self, "_neighbourhood", frozen_copy(links + np.eye(N)))  # N_i together with i
+        put(self, "_sqrt_Q", frozen_copy(_psd_sqrt(Q)))
+        put(self, "_sqrt_R", frozen_copy(_psd_sqrt(R_st)))
+        put(self, "_slices", tuple(slices))
+
+    def __setattr__(self, name: str, value: object) -> None:
+        raise AttributeError(f"a SensorNetworkModel is frozen (cannot set {name!r}); build a new model")
+
+    def __delattr__(self, name: str) -> None:
+        raise AttributeError(f"a SensorNetworkModel is frozen (cannot delete {name!r})")
+
+    def __reduce__(self) -> tuple:
+        return (type(self), (self.F, self.Q, self.H, self.R, self.adjacency))
+
+    def __repr__(self) -> str:
+        return (f"SensorNetworkModel(N = {self.n_agents} agents, n = {self.n_states} states, "
+                f"q = {self.measurement_sizes} measurements)")
+
+    @property
+    def n_agents(self) -> int:
+        """N, the number of agents."""
+        return self.adjacency.shape[0]
+
+    @property
+    def n_states(self) -> int:
+        """n, the length of the state."""
+        return self.F.shape[0]
+
+    @property
+    def measurement_sizes(self) -> tuple[int, ...]:
+        """``(q_1, ..., q_N)``, the length of each agent's measurement."""
+        return tuple(h.shape[0] for h in self.H)
+
+    @property
+    def n_measurements(self) -> int:
+        """``sum q_i``, the length of the stacked measurement ``z``."""
+        return self.H_stacked.shape[0]
+
+    def agent_measurement(self, z: ArrayLike, i: int) -> np.ndarray:
+        """Agent i's part ``z_i`` of a stacked measurement.
+
+        Parameters
+        ----------
+        z : (..., sum q_i) array_like
+            Stacked measurement(s).
+        i : int
+            Agent index, ``0 <= i < N``.
+
+        Returns
+        -------
+        (..., q_i) ndarray
+            A view of `z`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2), np.eye(1, 2)],
+        ...                                   [np.eye(2), np.eye(1)], graphs.path_graph(2))
+        >>> model.agent_measurement([1.0, 2.0, 3.0], 1)
+        array([3.])
+        """
+        z = self._check_z(z)
+        i = check_positive_int(i, "i", minimum=0)
+        if i >= self.n_agents:
+            raise ValueError(f"i must be an agent index below N = {self.n_agents}; got {i}")
+        return z[..., self._slices[i]]
+
+    def information_vectors(self, z: ArrayLike) -> np.ndarray:
+        """Each agent's information vector ``H_i^T R_i^{-1} z_i`` (zero for an agent that does not sense).
+
+        Parameters
+        ----------
+        z : (..., sum q_i) array_like
+            Stacked measurement(s), finite.
+
+        Returns
+        -------
+        (..., N, n) ndarray
+            Row i is agent i's vector.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2), np.eye(1, 2)],
+        ...                                   [4.0 * np.eye(2), np.eye(1)], graphs.path_graph(2))
+        >>> model.information_vectors([1.0, 2.0, 3.0])
+        array([[0.25, 0.5 ],
+               [3.  , 0.  ]])
+        """
+        z = require_finite(self._check_z(z), "z")
+        return self._information_vectors(z)
+
+    def _information_vectors(self, z: np.ndarray) -> np.ndarray:
+        y = z @ self._Rinv  # (..., sum q): R^{-1} z, block by block
+        # agent i: sum over its rows r of y_r H_r  ->  owner (N, sum q) @ (y_r H_r) (..., sum q, n)
+        return self._owner @ (y[..., :, None] * self.H_stacked)
+
+    def _check_z(self, z: ArrayLike, name: str = "z") -> np.ndarray:
+        z = float_array(z, name)
+        if z.ndim < 1 or z.shape[-1] != self.n_measurements:
+            raise ValueError(f"Incompatible dimensions of {name}; expected (..., {self.n_measurements}) (the stacked "
+                             f"measurements z_1..z_N of sizes {self.measurement_sizes}) but found {z.shape}")
+        return z
+
+    def check_state(self, x: ArrayLike, P: ArrayLike, names: tuple[str, str] = ("x0", "P0"),
+                    per_agent: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """An initial state, checked in full: what a filter's ``run`` does once.
+
+        Parameters
+        ----------
+        x : (..., N, n) or (n,) array_like
+            Mean(s), finite; an ``(n,)`` mean is given to every agent.
+        P : (..., N, n, n) or (n, n) array_like
+            Covariance(s), symmetric positive definite (the information filters invert it).
+        names : (str, str)
+            Names of `x` and `P` in error messages.
+        per_agent : bool
+            True: the state of N agents, ``(..., N, n)``; False: one (centralized)
+            state ``(..., n)``.
+
+        Returns
+        -------
+        x, P : ndarray
+            Float arrays of shapes ``(..., N, n)``, ``(..., N, n, n)`` (or ``(..., n)``,
+            ``(..., n, n)``), copies.
+
+        Raises
+        ------
+        ValueError, TypeError
+            A bad mean or covariance, named.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
+        ...                                   graphs.ring_graph(3))
+        >>> x, P = model.check_state(np.zeros(2), np.eye(2))
+        >>> x.shape, P.shape
+        ((3, 2), (3, 2, 2))
+        """
+        xname, Pname = names
+        n, N = self.n_states, self.n_agents
+        x = require_finite(float_array(x, xname), xname)
+        if x.ndim < 1 or x.shape[-1] != n:
+            raise ValueError(f"Incompatible dimensions of {xname}; expected (..., {n}) but found {x.shape}")
+        P = check_covariance(float_array(P, Pname), Pname, size=n, definite=True)
+        if per_agent:
+            if x.ndim == 1:
+                x = np.broadcast_to(x, (N, n))
+            if P.ndim == 2:
+                P = np.broadcast_to(P, (N, n, n))
+            if x.shape[-2] != N or P.shape[-3] != N:
+                raise ValueError(f"Incompatible dimensions of {xname} {x.shape} and {Pname} {P.shape}; expected "
+                                 f"(..., N, n) = (..., {N}, {n}) and (..., {N}, {n}, {n}) (or one (n,) mean and "
+                                 f"(n, n) covariance for every agent)")
+            batch = _broadcast(xname, x.shape[:-2], Pname, P.shape[:-3])
+            shape = (*batch, N, n)
+        else:
+            batch = _broadcast(xname, x.shape[:-1], Pname, P.shape[:-2])
+            shape = (*batch, n)
+        return np.broadcast_to(x, shape).copy(), np.broadcast_to(P, (*shape, n)).copy()
+
+    def simulate(self, x0: ArrayLike, P0: ArrayLike, n_steps: int, rng: np.random.Generator | int,
+                 n_runs: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Draw a target trajectory and every agent's measurements: the same data for every filter.
+
+        ``x[0] ~ N(x0, P0)``; for ``k = 1..n_steps``: ``x[k] = F x[k-1] + w``,
+        ``z[k] = H x[k] + v`` (stacked over agents).
+
+        Parameters
+        ----------
+        x0 : (n,) array_like
+            Mean of the initial state.
+        P0 : (n, n) array_like
+            Its covariance, symmetric positive semidefinite.
+        n_steps : int
+            K >= 1 steps.
+        rng : numpy.random.Generator or int
+            The only source of randomness (an int seeds ``default_rng``).
+        n_runs : int, optional
+            Independent runs along a leading axis (default: one run, no axis).
+
+        Returns
+        -------
+        x_true : (K + 1, [n_runs,] n) ndarray
+            States ``x[0..K]``.
+        z : (K, [n_runs,] sum q_i) ndarray
+            Measurements of steps 1..K.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel(np.eye(2), 0.01 * np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
+        ...                                   graphs.ring_graph(3))
+        >>> x, z = model.simulate(np.zeros(2), np.eye(2), 10, rng=1)
+        >>> x.shape, z.shape
+        ((11, 2), (10, 6))
+        >>> bool(np.array_equal(z, model.simulate(np.zeros(2), np.eye(2), 10, rng=1)[1]))   # seeded: identical
+        True
+        """
+        gen = check_generator(rng)
+        n = self.n_states
+        x0 = require_finite(float_array(x0, "x0"), "x0")
+        if x0.shape != (n,):
+            raise ValueError(f"Incompatible dimensions of x0; expected ({n},) but found {x0.shape}")
+        P0 = check_covariance(float_array(P0, "P0"), "P0", size=n)
+        if P0.ndim != 2:
+            raise ValueError(f"P0 must be one ({n}, {n}) covariance; got shape {P0.shape}")
+        from ._validation import check_steps
+
+        K = check_steps(n_steps)
+        runs = () if n_runs is None else (check_positive_int(n_runs, "n_runs"),)
+        q = self.n_measurements
+        x = np.empty((K + 1, *runs, n))
+        z = np.empty((K, *runs, q))
+        x[0] = x0 + gen.standard_normal((*runs, n)) @ _psd_sqrt(P0).T
+        for k in range(K):
+            x[k + 1] = x[k] @ self.F.T + gen.standard_normal((*runs, n)) @ self._sqrt_Q.T
+            z[k] = x[k + 1] @ self.H_stacked.T + gen.standard_normal((*runs, q)) @ self._sqrt_R.T
+        return x, z
+
+
+# --------------------------------------------------------------------------------------------
+# the filters
+
+
+class _NetworkFilter:
+    """Shared predict / update / run of the filters (each defines ``_correct``)."""
+
+    __slots__ = ("model",)
+    _what = "filter update"
+    _per_agent = True
+
+    def __init__(self, model: SensorNetworkModel) -> None:
+        if not isinstance(model, SensorNetworkModel):
+            raise TypeError(f"model must be a SensorNetworkModel; got {type(model).__name__}")
+        object.__setattr__(self, "model", model)
+
+    def __setattr__(self, name: str, value: object) -> None:
+        raise AttributeError(f"a {type(self).__name__} is frozen (cannot set {name!r}); build a new filter")
+
+    def __reduce__(self) -> tuple:
+        return (type(self), (self.model, *self._args()))
+
+    def __repr__(self) -> str:
+        args = "".join(f", {a!r}" for a in self._args() if not isinstance(a, np.ndarray))
+        return f"{type(self).__name__}({self.model!r}{args})"
+
+    def _args(self) -> tuple:
+        """The constructor's arguments after the model (pickling, repr)."""
+        return ()
+
+    def predict(self, x: ArrayLike, P: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Time update of every agent: ``x- = F x``, ``P- = F P F^T + Q`` (:func:`mascore.kalman.predict`).
+
+        Parameters
+        ----------
+        x : (..., N, n) array_like
+            Means (``(..., n)`` for the centralized filter).
+        P : (..., N, n, n) array_like
+            Covariances (``(..., n, n)`` for the centralized filter).
+
+        Returns
+        -------
+        x_pred, P_pred : ndarray
+            The predictions, same shapes.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel([[1.0]], [[0.5]], [[[1.0]]] * 2, [[[1.0]]] * 2, graphs.path_graph(2))
+        >>> x, P = fusion.MeasurementForwardingFilter(model).predict(np.ones((2, 1)), np.ones((2, 1, 1)))
+        >>> P[:, 0, 0]                                             # 1 + Q
+        array([1.5, 1.5])
+        """
+        x, P = self._check_xP(x, P)
+        return kalman.predict(x, P, self.model._kf)
+
+    def update(self, x: ArrayLike, P: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Measurement update with the filter's communication round(s).
+
+        Parameters
+        ----------
+        x : (..., N, n) array_like
+            Predicted means (``(..., n)`` for the centralized filter).
+        P : (..., N, n, n) array_like
+            Predicted covariances, symmetric positive definite.
+        z : (..., sum q_i) array_like
+            The stacked measurements of every agent, finite.
+
+        Returns
+        -------
+        x_post : ndarray
+            Corrected means; their batch axes are those of `x`, `P` and `z` broadcast.
+        P_post : ndarray
+            Corrected covariances; their batch axes are those of `P` (and `x`): the
+            covariances do not depend on the data.
+
+        Raises
+        ------
+        ValueError
+            A bad shape, a NaN or inf in `x`, `P` or `z`, or a result that overflowed.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 2, [[[1.0]]] * 2, graphs.path_graph(2))
+        >>> x, P = fusion.MeasurementForwardingFilter(model).update(np.zeros((2, 1)), np.ones((2, 1, 1)), [3.0, 0.0])
+        >>> x[:, 0], P[:, 0, 0]                                    # both hear both: information 1 + 2
+        (array([1., 1.]), array([0.33333333, 0.33333333]))
+        """
+        x, P = self._check_xP(x, P)
+        z = self.model._check_z(z)
+        axis = 2 if self._per_agent else 1
+        _broadcast("x", x.shape[:-axis], "z", z.shape[:-1])
+        try:
+            with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+                out = self._correct(x, P, z)
+        except np.linalg.LinAlgError:
+            out = None
+        if out is None:
+            for value, name in ((x, "x"), (P, "P"), (z, "z")):
+                require_finite(value, name)
+            raise ValueError(f"the {self._what} met a singular matrix: the predicted covariances must be positive "
+                             "definite (Q positive definite or F invertible)")
+        return finite_result(self._what, *out, inputs=((x, "x"), (P, "P"), (z, "z")))
+
+    def run(self, x0: ArrayLike, P0: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """A whole run: predict, then update, for each measurement.
+
+        Parameters
+        ----------
+        x0 : (..., N, n) or (n,) array_like
+            Initial means (one ``(n,)`` mean for every agent allowed).
+        P0 : (..., N, n, n) or (n, n) array_like
+            Initial covariances, symmetric positive definite.
+        z : (K, ..., sum q_i) array_like
+            Measurements of steps 1..K (as :meth:`SensorNetworkModel.simulate` returns).
+
+        Returns
+        -------
+        x : (K, ..., N, n) ndarray
+            Corrected means after each step (``(K, ..., n)`` for the centralized filter).
+        P : (K, ..., N, n, n) ndarray
+            Corrected covariances. Their leading axes are those of `P0` and `x0`, not of `z`:
+            the covariances do not depend on the data, so runs that share an initial state
+            share them.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel(np.eye(2), 0.01 * np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
+        ...                                   graphs.ring_graph(3))
+        >>> x_true, z = model.simulate(np.zeros(2), np.eye(2), 50, rng=0, n_runs=10)   # the same data for all
+        >>> x, P = fusion.ConsensusOnInformationFilter(model, 2).run(np.zeros(2), np.eye(2), z)
+        >>> x.shape, P.shape                                       # (K, runs, N, n); P shared by the runs
+        ((50, 10, 3, 2), (50, 3, 2, 2))
+        """
+        x, P = self.model.check_state(x0, P0, ("x0", "P0"), per_agent=self._per_agent)
+        z = require_finite(self.model._check_z(z), "z")
+        if z.ndim < 2:
+            raise ValueError(f"z must be (K, ..., {self.model.n_measurements}): one stacked measurement per step; "
+                             f"got shape {z.shape}")
+        xs, Ps = [], []
+        for k in range(z.shape[0]):
+            x, P = self.predict(x, P)
+            x, P = self.update(x, P, z[k])
+            xs.append(x)
+            Ps.append(P)
+        return np.stack(xs), np.stack(Ps)
+
+    def _check_xP(self, x: ArrayLike, P: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        x, P = float_array(x, "x"), float_array(P, "P")
+        n, N = self.model.n_states, self.model.n_agents
+        if self._per_agent:
+            if x.ndim < 2 or x.shape[-2:] != (N, n):
+                raise ValueError(f"Incompatible dimensions of x; expected (..., N, n) = (..., {N}, {n}) but found "
+                                 f"{x.shape}")
+            if P.ndim < 3 or P.shape[-3:] != (N, n, n):
+                raise ValueError(f"Incompatible dimensions of P; expected (..., N, n, n) = (..., {N}, {n}, {n}) but "
+                                 f"found {P.shape}")
+            _broadcast("x", x.shape[:-2], "P", P.shape[:-3])
+        else:
+            if x.ndim < 1 or x.shape[-1] != n:
+                raise ValueError(f"Incompatible dimensions of x; expected (..., {n}) but found {x.shape}")
+            if P.ndim < 2 or P.shape[-2:] != (n, n):
+                raise ValueError(f"Incompatible dimensions of P; expected (..., {n}, {n}) but found {P.shape}")
+            _broadcast("x", x.shape[:-1], "P", P.shape[:-2])
+        return x, P
+
+    def _correct(self, x: np.ndarray, P: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+
+class CentralizedFilter(_NetworkFilter):
+    """The centralized Kalman filter: one node fuses every agent's measurement (the bound).
+
+    The update is :func:`mascore.kalman.update` with the stacked model
+    ``H = [H_1; ...; H_N]``, ``R = blockdiag(R_i)`` (Kalman 1960; in information
+    form ``P+^{-1} = P-^{-1} + sum_i H_i^T R_i^{-1} H_i``). Its state is one mean
+    ``(..., n)`` and covariance ``(..., n, n)``, not one per agent. Each agent
+    sends its ``q_i`` numbers to the centre.
+
+    Parameters
+    ----------
+    model : SensorNetworkModel
+        The sensing (the graph is not used).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import fusion, graphs
+    >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.ring_graph(4))
+    >>> x, P = fusion.CentralizedFilter(model).run([0.0], [[1.0]], np.ones((1, 4)))
+    >>> x[-1], P[-1]                                           # prior 1 and four unit measurements: 1/5
+    (array([0.8]), array([[0.2]]))
+    """
+
+    __slots__ = ()
+    _what = "centralized update"
+    _per_agent = False
+
+    def _correct(self, x, P, z):
+        return kalman.update(x, P, z, self.model._kf)
+
+
+class MeasurementForwardingFilter(_NetworkFilter):
+    """Measurement forwarding: each agent fuses its own and its neighbours' measurements, one hop.
+
+    Agent i's update is the exact Kalman update on the measurements of
+    ``N_i ∪ {i}`` (information form)::
+
+        P_i+^{-1} = P_i-^{-1} + sum_{j in N_i ∪ {i}} H_j^T R_j^{-1} H_j,
+        x_i+ = x_i- + P_i+ sum_j H_j^T R_j^{-1} (z_j - H_j x_i-),
+
+    computed as ``P_i+ = (I + P_i- S_i)^{-1} P_i-`` (no inverse of ``P_i-``). Its
+    covariance is the true error covariance of its estimate (a local Kalman filter
+    with neighbour data); on a complete graph it is the centralized filter. Each
+    agent sends its ``q_i`` measurement numbers per step (the ``H_j``, ``R_j`` of
+    neighbours are known beforehand).
+
+    Parameters
+    ----------
+    model : SensorNetworkModel
+        The sensing and the graph.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import fusion, graphs
+    >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.path_graph(4))
+    >>> x, P = fusion.MeasurementForwardingFilter(model).run([0.0], [[1.0]], np.ones((1, 4)))
+    >>> P[-1, :, 0, 0]                                         # end agents hear 2 measurements, inner ones 3
+    array([0.33333333, 0.25      , 0.25      , 0.33333333])
+    """
+
+    __slots__ = ("_S",)
+    _what = "measurement-forwarding update"
+
+    def __init__(self, model: SensorNetworkModel) -> None:
+        super().__init__(model)
+        object.__setattr__(self, "_S", frozen_copy(_mix(model._neighbourhood, model.information_matrices, 2)))
+
+    def _correct(self, x, P, z):
+        i = _mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
+        return _information_update(x, P, self._S, i)
+
+
+class DiffusionKalmanFilter(_NetworkFilter):
+    """The diffusion Kalman filter of Cattivelli and Sayed (2010), computed in information form.
+
+    Step 1, incremental update: agent i corrects its prediction with the
+    measurements of ``N_i ∪ {i}`` (the update of :class:`MeasurementForwardingFilter`),
+    giving ``psi_i`` and ``P_i``. Step 2, diffusion: ``x_i = sum_l c_{l,i} psi_l``
+    over ``l in N_i ∪ {i}``, with convex weights (``sum_l c_{l,i} = 1``). The
+    covariance returned is the paper's ``P_i`` of step 1: it is **not** the
+    error covariance of the diffused estimate ``x_i`` (Cattivelli and Sayed
+    analyse the diffused estimate's error separately); compare it with the
+    error, do not take it as a bound. On a complete graph it equals the
+    centralized filter (from a common prior). Each agent sends its ``q_i``
+    measurement numbers and its ``n``-vector ``psi_i`` per step.
+
+    Parameters
+    ----------
+    model : SensorNetworkModel
+        The sensing and the graph.
+    weights : "metropolis" or (N, N) array_like
+        Diffusion weights as a row-stochastic matrix ``C[i, l] = c_{l,i}``:
+        non-negative, rows summing to 1, zero off the graph and the diagonal.
+        Default: the model's Metropolis weights.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import fusion, graphs
+    >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.path_graph(3))
+    >>> dkf = fusion.DiffusionKalmanFilter(model)
+    >>> x, P = dkf.update(np.zeros((3, 1)), np.ones((3, 1, 1)), [3.0, 0.0, 0.0])
+    >>> x[:, 0]                                   # psi = (1, 0.75, 0), then mixed with the Metropolis weights
+    array([0.91666667, 0.58333333, 0.25      ])
+    """
+
+    __slots__ = ("_S", "weights")
+    _what = "diffusion Kalman update"
+
+    def _args(self) -> tuple:
+        return (self.weights,)
+
+    def __init__(self, model: SensorNetworkModel, weights: str | ArrayLike = "metropolis") -> None:
+        super().__init__(model)
+        if isinstance(weights, str):
+            if weights != "metropolis":
+                raise ValueError(f"weights must be 'metropolis' or an (N, N) matrix; got {weights!r}")
+            C = model.weights
+        else:
+            C = _check_stochastic(weights, "weights", model)
+        object.__setattr__(self, "weights", frozen_copy(C))
+        object.__setattr__(self, "_S", frozen_copy(_mix(model._neighbourhood, model.information_matrices, 2)))
+
+    def _correct(self, x, P, z):
+        i = _mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
+        psi, P_new = _information_update(x, P, self._S, i)
+        return _mix(self.weights, psi, 1), P_new
+
+
+class ConsensusOnInformationFilter(_NetworkFilter):
+    """Consensus on information (CI) of Battistelli and Chisci (2014); the hybrid HCMCI of Battistelli et al. (2015).
+
+    Per step, with ``Omega_i- = P_i-^{-1}`` and ``q_i- = Omega_i- x_i-``
+    (the HCMCI of Battistelli, Chisci, Mugnai, Farina and Graziano 2015)::
+
+        prior pair:    (Omega_i, q_i)^0 = (Omega_i-, q_i-)
+        novelty pair:  (dOmega_i, dq_i)^0 = (H_i^T R_i^{-1} H_i, H_i^T R_i^{-1} z_i)
+        L consensus steps on both:  (.)_i^{l+1} = sum_j pi_ij (.)_j^l       (Metropolis pi)
+        Omega_i+ = Omega_i^L + w dOmega_i^L,   q_i+ = q_i^L + w dq_i^L,
+        P_i+ = Omega_i+^{-1},  x_i+ = P_i+ q_i+.
+
+    With ``novelty_weight`` ``w = 1`` this is CI (Battistelli and Chisci 2014,
+    local correction, then L steps on the information
+    pair; consensus is linear, so mixing the two pairs separately is the same).
+    CI is consistent for every ``L >= 0`` (``L = 0``: each agent's local filter):
+    a convex combination of consistent information pairs is consistent whatever
+    their correlation (the covariance-intersection argument of the paper),
+    so ``P_i+ >= E[e_i e_i^T]`` in the PSD sense. As ``L -> inf`` on a connected
+    graph CI tends to the centralized filter with every ``R_i`` multiplied by N
+    (each agent keeps 1/N of the team's measurement information).
+
+    With ``w = N`` (``novelty_weight="N"``, HCMCI) the novelty is rescaled so
+    that ``L -> inf`` gives the centralized filter itself. Consistency then holds
+    if ``w [W^L]_ij <= 1`` for every agent i and every sensing agent j (the
+    measurement part of the argument above: agent j's noise enters agent i's
+    information ``w [W^L]_ij`` times and its variance ``(w [W^L]_ij)^2`` times);
+    with ``w = N`` that holds only in the limit.
+
+    Parameters
+    ----------
+    model : SensorNetworkModel
+        The sensing and the graph.
+    n_consensus : int
+        L >= 0 consensus steps per measurement update.
+    novelty_weight : float or "N"
+        ``w >= 1`` (default 1: CI); ``"N"``: the number of agents (HCMCI).
+
+    Attributes
+    ----------
+    n_consensus : int
+        L.
+    novelty_weight : float
+        w.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import fusion, graphs
+    >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.complete_graph(4))
+    >>> ci = fusion.ConsensusOnInformationFilter(model, n_consensus=1)
+    >>> x, P = ci.update(np.zeros((4, 1)), np.ones((4, 1, 1)), [4.0, 0.0, 0.0, 0.0])
+    >>> x[:, 0], P[:, 0, 0]                       # prior 1 + the average measurement information 1
+    (array([0.5, 0.5, 0.5, 0.5]), array([0.5, 0.5, 0.5, 0.5]))
+    >>> hcmci = fusion.ConsensusOnInformationFilter(model, n_consensus=1, novelty_weight="N")
+    >>> hcmci.update(np.zeros((4, 1)), np.ones((4, 1, 1)), [4.0, 0.0, 0.0, 0.0])[0][:, 0]   # = centralized
+    array([0.8, 0.8, 0.8, 0.8])
+    """
+
+    __slots__ = ("n_consensus", "novelty_weight", "_WL", "_SL")
+    _what = "consensus-on-information update"
+
+    def _args(self) -> tuple:
+        return (self.n_consensus, self.novelty_weight)
+
+    def __init__(self, model: SensorNetworkModel, n_consensus: int, novelty_weight: float | str = 1.0) -> None:
+        super().__init__(model)
+        L = check_positive_int(n_consensus, "n_consensus", minimum=0)
+        if isinstance(novelty_weight, str):
+            if novelty_weight != "N":
+                raise ValueError(f"novelty_weight must be a number >= 1 or 'N'; got {novelty_weight!r}")
+            w = float(model.n_agents)
+        else:
+            w = check_positive(novelty_weight, "novelty_weight")
+            if w < 1:
+                raise ValueError(f"novelty_weight must be >= 1 (1: CI, N: HCMCI); got {novelty_weight!r}")
+        WL = np.linalg.matrix_power(model.weights, L)
+        object.__setattr__(self, "n_consensus", L)
+        object.__setattr__(self, "novelty_weight", w)
+        object.__setattr__(self, "_WL", frozen_copy(WL))
+        object.__setattr__(self, "_SL", frozen_copy(w * _mix(WL, model.information_matrices, 2)))
+
+    def _correct(self, x, P, z):
+        Om, q = _information_pair(x, P)
+        Om = _mix(self._WL, Om, 2) + self._SL
+        q = _mix(self._WL, q, 1) + self.novelty_weight * _mix(self._WL, self.model._information_vectors(z), 1)
+        return _from_information(Om, q)
+
+
+class InformationConsensusFilter(_NetworkFilter):
+    """The information-weighted consensus filter (ICF) of Kamal, Farrell and Roy-Chowdhury (2013).
+
+    Per step, with ``J_i- = P_i-^{-1}``::
+
+        V_i^0 = J_i- / N + H_i^T R_i^{-1} H_i,    v_i^0 = J_i- x_i- / N + H_i^T R_i^{-1} z_i,
+        K iterations:  (.)_i^{k+1} = (.)_i^k + eps sum_{j in N_i} ((.)_j^k - (.)_i^k),
+        x_i+ = (V_i^K)^{-1} v_i^K,   J_i+ = N V_i^K,   P_i+ = J_i+^{-1}.
+
+    The prior's 1/N weighting accounts for the agents' priors being (in the
+    limit) the same information; as ``K -> inf`` on a connected graph, from a
+    common prior, each agent's estimate tends to the centralized one (the
+    paper's convergence result). For finite K it need not be consistent. (It is the
+    HCMCI form of :class:`ConsensusOnInformationFilter` with ``w = N`` and the
+    consensus matrix ``I - eps L`` in place of Metropolis weights.)
+
+    Parameters
+    ----------
+    model : SensorNetworkModel
+        The sensing and the graph.
+    n_iterations : int
+        K >= 0 consensus iterations per step.
+    rate : float, optional
+        eps, in ``(0, 1 / d_max)`` (``d_max`` the largest degree); default
+        ``0.65 / d_max``.
+
+    Attributes
+    ----------
+    n_iterations : int
+        K.
+    rate : float
+        eps.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import fusion, graphs
+    >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.ring_graph(4))
+    >>> icf = fusion.InformationConsensusFilter(model, n_iterations=60)
+    >>> x, P = icf.update(np.zeros((4, 1)), np.ones((4, 1, 1)), [4.0, 0.0, 0.0, 0.0])
+    >>> np.round(x[:, 0], 6), np.round(P[:, 0, 0], 6)         # centralized: 0.8, 0.2
+    (array([0.8, 0.8, 0.8, 0.8]), array([0.2, 0.2, 0.2, 0.2]))
+    """
+
+    __slots__ = ("n_iterations", "rate", "_WK", "_SK")
+    _what = "information consensus (ICF) update"
+
+    def _args(self) -> tuple:
+        return (self.n_iterations, self.rate or None)  # rate 0: a graph without links (the default)
+
+    def __init__(self, model: SensorNetworkModel, n_iterations: int, rate: float | None = None) -> None:
+        super().__init__(model)
+        K = check_positive_int(n_iterations, "n_iterations", minimum=0)
+        links = model.adjacency > 0
+        d_max = int(links.sum(axis=1).max())
+        if rate is None:
+            eps = 0.65 / d_max if d_max else 0.0
+        else:
+            eps = check_positive(rate, "rate")
+            if d_max and eps >= 1.0 / d_max:
+                raise ValueError(f"rate must lie in (0, 1 / d_max) = (0, {1.0 / d_max:.4g}) for the largest degree "
+                                 f"d_max = {d_max}; got {rate!r}")
+        Lap = np.diag(links.sum(axis=1).astype(float)) - links
+        WK = np.linalg.matrix_power(np.eye(model.n_agents) - eps * Lap, K)
+        object.__setattr__(self, "n_iterations", K)
+        object.__setattr__(self, "rate", eps)
+        object.__setattr__(self, "_WK", frozen_copy(WK))
+        object.__setattr__(self, "_SK", frozen_copy(_mix(WK, model.information_matrices, 2)))
+
+    def _correct(self, x, P, z):
+        N = self.model.n_agents
+        J, q = _information_pair(x, P)
+        V = _mix(self._WK, J, 2) / N + self._SK
+        v = _mix(self._WK, q, 1) / N + _mix(self._WK, self.model._information_vectors(z), 1)
+        Vinv = symmetric_part(np.linalg.inv(V))
+        return (Vinv @ v[..., None])[..., 0], Vinv / N
+
+
+class CovarianceIntersectionFilter(_NetworkFilter):
+    """Diffusion Kalman filtering with covariance intersection (Hu, Xie and Zhang 2012).
+
+    Step 1, incremental update: agent i corrects its prediction with the
+    measurements of ``N_i ∪ {i}`` (``measurements="neighbourhood"``, as Hu, Xie
+    and Zhang) or with its own only (``"own"``),
+    giving ``(psi_i, P_i)``. Step 2: agent i fuses the estimates
+    ``(psi_j, P_j)``, ``j in N_i ∪ {i}``, by :func:`covariance_intersection`
+    (Julier and Uhlmann 1997) with weights minimizing the trace or the
+    determinant of the result. Since covariance intersection is consistent
+    whatever the correlation between its inputs, every agent's ``P_i`` bounds
+    its error covariance at every step, from a consistent prior.
+
+    The weights depend only on the covariances, not on the data: with a batch
+    of runs sharing one covariance per agent they are computed once per agent
+    and step; covariances with batch axes are fused one batch element at a
+    time (a weight search each).
+
+    Parameters
+    ----------
+    model : SensorNetworkModel
+        The sensing and the graph.
+    criterion : {"trace", "det"} or None
+        What the weights minimize (None: equal weights ``1 / (d_i + 1)``).
+    measurements : {"neighbourhood", "own"}
+        Which measurements step 1 uses.
+
+    Attributes
+    ----------
+    criterion : str or None
+        As given.
+    measurements : str
+        As given.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import fusion, graphs
+    >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.path_graph(3))
+    >>> cif = fusion.CovarianceIntersectionFilter(model, measurements="own")
+    >>> x, P = cif.update(np.zeros((3, 1)), np.ones((3, 1, 1)), [3.0, 0.0, 0.0])
+    >>> x[:, 0], P[:, 0, 0]              # local estimates 1.5, 0, 0, all with P = 1/2: equal weights
+    (array([0.75, 0.5 , 0.  ]), array([0.5, 0.5, 0.5]))
+    """
+
+    __slots__ = ("criterion", "measurements", "_S", "_hood")
+    _what = "covariance-intersection diffusion update"
+
+    def _args(self) -> tuple:
+        return (self.criterion, self.measurements)
+
+    def __init__(self, model: SensorNetworkModel, criterion: str | None = "trace",
+                 measurements: str = "neighbourhood") -> None:
+        super().__init__(model)
+        if criterion not in ("trace", "det", None):
+            raise ValueError(f"criterion must be 'trace', 'det' or None; got {criterion!r}")
+        if measurements not in ("neighbourhood", "own"):
+            raise ValueError(f"measurements must be 'neighbourhood' or 'own'; got {measurements!r}")
+        M = model._neighbourhood if measurements == "neighbourhood" else np.eye(model.n_agents)
+        object.__setattr__(self, "criterion", criterion)
+        object.__setattr__(self, "measurements", measurements)
+        object.__setattr__(self, "_S", frozen_copy(_mix(M, model.information_matrices, 2)))
+        object.__setattr__(self, "_hood", tuple(np.flatnonzero(row) for row in model._neighbourhood))
+
+    def _correct(self, x, P, z):
+        M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
+        psi, P_loc = _information_update(x, P, self._S, _mix(M, self.model._information_vectors(z), 1))
+        Om, q = _information_pair(psi, P_loc)  # (..., N, n, n), (..., N, n)
+        C = np.zeros((*P_loc.shape[:-3], self.model.n_agents, self.model.n_agents))
+        for idx in np.ndindex(*P_loc.shape[:-3]):  # the weights: from the covariances only
+            for i, hood in enumerate(self._hood):
+                infos = Om[idx][hood]
+                if self.criterion is None:
+                    C[idx + (i, hood)] = 1.0 / len(hood)
+                else:
+                    C[idx + (i, hood)] = _ci_weights(infos, self.criterion)
+        # agent i: Omega_i = sum_j C_ij Omega_j, q_i = sum_j C_ij q_j
+        Om_f = np.einsum("...ij,...jab->...iab", C, Om)
+        q_f = np.einsum("...ij,...ja->...ia", C, q)
+        return _from_information(Om_f, q_f)
+
+
+def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true: ArrayLike | None = None,
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The exact error covariance ``E[e_i e_i^T]`` of a filter's estimates, without Monte Carlo.
+
+    Every filter of this module is linear in the data for given covariances, and
+    its covariances do not depend on the data. So the error of each agent is a
+    linear map of the noise sources (initial error, process noise, measurement
+    noise), and running the filter once per source direction, scaled by the
+    square roots of ``P0_true``, Q and R (a batch of ``n + K (n + sum q_i)`` runs
+    from the mean 0), gives ``E[e e^T] = sum_d e_d e_d^T`` to rounding. Compare
+    it with the filter's own P: a consistent filter has ``P - E[e e^T] >= 0``.
+
+    Parameters
+    ----------
+    filt : filter of this module
+        E.g. a :class:`ConsensusOnInformationFilter`.
+    P0 : (n, n) or (N, n, n) array_like
+        The filter's initial covariance(s), symmetric positive definite.
+    n_steps : int
+        K >= 1 steps.
+    P0_true : (n, n) array_like, optional
+        The covariance of the true initial error (every agent starts from the
+        same mean); default `P0` (which must then be one (n, n) matrix).
+
+    Returns
+    -------
+    C : (K, N, n, n) ndarray
+        ``E[e_i e_i^T]`` after each update, per agent (``(K, n, n)`` for the
+        centralized filter).
+    P : (K, N, n, n) ndarray
+        The filter's covariances, same shape.
+
+    Raises
+    ------
+    ValueError, TypeError
+        A bad filter or covariance.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import fusion, graphs
+    >>> model = fusion.SensorNetworkModel(np.eye(2), 0.1 * np.eye(2), [np.eye(2), np.eye(1, 2), np.zeros((0, 2))],
+    ...                                   [np.eye(2), np.eye(1), None], graphs.path_graph(3))
+    >>> C, P = fusion.error_covariance(fusion.ConsensusOnInformationFilter(model, 2), np.eye(2), 20)
+    >>> bool(np.linalg.eigvalsh(P - C).min() >= 0)             # consistent
+    True
+    >>> C, P = fusion.error_covariance(fusion.MeasurementForwardingFilter(model), np.eye(2), 20)
+    >>> bool(np.allclose(P, C))                                 # a Kalman filter: P is its error covariance
+    True
+    """
+    if not isinstance(filt, _NetworkFilter):
+        raise TypeError(f"filt must be a filter of mascore.fusion; got {type(filt).__name__}")
+    from ._validation import check_steps
+
+    model = filt.model
+    K = check_steps(n_steps)
+    n, q = model.n_states, model.n_measurements
+    x, P = model.check_state(np.zeros(n), P0, ("x0", "P0"), per_agent=filt._per_agent)
+    if P0_true is None:
+        P0_true = float_array(P0, "P0")
+        if P0_true.ndim != 2:
+            raise ValueError("P0_true (the covariance of the true initial error) is needed when P0 is per agent")
+    P0_true = check_covariance(float_array(P0_true, "P0_true"), "P0_true", size=n)
+    if P0_true.ndim != 2:
+        raise ValueError(f"P0_true must be one ({n}, {n}) covariance; got shape {P0_true.shape}")
+    D = n + K * (n + q)
+    truth = np.zeros((D, n))
+    truth[:n] = _psd_sqrt(P0_true).T
+    x = np.zeros((D, *x.shape))
+    C_out = np.empty((K, *P.shape))
+    P_out = np.empty((K, *P.shape))
+    row = n
+    sub = "dia,dib->iab" if filt._per_agent else "da,db->ab"
+    for k in range(K):
+        truth = truth @ model.F.T
+        truth[row:row + n] += model._sqrt_Q.T
+        row += n
+        z = truth @ model.H_stacked.T
+        z[row:row + q] += model._sqrt_R.T
+        row += q
+        x, P = filt.update(*filt.predict(x, P), z)
+        if P.ndim > P_out.ndim - 1:  # a filter that returned one covariance per run: they are all equal
+            P = P[0]
+        e = (truth[:, None, :] if filt._per_agent else truth) - x
+        C_out[k] = np.einsum(sub, e, e)
+        P_out[k] = P
+    return C_out, P_out
+
+
+# --------------------------------------------------------------------------------------------
+# covariance intersection
+
+
+def covariance_intersection(means: ArrayLike, covs: ArrayLike, weights: str | ArrayLike | None = "trace",
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Covariance intersection of k estimates with unknown cross-correlation (Julier and Uhlmann 1997).
+
+    ``P^{-1} = sum_k w_k P_k^{-1}``, ``x = P sum_k w_k P_k^{-1} x_k`` with ``w`` on
+    the simplex. If each ``P_k`` bounds its estimate's error covariance, then
+    ``P >= E[e e^T]`` (PSD) for *every* joint error covariance with those
+    marginals (Julier and Uhlmann 1997; Chen, Arambel and Mehra 2002).
+    The weights minimize ``trace(P)`` or ``det(P)`` (both convex in w).
+
+    Parameters
+    ----------
+    means : (k, n) array_like
+        The estimates, finite.
+    covs : (k, n, n) array_like
+        Their covariances, symmetric positive definite.
+    weights : "trace", "det", None or (k,) array_like
+        ``"trace"`` (default) or ``"det"``: the weights minimizing that of P
+        (bounded scalar search for k = 2, SLSQP with gradients for k > 2; equal
+        weights unless they are beaten, so a flat criterion gives ``1/k``);
+        None: equal weights ``1/k``; an array: given weights, non-negative,
+        summing to 1.
+
+    Returns
+    -------
+    x : (n,) ndarray
+        Fused mean.
+    P : (n, n) ndarray
+        Fused covariance.
+    w : (k,) ndarray
+        The weights used.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Bad shapes, a covariance not positive definite, weights off the simplex.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import fusion
+    >>> x, P, w = fusion.covariance_intersection([[0.0, 0.0], [1.0, 1.0]],
+    ...                                          [np.diag([1.0, 4.0]), np.diag([4.0, 1.0])])
+    >>> np.round(w, 6), np.round(x, 6)
+    (array([0.5, 0.5]), array([0.2, 0.8]))
+    >>> np.round(P, 6)
+    array([[1.6, 0. ],
+           [0. , 1.6]])
+    """
+    means = require_finite(float_array(means, "means"), "means")
+    if means.ndim != 2 or 0 in means.shape:
+        raise ValueError(f"means must be a (k, n) array of k >= 1 estimates; got shape {means.shape}")
+    k, n = means.shape
+    covs = float_array(covs, "covs")
+    if covs.shape != (k, n, n):
+        raise ValueError(f"Incompatible dimensions of covs; expected (k, n, n) = ({k}, {n}, {n}) for means of "
+                         f"shape {means.shape} but found {covs.shape}")
+    check_covariance(covs, "covs", definite=True)
+    infos = symmetric_part(np.linalg.inv(covs))
+    if isinstance(weights, str) or weights is None:
+        if weights is None:
+            w = np.full(k, 1.0 / k)
+        elif weights in ("trace", "det"):
+            w = _ci_weights(infos, weights)
+        else:
+            raise ValueError(f"weights must be 'trace', 'det', None or a (k,) array; got {weights!r}")
+    else:
+        w = require_finite(float_array(weights, "weights"), "weights")
+        if w.shape != (k,):
+            raise ValueError(f"Incompatible dimensions of weights; expected ({k},) but found {w.shape}")
+        if np.any(w < 0) or abs(w.sum() - 1.0) > 1e-9:
+            raise ValueError(f"weights must be non-negative and sum to 1; got {w.tolist()}")
+    info = np.einsum("k,kij->ij", w, infos)
+    P = symmetric_part(np.linalg.inv(info))
+    x = P @ np.einsum("k,kij,kj->i", w, infos, means)
+    return finite_result("covariance intersection", x, P, w, advice="the covariances are too close to singular")
+
+
+def _ci_objective(infos: np.ndarray, criterion: str):
+    def f(w):
+        info = np.einsum("k,kij->ij", w, infos)
+        if criterion == "det":
+            sign, logdet = np.linalg.slogdet(info)
+            return -logdet if sign > 0 else np.inf
+        return float(np.trace(np.linalg.inv(info)))
+
+    def grad(w):
+        inv = np.linalg.inv(np.einsum("k,kij->ij", w, infos))
+        if criterion == "det":  # d(-log det) / dw_k = -tr(Om^{-1} Om_k)
+            return -np.einsum("ij,kji->k", inv, infos)
+        return -np.einsum("ij,kjl,li->k", inv, infos, inv)  # d tr(Om^{-1}) / dw_k = -tr(Om^-1 Om_k Om^-1)
+
+    return f, grad
+
+
+def _ci_weights(infos: np.ndarray, criterion: str) -> np.ndarray:
+    """The simplex weights minimizing trace or det of the fused covariance (a convex problem)."""
+    from scipy import optimize
+
+    k = infos.shape[0]
+    if k == 1:
+        return np.ones(1)
+    f, grad = _ci_objective(infos, criterion)
+    w0 = np.full(k, 1.0 / k)
+    if k == 2:
+        res = optimize.minimize_scalar(lambda a: f(np.array([a, 1.0 - a])), bounds=(0.0, 1.0), method="bounded",
+                                       options={"xatol": 1e-12})
+        # the bounded search never returns an end point: take one if it is better
+        w = min((np.array([t, 1.0 - t]) for t in (float(res.x), 0.0, 1.0)), key=f)
+    else:
+        res = optimize.minimize(f, w0, jac=grad, method="SLSQP", bounds=[(0.0, 1.0)] * k,
+                                constraints=({"type": "eq", "fun": lambda w: w.sum() - 1.0,
+                                              "jac": lambda w: np.ones_like(w)},),
+                                options={"ftol": 1e-14, "maxiter": 500})
+        w = np.clip(res.x, 0.0, None)
+        w = w / w.sum()
+    # a tie (a flat criterion, e.g. equal covariances) keeps the equal weights: the result does not depend on
+    # where the search stopped
+    return w if f(w) < f(w0) * (1 - 1e-12) else w0
+
+
+# --------------------------------------------------------------------------------------------
+# cost model
+
+
+@dataclass(frozen=True)
+class FilterCost:
+    """Floats sent and flops per agent per step of one filter, with the formulas.
+
+    Parameters
+    ----------
+    method : str
+        The filter.
+    floats_sent : float
+        Numbers each agent broadcasts per step (a broadcast reaches every neighbour).
+    flops : float
+        Floating-point operations per agent per step (leading terms; a multiply-add is 2).
+    floats_formula, flops_formula : str
+        The same as formulas of n, q, d (degree), L (iterations), N.
+    note : str
+        What the count assumes.
+
+    Examples
+    --------
+    >>> from mascore.fusion import filter_cost
+    >>> filter_cost("measurement-forwarding", n=4, q=2, degree=2).floats_sent
+    2.0
+    """
+
+    method: str
+    floats_sent: float
+    flops: float
+    floats_formula: str
+    flops_formula: str
+    note: str = ""
+
+
+#: The methods :func:`filter_cost` knows.
+_COST_METHODS = ("centralized", "measurement-forwarding", "consensus-on-information", "hcmci",
+                 "information-consensus", "diffusion-kf", "covariance-intersection")
+
+
+def filter_cost(method: str, n: int, q: int, degree: int, iterations: int = 1, n_agents: int = 1) -> FilterCost:
+    """Floats sent and flops per agent per step of a filter, as formulas of (n, q, d, L, N).
+
+    Leading-order counts for a time-invariant model (``H_j^T R_j^{-1} H_j`` and
+    ``R_j^{-1}`` computed once): a matrix product ``2 n^3``, an inverse of a
+    symmetric positive definite matrix ``n^3``, a solve with n right-hand sides
+    ``8/3 n^3``; a symmetric matrix is sent as its ``n (n + 1) / 2`` distinct
+    entries. Per step: the prediction ``4 n^3``; the local information vector
+    ``2 q^2 + 2 q n``; a consensus step mixes ``d + 1`` pairs.
+
+    Parameters
+    ----------
+    method : str
+        ``"centralized"`` (floats: sent to the centre; flops: the centre's),
+        ``"measurement-forwarding"``, ``"consensus-on-information"`` (CI),
+        ``"hcmci"``, ``"information-consensus"`` (ICF), ``"diffusion-kf"``,
+        ``"covariance-intersection"`` (:class:`CovarianceIntersectionFilter`:
+        ``iterations`` = evaluations of the weight search).
+    n : int
+        State dimension.
+    q : int
+        Measurement dimension per agent (0 allowed).
+    degree : int
+        d, neighbours per agent.
+    iterations : int
+        L (or K): consensus steps per update (evaluations of the weight search for
+        covariance intersection).
+    n_agents : int
+        N (used by the centralized count only).
+
+    Returns
+    -------
+    FilterCost
+        The counts and formulas.
+
+    Examples
+    --------
+    >>> from mascore.fusion import filter_cost
+    >>> c = filter_cost("consensus-on-information", n=4, q=2, degree=2, iterations=3)
+    >>> c.floats_sent, c.floats_formula
+    (42.0, 'L (n (n + 1) / 2 + n)')
+    """
+    if method not in _COST_METHODS:
+        raise ValueError(f"method must be one of {_COST_METHODS}; got {method!r}")
+    n = check_positive_int(n, "n")
+    q = check_positive_int(q, "q", minimum=0)
+    d = check_positive_int(degree, "degree", minimum=0)
+    L = check_positive_int(iterations, "iterations", minimum=0)
+    N = check_positive_int(n_agents, "n_agents")
+    pair = n * (n + 1) / 2 + n  # a symmetric matrix and a vector
+    predict = 4 * n**3 + 2 * n**2
+    local = 2 * q**2 + 2 * q * n
+    info_update = 2 * n**3 + 8 / 3 * n**3 + 6 * n**2  # P S, solve (I + P S) X = P, the mean
+    to_info = n**3 + 2 * n**2  # Omega = P^{-1}, q = Omega x
+    from_info = n**3 + 2 * n**2  # P = Omega^{-1}, x = P q
+    mix = 2 * (d + 1) * pair
+    if method == "centralized":
+        return FilterCost(method, float(q), N * local + predict + info_update, "q",
+                          "N (2 q^2 + 2 q n) + 26/3 n^3 + 8 n^2",
+                          "floats: each agent to the centre; flops: the centre's, information form")
+    if method == "measurement-forwarding":
+        return FilterCost(method, float(q), (d + 1) * local + (d + 1) * n + predict + info_update, "q",
+                          "(d + 1) (2 q^2 + 2 q n + n) + 26/3 n^3 + 8 n^2")
+    if method == "diffusion-kf":
+        return FilterCost(method, float(q + n), (d + 1) * local + (d + 1) * n + predict + info_update
+                          + 2 * (d + 1) * n, "q + n", "(d + 1) (2 q^2 + 2 q n + 3 n) + 26/3 n^3 + 8 n^2",
+                          "measurements for the incremental step, then psi_i for the diffusion")
+    if method in ("consensus-on-information", "information-consensus"):
+        return FilterCost(method, L * pair, predict + to_info + local + L * mix + from_info,
+                          "L (n (n + 1) / 2 + n)",
+                          "6 n^3 + 2 q^2 + 2 q n + 2 L (d + 1) (n (n + 1) / 2 + n) + 6 n^2")
+    if method == "hcmci":
+        return FilterCost(method, 2 * L * pair, predict + to_info + local + 2 * L * mix + from_info,
+                          "2 L (n (n + 1) / 2 + n)",
+                          "6 n^3 + 2 q^2 + 2 q n + 4 L (d + 1) (n (n + 1) / 2 + n) + 6 n^2",
+                          "the prior and the novelty pairs, each L steps")
+    # CovarianceIntersectionFilter: incremental update with the neighbourhood's measurements, then one covariance
+    # intersection of the d + 1 neighbourhood estimates (each sent as an information pair)
+    incremental = (d + 1) * local + (d + 1) * n + predict + info_update
+    fuse = to_info + L * (2 * (d + 1) * n**2 + n**3) + 2 * (d + 1) * pair + from_info
+    return FilterCost(method, q + pair, incremental + fuse, "q + n (n + 1) / 2 + n",
+                      "(d + 1) (2 q^2 + 2 q n + n) + 32/3 n^3 + 12 n^2 + L (2 (d + 1) n^2 + n^3) "
+                      "+ 2 (d + 1) (n (n + 1) / 2 + n)",
+                      "measurements, then the information pair; L = evaluations of the weight search (about 10-30)")
+
+
+# --------------------------------------------------------------------------------------------
+# kernels (checked arguments)
+
+
+def _mix(W: np.ndarray, X: np.ndarray, axes: int) -> np.ndarray:
+    """``Y_i = sum_j W[i, j] X_j`` over the agent axis of X ``(..., N, *rest)``, rest of `axes` (1 or 2) axes."""
+    rest = X.shape[X.ndim - axes:]
+    flat = X.reshape(*X.shape[:X.ndim - axes], -1)
+    return (W @ flat).reshape(*flat.shape[:-2], W.shape[0], *rest)
+
+
+def _information_update(x, P, S, i):
+    """``P+ = (P^{-1} + S)^{-1} = (I + P S)^{-1} P``, ``x+ = x + P+ (i - S x)`` (no inverse of P)."""
+    n = x.shape[-1]
+    P_new = symmetric_part(np.linalg.solve(np.eye(n) + P @ S, P))
+    r = i - (S @ x[..., None])[..., 0]
+    return x + (P_new @ r[..., None])[..., 0], P_new
+
+
+def _information_pair(x, P):
+    """``(P^{-1}, P^{-1} x)``."""
+    Om = symmetric_part(np.linalg.inv(P))
+    return Om, (Om @ x[..., None])[..., 0]
+
+
+def _from_information(Om, q):
+    """``(Om^{-1} q, Om^{-1})``."""
+    P = symmetric_part(np.linalg.inv(Om))
+    return (P @ q[..., None])[..., 0], P
+
+
+def _psd_sqrt(M: np.ndarray) -> np.ndarray:
+    """A square root S of a PSD matrix (``S S^T = M``), from its eigen-decomposition."""
+    if M.size == 0:
+        return np.zeros_like(M)
+    lam, V = np.linalg.eigh(M)
+    return V * np.sqrt(np.clip(lam, 0.0, None))
+
+
+def _broadcast(aname: str, a: tuple, bname: str, b: tuple) -> tuple:
+    try:
+        return np.broadcast_shapes(a, b)
+    except ValueError:
+        raise ValueError(f"the batch axes of {aname} {a} and {bname} {b} do not broadcast") from None
+
+
+def _check_stochastic(C: ArrayLike, name: str, model: SensorNetworkModel) -> np.ndarray:
+    """Row-stochastic weights on the graph and the diagonal."""
+    N = model.n_agents
+    C = check_square(C, name, N)
+    if np.any(C < 0) or not np.allclose(C.sum(axis=1), 1.0, rtol=0, atol=1e-9):
+        raise ValueError(f"{name} must be non-negative with rows summing to 1 (convex combinations); "
+                         f"row sums {np.round(C.sum(axis=1), 6).tolist()}")
+    if np.any((C > 0) & (model._neighbourhood == 0)):
+        raise ValueError(f"{name} must be zero where the graph has no link (C[i, l] > 0 needs l = i or "
+                         "adjacency[i, l] > 0)")
+    return C
+
