@@ -296,6 +296,11 @@ def check_assumption4(adjacency: ArrayLike, pinning: ArrayLike) -> None:
     Aadj, g = _check_graph(adjacency, pinning)
     roots = graphs.spanning_tree_roots(Aadj)
     if roots.size == 0:
+        comps = graphs.connected_components(Aadj)
+        if len(comps) > 1:
+            raise ValueError(f"Assumption 4 fails: the interaction graph has no directed spanning tree (adjacency "
+                             f"is a disconnected graph, {len(comps)} components: {[c.tolist() for c in comps]}): the "
+                             "leader's information cannot reach every agent")
         raise ValueError("Assumption 4 fails: the interaction graph has no directed spanning tree "
                          "(adjacency[i, j] > 0 means agent i receives from agent j)")
     if not np.any(g[roots] > 0):

@@ -232,6 +232,10 @@ def test_a_disconnected_graph_is_named_as_such():
     with pytest.raises(ValueError, match=r"disconnected graph \(2 components: \[\[0, 1, 2\], \[3, 4, 5\]\]\)"):
         rendezvous.simulate_rendezvous(0, model, x0, split, 3, "estimation", x_hat0=x0.ravel(), P0=np.eye(4))
     assert [c.tolist() for c in graphs.connected_components(split)] == [[0, 1, 2], [3, 4, 5]]
+    from mascore import synchronization as sync
+
+    with pytest.raises(ValueError, match=r"Assumption 4 fails: .* disconnected graph, 2 components"):
+        sync.design_synchronization(np.eye(2), np.eye(2), np.eye(2), split, np.ones(6))
 
 
 # --------------------------------------------------------------------------- synchronization design without a grid search
