@@ -655,7 +655,7 @@ def ekf_flocking_step(
     gains : FlockingGains
         The flocking gains of eq. (6).
     Q_team : (2nN, 2nN) array_like
-        ``I_N kron Q``.
+        Team process-noise covariance ``I_N kron Q`` (m^2, m^2/s^2), symmetric positive semidefinite.
 
     Returns
     -------

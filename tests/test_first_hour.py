@@ -342,3 +342,37 @@ def test_networkx_graphs_work_across_the_modules():
     a = observers.distributed_observer([[0.0, 1.0], [-1.0, -0.1]], np.eye(2), C, np.eye(1), 0.5 * np.eye(1), np.eye(2), G)
     b = observers.distributed_observer([[0.0, 1.0], [-1.0, -0.1]], np.eye(2), C, np.eye(1), 0.5 * np.eye(1), np.eye(2), A)
     np.testing.assert_allclose(a.L, b.L)
+
+
+# --------------------------------------------------------------------------- what Q and R are, in every signature
+
+
+def test_every_q_and_r_parameter_says_what_it_is():
+    """Covariance, cost weight, ellipsoid shape or noise intensity: every public docstring says which."""
+    import importlib
+    import inspect
+
+    docscrape = pytest.importorskip("numpydoc.docscrape")
+    names = {"Q", "R", "Q1", "Q2", "Q_team", "Omega", "Q_filter"}
+    words = ("covariance", "weight", "shape", "intensity", "as in")
+    exempt = {("flocking.FlockingGains", "R")}  # the spring's rest length (m), Song et al.'s calligraphic R
+    missing = []
+    for mod in ("kalman", "distributed_kf", "rendezvous", "sensing", "distributed_ekf", "flocking", "consensus",
+                "set_membership", "ellipsoids", "synchronization", "lqr", "observers", "noise"):
+        module = importlib.import_module(f"mascore.{mod}")
+        for name in module.__all__:
+            obj = getattr(module, name)
+            targets = []
+            if inspect.isclass(obj):
+                targets.append((f"{mod}.{name}", docscrape.ClassDoc(obj)))
+                targets += [(f"{mod}.{name}.{m}", docscrape.FunctionDoc(f))
+                            for m, f in inspect.getmembers(obj, inspect.isfunction) if not m.startswith("_") and f.__doc__]
+            elif callable(obj):
+                targets.append((f"{mod}.{name}", docscrape.FunctionDoc(obj)))
+            for where, doc in targets:
+                for param in doc["Parameters"]:
+                    for pname in (x.strip() for x in param.name.split(",")):
+                        text = " ".join(param.desc).lower()
+                        if pname in names and (where, pname) not in exempt and not any(w in text for w in words):
+                            missing.append(f"{where}({pname})")
+    assert not missing, missing
