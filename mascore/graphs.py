@@ -6,6 +6,14 @@ agent ``j`` (the directed edge ``j -> i``). An undirected graph has a symmetric
 ``A``. The (in-degree) Laplacian is ``L = diag(A @ 1) - A``; its rows sum to
 zero. This is the convention of Ren, Beard and Kingston (2005) and of most of
 the consensus literature.
+
+networkx graphs: every mascore argument that expects an adjacency matrix (here and in
+every other module) also accepts a networkx graph, read by :func:`from_networkx` (node
+``i`` of ``sorted(G.nodes)`` is agent ``i``; an edge ``j -> i`` with weight ``w`` gives
+``A[i, j] = w``; an undirected edge both entries); a list of graphs is read as a stack.
+So the networkx generators (``nx.erdos_renyi_graph``, ``nx.random_regular_graph``,
+``nx.connected_watts_strogatz_graph``, ...) give random graphs directly;
+:func:`to_networkx` goes the other way.
 """
 
 from __future__ import annotations
@@ -27,6 +35,7 @@ __all__ = [
     "adjacency_from_edges",
     "complete_graph",
     "connected_components",
+    "from_networkx",
     "graph_union",
     "has_spanning_tree",
     "is_connected",
@@ -581,6 +590,40 @@ def to_networkx(A: ArrayLike, directed: bool | None = None) -> nx.Graph:
     for i, j in zip(*np.nonzero(A)):
         G.add_edge(int(j), int(i), weight=float(A[i, j]))
     return G
+
+
+def from_networkx(graph: nx.Graph | Sequence[nx.Graph]) -> np.ndarray:
+    """The adjacency matrix of a networkx graph, in mascore's convention (the inverse of :func:`to_networkx`).
+
+    Every function that takes an adjacency calls this on a networkx graph itself; call it to see
+    or change the matrix.
+
+    Parameters
+    ----------
+    graph : networkx.Graph or networkx.DiGraph, or a list of them
+        Node ``i`` of ``sorted(graph.nodes)`` is agent ``i``; edge attribute ``weight``
+        (default 1) is the weight.
+
+    Returns
+    -------
+    (N, N) or (T, N, N) ndarray
+        ``A[i, j] > 0`` iff agent ``i`` receives from agent ``j`` (edge ``j -> i``).
+
+    Examples
+    --------
+    >>> import networkx as nx
+    >>> from mascore import graphs
+    >>> graphs.from_networkx(nx.path_graph(3))
+    array([[0., 1., 0.],
+           [1., 0., 1.],
+           [0., 1., 0.]])
+    """
+    from ._validation import _is_graph, graph_adjacency
+
+    if not (_is_graph(graph) or (isinstance(graph, (list, tuple)) and graph and all(map(_is_graph, graph)))):
+        raise TypeError(f"graph must be a networkx graph or a list of them; got {type(graph).__name__}")
+    return _check_adjacency(graph_adjacency(graph), "graph") if _is_graph(graph) else _adjacency_stack(
+        graph_adjacency(graph))
 
 
 def _reach_count(out: list[np.ndarray], root: int) -> int:

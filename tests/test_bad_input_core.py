@@ -96,6 +96,7 @@ def baselines() -> dict[str, tuple]:
         "graphs.has_spanning_tree": (graphs.has_spanning_tree, dict(A=A)),
         "graphs.is_connected": (graphs.is_connected, dict(A=A)),
         "graphs.connected_components": (graphs.connected_components, dict(A=A)),
+        "graphs.from_networkx": (graphs.from_networkx, dict(graph=graphs.to_networkx(A))),
         "graphs.require_connected": (graphs.require_connected, dict(A=A, why="the test")),
         "graphs.graph_union": (graphs.graph_union, dict(adjacencies=[A, graphs.complete_graph(N)])),
         "graphs.unions_over_windows": (graphs.unions_over_windows, dict(adjacencies=np.stack([A, A, A]), window=2)),

@@ -138,6 +138,10 @@ def test_networkx_graphs_are_accepted_where_an_adjacency_is():
 def test_graph_round_trip_through_to_networkx():
     A = graphs.adjacency_from_edges(4, [(0, 1), (1, 2, 2.0), (3, 0)], directed=True)
     np.testing.assert_array_equal(graphs.laplacian(graphs.to_networkx(A)), graphs.laplacian(A))
+    np.testing.assert_array_equal(graphs.from_networkx(graphs.to_networkx(A)), A)
+    assert graphs.from_networkx([nx.cycle_graph(3), nx.path_graph(3)]).shape == (2, 3, 3)
+    with pytest.raises(TypeError, match="graph must be a networkx graph"):
+        graphs.from_networkx(A)
 
 
 def test_rendezvous_takes_a_networkx_graph():
