@@ -303,6 +303,47 @@ def float_array(value: object, name: str) -> np.ndarray:
     return arr.astype(float, copy=False)
 
 
+# ---------------------------------------------------------------- networkx graphs where an adjacency is expected
+
+
+def _is_graph(value: object) -> bool:
+    """Whether `value` is a networkx graph (duck-typed, so networkx is imported only by its user)."""
+    return type(value).__module__.startswith("networkx") and hasattr(value, "is_directed") and hasattr(value, "adj")
+
+
+def graph_adjacency(graph: object) -> np.ndarray:
+    """The adjacency matrix of a networkx graph (or the ``(T, N, N)`` stack of a list of graphs), mascore's convention.
+
+    Agent ``i`` is the i-th node of ``sorted(graph.nodes)`` (the nodes ``0..N-1`` of
+    every networkx generator), or of ``graph.nodes`` if they do not sort. An edge
+    ``j -> i`` with attribute ``weight`` (default 1) gives ``A[i, j] = weight`` (agent
+    ``i`` receives from ``j``); an undirected edge gives both entries. Every mascore
+    argument that expects an adjacency accepts a graph, through :func:`float_array`.
+
+    Examples
+    --------
+    >>> import networkx as nx
+    >>> from mascore._validation import graph_adjacency
+    >>> graph_adjacency(nx.DiGraph([(0, 1)]))            # 0 -> 1: agent 1 hears agent 0
+    array([[0., 0.],
+           [1., 0.]])
+    """
+    if isinstance(graph, (list, tuple)):
+        mats = [graph_adjacency(g) for g in graph]
+        if len({m.shape for m in mats}) > 1:
+            raise ValueError(f"the graphs of a sequence must have the same number of nodes; got {[m.shape[0] for m in mats]}")
+        return np.stack(mats)
+    import networkx as nx
+
+    nodes = list(graph.nodes)
+    try:
+        nodes = sorted(nodes)
+    except TypeError:
+        pass
+    M = nx.to_numpy_array(graph, nodelist=nodes, weight="weight", dtype=float)  # M[u, v]: edge u -> v
+    return np.ascontiguousarray(M.T)
+
+
 def require_finite(arr: np.ndarray, name: str) -> np.ndarray:
     """Raise a ``ValueError`` naming `name` if `arr` holds NaN or inf."""
     if not np.isfinite(arr).all():
@@ -365,44 +406,3 @@ def frozen_copy(arr: ArrayLike) -> np.ndarray:
     out = np.array(arr, dtype=float, copy=True)
     out.setflags(write=False)
     return out.view()
-
-
-# ---------------------------------------------------------------- networkx graphs where an adjacency is expected
-
-
-def _is_graph(value: object) -> bool:
-    """Whether `value` is a networkx graph (duck-typed, so networkx is imported only by its user)."""
-    return type(value).__module__.startswith("networkx") and hasattr(value, "is_directed") and hasattr(value, "adj")
-
-
-def graph_adjacency(graph: object) -> np.ndarray:
-    """The adjacency matrix of a networkx graph (or the ``(T, N, N)`` stack of a list of graphs), mascore's convention.
-
-    Agent ``i`` is the i-th node of ``sorted(graph.nodes)`` (the nodes ``0..N-1`` of
-    every networkx generator), or of ``graph.nodes`` if they do not sort. An edge
-    ``j -> i`` with attribute ``weight`` (default 1) gives ``A[i, j] = weight`` (agent
-    ``i`` receives from ``j``); an undirected edge gives both entries. Every mascore
-    argument that expects an adjacency accepts a graph, through :func:`float_array`.
-
-    Examples
-    --------
-    >>> import networkx as nx
-    >>> from mascore._validation import graph_adjacency
-    >>> graph_adjacency(nx.DiGraph([(0, 1)]))            # 0 -> 1: agent 1 hears agent 0
-    array([[0., 0.],
-           [1., 0.]])
-    """
-    if isinstance(graph, (list, tuple)):
-        mats = [graph_adjacency(g) for g in graph]
-        if len({m.shape for m in mats}) > 1:
-            raise ValueError(f"the graphs of a sequence must have the same number of nodes; got {[m.shape[0] for m in mats]}")
-        return np.stack(mats)
-    import networkx as nx
-
-    nodes = list(graph.nodes)
-    try:
-        nodes = sorted(nodes)
-    except TypeError:
-        pass
-    M = nx.to_numpy_array(graph, nodelist=nodes, weight="weight", dtype=float)  # M[u, v]: edge u -> v
-    return np.ascontiguousarray(M.T)
