@@ -39,7 +39,7 @@ estimating agent and Monte Carlo runs.
 Checked model, owned work arrays
 --------------------------------
 :class:`EKFModel` checks the constant data once, at construction (``dt > 0``, a
-:class:`FlockingGains`, ``I_N kron Q`` symmetric positive semidefinite, ``R``
+:class:`~mascore.flocking.FlockingGains`, ``I_N kron Q`` symmetric positive semidefinite, ``R``
 definite, sizes) and keeps read-only copies. :class:`FlockingEKF` checks a prior
 in full once (finite estimates; covariances symmetric positive semidefinite by one
 Cholesky factorisation of ``Sigma + 1e-8 max(1, max|Sigma|) I``, the tolerance of
@@ -104,7 +104,7 @@ __all__ = [
 class EKFModel:
     """The constant data of the agents' EKFs, checked once: team size, ``dt``, gains, ``I_N kron Q``, ``R``.
 
-    The constructor checks every argument (``dt > 0``, a :class:`FlockingGains`,
+    The constructor checks every argument (``dt > 0``, a :class:`~mascore.flocking.FlockingGains`,
     covariances finite, symmetric, positive semidefinite -- ``R`` definite -- and of
     the team's size) and stores read-only copies (:func:`mascore._validation.frozen_copy`),
     so no later change to the caller's arrays can slip past the check. The prediction
@@ -118,7 +118,7 @@ class EKFModel:
         Team size ``N`` (>= 1).
     dt : float, optional
         Sampling time (s), finite and > 0 (with `gains` and `Q_team`).
-    gains : FlockingGains, optional
+    gains : mascore.flocking.FlockingGains, optional
         The flocking gains of eq. (6).
     Q_team : (2nN, 2nN) array_like, optional
         Team process-noise covariance ``I_N kron Q`` (symmetric positive semidefinite).

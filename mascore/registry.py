@@ -68,13 +68,13 @@ __all__ = [
     "write_study",
 ]
 
-#: What every study module of :mod:`mascore.papers` exports (:func:`study_modules`): the default
+#: What every study module of ``mascore.papers`` exports (:func:`study_modules`): the default
 #: settings, ``run(settings=SETTINGS, seed=1, progress=False)``, ``claims(result)``, the figure and
 #: table specs, and the :class:`Study` made of them. A paper module (its name is the paper's key)
 #: also exports ``REGISTRY``, its :class:`PaperRegistry`.
 STUDY_CONTRACT = ("SETTINGS", "run", "claims", "FIGURES", "TABLES", "STUDY")
 
-#: Modules outside :mod:`mascore.papers` that declare a ``REGISTRY`` of their own: the comparisons,
+#: Modules outside ``mascore.papers`` that declare a ``REGISTRY`` of their own: the comparisons,
 #: whose ledgers follow the papers' (``results/compare/claims.json``).
 COMPARISON_MODULES = ("mascore.compare",)
 
@@ -406,7 +406,7 @@ class PaperRegistry:
 
 
 def study_modules() -> list:
-    """Every study module of :mod:`mascore.papers`, in book order (papers by position, then their studies).
+    """Every study module of ``mascore.papers``, in book order (papers by position, then their studies).
 
     A study module is one that exports ``STUDY`` (and the rest of :data:`STUDY_CONTRACT`);
     nothing is listed by hand: a new module with a study is found here.
@@ -432,7 +432,7 @@ def study_modules() -> list:
 
 
 def paper_registries() -> tuple[PaperRegistry, ...]:
-    """The registries of every paper, discovered in :mod:`mascore.papers`, in book order.
+    """The registries of every paper, discovered in ``mascore.papers``, in book order.
 
     A paper is a module ``mascore.papers.<key>`` that exports ``REGISTRY``, a
     :class:`PaperRegistry` whose key is the module's name; papers are ordered by
