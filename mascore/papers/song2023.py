@@ -203,6 +203,9 @@ class RendezvousSettings:
         return int(round(self.horizon / self.dt))
 
 
+#: Most timed repeats the step-timing helpers accept (more would run for hours).
+MAX_REPEAT = 10_000
+
 #: The paper's settings (with our choices where it gives none).
 SETTINGS = RendezvousSettings()
 
@@ -315,7 +318,13 @@ def estimator_step_seconds(n_agents: int, repeat: int = 5, plain_repeat: int = 3
     """
     n_agents = check_positive_int(n_agents, "n_agents", minimum=3)  # a ring
     check_positive_int(repeat, "repeat")
+    check_fits_in_memory(32.0 * repeat, "repeat", "the timings (one Python float each)")
+    if repeat > MAX_REPEAT:
+        raise ValueError(f"repeat must be an integer in [1, {MAX_REPEAT}] (timed repeats); got {repeat}")
     check_positive_int(plain_repeat, "plain_repeat")
+    check_fits_in_memory(32.0 * plain_repeat, "plain_repeat", "the timings (one Python float each)")
+    if plain_repeat > MAX_REPEAT:
+        raise ValueError(f"plain_repeat must be an integer in [1, {MAX_REPEAT}] (timed repeats); got {plain_repeat}")
     s = setup(n_agents)
     noise = np.eye(2 * s.n)
     model = dkf.team_filter_model(s.A, s.B, s.K, noise, noise, n_agents)

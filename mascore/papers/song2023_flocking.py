@@ -274,6 +274,9 @@ class FlockingSettings:
         return int(round(self.t_final / self.dt))
 
 
+#: Most timed repeats the step-timing helpers accept (more would run for hours).
+MAX_REPEAT = 10_000
+
 #: The paper's settings (with our choices where it gives none).
 SETTINGS = FlockingSettings()
 
@@ -1078,6 +1081,9 @@ def ekf_step_seconds(settings: FlockingSettings = SETTINGS, seed: int = 0, repea
     check_settings_type(settings, FlockingSettings, "settings")
     check_seed(seed, "seed")
     check_positive_int(repeat, "repeat")
+    check_fits_in_memory(32.0 * repeat, "repeat", "the timings (one Python float each)")
+    if repeat > MAX_REPEAT:
+        raise ValueError(f"repeat must be an integer in [1, {MAX_REPEAT}] (timed repeats); got {repeat}")
     rng = np.random.default_rng([seed, 7])
     X = initial_states(rng, 1, settings)[0]
     X_hat, Sigma0 = initial_estimates(rng, X, settings)
