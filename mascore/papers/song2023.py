@@ -182,9 +182,6 @@ class RendezvousSettings:
             if int(round(getattr(self, name) / self.dt)) < 1:
                 raise ValueError(f"RendezvousSettings.{name} must be at least half a sampling time "
                                  f"({self.dt / 2:g} s) to give one step; got {getattr(self, name)!r}")
-        if self.converged_from >= self.horizon:
-            raise ValueError(f"RendezvousSettings.converged_from must be a time before the horizon "
-                             f"({self.horizon:g} s); got {self.converged_from!r}")
         team = 8.0 * self.n_agents**2 * 2 * self.n * (self.horizon / self.dt + 1)  # whole-team estimates per step
         for name in ("fig2_runs", "fig3_runs", "process_noise_runs"):
             check_fits_in_memory(team * getattr(self, name), f"RendezvousSettings.{name}",

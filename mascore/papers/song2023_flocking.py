@@ -185,12 +185,6 @@ class FlockingSettings:
             if int(round(getattr(self, name) / self.dt)) < 1:
                 raise ValueError(f"FlockingSettings.{name} must be at least half a sampling time "
                                  f"({self.dt / 2:g} s) to give one step; got {getattr(self, name)!r}")
-        if self.settled_window > self.t_final:
-            raise ValueError(f"FlockingSettings.settled_window must be at most t_final ({self.t_final:g} s); "
-                             f"got {self.settled_window!r}")
-        if self.transient >= self.t_final:
-            raise ValueError(f"FlockingSettings.transient must be a time before t_final ({self.t_final:g} s); "
-                             f"got {self.transient!r}")
         m = 2 * self.n_dim
         per_run = 8.0 * (self.n_agents**2 * m + self.n_agents * m * m) * (self.t_final / self.dt + 1)
         check_fits_in_memory(3 * per_run * self.n_runs, "FlockingSettings.n_runs",
