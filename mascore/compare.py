@@ -111,6 +111,10 @@ _MAX_SCALE = 1e6
 class BenchmarkSettings:
     """The common benchmark's settings (one place; the chapter shows them).
 
+    Every field is checked when the settings are built or ``dataclasses.replace``-d
+    (``mascore.registry.check_settings``): counts >= 1, variances and scales finite
+    and non-negative (at most 1e6 m or m/s for the scales, 1e12 for the variances).
+
     Parameters
     ----------
     dt : float
@@ -146,9 +150,6 @@ class BenchmarkSettings:
         The sweep :func:`run` makes (:func:`grid_cells`): ``"quick"`` for the book and the
         published ledger, ``"full"`` for the command line.
 
-    Every field is checked when the settings are built or ``dataclasses.replace``-d
-    (:func:`mascore.registry.check_settings`): counts >= 1, variances and scales finite
-    and non-negative (at most 1e6 m or m/s for the scales, 1e12 for the variances).
 
     Examples
     --------

@@ -55,9 +55,6 @@ __all__ = [
     "FigureSpec",
     "PaperRegistry",
     "SettingsView",
-    "allowed_values",
-    "check_settings",
-    "check_settings_type",
     "documented_settings",
     "Study",
     "TableSpec",
@@ -609,7 +606,7 @@ def setting(default: Any, *, source: str = "paper", where: str = "", unit: str =
     """A settings-dataclass field that documents and checks itself.
 
     The declaration says what the field is (shown by :func:`show_settings` and
-    :func:`documented_settings`) and which values it takes: :func:`check_settings`,
+    :func:`documented_settings`) and which values it takes: ``check_settings``,
     called by the dataclass's ``__post_init__``, refuses any other value by the
     field's name, so construction and :func:`dataclasses.replace` both fail early.
 
@@ -645,7 +642,7 @@ def setting(default: Any, *, source: str = "paper", where: str = "", unit: str =
     -------
     dataclasses.Field
         The field, its metadata read by :func:`show_settings`, :func:`documented_settings`
-        and :func:`check_settings`.
+        and ``check_settings``.
 
     Raises
     ------
@@ -925,7 +922,7 @@ def documented_settings(settings_class: type) -> type:
     ------
     TypeError
         If `settings_class` is not a dataclass, or defines no ``__post_init__`` (which must call
-        :func:`check_settings`).
+        ``check_settings``).
 
     Examples
     --------
