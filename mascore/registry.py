@@ -546,7 +546,7 @@ def paper_registry(key: str) -> PaperRegistry:
     for reg in (*paper_registries(), *comparison_registries()):
         if reg.key == key:
             return reg
-    raise ValueError(f"paper must be one of {', '.join(ledger_keys())}; got {key!r}")
+    raise ValueError(f"paper must be one of {', '.join(ledger_keys())}; got key {key!r}")
 
 
 def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | Path) -> list[Claim]:
@@ -582,6 +582,12 @@ def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | 
     >>> {c.study for c in claims}
     {'kalman-consensus'}
     """
+    if not isinstance(paper, PaperRegistry):
+        raise TypeError(f"paper must be a PaperRegistry (a paper module's REGISTRY); got {type(paper).__name__}")
+    if not isinstance(study, Study):
+        raise TypeError(f"study must be a Study (one of paper.studies); got {type(study).__name__}")
+    if not isinstance(out_dir, str | Path):
+        raise TypeError(f"out_dir must be a path (str or pathlib.Path); got {type(out_dir).__name__}")
     plt = require("matplotlib.pyplot", "drawing a registered figure")
 
     from .plotting import save_figure
@@ -1048,6 +1054,9 @@ def all_figures(papers: Sequence[str] | None = None) -> list[tuple[PaperRegistry
     >>> len(all_figures(["ren2005"])) > 0
     True
     """
+    if papers is not None and (isinstance(papers, str) or not isinstance(papers, Sequence)
+                               or not all(isinstance(p, str) for p in papers)):
+        raise TypeError(f"papers must be a sequence of paper keys (e.g. ['ren2005']) or None; got {papers!r}")
     out = []
     for key in paper_keys() if papers is None else papers:
         reg = paper_registry(key)
