@@ -13,7 +13,8 @@ Two steps:
 
    * ``clear``: ``ValueError``/``TypeError`` whose message names the argument;
    * ``unclear``: another exception, or a message that does not name it;
-   * ``silent-nan``: returned with NaN/inf in the output;
+   * ``silent-nan``: returned with NaN/inf in the output (unless the unspoiled baseline
+     call already returns NaN/inf: documented ones, such as a metric a method lacks);
    * ``accepted``: returned normally although the spoil is always invalid
      (NaN/inf entries, a string for a number, a negative seed, a count < 1, dt <= 0);
    * ``returned``: returned normally from a spoil that can be valid (a smaller
@@ -270,7 +271,7 @@ def _alarm(signum, frame):
     raise _Timeout
 
 
-def classify(func, args, kwargs, arg_name: str, always_invalid: bool) -> str:
+def classify(func, args, kwargs, arg_name: str, always_invalid: bool, nan_documented: bool = False) -> str:
     signal.signal(signal.SIGALRM, _alarm)
     signal.alarm(TIME_LIMIT_S)
     try:
@@ -287,9 +288,23 @@ def classify(func, args, kwargs, arg_name: str, always_invalid: bool) -> str:
         return "unclear"
     finally:
         signal.alarm(0)
-    if _has_nonfinite(result):
+    if _has_nonfinite(result) and not nan_documented:
         return "silent-nan"
     return "accepted" if always_invalid else "returned"
+
+
+def _baseline_has_nonfinite(func, args, kwargs) -> bool:
+    """Whether the unspoiled call already returns NaN/inf (documented ones, e.g. a metric a method lacks)."""
+    signal.signal(signal.SIGALRM, _alarm)
+    signal.alarm(TIME_LIMIT_S)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return _has_nonfinite(func(*copy.deepcopy(args), **copy.deepcopy(kwargs)))
+    except Exception:  # noqa: BLE001 - a baseline that no longer runs: judge its spoils as usual
+        return False
+    finally:
+        signal.alarm(0)
 
 
 def sweep(baselines: Path, csv: Path | None, modules: tuple[str, ...] | None = None) -> Counter:
@@ -304,6 +319,7 @@ def sweep(baselines: Path, csv: Path | None, modules: tuple[str, ...] | None = N
             bound = inspect.signature(func).bind(*args, **kwargs)
         except TypeError:
             continue  # the signature changed since the baseline was recorded
+        nan_documented = _baseline_has_nonfinite(func, args, kwargs)
         for arg_name, value in list(bound.arguments.items()):
             trials = [(arg_name, kind, spoiled, invalid) for kind, spoiled, invalid in spoils(arg_name, value)]
             if _is_settings(value):
@@ -311,7 +327,7 @@ def sweep(baselines: Path, csv: Path | None, modules: tuple[str, ...] | None = N
             for named, kind, spoiled, always_invalid in trials:
                 trial = copy.deepcopy(bound)
                 trial.arguments[arg_name] = spoiled
-                outcome = classify(func, trial.args, trial.kwargs, named, always_invalid)
+                outcome = classify(func, trial.args, trial.kwargs, named, always_invalid, nan_documented)
                 rows.append({"function": key, "argument": arg_name if named == arg_name else f"{arg_name}.{named}",
                              "spoil": kind, "outcome": outcome})
     counts = Counter(r["outcome"] for r in rows)

@@ -55,7 +55,7 @@ import numpy as np
 
 from . import consensus, graphs, kalman, rendezvous, set_membership
 from . import distributed_kf as dkf
-from ._validation import check_fits_in_memory, check_positive, check_positive_int, check_probability
+from ._validation import check_fits_in_memory, check_positive, check_positive_int, check_probability, check_seed
 from .agents import double_integrator
 from .registry import FigureSpec, PaperRegistry, Study, TableSpec, check_settings, check_settings_type, setting
 from .sweep import Grid, cell_seed
@@ -275,6 +275,7 @@ def floats_per_step(method: str, n_agents: int, degree: float = 2.0) -> float:
     (24.0, 0.0)
     """
     _check_n_agents(n_agents)
+    degree = check_positive(degree, "degree", "(mean neighbours per agent)")
     table = {
         "centralized": 8.0 * (degree + 1), "local": 4.0, "song-mb": 0.0, "song-eb": 0.0,
         "vlahakis": 4.0, "set-membership": 4.0,
@@ -290,8 +291,10 @@ def _check_n_agents(n_agents: object) -> int:
 
 
 def _check_run(n_agents: object, noise: object, dropout: object, q_scale: object, runs: object,
-               settings: BenchmarkSettings) -> tuple[int, int]:
+               settings: BenchmarkSettings, seed: object = 0) -> tuple[int, int]:
     """The arguments of a simulation, checked: ``(n_agents, runs)``."""
+    if not isinstance(seed, np.random.SeedSequence):
+        check_seed(seed, "seed")
     check_settings_type(settings, BenchmarkSettings)
     n_agents = _check_n_agents(n_agents)
     if noise not in NOISES:
@@ -643,7 +646,7 @@ def simulate_team(
     >>> bool(0.5 < m["nees_own"].mean() < 1.5)          # a correct Kalman filter is consistent
     True
     """
-    n_agents, runs = _check_run(n_agents, noise, dropout, q_scale, runs, settings)
+    n_agents, runs = _check_run(n_agents, noise, dropout, q_scale, runs, settings, seed)
     if method not in TEAM_METHODS:
         raise ValueError(f"method must be one of {TEAM_METHODS}; got {method!r}")
     team = _team(int(n_agents), noise, float(q_scale), settings, graph)
@@ -757,7 +760,7 @@ def simulate_shared(
     >>> bool(best["rmse_own"].mean() <= ren["rmse_own"].mean())
     True
     """
-    n_agents, runs = _check_run(n_agents, noise, dropout, 1.0, runs, settings)
+    n_agents, runs = _check_run(n_agents, noise, dropout, 1.0, runs, settings, seed)
     if method not in SHARED_METHODS:
         raise ValueError(f"method must be one of {SHARED_METHODS}; got {method!r}")
     start = time.thread_time()

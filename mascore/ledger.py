@@ -309,6 +309,15 @@ def write_claims(
 
     if paper not in ledger_keys():
         raise ValueError(f"paper must be one of {ledger_keys()}; got {paper!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"seed must be the run's non-negative integer seed; got {seed!r}")
+    if not isinstance(created_by, str):
+        raise TypeError(f"created_by must be the command (a string); got {type(created_by).__name__}")
+    if isinstance(claims, str | bytes) or not isinstance(claims, Iterable):
+        raise TypeError(f"claims must be a sequence of Claim; got {type(claims).__name__}")
+    claims = list(claims)
+    if not all(isinstance(c, Claim) for c in claims):
+        raise TypeError(f"claims must be a sequence of Claim; got {sorted({type(c).__name__ for c in claims})}")
     ids = [c.id for c in claims]
     foreign = [i for i in ids if not i.startswith(f"{paper}/")]
     if foreign:
@@ -562,6 +571,13 @@ def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = ""
     >>> format_value([1.5, 2.25], labels=["mean", "rms"], unit="m")
     'mean: 1.5; rms: 2.25 (m)'
     """
+    for name, count in (("digits", digits), ("max_items", max_items)):
+        if isinstance(count, bool) or not isinstance(count, int | np.integer):
+            raise TypeError(f"{name} must be an integer >= 1; got {type(count).__name__} {count!r}")
+        if count < 1:
+            raise ValueError(f"{name} must be an integer >= 1; got {count}")
+    if not isinstance(unit, str):
+        raise TypeError(f"unit must be a string; got {type(unit).__name__}")
     suffix = f"\u00a0{unit}" if unit else ""
     if value is None:
         return "\u2014"

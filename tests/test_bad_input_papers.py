@@ -166,3 +166,36 @@ def test_ledger_refuses_bad_claims_and_digits_by_name():
     with pytest.raises(TypeError, match="x must be a real number"):
         format_number("1.0")
     assert format_number(np.float64(0.076812)) == "0.07681"
+
+
+def test_compare_and_ledger_helpers_name_their_arguments(tmp_path):
+    from mascore import ledger, report
+    from mascore.registry import all_figures, paper_registry, write_study
+
+    with pytest.raises(ValueError, match="degree"):
+        compare.floats_per_step("centralized", 8, degree=np.nan)
+    with pytest.raises(ValueError, match="seed"):
+        compare.simulate_team("local", 4, -1, runs=2)
+    with pytest.raises(ValueError, match="seed"):
+        compare.simulate_shared("no-fusion", 4, -1, runs=2)
+    claim = Claim("vlahakis/a", "w", "s", 2.0, 2.0, {"abs": 0.1})
+    with pytest.raises(ValueError, match="seed"):
+        ledger.write_claims([claim], tmp_path / "claims.json", "vlahakis", -1, "cmd")
+    with pytest.raises(TypeError, match="claims must be a sequence of Claim"):
+        ledger.write_claims(["a"], tmp_path / "claims.json", "vlahakis", 1, "cmd")
+    with pytest.raises(TypeError, match="digits"):
+        ledger.format_value(1.5, digits=2.5)
+    with pytest.raises(ValueError, match="max_items"):
+        ledger.format_value([1.0, 2.0], max_items=0)
+    with pytest.raises(ValueError, match="key 3"):
+        paper_registry(3)
+    with pytest.raises(TypeError, match="papers must be a sequence"):
+        all_figures("ren2005")
+    with pytest.raises(TypeError, match="paper must be a PaperRegistry"):
+        write_study("ren2005", ren.STUDY, None, tmp_path)
+    with pytest.raises(TypeError, match="records must be a sequence"):
+        report.verdict_summary(None)
+    with pytest.raises(ValueError, match=r"records\[0\]\['verdict'\]"):
+        report.attention_list([{"paper": "ren2005", "verdict": "maybe", "where": "w", "statement": "s"}])
+    with pytest.raises(TypeError, match="papers must be a sequence"):
+        report.errata_list("ren2005")
