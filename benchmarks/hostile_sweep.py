@@ -178,9 +178,10 @@ class Replaced:
 
 
 def _is_settings(value) -> bool:
-    """A settings dataclass instance: its fields declared with ``mascore.registry.setting``."""
+    """A settings dataclass instance: a ``...Settings`` class or fields declared with ``mascore.registry.setting``."""
     return (dataclasses.is_dataclass(value) and not isinstance(value, type)
-            and any("source" in f.metadata for f in dataclasses.fields(value)))
+            and (type(value).__name__.endswith("Settings")
+                 or any("source" in f.metadata for f in dataclasses.fields(value))))
 
 
 def field_spoils(value) -> list[tuple[str, str, object, bool]]:

@@ -143,7 +143,7 @@ class SetMembershipSettings:
     """
 
     A: tuple = setting(((0.0, -1.0), (1.0, 0.0)), where="eq. (23)", note="dynamics of the agents and the leader",
-            check=_square)
+                       check=_square)
     B: tuple = setting(((1.0, 0.0), (0.0, 1.0)), where="eq. (23)", note="input matrix")
     C: tuple = setting(((1.0, 0.0),), where="eq. (23)", note="each agent measures its first component")
     D: tuple = setting(((1.0,),), where="eq. (23)", note="output disturbance matrix")
@@ -152,62 +152,45 @@ class SetMembershipSettings:
     adjacency: tuple = setting(((0, 0, 0, 1), (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0)),
                                where="eq. (24), Fig. 1(a)",
                                note="row i, column j = 1: agent i hears agent j (off-diagonal rows of the Laplacian)",
-            low=0, check=_square)
+                               low=0, check=_square)
     pinning: tuple = setting((1.0, 0.0, 0.0, 0.0), where="Sec. 5, G = diag(1, 0, 0, 0)",
-                             note="pinning gains: only agent 1 hears the leader",
-            low=0)
+                             note="pinning gains: only agent 1 hears the leader", low=0)
     q_riccati: float = setting(0.1, where="Sec. 5", note="weight Q = 0.1 I₂ of the Riccati-like eq. (16)",
-            low=0, low_open=True)
+                               low=0, low_open=True)
     c0: float = setting(2.0 / 3.0, where="Sec. 5", note="centre of the circle C(c0, r0) of Lemma 2")
-    r0: float = setting(0.6, where="Sec. 5", note="radius of C(c0, r0)",
-            low=0, low_open=True)
-    alpha: float = setting(1.1, where="Sec. 5", note="α of the bound |A_c^k| ≤ α μ^k (Fig. 2(c))",
-            low=0, low_open=True)
-    mu: float = setting(0.9, where="Sec. 5", note="μ of the same bound",
-            low=0, low_open=True, high=1, high_open=True)
-    p0: float = setting(2.0, where="Sec. 5", unit=_STATE2, note="bound p0 of eq. (21)",
-            low=0, low_open=True)
-    q_bar: float = setting(0.1, where="Sec. 5", unit=_STATE2, note="bound q̄ of eq. (21)",
-            low=0, low_open=True)
+    r0: float = setting(0.6, where="Sec. 5", note="radius of C(c0, r0)", low=0, low_open=True)
+    alpha: float = setting(1.1, where="Sec. 5", note="α of the bound |A_c^k| ≤ α μ^k (Fig. 2(c))", low=0, low_open=True)
+    mu: float = setting(0.9, where="Sec. 5", note="μ of the same bound", low=0, low_open=True, high=1, high_open=True)
+    p0: float = setting(2.0, where="Sec. 5", unit=_STATE2, note="bound p0 of eq. (21)", low=0, low_open=True)
+    q_bar: float = setting(0.1, where="Sec. 5", unit=_STATE2, note="bound q̄ of eq. (21)", low=0, low_open=True)
     P0: tuple = setting(((2.0, 0.0), (0.0, 2.0)), where="Sec. 5", unit=_STATE2,
-                        note="initial ellipsoid shape of every agent",
-            check=_positive_definite)
+                        note="initial ellipsoid shape of every agent", check=_positive_definite)
     x0_hat: tuple = setting(((50.0, -50.0), (50.0, -50.0), (-50.0, 50.0), (-50.0, 50.0)), where="Sec. 5",
                             unit=_STATE, note="initial estimates of agents 1-4")
     x0_box: float = setting(1.0, where="Sec. 5", unit=_STATE,
-                            note="true x0 uniform in [x̂0, x̂0 + x0_box] componentwise",
-            low=0)
-    leader_x0: tuple = setting((5.0, 5.0), where="Sec. 5", unit=_STATE, note="initial state of the leader",
-            length=2)
+                            note="true x0 uniform in [x̂0, x̂0 + x0_box] componentwise", low=0)
+    leader_x0: tuple = setting((5.0, 5.0), where="Sec. 5", unit=_STATE, note="initial state of the leader", length=2)
     t_f: int = setting(60, where="Table 1: T = 61 steps, T_f = 60; Figs. 2-6 use the same",
-                       note="last time step; k = 0..T_f",
-            low=1)
+                       note="last time step; k = 0..T_f", low=1)
     alpha_w: tuple = setting((0.05, 0.5, 1.0), where="Table 1 and Sec. 5", unit=_STATE,
-                             note="w uniform in [-α_w, α_w]², one entry per row",
-            low=0)
+                             note="w uniform in [-α_w, α_w]², one entry per row", low=0)
     alpha_v: tuple = setting((0.05, 0.5, 1.0), where="Table 1 and Sec. 5", unit=_STATE,
-                             note="v uniform in [-α_v, α_v], one entry per row",
-            low=0)
+                             note="v uniform in [-α_v, α_v], one entry per row", low=0)
     q: tuple = setting((0.1, 1.0, 2.0), where="Table 1", unit=_STATE2, note="filter bound Q_k = q I₂ per row",
-            low=0, low_open=True)
+                       low=0, low_open=True)
     r: tuple = setting((0.1, 1.0, 1.0), where="Table 1", unit=_STATE2, note="filter bound R_k = r per row",
-            low=0, low_open=True)
+                       low=0, low_open=True)
     figure_row: int = setting(1, where="Sec. 5: 'the first row in Table 1 corresponds to Fig. 2(b)'",
-                              note="Table 1 row of Figs. 2-6",
-            low=1)
+                              note="Table 1 row of Figs. 2-6", low=1)
     figure_method: str = setting("sdp", source="chosen", where="the paper solves the SDPs with SDPT3; we use Clarabel",
-                                 note="filter of Figs. 2-6: 'sdp' or 'closed_form'",
-            choices=("sdp", "closed_form"))
+                                 note="filter of Figs. 2-6: 'sdp' or 'closed_form'", choices=("sdp", "closed_form"))
     table_method: str = setting("closed_form", source="chosen",
                                 where="same optimum as the SDPs, claim sdp-closed-form-agree; far faster",
-                                note="filter of the Table 1 study",
-            choices=("sdp", "closed_form"))
+                                note="filter of the Table 1 study", choices=("sdp", "closed_form"))
     n_runs: int = setting(100, source="chosen", where="the paper reports one unseeded draw per row",
-                          note="seeds per Table 1 row (run 0 is the ledger's value, the rest the spread)",
-            low=1)
+                          note="seeds per Table 1 row (run 0 is the ledger's value, the rest the spread)", low=1)
     k_max_check: int = setting(400, source="chosen", where="0.9^400 ≈ 5 × 10⁻¹⁹: the bound is checked to zero",
-                               note="last k of the check |A_c^k| ≤ α μ^k",
-            low=1)
+                               note="last k of the check |A_c^k| ≤ α μ^k", low=1)
 
     def __post_init__(self) -> None:
         check_settings(self)

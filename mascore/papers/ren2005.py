@@ -85,29 +85,21 @@ class KalmanConsensusSettings:
     """Every parameter of the ren2005 runs: the paper's (Sec. II-C) and the ones we chose."""
 
     # Fig. 1, the meet-for-dinner example
-    n_agents: int = setting(10, where="Sec. II-C", note="friends meeting for dinner (Fig. 1)",
-            low=2)
-    Q: float = setting(0.1, where="Sec. II-C", unit="h²", note="process noise of the consensus value",
-            low=0)
+    n_agents: int = setting(10, where="Sec. II-C", note="friends meeting for dinner (Fig. 1)", low=2)
+    Q: float = setting(0.1, where="Sec. II-C", unit="h²", note="process noise of the consensus value", low=0)
     Omega: float = setting(0.1, where="Sec. II-C", unit="h²", note="communication noise Ω_ij, every link",
-            low=0, low_open=True)
+                           low=0, low_open=True)
     xi0: tuple[float, ...] = setting(
         tuple(float(x) for x in range(1, 11)), source="chosen", where='paper: "uniformly assigned"', unit="h",
-        note="initial meeting times ξ_i(0) of agents 1..10",
-            kind="reals")
+        note="initial meeting times ξ_i(0) of agents 1..10", kind="reals")
     P_equal: float = setting(1.0, source="chosen", where='paper: "uniformly assigned"', unit="h²",
-                             note="initial variances (left column; all but agent 7 in the right)",
-            low=0, low_open=True)
+                             note="initial variances (left column; all but agent 7 in the right)", low=0, low_open=True)
     confident_agent: int = setting(7, source="derived", where="the agent whose ξ_i(0) = 7",
-                                   note="the confident agent of Fig. 1's right column (1-based)",
-            low=1)
-    P_confident: float = setting(0.001, where="Sec. II-C", unit="h²", note="its initial variance",
-            low=0, low_open=True)
-    n_steps: int = setting(100, source="chosen", where="not given", note="horizon of Fig. 1 (steps)",
-            low=1)
+                                   note="the confident agent of Fig. 1's right column (1-based)", low=1)
+    P_confident: float = setting(0.001, where="Sec. II-C", unit="h²", note="its initial variance", low=0, low_open=True)
+    n_steps: int = setting(100, source="chosen", where="not given", note="horizon of Fig. 1 (steps)", low=1)
     max_call: int = setting(5, source="chosen", where='paper: "a random length of time"', unit="steps",
-                            note="calls last 1..max_call steps, uniformly; the whole team is re-paired at once",
-            low=1)
+                            note="calls last 1..max_call steps, uniformly; the whole team is re-paired at once", low=1)
     fig1_noise: bool = setting(False, source="chosen", where="not said; the figure shows exact agreement",
                                note="draw communication noise in Fig. 1 (Ω enters the weights either way)")
     include_self: bool = setting(True, where="eqs. (1), (4): g_ii = 1",
@@ -115,49 +107,36 @@ class KalmanConsensusSettings:
     # Theorems 3.2 and 3.9 on switching graphs
     switch_xi0: tuple[float, ...] = setting(
         tuple(float(x) for x in range(1, 7)), source="chosen", where="the paper simulates no switching",
-        note="initial states of the six agents of Figs. 2-3",
-            length=6)
+        note="initial states of the six agents of Figs. 2-3", length=6)
     switch_P0: float = setting(1.0, source="chosen", where="the paper simulates no switching",
-                               note="their initial variances",
-            low=0, low_open=True)
+                               note="their initial variances", low=0, low_open=True)
     dwell_steps: int = setting(2, source="chosen", where="the paper simulates no switching",
-                               note="steps per graph, discrete time",
-            low=1)
+                               note="steps per graph, discrete time", low=1)
     switch_steps: int = setting(800, source="chosen", where="the paper simulates no switching",
-                                note="horizon, discrete time (steps)",
-            low=1)
+                                note="horizon, discrete time (steps)", low=1)
     dwell_time: float = setting(1.0, source="chosen", where="the paper simulates no switching", unit="s",
-                                note="time per graph, continuous time",
-            low=0, low_open=True)
+                                note="time per graph, continuous time", low=0, low_open=True)
     t_final: float = setting(200.0, source="chosen", where="the paper simulates no switching", unit="s",
-                             note="horizon, continuous time",
-            low=0, low_open=True)
+                             note="horizon, continuous time", low=0, low_open=True)
     # communication noise (the paper's model, not simulated there)
     noise_runs: int = setting(200, source="chosen", where="the paper shows no noisy run",
-                              note="pairing schedules, discrete noise study (Fig. 1 setting, equal P)",
-            low=1)
+                              note="pairing schedules, discrete noise study (Fig. 1 setting, equal P)", low=1)
     noise_steps: int = setting(300, source="chosen", where="the paper shows no noisy run",
-                               note="their horizon (steps)",
-            low=1)
+                               note="their horizon (steps)", low=1)
     noise_Omega_small: float = setting(0.01, source="chosen", where="the paper shows no noisy run", unit="h²",
-                                       note="the smaller Ω compared with the paper's",
-            low=0, low_open=True)
+                                       note="the smaller Ω compared with the paper's", low=0, low_open=True)
     noise_paths: int = setting(100, source="chosen", where="the paper shows no noisy run",
-                               note="paths, continuous-time noise on the fixed Fig. 2 graph",
-            low=1)
+                               note="paths, continuous-time noise on the fixed Fig. 2 graph", low=1)
     noise_t_final: float = setting(40.0, source="chosen", where="the paper shows no noisy run", unit="s",
-                                   note="their horizon",
-            low=0, low_open=True)
+                                   note="their horizon", low=0, low_open=True)
     noise_dt: float = setting(0.01, source="chosen", where="the paper shows no noisy run", unit="s",
-                              note="Euler-Maruyama step",
-            low=0, low_open=True)
+                              note="Euler-Maruyama step", low=0, low_open=True)
     # beyond the paper
     bias_runs: int = setting(1000, source="chosen", where="beyond the paper",
-                             note="pairing schedules in the bias study (Fig. 1 right-column data)",
-            low=1)
+                             note="pairing schedules in the bias study (Fig. 1 right-column data)", low=1)
     ideal_Omega: float = setting(1e-6, source="chosen", where="beyond the paper", unit="h²",
                                  note="Ω of the variant closest to central fusion (Q = 0, no self term)",
-            low=0, low_open=True)
+                                 low=0, low_open=True)
 
     def __post_init__(self) -> None:
         check_settings(self)

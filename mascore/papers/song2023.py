@@ -107,38 +107,27 @@ class RendezvousSettings:
     Change a copy with :func:`dataclasses.replace` (``replace(SETTINGS, fig3_runs=10)``).
     """
 
-    n_agents: int = setting(8, where="Table I", note="number of agents $N$",
-            low=2)
-    n: int = setting(2, where="Table I", note="dimension $n$ of the plane",
-            low=1)
-    dt: float = setting(0.1, where="Table I", unit="s", note="sampling time $\\Delta t$",
-            low=0, low_open=True)
-    sensing_range: float = setting(150.0, where="Table I", unit="m", note="sensing range $r$",
-            low=0, low_open=True)
+    n_agents: int = setting(8, where="Table I", note="number of agents $N$", low=2)
+    n: int = setting(2, where="Table I", note="dimension $n$ of the plane", low=1)
+    dt: float = setting(0.1, where="Table I", unit="s", note="sampling time $\\Delta t$", low=0, low_open=True)
+    sensing_range: float = setting(150.0, where="Table I", unit="m", note="sensing range $r$", low=0, low_open=True)
     rho1: float = setting(0.5, where="Table I", unit="1/s²", note="rendezvous gain $\\rho_1$ on positions",
-            low=0, low_open=True)
+                          low=0, low_open=True)
     rho2: float = setting(1.5, where="Table I", unit="1/s", note="rendezvous gain $\\rho_2$ on velocities",
-            low=0, low_open=True)
-    fig2_q: float = setting(1.0, where="Sec. V.A, Fig. 2", note="$Q$ = this $\\times I_{2n}$ per agent",
-            low=0)
-    fig2_r: float = setting(1.0, where="Sec. V.A, Fig. 2", note="$R$ = this $\\times I_{2nN}$",
-            low=0, low_open=True)
+                          low=0, low_open=True)
+    fig2_q: float = setting(1.0, where="Sec. V.A, Fig. 2", note="$Q$ = this $\\times I_{2n}$ per agent", low=0)
+    fig2_r: float = setting(1.0, where="Sec. V.A, Fig. 2", note="$R$ = this $\\times I_{2nN}$", low=0, low_open=True)
     fig2_topology: str = setting("fixed, from the initial positions", where="Sec. V.A, Fig. 2",
                                  note="the disk graph of radius $r$ at $t = 0$, kept for the whole run")
     fig2_max_edge_fraction: float = setting(
         0.6, source="chosen", where="Fig. 2(a) shows non-neighbours; not quantified",
-        note="Fig. 2 start redrawn until at most this share of the pairs are neighbours",
-            low=0, low_open=True, high=1)
+        note="Fig. 2 start redrawn until at most this share of the pairs are neighbours", low=0, low_open=True, high=1)
     fig2_runs: int = setting(
         50, source="chosen", where="the paper plots one run",
-        note="noise realizations on the Fig. 2 topology (NEES statistics); run 1 is plotted",
-            low=1)
-    fig3_q: float = setting(1.0, where="Sec. V.A, Fig. 3", note="$Q$ = this $\\times I_{2n}$ per agent",
-            low=0)
-    fig3_r: float = setting(100.0, where="Sec. V.A, Fig. 3", note="$R$ = this $\\times I_{2nN}$",
-            low=0, low_open=True)
-    fig3_runs: int = setting(50, where="Sec. V.A, Fig. 3", note="Monte Carlo runs, random initial positions",
-            low=1)
+        note="noise realizations on the Fig. 2 topology (NEES statistics); run 1 is plotted", low=1)
+    fig3_q: float = setting(1.0, where="Sec. V.A, Fig. 3", note="$Q$ = this $\\times I_{2n}$ per agent", low=0)
+    fig3_r: float = setting(100.0, where="Sec. V.A, Fig. 3", note="$R$ = this $\\times I_{2nN}$", low=0, low_open=True)
+    fig3_runs: int = setting(50, where="Sec. V.A, Fig. 3", note="Monte Carlo runs, random initial positions", low=1)
     fig3_topology: str = setting(
         "fixed per run, from its initial positions", source="chosen",
         where="the paper fixes the topology only for Fig. 2 and does not say for Fig. 3",
@@ -146,35 +135,27 @@ class RendezvousSettings:
              "eq. (21) uses the neighbours' estimates. Remark 6's reading (all agents' estimates, complete "
              "control graph, same sensing) is run beside it")
     horizon: float = setting(40.0, source="chosen", where="not given; the spread settles within about 15 s",
-                             unit="s", note="length of every run",
-            low=0, low_open=True)
+                             unit="s", note="length of every run", low=0, low_open=True)
     converged_from: float = setting(20.0, source="chosen", where="'converged state' is not defined", unit="s",
-                                    note="converged values: time average from here to the end",
-            low=0)
+                                    note="converged values: time average from here to the end", low=0)
     box: float = setting(400.0, source="chosen", where="'random initial positions' in the paper", unit="m",
                          note="initial positions uniform in a square of this side, redrawn until the disk "
-                              "graph is connected and system (43) observable for every agent",
-            low=0, low_open=True)
+                              "graph is connected and system (43) observable for every agent", low=0, low_open=True)
     v0: float = setting(5.0, source="chosen", where="not given", unit="m/s",
-                        note="initial velocities uniform in $\\pm$ this per axis",
-            low=0)
+                        note="initial velocities uniform in $\\pm$ this per axis", low=0)
     sigma_p0: float = setting(10.0, source="chosen", where="not given", unit="m",
                               note="std of every initial position estimate error; all agents start from the "
                                    "same team estimate, $\\Sigma[0] = 1 1^T \\otimes P_0$ (our reading of "
-                                   "Assumption 2)",
-            low=0, low_open=True)
+                                   "Assumption 2)", low=0, low_open=True)
     sigma_v0: float = setting(1.0, source="chosen", where="not given", unit="m/s",
-                              note="std of every initial velocity estimate error",
-            low=0, low_open=True)
+                              note="std of every initial velocity estimate error", low=0, low_open=True)
     process_noise_q: tuple = setting((1.0, 0.1, 0.01), source="chosen", where="beyond the paper",
-                                     note="process-noise study: $Q = q I_{2n}$ for these $q$, $R$ of Fig. 3",
-            low=0)
+                                     note="process-noise study: $Q = q I_{2n}$ for these $q$, $R$ of Fig. 3", low=0)
     process_noise_runs: int = setting(6, source="chosen", where="beyond the paper",
-                                      note="runs per $q$ of the process-noise study",
-            low=1)
+                                      note="runs per $q$ of the process-noise study", low=1)
     process_noise_horizon: float = setting(24.0, source="chosen", where="beyond the paper", unit="s",
                                            note="horizon of the process-noise study (converged = second half)",
-            low=0, low_open=True)
+                                           low=0, low_open=True)
 
     def __post_init__(self) -> None:
         check_settings(self)

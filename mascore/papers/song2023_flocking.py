@@ -97,84 +97,62 @@ class FlockingSettings:
     :func:`dataclasses.replace` (``replace(SETTINGS, n_runs=10)``).
     """
 
-    n_agents: int = setting(8, where="Table I", note="number of agents $N$",
-            low=2)
-    n_dim: int = setting(2, where="Table I", note="dimension $n$ of the plane",
-            low=1)
-    dt: float = setting(0.1, where="Table I", unit="s", note="sampling time $\\Delta t$",
-            low=0, low_open=True)
-    sensing_range: float = setting(150.0, where="Table I", unit="m", note="sensing range $r$",
-            low=0, low_open=True)
-    rho3: float = setting(3.0, where="Table I", unit="1/s", note="velocity-alignment gain $\\rho_3$",
-            low=0)
-    rho4: float = setting(1.0, where="Table I", note="distance-keeping gain $\\rho_4$",
-            low=0)
-    rho5: float = setting(2.0, where="Table I", unit="1/s", note="radial damping gain $\\rho_5$ of $\\phi_2$",
-            low=0)
-    rho6: float = setting(1.0, where="Table I", unit="1/s²", note="spring gain $\\rho_6$ of $\\phi_2$",
-            low=0)
-    beta: float = setting(0.33, where="Table I", note="decay rate $\\beta$ of $\\phi_1$",
-            low=0, low_open=True)
+    n_agents: int = setting(8, where="Table I", note="number of agents $N$", low=2)
+    n_dim: int = setting(2, where="Table I", note="dimension $n$ of the plane", low=1)
+    dt: float = setting(0.1, where="Table I", unit="s", note="sampling time $\\Delta t$", low=0, low_open=True)
+    sensing_range: float = setting(150.0, where="Table I", unit="m", note="sensing range $r$", low=0, low_open=True)
+    rho3: float = setting(3.0, where="Table I", unit="1/s", note="velocity-alignment gain $\\rho_3$", low=0)
+    rho4: float = setting(1.0, where="Table I", note="distance-keeping gain $\\rho_4$", low=0)
+    rho5: float = setting(2.0, where="Table I", unit="1/s", note="radial damping gain $\\rho_5$ of $\\phi_2$", low=0)
+    rho6: float = setting(1.0, where="Table I", unit="1/s²", note="spring gain $\\rho_6$ of $\\phi_2$", low=0)
+    beta: float = setting(0.33, where="Table I", note="decay rate $\\beta$ of $\\phi_1$", low=0, low_open=True)
     spring_length: float = setting(120.0, where="Table I", unit="m",
                                    note="rest length $\\mathcal R$ of the spring; the flock's radius bound",
-            low=0, low_open=True)
-    process_noise: float = setting(1.0, where="Sec. V", note="$Q$ = this $\\times I_{2n}$ per agent",
-            low=0)
+                                   low=0, low_open=True)
+    process_noise: float = setting(1.0, where="Sec. V", note="$Q$ = this $\\times I_{2n}$ per agent", low=0)
     measurement_noise_fig4: float = setting(
         1.0, where="Sec. V-B: as the rendezvous example, Fig. 2",
-        note="Fig. 4: $R$ = this $\\times I$ per measured agent",
-            low=0, low_open=True)
+        note="Fig. 4: $R$ = this $\\times I$ per measured agent", low=0, low_open=True)
     measurement_noise_fig5: float = setting(10.0, where="Sec. V-B",
                                             note="Figs. 5-6: $R$ = this $\\times I$ per measured agent",
-            low=0, low_open=True)
-    n_runs: int = setting(50, where="Sec. V-B", note="Monte Carlo runs of Figs. 5-6",
-            low=1)
-    observer: int = setting(1, where="Fig. 4", note="agent (numbered from 1) whose filter Fig. 4 shows",
-            low=1)
+                                            low=0, low_open=True)
+    n_runs: int = setting(50, where="Sec. V-B", note="Monte Carlo runs of Figs. 5-6", low=1)
+    observer: int = setting(1, where="Fig. 4", note="agent (numbered from 1) whose filter Fig. 4 shows", low=1)
     t_final: float = setting(60.0, source="chosen", where="not given; every case settles within about 20 s",
-                             unit="s", note="horizon of every run",
-            low=0, low_open=True)
+                             unit="s", note="horizon of every run", low=0, low_open=True)
     box: float = setting(300.0, source="chosen", where="'random' in the paper", unit="m",
                          note="Figs. 5-6: initial positions uniform in a square of this side (for N = 8; "
                               "scaled by $\\sqrt{N/8}$), redrawn until the proximity graph is connected",
-            low=0, low_open=True)
+                              low=0, low_open=True)
     v0_max: float = setting(5.0, source="chosen", where="not given", unit="m/s",
-                            note="initial velocities uniform in $\\pm$ this per axis",
-            low=0)
+                            note="initial velocities uniform in $\\pm$ this per axis", low=0)
     fig4_spacing: float = setting(100.0, source="chosen", where="Fig. 4 shows its start only as a picture",
                                   unit="m", note="Fig. 4: $2\\times 4$ grid of this spacing, agent 1 at a corner",
-            low=0, low_open=True)
+                                  low=0, low_open=True)
     sigma0_position: float = setting(10.0, source="chosen", where="'carefully selected' in the paper", unit="m",
                                      note="std of every prior position error, same $\\Sigma_0$ for all agents "
-                                          "(Assumption 2)",
-            low=0, low_open=True)
+                                          "(Assumption 2)", low=0, low_open=True)
     sigma0_velocity: float = setting(1.0, source="chosen", where="as above", unit="m/s",
-                                     note="std of every prior velocity error",
-            low=0, low_open=True)
+                                     note="std of every prior velocity error", low=0, low_open=True)
     min_distance: float = setting(1e-6, source="chosen", where="coincident agents are not discussed", unit="m",
                                   note="$\\lVert p_{ij}\\rVert$ floored at this $d_{\\min}$ in $\\phi_2$",
-            low=0, low_open=True)
+                                  low=0, low_open=True)
     settled_window: float = setting(20.0, source="chosen", where="'converged' is not defined", unit="s",
                                     note="converged values: time average over the last window of the run",
-            low=0, low_open=True)
+                                    low=0, low_open=True)
     transient: float = setting(5.0, source="chosen", where="Fig. 4 claim", unit="s",
-                               note="Fig. 4 errors are judged from this time on",
-            low=0)
+                               note="Fig. 4 errors are judged from this time on", low=0)
     similar_fraction: float = setting(
         0.25, source="chosen", where="'similar' in Fig. 5 is not quantified",
-        note="(iii) similar to (ii): $\\lvert(iii)-(ii)\\rvert \\le$ this $\\times\\,((i)-(ii))$",
-            low=0)
+        note="(iii) similar to (ii): $\\lvert(iii)-(ii)\\rvert \\le$ this $\\times\\,((i)-(ii))$", low=0)
     beyond_sensing_ranges: tuple = setting((130.0, 150.0, 200.0, 250.0), source="chosen",
                                            where="beyond the paper", unit="m", note="sweep over $r$ with N = 8",
-            low=0, low_open=True)
+                                           low=0, low_open=True)
     beyond_sizes: tuple = setting((4, 8, 12, 16, 24), source="chosen", where="beyond the paper",
-                                  note="sweep over $N$ with r = 150 m",
-            low=2)
-    beyond_runs: int = setting(2, source="chosen", where="beyond the paper", note="runs per point of the sweep",
-            low=1)
+                                  note="sweep over $N$ with r = 150 m", low=2)
+    beyond_runs: int = setting(2, source="chosen", where="beyond the paper", note="runs per point of the sweep", low=1)
     beyond_t_final: float = setting(40.0, source="chosen", where="beyond the paper", unit="s",
-                                    note="horizon of the sweep's runs",
-            low=0, low_open=True)
+                                    note="horizon of the sweep's runs", low=0, low_open=True)
 
     def __post_init__(self) -> None:
         check_settings(self)

@@ -118,47 +118,38 @@ class ObserverSettings:
     """Every parameter of the Example 1 run (Sec. 5) and of the checks beyond it."""
 
     A: tuple = setting(((0.0, 1.0), (-1.0, -0.1)), where="Sec. 5, Example 1",
-                       note="agent (26): state (position, velocity)",
-            check=_square)
+                       note="agent (26): state (position, velocity)", check=_square)
     Bbar: tuple = setting(((0.0,), (1.0,)), where="Sec. 5, Example 1", note="the disturbance enters the velocity")
     C: tuple = setting(((1.0, 0.0),), where="Sec. 5, Example 1", note="each agent measures its position")
-    n_agents: int = setting(5, where="Sec. 5, Example 1", note="number of agents",
-            low=3)
+    n_agents: int = setting(5, where="Sec. 5, Example 1", note="number of agents", low=3)
     graph: str = setting("ring", where="Sec. 5, 'cyclic nearest neighbour interconnection'",
                          note="unit edge weights, Laplacian D − A (ring, path, complete or star)",
-            choices=tuple(_GRAPHS))
-    Q1: float = setting(10.0, where="Sec. 5", note="weight on the absolute output error",
-            low=0, low_open=True)
-    R: float = setting(1.0, where="Sec. 5", note="weight on the disturbance",
-            low=0, low_open=True)
-    Q2: tuple = setting((5.0, 25.0), where="Sec. 5, Figs. 1 and 2", note="weight on the relative output error",
-            low=0)
+                         choices=tuple(_GRAPHS))
+    Q1: float = setting(10.0, where="Sec. 5", note="weight on the absolute output error", low=0, low_open=True)
+    R: float = setting(1.0, where="Sec. 5", note="weight on the disturbance", low=0, low_open=True)
+    Q2: tuple = setting((5.0, 25.0), where="Sec. 5, Figs. 1 and 2", note="weight on the relative output error", low=0)
     initial_error: float = setting(1.0, source="chosen", where="the paper: 'arbitrary initial estimate error'",
                                    unit="m, m/s", note="initial errors uniform in [−e, e], drawn from the seed",
-            low=0, low_open=True)
+                                   low=0, low_open=True)
     t_end: float = setting(30.0, source="chosen", where="not given", unit="s", note="horizon of Figs. 1-2",
-            low=0, low_open=True)
+                           low=0, low_open=True)
     dt: float = setting(0.002, source="chosen", where="not given", unit="s",
                         note="output step of Figs. 1-2 (exact discretization; resolves the fast pole)",
-            low=0, low_open=True)
+                        low=0, low_open=True)
     settle_fraction: float = setting(0.01, source="chosen", where="'faster convergence' is not quantified",
                                      note="settling time: disagreement below this fraction of its start",
-            low=0, low_open=True, high=1, high_open=True)
+                                     low=0, low_open=True, high=1, high_open=True)
     phi_grid: tuple = setting((-0.3, 2.4, 55), source="chosen", where="beyond the paper",
-                              note="Φ grid (from, to, points) of the profile Γ(Φ)",
-            length=3, check=_phi_grid)
+                              note="Φ grid (from, to, points) of the profile Γ(Φ)", length=3, check=_phi_grid)
     flat_step: float = setting(0.05, source="chosen", where="our test",
                                note="Φ counts as determined if Γ rises (10⁻⁶ relative) at Φ ± this step",
-            low=0, low_open=True)
+                               low=0, low_open=True)
     lqr_q1: float = setting(1.0, source="chosen", where="the paper has no control example",
-                            note="controller comparison: Q1 = q I",
-            low=0)
+                            note="controller comparison: Q1 = q I", low=0, low_open=True)
     lqr_q2: float = setting(1.0, source="chosen", where="the paper has no control example",
-                            note="controller comparison: Q2 = q I",
-            low=0)
+                            note="controller comparison: Q2 = q I", low=0)
     lqr_r: float = setting(1.0, source="chosen", where="the paper has no control example",
-                           note="controller comparison: R = r I",
-            low=0, low_open=True)
+                           note="controller comparison: R = r I", low=0, low_open=True)
 
     def __post_init__(self) -> None:
         check_settings(self)
