@@ -207,8 +207,8 @@ class SetMembershipSettings:
                 raise ValueError(f"SetMembershipSettings.{name} must have one row per agent (rows of x0_hat, "
                                  f"{n_agents}); got {len(getattr(self, name))}")
         per_run = 8.0 * (self.t_f + 1) * n_agents * (4 * n + 2 * n * n + len(self.C))
-        check_fits_in_memory(per_run * self.n_runs * len(self.q), "SetMembershipSettings.n_runs",
-                             "the trajectories and ellipsoids of every run of Table 1")
+        check_fits_in_memory(per_run * self.n_runs, "SetMembershipSettings.n_runs",
+                             "the trajectories and ellipsoids of the runs of one Table 1 row")
         lengths = {len(self.alpha_w), len(self.alpha_v), len(self.q), len(self.r)}
         if lengths != {len(TABLE1_PUBLISHED)}:
             raise ValueError(f"alpha_w, alpha_v, q and r need one entry per Table 1 row "

@@ -154,8 +154,8 @@ class KalmanConsensusSettings:
                              "the pairings and states of the noise study")
         check_fits_in_memory(n2 * min(self.bias_runs, 500) * (self.n_steps + 1), "KalmanConsensusSettings.bias_runs",
                              "the pairings of one chunk of the bias study")
-        check_fits_in_memory(8.0 * len(self.switch_xi0) * self.noise_paths * (self.noise_t_final / self.noise_dt),
-                             "KalmanConsensusSettings.noise_paths", "the Euler-Maruyama paths")
+        check_fits_in_memory(8.0 * 2 * len(self.switch_xi0) * self.noise_paths * 401,
+                             "KalmanConsensusSettings.noise_paths", "the Euler-Maruyama paths at 401 times")
 
     @property
     def fig1_xi0(self) -> np.ndarray:

@@ -163,10 +163,10 @@ class RendezvousSettings:
             if int(round(getattr(self, name) / self.dt)) < 1:
                 raise ValueError(f"RendezvousSettings.{name} must be at least half a sampling time "
                                  f"({self.dt / 2:g} s) to give one step; got {getattr(self, name)!r}")
-        team = 8.0 * self.n_agents**2 * 2 * self.n * (self.horizon / self.dt + 1)  # whole-team estimates per step
+        per_run = 8.0 * self.n_agents * (2 * self.n + 3) * (self.horizon / self.dt + 1)  # states, errors, NEES
         for name in ("fig2_runs", "fig3_runs", "process_noise_runs"):
-            check_fits_in_memory(team * getattr(self, name), f"RendezvousSettings.{name}",
-                                 "the whole-team estimates of every agent and step")
+            check_fits_in_memory(per_run * getattr(self, name), f"RendezvousSettings.{name}",
+                                 "the states and errors of every run, agent and step")
 
     @property
     def n_steps(self) -> int:
@@ -374,8 +374,8 @@ def _check_run_arguments(seed: object, n_runs: object, horizon: object, dt: floa
                              f"got {horizon!r}")
     if n_runs is not None:
         n_steps = (horizon if horizon is not None else settings.horizon) / dt
-        check_fits_in_memory(8.0 * settings.n_agents**2 * 2 * settings.n * (n_steps + 1) * n_runs, "n_runs",
-                             "the whole-team estimates of every agent and step")
+        check_fits_in_memory(8.0 * settings.n_agents * (2 * settings.n + 3) * (n_steps + 1) * n_runs, "n_runs",
+                             "the states and errors of every run, agent and step")
 
 
 # ----------------------------------------------------------------------------

@@ -164,11 +164,11 @@ class FlockingSettings:
                 raise ValueError(f"FlockingSettings.{name} must be at least half a sampling time "
                                  f"({self.dt / 2:g} s) to give one step; got {getattr(self, name)!r}")
         m = 2 * self.n_dim
-        per_run = 8.0 * (self.n_agents**2 * m + self.n_agents * m * m) * (self.t_final / self.dt + 1)
-        check_fits_in_memory(3 * per_run * self.n_runs, "FlockingSettings.n_runs",
-                             "the estimates and covariances of every run, agent and step")
+        per_step = 8.0 * (2 * self.n_agents * m + self.n_agents**2)  # states, estimates, graph
+        check_fits_in_memory(3 * per_step * (self.t_final / self.dt + 1) * self.n_runs, "FlockingSettings.n_runs",
+                             "the states, estimates and graphs of every case, run and step")
         biggest = max(self.beyond_sizes)
-        check_fits_in_memory(8.0 * (biggest**2 * m + biggest * m * m) * (self.beyond_t_final / self.dt + 1)
+        check_fits_in_memory(3 * 8.0 * (2 * biggest * m + biggest**2) * (self.beyond_t_final / self.dt + 1)
                              * self.beyond_runs, "FlockingSettings.beyond_runs", "the runs of the sweep")
 
     @property
