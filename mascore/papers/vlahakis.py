@@ -487,6 +487,7 @@ def settling_time(t: np.ndarray, signal: np.ndarray, fraction: float) -> float:
     """First time after which ``max_i |signal[:, i]|`` stays below `fraction` of its initial value.
 
     `t` is (T,), increasing; `signal` is (T, N) with finite entries; `fraction` is a finite number > 0.
+    Returns ``inf`` when the signal has not settled by the last time (it never does within the horizon).
     """
     t = float_array(t, "t")
     if t.ndim != 1 or t.size == 0:
