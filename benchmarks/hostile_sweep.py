@@ -353,6 +353,7 @@ def _report(title: str, rows: list[dict]) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    global TIME_LIMIT_S
     parser = argparse.ArgumentParser(prog="python -m benchmarks.hostile_sweep", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     rec = sub.add_parser("record", help="record baseline calls from the core unit tests")
@@ -363,6 +364,8 @@ def main(argv: list[str] | None = None) -> int:
     swp = sub.add_parser("sweep", help="spoil the baselines one argument at a time")
     swp.add_argument("baselines", type=Path)
     swp.add_argument("--csv", type=Path, default=None)
+    swp.add_argument("--time-limit", type=int, default=TIME_LIMIT_S,
+                     help=f"seconds before a call counts as a hang (default {TIME_LIMIT_S}; raise it on a loaded machine)")
     for p in (rec, swp):
         p.add_argument("--modules", nargs="+", default=None,
                        help="modules of mascore to sweep (default: the concept modules), e.g. papers.ren2005")
@@ -370,6 +373,7 @@ def main(argv: list[str] | None = None) -> int:
     modules = tuple(args.modules) if args.modules else None
     if args.command == "record":
         return int(record(args.out, [t for t in args.tests if Path(t).exists()], modules))
+    TIME_LIMIT_S = args.time_limit
     sweep(args.baselines, args.csv, modules)
     return 0
 
