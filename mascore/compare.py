@@ -313,15 +313,16 @@ def _check_run(n_agents: object, noise: object, dropout: object, q_scale: object
 # noise
 
 
-def _check_cell(cell: object, name: str = "cell") -> Mapping[str, Any]:
-    """A cell of the grid, checked: its task, method, team size, noise, drop-out and q_scale (team task)."""
+def _check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[str, Any]:
+    """A cell of the grid, checked: its task, method, team size, drop-out and (`full`) noise and q_scale."""
     if not isinstance(cell, Mapping):
         raise TypeError(f"{name} must be a mapping of the cell's coordinates (task, method, n_agents, noise, "
                         f"dropout, q_scale); got {type(cell).__name__}")
     task = cell.get("task")
     if task not in ("team", "shared"):
         raise ValueError(f"{name}['task'] must be 'team' or 'shared'; got {task!r}")
-    required = ("method", "n_agents", "noise", "dropout") + (("q_scale",) if task == "team" else ())
+    required = ("method", "n_agents", "dropout") + (("noise",) if full else ()) + (
+        ("q_scale",) if full and task == "team" else ())
     missing = [k for k in required if k not in cell]
     if missing:
         raise ValueError(f"{name} lacks the coordinates {missing} (a {task} cell needs {list(required)})")
@@ -329,14 +330,14 @@ def _check_cell(cell: object, name: str = "cell") -> Mapping[str, Any]:
     if cell["method"] not in methods:
         raise ValueError(f"{name}['method'] of a {task} cell must be one of {methods}; got {cell['method']!r}")
     check_positive_int(cell["n_agents"], f"{name}['n_agents']", minimum=3)
-    if cell["noise"] not in NOISES:
+    if "noise" in cell and cell["noise"] not in NOISES:
         raise ValueError(f"{name}['noise'] must be one of {NOISES}; got {cell['noise']!r}")
     if check_probability(cell["dropout"], f"{name}['dropout']") >= 1.0:
         raise ValueError(f"{name}['dropout'] must be below 1; got {cell['dropout']!r}")
-    if task == "team":
+    if task == "team" and "q_scale" in cell:
         check_positive(cell["q_scale"], f"{name}['q_scale']")
-        if cell.get("graph", "ring") not in GRAPHS:
-            raise ValueError(f"{name}['graph'] must be one of {GRAPHS}; got {cell.get('graph')!r}")
+    if task == "team" and cell.get("graph", "ring") not in GRAPHS:
+        raise ValueError(f"{name}['graph'] must be one of {GRAPHS}; got {cell.get('graph')!r}")
     return cell
 
 
@@ -1137,7 +1138,7 @@ def cell_cost(cell: Mapping[str, Any]) -> float:
     >>> cell_cost({**base, "method": "song-eb"}) > cell_cost({**base, "method": "local"})
     True
     """
-    _check_cell(cell)
+    _check_cell(cell, full=False)
     if cell["task"] != "team":
         return 1.0
     n = float(cell["n_agents"])
