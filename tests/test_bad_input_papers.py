@@ -199,3 +199,13 @@ def test_compare_and_ledger_helpers_name_their_arguments(tmp_path):
         report.attention_list([{"paper": "ren2005", "verdict": "maybe", "where": "w", "statement": "s"}])
     with pytest.raises(TypeError, match="papers must be a sequence"):
         report.errata_list("ren2005")
+
+
+def test_rendezvous_setup_checks_itself():
+    s = rdv.setup()
+    with pytest.raises(ValueError, match=r"RendezvousSetup\.box"):
+        dataclasses.replace(s, box=-400.0)
+    with pytest.raises(ValueError, match=r"RendezvousSetup\.A must have shape \(4, 4\)"):
+        dataclasses.replace(s, A=np.eye(3))
+    with pytest.raises(ValueError, match=r"RendezvousSetup\.K contains NaN"):
+        dataclasses.replace(s, K=np.full((2, 4), np.nan))

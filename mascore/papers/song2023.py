@@ -218,6 +218,19 @@ class RendezvousSetup:
     sigma_p0: float = SETTINGS.sigma_p0
     sigma_v0: float = SETTINGS.sigma_v0
 
+    def __post_init__(self) -> None:
+        check_positive_int(self.n_agents, "RendezvousSetup.n_agents", minimum=2)
+        check_positive_int(self.n, "RendezvousSetup.n")
+        for name in ("dt", "sensing_range", "box", "sigma_p0", "sigma_v0"):
+            check_positive(getattr(self, name), f"RendezvousSetup.{name}")
+        check_positive(self.v0, "RendezvousSetup.v0", allow_zero=True)
+        m = 2 * self.n
+        for name, shape in (("A", (m, m)), ("B", (m, self.n)), ("K", (self.n, m))):
+            value = float_array(getattr(self, name), f"RendezvousSetup.{name}")
+            if value.shape != shape:
+                raise ValueError(f"RendezvousSetup.{name} must have shape {shape} (n = {self.n}); got {value.shape}")
+            require_finite(value, f"RendezvousSetup.{name}")
+
     @property
     def m(self) -> int:
         """Agent state dimension 2n."""
