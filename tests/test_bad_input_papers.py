@@ -209,3 +209,11 @@ def test_rendezvous_setup_checks_itself():
         dataclasses.replace(s, A=np.eye(3))
     with pytest.raises(ValueError, match=r"RendezvousSetup\.K contains NaN"):
         dataclasses.replace(s, K=np.full((2, 4), np.nan))
+
+
+def test_disturbance_setting_checks_itself():
+    row = sm.SETTINGS.rows[0]
+    with pytest.raises(ValueError, match=r"DisturbanceSetting\.q must be a finite number > 0"):
+        dataclasses.replace(row, q=-0.1)
+    with pytest.raises(ValueError, match=r"DisturbanceSetting\.alpha_w"):
+        dataclasses.replace(row, alpha_w=np.nan)

@@ -113,6 +113,12 @@ class DisturbanceSetting:
     paper_mean: float
     paper_rms: float
 
+    def __post_init__(self) -> None:
+        for name in ("alpha_w", "alpha_v", "paper_mean", "paper_rms"):
+            check_positive(getattr(self, name), f"DisturbanceSetting.{name}", allow_zero=True)
+        for name in ("q", "r"):
+            check_positive(getattr(self, name), f"DisturbanceSetting.{name}")
+
     @property
     def Q(self) -> np.ndarray:
         return self.q * np.eye(2)
