@@ -13,7 +13,8 @@ Two steps:
 
    * ``clear``: ``ValueError``/``TypeError`` whose message names the argument;
    * ``unclear``: another exception, or a message that does not name it;
-   * ``silent-nan``: returned with NaN/inf in the output;
+   * ``silent-nan``: returned with NaN/inf in the output (unless the unspoiled baseline
+     call already returns NaN/inf: documented ones, such as a metric a method lacks);
    * ``accepted``: returned normally although the spoil is always invalid
      (NaN/inf entries, a string for a number, a negative seed, a count < 1, dt <= 0);
    * ``returned``: returned normally from a spoil that can be valid (a smaller
@@ -24,6 +25,13 @@ Usage::
 
     python -m benchmarks.hostile_sweep record --out results/sweep/baselines.pkl
     python -m benchmarks.hostile_sweep sweep results/sweep/baselines.pkl --csv results/sweep/outcomes.csv
+
+A settings dataclass argument (fields declared with ``mascore.registry.setting``) is
+spoiled as a whole (a string) and field by field: each field gets the spoils of its value,
+and the settings are rebuilt with ``dataclasses.replace`` as part of the call, so a
+settings class that refuses the value when built counts as a (named) refusal. The paper
+modules and the comparison are swept with ``--modules`` (e.g. ``papers.ren2005 compare``);
+the summary is printed for all calls and per module.
 
 Run ``record`` against an older checkout (``PYTHONPATH=<checkout>``) to compare
 before and after with the same kind of calls.
@@ -133,6 +141,14 @@ class Recorder:
 
     def pytest_unconfigure(self, config) -> None:
         self.out.parent.mkdir(parents=True, exist_ok=True)
+        kept = {}
+        for key, call in self.calls.items():  # a call holding a class of a module gone by now is dropped
+            try:
+                pickle.dumps(call)
+                kept[key] = call
+            except Exception:  # noqa: BLE001
+                pass
+        self.calls = kept
         self.out.write_bytes(pickle.dumps(self.calls))
         print(f"\nrecorded baselines of {len(self.calls)} of {self.n_functions} functions -> {self.out}")
 
@@ -147,11 +163,53 @@ def record(out: Path, tests: list[str], modules: tuple[str, ...] | None = None) 
 # ---------------------------------------------------------------- step 2: spoil and classify
 
 
+class Replaced:
+    """A settings dataclass with one field spoiled, built (``dataclasses.replace``) only when the call is made.
+
+    The build is part of the call: a settings class that refuses the value on ``replace`` counts
+    as a refusal of the call, named if the message names the field.
+    """
+
+    def __init__(self, settings, field: str, value) -> None:
+        self.settings, self.field, self.value = settings, field, value
+
+    def build(self):
+        return dataclasses.replace(self.settings, **{self.field: self.value})
+
+
+def _is_settings(value) -> bool:
+    """A settings dataclass instance: a ``...Settings`` class or fields declared with ``mascore.registry.setting``."""
+    return (dataclasses.is_dataclass(value) and not isinstance(value, type)
+            and (type(value).__name__.endswith("Settings")
+                 or any("source" in f.metadata for f in dataclasses.fields(value))))
+
+
+def field_spoils(value) -> list[tuple[str, str, object, bool]]:
+    """(field, kind, Replaced, always_invalid): each field of a settings dataclass spoiled in turn."""
+    out = []
+    for f in dataclasses.fields(value):
+        current = getattr(value, f.name)
+        if isinstance(current, tuple) and current and all(isinstance(x, tuple) for x in current):
+            current = np.asarray(current, dtype=float) if _numeric_rows(current) else current
+        elif isinstance(current, tuple):
+            current = list(current)
+        for kind, spoiled, invalid in spoils(f.name, current):
+            out.append((f.name, f"{f.name}: {kind}", Replaced(value, f.name, spoiled), invalid))
+    return out
+
+
+def _numeric_rows(rows) -> bool:
+    return all(isinstance(x, (int, float)) and not isinstance(x, bool) for r in rows for x in r) and \
+        len({len(r) for r in rows}) == 1
+
+
 def spoils(name: str, value) -> list[tuple[str, object, bool]]:
     """(kind, spoiled value, always_invalid) for one argument value."""
     out: list[tuple[str, object, bool]] = []
     if isinstance(value, bool) or value is None or callable(value):
         return out
+    if _is_settings(value):
+        return [("string for settings", "settings", True)]
     if isinstance(value, np.random.Generator) or (SEED_NAMES.match(name) and isinstance(value, int)):
         return [("negative seed", -1, True), ("string seed", "seed", True)]
     if isinstance(value, (int, np.integer)):
@@ -214,12 +272,14 @@ def _alarm(signum, frame):
     raise _Timeout
 
 
-def classify(func, args, kwargs, arg_name: str, always_invalid: bool) -> str:
+def classify(func, args, kwargs, arg_name: str, always_invalid: bool, nan_documented: bool = False) -> str:
     signal.signal(signal.SIGALRM, _alarm)
     signal.alarm(TIME_LIMIT_S)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
+            args = tuple(a.build() if isinstance(a, Replaced) else a for a in args)
+            kwargs = {k: v.build() if isinstance(v, Replaced) else v for k, v in kwargs.items()}
             result = func(*args, **kwargs)
     except _Timeout:
         return "hang"
@@ -229,9 +289,23 @@ def classify(func, args, kwargs, arg_name: str, always_invalid: bool) -> str:
         return "unclear"
     finally:
         signal.alarm(0)
-    if _has_nonfinite(result):
+    if _has_nonfinite(result) and not nan_documented:
         return "silent-nan"
     return "accepted" if always_invalid else "returned"
+
+
+def _baseline_has_nonfinite(func, args, kwargs) -> bool:
+    """Whether the unspoiled call already returns NaN/inf (documented ones, e.g. a metric a method lacks)."""
+    signal.signal(signal.SIGALRM, _alarm)
+    signal.alarm(TIME_LIMIT_S)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return _has_nonfinite(func(*copy.deepcopy(args), **copy.deepcopy(kwargs)))
+    except Exception:  # noqa: BLE001 - a baseline that no longer runs: judge its spoils as usual
+        return False
+    finally:
+        signal.alarm(0)
 
 
 def sweep(baselines: Path, csv: Path | None, modules: tuple[str, ...] | None = None) -> Counter:
@@ -246,28 +320,40 @@ def sweep(baselines: Path, csv: Path | None, modules: tuple[str, ...] | None = N
             bound = inspect.signature(func).bind(*args, **kwargs)
         except TypeError:
             continue  # the signature changed since the baseline was recorded
+        nan_documented = _baseline_has_nonfinite(func, args, kwargs)
         for arg_name, value in list(bound.arguments.items()):
-            for kind, spoiled, always_invalid in spoils(arg_name, value):
+            trials = [(arg_name, kind, spoiled, invalid) for kind, spoiled, invalid in spoils(arg_name, value)]
+            if _is_settings(value):
+                trials += field_spoils(value)
+            for named, kind, spoiled, always_invalid in trials:
                 trial = copy.deepcopy(bound)
                 trial.arguments[arg_name] = spoiled
-                outcome = classify(func, trial.args, trial.kwargs, arg_name, always_invalid)
-                rows.append({"function": key, "argument": arg_name, "spoil": kind, "outcome": outcome})
+                outcome = classify(func, trial.args, trial.kwargs, named, always_invalid, nan_documented)
+                rows.append({"function": key, "argument": arg_name if named == arg_name else f"{arg_name}.{named}",
+                             "spoil": kind, "outcome": outcome})
     counts = Counter(r["outcome"] for r in rows)
     if csv is not None:
         import pandas as pd
 
         csv.parent.mkdir(parents=True, exist_ok=True)
         pd.DataFrame(rows).to_csv(csv, index=False)
-    refused = counts["clear"] + counts["unclear"]
-    print(f"{len(rows)} calls of {len({r['function'] for r in rows})} functions")
-    for outcome in ("clear", "unclear", "silent-nan", "accepted", "returned", "hang"):
-        print(f"  {outcome:11s} {counts[outcome]:6d}")
-    if refused:
-        print(f"  refusals naming the argument: {counts['clear'] / refused:.1%}")
+    _report("all", rows)
+    for group in sorted({r["function"].rsplit(".", 1)[0] for r in rows}):
+        _report(group, [r for r in rows if r["function"].rsplit(".", 1)[0] == group])
     return counts
 
 
+def _report(title: str, rows: list[dict]) -> None:
+    counts = Counter(r["outcome"] for r in rows)
+    refused = counts["clear"] + counts["unclear"]
+    named = f"{counts['clear'] / refused:.1%}" if refused else "-"
+    print(f"{title}: {len(rows)} calls of {len({r['function'] for r in rows})} functions; "
+          + ", ".join(f"{o} {counts[o]}" for o in ("clear", "unclear", "silent-nan", "accepted", "returned", "hang"))
+          + f"; refusals naming the argument {named}")
+
+
 def main(argv: list[str] | None = None) -> int:
+    global TIME_LIMIT_S
     parser = argparse.ArgumentParser(prog="python -m benchmarks.hostile_sweep", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     rec = sub.add_parser("record", help="record baseline calls from the core unit tests")
@@ -278,6 +364,8 @@ def main(argv: list[str] | None = None) -> int:
     swp = sub.add_parser("sweep", help="spoil the baselines one argument at a time")
     swp.add_argument("baselines", type=Path)
     swp.add_argument("--csv", type=Path, default=None)
+    swp.add_argument("--time-limit", type=int, default=TIME_LIMIT_S,
+                     help=f"seconds before a call counts as a hang (default {TIME_LIMIT_S}; raise it on a loaded machine)")
     for p in (rec, swp):
         p.add_argument("--modules", nargs="+", default=None,
                        help="modules of mascore to sweep (default: the concept modules), e.g. papers.ren2005")
@@ -285,6 +373,7 @@ def main(argv: list[str] | None = None) -> int:
     modules = tuple(args.modules) if args.modules else None
     if args.command == "record":
         return int(record(args.out, [t for t in args.tests if Path(t).exists()], modules))
+    TIME_LIMIT_S = args.time_limit
     sweep(args.baselines, args.csv, modules)
     return 0
 

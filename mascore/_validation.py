@@ -406,3 +406,34 @@ def frozen_copy(arr: ArrayLike) -> np.ndarray:
     out = np.array(arr, dtype=float, copy=True)
     out.setflags(write=False)
     return out.view()
+
+
+def available_memory_bytes() -> int:
+    """Memory the system can still give this process (``MemAvailable`` of ``/proc/meminfo``, else free pages)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        import os
+
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_AVPHYS_PAGES"))
+    except (AttributeError, OSError, ValueError):  # pragma: no cover - no way to ask: assume 8 GiB
+        return 8 * 2**30
+
+
+def check_fits_in_memory(n_bytes: float, name: str, what: str = "") -> None:
+    """Refuse up front (``ValueError`` naming `name`) a request whose arrays need more than the available memory.
+
+    `n_bytes` is the size of what the request must hold at once (e.g. runs x agents x steps x 8 bytes);
+    `what` says what it is (``"the state histories"``). A request that cannot fit is refused instead of
+    running for a long time before failing.
+    """
+    available = available_memory_bytes()
+    if not np.isfinite(n_bytes) or n_bytes > available:
+        held = f" for {what}" if what else ""
+        raise ValueError(f"{name} asks for too much: about {float(n_bytes) / 2**30:.3g} GiB{held}, but only "
+                         f"{available / 2**30:.3g} GiB of memory is available; ask for fewer")

@@ -55,9 +55,9 @@ import numpy as np
 
 from . import consensus, graphs, kalman, rendezvous, set_membership
 from . import distributed_kf as dkf
-from ._validation import check_positive, check_positive_int, check_probability
+from ._validation import check_fits_in_memory, check_positive, check_positive_int, check_probability, check_seed
 from .agents import double_integrator
-from .registry import FigureSpec, PaperRegistry, Study, TableSpec
+from .registry import FigureSpec, PaperRegistry, Study, TableSpec, check_settings, check_settings_type, setting
 from .sweep import Grid, cell_seed
 
 __all__ = [
@@ -103,9 +103,17 @@ NOISES = ("gaussian", "uniform", "student-t")
 SEED_AXES = ("task", "n_agents", "noise", "block")
 
 
+#: Largest initial spread or noise std (m, m/s) the benchmark accepts: the squared errors stay far from overflow.
+_MAX_SCALE = 1e6
+
+
 @dataclass(frozen=True)
 class BenchmarkSettings:
     """The common benchmark's settings (one place; the chapter shows them).
+
+    Every field is checked when the settings are built or ``dataclasses.replace``-d
+    (``mascore.registry.check_settings``): counts >= 1, variances and scales finite
+    and non-negative (at most 1e6 m or m/s for the scales, 1e12 for the variances).
 
     Parameters
     ----------
@@ -142,6 +150,7 @@ class BenchmarkSettings:
         The sweep :func:`run` makes (:func:`grid_cells`): ``"quick"`` for the book and the
         published ledger, ``"full"`` for the command line.
 
+
     Examples
     --------
     >>> from mascore.compare import SETTINGS
@@ -149,23 +158,44 @@ class BenchmarkSettings:
     (0.1, 150)
     """
 
-    dt: float = 0.1
-    n_steps: int = 150
-    steady_from: int = 75
-    q_pos: float = 1e-4
-    q_vel: float = 1e-4
-    r: float = 0.01
-    rho: tuple[float, float] = (0.5, 1.5)
-    init_pos: float = 5.0
-    init_vel: float = 1.0
-    p0: float = 1.0
-    sm_confidence: float = 0.997
-    sensing_range: float = 1.0
-    mean_degree: float = 4.0
-    shared_steps: int = 30
-    shared_var: tuple[float, float] = (0.5, 5.0)
-    runs: int = 50
-    grid: str = "quick"
+    dt: float = setting(0.1, source="chosen", unit="s", note="sampling time", low=0, low_open=True)
+    n_steps: int = setting(150, source="chosen", note="steps per run of the team task", low=1)
+    steady_from: int = setting(75, source="chosen", note="first step of the steady-state window", low=0)
+    q_pos: float = setting(1e-4, source="chosen", unit="m²", note="process-noise variance per position entry",
+                           low=0, high=_MAX_SCALE**2)
+    q_vel: float = setting(1e-4, source="chosen", unit="m²/s²", note="process-noise variance per velocity entry",
+                           low=0, high=_MAX_SCALE**2)
+    r: float = setting(0.01, source="chosen", note="measurement-noise variance of each measured entry",
+                       low=0, low_open=True, high=_MAX_SCALE**2)
+    rho: tuple[float, float] = setting((0.5, 1.5), source="chosen", where="Song et al. eq. (4)",
+                                       note="rendezvous gain K = [rho_1 I, rho_2 I]", length=2, low=0, low_open=True)
+    init_pos: float = setting(5.0, source="chosen", unit="m", note="std of the initial positions",
+                              low=0, high=_MAX_SCALE)
+    init_vel: float = setting(1.0, source="chosen", unit="m/s", note="std of the initial velocities",
+                              low=0, high=_MAX_SCALE)
+    p0: float = setting(1.0, source="chosen", note="initial estimation-error variance of every state entry",
+                        low=0, low_open=True, high=_MAX_SCALE**2)
+    sm_confidence: float = setting(0.997, source="chosen", note="probability mass of the set-membership bound",
+                                   low=0, low_open=True, high=1, high_open=True)
+    sensing_range: float = setting(1.0, source="chosen", unit="m", note="range of the geometric graph",
+                                   low=0, low_open=True)
+    mean_degree: float = setting(4.0, source="chosen", note="expected neighbours of the geometric graph",
+                                 low=0, low_open=True)
+    shared_steps: int = setting(30, source="chosen", note="steps of the shared-quantity task", low=1)
+    shared_var: tuple[float, float] = setting((0.5, 5.0), source="chosen", unit="m²",
+                                              note="range of the prior variances of the shared task",
+                                              length=2, low=0, low_open=True)
+    runs: int = setting(50, source="chosen", note="Monte Carlo runs per cell", low=1)
+    grid: str = setting("quick", source="chosen", note="the sweep run makes", choices=("quick", "full"))
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+        if self.steady_from >= self.n_steps:
+            raise ValueError(f"BenchmarkSettings.steady_from must be a step before n_steps ({self.n_steps}); "
+                             f"got {self.steady_from}")
+        if self.shared_var[0] > self.shared_var[1]:
+            raise ValueError(f"BenchmarkSettings.shared_var must be a range (low, high) with low <= high; "
+                             f"got {self.shared_var}")
 
 
 #: The settings used by the chapter and the CLI (the study's settings, :data:`STUDY`).
@@ -200,6 +230,7 @@ def benchmark_graph(kind: str, n_agents: int, settings: BenchmarkSettings = SETT
     >>> graphs.is_connected(A), A.shape
     (True, (16, 16))
     """
+    check_settings_type(settings, BenchmarkSettings)
     n_agents = _check_n_agents(n_agents)
     if kind == "ring":
         return graphs.ring_graph(n_agents)
@@ -244,6 +275,7 @@ def floats_per_step(method: str, n_agents: int, degree: float = 2.0) -> float:
     (24.0, 0.0)
     """
     _check_n_agents(n_agents)
+    degree = check_positive(degree, "degree", "(mean neighbours per agent)")
     table = {
         "centralized": 8.0 * (degree + 1), "local": 4.0, "song-mb": 0.0, "song-eb": 0.0,
         "vlahakis": 4.0, "set-membership": 4.0,
@@ -259,19 +291,54 @@ def _check_n_agents(n_agents: object) -> int:
 
 
 def _check_run(n_agents: object, noise: object, dropout: object, q_scale: object, runs: object,
-               settings: BenchmarkSettings) -> tuple[int, int]:
+               settings: BenchmarkSettings, seed: object = 0) -> tuple[int, int]:
     """The arguments of a simulation, checked: ``(n_agents, runs)``."""
+    if not isinstance(seed, np.random.SeedSequence):
+        check_seed(seed, "seed")
+    check_settings_type(settings, BenchmarkSettings)
     n_agents = _check_n_agents(n_agents)
     if noise not in NOISES:
         raise ValueError(f"noise must be one of {NOISES}; got {noise!r}")
     if check_probability(dropout, "dropout") >= 1.0:
         raise ValueError("dropout must be below 1 (every link lost at every step leaves nothing to compare)")
     check_positive(q_scale, "q_scale", "(the filters' Q over the true Q)")
-    return n_agents, check_positive_int(settings.runs if runs is None else runs, "runs")
+    runs = check_positive_int(settings.runs if runs is None else runs, "runs")
+    # the team filters hold (runs, N, N, 4) views and up to (runs, 4N, 4N) covariances at once
+    check_fits_in_memory(8.0 * runs * (n_agents**2 * 4 * 8 + (4 * n_agents) ** 2 * 3), "runs",
+                         "the estimates and covariances of one step")
+    return n_agents, runs
 
 
 # --------------------------------------------------------------------------------------------
 # noise
+
+
+def _check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[str, Any]:
+    """A cell of the grid, checked: its task, method, team size, drop-out and (`full`) noise and q_scale."""
+    if not isinstance(cell, Mapping):
+        raise TypeError(f"{name} must be a mapping of the cell's coordinates (task, method, n_agents, noise, "
+                        f"dropout, q_scale); got {type(cell).__name__}")
+    task = cell.get("task")
+    if task not in ("team", "shared"):
+        raise ValueError(f"{name}['task'] must be 'team' or 'shared'; got {task!r}")
+    required = ("method", "n_agents", "dropout") + (("noise",) if full else ()) + (
+        ("q_scale",) if full and task == "team" else ())
+    missing = [k for k in required if k not in cell]
+    if missing:
+        raise ValueError(f"{name} lacks the coordinates {missing} (a {task} cell needs {list(required)})")
+    methods = TEAM_METHODS if task == "team" else SHARED_METHODS
+    if cell["method"] not in methods:
+        raise ValueError(f"{name}['method'] of a {task} cell must be one of {methods}; got {cell['method']!r}")
+    check_positive_int(cell["n_agents"], f"{name}['n_agents']", minimum=3)
+    if "noise" in cell and cell["noise"] not in NOISES:
+        raise ValueError(f"{name}['noise'] must be one of {NOISES}; got {cell['noise']!r}")
+    if check_probability(cell["dropout"], f"{name}['dropout']") >= 1.0:
+        raise ValueError(f"{name}['dropout'] must be below 1; got {cell['dropout']!r}")
+    if task == "team" and "q_scale" in cell:
+        check_positive(cell["q_scale"], f"{name}['q_scale']")
+    if task == "team" and cell.get("graph", "ring") not in GRAPHS:
+        raise ValueError(f"{name}['graph'] must be one of {GRAPHS}; got {cell.get('graph')!r}")
+    return cell
 
 
 def _draw(rng: np.random.Generator, noise: str, shape: tuple) -> np.ndarray:
@@ -576,7 +643,7 @@ def simulate_team(
     >>> bool(0.5 < m["nees_own"].mean() < 1.5)          # a correct Kalman filter is consistent
     True
     """
-    n_agents, runs = _check_run(n_agents, noise, dropout, q_scale, runs, settings)
+    n_agents, runs = _check_run(n_agents, noise, dropout, q_scale, runs, settings, seed)
     if method not in TEAM_METHODS:
         raise ValueError(f"method must be one of {TEAM_METHODS}; got {method!r}")
     team = _team(int(n_agents), noise, float(q_scale), settings, graph)
@@ -690,7 +757,7 @@ def simulate_shared(
     >>> bool(best["rmse_own"].mean() <= ren["rmse_own"].mean())
     True
     """
-    n_agents, runs = _check_run(n_agents, noise, dropout, 1.0, runs, settings)
+    n_agents, runs = _check_run(n_agents, noise, dropout, 1.0, runs, settings, seed)
     if method not in SHARED_METHODS:
         raise ValueError(f"method must be one of {SHARED_METHODS}; got {method!r}")
     start = time.thread_time()
@@ -811,6 +878,8 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
     >>> len(rows), sorted(rows[0])[:3]
     (50, ['containment', 'cpu_s', 'floats'])
     """
+    _check_cell(cell)
+    check_settings_type(settings, BenchmarkSettings)
     seed = cell_seed(cell, SEED_AXES, base_seed)
     common = {"noise": cell["noise"], "dropout": float(cell["dropout"])}
     if cell["task"] == "team":
@@ -866,7 +935,19 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
     """
     import pandas as pd
 
+    check_settings_type(settings, BenchmarkSettings)
+    if not isinstance(table, pd.DataFrame):
+        raise TypeError(f"table must be a pandas DataFrame of run_cell rows (the sweep's table); "
+                        f"got {type(table).__name__}")
+    if isinstance(by, str) or not isinstance(by, Sequence):
+        raise TypeError(f"by must be a sequence of column names; got {by!r}")
     by = list(by)
+    needed = {"task", "method", "n_agents", "cell", "block", "run", "rmse_own", "cpu_s", "floats", "nees_own",
+              "containment", "spread"} | set(by) - {"graph"}
+    missing = sorted(needed - set(table.columns))
+    if missing:
+        raise ValueError(f"table lacks the columns {missing} (rows of run_cell with their cell coordinates; "
+                         f"by = {by})")
     t = table.copy()
     if "graph" not in t:
         t["graph"] = "ring"
@@ -1012,6 +1093,7 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
     >>> result.summary["study"].unique().tolist()  # doctest: +SKIP
     ['dropout', 'graph', 'noise', 'scaling', 'shared', 'wrong-q']
     """
+    check_settings_type(settings, BenchmarkSettings)
     import tempfile
 
     from .sweep import run_sweep
@@ -1052,6 +1134,7 @@ def cell_cost(cell: Mapping[str, Any]) -> float:
     >>> cell_cost({**base, "method": "song-eb"}) > cell_cost({**base, "method": "local"})
     True
     """
+    _check_cell(cell, full=False)
     if cell["task"] != "team":
         return 1.0
     n = float(cell["n_agents"])

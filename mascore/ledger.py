@@ -134,9 +134,20 @@ class Claim:
     def __post_init__(self) -> None:
         if not isinstance(self.id, str) or not _CLAIM_ID.fullmatch(self.id):
             raise ValueError(f"claim id must look like 'PAPER/short-name' with PAPER a ledger's key; got {self.id!r}")
+        for name in ("where", "statement", "note", "unit", "rule", "band_reason", "study"):
+            if not isinstance(getattr(self, name), str):
+                raise TypeError(f"{self.id}: {name} must be a string; got {type(getattr(self, name)).__name__}")
+        if self.tolerance is not None and not isinstance(self.tolerance, dict):
+            raise TypeError(f"{self.id}: tolerance must be a dict ({{'abs': t}} or {{'rel': t}}) or None; "
+                            f"got {type(self.tolerance).__name__}")
+        if self.holds is not None and not isinstance(self.holds, bool | np.bool_):
+            raise TypeError(f"{self.id}: holds must be True, False or None; got {type(self.holds).__name__}")
         object.__setattr__(self, "value", _jsonable(self.value))
         object.__setattr__(self, "paper_value", _jsonable(self.paper_value))
         if self.labels is not None:
+            if isinstance(self.labels, str | bytes) or not isinstance(self.labels, list | tuple | np.ndarray):
+                raise TypeError(f"{self.id}: labels must be a sequence of strings (one per value); "
+                                f"got {type(self.labels).__name__} {self.labels!r}")
             object.__setattr__(self, "labels", tuple(str(x) for x in self.labels))
         if self.paper_value is None:
             if self.holds is None or self.tolerance is not None:
@@ -144,6 +155,11 @@ class Claim:
             object.__setattr__(self, "holds", bool(self.holds))
             object.__setattr__(self, "verdict", "holds" if self.holds else "fails")
             return
+        if not _all_numbers(self.paper_value):
+            raise TypeError(f"{self.id}: paper_value must be a number or a list of numbers; got {self.paper_value!r}")
+        if not _all_numbers(self.value):
+            raise TypeError(f"{self.id}: value must be a number or a list of numbers, as paper_value; "
+                            f"got {self.value!r}")
         object.__setattr__(self, "tolerance", _normalized_tolerance(self))
         object.__setattr__(self, "verdict", _quantitative_verdict(self))
 
@@ -285,6 +301,15 @@ def write_claims(
 
     if paper not in ledger_keys():
         raise ValueError(f"paper must be one of {ledger_keys()}; got {paper!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"seed must be the run's non-negative integer seed; got {seed!r}")
+    if not isinstance(created_by, str):
+        raise TypeError(f"created_by must be the command (a string); got {type(created_by).__name__}")
+    if isinstance(claims, str | bytes) or not isinstance(claims, Iterable):
+        raise TypeError(f"claims must be a sequence of Claim; got {type(claims).__name__}")
+    claims = list(claims)
+    if not all(isinstance(c, Claim) for c in claims):
+        raise TypeError(f"claims must be a sequence of Claim; got {sorted({type(c).__name__ for c in claims})}")
     ids = [c.id for c in claims]
     foreign = [i for i in ids if not i.startswith(f"{paper}/")]
     if foreign:
@@ -476,10 +501,17 @@ def format_number(x: float, digits: int = 4) -> str:
     >>> format_number(0.076812345), format_number(2.7755575615628914e-17), format_number(5.0)
     ('0.07681', '2.776 × 10⁻¹⁷', '5')
     """
+    if isinstance(digits, bool) or not isinstance(digits, int | np.integer):
+        raise TypeError(f"digits must be an integer >= 1 (significant digits); got {type(digits).__name__} {digits!r}")
+    if digits < 1:
+        raise ValueError(f"digits must be an integer >= 1 (significant digits); got {digits}")
+    digits = int(digits)
     if isinstance(x, bool | np.bool_):
         return str(bool(x))
     if isinstance(x, int | np.integer):
         return f"{int(x):,}" if abs(int(x)) >= 10_000 else str(int(x))
+    if isinstance(x, str | bytes) or not hasattr(x, "__float__"):
+        raise TypeError(f"x must be a real number; got {type(x).__name__} {x!r}")
     x = float(x)
     if not math.isfinite(x):
         return str(x)
@@ -505,7 +537,8 @@ def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = ""
     Numbers through :func:`format_number` (with `unit` appended), lists labelled by
     `labels` when given and cut after `max_items` entries (marked with an ellipsis),
     dicts as ``label = value`` pairs (underscores in labels read as spaces), ``None``
-    as a dash.
+    as a dash. Any value is shown, by design: NaN and infinities print as ``nan`` and
+    ``inf``, a string as itself (this is a display helper; :class:`Claim` refuses them).
 
     Parameters
     ----------
@@ -531,6 +564,13 @@ def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = ""
     >>> format_value([1.5, 2.25], labels=["mean", "rms"], unit="m")
     'mean: 1.5; rms: 2.25 (m)'
     """
+    for name, count in (("digits", digits), ("max_items", max_items)):
+        if isinstance(count, bool) or not isinstance(count, int | np.integer):
+            raise TypeError(f"{name} must be an integer >= 1; got {type(count).__name__} {count!r}")
+        if count < 1:
+            raise ValueError(f"{name} must be an integer >= 1; got {count}")
+    if not isinstance(unit, str):
+        raise TypeError(f"unit must be a string; got {type(unit).__name__}")
     suffix = f"\u00a0{unit}" if unit else ""
     if value is None:
         return "\u2014"
@@ -663,6 +703,11 @@ def _normalized_tolerance(claim: Claim) -> dict:
         raise ValueError(f"{claim.id}: tolerance must be {{'abs': t}} or {{'rel': t}}, optionally with "
                          f"'approx_abs' / 'approx_rel'; got {tol!r}")
     kind = kinds[0]
+    for key, bound in tol.items():
+        if isinstance(bound, bool) or not isinstance(bound, int | float | np.integer | np.floating):
+            raise TypeError(f"{claim.id}: tolerance[{key!r}] must be a finite number >= 0; got {bound!r}")
+        if not math.isfinite(float(bound)):
+            raise ValueError(f"{claim.id}: tolerance[{key!r}] must be a finite number >= 0; got {bound!r}")
     t = float(tol[kind])
     a = float(tol.get(f"approx_{kind}", round(APPROX_FACTOR * t, 12)))
     if not (t >= 0 and a >= t):
@@ -698,6 +743,13 @@ def _quantitative_verdict(claim: Claim) -> str:
     if worst <= claim.tolerance[f"approx_{kind}"]:
         return "approximately"
     return "does-not-reproduce"
+
+
+def _all_numbers(value: Any) -> bool:
+    """A number or a (nested) list of numbers, as :func:`_jsonable` leaves them (no bools, no strings)."""
+    if isinstance(value, list):
+        return bool(value) and all(_all_numbers(v) for v in value)
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def _jsonable(value: Any) -> Any:

@@ -113,6 +113,7 @@ def verdict_summary(records: Sequence[dict]):
     """
     pd = require("pandas", "this table")
 
+    _check_records(records, ("paper", "verdict"))
     papers = [p for p in paper_keys() if any(r["paper"] == p for r in records)]
     table = pd.DataFrame(0, index=pd.Index(papers), columns=list(VERDICTS))
     for r in records:
@@ -151,6 +152,7 @@ def attention_list(records: Sequence[dict]) -> MarkdownText:
     >>> "Another." in text, "A number." in text
     (True, False)
     """
+    _check_records(records, ("paper", "verdict", "where", "statement"))
     rows = ["| verdict | where | claim |", "|---|---|---|"]
     for verdict in ATTENTION:
         for r in (r for r in records if r["verdict"] == verdict):
@@ -181,6 +183,9 @@ def errata_list(papers: Sequence[str] | None = None) -> MarkdownText:
     >>> str(errata_list(["ren2005"])).startswith(":::")
     True
     """
+    if papers is not None and (isinstance(papers, str) or not isinstance(papers, Sequence)
+                               or not all(isinstance(p, str) for p in papers)):
+        raise TypeError(f"papers must be a sequence of paper keys (e.g. ['ren2005']) or None; got {papers!r}")
     blocks = []
     for key in paper_keys() if papers is None else papers:
         reg = paper_registry(key)
@@ -189,3 +194,18 @@ def errata_list(papers: Sequence[str] | None = None) -> MarkdownText:
             blocks.append(f":::{{dropdown}} {reg.citation}: {len(reg.errata)} errata and readings\n"
                           f"{items}\n:::")
     return MarkdownText("\n\n".join(blocks))
+
+
+def _check_records(records: object, keys: tuple[str, ...]) -> None:
+    """`records` as :func:`mascore.ledger.load_claims` gives them: a sequence of dicts with `keys`."""
+    if isinstance(records, str | bytes | dict) or not isinstance(records, Sequence):
+        raise TypeError(f"records must be a sequence of claim records (dicts, mascore.ledger.load_claims); "
+                        f"got {type(records).__name__}")
+    for i, r in enumerate(records):
+        if not isinstance(r, dict):
+            raise TypeError(f"records[{i}] must be a claim record (a dict); got {type(r).__name__}")
+        missing = [k for k in keys if k not in r]
+        if missing:
+            raise ValueError(f"records[{i}] lacks the keys {missing} of a claim record")
+        if r["verdict"] not in VERDICTS:
+            raise ValueError(f"records[{i}]['verdict'] must be one of {VERDICTS}; got {r['verdict']!r}")

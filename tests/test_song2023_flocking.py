@@ -54,7 +54,7 @@ def test_settings_are_documented_and_frozen():
     table = show_settings(s.SETTINGS)._repr_markdown_()
     assert "FlockingGains(" not in table and "| `similar_fraction` |" in table
     similar = next(line for line in table.splitlines() if "similar_fraction" in line)
-    assert similar.count("|") == 5, "a '|' inside the math of a note would split the table cell"
+    assert similar.count("|") == 6, "a '|' inside the math of a note would split the table cell"
 
 
 def test_initial_states_connected_and_reproducible():

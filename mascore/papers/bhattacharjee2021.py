@@ -43,6 +43,7 @@ from .. import synchronization as sync
 from .._progress import progress_bar
 from .._validation import (
     check_adjacency,
+    check_fits_in_memory,
     check_positive,
     check_positive_int,
     check_seed,
@@ -51,7 +52,16 @@ from .._validation import (
 )
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors
-from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, documented_settings, setting
+from ..registry import (
+    FigureSpec,
+    PaperRegistry,
+    Study,
+    TableSpec,
+    check_settings,
+    check_settings_type,
+    documented_settings,
+    setting,
+)
 
 __all__ = [
     "FIGURES",
@@ -103,6 +113,12 @@ class DisturbanceSetting:
     paper_mean: float
     paper_rms: float
 
+    def __post_init__(self) -> None:
+        for name in ("alpha_w", "alpha_v", "paper_mean", "paper_rms"):
+            check_positive(getattr(self, name), f"DisturbanceSetting.{name}", allow_zero=True)
+        for name in ("q", "r"):
+            check_positive(getattr(self, name), f"DisturbanceSetting.{name}")
+
     @property
     def Q(self) -> np.ndarray:
         return self.q * np.eye(2)
@@ -110,6 +126,18 @@ class DisturbanceSetting:
     @property
     def R(self) -> np.ndarray:
         return self.r * np.eye(1)
+
+
+def _square(M: tuple) -> str | None:
+    """None if `M` (rows) is square, else what it must be."""
+    return None if len(M) == len(M[0]) else "a square matrix (tuple of n rows of n entries)"
+
+
+def _positive_definite(M: tuple) -> str | None:
+    """None if `M` (rows) is a symmetric positive definite matrix, else what it must be."""
+    arr = np.array(M, dtype=float)
+    ok = arr.shape[0] == arr.shape[1] and np.allclose(arr, arr.T) and bool(np.all(np.linalg.eigvalsh(arr) > 0))
+    return None if ok else "a symmetric positive definite matrix"
 
 
 @documented_settings
@@ -120,7 +148,8 @@ class SetMembershipSettings:
     Matrices are nested tuples (rows); :meth:`matrix` returns them as arrays.
     """
 
-    A: tuple = setting(((0.0, -1.0), (1.0, 0.0)), where="eq. (23)", note="dynamics of the agents and the leader")
+    A: tuple = setting(((0.0, -1.0), (1.0, 0.0)), where="eq. (23)", note="dynamics of the agents and the leader",
+                       check=_square)
     B: tuple = setting(((1.0, 0.0), (0.0, 1.0)), where="eq. (23)", note="input matrix")
     C: tuple = setting(((1.0, 0.0),), where="eq. (23)", note="each agent measures its first component")
     D: tuple = setting(((1.0,),), where="eq. (23)", note="output disturbance matrix")
@@ -128,44 +157,64 @@ class SetMembershipSettings:
                        note="input disturbance matrix (not the pinning gains, also written G in Sec. 4)")
     adjacency: tuple = setting(((0, 0, 0, 1), (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0)),
                                where="eq. (24), Fig. 1(a)",
-                               note="row i, column j = 1: agent i hears agent j (off-diagonal rows of the Laplacian)")
+                               note="row i, column j = 1: agent i hears agent j (off-diagonal rows of the Laplacian)",
+                               low=0, check=_square)
     pinning: tuple = setting((1.0, 0.0, 0.0, 0.0), where="Sec. 5, G = diag(1, 0, 0, 0)",
-                             note="pinning gains: only agent 1 hears the leader")
-    q_riccati: float = setting(0.1, where="Sec. 5", note="weight Q = 0.1 I₂ of the Riccati-like eq. (16)")
+                             note="pinning gains: only agent 1 hears the leader", low=0)
+    q_riccati: float = setting(0.1, where="Sec. 5", note="weight Q = 0.1 I₂ of the Riccati-like eq. (16)",
+                               low=0, low_open=True)
     c0: float = setting(2.0 / 3.0, where="Sec. 5", note="centre of the circle C(c0, r0) of Lemma 2")
-    r0: float = setting(0.6, where="Sec. 5", note="radius of C(c0, r0)")
-    alpha: float = setting(1.1, where="Sec. 5", note="α of the bound |A_c^k| ≤ α μ^k (Fig. 2(c))")
-    mu: float = setting(0.9, where="Sec. 5", note="μ of the same bound")
-    p0: float = setting(2.0, where="Sec. 5", unit=_STATE2, note="bound p0 of eq. (21)")
-    q_bar: float = setting(0.1, where="Sec. 5", unit=_STATE2, note="bound q̄ of eq. (21)")
+    r0: float = setting(0.6, where="Sec. 5", note="radius of C(c0, r0)", low=0, low_open=True)
+    alpha: float = setting(1.1, where="Sec. 5", note="α of the bound |A_c^k| ≤ α μ^k (Fig. 2(c))", low=0, low_open=True)
+    mu: float = setting(0.9, where="Sec. 5", note="μ of the same bound", low=0, low_open=True, high=1, high_open=True)
+    p0: float = setting(2.0, where="Sec. 5", unit=_STATE2, note="bound p0 of eq. (21)", low=0, low_open=True)
+    q_bar: float = setting(0.1, where="Sec. 5", unit=_STATE2, note="bound q̄ of eq. (21)", low=0, low_open=True)
     P0: tuple = setting(((2.0, 0.0), (0.0, 2.0)), where="Sec. 5", unit=_STATE2,
-                        note="initial ellipsoid shape of every agent")
+                        note="initial ellipsoid shape of every agent", check=_positive_definite)
     x0_hat: tuple = setting(((50.0, -50.0), (50.0, -50.0), (-50.0, 50.0), (-50.0, 50.0)), where="Sec. 5",
                             unit=_STATE, note="initial estimates of agents 1-4")
     x0_box: float = setting(1.0, where="Sec. 5", unit=_STATE,
-                            note="true x0 uniform in [x̂0, x̂0 + x0_box] componentwise")
-    leader_x0: tuple = setting((5.0, 5.0), where="Sec. 5", unit=_STATE, note="initial state of the leader")
+                            note="true x0 uniform in [x̂0, x̂0 + x0_box] componentwise", low=0)
+    leader_x0: tuple = setting((5.0, 5.0), where="Sec. 5", unit=_STATE, note="initial state of the leader", length=2)
     t_f: int = setting(60, where="Table 1: T = 61 steps, T_f = 60; Figs. 2-6 use the same",
-                       note="last time step; k = 0..T_f")
+                       note="last time step; k = 0..T_f", low=1)
     alpha_w: tuple = setting((0.05, 0.5, 1.0), where="Table 1 and Sec. 5", unit=_STATE,
-                             note="w uniform in [-α_w, α_w]², one entry per row")
+                             note="w uniform in [-α_w, α_w]², one entry per row", low=0)
     alpha_v: tuple = setting((0.05, 0.5, 1.0), where="Table 1 and Sec. 5", unit=_STATE,
-                             note="v uniform in [-α_v, α_v], one entry per row")
-    q: tuple = setting((0.1, 1.0, 2.0), where="Table 1", unit=_STATE2, note="filter bound Q_k = q I₂ per row")
-    r: tuple = setting((0.1, 1.0, 1.0), where="Table 1", unit=_STATE2, note="filter bound R_k = r per row")
+                             note="v uniform in [-α_v, α_v], one entry per row", low=0)
+    q: tuple = setting((0.1, 1.0, 2.0), where="Table 1", unit=_STATE2, note="filter bound Q_k = q I₂ per row",
+                       low=0, low_open=True)
+    r: tuple = setting((0.1, 1.0, 1.0), where="Table 1", unit=_STATE2, note="filter bound R_k = r per row",
+                       low=0, low_open=True)
     figure_row: int = setting(1, where="Sec. 5: 'the first row in Table 1 corresponds to Fig. 2(b)'",
-                              note="Table 1 row of Figs. 2-6")
+                              note="Table 1 row of Figs. 2-6", low=1)
     figure_method: str = setting("sdp", source="chosen", where="the paper solves the SDPs with SDPT3; we use Clarabel",
-                                 note="filter of Figs. 2-6: 'sdp' or 'closed_form'")
+                                 note="filter of Figs. 2-6: 'sdp' or 'closed_form'", choices=("sdp", "closed_form"))
     table_method: str = setting("closed_form", source="chosen",
                                 where="same optimum as the SDPs, claim sdp-closed-form-agree; far faster",
-                                note="filter of the Table 1 study")
+                                note="filter of the Table 1 study", choices=("sdp", "closed_form"))
     n_runs: int = setting(100, source="chosen", where="the paper reports one unseeded draw per row",
-                          note="seeds per Table 1 row (run 0 is the ledger's value, the rest the spread)")
+                          note="seeds per Table 1 row (run 0 is the ledger's value, the rest the spread)", low=1)
     k_max_check: int = setting(400, source="chosen", where="0.9^400 ≈ 5 × 10⁻¹⁹: the bound is checked to zero",
-                               note="last k of the check |A_c^k| ≤ α μ^k")
+                               note="last k of the check |A_c^k| ≤ α μ^k", low=1)
 
     def __post_init__(self) -> None:
+        check_settings(self)
+        n, n_agents = len(self.A), len(self.x0_hat)
+        for name, got in (("B", len(self.B)), ("G", len(self.G)), ("C", len(self.C[0])), ("P0", len(self.P0)),
+                          ("x0_hat", len(self.x0_hat[0])), ("leader_x0", len(self.leader_x0))):
+            if got != n:
+                raise ValueError(f"SetMembershipSettings.{name} must match the state size of A ({n}); got {got}")
+        if len(self.D) != len(self.C):
+            raise ValueError(f"SetMembershipSettings.D must have one row per output (rows of C, {len(self.C)}); "
+                             f"got {len(self.D)}")
+        for name in ("adjacency", "pinning"):
+            if len(getattr(self, name)) != n_agents:
+                raise ValueError(f"SetMembershipSettings.{name} must have one row per agent (rows of x0_hat, "
+                                 f"{n_agents}); got {len(getattr(self, name))}")
+        per_run = 8.0 * (self.t_f + 1) * n_agents * (4 * n + 2 * n * n + len(self.C))
+        check_fits_in_memory(per_run * self.n_runs, "SetMembershipSettings.n_runs",
+                             "the trajectories and ellipsoids of the runs of one Table 1 row")
         lengths = {len(self.alpha_w), len(self.alpha_v), len(self.q), len(self.r)}
         if lengths != {len(TABLE1_PUBLISHED)}:
             raise ValueError(f"alpha_w, alpha_v, q and r need one entry per Table 1 row "
@@ -289,6 +338,7 @@ def design(scenario: SetMembershipSettings = SETTINGS, adjacency: np.ndarray | N
     >>> float(d.c), float(d.r)
     (1.5, 1.0)
     """
+    check_settings_type(scenario, SetMembershipSettings, "scenario")
     adjacency = scenario.matrix("adjacency") if adjacency is None else adjacency
     return sync.design_synchronization(scenario.matrix("A"), scenario.matrix("B"),
                                        scenario.q_riccati * np.eye(len(scenario.A)), adjacency,
@@ -345,11 +395,14 @@ def draw(seed: int, n_runs: int = 1, scenario: SetMembershipSettings = SETTINGS)
     >>> np.array_equal(bs.draw(1, 3).x0[0], bs.draw(1, 1).x0[0])     # run 0 is the same draw in every study
     True
     """
+    check_settings_type(scenario, SetMembershipSettings, "scenario")
     seed = check_seed(seed, "seed")
     n_runs = check_positive_int(n_runs, "n_runs")
     x0_hat, t_f = scenario.matrix("x0_hat"), scenario.t_f
     n_agents, n = x0_hat.shape
     p = len(scenario.C)
+    check_fits_in_memory(8.0 * n_runs * ((2 * t_f + 2) * n_agents * n + (t_f + 1) * n_agents * p), "n_runs",
+                         "the draws of x0, w and v")
     x0, w, v = [], [], []
     for child in np.random.SeedSequence(int(seed)).spawn(n_runs):
         rng = np.random.default_rng(child)
@@ -502,6 +555,7 @@ def simulate(
     >>> bool(abs(closed_form.P - sdp.P).max() < 1e-4)
     True
     """
+    check_settings_type(scenario, SetMembershipSettings, "scenario")
     s = scenario
     if setting is not None and not isinstance(setting, DisturbanceSetting):
         raise TypeError(f"setting must be a DisturbanceSetting (a Table 1 row) or None; got {type(setting).__name__}")
@@ -563,6 +617,7 @@ def table1_study(
         and the spread (mean, std, 5/50/95 % quantiles, min, max) over the runs.
     runs : the :class:`ClosedLoopRun` of each row.
     """
+    check_settings_type(scenario, SetMembershipSettings, "scenario")
     seed = check_seed(seed, "seed")
     n_runs = scenario.n_runs if n_runs is None else check_positive_int(n_runs, "n_runs")
     draws = draw(seed, n_runs, scenario)
@@ -637,6 +692,7 @@ def noise_free_metrics(
     leader_shift : the law uses ``x^(0)_{k + leader_shift}`` instead of ``x^(0)_k``
     first_k : first time step of the average (0 in our reading)
     """
+    check_settings_type(scenario, SetMembershipSettings, "scenario")
     s = scenario
     x0 = _check_states(x0, "x0", s)
     adjacency = (s.matrix("adjacency") if adjacency is None
@@ -681,6 +737,7 @@ def table1_readings(x0: np.ndarray | None = None, scenario: SetMembershipSetting
     ``x0`` defaults to the centre of the boxes the true initial states are drawn from.
     (A is orthogonal, so ``A^T = A^{-1}`` moves the leader one step back.)
     """
+    check_settings_type(scenario, SetMembershipSettings, "scenario")
     s = scenario
     x0_hat = s.matrix("x0_hat")
     x0 = x0_hat + 0.5 * s.x0_box if x0 is None else _check_states(x0, "x0", s)
@@ -805,6 +862,7 @@ def run(settings: SetMembershipSettings = SETTINGS, seed: int = 1, progress: boo
     >>> float(result.design.c)
     1.5
     """
+    check_settings_type(settings, SetMembershipSettings, "settings")
     seed = check_seed(seed, "seed")
     if settings.figure_method not in smf.METHODS or settings.table_method not in smf.METHODS:
         raise ValueError(f"figure_method and table_method must be in {smf.METHODS}; got "
@@ -847,6 +905,7 @@ def plot_fig1(des: sync.SyncDesign | None = None, scenario: SetMembershipSetting
     2
     >>> plt.close("all")
     """
+    check_settings_type(scenario, SetMembershipSettings, "scenario")
     des = des if des is not None else design(scenario)
     adjacency, pinning, n = scenario.matrix("adjacency"), scenario.matrix("pinning"), scenario.n_agents
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(8.0, 3.8), layout="constrained")
@@ -935,6 +994,7 @@ def plot_fig2(run: ClosedLoopRun, des: sync.SyncDesign | None = None, k_max: int
     True
     >>> plt.close("all")
     """
+    check_settings_type(scenario, SetMembershipSettings, "scenario")
     s = scenario
     k_max = s.t_f if k_max is None else check_positive_int(k_max, "k_max", minimum=0)
     if bounds is None:
@@ -1059,6 +1119,7 @@ def plot_fig6(run: ClosedLoopRun, scenario: SetMembershipSettings = SETTINGS) ->
     True
     >>> plt.close("all")
     """
+    check_settings_type(scenario, SetMembershipSettings, "scenario")
     fig, ax = plt.subplots(figsize=(6.4, 3.8), layout="constrained")
     tr = run.trace[0]
     n = tr.shape[1]

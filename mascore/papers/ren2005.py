@@ -28,6 +28,7 @@ from .._progress import progress_bar
 from .._validation import (
     as_matrix,
     check_adjacency,
+    check_fits_in_memory,
     check_positive,
     check_positive_int,
     check_seed,
@@ -37,7 +38,16 @@ from .._validation import (
 from ..graphs import adjacency_from_edges, has_spanning_tree, is_connected, spanning_tree_roots
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors, new_axes
-from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, documented_settings, setting
+from ..registry import (
+    FigureSpec,
+    PaperRegistry,
+    Study,
+    TableSpec,
+    check_settings,
+    check_settings_type,
+    documented_settings,
+    setting,
+)
 
 __all__ = [
     "REGISTRY",
@@ -75,20 +85,21 @@ class KalmanConsensusSettings:
     """Every parameter of the ren2005 runs: the paper's (Sec. II-C) and the ones we chose."""
 
     # Fig. 1, the meet-for-dinner example
-    n_agents: int = setting(10, where="Sec. II-C", note="friends meeting for dinner (Fig. 1)")
-    Q: float = setting(0.1, where="Sec. II-C", unit="h²", note="process noise of the consensus value")
-    Omega: float = setting(0.1, where="Sec. II-C", unit="h²", note="communication noise Ω_ij, every link")
+    n_agents: int = setting(10, where="Sec. II-C", note="friends meeting for dinner (Fig. 1)", low=2)
+    Q: float = setting(0.1, where="Sec. II-C", unit="h²", note="process noise of the consensus value", low=0)
+    Omega: float = setting(0.1, where="Sec. II-C", unit="h²", note="communication noise Ω_ij, every link",
+                           low=0, low_open=True)
     xi0: tuple[float, ...] = setting(
         tuple(float(x) for x in range(1, 11)), source="chosen", where='paper: "uniformly assigned"', unit="h",
-        note="initial meeting times ξ_i(0) of agents 1..10")
+        note="initial meeting times ξ_i(0) of agents 1..10", kind="reals")
     P_equal: float = setting(1.0, source="chosen", where='paper: "uniformly assigned"', unit="h²",
-                             note="initial variances (left column; all but agent 7 in the right)")
+                             note="initial variances (left column; all but agent 7 in the right)", low=0, low_open=True)
     confident_agent: int = setting(7, source="derived", where="the agent whose ξ_i(0) = 7",
-                                   note="the confident agent of Fig. 1's right column (1-based)")
-    P_confident: float = setting(0.001, where="Sec. II-C", unit="h²", note="its initial variance")
-    n_steps: int = setting(100, source="chosen", where="not given", note="horizon of Fig. 1 (steps)")
+                                   note="the confident agent of Fig. 1's right column (1-based)", low=1)
+    P_confident: float = setting(0.001, where="Sec. II-C", unit="h²", note="its initial variance", low=0, low_open=True)
+    n_steps: int = setting(100, source="chosen", where="not given", note="horizon of Fig. 1 (steps)", low=1)
     max_call: int = setting(5, source="chosen", where='paper: "a random length of time"', unit="steps",
-                            note="calls last 1..max_call steps, uniformly; the whole team is re-paired at once")
+                            note="calls last 1..max_call steps, uniformly; the whole team is re-paired at once", low=1)
     fig1_noise: bool = setting(False, source="chosen", where="not said; the figure shows exact agreement",
                                note="draw communication noise in Fig. 1 (Ω enters the weights either way)")
     include_self: bool = setting(True, where="eqs. (1), (4): g_ii = 1",
@@ -96,35 +107,55 @@ class KalmanConsensusSettings:
     # Theorems 3.2 and 3.9 on switching graphs
     switch_xi0: tuple[float, ...] = setting(
         tuple(float(x) for x in range(1, 7)), source="chosen", where="the paper simulates no switching",
-        note="initial states of the six agents of Figs. 2-3")
+        note="initial states of the six agents of Figs. 2-3", length=6)
     switch_P0: float = setting(1.0, source="chosen", where="the paper simulates no switching",
-                               note="their initial variances")
+                               note="their initial variances", low=0, low_open=True)
     dwell_steps: int = setting(2, source="chosen", where="the paper simulates no switching",
-                               note="steps per graph, discrete time")
+                               note="steps per graph, discrete time", low=1)
     switch_steps: int = setting(800, source="chosen", where="the paper simulates no switching",
-                                note="horizon, discrete time (steps)")
+                                note="horizon, discrete time (steps)", low=1)
     dwell_time: float = setting(1.0, source="chosen", where="the paper simulates no switching", unit="s",
-                                note="time per graph, continuous time")
+                                note="time per graph, continuous time", low=0, low_open=True)
     t_final: float = setting(200.0, source="chosen", where="the paper simulates no switching", unit="s",
-                             note="horizon, continuous time")
+                             note="horizon, continuous time", low=0, low_open=True)
     # communication noise (the paper's model, not simulated there)
     noise_runs: int = setting(200, source="chosen", where="the paper shows no noisy run",
-                              note="pairing schedules, discrete noise study (Fig. 1 setting, equal P)")
+                              note="pairing schedules, discrete noise study (Fig. 1 setting, equal P)", low=1)
     noise_steps: int = setting(300, source="chosen", where="the paper shows no noisy run",
-                               note="their horizon (steps)")
+                               note="their horizon (steps)", low=1)
     noise_Omega_small: float = setting(0.01, source="chosen", where="the paper shows no noisy run", unit="h²",
-                                       note="the smaller Ω compared with the paper's")
+                                       note="the smaller Ω compared with the paper's", low=0, low_open=True)
     noise_paths: int = setting(100, source="chosen", where="the paper shows no noisy run",
-                               note="paths, continuous-time noise on the fixed Fig. 2 graph")
+                               note="paths, continuous-time noise on the fixed Fig. 2 graph", low=1)
     noise_t_final: float = setting(40.0, source="chosen", where="the paper shows no noisy run", unit="s",
-                                   note="their horizon")
+                                   note="their horizon", low=0, low_open=True)
     noise_dt: float = setting(0.01, source="chosen", where="the paper shows no noisy run", unit="s",
-                              note="Euler-Maruyama step")
+                              note="Euler-Maruyama step", low=0, low_open=True)
     # beyond the paper
     bias_runs: int = setting(1000, source="chosen", where="beyond the paper",
-                             note="pairing schedules in the bias study (Fig. 1 right-column data)")
+                             note="pairing schedules in the bias study (Fig. 1 right-column data)", low=1)
     ideal_Omega: float = setting(1e-6, source="chosen", where="beyond the paper", unit="h²",
-                                 note="Ω of the variant closest to central fusion (Q = 0, no self term)")
+                                 note="Ω of the variant closest to central fusion (Q = 0, no self term)",
+                                 low=0, low_open=True)
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+        if len(self.xi0) != self.n_agents:
+            raise ValueError(f"KalmanConsensusSettings.xi0 must hold one initial time per agent (n_agents = "
+                             f"{self.n_agents}); got {len(self.xi0)}")
+        if not 1 <= self.confident_agent <= self.n_agents:
+            raise ValueError(f"KalmanConsensusSettings.confident_agent must be an agent 1..n_agents "
+                             f"(1..{self.n_agents}); got {self.confident_agent}")
+        if self.noise_dt > self.noise_t_final:
+            raise ValueError(f"KalmanConsensusSettings.noise_dt must be at most noise_t_final "
+                             f"({self.noise_t_final} s); got {self.noise_dt}")
+        n2 = 8.0 * self.n_agents**2
+        check_fits_in_memory(n2 * self.noise_runs * (self.noise_steps + 1), "KalmanConsensusSettings.noise_runs",
+                             "the pairings and states of the noise study")
+        check_fits_in_memory(n2 * min(self.bias_runs, 500) * (self.n_steps + 1), "KalmanConsensusSettings.bias_runs",
+                             "the pairings of one chunk of the bias study")
+        check_fits_in_memory(8.0 * 2 * len(self.switch_xi0) * self.noise_paths * 401,
+                             "KalmanConsensusSettings.noise_paths", "the Euler-Maruyama paths at 401 times")
 
     @property
     def fig1_xi0(self) -> np.ndarray:
@@ -325,6 +356,7 @@ def fig1_initial(confident: bool, settings: KalmanConsensusSettings = SETTINGS) 
     >>> float(P0[6]), float(P0[0])
     (0.001, 1.0)
     """
+    check_settings_type(settings, KalmanConsensusSettings, "settings")
     xi0 = settings.fig1_xi0
     P0 = np.full(settings.n_agents, settings.P_equal)
     if confident:
@@ -335,6 +367,7 @@ def fig1_initial(confident: bool, settings: KalmanConsensusSettings = SETTINGS) 
 def _pairings(settings: KalmanConsensusSettings, rng: np.random.Generator, n_steps: int,
               size: int | None = None) -> np.ndarray:
     """Random one-to-one pairings of the Fig. 1 team, calls of 1..max_call steps."""
+    check_settings_type(settings, KalmanConsensusSettings, "settings")
     return cs.random_pairings(settings.n_agents, n_steps, rng, max_duration=settings.max_call, size=size)
 
 
@@ -366,6 +399,7 @@ def fig1(seed: int = 1, noise: bool | None = None, settings: KalmanConsensusSett
     >>> bool(np.ptp(final) < 0.01), round(float(final.mean()), 1)   # all agree; the average 5.5 h is pulled to 7 h
     (True, 5.8)
     """
+    check_settings_type(settings, KalmanConsensusSettings, "settings")
     check_seed(seed, "seed")
     noise = settings.fig1_noise if noise is None else noise
     rng = np.random.default_rng(seed)
@@ -447,6 +481,7 @@ def switching_demo(graphs: np.ndarray, settings: KalmanConsensusSettings = SETTI
     >>> ren2005.switching_demo(ren2005.no_union_sequence()).union_ok
     False
     """
+    check_settings_type(settings, KalmanConsensusSettings, "settings")
     s = settings
     xi0 = np.asarray(s.switch_xi0, dtype=float)
     graphs = _check_graph_stack(graphs, xi0.size)
@@ -479,6 +514,7 @@ def fixed_graph_run(settings: KalmanConsensusSettings = SETTINGS) -> cs.Consensu
     >>> bool(ren2005.fixed_graph_run().spread[-1] < 1e-3)
     True
     """
+    check_settings_type(settings, KalmanConsensusSettings, "settings")
     s = settings
     xi0 = np.asarray(s.switch_xi0, dtype=float)
     return cs.kalman_consensus_continuous(xi0, np.full(xi0.size, s.switch_P0), fig2_graph(), s.t_final, s.Q,
@@ -525,11 +561,13 @@ def noise_study(seed: int = 1, n_runs: int | None = None, n_steps: int | None = 
         log(rms) against log(k) over the second half (about 0 for a stationary
         floor, -1/2 for a disagreement that decays like 1/sqrt(k)); ``team_mean``.
     """
+    check_settings_type(settings, KalmanConsensusSettings, "settings")
     s = settings
     check_seed(seed, "seed")
     n_runs = check_positive_int(s.noise_runs if n_runs is None else n_runs, "n_runs")
     # the floors average the last and third quarters of the horizon: at least 4 steps
     n_steps = check_positive_int(s.noise_steps if n_steps is None else n_steps, "n_steps", minimum=4)
+    check_fits_in_memory(8.0 * s.n_agents**2 * n_runs * (n_steps + 1), "n_runs", "the pairings and states")
     Q = s.Q if Q is None else Q
     Omega = s.Omega if Omega is None else Omega
     rng = np.random.default_rng(seed)
@@ -575,6 +613,7 @@ def noise_continuous(seed: int = 1, settings: KalmanConsensusSettings = SETTINGS
     >>> bool(out['floor'] > out['floor_quiet'])                 # noise leaves a disagreement floor
     True
     """
+    check_settings_type(settings, KalmanConsensusSettings, "settings")
     s = settings
     xi0 = np.asarray(s.switch_xi0, dtype=float)
     t = np.linspace(0.0, s.noise_t_final, 401)
@@ -606,11 +645,14 @@ def bias_study(seed: int = 1, n_runs: int | None = None, n_steps: int | None = N
     ``average`` the plain mean of the initial times, ``bias`` mean(values) - fused,
     ``se`` its standard error, ``std``, ``max_spread`` the worst final disagreement.
     """
+    check_settings_type(settings, KalmanConsensusSettings, "settings")
     s = settings
     check_seed(seed, "seed")
     # the standard error needs two schedules at least
     n_runs = check_positive_int(s.bias_runs if n_runs is None else n_runs, "n_runs", minimum=2)
     n_steps = check_positive_int(s.n_steps if n_steps is None else n_steps, "n_steps")
+    check_fits_in_memory(8.0 * s.n_agents**2 * min(n_runs, 500) * (n_steps + 1), "n_steps", "one chunk of pairings")
+    check_fits_in_memory(64.0 * n_runs, "n_runs", "the agreed values")
     Q = s.Q if Q is None else Q
     Omega = s.Omega if Omega is None else Omega
     rng = np.random.default_rng(seed)
@@ -666,6 +708,7 @@ def overconfidence(seed: int = 1, settings: KalmanConsensusSettings = SETTINGS,
     >>> bool(np.all(paper['actual'][-1] >= paper['believed'][-1]))   # the agents believe they know more
     True
     """
+    check_settings_type(settings, KalmanConsensusSettings, "settings")
     s = settings
     check_seed(seed, "seed")
     res = fig1(seed, settings=s) if fig1_result is None else fig1_result
@@ -770,6 +813,7 @@ def run(settings: KalmanConsensusSettings = SETTINGS, seed: int = 1, progress: b
     >>> result.union.union_ok, result.no_union.union_ok
     (True, False)
     """
+    check_settings_type(settings, KalmanConsensusSettings, "settings")
     s = settings
     check_seed(seed, "seed")
     tasks = {

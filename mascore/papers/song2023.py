@@ -30,6 +30,7 @@ from .._progress import progress_bar
 from .._timing import median_time
 from .._validation import (
     check_adjacency,
+    check_fits_in_memory,
     check_generator,
     check_positive,
     check_positive_int,
@@ -42,7 +43,16 @@ from ..graphs import complete_graph, is_connected, laplacian, proximity_graph, r
 from ..kalman import nees_interval
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors, plot_graph, plot_trajectories
-from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, documented_settings, setting
+from ..registry import (
+    FigureSpec,
+    PaperRegistry,
+    Study,
+    TableSpec,
+    check_settings,
+    check_settings_type,
+    documented_settings,
+    setting,
+)
 from ..rendezvous import (
     RendezvousModel,
     RendezvousResult,
@@ -97,25 +107,27 @@ class RendezvousSettings:
     Change a copy with :func:`dataclasses.replace` (``replace(SETTINGS, fig3_runs=10)``).
     """
 
-    n_agents: int = setting(8, where="Table I", note="number of agents $N$")
-    n: int = setting(2, where="Table I", note="dimension $n$ of the plane")
-    dt: float = setting(0.1, where="Table I", unit="s", note="sampling time $\\Delta t$")
-    sensing_range: float = setting(150.0, where="Table I", unit="m", note="sensing range $r$")
-    rho1: float = setting(0.5, where="Table I", unit="1/s²", note="rendezvous gain $\\rho_1$ on positions")
-    rho2: float = setting(1.5, where="Table I", unit="1/s", note="rendezvous gain $\\rho_2$ on velocities")
-    fig2_q: float = setting(1.0, where="Sec. V.A, Fig. 2", note="$Q$ = this $\\times I_{2n}$ per agent")
-    fig2_r: float = setting(1.0, where="Sec. V.A, Fig. 2", note="$R$ = this $\\times I_{2nN}$")
+    n_agents: int = setting(8, where="Table I", note="number of agents $N$", low=2)
+    n: int = setting(2, where="Table I", note="dimension $n$ of the plane", low=1)
+    dt: float = setting(0.1, where="Table I", unit="s", note="sampling time $\\Delta t$", low=0, low_open=True)
+    sensing_range: float = setting(150.0, where="Table I", unit="m", note="sensing range $r$", low=0, low_open=True)
+    rho1: float = setting(0.5, where="Table I", unit="1/s²", note="rendezvous gain $\\rho_1$ on positions",
+                          low=0, low_open=True)
+    rho2: float = setting(1.5, where="Table I", unit="1/s", note="rendezvous gain $\\rho_2$ on velocities",
+                          low=0, low_open=True)
+    fig2_q: float = setting(1.0, where="Sec. V.A, Fig. 2", note="$Q$ = this $\\times I_{2n}$ per agent", low=0)
+    fig2_r: float = setting(1.0, where="Sec. V.A, Fig. 2", note="$R$ = this $\\times I_{2nN}$", low=0, low_open=True)
     fig2_topology: str = setting("fixed, from the initial positions", where="Sec. V.A, Fig. 2",
                                  note="the disk graph of radius $r$ at $t = 0$, kept for the whole run")
     fig2_max_edge_fraction: float = setting(
         0.6, source="chosen", where="Fig. 2(a) shows non-neighbours; not quantified",
-        note="Fig. 2 start redrawn until at most this share of the pairs are neighbours")
+        note="Fig. 2 start redrawn until at most this share of the pairs are neighbours", low=0, low_open=True, high=1)
     fig2_runs: int = setting(
         50, source="chosen", where="the paper plots one run",
-        note="noise realizations on the Fig. 2 topology (NEES statistics); run 1 is plotted")
-    fig3_q: float = setting(1.0, where="Sec. V.A, Fig. 3", note="$Q$ = this $\\times I_{2n}$ per agent")
-    fig3_r: float = setting(100.0, where="Sec. V.A, Fig. 3", note="$R$ = this $\\times I_{2nN}$")
-    fig3_runs: int = setting(50, where="Sec. V.A, Fig. 3", note="Monte Carlo runs, random initial positions")
+        note="noise realizations on the Fig. 2 topology (NEES statistics); run 1 is plotted", low=1)
+    fig3_q: float = setting(1.0, where="Sec. V.A, Fig. 3", note="$Q$ = this $\\times I_{2n}$ per agent", low=0)
+    fig3_r: float = setting(100.0, where="Sec. V.A, Fig. 3", note="$R$ = this $\\times I_{2nN}$", low=0, low_open=True)
+    fig3_runs: int = setting(50, where="Sec. V.A, Fig. 3", note="Monte Carlo runs, random initial positions", low=1)
     fig3_topology: str = setting(
         "fixed per run, from its initial positions", source="chosen",
         where="the paper fixes the topology only for Fig. 2 and does not say for Fig. 3",
@@ -123,32 +135,47 @@ class RendezvousSettings:
              "eq. (21) uses the neighbours' estimates. Remark 6's reading (all agents' estimates, complete "
              "control graph, same sensing) is run beside it")
     horizon: float = setting(40.0, source="chosen", where="not given; the spread settles within about 15 s",
-                             unit="s", note="length of every run")
+                             unit="s", note="length of every run", low=0, low_open=True)
     converged_from: float = setting(20.0, source="chosen", where="'converged state' is not defined", unit="s",
-                                    note="converged values: time average from here to the end")
+                                    note="converged values: time average from here to the end", low=0)
     box: float = setting(400.0, source="chosen", where="'random initial positions' in the paper", unit="m",
                          note="initial positions uniform in a square of this side, redrawn until the disk "
-                              "graph is connected and system (43) observable for every agent")
+                              "graph is connected and system (43) observable for every agent", low=0, low_open=True)
     v0: float = setting(5.0, source="chosen", where="not given", unit="m/s",
-                        note="initial velocities uniform in $\\pm$ this per axis")
+                        note="initial velocities uniform in $\\pm$ this per axis", low=0)
     sigma_p0: float = setting(10.0, source="chosen", where="not given", unit="m",
                               note="std of every initial position estimate error; all agents start from the "
                                    "same team estimate, $\\Sigma[0] = 1 1^T \\otimes P_0$ (our reading of "
-                                   "Assumption 2)")
+                                   "Assumption 2)", low=0, low_open=True)
     sigma_v0: float = setting(1.0, source="chosen", where="not given", unit="m/s",
-                              note="std of every initial velocity estimate error")
+                              note="std of every initial velocity estimate error", low=0, low_open=True)
     process_noise_q: tuple = setting((1.0, 0.1, 0.01), source="chosen", where="beyond the paper",
-                                     note="process-noise study: $Q = q I_{2n}$ for these $q$, $R$ of Fig. 3")
+                                     note="process-noise study: $Q = q I_{2n}$ for these $q$, $R$ of Fig. 3", low=0)
     process_noise_runs: int = setting(6, source="chosen", where="beyond the paper",
-                                      note="runs per $q$ of the process-noise study")
+                                      note="runs per $q$ of the process-noise study", low=1)
     process_noise_horizon: float = setting(24.0, source="chosen", where="beyond the paper", unit="s",
-                                           note="horizon of the process-noise study (converged = second half)")
+                                           note="horizon of the process-noise study (converged = second half)",
+                                           low=0, low_open=True)
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+        for name in ("horizon", "process_noise_horizon"):
+            if int(round(getattr(self, name) / self.dt)) < 1:
+                raise ValueError(f"RendezvousSettings.{name} must be at least half a sampling time "
+                                 f"({self.dt / 2:g} s) to give one step; got {getattr(self, name)!r}")
+        per_run = 8.0 * self.n_agents * (2 * self.n + 3) * (self.horizon / self.dt + 1)  # states, errors, NEES
+        for name in ("fig2_runs", "fig3_runs", "process_noise_runs"):
+            check_fits_in_memory(per_run * getattr(self, name), f"RendezvousSettings.{name}",
+                                 "the states and errors of every run, agent and step")
 
     @property
     def n_steps(self) -> int:
         """Number of steps of the horizon."""
         return int(round(self.horizon / self.dt))
 
+
+#: Most timed repeats the step-timing helpers accept (more would run for hours).
+MAX_REPEAT = 10_000
 
 #: The paper's settings (with our choices where it gives none).
 SETTINGS = RendezvousSettings()
@@ -183,6 +210,19 @@ class RendezvousSetup:
     v0: float = SETTINGS.v0
     sigma_p0: float = SETTINGS.sigma_p0
     sigma_v0: float = SETTINGS.sigma_v0
+
+    def __post_init__(self) -> None:
+        check_positive_int(self.n_agents, "RendezvousSetup.n_agents", minimum=2)
+        check_positive_int(self.n, "RendezvousSetup.n")
+        for name in ("dt", "sensing_range", "box", "sigma_p0", "sigma_v0"):
+            check_positive(getattr(self, name), f"RendezvousSetup.{name}")
+        check_positive(self.v0, "RendezvousSetup.v0", allow_zero=True)
+        m = 2 * self.n
+        for name, shape in (("A", (m, m)), ("B", (m, self.n)), ("K", (self.n, m))):
+            value = float_array(getattr(self, name), f"RendezvousSetup.{name}")
+            if value.shape != shape:
+                raise ValueError(f"RendezvousSetup.{name} must have shape {shape} (n = {self.n}); got {value.shape}")
+            require_finite(value, f"RendezvousSetup.{name}")
 
     @property
     def m(self) -> int:
@@ -221,6 +261,7 @@ def setup(n_agents: int | None = None, settings: RendezvousSettings = SETTINGS) 
     >>> s.K.shape, s.A.shape
     ((2, 4), (4, 4))
     """
+    check_settings_type(settings, RendezvousSettings, "settings")
     st = settings
     if n_agents is not None:
         n_agents = check_positive_int(n_agents, "n_agents")
@@ -261,7 +302,13 @@ def estimator_step_seconds(n_agents: int, repeat: int = 5, plain_repeat: int = 3
     """
     n_agents = check_positive_int(n_agents, "n_agents", minimum=3)  # a ring
     check_positive_int(repeat, "repeat")
+    check_fits_in_memory(32.0 * repeat, "repeat", "the timings (one Python float each)")
+    if repeat > MAX_REPEAT:
+        raise ValueError(f"repeat must be an integer in [1, {MAX_REPEAT}] (timed repeats); got {repeat}")
     check_positive_int(plain_repeat, "plain_repeat")
+    check_fits_in_memory(32.0 * plain_repeat, "plain_repeat", "the timings (one Python float each)")
+    if plain_repeat > MAX_REPEAT:
+        raise ValueError(f"plain_repeat must be an integer in [1, {MAX_REPEAT}] (timed repeats); got {plain_repeat}")
     s = setup(n_agents)
     noise = np.eye(2 * s.n)
     model = dkf.team_filter_model(s.A, s.B, s.K, noise, noise, n_agents)
@@ -324,8 +371,10 @@ def _initial_estimates(rng: np.random.Generator, s: RendezvousSetup, x0: np.ndar
     return (x0 + rng.standard_normal(x0.shape) * std).reshape(x0.shape[0], -1)
 
 
-def _check_run_arguments(seed: object, n_runs: object, horizon: object, dt: float) -> None:
+def _check_run_arguments(seed: object, n_runs: object, horizon: object, dt: float,
+                         settings: RendezvousSettings = SETTINGS) -> None:
     """Entry checks of :func:`fig2`, :func:`fig3` and :func:`process_noise_study` (``None`` = the setting)."""
+    check_settings_type(settings, RendezvousSettings, "settings")
     check_seed(seed, "seed")
     if n_runs is not None:
         check_positive_int(n_runs, "n_runs")
@@ -334,6 +383,10 @@ def _check_run_arguments(seed: object, n_runs: object, horizon: object, dt: floa
         if int(round(horizon / dt)) < 1:
             raise ValueError(f"horizon must be at least half a sampling time ({dt / 2:g} s) to give one step; "
                              f"got {horizon!r}")
+    if n_runs is not None:
+        n_steps = (horizon if horizon is not None else settings.horizon) / dt
+        check_fits_in_memory(8.0 * settings.n_agents * (2 * settings.n + 3) * (n_steps + 1) * n_runs, "n_runs",
+                             "the states and errors of every run, agent and step")
 
 
 # ----------------------------------------------------------------------------
@@ -456,7 +509,8 @@ def fig2(seed: int = 0, n_runs: int | None = None, horizon: float | None = None,
     >>> r2.adjacency.shape
     (8, 8)
     """
-    _check_run_arguments(seed, n_runs, horizon, settings.dt)
+    check_settings_type(settings, RendezvousSettings, "settings")
+    _check_run_arguments(seed, n_runs, horizon, settings.dt, settings)
     rng = np.random.default_rng([seed, 2])
     s = setup(settings=settings)
     n_runs = settings.fig2_runs if n_runs is None else n_runs
@@ -671,7 +725,8 @@ def fig3(seed: int = 0, n_runs: int | None = None, horizon: float | None = None,
     >>> float(r3.time[-1])
     4.0
     """
-    _check_run_arguments(seed, n_runs, horizon, settings.dt)
+    check_settings_type(settings, RendezvousSettings, "settings")
+    _check_run_arguments(seed, n_runs, horizon, settings.dt, settings)
     rng = np.random.default_rng([seed, 3])
     s = setup(settings=settings)
     n_runs = settings.fig3_runs if n_runs is None else n_runs
@@ -822,7 +877,8 @@ def process_noise_study(seed: int = 0, q_values: tuple | None = None, n_runs: in
     -------
     DataFrame with columns ``q``, ``law``, ``pos_std_m``, ``vel_std_mps``.
     """
-    _check_run_arguments(seed, n_runs, horizon, settings.dt)
+    check_settings_type(settings, RendezvousSettings, "settings")
+    _check_run_arguments(seed, n_runs, horizon, settings.dt, settings)
     if q_values is not None:
         q = require_finite(float_array(q_values, "q_values"), "q_values")
         if q.ndim != 1 or q.size == 0 or np.any(q < 0):
@@ -912,6 +968,7 @@ def run(settings: RendezvousSettings = SETTINGS, seed: int = 1, progress: bool =
     >>> float(result.fig3.time[-1])
     4.0
     """
+    check_settings_type(settings, RendezvousSettings, "settings")
     check_seed(seed, "seed")
     r2 = fig2(seed, settings=settings)
     return RendezvousRun(settings, r2, theorem1(r2), fig3(seed, progress=progress, settings=settings),

@@ -34,6 +34,7 @@ import pandas as pd
 from .._progress import progress_bar
 from .._timing import median_time
 from .._validation import (
+    check_fits_in_memory,
     check_generator,
     check_positive,
     check_positive_int,
@@ -53,7 +54,15 @@ from ..flocking import (
 from ..graphs import is_connected, proximity_graph
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors, plot_graph
-from ..registry import FigureSpec, Study, TableSpec, documented_settings, setting
+from ..registry import (
+    FigureSpec,
+    Study,
+    TableSpec,
+    check_settings,
+    check_settings_type,
+    documented_settings,
+    setting,
+)
 from ..sensing import measure
 
 __all__ = [
@@ -88,55 +97,79 @@ class FlockingSettings:
     :func:`dataclasses.replace` (``replace(SETTINGS, n_runs=10)``).
     """
 
-    n_agents: int = setting(8, where="Table I", note="number of agents $N$")
-    n_dim: int = setting(2, where="Table I", note="dimension $n$ of the plane")
-    dt: float = setting(0.1, where="Table I", unit="s", note="sampling time $\\Delta t$")
-    sensing_range: float = setting(150.0, where="Table I", unit="m", note="sensing range $r$")
-    rho3: float = setting(3.0, where="Table I", unit="1/s", note="velocity-alignment gain $\\rho_3$")
-    rho4: float = setting(1.0, where="Table I", note="distance-keeping gain $\\rho_4$")
-    rho5: float = setting(2.0, where="Table I", unit="1/s", note="radial damping gain $\\rho_5$ of $\\phi_2$")
-    rho6: float = setting(1.0, where="Table I", unit="1/s²", note="spring gain $\\rho_6$ of $\\phi_2$")
-    beta: float = setting(0.33, where="Table I", note="decay rate $\\beta$ of $\\phi_1$")
+    n_agents: int = setting(8, where="Table I", note="number of agents $N$", low=2)
+    n_dim: int = setting(2, where="Table I", note="dimension $n$ of the plane", low=1)
+    dt: float = setting(0.1, where="Table I", unit="s", note="sampling time $\\Delta t$", low=0, low_open=True)
+    sensing_range: float = setting(150.0, where="Table I", unit="m", note="sensing range $r$", low=0, low_open=True)
+    rho3: float = setting(3.0, where="Table I", unit="1/s", note="velocity-alignment gain $\\rho_3$", low=0)
+    rho4: float = setting(1.0, where="Table I", note="distance-keeping gain $\\rho_4$", low=0)
+    rho5: float = setting(2.0, where="Table I", unit="1/s", note="radial damping gain $\\rho_5$ of $\\phi_2$", low=0)
+    rho6: float = setting(1.0, where="Table I", unit="1/s²", note="spring gain $\\rho_6$ of $\\phi_2$", low=0)
+    beta: float = setting(0.33, where="Table I", note="decay rate $\\beta$ of $\\phi_1$", low=0, low_open=True)
     spring_length: float = setting(120.0, where="Table I", unit="m",
-                                   note="rest length $\\mathcal R$ of the spring; the flock's radius bound")
-    process_noise: float = setting(1.0, where="Sec. V", note="$Q$ = this $\\times I_{2n}$ per agent")
+                                   note="rest length $\\mathcal R$ of the spring; the flock's radius bound",
+                                   low=0, low_open=True)
+    process_noise: float = setting(1.0, where="Sec. V", note="$Q$ = this $\\times I_{2n}$ per agent", low=0)
     measurement_noise_fig4: float = setting(
         1.0, where="Sec. V-B: as the rendezvous example, Fig. 2",
-        note="Fig. 4: $R$ = this $\\times I$ per measured agent")
+        note="Fig. 4: $R$ = this $\\times I$ per measured agent", low=0, low_open=True)
     measurement_noise_fig5: float = setting(10.0, where="Sec. V-B",
-                                            note="Figs. 5-6: $R$ = this $\\times I$ per measured agent")
-    n_runs: int = setting(50, where="Sec. V-B", note="Monte Carlo runs of Figs. 5-6")
-    observer: int = setting(1, where="Fig. 4", note="agent (numbered from 1) whose filter Fig. 4 shows")
+                                            note="Figs. 5-6: $R$ = this $\\times I$ per measured agent",
+                                            low=0, low_open=True)
+    n_runs: int = setting(50, where="Sec. V-B", note="Monte Carlo runs of Figs. 5-6", low=1)
+    observer: int = setting(1, where="Fig. 4", note="agent (numbered from 1) whose filter Fig. 4 shows", low=1)
     t_final: float = setting(60.0, source="chosen", where="not given; every case settles within about 20 s",
-                             unit="s", note="horizon of every run")
+                             unit="s", note="horizon of every run", low=0, low_open=True)
     box: float = setting(300.0, source="chosen", where="'random' in the paper", unit="m",
                          note="Figs. 5-6: initial positions uniform in a square of this side (for N = 8; "
-                              "scaled by $\\sqrt{N/8}$), redrawn until the proximity graph is connected")
+                              "scaled by $\\sqrt{N/8}$), redrawn until the proximity graph is connected",
+                              low=0, low_open=True)
     v0_max: float = setting(5.0, source="chosen", where="not given", unit="m/s",
-                            note="initial velocities uniform in $\\pm$ this per axis")
+                            note="initial velocities uniform in $\\pm$ this per axis", low=0)
     fig4_spacing: float = setting(100.0, source="chosen", where="Fig. 4 shows its start only as a picture",
-                                  unit="m", note="Fig. 4: $2\\times 4$ grid of this spacing, agent 1 at a corner")
+                                  unit="m", note="Fig. 4: $2\\times 4$ grid of this spacing, agent 1 at a corner",
+                                  low=0, low_open=True)
     sigma0_position: float = setting(10.0, source="chosen", where="'carefully selected' in the paper", unit="m",
                                      note="std of every prior position error, same $\\Sigma_0$ for all agents "
-                                          "(Assumption 2)")
+                                          "(Assumption 2)", low=0, low_open=True)
     sigma0_velocity: float = setting(1.0, source="chosen", where="as above", unit="m/s",
-                                     note="std of every prior velocity error")
+                                     note="std of every prior velocity error", low=0, low_open=True)
     min_distance: float = setting(1e-6, source="chosen", where="coincident agents are not discussed", unit="m",
-                                  note="$\\lVert p_{ij}\\rVert$ floored at this $d_{\\min}$ in $\\phi_2$")
+                                  note="$\\lVert p_{ij}\\rVert$ floored at this $d_{\\min}$ in $\\phi_2$",
+                                  low=0, low_open=True)
     settled_window: float = setting(20.0, source="chosen", where="'converged' is not defined", unit="s",
-                                    note="converged values: time average over the last window of the run")
+                                    note="converged values: time average over the last window of the run",
+                                    low=0, low_open=True)
     transient: float = setting(5.0, source="chosen", where="Fig. 4 claim", unit="s",
-                               note="Fig. 4 errors are judged from this time on")
+                               note="Fig. 4 errors are judged from this time on", low=0)
     similar_fraction: float = setting(
         0.25, source="chosen", where="'similar' in Fig. 5 is not quantified",
-        note="(iii) similar to (ii): $\\lvert(iii)-(ii)\\rvert \\le$ this $\\times\\,((i)-(ii))$")
+        note="(iii) similar to (ii): $\\lvert(iii)-(ii)\\rvert \\le$ this $\\times\\,((i)-(ii))$", low=0)
     beyond_sensing_ranges: tuple = setting((130.0, 150.0, 200.0, 250.0), source="chosen",
-                                           where="beyond the paper", unit="m", note="sweep over $r$ with N = 8")
+                                           where="beyond the paper", unit="m", note="sweep over $r$ with N = 8",
+                                           low=0, low_open=True)
     beyond_sizes: tuple = setting((4, 8, 12, 16, 24), source="chosen", where="beyond the paper",
-                                  note="sweep over $N$ with r = 150 m")
-    beyond_runs: int = setting(2, source="chosen", where="beyond the paper", note="runs per point of the sweep")
+                                  note="sweep over $N$ with r = 150 m", low=2)
+    beyond_runs: int = setting(2, source="chosen", where="beyond the paper", note="runs per point of the sweep", low=1)
     beyond_t_final: float = setting(40.0, source="chosen", where="beyond the paper", unit="s",
-                                    note="horizon of the sweep's runs")
+                                    note="horizon of the sweep's runs", low=0, low_open=True)
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+        if not self.observer <= self.n_agents:
+            raise ValueError(f"FlockingSettings.observer must be an agent 1..n_agents (1..{self.n_agents}); "
+                             f"got {self.observer}")
+        for name in ("t_final", "beyond_t_final"):
+            if int(round(getattr(self, name) / self.dt)) < 1:
+                raise ValueError(f"FlockingSettings.{name} must be at least half a sampling time "
+                                 f"({self.dt / 2:g} s) to give one step; got {getattr(self, name)!r}")
+        m = 2 * self.n_dim
+        per_step = 8.0 * (2 * self.n_agents * m + self.n_agents**2)  # states, estimates, graph
+        check_fits_in_memory(3 * per_step * (self.t_final / self.dt + 1) * self.n_runs, "FlockingSettings.n_runs",
+                             "the states, estimates and graphs of every case, run and step")
+        biggest = max(self.beyond_sizes)
+        check_fits_in_memory(3 * 8.0 * (2 * biggest * m + biggest**2) * (self.beyond_t_final / self.dt + 1)
+                             * self.beyond_runs, "FlockingSettings.beyond_runs", "the runs of the sweep")
 
     @property
     def gains(self) -> FlockingGains:
@@ -170,6 +203,9 @@ class FlockingSettings:
         """Number of steps of the horizon ``t_final``."""
         return int(round(self.t_final / self.dt))
 
+
+#: Most timed repeats the step-timing helpers accept (more would run for hours).
+MAX_REPEAT = 10_000
 
 #: The paper's settings (with our choices where it gives none).
 SETTINGS = FlockingSettings()
@@ -236,6 +272,7 @@ def initial_states(
     >>> X0.shape, all(graphs.is_connected(graphs.proximity_graph(x[:, :2], 150.0)) for x in X0)
     ((3, 8, 4), True)
     """
+    check_settings_type(settings, FlockingSettings, "settings")
     rng = check_generator(rng)
     n_runs = check_positive_int(n_runs, "n_runs")
     max_tries = check_positive_int(max_tries, "max_tries")
@@ -259,6 +296,7 @@ def initial_states(
 
 def fig4_initial_state(rng: np.random.Generator, settings: FlockingSettings = SETTINGS) -> np.ndarray:
     """Fig. 4 initial state: rows of 4 agents (2 x 4 for N = 8), ``fig4_spacing`` apart, random velocities."""
+    check_settings_type(settings, FlockingSettings, "settings")
     rng = check_generator(rng)
     j = np.arange(settings.n_agents)
     p = settings.fig4_spacing * np.stack([j % 4, j // 4], axis=-1).astype(float)
@@ -273,6 +311,7 @@ def initial_estimates(rng: np.random.Generator, X0: np.ndarray,
     ``X_hat0`` has shape ``(..., N, N, 2n)`` for ``X0`` ``(..., N, 2n)``;
     ``Sigma0 = I_N kron sigma0_agent``.
     """
+    check_settings_type(settings, FlockingSettings, "settings")
     rng = check_generator(rng)
     X0 = require_finite(float_array(X0, "X0"), "X0")
     m = 2 * settings.n_dim
@@ -289,6 +328,7 @@ def initial_estimates(rng: np.random.Generator, X0: np.ndarray,
 
 def run_fig4(settings: FlockingSettings = SETTINGS, seed: int = 1) -> EstimatedFlockingRun:
     """The single run of Fig. 4: estimation-based flocking (case (iii)), ``R_fig4``, recording ``observer``."""
+    check_settings_type(settings, FlockingSettings, "settings")
     check_seed(seed, "seed")
     rng = np.random.default_rng([seed, 4])
     X0 = fig4_initial_state(rng, settings)
@@ -381,6 +421,7 @@ def run_fig5(settings: FlockingSettings = SETTINGS, seed: int = 1, progress: boo
     three cases share their initial states (common random numbers) and draw
     their noise from independent streams.
     """
+    check_settings_type(settings, FlockingSettings, "settings")
     check_seed(seed, "seed")
     root = np.random.SeedSequence([seed, 5])
     init_ss, *case_ss = root.spawn(4)
@@ -436,6 +477,7 @@ def beyond_study(settings: FlockingSettings = SETTINGS, seed: int = 1, progress:
         ``DivergenceError``, or ended with an agent farther than 10 R from
         the centre of mass; their numbers are then meaningless).
     """
+    check_settings_type(settings, FlockingSettings, "settings")
     check_seed(seed, "seed")
     points = [(settings.n_agents, r) for r in settings.beyond_sensing_ranges]
     points += [(N, settings.sensing_range) for N in settings.beyond_sizes if N != settings.n_agents]
@@ -518,6 +560,7 @@ def run(settings: FlockingSettings = SETTINGS, seed: int = 1, progress: bool = F
     >>> result.fig5.diverged
     (False, False, False)
     """
+    check_settings_type(settings, FlockingSettings, "settings")
     check_seed(seed, "seed")
     parts = (("fig4", lambda: run_fig4(settings, seed)),
              ("fig5", lambda: run_fig5(settings, seed, progress=progress)),
@@ -541,6 +584,7 @@ def plot_fig4(run4: EstimatedFlockingRun, settings: FlockingSettings = SETTINGS)
     the observer's filter for every other agent. Dashed: agents that are not
     the observer's neighbours at the end. One legend below the panels.
     """
+    check_settings_type(settings, FlockingSettings, "settings")
     fig, axes = plt.subplots(3, 2, figsize=(7.5, 10.6), layout="constrained")
     X, Xh, A, t = run4.X, run4.X_hat, run4.adjacency, run4.t
     N, o = X.shape[-2], run4.observer
@@ -647,6 +691,7 @@ def plot_fig6(res: Fig5Result, settings: FlockingSettings = SETTINGS, run_index:
     True
     >>> plt.close("all")
     """
+    check_settings_type(settings, FlockingSettings, "settings")
     run_index = check_positive_int(run_index, "run_index", minimum=0)
     if run_index >= res.final.shape[1]:
         raise ValueError(f"run_index must be a run index in [0, {res.final.shape[1] - 1}]; got {run_index}")
@@ -671,6 +716,7 @@ def plot_beyond(table: pd.DataFrame, settings: FlockingSettings = SETTINGS) -> p
     cases are left out; a shaded band runs from the last point where every
     case is stable to the last point.
     """
+    check_settings_type(settings, FlockingSettings, "settings")
     fig, axes = plt.subplots(2, 2, figsize=(7.5, 6.2), layout="constrained")
     by_r = table[table["N"] == settings.n_agents]
     by_n = table[table["r (m)"] == settings.sensing_range]
@@ -750,6 +796,7 @@ def fig4_claim(run4: EstimatedFlockingRun, settings: FlockingSettings = SETTINGS
     that of the first half), and (4) it drops sharply when an agent comes back
     into range after at least 1 s out of it (median ratio after/before < 0.5).
     """
+    check_settings_type(settings, FlockingSettings, "settings")
     s = fig4_statistics(run4, settings.transient)
     o = run4.observer + 1
     holds = (s["mean_error_non_neighbours"] > s["mean_error_neighbours"] and s["within_3_sigma_non_neighbours"] >= 0.95
@@ -796,6 +843,7 @@ def fig5_claims(res: Fig5Result, settings: FlockingSettings = SETTINGS) -> list[
     of case (i) and (iii) is similar to (ii):
     ``|(iii) - (ii)| <= similar_fraction ((i) - (ii))``.
     """
+    check_settings_type(settings, FlockingSettings, "settings")
     a = settings.similar_fraction
     shared = (
         f"Settled = time average over the last {format_number(settings.settled_window)} s of "
@@ -831,6 +879,7 @@ def fig6_claim(res: Fig5Result, settings: FlockingSettings = SETTINGS) -> Claim:
     mass in at least 95 % of the runs for cases (ii) and (iii), and in at most
     5 % of the runs for case (i).
     """
+    check_settings_type(settings, FlockingSettings, "settings")
     R, r = settings.spring_length, settings.sensing_range
     d_end = res.max_distance[:, :, -1]  # (3, runs)
     frac = (d_end <= R).mean(axis=1)
@@ -959,8 +1008,12 @@ def ekf_step_seconds(settings: FlockingSettings = SETTINGS, seed: int = 0, repea
     >>> flocking_paper.ekf_step_seconds(repeat=1) > 0
     True
     """
+    check_settings_type(settings, FlockingSettings, "settings")
     check_seed(seed, "seed")
     check_positive_int(repeat, "repeat")
+    check_fits_in_memory(32.0 * repeat, "repeat", "the timings (one Python float each)")
+    if repeat > MAX_REPEAT:
+        raise ValueError(f"repeat must be an integer in [1, {MAX_REPEAT}] (timed repeats); got {repeat}")
     rng = np.random.default_rng([seed, 7])
     X = initial_states(rng, 1, settings)[0]
     X_hat, Sigma0 = initial_estimates(rng, X, settings)

@@ -50,6 +50,7 @@ import pandas as pd
 from .. import graphs, lqr, observers
 from .._progress import progress_bar
 from .._validation import (
+    check_fits_in_memory,
     check_generator,
     check_positive,
     check_positive_int,
@@ -59,7 +60,16 @@ from .._validation import (
 )
 from ..ledger import Claim, format_number
 from ..plotting import agent_colors
-from ..registry import FigureSpec, PaperRegistry, Study, TableSpec, documented_settings, setting
+from ..registry import (
+    FigureSpec,
+    PaperRegistry,
+    Study,
+    TableSpec,
+    check_settings,
+    check_settings_type,
+    documented_settings,
+    setting,
+)
 
 __all__ = [
     "L_READING",
@@ -90,38 +100,70 @@ _GRAPHS: dict[str, Callable[[int], np.ndarray]] = {
 FLAT_TOL = 1e-6
 
 
+def _square(M: tuple) -> str | None:
+    """None if `M` (rows) is square, else what it must be."""
+    return None if len(M) == len(M[0]) else "a square matrix (tuple of n rows of n entries)"
+
+
+def _phi_grid(grid: tuple) -> str | None:
+    """None if `grid` is ``(lo, hi, count)`` with ``lo < hi`` and an integer count >= 2."""
+    lo, hi, count = grid
+    ok = lo < hi and isinstance(count, int | np.integer) and not isinstance(count, bool) and count >= 2
+    return None if ok else "(lo, hi, count): finite lo < hi and an integer count >= 2"
+
+
 @documented_settings
 @dataclass(frozen=True)
 class ObserverSettings:
     """Every parameter of the Example 1 run (Sec. 5) and of the checks beyond it."""
 
     A: tuple = setting(((0.0, 1.0), (-1.0, -0.1)), where="Sec. 5, Example 1",
-                       note="agent (26): state (position, velocity)")
+                       note="agent (26): state (position, velocity)", check=_square)
     Bbar: tuple = setting(((0.0,), (1.0,)), where="Sec. 5, Example 1", note="the disturbance enters the velocity")
     C: tuple = setting(((1.0, 0.0),), where="Sec. 5, Example 1", note="each agent measures its position")
-    n_agents: int = setting(5, where="Sec. 5, Example 1", note="number of agents")
+    n_agents: int = setting(5, where="Sec. 5, Example 1", note="number of agents", low=3)
     graph: str = setting("ring", where="Sec. 5, 'cyclic nearest neighbour interconnection'",
-                         note="unit edge weights, Laplacian D − A (ring, path, complete or star)")
-    Q1: float = setting(10.0, where="Sec. 5", note="weight on the absolute output error")
-    R: float = setting(1.0, where="Sec. 5", note="weight on the disturbance")
-    Q2: tuple = setting((5.0, 25.0), where="Sec. 5, Figs. 1 and 2", note="weight on the relative output error")
+                         note="unit edge weights, Laplacian D − A (ring, path, complete or star)",
+                         choices=tuple(_GRAPHS))
+    Q1: float = setting(10.0, where="Sec. 5", note="weight on the absolute output error", low=0, low_open=True)
+    R: float = setting(1.0, where="Sec. 5", note="weight on the disturbance", low=0, low_open=True)
+    Q2: tuple = setting((5.0, 25.0), where="Sec. 5, Figs. 1 and 2", note="weight on the relative output error", low=0)
     initial_error: float = setting(1.0, source="chosen", where="the paper: 'arbitrary initial estimate error'",
-                                   unit="m, m/s", note="initial errors uniform in [−e, e], drawn from the seed")
-    t_end: float = setting(30.0, source="chosen", where="not given", unit="s", note="horizon of Figs. 1-2")
+                                   unit="m, m/s", note="initial errors uniform in [−e, e], drawn from the seed",
+                                   low=0, low_open=True)
+    t_end: float = setting(30.0, source="chosen", where="not given", unit="s", note="horizon of Figs. 1-2",
+                           low=0, low_open=True)
     dt: float = setting(0.002, source="chosen", where="not given", unit="s",
-                        note="output step of Figs. 1-2 (exact discretization; resolves the fast pole)")
+                        note="output step of Figs. 1-2 (exact discretization; resolves the fast pole)",
+                        low=0, low_open=True)
     settle_fraction: float = setting(0.01, source="chosen", where="'faster convergence' is not quantified",
-                                     note="settling time: disagreement below this fraction of its start")
+                                     note="settling time: disagreement below this fraction of its start",
+                                     low=0, low_open=True, high=1, high_open=True)
     phi_grid: tuple = setting((-0.3, 2.4, 55), source="chosen", where="beyond the paper",
-                              note="Φ grid (from, to, points) of the profile Γ(Φ)")
+                              note="Φ grid (from, to, points) of the profile Γ(Φ)", length=3, check=_phi_grid)
     flat_step: float = setting(0.05, source="chosen", where="our test",
-                               note="Φ counts as determined if Γ rises (10⁻⁶ relative) at Φ ± this step")
+                               note="Φ counts as determined if Γ rises (10⁻⁶ relative) at Φ ± this step",
+                               low=0, low_open=True)
     lqr_q1: float = setting(1.0, source="chosen", where="the paper has no control example",
-                            note="controller comparison: Q1 = q I")
+                            note="controller comparison: Q1 = q I", low=0, low_open=True)
     lqr_q2: float = setting(1.0, source="chosen", where="the paper has no control example",
-                            note="controller comparison: Q2 = q I")
+                            note="controller comparison: Q2 = q I", low=0)
     lqr_r: float = setting(1.0, source="chosen", where="the paper has no control example",
-                           note="controller comparison: R = r I")
+                           note="controller comparison: R = r I", low=0, low_open=True)
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+        n = len(self.A)
+        if len(self.Bbar) != n:
+            raise ValueError(f"ObserverSettings.Bbar must have one row per state ({n}, the size of A); "
+                             f"got {len(self.Bbar)} rows")
+        if len(self.C[0]) != n:
+            raise ValueError(f"ObserverSettings.C must have one column per state ({n}, the size of A); "
+                             f"got {len(self.C[0])} columns")
+        if self.dt > self.t_end:
+            raise ValueError(f"ObserverSettings.dt must be at most t_end ({self.t_end:g} s); got {self.dt!r}")
+        check_fits_in_memory(8.0 * 4 * self.n_agents * n * (self.t_end / self.dt + 1) * len(self.Q2),
+                             "ObserverSettings.dt", "the error histories of Figs. 1-2")
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(A, Bbar, C)`` as float arrays.
@@ -251,6 +293,7 @@ def design(Q2: float, reading: str = "as-printed", trace_in: str = "transformed"
     >>> obs.L.shape, obs.Phi.shape
     ((2, 1), (1, 1))
     """
+    check_settings_type(settings, ObserverSettings, "settings")
     Q2 = _check_q2(Q2)
     if n_agents is not None:
         settings = dataclasses.replace(settings, n_agents=_check_n_agents(n_agents))
@@ -323,6 +366,7 @@ def as_printed_phi_interval(Q2: float, n_agents: int | None = None,
     >>> bool(lo < 0.5 < hi)                                 # Phi = Q2 / Q1 = 0.5 lies inside
     True
     """
+    check_settings_type(settings, ObserverSettings, "settings")
     Q2 = _check_q2(Q2)
     lam = _lam(settings, _check_n_agents(n_agents))
     lam = lam[lam > 1e-9]
@@ -361,6 +405,7 @@ def phi_profile(Q2: float, reading: str, phis: np.ndarray, settings: ObserverSet
     (K,) ndarray
         ``min sum_i trace(S_i)`` in the coordinates of eq. (32) (``inf`` where a mode is unstable).
     """
+    check_settings_type(settings, ObserverSettings, "settings")
     Q2 = _check_q2(Q2)
     phis = float_array(phis, "phis")
     if phis.ndim > 1 or phis.size == 0:
@@ -380,6 +425,7 @@ def profile_argmin(Q2: float, reading: str, bounds: tuple[float, float], setting
     evaluates the profile on `points` gains and narrows the grid to the two
     cells around its minimum (final resolution ``width / (points / 2)^rounds``).
     """
+    check_settings_type(settings, ObserverSettings, "settings")
     Q2 = _check_q2(Q2)
     b = float_array(bounds, "bounds")
     if b.shape != (2,):
@@ -431,6 +477,7 @@ def initial_errors(seed: int, settings: ObserverSettings = SETTINGS) -> np.ndarr
     >>> e0.shape, bool(np.abs(e0).max() <= 1.0)
     ((5, 2), True)
     """
+    check_settings_type(settings, ObserverSettings, "settings")
     rng = check_generator(seed, "seed")
     n = len(settings.A)
     return rng.uniform(-settings.initial_error, settings.initial_error, size=(settings.n_agents, n))
@@ -440,6 +487,7 @@ def settling_time(t: np.ndarray, signal: np.ndarray, fraction: float) -> float:
     """First time after which ``max_i |signal[:, i]|`` stays below `fraction` of its initial value.
 
     `t` is (T,), increasing; `signal` is (T, N) with finite entries; `fraction` is a finite number > 0.
+    Returns ``inf`` when the signal has not settled by the last time (it never does within the horizon).
     """
     t = float_array(t, "t")
     if t.ndim != 1 or t.size == 0:
@@ -518,6 +566,7 @@ def fig12(seed: int, settings: ObserverSettings = SETTINGS) -> tuple[Fig12Result
     >>> [r.Q2 for r in vlahakis.fig12(seed=1)]
     [5.0, 25.0]
     """
+    check_settings_type(settings, ObserverSettings, "settings")
     s = settings
     A, _, C = s.arrays()
     t = np.arange(0.0, s.t_end + s.dt / 2, s.dt)
@@ -607,6 +656,7 @@ def readings_table(settings: ObserverSettings = SETTINGS) -> pd.DataFrame:
     empty and ``Phi_free_low``/``Phi_free_high`` give the optimal interval
     (closed form, :func:`as_printed_phi_interval`).
     """
+    check_settings_type(settings, ObserverSettings, "settings")
     return _readings_table(settings)
 
 
@@ -654,6 +704,7 @@ def lmi_variants_table(settings: ObserverSettings = SETTINGS) -> pd.DataFrame:
     A reading whose program is infeasible or not solved to optimality is
     recorded as such.
     """
+    check_settings_type(settings, ObserverSettings, "settings")
     return _lmi_variants_table(settings)
 
 
@@ -691,6 +742,7 @@ def _lmi_variants_table(s: ObserverSettings) -> pd.DataFrame:
 
 def structure_check(n_agents: int | None = None, settings: ObserverSettings = SETTINGS) -> dict:
     """Eqs. (13)-(16) against the dense centralized ARE (9) for all-to-all weights (11)."""
+    check_settings_type(settings, ObserverSettings, "settings")
     s = settings
     n_agents = s.n_agents if n_agents is None else check_positive_int(n_agents, "n_agents")
     A, Bbar, _ = s.arrays()
@@ -706,6 +758,7 @@ def structure_check(n_agents: int | None = None, settings: ObserverSettings = SE
 
 def controller_comparison(n_agents: int | None = None, settings: ObserverSettings = SETTINGS) -> pd.DataFrame:
     """Costs of the centralized, top-down and bottom-up LQR on the graph (weights chosen here)."""
+    check_settings_type(settings, ObserverSettings, "settings")
     s = settings
     n_agents = _check_n_agents(n_agents)
     A, Bbar, _ = s.arrays()
@@ -866,6 +919,7 @@ def run(settings: ObserverSettings = SETTINGS, seed: int = 1, progress: bool = F
     >>> len(vlahakis.claims(result))                      # the ledger, from the result alone
     12
     """
+    check_settings_type(settings, ObserverSettings, "settings")
     s = settings
     check_seed(seed, "seed")
     if not set(PUBLISHED["Phi"]) <= set(s.Q2):
