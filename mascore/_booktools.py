@@ -75,6 +75,7 @@ def plain_text(markup: str) -> str:
     'Errors for Q_2 = 5 and Phi of eq. (62), not the figure fig-x.'
     """
     text = re.sub(r"\{numref\}`([^`]*)`", r"the figure \1", markup)
+    text = re.sub(r"\{glue:text\}`[^`]*`", "(the value of this run)", text)
     text = re.sub(r"\{[a-z:]+\}`([^`]*)`", r"\1", text)
     text = re.sub(r"\\(?:mathcal|mathbb|mathrm|mathbf|operatorname|boldsymbol|left|right|[bB]ig)\b\s*", "", text)
     text = re.sub(r"\$([^$]*)\$", lambda m: re.sub(r"\\([A-Za-z]+)", r"\1", m.group(1)).replace("{", "").replace("}", ""),

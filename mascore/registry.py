@@ -71,6 +71,9 @@ __all__ = [
     "allowed_values",
     "check_settings",
     "check_settings_type",
+    "caption_values",
+    "glue_caption_values",
+    "glue_key",
 ]
 
 #: What every study module of ``mascore.papers`` exports (:func:`study_modules`): the default
@@ -102,6 +105,11 @@ class FigureSpec:
         ``draw(result) -> matplotlib.figure.Figure``: draws from the result alone (everything
         it shows is computed by the study's ``run``), and returns the figure (:meth:`Study.draw`
         refuses anything else).
+    values : callable, optional
+        ``values(result) -> {name: number}``: the numbers the caption quotes, computed from the
+        result. The caption refers to one as ``{{name:.3g}}`` (a format spec after the colon);
+        the book shows the value of the chapter's run (MyST-NB ``glue``), so a caption cannot
+        quote a stale number.
 
     Examples
     --------
@@ -115,6 +123,62 @@ class FigureSpec:
     number: str
     caption: str
     draw: Callable[[Any], matplotlib.figure.Figure]
+    values: Callable[[Any], Mapping[str, float]] | None = None
+
+    def __post_init__(self) -> None:
+        if self.placeholders() and self.values is None:
+            raise ValueError(f"figure {self.name!r}: the caption quotes {self.placeholders()} but no values "
+                             "function computes them")
+
+    def placeholders(self) -> list[str]:
+        """Names of the computed values the caption quotes (``{{name:fmt}}``), in order.
+
+        Returns
+        -------
+        list of str
+            The names.
+
+        Examples
+        --------
+        >>> from mascore.papers import ren2005
+        >>> ren2005.REGISTRY.study("kalman-consensus").figure("bias").placeholders()
+        ['fused', 'average']
+        """
+        return [m.group(1) for m in _CAPTION_VALUE.finditer(self.caption)]
+
+    def caption_with(self, result: Any) -> str:
+        """The caption with its computed values filled in from `result`.
+
+        Parameters
+        ----------
+        result : object
+            The output of the study's ``run``.
+
+        Returns
+        -------
+        str
+            The caption, every ``{{name:fmt}}`` replaced by ``format(values(result)[name], fmt)``.
+
+        Raises
+        ------
+        KeyError
+            If the values function does not compute a quoted name.
+
+        Examples
+        --------
+        >>> from mascore.registry import FigureSpec
+        >>> spec = FigureSpec("f", "", "Settles at {{level:.2f}}.", draw=None, values=lambda r: {"level": r})
+        >>> spec.caption_with(0.04993)
+        'Settles at 0.05.'
+        """
+        if self.values is None:
+            return self.caption
+        values = self.values(result)
+        return _CAPTION_VALUE.sub(lambda m: format(values[m.group(1)], m.group(2) or ""), self.caption)
+
+
+#: A computed value quoted by a caption: ``{{name}}`` or ``{{name:.3g}}``.
+_CAPTION_VALUE = re.compile(r"\{\{(\w+)(?::([^{}]*))?\}\}")
 
 
 @dataclass(frozen=True)
@@ -407,7 +471,108 @@ class PaperRegistry:
             source = f"{self.citation}, {spec.number} (rebuilt). "
         else:  # e.g. "Theorems 3.2 and 3.9 (our check)": what of the paper the figure is about
             source = f"{self.citation}, {spec.number}. "
-        return source + spec.caption
+        caption = spec.caption
+        if isinstance(spec, FigureSpec):  # computed values: glued by the chapter (glue_caption_values)
+            caption = _CAPTION_VALUE.sub(
+                lambda m: f"{{glue:text}}`{glue_key(spec, m.group(1))}{':' + m.group(2) if m.group(2) else ''}`",
+                caption)
+        return source + caption
+
+
+def glue_key(spec: FigureSpec, name: str) -> str:
+    """The MyST-NB glue key of value `name` quoted by the caption of `spec`: ``{figure}-{name}``.
+
+    Parameters
+    ----------
+    spec : FigureSpec
+        The figure.
+    name : str
+        One of ``spec.placeholders()``.
+
+    Returns
+    -------
+    str
+        The key (unique in a chapter: figure names are unique in a paper).
+
+    Examples
+    --------
+    >>> from mascore.papers import ren2005
+    >>> glue_key(ren2005.REGISTRY.study("kalman-consensus").figure("bias"), "fused")
+    'bias-fused'
+    """
+    return f"{spec.name}-{name}"
+
+
+def caption_values(study: Study, result: Any) -> dict[str, float]:
+    """Every value the study's captions quote, computed from `result`, by glue key.
+
+    Parameters
+    ----------
+    study : Study
+        The study.
+    result : object
+        The output of its ``run``.
+
+    Returns
+    -------
+    dict
+        ``{glue_key(spec, name): value}`` over every figure and quoted name.
+
+    Raises
+    ------
+    KeyError
+        If a figure's values function does not compute a name its caption quotes.
+
+    Examples
+    --------
+    >>> from mascore.papers import ren2005
+    >>> study = ren2005.REGISTRY.study("kalman-consensus")
+    >>> values = caption_values(study, ren2005.run(ren2005.SETTINGS, seed=1))
+    >>> round(values["bias-fused"], 3)
+    6.985
+    """
+    out = {}
+    for spec in study.figures:
+        if spec.values is None:
+            continue
+        values = spec.values(result)
+        for name in spec.placeholders():
+            if name not in values:
+                raise KeyError(f"figure {spec.name!r}: its values function does not compute {name!r}")
+            out[glue_key(spec, name)] = float(values[name])
+    return out
+
+
+def glue_caption_values(study: Study, result: Any) -> dict[str, float]:
+    """Glue (MyST-NB) every value the study's captions quote, so the chapter's captions show this run's numbers.
+
+    Call it in the chapter's notebook after the run; the captions that ``make sync`` writes into
+    the figure cells refer to these keys.
+
+    Parameters
+    ----------
+    study : Study
+        The study.
+    result : object
+        The output of its ``run``.
+
+    Returns
+    -------
+    dict
+        The glued values, by key (see :func:`caption_values`).
+
+    Examples
+    --------
+    >>> from mascore.papers import ren2005
+    >>> from mascore.registry import glue_caption_values
+    >>> study = ren2005.REGISTRY.study("kalman-consensus")
+    >>> glued = glue_caption_values(study, ren2005.run(ren2005.SETTINGS, seed=1))  # doctest: +SKIP
+    """
+    glue = require("myst_nb", "gluing caption values in a notebook").glue
+    values = caption_values(study, result)
+    for key, value in values.items():
+        glue(key, value, display=False)
+    return values
 
 
 def study_modules() -> list:

@@ -133,3 +133,32 @@ def test_prose_check_fails_on_typed_timings():
     assert prose_problems("x", "| 32 | 0.40 s | 3.0 s |") and prose_problems("x", "ten times faster, 8 times faster")
     assert prose_problems("x", "measured on 23 Nov 2026") and prose_problems("x", "(claim `fig5-error`)")
     assert not prose_problems("x", "sampled at 0.1 s, simulated for 30 s on 2 x 2 blocks, {glue:text}`t_ms` ms")
+
+
+#: A decimal number in prose (a result quoted in a caption if it has three or more significant digits).
+_DECIMAL = re.compile(r"(?<![\w.])\d+\.\d+(?![\w.])")
+
+
+def typed_results(caption: str) -> list[str]:
+    """Numbers of three or more significant digits typed into a caption (math and computed values aside)."""
+    text = re.sub(r"\$[^$]*\$|\{\{[^}]*\}\}", "", caption)
+    text = re.sub(r"(?:eqs?\.|Theorems?|Lemma|Sec\.|Table|Figs?\.)\s*\(?[\d.,\- and]+\)?", "", text)
+    return [x for x in _DECIMAL.findall(text) if len(x.replace(".", "").lstrip("0")) >= 3]
+
+
+def test_the_typed_result_check_catches_a_typed_number():
+    assert typed_results("the fused value (dotted, 6.985); a limit of 2.462") == ["6.985", "2.462"]
+    assert typed_results("the fused value ({{fused:.4g}}), $P_7(0)=0.001$, eqs. (4)-(5), Theorem 3.9") == []
+
+
+@pytest.mark.parametrize("chapter", sorted(CHAPTERS))
+def test_captions_quote_computed_values_not_typed_ones(chapter):
+    """A caption's result numbers come from the run (``{{name:fmt}}`` placeholders glued by the chapter)."""
+    reg, study = CHAPTERS[chapter]
+    typed = {spec.name: typed_results(spec.caption) for spec in study.figures}
+    assert not any(typed.values()), f"{chapter}: numbers typed into captions: { {k: v for k, v in typed.items() if v} }"
+    quoting = [spec.name for spec in study.figures if spec.placeholders()]
+    if quoting:
+        sources = "".join("".join(c["source"]) for c in _cells(chapter) if c["cell_type"] == "code")
+        assert "glue_caption_values(STUDY, result)" in sources, (
+            f"{chapter}: the captions of {quoting} quote computed values, but the chapter does not glue them")

@@ -165,3 +165,16 @@ def test_a_registry_whose_key_is_not_its_module_is_refused(tmp_path, monkeypatch
 def test_paper_registry_refuses_a_bad_key():
     with pytest.raises(ValueError, match="key must be"):
         PaperRegistry("Not A Key", "x", ())
+
+
+def test_a_caption_quoting_a_value_needs_its_values_function():
+    """A caption that quotes ``{{name}}`` without a function computing it is refused when declared."""
+    from mascore.registry import FigureSpec
+
+    with pytest.raises(ValueError, match="no values function"):
+        FigureSpec("f", "", "Settles at {{level:.2f}}.", draw=lambda r: None)
+    spec = FigureSpec("f", "", "From {{a:.1f}} to {{b}}.", draw=lambda r: None, values=lambda r: {"a": r, "b": 2})
+    assert spec.caption_with(0.26) == "From 0.3 to 2."
+    missing = FigureSpec("f", "", "From {{a}}.", draw=lambda r: None, values=lambda r: {})
+    with pytest.raises(KeyError):
+        missing.caption_with(1.0)

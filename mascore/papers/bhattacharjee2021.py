@@ -1371,9 +1371,10 @@ FIGURES = (
         "four agents and the leader (dashed), the two components side by side: the agents start about 70 state "
         "units from the leader and lock onto its rotation within about 15 steps. (b) The normalized global "
         "disagreement $\\lvert\\bar\\delta_k\\rvert = \\lvert\\delta_k\\rvert/\\bar\\mu$, $\\bar\\mu = 22$, and the "
-        "conservative limit 2.462 of eq. (21) (dotted): look for the curve settling far below the line. "
+        "conservative limit {{bound:.4g}} of eq. (21) (dotted): look for the curve settling far below the line. "
         "(c) $\\lVert A_c^k\\rVert$ under the bound $1.1 \\cdot 0.9^k$ (dashed) at every step.",
-        lambda r: plot_fig2(r.figure_run, r.design, scenario=r.settings, bounds=(r.bound, r.power_norms))),
+        lambda r: plot_fig2(r.figure_run, r.design, scenario=r.settings, bounds=(r.bound, r.power_norms)),
+        values=lambda r: {"bound": r.bound}),
     FigureSpec(
         "fig3", "Fig. 3",
         "Estimation errors $e_{jk}$ of agents 1 (top) and 2 (bottom), components $j = 1, 2$, with the extent "
@@ -1395,12 +1396,14 @@ FIGURES = (
         lambda r: plot_fig5(r.figure_run)),
     FigureSpec(
         "fig6", "Fig. 6",
-        "Trace of the correction shape matrices $P^{(i)}_{k|k}$ of the four agents: 2.87 after the first "
-        "correction of $P_0$ (trace 4, dotted), then down to 1.558 within about five steps (the paper reads "
+        "Trace of the correction shape matrices $P^{(i)}_{k|k}$ of the four agents: {{first:.3g}} after the first "
+        "correction of $P_0$ (trace 4, dotted), then down to {{last:.4g}} within about five steps (the paper reads "
         "'approximately 1.5'). The four curves coincide: "
         "the shapes depend only on $P_0$, $Q$ and $R$, the same for every agent, not on the measurements, so "
         "each agent is drawn with its own line style and markers to keep all four visible.",
-        lambda r: plot_fig6(r.figure_run, r.settings)),
+        lambda r: plot_fig6(r.figure_run, r.settings),
+        values=lambda r: {"first": float(r.figure_run.trace[0][0].mean()),
+                          "last": float(r.figure_run.trace[0][-1].mean())}),
 )
 
 TABLES = (

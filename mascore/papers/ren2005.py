@@ -1341,23 +1341,37 @@ def claims(result: KalmanConsensusResult) -> list[Claim]:
 
 # --------------------------------------------------------------------------- registry
 
+
+def _fig1_values(result: KalmanConsensusResult) -> dict[str, float]:
+    """The numbers Fig. 1's caption quotes: plain average, central fusion, settled variance."""
+    equal = result.fig1.equal
+    return {"average": float(equal.xi[0].mean()), "fused": result.fig1.fused_confident,
+            "settled": float(np.median(equal.P[-1]))}
+
+
+def _bias_values(result: KalmanConsensusResult) -> dict[str, float]:
+    """The central fusion and the plain average of the bias study's initial data."""
+    first = next(iter(result.bias.values()))
+    return {"fused": first["fused"], "average": first["average"]}
+
+
 FIGURES = (
     FigureSpec(
         "fig1", "Fig. 1",
         "The meet-for-dinner example: ten agents, paired at random for calls of 1 to 5 steps, run eqs. (4)-(5) "
         "with $Q=\\Omega=0.1$. Top: meeting times $\\xi_i$; bottom: variances $P_i$, log scale. (a), (c): equal "
         "initial variances $P_i(0)=1$; (b), (d): agent 7, which starts at 7, has $P_7(0)=0.001$. Look for: "
-        "both teams agree, in (a) on the plain average 5.5, in (b) only a little higher and far below the "
-        "central-fusion value (dotted, 6.985); within about 20 steps every variance settles at the same 0.05 "
-        "(the curves coincide), agent 7's included, which is why its advantage fades.",
-        _draw_fig1),
+        "both teams agree, in (a) on the plain average {{average:.3g}}, in (b) only a little higher and far "
+        "below the central-fusion value (dotted, {{fused:.4g}}); within about 20 steps every variance settles "
+        "at the same {{settled:.2g}} (the curves coincide), agent 7's included, which is why its advantage fades.",
+        _draw_fig1, values=_fig1_values),
     FigureSpec(
         "average", "",
         "Ordinary average consensus on the pairing schedule of Fig. 1: (a) every call replaces both values by "
-        "their mean, whatever the agents' confidence, and the team agrees on the plain average 5.5; (b) Kalman "
-        "consensus with agent 7 confident (Fig. 1 (b) again) weights the calls by the variances and ends a "
-        "little higher.",
-        _draw_average),
+        "their mean, whatever the agents' confidence, and the team agrees on the plain average {{average:.3g}}; "
+        "(b) Kalman consensus with agent 7 confident (Fig. 1 (b) again) weights the calls by the variances and "
+        "ends a little higher.",
+        _draw_average, values=_fig1_values),
     FigureSpec(
         "fig2_fig3", "Figs. 2-3",
         "The six-agent graphs of Figs. 2-3, redrawn from their captions (the drawings are lost in the text we "
@@ -1395,11 +1409,12 @@ FIGURES = (
         "bias", "",
         "Agreed value over 1000 random pairing schedules, on Fig. 1's right-column data (agent 7 starts at 7 "
         "with $P_7(0)=0.001$), noise-free, for the paper's scheme and two variants. Dotted: the central "
-        "inverse-variance fusion of the initial data (6.985); dashed: the plain average 5.5. Look for: the "
+        "inverse-variance fusion of the initial data ({{fused:.4g}}); dashed: the plain average {{average:.3g}}. "
+        "Look for: the "
         "paper's scheme lands far below the fused value, often near the plain average; dropping $Q$ helps a "
         "little; dropping also $\\Omega$ and the self term puts almost every run on the fused value (the "
         "narrow spike on the dotted line).",
-        _draw_bias),
+        _draw_bias, values=_bias_values),
     FigureSpec(
         "overconfidence", "",
         "Believed ($P_i$, dashed) and actual (solid) error variance of agent 7 (red) and agent 1 (blue) on the "

@@ -1202,8 +1202,8 @@ def claims(result: ObserverResult) -> list[Claim]:
 # ---------------------------------------------------------------- the registry
 
 _FIG_LOOK = {
-    1: "Look for the fast pole (about −23 rad/s) removing most of each error within 0.2 s, then a small common "
-       "tail that decays slowly (the pole near −0.26 rad/s of the printed $L$, the 'slowest pole being near the "
+    1: "Look for the fast pole (about {{fast:.2g}} rad/s) removing most of each error within 0.2 s, then a small "
+       "common tail that decays slowly (the pole near {{slow:.2g}} rad/s of the printed $L$, the 'slowest pole being near the "
        "origin' of Sec. 5). The panels differ only in $\\Phi$, and so little that they look alike: the table "
        "under Fig. 2 measures the difference (with the larger printed $\\Phi$ (b) the errors agree a little "
        "sooner).",
@@ -1220,8 +1220,16 @@ def _fig12_caption(k: int, Q2: float, level: str) -> str:
             "is linear up to 0.1 s and logarithmic after. " + _FIG_LOOK[k])
 
 
+def _printed_poles(r: ObserverResult) -> dict[str, float]:
+    """The fast and the slow pole of ``A - L C`` with the printed ``L`` (rad/s)."""
+    A, _, C = r.settings.arrays()
+    ev = np.sort(np.linalg.eigvals(A - L_PRINTED @ C).real)
+    return {"fast": float(ev[0]), "slow": float(ev[-1])}
+
+
 FIGURES = (
-    FigureSpec("fig1", "Fig. 1", _fig12_caption(1, 5.0, "low"), lambda r: plot_fig12(r.fig12[0])),
+    FigureSpec("fig1", "Fig. 1", _fig12_caption(1, 5.0, "low"), lambda r: plot_fig12(r.fig12[0]),
+               values=_printed_poles),
     FigureSpec("fig2", "Fig. 2", _fig12_caption(2, 25.0, "high"), lambda r: plot_fig12(r.fig12[1])),
     FigureSpec(
         "phi-profile", "",
