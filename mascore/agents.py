@@ -38,7 +38,7 @@ class LTIAgent:
         Input matrix.
     dt : float, optional
         Sampling time (s) the agent was discretized with. A model built from the
-        agent (e.g. :meth:`mascore.rendezvous.RendezvousModel.from_agent`) takes its
+        agent (e.g. ``mascore.rendezvous.RendezvousModel.from_agent``) takes its
         time base from here, and refuses a ``dt`` that contradicts it.
     A_c, B_c : array_like, optional
         The continuous-time agent ``x' = A_c x + B_c u`` that ``(A, B)`` samples with a
