@@ -1202,7 +1202,7 @@ def _fig6_claim(result: SetMembershipResult) -> Claim:
         f"reads the value off its plot ('approximately 1.5'; its 2.667-fold decrease is 4 / 1.5, so it carries no "
         f"further digits). The gap of {format_number(tr_end - 1.5)} is not numerical: the trace does not depend on "
         f"the noise draw (the SDPs use only P, Q, R), has settled by k = 10 (change over the last 10 steps "
-        f"{format_number(settle, 2)}), and the closed-form twins give the same value (claim sdp-closed-form-agree). "
+        f"{format_number(settle, 2)}), and the closed-form twins give the same value (see the claim on the SDP and closed-form paths). "
         "We read the paper's 1.5 as a rounded reading of its plot and keep the 0.05 tolerance fixed beforehand.",
         unit=_STATE2)
 
@@ -1379,7 +1379,7 @@ FIGURES = (
         "fig3", "Fig. 3",
         "Estimation errors $e_{jk}$ of agents 1 (top) and 2 (bottom), components $j = 1, 2$, with the extent "
         "of the correction ellipsoid along each axis, $\\pm\\sqrt{(P_{k|k})_{jj}}$ (shaded). Look for the errors "
-        "staying inside the band at every step (claim containment), and the band reaching its steady width "
+        "staying inside the band at every step (the ledger checks it), and the band reaching its steady width "
         "within a few steps: about $\\pm 0.63$ on the measured component 1, $\\pm 1.08$ on component 2.",
         lambda r: plot_fig3_4(r.figure_run, (1, 2))),
     FigureSpec(
@@ -1391,8 +1391,8 @@ FIGURES = (
         "fig5", "Fig. 5",
         "Norms of the estimation errors $\\lVert e_k^{(i)}\\rVert$ of the four agents. Look for every curve "
         "staying below its value at $k = 0$ after the first step: the step $\\sup_k \\lVert e^{(g)}_k\\rVert \\le "
-        "\\lVert e^{(g)}_0\\rVert$ of the proof of Corollary 1 holds for this draw (claim "
-        "fig5-error-below-initial), though not for every draw.",
+        "\\lVert e^{(g)}_0\\rVert$ of the proof of Corollary 1 holds for this draw (the ledger "
+        "checks it), though not for every draw.",
         lambda r: plot_fig5(r.figure_run)),
     FigureSpec(
         "fig6", "Fig. 6",

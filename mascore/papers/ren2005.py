@@ -1166,7 +1166,7 @@ def _fig1_claims(result: KalmanConsensusResult) -> list[Claim]:
         f"{format_number(100 * share, 3)} % of the agreed values are closer to 7 than {format_number(d_eq)} h. "
         "The pull is modest: Q erodes agent 7's advantage at its first step (P + Q = "
         f"{format_number(s.P_confident + s.Q)}), so the agreed value stays far from the central fusion value "
-        "(claim ren2005/beyond-fusion-bias); on some schedules it lands below the plain average.\n\n"
+        "(see the claim on the bias of the agreed value); on some schedules it lands below the plain average.\n\n"
         + _fig1_choices(s),
         rule="distance to 7 (agent 7 confident) < distance to 7 (equal P), and share of schedules closer "
              "to 7 > 0.5")
