@@ -102,7 +102,8 @@ TYPED_TIMING = re.compile(
     re.I,
 )
 #: Words of the workshop, not of the book: an issue, a claim's slug, the date of a measurement.
-WORKSHOP_WORDS = re.compile(r"\bof the issue\b|\bthe issue's\b|\(claim `|\(claim [\w/-]+\)|\bclaim `[a-z0-9-]+`|\b\d{1,2} (?:Jan|Feb|Mar|Apr|May|"
+WORKSHOP_WORDS = re.compile(r"\bof the issue\b|\bthe issue's\b|\(claim `|\(claim [\w/-]+\)|\bclaim `[a-z0-9-]+`"
+                            r"|\b\d{1,2} (?:Jan|Feb|Mar|Apr|May|"
                             r"Jun|Jul|Aug|Sep|Oct|Nov|Dec)[a-z]* 20\d\d\b|\b20\d\d-\d\d-\d\d\b")
 
 
