@@ -84,7 +84,9 @@ __all__ = [
     "fitted_slopes",
     "floats_per_step",
     "grid_cells",
+    "LOCALIZATION_NOT_APPLICABLE",
     "headline",
+    "localization_model",
     "node_cost",
     "node_costs",
     "NODE_ORDER",
@@ -885,6 +887,63 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
     return fusion.SensorNetworkModel(F, Q, H, R, benchmark_graph(graph, n_agents, s))
 
 
+#: The papers' methods on cooperative localization: none applies as published, for these reasons.
+LOCALIZATION_NOT_APPLICABLE = {
+    "song-mb, song-eb": "need absolute measurements of the neighbours' states (eq. (2)); here they are relative",
+    "vlahakis": "needs every agent to measure its own output (the Q1 term); here only the anchors do",
+    "set-membership": "a single agent's filter; without an anchor an agent's relative measurements do not fix it",
+    "ren-kc": "fuses priors of a quantity nobody measures; there is no common quantity here",
+}
+
+
+def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
+    """Cooperative localization: the team's positions, relative measurements on the links, absolute at two anchors.
+
+    The state is every agent's planar position, ``(p_1, ..., p_N)`` (2N numbers), each a
+    random walk of variance ``q_pos`` per step. Agent i measures ``z_ij = p_j - p_i + noise``
+    (variance ``r`` per coordinate) to each neighbour j, and the anchors (agents 0 and
+    N // 2) also their own position. Every filter of :mod:`mascore.fusion` then applies
+    as to a common target (the team's positions); each agent is scored on its own position.
+
+    Parameters
+    ----------
+    n_agents : int
+        Team size N >= 3.
+    graph : {"ring", "geometric"}
+        The sensing and communication graph (:func:`benchmark_graph`).
+    settings : BenchmarkSettings
+        ``q_pos`` and ``r``.
+
+    Returns
+    -------
+    mascore.fusion.SensorNetworkModel
+        Without the anchors the positions would be observable only up to a common shift.
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> compare.localization_model(4).measurement_sizes
+    (6, 4, 6, 4)
+    """
+    from . import fusion
+
+    n_agents = _check_n_agents(n_agents)
+    s = settings
+    A = benchmark_graph(graph, n_agents, s)
+    n = 2 * n_agents
+    I2 = np.eye(2)
+    H, R = [], []
+    for i in range(n_agents):
+        rows = []
+        if i in (0, n_agents // 2):
+            rows.append(np.kron(np.eye(n_agents)[i], I2))
+        for j in np.flatnonzero(A[i]):
+            rows.append(np.kron(np.eye(n_agents)[j] - np.eye(n_agents)[i], I2))
+        H.append(np.vstack(rows))
+        R.append(s.r * np.eye(H[-1].shape[0]))
+    return fusion.SensorNetworkModel(np.eye(n), s.q_pos * np.eye(n), H, R, A)
+
+
 def target_filter(method: str, model):
     """The :mod:`mascore.fusion` filter of a :data:`TARGET_METHODS` name on `model`.
 
@@ -926,7 +985,7 @@ def target_filter(method: str, model):
     return fusion.ConsensusOnInformationFilter(model, int(L), novelty_weight="N" if kind == "hcmci" else 1.0)
 
 
-def target_cost(method: str, n_agents: int, degree: float) -> tuple[float, float]:
+def target_cost(method: str, n_agents: int, degree: float, task: str = "target") -> tuple[float, float]:
     """Floats sent and flops per agent per step of a common-target method (:func:`mascore.fusion.filter_cost`).
 
     Parameters
@@ -937,6 +996,9 @@ def target_cost(method: str, n_agents: int, degree: float) -> tuple[float, float
         N.
     degree : float
         Mean number of neighbours (rounded for the count).
+    task : {"target", "localization"}
+        The model: n = 4 and one measurement per agent, or n = 2N and ``2 degree`` measurements
+        per agent (the anchors' two more are left out of the count).
 
     Returns
     -------
@@ -961,7 +1023,8 @@ def target_cost(method: str, n_agents: int, degree: float) -> tuple[float, float
         kind, L = method.rsplit("-L", 1)
         name = {"ci": "consensus-on-information", "hcmci": "hcmci", "icf": "information-consensus"}[kind]
         L = int(L)
-    c = fusion.filter_cost(name, n=4, q=1, degree=d if method != "local" else 0, iterations=L, n_agents=n_agents)
+    n, q = (4, 1) if task == "target" else (2 * int(n_agents), 2 * d)
+    c = fusion.filter_cost(name, n=n, q=q, degree=d if method != "local" else 0, iterations=L, n_agents=n_agents)
     return c.floats_sent, c.flops
 
 
@@ -973,8 +1036,9 @@ def simulate_target(
     graph: str = "ring",
     runs: int | None = None,
     settings: BenchmarkSettings = SETTINGS,
+    task: str = "target",
 ) -> dict[str, np.ndarray]:
-    """Track the common target with one filter of :mod:`mascore.fusion`, batched over runs.
+    """Track the common target (or localize the team) with one filter of :mod:`mascore.fusion`, batched over runs.
 
     Parameters
     ----------
@@ -990,12 +1054,15 @@ def simulate_target(
         Monte Carlo runs (default ``settings.runs``).
     settings : BenchmarkSettings
         The benchmark's settings (``n_steps``, ``steady_from``, ``p0``).
+    task : {"target", "localization"}
+        :func:`target_model` or :func:`localization_model`.
 
     Returns
     -------
     dict of str to ndarray
         Per run: ``rmse_own`` (m), RMS position error of the agents' estimates over the
-        steady window; ``nees_own``, NEES per degree of freedom with each agent's own P;
+        steady window (of the target; of its own position for localization); ``nees_own``,
+        NEES per degree of freedom with each agent's own P (of that position);
         ``cpu_s``, CPU of the whole batch's filtering (one value, repeated).
 
     Examples
@@ -1006,23 +1073,36 @@ def simulate_target(
     True
     """
     n_agents, runs = _check_run(n_agents, "gaussian", 0.0, 1.0, runs, settings)
+    if task not in ("target", "localization"):
+        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
     s = settings
-    model = target_model(n_agents, graph, s)
+    model = (target_model if task == "target" else localization_model)(n_agents, graph, s)
     filt = target_filter(method, model)
-    P0 = s.p0 * np.eye(4)
-    x_true, z = model.simulate(np.zeros(4), P0, s.n_steps, np.random.default_rng(seed), n_runs=runs)
+    n = model.n_states
+    P0 = s.p0 * np.eye(n)
+    x_true, z = model.simulate(np.zeros(n), P0, s.n_steps, np.random.default_rng(seed), n_runs=runs)
     tic = time.thread_time()
-    x, P = filt.run(np.zeros(4), P0, z)
+    x, P = filt.run(np.zeros(n), P0, z)
     cpu = time.thread_time() - tic
     w = slice(s.steady_from, s.n_steps)
-    truth = x_true[1:][w]                                      # (K', runs, 4)
+    truth = x_true[1:][w]                                      # (K', runs, n)
     x, P = x[w], P[w]
     if method == "centralized":
         x, P = x[:, :, None], P[:, None]                       # one estimate, shared by every agent
-    e = truth[:, :, None] - x                                  # (K', runs, N', 4)
-    P = np.broadcast_to(P[:, None] if P.ndim == 4 else P, (*e.shape, 4))
-    nees = np.einsum("...i,...i->...", e, np.linalg.solve(P, e[..., None])[..., 0]) / 4
-    return {"rmse_own": np.sqrt(np.mean(np.sum(e[..., :2] ** 2, -1), axis=(0, 2))),
+    e = truth[:, :, None] - x                                  # (K', runs, N', n)
+    P = np.broadcast_to(P[:, None] if P.ndim == 4 else P, (*e.shape, n))
+    if task == "target":
+        e_nees, P_nees, dof = e, P, 4                          # NEES of the whole state, RMSE of the position
+        e = e[..., :2]
+    else:
+        N = n_agents
+        own = np.arange(N)
+        idx = 2 * own[:, None] + np.arange(2)                 # (N, 2): agent i's own coordinates
+        e = np.broadcast_to(e, (*e.shape[:2], N, n))[:, :, own[:, None], idx]              # (K', runs, N, 2)
+        P = np.broadcast_to(P, (*P.shape[:2], N, n, n))[:, :, own[:, None, None], idx[:, :, None], idx[:, None, :]]
+        e_nees, P_nees, dof = e, P, 2
+    nees = np.einsum("...i,...i->...", e_nees, np.linalg.solve(P_nees, e_nees[..., None])[..., 0]) / dof
+    return {"rmse_own": np.sqrt(np.mean(np.sum(e ** 2, -1), axis=(0, 2))),
             "nees_own": nees.mean(axis=(0, 2)), "cpu_s": np.full(runs, cpu)}
 
 
@@ -1037,10 +1117,11 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     noise, no drop-out, correct Q): ``scaling`` over N (with the Vlahakis
     observer's coupling knob), ``graph`` (the geometric graph at N = 16, and 32
     in the full grid), ``dropout``, ``noise`` and ``wrong-q`` at N = 8, the
-    ``shared`` task and the common-``target`` task (:func:`simulate_target`);
+    ``shared`` task, the common-``target`` task and cooperative ``localization``
+    (:func:`simulate_target`);
     each with ``blocks x settings.runs`` seeds (quick: 2 x 50, full: 4 x 50, N up to
     64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
-    N = 8, the shared and the target tasks).
+    N = 8, the shared, target and localization tasks).
 
     Parameters
     ----------
@@ -1080,6 +1161,8 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
                     "block": blocks200}),
         ("target", {**base, "task": ["target"], "method": list(TARGET_METHODS), "graph": ["geometric"],
                     "n_agents": [16], "block": blocks200}),
+        ("localization", {**base, "task": ["localization"], "method": list(TARGET_METHODS),
+                          "n_agents": [8] if quick else [8, 16], "block": blocks200}),
     ]
     cells = []
     for study, axes in studies:
@@ -1119,9 +1202,9 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
     """
     seed = cell_seed(cell, SEED_AXES, base_seed)
     common = {"noise": cell["noise"], "dropout": float(cell["dropout"])}
-    if cell["task"] == "target":
+    if cell["task"] in ("target", "localization"):
         metrics = simulate_target(cell["method"], int(cell["n_agents"]), seed, graph=cell.get("graph", "ring"),
-                                  settings=settings)
+                                  settings=settings, task=cell["task"])
         nan = np.full_like(metrics["rmse_own"], np.nan)
         metrics.update(rmse_view=nan, containment=nan, spread=nan)
     elif cell["task"] == "team":
@@ -1133,8 +1216,8 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
                        spread=metrics["rmse_own"] * np.nan)
     adjacency = benchmark_graph(cell.get("graph", "ring"), int(cell["n_agents"]), settings)
     degree = float(adjacency.sum(1).mean())
-    if cell["task"] == "target":
-        floats = target_cost(cell["method"], int(cell["n_agents"]), degree)[0]
+    if cell["task"] in ("target", "localization"):
+        floats = target_cost(cell["method"], int(cell["n_agents"]), degree, cell["task"])[0]
     else:
         floats = floats_per_step(cell["method"], int(cell["n_agents"]), degree=degree)
     runs = len(metrics["rmse_own"])
@@ -1406,7 +1489,7 @@ def headline(summary, task: str = "team"):
     ----------
     summary : pandas.DataFrame
         Output of :func:`summarize`.
-    task : {"team", "target", "shared"}
+    task : {"team", "target", "localization", "shared"}
         The scenario: ``"team"``, own state at N = 8 on the ring (the case where cooperation
         cannot help: forwarding the neighbours' measurements of an agent already is the
         centralized filter); ``"target"``, the common target at N = 8 on the ring; ``"shared"``,
@@ -1433,14 +1516,15 @@ def headline(summary, task: str = "team"):
     """
     import pandas as pd
 
-    if task not in ("team", "target", "shared"):
-        raise ValueError(f"task must be 'team', 'target' or 'shared'; got {task!r}")
+    if task not in ("team", "target", "localization", "shared"):
+        raise ValueError(f"task must be 'team', 'target', 'localization' or 'shared'; got {task!r}")
     dash = "—"
     frame = summary[(summary["task"] == task) & (summary["n_agents"] == 8) & (summary["dropout"] == 0.0)]
     if task == "team":
         frame = frame[frame["study"] == "scaling"]
     frame = frame[frame.get("graph", "ring") == "ring"].set_index("method")
-    methods = {"team": TEAM_METHODS, "target": TARGET_METHODS, "shared": SHARED_METHODS}[task]
+    methods = {"team": TEAM_METHODS, "target": TARGET_METHODS, "localization": TARGET_METHODS,
+               "shared": SHARED_METHODS}[task]
     slopes = fitted_slopes(summary) if task == "team" else {}
     rows = []
     for m in methods:
@@ -1456,11 +1540,12 @@ def headline(summary, task: str = "team"):
         if task == "team":
             row["spread (m)"] = round(r["spread_mean"], 3)
             row["CPU slope in N"] = round(slopes[m], 2) if m in slopes else dash
-        if task == "target":
-            row["flops/agent/step"] = round(target_cost(m, 8, 2)[1])
+        if task in ("target", "localization"):
+            row["flops/agent/step"] = round(target_cost(m, 8, 2, task)[1])
         rows.append(row)
-    if task == "target":
-        for m, why in TARGET_NOT_APPLICABLE.items():
+    if task in ("target", "localization"):
+        reasons = TARGET_NOT_APPLICABLE if task == "target" else LOCALIZATION_NOT_APPLICABLE
+        for m, why in reasons.items():
             rows.append({"method": m, "RMSE ratio [95 %]": "not applicable", "seeds": 0, "consistency": why,
                          "floats/step": dash, "CPU µs/agent/step": dash, "flops/agent/step": dash})
     out = pd.DataFrame(rows).set_index("method")
@@ -1524,12 +1609,12 @@ def compare_claims(summary, phi: dict | None = None) -> list:
     b8 = base[base["n_agents"] == 8].set_index("method")
     where = "Comparing the methods"
     claims = []
-    bounded = s[s["task"].isin(["team", "target"]) & (s["method"] != "centralized")]
+    bounded = s[s["task"].isin(["team", "target", "localization"]) & (s["method"] != "centralized")]
     worst = {f"{t}: {m}": round(float(g["ratio_lo"].min()), 6) for (t, m), g in bounded.groupby(["task", "method"])}
     claims.append(Claim.qualitative(
         "compare/centralized-bound", where,
-        "The centralized Kalman filter's RMSE lower-bounds every other method's in every condition of the own-state "
-        "and the common-target sweeps (lowest lower end of the 95 % interval of the run-by-run ratio).",
+        "The centralized Kalman filter's RMSE lower-bounds every other method's in every condition of the own-state, "
+        "common-target and localization sweeps (lowest lower end of the 95 % interval of the run-by-run ratio).",
         worst, all(v >= 1.0 - 1e-9 for v in worst.values()), rule="min ratio_lo >= 1 for every method",
         note="Under a wrong Q the centralized filter is wrong too; the ratio is still taken to it."))
     fwd = team[team["method"] == "forwarding"]
@@ -1686,6 +1771,36 @@ def compare_claims(summary, phi: dict | None = None) -> list:
         and all(abs(n8[m] - 1) < 0.1 for m in ("hcmci-L5", "icf-L5"))
         and all(abs(v[m] - 1) < 0.1 for v in nees.values() for m in ("forwarding", "centralized")),
         rule="CI < 0.9 at all L, N; HCMCI, ICF > 1.1 at L = 1, |NEES - 1| < 0.1 at L = 5, N = 8"))
+    # ------------------------------------------------------------------ cooperative localization
+    loc = s[(s["task"] == "localization") & (s["n_agents"] == 8) & (s["graph"] == "ring")].set_index("method")
+    lr = {m: round(float(loc.loc[m, "ratio_mean"]), 4) for m in TARGET_METHODS if m != "centralized"}
+    claims.append(Claim.qualitative(
+        "compare/localization-needs-hops", where,
+        "In cooperative localization (relative measurements, two anchors, the ring of 8) one hop is not enough: "
+        "an agent's own position is fixed by chains of relative measurements to the anchors, so forwarding the "
+        "neighbours' measurements stays more than twice the centralized RMSE, while the consensus filters, which "
+        "carry information over many hops, come within 25 % at both L = 1 and L = 5.",
+        {"forwarding": lr["forwarding"], "local": lr["local"],
+         "consensus": {m: lr[m] for m in ("ci-L1", "ci-L5", "hcmci-L1", "hcmci-L5", "icf-L1", "icf-L5")}},
+        lr["forwarding"] > 2 and lr["local"] > lr["forwarding"]
+        and all(lr[m] < 1.25 for m in ("ci-L1", "ci-L5", "hcmci-L1", "hcmci-L5", "icf-L1", "icf-L5")),
+        rule="forwarding > 2; every consensus filter < 1.25 at L = 1 and 5"))
+    knob_loc = {m: {L: lr[f"{m}-L{L}"] for L in (1, 5)} for m in ("ci", "hcmci", "icf")}
+    nees_loc = {m: round(float(loc.loc[m, "nees_own_mean"]), 4) for m in ("ci-L1", "ci-L5", "hcmci-L1",
+                                                                          "hcmci-L5", "icf-L1", "icf-L5")}
+    claims.append(Claim.qualitative(
+        "compare/localization-knob", where,
+        "The consensus steps do not buy the same thing in every scenario: in localization more steps bring HCMCI "
+        "and ICF closer to the centralized filter but make consensus on information less accurate (its weights "
+        "tend to 1/N per measurement); HCMCI and ICF are overconfident at L = 1 (NEES per dof above 1.1) and less so "
+        "at L = 5, while consensus on information stays conservative at both (below 0.9).",
+        {"ratio": knob_loc, "nees": nees_loc},
+        knob_loc["hcmci"][5] < knob_loc["hcmci"][1] and knob_loc["icf"][5] < knob_loc["icf"][1]
+        and knob_loc["ci"][5] > knob_loc["ci"][1]
+        and all(nees_loc[f"{m}-L1"] > 1.1 and 1 < nees_loc[f"{m}-L5"] < nees_loc[f"{m}-L1"] for m in ("hcmci", "icf"))
+        and all(nees_loc[f"ci-L{L}"] < 0.9 for L in (1, 5)),
+        rule="ratio falls with L for HCMCI, ICF and rises for CI; HCMCI, ICF: NEES > 1.1 at L = 1, between 1 and "
+             "that at L = 5; CI < 0.9 at L = 1, 5"))
     return claims
 
 
@@ -1913,6 +2028,10 @@ TABLES = (
     TableSpec("headline_target", "", "Common target, per method at N = 8 on the ring: RMSE ratio to the centralized "
               "filter, consistency, floats sent, CPU and flops per agent and step; the papers' methods that do "
               "not apply, with the reason.", lambda r: headline(r.summary, "target").reset_index()),
+    TableSpec("headline_localization", "", "Cooperative localization, per method at N = 8 on the ring: RMSE ratio of "
+              "each agent's own position to the centralized filter's, consistency, floats sent, CPU and flops per "
+              "agent and step; the papers' methods that do not apply, with the reason.",
+              lambda r: headline(r.summary, "localization").reset_index()),
     TableSpec("headline_shared", "", "Shared quantity (Ren et al.'s task), per method at N = 8: RMSE ratio to the "
               "central fusion, consistency, floats sent and CPU per agent and step.",
               lambda r: headline(r.summary, "shared").reset_index()),
