@@ -449,6 +449,11 @@ class _Song(_Estimator):
     def views(self, Z, S):
         return self.filter.X_hat if self.eb else Z
 
+    @property
+    def team_estimates(self):
+        """Every agent's estimate of every agent, ``(R, N, N, 4)``."""
+        return self.filter.X_hat
+
     def predict(self, U):
         self.filter.predict()
 
@@ -669,7 +674,9 @@ def simulate_team(
         position estimate over the steady window; ``rmse_view`` (m), of the
         positions its control uses (itself and its neighbours); ``nees_own``,
         mean normalized estimation error squared of the own state per degree
-        of freedom (NaN without a covariance); ``containment``, fraction of
+        of freedom (NaN without a covariance); ``rmse_far`` (m), of the positions of the
+        agents it neither senses nor hears from (Song et al.'s filters only, which estimate
+        the whole team; NaN otherwise); ``containment``, fraction of
         agent-steps whose true state lies in the set-membership ellipsoid (NaN
         for the other methods); ``spread`` (m), steady-state RMS distance of
         the agents to their centroid; and ``cpu_s``, the CPU time (s) of this
@@ -698,7 +705,7 @@ def simulate_team(
     nominal = team.adjacency > 0
     eye = np.eye(N, dtype=bool)
     held = None
-    acc = {k: np.zeros(runs) for k in ("own", "view", "nees", "contained", "spread")}
+    acc = {k: np.zeros(runs) for k in ("own", "view", "nees", "contained", "spread", "far")}
     for k in range(s.n_steps):
         lost = (drop_rng.random((runs, N, N)) < dropout) & ~eye
         S = (nominal | eye) & ~lost
@@ -729,6 +736,8 @@ def simulate_team(
         "rmse_own": np.sqrt(acc["own"] / n), "rmse_view": np.sqrt(acc["view"] / n),
         "nees_own": acc["nees"] / n if est.own_cov is not None else nan,
         "containment": acc["contained"] / n if method == "set-membership" else nan,
+        "rmse_far": np.sqrt(acc["far"] / n) if getattr(est, "team_estimates", None) is not None and
+        not np.all(nominal | eye) else nan,
         "spread": np.sqrt(acc["spread"] / n), "cpu_s": np.full(runs, cpu),
     }
 
@@ -747,6 +756,11 @@ def _accumulate(acc: dict, est: _Estimator, x: np.ndarray, view: np.ndarray, see
         acc["contained"] += inside.mean(-1)
     centred = x[..., :2] - x[..., :2].mean(-2, keepdims=True)
     acc["spread"] += np.mean(np.sum(centred**2, -1), -1)
+    team = getattr(est, "team_estimates", None)
+    far = ~seen
+    if team is not None and far.any():  # agent i's estimates of the agents it neither senses nor hears from
+        ef = np.sum((team[..., :2] - x[:, None, :, :2]) ** 2, -1)  # (R, N, N)
+        acc["far"] += np.sum(ef * far, (-1, -2)) / far.sum()
 
 
 # --------------------------------------------------------------------------------------------
@@ -1206,14 +1220,14 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
         metrics = simulate_target(cell["method"], int(cell["n_agents"]), seed, graph=cell.get("graph", "ring"),
                                   settings=settings, task=cell["task"])
         nan = np.full_like(metrics["rmse_own"], np.nan)
-        metrics.update(rmse_view=nan, containment=nan, spread=nan)
+        metrics.update(rmse_view=nan, containment=nan, spread=nan, rmse_far=nan)
     elif cell["task"] == "team":
         metrics = simulate_team(cell["method"], int(cell["n_agents"]), seed, q_scale=float(cell["q_scale"]),
                                 graph=cell.get("graph", "ring"), settings=settings, **common)
     else:
         metrics = simulate_shared(cell["method"], int(cell["n_agents"]), seed, settings=settings, **common)
         metrics.update(rmse_view=np.full_like(metrics["rmse_own"], np.nan), containment=metrics["rmse_own"] * np.nan,
-                       spread=metrics["rmse_own"] * np.nan)
+                       spread=metrics["rmse_own"] * np.nan, rmse_far=metrics["rmse_own"] * np.nan)
     adjacency = benchmark_graph(cell.get("graph", "ring"), int(cell["n_agents"]), settings)
     degree = float(adjacency.sum(1).mean())
     if cell["task"] in ("target", "localization"):
@@ -1247,7 +1261,7 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
     -------
     pandas.DataFrame
         One row per group: ``n`` runs, and ``mean``/``lo``/``hi`` of
-        ``rmse_own``, ``ratio``, ``nees_own``, ``containment``, ``spread``,
+        ``rmse_own``, ``ratio``, ``nees_own``, ``containment``, ``spread``, ``rmse_far``,
         plus ``floats`` and ``cpu_us`` (CPU per agent per step and run, µs).
 
     Examples
@@ -1279,7 +1293,7 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
     for key, g in t.groupby(by, sort=False, dropna=False):
         row = dict(zip(by, key if isinstance(key, tuple) else (key,)))
         row["n"] = len(g)
-        for col in ("rmse_own", "ratio", "nees_own", "containment", "spread"):
+        for col in ("rmse_own", "ratio", "nees_own", "containment", "spread", "rmse_far"):
             m, half = _mean_ci(g[col].to_numpy())
             row[f"{col}_mean"], row[f"{col}_lo"], row[f"{col}_hi"] = m, m - half, m + half
         row["floats"] = float(g["floats"].iloc[0])
@@ -1539,6 +1553,7 @@ def headline(summary, task: str = "team"):
                "CPU µs/agent/step": round(r["cpu_us"], 2)}
         if task == "team":
             row["spread (m)"] = round(r["spread_mean"], 3)
+            row["non-neighbours' RMSE (m)"] = round(r["rmse_far_mean"], 3) if np.isfinite(r["rmse_far_mean"]) else dash
             row["CPU slope in N"] = round(slopes[m], 2) if m in slopes else dash
         if task in ("target", "localization"):
             row["flops/agent/step"] = round(target_cost(m, 8, 2, task)[1])
@@ -1692,6 +1707,27 @@ def compare_claims(summary, phi: dict | None = None) -> list:
         "a local Kalman filter's (within 3 %): the neighbours' measurements of agent i are never sent to i. "
         "What they buy is the estimate of the others, without any communication.",
         gain, all(abs(v - 1) < 0.03 for v in gain.values()), rule="|RMSE / RMSE_local - 1| < 0.03"))
+    song_far = {}
+    for n, g in base[base["method"].isin(["song-mb", "song-eb"])].groupby("n_agents"):
+        for _, r in g.iterrows():
+            song_far[f"{r['method']}, N = {n}"] = {"far": round(float(r["rmse_far_mean"]), 4),
+                                                   "own": round(float(r["rmse_own_mean"]), 4),
+                                                   "spread": round(float(r["spread_mean"]), 4)}
+    song_far = {k: v for k, v in song_far.items() if np.isfinite(v["far"])}
+    sizes_far = sorted({int(k.rsplit("= ", 1)[1]) for k in song_far if k.startswith("song-eb")}) or [0]
+    claims.append(Claim.qualitative(
+        "compare/song-non-neighbours", where,
+        "What Song et al.'s filters sell, an estimate of the agents one neither senses nor hears from, is measured "
+        "here: its RMSE is at least 1.5 times the agent's own-state RMSE, a factor that grows with the team "
+        "(the non-neighbours are more hops away), and it is of the order of the team's spread around its centroid "
+        "(between half of it and the spread itself), the error of an agent that would only know where the "
+        "team's centre is.", song_far,
+        len(song_far) >= 4 and all(v["far"] > 1.5 * v["own"] and 0.5 < v["far"] / v["spread"] < 1.0
+                                   for v in song_far.values())
+        and all(song_far[f"{m}, N = {max(sizes_far)}"]["far"] / song_far[f"{m}, N = {max(sizes_far)}"]["own"]
+                > song_far[f"{m}, N = {min(sizes_far)}"]["far"] / song_far[f"{m}, N = {min(sizes_far)}"]["own"]
+                for m in ("song-mb", "song-eb")),
+        rule="far > 1.5 own, 0.5 < far / spread < 1 for song-mb and song-eb at every N; far / own grows with N"))
     if phi is None:
         phi = vlahakis_profile(8)
     gammas = [v for k, v in phi.items() if k.startswith("Phi =")]

@@ -25,10 +25,12 @@ CPU = "cpu_s"  # the only column that depends on the machine and the moment
 
 
 def _small_cells() -> list[dict]:
-    """A slice of the quick grid: every team method at N = 4, a drop-out cell, the shared task."""
+    """A slice of the quick grid: every team method at N = 4, a drop-out cell, the shared task, fusion cells."""
     cells = [c for c in compare.grid_cells("quick") if c["block"] == 0 and c["n_agents"] in (4, 8)
              and (c["study"] in ("scaling", "shared") or c["dropout"] == 0.3)]
-    return [c for c in cells if c["n_agents"] == 4 or c["study"] != "scaling"]
+    fusion = [c for c in compare.grid_cells("quick") if c["block"] == 0 and c["task"] in ("target", "localization")
+              and c["n_agents"] == 8 and c["method"] in ("centralized", "hcmci-L1", "ci-diffusion")]
+    return [c for c in cells if c["n_agents"] == 4 or c["study"] != "scaling"] + fusion
 
 
 def _without_cpu(table: pd.DataFrame) -> pd.DataFrame:
@@ -384,3 +386,10 @@ def test_headlines_have_no_nan_and_list_what_does_not_apply():
     target = compare.headline(summary, "target")
     assert set(compare.TARGET_NOT_APPLICABLE) <= set(target.index)
     assert target.loc["ci-L5", "floats/step"] == 70.0
+
+
+def test_song_estimates_non_neighbours_and_the_others_do_not():
+    eb = compare.simulate_team("song-eb", 6, 1, runs=10)
+    local = compare.simulate_team("local", 6, 1, runs=10)
+    assert np.all(np.isfinite(eb["rmse_far"])) and np.all(eb["rmse_far"] > eb["rmse_own"])
+    assert np.all(np.isnan(local["rmse_far"]))
