@@ -393,3 +393,16 @@ def test_song_estimates_non_neighbours_and_the_others_do_not():
     local = compare.simulate_team("local", 6, 1, runs=10)
     assert np.all(np.isfinite(eb["rmse_far"])) and np.all(eb["rmse_far"] > eb["rmse_own"])
     assert np.all(np.isnan(local["rmse_far"]))
+
+
+def test_switching_topology_changes_and_leaves_the_centralized_filter_alone():
+    G = compare.switching_graphs(16, 40)
+    np.testing.assert_array_equal(G, compare.switching_graphs(16, 40))  # the same graphs for every cell
+    assert (G != G[0]).any() and np.all(G == np.swapaxes(G, -1, -2)) and not np.any(G[:, np.arange(16), np.arange(16)])
+    fixed = compare.simulate_target("centralized", 8, 3, runs=10)
+    switching = compare.simulate_target("centralized", 8, 3, runs=10, graph="switching")
+    np.testing.assert_allclose(switching["rmse_own"], fixed["rmse_own"], rtol=1e-12)  # it does not talk
+    ci = compare.simulate_target("ci-L1", 8, 3, runs=10, graph="switching")
+    assert np.all(ci["rmse_own"] > fixed["rmse_own"])
+    with pytest.raises(ValueError, match="switching"):
+        compare.simulate_target("ci-L1", 8, 3, runs=2, graph="switching", task="localization")
