@@ -10,25 +10,37 @@ its own state and, on every link of the graph, its neighbours' states,
 agent forms its views:
 
 =================== ========================================================================
-``centralized``     one Kalman filter over the whole team with every measurement (the bound;
-                    all-to-all communication)
+``centralized``     one Kalman filter over the whole team with every measurement (the bound)
 ``local``           a Kalman filter per agent on its own state from its own measurement; the
-                    neighbours' views are their broadcast estimates (no cooperation: the floor)
+                    neighbours' views are their broadcast estimates (no cooperation)
+``forwarding``      a Kalman filter per agent on its own state from its own measurement and its
+                    neighbours' measurements of it, sent over one hop: on this task it *is* the
+                    centralized filter (the own state is the case where cooperation cannot help)
 ``song-mb``         Song et al.'s whole-team filter on every agent, control on measurements
                     (eqs. (5), (8)-(20))
 ``song-eb``         Song et al.'s estimation-based filter, control on the agent's own team
                     estimate (eqs. (21), (29)-(34))
 ``vlahakis``        the LQR-dual distributed observer (Vlahakis and Halikias), designed per
-                    axis in continuous time and discretized (forward Euler), with own and
-                    relative position measurements
+                    axis in continuous time on the filter's Q and discretized (forward Euler),
+                    with own and relative position measurements (its design needs m < n);
+                    ``vlahakis-phi0`` and ``vlahakis-phi1``: other points of its optimal Phi set
 ``set-membership``  the closed-form set-membership filter of Bhattacharjee and Subbarao on
-                    each agent's own state, given an ellipsoidal noise bound
+                    each agent's own state, given an ellipsoidal noise bound (with H = I its
+                    correction returns the measurement)
 =================== ========================================================================
 
 **The shared task** (Ren et al.): every agent holds a prior estimate of one
 common 2-D quantity, with its own covariance; the methods are the central
 fusion (the bound), no fusion, average consensus and Ren et al.'s discrete
-Kalman consensus, over the same ring.
+Kalman consensus at the paper's Q = Omega = 0.1 (``ren-kc``) and at 0
+(``ren-kc-q0``), over the ring, a geometric graph or a switching one.
+
+**The common target** (:func:`target_model`) and **cooperative localization**
+(:func:`localization_model`): the field's filters of :mod:`mascore.fusion`
+(:data:`TARGET_METHODS`) on a target that no agent observes alone, and on the
+team's positions from relative measurements and two anchors; the papers'
+methods that do not apply are listed with the reason
+(:data:`TARGET_NOT_APPLICABLE`, :data:`LOCALIZATION_NOT_APPLICABLE`).
 
 **Robustness axes**: link drop-outs (each link's measurement and message lost with
 probability ``dropout`` at each step; a lost message leaves the last received
