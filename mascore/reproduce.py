@@ -214,7 +214,7 @@ def _compare(args: argparse.Namespace) -> int:
     write_claims(claims, folder / "claims.json", "compare", args.seed,
                  created_by=f"mascore compare --grid {args.grid} --seed {args.seed}")
     where = args.scheduler or (f"{workers} local workers" if workers else "this process")
-    for task in ("team", "target", "localization", "shared"):
+    for task in ("team", "position", "target", "localization", "shared"):
         print(compare.headline(summary, task).to_string())
     held = sum(c.verdict == "holds" for c in claims)
     print(f"compare: {len(table['cell'].unique())} cells, {len(table)} runs in {elapsed:.1f} s on {where}; "
