@@ -46,13 +46,16 @@ def serial(tmp_path_factory):
 def test_grid_cells_cover_the_studies_with_100_seeds():
     cells = compare.grid_cells("quick")
     studies = {c["study"] for c in cells}
-    assert studies == {"scaling", "graph", "dropout", "noise", "wrong-q", "shared", "target", "localization"}
+    assert studies == {"scaling", "graph", "dropout", "noise", "wrong-q", "shared", "target", "localization",
+                       "position"}
     blocks = {c["block"] for c in cells}
     assert len(blocks) * compare.SETTINGS.runs >= 100
-    assert {c["method"] for c in cells if c["task"] == "team"} == set(compare.TEAM_METHODS)
+    assert {c["method"] for c in cells if c["task"] == "team"} == set(compare.TEAM_METHODS) | set(compare.SM_CONFIDENCE)
     assert {c["method"] for c in cells if c["task"] == "target"} == set(compare.TARGET_METHODS)
+    assert {c["method"] for c in cells if c.get("sensing") == "position"} == set(compare.POSITION_METHODS)
+    assert all(c.get("sensing", "full") == "full" for c in cells if c["study"] != "position")  # old cells: no key
     headline = [c for c in cells if c["task"] in ("shared", "target", "localization")
-                or (c["study"] == "scaling" and c["n_agents"] == 8)]
+                or (c["study"] in ("scaling", "position") and c["n_agents"] == 8)]
     for c in headline:  # 200 seeds behind every headline number
         assert len({d["block"] for d in headline if d["method"] == c["method"] and d["task"] == c["task"]}) == 4
     assert len({sweep.cell_id(c) for c in cells}) == len(cells)
@@ -406,3 +409,150 @@ def test_switching_topology_changes_and_leaves_the_centralized_filter_alone():
     assert np.all(ci["rmse_own"] > fixed["rmse_own"])
     with pytest.raises(ValueError, match="switching"):
         compare.simulate_target("ci-L1", 8, 3, runs=2, graph="switching", task="localization")
+
+
+# ---------------------------------------------------------------------------- position-only sensing
+
+_OLD_CELL = {"study": "scaling", "task": "team", "method": "local", "n_agents": 4, "graph": "ring",
+             "noise": "gaussian", "dropout": 0.0, "q_scale": 1.0, "block": 0}
+
+
+def test_old_cells_keep_their_seeds_and_numbers():
+    """A cell without a sensing key (or with "full") gives the numbers of before the position study."""
+    before = {"rmse_own": 0.04893716775245586, "nees_own": 0.9244810451838936, "spread": 0.08614569633939237}
+    rows = compare.run_cell(_OLD_CELL)
+    for key, value in before.items():  # stored from the code before the sensing coordinate existed
+        assert rows[0][key] == pytest.approx(value, rel=1e-12, abs=0), key
+    sm = {**_OLD_CELL, "study": "noise", "method": "set-membership", "n_agents": 8, "noise": "uniform", "block": 1}
+    assert compare.run_cell(sm)[0]["rmse_own"] == pytest.approx(0.13921996031300424, rel=1e-12, abs=0)
+    for cell in (_OLD_CELL, sm):
+        strip = lambda rows: [{k: v for k, v in r.items() if k != CPU} for r in rows]  # noqa: E731
+        a, b = strip(compare.run_cell(cell)), strip(compare.run_cell({**cell, "sensing": "full"}))
+        assert json.dumps(a) == json.dumps(b)
+    full = sweep.cell_seed(_OLD_CELL, compare.SEED_AXES)
+    new = sweep.cell_seed({**_OLD_CELL, "sensing": "position"}, (*compare.SEED_AXES, "sensing"))
+    assert full.entropy != new.entropy or full.spawn_key != new.spawn_key
+    assert np.random.default_rng(full).random() != np.random.default_rng(new).random()
+
+
+@pytest.mark.parametrize("cell, match", [
+    ({**_OLD_CELL, "sensing": "velocity"}, "sensing"),
+    ({**_OLD_CELL, "method": "song-eb", "sensing": "position"}, "position"),
+    ({**_OLD_CELL, "task": "target", "method": "centralized", "sensing": "position"}, "sensing"),
+])
+def test_bad_sensing_is_refused_by_name(cell, match):
+    with pytest.raises(ValueError, match=match):
+        compare.run_cell(cell)
+
+
+def test_simulate_team_refuses_bad_sensing():
+    with pytest.raises(ValueError, match="sensing"):
+        compare.simulate_team("local", 4, 0, runs=2, sensing="pos")
+    with pytest.raises(ValueError, match="not applicable|does not apply"):
+        compare.simulate_team("song-mb", 4, 0, runs=2, sensing="position")
+    with pytest.raises(ValueError, match="does not apply"):
+        compare.floats_per_step("song-mb", 4, sensing="position")
+
+
+def test_position_only_local_kf_matches_the_dare():
+    """The per-agent position-only filter reaches the DARE with C = [1 0] per axis; its MSE matches, within its interval."""
+    s = compare.SETTINGS
+    team = compare._team(4, "gaussian", 1.0, s)
+    est = compare._LocalPosition(team, np.zeros((1, 4, 4)))
+    for _ in range(400):
+        est.update(np.zeros((1, 4, 4, 2)), np.ones((1, 4, 4), bool))
+        est.predict(np.zeros((1, 4, 2)))
+    A, C = np.array([[1.0, s.dt], [0.0, 1.0]]), np.array([[1.0, 0.0]])
+    prior = sla.solve_discrete_are(A.T, C.T, np.diag([s.q_pos, s.q_vel]), np.array([[s.r]]))
+    P = np.broadcast_to(est.P, (1, 4, 4, 4)).reshape(-1, 4, 4)[0]
+    np.testing.assert_allclose(P[np.ix_([0, 2], [0, 2])], prior, rtol=1e-8)  # x axis: [p_x, v_x]
+    pos_only, full = compare._position_only_kf_rmse()
+    m = compare.simulate_team("local", 8, 21, runs=200, sensing="position")
+    mse = m["rmse_own"] ** 2
+    half = 1.96 * mse.std(ddof=1) / np.sqrt(mse.size)
+    assert abs(mse.mean() - pos_only**2) < 2 * half, (mse.mean(), pos_only**2, half)
+    assert pos_only > full  # measuring the velocity too helps
+
+
+def test_centralized_position_covariance_matches_the_dare_of_three_positions():
+    """On the ring every agent's position is measured three times; the team filter splits per agent: its own block
+    is the DARE with C = [1 0; 1 0; 1 0] per axis."""
+    s = compare.SETTINGS
+    N = 5
+    team = compare._team(N, "gaussian", 1.0, s)
+    est = compare._CentralizedPosition(team, np.zeros((1, N, 4)))
+    S = ((team.adjacency > 0) | np.eye(N, dtype=bool))[None]
+    for _ in range(400):
+        est.predict(np.zeros((1, N, 2)))
+        est.update(np.zeros((1, N, N, 2)), S)
+    A, C = np.array([[1.0, s.dt], [0.0, 1.0]]), np.ones((3, 1)) @ np.array([[1.0, 0.0]])
+    prior = sla.solve_discrete_are(A.T, C.T, np.diag([s.q_pos, s.q_vel]), s.r * np.eye(3))
+    post = prior - prior @ C.T @ np.linalg.solve(C @ prior @ C.T + s.r * np.eye(3), C @ prior)
+    own = compare._CentralizedPosition.own_cov.fget(est)[0]
+    for i in range(N):
+        np.testing.assert_allclose(own[i][np.ix_([1, 3], [1, 3])], post, rtol=1e-7)  # y axis
+    P = est.P[0]
+    off = P.copy()
+    for i in range(N):
+        off[4 * i:4 * i + 4, 4 * i:4 * i + 4] = 0
+    assert np.abs(off).max() < 1e-12  # no cross-covariance: the task is separable
+
+
+@pytest.mark.parametrize("dropout", [0.0, 0.3])
+def test_forwarding_is_the_centralized_filter_with_positions_only(dropout):
+    c = compare.simulate_team("centralized", 6, 4, runs=20, dropout=dropout, sensing="position")
+    f = compare.simulate_team("forwarding", 6, 4, runs=20, dropout=dropout, sensing="position")
+    np.testing.assert_allclose(f["rmse_own"], c["rmse_own"], rtol=1e-10)
+    np.testing.assert_allclose(f["nees_own"], c["nees_own"], rtol=1e-9)
+    local = compare.simulate_team("local", 6, 4, runs=20, dropout=dropout, sensing="position")
+    assert np.all(local["rmse_own"] > c["rmse_own"])
+
+
+def test_set_membership_with_positions_filters_and_contains_the_truth_at_every_step():
+    """C = [I 0]: the centre is not the measurement; under uniform noise (guaranteed bounds) the set holds the
+    true state after every correction and prediction; the gain applied to all agents is the package's own."""
+    from mascore import set_membership
+
+    s = compare.SETTINGS
+    N, R = 4, 30
+    team = compare._team(N, "uniform", 1.0, s)
+    rng = np.random.default_rng(7)
+    box = lambda shape: rng.uniform(-np.sqrt(3.0), np.sqrt(3.0), shape)  # noqa: E731  unit variance, bounded
+    x = rng.standard_normal((R, N, 4))
+    est = compare._SetMembershipPosition(team, x + np.sqrt(s.p0) * box((R, N, 4)))
+    q_std = np.sqrt(np.diag(team.Q))
+    moved = []
+    for k in range(60):
+        Z = x[:, None, :, :2] + np.sqrt(s.r) * box((R, N, N, 2))
+        prior_c, prior_P = est.own.copy(), np.array(est.shape)
+        est.update(Z, np.ones((1, N, N), bool))
+        assert est.containment(x).all(), k
+        y = Z[:, np.arange(N), np.arange(N)]
+        moved.append(np.abs(est.own[..., :2] - y).max())
+        if k == 0:  # the batched gain is the package's correction on every agent and run
+            c, P, _ = est.model.correct(prior_c, np.broadcast_to(prior_P, (R, N, 4, 4)), y, check_consistency=False)
+            np.testing.assert_allclose(est.own, c, rtol=1e-10, atol=1e-12)
+            np.testing.assert_allclose(np.broadcast_to(est.shape, P.shape), P, rtol=1e-10)
+        U = 0.1 * rng.standard_normal((R, N, 2))
+        est.predict(U)
+        x = x @ team.A.T + U @ team.B.T + q_std * box((R, N, 4))
+        assert est.containment(x).all(), k
+    assert min(moved) > 1e-3  # the correction does not return the measurement (L != I)
+    assert isinstance(est.model, set_membership.SetMembershipModel)
+    m = compare.simulate_team("set-membership", 6, 3, runs=30, noise="uniform", sensing="position")
+    assert m["containment"].min() == 1.0
+    assert np.all(m["set_size"] > m["rmse_own"])  # the set's largest semi-axis is larger than the error
+    assert np.sqrt(2 * s.r) > m["rmse_own"].mean()  # better than the raw measurement
+
+
+def test_position_headline_lists_every_method_and_what_does_not_apply():
+    cells = [c for c in compare.grid_cells("quick") if c["study"] == "position" and c["block"] == 0]
+    rows = [{**r, **c, "cell": sweep.cell_id(c)} for c in cells for r in compare.run_cell(c)]
+    summary = compare.summarize(pd.DataFrame(rows))
+    table = compare.headline(summary, "position")
+    assert list(table.index) == [*compare.POSITION_METHODS, *compare.POSITION_NOT_APPLICABLE]
+    assert not table.isna().any().any()
+    assert table.loc["forwarding", "RMSE ratio [95 %]"].startswith("1.000")
+    assert table.loc["set-membership", "contains, uniform"] == "1.000"
+    assert float(table.loc["set-membership-c90", "set size (m)"]) < float(table.loc["set-membership", "set size (m)"])
+    assert table.loc["centralized", "floats/step"] == 18.0  # positions up (2 per measurement), estimates down
