@@ -814,6 +814,7 @@ class _SetMembership(_Estimator):
 
 #: The position-only output matrix of one agent, ``C = [I_2 0]`` (m).
 _C_POS = np.hstack([np.eye(2), np.zeros((2, 2))])
+_C_POS.setflags(write=False)
 
 
 class _CentralizedPosition(_Estimator):
