@@ -164,8 +164,8 @@ POSITION_METHODS = ("centralized", "local", "forwarding", "vlahakis", "vlahakis-
                     *SM_CONFIDENCE)
 #: Team methods that do not apply under position-only sensing, with the reason.
 POSITION_NOT_APPLICABLE = {
-    "song-mb": "measures its neighbours' full states (eq. (2)); not defined for positions only",
-    "song-eb": "measures its neighbours' full states (eq. (2)); not defined for positions only",
+    "song-mb": "needs full-state measurements of its neighbours (eq. (2))",
+    "song-eb": "needs full-state measurements of its neighbours (eq. (2))",
 }
 #: Every team-method name a cell may carry (the set-membership knob's variants run in the position study).
 _TEAM_ALL = TEAM_METHODS + tuple(m for m in SM_CONFIDENCE if m not in TEAM_METHODS)
@@ -2006,14 +2006,13 @@ def _position_headline(summary):
         bounded = uniform["containment_mean"].get(m, np.nan)
         rows.append({
             "method": m, "RMSE ratio [95 %]": f"{r['ratio_mean']:.3f} [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]",
-            "RMSE (m)": round(float(r["rmse_own_mean"]), 4),
             "consistency": f"NEES {nees:.2f}" if np.isfinite(nees) else f"contains {inside:.3f}"
             if np.isfinite(inside) else dash,
             "set size (m)": round(float(size[m]), 3) if np.isfinite(size[m]) else dash,
             "contains, uniform": f"{bounded:.3f}" if np.isfinite(bounded) else dash,
             "floats/step": r["floats"], "CPU µs/agent/step": round(r["cpu_us"], 2)})
     for m, why in POSITION_NOT_APPLICABLE.items():
-        rows.append({"method": m, "RMSE ratio [95 %]": "not applicable", "RMSE (m)": dash, "consistency": why,
+        rows.append({"method": m, "RMSE ratio [95 %]": "not applicable", "consistency": why,
                      "set size (m)": dash, "contains, uniform": dash, "floats/step": dash, "CPU µs/agent/step": dash})
     return pd.DataFrame(rows).set_index("method")
 
