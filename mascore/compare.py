@@ -3,7 +3,8 @@
 **The team task.** ``N`` identical planar double integrators (``dt = 0.1`` s,
 state ``[p_x, p_y, v_x, v_y]``) run the rendezvous law of Song et al. eq. (4),
 ``u_i = -K sum_j a_ij (x_i - x_j)``, on a ring (or a geometric graph,
-:func:`benchmark_graph`), with each agent's *views* of
+:func:`benchmark_graph`, or the switching proximity topology, :func:`switching_graphs`,
+where the Vlahakis observer does not apply: :data:`SWITCHING_NOT_APPLICABLE`), with each agent's *views* of
 itself and of its neighbours in place of the true states. Agent ``i`` measures
 its own state and, on every link of the graph, its neighbours' states,
 ``z_ij = x_j + nu_ij`` (Song et al. eq. (2)). The methods differ only in how an
@@ -38,7 +39,9 @@ Kalman consensus at the paper's Q = Omega = 0.1 (``ren-kc``) and at 0
 **The common target** (:func:`target_model`) and **cooperative localization**
 (:func:`localization_model`): the field's filters of :mod:`mascore.fusion`
 (:data:`TARGET_METHODS`) on a target that no agent observes alone, and on the
-team's positions from relative measurements and two anchors; the papers'
+team's positions from relative measurements and two anchors, over the ring, a geometric
+graph or the switching topology (in localization the graph is the sensing too: a step's
+relative measurements are those of its current links); the papers'
 methods that do not apply are listed with the reason
 (:data:`TARGET_NOT_APPLICABLE`, :data:`LOCALIZATION_NOT_APPLICABLE`).
 
@@ -114,6 +117,7 @@ __all__ = [
     "summarize",
     "switching_graphs",
     "SWITCHING_GRAPHS",
+    "SWITCHING_NOT_APPLICABLE",
     "target_cost",
     "target_filter",
     "target_model",
@@ -476,15 +480,17 @@ class _Team:
     P0: np.ndarray
     noise: str
     s: BenchmarkSettings
+    switching: bool = False  # adjacency and laplacian are this step's (simulate_team sets them at every step)
 
 
 def _team(n_agents: int, noise: str, q_scale: float, s: BenchmarkSettings, graph: str = "ring") -> _Team:
     agent = double_integrator(2, s.dt)
     Q = np.diag([s.q_pos, s.q_pos, s.q_vel, s.q_vel])
-    adjacency = benchmark_graph(graph, n_agents, s)
+    switching = graph == "switching"
+    adjacency = switching_graphs(n_agents, 1, s)[0] if switching else benchmark_graph(graph, n_agents, s)
     return _Team(N=n_agents, A=agent.A, B=agent.B, K=rendezvous.rendezvous_gain(*s.rho, 2), Q=Q,
                  Q_filter=q_scale * Q, R=s.r * np.eye(4), adjacency=adjacency,
-                 laplacian=graphs.laplacian(adjacency), P0=s.p0 * np.eye(4), noise=noise, s=s)
+                 laplacian=graphs.laplacian(adjacency), P0=s.p0 * np.eye(4), noise=noise, s=s, switching=switching)
 
 
 class _Estimator:
@@ -591,7 +597,9 @@ class _Song(_Estimator):
         return self.filter.X_hat
 
     def predict(self, U):
-        self.filter.predict()
+        # switching: every agent predicts with the Laplacian of the control just applied (Song et al.'s
+        # Remark 7: the topology known from the neighbours; Theorem 1 itself assumes a fixed one)
+        self.filter.predict(self.t.laplacian if self.t.switching else None)
 
     @property
     def own_cov(self):
@@ -768,6 +776,14 @@ def _make(method: str, team: _Team, x_hat0: np.ndarray) -> _Estimator:
     raise ValueError(f"method must be one of {TEAM_METHODS}; got {method!r}")
 
 
+#: Team methods that do not apply on the switching topology, with the reason (the chapter shows them).
+SWITCHING_NOT_APPLICABLE = {
+    "vlahakis, vlahakis-phi0, vlahakis-phi1": "its gains come from an LMI over the eigenvalues of one fixed "
+    "Laplacian (eqs. (56)-(62)); for a graph that changes at every step, often disconnected, the paper gives "
+    "no design and no stability guarantee",
+}
+
+
 def simulate_team(
     method: str,
     n_agents: int,
@@ -796,8 +812,14 @@ def simulate_team(
         Probability that a link's measurement and message are lost at a step.
     q_scale : float
         The filters' process-noise covariance over the true one (1: correct).
-    graph : {"ring", "geometric"}
-        The sensing and communication graph (:func:`benchmark_graph`).
+    graph : {"ring", "geometric", "switching"}
+        The sensing and communication graph (:func:`benchmark_graph`). ``"switching"``: at
+        step k the graph ``switching_graphs(N, settings.n_steps)[k]`` (:func:`switching_graphs`)
+        carries the measurements, the messages and the rendezvous law's Laplacian; the
+        centralized filter and forwarding use the measurements of the current links, Song et
+        al.'s filters predict with the current Laplacian, a view of an agent out of reach stays
+        the last one received (as with drop-outs). The Vlahakis observers do not apply
+        (:data:`SWITCHING_NOT_APPLICABLE`): a ValueError.
     runs : int, optional
         Monte Carlo runs (default ``settings.runs``).
     settings : BenchmarkSettings
@@ -808,7 +830,7 @@ def simulate_team(
     dict of str to ndarray
         Per run ``(runs,)``: ``rmse_own`` (m), RMS error of each agent's own
         position estimate over the steady window; ``rmse_view`` (m), of the
-        positions its control uses (itself and its neighbours); ``nees_own``,
+        positions its control uses (itself and its neighbours at that step); ``nees_own``,
         mean normalized estimation error squared of the own state per degree
         of freedom (NaN without a covariance); ``rmse_far`` (m), of the positions of the
         agents it neither senses nor hears from (Song et al.'s filters only, which estimate
@@ -829,7 +851,13 @@ def simulate_team(
     n_agents, runs = _check_run(n_agents, noise, dropout, q_scale, runs, settings, seed)
     if method not in TEAM_METHODS:
         raise ValueError(f"method must be one of {TEAM_METHODS}; got {method!r}")
+    if graph not in SWITCHING_GRAPHS:
+        raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
+    if graph == "switching" and method in VLAHAKIS_PHI:
+        raise ValueError(f"{method} does not apply on graph='switching': "
+                         f"{SWITCHING_NOT_APPLICABLE['vlahakis, vlahakis-phi0, vlahakis-phi1']}")
     team = _team(int(n_agents), noise, float(q_scale), settings, graph)
+    topology = switching_graphs(int(n_agents), settings.n_steps, settings) > 0 if team.switching else None
     init_rng, proc_rng, meas_rng, drop_rng = np.random.default_rng(seed).spawn(4)
     N, s = team.N, settings
     x = np.concatenate([s.init_pos * init_rng.standard_normal((runs, N, 2)),
@@ -842,7 +870,12 @@ def simulate_team(
     eye = np.eye(N, dtype=bool)
     held = None
     acc = {k: np.zeros(runs) for k in ("own", "view", "nees", "contained", "spread", "far")}
+    acc["far_steps"] = 0  # steps with an agent out of reach (every step on a fixed graph that is not complete)
     for k in range(s.n_steps):
+        if topology is not None:  # this step's graph: sensing, messages and the control's Laplacian
+            nominal = topology[k]
+            team.adjacency = nominal.astype(float)
+            team.laplacian = graphs.laplacian(team.adjacency)
         lost = (drop_rng.random((runs, N, N)) < dropout) & ~eye
         S = (nominal | eye) & ~lost
         nu = r_std * _draw(meas_rng, noise, (runs, N, N, 4))
@@ -872,8 +905,8 @@ def simulate_team(
         "rmse_own": np.sqrt(acc["own"] / n), "rmse_view": np.sqrt(acc["view"] / n),
         "nees_own": acc["nees"] / n if est.own_cov is not None else nan,
         "containment": acc["contained"] / n if method == "set-membership" else nan,
-        "rmse_far": np.sqrt(acc["far"] / n) if getattr(est, "team_estimates", None) is not None and
-        not np.all(nominal | eye) else nan,
+        "rmse_far": np.sqrt(acc["far"] / acc["far_steps"]) if getattr(est, "team_estimates", None) is not None
+        and acc["far_steps"] > 0 else nan,
         "spread": np.sqrt(acc["spread"] / n), "cpu_s": np.full(runs, cpu),
     }
 
@@ -897,6 +930,7 @@ def _accumulate(acc: dict, est: _Estimator, x: np.ndarray, view: np.ndarray, see
     if team is not None and far.any():  # agent i's estimates of the agents it neither senses nor hears from
         ef = np.sum((team[..., :2] - x[:, None, :, :2]) ** 2, -1)  # (R, N, N)
         acc["far"] += np.sum(ef * far, (-1, -2)) / far.sum()
+        acc["far_steps"] += 1
 
 
 # --------------------------------------------------------------------------------------------
@@ -1100,6 +1134,56 @@ def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSe
     return fusion.SensorNetworkModel(np.eye(n), s.q_pos * np.eye(n), H, R, A)
 
 
+def _localization_switching(n_agents: int, settings: BenchmarkSettings):
+    """Cooperative localization on :func:`switching_graphs`: one model over every link the run ever has,
+    and each step's model with the rows of its current links.
+
+    Returns
+    -------
+    union : mascore.fusion.SensorNetworkModel
+        :func:`localization_model`'s sensing over the union of the step graphs (it draws the data:
+        each possible link's measurement has its own noise; a step keeps its current links' rows).
+    steps : list of (mascore.fusion.SensorNetworkModel, ndarray of int)
+        Per step k: the model of graph k (anchors' rows, then the relative rows of its current
+        links, as :func:`localization_model` orders them) and the indices of its rows in ``union``'s
+        stacked measurement.
+    """
+    from . import fusion
+
+    G = switching_graphs(n_agents, settings.n_steps, settings) > 0
+    union_adj = G.any(0)
+    n = 2 * n_agents
+    I2, eye = np.eye(2), np.eye(n_agents)
+    H, R, rows_of = [], [], []  # rows_of[i]: {"anchor" or j: agent i's stacked row indices in the union}
+    start = 0
+    for i in range(n_agents):
+        blocks, where = [], {}
+        if i in (0, n_agents // 2):
+            blocks.append(np.kron(eye[i], I2))
+            where["anchor"] = start + np.arange(2)
+            start += 2
+        for j in np.flatnonzero(union_adj[i]):
+            blocks.append(np.kron(eye[j] - eye[i], I2))
+            where[int(j)] = start + np.arange(2)
+            start += 2
+        H.append(np.vstack(blocks) if blocks else np.zeros((0, n)))
+        R.append(settings.r * np.eye(H[-1].shape[0]) if blocks else None)
+        rows_of.append(where)
+    F, Q = np.eye(n), settings.q_pos * np.eye(n)
+    union = fusion.SensorNetworkModel(F, Q, H, R, union_adj.astype(float))
+    steps = []
+    for A in G:
+        Hk, Rk, idx = [], [], []
+        for i in range(n_agents):
+            keep = [k for k in rows_of[i] if k == "anchor" or A[i, k]]
+            rows = np.concatenate([rows_of[i][k] for k in keep]) if keep else np.zeros(0, int)
+            idx.append(rows)
+            Hk.append(union.H_stacked[rows])
+            Rk.append(settings.r * np.eye(len(rows)) if len(rows) else None)
+        steps.append((fusion.SensorNetworkModel(F, Q, Hk, Rk, A.astype(float)), np.concatenate(idx)))
+    return union, steps
+
+
 def target_filter(method: str, model):
     """The :mod:`mascore.fusion` filter of a :data:`TARGET_METHODS` name on `model`.
 
@@ -1205,7 +1289,9 @@ def simulate_target(
     seed : numpy.random.SeedSequence or int
         Source of the target's path and the measurements (the same for every method).
     graph : {"ring", "geometric", "switching"}
-        The communication graph (``"switching"``: :func:`switching_graphs`, target task only).
+        The communication graph (``"switching"``: graph k of :func:`switching_graphs` at step k; in
+        localization it is the sensing graph too, so a step's relative measurements are those of its
+        current links, the anchors' always; the data are drawn once over every link the sequence has).
     runs : int, optional
         Monte Carlo runs (default ``settings.runs``).
     settings : BenchmarkSettings
@@ -1232,24 +1318,28 @@ def simulate_target(
     if task not in ("target", "localization"):
         raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
     s = settings
-    if graph == "switching" and task != "target":
-        raise ValueError("the switching topology is for the target task (in localization the graph is the sensing)")
-    model = (target_model if task == "target" else localization_model)(
-        n_agents, "ring" if graph == "switching" else graph, s)
+    if graph not in SWITCHING_GRAPHS:
+        raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
+    if graph == "switching" and task == "localization":  # the sensing switches too: each step's links' rows
+        model, steps = _localization_switching(n_agents, s)
+    else:
+        model = (target_model if task == "target" else localization_model)(
+            n_agents, "ring" if graph == "switching" else graph, s)
     n = model.n_states
     P0 = s.p0 * np.eye(n)
     x_true, z = model.simulate(np.zeros(n), P0, s.n_steps, np.random.default_rng(seed), n_runs=runs)
     if graph == "switching":  # the filters hold no state: one filter per step's graph
         from . import fusion
 
-        G = switching_graphs(n_agents, s.n_steps, s)
-        filters = [target_filter(method, fusion.SensorNetworkModel(model.F, model.Q, model.H, model.R, A))
-                   for A in G]
+        if task == "target":
+            G = switching_graphs(n_agents, s.n_steps, s)
+            steps = [(fusion.SensorNetworkModel(model.F, model.Q, model.H, model.R, A), slice(None)) for A in G]
+        filters = [target_filter(method, m) for m, _ in steps]
         tic = time.thread_time()
         xk, Pk = model.check_state(np.zeros(n), P0, per_agent=filters[0]._per_agent)
         xs, Ps = [], []
         for k, f in enumerate(filters):
-            xk, Pk = f.update(*f.predict(xk, Pk), z[k])
+            xk, Pk = f.update(*f.predict(xk, Pk), z[k][..., steps[k][1]])
             xs.append(xk)
             Ps.append(Pk)
         x, P = np.stack(xs), np.stack(Ps)
@@ -1293,7 +1383,10 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     observer's coupling knob), ``graph`` (the geometric graph at N = 16, and 32
     in the full grid), ``dropout``, ``noise`` and ``wrong-q`` at N = 8, the
     ``shared`` task, the common-``target`` task and cooperative ``localization``
-    (:func:`simulate_target`);
+    (:func:`simulate_target`), and the switching topology (:func:`switching_graphs`): the
+    shared and target tasks at N = 16, the own state at N = 16 (study ``switching``, without
+    the Vlahakis observers, :data:`SWITCHING_NOT_APPLICABLE`; quick: one block) and
+    localization at N = 8 (quick: 2 blocks) and 16 (full grid only);
     each with ``blocks x settings.runs`` seeds (quick: 2 x 50, full: 4 x 50, N up to
     64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
     N = 8, the shared, target and localization tasks).
@@ -1340,7 +1433,16 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
                     "n_agents": [16], "block": blocks200}),
         ("localization", {**base, "task": ["localization"], "method": list(TARGET_METHODS),
                           "n_agents": [8] if quick else [8, 16], "block": blocks200}),
+        # the switching topology (switching_graphs) for the own state and localization; the quick grid keeps
+        # one block of the own state and localization at N = 8 with its 2 blocks (its budget)
+        ("switching", {**base, "method": [m for m in core if m not in VLAHAKIS_PHI], "graph": ["switching"],
+                       "n_agents": [16], "block": blocks[:1] if quick else blocks200}),
+        ("localization", {**base, "task": ["localization"], "method": list(TARGET_METHODS), "graph": ["switching"],
+                          "n_agents": [8], "block": blocks if quick else blocks200}),
     ]
+    if not quick:
+        studies.append(("localization", {**base, "task": ["localization"], "method": list(TARGET_METHODS),
+                                         "graph": ["switching"], "n_agents": [16], "block": blocks200}))
     cells = []
     for study, axes in studies:
         for cell in Grid(axes).cells():
