@@ -3,7 +3,8 @@
 **The team task.** ``N`` identical planar double integrators (``dt = 0.1`` s,
 state ``[p_x, p_y, v_x, v_y]``) run the rendezvous law of Song et al. eq. (4),
 ``u_i = -K sum_j a_ij (x_i - x_j)``, on a ring (or a geometric graph,
-:func:`benchmark_graph`), with each agent's *views* of
+:func:`benchmark_graph`, or the switching proximity topology, :func:`switching_graphs`,
+where the Vlahakis observer does not apply: :data:`SWITCHING_NOT_APPLICABLE`), with each agent's *views* of
 itself and of its neighbours in place of the true states. Agent ``i`` measures
 its own state and, on every link of the graph, its neighbours' states,
 ``z_ij = x_j + nu_ij`` (Song et al. eq. (2)). The methods differ only in how an
@@ -47,7 +48,9 @@ Kalman consensus at the paper's Q = Omega = 0.1 (``ren-kc``) and at 0
 **The common target** (:func:`target_model`) and **cooperative localization**
 (:func:`localization_model`): the field's filters of :mod:`mascore.fusion`
 (:data:`TARGET_METHODS`) on a target that no agent observes alone, and on the
-team's positions from relative measurements and two anchors; the papers'
+team's positions from relative measurements and two anchors, over the ring, a geometric
+graph or the switching topology (in localization the graph is the sensing too: a step's
+relative measurements are those of its current links); the papers'
 methods that do not apply are listed with the reason
 (:data:`TARGET_NOT_APPLICABLE`, :data:`LOCALIZATION_NOT_APPLICABLE`).
 
@@ -127,6 +130,7 @@ __all__ = [
     "summarize",
     "switching_graphs",
     "SWITCHING_GRAPHS",
+    "SWITCHING_NOT_APPLICABLE",
     "target_cost",
     "target_filter",
     "target_model",
@@ -473,9 +477,12 @@ def _check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[
         raise ValueError(f"{name}['dropout'] must be below 1; got {cell['dropout']!r}")
     if task == "team" and "q_scale" in cell:
         check_positive(cell["q_scale"], f"{name}['q_scale']")
-    graphs_of = GRAPHS if task in ("team", "localization") else SWITCHING_GRAPHS
-    if cell.get("graph", "ring") not in graphs_of:
-        raise ValueError(f"{name}['graph'] of a {task} cell must be one of {graphs_of}; got {cell.get('graph')!r}")
+    if cell.get("graph", "ring") not in SWITCHING_GRAPHS:
+        raise ValueError(f"{name}['graph'] of a {task} cell must be one of {SWITCHING_GRAPHS}; "
+                         f"got {cell.get('graph')!r}")
+    if task == "team" and cell.get("graph") == "switching" and cell["method"] in VLAHAKIS_PHI:
+        raise ValueError(f"{name}: {cell['method']} does not apply on the switching graph "
+                         "(SWITCHING_NOT_APPLICABLE)")
     sensing = cell.get("sensing", "full")
     if sensing not in SENSINGS or (task != "team" and sensing != "full"):
         raise ValueError(f"{name}['sensing'] must be one of {SENSINGS} (a team cell; other tasks have their own "
@@ -528,15 +535,17 @@ class _Team:
     P0: np.ndarray
     noise: str
     s: BenchmarkSettings
+    switching: bool = False  # adjacency and laplacian are this step's (simulate_team sets them at every step)
 
 
 def _team(n_agents: int, noise: str, q_scale: float, s: BenchmarkSettings, graph: str = "ring") -> _Team:
     agent = double_integrator(2, s.dt)
     Q = np.diag([s.q_pos, s.q_pos, s.q_vel, s.q_vel])
-    adjacency = benchmark_graph(graph, n_agents, s)
+    switching = graph == "switching"
+    adjacency = switching_graphs(n_agents, 1, s)[0] if switching else benchmark_graph(graph, n_agents, s)
     return _Team(N=n_agents, A=agent.A, B=agent.B, K=rendezvous.rendezvous_gain(*s.rho, 2), Q=Q,
                  Q_filter=q_scale * Q, R=s.r * np.eye(4), adjacency=adjacency,
-                 laplacian=graphs.laplacian(adjacency), P0=s.p0 * np.eye(4), noise=noise, s=s)
+                 laplacian=graphs.laplacian(adjacency), P0=s.p0 * np.eye(4), noise=noise, s=s, switching=switching)
 
 
 class _Estimator:
@@ -643,7 +652,9 @@ class _Song(_Estimator):
         return self.filter.X_hat
 
     def predict(self, U):
-        self.filter.predict()
+        # switching: every agent predicts with the Laplacian of the control just applied (Song et al.'s
+        # Remark 7: the topology known from the neighbours; Theorem 1 itself assumes a fixed one)
+        self.filter.predict(self.t.laplacian if self.t.switching else None)
 
     @property
     def own_cov(self):
@@ -953,6 +964,14 @@ def _make(method: str, team: _Team, x_hat0: np.ndarray, sensing: str = "full") -
     raise ValueError(f"method must be one of {_TEAM_ALL}; got {method!r}")
 
 
+#: Team methods that do not apply on the switching topology, with the reason (the chapter shows them).
+SWITCHING_NOT_APPLICABLE = {
+    "vlahakis, vlahakis-phi0, vlahakis-phi1": "its gains come from an LMI over the eigenvalues of one fixed "
+    "Laplacian (eqs. (56)-(62)); for a graph that changes at every step, often disconnected, the paper gives "
+    "no design and no stability guarantee",
+}
+
+
 def simulate_team(
     method: str,
     n_agents: int,
@@ -983,8 +1002,14 @@ def simulate_team(
         Probability that a link's measurement and message are lost at a step.
     q_scale : float
         The filters' process-noise covariance over the true one (1: correct).
-    graph : {"ring", "geometric"}
-        The sensing and communication graph (:func:`benchmark_graph`).
+    graph : {"ring", "geometric", "switching"}
+        The sensing and communication graph (:func:`benchmark_graph`). ``"switching"``: at
+        step k the graph ``switching_graphs(N, settings.n_steps)[k]`` (:func:`switching_graphs`)
+        carries the measurements, the messages and the rendezvous law's Laplacian; the
+        centralized filter and forwarding use the measurements of the current links, Song et
+        al.'s filters predict with the current Laplacian, a view of an agent out of reach stays
+        the last one received (as with drop-outs). The Vlahakis observers do not apply
+        (:data:`SWITCHING_NOT_APPLICABLE`): a ValueError.
     runs : int, optional
         Monte Carlo runs (default ``settings.runs``).
     settings : BenchmarkSettings
@@ -1002,7 +1027,7 @@ def simulate_team(
     dict of str to ndarray
         Per run ``(runs,)``: ``rmse_own`` (m), RMS error of each agent's own
         position estimate over the steady window; ``rmse_view`` (m), of the
-        positions its control uses (itself and its neighbours); ``nees_own``,
+        positions its control uses (itself and its neighbours at that step); ``nees_own``,
         mean normalized estimation error squared of the own state per degree
         of freedom (NaN without a covariance); ``rmse_far`` (m), of the positions of the
         agents it neither senses nor hears from (Song et al.'s filters only, which estimate
@@ -1031,7 +1056,13 @@ def simulate_team(
     if sensing == "position" and method in POSITION_NOT_APPLICABLE:
         raise ValueError(f"method {method!r} does not apply under position-only sensing: "
                          f"{POSITION_NOT_APPLICABLE[method]}")
+    if graph not in SWITCHING_GRAPHS:
+        raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
+    if graph == "switching" and method in VLAHAKIS_PHI:
+        raise ValueError(f"{method} does not apply on graph='switching': "
+                         f"{SWITCHING_NOT_APPLICABLE['vlahakis, vlahakis-phi0, vlahakis-phi1']}")
     team = _team(int(n_agents), noise, float(q_scale), settings, graph)
+    topology = switching_graphs(int(n_agents), settings.n_steps, settings) > 0 if team.switching else None
     init_rng, proc_rng, meas_rng, drop_rng = np.random.default_rng(seed).spawn(4)
     N, s = team.N, settings
     x = np.concatenate([s.init_pos * init_rng.standard_normal((runs, N, 2)),
@@ -1048,7 +1079,12 @@ def simulate_team(
     eye = np.eye(N, dtype=bool)
     held = None
     acc = {k: np.zeros(runs) for k in ("own", "view", "nees", "contained", "spread", "far", "set_size")}
+    acc["far_steps"] = 0  # steps with an agent out of reach (every step on a fixed graph that is not complete)
     for k in range(s.n_steps):
+        if topology is not None:  # this step's graph: sensing, messages and the control's Laplacian
+            nominal = topology[k]
+            team.adjacency = nominal.astype(float)
+            team.laplacian = graphs.laplacian(team.adjacency)
         lost = (drop_rng.random((runs, N, N)) < dropout) & ~eye
         S = (nominal | eye) & ~lost
         nu = r_std * _draw(meas_rng, noise, (runs, N, N, measured))
@@ -1079,8 +1115,8 @@ def simulate_team(
         "nees_own": acc["nees"] / n if est.own_cov is not None else nan,
         "containment": acc["contained"] / n if method in SM_CONFIDENCE else nan,
         "set_size": acc["set_size"] / n if method in SM_CONFIDENCE else nan,
-        "rmse_far": np.sqrt(acc["far"] / n) if getattr(est, "team_estimates", None) is not None and
-        not np.all(nominal | eye) else nan,
+        "rmse_far": np.sqrt(acc["far"] / acc["far_steps"]) if getattr(est, "team_estimates", None) is not None
+        and acc["far_steps"] > 0 else nan,
         "spread": np.sqrt(acc["spread"] / n), "cpu_s": np.full(runs, cpu),
     }
 
@@ -1108,6 +1144,7 @@ def _accumulate(acc: dict, est: _Estimator, x: np.ndarray, view: np.ndarray, see
     if team is not None and far.any():  # agent i's estimates of the agents it neither senses nor hears from
         ef = np.sum((team[..., :2] - x[:, None, :, :2]) ** 2, -1)  # (R, N, N)
         acc["far"] += np.sum(ef * far, (-1, -2)) / far.sum()
+        acc["far_steps"] += 1
 
 
 # --------------------------------------------------------------------------------------------
@@ -1311,6 +1348,56 @@ def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSe
     return fusion.SensorNetworkModel(np.eye(n), s.q_pos * np.eye(n), H, R, A)
 
 
+def _localization_switching(n_agents: int, settings: BenchmarkSettings):
+    """Cooperative localization on :func:`switching_graphs`: one model over every link the run ever has,
+    and each step's model with the rows of its current links.
+
+    Returns
+    -------
+    union : mascore.fusion.SensorNetworkModel
+        :func:`localization_model`'s sensing over the union of the step graphs (it draws the data:
+        each possible link's measurement has its own noise; a step keeps its current links' rows).
+    steps : list of (mascore.fusion.SensorNetworkModel, ndarray of int)
+        Per step k: the model of graph k (anchors' rows, then the relative rows of its current
+        links, as :func:`localization_model` orders them) and the indices of its rows in ``union``'s
+        stacked measurement.
+    """
+    from . import fusion
+
+    G = switching_graphs(n_agents, settings.n_steps, settings) > 0
+    union_adj = G.any(0)
+    n = 2 * n_agents
+    I2, eye = np.eye(2), np.eye(n_agents)
+    H, R, rows_of = [], [], []  # rows_of[i]: {"anchor" or j: agent i's stacked row indices in the union}
+    start = 0
+    for i in range(n_agents):
+        blocks, where = [], {}
+        if i in (0, n_agents // 2):
+            blocks.append(np.kron(eye[i], I2))
+            where["anchor"] = start + np.arange(2)
+            start += 2
+        for j in np.flatnonzero(union_adj[i]):
+            blocks.append(np.kron(eye[j] - eye[i], I2))
+            where[int(j)] = start + np.arange(2)
+            start += 2
+        H.append(np.vstack(blocks) if blocks else np.zeros((0, n)))
+        R.append(settings.r * np.eye(H[-1].shape[0]) if blocks else None)
+        rows_of.append(where)
+    F, Q = np.eye(n), settings.q_pos * np.eye(n)
+    union = fusion.SensorNetworkModel(F, Q, H, R, union_adj.astype(float))
+    steps = []
+    for A in G:
+        Hk, Rk, idx = [], [], []
+        for i in range(n_agents):
+            keep = [k for k in rows_of[i] if k == "anchor" or A[i, k]]
+            rows = np.concatenate([rows_of[i][k] for k in keep]) if keep else np.zeros(0, int)
+            idx.append(rows)
+            Hk.append(union.H_stacked[rows])
+            Rk.append(settings.r * np.eye(len(rows)) if len(rows) else None)
+        steps.append((fusion.SensorNetworkModel(F, Q, Hk, Rk, A.astype(float)), np.concatenate(idx)))
+    return union, steps
+
+
 def target_filter(method: str, model):
     """The :mod:`mascore.fusion` filter of a :data:`TARGET_METHODS` name on `model`.
 
@@ -1416,7 +1503,9 @@ def simulate_target(
     seed : numpy.random.SeedSequence or int
         Source of the target's path and the measurements (the same for every method).
     graph : {"ring", "geometric", "switching"}
-        The communication graph (``"switching"``: :func:`switching_graphs`, target task only).
+        The communication graph (``"switching"``: graph k of :func:`switching_graphs` at step k; in
+        localization it is the sensing graph too, so a step's relative measurements are those of its
+        current links, the anchors' always; the data are drawn once over every link the sequence has).
     runs : int, optional
         Monte Carlo runs (default ``settings.runs``).
     settings : BenchmarkSettings
@@ -1443,24 +1532,28 @@ def simulate_target(
     if task not in ("target", "localization"):
         raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
     s = settings
-    if graph == "switching" and task != "target":
-        raise ValueError("the switching topology is for the target task (in localization the graph is the sensing)")
-    model = (target_model if task == "target" else localization_model)(
-        n_agents, "ring" if graph == "switching" else graph, s)
+    if graph not in SWITCHING_GRAPHS:
+        raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
+    if graph == "switching" and task == "localization":  # the sensing switches too: each step's links' rows
+        model, steps = _localization_switching(n_agents, s)
+    else:
+        model = (target_model if task == "target" else localization_model)(
+            n_agents, "ring" if graph == "switching" else graph, s)
     n = model.n_states
     P0 = s.p0 * np.eye(n)
     x_true, z = model.simulate(np.zeros(n), P0, s.n_steps, np.random.default_rng(seed), n_runs=runs)
     if graph == "switching":  # the filters hold no state: one filter per step's graph
         from . import fusion
 
-        G = switching_graphs(n_agents, s.n_steps, s)
-        filters = [target_filter(method, fusion.SensorNetworkModel(model.F, model.Q, model.H, model.R, A))
-                   for A in G]
+        if task == "target":
+            G = switching_graphs(n_agents, s.n_steps, s)
+            steps = [(fusion.SensorNetworkModel(model.F, model.Q, model.H, model.R, A), slice(None)) for A in G]
+        filters = [target_filter(method, m) for m, _ in steps]
         tic = time.thread_time()
         xk, Pk = model.check_state(np.zeros(n), P0, per_agent=filters[0]._per_agent)
         xs, Ps = [], []
         for k, f in enumerate(filters):
-            xk, Pk = f.update(*f.predict(xk, Pk), z[k])
+            xk, Pk = f.update(*f.predict(xk, Pk), z[k][..., steps[k][1]])
             xs.append(xk)
             Ps.append(Pk)
         x, P = np.stack(xs), np.stack(Ps)
@@ -1508,6 +1601,10 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     position-only sensing (:data:`POSITION_METHODS`, with the set-membership filter's
     confidence knob, under Gaussian noise; the centralized, local and set-membership
     filters under uniform noise, where its bound is guaranteed);
+    and the switching topology (:func:`switching_graphs`): the shared and target tasks at
+    N = 16, the own state at N = 16 (study ``switching``, without the Vlahakis observers,
+    :data:`SWITCHING_NOT_APPLICABLE`) and localization at N = 8 (quick: 2 blocks) and 16
+    (full grid only);
     each with ``blocks x settings.runs`` seeds (quick: 2 x 50, full: 4 x 50, N up to
     64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
     N = 8, position sensing, the shared, target and localization tasks).
@@ -1558,7 +1655,16 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
                       "block": blocks200}),
         ("position", {**base, "sensing": ["position"], "method": ["centralized", "local", "set-membership"],
                       "noise": ["uniform"], "n_agents": [8], "block": blocks200}),
+        # the switching topology (switching_graphs) for the own state and localization; the quick grid runs
+        # localization at N = 8 only (at 16 covariance intersection's weight search costs 6 s of CPU per block)
+        ("switching", {**base, "method": [m for m in core if m not in VLAHAKIS_PHI], "graph": ["switching"],
+                       "n_agents": [16], "block": blocks if quick else blocks200}),
+        ("localization", {**base, "task": ["localization"], "method": list(TARGET_METHODS), "graph": ["switching"],
+                          "n_agents": [8], "block": blocks if quick else blocks200}),
     ]
+    if not quick:
+        studies.append(("localization", {**base, "task": ["localization"], "method": list(TARGET_METHODS),
+                                         "graph": ["switching"], "n_agents": [16], "block": blocks200}))
     cells = []
     for study, axes in studies:
         for cell in Grid(axes).cells():
@@ -2292,6 +2398,61 @@ def compare_claims(summary, phi: dict | None = None) -> list:
             "its Q = Omega knob.", ren_sw,
             all(v["switching"] > 1.5 and v["switching"] > v["geometric"] for v in ren_sw.values()),
             rule="ratio > 1.5 on the switching graph and above the fixed graph's, at Q = Omega = 0.1 and 0"))
+    # ------------------------------------------------------------------ own state and localization, switching
+    sw_team = team[team["graph"] == "switching"].set_index("method")
+    if not sw_team.empty:
+        song_sw = {m: round(float(sw_team.loc[m, "rmse_own_mean"] / sw_team.loc["local", "rmse_own_mean"]), 4)
+                   for m in ("song-mb", "song-eb")}
+        nees_sw = nees_at(sw_team.reset_index())
+        claims.append(Claim.qualitative(
+            "compare/switching-own-state", where,
+            "On the switching topology of 16 (the rendezvous law, the sensing and Song et al.'s prediction all on "
+            "the graph of the step) Song et al.'s filters keep their own-state accuracy, that of a local Kalman "
+            "filter (within 3 %, measurement- and estimation-based alike), and the centralized, local, forwarding "
+            "and estimation-based filters stay consistent (NEES per dof within 10 % of 1).",
+            {"RMSE / local": song_sw, "nees": nees_sw},
+            all(abs(v - 1) < 0.03 for v in song_sw.values())
+            and all(abs(nees_sw[m] - 1) < 0.1 for m in ("centralized", "local", "forwarding", "song-eb")),
+            rule="|RMSE / RMSE_local - 1| < 0.03 for song-mb, song-eb; |NEES - 1| < 0.1 for centralized, local, "
+                 "forwarding, song-eb"))
+    loc_all = s[s["task"] == "localization"]
+    loc_sw = loc_all[loc_all["graph"] == "switching"]
+    if not loc_sw.empty:
+        consensus_names = [f"{m}-L{L}" for m in ("ci", "hcmci", "icf") for L in (1, 5)]
+        sw_loc = {}
+        for n, g in loc_sw.groupby("n_agents"):
+            g = g.set_index("method")
+            sw_loc[f"N = {n}"] = {"ratio": {m: round(float(g.loc[m, "ratio_mean"]), 4) for m in consensus_names},
+                                  "nees CI": {m: round(float(g.loc[m, "nees_own_mean"]), 4) for m in ("ci-L1",
+                                                                                                      "ci-L5")}}
+        claims.append(Claim.qualitative(
+            "compare/switching-localization-consensus", where,
+            "In cooperative localization on the switching topology (relative measurements on the links of the step "
+            "only) the consensus filters keep their accuracy: every one comes within 25 % of the centralized filter "
+            "at L = 1 and L = 5, as on the fixed ring, and consensus on information stays conservative (NEES per "
+            "dof below 0.9) at both.", sw_loc,
+            all(v < 1.25 for d in sw_loc.values() for v in d["ratio"].values())
+            and all(v < 0.9 for d in sw_loc.values() for v in d["nees CI"].values()),
+            rule="ratio < 1.25 for CI, HCMCI, ICF at L = 1 and 5; CI NEES < 0.9 at L = 1 and 5; at every N"))
+        diff = {}
+        for n, g in loc_all[loc_all["method"] == "diffusion"].groupby("n_agents"):
+            g = g.set_index("graph")
+            if {"ring", "switching"} <= set(g.index):
+                diff[f"N = {n}"] = {"ratio, switching": round(float(g.loc["switching", "ratio_mean"]), 4),
+                                    "ratio, ring": round(float(g.loc["ring", "ratio_mean"]), 4),
+                                    "nees, switching": round(float(g.loc["switching", "nees_own_mean"]), 4)}
+        if diff:
+            claims.append(Claim.qualitative(
+                "compare/switching-localization-diffusion", where,
+                "The diffusion Kalman filter does not break in localization on the switching topology as it does "
+                "on the common target: its NEES per dof stays below 2 and its RMSE over the centralized filter's "
+                "below 3 times its value on the fixed ring of the same size (the target's thresholds, negated).",
+                diff, all(v["nees, switching"] < 2 and v["ratio, switching"] < 3 * v["ratio, ring"]
+                          for v in diff.values()),
+                rule="NEES < 2 and ratio < 3 x the ring's, at every N with both graphs",
+                note="The quick grid decides it at N = 8 only; the full grid adds N = 16, where the diffusion "
+                     "filter is already overconfident on the fixed ring in localization, and the rule fails there "
+                     "(its NEES on the switching graph stays above 2)."))
     # ------------------------------------------------------------------ cooperative localization
     loc = s[(s["task"] == "localization") & (s["n_agents"] == 8) & (s["graph"] == "ring")].set_index("method")
     lr = {m: round(float(loc.loc[m, "ratio_mean"]), 4) for m in TARGET_METHODS if m != "centralized"}

@@ -29,7 +29,8 @@ def _small_cells() -> list[dict]:
     cells = [c for c in compare.grid_cells("quick") if c["block"] == 0 and c["n_agents"] in (4, 8)
              and (c["study"] in ("scaling", "shared") or c["dropout"] == 0.3)]
     fusion = [c for c in compare.grid_cells("quick") if c["block"] == 0 and c["task"] in ("target", "localization")
-              and c["n_agents"] == 8 and c["method"] in ("centralized", "hcmci-L1", "ci-diffusion")]
+              and c["n_agents"] == 8 and c["graph"] == "ring" and c["method"] in ("centralized", "hcmci-L1",
+                                                                                  "ci-diffusion")]
     return [c for c in cells if c["n_agents"] == 4 or c["study"] != "scaling"] + fusion
 
 
@@ -47,7 +48,7 @@ def test_grid_cells_cover_the_studies_with_100_seeds():
     cells = compare.grid_cells("quick")
     studies = {c["study"] for c in cells}
     assert studies == {"scaling", "graph", "dropout", "noise", "wrong-q", "shared", "target", "localization",
-                       "position"}
+                       "position", "switching"}
     blocks = {c["block"] for c in cells}
     assert len(blocks) * compare.SETTINGS.runs >= 100
     assert {c["method"] for c in cells if c["task"] == "team"} == set(compare.TEAM_METHODS) | set(compare.SM_CONFIDENCE)
@@ -407,8 +408,96 @@ def test_switching_topology_changes_and_leaves_the_centralized_filter_alone():
     np.testing.assert_allclose(switching["rmse_own"], fixed["rmse_own"], rtol=1e-12)  # it does not talk
     ci = compare.simulate_target("ci-L1", 8, 3, runs=10, graph="switching")
     assert np.all(ci["rmse_own"] > fixed["rmse_own"])
-    with pytest.raises(ValueError, match="switching"):
-        compare.simulate_target("ci-L1", 8, 3, runs=2, graph="switching", task="localization")
+    loc = compare.simulate_target("ci-L1", 8, 3, runs=4, graph="switching", task="localization")
+    loc_ring = compare.simulate_target("ci-L1", 8, 3, runs=4, task="localization")
+    assert np.all(np.isfinite(loc["rmse_own"])) and not np.allclose(loc["rmse_own"], loc_ring["rmse_own"])
+
+
+def test_switching_own_state_uses_the_graph_of_each_step(monkeypatch):
+    """At step k the control's Laplacian, the measurements and Song et al.'s prediction use switching_graphs[k]."""
+    from dataclasses import replace
+
+    from mascore import distributed_kf as dkf
+    from mascore import graphs, rendezvous
+
+    s = replace(compare.SETTINGS, n_steps=30, steady_from=10)
+    G = compare.switching_graphs(8, s.n_steps, s)
+    assert (G != G[0]).any()
+    control, predict, masks = [], [], []
+    consensus_control, team_predict, team_update = (rendezvous.consensus_control, dkf.TeamFilter.predict,
+                                                    dkf.TeamFilter.update)
+
+    def record_control(view, laplacian, K):
+        control.append(np.array(laplacian))
+        return consensus_control(view, laplacian, K)
+
+    def record_predict(self, laplacian=None):
+        predict.append(np.array(self.laplacian if laplacian is None else laplacian))
+        return team_predict(self, laplacian)
+
+    def record_update(self, Z, mask):
+        masks.append(np.array(mask))
+        return team_update(self, Z, mask)
+
+    monkeypatch.setattr(rendezvous, "consensus_control", record_control)
+    monkeypatch.setattr(dkf.TeamFilter, "predict", record_predict)
+    monkeypatch.setattr(dkf.TeamFilter, "update", record_update)
+    compare.simulate_team("song-eb", 8, 0, graph="switching", runs=3, settings=s)
+    assert len(control) == len(predict) == len(masks) == s.n_steps
+    for k in range(s.n_steps):
+        L_k = graphs.laplacian(G[k])
+        np.testing.assert_array_equal(control[k], L_k)
+        np.testing.assert_array_equal(predict[k], L_k)  # the prediction after step k's control
+        np.testing.assert_array_equal(masks[k].reshape(8, 8), (G[k] > 0) | np.eye(8, dtype=bool))
+
+
+def test_switching_own_state_centralized_is_the_bound():
+    runs = 40
+    m = {method: compare.simulate_team(method, 16, 2, graph="switching", runs=runs)
+         for method in ("centralized", "local", "forwarding")}
+    assert np.all(np.isfinite(m["centralized"]["rmse_own"]))
+    assert m["centralized"]["rmse_own"].mean() <= m["local"]["rmse_own"].mean()
+    np.testing.assert_allclose(m["forwarding"]["rmse_own"], m["centralized"]["rmse_own"], rtol=1e-9)  # one hop
+    assert abs(m["centralized"]["nees_own"].mean() - 1) < 0.1
+
+
+def test_vlahakis_refuses_the_switching_topology_and_says_why():
+    for method in compare.VLAHAKIS_PHI:
+        with pytest.raises(ValueError, match=f"{method} does not apply on graph='switching'.*fixed Laplacian"):
+            compare.simulate_team(method, 8, 0, graph="switching", runs=2)
+    assert any("vlahakis" in k for k in compare.SWITCHING_NOT_APPLICABLE)
+    cells = compare.grid_cells("quick") + compare.grid_cells("full")
+    assert not any(c["method"] in compare.VLAHAKIS_PHI for c in cells if c["graph"] == "switching")
+
+
+def test_localization_on_switching_matches_the_time_varying_riccati_recursion():
+    """The centralized filter's MSE and NEES = an exact time-varying covariance recursion over the same graphs."""
+    s = compare.SETTINGS
+    N, n = 8, 16
+    G = compare.switching_graphs(N, s.n_steps, s)
+    I2, eye = np.eye(2), np.eye(N)
+    P = s.p0 * np.eye(n)
+    traces = []
+    for A in G:  # built here from the graph: anchors 0 and N/2, z_ij = p_j - p_i on this step's links
+        rows = [np.kron(eye[i], I2) for i in (0, N // 2)]
+        rows += [np.kron(eye[j] - eye[i], I2) for i in range(N) for j in range(N) if A[i, j]]
+        H = np.vstack(rows)
+        P = P + s.q_pos * np.eye(n)
+        P = np.linalg.inv(np.linalg.inv(P) + H.T @ H / s.r)
+        traces.append(np.trace(P) / N)  # mean over agents of the own position's variance
+    predicted = float(np.mean(traces[s.steady_from:]))
+    m = compare.simulate_target("centralized", N, 11, runs=200, graph="switching", task="localization")
+    mse = m["rmse_own"] ** 2
+    half = 1.96 * mse.std(ddof=1) / np.sqrt(mse.size)
+    assert abs(mse.mean() - predicted) < 2 * half, (mse.mean(), predicted, half)
+    assert abs(m["nees_own"].mean() - 1) < 0.07
+    _, steps = compare._localization_switching(N, s)  # each step's information matrix, exactly
+    for k in (0, 40, 149):
+        rows = [np.kron(eye[i], I2) for i in (0, N // 2)]
+        rows += [np.kron(eye[j] - eye[i], I2) for i in range(N) for j in range(N) if G[k][i, j]]
+        H = np.vstack(rows)
+        np.testing.assert_allclose(steps[k][0].information_matrices.sum(0), H.T @ H / s.r, atol=1e-9)
+
 
 
 # ---------------------------------------------------------------------------- position-only sensing
@@ -556,3 +645,4 @@ def test_position_headline_lists_every_method_and_what_does_not_apply():
     assert table.loc["set-membership", "contains, uniform"] == "1.000"
     assert float(table.loc["set-membership-c90", "set size (m)"]) < float(table.loc["set-membership", "set size (m)"])
     assert table.loc["centralized", "floats/step"] == 18.0  # positions up (2 per measurement), estimates down
+
