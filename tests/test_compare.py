@@ -495,3 +495,47 @@ def test_localization_on_switching_matches_the_time_varying_riccati_recursion():
         rows += [np.kron(eye[j] - eye[i], I2) for i in range(N) for j in range(N) if G[k][i, j]]
         H = np.vstack(rows)
         np.testing.assert_allclose(steps[k][0].information_matrices.sum(0), H.T @ H / s.r, atol=1e-9)
+
+
+def test_switching_own_state_keeps_the_last_received_view_of_an_agent_out_of_reach(monkeypatch):
+    """A view of j held by i is j's broadcast estimate at the last step k' <= k with the link (i, j) in graph k'."""
+    from dataclasses import replace
+
+    from mascore import rendezvous
+
+    s = replace(compare.SETTINGS, n_steps=40, steady_from=10)
+    N = 8
+    G = compare.switching_graphs(N, s.n_steps, s) > 0
+    views = []
+    consensus_control = rendezvous.consensus_control
+
+    def record(view, laplacian, K):
+        views.append(np.array(view))
+        return consensus_control(view, laplacian, K)
+
+    monkeypatch.setattr(rendezvous, "consensus_control", record)
+    compare.simulate_team("local", N, 5, graph="switching", runs=3, settings=s)
+    assert len(views) == s.n_steps
+    own = np.stack([v[:, np.arange(N), np.arange(N)] for v in views])  # (steps, R, N, 4): j's broadcast estimate
+    checked = 0
+    for k in range(s.n_steps):
+        for i in range(N):
+            for j in range(N):
+                if i == j:
+                    continue
+                linked = np.flatnonzero(G[: k + 1, i, j])
+                last = linked[-1] if linked.size else 0  # never linked: the view of the first step
+                np.testing.assert_array_equal(views[k][:, i, j], own[last][:, j])
+                checked += last != k
+    assert checked > 0  # some views were held over steps without the link
+
+
+def test_switching_own_state_runs_with_dropouts_for_every_applicable_method():
+    from dataclasses import replace
+
+    s = replace(compare.SETTINGS, n_steps=30, steady_from=10)
+    for method in compare.CORE_METHODS:
+        if method in compare.VLAHAKIS_PHI:
+            continue
+        m = compare.simulate_team(method, 8, 4, dropout=0.3, graph="switching", runs=3, settings=s)
+        assert np.all(np.isfinite(m["rmse_own"])) and np.all(np.isfinite(m["rmse_view"])), method
