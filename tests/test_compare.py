@@ -539,3 +539,34 @@ def test_switching_own_state_runs_with_dropouts_for_every_applicable_method():
             continue
         m = compare.simulate_team(method, 8, 4, dropout=0.3, graph="switching", runs=3, settings=s)
         assert np.all(np.isfinite(m["rmse_own"])) and np.all(np.isfinite(m["rmse_view"])), method
+
+
+def test_localization_riccati_is_the_exact_error_covariance_of_the_fusion_filters_on_a_fixed_graph():
+    """localization_riccati (built from the graph) = fusion.error_covariance (the filters' exact error) on the ring."""
+    from mascore import fusion
+
+    s = compare.SETTINGS
+    N = 8
+    exact = compare.localization_riccati(N, "ring")
+    model = compare.localization_model(N, "ring")
+    own = 2 * np.arange(N)[:, None] + np.arange(2)
+    w = slice(s.steady_from, s.n_steps)
+    C, P = fusion.error_covariance(fusion.CentralizedFilter(model), s.p0 * np.eye(2 * N), s.n_steps)
+    assert np.isclose(np.trace(C[w], axis1=1, axis2=2).mean() / N, exact["centralized"], rtol=1e-8)
+    C, P = fusion.error_covariance(fusion.MeasurementForwardingFilter(model), s.p0 * np.eye(2 * N), s.n_steps)
+    blocks = C[w][:, np.arange(N)[:, None, None], own[:, :, None], own[:, None, :]]  # (K', N, 2, 2)
+    assert np.isclose(np.trace(blocks, axis1=-2, axis2=-1).mean(), exact["forwarding"], rtol=1e-8)
+    # agents 2 and 6 of the ring never have an anchor within one hop: their own position drifts unobserved
+    assert exact["anchor reach, least"] == 0.0 and exact["forwarding ratio"] > 5
+
+
+def test_localization_forwarding_on_switching_matches_the_exact_recursion():
+    """Forwarding on the switching graph: its MSE is the time-varying Riccati recursion's, its NEES 1."""
+    N = 8
+    exact = compare.localization_riccati(N, "switching")
+    m = compare.simulate_target("forwarding", N, 13, runs=200, graph="switching", task="localization")
+    mse = m["rmse_own"] ** 2
+    half = 1.96 * mse.std(ddof=1) / np.sqrt(mse.size)
+    assert abs(mse.mean() - exact["forwarding"]) < 2 * half, (mse.mean(), exact["forwarding"], half)
+    assert abs(m["nees_own"].mean() - 1) < 0.07
+    assert exact["anchor reach, least"] > 0  # every agent meets an anchor within one hop now and then
