@@ -111,6 +111,7 @@ __all__ = [
     "LOCALIZATION_NOT_APPLICABLE",
     "headline",
     "localization_model",
+    "localization_riccati",
     "node_cost",
     "node_costs",
     "NODE_ORDER",
@@ -1396,6 +1397,77 @@ def _localization_switching(n_agents: int, settings: BenchmarkSettings):
             Rk.append(settings.r * np.eye(len(rows)) if len(rows) else None)
         steps.append((fusion.SensorNetworkModel(F, Q, Hk, Rk, A.astype(float)), np.concatenate(idx)))
     return union, steps
+
+
+def localization_riccati(n_agents: int, graph: str = "ring",
+                         settings: BenchmarkSettings = SETTINGS) -> dict[str, float]:
+    """Exact own-position errors of the two Kalman filters of cooperative localization, without Monte Carlo.
+
+    The centralized filter and measurement forwarding are Kalman filters (on all the
+    measurements of a step, and on those of agent i's closed neighbourhood of that step),
+    so their covariances are their error covariances, and they follow a time-varying
+    Riccati recursion over the graph sequence (a switching graph has no steady state: no
+    DARE). The recursion is built here from the graph alone (agent i's rows: its anchor
+    row if it is agent 0 or N // 2, and ``p_j - p_i`` for its links of the step), not from
+    :func:`localization_model`, so it checks :func:`simulate_target` independently.
+
+    Parameters
+    ----------
+    n_agents : int
+        Team size N >= 3.
+    graph : {"ring", "geometric", "switching"}
+        The sensing and communication graph; ``"switching"``: graph k of :func:`switching_graphs` at step k.
+    settings : BenchmarkSettings
+        ``p0``, ``q_pos``, ``r``, ``n_steps``, ``steady_from``.
+
+    Returns
+    -------
+    dict of str to float
+        ``"centralized"``, ``"forwarding"`` (m^2): the mean over the steady window and the agents of the
+        variance of an agent's own position (trace of its 2 x 2 block), what :func:`simulate_target`'s
+        ``rmse_own ** 2`` estimates; ``"forwarding ratio"``: the square root of their quotient;
+        ``"anchor reach"``: the fraction of agent-steps with an anchor in the closed neighbourhood, and
+        ``"anchor reach, least"``: the same for the agent that has one least often.
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> e = compare.localization_riccati(8)
+    >>> bool(e["forwarding"] > e["centralized"] > 0), e["anchor reach, least"]   # ring: agents 2 and 6
+    (True, 0.0)
+    """
+    N = _check_n_agents(n_agents)
+    s = settings
+    if graph not in SWITCHING_GRAPHS:
+        raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
+    G = (switching_graphs(N, s.n_steps, s) if graph == "switching"
+         else np.broadcast_to(benchmark_graph(graph, N, s), (s.n_steps, N, N))) > 0
+    n, eye = 2 * N, np.eye(N)
+    anchors = (0, N // 2)
+    own = 2 * np.arange(N)[:, None] + np.arange(2)                     # (N, 2): agent i's coordinates
+    Pc = s.p0 * np.eye(n)
+    Pf = np.broadcast_to(Pc, (N, n, n)).copy()
+    central, forwarding, reach = [], [], []
+    for A in G:
+        info = np.zeros((N, n, n))                                     # agent j's H_j^T R^-1 H_j at this step
+        for j in range(N):
+            rows = [eye[j]] if j in anchors else []
+            rows += [eye[m] - eye[j] for m in np.flatnonzero(A[j])]
+            if rows:
+                H = np.kron(np.array(rows), np.eye(2))
+                info[j] = H.T @ H / s.r
+        closed = A | np.eye(N, dtype=bool)
+        Pc = np.linalg.inv(np.linalg.inv(Pc + s.q_pos * np.eye(n)) + info.sum(0))
+        Pf = np.linalg.inv(np.linalg.inv(Pf + s.q_pos * np.eye(n)) + np.einsum("ij,jab->iab", closed, info))
+        central.append(np.trace(Pc) / N)
+        forwarding.append(np.mean(np.trace(Pf[np.arange(N)[:, None, None], own[:, :, None], own[:, None, :]],
+                                           axis1=1, axis2=2)))
+        reach.append(closed[:, list(anchors)].any(1))
+    w = slice(s.steady_from, s.n_steps)
+    c, f = float(np.mean(central[w])), float(np.mean(forwarding[w]))
+    reach = np.array(reach)
+    return {"centralized": c, "forwarding": f, "forwarding ratio": float(np.sqrt(f / c)),
+            "anchor reach": float(reach.mean()), "anchor reach, least": float(reach.mean(0).min())}
 
 
 def target_filter(method: str, model):

@@ -646,3 +646,76 @@ def test_position_headline_lists_every_method_and_what_does_not_apply():
     assert float(table.loc["set-membership-c90", "set size (m)"]) < float(table.loc["set-membership", "set size (m)"])
     assert table.loc["centralized", "floats/step"] == 18.0  # positions up (2 per measurement), estimates down
 
+def test_switching_own_state_keeps_the_last_received_view_of_an_agent_out_of_reach(monkeypatch):
+    """A view of j held by i is j's broadcast estimate at the last step k' <= k with the link (i, j) in graph k'."""
+    from dataclasses import replace
+
+    from mascore import rendezvous
+
+    s = replace(compare.SETTINGS, n_steps=40, steady_from=10)
+    N = 8
+    G = compare.switching_graphs(N, s.n_steps, s) > 0
+    views = []
+    consensus_control = rendezvous.consensus_control
+
+    def record(view, laplacian, K):
+        views.append(np.array(view))
+        return consensus_control(view, laplacian, K)
+
+    monkeypatch.setattr(rendezvous, "consensus_control", record)
+    compare.simulate_team("local", N, 5, graph="switching", runs=3, settings=s)
+    assert len(views) == s.n_steps
+    own = np.stack([v[:, np.arange(N), np.arange(N)] for v in views])  # (steps, R, N, 4): j's broadcast estimate
+    checked = 0
+    for k in range(s.n_steps):
+        for i in range(N):
+            for j in range(N):
+                if i == j:
+                    continue
+                linked = np.flatnonzero(G[: k + 1, i, j])
+                last = linked[-1] if linked.size else 0  # never linked: the view of the first step
+                np.testing.assert_array_equal(views[k][:, i, j], own[last][:, j])
+                checked += last != k
+    assert checked > 0  # some views were held over steps without the link
+
+
+def test_switching_own_state_runs_with_dropouts_for_every_applicable_method():
+    from dataclasses import replace
+
+    s = replace(compare.SETTINGS, n_steps=30, steady_from=10)
+    for method in compare.CORE_METHODS:
+        if method in compare.VLAHAKIS_PHI:
+            continue
+        m = compare.simulate_team(method, 8, 4, dropout=0.3, graph="switching", runs=3, settings=s)
+        assert np.all(np.isfinite(m["rmse_own"])) and np.all(np.isfinite(m["rmse_view"])), method
+
+
+def test_localization_riccati_is_the_exact_error_covariance_of_the_fusion_filters_on_a_fixed_graph():
+    """localization_riccati (built from the graph) = fusion.error_covariance (the filters' exact error) on the ring."""
+    from mascore import fusion
+
+    s = compare.SETTINGS
+    N = 8
+    exact = compare.localization_riccati(N, "ring")
+    model = compare.localization_model(N, "ring")
+    own = 2 * np.arange(N)[:, None] + np.arange(2)
+    w = slice(s.steady_from, s.n_steps)
+    C, P = fusion.error_covariance(fusion.CentralizedFilter(model), s.p0 * np.eye(2 * N), s.n_steps)
+    assert np.isclose(np.trace(C[w], axis1=1, axis2=2).mean() / N, exact["centralized"], rtol=1e-8)
+    C, P = fusion.error_covariance(fusion.MeasurementForwardingFilter(model), s.p0 * np.eye(2 * N), s.n_steps)
+    blocks = C[w][:, np.arange(N)[:, None, None], own[:, :, None], own[:, None, :]]  # (K', N, 2, 2)
+    assert np.isclose(np.trace(blocks, axis1=-2, axis2=-1).mean(), exact["forwarding"], rtol=1e-8)
+    # agents 2 and 6 of the ring never have an anchor within one hop: their own position drifts unobserved
+    assert exact["anchor reach, least"] == 0.0 and exact["forwarding ratio"] > 5
+
+
+def test_localization_forwarding_on_switching_matches_the_exact_recursion():
+    """Forwarding on the switching graph: its MSE is the time-varying Riccati recursion's, its NEES 1."""
+    N = 8
+    exact = compare.localization_riccati(N, "switching")
+    m = compare.simulate_target("forwarding", N, 13, runs=200, graph="switching", task="localization")
+    mse = m["rmse_own"] ** 2
+    half = 1.96 * mse.std(ddof=1) / np.sqrt(mse.size)
+    assert abs(mse.mean() - exact["forwarding"]) < 2 * half, (mse.mean(), exact["forwarding"], half)
+    assert abs(m["nees_own"].mean() - 1) < 0.07
+    assert exact["anchor reach, least"] > 0  # every agent meets an anchor within one hop now and then
