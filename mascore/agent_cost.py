@@ -59,6 +59,7 @@ __all__ = [
     "agent_step",
     "agent_step_cost",
     "blas_pinned",
+    "max_deviation",
     "slopes",
 ]
 
@@ -78,8 +79,8 @@ WHOLE_FILTER = {("team", "centralized"), ("team", "song-eb"), ("target", "centra
                 ("localization", "centralized")}
 #: Largest N measured per (task, method), with the reason; the others go to 128.
 MAX_AGENTS = {
-    ("team", "song-eb"): (32, "its joint covariance of all agents' team estimates is (N^2 n_r)^2 floats: "
-                              "0.5 GB at N = 64, and a dense step of it takes minutes"),
+    ("team", "song-eb"): (32, "its joint covariance of all agents' team estimates holds (2 N^2)^2 floats (per "
+                              "axis): 0.5 GB at N = 64, 8.6 GB at 128"),
 }
 
 #: Leading-order work and memory of one agent per step (n the state size: 4 in the team and target tasks,
@@ -486,6 +487,33 @@ def _fusion_step(task: str, method: str, N: int, i: int, seed: int, s: compare.B
     return AgentStep(run=run, **step)
 
 
+def max_deviation(step: AgentStep) -> float:
+    """Largest absolute difference between the one-agent step and agent i's row of the team-wide filter.
+
+    Parameters
+    ----------
+    step : AgentStep
+        From :func:`agent_step`.
+
+    Returns
+    -------
+    float
+        ``max |run() - reference()|`` over the arrays returned (rounding: about 1e-15 relative);
+        NaN for a whole filter, which has no separate reference.
+
+    Examples
+    --------
+    >>> from mascore import agent_cost
+    >>> bool(agent_cost.max_deviation(agent_cost.agent_step("team", "song-mb", 6, agent=2)) < 1e-12)
+    True
+    """
+    if not isinstance(step, AgentStep):
+        raise TypeError(f"step must be an AgentStep (from agent_step); got {type(step).__name__}")
+    if step.reference is None:
+        return float("nan")
+    return max(float(np.max(np.abs(np.asarray(a) - np.asarray(b)))) for a, b in zip(step.run(), step.reference()))
+
+
 # --------------------------------------------------------------------------------------------
 # timing
 
@@ -518,7 +546,7 @@ def agent_step_cost(task: str, method: str, n_agents: int, *, repeats: int = 7, 
     """CPU time (µs) of one agent's step (:func:`agent_step`): one run, one thread, median of `repeats`.
 
     After one warm-up call, each repeat calls the step enough times to last about
-    `min_time` seconds of this thread's CPU (:func:`time.thread_time`) and keeps the
+    `min_time` seconds of this thread's CPU (``time.thread_time``) and keeps the
     time per call; the median of the repeats is returned (robust to other processes on
     the machine). BLAS is held to one thread by ``threadpoolctl`` when installed; else
     the caller must set ``OMP_NUM_THREADS=1`` (see :func:`blas_pinned`).

@@ -146,3 +146,10 @@ def test_snapshot_covers_every_method_and_stops_where_stated():
             # the analytic columns are the functions' values
             np.testing.assert_allclose(rows["flops"], [agent_cost.agent_flops(task, m, n) for n in rows.index],
                                        rtol=1e-5)
+
+
+def test_max_deviation_is_nan_for_a_whole_filter_and_refuses_other_objects():
+    assert np.isnan(agent_cost.max_deviation(agent_cost.agent_step("team", "centralized", 4)))
+    assert agent_cost.max_deviation(agent_cost.agent_step("localization", "icf-L5", 5, agent=2)) < 1e-9
+    with pytest.raises(TypeError, match="step"):
+        agent_cost.max_deviation("local")
