@@ -795,7 +795,7 @@ def slopes(table, top: int | None = None):
     Returns
     -------
     pandas.DataFrame
-        Index (task, method); ``slope`` (measured), ``flops_slope`` (analytic, same N), ``measured_to`` (largest N).
+        Index ``(task, method)``; ``slope`` (measured), ``flops_slope`` (analytic, same N), ``measured_to`` (largest N).
 
     Examples
     --------
@@ -816,7 +816,9 @@ def slopes(table, top: int | None = None):
         out[(task, method)] = {"slope": _slope(g["n_agents"], g["us_per_step"]),
                                "flops_slope": _slope(g["n_agents"], g["flops"]),
                                "measured_to": int(g["n_agents"].max()) if len(g) else 0}
-    return pd.DataFrame.from_dict(out, orient="index")
+    result = pd.DataFrame.from_dict(out, orient="index")
+    result.index = pd.MultiIndex.from_tuples(result.index, names=["task", "method"])
+    return result
 
 
 def _slope(n, y) -> float:
