@@ -243,7 +243,7 @@ def _team_step(method: str, N: int, i: int, seed: int, s: compare.BenchmarkSetti
         x = x @ team.A.T + U @ team.B.T + np.sqrt(np.diag(team.Q)) * rng.standard_normal(x.shape)
     Z = measure()
     if (("team", method)) in WHOLE_FILTER:
-        U = control(Z)  # the control of this step, from the estimator's views before the update (close enough)
+        U = control(Z)  # the inputs of the timed step (from the views before the update: the work is the same)
         filt = est.filter
 
         def run():
