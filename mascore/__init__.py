@@ -26,7 +26,7 @@ SUBMODULES = (
     # estimation
     "sensing", "distributed_kf", "distributed_ekf", "fusion", "ellipsoids", "set_membership", "observers", "riccati",
     # comparing the methods, sweeps on Dask
-    "compare", "sweep",
+    "compare", "agent_cost", "sweep",
     # errors
     "exceptions",
     # the papers' scenarios

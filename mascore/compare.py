@@ -2914,6 +2914,11 @@ def node_cost(method: str, n_agents: int, n_steps: int = 20, repeats: int = 3, s
     float
         µs per step.
 
+    See Also
+    --------
+    mascore.agent_cost.agent_step_cost : one agent's own work per step (its neighbours' messages given),
+        for every task; the chapter's table.
+
     Examples
     --------
     >>> from mascore import compare
@@ -2958,6 +2963,10 @@ def node_costs(sizes: Sequence[int] = (4, 8, 16), methods: Sequence[str] = CORE_
     pandas.DataFrame
         µs per step on the busiest node, one row per method, one column per N, ``slope`` (log-log
         in N) and the analytic ``work`` and ``memory`` orders (:data:`NODE_ORDER`).
+
+    See Also
+    --------
+    mascore.agent_cost.agent_costs : one agent's cost over N = 4 ... 128 with slopes and analytic counts.
 
     Examples
     --------
