@@ -17,7 +17,11 @@ The cells run serially in this process (``workers=0``), on a local Dask cluster
 of worker processes (``workers=K``), or on any Dask cluster given by its
 scheduler address (``scheduler="tcp://HOST:8786"``). Dask's nanny starts each
 worker with one BLAS thread, so a cell computes the same floating-point numbers
-in a worker as in a serial run with ``OMP_NUM_THREADS=1``.
+in a worker as in a serial run with ``OMP_NUM_THREADS=1``. The local cluster's
+workers keep the C library's memory allocator settings, as a serial run does
+(Dask's default ``MALLOC_TRIM_THRESHOLD_=65536`` made large-array cells up to
+twice as slow); workers of another cluster are best started the same way,
+``dask worker --no-nanny`` with ``OMP_NUM_THREADS=1``.
 """
 
 from __future__ import annotations
@@ -204,7 +208,8 @@ def run_sweep(
         ``cell`` identifier added.
     out : str or pathlib.Path
         CSV file of the table. Rows of cells already in it are kept and those
-        cells are skipped (resume); new rows are appended as cells finish.
+        cells are skipped (resume); the rows of finished cells are appended every
+        2 seconds, and when the sweep stops (also by an error or an interrupt).
         Delete the file when the task's code has changed: its rows are not recomputed.
     workers : int
         0 runs the cells in this process; ``K >= 1`` starts a local Dask
@@ -258,10 +263,16 @@ def run_sweep(
     bar = progress_bar(range(len(todo)), enabled=progress, desc="sweep", unit="cell", initial=len(todo) - len(pending),
                        total=len(todo))
     bar_update = getattr(bar, "update", lambda n: None)
-    for rows in _results(pending, task, workers, scheduler):
-        _append(out, rows)
-        bar_update(1)
-    getattr(bar, "close", lambda: None)()
+    writer = _Appender(out)
+    results = _results(pending, task, workers, scheduler)
+    try:
+        for rows in results:
+            writer.add(rows)
+            bar_update(1)
+    finally:  # keep every finished cell, also when interrupted
+        writer.flush()
+        results.close()
+        getattr(bar, "close", lambda: None)()
     table = pd.read_csv(out, keep_default_na=False, na_values=[""])
     if pending:  # rewrite in canonical order; a finished table is only read (readers may share it)
         table["_order"] = np.arange(len(table))
@@ -281,19 +292,51 @@ def _done_cells(out: Path) -> set[str]:
     return set(pd.read_csv(out, usecols=[CELL_COLUMN])[CELL_COLUMN])
 
 
-def _append(out: Path, rows: list[dict]) -> None:
-    """Append one cell's rows to the CSV, with the header when the file is new."""
-    import pandas as pd
+class _Appender:
+    """Appends finished cells' rows to the CSV at `out`, a batch at most every `interval` seconds.
 
-    frame = pd.DataFrame(rows)
-    if out.exists() and out.stat().st_size > 0:
-        columns = list(pd.read_csv(out, nrows=0).columns)
-        if sorted(columns) != sorted(frame.columns):
-            raise ValueError(f"the rows of this cell have columns {sorted(frame.columns)}, but {out} has {columns}; "
+    Writing each cell as it arrives cost about 16 ms (a data frame, the header read
+    back, a CSV append): 12 s of the client's time on the full comparison grid, taken
+    from the workers when they have every core. Here the rows wait in memory
+    for at most `interval` seconds (and are written when the sweep stops, also by an
+    exception or an interrupt), so a resumed sweep loses at most that much work.
+    """
+
+    def __init__(self, out: Path, interval: float = 2.0) -> None:
+        import time
+
+        self.out, self.interval, self._clock = out, float(interval), time.monotonic
+        self.rows: list[dict] = []
+        self.columns: list[str] | None = None  # the file's, once known
+        self.exists = out.exists() and out.stat().st_size > 0
+        if self.exists:
+            import pandas as pd
+
+            self.columns = list(pd.read_csv(out, nrows=0).columns)
+        self.last = self._clock()
+
+    def add(self, rows: list[dict]) -> None:
+        """Take one cell's rows; write the waiting rows if `interval` seconds have passed."""
+        keys = sorted(set().union(*rows))
+        if self.columns is None:
+            self.columns = keys  # a new file: its header is the first cell's columns, sorted
+        elif keys != sorted(self.columns):
+            raise ValueError(f"the rows of this cell have columns {keys}, but {self.out} has {self.columns}; "
                              "write to a new file")
-        frame[columns].to_csv(out, mode="a", header=False, index=False)
-    else:
-        frame[sorted(frame.columns)].to_csv(out, index=False)
+        self.rows.extend(rows)
+        if self._clock() - self.last >= self.interval:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the waiting rows (with the header if the file is new)."""
+        self.last = self._clock()
+        if not self.rows:
+            return
+        import pandas as pd
+
+        frame = pd.DataFrame(self.rows, columns=self.columns)
+        frame.to_csv(self.out, mode="a" if self.exists else "w", header=not self.exists, index=False)
+        self.exists, self.rows = True, []
 
 
 def _labelled(task: Callable, cid: str, cell: dict) -> list[dict]:
@@ -319,16 +362,25 @@ def _results(pending: list[tuple[str, dict]], task: Callable, workers: int, sche
         client = distributed.Client(scheduler, set_as_default=False)
         cluster = None
     else:
+        import dask
+
         workers = check_positive_int(workers, "workers")
-        cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                           dashboard_address=None, silence_logs=40)
+        # Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_=65536, which also fixes glibc's
+        # mmap threshold at 128 kB: every larger array is then mapped and unmapped, and its pages
+        # faulted in again (the N = 64 cells of the comparison ran 35-60 % slower, most of it in the
+        # kernel, than in a serial run). The workers start with the C library's defaults, like a serial run.
+        with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+            cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                               dashboard_address=None, silence_logs=40)
         client = distributed.Client(cluster, set_as_default=False)
     try:
         futures = [client.submit(_labelled, task, cid, cell, key=f"cell-{i}-{hashlib.sha1(cid.encode()).hexdigest()}",
                                  pure=False, priority=len(pending) - i)  # in the order given: longest first
                    for i, (cid, cell) in enumerate(pending)]
-        for future in distributed.as_completed(futures, loop=client.loop):
-            yield future.result()
+        # the results are gathered in the background, not by one round trip per cell from this thread
+        for future, rows in distributed.as_completed(futures, with_results=True, loop=client.loop):
+            future.release()
+            yield rows
     finally:
         client.close()
         if cluster is not None:

@@ -139,6 +139,18 @@ def test_an_interrupted_sweep_resumes(serial, tmp_path):
     np.testing.assert_array_equal(again.to_numpy(), kept.to_numpy())  # the finished cells were not rerun
 
 
+def _allocator_task(cell):
+    return [{"trim": os.environ.get("MALLOC_TRIM_THRESHOLD_", "unset"), "blas": os.environ.get("OMP_NUM_THREADS")}]
+
+
+def test_local_workers_keep_the_allocator_defaults_and_one_blas_thread(tmp_path, monkeypatch):
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)  # Dask's nanny would set it to 65536
+    table = sweep.run_sweep(sweep.Grid({"block": [0, 1]}).cells(), _allocator_task, tmp_path / "t.csv", workers=1,
+                            progress=False)
+    assert table["trim"].tolist() == ["unset", "unset"]
+    assert table["blas"].astype(str).tolist() == ["1", "1"]
+
+
 def test_run_sweep_refuses_bad_arguments(tmp_path):
     cells = sweep.Grid({"scale": [1.0], "block": [0]}).cells()
     with pytest.raises(ValueError, match="workers"):
