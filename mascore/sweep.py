@@ -273,7 +273,7 @@ def run_sweep(
         writer.flush()
         results.close()
         getattr(bar, "close", lambda: None)()
-    table = pd.read_csv(out, keep_default_na=False, na_values=[""])
+    table = pd.read_csv(out, keep_default_na=False, na_values=[""], low_memory=False)
     if pending:  # rewrite in canonical order; a finished table is only read (readers may share it)
         table["_order"] = np.arange(len(table))
         keys = list(sort_by) if sort_by else [CELL_COLUMN]
