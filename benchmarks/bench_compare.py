@@ -41,8 +41,8 @@ Prediction for the full grid: 494 s of work plus about 9 s of fixed costs on 1 w
 505 s), half the work plus about 13 s on 2 (start, imports, close, the client's share: about
 260 s): 1.93x (measured before: 1.78x). Measured by ``--snapshot`` on 2026-11-29 on the grid of
 924 cells (with the position-sensing and switching studies), nothing else running: 510 s on 1 worker,
-279 s on 2, **1.83x**, the same table. The gap to the prediction is the two workers sharing the
-memory bus and the page-fault path of the VM, which CPU times do not show.
+279 s on 2, **1.83x**, the same table. The gap to the prediction is probably the two workers sharing the
+memory bus and the page-fault path of the VM, which CPU times do not show (not measured).
 """
 
 from __future__ import annotations

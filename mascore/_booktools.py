@@ -42,7 +42,7 @@ API_GROUPS: dict[str, tuple[str, ...]] = {
     "Shared building blocks": ("agents", "graphs", "noise", "kalman", "sensing"),
     "Consensus and cooperative control": ("consensus", "rendezvous", "flocking", "synchronization", "lqr", "riccati"),
     "Estimation": ("distributed_kf", "distributed_ekf", "fusion", "ellipsoids", "set_membership", "observers"),
-    "Comparing the methods": ("compare", "sweep"),
+    "Comparing the methods": ("compare", "agent_cost", "sweep"),
     "Reproduction and the book": ("registry", "ledger", "report", "reproduce", "plotting", "exceptions"),
 }
 
