@@ -119,7 +119,9 @@ _CI_EVALS = 20
 class AgentStep:
     """One agent's step of a method, ready to time, with the team-wide filter's numbers to check it against.
 
-    Attributes
+    Built by :func:`agent_step`; the fields are the parameters.
+
+    Parameters
     ----------
     task, method : str
         As asked.
@@ -139,6 +141,15 @@ class AgentStep:
     reference : callable or None
         ``reference()``: agent i's result from the team-wide filter on the same state (None for a
         whole filter, where the step *is* the team-wide filter).
+
+    Examples
+    --------
+    >>> from mascore import agent_cost
+    >>> step = agent_cost.agent_step("target", "ci-L5", 8)
+    >>> step.scope, step.degree
+    ('one agent', 2)
+    >>> bool(agent_cost.max_deviation(step) < 1e-12)   # agent i's numbers of the team-wide filter
+    True
     """
 
     task: str
