@@ -25,6 +25,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from benchmarks.timing import cpu_model
+
 DATA = Path(__file__).resolve().parent / "data"
 
 
@@ -197,14 +199,7 @@ def machine() -> dict:
     """Where and with what the table was measured."""
     import scipy
 
-    cpu = "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    cpu = cpu_model()
     return {"date": time.strftime("%Y-%m-%d"), "cpu": cpu, "cores": os.cpu_count(),
             "python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
             "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "unset")}

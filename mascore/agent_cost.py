@@ -161,6 +161,13 @@ class AgentStep:
     run: Callable[[], tuple]
     reference: Callable[[], tuple] | None = field(default=None, repr=False)
 
+def _check_task_method(task: object, method: object) -> None:
+    """Refuse a task or a method of that task that this module does not know, by name."""
+    if task not in AGENT_TASKS:
+        raise ValueError(f"task must be one of {AGENT_TASKS}; got {task!r}")
+    if method not in AGENT_METHODS[task]:
+        raise ValueError(f"method must be one of {AGENT_METHODS[task]} for task {task!r}; got {method!r}")
+
 
 # --------------------------------------------------------------------------------------------
 # one agent's step
@@ -212,10 +219,7 @@ def agent_step(task: str, method: str, n_agents: int, *, agent: int = 0, seed: i
     >>> bool(np.allclose(x, x_ref) and np.allclose(P, P_ref))
     True
     """
-    if task not in AGENT_TASKS:
-        raise ValueError(f"task must be one of {AGENT_TASKS}; got {task!r}")
-    if method not in AGENT_METHODS[task]:
-        raise ValueError(f"method must be one of {AGENT_METHODS[task]} for task {task!r}; got {method!r}")
+    _check_task_method(task, method)
     N = compare._check_n_agents(n_agents)
     i = check_positive_int(agent, "agent", minimum=0)
     if i >= N:
@@ -660,10 +664,7 @@ def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float
     >>> agent_cost.agent_flops("team", "song-eb", 16) / agent_cost.agent_flops("team", "song-eb", 8)  # O(N^6)
     64.0
     """
-    if task not in AGENT_TASKS:
-        raise ValueError(f"task must be one of {AGENT_TASKS}; got {task!r}")
-    if method not in AGENT_METHODS[task]:
-        raise ValueError(f"method must be one of {AGENT_METHODS[task]} for task {task!r}; got {method!r}")
+    _check_task_method(task, method)
     N = check_positive_int(n_agents, "n_agents")
     d = check_positive_int(degree, "degree", minimum=0)
     if task != "team":
@@ -705,10 +706,7 @@ def agent_memory(task: str, method: str, n_agents: int, degree: int = 2) -> floa
     >>> agent_cost.agent_memory("team", "song-eb", 8) / agent_cost.agent_memory("team", "song-eb", 4)  # O(N^4)
     16.0
     """
-    if task not in AGENT_TASKS:
-        raise ValueError(f"task must be one of {AGENT_TASKS}; got {task!r}")
-    if method not in AGENT_METHODS[task]:
-        raise ValueError(f"method must be one of {AGENT_METHODS[task]} for task {task!r}; got {method!r}")
+    _check_task_method(task, method)
     N = check_positive_int(n_agents, "n_agents")
     d = check_positive_int(degree, "degree", minimum=0)
     n = 4 if task != "localization" else 2 * N
