@@ -766,20 +766,24 @@ class _Forwarding(_Estimator):
     covariance per agent and run (drop-outs change the count of measurements).
     """
 
-    def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
+    def __init__(self, team: _Team, x_hat0: np.ndarray, H: np.ndarray | None = None,
+                 R: np.ndarray | None = None) -> None:
         super().__init__(team, x_hat0)
         self.P = np.broadcast_to(team.P0, (*x_hat0.shape[:2], 4, 4)).copy()
-        self.Rinv = np.linalg.inv(team.R)
+        H = np.eye(4) if H is None else H            # each measurement z_ji = H x_i + nu_ji
+        Rinv = np.linalg.inv(team.R if R is None else R)
+        self.info = H.T @ Rinv @ H                   # (4, 4): the information of one measurement
+        self.to_state = Rinv.T @ H                   # (m, 4): z @ to_state = (H^T R^-1 z)^T
 
     def update(self, Z, S):
-        # measurements of x_i: z_ji for the j that measured i (S[j, i]); Z[r, j, i] = x_i + nu_ji
+        # measurements of x_i: z_ji for the j that measured i (S[j, i]); Z[r, j, i] = H x_i + nu_ji
         St = np.swapaxes(np.broadcast_to(S, (Z.shape[0], *S.shape[1:])), -1, -2)  # St[r, i, j] = S[r, j, i]
         count = St.sum(-1).astype(float)                                        # (R, N)
         zsum = np.einsum("rij,rjid->rid", St, Z)                                 # sum_j z_ji
         prior_info = np.linalg.inv(self.P)
-        P = np.linalg.inv(prior_info + count[..., None, None] * self.Rinv)
+        P = np.linalg.inv(prior_info + count[..., None, None] * self.info)
         self.P = 0.5 * (P + np.swapaxes(P, -1, -2))
-        rhs = np.einsum("...ij,...j->...i", prior_info, self.own) + zsum @ self.Rinv.T
+        rhs = np.einsum("...ij,...j->...i", prior_info, self.own) + zsum @ self.to_state
         self.own = np.einsum("...ij,...j->...i", self.P, rhs)
 
     def predict(self, U):
@@ -886,15 +890,8 @@ class _LocalPosition(_Local):
 class _ForwardingPosition(_Forwarding):
     """Forwarding with positions only: agent i corrects with its own and its neighbours' position measurements of i."""
 
-    def update(self, Z, S):
-        St = np.swapaxes(np.broadcast_to(S, (Z.shape[0], *S.shape[1:])), -1, -2)  # St[r, i, j] = S[r, j, i]
-        count = St.sum(-1).astype(float)                                        # (R, N)
-        zsum = np.einsum("rij,rjid->rid", St, Z)                                 # sum_j z_ji, (R, N, 2)
-        prior_info = np.linalg.inv(self.P)
-        P = np.linalg.inv(prior_info + count[..., None, None] * (_C_POS.T @ _C_POS / self.t.s.r))
-        self.P = 0.5 * (P + np.swapaxes(P, -1, -2))
-        rhs = np.einsum("...ij,...j->...i", prior_info, self.own) + zsum @ _C_POS / self.t.s.r
-        self.own = np.einsum("...ij,...j->...i", self.P, rhs)
+    def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
+        super().__init__(team, x_hat0, H=_C_POS, R=team.s.r * np.eye(2))
 
 
 class _SetMembershipPosition(_Estimator):
