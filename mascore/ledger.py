@@ -43,11 +43,13 @@ __all__ = [
     "Claim",
     "ClaimsView",
     "claims_table",
+    "deviation_sentence",
     "format_number",
     "format_value",
     "load_claims",
     "output_hashes",
     "show_claims",
+    "verdict_words",
     "verify_outputs",
     "write_claims",
 ]
@@ -65,7 +67,7 @@ VERDICTS = ("reproduces", "approximately", "does-not-reproduce", "holds", "fails
 _CLAIM_ID = re.compile(r"[a-z][a-z0-9_]*/\S+")
 
 _RECORD_KEYS = ("id", "where", "statement", "paper_value", "value", "tolerance", "verdict", "note")
-_OPTIONAL_KEYS = ("unit", "labels", "rule", "band_reason", "study")
+_OPTIONAL_KEYS = ("unit", "labels", "rule", "band_reason", "study", "why")
 
 
 @dataclass(frozen=True)
@@ -105,6 +107,9 @@ class Claim:
         Required when the band of "approximately" is wider than 3t: why.
     study : str
         The study (book chapter) that computed the claim; set by the writer.
+    why : str
+        For a claim that does not fully reproduce: one sentence, in a reader's words, of why
+        (the reproduction report shows it; the `note` gives the evidence).
     holds : bool, optional
         The decided condition of a qualitative claim (use :meth:`qualitative`).
 
@@ -128,13 +133,14 @@ class Claim:
     rule: str = ""
     band_reason: str = ""
     study: str = ""
+    why: str = ""
     holds: bool | None = None
     verdict: str = field(default="", init=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.id, str) or not _CLAIM_ID.fullmatch(self.id):
             raise ValueError(f"claim id must look like 'PAPER/short-name' with PAPER a ledger's key; got {self.id!r}")
-        for name in ("where", "statement", "note", "unit", "rule", "band_reason", "study"):
+        for name in ("where", "statement", "note", "unit", "rule", "band_reason", "study", "why"):
             if not isinstance(getattr(self, name), str):
                 raise TypeError(f"{self.id}: {name} must be a string; got {type(getattr(self, name)).__name__}")
         if self.tolerance is not None and not isinstance(self.tolerance, dict):
@@ -166,7 +172,7 @@ class Claim:
     @classmethod
     def qualitative(
         cls, id: str, where: str, statement: str, value: Any, holds: bool | np.bool_, note: str = "",
-        *, rule: str = "", unit: str = "",
+        *, rule: str = "", unit: str = "", why: str = "",
     ) -> Claim:
         """A claim without a published number, decided by a measured condition.
 
@@ -188,6 +194,8 @@ class Claim:
             The condition in words or symbols (``"max_ratio <= 1"``).
         unit : str
             Unit of `value`.
+        why : str
+            When it fails: one sentence of why, for the reproduction report.
 
         Returns
         -------
@@ -201,7 +209,7 @@ class Claim:
         ...                   rule="spread < 1e-6").verdict
         'holds'
         """
-        return cls(id, where, statement, None, value, None, note, unit=unit, rule=rule, holds=bool(holds))
+        return cls(id, where, statement, None, value, None, note, unit=unit, rule=rule, why=why, holds=bool(holds))
 
     @property
     def deviation(self) -> float | None:
@@ -639,16 +647,74 @@ class ClaimsView:
     __str__ = _repr_markdown_
 
 
-def _verdict_text(record: dict) -> str:
-    verdict = f"**{record['verdict']}**"
+def verdict_words(verdict: str) -> str:
+    """A verdict as the book prints it: ``"does-not-reproduce"`` reads ``"does not reproduce"``.
+
+    Parameters
+    ----------
+    verdict : str
+        One of :data:`VERDICTS`.
+
+    Returns
+    -------
+    str
+        The verdict in plain words.
+
+    Examples
+    --------
+    >>> from mascore.ledger import verdict_words
+    >>> verdict_words("does-not-reproduce"), verdict_words("holds")
+    ('does not reproduce', 'holds')
+    """
+    if verdict not in VERDICTS:
+        raise ValueError(f"verdict must be one of {VERDICTS}; got {verdict!r}")
+    return verdict.replace("-", " ")
+
+
+def deviation_sentence(record: dict) -> str:
+    """How far a quantitative claim is off, against its tolerance, in one sentence ("" for a qualitative claim).
+
+    The sentence agrees with the verdict (a non-breaking space before ``%``):
+    ``"0.74 % off; tolerance 5 %"`` when it reproduces,
+    ``"9.9 % off; tolerance 5 %, approximately within 15 %"`` when approximately reproduced,
+    ``"40 % off; more than the 15 % of 'approximately'"`` when it does not reproduce.
+
+    Parameters
+    ----------
+    record : dict
+        A claim record (:meth:`Claim.to_dict`) with ``paper_value``, ``value``, ``tolerance``, ``verdict``.
+
+    Returns
+    -------
+    str
+        The sentence.
+
+    Examples
+    --------
+    >>> from mascore.ledger import Claim, deviation_sentence
+    >>> record = Claim("ren2005/x", "Fig. 1", "A number.", 1.0, 1.099, {"rel": 0.05}).to_dict()
+    >>> print(deviation_sentence(record).replace("\\xa0", " "))
+    9.9 % off; tolerance 5 %, approximately within 15 %
+    """
     tol = record.get("tolerance")
     if not tol:
-        return verdict
+        return ""
     kind = "rel" if "rel" in tol else "abs"
-    fmt = (lambda v: format_number(100 * v, 3) + " %") if kind == "rel" else format_number
-    dev = _worst_deviation(record["paper_value"], record["value"], kind)
-    return (f"{verdict}<br>off by {fmt(dev)}; reproduces within {fmt(tol[kind])}, "
-            f"approximately within {fmt(tol[f'approx_{kind}'])}")
+    unit = f"\u00a0{record['unit']}" if record.get("unit") else ""
+    fmt = (lambda v: format_number(100 * v, 3) + "\u00a0%") if kind == "rel" else (lambda v: format_number(v) + unit)
+    off = f"{fmt(_worst_deviation(record['paper_value'], record['value'], kind))} off"
+    band = fmt(tol[f"approx_{kind}"])
+    if record["verdict"] == "reproduces":
+        return f"{off}; tolerance {fmt(tol[kind])}"
+    if record["verdict"] == "approximately":
+        return f"{off}; tolerance {fmt(tol[kind])}, approximately within {band}"
+    return f"{off}; more than the {band} of 'approximately'"
+
+
+def _verdict_text(record: dict) -> str:
+    verdict = f"**{verdict_words(record['verdict'])}**"
+    sentence = deviation_sentence(record)
+    return f"{verdict}<br>{sentence}" if sentence else verdict
 
 
 def _notes_markdown(records: Sequence[dict]) -> list[str]:

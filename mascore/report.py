@@ -13,10 +13,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ._optional import require
-from .ledger import VERDICTS
+from .ledger import VERDICTS, deviation_sentence, verdict_words
 from .registry import paper_keys, paper_registry
 
-__all__ = ["MarkdownText", "attention_list", "errata_list", "math_text", "verdict_summary"]
+__all__ = ["MarkdownText", "attention_list", "errata_list", "math_text", "verdict_summary", "why"]
 
 #: Verdicts the report lists one by one (everything else is counted only).
 ATTENTION = ("approximately", "does-not-reproduce", "fails")
@@ -90,7 +90,7 @@ def math_text(text: str) -> str:
 
 
 def verdict_summary(records: Sequence[dict]):
-    """Claims per paper (rows, book order) and verdict (columns), with totals.
+    """Claims per paper (rows, book order, by the papers' names) and verdict (columns, in words), with totals.
 
     Parameters
     ----------
@@ -100,7 +100,8 @@ def verdict_summary(records: Sequence[dict]):
     Returns
     -------
     pandas.DataFrame
-        Counts, with a total row and column.
+        Counts, with a total row and column; rows named by the papers' citations
+        (``"Ren, Beard and Kingston 2005"``), columns by the verdicts in words (``"does not reproduce"``).
 
     Examples
     --------
@@ -108,8 +109,8 @@ def verdict_summary(records: Sequence[dict]):
     >>> ok = Claim("ren2005/a", "Sec. 2", "A number.", 2.0, 2.01, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
     >>> off = Claim("ren2005/b", "Sec. 3", "Another.", 2.0, 3.0, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
     >>> from mascore.report import verdict_summary
-    >>> int(verdict_summary([ok, off]).loc["ren2005", "reproduces"])
-    1
+    >>> verdict_summary([ok, off]).loc["Ren, Beard and Kingston 2005"].to_dict()
+    {'reproduces': 1, 'does not reproduce': 1, 'total': 2}
     """
     pd = require("pandas", "this table")
 
@@ -121,6 +122,9 @@ def verdict_summary(records: Sequence[dict]):
     table = table.loc[:, table.sum() > 0]
     table["total"] = table.sum(axis=1)
     table.loc["all papers"] = table.sum()
+    table.index = [paper_registry(p).citation if p in papers else p for p in table.index]
+    table.index.name = "paper"
+    table.columns = [verdict_words(c) if c in VERDICTS else c for c in table.columns]
     return table
 
 
@@ -130,7 +134,7 @@ def ledger_label(paper: str, study: str) -> str:
 
 
 def attention_list(records: Sequence[dict]) -> MarkdownText:
-    """A table of every claim that is approximate, does not reproduce or fails, linked to its ledger.
+    """A table of every claim that is approximate, does not reproduce or fails, linked to its ledger, with why.
 
     Parameters
     ----------
@@ -153,15 +157,63 @@ def attention_list(records: Sequence[dict]) -> MarkdownText:
     (True, False)
     """
     _check_records(records, ("paper", "verdict", "where", "statement"))
-    rows = ["| verdict | where | claim |", "|---|---|---|"]
+    rows = ["| verdict | paper, where | claim | why |", "|---|---|---|---|"]
     for verdict in ATTENTION:
         for r in (r for r in records if r["verdict"] == verdict):
             reg = paper_registry(r["paper"])
             study = r.get("study") or reg.studies[0].name
-            cells = (f"**{verdict}**", f"{reg.citation}, {r['where']}",
-                     f"{math_text(r['statement'])} ({{ref}}`ledger <{ledger_label(r['paper'], study)}>`)")
+            cells = (f"**{verdict_words(verdict)}**", f"{reg.citation}, {r['where']}",
+                     f"{math_text(r['statement'])} ({{ref}}`ledger <{ledger_label(r['paper'], study)}>`)",
+                     math_text(why(r)))
             rows.append("| " + " | ".join(c.replace("|", "\\|").replace("\n", " ") for c in cells) + " |")
     return MarkdownText("\n".join(rows) if len(rows) > 2 else "Every claim reproduces or holds.")
+
+
+#: Words that mark a note's sentence as a reason (a fallback when a claim states no ``why``).
+_REASON = re.compile(r"\b(why|because|systematic|not numerical|rounded|does not determine|no reading|cannot|"
+                     r"dominated|indistinguishable|slip|misprint|instead)\b", re.I)
+
+
+def why(record: dict, max_words: int = 35) -> str:
+    """Why a claim does not fully reproduce, in one or two sentences for the report's table.
+
+    The claim's own ``why`` when it states one; otherwise how far it is off (for a published
+    number, :func:`mascore.ledger.deviation_sentence`) and the first sentence of its note that
+    gives a reason, cut at `max_words` words (the ledger holds the rest).
+
+    Parameters
+    ----------
+    record : dict
+        A claim record.
+    max_words : int
+        Longest reason taken from the note.
+
+    Returns
+    -------
+    str
+        The reason.
+
+    Examples
+    --------
+    >>> from mascore.ledger import Claim
+    >>> from mascore.report import why
+    >>> off = Claim("ren2005/b", "Sec. 3", "Another.", 2.0, 3.0, {"rel": 0.01},
+    ...             note="Ours is run 0. The gap is systematic: the paper rounds.").to_dict()
+    >>> print(why(off).replace("\\xa0", " "))
+    50 % off; more than the 3 % of 'approximately'. The gap is systematic: the paper rounds.
+    """
+    if record.get("why"):
+        return record["why"]
+    paragraphs = [" ".join(p.split()) for p in (record.get("note") or "").split("\n\n") if p.strip()]
+    stated = [p.split(":", 1)[1].strip() for p in paragraphs if re.match(r"Why\b[^:]*:", p)]
+    sentences = [s for p in stated + paragraphs for s in re.split(r"(?<=[.;])\s+(?=[A-Z])", p)]
+    reason = next((s for s in sentences if _REASON.search(s)), sentences[0] if sentences else "")
+    words = reason.split()
+    if len(words) > max_words:
+        reason = " ".join(words[:max_words]).rstrip(",;:") + " \u2026"
+    reason = reason[:1].upper() + reason[1:]
+    deviation = deviation_sentence(record) if record.get("paper_value") is not None else ""
+    return ". ".join(t for t in (deviation, reason) if t)
 
 
 def errata_list(papers: Sequence[str] | None = None) -> MarkdownText:
