@@ -21,9 +21,11 @@ from matplotlib.layout_engine import ConstrainedLayoutEngine, TightLayoutEngine 
 
 __all__ = [
     "COLUMN_WIDTH",
+    "PIXEL_RATIO",
     "STYLE",
     "agent_colors",
     "fit_to_column",
+    "legend_overlaps",
     "new_axes",
     "plot_band",
     "plot_graph",
@@ -32,17 +34,22 @@ __all__ = [
     "use_style",
 ]
 
-#: Width (inches) of the book's figures at 100 dpi: a figure's image is 660 px wide at most in the
-#: text column of a 1280 px window. A wider
-#: figure would be shrunk by the browser, and its 10 pt tick labels with it (below 9 px at 13 in).
+#: Width (inches) of the book's figures at 100 dpi: a figure's image is 650 CSS px wide at most, the
+#: text column of a 1280 px window. A wider figure would be shrunk by the browser, and its 10 pt tick
+#: labels with it (below 9 px at 13 in).
 COLUMN_WIDTH = 6.5
 
+#: Device pixels per CSS pixel of the book's images: every figure is rendered at twice its size
+#: (200 dpi for a 100 dpi layout) and shown at its size, sharp on a HiDPI ("retina") screen.
+PIXEL_RATIO = 2
+
 #: rcParams of the book's figures. ``figure.hooks`` fits every pyplot figure to the column
-#: (:func:`fit_to_column`), so a figure drawn wider keeps its fonts readable.
+#: (:func:`fit_to_column`), so a figure drawn wider keeps its fonts readable. Files are saved at
+#: :data:`PIXEL_RATIO` x 100 dpi; a notebook shows its figures the same way (:func:`use_style`).
 STYLE = {
     "figure.figsize": (6.4, 4.0),
     "figure.dpi": 100,
-    "savefig.dpi": 150,
+    "savefig.dpi": 100 * PIXEL_RATIO,
     "savefig.bbox": "tight",
     "axes.grid": True,
     "grid.alpha": 0.3,
@@ -62,7 +69,9 @@ STYLE = {
 def use_style() -> None:
     """Apply the book's figure style (:data:`STYLE`) to matplotlib's global rcParams.
 
-    Call it once per notebook, before drawing.
+    Call it once per notebook, before drawing. In a notebook (IPython's inline backend) it also
+    shows figures at twice their pixels ("retina" PNG: 200 dpi, displayed at the size of 100 dpi),
+    as the files of :func:`save_figure` are saved.
 
     Examples
     --------
@@ -73,6 +82,23 @@ def use_style() -> None:
     True
     """
     mpl.rcParams.update(STYLE)
+    _inline_at_pixel_ratio()
+
+
+def _inline_at_pixel_ratio() -> None:
+    """Inline figures of a running IPython kernel as 2x PNG shown at 1x (nothing outside IPython)."""
+    import sys
+
+    if "IPython" not in sys.modules:
+        return
+    from IPython import get_ipython
+
+    shell = get_ipython()
+    if shell is None or getattr(shell, "kernel", None) is None:
+        return
+    from matplotlib_inline.backend_inline import set_matplotlib_formats
+
+    set_matplotlib_formats("retina")
 
 
 def fit_to_column(fig: plt.Figure, width: float = COLUMN_WIDTH) -> plt.Figure:
@@ -431,3 +457,83 @@ def save_figure(fig: plt.Figure, path: str | Path) -> Path:
     fig.savefig(path)
     plt.close(fig)
     return path
+
+
+def legend_overlaps(fig: plt.Figure, samples_per_px: float = 0.5) -> list[str]:
+    """Legends of `fig` that cover plotted data: one line per (legend, artist) pair that overlaps.
+
+    Every legend (of an Axes or of the figure) is checked against the data of every Axes it
+    lies over, in display pixels after the figure is drawn: the vertices of each visible line
+    and the segments between them (sampled every ``1 / samples_per_px`` px, so a line crossing
+    the legend between two vertices counts), and the points of each scatter. Grid lines and a
+    legend's own handles do not count. A legend placed outside the axes covers nothing.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure, as it will be saved.
+    samples_per_px : float
+        Sampling density of line segments (points per display pixel).
+
+    Returns
+    -------
+    list of str
+        ``"panel 2 ('title'): legend covers line 'agent 3'"`` for each overlap; empty when no
+        legend covers data.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.plotting import legend_overlaps
+    >>> fig, ax = plt.subplots()
+    >>> _ = ax.plot([0, 1], [0, 1], label="rising")
+    >>> _ = ax.legend(loc="center")
+    >>> legend_overlaps(fig)
+    ["panel 1: legend covers line 'rising'"]
+    >>> _ = ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1))
+    >>> legend_overlaps(fig)
+    []
+    >>> plt.close(fig)
+    """
+    if not isinstance(fig, mpl.figure.Figure):
+        raise TypeError(f"fig must be a matplotlib Figure; got {type(fig).__name__}")
+    fig.canvas.draw()
+    axes = [ax for ax in fig.axes if ax.get_visible()]
+    legends = [(ax.get_legend(), [ax]) for ax in axes if ax.get_legend() is not None]
+    legends += [(leg, axes) for leg in fig.legends]
+    out = []
+    for legend, covered in legends:
+        if not legend.get_visible():
+            continue
+        box = legend.get_window_extent()
+        for ax in covered:
+            name = f"panel {fig.axes.index(ax) + 1}" + (f" ({ax.get_title()!r})" if ax.get_title() else "")
+            for artist, kind, points in _data_points(ax, samples_per_px):
+                inside = ((points[:, 0] > box.x0) & (points[:, 0] < box.x1)
+                          & (points[:, 1] > box.y0) & (points[:, 1] < box.y1))
+                clip = ax.get_window_extent()  # data outside the panel is not drawn
+                inside &= ((points[:, 0] >= clip.x0) & (points[:, 0] <= clip.x1)
+                           & (points[:, 1] >= clip.y0) & (points[:, 1] <= clip.y1))
+                if inside.any():
+                    label = artist.get_label()
+                    out.append(f"{name}: legend covers {kind}" + (f" {label!r}" if not label.startswith("_") else ""))
+    return out
+
+
+def _data_points(ax: plt.Axes, samples_per_px: float):
+    """(artist, kind, display points) of the visible lines (sampled along their segments) and scatters."""
+    for line in ax.get_lines():
+        if not line.get_visible():
+            continue
+        xy = line.get_transform().transform(np.asarray(line.get_xydata(), dtype=float))
+        xy = xy[np.all(np.isfinite(xy), axis=1)]
+        if line.get_linestyle() not in ("None", "none", "", " ") and len(xy) > 1:
+            steps = np.maximum(np.ceil(np.linalg.norm(np.diff(xy, axis=0), axis=1) * samples_per_px), 1).astype(int)
+            xy = np.concatenate([np.linspace(a, b, n, endpoint=False) for a, b, n in zip(xy[:-1], xy[1:], steps)]
+                                + [xy[-1:]])
+        if len(xy):
+            yield line, "line", xy
+    for coll in ax.collections:
+        if coll.get_visible() and isinstance(coll, mpl.collections.PathCollection) and len(coll.get_offsets()):
+            xy = coll.get_offset_transform().transform(np.asarray(coll.get_offsets(), dtype=float))
+            yield coll, "markers", xy[np.all(np.isfinite(xy), axis=1)]

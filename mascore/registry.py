@@ -720,6 +720,9 @@ def paper_registry(key: str) -> PaperRegistry:
 def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | Path) -> list[Claim]:
     """Write a study's figures (PNG) and tables (CSV) into `out_dir`; return its claims.
 
+    Beside each figure, ``NAME.layout.json`` lists the legends that cover its data
+    (:func:`mascore.plotting.legend_overlaps`; empty when none does).
+
     Each claim is tagged with the study's name (``Claim.study``), so the report can
     link it to its chapter.
 
@@ -758,11 +761,16 @@ def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | 
         raise TypeError(f"out_dir must be a path (str or pathlib.Path); got {type(out_dir).__name__}")
     plt = require("matplotlib.pyplot", "drawing a registered figure")
 
-    from .plotting import save_figure
+    import json
+
+    from .plotting import legend_overlaps, save_figure
 
     out_dir = Path(out_dir)
     for spec in study.figures:
-        save_figure(study.draw(spec.name, result), out_dir / "figures" / f"{spec.name}.png")
+        fig = study.draw(spec.name, result)
+        layout = {"legend_overlaps": legend_overlaps(fig)}  # read by the book's tests: no legend over data
+        save_figure(fig, out_dir / "figures" / f"{spec.name}.png")
+        (out_dir / "figures" / f"{spec.name}.layout.json").write_text(json.dumps(layout, indent=1) + "\n")
         plt.close("all")
     for spec in study.tables:
         (out_dir / "tables").mkdir(parents=True, exist_ok=True)

@@ -166,3 +166,27 @@ def test_captions_quote_computed_values_not_typed_ones(chapter):
         sources = "".join("".join(c["source"]) for c in _cells(chapter) if c["cell_type"] == "code")
         assert "glue_caption_values(STUDY, result)" in sources, (
             f"{chapter}: the captions of {quoting} quote computed values, but the chapter does not glue them")
+
+
+# ---------------------------------------------------------------- figures: no legend over the data
+
+RESULTS = ROOT / "results"
+
+
+def test_no_legend_covers_the_data_of_a_registered_figure():
+    """Every registered figure, as `mascore reproduce` drew it: no legend covers a data line or marker
+    (measured from the artists' extents, :func:`mascore.plotting.legend_overlaps`, written beside each figure)."""
+    from mascore.registry import all_figures
+
+    missing, offenders = [], []
+    for reg, _, spec in all_figures():
+        layout = RESULTS / reg.key / "figures" / f"{spec.name}.layout.json"
+        if not layout.exists():
+            missing.append(f"{reg.key}/{spec.name}")
+            continue
+        overlaps = json.loads(layout.read_text())["legend_overlaps"]
+        offenders += [f"{reg.figure_label(spec.name)}: {o}" for o in overlaps]
+    if len(missing) == len(all_figures()):
+        pytest.skip(f"no figure layouts in {RESULTS}: run `python -m mascore reproduce all --out results` first")
+    assert not missing, f"figures without a layout record (rerun `mascore reproduce`): {missing}"
+    assert not offenders, "legends over the data:\n" + "\n".join(offenders)
