@@ -343,24 +343,42 @@ def plot_graph(
             ax.add_patch(plt.Circle(p[i], sensing_range, fill=False, ls="--", lw=0.8, color=color))
         ax.plot(*p[i], "o", color=color, ms=9, zorder=2)
     if node_labels:
-        _node_labels(ax, p, colors)
+        _node_labels(ax, p, colors, np.argwhere(A + A.T > 0))
     return _plane_axes(ax, unit)
 
 
-def _node_labels(ax: plt.Axes, p: np.ndarray, colors: list) -> None:
+def _node_labels(ax: plt.Axes, p: np.ndarray, colors: list, edges: np.ndarray) -> None:
     """Number the agents inside their markers; an agent crowded by a neighbour gets its number
-    beside the marker, on the side away from that neighbour, so that no number is covered."""
+    beside the marker, in the free direction: of eight around it, the one farthest from the other
+    agents, the edges (pairs of agent indices) and the numbers already placed, so that no number is
+    covered or runs into another."""
     ax.autoscale_view()
     span = max(np.ptp(ax.get_xlim()), np.ptp(ax.get_ylim()))
     d = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.diag(np.full(len(p), np.inf))
+    angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    compass = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    placed: list[np.ndarray] = []
     for i, color in enumerate(colors):
-        j = int(np.argmin(d[i]))
-        if len(p) > 1 and d[i, j] < 0.08 * span:
-            away = (p[i] - p[j]) / max(d[i, j], 1e-12)
+        if len(p) > 1 and d[i].min() < 0.08 * span:
+            spots = p[i] + 0.045 * span * compass
+            obstacles = [np.delete(p, i, axis=0), *placed]
+            clearance = np.min(np.linalg.norm(spots[:, None] - np.concatenate(
+                [np.reshape(o, (-1, 2)) for o in obstacles])[None], axis=-1), axis=1)
+            for a, b in edges:
+                clearance = np.minimum(clearance, _distance_to_segment(spots, p[a], p[b]))
+            away = compass[int(np.argmax(clearance))]
+            placed.append(spots[int(np.argmax(clearance))])
             ax.annotate(str(i + 1), p[i], xytext=11 * away, textcoords="offset points", ha="center", va="center",
                         fontsize=8, fontweight="bold", color=color, zorder=3)
         else:
             ax.annotate(str(i + 1), p[i], ha="center", va="center", fontsize=7, color="white", zorder=3)
+
+
+def _distance_to_segment(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance of each point of `x` (k, 2) to the segment from `a` to `b`."""
+    ab = b - a
+    t = np.clip(((x - a) @ ab) / max(float(ab @ ab), 1e-300), 0.0, 1.0)
+    return np.linalg.norm(x - (a + t[:, None] * ab), axis=1)
 
 
 def _plane_axes(ax: plt.Axes, unit: str) -> plt.Axes:
