@@ -16,7 +16,8 @@ from ._optional import require
 from .ledger import VERDICTS, deviation_sentence, verdict_words
 from .registry import paper_keys, paper_registry
 
-__all__ = ["MarkdownText", "attention_list", "errata_list", "math_text", "verdict_summary", "why"]
+__all__ = ["MarkdownText", "attention_list", "best_methods", "errata_list", "math_text", "reading_paths", "verdict_summary",
+           "why"]
 
 #: Verdicts the report lists one by one (everything else is counted only).
 ATTENTION = ("approximately", "does-not-reproduce", "fails")
@@ -261,3 +262,110 @@ def _check_records(records: object, keys: tuple[str, ...]) -> None:
             raise ValueError(f"records[{i}] lacks the keys {missing} of a claim record")
         if r["verdict"] not in VERDICTS:
             raise ValueError(f"records[{i}]['verdict'] must be one of {VERDICTS}; got {r['verdict']!r}")
+
+
+#: The comparison's scenarios in the intro's answer: task, the reader's name, and the study that holds it.
+_SCENARIOS = (("team", "own state", "scaling"), ("target", "common target", None),
+              ("localization", "cooperative localization", None))
+
+
+def best_methods(summary, n_agents: int = 8) -> dict[str, tuple[str, float]]:
+    """Per scenario of the comparison, the method closest to the centralized filter and its RMSE ratio.
+
+    On the ring of `n_agents` without drop-outs (the comparison's headline tables), among the
+    methods other than the centralized filter (the bound, ratio 1).
+
+    Parameters
+    ----------
+    summary : pandas.DataFrame
+        :func:`mascore.compare.summarize` of the sweep.
+    n_agents : int
+        Team size of the headline tables.
+
+    Returns
+    -------
+    dict
+        Scenario name (``"own state"``, ``"common target"``, ``"cooperative localization"``) ->
+        (method, mean RMSE ratio to the centralized filter), for the scenarios in `summary`.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore.report import best_methods
+    >>> s = pd.DataFrame({"task": "target", "study": "scaling", "graph": "ring", "n_agents": 8, "dropout": 0.0,
+    ...                   "method": ["centralized", "local", "ci-L5"], "ratio_mean": [1.0, 1.9, 1.2]})
+    >>> best_methods(s)
+    {'common target': ('ci-L5', 1.2)}
+    """
+    frame = summary[(summary["n_agents"] == n_agents) & (summary["dropout"] == 0.0)
+                    & (summary["graph"] == "ring") & (summary["method"] != "centralized")]
+    out = {}
+    for task, name, study in _SCENARIOS:
+        rows = frame[(frame["task"] == task) & ((frame["study"] == study) if study else True)]
+        rows = rows[rows["ratio_mean"].notna()]
+        if len(rows):
+            best = rows.loc[rows["ratio_mean"].idxmin()]
+            out[name] = (str(best["method"]), float(best["ratio_mean"]))
+    return out
+
+
+def reading_paths(records: Sequence[dict], best: dict[str, tuple[str, float]] | None = None,
+                  apply_examples: Sequence[str] = ()) -> MarkdownText:
+    """The intro's four questions, each with its page and a one-line answer computed from the results.
+
+    Parameters
+    ----------
+    records : sequence of dict
+        The papers' claim records (:func:`mascore.ledger.load_claims`).
+    best : dict, optional
+        :func:`best_methods` of the comparison's sweep; None when the sweep has not been run.
+    apply_examples : sequence of str
+        Titles of the apply chapter's worked examples.
+
+    Returns
+    -------
+    MarkdownText
+        A Markdown list with links to the pages ({doc} roles from the book's root).
+
+    Examples
+    --------
+    >>> from mascore.ledger import Claim
+    >>> from mascore.report import reading_paths
+    >>> ok = Claim("ren2005/a", "Sec. 2", "A number.", 2.0, 2.01, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
+    >>> print(str(reading_paths([ok])).splitlines()[0])
+    - **Did it reproduce?** All 1 published claims reproduce or hold ({doc}`the reproduction report </notebooks/reproduction_report>`).
+    """
+    _check_records(records, ("paper", "verdict"))
+    good = sum(r["verdict"] in ("reproduces", "holds") for r in records)
+    near = sum(r["verdict"] == "approximately" for r in records)
+    bad = len(records) - good - near
+    if good == len(records):
+        verdict = f"All {len(records)} published claims reproduce or hold"
+    else:
+        verdict = (f"{good} of {len(records)} published claims reproduce or hold, {near} approximately, "
+                   f"{bad} do not reproduce or fail; the report says which and why")
+    lines = [f"- **Did it reproduce?** {verdict} "
+             f"({{doc}}`the reproduction report </notebooks/reproduction_report>`)."]
+    if best:
+        closest = "; ".join(f"{name}: `{m}`, RMSE {ratio:.2f} times the centralized filter's"
+                            for name, (m, ratio) in best.items())
+        lines.append(f"- **Which method for my team?** It depends on what the team estimates. Closest to the "
+                     f"centralized filter on a ring of 8 agents, {closest} "
+                     f"({{doc}}`the comparison and its decision table </notebooks/comparing_methods>`).")
+    else:
+        lines.append("- **Which method for my team?** The comparison puts every method on the same problems "
+                     "({doc}`comparing the methods </notebooks/comparing_methods>`).")
+    examples = f": {len(apply_examples)} worked examples ({'; '.join(apply_examples)})" if apply_examples else ""
+    lines.append(f"- **How do I use it on my system?** Each method on a system of our own, in a few lines of "
+                 f"code, each ending with the theory's check{examples} "
+                 f"({{doc}}`apply it to your own system </notebooks/apply_your_system>`).")
+    papers = []
+    for key in paper_keys():
+        reg = paper_registry(key)
+        mine = [r for r in records if r["paper"] == key]
+        ok = sum(r["verdict"] in ("reproduces", "holds") for r in mine)
+        links = ", ".join(f"{{doc}}`{s.name.replace('-', ' ')} </notebooks/{s.chapter}>`" for s in reg.studies)
+        papers.append(f"{reg.citation} ({links}: {ok} of {len(mine)} claims reproduce or hold)")
+    lines.append("- **How does paper X work?** Each paper has its chapter, its derivation and its ledger: "
+                 + "; ".join(papers) + ".")
+    return MarkdownText("\n".join(lines))
