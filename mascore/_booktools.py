@@ -25,6 +25,7 @@ from .registry import PaperRegistry, Study, paper_registries, study_modules
 __all__ = [
     "API_GROUPS",
     "api_groups",
+    "alt_text",
     "api_page",
     "chapter_studies",
     "drawn_figures",
@@ -84,11 +85,29 @@ def plain_text(markup: str) -> str:
     return " ".join(text.split())
 
 
+def alt_text(caption: str) -> str:
+    """An image's alt text from its caption: what the figure shows, as plain text (:func:`plain_text`).
+
+    The caption's "Look for:" part is left to the caption itself (a screen reader reads both), and a
+    value the run computes (``{glue:text}`` in the caption) is left out with its parentheses: alt
+    text is written before the run, and names no number it cannot know.
+
+    Examples
+    --------
+    >>> alt_text("Dotted: the fusion of the data ({glue:text}`f:.4g`); dashed: the average {glue:text}`a:.3g`. "
+    ...          "Look for: the gap.")
+    'Dotted: the fusion of the data; dashed: the average.'
+    """
+    text = re.split(r"\s*Look for\b", caption)[0]
+    text = re.sub(r"\(\s*\{glue:text\}`[^`]*`\s*\)|\s*\{glue:text\}`[^`]*`", "", text)
+    return re.sub(r"\s+([;:,.])", r"\1", plain_text(text))
+
+
 def sync_notebook(path: str | Path) -> int:
     """Write the registry's figure metadata into the notebook's figure cells; returns cells changed.
 
     Every figure cell (registered or captioned by hand) also gets its caption, as plain text, as the
-    image's alt text (``{"mystnb": {"image": {"alt": ...}}}``).
+    image's alt text (``{"mystnb": {"image": {"alt": ...}}}``, :func:`alt_text`).
     """
     path = Path(path)
     chapters = chapter_studies()
@@ -108,8 +127,8 @@ def sync_notebook(path: str | Path) -> int:
                 cell["metadata"].setdefault("mystnb", {})["figure"] = meta
                 changed += 1
         figure = cell["metadata"].get("mystnb", {}).get("figure")
-        if figure and cell["metadata"]["mystnb"].get("image") != {"alt": plain_text(figure["caption"])}:
-            cell["metadata"]["mystnb"]["image"] = {"alt": plain_text(figure["caption"])}
+        if figure and cell["metadata"]["mystnb"].get("image") != {"alt": alt_text(figure["caption"])}:
+            cell["metadata"]["mystnb"]["image"] = {"alt": alt_text(figure["caption"])}
             changed += 1
     if changed:
         path.write_text(json.dumps(nb, indent=1, ensure_ascii=False) + "\n")

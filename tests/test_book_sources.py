@@ -51,7 +51,7 @@ def test_each_registered_figure_is_drawn_once_with_the_registry_caption(chapter)
 
 @pytest.mark.parametrize("chapter", sorted(CHAPTERS))
 def test_every_figure_cell_has_a_unique_label_and_a_caption(chapter):
-    from mascore._booktools import plain_text
+    from mascore._booktools import alt_text
 
     labels = []
     for cell in _cells(chapter):
@@ -59,7 +59,7 @@ def test_every_figure_cell_has_a_unique_label_and_a_caption(chapter):
         if meta:
             assert meta.get("caption", "").strip(), f"{chapter}: figure {meta.get('name')} without caption"
             alt = cell["metadata"]["mystnb"].get("image", {}).get("alt")
-            assert alt == plain_text(meta["caption"]), f"{chapter}: alt text of {meta['name']} is not its caption: `make sync`"
+            assert alt == alt_text(meta["caption"]), f"{chapter}: alt text of {meta['name']} is not its caption: `make sync`"
             labels.append(meta["name"])
     assert len(labels) == len(set(labels)), f"{chapter}: duplicate figure labels"
     assert all(label.startswith("fig-") for label in labels)
@@ -190,3 +190,115 @@ def test_no_legend_covers_the_data_of_a_registered_figure():
         pytest.skip(f"no figure layouts in {RESULTS}: run `python -m mascore reproduce all --out results` first")
     assert not missing, f"figures without a layout record (rerun `mascore reproduce`): {missing}"
     assert not offenders, "legends over the data:\n" + "\n".join(offenders)
+
+
+# ---------------------------------------------------------------- glossary and bibliography complete
+
+def _reader_texts() -> list[tuple[str, str]]:
+    """(where, text) of what the book shows in words: Markdown of the notebooks and book pages, figure
+    captions, the ledgers' statements, notes and rules (when results/ exists), the errata, docstrings."""
+    from mascore.ledger import load_claims
+    from mascore.registry import all_figures, paper_registries
+
+    out = [(where, text) for where, text in _markdown_cells()]
+    out += [(p.name, p.read_text()) for p in sorted((ROOT / "book").glob("*.md"))]
+    out += [(reg.figure_label(spec.name), spec.caption) for reg, _, spec in all_figures()]
+    out += [(f"{reg.key} errata", e) for reg in paper_registries() for e in reg.errata]
+    if (RESULTS / "song2023" / "claims.json").exists():
+        out += [(r["id"], " ".join((r["statement"], r.get("note", ""), r.get("rule", ""))))
+                for r in load_claims(RESULTS, verify=False)]
+    return out
+
+
+def _prose(text: str) -> str:
+    """Text without code blocks, inline code, math, roles' targets and link targets."""
+    text = re.sub(r"```.*?```|\$\$.*?\$\$", " ", text, flags=re.S)
+    text = re.sub(r"\{[a-z:]+\}`[^`]*`|`[^`]*`|\$[^$]*\$|\]\([^)]*\)", " ", text)
+    return text
+
+
+#: Capitalized words that are not abbreviations (names, Roman numerals, a logical AND in a rule).
+NOT_ABBREVIATIONS = {"II", "III", "IV", "VI", "MATLAB", "NumPy", "SciPy", "NaN", "AND", "OR", "CPU", "JupyterLab"}
+
+
+def glossary_terms() -> set[str]:
+    block = re.search(r"```\{glossary\}\n(.*?)```", (ROOT / "book" / "notation.md").read_text(), re.S).group(1)
+    return {line.strip() for line in block.splitlines() if line.strip() and not line.startswith(" ")}
+
+
+def abbreviations(text: str) -> set[str]:
+    """Words of two or more capitals (``EKF``, ``CoM``, ``SDPs`` as ``SDP``) in the prose of `text`."""
+    words = re.findall(r"\b(?:[A-Z]{2,}[a-z]?|[A-Z][a-z]?[A-Z]+)s?\b", _prose(text))
+    return {w[:-1] if w.endswith("s") and w[:-1].isupper() else w for w in words} - NOT_ABBREVIATIONS
+
+
+def test_every_abbreviation_is_in_the_glossary():
+    terms = glossary_terms()
+    missing = {}
+    for where, text in _reader_texts():
+        for word in abbreviations(text) - terms:
+            missing.setdefault(word, where)
+    assert not missing, f"abbreviations without a glossary entry (book/notation.md): {missing}"
+
+
+def test_the_abbreviation_check_sees_abbreviations():
+    assert abbreviations("The EKF and two SDPs about the CoM; $LMI$ and `DARE` are not prose.") == {"EKF", "SDP", "CoM"}
+    assert {"DARE", "EKF", "SMF", "ISS", "CoM", "HCMCI", "ICF"} <= glossary_terms()
+
+
+def bibliography_surnames() -> set[str]:
+    bib = (ROOT / "book" / "references.bib").read_text()
+    names = set()
+    for authors in re.findall(r"author\s*=\s*\{(.*)\},?\n", bib):
+        for person in authors.split(" and "):
+            names.add(person.split(",")[0].strip().strip("{}"))
+    return names
+
+
+_SURNAME = r"[A-Z][a-z]+(?:-[A-Z][a-z]+)?"
+
+
+def cited_surnames(text: str) -> set[str]:
+    """Surnames cited in prose: ``Kamal et al.``, ``Cattivelli and Sayed``, ``Xiao, Boyd and Lall 2005``."""
+    text = _prose(text)
+    names = set(re.findall(rf"\b({_SURNAME}) et al\.", text))
+    for m in re.finditer(rf"\b((?:{_SURNAME}, )*{_SURNAME}) and ({_SURNAME})\b(?=\)|,|;|'s| \(?\d{{4}}| \{{cite)", text):
+        names |= {n.strip() for n in m.group(1).split(",")} | {m.group(2)}
+    return names
+
+
+#: Capitalized pairs that read like "A and B" citations but are not people.
+NOT_PEOPLE = {"Graphs", "Laplacians", "Theorems", "Figs", "Tables", "Sec", "Secs", "Lemma", "Kalman", "Riccati",
+              "Gaussian", "Song", "Remark"}
+
+
+def test_every_name_cited_has_a_bibliography_entry():
+    """A name cited in the book's prose, captions, ledgers or docstrings is an author in book/references.bib."""
+    known = bibliography_surnames()
+    texts = _reader_texts() + [(p.name, p.read_text()) for p in sorted((ROOT / "mascore").rglob("*.py"))]
+    missing = {}
+    for where, text in texts:
+        for name in cited_surnames(text) - known - NOT_PEOPLE:
+            missing.setdefault(name, where)
+    assert not missing, f"names cited without a bibliography entry: {missing}"
+
+
+def test_the_citation_check_sees_citations():
+    text = "(`ci-L1`, Battistelli and Chisci), Kamal et al. and Hu, Xie and Zhang 2012; Graphs and Laplacians"
+    assert cited_surnames(text) == {"Battistelli", "Chisci", "Kamal", "Hu", "Xie", "Zhang"}
+    assert {"Battistelli", "Chisci", "Kamal", "Cattivelli", "Sayed", "Hu", "Deshpande"} <= bibliography_surnames()
+
+
+def test_alt_text_has_no_placeholder():
+    """Alt text is the caption as the reader sees it, with the run's values in place (no '(the value of this run)')."""
+    from mascore._booktools import alt_text
+    from mascore.registry import all_figures
+
+    placeholders = [reg.figure_label(spec.name) for reg, _, spec in all_figures()
+                    if re.search(r"value of this run|glue|\{\{", alt_text(reg.full_caption(spec)))]
+    for path in sorted((ROOT / "notebooks").glob("*.ipynb")):
+        for cell in json.loads(path.read_text())["cells"]:
+            alt = cell["metadata"].get("mystnb", {}).get("image", {}).get("alt", "")
+            if "value of this run" in alt:
+                placeholders.append(f"{path.stem}: {cell['metadata']['mystnb']['figure']['name']}")
+    assert not placeholders, f"alt text with a placeholder instead of the run's value: {sorted(set(placeholders))}"
