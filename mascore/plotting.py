@@ -477,14 +477,15 @@ def save_figure(fig: plt.Figure, path: str | Path) -> Path:
     return path
 
 
-def legend_overlaps(fig: plt.Figure, samples_per_px: float = 0.5) -> list[str]:
+def legend_overlaps(fig: plt.Figure, samples_per_px: float = 0.5, margin_px: float = 2.0) -> list[str]:
     """Legends of `fig` that cover plotted data: one line per (legend, artist) pair that overlaps.
 
     Every legend (of an Axes or of the figure) is checked against the data of every Axes it
     lies over, in display pixels after the figure is drawn: the vertices of each visible line
     and the segments between them (sampled every ``1 / samples_per_px`` px, so a line crossing
-    the legend between two vertices counts), and the points of each scatter. Grid lines and a
-    legend's own handles do not count. A legend placed outside the axes covers nothing.
+    the legend between two vertices counts), the outlines of its patches (circles, ellipses,
+    polygons) and the points of each scatter. Grid lines and a legend's own handles do not
+    count. A legend placed outside the axes covers nothing.
 
     Parameters
     ----------
@@ -492,6 +493,9 @@ def legend_overlaps(fig: plt.Figure, samples_per_px: float = 0.5) -> list[str]:
         The figure, as it will be saved.
     samples_per_px : float
         Sampling density of line segments (points per display pixel).
+    margin_px : float
+        Data closer than this to the legend's box counts as covered (display pixels at the
+        figure's dpi): a legend touching a curve reads as lying on it.
 
     Returns
     -------
@@ -523,7 +527,7 @@ def legend_overlaps(fig: plt.Figure, samples_per_px: float = 0.5) -> list[str]:
     for legend, covered in legends:
         if not legend.get_visible():
             continue
-        box = legend.get_window_extent()
+        box = legend.get_window_extent().padded(margin_px)
         for ax in covered:
             name = f"panel {fig.axes.index(ax) + 1}" + (f" ({ax.get_title()!r})" if ax.get_title() else "")
             for artist, kind, points in _data_points(ax, samples_per_px):
@@ -539,19 +543,33 @@ def legend_overlaps(fig: plt.Figure, samples_per_px: float = 0.5) -> list[str]:
 
 
 def _data_points(ax: plt.Axes, samples_per_px: float):
-    """(artist, kind, display points) of the visible lines (sampled along their segments) and scatters."""
+    """(artist, kind, display points) of the visible lines and patch outlines (sampled along their
+    segments) and scatters."""
     for line in ax.get_lines():
         if not line.get_visible():
             continue
         xy = line.get_transform().transform(np.asarray(line.get_xydata(), dtype=float))
-        xy = xy[np.all(np.isfinite(xy), axis=1)]
-        if line.get_linestyle() not in ("None", "none", "", " ") and len(xy) > 1:
-            steps = np.maximum(np.ceil(np.linalg.norm(np.diff(xy, axis=0), axis=1) * samples_per_px), 1).astype(int)
-            xy = np.concatenate([np.linspace(a, b, n, endpoint=False) for a, b, n in zip(xy[:-1], xy[1:], steps)]
-                                + [xy[-1:]])
+        if line.get_linestyle() not in ("None", "none", "", " "):
+            xy = _along(xy, samples_per_px)
         if len(xy):
-            yield line, "line", xy
+            yield line, "line", xy[np.all(np.isfinite(xy), axis=1)]
+    for patch in ax.patches:
+        if patch.get_visible():
+            path = patch.get_path().interpolated(8)
+            xy = _along(patch.get_transform().transform(path.vertices), samples_per_px)
+            if len(xy):
+                yield patch, "outline", xy
     for coll in ax.collections:
         if coll.get_visible() and isinstance(coll, mpl.collections.PathCollection) and len(coll.get_offsets()):
             xy = coll.get_offset_transform().transform(np.asarray(coll.get_offsets(), dtype=float))
             yield coll, "markers", xy[np.all(np.isfinite(xy), axis=1)]
+
+
+def _along(xy: np.ndarray, samples_per_px: float) -> np.ndarray:
+    """Points along the polyline `xy` (k, 2), about `samples_per_px` per pixel (non-finite vertices dropped)."""
+    xy = xy[np.all(np.isfinite(xy), axis=1)]
+    if len(xy) < 2:
+        return xy
+    steps = np.maximum(np.ceil(np.linalg.norm(np.diff(xy, axis=0), axis=1) * samples_per_px), 1).astype(int)
+    return np.concatenate([np.linspace(a, b, n, endpoint=False) for a, b, n in zip(xy[:-1], xy[1:], steps)]
+                          + [xy[-1:]])

@@ -107,3 +107,14 @@ def test_saved_figures_have_two_device_pixels_per_css_pixel(tmp_path):
     inches += 2 * matplotlib.rcParams["savefig.pad_inches"]  # the tight box and its padding
     assert width == pytest.approx(plotting.PIXEL_RATIO * 100 * inches, abs=3)
     assert plotting.PIXEL_RATIO >= 2
+
+
+def test_legend_overlap_counts_patch_outlines_and_near_misses():
+    plotting.use_style()
+    fig, ax = plt.subplots(figsize=(4, 4))
+    ax.add_patch(plt.Circle((0.5, 0.5), 0.05, fill=False, label="circle"))
+    ax.set(xlim=(0, 1), ylim=(0, 1))
+    ax.plot([0.5], [0.5], "o", label="centre")
+    ax.legend(loc="center")
+    assert any("outline" in o for o in plotting.legend_overlaps(fig))
+    plt.close(fig)
