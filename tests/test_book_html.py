@@ -166,8 +166,10 @@ def test_every_image_of_a_chapter_is_a_captioned_figure():
 # ---------------------------------------------------------------- the pages as a reader sees them, at 1280 px
 
 #: The style's tick labels are 10 pt at 100 dpi, 13.9 px per em (digits 10 px high): an image shown at
-#: less than 90 % of its width puts them under 9 px.
+#: less than 90 % of its layout width (its pixels over PIXEL_RATIO) puts them under 9 px.
 MIN_IMAGE_SCALE = 0.9
+#: Visible words a page may show (collapsed blocks excluded): about 15 minutes of reading.
+MAX_WORDS = 4000
 READ_PAGES = sorted({*(HTML / "notebooks").glob("*.html"), HTML / "notation.html", HTML / "intro.html",
                      HTML / "bibliography.html"}) if HTML.exists() else []
 READ_PAGES = [p for p in READ_PAGES if p.exists() and not p.name.startswith(".")]
@@ -190,22 +192,33 @@ def layout_problems(m: dict) -> list[str]:
     out += [f"display equation {e['width']} px wide in a {m['column']:.0f} px column: {e['what']}" for e in m["equations"]]
     out += [f"table {t['width']} px wide in a {m['column']:.0f} px column: {t['what']}" for t in m["tables"]]
     out += [f"a table cell shows NaN/None: {head}" for head in sorted(set(m["nan"]))]
-    out += [f"figure {i['id']} shrunk to {i['shown'] / i['natural']:.0%} of its width (tick labels under 9 px)"
-            for i in m["images"] if i["shown"] < MIN_IMAGE_SCALE * i["natural"]]
+    from mascore.plotting import PIXEL_RATIO
+
+    for i in m["images"]:
+        layout = i["natural"] / PIXEL_RATIO  # the width the figure was laid out for, in CSS px
+        if i["shown"] < MIN_IMAGE_SCALE * layout:
+            out.append(f"figure {i['id']} shrunk to {i['shown'] / layout:.0%} of its width (tick labels under 9 px)")
+        if i["natural"] < 1.95 * i["shown"]:
+            out.append(f"figure {i['id']} has {i['natural'] / i['shown']:.2g} image pixels per CSS pixel "
+                       f"(blurred on a HiDPI screen; {PIXEL_RATIO} needed)")
+    if m.get("words", 0) > MAX_WORDS:
+        out.append(f"{m['words']} visible words (more than about {MAX_WORDS}: split the page into sub-pages, "
+                   "or collapse what a first reading can skip)")
     return out
 
 
 @pytest.mark.parametrize("path", READ_PAGES, ids=lambda p: p.relative_to(HTML).as_posix())
 def test_page_fits_its_column_at_1280px(path):
     """No formula MathJax rejects, no display equation or table wider than the column, no NaN cell, no
-    figure shrunk (headless Chromium)."""
+    figure shrunk or blurred (2 image pixels per CSS pixel), at most about 4,000 visible words (headless
+    Chromium)."""
     from mascore._booktools import measure_page
 
     problems = layout_problems(measure_page(path, browser=_browser()))
     assert not problems, "\n".join(problems)
 
 
-def test_layout_check_fails_on_wide_math_tables_nan_and_shrunk_figures():
+def test_layout_check_fails_on_wide_math_tables_nan_shrunk_or_blurry_figures_and_long_pages():
     path = HTML / "notebooks" / "building_blocks.html"
     wide_math = "\\[" + " + ".join(f"x_{{{i}}}^{{2}}" for i in range(80)) + "\\]"
     bad = ('<div class="math notranslate nohighlight">' + wide_math + "</div>"
@@ -213,7 +226,10 @@ def test_layout_check_fails_on_wide_math_tables_nan_and_shrunk_figures():
            "<table><tr>" + "<td>wide_column_name_without_breaks_anywhere</td>" * 30 + "</tr>"
            "<tr><td>NaN</td></tr></table>"
            '<figure id="fig-shrunk"><img src="data:image/svg+xml;utf8,'
-           "%3Csvg xmlns='http://www.w3.org/2000/svg' width='2000' height='10'%3E%3C/svg%3E\"></figure>")
+           "%3Csvg xmlns='http://www.w3.org/2000/svg' width='2000' height='10'%3E%3C/svg%3E\"></figure>"
+           '<figure id="fig-blurry"><img style="width: 300px" src="data:image/svg+xml;utf8,'
+           "%3Csvg xmlns='http://www.w3.org/2000/svg' width='300' height='10'%3E%3C/svg%3E\"></figure>"
+           "<p>" + "word " * MAX_WORDS + "</p>")
     probe = path.with_name(".layout-selftest.html")
     probe.write_text(path.read_text().replace('<article class="bd-article">', '<article class="bd-article">' + bad, 1))
     from mascore._booktools import measure_page
@@ -225,6 +241,8 @@ def test_layout_check_fails_on_wide_math_tables_nan_and_shrunk_figures():
     assert "display equation" in problems and "table" in problems and "NaN" in problems, problems
     assert "MathJax cannot typeset" in problems, problems
     assert "fig-shrunk" in problems, problems
+    assert "fig-blurry has 1 image pixels per CSS pixel" in problems, problems
+    assert "visible words" in problems, problems
 
 
 def _next_page(path: Path) -> str:
