@@ -287,9 +287,31 @@ def test_api_pages_show_formulas_as_math_not_code(path):
     assert not tex, tex[:5]
 
 
-@pytest.mark.parametrize("chapter", sorted({s.chapter for _, s in STUDIES} | {"building_blocks", "apply_your_system"}))
+@pytest.mark.parametrize("chapter", sorted({s.chapter for _, s in STUDIES} | {"building_blocks", "apply_your_system",
+                                                                         "apply_control_designs"}))
 def test_a_tagged_equation_has_one_number(chapter):
     """An equation that carries the paper's number (``\\tag``) gets no second, Sphinx number beside it."""
     blocks = re.findall(r'<div class="[^"]*\bmath\b[^"]*"[^>]*>(.*?)</div>', _page(chapter), re.S)
     double = [b[:80] for b in blocks if 'class="eqno"' in b and "\\tag" in b]
     assert not double, double
+
+
+def test_the_intro_opens_with_four_reading_paths():
+    """Each question on the intro's first screen, with its one-line answer and a link to its page."""
+    html = (HTML / "intro.html").read_text()
+    article = html[html.index('<article class="bd-article">'):]
+    first = html_module.unescape(re.sub(r"<[^>]+>", "", article))[:4000]
+    targets = {"Did it reproduce?": "reproduction_report.html", "Which method for my team?": "comparing_methods.html",
+               "How do I use it on my system?": "apply_your_system.html",
+               "How does paper X work?": "ren2005_kalman_consensus.html"}
+    for question, page in targets.items():
+        assert question in first, f"{question!r} is not on the intro's first screen"
+        item = re.search(rf"{re.escape(question)}</strong>(.*?)</li>", article, re.S)
+        assert item and f"notebooks/{page}" in item.group(1), f"{question!r} does not link to {page}"
+        assert re.search(r"\d", re.sub(r"<[^>]+>", "", item.group(1))), f"{question!r}: no computed answer"
+
+
+def test_the_apply_chapter_ends_with_the_comparison():
+    html = (HTML / "notebooks" / "apply_your_system.html").read_text()
+    last = html[html.rindex("Where to go from here"):]
+    assert "comparing_methods.html" in last, "the apply chapter does not point to the comparison"

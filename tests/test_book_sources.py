@@ -33,6 +33,13 @@ def test_papers_are_in_the_order_of_the_table_of_contents():
     assert list(dict.fromkeys(in_book)) == list(paper_keys())
 
 
+def test_the_apply_chapter_comes_after_the_papers():
+    """It uses the papers' equations and theorems by number: the reader meets them first."""
+    toc = re.findall(r"file:\s*notebooks/(\w+)", (ROOT / "book" / "_toc.yml").read_text())
+    last_paper = max(toc.index(c) for c in CHAPTERS)
+    assert toc.index("apply_your_system") > last_paper, toc
+
+
 @pytest.mark.parametrize("chapter", sorted(CHAPTERS))
 def test_each_registered_figure_is_drawn_once_with_the_registry_caption(chapter):
     reg, study = CHAPTERS[chapter]
