@@ -25,7 +25,6 @@ from .registry import PaperRegistry, Study, paper_registries, study_modules
 __all__ = [
     "API_GROUPS",
     "api_groups",
-    "alt_text",
     "api_page",
     "chapter_studies",
     "drawn_figures",
@@ -74,9 +73,16 @@ def plain_text(markup: str) -> str:
     --------
     >>> plain_text(r"Errors for $Q_2 = 5$ and $\\Phi$ of eq. (62), *not* {numref}`fig-x`.")
     'Errors for Q_2 = 5 and Phi of eq. (62), not the figure fig-x.'
+
+    A value computed by the chapter's run (``{glue:text}`...```) is not known when the alt text is
+    written: the brackets that quote it are left out, so the sentence stays whole.
+
+    >>> plain_text("It settles at the fused value ({glue:text}`bias-fused:.4g` h).")
+    'It settles at the fused value.'
     """
     text = re.sub(r"\{numref\}`([^`]*)`", r"the figure \1", markup)
-    text = re.sub(r"\{glue:text\}`[^`]*`", "(the value of this run)", text)
+    text = re.sub(r"\s*\((?:[^()]|\([^()]*\))*\{glue:text\}`[^`]*`(?:[^()]|\([^()]*\))*\)", "", text)
+    text = re.sub(r"\s*\{glue:text\}`[^`]*`", "", text)
     text = re.sub(r"\{[a-z:]+\}`([^`]*)`", r"\1", text)
     text = re.sub(r"\\(?:mathcal|mathbb|mathrm|mathbf|operatorname|boldsymbol|left|right|[bB]ig)\b\s*", "", text)
     text = re.sub(r"\$([^$]*)\$", lambda m: re.sub(r"\\([A-Za-z]+)", r"\1", m.group(1)).replace("{", "").replace("}", ""),
@@ -85,29 +91,11 @@ def plain_text(markup: str) -> str:
     return " ".join(text.split())
 
 
-def alt_text(caption: str) -> str:
-    """An image's alt text from its caption: what the figure shows, as plain text (:func:`plain_text`).
-
-    The caption's "Look for:" part is left to the caption itself (a screen reader reads both), and a
-    value the run computes (``{glue:text}`` in the caption) is left out with its parentheses: alt
-    text is written before the run, and names no number it cannot know.
-
-    Examples
-    --------
-    >>> alt_text("Dotted: the fusion of the data ({glue:text}`f:.4g`); dashed: the average {glue:text}`a:.3g`. "
-    ...          "Look for: the gap.")
-    'Dotted: the fusion of the data; dashed: the average.'
-    """
-    text = re.split(r"\s*Look for\b", caption)[0]
-    text = re.sub(r"\(\s*\{glue:text\}`[^`]*`\s*\)|\s*\{glue:text\}`[^`]*`", "", text)
-    return re.sub(r"\s+([;:,.])", r"\1", plain_text(text))
-
-
 def sync_notebook(path: str | Path) -> int:
     """Write the registry's figure metadata into the notebook's figure cells; returns cells changed.
 
     Every figure cell (registered or captioned by hand) also gets its caption, as plain text, as the
-    image's alt text (``{"mystnb": {"image": {"alt": ...}}}``, :func:`alt_text`).
+    image's alt text (``{"mystnb": {"image": {"alt": ...}}}``).
     """
     path = Path(path)
     chapters = chapter_studies()
@@ -127,8 +115,8 @@ def sync_notebook(path: str | Path) -> int:
                 cell["metadata"].setdefault("mystnb", {})["figure"] = meta
                 changed += 1
         figure = cell["metadata"].get("mystnb", {}).get("figure")
-        if figure and cell["metadata"]["mystnb"].get("image") != {"alt": alt_text(figure["caption"])}:
-            cell["metadata"]["mystnb"]["image"] = {"alt": alt_text(figure["caption"])}
+        if figure and cell["metadata"]["mystnb"].get("image") != {"alt": plain_text(figure["caption"])}:
+            cell["metadata"]["mystnb"]["image"] = {"alt": plain_text(figure["caption"])}
             changed += 1
     if changed:
         path.write_text(json.dumps(nb, indent=1, ensure_ascii=False) + "\n")

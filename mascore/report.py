@@ -124,7 +124,6 @@ def verdict_summary(records: Sequence[dict]):
     table["total"] = table.sum(axis=1)
     table.loc["all papers"] = table.sum()
     table.index = [paper_registry(p).citation if p in papers else p for p in table.index]
-    table.index.name = "paper"
     table.columns = [verdict_words(c) if c in VERDICTS else c for c in table.columns]
     return table
 
@@ -175,7 +174,7 @@ _REASON = re.compile(r"\b(why|because|systematic|not numerical|rounded|does not 
                      r"dominated|indistinguishable|slip|misprint|instead)\b", re.I)
 
 
-def why(record: dict, max_words: int = 35) -> str:
+def why(record: dict, max_words: int = 25) -> str:
     """Why a claim does not fully reproduce, in one or two sentences for the report's table.
 
     The claim's own ``why`` when it states one; otherwise how far it is off (for a published

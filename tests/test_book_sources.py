@@ -58,7 +58,7 @@ def test_each_registered_figure_is_drawn_once_with_the_registry_caption(chapter)
 
 @pytest.mark.parametrize("chapter", sorted(CHAPTERS))
 def test_every_figure_cell_has_a_unique_label_and_a_caption(chapter):
-    from mascore._booktools import alt_text
+    from mascore._booktools import plain_text
 
     labels = []
     for cell in _cells(chapter):
@@ -66,7 +66,7 @@ def test_every_figure_cell_has_a_unique_label_and_a_caption(chapter):
         if meta:
             assert meta.get("caption", "").strip(), f"{chapter}: figure {meta.get('name')} without caption"
             alt = cell["metadata"]["mystnb"].get("image", {}).get("alt")
-            assert alt == alt_text(meta["caption"]), f"{chapter}: alt text of {meta['name']} is not its caption: `make sync`"
+            assert alt == plain_text(meta["caption"]), f"{chapter}: alt text of {meta['name']} is not its caption: `make sync`"
             labels.append(meta["name"])
     assert len(labels) == len(set(labels)), f"{chapter}: duplicate figure labels"
     assert all(label.startswith("fig-") for label in labels)
@@ -298,11 +298,11 @@ def test_the_citation_check_sees_citations():
 
 def test_alt_text_has_no_placeholder():
     """Alt text is the caption as the reader sees it, with the run's values in place (no '(the value of this run)')."""
-    from mascore._booktools import alt_text
+    from mascore._booktools import plain_text
     from mascore.registry import all_figures
 
     placeholders = [reg.figure_label(spec.name) for reg, _, spec in all_figures()
-                    if re.search(r"value of this run|glue|\{\{", alt_text(reg.full_caption(spec)))]
+                    if re.search(r"value of this run|glue|\{\{", plain_text(reg.full_caption(spec)))]
     for path in sorted((ROOT / "notebooks").glob("*.ipynb")):
         for cell in json.loads(path.read_text())["cells"]:
             alt = cell["metadata"].get("mystnb", {}).get("image", {}).get("alt", "")
