@@ -169,6 +169,16 @@ def attention_list(records: Sequence[dict]) -> MarkdownText:
     return MarkdownText("\n".join(rows) if len(rows) > 2 else "Every claim reproduces or holds.")
 
 
+def _module_whys() -> dict[str, str]:
+    """Claim id -> why, from the ``WHY`` mappings of the papers' study modules."""
+    from .registry import study_modules
+
+    out: dict[str, str] = {}
+    for module in study_modules():
+        out |= {k: v for k, v in dict(getattr(module, "WHY", None) or {}).items() if isinstance(v, str)}
+    return out
+
+
 #: Words that mark a note's sentence as a reason (a fallback when a claim states no ``why``).
 _REASON = re.compile(r"\b(why|because|systematic|not numerical|rounded|does not determine|no reading|cannot|"
                      r"dominated|indistinguishable|slip|misprint|instead)\b", re.I)
@@ -177,9 +187,10 @@ _REASON = re.compile(r"\b(why|because|systematic|not numerical|rounded|does not 
 def why(record: dict, max_words: int = 25) -> str:
     """Why a claim does not fully reproduce, in one or two sentences for the report's table.
 
-    The claim's own ``why`` when it states one; otherwise how far it is off (for a published
-    number, :func:`mascore.ledger.deviation_sentence`) and the first sentence of its note that
-    gives a reason, cut at `max_words` words (the ledger holds the rest).
+    The claim's own ``why`` when it states one, or the sentence its paper module gives it (a
+    module-level ``WHY`` mapping, claim id -> sentence); otherwise how far it is off (for a
+    published number, :func:`mascore.ledger.deviation_sentence`) and the first sentence of its note
+    that gives a reason, cut at `max_words` words (the ledger holds the rest).
 
     Parameters
     ----------
@@ -202,8 +213,9 @@ def why(record: dict, max_words: int = 25) -> str:
     >>> print(why(off).replace("\\xa0", " "))
     50 % off; more than the 3 % of 'approximately'. The gap is systematic: the paper rounds.
     """
-    if record.get("why"):
-        return record["why"]
+    stated = record.get("why") or _module_whys().get(record.get("id", ""))
+    if stated:
+        return stated
     paragraphs = [" ".join(p.split()) for p in (record.get("note") or "").split("\n\n") if p.strip()]
     stated = [p.split(":", 1)[1].strip() for p in paragraphs if re.match(r"Why\b[^:]*:", p)]
     sentences = [s for p in stated + paragraphs for s in re.split(r"(?<=[.;])\s+(?=[A-Z])", p)]

@@ -181,3 +181,12 @@ def test_report_says_why_each_claim_to_look_at_is_there():
     assert rows[0].endswith("| 50 % off; more than the 3 % of 'approximately'. The gap is systematic: the paper rounds. |")
     assert rows[1].endswith("| The printed value is a misprint. |")  # the claim's own why wins
     assert "does-not-reproduce" not in text and "ren2005 " not in text and "**does not reproduce**" in text
+
+
+def test_report_takes_the_why_its_paper_module_states(monkeypatch):
+    from mascore.papers import ren2005
+    from mascore.report import attention_list
+
+    monkeypatch.setattr(ren2005, "WHY", {"ren2005/b": "The paper's schedule is not ours."}, raising=False)
+    rows = str(attention_list([_paper_records()[1]])).splitlines()
+    assert rows[2].endswith("| The paper's schedule is not ours. |")
