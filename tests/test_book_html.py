@@ -5,9 +5,11 @@ registered figure of every paper is an image with its numbered caption in its
 chapter, numbered in its chapter and with its caption as alt text, every chapter
 shows its ledger table, no page shows raw LaTeX, an error or stderr block, or loads
 anything from the network. In headless Chromium at 1280 px (offline), no display
-equation or table is wider than the text column, no table cell shows NaN, and no
-figure is shrunk below legibility. Tests at the end show that each check fails on
-a page with a figure removed, a formula broken or the layout overflowing.
+equation or table is wider than the text column, no table cell shows NaN, no
+figure is shrunk below legibility or has fewer than two image pixels per CSS pixel,
+and no page shows more than about 4,000 words. The intro opens with its four reading
+paths. Tests at the end show that each check fails on a page with a figure removed,
+a formula broken or the layout overflowing.
 """
 
 from __future__ import annotations
