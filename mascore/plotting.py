@@ -31,6 +31,7 @@ __all__ = [
     "plot_graph",
     "plot_trajectories",
     "save_figure",
+    "unlabelled_lines",
     "use_style",
 ]
 
@@ -573,3 +574,51 @@ def _along(xy: np.ndarray, samples_per_px: float) -> np.ndarray:
     steps = np.maximum(np.ceil(np.linalg.norm(np.diff(xy, axis=0), axis=1) * samples_per_px), 1).astype(int)
     return np.concatenate([np.linspace(a, b, n, endpoint=False) for a, b, n in zip(xy[:-1], xy[1:], steps)]
                           + [xy[-1:]])
+
+
+def unlabelled_lines(fig: plt.Figure, limit: int = 5) -> list[str]:
+    """Panels of `fig` with more than `limit` data lines a reader cannot tell apart by a legend entry.
+
+    A line counts as labelled when its label is the text of an entry of a legend of the figure (its
+    panel's or a figure legend); reference lines drawn across the whole panel (``axhline``,
+    ``axvline``, any line of two points) do not count.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure.
+    limit : int
+        Most unlabelled lines a panel may show.
+
+    Returns
+    -------
+    list of str
+        ``"panel 2 ('title'): 8 unlabelled lines"`` for each panel over the limit.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.plotting import unlabelled_lines
+    >>> fig, ax = plt.subplots()
+    >>> _ = ax.plot([[0, 1, 2, 3, 4, 5]] * 3)  # six lines of three points
+    >>> unlabelled_lines(fig)
+    ['panel 1: 6 unlabelled lines']
+    >>> for i, line in enumerate(ax.get_lines()):
+    ...     line.set_label(f"agent {i}")
+    >>> _ = ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    >>> unlabelled_lines(fig)
+    []
+    >>> plt.close(fig)
+    """
+    if not isinstance(fig, mpl.figure.Figure):
+        raise TypeError(f"fig must be a matplotlib Figure; got {type(fig).__name__}")
+    legends = [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None] + list(fig.legends)
+    entries = {t.get_text() for leg in legends for t in leg.get_texts()}
+    out = []
+    for n, ax in enumerate(fig.axes, 1):
+        lines = [ln for ln in ax.get_lines() if ln.get_visible() and len(ln.get_xydata()) > 2
+                 and ln.get_label() not in entries]
+        if len(lines) > limit:
+            out.append(f"panel {n}" + (f" ({ax.get_title()!r})" if ax.get_title() else "")
+                       + f": {len(lines)} unlabelled lines")
+    return out

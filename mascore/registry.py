@@ -721,7 +721,8 @@ def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | 
     """Write a study's figures (PNG) and tables (CSV) into `out_dir`; return its claims.
 
     Beside each figure, ``NAME.layout.json`` lists the legends that cover its data
-    (:func:`mascore.plotting.legend_overlaps`; empty when none does).
+    (:func:`mascore.plotting.legend_overlaps`) and the panels with more than five unlabelled
+    lines (:func:`mascore.plotting.unlabelled_lines`); both empty when none.
 
     Each claim is tagged with the study's name (``Claim.study``), so the report can
     link it to its chapter.
@@ -763,12 +764,13 @@ def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | 
 
     import json
 
-    from .plotting import legend_overlaps, save_figure
+    from .plotting import legend_overlaps, save_figure, unlabelled_lines
 
     out_dir = Path(out_dir)
     for spec in study.figures:
         fig = study.draw(spec.name, result)
-        layout = {"legend_overlaps": legend_overlaps(fig)}  # read by the book's tests: no legend over data
+        layout = {"legend_overlaps": legend_overlaps(fig),  # read by the book's tests: no legend over data,
+                  "unlabelled_lines": unlabelled_lines(fig)}  # no panel with more than five unlabelled lines
         save_figure(fig, out_dir / "figures" / f"{spec.name}.png")
         (out_dir / "figures" / f"{spec.name}.layout.json").write_text(json.dumps(layout, indent=1) + "\n")
         plt.close("all")

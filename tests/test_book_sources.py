@@ -180,9 +180,13 @@ def test_captions_quote_computed_values_not_typed_ones(chapter):
 RESULTS = ROOT / "results"
 
 
-def test_no_legend_covers_the_data_of_a_registered_figure():
+@pytest.mark.parametrize("key,what", [("legend_overlaps", "legends over the data"),
+                                      ("unlabelled_lines", "panels with more than five unlabelled lines")])
+def test_registered_figures_keep_their_legends_off_the_data_and_label_their_lines(key, what):
     """Every registered figure, as `mascore reproduce` drew it: no legend covers a data line or marker
-    (measured from the artists' extents, :func:`mascore.plotting.legend_overlaps`, written beside each figure)."""
+    (measured from the artists' extents, :func:`mascore.plotting.legend_overlaps`), no panel shows more
+    than five lines without a legend entry (:func:`mascore.plotting.unlabelled_lines`); both are written
+    beside each figure."""
     from mascore.registry import all_figures
 
     missing, offenders = [], []
@@ -191,12 +195,14 @@ def test_no_legend_covers_the_data_of_a_registered_figure():
         if not layout.exists():
             missing.append(f"{reg.key}/{spec.name}")
             continue
-        overlaps = json.loads(layout.read_text())["legend_overlaps"]
-        offenders += [f"{reg.figure_label(spec.name)}: {o}" for o in overlaps]
+        record = json.loads(layout.read_text())
+        if key not in record:
+            missing.append(f"{reg.key}/{spec.name}")
+        offenders += [f"{reg.figure_label(spec.name)}: {o}" for o in record.get(key, [])]
     if len(missing) == len(all_figures()):
         pytest.skip(f"no figure layouts in {RESULTS}: run `python -m mascore reproduce all --out results` first")
     assert not missing, f"figures without a layout record (rerun `mascore reproduce`): {missing}"
-    assert not offenders, "legends over the data:\n" + "\n".join(offenders)
+    assert not offenders, f"{what}:\n" + "\n".join(offenders)
 
 
 # ---------------------------------------------------------------- glossary and bibliography complete
