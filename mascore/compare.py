@@ -77,7 +77,7 @@ from typing import Any
 
 import numpy as np
 
-from . import consensus, graphs, kalman, rendezvous, set_membership
+from . import consensus, estimation, graphs, kalman, rendezvous, set_membership
 from . import distributed_kf as dkf
 from ._validation import check_fits_in_memory, check_positive, check_positive_int, check_probability, check_seed
 from .agents import double_integrator
@@ -94,6 +94,7 @@ __all__ = [
     "STUDY",
     "TABLES",
     "TARGET_METHODS",
+    "target_methods",
     "TARGET_NOT_APPLICABLE",
     "TEAM_METHODS",
     "VLAHAKIS_PHI",
@@ -459,8 +460,8 @@ def _check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[
     if not isinstance(cell, Mapping):
         raise TypeError(f"{name} must be a mapping of the cell's coordinates (task, method, n_agents, noise, "
                         f"dropout, q_scale); got {type(cell).__name__}")
-    methods_of = {"team": _TEAM_ALL, "shared": SHARED_METHODS, "target": TARGET_METHODS,
-                  "localization": TARGET_METHODS}
+    methods_of = {"team": _TEAM_ALL, "shared": SHARED_METHODS, "target": target_methods("target"),
+                  "localization": target_methods("localization")}
     task = cell.get("task")
     if task not in methods_of:
         raise ValueError(f"{name}['task'] must be one of {tuple(methods_of)}; got {task!r}")
@@ -579,7 +580,7 @@ class _Centralized(_Estimator):
     def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
         super().__init__(team, x_hat0)
         self.model = dkf.team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N)
-        self.filter = dkf.CentralizedFilter(self.model, team.B, x_hat0, team.P0)
+        self.filter = dkf.CentralizedTeamFilter(self.model, team.B, x_hat0, team.P0)
 
     def update(self, Z, S):
         self.filter.update(Z, S)
@@ -1243,9 +1244,31 @@ def _average(xi: np.ndarray, G: np.ndarray) -> np.ndarray:
 # the common-target task (mascore.fusion)
 
 
-#: Filters of the common-target task, in table order (``-L<k>``: k consensus steps per update).
-TARGET_METHODS = ("centralized", "local", "forwarding", "ci-L1", "ci-L5", "hcmci-L1", "hcmci-L5", "icf-L1",
-                  "icf-L5", "diffusion", "ci-diffusion")
+#: Filters of the common-target task, in table order (``-L<k>``: k consensus steps per update): the specs of
+#: :data:`mascore.fusion.METHODS` as found at import (:func:`target_methods` finds those added since).
+TARGET_METHODS = estimation.method_names("target")
+
+
+def target_methods(task: str = "target") -> tuple[str, ...]:
+    """The methods of the common-target (or localization) task, in table order, from their specs.
+
+    Parameters
+    ----------
+    task : {"target", "localization"}
+        The scenario.
+
+    Returns
+    -------
+    tuple of str
+        The names of the :class:`mascore.estimation.MethodSpec` of that task (a new filter module's included).
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> compare.target_methods()[:3]
+    ('centralized', 'local', 'forwarding')
+    """
+    return estimation.method_names(task)
 #: Methods of the papers that do not apply to the common target, with the reason (the headline shows them).
 TARGET_NOT_APPLICABLE = {
     "song-mb, song-eb": "estimate the agents' own states in a rendezvous loop; there is no common target",
@@ -1467,19 +1490,21 @@ def localization_riccati(n_agents: int, graph: str = "ring",
             "anchor reach": float(reach.mean()), "anchor reach, least": float(reach.mean(0).min())}
 
 
-def target_filter(method: str, model):
-    """The :mod:`mascore.fusion` filter of a :data:`TARGET_METHODS` name on `model`.
+def target_filter(method: str, model, task: str = "target"):
+    """The filter of a common-target method on `model`, as its spec builds it (:data:`mascore.fusion.METHODS`).
 
     Parameters
     ----------
     method : str
-        One of :data:`TARGET_METHODS`.
+        One of :func:`target_methods`.
     model : mascore.fusion.SensorNetworkModel
         The sensing and the graph.
+    task : {"target", "localization"}
+        The scenario whose methods are searched.
 
     Returns
     -------
-    filter of mascore.fusion
+    filter
         ``local`` is consensus on information with no consensus step (each agent's own Kalman filter).
 
     Examples
@@ -1488,24 +1513,7 @@ def target_filter(method: str, model):
     >>> compare.target_filter("ci-L5", compare.target_model(8)).n_consensus
     5
     """
-    from . import fusion
-
-    if method not in TARGET_METHODS:
-        raise ValueError(f"method must be one of {TARGET_METHODS}; got {method!r}")
-    if method == "centralized":
-        return fusion.CentralizedFilter(model)
-    if method == "local":
-        return fusion.ConsensusOnInformationFilter(model, 0)
-    if method == "forwarding":
-        return fusion.MeasurementForwardingFilter(model)
-    if method == "diffusion":
-        return fusion.DiffusionKalmanFilter(model)
-    if method == "ci-diffusion":
-        return fusion.CovarianceIntersectionFilter(model)
-    kind, L = method.rsplit("-L", 1)
-    if kind == "icf":
-        return fusion.InformationConsensusFilter(model, int(L))
-    return fusion.ConsensusOnInformationFilter(model, int(L), novelty_weight="N" if kind == "hcmci" else 1.0)
+    return estimation.method_spec(method, task).build(model)
 
 
 def target_cost(method: str, n_agents: int, degree: float, task: str = "target") -> tuple[float, float]:
@@ -1534,21 +1542,10 @@ def target_cost(method: str, n_agents: int, degree: float, task: str = "target")
     >>> target_cost("local", 8, 2)[0], target_cost("ci-L5", 8, 2)[0]
     (0.0, 70.0)
     """
-    from . import fusion
-
     d = int(round(degree))
-    names = {"centralized": ("centralized", 1), "forwarding": ("measurement-forwarding", 1),
-             "diffusion": ("diffusion-kf", 1), "ci-diffusion": ("covariance-intersection", 20),
-             "local": ("consensus-on-information", 0)}
-    if method in names:
-        name, L = names[method]
-    else:
-        kind, L = method.rsplit("-L", 1)
-        name = {"ci": "consensus-on-information", "hcmci": "hcmci", "icf": "information-consensus"}[kind]
-        L = int(L)
     n, q = (4, 1) if task == "target" else (2 * int(n_agents), 2 * d)
-    c = fusion.filter_cost(name, n=n, q=q, degree=d if method != "local" else 0, iterations=L, n_agents=n_agents)
-    return c.floats_sent, c.flops
+    floats, flops = estimation.method_spec(method, task).cost(n, q, d, int(n_agents))
+    return float(floats), float(flops)
 
 
 def simulate_target(
@@ -1600,6 +1597,7 @@ def simulate_target(
     n_agents, runs = _check_run(n_agents, "gaussian", 0.0, 1.0, runs, settings)
     if task not in ("target", "localization"):
         raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    spec = estimation.method_spec(method, task)
     s = settings
     if graph not in SWITCHING_GRAPHS:
         raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
@@ -1617,9 +1615,9 @@ def simulate_target(
         if task == "target":
             G = switching_graphs(n_agents, s.n_steps, s)
             steps = [(fusion.SensorNetworkModel(model.F, model.Q, model.H, model.R, A), slice(None)) for A in G]
-        filters = [target_filter(method, m) for m, _ in steps]
+        filters = [target_filter(method, m, task) for m, _ in steps]
         tic = time.thread_time()
-        xk, Pk = model.check_state(np.zeros(n), P0, per_agent=filters[0]._per_agent)
+        xk, Pk = model.check_state(np.zeros(n), P0, per_agent=not spec.whole_filter)
         xs, Ps = [], []
         for k, f in enumerate(filters):
             xk, Pk = f.update(*f.predict(xk, Pk), z[k][..., steps[k][1]])
@@ -1628,14 +1626,14 @@ def simulate_target(
         x, P = np.stack(xs), np.stack(Ps)
         cpu = time.thread_time() - tic
     else:
-        filt = target_filter(method, model)
+        filt = target_filter(method, model, task)
         tic = time.thread_time()
         x, P = filt.run(np.zeros(n), P0, z)
         cpu = time.thread_time() - tic
     w = slice(s.steady_from, s.n_steps)
     truth = x_true[1:][w]                                      # (K', runs, n)
     x, P = x[w], P[w]
-    if method == "centralized":
+    if spec.whole_filter:
         x, P = x[:, :, None], P[:, None]                       # one estimate, shared by every agent
     e = truth[:, :, None] - x                                  # (K', runs, N', n)
     P = np.broadcast_to(P[:, None] if P.ndim == 4 else P, (*e.shape, n))
@@ -1714,11 +1712,12 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
                     "dropout": [0.0, 0.1, 0.3], "block": blocks200}),
         ("shared", {**base, "task": ["shared"], "method": list(SHARED_METHODS), "n_agents": [16],
                     "graph": ["geometric", "switching"], "block": blocks200}),
-        ("target", {**base, "task": ["target"], "method": list(TARGET_METHODS), "n_agents": [8, 16],
+        ("target", {**base, "task": ["target"], "method": list(target_methods("target")), "n_agents": [8, 16],
                     "block": blocks200}),
-        ("target", {**base, "task": ["target"], "method": list(TARGET_METHODS), "graph": ["geometric", "switching"],
+        ("target", {**base, "task": ["target"], "method": list(target_methods("target")),
+                    "graph": ["geometric", "switching"],
                     "n_agents": [16], "block": blocks200}),
-        ("localization", {**base, "task": ["localization"], "method": list(TARGET_METHODS),
+        ("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
                           "n_agents": [8] if quick else [8, 16], "block": blocks200}),
         ("position", {**base, "sensing": ["position"], "method": list(POSITION_METHODS), "n_agents": [8],
                       "block": blocks200}),
@@ -1728,11 +1727,11 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
         # localization at N = 8 only (at 16 covariance intersection's weight search costs 6 s of CPU per block)
         ("switching", {**base, "method": [m for m in core if m not in VLAHAKIS_PHI], "graph": ["switching"],
                        "n_agents": [16], "block": blocks if quick else blocks200}),
-        ("localization", {**base, "task": ["localization"], "method": list(TARGET_METHODS), "graph": ["switching"],
-                          "n_agents": [8], "block": blocks if quick else blocks200}),
+        ("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
+                          "graph": ["switching"], "n_agents": [8], "block": blocks if quick else blocks200}),
     ]
     if not quick:
-        studies.append(("localization", {**base, "task": ["localization"], "method": list(TARGET_METHODS),
+        studies.append(("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
                                          "graph": ["switching"], "n_agents": [16], "block": blocks200}))
     cells = []
     for study, axes in studies:
@@ -2125,8 +2124,8 @@ def headline(summary, task: str = "team"):
     if task == "team":
         frame = frame[frame["study"] == "scaling"]
     frame = frame[frame.get("graph", "ring") == "ring"].set_index("method")
-    methods = {"team": TEAM_METHODS, "target": TARGET_METHODS, "localization": TARGET_METHODS,
-               "shared": SHARED_METHODS}[task]
+    methods = {"team": TEAM_METHODS, "target": target_methods("target"),
+               "localization": target_methods("localization"), "shared": SHARED_METHODS}[task]
     slopes = fitted_slopes(summary) if task == "team" else {}
     rows = []
     for m in methods:
