@@ -10,7 +10,7 @@ import numpy as np
 
 from .. import estimation, graphs
 from .._validation import check_fits_in_memory, check_positive, check_positive_int, check_probability, check_seed
-from ..registry import check_settings, check_settings_type, setting
+from ..settings import check_settings, check_settings_type, setting
 
 #: Estimators of the team task, in table order.
 TEAM_METHODS = ("centralized", "local", "forwarding", "song-mb", "song-eb", "vlahakis", "vlahakis-phi0",
@@ -59,7 +59,7 @@ class BenchmarkSettings:
     """The common benchmark's settings (one place; the chapter shows them).
 
     Every field is checked when the settings are built or ``dataclasses.replace``-d
-    (``mascore.registry.check_settings``): counts >= 1, variances and scales finite
+    (``mascore.settings.check_settings``): counts >= 1, variances and scales finite
     and non-negative (at most 1e6 m or m/s for the scales, 1e12 for the variances).
 
     Parameters

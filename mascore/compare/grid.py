@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..registry import check_settings_type
+from ..settings import check_settings_type
 from ..sweep import Grid, cell_seed
 from .benchmark import (
     CORE_METHODS,
@@ -386,7 +386,7 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
     check_settings_type(settings, BenchmarkSettings)
     import tempfile
 
-    from .sweep import run_sweep
+    from ..sweep import run_sweep
 
     if settings.grid not in ("quick", "full"):
         raise ValueError(f"settings.grid must be 'quick' or 'full'; got {settings.grid!r}")

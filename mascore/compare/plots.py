@@ -9,7 +9,7 @@ from .tables import fitted_slopes
 
 
 def _plt():
-    from ._optional import require
+    from .._optional import require
 
     return require("matplotlib.pyplot", "the comparison's figures")
 

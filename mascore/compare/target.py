@@ -79,7 +79,7 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
     >>> compare.target_model(8)
     SensorNetworkModel(N = 8 agents, n = 4 states, q = (1, 1, 1, 1, 1, 1, 1, 1) measurements)
     """
-    from . import fusion
+    from .. import fusion
 
     n_agents = _check_n_agents(n_agents)
     s = settings
@@ -128,7 +128,7 @@ def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSe
     >>> compare.localization_model(4).measurement_sizes
     (6, 4, 6, 4)
     """
-    from . import fusion
+    from .. import fusion
 
     n_agents = _check_n_agents(n_agents)
     s = settings
@@ -161,7 +161,7 @@ def _localization_switching(n_agents: int, settings: BenchmarkSettings):
         links, as :func:`localization_model` orders them) and the indices of its rows in ``union``'s
         stacked measurement.
     """
-    from . import fusion
+    from .. import fusion
 
     G = switching_graphs(n_agents, settings.n_steps, settings) > 0
     union_adj = G.any(0)
@@ -388,7 +388,7 @@ def simulate_target(
     P0 = s.p0 * np.eye(n)
     x_true, z = model.simulate(np.zeros(n), P0, s.n_steps, np.random.default_rng(seed), n_runs=runs)
     if graph == "switching":  # the filters hold no state: one filter per step's graph
-        from . import fusion
+        from .. import fusion
 
         if task == "target":
             G = switching_graphs(n_agents, s.n_steps, s)

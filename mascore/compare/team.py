@@ -186,7 +186,7 @@ def _vlahakis_gains(adjacency: np.ndarray, q_vel: float, r: float, dt: float,
     small ``|Y2|`` tie-break term (ours, not the paper's) picks ``Phi`` near 0.
     A number: that ``Phi`` (another point of the optimal interval, see :func:`vlahakis_profile`).
     """
-    from . import observers
+    from .. import observers
 
     A = np.array([[0.0, 1.0], [0.0, 0.0]])
     obs = observers.distributed_observer(A, np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]]),
@@ -229,7 +229,7 @@ def vlahakis_profile(n_agents: int = 8, phis: Sequence[float] = (-0.1, 0.0, 0.31
     >>> bool(abs(g["Phi = 1"] / g["Phi = 0"] - 1) < 1e-3)        # flat: every Phi is optimal
     True
     """
-    from . import observers
+    from .. import observers
 
     s = settings
     A, Bbar, C = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])

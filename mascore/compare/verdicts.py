@@ -39,7 +39,7 @@ def compare_claims(summary, phi: dict | None = None) -> list:
     >>> [c.verdict for c in compare.compare_claims(summary)][:2]  # doctest: +SKIP
     ['holds', 'holds']
     """
-    from .ledger import Claim
+    from ..ledger import Claim
 
     s = summary
     team = s[s["task"] == "team"]
@@ -355,7 +355,7 @@ def compare_claims(summary, phi: dict | None = None) -> list:
 
 def _position_claims(summary, where: str) -> list:
     """The claims of the study ``position`` (own state at N = 8, positions only); none if the summary lacks it."""
-    from .ledger import Claim
+    from ..ledger import Claim
 
     pos = summary[(summary["study"] == "position") & (summary["task"] == "team")]
     if pos.empty:
