@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ._optional import require
-from .ledger import Claim
+from .claims import Claim
 from .settings import (
     SettingsView,
     allowed_values,
@@ -57,7 +57,6 @@ if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
 
 __all__ = [
-    "COMPARISON_MODULES",
     "STUDY_CONTRACT",
     "FigureSpec",
     "PaperRegistry",
@@ -89,9 +88,6 @@ __all__ = [
 #: also exports ``REGISTRY``, its :class:`PaperRegistry`.
 STUDY_CONTRACT = ("SETTINGS", "run", "claims", "FIGURES", "TABLES", "STUDY")
 
-#: Modules outside ``mascore.papers`` that declare a ``REGISTRY`` of their own: the comparisons,
-#: whose ledgers follow the papers' (``results/compare/claims.json``).
-COMPARISON_MODULES = ("mascore.compare",)
 
 
 @dataclass(frozen=True)
@@ -385,6 +381,9 @@ class PaperRegistry:
     position : int
         Place of the paper in the book's table of contents (``book/_toc.yml``); the reports,
         ledgers and :func:`paper_keys` list the papers in this order.
+    kind : {"paper", "comparison"}
+        A paper, or a comparison of the papers' methods (its ledger follows the papers':
+        :func:`comparison_registries`).
 
     Examples
     --------
@@ -398,8 +397,11 @@ class PaperRegistry:
     studies: tuple[Study, ...]
     errata: tuple[str, ...] = ()
     position: int = 0
+    kind: str = "paper"
 
     def __post_init__(self) -> None:
+        if self.kind not in ("paper", "comparison"):
+            raise ValueError(f"kind must be 'paper' or 'comparison'; got {self.kind!r}")
         if not isinstance(self.key, str) or not re.fullmatch(r"[a-z][a-z0-9_]*", self.key):
             raise ValueError(f"key must be a module name of lower-case letters, digits and underscores; "
                              f"got {self.key!r}")
@@ -603,7 +605,9 @@ def study_modules() -> list:
 
     modules = [importlib.import_module(f"{package.__name__}.{info.name}")
                for info in pkgutil.iter_modules(package.__path__) if not info.name.startswith("_")]
-    with_study = {id(m.STUDY): m for m in modules if isinstance(getattr(m, "STUDY", None), Study)}
+    comparisons = {id(s) for reg in comparison_registries() for s in reg.studies}  # their own chapter
+    with_study = {id(m.STUDY): m for m in modules
+                  if isinstance(getattr(m, "STUDY", None), Study) and id(m.STUDY) not in comparisons}
     ordered = [with_study.pop(id(s)) for reg in paper_registries() for s in reg.studies if id(s) in with_study]
     return ordered + sorted(with_study.values(), key=lambda m: m.__name__)  # a study on no registry: last
 
@@ -631,6 +635,15 @@ def paper_registries() -> tuple[PaperRegistry, ...]:
     >>> [reg.key for reg in paper_registries()]
     ['song2023', 'ren2005', 'bhattacharjee2021', 'vlahakis']
     """
+    found = [reg for reg in _registries() if reg.kind == "paper"]
+    positions = [reg.position for reg in found]
+    if len(set(positions)) != len(positions):
+        raise ValueError(f"papers must have distinct positions; got {dict((r.key, r.position) for r in found)}")
+    return tuple(sorted(found, key=lambda reg: reg.position))
+
+
+def _registries() -> list[PaperRegistry]:
+    """Every ``REGISTRY`` of ``mascore.papers`` (papers and comparisons), its key checked against its module."""
     import mascore.papers as package
 
     found = []
@@ -642,10 +655,7 @@ def paper_registries() -> tuple[PaperRegistry, ...]:
             if reg.key != info.name:
                 raise ValueError(f"mascore.papers.{info.name}: REGISTRY.key must be the module's name; got {reg.key!r}")
             found.append(reg)
-    positions = [reg.position for reg in found]
-    if len(set(positions)) != len(positions):
-        raise ValueError(f"papers must have distinct positions; got {dict((r.key, r.position) for r in found)}")
-    return tuple(sorted(found, key=lambda reg: reg.position))
+    return found
 
 
 def paper_keys() -> tuple[str, ...]:
@@ -666,7 +676,7 @@ def paper_keys() -> tuple[str, ...]:
 
 
 def comparison_registries() -> tuple[PaperRegistry, ...]:
-    """The registries of the comparisons (:data:`COMPARISON_MODULES`), whose ledgers follow the papers'.
+    """The registries of the comparisons (``kind="comparison"``, in ``mascore.papers``), whose ledgers follow the papers'.
 
     Returns
     -------
@@ -679,7 +689,7 @@ def comparison_registries() -> tuple[PaperRegistry, ...]:
     >>> [reg.key for reg in comparison_registries()]
     ['compare']
     """
-    return tuple(importlib.import_module(name).REGISTRY for name in COMPARISON_MODULES)
+    return tuple(sorted((reg for reg in _registries() if reg.kind == "comparison"), key=lambda reg: reg.position))
 
 
 def ledger_keys() -> tuple[str, ...]:

@@ -1,17 +1,20 @@
-"""The comparison as a study: its figures, tables and claims, on the same contract as the papers' modules."""
+"""The comparison of the methods as a study: its figures, tables and claims, on the same contract as the papers.
+
+The computation is :mod:`mascore.compare` (scenarios, sweep, tables, verdicts, figures); this module
+declares it as the chapter "Comparing the methods" and its ledger ``results/compare/claims.json``
+(:data:`REGISTRY`, a comparison: :func:`mascore.registry.comparison_registries`).
+"""
 
 from __future__ import annotations
 
+from ..compare.benchmark import SETTINGS
+from ..compare.grid import CompareResult, run
+from ..compare.plots import plot_cost, plot_pareto, plot_robustness
+from ..compare.tables import headline
+from ..compare.verdicts import compare_claims
 from ..registry import FigureSpec, PaperRegistry, Study, TableSpec
-from .benchmark import SETTINGS
-from .grid import CompareResult, run
-from .plots import plot_cost, plot_pareto, plot_robustness
-from .tables import headline
-from .verdicts import compare_claims
 
-# --------------------------------------------------------------------------------------------
-# the comparison as a study (the same contract as the papers' modules)
-
+__all__ = ["FIGURES", "REGISTRY", "SETTINGS", "STUDY", "TABLES", "claims", "run"]
 
 def claims(result: CompareResult) -> list:
     """The comparison's ledger (``compare/...`` claims), from `result` alone (:func:`compare_claims`).
@@ -28,7 +31,7 @@ def claims(result: CompareResult) -> list:
 
     Examples
     --------
-    >>> from mascore import compare
+    >>> from mascore.papers import compare
     >>> [c.id for c in compare.claims(compare.run())][:1]  # doctest: +SKIP
     ['compare/centralized-bound']
     """
@@ -73,4 +76,4 @@ TABLES = (
 STUDY = Study("compare", "comparing_methods", SETTINGS, run, FIGURES, TABLES, claims)
 
 #: The comparison's registry: its ledger is ``results/compare/claims.json`` (``python -m mascore compare``).
-REGISTRY = PaperRegistry("compare", "Comparing the methods", studies=(STUDY,), position=5)
+REGISTRY = PaperRegistry("compare", "Comparing the methods", studies=(STUDY,), position=5, kind="comparison")
