@@ -42,9 +42,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import compare, estimation, fusion, kalman, rendezvous, set_membership
 from . import distributed_kf as dkf
+from . import estimation, fusion, kalman, rendezvous, set_membership
 from ._validation import check_positive_int
+from .compare.benchmark import SETTINGS, BenchmarkSettings, check_n_agents
+from .compare.target import localization_model, target_model
+from .compare.team import make_estimator, team_setup
 
 __all__ = [
     "AGENT_METHODS",  # noqa: F822 (read from the specs by the module's __getattr__)
@@ -190,7 +193,7 @@ def _check_task_method(task: object, method: object) -> None:
 
 
 def agent_step(task: str, method: str, n_agents: int, *, agent: int = 0, seed: int = 0,
-               settings: compare.BenchmarkSettings = compare.SETTINGS) -> AgentStep:
+               settings: BenchmarkSettings = SETTINGS) -> AgentStep:
     """Agent `agent`'s work per step of `method`, cut out of one run of the scenario.
 
     The scenario's model is built (:func:`mascore.compare.target_model`,
@@ -212,7 +215,7 @@ def agent_step(task: str, method: str, n_agents: int, *, agent: int = 0, seed: i
         The agent i, ``0 <= i < N``.
     seed : int
         Seed of the state and measurements.
-    settings : mascore.compare.BenchmarkSettings
+    settings : mascore.BenchmarkSettings
         The benchmark's settings.
 
     Returns
@@ -236,7 +239,7 @@ def agent_step(task: str, method: str, n_agents: int, *, agent: int = 0, seed: i
     True
     """
     _check_task_method(task, method)
-    N = compare._check_n_agents(n_agents)
+    N = check_n_agents(n_agents)
     i = check_positive_int(agent, "agent", minimum=0)
     if i >= N:
         raise ValueError(f"agent must be an agent index below n_agents = {N}; got {agent!r}")
@@ -246,14 +249,14 @@ def agent_step(task: str, method: str, n_agents: int, *, agent: int = 0, seed: i
     return _fusion_step(task, method, N, i, seed, settings)
 
 
-def _team_step(method: str, N: int, i: int, seed: int, s: compare.BenchmarkSettings) -> AgentStep:
+def _team_step(method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> AgentStep:
     """The team task: the estimator of :mod:`mascore.compare` run two steps, then agent i's next step."""
-    team = compare._team(N, "gaussian", 1.0, s, "ring")
+    team = team_setup(N, "gaussian", 1.0, s, "ring")
     rng = np.random.default_rng(seed)
     x = np.concatenate([s.init_pos * rng.standard_normal((1, N, 2)), s.init_vel * rng.standard_normal((1, N, 2))],
                        axis=-1)
     x_hat0 = x + np.sqrt(s.p0) * rng.standard_normal(x.shape)
-    est = compare._make(method, team, x_hat0)
+    est = make_estimator(method, team, x_hat0)
     S = (team.adjacency > 0) | np.eye(N, dtype=bool)
     S = S[None]
     hood = np.flatnonzero(S[0, i])
@@ -380,14 +383,14 @@ def _song_mb_step(before: dkf.TeamFilter, after: dkf.TeamFilter, Z_i: np.ndarray
                      lambda: (after.X_hat[0, i], after.Sigma[0, i]))
 
 
-def _fusion_step(task: str, method: str, N: int, i: int, seed: int, s: compare.BenchmarkSettings) -> AgentStep:
+def _fusion_step(task: str, method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> AgentStep:
     """The target and localization tasks: the method's filter run two steps, then its own ``agent_step`` for agent i.
 
     The inputs of agent i's step (its own data, its neighbours' messages of each round) are cut out of
     the team-wide filter by the filter's ``agent_inputs`` (untimed); the timed step is its ``agent_step``.
     """
     spec = estimation.method_spec(method, task)
-    model = (compare.target_model if task == "target" else compare.localization_model)(N, "ring", s)
+    model = (target_model if task == "target" else localization_model)(N, "ring", s)
     filt = spec.build(model)
     n = model.n_states
     rng = np.random.default_rng(seed)
@@ -468,7 +471,7 @@ def blas_pinned() -> str:
 
 def agent_step_cost(task: str, method: str, n_agents: int, *, repeats: int = 7, min_time: float = 0.02,
                     agent: int = 0, seed: int = 0,
-                    settings: compare.BenchmarkSettings = compare.SETTINGS) -> float:
+                    settings: BenchmarkSettings = SETTINGS) -> float:
     """CPU time (µs) of one agent's step (:func:`agent_step`): one run, one thread, median of `repeats`.
 
     After one warm-up call, each repeat calls the step enough times to last about
@@ -651,7 +654,7 @@ def _whole_filter(task: str, method: str) -> bool:
 
 def agent_costs(sizes: Sequence[int] = (4, 8, 16, 32, 64, 128), tasks: Sequence[str] = AGENT_TASKS,
                 methods: Sequence[str] | None = None, *, repeats: int = 7, min_time: float = 0.02,
-                settings: compare.BenchmarkSettings = compare.SETTINGS, progress: bool = False):
+                settings: BenchmarkSettings = SETTINGS, progress: bool = False):
     """:func:`agent_step_cost` over team sizes, with log-log slopes and the analytic counts.
 
     Parameters
@@ -664,7 +667,7 @@ def agent_costs(sizes: Sequence[int] = (4, 8, 16, 32, 64, 128), tasks: Sequence[
         Methods (default: every method of each task); a method not in a task is skipped.
     repeats, min_time : int, float
         As :func:`agent_step_cost`.
-    settings : mascore.compare.BenchmarkSettings
+    settings : mascore.BenchmarkSettings
         The benchmark's settings.
     progress : bool
         Print each measurement as it is made.
@@ -685,7 +688,7 @@ def agent_costs(sizes: Sequence[int] = (4, 8, 16, 32, 64, 128), tasks: Sequence[
     """
     import pandas as pd
 
-    sizes = [compare._check_n_agents(n) for n in sizes]
+    sizes = [check_n_agents(n) for n in sizes]
     rows = []
     for task in tasks:
         if task not in AGENT_TASKS:

@@ -25,8 +25,10 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
+import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -186,8 +188,8 @@ def method_specs(task: str | None = None) -> tuple[MethodSpec, ...]:
     """Every method declared in the package (a module's ``METHODS``), in table order; those of `task` if given.
 
     Modules of the numerical core are scanned (not the private ones, nor those of
-    :data:`STUDY_LAYER`); a new module with a ``METHODS`` tuple is found with
-    nothing listed by hand.
+    :data:`STUDY_LAYER`), and those whose source assigns ``METHODS`` imported; a new
+    module with a ``METHODS`` tuple is found with nothing listed by hand.
 
     Parameters
     ----------
@@ -214,7 +216,7 @@ def method_specs(task: str | None = None) -> tuple[MethodSpec, ...]:
 
     found: dict[tuple[str, str], MethodSpec] = {}
     for info in pkgutil.iter_modules(package.__path__):
-        if info.name.startswith("_") or info.name in STUDY_LAYER or info.ispkg:
+        if info.name.startswith("_") or info.name in STUDY_LAYER or info.ispkg or not _declares_methods(info):
             continue
         module = importlib.import_module(f"{package.__name__}.{info.name}")
         for spec in getattr(module, "METHODS", ()):
@@ -226,6 +228,18 @@ def method_specs(task: str | None = None) -> tuple[MethodSpec, ...]:
                 found[(t, spec.name)] = spec
     specs = sorted({id(s): s for s in found.values()}.values(), key=lambda s: (s.position, s.name))
     return tuple(s for s in specs if task is None or task in s.tasks)
+
+
+def _declares_methods(info: pkgutil.ModuleInfo) -> bool:
+    """Whether a module's source assigns ``METHODS`` at its top level (read, not imported: the scan stays cheap)."""
+    path = Path(getattr(info.module_finder, "path", "")) / f"{info.name}.py"
+    try:
+        return _METHODS_LINE.search(path.read_text(encoding="utf-8")) is not None
+    except OSError:  # not a plain source file: import it to see
+        return True
+
+
+_METHODS_LINE = re.compile(r"^METHODS\s*(?::[^=\n]*)?=", re.M)
 
 
 def method_names(task: str) -> tuple[str, ...]:

@@ -47,7 +47,7 @@ POSITION_NOT_APPLICABLE = {
     "song-eb": "needs full-state measurements of its neighbours (eq. (2))",
 }
 #: Every team-method name a cell may carry (the set-membership knob's variants run in the position study).
-_TEAM_ALL = TEAM_METHODS + tuple(m for m in SM_CONFIDENCE if m not in TEAM_METHODS)
+ALL_TEAM_METHODS = TEAM_METHODS + tuple(m for m in SM_CONFIDENCE if m not in TEAM_METHODS)
 
 
 #: Largest initial spread or noise std (m, m/s) the benchmark accepts: the squared errors stay far from overflow.
@@ -178,7 +178,7 @@ def benchmark_graph(kind: str, n_agents: int, settings: BenchmarkSettings = SETT
     (True, (16, 16))
     """
     check_settings_type(settings, BenchmarkSettings)
-    n_agents = _check_n_agents(n_agents)
+    n_agents = check_n_agents(n_agents)
     if kind == "ring":
         return graphs.ring_graph(n_agents)
     if kind != "geometric":
@@ -223,7 +223,7 @@ def switching_graphs(n_agents: int, n_steps: int, settings: BenchmarkSettings = 
     >>> G.shape, bool((G != G[0]).any())
     ((30, 16, 16), True)
     """
-    n_agents = _check_n_agents(n_agents)
+    n_agents = check_n_agents(n_agents)
     n_steps = check_positive_int(n_steps, "n_steps")
     side = np.sqrt(n_agents * np.pi * settings.sensing_range**2 / settings.mean_degree)
     rng = np.random.default_rng([n_agents, 7919])
@@ -237,7 +237,7 @@ def switching_graphs(n_agents: int, n_steps: int, settings: BenchmarkSettings = 
     return out
 
 
-def _mean_degree(kind: str, n_agents: int, settings: BenchmarkSettings) -> float:
+def mean_degree(kind: str, n_agents: int, settings: BenchmarkSettings) -> float:
     if kind == "switching":
         return float(switching_graphs(n_agents, settings.n_steps, settings).sum(-1).mean())
     return float(benchmark_graph(kind, n_agents, settings).sum(1).mean())
@@ -280,7 +280,7 @@ def floats_per_step(method: str, n_agents: int, degree: float = 2.0, sensing: st
     >>> floats_per_step("centralized", 8, sensing="position"), floats_per_step("forwarding", 8, sensing="position")
     (18.0, 8.0)
     """
-    _check_n_agents(n_agents)
+    check_n_agents(n_agents)
     degree = check_positive(degree, "degree", "(mean neighbours per agent)")
     if sensing not in SENSINGS:
         raise ValueError(f"sensing must be one of {SENSINGS}; got {sensing!r}")
@@ -292,7 +292,7 @@ def floats_per_step(method: str, n_agents: int, degree: float = 2.0, sensing: st
     }
     table.update({m: 4.0 for m in SM_CONFIDENCE})
     if method not in table:
-        raise ValueError(f"method must be one of {_TEAM_ALL + SHARED_METHODS}; got {method!r}")
+        raise ValueError(f"method must be one of {ALL_TEAM_METHODS + SHARED_METHODS}; got {method!r}")
     if sensing == "position":
         if method in POSITION_NOT_APPLICABLE:
             raise ValueError(f"method {method!r} does not apply under position-only sensing: "
@@ -301,17 +301,17 @@ def floats_per_step(method: str, n_agents: int, degree: float = 2.0, sensing: st
     return table[method]
 
 
-def _check_n_agents(n_agents: object) -> int:
+def check_n_agents(n_agents: object) -> int:
     return check_positive_int(n_agents, "n_agents", minimum=3)
 
 
-def _check_run(n_agents: object, noise: object, dropout: object, q_scale: object, runs: object,
+def check_run(n_agents: object, noise: object, dropout: object, q_scale: object, runs: object,
                settings: BenchmarkSettings, seed: object = 0) -> tuple[int, int]:
     """The arguments of a simulation, checked: ``(n_agents, runs)``."""
     if not isinstance(seed, np.random.SeedSequence):
         check_seed(seed, "seed")
     check_settings_type(settings, BenchmarkSettings)
-    n_agents = _check_n_agents(n_agents)
+    n_agents = check_n_agents(n_agents)
     if noise not in NOISES:
         raise ValueError(f"noise must be one of {NOISES}; got {noise!r}")
     if check_probability(dropout, "dropout") >= 1.0:
@@ -328,12 +328,12 @@ def _check_run(n_agents: object, noise: object, dropout: object, q_scale: object
 # noise
 
 
-def _check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[str, Any]:
+def check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[str, Any]:
     """A cell of the grid, checked: its task, method, team size, drop-out and (`full`) noise and q_scale."""
     if not isinstance(cell, Mapping):
         raise TypeError(f"{name} must be a mapping of the cell's coordinates (task, method, n_agents, noise, "
                         f"dropout, q_scale); got {type(cell).__name__}")
-    methods_of = {"team": _TEAM_ALL, "shared": SHARED_METHODS, "target": estimation.method_names("target"),
+    methods_of = {"team": ALL_TEAM_METHODS, "shared": SHARED_METHODS, "target": estimation.method_names("target"),
                   "localization": estimation.method_names("localization")}
     task = cell.get("task")
     if task not in methods_of:
@@ -368,7 +368,7 @@ def _check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[
     return cell
 
 
-def _draw(rng: np.random.Generator, noise: str, shape: tuple) -> np.ndarray:
+def draw_noise(rng: np.random.Generator, noise: str, shape: tuple) -> np.ndarray:
     """Zero-mean, unit-variance samples of the chosen distribution."""
     if noise == "gaussian":
         return rng.standard_normal(shape)
@@ -377,7 +377,7 @@ def _draw(rng: np.random.Generator, noise: str, shape: tuple) -> np.ndarray:
     return rng.standard_t(3.0, shape) / np.sqrt(3.0)  # Student-t(3) has variance 3
 
 
-def _bound_scale(noise: str, dim: int, confidence: float) -> float:
+def bound_scale(noise: str, dim: int, confidence: float) -> float:
     """``s`` such that the ellipsoid ``{w : w^T (s Cov)^{-1} w <= 1}`` is the bound given to the set-membership filter.
 
     Uniform noise: the box of half-widths ``sqrt(3 var)`` lies inside ``3 dim Cov``

@@ -21,9 +21,9 @@ from .benchmark import (
     TEAM_METHODS,
     VLAHAKIS_PHI,
     BenchmarkSettings,
-    _check_cell,
-    _mean_degree,
+    check_cell,
     floats_per_step,
+    mean_degree,
 )
 from .shared import simulate_shared
 from .tables import fitted_slopes
@@ -151,7 +151,7 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
     >>> len(rows), sorted(rows[0])[:3]
     (50, ['containment', 'cpu_s', 'floats'])
     """
-    _check_cell(cell)
+    check_cell(cell)
     check_settings_type(settings, BenchmarkSettings)
     sensing = cell.get("sensing", "full")
     seed = cell_seed(cell, SEED_AXES if sensing == "full" else (*SEED_AXES, "sensing"), base_seed)
@@ -170,7 +170,7 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
         metrics.update(rmse_view=np.full_like(metrics["rmse_own"], np.nan), containment=metrics["rmse_own"] * np.nan,
                        spread=metrics["rmse_own"] * np.nan, rmse_far=metrics["rmse_own"] * np.nan,
                        set_size=metrics["rmse_own"] * np.nan)
-    degree = _mean_degree(cell.get("graph", "ring"), int(cell["n_agents"]), settings)
+    degree = mean_degree(cell.get("graph", "ring"), int(cell["n_agents"]), settings)
     if cell["task"] in ("target", "localization"):
         floats = target_cost(cell["method"], int(cell["n_agents"]), degree, cell["task"])[0]
     else:
@@ -422,7 +422,7 @@ def cell_cost(cell: Mapping[str, Any]) -> float:
     >>> cell_cost({**base, "method": "song-eb"}) > cell_cost({**base, "method": "local"})
     True
     """
-    _check_cell(cell, full=False)
+    check_cell(cell, full=False)
     if cell["task"] != "team":  # the covariance-intersection weight search: about a team filter at N = 8 per agent
         return 200.0 * float(cell["n_agents"]) if cell["method"] == "ci-diffusion" else 1.0
     n = float(cell["n_agents"])

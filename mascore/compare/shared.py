@@ -7,7 +7,16 @@ import time
 import numpy as np
 
 from .. import consensus
-from .benchmark import REN_Q, SETTINGS, SHARED_METHODS, BenchmarkSettings, _check_run, _draw, benchmark_graph, switching_graphs
+from .benchmark import (
+    REN_Q,
+    SETTINGS,
+    SHARED_METHODS,
+    BenchmarkSettings,
+    benchmark_graph,
+    check_run,
+    draw_noise,
+    switching_graphs,
+)
 
 # --------------------------------------------------------------------------------------------
 # the shared task
@@ -61,7 +70,7 @@ def simulate_shared(
     >>> bool(best["rmse_own"].mean() <= ren["rmse_own"].mean())
     True
     """
-    n_agents, runs = _check_run(n_agents, noise, dropout, 1.0, runs, settings, seed)
+    n_agents, runs = check_run(n_agents, noise, dropout, 1.0, runs, settings, seed)
     if method not in SHARED_METHODS:
         raise ValueError(f"method must be one of {SHARED_METHODS}; got {method!r}")
     start = time.thread_time()
@@ -69,7 +78,7 @@ def simulate_shared(
     N = int(n_agents)
     lo, hi = np.log(settings.shared_var[0]), np.log(settings.shared_var[1])
     var = np.exp(init_rng.uniform(lo, hi, (runs, N)))
-    xi = np.sqrt(var)[..., None] * _draw(init_rng, noise, (runs, N, 2))  # truth is 0
+    xi = np.sqrt(var)[..., None] * draw_noise(init_rng, noise, (runs, N, 2))  # truth is 0
     P = var[..., None, None] * np.eye(2)
     adjacency = switching_graphs(N, settings.shared_steps, settings) if graph == "switching" else \
         benchmark_graph(graph, N, settings)

@@ -146,7 +146,7 @@ def _position_headline(summary):
     return pd.DataFrame(rows).set_index("method")
 
 
-def _position_only_kf_rmse(settings: BenchmarkSettings = SETTINGS) -> tuple[float, float]:
+def position_only_kf_rmse(settings: BenchmarkSettings = SETTINGS) -> tuple[float, float]:
     """Steady-state posterior position RMSE (m) of a discrete Kalman filter per agent: (position only, full state).
 
     From the DARE of one axis, ``[p, v]`` with ``C = [1 0]`` or ``C = I``: the independent reference for the

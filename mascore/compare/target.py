@@ -12,9 +12,9 @@ from .benchmark import (
     SETTINGS,
     SWITCHING_GRAPHS,
     BenchmarkSettings,
-    _check_n_agents,
-    _check_run,
     benchmark_graph,
+    check_n_agents,
+    check_run,
     switching_graphs,
 )
 
@@ -81,7 +81,7 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
     """
     from .. import fusion
 
-    n_agents = _check_n_agents(n_agents)
+    n_agents = check_n_agents(n_agents)
     s = settings
     F = double_integrator(2, s.dt).A
     Q = np.diag([s.q_pos, s.q_pos, s.q_vel, s.q_vel])
@@ -130,7 +130,7 @@ def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSe
     """
     from .. import fusion
 
-    n_agents = _check_n_agents(n_agents)
+    n_agents = check_n_agents(n_agents)
     s = settings
     A = benchmark_graph(graph, n_agents, s)
     n = 2 * n_agents
@@ -234,7 +234,7 @@ def localization_riccati(n_agents: int, graph: str = "ring",
     >>> bool(e["forwarding"] > e["centralized"] > 0), e["anchor reach, least"]   # ring: agents 2 and 6
     (True, 0.0)
     """
-    N = _check_n_agents(n_agents)
+    N = check_n_agents(n_agents)
     s = settings
     if graph not in SWITCHING_GRAPHS:
         raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
@@ -372,7 +372,7 @@ def simulate_target(
     >>> bool(0.5 < m["nees_own"].mean() < 1.5)
     True
     """
-    n_agents, runs = _check_run(n_agents, "gaussian", 0.0, 1.0, runs, settings)
+    n_agents, runs = check_run(n_agents, "gaussian", 0.0, 1.0, runs, settings)
     if task not in ("target", "localization"):
         raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
     spec = estimation.method_spec(method, task)

@@ -12,7 +12,7 @@ from .. import distributed_kf as dkf
 from .. import graphs, kalman, rendezvous, set_membership
 from ..agents import double_integrator
 from .benchmark import (
-    _TEAM_ALL,
+    ALL_TEAM_METHODS,
     POSITION_NOT_APPLICABLE,
     SENSINGS,
     SETTINGS,
@@ -20,11 +20,11 @@ from .benchmark import (
     SWITCHING_GRAPHS,
     VLAHAKIS_PHI,
     BenchmarkSettings,
-    _bound_scale,
-    _check_n_agents,
-    _check_run,
-    _draw,
     benchmark_graph,
+    bound_scale,
+    check_n_agents,
+    check_run,
+    draw_noise,
     switching_graphs,
 )
 
@@ -51,7 +51,7 @@ class _Team:
     switching: bool = False  # adjacency and laplacian are this step's (simulate_team sets them at every step)
 
 
-def _team(n_agents: int, noise: str, q_scale: float, s: BenchmarkSettings, graph: str = "ring") -> _Team:
+def team_setup(n_agents: int, noise: str, q_scale: float, s: BenchmarkSettings, graph: str = "ring") -> _Team:
     agent = double_integrator(2, s.dt)
     Q = np.diag([s.q_pos, s.q_pos, s.q_vel, s.q_vel])
     switching = graph == "switching"
@@ -235,7 +235,7 @@ def vlahakis_profile(n_agents: int = 8, phis: Sequence[float] = (-0.1, 0.0, 0.31
     A, Bbar, C = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])
     Q1, Q2 = np.eye(1) / (s.r * s.dt), np.eye(1) / (2 * s.r * s.dt)
     obs = observers.distributed_observer(A, Bbar, C, Q1=Q1, Q2=Q2, R=np.eye(1) * s.dt / s.q_vel,
-                                         adjacency=graphs.ring_graph(_check_n_agents(n_agents)))
+                                         adjacency=graphs.ring_graph(check_n_agents(n_agents)))
     G = [Bbar * np.sqrt(s.q_vel / s.dt)] * len(obs.lam)  # R^{-1/2} Bbar: the disturbance factor
     Rw = [Q1 + lam * Q2 for lam in obs.lam]
     values = observers.bound_at_fixed_phi(A, C, obs.L, obs.lam, G, Rw, np.asarray(phis, float))
@@ -312,9 +312,9 @@ class _SetMembership(_Estimator):
         super().__init__(team, x_hat0)
         s = team.s
         confidence = s.sm_confidence if confidence is None else confidence
-        self.shape = np.broadcast_to(_bound_scale("gaussian", 4, confidence) * team.P0,
+        self.shape = np.broadcast_to(bound_scale("gaussian", 4, confidence) * team.P0,
                                      (*x_hat0.shape[:2], 4, 4)).copy()
-        scale = _bound_scale(team.noise, 4, confidence)
+        scale = bound_scale(team.noise, 4, confidence)
         self.W_meas = scale * team.R
         self.W_proc = scale * team.Q_filter
 
@@ -423,9 +423,9 @@ class _SetMembershipPosition(_Estimator):
         confidence = s.sm_confidence if confidence is None else confidence
         self.model = set_membership.SetMembershipModel(
             A=team.A, G=np.eye(4), C=_C_POS, D=np.eye(2), B=team.B,
-            Q=_bound_scale(team.noise, 4, confidence) * team.Q_filter,
-            R=_bound_scale(team.noise, 2, confidence) * s.r * np.eye(2))
-        self.shape = _bound_scale(team.noise, 4, confidence) * team.P0  # (4, 4): the same for every agent
+            Q=bound_scale(team.noise, 4, confidence) * team.Q_filter,
+            R=bound_scale(team.noise, 2, confidence) * s.r * np.eye(2))
+        self.shape = bound_scale(team.noise, 4, confidence) * team.P0  # (4, 4): the same for every agent
 
     def update(self, Z, S):
         N = self.t.N
@@ -447,7 +447,7 @@ class _SetMembershipPosition(_Estimator):
         return self.shape
 
 
-def _make(method: str, team: _Team, x_hat0: np.ndarray, sensing: str = "full") -> _Estimator:
+def make_estimator(method: str, team: _Team, x_hat0: np.ndarray, sensing: str = "full") -> _Estimator:
     if sensing == "position":
         position = {"centralized": _CentralizedPosition, "local": _LocalPosition, "forwarding": _ForwardingPosition}
         if method in position:
@@ -471,7 +471,7 @@ def _make(method: str, team: _Team, x_hat0: np.ndarray, sensing: str = "full") -
         return _Forwarding(team, x_hat0)
     if method == "set-membership":
         return _SetMembership(team, x_hat0)
-    raise ValueError(f"method must be one of {_TEAM_ALL}; got {method!r}")
+    raise ValueError(f"method must be one of {ALL_TEAM_METHODS}; got {method!r}")
 
 
 #: Team methods that do not apply on the switching topology, with the reason (the chapter shows them).
@@ -558,11 +558,11 @@ def simulate_team(
     >>> bool(0.5 < m["nees_own"].mean() < 1.5)          # a correct Kalman filter is consistent
     True
     """
-    n_agents, runs = _check_run(n_agents, noise, dropout, q_scale, runs, settings, seed)
+    n_agents, runs = check_run(n_agents, noise, dropout, q_scale, runs, settings, seed)
     if sensing not in SENSINGS:
         raise ValueError(f"sensing must be one of {SENSINGS}; got {sensing!r}")
-    if method not in _TEAM_ALL:
-        raise ValueError(f"method must be one of {_TEAM_ALL}; got {method!r}")
+    if method not in ALL_TEAM_METHODS:
+        raise ValueError(f"method must be one of {ALL_TEAM_METHODS}; got {method!r}")
     if sensing == "position" and method in POSITION_NOT_APPLICABLE:
         raise ValueError(f"method {method!r} does not apply under position-only sensing: "
                          f"{POSITION_NOT_APPLICABLE[method]}")
@@ -571,7 +571,7 @@ def simulate_team(
     if graph == "switching" and method in VLAHAKIS_PHI:
         raise ValueError(f"{method} does not apply on graph='switching': "
                          f"{SWITCHING_NOT_APPLICABLE['vlahakis, vlahakis-phi0, vlahakis-phi1']}")
-    team = _team(int(n_agents), noise, float(q_scale), settings, graph)
+    team = team_setup(int(n_agents), noise, float(q_scale), settings, graph)
     topology = switching_graphs(int(n_agents), settings.n_steps, settings) > 0 if team.switching else None
     init_rng, proc_rng, meas_rng, drop_rng = np.random.default_rng(seed).spawn(4)
     N, s = team.N, settings
@@ -580,8 +580,8 @@ def simulate_team(
     if sensing == "full":
         x_hat0 = x + np.sqrt(s.p0) * init_rng.standard_normal(x.shape)
     else:  # the noise's distribution: bounded under uniform noise (the set-membership filter's initial set)
-        x_hat0 = x + np.sqrt(s.p0) * _draw(init_rng, noise, x.shape)
-    est = _make(method, team, x_hat0, sensing)
+        x_hat0 = x + np.sqrt(s.p0) * draw_noise(init_rng, noise, x.shape)
+    est = make_estimator(method, team, x_hat0, sensing)
     measured = 4 if sensing == "full" else 2  # z_ij = x_j + nu_ij, or its position [I 0] x_j + nu_ij
     cpu = 0.0  # the estimator's own work only: not its design (offline), not the simulation around it
     q_std, r_std = np.sqrt(np.diag(team.Q)), np.sqrt(s.r)
@@ -597,7 +597,7 @@ def simulate_team(
             team.laplacian = graphs.laplacian(team.adjacency)
         lost = (drop_rng.random((runs, N, N)) < dropout) & ~eye
         S = (nominal | eye) & ~lost
-        nu = r_std * _draw(meas_rng, noise, (runs, N, N, measured))
+        nu = r_std * draw_noise(meas_rng, noise, (runs, N, N, measured))
         Z = np.where(S[..., None], x[:, None, :, :measured] + nu, 0.0)
         tic = time.thread_time()
         est.update(Z, S if dropout > 0 else S[:1])
@@ -614,7 +614,7 @@ def simulate_team(
         tic = time.thread_time()
         est.predict(U)
         cpu += time.thread_time() - tic
-        w = q_std * _draw(proc_rng, noise, (runs, N, 4))
+        w = q_std * draw_noise(proc_rng, noise, (runs, N, 4))
         x = x @ team.A.T + U @ team.B.T + w
         if not np.all(np.isfinite(x)):
             raise ValueError(f"{method}: the closed loop diverged (non-finite states at step {k})")

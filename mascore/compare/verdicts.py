@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .benchmark import REN_Q, SETTINGS, SM_CONFIDENCE, VLAHAKIS_PHI
-from .tables import _position_only_kf_rmse
+from .tables import position_only_kf_rmse
 from .target import TARGET_METHODS
 from .team import vlahakis_profile
 
@@ -39,7 +39,7 @@ def compare_claims(summary, phi: dict | None = None) -> list:
     >>> [c.verdict for c in compare.compare_claims(summary)][:2]  # doctest: +SKIP
     ['holds', 'holds']
     """
-    from ..ledger import Claim
+    from ..claims import Claim
 
     s = summary
     team = s[s["task"] == "team"]
@@ -156,7 +156,7 @@ def compare_claims(summary, phi: dict | None = None) -> list:
         phi = vlahakis_profile(8)
     gammas = [v for k, v in phi.items() if k.startswith("Phi =")]
     flat = (max(gammas) - min(gammas)) / min(gammas)
-    pos_only, full = _position_only_kf_rmse()
+    pos_only, full = position_only_kf_rmse()
     vl = {m: round(float(b8.loc[m, "rmse_own_mean"] / b8.loc["local", "rmse_own_mean"]), 4)
           for m in VLAHAKIS_PHI if m in b8.index}
     kf_pos = pos_only / full
@@ -355,7 +355,7 @@ def compare_claims(summary, phi: dict | None = None) -> list:
 
 def _position_claims(summary, where: str) -> list:
     """The claims of the study ``position`` (own state at N = 8, positions only); none if the summary lacks it."""
-    from ..ledger import Claim
+    from ..claims import Claim
 
     pos = summary[(summary["study"] == "position") & (summary["task"] == "team")]
     if pos.empty:
@@ -397,7 +397,7 @@ def _position_claims(summary, where: str) -> list:
         and size[name["set-membership-c90"]] < size[name["set-membership"]] < size[name["set-membership-c99999"]],
         rule="containment == 1 under uniform noise and >= the confidence under Gaussian noise; size / RMSE > 3; "
              "size increasing in the confidence"))
-    pos_only, _ = _position_only_kf_rmse()
+    pos_only, _ = position_only_kf_rmse()
     local = rmse(g, "local")
     vl = {m: round(rmse(g, m) / local, 4) for m in VLAHAKIS_PHI}
     claims.append(Claim.qualitative(
