@@ -307,31 +307,20 @@ def _team_step(method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> 
             return kalman.predict(xu, Pu, model, u_i)
 
         return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i], est.P))
-    if method == "forwarding":
-        x_i, P_i = before.own[0, i].copy(), before.P[0, i].copy()
-        z_in = Z[0, hood, i].copy()  # (d + 1, 4): z_ji, the measurements of x_i by i and by its neighbours
-        Rinv, A, B, Qf = np.linalg.inv(team.R), team.A, team.B, team.Q_filter
+    if method == "forwarding":  # the filter's own agent step
+        filt = before.filter
+        own, messages = filt.agent_inputs(before.own[0], before.P[0], Z[0], S[0], U[0], i)
 
         def run():
-            info = np.linalg.inv(P_i)
-            P = np.linalg.inv(info + len(z_in) * Rinv)
-            P = 0.5 * (P + P.T)
-            xp = P @ (info @ x_i + Rinv @ z_in.sum(0))
-            return A @ xp + B @ u_i, A @ P @ A.T + Qf
+            return filt.agent_step(i, own, messages)
 
         return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i], est.P[0, i]))
-    if method == "vlahakis":
-        x_i = before.own[0, i].copy()
-        p_nb = before.own[0, nbrs, :2].copy()  # the neighbours' broadcast position estimates (messages)
-        z_own_pos, z_nb = z_own[:2].copy(), Z[0, i, nbrs, :2].copy()
-        gain, Phi, A, B = before.gain, before.Phi, team.A, team.B
-        a = team.adjacency[i, nbrs].copy()
+    if method == "vlahakis":  # the observer's own agent step, with the neighbours' broadcast output estimates
+        obs = before.observer
+        own, messages = obs.agent_inputs(before.own[0], Z[0, :, :, :2], U[0], i)
 
         def run():
-            p = x_i[:2]
-            coupling = a @ ((z_own_pos - z_nb) - (p - p_nb))
-            xu = x_i + gain @ ((z_own_pos - p) + Phi * coupling)
-            return (A @ xu + B @ u_i,)
+            return obs.agent_step(i, own, messages)
 
         return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i],))
     # set-membership: the filter's public one-agent model

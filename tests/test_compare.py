@@ -18,7 +18,7 @@ import pandas as pd
 import pytest
 import scipy.linalg as sla
 
-from mascore import compare, consensus, sweep
+from mascore import compare, consensus, graphs, sweep
 from mascore.reproduce import main, results_dir
 
 CPU = "cpu_s"  # the only column that depends on the machine and the moment
@@ -283,12 +283,12 @@ def test_vlahakis_rmse_matches_its_error_covariance():
     """
     s = compare.SETTINGS
     N = 5
-    L, Phi = compare._vlahakis_gains(compare.graphs.ring_graph(N), s.q_vel, s.r, s.dt)
+    L, Phi = compare._vlahakis_gains(graphs.ring_graph(N), s.q_vel, s.r, s.dt)
     G = s.dt * L                                          # (2, 1)
     C = np.array([[1.0, 0.0]])
     A = np.array([[1.0, s.dt], [0.0, 1.0]])
-    adjacency = compare.graphs.ring_graph(N)
-    lap = compare.graphs.laplacian(adjacency)
+    adjacency = graphs.ring_graph(N)
+    lap = graphs.laplacian(adjacency)
     M = np.eye(2 * N) - np.kron(np.eye(N) + Phi * lap, G @ C)
     deg = adjacency.sum(1)
     noise = np.kron(np.diag(s.r * ((1 + Phi * deg) ** 2 + Phi**2 * (adjacency**2).sum(1))), G @ G.T)
@@ -330,7 +330,7 @@ def test_set_membership_centre_is_the_measurement_with_full_state_sensing():
 def test_vlahakis_gain_follows_the_filters_q():
     """More process noise in the filter's Q: a larger observer gain (the Q knob is not inverted)."""
     s = compare.SETTINGS
-    gains = [compare._Vlahakis(compare.team_setup(6, "gaussian", q, s), np.zeros((1, 6, 4))).gain[0, 0]
+    gains = [compare._Vlahakis(compare.team_setup(6, "gaussian", q, s), np.zeros((1, 6, 4))).observer.gain[0, 0]
              for q in (0.1, 1.0, 10.0)]
     assert gains[0] < gains[1] < gains[2]
 

@@ -11,6 +11,7 @@ import numpy as np
 from .. import distributed_kf as dkf
 from .. import graphs, kalman, rendezvous, set_membership
 from ..agents import double_integrator
+from ..own_state import CentralizedOutputFilter, OwnStateForwardingFilter
 from .benchmark import (
     ALL_TEAM_METHODS,
     POSITION_NOT_APPLICABLE,
@@ -246,61 +247,46 @@ def vlahakis_profile(n_agents: int = 8, phis: Sequence[float] = (-0.1, 0.0, 0.31
 
 
 class _Vlahakis(_Estimator):
+    """The Vlahakis observer (:class:`mascore.observers.DiscreteNetworkObserver`) with its gains from the LMI."""
+
     def __init__(self, team: _Team, x_hat0: np.ndarray, phi: float | None = None) -> None:
         super().__init__(team, x_hat0)
         s = team.s
+        from .. import observers
+
         L, Phi = _vlahakis_gains(team.adjacency, team.Q_filter[2, 2], s.r, s.dt, phi)  # the filter's Q
-        self.gain = s.dt * np.kron(L, np.eye(2))  # (4, 2): per-axis gain on [p; v]
-        self.Phi = Phi
+        # (4, 2): per-axis gain on [p; v]; the outputs are the positions
+        self.observer = observers.DiscreteNetworkObserver(s.dt * np.kron(L, np.eye(2)), Phi, team.adjacency, team.A,
+                                                          team.B, _C_POS)
 
     def update(self, Z, S):
-        N = self.t.N
-        p_hat = self.own[..., :2]
-        z_pos = Z[..., :2]                          # (R, N, N, 2): z_ij positions
-        own_z = z_pos[:, np.arange(N), np.arange(N)]
-        links = self.t.adjacency * S               # links delivered at this step, (R, N, N)
-        rel_meas = own_z[:, :, None] - z_pos       # y_i - y_j measured
-        rel_est = p_hat[:, :, None] - p_hat[:, None]
-        coupling = np.einsum("rij,rijd->rid", links, rel_meas - rel_est)
-        innovation = (own_z - p_hat) + self.Phi * coupling
-        self.own = self.own + innovation @ self.gain.T
+        self.own = self.observer.update(self.own, Z[..., :2], S)  # z_ij positions; the links delivered
 
     def predict(self, U):
-        self.own = self.own @ self.t.A.T + U @ self.t.B.T
+        self.own = self.observer.predict(self.own, U)
 
 
 class _Forwarding(_Estimator):
-    """Measurement forwarding: agent i corrects with its own and its neighbours' measurements of x_i.
+    """Measurement forwarding on the own states (:class:`mascore.own_state.OwnStateForwardingFilter`).
 
     With every agent measuring its own full state and the controls known, the team
     filter splits into one filter per agent, and this one-hop filter *is* the
-    centralized one (the test checks it run by run). Information form, one
-    covariance per agent and run (drop-outs change the count of measurements).
+    centralized one (the test checks it run by run). One covariance per agent and run
+    (drop-outs change the count of measurements).
     """
 
     def __init__(self, team: _Team, x_hat0: np.ndarray, H: np.ndarray | None = None,
                  R: np.ndarray | None = None) -> None:
         super().__init__(team, x_hat0)
         self.P = np.broadcast_to(team.P0, (*x_hat0.shape[:2], 4, 4)).copy()
-        H = np.eye(4) if H is None else H            # each measurement z_ji = H x_i + nu_ji
-        Rinv = np.linalg.inv(team.R if R is None else R)
-        self.info = H.T @ Rinv @ H                   # (4, 4): the information of one measurement
-        self.to_state = Rinv.T @ H                   # (m, 4): z @ to_state = (H^T R^-1 z)^T
+        self.filter = OwnStateForwardingFilter(team.A, team.B, team.Q_filter, np.eye(4) if H is None else H,
+                                               team.R if R is None else R)  # each measurement z_ji = H x_i + nu_ji
 
     def update(self, Z, S):
-        # measurements of x_i: z_ji for the j that measured i (S[j, i]); Z[r, j, i] = H x_i + nu_ji
-        St = np.swapaxes(np.broadcast_to(S, (Z.shape[0], *S.shape[1:])), -1, -2)  # St[r, i, j] = S[r, j, i]
-        count = St.sum(-1).astype(float)                                        # (R, N)
-        zsum = np.einsum("rij,rjid->rid", St, Z)                                 # sum_j z_ji
-        prior_info = np.linalg.inv(self.P)
-        P = np.linalg.inv(prior_info + count[..., None, None] * self.info)
-        self.P = 0.5 * (P + np.swapaxes(P, -1, -2))
-        rhs = np.einsum("...ij,...j->...i", prior_info, self.own) + zsum @ self.to_state
-        self.own = np.einsum("...ij,...j->...i", self.P, rhs)
+        self.own, self.P = self.filter.update(self.own, self.P, Z, S)
 
     def predict(self, U):
-        self.own = self.own @ self.t.A.T + U @ self.t.B.T
-        self.P = self.t.A @ self.P @ self.t.A.T + self.t.Q_filter
+        self.own, self.P = self.filter.predict(self.own, self.P, U)
 
     @property
     def own_cov(self):
@@ -346,48 +332,27 @@ _C_POS.setflags(write=False)
 
 
 class _CentralizedPosition(_Estimator):
-    """One Kalman filter over the team state ``(4N,)`` with every position measurement (information form).
+    """The centre's Kalman filter of the team with every position measurement.
 
-    ``P^{-1} = P^-^{-1} + H^T R^{-1} H`` with one row block ``[0 .. C .. 0]`` per delivered
-    ``z_ij`` (block j), ``R = r I``; ``x = x^- + P H^T R^{-1} (z - H x^-)``. One team covariance
-    ``(B, 4N, 4N)``: shared by the runs (B = 1) or one per run when links drop.
+    :class:`mascore.own_state.CentralizedOutputFilter`, with ``C = [I 0]``.
     """
 
     link_borne = False
 
     def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
         super().__init__(team, x_hat0)
-        N = team.N
-        self.A_team = np.kron(np.eye(N), team.A)
-        self.Q_team = np.kron(np.eye(N), team.Q_filter)
-        self.P = np.kron(np.eye(N), team.P0)[None]
-        self.CtC = _C_POS.T @ _C_POS / team.s.r  # (4, 4): information of one position measurement
+        self.filter = CentralizedOutputFilter(team.A, team.B, team.Q_filter, _C_POS, team.s.r, team.N)
+        self.P = np.kron(np.eye(team.N), team.P0)[None]
 
     def update(self, Z, S):
-        R_, N = self.own.shape[:2]
-        count = S.sum(-2).astype(float)                                   # (B, N): measurements of x_j
-        info = np.linalg.inv(self.P)
-        if info.shape[0] != count.shape[0]:                               # links drop per run: one P per run
-            info = np.broadcast_to(info, (count.shape[0], *info.shape[1:])).copy()
-        diag = count[..., None, None] * self.CtC                          # (B, N, 4, 4)
-        idx = np.arange(N)
-        blocks = info.reshape(-1, N, 4, N, 4)
-        blocks[:, idx, :, idx, :] += np.moveaxis(diag, 1, 0)              # H^T R^-1 H is block-diagonal
-        P = np.linalg.inv(blocks.reshape(info.shape))
-        self.P = 0.5 * (P + np.swapaxes(P, -1, -2))
-        resid = np.where(S[..., None], Z - self.own[:, None, :, :2], 0.0)  # z_ij - C x_j, (R, N, N, 2)
-        rhs = resid.sum(1) @ _C_POS / self.t.s.r                          # H^T R^-1 (z - H x), (R, N, 4)
-        self.own = self.own + (self.P @ rhs.reshape(R_, 4 * N, 1)).reshape(R_, N, 4)
+        self.own, self.P = self.filter.update(self.own, self.P, Z, S)
 
     def predict(self, U):
-        self.own = self.own @ self.t.A.T + U @ self.t.B.T
-        self.P = self.A_team @ self.P @ self.A_team.T + self.Q_team
+        self.own, self.P = self.filter.predict(self.own, self.P, U)
 
     @property
     def own_cov(self):
-        N = self.t.N
-        idx = np.arange(N)
-        return np.moveaxis(self.P.reshape(-1, N, 4, N, 4)[:, idx, :, idx, :], 0, 1)  # (B, N, 4, 4)
+        return self.filter.own_covariances(self.P)  # (B, N, 4, 4)
 
 
 class _LocalPosition(_Local):
