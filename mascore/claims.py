@@ -249,6 +249,18 @@ def _normalized_tolerance(claim: Claim) -> dict:
 def worst_deviation(paper_value: Any, value: Any, kind: str) -> float:
     """Largest deviation of `value` from `paper_value` over their entries: absolute, or relative (``kind="rel"``).
 
+    Parameters
+    ----------
+    paper_value, value : float or array_like
+        The paper's number(s) and ours, of one shape.
+    kind : {"abs", "rel"}
+        Absolute deviation, or relative to ``|paper_value|``.
+
+    Returns
+    -------
+    float
+        The largest deviation.
+
     Examples
     --------
     >>> from mascore.claims import worst_deviation

@@ -54,6 +54,13 @@ STUDY_LAYER = frozenset({"agent_cost", "compare", "ledger", "papers", "plotting"
 class GaussianState:
     """A Gaussian estimate: mean ``(..., n)`` and covariance ``(..., n, n)`` (per agent: ``(..., N, n)``).
 
+    Parameters
+    ----------
+    mean : ndarray
+        The mean.
+    covariance : ndarray
+        The covariance.
+
     Examples
     --------
     >>> import numpy as np
@@ -70,7 +77,12 @@ class GaussianState:
 class SetState:
     """A set-membership estimate: the ellipsoid ``{x: (x - c)^T E^-1 (x - c) <= 1}``.
 
-    The centre c is ``(..., n)``, the shape matrix E ``(..., n, n)``.
+    Parameters
+    ----------
+    centre : ndarray
+        The centre c, ``(..., n)``.
+    shape : ndarray
+        The shape matrix E, ``(..., n, n)``, positive definite.
 
     Examples
     --------
@@ -115,17 +127,25 @@ class Estimator(Protocol):
     own data and its neighbours' messages of one step out of a team-wide state;
     ``agent_step(i, own_data, messages)`` is agent i's step alone; ``messages()``
     declares what an agent sends per step.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        None: a protocol is a type to check against (``isinstance``), not a class to build.
+
+    Examples
+    --------
+    >>> from mascore import estimation, fusion
+    >>> from mascore.compare import target_model
+    >>> isinstance(fusion.ConsensusOnInformationFilter(target_model(4), 2), estimation.Estimator)
+    True
     """
 
-    def predict(self, *args: Any, **kwargs: Any) -> Any: ...
-
-    def update(self, *args: Any, **kwargs: Any) -> Any: ...
-
-    def agent_inputs(self, *args: Any, **kwargs: Any) -> tuple[Any, Sequence[Any]]: ...
-
-    def agent_step(self, i: int, own_data: Any, messages: Sequence[Any]) -> tuple: ...
-
-    def messages(self) -> tuple[Message, ...]: ...
+    predict: Callable[..., Any]
+    update: Callable[..., Any]
+    agent_inputs: Callable[..., tuple[Any, Sequence[Any]]]
+    agent_step: Callable[..., tuple]
+    messages: Callable[..., tuple[Message, ...]]
 
 
 @dataclass(frozen=True)
@@ -245,6 +265,16 @@ _METHODS_LINE = re.compile(r"^METHODS\s*(?::[^=\n]*)?=", re.M)
 def method_names(task: str) -> tuple[str, ...]:
     """The names of the methods of `task`, in table order (:func:`method_specs`).
 
+    Parameters
+    ----------
+    task : str
+        The scenario.
+
+    Returns
+    -------
+    tuple of str
+        The names.
+
     Examples
     --------
     >>> from mascore.estimation import method_names
@@ -256,6 +286,18 @@ def method_names(task: str) -> tuple[str, ...]:
 
 def method_spec(name: str, task: str | None = None) -> MethodSpec:
     """The spec of method `name` (of `task`, if given), by name.
+
+    Parameters
+    ----------
+    name : str
+        The method's name.
+    task : str, optional
+        The scenario (needed when methods of several tasks share the name).
+
+    Returns
+    -------
+    MethodSpec
+        Its spec.
 
     Raises
     ------

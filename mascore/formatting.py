@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["format_number", "format_value", "label"]
+__all__ = ["format_number", "format_value"]
 
 
 _SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079")
@@ -122,7 +122,7 @@ def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = ""
             text = format_value(v, digits, max_items)
             return "(" + text + ")" if isinstance(v, dict) else text
 
-        items = [f"{label(k)} = {item(v)}" for k, v in list(value.items())[:2 * max_items]]
+        items = [f"{_label(k)} = {item(v)}" for k, v in list(value.items())[:2 * max_items]]
         more = len(value) > 2 * max_items
         return "; ".join(items) + ("; \u2026" if more else "") + (f" ({unit})" if unit else "")
     if isinstance(value, list | tuple | np.ndarray):
@@ -135,6 +135,6 @@ def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = ""
     return str(value)
 
 
-def label(key: Any) -> str:
+def _label(key: Any) -> str:
     """A mapping key as text: underscores as spaces."""
     return str(key).replace("_", " ")

@@ -1263,7 +1263,40 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         received = super()._agent_messages(own, xm, Pm, z, i)
         return (received[0] if self.measurements == "neighbourhood" else (), (Om, q))
 
-    def agent_inputs(self, x, P, z, i):
+    def agent_inputs(self, x: ArrayLike, P: ArrayLike, z: ArrayLike, i: int) -> tuple[dict, tuple]:
+        """Agent i's own data and its neighbours' messages of one step (see :meth:`_NetworkFilter.agent_inputs`).
+
+        With ``measurements="own"`` the incremental step uses agent i's own measurement only.
+
+        Parameters
+        ----------
+        x : (N, n) array_like
+            Every agent's estimate before the step.
+        P : (N, n, n) array_like
+            Their covariances.
+        z : (sum q_i,) array_like
+            The step's stacked measurement.
+        i : int
+            The agent.
+
+        Returns
+        -------
+        own : dict
+            Agent i's own data.
+        messages : tuple
+            The neighbours' measurements, then their incremental estimates as information pairs.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
+        ...                                   graphs.ring_graph(3))
+        >>> filt = fusion.CovarianceIntersectionFilter(model)
+        >>> own, messages = filt.agent_inputs(np.zeros((3, 2)), np.broadcast_to(np.eye(2), (3, 2, 2)), np.ones(6), 0)
+        >>> len(messages[0]), messages[1][0].shape                  # two measurements; two information matrices
+        (2, (2, 2, 2))
+        """
         own, messages = super().agent_inputs(x, P, z, i)
         if self.measurements == "own":  # the incremental step with its own measurement only
             own.update(hood=np.array([i]), index=0, HtRinv=(own["HtRinv"][own["index"]],), S=own["I"])

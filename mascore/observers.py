@@ -1318,6 +1318,15 @@ class DiscreteNetworkObserver:
         -------
         (R, N, n) ndarray
             The corrected estimates.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs, observers
+        >>> obs = observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
+        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
+        >>> obs.update(np.zeros((1, 3, 2)), np.ones((1, 3, 3, 1)), np.ones((1, 3, 3))).shape
+        (1, 3, 2)
         """
         N = x_hat.shape[-2]
         p_hat = x_hat @ self.C.T
@@ -1330,7 +1339,29 @@ class DiscreteNetworkObserver:
         return x_hat + innovation @ self.gain.T
 
     def predict(self, x_hat: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """``x_i <- A x_i + B u_i`` for every agent: ``(R, N, n)`` from ``(R, N, n)`` and inputs ``(R, N, k)``."""
+        """The prediction ``x_i <- A x_i + B u_i`` of every agent.
+
+        Parameters
+        ----------
+        x_hat : (R, N, n) ndarray
+            The estimates.
+        u : (R, N, k) ndarray
+            The inputs applied.
+
+        Returns
+        -------
+        (R, N, n) ndarray
+            The predictions.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs, observers
+        >>> obs = observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
+        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
+        >>> obs.predict(np.ones((1, 3, 2)), np.zeros((1, 3, 1)))[0, 0]
+        array([1.1, 1. ])
+        """
         return x_hat @ self.A.T + u @ self.B.T
 
     def agent_inputs(self, x_hat: np.ndarray, z: np.ndarray, u: np.ndarray, i: int) -> tuple[dict, tuple]:
@@ -1346,6 +1377,24 @@ class DiscreteNetworkObserver:
             The inputs applied.
         i : int
             The agent.
+
+        Returns
+        -------
+        own : dict
+            ``x``, ``z`` (its own output measurement), ``z_nbrs`` (its measurements of its neighbours),
+            ``u``, ``a`` (its weights of its neighbours).
+        messages : tuple
+            One round: the neighbours' broadcast output estimates ``C x_hat_j``, ``(d, p)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs, observers
+        >>> obs = observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
+        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
+        >>> own, messages = obs.agent_inputs(np.zeros((3, 2)), np.ones((3, 3, 1)), np.zeros((3, 1)), 0)
+        >>> messages[0].shape                                  # two neighbours, one output each
+        (2, 1)
         """
         nbrs = np.flatnonzero(self.adjacency[i])
         own = {"x": x_hat[i].copy(), "z": z[i, i].copy(), "z_nbrs": z[i, nbrs].copy(), "u": u[i].copy(),
@@ -1353,12 +1402,56 @@ class DiscreteNetworkObserver:
         return own, ((x_hat[nbrs] @ self.C.T).copy(),)
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray]:
-        """Agent i's correction with its neighbours' output estimates, then its prediction: ``(x_i,)``."""
+        """Agent i's correction with its neighbours' output estimates, then its prediction.
+
+        Parameters
+        ----------
+        i : int
+            The agent.
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        tuple of ndarray
+            ``(x_i,)``, its estimate after the step, ``(n,)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs, observers
+        >>> obs = observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
+        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
+        >>> x, z, u = np.zeros((3, 2)), np.ones((3, 3, 1)), np.zeros((3, 1))
+        >>> x_i, = obs.agent_step(1, *obs.agent_inputs(x, z, u, 1))
+        >>> bool(np.allclose(x_i, obs.predict(obs.update(x[None], z[None], np.ones((1, 3, 3))), u[None])[0, 1]))
+        True
+        """
         p = self.C @ own["x"]
         coupling = own["a"] @ ((own["z"] - own["z_nbrs"]) - (p - messages[0]))
         xu = own["x"] + self.gain @ ((own["z"] - p) + self.coupling * coupling)
         return (self.A @ xu + self.B @ own["u"],)
 
     def messages(self, i: int = 0) -> tuple:
-        """Agent i broadcasts its output estimate ``C x_hat_i`` (p floats) per step."""
+        """What agent i sends per step: its output estimate ``C x_hat_i``, p floats (a broadcast).
+
+        Parameters
+        ----------
+        i : int
+            The agent (all send the same).
+
+        Returns
+        -------
+        tuple of Message
+            The message.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs, observers
+        >>> obs = observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
+        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
+        >>> obs.messages()[0].floats
+        1.0
+        """
         return (Message("output estimate C x_i", float(self.C.shape[0])),)

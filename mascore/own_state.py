@@ -107,6 +107,16 @@ class OwnStateForwardingFilter:
         -------
         x, P : ndarray
             The corrected estimates ``(R, N, n)`` and covariances ``(R, N, n, n)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import OwnStateForwardingFilter
+        >>> f = OwnStateForwardingFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1))
+        >>> x, P, S = np.zeros((1, 2, 1)), np.ones((1, 2, 1, 1)), np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])      # z_ji = 1 for agent 0, 3 for agent 1
+        >>> f.update(x, P, Z, S)[0][0, :, 0]
+        array([0.66666667, 2.        ])
         """
         St = np.swapaxes(np.broadcast_to(S, (Z.shape[0], *S.shape[1:])), -1, -2)  # St[r, i, j] = S[r, j, i]
         count = St.sum(-1).astype(float)                                        # (R, N)
@@ -118,7 +128,32 @@ class OwnStateForwardingFilter:
         return np.einsum("...ij,...j->...i", P, rhs), P
 
     def predict(self, x: np.ndarray, P: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``x_i <- A x_i + B u_i``, ``P_i <- A P_i A^T + Q`` for every agent and run."""
+        """The prediction ``x_i <- A x_i + B u_i``, ``P_i <- A P_i A^T + Q`` of every agent and run.
+
+        Parameters
+        ----------
+        x : (R, N, n) ndarray
+            The estimates.
+        P : (R, N, n, n) ndarray
+            Their covariances.
+        u : (R, N, k) ndarray
+            The inputs applied.
+
+        Returns
+        -------
+        x, P : ndarray
+            The predictions, same shapes.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import OwnStateForwardingFilter
+        >>> f = OwnStateForwardingFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1))
+        >>> x, P, S = np.zeros((1, 2, 1)), np.ones((1, 2, 1, 1)), np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])      # z_ji = 1 for agent 0, 3 for agent 1
+        >>> f.predict(x, P, np.ones((1, 2, 1)))[0][0, :, 0]
+        array([1., 1.])
+        """
         return x @ self.A.T + u @ self.B.T, self.A @ P @ self.A.T + self.Q
 
     def agent_inputs(self, x: np.ndarray, P: np.ndarray, Z: np.ndarray, S: np.ndarray, u: np.ndarray,
@@ -139,13 +174,57 @@ class OwnStateForwardingFilter:
             The inputs applied at the step.
         i : int
             The agent.
+
+        Returns
+        -------
+        own : dict
+            Its prior ``x``, ``P``, its input ``u``, its own measurement ``z`` and its ``index`` among
+            the senders of measurements of x_i.
+        messages : tuple
+            One round: the neighbours' delivered measurements ``z_ji`` of x_i, ``(c_i - 1, m)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import OwnStateForwardingFilter
+        >>> f = OwnStateForwardingFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1))
+        >>> x, P, S = np.zeros((1, 2, 1)), np.ones((1, 2, 1, 1)), np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])      # z_ji = 1 for agent 0, 3 for agent 1
+        >>> own, messages = f.agent_inputs(x[0], P[0], Z[0], S[0], np.zeros((2, 1)), 1)
+        >>> messages[0]                                            # agent 0's measurement of agent 1
+        array([[3.]])
         """
         senders = np.flatnonzero(S[:, i])  # i and the neighbours whose z_ji reached it, ascending
         return ({"x": x[i].copy(), "P": P[i].copy(), "u": u[i].copy(), "index": int(np.flatnonzero(senders == i)[0]),
                  "z": Z[i, i].copy()}, (Z[senders[senders != i], i].copy(),))
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's correction with its own and the received measurements of x_i, then its prediction."""
+        """Agent i's correction with its own and the received measurements of x_i, then its prediction.
+
+        Parameters
+        ----------
+        i : int
+            The agent.
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        x_i, P_i : ndarray
+            Its predicted estimate ``(n,)`` and covariance ``(n, n)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import OwnStateForwardingFilter
+        >>> f = OwnStateForwardingFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1))
+        >>> x, P, S = np.zeros((1, 2, 1)), np.ones((1, 2, 1, 1)), np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])      # z_ji = 1 for agent 0, 3 for agent 1
+        >>> u = np.zeros((1, 2, 1))
+        >>> x_i, P_i = f.agent_step(1, *f.agent_inputs(x[0], P[0], Z[0], S[0], u[0], 1))
+        >>> bool(np.allclose(x_i, f.predict(*f.update(x, P, Z, S), u)[0][0, 1]))
+        True
+        """
         z_in = np.insert(messages[0], own["index"], own["z"], axis=0)
         info = np.linalg.inv(own["P"])
         P = np.linalg.inv(info + len(z_in) * self.information)
@@ -154,7 +233,28 @@ class OwnStateForwardingFilter:
         return self.A @ x + self.B @ own["u"], self.A @ P @ self.A.T + self.Q
 
     def messages(self, i: int = 0) -> tuple[Message, ...]:
-        """Agent i sends each neighbour its measurement of that neighbour, m floats (``m d`` in all)."""
+        """What agent i sends per step: to each neighbour, its measurement of that neighbour (m floats).
+
+        Parameters
+        ----------
+        i : int
+            The agent (all send the same).
+
+        Returns
+        -------
+        tuple of Message
+            The message (floats per neighbour).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import OwnStateForwardingFilter
+        >>> f = OwnStateForwardingFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1))
+        >>> x, P, S = np.zeros((1, 2, 1)), np.ones((1, 2, 1, 1)), np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])      # z_ji = 1 for agent 0, 3 for agent 1
+        >>> f.messages()[0].floats
+        1.0
+        """
         return (Message("measurement z_ij of each neighbour j", float(self.to_state.shape[0])),)
 
 
@@ -237,6 +337,16 @@ class CentralizedOutputFilter:
         -------
         x, P : ndarray
             ``(R, N, n)``, and ``(B', N n, N n)`` with ``B'`` the runs of `S` (one covariance per run when links drop).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import CentralizedOutputFilter
+        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
+        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
+        >>> f.update(x, P, Z, S)[0][0, :, 0]
+        array([0.66666667, 2.        ])
         """
         R_, N, n = x.shape
         count = S.sum(-2).astype(float)                                   # (B, N): measurements of x_j
@@ -254,25 +364,150 @@ class CentralizedOutputFilter:
         return x + (P @ rhs.reshape(R_, n * N, 1)).reshape(R_, N, n), P
 
     def predict(self, x: np.ndarray, P: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The team's prediction: ``(R, N, n)`` states and ``(B, N n, N n)`` covariance."""
+        """The team's prediction.
+
+        Parameters
+        ----------
+        x : (R, N, n) ndarray
+            The states.
+        P : (B, N n, N n) ndarray
+            The team covariance.
+        u : (R, N, k) ndarray
+            The inputs applied.
+
+        Returns
+        -------
+        x, P : ndarray
+            The predictions, same shapes.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import CentralizedOutputFilter
+        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
+        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
+        >>> f.predict(x, P, np.ones((1, 2, 1)))[0][0, :, 0]
+        array([1., 1.])
+        """
         return x @ self.A.T + u @ self.B.T, self.A_team @ P @ self.A_team.T + self.Q_team
 
     def own_covariances(self, P: np.ndarray) -> np.ndarray:
-        """Agent i's own block ``(n, n)`` of the team covariance, for every agent: ``(B, N, n, n)``."""
+        """Agent i's own block of the team covariance, for every agent.
+
+        Parameters
+        ----------
+        P : (B, N n, N n) ndarray
+            The team covariance.
+
+        Returns
+        -------
+        (B, N, n, n) ndarray
+            The diagonal blocks.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import CentralizedOutputFilter
+        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
+        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
+        >>> f.own_covariances(2 * P)[0, :, 0, 0]
+        array([2., 2.])
+        """
         N, n = self.n_agents, self.A.shape[0]
         idx = np.arange(N)
         return np.moveaxis(P.reshape(-1, N, n, N, n)[:, idx, :, idx, :], 0, 1)
 
     def agent_inputs(self, x: np.ndarray, P: np.ndarray, Z: np.ndarray, S: np.ndarray, u: np.ndarray,
                      i: int) -> tuple[dict, tuple]:
-        """The centre's data of one step (the whole filter's: it is the busiest node); no message arrives."""
+        """The centre's data of one step (the whole filter's: it is the busiest node).
+
+        Parameters
+        ----------
+        x : (N, n) ndarray
+            The team's states before the step (one run).
+        P : (N n, N n) ndarray
+            The team covariance.
+        Z : (N, N, p) ndarray
+            The step's measurements.
+        S : (N, N) bool ndarray
+            The delivered links.
+        u : (N, k) ndarray
+            The inputs applied.
+        i : int
+            Unused: the centre's step is the same for every agent.
+
+        Returns
+        -------
+        own : dict
+            The team's data, with a run axis of one.
+        messages : tuple
+            Empty: the measurements are part of the centre's data.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import CentralizedOutputFilter
+        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
+        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
+        >>> own, messages = f.agent_inputs(x[0], P[0], Z[0], S[0], np.zeros((2, 1)), 0)
+        >>> own["x"].shape, messages
+        ((1, 2, 1), ())
+        """
         return {"x": x[None].copy(), "P": P[None].copy(), "Z": Z[None].copy(), "S": S[None].copy(),
                 "u": u[None].copy()}, ()
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """The centre's step: the whole team's correction and prediction."""
+        """The centre's step: the whole team's correction and prediction.
+
+        Parameters
+        ----------
+        i : int
+            Unused (the centre).
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        x, P : ndarray
+            The team's predicted states ``(1, N, n)`` and covariance ``(1, N n, N n)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import CentralizedOutputFilter
+        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
+        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
+        >>> x1, P1 = f.agent_step(0, *f.agent_inputs(x[0], P[0], Z[0], S[0], np.zeros((2, 1)), 0))
+        >>> x1[0, :, 0]
+        array([0.66666667, 2.        ])
+        """
         return self.predict(*self.update(own["x"], own["P"], own["Z"], own["S"]), own["u"])
 
     def messages(self, i: int = 0) -> tuple[Message, ...]:
-        """Each agent sends the centre its measurements: p floats per agent it measures (itself included)."""
+        """What each agent sends the centre per step: p floats per agent it measures (itself included).
+
+        Parameters
+        ----------
+        i : int
+            The agent (all send the same).
+
+        Returns
+        -------
+        tuple of Message
+            The message (floats per agent measured).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import CentralizedOutputFilter
+        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
+        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
+        >>> f.messages()[0].floats
+        1.0
+        """
         return (Message("measurements z_ij of itself and its neighbours, to the centre", float(self.C.shape[0])),)
