@@ -120,94 +120,45 @@ __all__ = [
     "vlahakis_profile",
 ]
 
-#: Where each name of the comparison lives (imported on first use: ``import mascore.compare`` is cheap).
-_WHERE = {
-    'BenchmarkSettings': 'benchmark',
-    'CORE_METHODS': 'benchmark',
-    'CompareResult': 'grid',
-    'GRAPHS': 'benchmark',
-    'LOCALIZATION_NOT_APPLICABLE': 'target',
-    'NODE_ORDER': 'cost',
-    'NOISES': 'benchmark',
-    'POSITION_METHODS': 'benchmark',
-    'POSITION_NOT_APPLICABLE': 'benchmark',
-    'REN_Q': 'benchmark',
-    'SEED_AXES': 'benchmark',
-    'SENSINGS': 'benchmark',
-    'SETTINGS': 'benchmark',
-    'SHARED_METHODS': 'benchmark',
-    'SM_CONFIDENCE': 'benchmark',
-    'SWITCHING_GRAPHS': 'benchmark',
-    'SWITCHING_NOT_APPLICABLE': 'team',
-    'TARGET_METHODS': 'target',
-    'TARGET_NOT_APPLICABLE': 'target',
-    'TEAM_METHODS': 'benchmark',
-    'VLAHAKIS_PHI': 'benchmark',
-    'WHOLE_TEAM': 'cost',
-    '_C_POS': 'team',
-    '_Centralized': 'team',
-    '_CentralizedPosition': 'team',
-    '_Estimator': 'team',
-    '_Forwarding': 'team',
-    '_ForwardingPosition': 'team',
-    '_Local': 'team',
-    '_LocalPosition': 'team',
-    '_MAX_SCALE': 'benchmark',
-    '_SetMembership': 'team',
-    '_SetMembershipPosition': 'team',
-    '_Song': 'team',
-    'ALL_TEAM_METHODS': 'benchmark',
-    '_Team': 'team',
-    '_Vlahakis': 'team',
-    '_accumulate': 'team',
-    '_average': 'shared',
-    'bound_scale': 'benchmark',
-    'check_cell': 'benchmark',
-    'check_n_agents': 'benchmark',
-    'check_run': 'benchmark',
-    '_concat': 'plots',
-    'draw_noise': 'benchmark',
-    '_localization_switching': 'target',
-    'make_estimator': 'team',
-    '_mean_ci': 'grid',
-    'mean_degree': 'benchmark',
-    '_order': 'plots',
-    '_own_blocks': 'team',
-    '_plain_ticks': 'plots',
-    '_plt': 'plots',
-    '_position_claims': 'verdicts',
-    '_position_headline': 'tables',
-    'position_only_kf_rmse': 'tables',
-    'team_setup': 'team',
-    '_vlahakis_gains': 'team',
-    'benchmark_graph': 'benchmark',
-    'cell_cost': 'grid',
-    'compare_claims': 'verdicts',
-    'fitted_slopes': 'tables',
-    'floats_per_step': 'benchmark',
-    'grid_cells': 'grid',
-    'headline': 'tables',
-    'localization_model': 'target',
-    'localization_riccati': 'target',
-    'node_cost': 'cost',
-    'node_costs': 'cost',
-    'plot_cost': 'plots',
-    'plot_pareto': 'plots',
-    'plot_robustness': 'plots',
-    'run': 'grid',
-    'run_cell': 'grid',
-    'run_compare': 'grid',
-    'simulate_shared': 'shared',
-    'simulate_target': 'target',
-    'simulate_team': 'team',
-    'summarize': 'grid',
-    'switching_graphs': 'benchmark',
-    'target_cost': 'target',
-    'target_filter': 'target',
-    'target_methods': 'target',
-    'target_model': 'target',
-    'vlahakis_profile': 'team',
+#: The submodule of each name of the comparison (imported on first use: ``import mascore.compare`` is cheap).
+_NAMES = {
+    'benchmark': (
+        'ALL_TEAM_METHODS', 'BenchmarkSettings', 'CORE_METHODS', 'GRAPHS', 'NOISES', 'POSITION_METHODS',
+        'POSITION_NOT_APPLICABLE', 'REN_Q', 'SEED_AXES', 'SENSINGS', 'SETTINGS', 'SHARED_METHODS', 'SM_CONFIDENCE',
+        'SWITCHING_GRAPHS', 'TEAM_METHODS', 'VLAHAKIS_PHI', '_MAX_SCALE', 'benchmark_graph', 'bound_scale',
+        'check_cell', 'check_n_agents', 'check_run', 'draw_noise', 'floats_per_step', 'mean_degree', 'switching_graphs'
+    ),
+    'team': (
+        'SWITCHING_NOT_APPLICABLE', '_C_POS', '_Centralized', '_CentralizedPosition', '_Estimator', '_Forwarding',
+        '_ForwardingPosition', '_Local', '_LocalPosition', '_SetMembership', '_SetMembershipPosition', '_Song', '_Team',
+        '_Vlahakis', '_accumulate', '_own_blocks', '_vlahakis_gains', 'make_estimator', 'simulate_team', 'team_setup',
+        'vlahakis_profile'
+    ),
+    'shared': (
+        '_average', 'simulate_shared'
+    ),
+    'target': (
+        'LOCALIZATION_NOT_APPLICABLE', 'TARGET_METHODS', 'TARGET_NOT_APPLICABLE', '_localization_switching',
+        'localization_model', 'localization_riccati', 'simulate_target', 'target_cost', 'target_filter',
+        'target_methods', 'target_model'
+    ),
+    'grid': (
+        'CompareResult', '_mean_ci', 'cell_cost', 'grid_cells', 'run', 'run_cell', 'run_compare', 'summarize'
+    ),
+    'tables': (
+        '_position_headline', 'fitted_slopes', 'headline', 'position_only_kf_rmse'
+    ),
+    'verdicts': (
+        '_position_claims', 'compare_claims'
+    ),
+    'plots': (
+        '_concat', '_order', '_plain_ticks', '_plt', 'plot_cost', 'plot_pareto', 'plot_robustness'
+    ),
+    'cost': (
+        'NODE_ORDER', 'WHOLE_TEAM', 'node_cost', 'node_costs'
+    ),
 }
+_WHERE = {name: module for module, names in _NAMES.items() for name in names}
 
 
 def __getattr__(name: str):
