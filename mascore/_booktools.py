@@ -73,9 +73,16 @@ def plain_text(markup: str) -> str:
     --------
     >>> plain_text(r"Errors for $Q_2 = 5$ and $\\Phi$ of eq. (62), *not* {numref}`fig-x`.")
     'Errors for Q_2 = 5 and Phi of eq. (62), not the figure fig-x.'
+
+    A value computed by the chapter's run (``{glue:text}`...```) is not known when the alt text is
+    written: the brackets that quote it are left out, so the sentence stays whole.
+
+    >>> plain_text("It settles at the fused value ({glue:text}`bias-fused:.4g` h).")
+    'It settles at the fused value.'
     """
     text = re.sub(r"\{numref\}`([^`]*)`", r"the figure \1", markup)
-    text = re.sub(r"\{glue:text\}`[^`]*`", "(the value of this run)", text)
+    text = re.sub(r"\s*\((?:[^()]|\([^()]*\))*\{glue:text\}`[^`]*`(?:[^()]|\([^()]*\))*\)", "", text)
+    text = re.sub(r"\s*\{glue:text\}`[^`]*`", "", text)
     text = re.sub(r"\{[a-z:]+\}`([^`]*)`", r"\1", text)
     text = re.sub(r"\\(?:mathcal|mathbb|mathrm|mathbf|operatorname|boldsymbol|left|right|[bB]ig)\b\s*", "", text)
     text = re.sub(r"\$([^$]*)\$", lambda m: re.sub(r"\\([A-Za-z]+)", r"\1", m.group(1)).replace("{", "").replace("}", ""),
