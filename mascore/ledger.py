@@ -833,13 +833,16 @@ def ledger_summary(claims: Iterable[Claim | dict], why: Mapping[str, str] | None
     missed = [r for r in records if r["verdict"] not in ("reproduces", "holds")]
     if missed:
         lines += ["", "Not fully reproduced, and why:", ""]
-    for r in missed:
+    for n, r in enumerate(missed):
         unit, labels = r.get("unit", ""), r.get("labels")
         values = ""
         if r.get("paper_value") is not None:
             values = (f" Paper {format_value(r['paper_value'], PAPER_DIGITS, unit=unit, labels=labels)}, "
                       f"ours {format_value(r['value'], unit=unit, labels=labels)}:")
-        reason = f" {why[r['id']]}" if r["id"] in why else ""
+        reason = why.get(r["id"], "")
+        if n + 1 < len(missed) and why.get(missed[n + 1]["id"]) == reason:
+            reason = ""  # a reason shared by the next claims is given once, after the last of them
+        reason = f" {reason}" if reason else ""
         verdict = {"approximately": "reproduces approximately"}.get(r["verdict"], r["verdict"].replace("-", " "))
         lines.append(f"- {r['statement']} ({r['where']}){values} {verdict}.{reason}")
     return "\n".join(lines)

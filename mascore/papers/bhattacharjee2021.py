@@ -949,7 +949,7 @@ def plot_fig1(des: sync.SyncDesign | None = None, scenario: SetMembershipSetting
              xticks=[], yticks=[])
     zoom.grid(False)
     zoom.spines[["top", "right"]].set_visible(True)
-    zoom.set_title("zoom: leftmost $\\Lambda_i$,\njust inside the circle", fontsize=8, pad=3)
+    zoom.text(0.95, 0.05, "zoom", transform=zoom.transAxes, fontsize=8, ha="right", va="bottom")
     ax2.indicate_inset_zoom(zoom, edgecolor="0.4")
     ax2.set_title(r"(b) eigenvalues of $\Gamma$")
     return fig
@@ -1426,7 +1426,7 @@ FIGURES = (
         "(a) The interaction graph of eq. (24): the directed ring 1 → 2 → 3 → 4 → 1 (an arrow from $j$ to $i$: "
         "agent $i$ hears agent $j$), with agent 1 pinned to the leader, node 0. (b) The eigenvalues $\\Lambda_i$ "
         "of $\\Gamma$ (eq. (15)) and the circle $C(c_0, r_0)$, $c_0 = 2/3$, $r_0 = 0.6$ of Lemma 2. Look for all "
-        "four crosses inside the dashed circle (the inset zooms on the leftmost, just inside): Lemma 2's condition, which gives the coupling gain $c = 1/c_0 = 1.5$.",
+        "four crosses inside the dashed circle (the inset, top left, magnifies the leftmost one: just inside): Lemma 2's condition, which gives the coupling gain $c = 1/c_0 = 1.5$.",
         lambda r: plot_fig1(r.design, r.settings)),
     FigureSpec(
         "fig2", "Fig. 2",
