@@ -1506,8 +1506,8 @@ REGISTRY = PaperRegistry(
         "above. With the edges reversed (adjacency transposed; $\\Gamma$ keeps its eigenvalues, so Fig. 1(b) "
         "cannot tell the two apart) the means agree within 2 % and every RMS value is about 4 % low. Neither "
         "graph fits both columns; the verdicts are for the graph as printed.",
-        "**Disturbance box.** Sec. 5's 'between -0.051_2 and 0.051_2' (the text as extracted) reads "
-        "$-0.05 \\cdot 1_2$ and $0.05 \\cdot 1_2$, $1_2$ the vector of ones: $w_k$ uniform in "
+        "**Disturbance box.** Sec. 5's 'between $-0.05\\,1_2$ and $0.05\\,1_2$' is read with $1_2$ the vector "
+        "of ones: $w_k$ uniform in "
         "$[-0.05, 0.05]^2$, as $\\alpha_w = 0.05$ in row 1 of Table 1 confirms.",
         "**Fig. 6's limit.** The trace of $P_{k|k}$ settles at 1.558 for the paper's $P_0$, $Q$, $R$, whatever "
         "the draw; the paper's 'approximately 1.5' and its '2.667-fold decrease' (= 4/1.5) are readings of its "

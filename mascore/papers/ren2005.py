@@ -204,8 +204,8 @@ FIG2_TREE = [(4, 0), (0, 3), (0, 1), (1, 2), (4, 5)]
 def fig2_graph() -> np.ndarray:
     """Fig. 2 redrawn: a directed graph with several spanning trees, not strongly connected.
 
-    The paper's drawing is lost in the text extraction; the text fixes that a
-    spanning tree can be rooted at A5, A1 or A4. Ours: the cycle 1 -> 4 -> 5 -> 1
+    Drawn to satisfy the paper's caption, which fixes that a spanning tree can
+    be rooted at A5, A1 or A4. Ours: the cycle 1 -> 4 -> 5 -> 1
     (the possible roots) feeding 2, 3 and 6, with nothing flowing back.
 
     Returns
@@ -1186,7 +1186,7 @@ def _graph_claim() -> Claim:
          "Fig. 3(b) has a spanning tree": has_spanning_tree(A3b), "Fig. 3(b) connected": is_connected(A3b),
          "union of Figs. 3(a), 3(b) has a spanning tree": has_spanning_tree(A3a + A3b)},
         roots == [1, 4, 5] and not has_spanning_tree(A3a) and not has_spanning_tree(A3b),
-        "The drawings are lost in the text we work from; we redrew graphs that satisfy the captions and "
+        "The paper's drawings are not reproduced here; we drew graphs that satisfy its captions and "
         "checked them: Fig. 2, the cycle A1 → A4 → A5 → A1 feeding A2, A3 and A6 with nothing flowing back; "
         "Fig. 3(a), the chains A1 → A2 → A3 and A4 → A5 → A6 with the bridge A3 → A6; Fig. 3(b), two-way "
         "chains A1 - A2 - A3 and A4 - A5 - A6.",
@@ -1490,7 +1490,7 @@ STUDY = Study("kalman-consensus", "ren2005_kalman_consensus", SETTINGS, run, FIG
 
 #: Errata and readings, for the reproduction report.
 ERRATA = (
-    "**Figs. 2-3** are lost in the text we work from; we redrew graphs that satisfy the captions (Fig. 2: "
+    "**Figs. 2-3** are not reproduced here; we drew graphs that satisfy the paper's captions (Fig. 2: "
     "spanning trees rooted at A1, A4 and A5, not strongly connected; Fig. 3: two graphs without a spanning "
     "tree whose union has one).",
     "**Fig. 1** gives $n=10$, $Q=\\Omega=0.1$ and $P=0.001$ for the agent starting at 7, and leaves out the "

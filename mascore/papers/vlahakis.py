@@ -1036,8 +1036,8 @@ def _shared_lmi_notes(r: ObserverResult) -> str:
         "the printed numbers with the program fed the printed L (the gain of the mixed convention, equal to "
         "it to every printed digit), with which the program does determine Φ.")
     tried = (
-        "No reading we tried gives the printed Φ and J together: table example1_readings (both local gains, "
-        "traces in the coordinates of eq. (32) or in the original ones) and table example1_lmi_variants (seven "
+        "No reading we tried gives the printed Φ and J together: the table of Example 1's readings (both local "
+        "gains, traces in the coordinates of eq. (32) or in the original ones) and the table of other readings (seven "
         "noise weights Qᵢ built from Q1, Q2 and their inverses, the complete graph, a doubled Laplacian, the "
         "ring without its λ = 0 mode; each with both local gains; rows where the program leaves Φ free are "
         f"marked and left out of the closest Φ). {'; '.join(_closest(r.variants, Q2) for Q2 in PUBLISHED['Phi'])}. "
@@ -1092,7 +1092,7 @@ def _interval_claim(r: ObserverResult) -> Claim:
         "With eqs. (29)-(30) and (56)-(62) as printed, the LMI program leaves Φ free in an interval of optimal "
         "values, and the printed Φ (0.3446 and 1.8479) lie in it.",
         value, holds,
-        "The interval is the closed form of as_printed_phi_interval: every Φ in it attains the optimum "
+        "The interval is in closed form (the optimum's condition in each mode): every Φ in it attains the optimum "
         "N trace(Ŝ), no Φ outside does. The program solved at the printed Φ in Sᵢ directly (non-strict, traces "
         "in the coordinates of eq. (32)) checks it, and the figure of Γ(Φ) shows the flat optimum. This makes "
         "the printed Φ consistent with the equations as printed, not evidence that they were computed from "
