@@ -1405,8 +1405,8 @@ def prose_values(result: KalmanConsensusResult) -> dict[str, float]:
 FIGURES = (
     FigureSpec(
         "fig1", "Fig. 1",
-        "The meet-for-dinner example: ten agents, paired at random for calls of 1 to {{max_call:.0f}} steps, run "
-        "eqs. (4)-(5) with $Q=\\Omega$ (here {{Q:g}} h²). Top: meeting times $\\xi_i$; bottom: variances $P_i$, log scale. (a), (c): equal "
+        "The meet-for-dinner example: ten agents, paired at random for calls of random length (1 to "
+        "{{max_call:.0f}} steps), run eqs. (4)-(5) with $Q=\\Omega$ (here {{Q:g}} h²). Top: meeting times $\\xi_i$; bottom: variances $P_i$, log scale. (a), (c): equal "
         "initial variances $P_i(0)=1$; (b), (d): agent 7, which starts at 7, has $P_7(0)=0.001$. Look for: "
         "both teams agree, in (a) on the plain average (here {{average:.3g}}), in (b) only a little higher and "
         "far below the central-fusion value (dotted, {{fused:.4g}}); within a few calls every variance settles "
