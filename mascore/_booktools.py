@@ -41,9 +41,11 @@ __all__ = [
 API_GROUPS: dict[str, tuple[str, ...]] = {
     "Shared building blocks": ("agents", "graphs", "noise", "kalman", "sensing"),
     "Consensus and cooperative control": ("consensus", "rendezvous", "flocking", "synchronization", "lqr", "riccati"),
-    "Estimation": ("distributed_kf", "distributed_ekf", "fusion", "ellipsoids", "set_membership", "observers"),
-    "Comparing the methods": ("compare", "agent_cost", "sweep"),
-    "Reproduction and the book": ("registry", "ledger", "report", "reproduce", "plotting", "exceptions"),
+    "Estimation": ("estimation", "distributed_kf", "distributed_ekf", "fusion", "own_state", "ellipsoids",
+                   "set_membership", "observers"),
+    "Comparing the methods": ("compare", "papers.compare", "agent_cost", "sweep"),
+    "Reproduction and the book": ("registry", "settings", "claims", "ledger", "formatting", "report", "reproduce",
+                                  "plotting", "exceptions"),
 }
 
 #: The group of the papers' study modules in the API reference.
@@ -66,6 +68,11 @@ def drawn_figures(cell_source: str) -> list[str]:
     return _DRAW.findall(cell_source)
 
 
+#: TeX commands that read as a symbol (or nothing) in an alt text; any other reads as its name.
+_TEX_WORDS = {"lvert": "|", "rvert": "|", "vert": "|", "lVert": "‖", "rVert": "‖", "Vert": "‖", "cdot": "·",
+              "bar": "", "hat": "", "tilde": "", "approx": "≈", "le": "≤", "ge": "≥", "pm": "±", "times": "×"}
+
+
 def plain_text(markup: str) -> str:
     """A caption as plain text, for an image's alt text: math without TeX, no Markdown markup.
 
@@ -79,14 +86,16 @@ def plain_text(markup: str) -> str:
 
     >>> plain_text("It settles at the fused value ({glue:text}`bias-fused:.4g` h).")
     'It settles at the fused value.'
+    >>> plain_text(r"Norms $\\lVert A_c^k\\rVert \\le 1.1 \\cdot 0.9^k$ of $\\bar\\delta_k$.")
+    'Norms ‖ A_c^k‖ ≤ 1.1 · 0.9^k of delta_k.'
     """
     text = re.sub(r"\{numref\}`([^`]*)`", r"the figure \1", markup)
     text = re.sub(r"\s*\((?:[^()]|\([^()]*\))*\{glue:text\}`[^`]*`(?:[^()]|\([^()]*\))*\)", "", text)
     text = re.sub(r"\s*\{glue:text\}`[^`]*`", "", text)
     text = re.sub(r"\{[a-z:]+\}`([^`]*)`", r"\1", text)
     text = re.sub(r"\\(?:mathcal|mathbb|mathrm|mathbf|operatorname|boldsymbol|left|right|[bB]ig)\b\s*", "", text)
-    text = re.sub(r"\$([^$]*)\$", lambda m: re.sub(r"\\([A-Za-z]+)", r"\1", m.group(1)).replace("{", "").replace("}", ""),
-                  text)
+    text = re.sub(r"\$([^$]*)\$", lambda m: re.sub(r"\\([A-Za-z]+)", lambda c: _TEX_WORDS.get(c.group(1), c.group(1)),
+                                                   m.group(1)).replace("{", "").replace("}", ""), text)
     text = re.sub(r"\\[,;:!]", " ", text).replace("*", "").replace("`", "")
     return " ".join(text.split())
 
