@@ -543,6 +543,11 @@ def legend_overlaps(fig: plt.Figure, samples_per_px: float = 0.5, margin_px: flo
     return out
 
 
+def _style(line) -> tuple[str, str]:
+    """Colour and line style of a line, the way a legend entry shows it."""
+    return mpl.colors.to_hex(line.get_color()), str(line.get_linestyle())
+
+
 def _data_points(ax: plt.Axes, samples_per_px: float):
     """(artist, kind, display points) of the visible lines and patch outlines (sampled along their
     segments) and scatters."""
@@ -580,7 +585,8 @@ def unlabelled_lines(fig: plt.Figure, limit: int = 5) -> list[str]:
     """Panels of `fig` with more than `limit` data lines a reader cannot tell apart by a legend entry.
 
     A line counts as labelled when its label is the text of an entry of a legend of the figure (its
-    panel's or a figure legend); reference lines drawn across the whole panel (``axhline``,
+    panel's or a figure legend), or when it has the colour and line style of an entry's handle (a
+    legend of the agents' colours drawn once for all panels); reference lines drawn across the whole panel (``axhline``,
     ``axvline``, any line of two points) do not count.
 
     Parameters
@@ -614,10 +620,11 @@ def unlabelled_lines(fig: plt.Figure, limit: int = 5) -> list[str]:
         raise TypeError(f"fig must be a matplotlib Figure; got {type(fig).__name__}")
     legends = [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None] + list(fig.legends)
     entries = {t.get_text() for leg in legends for t in leg.get_texts()}
+    styles = {_style(h) for leg in legends for h in leg.legend_handles if isinstance(h, mpl.lines.Line2D)}
     out = []
     for n, ax in enumerate(fig.axes, 1):
         lines = [ln for ln in ax.get_lines() if ln.get_visible() and len(ln.get_xydata()) > 2
-                 and ln.get_label() not in entries]
+                 and ln.get_label() not in entries and _style(ln) not in styles]
         if len(lines) > limit:
             out.append(f"panel {n}" + (f" ({ax.get_title()!r})" if ax.get_title() else "")
                        + f": {len(lines)} unlabelled lines")

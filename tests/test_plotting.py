@@ -118,3 +118,16 @@ def test_legend_overlap_counts_patch_outlines_and_near_misses():
     ax.legend(loc="center")
     assert any("outline" in o for o in plotting.legend_overlaps(fig))
     plt.close(fig)
+
+
+def test_lines_labelled_by_a_shared_legend_of_colours_count_as_labelled():
+    plotting.use_style()
+    fig, (a, b) = plt.subplots(1, 2)
+    for ax in (a, b):
+        for i in range(6):
+            ax.plot([0, 1, 2], [i, i + 1, i], color=f"C{i}")
+    assert len(plotting.unlabelled_lines(fig)) == 2
+    proxies = [plt.Line2D([], [], color=f"C{i}", label=f"agent {i + 1}") for i in range(6)]
+    fig.legend(handles=proxies, loc="outside lower center", ncol=6)
+    assert plotting.unlabelled_lines(fig) == []
+    plt.close(fig)
