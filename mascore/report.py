@@ -375,7 +375,7 @@ def reading_paths(records: Sequence[dict], best: dict[str, tuple[str, float]] | 
         reg = paper_registry(key)
         mine = [r for r in records if r["paper"] == key]
         ok = sum(r["verdict"] in ("reproduces", "holds") for r in mine)
-        links = ", ".join(f"{{doc}}`{s.name.replace('-', ' ')} </notebooks/{s.chapter}>`" for s in reg.studies)
+        links = ", ".join(f"{{doc}}`{s.name.replace('-', ' ').capitalize()} </notebooks/{s.chapter}>`" for s in reg.studies)
         papers.append(f"{reg.citation} ({links}: {ok} of {len(mine)} claims reproduce or hold)")
     lines.append("- **How does paper X work?** Each paper has its chapter, its derivation and its ledger: "
                  + "; ".join(papers) + ".")
