@@ -187,10 +187,10 @@ _REASON = re.compile(r"\b(why|because|systematic|not numerical|rounded|does not 
 def why(record: dict, max_words: int = 25) -> str:
     """Why a claim does not fully reproduce, in one or two sentences for the report's table.
 
-    The claim's own ``why`` when it states one, or the sentence its paper module gives it (a
-    module-level ``WHY`` mapping, claim id -> sentence); otherwise how far it is off (for a
-    published number, :func:`mascore.ledger.deviation_sentence`) and the first sentence of its note
-    that gives a reason, cut at `max_words` words (the ledger holds the rest).
+    For a published number, how far it is off (:func:`mascore.ledger.deviation_sentence`); then the
+    claim's own ``why`` when it states one, or the sentence its paper module gives it (a module-level
+    ``WHY`` mapping, claim id -> sentence), or else the first sentence of its note that gives a
+    reason, cut at `max_words` words (the ledger holds the rest).
 
     Parameters
     ----------
@@ -213,9 +213,10 @@ def why(record: dict, max_words: int = 25) -> str:
     >>> print(why(off).replace("\\xa0", " "))
     50 % off; more than the 3 % of 'approximately'. The gap is systematic: the paper rounds.
     """
+    deviation = deviation_sentence(record) if record.get("paper_value") is not None else ""
     stated = record.get("why") or _module_whys().get(record.get("id", ""))
     if stated:
-        return stated
+        return ". ".join(t for t in (deviation, stated) if t)
     paragraphs = [" ".join(p.split()) for p in (record.get("note") or "").split("\n\n") if p.strip()]
     stated = [p.split(":", 1)[1].strip() for p in paragraphs if re.match(r"Why\b[^:]*:", p)]
     sentences = [s for p in stated + paragraphs for s in re.split(r"(?<=[.;])\s+(?=[A-Z])", p)]
@@ -224,7 +225,6 @@ def why(record: dict, max_words: int = 25) -> str:
     if len(words) > max_words:
         reason = " ".join(words[:max_words]).rstrip(",;:") + " \u2026"
     reason = reason[:1].upper() + reason[1:]
-    deviation = deviation_sentence(record) if record.get("paper_value") is not None else ""
     return ". ".join(t for t in (deviation, reason) if t)
 
 

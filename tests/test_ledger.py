@@ -179,7 +179,7 @@ def test_report_says_why_each_claim_to_look_at_is_there():
     header, _, *rows = text.splitlines()
     assert header == "| verdict | paper, where | claim | why |" and len(rows) == 2
     assert rows[0].endswith("| 50 % off; more than the 3 % of 'approximately'. The gap is systematic: the paper rounds. |")
-    assert rows[1].endswith("| The printed value is a misprint. |")  # the claim's own why wins
+    assert rows[1].endswith("| 50 % off; more than the 3 % of 'approximately'. The printed value is a misprint. |")
     assert "does-not-reproduce" not in text and "ren2005 " not in text and "**does not reproduce**" in text
 
 
@@ -189,4 +189,4 @@ def test_report_takes_the_why_its_paper_module_states(monkeypatch):
 
     monkeypatch.setattr(ren2005, "WHY", {"ren2005/b": "The paper's schedule is not ours."}, raising=False)
     rows = str(attention_list([_paper_records()[1]])).splitlines()
-    assert rows[2].endswith("| The paper's schedule is not ours. |")
+    assert rows[2].endswith("'approximately'. The paper's schedule is not ours. |")
