@@ -29,6 +29,7 @@ def test_notebook_is_clean_and_has_cell_ids(path):
 
 def test_every_notebook_is_in_the_book():
     toc = yaml.safe_load((ROOT / "book" / "_toc.yml").read_text())
-    files = {ch["file"] for part in toc["parts"] for ch in part["chapters"]}
+    entries = [ch for part in toc["parts"] for ch in part["chapters"]]
+    files = {e["file"] for ch in entries for e in (ch, *ch.get("sections", [])) if "file" in e}  # chapters and sub-pages
     missing = [p.stem for p in NOTEBOOKS if f"notebooks/{p.stem}" not in files]
     assert NOTEBOOKS and not missing, f"notebooks missing from book/_toc.yml: {missing}"

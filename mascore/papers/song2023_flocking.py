@@ -736,8 +736,8 @@ def plot_beyond(table: pd.DataFrame, settings: FlockingSettings = SETTINGS) -> p
         unstable = data.loc[data["unstable"] != "-", x]
         if len(unstable):  # from the last stable point to the last point
             for ax in (ax_d, ax_e):
-                ax.axvspan(data.loc[data["unstable"] == "-", x].max(), unstable.max(), color="0.9", lw=0,
-                           label="(ii), (iii) lose stability")
+                ax.axvspan(data.loc[data["unstable"] == "-", x].max(), unstable.min(), color="0.9", lw=0,
+                           label="(ii), (iii) become unstable\nsomewhere in this band")
     for ax, letter in zip(axes.flat, "abcd"):
         ax.set_title(f"({letter})", loc="left")
     handles, labels = axes[0, 1].get_legend_handles_labels()
@@ -1026,6 +1026,22 @@ def ekf_step_seconds(settings: FlockingSettings = SETTINGS, seed: int = 0, repea
     return median_time(lambda: ekf_flocking_step(*args), repeat=repeat)
 
 
+def _fig4_caption_values(result: FlockingResult) -> dict[str, float]:
+    """The numbers the caption of Fig. 4 quotes: agent 1's statistical error in and out of range, the peak error."""
+    s = fig4_statistics(result.fig4, result.settings.transient)
+    return {"sigma_in": s["mean_sigma_neighbours"], "sigma_out": s["mean_sigma_non_neighbours"],
+            "max_out": s["max_error_non_neighbours"], "transient": result.settings.transient}
+
+
+def _beyond_caption_values(result: FlockingResult) -> dict[str, float]:
+    """The band of the team-size sweep: the largest N with every case stable, the first N with one unstable."""
+    by_n = result.beyond[result.beyond["r (m)"] == result.settings.sensing_range]
+    stable = by_n["unstable"] == "-"
+    unstable = by_n.loc[~stable, "N"]
+    return {"n_stable": float(by_n.loc[stable, "N"].max()),
+            "n_unstable": float(unstable.min()) if len(unstable) else float("nan")}
+
+
 # ----------------------------------------------------------------------------- the study
 
 
@@ -1037,11 +1053,12 @@ FIGURES = (
         "(c) true and (d) estimated trajectories (markers at the end: ▲ agent 1, ● its neighbours, "
         "□ and dashed lines its non-neighbours at the end); (e) agent 1's position error of every other agent "
         "and (f) its statistical error $\\sqrt{\\operatorname{tr}\\Sigma_{1,p_j}}$. Look for: (d) follows (c) "
-        "closely; the errors and the statistical error of an agent sit near 1 m while it is in range; while it "
-        "is out of range the statistical error (f) rises to a bounded plateau of about 5 m, and the actual "
-        "error (e) swings well above that plateau (the ledger gives its peak); both drop at once when the "
-        "agent comes back.",
+        "closely; while an agent is in range, its statistical error (f) sits near {{sigma_in:.1f}} m on "
+        "average (after the first {{transient:.0f}} s); out of range it rises to a bounded plateau (on average "
+        "{{sigma_out:.1f}} m), and the actual error (e) swings well above that plateau (up to {{max_out:.0f}} m); "
+        "both drop at once when the agent comes back.",
         lambda result: plot_fig4(result.fig4, result.settings),
+        lambda result: _fig4_caption_values(result),
     ),
     FigureSpec(
         "fig5", "Fig. 5",
@@ -1066,10 +1083,13 @@ FIGURES = (
         "(right, $r = 150$ m), median of 2 runs of 40 s per point: (a), (b) farthest agent from the centre of "
         "mass at the end, with $\\mathcal R$; (c), (d) settled RMS position error of the estimators of (iii). "
         "Look for: (i) needs $r$ well above $\\mathcal R$ to stay inside it while (ii) and (iii) do not depend "
-        "on $r$; the estimation error grows as $r$ shrinks or $N$ grows; between $N = 16$ and $24$ (shaded; near "
-        "$N = 18$ by the spectral radius computed in the chapter) the fully-connected law, real or virtual, "
-        "loses stability with the paper's gains and $\\Delta t$, so (ii) and (iii) have no point at $N = 24$.",
+        "on $r$; the estimation error grows as $r$ shrinks or $N$ grows. The shaded band runs from "
+        "$N$ = {{n_stable:.0f}}, the largest team at which all three cases are stable, to $N$ = {{n_unstable:.0f}}, "
+        "where the fully-connected law, real (ii) or virtual (iii), has diverged with the paper's gains and "
+        "$\\Delta t$: stability is lost somewhere inside the band, and (ii) and (iii) have no point at its "
+        "right end.",
         lambda result: plot_beyond(result.beyond, result.settings),
+        lambda result: _beyond_caption_values(result),
     ),
 )
 
