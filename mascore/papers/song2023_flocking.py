@@ -1066,7 +1066,8 @@ FIGURES = (
         "$R = 10\\,I$, the same initial states for the three cases): (i) flocking from measurements on the "
         "proximity graph, (ii) the same on a fixed fully-connected network, (iii) estimation-based flocking on "
         "the virtual fully-connected network. Look for: (ii) and (iii) (dashed and dotted) nearly coincide and "
-        "settle far below (i); the shaded last 20 s give the settled values of the ledger.",
+        "settle far below (i) in position, somewhat below it in velocity; the shaded last 20 s give the settled "
+        "values of the ledger.",
         lambda result: plot_fig5(result.fig5),
     ),
     FigureSpec(
