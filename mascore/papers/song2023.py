@@ -1419,8 +1419,9 @@ _ERRATA = (
     "Eq. (31): the left-hand side reads $\\mathbb E[e_i e_i^T]$; its right-hand side (the $i$-th block row of "
     "$\\Sigma$) and its use in eq. (32) require $\\mathbb E[e_i e^T]$.",
     "Eq. (15) drops the correlation between agent $i$'s own measurement noise in its control (eq. (5)) and "
-    "its estimate error. Negligible with $R = I$ (Fig. 2); with $R = 10\\,I$ eq. (15) is off by about 8 % of "
-    "the largest covariance entry in a one-step test. `mb_predict(KH_prev=...)` adds the term.",
+    "its estimate error. Negligible when the measurement noise is no larger than the process noise (Fig. 2); "
+    "visible when it is much larger (the comparison's filter on measurements is over-confident). "
+    "`mb_predict(KH_prev=...)` adds the term.",
     "Lemma 1: the recursion for $C_i[k+1]$ taken literally grows without bound within a few steps and makes "
     "$\\mathcal M_i$ of eq. (49) indefinite. We read $C_i$ as the regression map "
     "$\\mathbb E[e e_i^T]\\Sigma_i^{-1}$, which equals $C_i[0] = 1_N \\otimes I$ at $k = 0$ and makes "

@@ -1115,7 +1115,7 @@ FLOCKING_STUDY = STUDY
 FLOCKING_ERRATA = (
     "Flocking, Fig. 4: the noise is 'the same as in the previous rendezvous problem'; we read it as Fig. 2's $R = I$, not Fig. 3's $R = 100\\,I$.",
     "Flocking, Fig. 5: the 'root-mean-square STD' is not defined; we read it as the spread of the agents about their mean, $\\sqrt{\\tfrac1N\\sum_i\\lVert p_i-\\bar p\\rVert^2}$, root-mean-square over the runs.",
-    "Flocking, eqs. (38), (40): the EKF prediction assumes the other agents act on the true state, though each acts on its own estimate (the linear part carries this through eqs. (29)-(34)); the flocking filter is therefore somewhat over-confident: the mean squared error is 1.65 times its variance in Fig. 4's run.",
-    "Flocking, Fig. 6: the bound $\\mathcal R$ holds only for a fully-connected flock: at a noiseless equilibrium every agent is within $\\mathcal R(N-1)/N$ (105 m for N = 8) of the centre of mass. With noise, case (iii) exceeds that in its worst run (108 m) but stays within $\\mathcal R$.",
+    "Flocking, eqs. (38), (40): the EKF prediction assumes the other agents act on the true state, though each acts on its own estimate (the linear part carries this through eqs. (29)-(34)); the flocking filter is therefore somewhat over-confident: its mean squared error exceeds its variance in Fig. 4's run (the chapter gives the ratio).",
+    "Flocking, Fig. 6: the bound $\\mathcal R$ holds only for a fully-connected flock: at a noiseless equilibrium every agent is within $\\mathcal R(N-1)/N$ of the centre of mass. With noise, case (iii) can exceed that in its worst run (the chapter gives the distances) but stays within $\\mathcal R$.",
     "Flocking, Fig. 6: case (i) fails because $r = 150$ m is only 30 m above $\\mathcal R$, not because it lacks an estimator: at $r = 200$ m the proximity-graph flock is as tight as the fully-connected one.",
 )
