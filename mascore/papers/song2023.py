@@ -90,6 +90,7 @@ __all__ = [
     "STUDY",
     "FIGURES",
     "TABLES",
+    "WHY",
     "REGISTRY",
 ]
 
@@ -1408,6 +1409,14 @@ def claims(result: RendezvousRun) -> list[Claim]:
 # ----------------------------------------------------------------------------
 # the registry
 # ----------------------------------------------------------------------------
+
+#: Claim id -> why it is not reproduced, in a reader's words (the chapter's summary; the note gives the evidence).
+WHY = {
+    "song2023/fig3-position-std": (
+        "With $Q = I$ the process noise dominates the position spread, and eq. (21) on the neighbours' estimates "
+        "feeds back filter errors that are correlated over many steps, which the loop follows instead of averaging "
+        "them out; under Remark 6's reading, or with less process noise, the paper's ordering appears."),
+}
 
 #: The book's rendezvous chapter (``notebooks/song2023_rendezvous.ipynb``).
 STUDY = Study("rendezvous", "song2023_rendezvous", SETTINGS, run, FIGURES, TABLES, claims)
