@@ -1053,8 +1053,8 @@ FIGURES = (
         "(c) true and (d) estimated trajectories (markers at the end: ▲ agent 1, ● its neighbours, "
         "□ and dashed lines its non-neighbours at the end); (e) agent 1's position error of every other agent "
         "and (f) its statistical error $\\sqrt{\\operatorname{tr}\\Sigma_{1,p_j}}$. Look for: (d) follows (c) "
-        "closely; while an agent is in range, its statistical error (f) sits near {{sigma_in:.1f}} m on "
-        "average (after the first {{transient:.0f}} s); out of range it rises to a bounded plateau (on average "
+        "closely; while an agent is in range, its statistical error (f) is small (on average {{sigma_in:.1f}} m "
+        "after the first {{transient:.0f}} s); out of range it rises to a bounded plateau (on average "
         "{{sigma_out:.1f}} m), and the actual error (e) swings well above that plateau (up to {{max_out:.0f}} m); "
         "both drop at once when the agent comes back.",
         lambda result: plot_fig4(result.fig4, result.settings),
@@ -1085,10 +1085,10 @@ FIGURES = (
         "mass at the end, with $\\mathcal R$; (c), (d) settled RMS position error of the estimators of (iii). "
         "Look for: (i) needs $r$ well above $\\mathcal R$ to stay inside it while (ii) and (iii) do not depend "
         "on $r$; the estimation error grows as $r$ shrinks or $N$ grows. The shaded band runs from "
-        "$N$ = {{n_stable:.0f}}, the largest team at which all three cases are stable, to $N$ = {{n_unstable:.0f}}, "
-        "where the fully-connected law, real (ii) or virtual (iii), has diverged with the paper's gains and "
-        "$\\Delta t$: stability is lost somewhere inside the band, and (ii) and (iii) have no point at its "
-        "right end.",
+        "the largest team at which all three cases are stable ($N$ = {{n_stable:.0f}}) to the first at which the "
+        "fully-connected law, real (ii) or virtual (iii), has diverged with the paper's gains and $\\Delta t$ "
+        "($N$ = {{n_unstable:.0f}}): stability is lost somewhere inside the band, and (ii) and (iii) have no point "
+        "at its right end.",
         lambda result: plot_beyond(result.beyond, result.settings),
         lambda result: _beyond_caption_values(result),
     ),
