@@ -362,7 +362,7 @@ def reading_paths(records: Sequence[dict], best: dict[str, tuple[str, float]] | 
                             for name, (m, ratio) in best.items())
         lines.append(f"- **Which method for my team?** It depends on what the team estimates. Closest to the "
                      f"centralized filter on a ring of 8 agents, {closest} "
-                     f"({{doc}}`the comparison and its decision table </notebooks/comparing_methods>`).")
+                     f"({{ref}}`the comparison's decision table <decision-table>`).")
     else:
         lines.append("- **Which method for my team?** The comparison puts every method on the same problems "
                      "({doc}`comparing the methods </notebooks/comparing_methods>`).")
