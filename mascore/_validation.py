@@ -28,6 +28,7 @@ __all__ = [
     "check_positive_int",
     "check_seed",
     "check_steps",
+    "check_budget",
     "check_probability",
     "check_square",
 ]
@@ -37,6 +38,10 @@ SYMMETRY_RTOL = 1e-8
 
 #: Most time steps one simulation call accepts (a larger request is refused, not run).
 MAX_STEPS = 10_000_000
+
+#: Most elementary steps (steps x runs x repeats x agents) one call accepts: a larger request would run
+#: for days, so it is refused before any work starts.
+STEP_BUDGET = 10**9
 
 
 def as_vector(x: ArrayLike, name: str, size: int | None = None) -> np.ndarray:
@@ -198,6 +203,18 @@ def check_steps(n_steps: object, name: str = "n_steps") -> int:
     if n_steps > MAX_STEPS:
         raise ValueError(f"{name} = {n_steps} is more than MAX_STEPS = {MAX_STEPS}; run fewer steps (in chunks)")
     return n_steps
+
+
+def check_budget(name: str, *counts: float, budget: float = STEP_BUDGET, what: str = "steps") -> None:
+    """Refuse up front (``ValueError`` naming `name`) a request of more than `budget` elementary `what`.
+
+    `counts` are the factors of the request (e.g. steps, runs, repeats), already checked one by one;
+    their product must not exceed `budget` (:data:`STEP_BUDGET`).
+    """
+    total = math.prod(float(c) for c in counts)
+    if not math.isfinite(total) or total > budget:
+        raise ValueError(f"{name} asks for too much work: {total:.3g} {what} in one call, more than the budget of "
+                         f"{budget:.3g}; ask for fewer (or split the work into several calls)")
 
 
 def check_positive(x: object, name: str, unit: str = "", allow_zero: bool = False) -> float:

@@ -79,7 +79,16 @@ import numpy as np
 
 from . import consensus, graphs, kalman, rendezvous, set_membership
 from . import distributed_kf as dkf
-from ._validation import check_fits_in_memory, check_positive, check_positive_int, check_probability, check_seed
+from ._validation import (
+    MAX_STEPS,
+    check_budget,
+    check_fits_in_memory,
+    check_positive,
+    check_positive_int,
+    check_probability,
+    check_seed,
+    check_steps,
+)
 from .agents import double_integrator
 from .registry import FigureSpec, PaperRegistry, Study, TableSpec, check_settings, check_settings_type, setting
 from .sweep import Grid, cell_seed
@@ -232,7 +241,7 @@ class BenchmarkSettings:
     """
 
     dt: float = setting(0.1, source="chosen", unit="s", note="sampling time", low=0, low_open=True)
-    n_steps: int = setting(150, source="chosen", note="steps per run of the team task", low=1)
+    n_steps: int = setting(150, source="chosen", note="steps per run of the team task", low=1, high=MAX_STEPS)
     steady_from: int = setting(75, source="chosen", note="first step of the steady-state window", low=0)
     q_pos: float = setting(1e-4, source="chosen", unit="m²", note="process-noise variance per position entry",
                            low=0, high=_MAX_SCALE**2)
@@ -254,7 +263,8 @@ class BenchmarkSettings:
                                    low=0, low_open=True)
     mean_degree: float = setting(4.0, source="chosen", note="expected neighbours of the geometric graph",
                                  low=0, low_open=True)
-    shared_steps: int = setting(30, source="chosen", note="steps of the shared-quantity task", low=1)
+    shared_steps: int = setting(30, source="chosen", note="steps of the shared-quantity task", low=1,
+                                high=MAX_STEPS)
     shared_var: tuple[float, float] = setting((0.5, 5.0), source="chosen", unit="m²",
                                               note="range of the prior variances of the shared task",
                                               length=2, low=0, low_open=True)
@@ -428,7 +438,10 @@ def floats_per_step(method: str, n_agents: int, degree: float = 2.0, sensing: st
 
 
 def _check_n_agents(n_agents: object) -> int:
-    return check_positive_int(n_agents, "n_agents", minimum=3)
+    """A team size N >= 3 whose team covariances (a few (4N, 4N) arrays) fit in memory."""
+    n_agents = check_positive_int(n_agents, "n_agents", minimum=3)
+    check_fits_in_memory(8.0 * 4 * (4 * n_agents) ** 2, "n_agents", "a few of the team's (4N, 4N) covariances")
+    return n_agents
 
 
 def _check_run(n_agents: object, noise: object, dropout: object, q_scale: object, runs: object,
@@ -444,6 +457,7 @@ def _check_run(n_agents: object, noise: object, dropout: object, q_scale: object
         raise ValueError("dropout must be below 1 (every link lost at every step leaves nothing to compare)")
     check_positive(q_scale, "q_scale", "(the filters' Q over the true Q)")
     runs = check_positive_int(settings.runs if runs is None else runs, "runs")
+    check_budget("runs", runs, settings.n_steps, n_agents, what="agent-steps (runs x BenchmarkSettings.n_steps x N)")
     # the team filters hold (runs, N, N, 4) views and up to (runs, 4N, 4N) covariances at once
     check_fits_in_memory(8.0 * runs * (n_agents**2 * 4 * 8 + (4 * n_agents) ** 2 * 3), "runs",
                          "the estimates and covariances of one step")
@@ -2922,9 +2936,12 @@ def node_cost(method: str, n_agents: int, n_steps: int = 20, repeats: int = 3, s
     >>> compare.node_cost("local", 8, n_steps=5) > 0
     True
     """
-    short = replace(settings, n_steps=int(n_steps), steady_from=0)
+    n_steps = check_steps(n_steps)
+    repeats = check_positive_int(repeats, "repeats")
+    check_budget("repeats", repeats, n_steps, what="timed steps (repeats x n_steps)")
+    short = replace(settings, n_steps=n_steps, steady_from=0)
     best = min(float(simulate_team(method, n_agents, seed, runs=1, settings=short)["cpu_s"][0])
-               for _ in range(check_positive_int(repeats, "repeats")))
+               for _ in range(repeats))
     return 1e6 * best / short.n_steps
 
 
@@ -2974,6 +2991,14 @@ def node_costs(sizes: Sequence[int] = (4, 8, 16), methods: Sequence[str] = CORE_
     """
     import pandas as pd
 
+    sizes = [_check_n_agents(n) for n in sizes]
+    if len(sizes) < 2:
+        raise ValueError(f"sizes must hold at least two team sizes (a slope in N needs two); got {sizes!r}")
+    methods = list(methods)
+    if not methods:
+        raise ValueError("methods must name at least one method of TEAM_METHODS; got none")
+    n_steps = check_steps(n_steps)
+    check_budget("n_steps", n_steps, len(sizes), len(methods), what="timed steps (n_steps x sizes x methods)")
     rows = {}
     for m in methods:
         costs = {n: node_cost(m, n, n_steps, settings=settings) for n in sizes if not (m == "song-eb" and n > 32)}

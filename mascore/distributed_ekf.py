@@ -448,6 +448,9 @@ class FlockingEKF:
                     or not posterior_out.flags.writeable):
                 raise ValueError(f"posterior_out must be a writeable array of shape {self._P.shape}")
         own = np.arange(K) % N  # filter k is agent k % N's
+        if not obs[np.arange(K), own].all():
+            raise ValueError("observed must include every agent itself (observed[..., i, i] True): agent i's "
+                             "closed neighbourhood holds i, whose own state its control uses (eq. (39))")
         X_post, diag = np.empty(X.shape), np.empty((K, M))
         U, X_next = (np.empty((K, n)), np.empty(X.shape)) if predict else (None, None)
         scale = 0.5 if predict else 1.0  # the prediction starts from Sigma_post / 2

@@ -979,7 +979,7 @@ class TeamFilter:
         if exact_control_noise and mode != "mb":
             raise ValueError("exact_control_noise applies to the measurement-based loop (mode='mb') only")
         N, m, Mr = model.n_agents, model.m, model.M_r
-        L = _check_laplacian(laplacian, N)
+        L = _check_laplacian(laplacian, N, undirected=True)
         X = _float_array(x_hat0, "x_hat0")
         if X.ndim == 2 and X.shape[1] == N * m:
             X = np.broadcast_to(X.reshape(X.shape[0], 1, N, m), (X.shape[0], N, N, m))
@@ -1143,7 +1143,7 @@ class TeamFilter:
         """
         if self._mode != "eb":
             raise ValueError("f2_cross needs the augmented covariance of the estimation-based loop (mode='eb')")
-        L = self._L if laplacian is None else _check_laplacian(laplacian, self._model.n_agents)
+        L = self._L if laplacian is None else _check_laplacian(laplacian, self._model.n_agents, undirected=True)
         _check_batch(L, self._Sig, "laplacian", "Sigma")
         return _f2_cross(self._model, self._Sig, L)
 
@@ -1177,7 +1177,7 @@ class TeamFilter:
         True
         """
         if laplacian is not None:
-            L = _check_laplacian(laplacian, self._model.n_agents)
+            L = _check_laplacian(laplacian, self._model.n_agents, undirected=True)
             if L.shape != self._L.shape or not np.array_equal(L, self._L):
                 _check_batch(L, self._Sig, "laplacian", "Sigma", self._X)
                 self._set_topology(L)
@@ -2008,8 +2008,13 @@ def team_nees(model: TeamFilterModel, X_true: ArrayLike, X_hat: ArrayLike, Sigma
 
 def _team_nees(model, X_true, X_hat, Sigma_i):
     """:func:`team_nees` without checks."""
-    e = (X_true[:, None] - X_hat).reshape(X_true.shape[0], model.n_agents, -1)
-    return _lyapunov_v(e, Sigma_i, model.kron)
+    with np.errstate(over="ignore", invalid="ignore"):
+        e = (X_true[:, None] - X_hat).reshape(X_true.shape[0], model.n_agents, -1)
+        out = _lyapunov_v(e, Sigma_i, model.kron)
+    if not np.isfinite(out).all():
+        raise ValueError(f"X_true: the NEES overflows floating point (largest error {float(np.abs(e).max()):.3g}); "
+                         "the true states and the estimates must be of moderate magnitude (rescale the units)")
+    return out
 
 
 def f2_cross(model: TeamFilterModel, Sigma: ArrayLike, laplacian: ArrayLike) -> np.ndarray:
@@ -2053,7 +2058,7 @@ def f2_cross(model: TeamFilterModel, Sigma: ArrayLike, laplacian: ArrayLike) -> 
     """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
-    L = _check_laplacian(laplacian, N)
+    L = _check_laplacian(laplacian, N, undirected=True)
     Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr), kron=model.kron)
     _check_batch(L, Sig, "laplacian", "Sigma")
     return _f2_cross(model, Sig, L)
@@ -2248,11 +2253,13 @@ def _check_batch(L: np.ndarray, Sig: np.ndarray, lname: str, sname: str, X: np.n
         raise ValueError(f"{sname} has batch {Sig.shape[0]} but there are {X.shape[0]} runs")
 
 
-def _check_laplacian(L: ArrayLike, N: int, name: str = "laplacian", any_batch: bool = False) -> np.ndarray:
+def _check_laplacian(L: ArrayLike, N: int, name: str = "laplacian", any_batch: bool = False,
+                     undirected: bool = False) -> np.ndarray:
     """One Laplacian ``(N, N)`` or a batch ``(batch, N, N)`` (``(..., N, N)`` with `any_batch`): finite, rows
     summing to zero, off-diagonal entries <= 0.
 
-    Directed graphs are allowed. An adjacency matrix passed by mistake is named as such.
+    Directed graphs are allowed unless `undirected` (the team filter: Song et al. assume a common sensing
+    range, hence an undirected graph). An adjacency matrix passed by mistake is named as such.
     """
     L = _float_array(L, name)
     if (L.ndim < 2 or (L.ndim > 3 and not any_batch) or L.shape[-2:] != (N, N) or L.size == 0):
@@ -2269,6 +2276,10 @@ def _check_laplacian(L: ArrayLike, N: int, name: str = "laplacian", any_batch: b
             f"{name} must be a graph Laplacian: rows summing to zero and off-diagonal entries <= 0 "
             "(pass mascore.graphs.laplacian(A))"
         )
+    if undirected and np.abs(L - np.swapaxes(L, -1, -2)).max() > tol:
+        raise ValueError(f"{name} must be symmetric (an undirected graph): Song et al.'s team filter assumes that "
+                         f"every agent senses the agents that sense it (a common sensing range, Sec. II); got a "
+                         f"directed Laplacian (symmetrize the adjacency, e.g. A + A.T > 0)")
     return L
 
 

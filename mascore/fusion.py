@@ -65,6 +65,7 @@ and doubly stochastic; L consensus steps are applied as the precomputed power
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -76,6 +77,7 @@ from ._validation import (
     as_matrix,
     check_adjacency,
     check_covariance,
+    check_fits_in_memory,
     check_generator,
     check_positive,
     check_positive_int,
@@ -505,6 +507,8 @@ class SensorNetworkModel:
         K = check_steps(n_steps)
         runs = () if n_runs is None else (check_positive_int(n_runs, "n_runs"),)
         q = self.n_measurements
+        check_fits_in_memory(8.0 * (K + 1) * math.prod(runs) * (n + q), "n_runs" if runs else "n_steps",
+                             "the states and measurements drawn")
         x = np.empty((K + 1, *runs, n))
         z = np.empty((K, *runs, q))
         x[0] = x0 + gen.standard_normal((*runs, n)) @ _psd_sqrt(P0).T
@@ -606,6 +610,7 @@ class _NetworkFilter:
         (array([1., 1.]), array([0.33333333, 0.33333333]))
         """
         x, P = self._check_xP(x, P)
+        require_finite(P, "P")  # an information form would turn an infinite variance into silent zeros
         z = self.model._check_z(z)
         axis = 2 if self._per_agent else 1
         _broadcast("x", x.shape[:-axis], "z", z.shape[:-1])
@@ -654,10 +659,17 @@ class _NetworkFilter:
         ((50, 10, 3, 2), (50, 3, 2, 2))
         """
         x, P = self.model.check_state(x0, P0, ("x0", "P0"), per_agent=self._per_agent)
-        z = require_finite(self.model._check_z(z), "z")
+        z = self.model._check_z(z)
         if z.ndim < 2:
             raise ValueError(f"z must be (K, ..., {self.model.n_measurements}): one stacked measurement per step; "
                              f"got shape {z.shape}")
+        axis = 2 if self._per_agent else 1
+        batch = _broadcast("x0", x.shape[:-axis], "z", z.shape[1:-1])
+        n = self.model.n_states
+        per_run = n * (1 + n) * (self.model.n_agents if self._per_agent else 1)
+        check_fits_in_memory(8.0 * z.shape[0] * math.prod(batch) * per_run, "z",
+                             "the estimates and covariances of every step and run")
+        require_finite(z, "z")
         xs, Ps = [], []
         for k in range(z.shape[0]):
             x, P = self.predict(x, P)

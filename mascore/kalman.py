@@ -417,7 +417,10 @@ def update(
         z = _finite(_float_array(z, "z"), "z")
         if z.ndim < 1:
             raise ValueError(f"z must be a (..., q) array of measurements; got shape {z.shape}")
-        H, R = _checked_measurement(H, R, x.shape[-1], f"x of shape {x.shape} and z of shape {z.shape}", z.shape[-1])
+        q_z = z.shape[-1]  # blame H for a row count that z and R agree on, else z (checked against H below)
+        R = _float_array(R, "R")
+        q = q_z if R.ndim >= 2 and R.shape[-1] == q_z else None
+        H, R = _checked_measurement(H, R, x.shape[-1], f"x of shape {x.shape} and z of shape {z.shape}", q)
         I = np.eye(x.shape[-1])
     q, m = H.shape[-2:]
     if x.ndim == 0 or x.shape[-1] != m:

@@ -42,6 +42,7 @@ from ._validation import (
 from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
+from .agents import system_matrices
 from .exceptions import RiccatiError
 from .graphs import WHY_UNDIRECTED as _WHY_SYMMETRIC
 from .graphs import laplacian as _graph_laplacian
@@ -184,12 +185,13 @@ def dlqr(
     """
     A, B, Q, R, N, dt = _lqr_args("dlqr", A, B, Q, R, N)
     if dt is not None and dt is not True and dt == 0:
-        raise ValueError("sys is a continuous-time system (dt = 0): use lqr, or discretize it first")
+        raise ValueError("sys is a continuous-time system (dt = 0): use lqr, or sample it first "
+                         "(control.c2d(sys, dt) or LTIAgent.from_continuous(sys.A, sys.B, dt))")
     return _solve_lqr(A, B, Q, R, N, discrete=True)
 
 
 def _is_system(obj: object) -> bool:
-    """A state-space system, duck-typed like python-control's ``StateSpace`` (``A``, ``B``, ``dt``)."""
+    """An LTIAgent, or a state-space system duck-typed like python-control's ``StateSpace`` (``A``, ``B``, ``dt``)."""
     return all(hasattr(obj, name) for name in ("A", "B", "dt")) and not isinstance(obj, np.ndarray)
 
 
@@ -200,7 +202,8 @@ def _lqr_args(fname: str, A, B, Q, R, N):
     ``Q=``, ``R=``, ``N=`` by keyword work too.
     """
     if _is_system(A):
-        sys, dt = A, A.dt
+        sys = A
+        A_sys, B_sys, dt = system_matrices(sys, name="sys")
         if B is not None:  # (sys, Q, R[, N]) positionally: shift the slots
             rest = [v for v in (Q, R) if v is not None]
             if not rest:
@@ -208,7 +211,7 @@ def _lqr_args(fname: str, A, B, Q, R, N):
             if len(rest) == 2 and N is not None:
                 raise TypeError(f"{fname}(sys, Q, R[, N]): N given twice")
             Q, R, N = B, rest[0], (rest[1] if len(rest) == 2 else N)
-        A, B = _float_array(sys.A, "sys.A"), _float_array(sys.B, "sys.B")
+        A, B = A_sys, B_sys
     else:
         dt = None
         if B is None:

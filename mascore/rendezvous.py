@@ -26,15 +26,17 @@ from ._progress import progress_bar
 from ._validation import (
     as_matrix,
     check_covariance,
+    check_fits_in_memory,
     check_generator,
     check_positive,
     check_positive_int,
     check_square,
+    check_steps,
     frozen_copy,
 )
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
-from .agents import LTIAgent
+from .agents import LTIAgent, check_sampling_time
 from .graphs import laplacian as graph_laplacian
 from .graphs import require_connected
 from .noise import _psd_factor
@@ -316,6 +318,7 @@ class RendezvousModel:
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive sampling time in seconds; got {dt!r}")
         _check_time_base(A, B, float(dt))
+        check_sampling_time(self.A, float(dt))  # an A from LTIAgent.from_continuous knows its dt
         for name, value in (("A", A), ("B", B), ("K", K), ("Q", Q), ("R", R)):
             object.__setattr__(self, name, frozen_copy(value))
         object.__setattr__(self, "dt", float(dt))
@@ -484,7 +487,8 @@ def expected_spread(
     x, single = _states(x0, model.m)
     n_runs, N, m = x.shape
     A, BK, Q, R = model.A, model.B @ model.K, model.Q, model.R
-    n_steps = check_positive_int(n_steps, "n_steps")
+    n_steps = check_steps(n_steps)
+    check_fits_in_memory(8.0 * (n_steps + 1) * n_runs * m, "n_steps", "the expected spreads")
     Adj = _check_adjacency(adjacency)
     sensing_mask(Adj)  # isolated-agent check
     if Adj.shape[-1] != N or Adj.ndim not in (2, 3) or (Adj.ndim == 3 and Adj.shape[0] != n_runs):
@@ -636,8 +640,9 @@ def simulate_rendezvous(
         filter), eq. (5) with every agent also running the filter of
         eqs. (8)-(20), or eq. (21) on the agents' own estimates with the
         filter of eqs. (29)-(34).
-    x_hat0 : (N m,) or (R, N m) array_like
-        Common initial team estimate of all agents (filter modes), one per run.
+    x_hat0 : (N m,), (R, N m), (N, m) or (R, N, m) array_like
+        Common initial team estimate of all agents (filter modes), one per run (the
+        per-agent rows ``(N, m)`` are stacked into the team vector).
     P0 : (m, m) or (m N, m N) array_like
         Covariance of the initial estimate error (filter modes): per agent, or the
         full team covariance.
@@ -708,7 +713,9 @@ def simulate_rendezvous(
     n_runs, N, m = x.shape
     A, B, K, Q, R, dt = model.A, model.B, model.K, model.Q, model.R, model.dt
     R_team = team_noise_covariance(R, N, m)
-    n_steps = check_positive_int(n_steps, "n_steps")
+    n_steps = check_steps(n_steps)
+    check_fits_in_memory(8.0 * (n_steps + 1) * n_runs * N * m * (1 + (N if return_estimates else 0)), "n_steps",
+                         "the state histories")
     for flag, value in (("exact_control_noise", exact_control_noise), ("central", central),
                         ("progress", progress), ("switching", switching), ("return_estimates", return_estimates)):
         _check_flag(value, flag)
@@ -727,6 +734,19 @@ def simulate_rendezvous(
 
     filt = mode in ("measurement-filter", "estimation")
     filter_model = dkf.team_filter_model(A, B, K, Q, R, N) if filt else None
+    if filt:  # the shapes first, then the theory's conditions on the graph
+        if x_hat0 is None or P0 is None:
+            raise ValueError(f"mode {mode!r} needs x_hat0 and P0 (initial estimate and its covariance)")
+        xh0 = _float_array(x_hat0, "x_hat0")
+        if xh0.shape in ((N, m), (n_runs, N, m)):  # one row per agent: stack it into the team vector
+            xh0 = xh0.reshape(-1, N * m)
+        if single and xh0.shape == (N * m,):
+            xh0 = xh0[None]
+        if xh0.shape != (n_runs, N * m):
+            raise ValueError(f"Incompatible dimensions of x_hat0; expected the team estimate ({n_runs}, N m) = "
+                             f"({n_runs}, {N * m}) (or one row per agent, ({N}, {m})) but found {xh0.shape}")
+        if not np.all(np.isfinite(xh0)):
+            raise ValueError("x_hat0 contains NaN or infinite entries")
     if mode == "estimation":
         for adj in np.unique(Adj.reshape(-1, N, N), axis=0):  # each distinct graph once
             require_connected(adj, "mode 'estimation' (every agent estimates the whole team, system (43) "
@@ -738,15 +758,6 @@ def simulate_rendezvous(
     out: dict[str, np.ndarray | None] = {}
     team = central_filter = None
     if filt:
-        if x_hat0 is None or P0 is None:
-            raise ValueError(f"mode {mode!r} needs x_hat0 and P0 (initial estimate and its covariance)")
-        xh0 = _float_array(x_hat0, "x_hat0")
-        if single and xh0.shape == (N * m,):
-            xh0 = xh0[None]
-        if xh0.shape != (n_runs, N * m):
-            raise ValueError(f"Incompatible dimensions of x_hat0; expected ({n_runs}, {N * m}) but found {xh0.shape}")
-        if not np.all(np.isfinite(xh0)):
-            raise ValueError("x_hat0 contains NaN or infinite entries")
         # one covariance for a shared topology (fixed or switching), else one per run's fixed graph
         team = dkf.TeamFilter(filter_model, topology(0)[2], xh0, P0, mode="eb" if mode == "estimation" else "mb",
                               exact_control_noise=exact_control_noise and mode == "measurement-filter")

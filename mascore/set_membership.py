@@ -437,7 +437,11 @@ class SetMembershipModel:
             A = check_square(self.A, "A", n)
             G = as_matrix(self.G, "G (disturbance matrix)", (n, None))
             Q = _check_pd_small(self.Q, "Q", G.shape[1])
-            GQG = G @ Q @ G.T
+            with np.errstate(over="ignore", invalid="ignore"):
+                GQG = G @ Q @ G.T
+            if not np.isfinite(GQG).all():
+                raise ValueError("G (disturbance matrix): G Q G^T overflows floating point; G and Q must be of "
+                                 "moderate magnitude (rescale the units of the state or of the disturbance)")
             set_(self, "A", frozen_copy(A))
             set_(self, "G", frozen_copy(G))
             set_(self, "Q", frozen_copy(Q))
@@ -450,7 +454,11 @@ class SetMembershipModel:
             p = C.shape[0]
             D = as_matrix(self.D, "D", (p, None))
             R = _check_pd_small(self.R, "R", D.shape[1])
-            W = D @ R @ D.T
+            with np.errstate(over="ignore", invalid="ignore"):
+                W = D @ R @ D.T
+            if not np.isfinite(W).all():
+                raise ValueError("D: D R D^T overflows floating point; D and R must be of moderate magnitude "
+                                 "(rescale the units of the measurement or of its noise)")
             try:
                 _check_pd_small(W, "D R D^T (needed to test the consistency of y)", p)
             except ValueError as exc:

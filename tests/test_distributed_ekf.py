@@ -243,6 +243,7 @@ def _run_ekf(seed, n_steps=20, N=4):
     out = []
     for k in range(n_steps):
         observed = rng.random((2, N, N)) < 0.7
+        observed[:, np.arange(N), np.arange(N)] = True  # row i is agent i's closed neighbourhood
         z = X[:, None] + rng.standard_normal((2, N, N, 4))
         step = ekf.step(z, observed, predict=k < n_steps - 1)
         out += [a.copy() for a in step if a is not None] + [ekf.Sigma.copy()]
@@ -365,4 +366,4 @@ def test_an_overflowing_step_raises_naming_its_inputs():
     N = 4
     ekf = dekf.FlockingEKF(dekf.EKFModel(N, 10.0, GAINS, 0.01 * np.eye(M), np.eye(M)), X_hat, 1e307 * np.eye(M))
     with pytest.raises(ValueError, match=r"EKF step \(inputs X_hat, Sigma, z\) produced NaN or inf"):
-        ekf.step(X[:, None] + np.zeros((2, N, N, 4)), np.zeros((2, N, N), bool))
+        ekf.step(X[:, None] + np.zeros((2, N, N, 4)), np.broadcast_to(np.eye(N, dtype=bool), (2, N, N)))
