@@ -20,6 +20,7 @@ __all__ = [
     "LTIAgent",
     "double_integrator",
     "zoh",
+    "is_system",
     "system_matrices",
     "check_sampling_time",
     "team_matrices",
@@ -389,6 +390,33 @@ def agent_states(team: ArrayLike, n_states: int) -> np.ndarray:
             f"team state length {X.shape[-1]} is not a multiple of n_states={n_states}"
         )
     return X.reshape(*X.shape[:-1], X.shape[-1] // n_states, n_states)
+
+
+def is_system(obj: object) -> bool:
+    """Whether `obj` is a system a design function takes in place of ``(A, B)``.
+
+    An :class:`LTIAgent`, or any object with ``A``, ``B`` and ``dt`` (python-control's
+    ``StateSpace``, duck-typed: no import needed); not an array.
+
+    Parameters
+    ----------
+    obj : object
+        Anything.
+
+    Returns
+    -------
+    bool
+        True for a system (read it with :func:`system_matrices`).
+
+    Examples
+    --------
+    >>> from mascore import agents
+    >>> agents.is_system(agents.double_integrator(1, 0.1)), agents.is_system([[1.0]])
+    (True, False)
+    """
+    if isinstance(obj, LTIAgent):
+        return True
+    return not isinstance(obj, np.ndarray) and all(hasattr(obj, name) for name in ("A", "B", "dt"))
 
 
 def system_matrices(system: object, time: str | None = None, name: str = "sys",

@@ -42,7 +42,7 @@ from ._validation import (
 from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
-from .agents import system_matrices
+from .agents import is_system, system_matrices
 from .exceptions import RiccatiError
 from .graphs import WHY_UNDIRECTED as _WHY_SYMMETRIC
 from .graphs import laplacian as _graph_laplacian
@@ -190,18 +190,13 @@ def dlqr(
     return _solve_lqr(A, B, Q, R, N, discrete=True)
 
 
-def _is_system(obj: object) -> bool:
-    """An LTIAgent, or a state-space system duck-typed like python-control's ``StateSpace`` (``A``, ``B``, ``dt``)."""
-    return all(hasattr(obj, name) for name in ("A", "B", "dt")) and not isinstance(obj, np.ndarray)
-
-
 def _lqr_args(fname: str, A, B, Q, R, N):
     """``(A, B, Q, R, N, dt)`` from python-control's call forms ``(A, B, Q, R[, N])`` / ``(sys, Q, R[, N])``.
 
     With a system first, the positional slots after it hold ``Q, R[, N]`` (python-control's order);
     ``Q=``, ``R=``, ``N=`` by keyword work too.
     """
-    if _is_system(A):
+    if is_system(A):
         sys = A
         A_sys, B_sys, dt = system_matrices(sys, name="sys")
         if B is not None:  # (sys, Q, R[, N]) positionally: shift the slots

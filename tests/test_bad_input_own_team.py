@@ -216,3 +216,37 @@ def test_a_dt_contradicting_an_a_from_from_continuous_is_refused():
     with pytest.raises(ValueError, match=r"dt = 0.1 s contradicts A"):
         rv.RendezvousModel(oscillator.A, oscillator.B, [[1.0, 1.0]], np.eye(2), np.eye(2), 0.1)
     rv.RendezvousModel(oscillator.A, oscillator.B, [[1.0, 1.0]], np.eye(2), np.eye(2), 0.05)  # the right dt
+
+
+# ----------------------------------------------------------------------------- errors that say what to do
+
+
+def test_lemma2_failure_names_the_remedy_and_scaling_q_does_not_change_r():
+    from mascore import synchronization as sync
+
+    A, B = np.array([[1.05, 0.1], [0.0, 1.0]]), np.array([[0.0], [1.0]])  # r = 0.47
+    path = graphs.path_graph(4)
+    pin = np.array([1.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"pin more agents.*add edges.*scaling Q does not change r"):
+        sync.design_synchronization(A, B, np.eye(2), path, pin)
+    P1, P10 = sync.riccati_like(A, B, np.eye(2)), sync.riccati_like(A, B, 10 * np.eye(2))
+    assert sync.lemma2_r(A, B, np.eye(2), P1) == pytest.approx(sync.lemma2_r(A, B, 10 * np.eye(2), P10), rel=1e-8)
+    d = sync.design_synchronization(A, B, np.eye(2), path, 3 * np.ones(4))  # pinned harder: r0/c0 = 0.35 < r
+    assert d.rho < 1
+
+
+def test_dask_without_a_main_guard_is_explained_in_one_line(tmp_path):
+    pytest.importorskip("distributed")
+    import subprocess
+    import sys
+
+    script = tmp_path / "my_sweep.py"
+    script.write_text("from mascore import sweep\n"
+                      "cells = [{'scale': 1.0, 'block': 0}]\n"
+                      f"sweep.run_sweep(cells, sweep.demo_task, {str(tmp_path / 'out')!r}, workers=1, "
+                      "progress=False)\n")
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300,
+                          env={**__import__("os").environ, "OMP_NUM_THREADS": "1"})
+    last = done.stderr.strip().splitlines()[-1]
+    assert done.returncode != 0
+    assert last.startswith("RuntimeError: local Dask workers could not start") and '__name__ == "__main__"' in last
