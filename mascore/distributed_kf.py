@@ -72,6 +72,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._masked_gain import masked_gain, observed_indices
+from ._systems import design_args
 from ._validation import (
     as_matrix,
     check_covariance,
@@ -235,21 +236,23 @@ class TeamFilterModel:
 
 def team_filter_model(
     A: ArrayLike,
-    B: ArrayLike,
-    K: ArrayLike,
-    Q: ArrayLike,
-    R: ArrayLike,
-    n_agents: int,
+    B: ArrayLike | None = None,
+    K: ArrayLike | None = None,
+    Q: ArrayLike | None = None,
+    R: ArrayLike | None = None,
+    n_agents: int | None = None,
     reduce: bool = True,
 ) -> TeamFilterModel:
     """Validate the team model and find its Kronecker factor.
 
     Parameters
     ----------
-    A : (m, m) array_like
-        Agent transition matrix (eq. (1)).
-    B : (m, p) array_like
-        Agent input matrix.
+    A : (m, m) array_like, or LTIAgent or StateSpace
+        Agent transition matrix (eq. (1)), or the discrete-time agent as a system (an
+        :class:`~mascore.agents.LTIAgent` or a discrete python-control ``StateSpace``), then
+        without B: ``team_filter_model(agent, K, Q, R, n_agents)``.
+    B : (m, p) array_like, optional
+        Agent input matrix (not with a system).
     K : (p, m) array_like
         Consensus gain of eq. (4).
     Q : (m, m) array_like
@@ -279,6 +282,8 @@ def team_filter_model(
     >>> model.kron, model.M_r                                   # the recursions run on one axis
     (2, 10)
     """
+    A, B, (K, Q, R, n_agents), _ = design_args("team_filter_model", A, B, dict(K=K, Q=Q, R=R, n_agents=n_agents), None,
+                                               time="discrete")
     A = check_square(_float_array(A, "A"), "A")
     m = A.shape[0]
     if m == 0:

@@ -88,6 +88,7 @@ from ._validation import (
     require_finite,
     symmetric_part,
 )
+from .agents import is_system, system_matrices
 
 __all__ = [
     "SensorNetworkModel",
@@ -167,8 +168,8 @@ class SensorNetworkModel:
 
     Parameters
     ----------
-    F : (n, n) array_like
-        State-transition matrix, finite.
+    F : (n, n) array_like, or LTIAgent or StateSpace
+        State-transition matrix, finite; or a discrete-time system whose ``A`` it is.
     Q : (n, n) array_like
         Process-noise covariance, symmetric positive semidefinite.
     H : sequence of N (q_i, n) array_like
@@ -222,6 +223,8 @@ class SensorNetworkModel:
 
     def __init__(self, F: ArrayLike, Q: ArrayLike, H: Sequence[ArrayLike], R: Sequence[ArrayLike],
                  adjacency: ArrayLike) -> None:
+        if is_system(F):
+            F = system_matrices(F, "discrete", name="F", needed_by="SensorNetworkModel, x[k+1] = F x[k] + w[k],")[0]
         F = check_square(F, "F")
         n = F.shape[0]
         Q = check_covariance(Q, "Q", size=n)

@@ -51,6 +51,7 @@ from numpy.typing import ArrayLike
 from ._validation import check_covariance, check_positive_int, finite_result, frozen_copy, symmetric_part
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
+from .agents import is_system, system_matrices
 
 __all__ = ["LinearGaussianModel", "predict", "update", "kalman_gain", "run_filter", "nees", "nees_interval",
            "symmetrize"]
@@ -78,8 +79,10 @@ class LinearGaussianModel:
 
     Parameters
     ----------
-    F : (m, m) or (..., m, m) array_like
-        State-transition matrix, finite, ``m >= 1``.
+    F : (m, m) or (..., m, m) array_like, or LTIAgent or StateSpace
+        State-transition matrix, finite, ``m >= 1``; or a discrete-time system (an
+        :class:`~mascore.agents.LTIAgent` or a discrete python-control ``StateSpace``): its
+        ``A``, and its ``B`` unless `B` is given.
     Q : (m, m) or (..., m, m) array_like
         Process-noise covariance, symmetric positive semidefinite.
     H : (q, m) or (..., q, m) array_like
@@ -125,6 +128,10 @@ class LinearGaussianModel:
     B: np.ndarray | None
 
     def __init__(self, F: ArrayLike, Q: ArrayLike, H: ArrayLike, R: ArrayLike, B: ArrayLike | None = None) -> None:
+        if is_system(F):
+            F, B_sys, _ = system_matrices(F, "discrete", name="F", needed_by="LinearGaussianModel, x[k+1] = F x[k] + "
+                                          "B u[k] + w[k],")
+            B = B_sys if B is None else B
         F, Q, B = _checked_dynamics(F, Q, B)
         H, R = _checked_measurement(H, R, F.shape[-1], f"F of shape {F.shape}")
         for name, value in (("F", F), ("Q", Q), ("H", H), ("R", R)):
