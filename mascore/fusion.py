@@ -100,6 +100,7 @@ __all__ = [
     "CovarianceIntersectionFilter",
     "covariance_intersection",
     "error_covariance",
+    "track",
     "metropolis_weights",
     "FilterCost",
     "filter_cost",
@@ -1084,6 +1085,94 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         return _from_information(Om_f, q_f)
 
 
+def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
+          graphs: Sequence[object] | ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Run a sensor-network filter over measurements, on a fixed graph or one graph per step.
+
+    The one run loop for a user's own network: step k predicts, then fuses ``z[k]``
+    over graph k (the filter's own graph when `graphs` is None). A switching graph
+    rebuilds the filter, with its own settings, on the model with that step's graph
+    (each distinct graph once per call); the sensing ``H_i, R_i`` stays the model's.
+
+    Parameters
+    ----------
+    filt : CentralizedFilter, MeasurementForwardingFilter, DiffusionKalmanFilter, ConsensusOnInformationFilter, InformationConsensusFilter or CovarianceIntersectionFilter
+        The filter, built on the network's :class:`SensorNetworkModel`.
+    x0 : (..., N, n) or (n,) array_like
+        Initial means (one ``(n,)`` mean for every agent allowed), finite.
+    P0 : (..., N, n, n) or (n, n) array_like
+        Initial covariances, symmetric positive definite.
+    z : (K, ..., sum q_i) array_like
+        Measurements of steps 1..K (as :meth:`SensorNetworkModel.simulate` returns).
+    graphs : sequence of K adjacency matrices or networkx graphs, or (K, N, N) array_like, optional
+        The communication graph of each step (undirected, N agents; ``A[i, j] > 0``: i and j
+        exchange). Default: the model's graph at every step.
+
+    Returns
+    -------
+    x : (K, ..., N, n) ndarray
+        Each agent's corrected mean after each step (``(K, ..., n)`` for the centralized filter).
+    P : (K, ..., N, n, n) ndarray
+        Their covariances (leading axes those of `P0` and `x0`: they do not depend on the data).
+
+    Raises
+    ------
+    ValueError, TypeError
+        A bad filter, state, measurement or graph (named; a graph by its step), or more
+        graphs or steps than memory holds.
+
+    Examples
+    --------
+    >>> import networkx as nx
+    >>> import numpy as np
+    >>> from mascore import fusion, graphs
+    >>> model = fusion.SensorNetworkModel(np.eye(2), 0.01 * np.eye(2), [np.eye(2)] * 4, [np.eye(2)] * 4,
+    ...                                   graphs.ring_graph(4))
+    >>> x_true, z = model.simulate(np.zeros(2), np.eye(2), 20, rng=0)
+    >>> switching = [nx.path_graph(4) if k % 2 else nx.cycle_graph(4) for k in range(20)]
+    >>> x, P = fusion.track(fusion.ConsensusOnInformationFilter(model, 2), np.zeros(2), np.eye(2), z, switching)
+    >>> x.shape, P.shape
+    ((20, 4, 2), (20, 4, 2, 2))
+    """
+    if not isinstance(filt, _NetworkFilter):
+        raise TypeError(f"filt must be one of mascore.fusion's filters (e.g. ConsensusOnInformationFilter(model, "
+                        f"L)); got {type(filt).__name__}")
+    if graphs is None:
+        return filt.run(x0, P0, z)
+    model = filt.model
+    x, P = model.check_state(x0, P0, ("x0", "P0"), per_agent=filt._per_agent)
+    z = model._check_z(z)
+    if z.ndim < 2:
+        raise ValueError(f"z must be (K, ..., {model.n_measurements}): one stacked measurement per step; "
+                         f"got shape {z.shape}")
+    K = z.shape[0]
+    if isinstance(graphs, (str, bytes)) or not hasattr(graphs, "__len__"):
+        raise TypeError(f"graphs must be a sequence of K = {K} adjacency matrices or networkx graphs (one per "
+                        f"step); got {type(graphs).__name__}")
+    if len(graphs) != K:
+        raise ValueError(f"graphs must hold one graph per step: K = {K} (the steps of z); got {len(graphs)}")
+    axis = 2 if filt._per_agent else 1
+    batch = _broadcast("x0", x.shape[:-axis], "z", z.shape[1:-1])
+    n, N = model.n_states, model.n_agents
+    check_fits_in_memory(8.0 * K * math.prod(batch) * n * (1 + n) * (N if filt._per_agent else 1), "z",
+                         "the estimates and covariances of every step and run")
+    require_finite(z, "z")
+    built: dict[bytes, _NetworkFilter] = {}
+    xs, Ps = [], []
+    for k in range(K):
+        A = check_adjacency(float_array(graphs[k], f"graphs[{k}]"), f"graphs[{k}]", size=N, undirected=True,
+                            why="the consensus weights and the information exchange are symmetric")
+        key = A.tobytes()
+        if key not in built:
+            built[key] = filt if np.array_equal(A, model.adjacency) else type(filt)(
+                SensorNetworkModel(model.F, model.Q, model.H, model.R, A), *_settings_for_any_graph(filt))
+        step = built[key]
+        x, P = step.update(*step.predict(x, P), z[k])
+        xs.append(x)
+        Ps.append(P)
+    return np.stack(xs), np.stack(Ps)
+
+
 def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true: ArrayLike | None = None,
                      ) -> tuple[np.ndarray, np.ndarray]:
     """The exact error covariance ``E[e_i e_i^T]`` of a filter's estimates, without Monte Carlo.
@@ -1427,6 +1516,21 @@ def filter_cost(method: str, n: int, q: int, degree: int, iterations: int = 1, n
 
 # --------------------------------------------------------------------------------------------
 # kernels (checked arguments)
+
+
+def _settings_for_any_graph(filt: _NetworkFilter) -> tuple:
+    """A filter's constructor arguments after the model, with its graph-dependent defaults left to the new graph."""
+    model = filt.model
+    if isinstance(filt, DiffusionKalmanFilter):
+        if not np.array_equal(filt.weights, model.weights):
+            raise ValueError("filt: a DiffusionKalmanFilter with its own weights matrix belongs to one graph; build it "
+                             "with weights='metropolis' to follow a switching graph")
+        return ("metropolis",)
+    if isinstance(filt, InformationConsensusFilter):
+        d_max = int((model.adjacency > 0).sum(axis=1).max())
+        default = 0.65 / d_max if d_max else 0.0
+        return (filt.n_iterations, None if filt.rate == default else filt.rate)
+    return filt._args()
 
 
 def _mix(W: np.ndarray, X: np.ndarray, axes: int) -> np.ndarray:
