@@ -1096,8 +1096,9 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
 
     Parameters
     ----------
-    filt : CentralizedFilter, MeasurementForwardingFilter, DiffusionKalmanFilter, ConsensusOnInformationFilter, InformationConsensusFilter or CovarianceIntersectionFilter
-        The filter, built on the network's :class:`SensorNetworkModel`.
+    filt : fusion filter
+        One of this module's filters (e.g. :class:`ConsensusOnInformationFilter`), built on the
+        network's :class:`SensorNetworkModel`.
     x0 : (..., N, n) or (n,) array_like
         Initial means (one ``(n,)`` mean for every agent allowed), finite.
     P0 : (..., N, n, n) or (n, n) array_like
