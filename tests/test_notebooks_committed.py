@@ -29,6 +29,11 @@ def test_notebook_is_clean_and_has_cell_ids(path):
 
 def test_every_notebook_is_in_the_book():
     toc = yaml.safe_load((ROOT / "book" / "_toc.yml").read_text())
-    files = {ch["file"] for part in toc["parts"] for ch in part["chapters"]}
+    def entries(items):  # chapters and their sub-pages (sections), at any depth
+        for item in items:
+            yield item.get("file")
+            yield from entries(item.get("sections", []))
+
+    files = set(entries(ch for part in toc["parts"] for ch in part["chapters"]))
     missing = [p.stem for p in NOTEBOOKS if f"notebooks/{p.stem}" not in files]
     assert NOTEBOOKS and not missing, f"notebooks missing from book/_toc.yml: {missing}"
