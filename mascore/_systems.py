@@ -62,3 +62,13 @@ def _complete(fname: str, A, B, names: tuple, rest: tuple, dt):
         raise TypeError(f"{fname}() needs {', '.join(missing)}: call it with (A, B, {', '.join(names)}) or "
                         f"(sys, {', '.join(names)})")
     return A, B, rest, dt
+
+
+def full_state_only(m: int, shape: tuple) -> str:
+    """The message for an R of partial sensing given to Song et al.'s whole-team filters (full-state sensing)."""
+    return (f"R must be ({m}, {m}) per sensed agent or (m N, m N) for the team; got {shape}. Song et al.'s "
+            f"whole-team filters (song-mb, song-eb) are implemented for full-state sensing only, as eq. (2) "
+            f"measures every state of each sensed agent. For partial sensing "
+            f"(positions only, a subset of states) use a method that takes an output matrix: mascore.compare's "
+            f"POSITION_METHODS (centralized, local, forwarding, vlahakis, set-membership) on the team, or "
+            f"mascore.fusion's filters with your own H_i (fusion.SensorNetworkModel)")

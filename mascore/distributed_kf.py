@@ -72,7 +72,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._masked_gain import masked_gain, observed_indices
-from ._systems import design_args
+from ._systems import design_args, full_state_only
 from ._validation import (
     as_matrix,
     check_covariance,
@@ -293,6 +293,9 @@ def team_filter_model(
     Q = check_covariance(_float_array(Q, "Q"), "Q", size=m)
     n_agents = check_positive_int(n_agents, "n_agents", minimum=2)
     _check_flag(reduce, "reduce")
+    R_arr = _float_array(R, "R")
+    if R_arr.ndim == 2 and R_arr.shape[0] == R_arr.shape[1] and 0 < R_arr.shape[0] < m:  # partial sensing
+        raise ValueError(full_state_only(m, R_arr.shape))
     R_team = team_noise_covariance(R, n_agents, m)
     check_covariance(R_team, "R", definite=True)
     BK = B @ K

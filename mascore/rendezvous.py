@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 
 from . import distributed_kf as dkf
 from ._progress import progress_bar
+from ._systems import full_state_only
 from ._validation import (
     as_matrix,
     check_covariance,
@@ -310,6 +311,8 @@ class RendezvousModel:
         if Q.ndim != 2:
             raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
         R = check_covariance(_float_array(self.R, "R"), "R")
+        if R.ndim == 2 and 0 < R.shape[0] < m:  # partial sensing: say where it is supported
+            raise ValueError(full_state_only(m, R.shape))
         if R.ndim != 2 or R.shape[0] % m:
             raise ValueError(f"R must be ({m}, {m}) per sensed agent or (m N, m N) for the team; got {R.shape}")
         dt = self.dt

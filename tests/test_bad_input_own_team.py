@@ -250,3 +250,12 @@ def test_dask_without_a_main_guard_is_explained_in_one_line(tmp_path):
     last = done.stderr.strip().splitlines()[-1]
     assert done.returncode != 0
     assert last.startswith("RuntimeError: local Dask workers could not start") and '__name__ == "__main__"' in last
+
+
+def test_partial_sensing_for_songs_filters_names_the_methods_that_take_it():
+    agent = agents.double_integrator(2, 0.1)
+    for call in (lambda: rv.RendezvousModel(agent.A, agent.B, K_GAIN, np.eye(4), 0.01 * np.eye(2), 0.1),
+                 lambda: dk.team_filter_model(agent, K_GAIN, np.eye(4), 0.01 * np.eye(2), 3)):
+        with pytest.raises(ValueError, match=r"got \(2, 2\)\. Song et al.'s whole-team filters .*full-state .*"
+                                             r"POSITION_METHODS .*fusion.SensorNetworkModel"):
+            call()
