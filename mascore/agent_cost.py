@@ -111,9 +111,6 @@ AGENT_ORDER = {
     ("localization", "ci-diffusion"): ("O(N^3 + s d N^2)", "O(d N^2)"),
 }
 
-#: Evaluations of the covariance-intersection weight search counted per step (it stops at about 10-30).
-_CI_EVALS = 20
-
 
 @dataclass
 class AgentStep:

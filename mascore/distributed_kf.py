@@ -2396,11 +2396,3 @@ def _observable(F: np.ndarray, H: np.ndarray, tol: float) -> bool:
         blk = blk @ F
     s = np.linalg.svd(np.vstack(blocks), compute_uv=False)
     return int(np.sum(s > tol * s[0])) == n
-
-
-def _orth_rows(M: np.ndarray, tol: float) -> np.ndarray:
-    _, s, Vt = np.linalg.svd(M, full_matrices=False)
-    if s.size == 0:
-        return Vt[:0]
-    rank = int(np.sum(s > tol * max(1.0, s[0])))
-    return Vt[:rank]
