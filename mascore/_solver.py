@@ -97,9 +97,9 @@ def solve(problem: cp.Problem, what: str, options: Mapping[str, Any] | None = No
         solution = chain.invert(chain.solve_via_data(problem, data, True, False, opts), inverse)
     except cp.error.SolverError as exc:
         raise SolverError(f"{what}: the solver {SOLVER} failed: {exc}") from exc
-    if solution.status != cp.OPTIMAL:
-        return optimal_value(what, solution.status, None)  # raises, naming the status
-    problem.unpack(solution)
+    if solution.status in cp.settings.ERROR:
+        raise SolverError(f"{what}: the solver {SOLVER} failed (status {solution.status!r})")
+    problem.unpack(solution)  # status, value and variables, as problem.solve leaves them (infeasible included)
     return optimal_value(what, problem.status, problem.value)
 
 

@@ -310,8 +310,29 @@ class FlockingEKF:
         return self._P.copy()
 
     def view(self, name: str) -> np.ndarray:
-        """A read-only view of the state array `name` (``"X_hat"`` or ``"Sigma"``): no copy, but the next call
-        may overwrite it in place (copy it to keep it)."""
+        """The filter's own state array `name`, read-only and not copied (the fast read in a loop).
+
+        Parameters
+        ----------
+        name : {"X_hat", "Sigma"}
+            The state, as the property of that name.
+
+        Returns
+        -------
+        ndarray
+            A read-only view: the next call may replace or overwrite it in place (copy it to keep it).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import distributed_ekf as dekf
+        >>> from mascore.flocking import FlockingGains
+        >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+        >>> ekf = dekf.FlockingEKF(dekf.EKFModel(2, 0.1, gains, 0.01 * np.eye(8), np.eye(8)), np.zeros((2, 4)),
+        ...                        np.eye(8))
+        >>> ekf.view("Sigma").shape, ekf.view("Sigma").flags.writeable
+        ((8, 8), False)
+        """
         return state_view(self, name, {"X_hat": "_X", "Sigma": "_P"})
 
     def update(self, z: ArrayLike, observed: ArrayLike) -> np.ndarray:

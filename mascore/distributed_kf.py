@@ -1055,8 +1055,30 @@ class TeamFilter:
         return self._KH.copy()
 
     def view(self, name: str) -> np.ndarray:
-        """A read-only view of the state array `name` (``"X_hat"``, ``"Sigma"`` or ``"KH"``): no copy, but the
-        next step may overwrite it in place (copy it to keep it)."""
+        """The filter's own state array `name`, read-only and not copied (the fast read in a loop).
+
+        Parameters
+        ----------
+        name : {"X_hat", "Sigma", "KH"}
+            The state, as the property of that name.
+
+        Returns
+        -------
+        ndarray
+            A read-only view: the next step may overwrite it in place (copy it to keep it).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
+        >>> filt.view("Sigma").flags.writeable, np.array_equal(filt.view("Sigma"), filt.Sigma)
+        (False, True)
+        """
         return state_view(self, name, {"X_hat": "_X", "Sigma": "_Sig", "KH": "_KH"})
 
     def agent_covariances(self) -> np.ndarray:
@@ -1524,8 +1546,30 @@ class CentralizedFilter:
         return self._P.copy()
 
     def view(self, name: str) -> np.ndarray:
-        """A read-only view of the state array `name` (``"x_hat"`` or ``"P"``): no copy, replaced or overwritten
-        by the next step."""
+        """The filter's own state array `name`, read-only and not copied (the fast read in a loop).
+
+        Parameters
+        ----------
+        name : {"x_hat", "P"}
+            The state, as the property of that name.
+
+        Returns
+        -------
+        ndarray
+            A read-only view, replaced or overwritten by the next step (copy it to keep it).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = dkf.CentralizedFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> central.view("P").shape, central.view("P").flags.writeable
+        ((1, 6, 6), False)
+        """
         return state_view(self, name, {"x_hat": "_x", "P": "_P"})
 
     def predict(self, U: ArrayLike) -> None:
