@@ -333,11 +333,6 @@ def closed_loop_matrices(A: ArrayLike, BK: ArrayLike, laplacian: ArrayLike) -> t
     L = check_laplacian(_float_array(laplacian, "laplacian"), "laplacian")
     if L.shape[0] == 0 or A.shape[0] == 0:
         raise ValueError(f"laplacian and A must be at least 1 x 1; got {L.shape} and {A.shape}")
-    return _closed_loop_matrices(A, BK, L)
-
-
-def _closed_loop_matrices(A: np.ndarray, BK: np.ndarray, L: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`closed_loop_matrices` without checks."""
     N, m = L.shape[0], A.shape[0]
     F1 = np.kron(np.eye(N), A) - np.kron(L, BK)
     Lp = np.zeros((m * N, m * N * N))
@@ -1874,7 +1869,7 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
         graph_test = _graph_observability(A, BK, L, S, tol)
         if graph_test is not None:
             return graph_test
-    F1, _ = _closed_loop_matrices(A, BK, L)
+    F1, _ = closed_loop_matrices(A, BK, L)
     out = []
     for row in S:
         H = np.kron(np.eye(row.size)[row], np.eye(m))
