@@ -46,6 +46,9 @@ MODELS = {  # every checked model or value class: a builder of one instance
     "DiffusionKalmanFilter": lambda: fusion.DiffusionKalmanFilter(_sensor_network()),
     "CovarianceIntersectionFilter": lambda: fusion.CovarianceIntersectionFilter(_sensor_network()),
     "ConsensusOnInformationFilter": lambda: fusion.ConsensusOnInformationFilter(_sensor_network(), 2),
+    "InformationConsensusFilter": lambda: fusion.InformationConsensusFilter(_sensor_network(), 2),
+    "MeasurementForwardingFilter": lambda: fusion.MeasurementForwardingFilter(_sensor_network()),
+    "CentralizedFilter": lambda: fusion.CentralizedFilter(_sensor_network()),
     "LTIAgent": lambda: agents.LTIAgent.from_continuous([[0.0, 1.0], [0.0, 0.0]], [[0.0], [1.0]], 0.1),
     "Ellipsoid": lambda: ellipsoids.Ellipsoid([1.0, 2.0], np.diag([4.0, 1.0])),
     "SwitchingTopology": lambda: consensus.SwitchingTopology([0.0, 1.0], [graphs.path_graph(3), graphs.ring_graph(3)]),
@@ -54,8 +57,22 @@ MODELS = {  # every checked model or value class: a builder of one instance
     "DistributedGain": lambda: lqr.DistributedGain(np.array([[1.0, 2.0]]), np.array([[0.5, 0.0]])),
     "TopDownLQR": lambda: lqr.top_down_lqr(np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]),
                                            np.eye(2), 0.5 * np.eye(2), np.eye(1), graphs.ring_graph(4)),
+    "BottomUpLQR": lambda: lqr.BottomUpLQR(np.array([[1.0, 2.0]]), np.array([[0.5, 1.0]]), Phi=np.array([[0.5]]),
+                                           bound=3.0),
     "FlockingGains": lambda: GAINS,
 }
+
+
+def _subclasses(cls):
+    for sub in cls.__subclasses__():
+        yield sub
+        yield from _subclasses(sub)
+
+
+def test_every_frozen_class_is_probed_here():
+    """A new model class on the frozen base is listed in MODELS, so that the probes below reach it."""
+    found = {c.__name__ for c in _subclasses(Frozen) if c.__module__.startswith("mascore") and not c.__name__.startswith("_")}
+    assert found <= set(MODELS), f"add to MODELS: {sorted(found - set(MODELS))}"
 
 
 def _attributes(obj):
