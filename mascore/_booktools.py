@@ -66,6 +66,11 @@ def drawn_figures(cell_source: str) -> list[str]:
     return _DRAW.findall(cell_source)
 
 
+#: TeX commands that read as a symbol (or nothing) in an alt text; any other reads as its name.
+_TEX_WORDS = {"lvert": "|", "rvert": "|", "vert": "|", "lVert": "‖", "rVert": "‖", "Vert": "‖", "cdot": "·",
+              "bar": "", "hat": "", "tilde": "", "approx": "≈", "le": "≤", "ge": "≥", "pm": "±", "times": "×"}
+
+
 def plain_text(markup: str) -> str:
     """A caption as plain text, for an image's alt text: math without TeX, no Markdown markup.
 
@@ -73,13 +78,22 @@ def plain_text(markup: str) -> str:
     --------
     >>> plain_text(r"Errors for $Q_2 = 5$ and $\\Phi$ of eq. (62), *not* {numref}`fig-x`.")
     'Errors for Q_2 = 5 and Phi of eq. (62), not the figure fig-x.'
+
+    A value computed by the chapter's run (``{glue:text}`...```) is not known when the alt text is
+    written: the brackets that quote it are left out, so the sentence stays whole.
+
+    >>> plain_text("It settles at the fused value ({glue:text}`bias-fused:.4g` h).")
+    'It settles at the fused value.'
+    >>> plain_text(r"Norms $\\lVert A_c^k\\rVert \\le 1.1 \\cdot 0.9^k$ of $\\bar\\delta_k$.")
+    'Norms ‖ A_c^k‖ ≤ 1.1 · 0.9^k of delta_k.'
     """
     text = re.sub(r"\{numref\}`([^`]*)`", r"the figure \1", markup)
-    text = re.sub(r"\{glue:text\}`[^`]*`", "(the value of this run)", text)
+    text = re.sub(r"\s*\((?:[^()]|\([^()]*\))*\{glue:text\}`[^`]*`(?:[^()]|\([^()]*\))*\)", "", text)
+    text = re.sub(r"\s*\{glue:text\}`[^`]*`", "", text)
     text = re.sub(r"\{[a-z:]+\}`([^`]*)`", r"\1", text)
     text = re.sub(r"\\(?:mathcal|mathbb|mathrm|mathbf|operatorname|boldsymbol|left|right|[bB]ig)\b\s*", "", text)
-    text = re.sub(r"\$([^$]*)\$", lambda m: re.sub(r"\\([A-Za-z]+)", r"\1", m.group(1)).replace("{", "").replace("}", ""),
-                  text)
+    text = re.sub(r"\$([^$]*)\$", lambda m: re.sub(r"\\([A-Za-z]+)", lambda c: _TEX_WORDS.get(c.group(1), c.group(1)),
+                                                   m.group(1)).replace("{", "").replace("}", ""), text)
     text = re.sub(r"\\[,;:!]", " ", text).replace("*", "").replace("`", "")
     return " ".join(text.split())
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,6 +45,7 @@ __all__ = [
     "claims_table",
     "format_number",
     "format_value",
+    "ledger_summary",
     "load_claims",
     "output_hashes",
     "show_claims",
@@ -770,3 +771,78 @@ def _jsonable(value: Any) -> Any:
             raise ValueError(f"claim values must be finite; got {v}")
         return v
     return value
+
+
+def ledger_summary(claims: Iterable[Claim | dict], why: Mapping[str, str] | None = None) -> str:
+    """What a chapter's ledger says, for the top of the chapter: the verdicts counted, then each claim
+    that is not fully reproduced, with the paper's value, ours and why.
+
+    Parameters
+    ----------
+    claims : iterable of Claim or dict
+        The chapter's claims (objects or ``claims.json`` records).
+    why : mapping of str to str, optional
+        Claim id -> one sentence, in a reader's words, of why it is not reproduced (the claim's
+        note gives the evidence). A claim without one is listed without a reason.
+
+    Returns
+    -------
+    str
+        Markdown: one paragraph, then a list when some claim is not reproduced.
+
+    Examples
+    --------
+    >>> from mascore.ledger import Claim, ledger_summary
+    >>> a = Claim("ren2005/a", "Fig. 1", "A number.", 2.0, 2.01, {"rel": 0.05})
+    >>> b = Claim("ren2005/b", "Table 1", "Another number.", 1.0, 1.5, {"rel": 0.05})
+    >>> text = ledger_summary([a, b], why={"ren2005/b": "The paper leaves a setting out."})
+    >>> print(text.splitlines()[0])
+    Of the 2 published numbers checked here, 1 reproduces and 1 does not.
+    >>> print(text.splitlines()[-1])
+    - Another number. (Table 1) Paper 1, ours 1.5: does not reproduce. The paper leaves a setting out.
+    """
+    records = [c.to_dict() if isinstance(c, Claim) else dict(c) for c in claims]
+    why = dict(why or {})
+    numbers = [r for r in records if r.get("paper_value") is not None]
+    statements = [r for r in records if r.get("paper_value") is None]
+
+    def counted(rs: list[dict], verdicts: tuple[tuple[str, str, str], ...]) -> str:
+        parts = []
+        for verdict, one, many in verdicts:
+            n = sum(r["verdict"] == verdict for r in rs)
+            if n:
+                parts.append(f"{n} {one if n == 1 else many}")
+        if len(parts) == 1 and len(rs) > 1:  # one verdict for all
+            return parts[0].replace(f"{len(rs)} ", "all ", 1).replace("all do not", "none reproduces", 1) \
+                .replace("all fail", "none holds", 1)
+        return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
+
+    sentences = []
+    if numbers:
+        sentences.append(
+            f"Of the {len(numbers)} published number{'s' if len(numbers) != 1 else ''} checked here, "
+            + counted(numbers, (("reproduces", "reproduces", "reproduce"),
+                                ("approximately", "reproduces approximately", "reproduce approximately"),
+                                ("does-not-reproduce", "does not", "do not"))) + ".")
+    if statements:
+        n = len(statements)
+        lead = "Of the" if numbers else "The paper prints no number we check; of its"
+        sentences.append(f"{lead} {n} statement{'s' if n != 1 else ''} without a number, "
+                         + counted(statements, (("holds", "holds", "hold"), ("fails", "fails", "fail"))) + ".")
+    lines = [" ".join(sentences)]
+    missed = [r for r in records if r["verdict"] not in ("reproduces", "holds")]
+    if missed:
+        lines += ["", "Not fully reproduced, and why:", ""]
+    for n, r in enumerate(missed):
+        unit, labels = r.get("unit", ""), r.get("labels")
+        values = ""
+        if r.get("paper_value") is not None:
+            values = (f" Paper {format_value(r['paper_value'], PAPER_DIGITS, unit=unit, labels=labels)}, "
+                      f"ours {format_value(r['value'], unit=unit, labels=labels)}:")
+        reason = why.get(r["id"], "")
+        if n + 1 < len(missed) and why.get(missed[n + 1]["id"]) == reason:
+            reason = ""  # a reason shared by the next claims is given once, after the last of them
+        reason = f" {reason}" if reason else ""
+        verdict = {"approximately": "reproduces approximately"}.get(r["verdict"], r["verdict"].replace("-", " "))
+        lines.append(f"- {r['statement']} ({r['where']}){values} {verdict}.{reason}")
+    return "\n".join(lines)

@@ -142,7 +142,7 @@ class FigureSpec:
         --------
         >>> from mascore.papers import ren2005
         >>> ren2005.REGISTRY.study("kalman-consensus").figure("bias").placeholders()
-        ['fused', 'average']
+        ['bias_runs', 'fused', 'average']
         """
         return [m.group(1) for m in _CAPTION_VALUE.finditer(self.caption)]
 

@@ -70,6 +70,7 @@ __all__ = [
     "noise_continuous",
     "overconfidence",
     "plot_fig1",
+    "prose_values",
     "run",
     "switching_demo",
     "union_sequence",
@@ -203,8 +204,8 @@ FIG2_TREE = [(4, 0), (0, 3), (0, 1), (1, 2), (4, 5)]
 def fig2_graph() -> np.ndarray:
     """Fig. 2 redrawn: a directed graph with several spanning trees, not strongly connected.
 
-    The paper's drawing is lost in the text extraction; the text fixes that a
-    spanning tree can be rooted at A5, A1 or A4. Ours: the cycle 1 -> 4 -> 5 -> 1
+    Drawn to satisfy the paper's caption, which fixes that a spanning tree can
+    be rooted at A5, A1 or A4. Ours: the cycle 1 -> 4 -> 5 -> 1
     (the possible roots) feeding 2, 3 and 6, with nothing flowing back.
 
     Returns
@@ -1185,7 +1186,7 @@ def _graph_claim() -> Claim:
          "Fig. 3(b) has a spanning tree": has_spanning_tree(A3b), "Fig. 3(b) connected": is_connected(A3b),
          "union of Figs. 3(a), 3(b) has a spanning tree": has_spanning_tree(A3a + A3b)},
         roots == [1, 4, 5] and not has_spanning_tree(A3a) and not has_spanning_tree(A3b),
-        "The drawings are lost in the text we work from; we redrew graphs that satisfy the captions and "
+        "The paper's drawings are not reproduced here; we drew graphs that satisfy its captions and "
         "checked them: Fig. 2, the cycle A1 → A4 → A5 → A1 feeding A2, A3 and A6 with nothing flowing back; "
         "Fig. 3(a), the chains A1 → A2 → A3 and A4 → A5 → A6 with the bridge A3 → A6; Fig. 3(b), two-way "
         "chains A1 - A2 - A3 and A4 - A5 - A6.",
@@ -1339,43 +1340,90 @@ def claims(result: KalmanConsensusResult) -> list[Claim]:
             *_beyond_claims(result)]
 
 
+def prose_values(result: KalmanConsensusResult) -> dict[str, float]:
+    """The numbers the chapter's prose quotes, computed from one :func:`run` (glued by the book).
+
+    Parameters
+    ----------
+    result : KalmanConsensusResult
+        The output of :func:`run`.
+
+    Returns
+    -------
+    dict
+        Name -> value (hours, h², shares): the Fig. 1 values (``average``, ``agreed_equal``,
+        ``agreed_confident``, ``fused``, ``first_P`` agent 7's variance after its first time update,
+        ``settled``), the noise study (``floor_paper``, ``floor_small``, ``slope_paper``, ``slope_q0``,
+        ``floor_continuous``), the bias study (``bias``, ``mean_paper``, ``se_paper``, ``std_paper``,
+        ``above_average`` and ``below_average`` shares, ``bias_ideal``), the overconfidence study
+        (``believed``, ``actual``, ``overconfidence`` = actual / believed, ``times_fused``,
+        ``fused_variance``, ``ideal_actual``, ``ideal_believed``), the theorem runs' final spreads
+        (``spread_union_continuous``) and the confidence ratio ``p_ratio`` = P_equal / P_confident.
+
+    Examples
+    --------
+    >>> from mascore.papers import ren2005
+    >>> values = ren2005.prose_values(ren2005.run(seed=1))  # doctest: +SKIP
+    >>> round(values["fused"], 3)  # doctest: +SKIP
+    6.985
+    """
+    s, res = result.settings, result.fig1
+    paper, ideal = result.bias["paper"], result.bias["ideal"]
+    oc = result.overconfidence
+    oc_paper, oc_ideal = list(oc["variants"].values())
+    noise = result.noise
+    out = {
+        "average": float(res.equal.xi[0].mean()), "agreed_equal": float(res.equal.final_value),
+        "agreed_confident": float(res.confident.final_value), "fused": res.fused_confident,
+        "first_P": s.P_confident + s.Q, "settled": float(np.median(res.equal.P[-1])),
+        "floor_paper": noise["paper"]["floor"], "floor_small": noise["small_Omega"]["floor"],
+        "slope_paper": noise["paper"]["slope"], "slope_q0": noise["Q0"]["slope"],
+        "floor_continuous": result.noise_continuous["floor"],
+        "bias": paper["bias"], "mean_paper": float(paper["values"].mean()), "se_paper": paper["se"],
+        "std_paper": paper["std"], "above_average": float((paper["values"] > paper["average"]).mean()),
+        "bias_ideal": ideal["bias"],
+        "believed": float(oc_paper["believed"][-1].mean()), "actual": float(oc_paper["actual"][-1].mean()),
+        "fused_variance": oc["fused_variance"], "ideal_actual": float(oc_ideal["actual"][-1].mean()),
+        "ideal_believed": float(oc_ideal["believed"][-1].mean()),
+        "spread_union_continuous": float(result.union.continuous.spread[-1]),
+        "p_ratio": s.P_equal / s.P_confident,
+    }
+    out["below_average"] = 1 - out["above_average"]
+    out["bias_below"] = -out["bias"]
+    out.update(max_call=s.max_call, Q=s.Q, Omega=s.Omega, noise_runs=s.noise_runs, noise_paths=s.noise_paths,
+               noise_dt=s.noise_dt, bias_runs=s.bias_runs, n_steps=s.n_steps, noise_steps=s.noise_steps,
+               Omega_small=s.noise_Omega_small, ideal_Omega=s.ideal_Omega, dwell_steps=s.dwell_steps,
+               dwell_time=s.dwell_time)
+    out["overconfidence"] = out["actual"] / out["believed"]
+    out["times_fused"] = out["actual"] / out["fused_variance"]
+    return {k: float(v) for k, v in out.items()}
+
+
 # --------------------------------------------------------------------------- registry
-
-
-def _fig1_values(result: KalmanConsensusResult) -> dict[str, float]:
-    """The numbers Fig. 1's caption quotes: plain average, central fusion, settled variance."""
-    equal = result.fig1.equal
-    return {"average": float(equal.xi[0].mean()), "fused": result.fig1.fused_confident,
-            "settled": float(np.median(equal.P[-1]))}
-
-
-def _bias_values(result: KalmanConsensusResult) -> dict[str, float]:
-    """The central fusion and the plain average of the bias study's initial data."""
-    first = next(iter(result.bias.values()))
-    return {"fused": first["fused"], "average": first["average"]}
 
 
 FIGURES = (
     FigureSpec(
         "fig1", "Fig. 1",
-        "The meet-for-dinner example: ten agents, paired at random for calls of 1 to 5 steps, run eqs. (4)-(5) "
-        "with $Q=\\Omega=0.1$. Top: meeting times $\\xi_i$; bottom: variances $P_i$, log scale. (a), (c): equal "
+        "The meet-for-dinner example: ten agents, paired at random for calls of random length (1 to "
+        "{{max_call:.0f}} steps), run eqs. (4)-(5) with $Q=\\Omega$ (here {{Q:g}} h²). Top: meeting times $\\xi_i$; bottom: variances $P_i$, log scale. (a), (c): equal "
         "initial variances $P_i(0)=1$; (b), (d): agent 7, which starts at 7, has $P_7(0)=0.001$. Look for: "
-        "both teams agree, in (a) on the plain average {{average:.3g}}, in (b) only a little higher and far "
-        "below the central-fusion value (dotted, {{fused:.4g}}); within about 20 steps every variance settles "
-        "at the same {{settled:.2g}} (the curves coincide), agent 7's included, which is why its advantage fades.",
-        _draw_fig1, values=_fig1_values),
+        "both teams agree, in (a) on the plain average (here {{average:.3g}}), in (b) only a little higher and "
+        "far below the central-fusion value (dotted, {{fused:.4g}}); within a few calls every variance settles "
+        "at the same value (here {{settled:.2g}} h²; the curves coincide), agent 7's included, which is why its "
+        "advantage fades.",
+        _draw_fig1, values=prose_values),
     FigureSpec(
         "average", "",
         "Ordinary average consensus on the pairing schedule of Fig. 1: (a) every call replaces both values by "
-        "their mean, whatever the agents' confidence, and the team agrees on the plain average {{average:.3g}}; "
-        "(b) Kalman consensus with agent 7 confident (Fig. 1 (b) again) weights the calls by the variances and "
+        "their mean, whatever the agents' confidence, and the team agrees on the plain average (here "
+        "{{average:.3g}}); (b) Kalman consensus with agent 7 confident (Fig. 1 (b) again) weights the calls by the variances and "
         "ends a little higher.",
-        _draw_average, values=_fig1_values),
+        _draw_average, values=prose_values),
     FigureSpec(
         "fig2_fig3", "Figs. 2-3",
-        "The six-agent graphs of Figs. 2-3, redrawn from their captions (the drawings are lost in the text we "
-        "work from); arrows point the way information flows. Left, Fig. 2: spanning trees can be rooted at "
+        "The six-agent graphs of Figs. 2-3, drawn to satisfy the paper's captions (the paper's own drawings are "
+        "not reproduced here); arrows point the way information flows. Left, Fig. 2: spanning trees can be rooted at "
         "A1, A4 or A5 (bold: the one rooted at A5), yet the graph is not strongly connected, since nothing "
         "flows back into the cycle A1 → A4 → A5. Middle, Fig. 3(a): two leaders, A1 and A4, hear nobody. "
         "Right, Fig. 3(b): two isolated groups. Look for: neither Fig. 3 graph has a spanning tree, but their "
@@ -1393,37 +1441,39 @@ FIGURES = (
     FigureSpec(
         "noise", "",
         "Communication noise $\\nu_{ij}\\sim\\mathcal N(0,\\Omega)$ on every message, Fig. 1 setting with equal "
-        "variances: RMS deviation of the ten agents from their mean, averaged over 200 pairing schedules, log "
-        "scale. Look for: with $Q>0$ the disagreement stops decaying at a floor, lower for the smaller "
+        "variances: RMS deviation of the ten agents from their mean, averaged over random pairing schedules "
+        "(here {{noise_runs:.0f}}), log scale. Look for: with $Q>0$ the disagreement stops decaying at a floor, lower for the smaller "
         "$\\Omega$; with $Q=0$ it keeps falling, like $1/\\sqrt k$; without noise (dotted, the Fig. 1 run) it "
         "vanishes.",
-        _draw_noise),
+        _draw_noise, values=prose_values),
     FigureSpec(
         "noise_continuous", "",
-        "Continuous-time Kalman consensus, eqs. (1)-(3), with communication noise of intensity $\\Omega=0.1$ "
-        "(Euler-Maruyama, step 0.01 s) on the fixed Fig. 2 graph. (a) One noisy path of the six agents; (b) the "
-        "RMS disagreement, mean over 100 paths (solid), and without noise (dotted). Look for: the agents stay "
+        "Continuous-time Kalman consensus, eqs. (1)-(3), with communication noise of intensity $\\Omega$ (here "
+        "{{Omega:g}} h²; Euler-Maruyama, step {{noise_dt:g}} s) on the fixed Fig. 2 graph. (a) One noisy path of "
+        "the six agents; (b) the RMS disagreement, mean over many paths (here {{noise_paths:.0f}}, solid), and "
+        "without noise (dotted). Look for: the agents stay "
         "close but never agree exactly, while the noise-free disagreement shrinks exponentially.",
-        _draw_noise_continuous),
+        _draw_noise_continuous, values=prose_values),
     FigureSpec(
         "bias", "",
-        "Agreed value over 1000 random pairing schedules, on Fig. 1's right-column data (agent 7 starts at 7 "
+        "Agreed value over random pairing schedules (here {{bias_runs:.0f}}), on Fig. 1's right-column data (agent 7 starts at 7 "
         "with $P_7(0)=0.001$), noise-free, for the paper's scheme and two variants. Dotted: the central "
-        "inverse-variance fusion of the initial data ({{fused:.4g}}); dashed: the plain average {{average:.3g}}. "
+        "inverse-variance fusion of the initial data ({{fused:.4g}}); dashed: the plain average ({{average:.3g}}). "
         "Look for: the "
         "paper's scheme lands far below the fused value, often near the plain average; dropping $Q$ helps a "
         "little; dropping also $\\Omega$ and the self term puts almost every run on the fused value (the "
         "narrow spike on the dotted line).",
-        _draw_bias, values=_bias_values),
+        _draw_bias, values=prose_values),
     FigureSpec(
         "overconfidence", "",
         "Believed ($P_i$, dashed) and actual (solid) error variance of agent 7 (red) and agent 1 (blue) on the "
         "Fig. 1 pairings with agent 7 confident, noise-free; dotted: the central-fusion variance, below which "
-        "no estimate from the initial data can go. (a) The paper's settings: the agents settle believing 0.05 "
-        "while their actual variance is about half as large again. (b) $Q=0$, $\\Omega=10^{-6}$, no self "
-        "term: the actual variances come down to the fused one (the solid lines end on the dotted line), but "
-        "the believed $P_i$ fall through it to about $10^{-8}$.",
-        _draw_overconfidence),
+        "no estimate from the initial data can go. (a) The paper's settings: the agents' believed variance "
+        "settles below their actual one (here {{believed:.2g}} h² against {{actual:.2g}} h²). (b) $Q=0$, a tiny "
+        "$\\Omega$ (here {{ideal_Omega:.0e}} h²), no self term: the actual variances come down to the fused one "
+        "(the solid lines end on the dotted line), but the believed $P_i$ fall through it (here to "
+        "{{ideal_believed:.0e}} h²).",
+        _draw_overconfidence, values=prose_values),
 )
 
 TABLES = (
@@ -1440,7 +1490,7 @@ STUDY = Study("kalman-consensus", "ren2005_kalman_consensus", SETTINGS, run, FIG
 
 #: Errata and readings, for the reproduction report.
 ERRATA = (
-    "**Figs. 2-3** are lost in the text we work from; we redrew graphs that satisfy the captions (Fig. 2: "
+    "**Figs. 2-3** are not reproduced here; we drew graphs that satisfy the paper's captions (Fig. 2: "
     "spanning trees rooted at A1, A4 and A5, not strongly connected; Fig. 3: two graphs without a spanning "
     "tree whose union has one).",
     "**Fig. 1** gives $n=10$, $Q=\\Omega=0.1$ and $P=0.001$ for the agent starting at 7, and leaves out the "

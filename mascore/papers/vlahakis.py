@@ -78,6 +78,7 @@ __all__ = [
     "REGISTRY",
     "SETTINGS",
     "STUDY",
+    "WHY",
     "FIGURES",
     "TABLES",
     "Fig12Result",
@@ -88,6 +89,7 @@ __all__ = [
     "fig12",
     "initial_errors",
     "claims",
+    "prose_values",
     "run",
 ]
 
@@ -1023,8 +1025,8 @@ def _shared_lmi_notes(r: ObserverResult) -> str:
         "the printed numbers with the program fed the printed L (the gain of the mixed convention, equal to "
         "it to every printed digit), with which the program does determine Φ.")
     tried = (
-        "No reading we tried gives the printed Φ and J together: table example1_readings (both local gains, "
-        "traces in the coordinates of eq. (32) or in the original ones) and table example1_lmi_variants (seven "
+        "No reading we tried gives the printed Φ and J together: the table of Example 1's readings (both local "
+        "gains, traces in the coordinates of eq. (32) or in the original ones) and the table of other readings (seven "
         "noise weights Qᵢ built from Q1, Q2 and their inverses, the complete graph, a doubled Laplacian, the "
         "ring without its λ = 0 mode; each with both local gains; rows where the program leaves Φ free are "
         f"marked and left out of the closest Φ). {'; '.join(_closest(r.variants, Q2) for Q2 in PUBLISHED['Phi'])}. "
@@ -1079,7 +1081,7 @@ def _interval_claim(r: ObserverResult) -> Claim:
         "With eqs. (29)-(30) and (56)-(62) as printed, the LMI program leaves Φ free in an interval of optimal "
         "values, and the printed Φ (0.3446 and 1.8479) lie in it.",
         value, holds,
-        "The interval is the closed form of as_printed_phi_interval: every Φ in it attains the optimum "
+        "The interval is in closed form (the optimum's condition in each mode): every Φ in it attains the optimum "
         "N trace(Ŝ), no Φ outside does. The program solved at the printed Φ in Sᵢ directly (non-strict, traces "
         "in the coordinates of eq. (32)) checks it, and the figure of Γ(Φ) shows the flat optimum. This makes "
         "the printed Φ consistent with the equations as printed, not evidence that they were computed from "
@@ -1188,16 +1190,66 @@ def claims(result: ObserverResult) -> list[Claim]:
             *_cost_claims(result)]
 
 
+#: Why each claim that is not reproduced is not, in a reader's words (the claims' notes give the evidence).
+WHY = {
+    "vlahakis/example1-L": "Eqs. (29)-(30) as printed give another gain. The printed one is, to every printed "
+                           "digit, the gain of a mixed convention (the Riccati equation solved with the inverse of "
+                           "the weight, the gain formed with the weight itself): the next claim, which holds.",
+    **{f"vlahakis/example1-{what}-q2-{q:g}": (
+        "Fed the printed L, the program gives another Φ and a bound near 19 (with L as printed it leaves Φ free); "
+        "none of the readings we tried gives the printed Φ and J together.") for what in ("phi", "J") for q in (5, 25)},
+}
+
+
+def prose_values(result: ObserverResult) -> dict[str, float]:
+    """The numbers the chapter's prose quotes, computed from one :func:`run` (glued by the book).
+
+    Parameters
+    ----------
+    result : ObserverResult
+        The output of :func:`run`.
+
+    Returns
+    -------
+    dict
+        Name -> value: ``L_pos``, ``L_vel`` (eqs. (29)-(30) as printed, 1/s and 1/s²), ``slow``, ``fast``
+        (poles of ``A - L C`` with the printed ``L``, rad/s), ``n_trace`` (the optimum with ``L`` as
+        printed), ``lo5``, ``hi5``, ``lo25``, ``hi25`` (its intervals of optimal Φ), ``phi5``, ``J5``,
+        ``phi25``, ``J25`` (the program fed the printed ``L``), ``gap5``, ``gap25`` (how much higher the
+        bound is at the printed Φ, %), ``achieved5``, ``uncoupled5``, ``central5`` (costs, ``Q2 = 5``).
+
+    Examples
+    --------
+    >>> from mascore.papers import vlahakis
+    >>> values = vlahakis.prose_values(vlahakis.run(seed=1))  # doctest: +SKIP
+    >>> round(values["J5"], 2)  # doctest: +SKIP
+    19.17
+    """
+    rows = result.readings[result.readings.trace_in == "transformed"].set_index(["reading", "Q2"])
+    out = {"L_pos": rows.loc[("as-printed", 5.0), "L_position"], "L_vel": rows.loc[("as-printed", 5.0), "L_velocity"],
+           **_printed_poles(result), "n_trace": result.n_trace_s_hat}
+    for Q2 in PUBLISHED["Phi"]:
+        q = f"{Q2:g}"
+        out[f"lo{q}"], out[f"hi{q}"] = result.intervals[Q2]
+        out[f"phi{q}"] = rows.loc[(L_READING, Q2), "Phi"]
+        out[f"J{q}"] = rows.loc[(L_READING, Q2), "bound_J"]
+        out[f"gap{q}"] = 100 * (result.gamma_at_printed[(L_READING, Q2)] / result.gamma_at_lmi[Q2] - 1)
+        out[f"achieved{q}"] = rows.loc[(L_READING, Q2), "actual_cost"]
+        out[f"uncoupled{q}"] = rows.loc[(L_READING, Q2), "cost_Phi_0"]
+        out[f"central{q}"] = rows.loc[(L_READING, Q2), "centralized_cost"]
+    return {k: float(v) for k, v in out.items()}
+
+
 # ---------------------------------------------------------------- the registry
 
 _FIG_LOOK = {
-    1: "Look for the fast pole (about {{fast:.2g}} rad/s) removing most of each error within 0.2 s, then a small "
-       "common tail that decays slowly (the pole near {{slow:.2g}} rad/s of the printed $L$, the 'slowest pole being near the "
-       "origin' of Sec. 5). The panels differ only in $\\Phi$, and so little that they look alike: the table "
+    1: "Look for the fast pole (about {{fast:.2g}} rad/s) removing most of each error on the linear part of the "
+       "time axis, then a small common tail that decays slowly (the pole near {{slow:.2g}} rad/s of the printed $L$, "
+       "the 'slowest pole being near the origin' of Sec. 5). The panels differ only in $\\Phi$, and so little that they look alike: the table "
        "under Fig. 2 measures the difference (with the larger printed $\\Phi$ (b) the errors agree a little "
        "sooner).",
     2: "Look for the errors agreeing much sooner than for $Q_2 = 5$ (the previous figure): most of the "
-       "disagreement is gone within 0.05 s, while the small common tail decays as slowly. The panels differ "
+       "disagreement is gone early on the linear part of the time axis, while the small common tail decays as slowly. The panels differ "
        "only in $\\Phi$ and look alike; the table below measures the difference.",
 }
 
@@ -1227,9 +1279,9 @@ FIGURES = (
         "printed $\\Phi$ are the dotted lines. (a) $L$ from eqs. (29)-(30) as printed: $\\Gamma$ is flat at "
         "$N\\operatorname{trace}(\\hat S)$ over the whole optimal interval (shaded; the two curves coincide "
         "there), which contains the printed $\\Phi$: the program does not determine $\\Phi$. (b) The printed "
-        "$L$: a shallow minimum at the LMI's $\\Phi$ (dots), below the value at the printed $\\Phi$ and near 19, "
-        "far from the printed $J \\approx 13.4$.",
-        plot_phi_profile),
+        "$L$: a shallow minimum at the LMI's $\\Phi$ (dots), below the value at the printed $\\Phi$ and far above "
+        "the printed $J$ (the minima are {{J5:.4g}} and {{J25:.4g}}).",
+        plot_phi_profile, values=prose_values),
 )
 
 TABLES = (
