@@ -40,8 +40,9 @@ book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book in
 test: $(STAMP) lint $(RESULTS) book  ## lint, build the book, then unit tests, doctests, published numbers, the rendered HTML and every notebook (nbmake)
 	$(HEADLESS) $(BIN)/python -m pytest -n $(JOBS) --nbmake --doctest-modules tests notebooks mascore
 
-lint: $(STAMP)  ## ruff on the package, the tests and the benchmarks
+lint: $(STAMP)  ## ruff on the package, the tests and the benchmarks; the layers of the package (import-linter)
 	$(BIN)/ruff check mascore tests benchmarks
+	$(BIN)/lint-imports
 
 # The lowest versions pyproject.toml admits for the core (numpy, scipy, networkx), tested with
 # the tests that need nothing else. `make test` does not run it; .ci/run does.

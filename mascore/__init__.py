@@ -20,11 +20,12 @@ __version__ = "0.1.0"
 #: Public submodules, grouped by concept.
 SUBMODULES = (
     # shared building blocks
-    "agents", "graphs", "kalman", "noise", "plotting", "ledger", "reproduce",
+    "agents", "graphs", "kalman", "noise", "plotting", "settings", "claims", "ledger", "reproduce",
     # consensus and cooperative control
     "consensus", "rendezvous", "flocking", "synchronization", "lqr",
     # estimation
-    "sensing", "distributed_kf", "distributed_ekf", "fusion", "ellipsoids", "set_membership", "observers", "riccati",
+    "estimation", "sensing", "distributed_kf", "distributed_ekf", "fusion", "own_state", "ellipsoids", "set_membership",
+    "observers", "riccati",
     # comparing the methods, sweeps on Dask
     "compare", "agent_cost", "sweep",
     # errors

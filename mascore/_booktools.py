@@ -41,9 +41,11 @@ __all__ = [
 API_GROUPS: dict[str, tuple[str, ...]] = {
     "Shared building blocks": ("agents", "graphs", "noise", "kalman", "sensing"),
     "Consensus and cooperative control": ("consensus", "rendezvous", "flocking", "synchronization", "lqr", "riccati"),
-    "Estimation": ("distributed_kf", "distributed_ekf", "fusion", "ellipsoids", "set_membership", "observers"),
-    "Comparing the methods": ("compare", "agent_cost", "sweep"),
-    "Reproduction and the book": ("registry", "ledger", "report", "reproduce", "plotting", "exceptions"),
+    "Estimation": ("estimation", "distributed_kf", "distributed_ekf", "fusion", "own_state", "ellipsoids",
+                   "set_membership", "observers"),
+    "Comparing the methods": ("compare", "papers.compare", "agent_cost", "sweep"),
+    "Reproduction and the book": ("registry", "settings", "claims", "ledger", "formatting", "report", "reproduce",
+                                  "plotting", "exceptions"),
 }
 
 #: The group of the papers' study modules in the API reference.

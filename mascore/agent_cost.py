@@ -42,16 +42,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import compare, fusion, kalman, rendezvous, set_membership
 from . import distributed_kf as dkf
+from . import estimation, fusion, kalman, rendezvous, set_membership
 from ._validation import check_positive_int
+from .compare.benchmark import SETTINGS, BenchmarkSettings, check_n_agents
+from .compare.target import localization_model, target_model
+from .compare.team import make_estimator, team_setup
 
 __all__ = [
-    "AGENT_METHODS",
-    "AGENT_ORDER",
+    "AGENT_METHODS",  # noqa: F822 (read from the specs by the module's __getattr__)
+    "AGENT_ORDER",  # noqa: F822 (read from the specs by the module's __getattr__)
     "AGENT_TASKS",
+    "TEAM_METHODS",
+    "TEAM_ORDER",
+    "TEAM_WHOLE_FILTER",
+    "agent_methods",
     "MAX_AGENTS",
-    "WHOLE_FILTER",
+    "WHOLE_FILTER",  # noqa: F822 (read from the specs by the module's __getattr__)
     "AgentStep",
     "agent_costs",
     "agent_flops",
@@ -65,27 +72,21 @@ __all__ = [
 
 #: Tasks whose per-agent cost is measured.
 AGENT_TASKS = ("team", "target", "localization")
-#: Methods per task (the team task's own recipes; the fusion filters of the target and localization tasks).
-AGENT_METHODS = {
-    "team": ("centralized", "local", "forwarding", "song-mb", "song-eb", "vlahakis", "set-membership"),
-    "target": ("centralized", "local", "forwarding", "ci-L1", "ci-L5", "hcmci-L1", "hcmci-L5", "icf-L1", "icf-L5",
-               "diffusion", "ci-diffusion"),
-    "localization": ("centralized", "local", "forwarding", "ci-L1", "ci-L5", "hcmci-L1", "hcmci-L5", "icf-L1",
-                     "icf-L5", "diffusion", "ci-diffusion"),
-}
-#: Methods whose busiest agent runs the whole filter: the centre, or every agent of Song et al.'s estimation-based
-#: filter, which needs the joint covariance of all agents' team estimates (their Remark 4).
-WHOLE_FILTER = {("team", "centralized"), ("team", "song-eb"), ("target", "centralized"),
-                ("localization", "centralized")}
+#: The team task's methods (the estimators of :mod:`mascore.compare`'s own-state task); the methods of the
+#: target and localization tasks are their specs' (:data:`mascore.fusion.METHODS`): see :func:`agent_methods`.
+TEAM_METHODS = ("centralized", "local", "forwarding", "song-mb", "song-eb", "vlahakis", "set-membership")
+#: Team methods whose busiest agent runs the whole filter: the centre, or every agent of Song et al.'s
+#: estimation-based filter, which needs the joint covariance of all agents' team estimates (their Remark 4).
+TEAM_WHOLE_FILTER = frozenset({("team", "centralized"), ("team", "song-eb")})
 #: Largest N measured per (task, method), with the reason; the others go to 128.
 MAX_AGENTS = {
     ("team", "song-eb"): (32, "its joint covariance of all agents' team estimates holds (2 N^2)^2 floats (per "
                               "axis): 0.5 GB at N = 64, 8.6 GB at 128"),
 }
 
-#: Leading-order work and memory of one agent per step (n the state size: 4 in the team and target tasks,
-#: 2N in localization; d the degree, L the consensus rounds, N the team size; q_i = O(d) measurements).
-AGENT_ORDER = {
+#: Leading-order work and memory of one team-task agent per step (n = 4 the state size; d the degree, N the team
+#: size); those of the target and localization tasks are their specs' orders (:data:`AGENT_ORDER`).
+TEAM_ORDER = {
     ("team", "centralized"): ("O(N^3 n^3) at the centre", "O(N^2 n^2)"),
     ("team", "local"): ("O(n^3)", "O(n^2)"),
     ("team", "forwarding"): ("O(d n + n^3)", "O(n^2 + d n)"),
@@ -93,23 +94,45 @@ AGENT_ORDER = {
     ("team", "song-eb"): ("O(N^6 n^3): the joint covariance of all team estimates (dense)", "O(N^4 n^2)"),
     ("team", "vlahakis"): ("O(n^2 + d n)", "O(n + d n)"),
     ("team", "set-membership"): ("O(n^3)", "O(n^2)"),
-    ("target", "centralized"): ("O(N q^2 + n^3) at the centre", "O(n^2 + N q)"),
-    ("target", "local"): ("O(n^3)", "O(n^2)"),
-    ("target", "forwarding"): ("O(d q n + n^3)", "O(n^2 + d q)"),
-    ("target", "ci"): ("O(n^3 + L d n^2)", "O(d n^2)"),
-    ("target", "hcmci"): ("O(n^3 + L d n^2)", "O(d n^2)"),
-    ("target", "icf"): ("O(n^3 + L d n^2)", "O(d n^2)"),
-    ("target", "diffusion"): ("O(d q n + n^3)", "O(n^2 + d n)"),
-    ("target", "ci-diffusion"): ("O(n^3 + s d n^2): s weight-search evaluations", "O(d n^2)"),
-    ("localization", "centralized"): ("O(N^3) at the centre (n = 2N, N d q)", "O(N^2)"),
-    ("localization", "local"): ("O(N^3): n = 2N", "O(N^2)"),
-    ("localization", "forwarding"): ("O(N^3)", "O(N^2)"),
-    ("localization", "ci"): ("O(N^3 + L d N^2)", "O(d N^2)"),
-    ("localization", "hcmci"): ("O(N^3 + L d N^2)", "O(d N^2)"),
-    ("localization", "icf"): ("O(N^3 + L d N^2)", "O(d N^2)"),
-    ("localization", "diffusion"): ("O(N^3)", "O(N^2)"),
-    ("localization", "ci-diffusion"): ("O(N^3 + s d N^2)", "O(d N^2)"),
 }
+
+
+def agent_methods(task: str) -> tuple[str, ...]:
+    """The methods whose per-agent cost is measured in `task`, in table order.
+
+    Parameters
+    ----------
+    task : {"team", "target", "localization"}
+        The scenario (:data:`AGENT_TASKS`).
+
+    Returns
+    -------
+    tuple of str
+        :data:`TEAM_METHODS`, or the names of the task's :class:`mascore.estimation.MethodSpec` (a new filter
+        module's included).
+
+    Examples
+    --------
+    >>> from mascore import agent_cost
+    >>> agent_cost.agent_methods("target")[:3]
+    ('centralized', 'local', 'forwarding')
+    """
+    if task not in AGENT_TASKS:
+        raise ValueError(f"task must be one of {AGENT_TASKS}; got {task!r}")
+    return TEAM_METHODS if task == "team" else estimation.method_names(task)
+
+
+def __getattr__(name: str):
+    """``AGENT_METHODS``, ``WHOLE_FILTER`` and ``AGENT_ORDER``, read from the specs when asked (always current)."""
+    fusion_tasks = [t for t in AGENT_TASKS if t != "team"]
+    if name == "AGENT_METHODS":  # methods per task
+        return {t: agent_methods(t) for t in AGENT_TASKS}
+    if name == "WHOLE_FILTER":  # (task, method) whose busiest agent runs the whole filter
+        return TEAM_WHOLE_FILTER | {(t, s.name) for t in fusion_tasks for s in estimation.method_specs(t)
+                                    if s.whole_filter}
+    if name == "AGENT_ORDER":  # (task, method) -> (work, memory) per agent and step
+        return {**TEAM_ORDER, **{(t, s.name): s.order[t] for t in fusion_tasks for s in estimation.method_specs(t)}}
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass
@@ -160,10 +183,9 @@ class AgentStep:
 
 def _check_task_method(task: object, method: object) -> None:
     """Refuse a task or a method of that task that this module does not know, by name."""
-    if task not in AGENT_TASKS:
-        raise ValueError(f"task must be one of {AGENT_TASKS}; got {task!r}")
-    if method not in AGENT_METHODS[task]:
-        raise ValueError(f"method must be one of {AGENT_METHODS[task]} for task {task!r}; got {method!r}")
+    methods = agent_methods(task)
+    if method not in methods:
+        raise ValueError(f"method must be one of {methods} for task {task!r}; got {method!r}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -171,7 +193,7 @@ def _check_task_method(task: object, method: object) -> None:
 
 
 def agent_step(task: str, method: str, n_agents: int, *, agent: int = 0, seed: int = 0,
-               settings: compare.BenchmarkSettings = compare.SETTINGS) -> AgentStep:
+               settings: BenchmarkSettings = SETTINGS) -> AgentStep:
     """Agent `agent`'s work per step of `method`, cut out of one run of the scenario.
 
     The scenario's model is built (:func:`mascore.compare.target_model`,
@@ -193,7 +215,7 @@ def agent_step(task: str, method: str, n_agents: int, *, agent: int = 0, seed: i
         The agent i, ``0 <= i < N``.
     seed : int
         Seed of the state and measurements.
-    settings : mascore.compare.BenchmarkSettings
+    settings : mascore.BenchmarkSettings
         The benchmark's settings.
 
     Returns
@@ -217,7 +239,7 @@ def agent_step(task: str, method: str, n_agents: int, *, agent: int = 0, seed: i
     True
     """
     _check_task_method(task, method)
-    N = compare._check_n_agents(n_agents)
+    N = check_n_agents(n_agents)
     i = check_positive_int(agent, "agent", minimum=0)
     if i >= N:
         raise ValueError(f"agent must be an agent index below n_agents = {N}; got {agent!r}")
@@ -227,14 +249,14 @@ def agent_step(task: str, method: str, n_agents: int, *, agent: int = 0, seed: i
     return _fusion_step(task, method, N, i, seed, settings)
 
 
-def _team_step(method: str, N: int, i: int, seed: int, s: compare.BenchmarkSettings) -> AgentStep:
+def _team_step(method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> AgentStep:
     """The team task: the estimator of :mod:`mascore.compare` run two steps, then agent i's next step."""
-    team = compare._team(N, "gaussian", 1.0, s, "ring")
+    team = team_setup(N, "gaussian", 1.0, s, "ring")
     rng = np.random.default_rng(seed)
     x = np.concatenate([s.init_pos * rng.standard_normal((1, N, 2)), s.init_vel * rng.standard_normal((1, N, 2))],
                        axis=-1)
     x_hat0 = x + np.sqrt(s.p0) * rng.standard_normal(x.shape)
-    est = compare._make(method, team, x_hat0)
+    est = make_estimator(method, team, x_hat0)
     S = (team.adjacency > 0) | np.eye(N, dtype=bool)
     S = S[None]
     hood = np.flatnonzero(S[0, i])
@@ -254,7 +276,7 @@ def _team_step(method: str, N: int, i: int, seed: int, s: compare.BenchmarkSetti
         est.predict(U)
         x = x @ team.A.T + U @ team.B.T + np.sqrt(np.diag(team.Q)) * rng.standard_normal(x.shape)
     Z = measure()
-    if (("team", method)) in WHOLE_FILTER:
+    if ("team", method) in TEAM_WHOLE_FILTER:
         U = control(Z)  # the inputs of the timed step (from the views before the update: the work is the same)
         filt = est.filter
 
@@ -285,31 +307,20 @@ def _team_step(method: str, N: int, i: int, seed: int, s: compare.BenchmarkSetti
             return kalman.predict(xu, Pu, model, u_i)
 
         return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i], est.P))
-    if method == "forwarding":
-        x_i, P_i = before.own[0, i].copy(), before.P[0, i].copy()
-        z_in = Z[0, hood, i].copy()  # (d + 1, 4): z_ji, the measurements of x_i by i and by its neighbours
-        Rinv, A, B, Qf = np.linalg.inv(team.R), team.A, team.B, team.Q_filter
+    if method == "forwarding":  # the filter's own agent step
+        filt = before.filter
+        own, messages = filt.agent_inputs(before.own[0], before.P[0], Z[0], S[0], U[0], i)
 
         def run():
-            info = np.linalg.inv(P_i)
-            P = np.linalg.inv(info + len(z_in) * Rinv)
-            P = 0.5 * (P + P.T)
-            xp = P @ (info @ x_i + Rinv @ z_in.sum(0))
-            return A @ xp + B @ u_i, A @ P @ A.T + Qf
+            return filt.agent_step(i, own, messages)
 
         return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i], est.P[0, i]))
-    if method == "vlahakis":
-        x_i = before.own[0, i].copy()
-        p_nb = before.own[0, nbrs, :2].copy()  # the neighbours' broadcast position estimates (messages)
-        z_own_pos, z_nb = z_own[:2].copy(), Z[0, i, nbrs, :2].copy()
-        gain, Phi, A, B = before.gain, before.Phi, team.A, team.B
-        a = team.adjacency[i, nbrs].copy()
+    if method == "vlahakis":  # the observer's own agent step, with the neighbours' broadcast output estimates
+        obs = before.observer
+        own, messages = obs.agent_inputs(before.own[0], Z[0, :, :, :2], U[0], i)
 
         def run():
-            p = x_i[:2]
-            coupling = a @ ((z_own_pos - z_nb) - (p - p_nb))
-            xu = x_i + gain @ ((z_own_pos - p) + Phi * coupling)
-            return (A @ xu + B @ u_i,)
+            return obs.agent_step(i, own, messages)
 
         return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i],))
     # set-membership: the filter's public one-agent model
@@ -361,142 +372,37 @@ def _song_mb_step(before: dkf.TeamFilter, after: dkf.TeamFilter, Z_i: np.ndarray
                      lambda: (after.X_hat[0, i], after.Sigma[0, i]))
 
 
-def _fusion_step(task: str, method: str, N: int, i: int, seed: int, s: compare.BenchmarkSettings) -> AgentStep:
-    """The target and localization tasks: a :mod:`mascore.fusion` filter run two steps, then agent i's next step."""
-    model = (compare.target_model if task == "target" else compare.localization_model)(N, "ring", s)
-    filt = compare.target_filter(method, model)
+def _fusion_step(task: str, method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> AgentStep:
+    """The target and localization tasks: the method's filter run two steps, then its own ``agent_step`` for agent i.
+
+    The inputs of agent i's step (its own data, its neighbours' messages of each round) are cut out of
+    the team-wide filter by the filter's ``agent_inputs`` (untimed); the timed step is its ``agent_step``.
+    """
+    spec = estimation.method_spec(method, task)
+    model = (target_model if task == "target" else localization_model)(N, "ring", s)
+    filt = spec.build(model)
     n = model.n_states
     rng = np.random.default_rng(seed)
     _, z = model.simulate(np.zeros(n), s.p0 * np.eye(n), 3, rng)
-    if method == "centralized":
-        x, P = model.check_state(np.zeros(n), s.p0 * np.eye(n), per_agent=False)
-        for k in range(2):
-            x, P = filt.update(*filt.predict(x, P), z[k])
-
-        def run():
-            return filt.update(*filt.predict(x, P), z[2])
-
-        return AgentStep(task, method, N, i, int((model.adjacency[i] > 0).sum()), "whole filter", run)
-    x, P = model.check_state(np.zeros(n), s.p0 * np.eye(n))
-    x = x + np.sqrt(s.p0) * rng.standard_normal(x.shape)  # the agents start apart
+    x, P = model.check_state(np.zeros(n), s.p0 * np.eye(n), per_agent=not spec.whole_filter)
+    if not spec.whole_filter:
+        x = x + np.sqrt(s.p0) * rng.standard_normal(x.shape)  # the agents start apart
     for k in range(2):
         x, P = filt.update(*filt.predict(x, P), z[k])
-    zk = z[2]
-    xm, Pm = filt.predict(x, P)  # the team's predictions: the source of the neighbours' messages (untimed)
-    hood = np.flatnonzero(model._neighbourhood[i])
-    nbrs = hood[hood != i]
-    x_i, P_i = x[i].copy(), P[i].copy()
-    F, Q = model.F, model.Q
-    z_hood = [model.agent_measurement(zk, j).copy() for j in hood]  # own and received measurements
-    HtRinv = [model.H[j].T @ np.linalg.inv(model.R[j]) if model.H[j].shape[0] else np.zeros((n, 0)) for j in hood]
-    own = int(np.flatnonzero(hood == i)[0])
-    I_i = model.information_matrices[i]
-
-    def predict():
-        return F @ x_i, F @ P_i @ F.T + Q
-
-    def info_vec(j):
-        return HtRinv[j] @ z_hood[j]
-
-    def reference():
-        xr, Pr = filt.update(xm, Pm, zk)
-        return xr[i], Pr[i]
-
-    step = dict(task=task, method=method, n_agents=N, agent=i, degree=len(nbrs), scope="one agent",
-                reference=reference)
-    if method in ("forwarding", "diffusion", "ci-diffusion"):
-        S_i = sum(model.information_matrices[j] for j in hood)  # time-invariant: known beforehand
-        eye = np.eye(n)
-
-        def incremental():
-            xp, Pp = predict()
-            iv = sum(info_vec(k) for k in range(len(hood)))
-            Pn = np.linalg.solve(eye + Pp @ S_i, Pp)
-            Pn = 0.5 * (Pn + Pn.T)
-            return xp + Pn @ (iv - S_i @ xp), Pn
-
-        if method == "forwarding":
-            return AgentStep(run=incremental, **step)
-        # the neighbours' incremental estimates of this step (their messages), from the team-wide update
-        hood_S = fusion._mix(model._neighbourhood, model.information_matrices, 2)
-        psi_all, Ploc_all = fusion._information_update(
-            xm, Pm, hood_S, fusion._mix(model._neighbourhood, model._information_vectors(zk), 1))
-        if method == "diffusion":
-            c_self, c_nb = filt.weights[i, i], filt.weights[i, nbrs]
-            psi_nb = psi_all[nbrs].copy()
-
-            def run():
-                psi, Pn = incremental()
-                return c_self * psi + c_nb @ psi_nb, Pn
-
-            return AgentStep(run=run, **step)
-        Om_all = np.linalg.inv(Ploc_all)
-        Om_all = 0.5 * (Om_all + np.swapaxes(Om_all, -1, -2))
-        Om_nb, q_nb = Om_all[nbrs].copy(), (Om_all[nbrs] @ psi_all[nbrs][..., None])[..., 0]
-
-        def run():
-            psi, Pn = incremental()
-            Om = np.linalg.inv(Pn)
-            Om = 0.5 * (Om + Om.T)
-            infos = np.insert(Om_nb, own, Om, axis=0)
-            qs = np.insert(q_nb, own, Om @ psi, axis=0)
-            w = fusion._ci_weights(infos, filt.criterion)
-            Pf = np.linalg.inv(np.einsum("k,kab->ab", w, infos))
-            Pf = 0.5 * (Pf + Pf.T)
-            return Pf @ (w @ qs), Pf
-
-        return AgentStep(run=run, **step)
-    # consensus filters: L rounds; round l's messages are the neighbours' pairs after l rounds (the team-wide mix)
-    kind, L = ("ci", 0) if method == "local" else (method.rsplit("-L", 1)[0], int(method.rsplit("-L", 1)[1]))
-    Om_m = np.linalg.inv(Pm)
-    Om_m = 0.5 * (Om_m + np.swapaxes(Om_m, -1, -2))
-    q_m = (Om_m @ xm[..., None])[..., 0]
-    ivs = model._information_vectors(zk)
-    if kind == "icf":
-        eps = filt.rate
-        W = np.eye(N) - eps * (np.diag((model.adjacency > 0).sum(1)) - (model.adjacency > 0))
-        pairs = [(Om_m / N + model.information_matrices, q_m / N + ivs)]
-    else:
-        W = model.weights
-        if kind == "ci":
-            pairs = [(Om_m + model.information_matrices, q_m + ivs)]
-        else:  # hcmci: the prior and the novelty pairs
-            pairs = [(Om_m, q_m), (np.broadcast_to(model.information_matrices, Om_m.shape), ivs)]
-    msgs = []  # msgs[l][p] = (neighbours' matrices (d, n, n), vectors (d, n)) of pair p in round l
-    for _ in range(L):
-        msgs.append([(M[nbrs].copy(), v[nbrs].copy()) for M, v in pairs])
-        pairs = [(fusion._mix(W, M, 2), fusion._mix(W, v, 1)) for M, v in pairs]
-    w_self, w_nb = W[i, i], W[i, nbrs].copy()
-    w_nov = filt.novelty_weight if kind == "hcmci" else 1.0
-    z_own = z_hood[own]
-    HtR = HtRinv[own]
+    own, messages = filt.agent_inputs(x, P, z[2], i)
+    degree = int((model.adjacency[i] > 0).sum())
 
     def run():
-        xp, Pp = predict()
-        Om = np.linalg.inv(Pp)
-        Om = 0.5 * (Om + Om.T)
-        qv = Om @ xp
-        iv = HtR @ z_own
-        if kind == "icf":
-            cur = [(Om / N + I_i, qv / N + iv)]
-        elif kind == "ci":
-            cur = [(Om + I_i, qv + iv)]
-        else:
-            cur = [(Om, qv), (I_i, iv)]
-        for rnd in msgs:  # one consensus round: own pair weighted, plus the neighbours' received pairs
-            cur = [(w_self * M + np.einsum("k,kab->ab", w_nb, Mn), w_self * v + w_nb @ vn)
-                   for (M, v), (Mn, vn) in zip(cur, rnd)]
-        if kind == "hcmci":
-            Om_f, q_f = cur[0][0] + w_nov * cur[1][0], cur[0][1] + w_nov * cur[1][1]
-        else:
-            Om_f, q_f = cur[0]
-        Pf = np.linalg.inv(Om_f)
-        Pf = 0.5 * (Pf + Pf.T)
-        if kind == "icf":
-            return Pf @ q_f, Pf / N
-        return Pf @ q_f, Pf
+        return filt.agent_step(i, own, messages)
 
-    return AgentStep(run=run, **step)
+    if spec.whole_filter:
+        return AgentStep(task, method, N, i, degree, "whole filter", run)
+
+    def reference():
+        xr, Pr = filt.update(*filt.predict(x, P), z[2])
+        return xr[i], Pr[i]
+
+    return AgentStep(task, method, N, i, degree, "one agent", run, reference)
 
 
 def max_deviation(step: AgentStep) -> float:
@@ -554,7 +460,7 @@ def blas_pinned() -> str:
 
 def agent_step_cost(task: str, method: str, n_agents: int, *, repeats: int = 7, min_time: float = 0.02,
                     agent: int = 0, seed: int = 0,
-                    settings: compare.BenchmarkSettings = compare.SETTINGS) -> float:
+                    settings: BenchmarkSettings = SETTINGS) -> float:
     """CPU time (µs) of one agent's step (:func:`agent_step`): one run, one thread, median of `repeats`.
 
     After one warm-up call, each repeat calls the step enough times to last about
@@ -624,10 +530,6 @@ class _one_thread:
 # analytic counts
 
 
-def _kind(method: str) -> str:
-    return method.rsplit("-L", 1)[0] if "-L" in method else method
-
-
 def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float:
     """Analytic floating-point operations of one agent per step (leading terms; a multiply-add is 2).
 
@@ -665,7 +567,8 @@ def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float
     N = check_positive_int(n_agents, "n_agents")
     d = check_positive_int(degree, "degree", minimum=0)
     if task != "team":
-        return float(compare.target_cost(method, N, d, task)[1])
+        n, q = _dimensions(task, N, d)
+        return float(estimation.method_spec(method, task).cost(n, q, d, N)[1])
     n = 4
     kf = 4 * n**3 + 2 * n**2 + 26 / 3 * n**3 + 8 * n**2  # prediction + information update
     if method == "local":
@@ -706,35 +609,41 @@ def agent_memory(task: str, method: str, n_agents: int, degree: int = 2) -> floa
     _check_task_method(task, method)
     N = check_positive_int(n_agents, "n_agents")
     d = check_positive_int(degree, "degree", minimum=0)
-    n = 4 if task != "localization" else 2 * N
-    kind = _kind(method)
-    if (task, method) in WHOLE_FILTER:
-        if method == "song-eb":
-            return float((N * N * n) ** 2)
-        if task == "team":
-            return float((N * n) ** 2 + N * n)
-        return float(n**2 + n)
-    if method == "song-mb":  # its team estimate and its own covariance of the whole team
+    if task != "team":
+        n, q = _dimensions(task, N, d)
+        spec = estimation.method_spec(method, task)
+        return float(spec.memory(n, q, d, N)) if spec.memory else float("nan")
+    n = 4
+    if method == "song-eb":
+        return float((N * N * n) ** 2)
+    if method in ("centralized", "song-mb"):  # the team's estimate and covariance (song-mb: agent i's own)
         return float((N * n) ** 2 + N * n)
-    if kind in ("ci", "hcmci", "icf", "ci-diffusion"):
-        pairs = 2 if kind == "hcmci" else 1
-        return float((d + 1) * pairs * (n**2 + n))
     if method == "vlahakis":
         return float(n + d * n)
     return float(n**2 + n + d * n)
+
+
+def _dimensions(task: str, n_agents: int, degree: int) -> tuple[int, int]:
+    """State size n and measurements per agent q of the target (4, 1) and localization (2N, 2d) tasks."""
+    return (4, 1) if task == "target" else (2 * n_agents, 2 * degree)
 
 
 # --------------------------------------------------------------------------------------------
 # the table
 
 
-def _order_key(task: str, method: str) -> tuple[str, str]:
-    return (task, method) if (task, method) in AGENT_ORDER else (task, _kind(method))
+def _order(task: str, method: str) -> tuple[str, str]:
+    """The order of one agent's work and memory per step (:data:`TEAM_ORDER`, or the method's spec)."""
+    return TEAM_ORDER[(task, method)] if task == "team" else estimation.method_spec(method, task).order[task]
+
+
+def _whole_filter(task: str, method: str) -> bool:
+    return (task, method) in TEAM_WHOLE_FILTER if task == "team" else estimation.method_spec(method, task).whole_filter
 
 
 def agent_costs(sizes: Sequence[int] = (4, 8, 16, 32, 64, 128), tasks: Sequence[str] = AGENT_TASKS,
                 methods: Sequence[str] | None = None, *, repeats: int = 7, min_time: float = 0.02,
-                settings: compare.BenchmarkSettings = compare.SETTINGS, progress: bool = False):
+                settings: BenchmarkSettings = SETTINGS, progress: bool = False):
     """:func:`agent_step_cost` over team sizes, with log-log slopes and the analytic counts.
 
     Parameters
@@ -747,7 +656,7 @@ def agent_costs(sizes: Sequence[int] = (4, 8, 16, 32, 64, 128), tasks: Sequence[
         Methods (default: every method of each task); a method not in a task is skipped.
     repeats, min_time : int, float
         As :func:`agent_step_cost`.
-    settings : mascore.compare.BenchmarkSettings
+    settings : mascore.BenchmarkSettings
         The benchmark's settings.
     progress : bool
         Print each measurement as it is made.
@@ -768,22 +677,23 @@ def agent_costs(sizes: Sequence[int] = (4, 8, 16, 32, 64, 128), tasks: Sequence[
     """
     import pandas as pd
 
-    sizes = [compare._check_n_agents(n) for n in sizes]
+    sizes = [check_n_agents(n) for n in sizes]
     rows = []
     for task in tasks:
         if task not in AGENT_TASKS:
             raise ValueError(f"tasks must be among {AGENT_TASKS}; got {task!r}")
-        for m in (AGENT_METHODS[task] if methods is None else [m for m in methods if m in AGENT_METHODS[task]]):
+        known = agent_methods(task)
+        for m in (known if methods is None else [m for m in methods if m in known]):
             limit, why = MAX_AGENTS.get((task, m), (max(sizes), ""))
             for N in sizes:
                 us = agent_step_cost(task, m, N, repeats=repeats, min_time=min_time, settings=settings) \
                     if N <= limit else np.nan
                 if progress:
                     print(f"{task:13s} {m:15s} N = {N:4d}: {us:12.1f} us", flush=True)
-                work, mem = AGENT_ORDER[_order_key(task, m)]
+                work, mem = _order(task, m)
                 rows.append({"task": task, "method": m, "n_agents": N, "us_per_step": us,
                              "flops": agent_flops(task, m, N), "memory_floats": agent_memory(task, m, N),
-                             "scope": "whole filter" if (task, m) in WHOLE_FILTER else "one agent",
+                             "scope": "whole filter" if _whole_filter(task, m) else "one agent",
                              "work": work, "memory": mem, "stops_at": min(limit, max(sizes)), "why": why})
     return pd.DataFrame(rows)
 

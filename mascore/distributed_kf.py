@@ -41,7 +41,7 @@ Implementation (the "structured" path)
 Checked once, then stepped
 --------------------------
 :class:`TeamFilterModel` checks ``A``, ``BK``, ``Q``, ``R`` when it is built and
-keeps read-only copies. :class:`TeamFilter` (and :class:`CentralizedFilter`)
+keeps read-only copies. :class:`TeamFilter` (and :class:`CentralizedTeamFilter`)
 checks the initial state once and then owns it: a step checks only what
 changes (shapes, mask values) and tests its result for NaN/inf. It keeps the
 ``Φ`` blocks of its topology and its work arrays, and updates a large
@@ -100,7 +100,7 @@ __all__ = [
     "TeamFilterModel",
     "team_filter_model",
     "TeamFilter",
-    "CentralizedFilter",
+    "CentralizedTeamFilter",
     "closed_loop_matrices",
     "reduce_covariance",
     "expand_covariance",
@@ -1464,7 +1464,7 @@ class TeamFilter:
             Si[:, rows] += W[i] @ Rq[i] @ Wt[i]  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
 
 
-class CentralizedFilter:
+class CentralizedTeamFilter:
     """The centralized Kalman filter over all agents' measurements, applied inputs known (the reference).
 
     Holds the team estimate and its reduced covariance; :meth:`predict` and
@@ -1498,7 +1498,7 @@ class CentralizedFilter:
     >>> agent = agents.double_integrator(1, 0.1)
     >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
     ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
-    >>> central = dkf.CentralizedFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+    >>> central = dkf.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
     >>> central.predict(np.zeros((1, 3, 1)))
     >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), graphs.path_graph(3), np.eye(2))
     >>> central.update(Z, mask[0])
@@ -1561,7 +1561,7 @@ class CentralizedFilter:
         >>> agent = agents.double_integrator(1, 0.1)
         >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
         ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> central = dkf.CentralizedFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> central = dkf.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
         >>> central.view("P").shape, central.view("P").flags.writeable
         ((1, 6, 6), False)
         """
@@ -1588,7 +1588,7 @@ class CentralizedFilter:
         >>> agent = agents.double_integrator(1, 0.1)
         >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
         ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> central = dkf.CentralizedFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> central = dkf.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
         >>> central.predict(np.ones((1, 3, 1)))                    # p = dt^2 / 2, v = dt
         >>> central.x_hat[0, 0]
         array([0.005, 0.1  ])
@@ -1626,7 +1626,7 @@ class CentralizedFilter:
         >>> agent = agents.double_integrator(1, 0.1)
         >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
         ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
-        >>> central = dkf.CentralizedFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> central = dkf.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
         >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), graphs.path_graph(3), np.eye(2))
         >>> central.update(Z, mask[0])
         >>> bool(np.trace(central.P[0]) < 6.0)
@@ -1660,8 +1660,8 @@ def centralized_predict(
 
     Checks every argument in full on every call (including an eigenvalue test of the
     covariance, which dominates the cost for a large team), then runs the same step as
-    :class:`CentralizedFilter`. In a loop, build the filter once,
-    ``CentralizedFilter(model, B, x_hat0, P0)``, and call its :meth:`~CentralizedFilter.predict`: the fast path.
+    :class:`CentralizedTeamFilter`. In a loop, build the filter once,
+    ``CentralizedTeamFilter(model, B, x_hat0, P0)``, and call its :meth:`~CentralizedTeamFilter.predict`: the fast path.
 
     Parameters
     ----------
@@ -1727,8 +1727,8 @@ def centralized_update(
 
     Checks every argument in full on every call (including an eigenvalue test of the
     covariance, which dominates the cost for a large team), then runs the same step as
-    :class:`CentralizedFilter`. In a loop, build the filter once,
-    ``CentralizedFilter(model, B, x_hat0, P0)``, and call its :meth:`~CentralizedFilter.update`: the fast path.
+    :class:`CentralizedTeamFilter`. In a loop, build the filter once,
+    ``CentralizedTeamFilter(model, B, x_hat0, P0)``, and call its :meth:`~CentralizedTeamFilter.update`: the fast path.
 
     ``P^{-1} = P^-^{-1} + sum_i H_i^T (H_i R H_i^T)^{-1} H_i``,
     ``x = x^- + P sum_i H_i^T (H_i R H_i^T)^{-1} (z_i - H_i x^-)``.

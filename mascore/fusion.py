@@ -87,6 +87,7 @@ from ._validation import (
     require_finite,
     symmetric_part,
 )
+from .estimation import Message, MethodSpec
 
 __all__ = [
     "SensorNetworkModel",
@@ -101,6 +102,7 @@ __all__ = [
     "metropolis_weights",
     "FilterCost",
     "filter_cost",
+    "METHODS",
 ]
 
 
@@ -648,6 +650,129 @@ class _NetworkFilter(Frozen):
             Ps.append(P)
         return np.stack(xs), np.stack(Ps)
 
+    def agent_inputs(self, x: ArrayLike, P: ArrayLike, z: ArrayLike, i: int) -> tuple[dict, tuple]:
+        """Agent i's own data and the messages it receives at one step, cut out of the team-wide filter.
+
+        The team's predictions of the step are the source of the neighbours' messages (each
+        round's, in order): what agent i would receive from them. This is the untimed part of
+        a per-agent measurement (:mod:`mascore.agent_cost`); :meth:`agent_step` is the timed one.
+
+        Parameters
+        ----------
+        x : (N, n) array_like
+            Every agent's estimate before the step (``(n,)`` for the centralized filter).
+        P : (N, n, n) array_like
+            Their covariances (``(n, n)`` for the centralized filter).
+        z : (sum q_i,) array_like
+            The step's stacked measurement.
+        i : int
+            The agent, ``0 <= i < N``.
+
+        Returns
+        -------
+        own : dict
+            Agent i's own data: ``x``, ``P`` (its estimate before the step), ``z`` (its
+            measurement), its neighbourhood ``hood`` (i included, ascending), ``nbrs``,
+            ``index`` (of i in ``hood``), ``HtRinv`` (``H_j^T R_j^{-1}`` of each j in ``hood``),
+            ``S`` (their ``sum H_j^T R_j^{-1} H_j``), ``I`` (its own ``H_i^T R_i^{-1} H_i``): the
+            model's constant parts are known to the agent beforehand.
+        messages : tuple
+            One entry per communication round: the neighbours' messages of that round.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel(np.eye(2), 0.1 * np.eye(2), [np.eye(2)] * 4, [np.eye(2)] * 4,
+        ...                                   graphs.ring_graph(4))
+        >>> filt = fusion.ConsensusOnInformationFilter(model, 3)
+        >>> x, P, z = np.zeros((4, 2)), np.broadcast_to(np.eye(2), (4, 2, 2)), np.arange(8.0)
+        >>> own, messages = filt.agent_inputs(x, P, z, 1)
+        >>> len(messages), own["nbrs"].tolist()                       # 3 rounds from neighbours 0 and 2
+        (3, [0, 2])
+        >>> x1, P1 = filt.agent_step(1, own, messages)
+        >>> xr, Pr = filt.update(*filt.predict(x, P), z)               # agent 1's row of the team-wide filter
+        >>> bool(np.allclose(x1, xr[1]) and np.allclose(P1, Pr[1]))
+        True
+        """
+        x, P = self._check_xP(x, P)
+        z = require_finite(self.model._check_z(z), "z")
+        batch = x.shape[:-2] if self._per_agent else x.shape[:-1]
+        if z.ndim != 1 or batch:
+            raise ValueError(f"agent_inputs takes one run: x ({'N, ' if self._per_agent else ''}n) and z (sum q_i,); "
+                             f"got x {x.shape}, z {z.shape}")
+        N, n = self.model.n_agents, self.model.n_states
+        i = check_positive_int(i, "i", minimum=0)
+        if i >= N:
+            raise ValueError(f"i must be an agent index below N = {N}; got {i}")
+        if not self._per_agent:
+            return {"x": x, "P": P, "z": z}, ()
+        m = self.model
+        hood = np.flatnonzero(m._neighbourhood[i])
+        HtRinv = tuple(m.H[j].T @ np.linalg.inv(m.R[j]) if m.H[j].shape[0] else np.zeros((n, 0)) for j in hood)
+        own = {"x": x[i].copy(), "P": P[i].copy(), "z": m.agent_measurement(z, i).copy(), "hood": hood,
+               "nbrs": hood[hood != i], "index": int(np.flatnonzero(hood == i)[0]), "HtRinv": HtRinv,
+               "S": sum(m.information_matrices[j] for j in hood), "I": m.information_matrices[i]}
+        return own, self._agent_messages(own, *self.predict(x, P), z, i)
+
+    def agent_step(self, i: int, own_data: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        """Agent i's step alone: its prediction, its correction with its own data and its neighbours' messages.
+
+        Parameters
+        ----------
+        i : int
+            The agent.
+        own_data, messages
+            From :meth:`agent_inputs` (not checked again: this is the step that is timed).
+
+        Returns
+        -------
+        x_i : (n,) ndarray
+            Agent i's estimate after the step (the centralized filter: the team's ``(n,)``).
+        P_i : (n, n) ndarray
+            Its covariance.
+        """
+        if not self._per_agent:  # the centre runs the whole filter
+            return self.update(*self.predict(own_data["x"], own_data["P"]), own_data["z"])
+        return self._agent_step(i, own_data, messages)
+
+    def messages(self, i: int = 0) -> tuple[Message, ...]:
+        """What agent i sends per step, with the floats of each message (a symmetric matrix as n (n + 1) / 2).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(1, 2)] * 3, [np.eye(1)] * 3,
+        ...                                   graphs.ring_graph(3))
+        >>> fusion.ConsensusOnInformationFilter(model, 2).messages()
+        (Message(what='information pair (Omega, q), per consensus round', floats=10.0),)
+        """
+        q, n = float(self.model.measurement_sizes[i]), self.model.n_states
+        return self._messages(q, n * (n + 1) / 2 + n)
+
+    def _messages(self, q: float, pair: float) -> tuple[Message, ...]:
+        return (Message("measurement z_i, to each neighbour", q),)
+
+    def _agent_messages(self, own: dict, xm: np.ndarray, Pm: np.ndarray, z: np.ndarray, i: int) -> tuple:
+        """The neighbours' messages of each round, from the team's predictions `xm`, `Pm`."""
+        return (tuple(self.model.agent_measurement(z, j).copy() for j in own["nbrs"]),)
+
+    def _agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        return self._incremental(own, messages[0])
+
+    def _incremental(self, own: dict, received: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """Prediction, then the correction with the neighbourhood's measurements (information form)."""
+        F, Q = self.model.F, self.model.Q
+        xp, Pp = F @ own["x"], F @ own["P"] @ F.T + Q
+        zs = list(received)
+        zs.insert(own["index"], own["z"])
+        iv = sum(h @ zj for h, zj in zip(own["HtRinv"], zs))
+        S = own["S"]
+        Pn = np.linalg.solve(np.eye(len(xp)) + Pp @ S, Pp)
+        Pn = 0.5 * (Pn + Pn.T)
+        return xp + Pn @ (iv - S @ xp), Pn
+
     def _check_xP(self, x: ArrayLike, P: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         x, P = float_array(x, "x"), float_array(P, "P")
         n, N = self.model.n_states, self.model.n_agents
@@ -698,6 +823,9 @@ class CentralizedFilter(_NetworkFilter):
     __slots__ = ()
     _what = "centralized update"
     _per_agent = False
+
+    def _messages(self, q, pair):
+        return (Message("measurement z_i, to the centre", q),)
 
     def _correct(self, x, P, z):
         return kalman.update(x, P, z, self.model._kf)
@@ -800,6 +928,18 @@ class DiffusionKalmanFilter(_NetworkFilter):
         psi, P_new = _information_update(x, P, self._S, i)
         return _mix(self.weights, psi, 1), P_new
 
+    def _messages(self, q, pair):
+        return (Message("measurement z_i", q), Message("incremental estimate psi_i", float(self.model.n_states)))
+
+    def _agent_messages(self, own, xm, Pm, z, i):
+        psi, _ = _information_update(xm, Pm, self._S, _mix(self.model._neighbourhood,
+                                                             self.model._information_vectors(z), 1))
+        return (*super()._agent_messages(own, xm, Pm, z, i), psi[own["nbrs"]].copy())
+
+    def _agent_step(self, i, own, messages):
+        psi, Pn = self._incremental(own, messages[0])
+        return self.weights[i, i] * psi + self.weights[i, own["nbrs"]] @ messages[1], Pn
+
 
 class ConsensusOnInformationFilter(_NetworkFilter):
     """Consensus on information (CI) of Battistelli and Chisci (2014); the hybrid HCMCI of Battistelli et al. (2015).
@@ -881,6 +1021,28 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         self._set(n_consensus=L, novelty_weight=w, _WL=frozen_copy(WL))
         self._set(_SL=frozen_copy(w * _mix(WL, model.information_matrices, 2)))
 
+    def _messages(self, q, pair):
+        pairs = "the prior and the novelty pairs" if self.novelty_weight != 1.0 else "information pair (Omega, q)"
+        k = 2 if self.novelty_weight != 1.0 else 1
+        return (Message(f"{pairs}, per consensus round", k * self.n_consensus * pair),)
+
+    def _agent_messages(self, own, xm, Pm, z, i):
+        Om, q = _information_pair(xm, Pm)
+        I, iv = self.model.information_matrices, self.model._information_vectors(z)
+        pairs = [(Om, q), (np.broadcast_to(I, Om.shape), iv)] if self.novelty_weight != 1.0 else [(Om + I, q + iv)]
+        return _consensus_rounds(self.model.weights, pairs, own["nbrs"], self.n_consensus)
+
+    def _agent_step(self, i, own, messages):
+        W = self.model.weights
+        xp, Pp = self.model.F @ own["x"], self.model.F @ own["P"] @ self.model.F.T + self.model.Q
+        Om, qv = _information_pair(xp, Pp)
+        iv = own["HtRinv"][own["index"]] @ own["z"]
+        cur = [(Om, qv), (own["I"], iv)] if self.novelty_weight != 1.0 else [(Om + own["I"], qv + iv)]
+        cur = _consensus_agent(cur, messages, W[i, i], W[i, own["nbrs"]])
+        if self.novelty_weight != 1.0:
+            return _from_information(cur[0][0] + self.novelty_weight * cur[1][0], cur[0][1] + self.novelty_weight * cur[1][1])
+        return _from_information(*cur[0])
+
     def _correct(self, x, P, z):
         Om, q = _information_pair(x, P)
         Om = _mix(self._WL, Om, 2) + self._SL
@@ -954,6 +1116,28 @@ class InformationConsensusFilter(_NetworkFilter):
         WK = np.linalg.matrix_power(np.eye(model.n_agents) - eps * Lap, K)
         self._set(n_iterations=K, rate=eps, _WK=frozen_copy(WK))
         self._set(_SK=frozen_copy(_mix(WK, model.information_matrices, 2)))
+
+    def _messages(self, q, pair):
+        return (Message("information pair (V, v), per consensus iteration", self.n_iterations * pair),)
+
+    def _consensus_matrix(self) -> np.ndarray:
+        links = self.model.adjacency > 0
+        return np.eye(self.model.n_agents) - self.rate * (np.diag(links.sum(1)) - links)
+
+    def _agent_messages(self, own, xm, Pm, z, i):
+        N = self.model.n_agents
+        Om, q = _information_pair(xm, Pm)
+        pairs = [(Om / N + self.model.information_matrices, q / N + self.model._information_vectors(z))]
+        return _consensus_rounds(self._consensus_matrix(), pairs, own["nbrs"], self.n_iterations)
+
+    def _agent_step(self, i, own, messages):
+        N, W = self.model.n_agents, self._consensus_matrix()
+        xp, Pp = self.model.F @ own["x"], self.model.F @ own["P"] @ self.model.F.T + self.model.Q
+        Om, qv = _information_pair(xp, Pp)
+        iv = own["HtRinv"][own["index"]] @ own["z"]
+        (Om_f, q_f), = _consensus_agent([(Om / N + own["I"], qv / N + iv)], messages, W[i, i], W[i, own["nbrs"]])
+        x_f, P_f = _from_information(Om_f, q_f)
+        return x_f, P_f / N
 
     def _correct(self, x, P, z):
         N = self.model.n_agents
@@ -1042,6 +1226,69 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         Om_f = np.einsum("...ij,...jab->...iab", C, Om)
         q_f = np.einsum("...ij,...ja->...ia", C, q)
         return _from_information(Om_f, q_f)
+
+    def _messages(self, q, pair):
+        return (Message("measurement z_i", q if self.measurements == "neighbourhood" else 0.0),
+                Message("information pair of the incremental estimate", pair))
+
+    def _agent_messages(self, own, xm, Pm, z, i):
+        M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
+        psi, P_loc = _information_update(xm, Pm, self._S, _mix(M, self.model._information_vectors(z), 1))
+        Om, q = _information_pair(psi[own["nbrs"]], P_loc[own["nbrs"]])
+        received = super()._agent_messages(own, xm, Pm, z, i)
+        return (received[0] if self.measurements == "neighbourhood" else (), (Om, q))
+
+    def agent_inputs(self, x: ArrayLike, P: ArrayLike, z: ArrayLike, i: int) -> tuple[dict, tuple]:
+        """Agent i's own data and its neighbours' messages of one step (see :meth:`_NetworkFilter.agent_inputs`).
+
+        With ``measurements="own"`` the incremental step uses agent i's own measurement only.
+
+        Parameters
+        ----------
+        x : (N, n) array_like
+            Every agent's estimate before the step.
+        P : (N, n, n) array_like
+            Their covariances.
+        z : (sum q_i,) array_like
+            The step's stacked measurement.
+        i : int
+            The agent.
+
+        Returns
+        -------
+        own : dict
+            Agent i's own data.
+        messages : tuple
+            The neighbours' measurements, then their incremental estimates as information pairs.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs
+        >>> model = fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
+        ...                                   graphs.ring_graph(3))
+        >>> filt = fusion.CovarianceIntersectionFilter(model)
+        >>> own, messages = filt.agent_inputs(np.zeros((3, 2)), np.broadcast_to(np.eye(2), (3, 2, 2)), np.ones(6), 0)
+        >>> len(messages[0]), messages[1][0].shape                  # two measurements; two information matrices
+        (2, (2, 2, 2))
+        """
+        own, messages = super().agent_inputs(x, P, z, i)
+        if self.measurements == "own":  # the incremental step with its own measurement only
+            own.update(hood=np.array([i]), index=0, HtRinv=(own["HtRinv"][own["index"]],), S=own["I"])
+        return own, messages
+
+    def _agent_step(self, i, own, messages):
+        psi, Pn = self._incremental(own, messages[0])
+        Om, qv = _information_pair(psi, Pn)
+        Om_nb, q_nb = messages[1]
+        k = int((own["nbrs"] < i).sum())  # i's place in its neighbourhood
+        infos = np.insert(Om_nb, k, Om, axis=0)
+        qs = np.insert(q_nb, k, qv, axis=0)
+        if self.criterion is None:
+            w = np.full(len(infos), 1.0 / len(infos))
+        else:
+            w = _ci_weights(infos, self.criterion)
+        return _from_information(np.einsum("k,kab->ab", w, infos), w @ qs)
 
 
 def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true: ArrayLike | None = None,
@@ -1386,6 +1633,68 @@ def filter_cost(method: str, n: int, q: int, degree: int, iterations: int = 1, n
 
 
 # --------------------------------------------------------------------------------------------
+# the methods of the common-target and localization tasks (mascore.compare, mascore.agent_cost)
+
+
+def _cost(name: str, iterations: int = 1, degree: bool = True):
+    """``cost(n, q, degree, n_agents) -> (floats, flops)`` of :func:`filter_cost` for `name` (no neighbours if not `degree`)."""
+    def cost(n: int, q: int, d: int, n_agents: int) -> tuple[float, float]:
+        c = filter_cost(name, n=n, q=q, degree=d if degree else 0, iterations=iterations, n_agents=n_agents)
+        return c.floats_sent, c.flops
+    return cost
+
+
+def _orders(target: tuple[str, str], localization: tuple[str, str]) -> dict[str, tuple[str, str]]:
+    return {"target": target, "localization": localization}
+
+
+def _memory(pairs: int = 0):
+    """``memory(n, q, degree, n_agents)``: an estimate and covariance and d messages (`pairs` > 0: d + 1 pairs each)."""
+    def memory(n: int, q: int, d: int, n_agents: int) -> float:
+        return float((d + 1) * pairs * (n**2 + n)) if pairs else float(n**2 + n + d * n)
+    return memory
+
+
+def _centre_memory(n: int, q: int, d: int, n_agents: int) -> float:
+    return float(n**2 + n)
+
+
+_TASKS = ("target", "localization")
+_CONSENSUS = {  # kind -> (filter of L steps, filter_cost name)
+    "ci": (lambda m, L: ConsensusOnInformationFilter(m, L), "consensus-on-information"),
+    "hcmci": (lambda m, L: ConsensusOnInformationFilter(m, L, novelty_weight="N"), "hcmci"),
+    "icf": (lambda m, L: InformationConsensusFilter(m, L), "information-consensus"),
+}
+
+
+def _consensus_spec(kind: str, L: int, position: float) -> MethodSpec:
+    build, cost_name = _CONSENSUS[kind]
+    return MethodSpec(f"{kind}-L{L}", _TASKS, lambda model: build(model, L), _cost(cost_name, L),
+                      _orders(("O(n^3 + L d n^2)", "O(d n^2)"), ("O(N^3 + L d N^2)", "O(d N^2)")),
+                      _memory(2 if kind == "hcmci" else 1), position=position)
+
+
+#: The methods of the common-target and localization tasks, in table order (``-L<k>``: k consensus steps per update).
+METHODS = (
+    MethodSpec("centralized", _TASKS, CentralizedFilter, _cost("centralized"),
+               _orders(("O(N q^2 + n^3) at the centre", "O(n^2 + N q)"),
+                       ("O(N^3) at the centre (n = 2N, N d q)", "O(N^2)")), _centre_memory, whole_filter=True,
+               position=0),
+    MethodSpec("local", _TASKS, lambda model: ConsensusOnInformationFilter(model, 0),
+               _cost("consensus-on-information", 0, degree=False),
+               _orders(("O(n^3)", "O(n^2)"), ("O(N^3): n = 2N", "O(N^2)")), _memory(), position=1),
+    MethodSpec("forwarding", _TASKS, MeasurementForwardingFilter, _cost("measurement-forwarding"),
+               _orders(("O(d q n + n^3)", "O(n^2 + d q)"), ("O(N^3)", "O(N^2)")), _memory(), position=2),
+    *(_consensus_spec(kind, L, 3 + 2 * k + j) for k, kind in enumerate(_CONSENSUS) for j, L in enumerate((1, 5))),
+    MethodSpec("diffusion", _TASKS, DiffusionKalmanFilter, _cost("diffusion-kf"),
+               _orders(("O(d q n + n^3)", "O(n^2 + d n)"), ("O(N^3)", "O(N^2)")), _memory(), position=9),
+    MethodSpec("ci-diffusion", _TASKS, CovarianceIntersectionFilter, _cost("covariance-intersection", 20),
+               _orders(("O(n^3 + s d n^2): s weight-search evaluations", "O(d n^2)"), ("O(N^3 + s d N^2)", "O(d N^2)")),
+               _memory(1), position=10),
+)
+
+
+# --------------------------------------------------------------------------------------------
 # kernels (checked arguments)
 
 
@@ -1402,6 +1711,23 @@ def _information_update(x, P, S, i):
     P_new = symmetric_part(np.linalg.solve(np.eye(n) + P @ S, P))
     r = i - (S @ x[..., None])[..., 0]
     return x + (P_new @ r[..., None])[..., 0], P_new
+
+
+def _consensus_rounds(W: np.ndarray, pairs: list, nbrs: np.ndarray, rounds: int) -> tuple:
+    """The neighbours' pairs of each consensus round, from the team's initial pairs (round l: after l mixes)."""
+    out = []
+    for _ in range(rounds):
+        out.append(tuple((M[nbrs].copy(), v[nbrs].copy()) for M, v in pairs))
+        pairs = [(_mix(W, M, 2), _mix(W, v, 1)) for M, v in pairs]
+    return tuple(out)
+
+
+def _consensus_agent(pairs: list, rounds: Sequence, w_self: float, w_nb: np.ndarray) -> list:
+    """One agent's consensus rounds: its own pairs weighted, plus its neighbours' received pairs, per round."""
+    for received in rounds:
+        pairs = [(w_self * M + np.einsum("k,kab->ab", w_nb, Mn), w_self * v + w_nb @ vn)
+                 for (M, v), (Mn, vn) in zip(pairs, received)]
+    return pairs
 
 
 def _information_pair(x, P):

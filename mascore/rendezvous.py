@@ -760,7 +760,7 @@ def simulate_rendezvous(
             if mode == "estimation":
                 out["f2_cross"] = np.empty((n_steps + 1, N, filter_model.M_r, filter_model.M_r))
         if central:
-            central_filter = dkf.CentralizedFilter(filter_model, B, xh0, P0, batch=nb)
+            central_filter = dkf.CentralizedTeamFilter(filter_model, B, xh0, P0, batch=nb)
             out["central_pos_std"] = np.empty((n_steps + 1, nb))
             out["central_pos_error"] = np.empty((n_steps + 1, n_runs))
 

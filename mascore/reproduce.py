@@ -196,14 +196,15 @@ def _compare(args: argparse.Namespace) -> int:
     """``mascore compare``: the sweep, then the summary, headline table, figures and claims under ``out/compare``."""
     import os
 
-    from . import compare
+    from .compare import headline
+    from .papers.compare import STUDY
 
     workers = (os.cpu_count() or 1) if args.workers is None else args.workers
     if workers < 0:
         print(f"mascore: --workers must be >= 0; got {workers}", file=sys.stderr)
         return 2
     start = time.perf_counter()
-    study = compare.STUDY
+    study = STUDY
     result = study.run(dataclasses.replace(study.settings, grid=args.grid), args.seed, progress=True, out=args.out,
                        workers=workers, scheduler=args.scheduler)
     table, summary = result.table, result.summary
@@ -215,7 +216,7 @@ def _compare(args: argparse.Namespace) -> int:
                  created_by=f"mascore compare --grid {args.grid} --seed {args.seed}")
     where = args.scheduler or (f"{workers} local workers" if workers else "this process")
     for task in ("team", "position", "target", "localization", "shared"):
-        print(compare.headline(summary, task).to_string())
+        print(headline(summary, task).to_string())
     held = sum(c.verdict == "holds" for c in claims)
     print(f"compare: {len(table['cell'].unique())} cells, {len(table)} runs in {elapsed:.1f} s on {where}; "
           f"{held} of {len(claims)} claims hold -> {folder}")

@@ -56,7 +56,7 @@ def test_analytic_flops_grow_as_the_stated_order(task, method, ratio):
     # flops(2N) / flops(N) tends to 2^p for O(N^p): at N = 4096 the lower-order terms are within 2 %
     r = agent_cost.agent_flops(task, method, 8192) / agent_cost.agent_flops(task, method, 4096)
     assert r == pytest.approx(ratio, rel=0.02)
-    order = agent_cost.AGENT_ORDER[agent_cost._order_key(task, method)][0]
+    order = agent_cost._order(task, method)[0]
     p = round(np.log2(ratio))
     assert (f"N^{p}" in order) if p > 1 else ("N" not in order.split(":")[0] if p == 0 else "N q" in order)
 
@@ -73,7 +73,7 @@ def test_analytic_memory_grows_as_the_stated_order(task, method, ratio):
 def test_every_method_has_an_order_and_counts():
     for task in agent_cost.AGENT_TASKS:
         for m in agent_cost.AGENT_METHODS[task]:
-            assert agent_cost._order_key(task, m) in agent_cost.AGENT_ORDER
+            assert (task, m) in agent_cost.AGENT_ORDER
             assert agent_cost.agent_flops(task, m, 8) > 0 and agent_cost.agent_memory(task, m, 8) > 0
 
 

@@ -18,7 +18,7 @@ import pandas as pd
 import pytest
 import scipy.linalg as sla
 
-from mascore import compare, consensus, sweep
+from mascore import compare, consensus, graphs, sweep
 from mascore.reproduce import main, results_dir
 
 CPU = "cpu_s"  # the only column that depends on the machine and the moment
@@ -181,7 +181,7 @@ def test_simulate_team_refuses_bad_arguments(kwargs, match):
 def test_local_filter_matches_the_dare_and_its_rmse_matches_its_covariance():
     """The local Kalman filter's covariance reaches the DARE's; its RMSE and NEES agree with it."""
     s = compare.SETTINGS
-    team = compare._team(4, "gaussian", 1.0, s)
+    team = compare.team_setup(4, "gaussian", 1.0, s)
     est = compare._Local(team, np.zeros((1, 4, 4)))
     for _ in range(300):
         est.update(np.zeros((1, 4, 4, 4)), np.ones((1, 4, 4), bool))
@@ -199,7 +199,7 @@ def test_centralized_covariance_matches_the_team_dare():
     """Steady-state own covariance of the centralized filter = DARE of the team with every measurement."""
     s = compare.SETTINGS
     N = 4
-    team = compare._team(N, "gaussian", 1.0, s)
+    team = compare.team_setup(N, "gaussian", 1.0, s)
     est = compare._Centralized(team, np.zeros((1, N, 4)))
     S = (team.adjacency > 0) | np.eye(N, dtype=bool)
     for _ in range(300):
@@ -283,12 +283,12 @@ def test_vlahakis_rmse_matches_its_error_covariance():
     """
     s = compare.SETTINGS
     N = 5
-    L, Phi = compare._vlahakis_gains(compare.graphs.ring_graph(N), s.q_vel, s.r, s.dt)
+    L, Phi = compare._vlahakis_gains(graphs.ring_graph(N), s.q_vel, s.r, s.dt)
     G = s.dt * L                                          # (2, 1)
     C = np.array([[1.0, 0.0]])
     A = np.array([[1.0, s.dt], [0.0, 1.0]])
-    adjacency = compare.graphs.ring_graph(N)
-    lap = compare.graphs.laplacian(adjacency)
+    adjacency = graphs.ring_graph(N)
+    lap = graphs.laplacian(adjacency)
     M = np.eye(2 * N) - np.kron(np.eye(N) + Phi * lap, G @ C)
     deg = adjacency.sum(1)
     noise = np.kron(np.diag(s.r * ((1 + Phi * deg) ** 2 + Phi**2 * (adjacency**2).sum(1))), G @ G.T)
@@ -319,7 +319,7 @@ def test_forwarding_is_the_centralized_filter_on_the_own_state_task(dropout):
 
 
 def test_set_membership_centre_is_the_measurement_with_full_state_sensing():
-    team = compare._team(4, "gaussian", 1.0, compare.SETTINGS)
+    team = compare.team_setup(4, "gaussian", 1.0, compare.SETTINGS)
     rng = np.random.default_rng(0)
     est = compare._SetMembership(team, rng.standard_normal((3, 4, 4)))
     Z = rng.standard_normal((3, 4, 4, 4))
@@ -330,7 +330,7 @@ def test_set_membership_centre_is_the_measurement_with_full_state_sensing():
 def test_vlahakis_gain_follows_the_filters_q():
     """More process noise in the filter's Q: a larger observer gain (the Q knob is not inverted)."""
     s = compare.SETTINGS
-    gains = [compare._Vlahakis(compare._team(6, "gaussian", q, s), np.zeros((1, 6, 4))).gain[0, 0]
+    gains = [compare._Vlahakis(compare.team_setup(6, "gaussian", q, s), np.zeros((1, 6, 4))).observer.gain[0, 0]
              for q in (0.1, 1.0, 10.0)]
     assert gains[0] < gains[1] < gains[2]
 
@@ -558,7 +558,7 @@ def test_simulate_team_refuses_bad_sensing():
 def test_position_only_local_kf_matches_the_dare():
     """The per-agent position-only filter reaches the DARE with C = [1 0] per axis; its MSE matches, within its interval."""
     s = compare.SETTINGS
-    team = compare._team(4, "gaussian", 1.0, s)
+    team = compare.team_setup(4, "gaussian", 1.0, s)
     est = compare._LocalPosition(team, np.zeros((1, 4, 4)))
     for _ in range(400):
         est.update(np.zeros((1, 4, 4, 2)), np.ones((1, 4, 4), bool))
@@ -567,7 +567,7 @@ def test_position_only_local_kf_matches_the_dare():
     prior = sla.solve_discrete_are(A.T, C.T, np.diag([s.q_pos, s.q_vel]), np.array([[s.r]]))
     P = np.broadcast_to(est.P, (1, 4, 4, 4)).reshape(-1, 4, 4)[0]
     np.testing.assert_allclose(P[np.ix_([0, 2], [0, 2])], prior, rtol=1e-8)  # x axis: [p_x, v_x]
-    pos_only, full = compare._position_only_kf_rmse()
+    pos_only, full = compare.position_only_kf_rmse()
     m = compare.simulate_team("local", 8, 21, runs=200, sensing="position")
     mse = m["rmse_own"] ** 2
     half = 1.96 * mse.std(ddof=1) / np.sqrt(mse.size)
@@ -580,7 +580,7 @@ def test_centralized_position_covariance_matches_the_dare_of_three_positions():
     is the DARE with C = [1 0; 1 0; 1 0] per axis."""
     s = compare.SETTINGS
     N = 5
-    team = compare._team(N, "gaussian", 1.0, s)
+    team = compare.team_setup(N, "gaussian", 1.0, s)
     est = compare._CentralizedPosition(team, np.zeros((1, N, 4)))
     S = ((team.adjacency > 0) | np.eye(N, dtype=bool))[None]
     for _ in range(400):
@@ -616,7 +616,7 @@ def test_set_membership_with_positions_filters_and_contains_the_truth_at_every_s
 
     s = compare.SETTINGS
     N, R = 4, 30
-    team = compare._team(N, "uniform", 1.0, s)
+    team = compare.team_setup(N, "uniform", 1.0, s)
     rng = np.random.default_rng(7)
     box = lambda shape: rng.uniform(-np.sqrt(3.0), np.sqrt(3.0), shape)  # noqa: E731  unit variance, bounded
     x = rng.standard_normal((R, N, 4))

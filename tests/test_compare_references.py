@@ -27,7 +27,7 @@ def _posterior_position_mse(n_measurements: int) -> float:
     ``n`` measurements of covariance ``R`` are one of covariance ``R / n``.
     """
     s = compare.SETTINGS
-    team = compare._team(4, "gaussian", 1.0, s)
+    team = compare.team_setup(4, "gaussian", 1.0, s)
     R = team.R / n_measurements
     prior = sla.solve_discrete_are(team.A.T, np.eye(4), team.Q, R)
     posterior = prior - prior @ np.linalg.solve(prior + R, prior)

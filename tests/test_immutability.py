@@ -306,7 +306,7 @@ def _measure(k, n_agents=3):
 
 
 def _central_filter():
-    filt = dkf.CentralizedFilter(MODELS["TeamFilterModel"](), AGENT.B, np.zeros((1, 6)), np.eye(2))
+    filt = dkf.CentralizedTeamFilter(MODELS["TeamFilterModel"](), AGENT.B, np.zeros((1, 6)), np.eye(2))
     return filt, lambda k: (filt.predict(np.zeros((1, 3, 1))), filt.update(*_measure(k)))
 
 

@@ -36,7 +36,7 @@ from mascore.registry import (  # noqa: E402
     study_modules,
 )
 
-MODULES = [*study_modules(), *(importlib.import_module(name) for name in registry.COMPARISON_MODULES)]
+MODULES = [*study_modules(), *(importlib.import_module(f"mascore.papers.{reg.key}") for reg in comparison_registries())]
 
 
 @pytest.mark.parametrize("module", MODULES, ids=[m.__name__ for m in MODULES])

@@ -1,0 +1,173 @@
+"""One benchmark for every estimator: accuracy, consistency, messages and CPU, side by side.
+
+**The team task.** ``N`` identical planar double integrators (``dt = 0.1`` s,
+state ``[p_x, p_y, v_x, v_y]``) run the rendezvous law of Song et al. eq. (4),
+``u_i = -K sum_j a_ij (x_i - x_j)``, on a ring (or a geometric graph,
+:func:`benchmark_graph`, or the switching proximity topology, :func:`switching_graphs`,
+where the Vlahakis observer does not apply: :data:`SWITCHING_NOT_APPLICABLE`), with each agent's *views* of
+itself and of its neighbours in place of the true states. Agent ``i`` measures
+its own state and, on every link of the graph, its neighbours' states,
+``z_ij = x_j + nu_ij`` (Song et al. eq. (2)). The methods differ only in how an
+agent forms its views:
+
+=================== ========================================================================
+``centralized``     one Kalman filter over the whole team with every measurement (the bound)
+``local``           a Kalman filter per agent on its own state from its own measurement; the
+                    neighbours' views are their broadcast estimates (no cooperation)
+``forwarding``      a Kalman filter per agent on its own state from its own measurement and its
+                    neighbours' measurements of it, sent over one hop: on this task it *is* the
+                    centralized filter (the own state is the case where cooperation cannot help)
+``song-mb``         Song et al.'s whole-team filter on every agent, control on measurements
+                    (eqs. (5), (8)-(20))
+``song-eb``         Song et al.'s estimation-based filter, control on the agent's own team
+                    estimate (eqs. (21), (29)-(34))
+``vlahakis``        the LQR-dual distributed observer (Vlahakis and Halikias), designed per
+                    axis in continuous time on the filter's Q and discretized (forward Euler),
+                    with own and relative position measurements (its design needs m < n);
+                    ``vlahakis-phi0`` and ``vlahakis-phi1``: other points of its optimal Phi set
+``set-membership``  the closed-form set-membership filter of Bhattacharjee and Subbarao on
+                    each agent's own state, given an ellipsoidal noise bound: on full-state
+                    sensing (H = I) its correction returns the measurement; with positions
+                    only it filters (see below); ``set-membership-c90`` and ``-c99999``: its
+                    confidence knob (:data:`SM_CONFIDENCE`)
+=================== ========================================================================
+
+**Position-only sensing** (``sensing="position"``, the study ``position``): the same task
+with every measurement a position, ``z_ij = [I 0] x_j + nu_ij`` (the set-membership paper's
+partial output), for every method: the centralized, local and forwarding Kalman filters on
+positions, the Vlahakis observer (already on positions), the set-membership filter with
+``C = [I 0]``, whose set's size is reported (``set_size``); Song et al.'s filters measure full
+neighbour states and are listed as not applicable (:data:`POSITION_NOT_APPLICABLE`).
+
+**The shared task** (Ren et al.): every agent holds a prior estimate of one
+common 2-D quantity, with its own covariance; the methods are the central
+fusion (the bound), no fusion, average consensus and Ren et al.'s discrete
+Kalman consensus at the paper's Q = Omega = 0.1 (``ren-kc``) and at 0
+(``ren-kc-q0``), over the ring, a geometric graph or a switching one.
+
+**The common target** (:func:`target_model`) and **cooperative localization**
+(:func:`localization_model`): the field's filters of :mod:`mascore.fusion`
+(:data:`TARGET_METHODS`) on a target that no agent observes alone, and on the
+team's positions from relative measurements and two anchors, over the ring, a geometric
+graph or the switching topology (in localization the graph is the sensing too: a step's
+relative measurements are those of its current links); the papers'
+methods that do not apply are listed with the reason
+(:data:`TARGET_NOT_APPLICABLE`, :data:`LOCALIZATION_NOT_APPLICABLE`).
+
+**Robustness axes**: link drop-outs (each link's measurement and message lost with
+probability ``dropout`` at each step; a lost message leaves the last received
+view in place), noise distribution (Gaussian, bounded uniform, Student-t with 3
+degrees of freedom, all with the same covariance) and a wrong process-noise
+covariance in the filters (``q_scale`` times the true one).
+
+Every random number of a cell comes from :func:`mascore.sweep.cell_seed` on the
+seed axes :data:`SEED_AXES`, which leave out the method, the drop-out probability
+and ``q_scale``: all methods see the same noise (common random numbers), and the
+drop-out patterns are nested (a link lost at ``p = 0.1`` is also lost at ``0.3``).
+"""
+
+from __future__ import annotations
+
+import importlib
+
+__all__ = [
+    "GRAPHS",
+    "SEED_AXES",
+    "SETTINGS",
+    "SHARED_METHODS",
+    "TARGET_METHODS",
+    "target_methods",
+    "TARGET_NOT_APPLICABLE",
+    "TEAM_METHODS",
+    "VLAHAKIS_PHI",
+    "REN_Q",
+    "CORE_METHODS",
+    "BenchmarkSettings",
+    "CompareResult",
+    "benchmark_graph",
+    "cell_cost",
+    "compare_claims",
+    "fitted_slopes",
+    "floats_per_step",
+    "grid_cells",
+    "LOCALIZATION_NOT_APPLICABLE",
+    "headline",
+    "localization_model",
+    "localization_riccati",
+    "node_cost",
+    "node_costs",
+    "NODE_ORDER",
+    "POSITION_METHODS",
+    "POSITION_NOT_APPLICABLE",
+    "SENSINGS",
+    "SM_CONFIDENCE",
+    "plot_cost",
+    "plot_pareto",
+    "plot_robustness",
+    "run",
+    "run_cell",
+    "run_compare",
+    "simulate_shared",
+    "simulate_team",
+    "simulate_target",
+    "summarize",
+    "switching_graphs",
+    "SWITCHING_GRAPHS",
+    "SWITCHING_NOT_APPLICABLE",
+    "target_cost",
+    "target_filter",
+    "target_model",
+    "vlahakis_profile",
+]
+
+#: The submodule of each name of the comparison (imported on first use: ``import mascore.compare`` is cheap).
+_NAMES = {
+    'benchmark': (
+        'ALL_TEAM_METHODS', 'BenchmarkSettings', 'CORE_METHODS', 'GRAPHS', 'NOISES', 'POSITION_METHODS',
+        'POSITION_NOT_APPLICABLE', 'REN_Q', 'SEED_AXES', 'SENSINGS', 'SETTINGS', 'SHARED_METHODS', 'SM_CONFIDENCE',
+        'SWITCHING_GRAPHS', 'TEAM_METHODS', 'VLAHAKIS_PHI', '_MAX_SCALE', 'benchmark_graph', 'bound_scale',
+        'check_cell', 'check_n_agents', 'check_run', 'draw_noise', 'floats_per_step', 'mean_degree', 'switching_graphs'
+    ),
+    'team': (
+        'SWITCHING_NOT_APPLICABLE', '_C_POS', '_Centralized', '_CentralizedPosition', '_Estimator', '_Forwarding',
+        '_ForwardingPosition', '_Local', '_LocalPosition', '_SetMembership', '_SetMembershipPosition', '_Song', '_Team',
+        '_Vlahakis', '_accumulate', '_own_blocks', '_vlahakis_gains', 'make_estimator', 'simulate_team', 'team_setup',
+        'vlahakis_profile'
+    ),
+    'shared': (
+        '_average', 'simulate_shared'
+    ),
+    'target': (
+        'LOCALIZATION_NOT_APPLICABLE', 'TARGET_METHODS', 'TARGET_NOT_APPLICABLE', '_localization_switching',
+        'localization_model', 'localization_riccati', 'simulate_target', 'target_cost', 'target_filter',
+        'target_methods', 'target_model'
+    ),
+    'grid': (
+        'CompareResult', '_mean_ci', 'cell_cost', 'grid_cells', 'run', 'run_cell', 'run_compare', 'summarize'
+    ),
+    'tables': (
+        '_position_headline', 'fitted_slopes', 'headline', 'position_only_kf_rmse'
+    ),
+    'verdicts': (
+        '_position_claims', 'compare_claims'
+    ),
+    'plots': (
+        '_concat', '_order', '_plain_ticks', '_plt', 'plot_cost', 'plot_pareto', 'plot_robustness'
+    ),
+    'cost': (
+        'NODE_ORDER', 'node_cost', 'node_costs'
+    ),
+}
+_WHERE = {name: module for module, names in _NAMES.items() for name in names}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -1,0 +1,390 @@
+"""The benchmark's settings, its named constants, its graphs and the checks of a cell's arguments."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .. import estimation, graphs
+from .._validation import check_fits_in_memory, check_positive, check_positive_int, check_probability, check_seed
+from ..settings import check_settings, check_settings_type, setting
+
+#: Estimators of the team task, in table order.
+TEAM_METHODS = ("centralized", "local", "forwarding", "song-mb", "song-eb", "vlahakis", "vlahakis-phi0",
+                "vlahakis-phi1", "set-membership")
+#: The Vlahakis observer's coupling gain per team-method name: None is the LMI's choice (with our tie-break).
+VLAHAKIS_PHI = {"vlahakis": None, "vlahakis-phi0": 0.0, "vlahakis-phi1": 1.0}
+#: The team methods at their own recipe (without the knob variants): the figures' methods.
+CORE_METHODS = tuple(m for m in TEAM_METHODS if m not in ("vlahakis-phi0", "vlahakis-phi1"))
+#: Estimators of the shared-quantity task.
+SHARED_METHODS = ("central-fusion", "no-fusion", "average-consensus", "ren-kc", "ren-kc-q0")
+#: Ren et al.'s (Q, Omega) per shared-method name: the paper's 0.1, and the untuned 0 as the knob's other end.
+REN_Q = {"ren-kc": 0.1, "ren-kc-q0": 0.0}
+#: Sensing/communication graphs: a ring, or the proximity graph of a random layout.
+GRAPHS = ("ring", "geometric")
+#: Graphs of the common-target and shared tasks: the fixed ones, and a switching proximity topology.
+SWITCHING_GRAPHS = (*GRAPHS, "switching")
+#: Noise distributions, all with the covariance of the settings.
+NOISES = ("gaussian", "uniform", "student-t")
+#: Coordinates that choose a cell's random numbers (not the method, drop-out or q_scale: common random numbers).
+SEED_AXES = ("task", "n_agents", "noise", "block")
+#: What an agent of the team task measures of itself and its neighbours: the full state (Song et al. eq. (2)),
+#: or the position only, ``z_ij = [I 0] x_j + nu_ij`` (a cell without a ``sensing`` coordinate is ``"full"``;
+#: ``"position"`` joins the seed axes, so the cells of before keep their seeds).
+SENSINGS = ("full", "position")
+#: The set-membership filter's confidence level per method name (None: ``settings.sm_confidence``): its knob,
+#: the probability mass of the Gaussian ellipsoids it is given as bounds (bounded noise: the guaranteed bound).
+SM_CONFIDENCE = {"set-membership": None, "set-membership-c90": 0.9, "set-membership-c99999": 0.99999}
+#: The team methods under position-only sensing, in table order.
+POSITION_METHODS = ("centralized", "local", "forwarding", "vlahakis", "vlahakis-phi0", "vlahakis-phi1",
+                    *SM_CONFIDENCE)
+#: Team methods that do not apply under position-only sensing, with the reason.
+POSITION_NOT_APPLICABLE = {
+    "song-mb": "needs full-state measurements of its neighbours (eq. (2))",
+    "song-eb": "needs full-state measurements of its neighbours (eq. (2))",
+}
+#: Every team-method name a cell may carry (the set-membership knob's variants run in the position study).
+ALL_TEAM_METHODS = TEAM_METHODS + tuple(m for m in SM_CONFIDENCE if m not in TEAM_METHODS)
+
+
+#: Largest initial spread or noise std (m, m/s) the benchmark accepts: the squared errors stay far from overflow.
+_MAX_SCALE = 1e6
+
+
+@dataclass(frozen=True)
+class BenchmarkSettings:
+    """The common benchmark's settings (one place; the chapter shows them).
+
+    Every field is checked when the settings are built or ``dataclasses.replace``-d
+    (``mascore.settings.check_settings``): counts >= 1, variances and scales finite
+    and non-negative (at most 1e6 m or m/s for the scales, 1e12 for the variances).
+
+    Parameters
+    ----------
+    dt : float
+        Sampling time (s).
+    n_steps : int
+        Steps per run of the team task.
+    steady_from : int
+        First step of the window over which the steady-state metrics are averaged.
+    q_pos, q_vel : float
+        Process-noise variance per step of each position and velocity entry (m², m²/s²).
+    r : float
+        Measurement-noise variance of each measured entry (m² or m²/s²).
+    rho : tuple of float
+        Rendezvous gain ``K = [rho_1 I, rho_2 I]`` (Song et al. eq. (4)).
+    init_pos, init_vel : float
+        Standard deviations of the initial positions (m) and velocities (m/s).
+    p0 : float
+        Initial estimation-error variance of every state entry (filters' ``P_0``).
+    sensing_range, mean_degree : float
+        The ``"geometric"`` graph: the proximity graph of range ``sensing_range``
+        over a random layout in a square sized for this expected number of
+        neighbours (see :func:`benchmark_graph`).
+    sm_confidence : float
+        Probability mass of the ellipsoid given to the set-membership filter as the
+        noise bound when the noise is not bounded (Gaussian, Student-t).
+    shared_steps : int
+        Steps of the shared-quantity task.
+    shared_var : tuple of float
+        Range of the agents' prior variances in the shared task (m²), drawn log-uniformly.
+    runs : int
+        Monte Carlo runs per cell (one block of seeds).
+    grid : {"quick", "full"}
+        The sweep :func:`run` makes (:func:`grid_cells`): ``"quick"`` for the book and the
+        published ledger, ``"full"`` for the command line.
+
+
+    Examples
+    --------
+    >>> from mascore.compare import SETTINGS
+    >>> SETTINGS.dt, SETTINGS.n_steps
+    (0.1, 150)
+    """
+
+    dt: float = setting(0.1, source="chosen", unit="s", note="sampling time", low=0, low_open=True)
+    n_steps: int = setting(150, source="chosen", note="steps per run of the team task", low=1)
+    steady_from: int = setting(75, source="chosen", note="first step of the steady-state window", low=0)
+    q_pos: float = setting(1e-4, source="chosen", unit="m²", note="process-noise variance per position entry",
+                           low=0, high=_MAX_SCALE**2)
+    q_vel: float = setting(1e-4, source="chosen", unit="m²/s²", note="process-noise variance per velocity entry",
+                           low=0, high=_MAX_SCALE**2)
+    r: float = setting(0.01, source="chosen", note="measurement-noise variance of each measured entry",
+                       low=0, low_open=True, high=_MAX_SCALE**2)
+    rho: tuple[float, float] = setting((0.5, 1.5), source="chosen", where="Song et al. eq. (4)",
+                                       note="rendezvous gain K = [rho_1 I, rho_2 I]", length=2, low=0, low_open=True)
+    init_pos: float = setting(5.0, source="chosen", unit="m", note="std of the initial positions",
+                              low=0, high=_MAX_SCALE)
+    init_vel: float = setting(1.0, source="chosen", unit="m/s", note="std of the initial velocities",
+                              low=0, high=_MAX_SCALE)
+    p0: float = setting(1.0, source="chosen", note="initial estimation-error variance of every state entry",
+                        low=0, low_open=True, high=_MAX_SCALE**2)
+    sm_confidence: float = setting(0.997, source="chosen", note="probability mass of the set-membership bound",
+                                   low=0, low_open=True, high=1, high_open=True)
+    sensing_range: float = setting(1.0, source="chosen", unit="m", note="range of the geometric graph",
+                                   low=0, low_open=True)
+    mean_degree: float = setting(4.0, source="chosen", note="expected neighbours of the geometric graph",
+                                 low=0, low_open=True)
+    shared_steps: int = setting(30, source="chosen", note="steps of the shared-quantity task", low=1)
+    shared_var: tuple[float, float] = setting((0.5, 5.0), source="chosen", unit="m²",
+                                              note="range of the prior variances of the shared task",
+                                              length=2, low=0, low_open=True)
+    runs: int = setting(50, source="chosen", note="Monte Carlo runs per cell", low=1)
+    grid: str = setting("quick", source="chosen", note="the sweep run makes", choices=("quick", "full"))
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+        if self.steady_from >= self.n_steps:
+            raise ValueError(f"BenchmarkSettings.steady_from must be a step before n_steps ({self.n_steps}); "
+                             f"got {self.steady_from}")
+        if self.shared_var[0] > self.shared_var[1]:
+            raise ValueError(f"BenchmarkSettings.shared_var must be a range (low, high) with low <= high; "
+                             f"got {self.shared_var}")
+
+
+#: The settings used by the chapter and the CLI (the study's settings, :data:`STUDY`).
+SETTINGS = BenchmarkSettings()
+
+
+def benchmark_graph(kind: str, n_agents: int, settings: BenchmarkSettings = SETTINGS) -> np.ndarray:
+    """The benchmark's sensing and communication graph, fixed during a run.
+
+    Parameters
+    ----------
+    kind : {"ring", "geometric"}
+        ``"ring"``: each agent senses its two ring neighbours. ``"geometric"``: the
+        proximity graph (range ``settings.sensing_range``) of ``n_agents`` points
+        drawn uniformly in a square whose side gives ``settings.mean_degree``
+        expected neighbours; the layout is drawn from a seed fixed by ``n_agents``
+        (the first connected one), so every cell and method of a sweep sees the same graph.
+    n_agents : int
+        Team size N >= 3.
+    settings : BenchmarkSettings
+        The benchmark's settings.
+
+    Returns
+    -------
+    (N, N) ndarray
+        Symmetric 0/1 adjacency of a connected graph.
+
+    Examples
+    --------
+    >>> from mascore import compare, graphs
+    >>> A = compare.benchmark_graph("geometric", 16)
+    >>> graphs.is_connected(A), A.shape
+    (True, (16, 16))
+    """
+    check_settings_type(settings, BenchmarkSettings)
+    n_agents = check_n_agents(n_agents)
+    if kind == "ring":
+        return graphs.ring_graph(n_agents)
+    if kind != "geometric":
+        raise ValueError(f"kind must be one of {GRAPHS}; got {kind!r}")
+    side = np.sqrt(n_agents * np.pi * settings.sensing_range**2 / settings.mean_degree)
+    for attempt in range(1000):
+        layout = np.random.default_rng([n_agents, attempt]).uniform(0.0, side, (n_agents, 2))
+        A = graphs.proximity_graph(layout, settings.sensing_range)
+        if graphs.is_connected(A):
+            return A
+    raise ValueError(f"no connected geometric graph of {n_agents} agents in 1000 layouts; raise mean_degree")
+
+
+def switching_graphs(n_agents: int, n_steps: int, settings: BenchmarkSettings = SETTINGS) -> np.ndarray:
+    """A switching proximity topology: the disk graphs of agents wandering in a square, one per step.
+
+    The agents start as the ``"geometric"`` layout's square (sized for ``settings.mean_degree``
+    expected neighbours) and each moves by a random walk of step ``0.1 settings.sensing_range``
+    per step, reflected at the walls; the graph at step k links the agents closer than
+    ``settings.sensing_range``. It is often disconnected at one step and connected over a few
+    (the joint connectivity of Ren et al.'s and Song et al.'s switching-graph theorems). The
+    walk's seed is fixed by `n_agents`, so every cell and method sees the same graphs.
+
+    Parameters
+    ----------
+    n_agents : int
+        Team size N >= 3.
+    n_steps : int
+        Steps (graphs).
+    settings : BenchmarkSettings
+        ``sensing_range`` and ``mean_degree``.
+
+    Returns
+    -------
+    (n_steps, N, N) ndarray
+        Symmetric 0/1 adjacencies.
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> G = compare.switching_graphs(16, 30)
+    >>> G.shape, bool((G != G[0]).any())
+    ((30, 16, 16), True)
+    """
+    n_agents = check_n_agents(n_agents)
+    n_steps = check_positive_int(n_steps, "n_steps")
+    side = np.sqrt(n_agents * np.pi * settings.sensing_range**2 / settings.mean_degree)
+    rng = np.random.default_rng([n_agents, 7919])
+    p = rng.uniform(0.0, side, (n_agents, 2))
+    out = np.empty((n_steps, n_agents, n_agents))
+    for k in range(n_steps):
+        out[k] = graphs.proximity_graph(p, settings.sensing_range)
+        p = p + 0.1 * settings.sensing_range * rng.standard_normal(p.shape)
+        p = np.abs(p)
+        p = side - np.abs(side - p)  # reflect at 0 and at the side
+    return out
+
+
+def mean_degree(kind: str, n_agents: int, settings: BenchmarkSettings) -> float:
+    if kind == "switching":
+        return float(switching_graphs(n_agents, settings.n_steps, settings).sum(-1).mean())
+    return float(benchmark_graph(kind, n_agents, settings).sum(1).mean())
+
+
+def floats_per_step(method: str, n_agents: int, degree: float = 2.0, sensing: str = "full") -> float:
+    """Floats one agent sends per step, by method (the communication cost).
+
+    Parameters
+    ----------
+    method : str
+        One of :data:`TEAM_METHODS` or :data:`SHARED_METHODS` (or a set-membership
+        variant of :data:`SM_CONFIDENCE`).
+    n_agents : int
+        Team size N.
+    degree : float
+        Number of neighbours of the agent (2 on a ring; the mean degree of another graph).
+    sensing : {"full", "position"}
+        What a measurement holds (:data:`SENSINGS`): with positions only, a measurement
+        is 2 floats instead of 4 (``centralized``: ``2 (degree + 1)`` up and
+        ``4 (degree + 1)`` down; ``forwarding``: ``2 degree + 4``).
+
+    Returns
+    -------
+    float
+        ``centralized``: its measurements up, ``4 (degree + 1)``, plus the
+        estimates it needs down, ``4 (degree + 1)``, counted once at each end;
+        ``local``, ``vlahakis``, ``set-membership``: one broadcast of the own
+        estimate (4; Vlahakis's coupling uses its output part); ``forwarding``: each
+        neighbour's measurement sent to that neighbour (``4 degree``) plus the broadcast estimate;
+        ``song-mb``, ``song-eb``: 0 (they sense, they do not talk);
+        ``ren-kc``, ``ren-kc-q0``: the estimate and its covariance (2 + 3);
+        ``average-consensus``: 2; ``central-fusion``: 5 up, 2 down; ``no-fusion``: 0.
+
+    Examples
+    --------
+    >>> from mascore.compare import floats_per_step
+    >>> floats_per_step("centralized", 8), floats_per_step("song-eb", 8)
+    (24.0, 0.0)
+    >>> floats_per_step("centralized", 8, sensing="position"), floats_per_step("forwarding", 8, sensing="position")
+    (18.0, 8.0)
+    """
+    check_n_agents(n_agents)
+    degree = check_positive(degree, "degree", "(mean neighbours per agent)")
+    if sensing not in SENSINGS:
+        raise ValueError(f"sensing must be one of {SENSINGS}; got {sensing!r}")
+    table = {
+        "centralized": 8.0 * (degree + 1), "local": 4.0, "forwarding": 4.0 * degree + 4.0,
+        "song-mb": 0.0, "song-eb": 0.0, "vlahakis": 4.0, "vlahakis-phi0": 4.0, "vlahakis-phi1": 4.0,
+        "set-membership": 4.0,
+        "central-fusion": 7.0, "no-fusion": 0.0, "average-consensus": 2.0, "ren-kc": 5.0, "ren-kc-q0": 5.0,
+    }
+    table.update({m: 4.0 for m in SM_CONFIDENCE})
+    if method not in table:
+        raise ValueError(f"method must be one of {ALL_TEAM_METHODS + SHARED_METHODS}; got {method!r}")
+    if sensing == "position":
+        if method in POSITION_NOT_APPLICABLE:
+            raise ValueError(f"method {method!r} does not apply under position-only sensing: "
+                             f"{POSITION_NOT_APPLICABLE[method]}")
+        table.update({"centralized": 6.0 * (degree + 1), "forwarding": 2.0 * degree + 4.0})
+    return table[method]
+
+
+def check_n_agents(n_agents: object) -> int:
+    return check_positive_int(n_agents, "n_agents", minimum=3)
+
+
+def check_run(n_agents: object, noise: object, dropout: object, q_scale: object, runs: object,
+               settings: BenchmarkSettings, seed: object = 0) -> tuple[int, int]:
+    """The arguments of a simulation, checked: ``(n_agents, runs)``."""
+    if not isinstance(seed, np.random.SeedSequence):
+        check_seed(seed, "seed")
+    check_settings_type(settings, BenchmarkSettings)
+    n_agents = check_n_agents(n_agents)
+    if noise not in NOISES:
+        raise ValueError(f"noise must be one of {NOISES}; got {noise!r}")
+    if check_probability(dropout, "dropout") >= 1.0:
+        raise ValueError("dropout must be below 1 (every link lost at every step leaves nothing to compare)")
+    check_positive(q_scale, "q_scale", "(the filters' Q over the true Q)")
+    runs = check_positive_int(settings.runs if runs is None else runs, "runs")
+    # the team filters hold (runs, N, N, 4) views and up to (runs, 4N, 4N) covariances at once
+    check_fits_in_memory(8.0 * runs * (n_agents**2 * 4 * 8 + (4 * n_agents) ** 2 * 3), "runs",
+                         "the estimates and covariances of one step")
+    return n_agents, runs
+
+
+# --------------------------------------------------------------------------------------------
+# noise
+
+
+def check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[str, Any]:
+    """A cell of the grid, checked: its task, method, team size, drop-out and (`full`) noise and q_scale."""
+    if not isinstance(cell, Mapping):
+        raise TypeError(f"{name} must be a mapping of the cell's coordinates (task, method, n_agents, noise, "
+                        f"dropout, q_scale); got {type(cell).__name__}")
+    methods_of = {"team": ALL_TEAM_METHODS, "shared": SHARED_METHODS, "target": estimation.method_names("target"),
+                  "localization": estimation.method_names("localization")}
+    task = cell.get("task")
+    if task not in methods_of:
+        raise ValueError(f"{name}['task'] must be one of {tuple(methods_of)}; got {task!r}")
+    required = ("method", "n_agents", "dropout") + (("noise",) if full else ()) + (
+        ("q_scale",) if full and task == "team" else ())
+    missing = [k for k in required if k not in cell]
+    if missing:
+        raise ValueError(f"{name} lacks the coordinates {missing} (a {task} cell needs {list(required)})")
+    if cell["method"] not in methods_of[task]:
+        raise ValueError(f"{name}['method'] of a {task} cell must be one of {methods_of[task]}; got {cell['method']!r}")
+    check_positive_int(cell["n_agents"], f"{name}['n_agents']", minimum=3)
+    if "noise" in cell and cell["noise"] not in NOISES:
+        raise ValueError(f"{name}['noise'] must be one of {NOISES}; got {cell['noise']!r}")
+    if check_probability(cell["dropout"], f"{name}['dropout']") >= 1.0:
+        raise ValueError(f"{name}['dropout'] must be below 1; got {cell['dropout']!r}")
+    if task == "team" and "q_scale" in cell:
+        check_positive(cell["q_scale"], f"{name}['q_scale']")
+    if cell.get("graph", "ring") not in SWITCHING_GRAPHS:
+        raise ValueError(f"{name}['graph'] of a {task} cell must be one of {SWITCHING_GRAPHS}; "
+                         f"got {cell.get('graph')!r}")
+    if task == "team" and cell.get("graph") == "switching" and cell["method"] in VLAHAKIS_PHI:
+        raise ValueError(f"{name}: {cell['method']} does not apply on the switching graph "
+                         "(SWITCHING_NOT_APPLICABLE)")
+    sensing = cell.get("sensing", "full")
+    if sensing not in SENSINGS or (task != "team" and sensing != "full"):
+        raise ValueError(f"{name}['sensing'] must be one of {SENSINGS} (a team cell; other tasks have their own "
+                         f"sensing model); got {sensing!r} for a {task} cell")
+    if sensing == "position" and cell["method"] in POSITION_NOT_APPLICABLE:
+        raise ValueError(f"{name}['method'] {cell['method']!r} does not apply under position-only sensing: "
+                         f"{POSITION_NOT_APPLICABLE[cell['method']]}")
+    return cell
+
+
+def draw_noise(rng: np.random.Generator, noise: str, shape: tuple) -> np.ndarray:
+    """Zero-mean, unit-variance samples of the chosen distribution."""
+    if noise == "gaussian":
+        return rng.standard_normal(shape)
+    if noise == "uniform":
+        return rng.uniform(-np.sqrt(3.0), np.sqrt(3.0), shape)
+    return rng.standard_t(3.0, shape) / np.sqrt(3.0)  # Student-t(3) has variance 3
+
+
+def bound_scale(noise: str, dim: int, confidence: float) -> float:
+    """``s`` such that the ellipsoid ``{w : w^T (s Cov)^{-1} w <= 1}`` is the bound given to the set-membership filter.
+
+    Uniform noise: the box of half-widths ``sqrt(3 var)`` lies inside ``3 dim Cov``
+    (a guaranteed bound). Otherwise the chi-square quantile at `confidence`.
+    """
+    if noise == "uniform":
+        return 3.0 * dim
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(confidence, dim))

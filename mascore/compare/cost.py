@@ -1,0 +1,123 @@
+"""The cost of one node, one run, one thread (the whole team's step timed per node)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from .._validation import check_positive_int
+from .benchmark import CORE_METHODS, SETTINGS, BenchmarkSettings
+from .team import simulate_team
+
+# --------------------------------------------------------------------------------------------
+# the cost of one node, one run, one thread
+
+def node_cost(method: str, n_agents: int, n_steps: int = 20, repeats: int = 3, seed: int = 0,
+              settings: BenchmarkSettings = SETTINGS) -> float:
+    """CPU (µs) per step of the busiest node: one run, this thread only, the best of `repeats`.
+
+    Not a batch of runs (batching amortizes Python's overhead over the runs and
+    hides the algorithm): ``runs = 1``. The thread's CPU time does not count other
+    BLAS threads, so pin them (``OMP_NUM_THREADS=1``, as the command line and the tests
+    do). The busiest node of the whole-team filters runs the whole filter: the centre
+    (``centralized``), or every agent, which computes the team's covariance itself
+    (Song et al., Remark 4; our implementation computes it once for the team, so its
+    whole cost is charged to each agent). For the per-agent filters the value is the
+    team's CPU, an upper bound on one agent's: a node would make the same numpy calls
+    on one agent, and at these sizes a call costs its overhead, not its flops, so
+    dividing by N would report the batching, not the algorithm.
+
+    Parameters
+    ----------
+    method : str
+        One of :data:`TEAM_METHODS`.
+    n_agents : int
+        Team size N.
+    n_steps : int
+        Steps timed (the first, with the filters' set-up, included).
+    repeats : int
+        Runs timed; the smallest is kept (the least disturbed by other processes).
+    seed : int
+        Seed of the run.
+    settings : BenchmarkSettings
+        The benchmark's settings.
+
+    Returns
+    -------
+    float
+        µs per step.
+
+    See Also
+    --------
+    mascore.agent_cost.agent_step_cost : one agent's own work per step (its neighbours' messages given),
+        for every task; the chapter's table.
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> compare.node_cost("local", 8, n_steps=5) > 0
+    True
+    """
+    short = replace(settings, n_steps=int(n_steps), steady_from=0)
+    best = min(float(simulate_team(method, n_agents, seed, runs=1, settings=short)["cpu_s"][0])
+               for _ in range(check_positive_int(repeats, "repeats")))
+    return 1e6 * best / short.n_steps
+
+
+#: Leading-order work and memory per node and step of the team methods (state size n = 4, degree d, team N).
+NODE_ORDER = {
+    "centralized": ("O(N^3 n^3) at the centre", "O(N^2 n^2)"),
+    "local": ("O(n^3)", "O(n^2)"),
+    "forwarding": ("O(d n^2 + n^3)", "O(n^2)"),
+    "song-mb": ("O(N^3 n^3): the team's covariance, on every agent", "O(N^2 n^2)"),
+    "song-eb": ("O(N^6 n^3): the joint covariance of all agents' team estimates (dense)", "O(N^4 n^2)"),
+    "vlahakis": ("O(d n)", "O(n)"),
+    "set-membership": ("O(n^3)", "O(n^2)"),
+}
+
+
+def node_costs(sizes: Sequence[int] = (4, 8, 16), methods: Sequence[str] = CORE_METHODS, n_steps: int = 20,
+               settings: BenchmarkSettings = SETTINGS):
+    """:func:`node_cost` over team sizes, with each method's log-log slope in N.
+
+    Parameters
+    ----------
+    sizes : sequence of int
+        Team sizes (song-eb is skipped beyond 32: its covariance needs 0.5 GB at 64).
+    methods : sequence of str
+        Team methods.
+    n_steps : int
+        Steps timed per run.
+    settings : BenchmarkSettings
+        The benchmark's settings.
+
+    Returns
+    -------
+    pandas.DataFrame
+        µs per step on the busiest node, one row per method, one column per N, ``slope`` (log-log
+        in N) and the analytic ``work`` and ``memory`` orders (:data:`NODE_ORDER`).
+
+    See Also
+    --------
+    mascore.agent_cost.agent_costs : one agent's cost over N = 4 ... 128 with slopes and analytic counts.
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> t = compare.node_costs((4, 8), ("local",), n_steps=5)
+    >>> list(t.columns)
+    ['N = 4', 'N = 8', 'slope', 'work', 'memory']
+    """
+    import pandas as pd
+
+    rows = {}
+    for m in methods:
+        costs = {n: node_cost(m, n, n_steps, settings=settings) for n in sizes if not (m == "song-eb" and n > 32)}
+        row = {f"N = {n}": costs.get(n, np.nan) for n in sizes}
+        ns = sorted(costs)
+        row["slope"] = float(np.polyfit(np.log(ns), np.log([costs[n] for n in ns]), 1)[0]) if len(ns) > 1 else np.nan
+        row["work"], row["memory"] = NODE_ORDER[m]
+        rows[m] = row
+    return pd.DataFrame.from_dict(rows, orient="index")

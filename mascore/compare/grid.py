@@ -1,0 +1,431 @@
+"""The sweep: its named grids, one cell's runs, the summary with intervals, and the whole comparison's run."""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..settings import check_settings_type
+from ..sweep import Grid, cell_seed
+from .benchmark import (
+    CORE_METHODS,
+    POSITION_METHODS,
+    SEED_AXES,
+    SETTINGS,
+    SHARED_METHODS,
+    TEAM_METHODS,
+    VLAHAKIS_PHI,
+    BenchmarkSettings,
+    check_cell,
+    floats_per_step,
+    mean_degree,
+)
+from .shared import simulate_shared
+from .tables import fitted_slopes
+from .target import simulate_target, target_cost, target_methods
+from .team import simulate_team, vlahakis_profile
+
+# --------------------------------------------------------------------------------------------
+# grids and cells
+
+
+def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
+    """The cells of a named sweep: ``"quick"`` (the book, the tests) or ``"full"`` (the CLI).
+
+    Both are unions of one-factor studies around the baseline (ring, Gaussian
+    noise, no drop-out, correct Q): ``scaling`` over N (with the Vlahakis
+    observer's coupling knob), ``graph`` (the geometric graph at N = 16, and 32
+    in the full grid), ``dropout``, ``noise`` and ``wrong-q`` at N = 8, the
+    ``shared`` task, the common-``target`` task and cooperative ``localization``
+    (:func:`simulate_target`), and ``position``: the own-state task at N = 8 with
+    position-only sensing (:data:`POSITION_METHODS`, with the set-membership filter's
+    confidence knob, under Gaussian noise; the centralized, local and set-membership
+    filters under uniform noise, where its bound is guaranteed);
+    and the switching topology (:func:`switching_graphs`): the shared and target tasks at
+    N = 16, the own state at N = 16 (study ``switching``, without the Vlahakis observers,
+    :data:`SWITCHING_NOT_APPLICABLE`) and localization at N = 8 (quick: 2 blocks) and 16
+    (full grid only);
+    each with ``blocks x settings.runs`` seeds (quick: 2 x 50, full: 4 x 50, N up to
+    64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
+    N = 8, position sensing, the shared, target and localization tasks).
+
+    Parameters
+    ----------
+    name : {"quick", "full"}
+        Which sweep.
+
+    Returns
+    -------
+    list of dict
+        One dictionary of coordinates per cell.
+
+    Examples
+    --------
+    >>> from mascore.compare import grid_cells
+    >>> len(grid_cells("quick")) < len(grid_cells("full"))
+    True
+    """
+    if name not in ("quick", "full"):
+        raise ValueError(f"name must be 'quick' or 'full'; got {name!r}")
+    quick = name == "quick"
+    blocks = [0, 1] if quick else [0, 1, 2, 3]
+    blocks200 = [0, 1, 2, 3]  # the headline cells: 200 seeds in both grids
+    sizes = [4, 16] if quick else [4, 16, 32, 64]
+    base = {"task": ["team"], "graph": ["ring"], "noise": ["gaussian"], "dropout": [0.0], "q_scale": [1.0],
+            "block": blocks}
+    core = list(CORE_METHODS)  # the knob variants: in the scaling study only
+    studies = [
+        ("scaling", {**base, "method": list(TEAM_METHODS), "n_agents": [8], "block": blocks200}),
+        ("scaling", {**base, "method": list(TEAM_METHODS), "n_agents": sizes}),
+        ("graph", {**base, "method": core, "graph": ["geometric"], "n_agents": [16] if quick else [16, 32]}),
+        ("dropout", {**base, "method": core, "n_agents": [8], "dropout": [0.1, 0.3]}),
+        ("noise", {**base, "method": core, "n_agents": [8], "noise": ["uniform", "student-t"]}),
+        ("wrong-q", {**base, "method": core, "n_agents": [8], "q_scale": [0.1, 10.0]}),
+        ("shared", {**base, "task": ["shared"], "method": list(SHARED_METHODS), "n_agents": [8],
+                    "dropout": [0.0, 0.1, 0.3], "block": blocks200}),
+        ("shared", {**base, "task": ["shared"], "method": list(SHARED_METHODS), "n_agents": [16],
+                    "graph": ["geometric", "switching"], "block": blocks200}),
+        ("target", {**base, "task": ["target"], "method": list(target_methods("target")), "n_agents": [8, 16],
+                    "block": blocks200}),
+        ("target", {**base, "task": ["target"], "method": list(target_methods("target")),
+                    "graph": ["geometric", "switching"],
+                    "n_agents": [16], "block": blocks200}),
+        ("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
+                          "n_agents": [8] if quick else [8, 16], "block": blocks200}),
+        ("position", {**base, "sensing": ["position"], "method": list(POSITION_METHODS), "n_agents": [8],
+                      "block": blocks200}),
+        ("position", {**base, "sensing": ["position"], "method": ["centralized", "local", "set-membership"],
+                      "noise": ["uniform"], "n_agents": [8], "block": blocks200}),
+        # the switching topology (switching_graphs) for the own state and localization; the quick grid runs
+        # localization at N = 8 only (at 16 covariance intersection's weight search costs 6 s of CPU per block)
+        ("switching", {**base, "method": [m for m in core if m not in VLAHAKIS_PHI], "graph": ["switching"],
+                       "n_agents": [16], "block": blocks if quick else blocks200}),
+        ("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
+                          "graph": ["switching"], "n_agents": [8], "block": blocks if quick else blocks200}),
+    ]
+    if not quick:
+        studies.append(("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
+                                         "graph": ["switching"], "n_agents": [16], "block": blocks200}))
+    cells = []
+    for study, axes in studies:
+        for cell in Grid(axes).cells():
+            if cell["method"] == "song-eb" and cell["n_agents"] > 32:
+                continue  # its joint covariance is (2 N^2)^2 floats: 0.5 GB at N = 64
+            cells.append({"study": study, **cell})
+    return cells
+
+
+def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSettings = SETTINGS) -> list[dict[str, Any]]:
+    """Run one cell of a sweep: one row of metrics per Monte Carlo run.
+
+    Parameters
+    ----------
+    cell : mapping
+        Coordinates ``study, task, method, n_agents, graph, noise, dropout, q_scale, block``
+        (``graph`` may be left out: a ring), and for the team task optionally ``sensing``
+        (:data:`SENSINGS`; left out: ``"full"``, and the cell's seed is that of before; any
+        other sensing joins the seed axes).
+    base_seed : int
+        The sweep's seed.
+    settings : BenchmarkSettings
+        The benchmark's settings.
+
+    Returns
+    -------
+    list of dict
+        Rows with ``run`` (index inside the block), the metrics of
+        :func:`simulate_team` or :func:`simulate_shared` (those a task does not have are NaN),
+        ``floats``, and ``sensing`` (the team task's; NaN for the others), so that every
+        row of a sweep has the same columns.
+
+    Examples
+    --------
+    >>> from mascore.compare import run_cell
+    >>> rows = run_cell({"study": "scaling", "task": "team", "method": "local", "n_agents": 4,
+    ...                  "noise": "gaussian", "dropout": 0.0, "q_scale": 1.0, "block": 0})
+    >>> len(rows), sorted(rows[0])[:3]
+    (50, ['containment', 'cpu_s', 'floats'])
+    """
+    check_cell(cell)
+    check_settings_type(settings, BenchmarkSettings)
+    sensing = cell.get("sensing", "full")
+    seed = cell_seed(cell, SEED_AXES if sensing == "full" else (*SEED_AXES, "sensing"), base_seed)
+    common = {"noise": cell["noise"], "dropout": float(cell["dropout"])}
+    if cell["task"] in ("target", "localization"):
+        metrics = simulate_target(cell["method"], int(cell["n_agents"]), seed, graph=cell.get("graph", "ring"),
+                                  settings=settings, task=cell["task"])
+        nan = np.full_like(metrics["rmse_own"], np.nan)
+        metrics.update(rmse_view=nan, containment=nan, spread=nan, rmse_far=nan, set_size=nan)
+    elif cell["task"] == "team":
+        metrics = simulate_team(cell["method"], int(cell["n_agents"]), seed, q_scale=float(cell["q_scale"]),
+                                graph=cell.get("graph", "ring"), settings=settings, sensing=sensing, **common)
+    else:
+        metrics = simulate_shared(cell["method"], int(cell["n_agents"]), seed, settings=settings,
+                                  graph=cell.get("graph", "ring"), **common)
+        metrics.update(rmse_view=np.full_like(metrics["rmse_own"], np.nan), containment=metrics["rmse_own"] * np.nan,
+                       spread=metrics["rmse_own"] * np.nan, rmse_far=metrics["rmse_own"] * np.nan,
+                       set_size=metrics["rmse_own"] * np.nan)
+    degree = mean_degree(cell.get("graph", "ring"), int(cell["n_agents"]), settings)
+    if cell["task"] in ("target", "localization"):
+        floats = target_cost(cell["method"], int(cell["n_agents"]), degree, cell["task"])[0]
+    else:
+        floats = floats_per_step(cell["method"], int(cell["n_agents"]), degree=degree, sensing=sensing)
+    runs = len(metrics["rmse_own"])
+    label = sensing if cell["task"] == "team" else float("nan")
+    return [{"run": r, "floats": floats, "sensing": label, **{k: float(v[r]) for k, v in metrics.items()}}
+            for r in range(runs)]
+
+
+def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n_agents", "noise", "dropout",
+                                         "q_scale"), settings: BenchmarkSettings = SETTINGS):
+    """Means and 95 % confidence intervals per group, with the ratio to the bound.
+
+    The ratio of a method's RMSE to the bound's (``centralized`` or
+    ``central-fusion``) is formed run by run on common random numbers (same
+    seed block and run), so its interval is much tighter than that of a
+    ratio of means.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        Rows of :func:`run_cell` with their cell coordinates and ``cell`` identifier
+        (the sweep's table).
+    by : sequence of str
+        Grouping columns.
+    settings : BenchmarkSettings
+        The benchmark's settings (its step counts give the CPU per step).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per group: ``n`` runs, and ``mean``/``lo``/``hi`` of
+        ``rmse_own``, ``ratio``, ``nees_own``, ``containment``, ``spread``, ``rmse_far``,
+        ``set_size`` (NaN where the table has none),
+        plus ``floats`` and ``cpu_us`` (CPU per agent per step and run, µs).
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore.compare import run_cell, summarize
+    >>> cell = {"study": "scaling", "task": "team", "n_agents": 4, "noise": "gaussian", "dropout": 0.0,
+    ...         "q_scale": 1.0, "block": 0}
+    >>> rows = [{**r, **cell, "method": m, "cell": m} for m in ("centralized", "local")
+    ...         for r in run_cell({**cell, "method": m})]
+    >>> s = summarize(pd.DataFrame(rows))
+    >>> bool((s.set_index("method").loc["local", "ratio_mean"] > 1.0))      # no cooperation costs accuracy
+    True
+    """
+    import pandas as pd
+
+    check_settings_type(settings, BenchmarkSettings)
+    if not isinstance(table, pd.DataFrame):
+        raise TypeError(f"table must be a pandas DataFrame of run_cell rows (the sweep's table); "
+                        f"got {type(table).__name__}")
+    if isinstance(by, str) or not isinstance(by, Sequence):
+        raise TypeError(f"by must be a sequence of column names; got {by!r}")
+    by = list(by)
+    needed = {"task", "method", "n_agents", "cell", "block", "run", "rmse_own", "cpu_s", "floats", "nees_own",
+              "containment", "spread"} | set(by) - {"graph"}
+    missing = sorted(needed - set(table.columns))
+    if missing:
+        raise ValueError(f"table lacks the columns {missing} (rows of run_cell with their cell coordinates; "
+                         f"by = {by})")
+    t = table.copy()
+    if "graph" not in t:
+        t["graph"] = "ring"
+    for col in ("rmse_far", "set_size"):  # tables of before these metrics
+        if col not in t:
+            t[col] = np.nan
+    bound = t[t["method"].isin(["centralized", "central-fusion"])]
+    keys = [c for c in by if c != "method"] + ["block", "run"]
+    ref = bound.set_index(keys)["rmse_own"].rename("bound_rmse")
+    t = t.join(ref, on=keys)
+    t["ratio"] = t["rmse_own"] / t["bound_rmse"]
+    steps = np.where(t["task"] == "shared", settings.shared_steps, settings.n_steps)
+    t["cpu_us"] = 1e6 * t["cpu_s"] / (t["n_agents"] * steps * t.groupby("cell")["run"].transform("size"))
+    out = []
+    for key, g in t.groupby(by, sort=False, dropna=False):
+        row = dict(zip(by, key if isinstance(key, tuple) else (key,)))
+        row["n"] = len(g)
+        for col in ("rmse_own", "ratio", "nees_own", "containment", "spread", "rmse_far", "set_size"):
+            m, half = _mean_ci(g[col].to_numpy())
+            row[f"{col}_mean"], row[f"{col}_lo"], row[f"{col}_hi"] = m, m - half, m + half
+        row["floats"] = float(g["floats"].iloc[0])
+        row["cpu_us"] = float(g.drop_duplicates("cell")["cpu_us"].median())
+        out.append(row)
+    return pd.DataFrame(out).sort_values(by, kind="stable", ignore_index=True)  # N numerically, not as text
+
+
+def _mean_ci(x: np.ndarray) -> tuple[float, float]:
+    """Mean and the half-width of its 95 % normal-approximation interval (NaN-aware)."""
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return float("nan"), float("nan")
+    half = 1.96 * x.std(ddof=1) / np.sqrt(x.size) if x.size > 1 else float("nan")
+    return float(x.mean()), float(half)
+
+
+# --------------------------------------------------------------------------------------------
+# the whole comparison: sweep, summary, claims, figures
+
+
+def run_compare(
+    grid: str = "quick",
+    out: str | Path = "results",
+    *,
+    workers: int = 0,
+    scheduler: str | None = None,
+    seed: int = 0,
+    progress: bool = True,
+):
+    """Run a named sweep (resuming), and return its table and summary.
+
+    Parameters
+    ----------
+    grid : {"quick", "full"}
+        The sweep (:func:`grid_cells`).
+    out : str or pathlib.Path
+        Results folder; the table goes to ``out/compare/table-GRID-SEED.csv``.
+    workers : int
+        0: serially in this process; K: a local Dask cluster of K processes.
+    scheduler : str, optional
+        Address of a running Dask scheduler (overrides `workers`).
+    seed : int
+        The sweep's base seed.
+    progress : bool
+        Progress bar over cells.
+
+    Returns
+    -------
+    table : pandas.DataFrame
+        One row per Monte Carlo run and cell.
+    summary : pandas.DataFrame
+        :func:`summarize` of the table.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from mascore import compare
+    >>> table, summary = compare.run_compare("quick", tempfile.mkdtemp(), progress=False)  # doctest: +SKIP
+    """
+    result = run(replace(SETTINGS, grid=grid), seed, progress, out=out, workers=workers, scheduler=scheduler)
+    return result.table, result.summary
+
+
+@dataclass(frozen=True, eq=False)
+class CompareResult:
+    """The comparison's sweep, once: its table and summary (see :func:`run`).
+
+    Parameters
+    ----------
+    settings : BenchmarkSettings
+        The run's settings (``settings.grid`` is the sweep).
+    seed : int
+        The sweep's base seed.
+    table : pandas.DataFrame
+        One row per Monte Carlo run and cell.
+    summary : pandas.DataFrame
+        :func:`summarize` of the table.
+    slopes : dict
+        Method -> fitted CPU slope in N (:func:`fitted_slopes`).
+    phi : dict
+        The Vlahakis program's value at fixed coupling gains on the ring of 8 (:func:`vlahakis_profile`).
+
+    Examples
+    --------
+    >>> from mascore.compare import CompareResult
+    >>> sorted(CompareResult.__dataclass_fields__)[:3]
+    ['phi', 'seed', 'settings']
+    """
+
+    settings: BenchmarkSettings
+    seed: int
+    table: Any
+    summary: Any
+    slopes: dict
+    phi: dict
+
+
+def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = False, *,
+        out: str | Path | None = None, workers: int = 0, scheduler: str | None = None) -> CompareResult:
+    """The comparison's study: the sweep ``settings.grid`` (resuming from `out`), its summary, slopes and gains.
+
+    Parameters
+    ----------
+    settings : BenchmarkSettings
+        The benchmark and the sweep (default :data:`SETTINGS`, the quick grid).
+    seed : int
+        The sweep's base seed (the published ledger's is 0).
+    progress : bool
+        Progress bar over cells.
+    out : str or pathlib.Path, optional
+        Results folder; the table goes to ``out/compare/table-GRID-SEED.csv`` and a later
+        run resumes from it. Default: a temporary folder (nothing is kept).
+    workers : int
+        0: serially in this process; K: a local Dask cluster of K processes.
+    scheduler : str, optional
+        Address of a running Dask scheduler (overrides `workers`).
+
+    Returns
+    -------
+    CompareResult
+        Everything the figures, tables and claims need.
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> result = compare.run(seed=0)  # doctest: +SKIP
+    >>> result.summary["study"].unique().tolist()  # doctest: +SKIP
+    ['dropout', 'graph', 'noise', 'scaling', 'shared', 'wrong-q']
+    """
+    check_settings_type(settings, BenchmarkSettings)
+    import tempfile
+
+    from ..sweep import run_sweep
+
+    if settings.grid not in ("quick", "full"):
+        raise ValueError(f"settings.grid must be 'quick' or 'full'; got {settings.grid!r}")
+    with tempfile.TemporaryDirectory(prefix="mascore-compare-") as scratch:
+        folder = Path(scratch if out is None else out) / "compare"
+        table = run_sweep(grid_cells(settings.grid), functools.partial(run_cell, base_seed=seed, settings=settings),
+                          folder / f"table-{settings.grid}-{seed}.csv", workers=workers, scheduler=scheduler,
+                          progress=progress, cost=cell_cost)
+    summary = summarize(table, settings=settings)
+    profile = vlahakis_profile(8, settings=settings)
+    return CompareResult(settings, int(seed), table, summary, fitted_slopes(summary), profile)
+
+
+def cell_cost(cell: Mapping[str, Any]) -> float:
+    """A rough relative run time of a cell, to start the longest cells first on a cluster.
+
+    Parameters
+    ----------
+    cell : mapping
+        Coordinates with ``task``, ``method``, ``n_agents`` and ``dropout``.
+
+    Returns
+    -------
+    float
+        Proportional to the flops of one step for a block of runs: the whole-team
+        filters grow like ``N^3``-``N^4`` (and keep one covariance per run when links drop),
+        the per-agent ones like ``N``.
+
+    Examples
+    --------
+    >>> from mascore.compare import cell_cost
+    >>> base = {"task": "team", "n_agents": 32, "dropout": 0.0}
+    >>> cell_cost({**base, "method": "song-eb"}) > cell_cost({**base, "method": "local"})
+    True
+    """
+    check_cell(cell, full=False)
+    if cell["task"] != "team":  # the covariance-intersection weight search: about a team filter at N = 8 per agent
+        return 200.0 * float(cell["n_agents"]) if cell["method"] == "ci-diffusion" else 1.0
+    n = float(cell["n_agents"])
+    whole_team = {"song-eb": n**4, "song-mb": n**3.5, "centralized": n**3}
+    per_run = 20.0 if cell["dropout"] > 0 and cell["method"] in whole_team else 1.0
+    return whole_team.get(cell["method"], 50.0 * n) * per_run

@@ -1,0 +1,430 @@
+"""The common-target and cooperative-localization tasks: their models, and the fusion filters run on them."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .. import estimation
+from ..agents import double_integrator
+from .benchmark import (
+    SETTINGS,
+    SWITCHING_GRAPHS,
+    BenchmarkSettings,
+    benchmark_graph,
+    check_n_agents,
+    check_run,
+    switching_graphs,
+)
+
+# --------------------------------------------------------------------------------------------
+# the common-target task (mascore.fusion)
+
+
+#: Filters of the common-target task, in table order (``-L<k>``: k consensus steps per update): the specs of
+#: :data:`mascore.fusion.METHODS` as found at import (:func:`target_methods` finds those added since).
+TARGET_METHODS = estimation.method_names("target")
+
+
+def target_methods(task: str = "target") -> tuple[str, ...]:
+    """The methods of the common-target (or localization) task, in table order, from their specs.
+
+    Parameters
+    ----------
+    task : {"target", "localization"}
+        The scenario.
+
+    Returns
+    -------
+    tuple of str
+        The names of the :class:`mascore.estimation.MethodSpec` of that task (a new filter module's included).
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> compare.target_methods()[:3]
+    ('centralized', 'local', 'forwarding')
+    """
+    return estimation.method_names(task)
+#: Methods of the papers that do not apply to the common target, with the reason (the headline shows them).
+TARGET_NOT_APPLICABLE = {
+    "song-mb, song-eb": "estimate the agents' own states in a rendezvous loop; there is no common target",
+    "vlahakis": "an observer of each agent's own state, coupled by relative outputs; there is no common target",
+    "set-membership": "a single agent's filter; alone, an agent that senses one coordinate cannot observe the target",
+    "ren-kc": "fuses priors of a quantity nobody measures; with measurements it becomes the consensus filters above",
+}
+
+
+def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
+    """The common target: a planar double integrator; agent i measures one position coordinate (x if i is even).
+
+    Parameters
+    ----------
+    n_agents : int
+        Sensors N >= 3.
+    graph : {"ring", "geometric"}
+        Their communication graph (:func:`benchmark_graph`).
+    settings : BenchmarkSettings
+        ``dt``, ``q_pos``, ``q_vel`` (the target's process noise) and ``r`` (each measurement's variance).
+
+    Returns
+    -------
+    mascore.fusion.SensorNetworkModel
+        No agent observes the target alone; the team does.
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> compare.target_model(8)
+    SensorNetworkModel(N = 8 agents, n = 4 states, q = (1, 1, 1, 1, 1, 1, 1, 1) measurements)
+    """
+    from .. import fusion
+
+    n_agents = check_n_agents(n_agents)
+    s = settings
+    F = double_integrator(2, s.dt).A
+    Q = np.diag([s.q_pos, s.q_pos, s.q_vel, s.q_vel])
+    H = [np.eye(4)[[i % 2]] for i in range(n_agents)]
+    R = [s.r * np.eye(1)] * n_agents
+    return fusion.SensorNetworkModel(F, Q, H, R, benchmark_graph(graph, n_agents, s))
+
+
+#: The papers' methods on cooperative localization: none applies as published, for these reasons.
+LOCALIZATION_NOT_APPLICABLE = {
+    "song-mb, song-eb": "need absolute measurements of the neighbours' states (eq. (2)); here they are relative",
+    "vlahakis": "needs every agent to measure its own output (the Q1 term); here only the anchors do",
+    "set-membership": "a single agent's filter; without an anchor an agent's relative measurements do not fix it",
+    "ren-kc": "fuses priors of a quantity nobody measures; there is no common quantity here",
+}
+
+
+def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
+    """Cooperative localization: the team's positions, relative measurements on the links, absolute at two anchors.
+
+    The state is every agent's planar position, ``(p_1, ..., p_N)`` (2N numbers), each a
+    random walk of variance ``q_pos`` per step. Agent i measures ``z_ij = p_j - p_i + noise``
+    (variance ``r`` per coordinate) to each neighbour j, and the anchors (agents 0 and
+    N // 2) also their own position. Every filter of :mod:`mascore.fusion` then applies
+    as to a common target (the team's positions); each agent is scored on its own position.
+
+    Parameters
+    ----------
+    n_agents : int
+        Team size N >= 3.
+    graph : {"ring", "geometric"}
+        The sensing and communication graph (:func:`benchmark_graph`).
+    settings : BenchmarkSettings
+        ``q_pos`` and ``r``.
+
+    Returns
+    -------
+    mascore.fusion.SensorNetworkModel
+        Without the anchors the positions would be observable only up to a common shift.
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> compare.localization_model(4).measurement_sizes
+    (6, 4, 6, 4)
+    """
+    from .. import fusion
+
+    n_agents = check_n_agents(n_agents)
+    s = settings
+    A = benchmark_graph(graph, n_agents, s)
+    n = 2 * n_agents
+    I2 = np.eye(2)
+    H, R = [], []
+    for i in range(n_agents):
+        rows = []
+        if i in (0, n_agents // 2):
+            rows.append(np.kron(np.eye(n_agents)[i], I2))
+        for j in np.flatnonzero(A[i]):
+            rows.append(np.kron(np.eye(n_agents)[j] - np.eye(n_agents)[i], I2))
+        H.append(np.vstack(rows))
+        R.append(s.r * np.eye(H[-1].shape[0]))
+    return fusion.SensorNetworkModel(np.eye(n), s.q_pos * np.eye(n), H, R, A)
+
+
+def _localization_switching(n_agents: int, settings: BenchmarkSettings):
+    """Cooperative localization on :func:`switching_graphs`: one model over every link the run ever has,
+    and each step's model with the rows of its current links.
+
+    Returns
+    -------
+    union : mascore.fusion.SensorNetworkModel
+        :func:`localization_model`'s sensing over the union of the step graphs (it draws the data:
+        each possible link's measurement has its own noise; a step keeps its current links' rows).
+    steps : list of (mascore.fusion.SensorNetworkModel, ndarray of int)
+        Per step k: the model of graph k (anchors' rows, then the relative rows of its current
+        links, as :func:`localization_model` orders them) and the indices of its rows in ``union``'s
+        stacked measurement.
+    """
+    from .. import fusion
+
+    G = switching_graphs(n_agents, settings.n_steps, settings) > 0
+    union_adj = G.any(0)
+    n = 2 * n_agents
+    I2, eye = np.eye(2), np.eye(n_agents)
+    H, R, rows_of = [], [], []  # rows_of[i]: {"anchor" or j: agent i's stacked row indices in the union}
+    start = 0
+    for i in range(n_agents):
+        blocks, where = [], {}
+        if i in (0, n_agents // 2):
+            blocks.append(np.kron(eye[i], I2))
+            where["anchor"] = start + np.arange(2)
+            start += 2
+        for j in np.flatnonzero(union_adj[i]):
+            blocks.append(np.kron(eye[j] - eye[i], I2))
+            where[int(j)] = start + np.arange(2)
+            start += 2
+        H.append(np.vstack(blocks) if blocks else np.zeros((0, n)))
+        R.append(settings.r * np.eye(H[-1].shape[0]) if blocks else None)
+        rows_of.append(where)
+    F, Q = np.eye(n), settings.q_pos * np.eye(n)
+    union = fusion.SensorNetworkModel(F, Q, H, R, union_adj.astype(float))
+    steps = []
+    for A in G:
+        Hk, Rk, idx = [], [], []
+        for i in range(n_agents):
+            keep = [k for k in rows_of[i] if k == "anchor" or A[i, k]]
+            rows = np.concatenate([rows_of[i][k] for k in keep]) if keep else np.zeros(0, int)
+            idx.append(rows)
+            Hk.append(union.H_stacked[rows])
+            Rk.append(settings.r * np.eye(len(rows)) if len(rows) else None)
+        steps.append((fusion.SensorNetworkModel(F, Q, Hk, Rk, A.astype(float)), np.concatenate(idx)))
+    return union, steps
+
+
+def localization_riccati(n_agents: int, graph: str = "ring",
+                         settings: BenchmarkSettings = SETTINGS) -> dict[str, float]:
+    """Exact own-position errors of the two Kalman filters of cooperative localization, without Monte Carlo.
+
+    The centralized filter and measurement forwarding are Kalman filters (on all the
+    measurements of a step, and on those of agent i's closed neighbourhood of that step),
+    so their covariances are their error covariances, and they follow a time-varying
+    Riccati recursion over the graph sequence (a switching graph has no steady state: no
+    DARE). The recursion is built here from the graph alone (agent i's rows: its anchor
+    row if it is agent 0 or N // 2, and ``p_j - p_i`` for its links of the step), not from
+    :func:`localization_model`, so it checks :func:`simulate_target` independently.
+
+    Parameters
+    ----------
+    n_agents : int
+        Team size N >= 3.
+    graph : {"ring", "geometric", "switching"}
+        The sensing and communication graph; ``"switching"``: graph k of :func:`switching_graphs` at step k.
+    settings : BenchmarkSettings
+        ``p0``, ``q_pos``, ``r``, ``n_steps``, ``steady_from``.
+
+    Returns
+    -------
+    dict of str to float
+        ``"centralized"``, ``"forwarding"`` (m^2): the mean over the steady window and the agents of the
+        variance of an agent's own position (trace of its 2 x 2 block), what :func:`simulate_target`'s
+        ``rmse_own ** 2`` estimates; ``"forwarding ratio"``: the square root of their quotient;
+        ``"anchor reach"``: the fraction of agent-steps with an anchor in the closed neighbourhood, and
+        ``"anchor reach, least"``: the same for the agent that has one least often.
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> e = compare.localization_riccati(8)
+    >>> bool(e["forwarding"] > e["centralized"] > 0), e["anchor reach, least"]   # ring: agents 2 and 6
+    (True, 0.0)
+    """
+    N = check_n_agents(n_agents)
+    s = settings
+    if graph not in SWITCHING_GRAPHS:
+        raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
+    G = (switching_graphs(N, s.n_steps, s) if graph == "switching"
+         else np.broadcast_to(benchmark_graph(graph, N, s), (s.n_steps, N, N))) > 0
+    n, eye = 2 * N, np.eye(N)
+    anchors = (0, N // 2)
+    own = 2 * np.arange(N)[:, None] + np.arange(2)                     # (N, 2): agent i's coordinates
+    Pc = s.p0 * np.eye(n)
+    Pf = np.broadcast_to(Pc, (N, n, n)).copy()
+    central, forwarding, reach = [], [], []
+    for A in G:
+        info = np.zeros((N, n, n))                                     # agent j's H_j^T R^-1 H_j at this step
+        for j in range(N):
+            rows = [eye[j]] if j in anchors else []
+            rows += [eye[m] - eye[j] for m in np.flatnonzero(A[j])]
+            if rows:
+                H = np.kron(np.array(rows), np.eye(2))
+                info[j] = H.T @ H / s.r
+        closed = A | np.eye(N, dtype=bool)
+        Pc = np.linalg.inv(np.linalg.inv(Pc + s.q_pos * np.eye(n)) + info.sum(0))
+        Pf = np.linalg.inv(np.linalg.inv(Pf + s.q_pos * np.eye(n)) + np.einsum("ij,jab->iab", closed, info))
+        central.append(np.trace(Pc) / N)
+        forwarding.append(np.mean(np.trace(Pf[np.arange(N)[:, None, None], own[:, :, None], own[:, None, :]],
+                                           axis1=1, axis2=2)))
+        reach.append(closed[:, list(anchors)].any(1))
+    w = slice(s.steady_from, s.n_steps)
+    c, f = float(np.mean(central[w])), float(np.mean(forwarding[w]))
+    reach = np.array(reach)
+    return {"centralized": c, "forwarding": f, "forwarding ratio": float(np.sqrt(f / c)),
+            "anchor reach": float(reach.mean()), "anchor reach, least": float(reach.mean(0).min())}
+
+
+def target_filter(method: str, model, task: str = "target"):
+    """The filter of a common-target method on `model`, as its spec builds it (:data:`mascore.fusion.METHODS`).
+
+    Parameters
+    ----------
+    method : str
+        One of :func:`target_methods`.
+    model : mascore.fusion.SensorNetworkModel
+        The sensing and the graph.
+    task : {"target", "localization"}
+        The scenario whose methods are searched.
+
+    Returns
+    -------
+    filter
+        ``local`` is consensus on information with no consensus step (each agent's own Kalman filter).
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> compare.target_filter("ci-L5", compare.target_model(8)).n_consensus
+    5
+    """
+    return estimation.method_spec(method, task).build(model)
+
+
+def target_cost(method: str, n_agents: int, degree: float, task: str = "target") -> tuple[float, float]:
+    """Floats sent and flops per agent per step of a common-target method (:func:`mascore.fusion.filter_cost`).
+
+    Parameters
+    ----------
+    method : str
+        One of :data:`TARGET_METHODS`.
+    n_agents : int
+        N.
+    degree : float
+        Mean number of neighbours (rounded for the count).
+    task : {"target", "localization"}
+        The model: n = 4 and one measurement per agent, or n = 2N and ``2 degree`` measurements
+        per agent (the anchors' two more are left out of the count).
+
+    Returns
+    -------
+    (float, float)
+        Floats sent, flops (``local``: none sent; the flops of its own filter).
+
+    Examples
+    --------
+    >>> from mascore.compare import target_cost
+    >>> target_cost("local", 8, 2)[0], target_cost("ci-L5", 8, 2)[0]
+    (0.0, 70.0)
+    """
+    d = int(round(degree))
+    n, q = (4, 1) if task == "target" else (2 * int(n_agents), 2 * d)
+    floats, flops = estimation.method_spec(method, task).cost(n, q, d, int(n_agents))
+    return float(floats), float(flops)
+
+
+def simulate_target(
+    method: str,
+    n_agents: int,
+    seed: np.random.SeedSequence | int,
+    *,
+    graph: str = "ring",
+    runs: int | None = None,
+    settings: BenchmarkSettings = SETTINGS,
+    task: str = "target",
+) -> dict[str, np.ndarray]:
+    """Track the common target (or localize the team) with one filter of :mod:`mascore.fusion`, batched over runs.
+
+    Parameters
+    ----------
+    method : str
+        One of :data:`TARGET_METHODS`.
+    n_agents : int
+        Sensors N >= 3.
+    seed : numpy.random.SeedSequence or int
+        Source of the target's path and the measurements (the same for every method).
+    graph : {"ring", "geometric", "switching"}
+        The communication graph (``"switching"``: graph k of :func:`switching_graphs` at step k; in
+        localization it is the sensing graph too, so a step's relative measurements are those of its
+        current links, the anchors' always; the data are drawn once over every link the sequence has).
+    runs : int, optional
+        Monte Carlo runs (default ``settings.runs``).
+    settings : BenchmarkSettings
+        The benchmark's settings (``n_steps``, ``steady_from``, ``p0``).
+    task : {"target", "localization"}
+        :func:`target_model` or :func:`localization_model`.
+
+    Returns
+    -------
+    dict of str to ndarray
+        Per run: ``rmse_own`` (m), RMS position error of the agents' estimates over the
+        steady window (of the target; of its own position for localization); ``nees_own``,
+        NEES per degree of freedom with each agent's own P (of that position);
+        ``cpu_s``, CPU of the whole batch's filtering (one value, repeated).
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> m = compare.simulate_target("centralized", 8, 0, runs=20)
+    >>> bool(0.5 < m["nees_own"].mean() < 1.5)
+    True
+    """
+    n_agents, runs = check_run(n_agents, "gaussian", 0.0, 1.0, runs, settings)
+    if task not in ("target", "localization"):
+        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    spec = estimation.method_spec(method, task)
+    s = settings
+    if graph not in SWITCHING_GRAPHS:
+        raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
+    if graph == "switching" and task == "localization":  # the sensing switches too: each step's links' rows
+        model, steps = _localization_switching(n_agents, s)
+    else:
+        model = (target_model if task == "target" else localization_model)(
+            n_agents, "ring" if graph == "switching" else graph, s)
+    n = model.n_states
+    P0 = s.p0 * np.eye(n)
+    x_true, z = model.simulate(np.zeros(n), P0, s.n_steps, np.random.default_rng(seed), n_runs=runs)
+    if graph == "switching":  # the filters hold no state: one filter per step's graph
+        from .. import fusion
+
+        if task == "target":
+            G = switching_graphs(n_agents, s.n_steps, s)
+            steps = [(fusion.SensorNetworkModel(model.F, model.Q, model.H, model.R, A), slice(None)) for A in G]
+        filters = [target_filter(method, m, task) for m, _ in steps]
+        tic = time.thread_time()
+        xk, Pk = model.check_state(np.zeros(n), P0, per_agent=not spec.whole_filter)
+        xs, Ps = [], []
+        for k, f in enumerate(filters):
+            xk, Pk = f.update(*f.predict(xk, Pk), z[k][..., steps[k][1]])
+            xs.append(xk)
+            Ps.append(Pk)
+        x, P = np.stack(xs), np.stack(Ps)
+        cpu = time.thread_time() - tic
+    else:
+        filt = target_filter(method, model, task)
+        tic = time.thread_time()
+        x, P = filt.run(np.zeros(n), P0, z)
+        cpu = time.thread_time() - tic
+    w = slice(s.steady_from, s.n_steps)
+    truth = x_true[1:][w]                                      # (K', runs, n)
+    x, P = x[w], P[w]
+    if spec.whole_filter:
+        x, P = x[:, :, None], P[:, None]                       # one estimate, shared by every agent
+    e = truth[:, :, None] - x                                  # (K', runs, N', n)
+    P = np.broadcast_to(P[:, None] if P.ndim == 4 else P, (*e.shape, n))
+    if task == "target":
+        e_nees, P_nees, dof = e, P, 4                          # NEES of the whole state, RMSE of the position
+        e = e[..., :2]
+    else:
+        N = n_agents
+        own = np.arange(N)
+        idx = 2 * own[:, None] + np.arange(2)                 # (N, 2): agent i's own coordinates
+        e = np.broadcast_to(e, (*e.shape[:2], N, n))[:, :, own[:, None], idx]              # (K', runs, N, 2)
+        P = np.broadcast_to(P, (*P.shape[:2], N, n, n))[:, :, own[:, None, None], idx[:, :, None], idx[:, None, :]]
+        e_nees, P_nees, dof = e, P, 2
+    nees = np.einsum("...i,...i->...", e_nees, np.linalg.solve(P_nees, e_nees[..., None])[..., 0]) / dof
+    return {"rmse_own": np.sqrt(np.mean(np.sum(e ** 2, -1), axis=(0, 2))),
+            "nees_own": nees.mean(axis=(0, 2)), "cpu_s": np.full(runs, cpu)}

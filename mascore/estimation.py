@@ -1,0 +1,320 @@
+"""One estimator protocol: the state, the steps, the messages, and the spec that declares a method.
+
+Every estimator of the package is one class with the same shape (Stone Soup's
+Predictor / Updater over one State; filterpy's one class per filter):
+
+- a **state value**: :class:`GaussianState` (mean and covariance) or
+  :class:`SetState` (centre and shape matrix of an ellipsoidal set);
+- ``predict(...)`` and ``update(...)``: the team-wide steps, vectorized over
+  agents and runs (each filter's own signature: the data it needs);
+- ``agent_inputs(...)`` and ``agent_step(i, own_data, messages)``: what **one**
+  agent computes at one step, from its own data and the messages its neighbours
+  sent it (each round's, in order), with ``messages()`` declaring what an agent
+  sends per step and how many floats (:class:`Message`).
+
+A **method** is declared once, beside its filter, by a :class:`MethodSpec`: its
+name, how it is built from a scenario's model, the floats it sends and the flops
+of one agent, the order of an agent's work and memory, and the scenarios where it
+applies (with the reason where it does not). A module of the package declares its
+methods in a module-level ``METHODS`` tuple; :func:`method_specs` finds them (a
+new filter module is found with nothing listed by hand), and the comparison and
+the cost tables read them.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+__all__ = [
+    "GaussianState",
+    "SetState",
+    "Message",
+    "Estimator",
+    "MethodSpec",
+    "method_specs",
+    "method_spec",
+    "method_names",
+    "STUDY_LAYER",
+]
+
+#: Modules of ``mascore`` above the numerical core (studies, CLI, book tools): never scanned for specs.
+STUDY_LAYER = frozenset({"agent_cost", "compare", "ledger", "papers", "plotting", "registry", "report", "reproduce",
+                         "sweep"})
+
+
+@dataclass(frozen=True)
+class GaussianState:
+    """A Gaussian estimate: mean ``(..., n)`` and covariance ``(..., n, n)`` (per agent: ``(..., N, n)``).
+
+    Parameters
+    ----------
+    mean : ndarray
+        The mean.
+    covariance : ndarray
+        The covariance.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore.estimation import GaussianState
+    >>> GaussianState(np.zeros(2), np.eye(2)).mean.shape
+    (2,)
+    """
+
+    mean: np.ndarray
+    covariance: np.ndarray
+
+
+@dataclass(frozen=True)
+class SetState:
+    """A set-membership estimate: the ellipsoid ``{x: (x - c)^T E^-1 (x - c) <= 1}``.
+
+    Parameters
+    ----------
+    centre : ndarray
+        The centre c, ``(..., n)``.
+    shape : ndarray
+        The shape matrix E, ``(..., n, n)``, positive definite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore.estimation import SetState
+    >>> SetState(np.zeros(2), np.eye(2)).shape.shape
+    (2, 2)
+    """
+
+    centre: np.ndarray
+    shape: np.ndarray
+
+
+@dataclass(frozen=True)
+class Message:
+    """What an agent sends per step (to each neighbour by broadcast, or to the centre), and how many floats.
+
+    Parameters
+    ----------
+    what : str
+        The content (e.g. ``"information pair (Omega, q)"``).
+    floats : float
+        Floats sent per step for it (all rounds together).
+
+    Examples
+    --------
+    >>> from mascore.estimation import Message
+    >>> Message("measurement", 2).floats
+    2
+    """
+
+    what: str
+    floats: float
+
+
+@runtime_checkable
+class Estimator(Protocol):
+    """The protocol every estimator implements (a structural type: no base class to inherit).
+
+    ``predict`` and ``update`` are the team-wide steps (their arguments are the
+    filter's own: a state and the data it needs); ``agent_inputs`` cuts agent i's
+    own data and its neighbours' messages of one step out of a team-wide state;
+    ``agent_step(i, own_data, messages)`` is agent i's step alone; ``messages()``
+    declares what an agent sends per step.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        None: a protocol is a type to check against (``isinstance``), not a class to build.
+
+    Examples
+    --------
+    >>> from mascore import estimation, fusion
+    >>> from mascore.compare import target_model
+    >>> isinstance(fusion.ConsensusOnInformationFilter(target_model(4), 2), estimation.Estimator)
+    True
+    """
+
+    predict: Callable[..., Any]
+    update: Callable[..., Any]
+    agent_inputs: Callable[..., tuple[Any, Sequence[Any]]]
+    agent_step: Callable[..., tuple]
+    messages: Callable[..., tuple[Message, ...]]
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """A method, declared once beside its filter: how it is built, what it sends, what it costs, where it applies.
+
+    Parameters
+    ----------
+    name : str
+        The method's name in every table (e.g. ``"ci-L5"``), unique within each task.
+    tasks : tuple of str
+        The scenarios where it applies (e.g. ``("target", "localization")``).
+    build : callable
+        ``build(model)``: the estimator on a scenario's model.
+    cost : callable
+        ``cost(n, q, degree, n_agents)``: ``(floats, flops)`` of one agent per step (the busiest:
+        the centre of a centralized filter), for state size n and q measurements per agent.
+    order : mapping of str to (str, str)
+        Per task, the order of one agent's work and memory per step.
+    memory : callable, optional
+        ``memory(n, q, degree, n_agents)``: floats one agent holds per step (its estimate, its
+        covariance and one round's messages; leading terms).
+    not_applicable : mapping of str to str
+        Scenario -> why the method does not apply there (the tables show it).
+    whole_filter : bool
+        The busiest agent runs the whole filter (the centre): timed as the team-wide step.
+    position : float
+        Rank in the tables (ascending; ties by name).
+
+    Examples
+    --------
+    >>> from mascore.estimation import method_spec
+    >>> method_spec("ci-L5", "target").tasks
+    ('target', 'localization')
+    """
+
+    name: str
+    tasks: tuple[str, ...]
+    build: Callable[[Any], Any]
+    cost: Callable[[int, int, int, int], tuple[float, float]]
+    order: Mapping[str, tuple[str, str]]
+    memory: Callable[[int, int, int, int], float] | None = None
+    not_applicable: Mapping[str, str] = field(default_factory=dict)
+    whole_filter: bool = False
+    position: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.name, str) and self.name):
+            raise ValueError(f"name must be a non-empty string; got {self.name!r}")
+        for attr in ("build", "cost"):
+            if not callable(getattr(self, attr)):
+                raise TypeError(f"{attr} of method {self.name!r} must be callable")
+        missing = [t for t in self.tasks if t not in self.order]
+        if missing:
+            raise ValueError(f"method {self.name!r}: order must give the work and memory of every task; "
+                             f"missing {missing}")
+
+
+def method_specs(task: str | None = None) -> tuple[MethodSpec, ...]:
+    """Every method declared in the package (a module's ``METHODS``), in table order; those of `task` if given.
+
+    Modules of the numerical core are scanned (not the private ones, nor those of
+    :data:`STUDY_LAYER`), and those whose source assigns ``METHODS`` imported; a new
+    module with a ``METHODS`` tuple is found with nothing listed by hand.
+
+    Parameters
+    ----------
+    task : str, optional
+        Keep the methods that apply to this scenario.
+
+    Returns
+    -------
+    tuple of MethodSpec
+        Sorted by :attr:`MethodSpec.position`.
+
+    Raises
+    ------
+    ValueError
+        Two specs with one name.
+
+    Examples
+    --------
+    >>> from mascore.estimation import method_specs
+    >>> [s.name for s in method_specs("target")][:3]
+    ['centralized', 'local', 'forwarding']
+    """
+    import mascore as package
+
+    found: dict[tuple[str, str], MethodSpec] = {}
+    for info in pkgutil.iter_modules(package.__path__):
+        if info.name.startswith("_") or info.name in STUDY_LAYER or info.ispkg or not _declares_methods(info):
+            continue
+        module = importlib.import_module(f"{package.__name__}.{info.name}")
+        for spec in getattr(module, "METHODS", ()):
+            if not isinstance(spec, MethodSpec):
+                continue
+            for t in spec.tasks:
+                if found.get((t, spec.name), spec) is not spec:
+                    raise ValueError(f"two methods of task {t!r} are named {spec.name!r} (one in {module.__name__})")
+                found[(t, spec.name)] = spec
+    specs = sorted({id(s): s for s in found.values()}.values(), key=lambda s: (s.position, s.name))
+    return tuple(s for s in specs if task is None or task in s.tasks)
+
+
+def _declares_methods(info: pkgutil.ModuleInfo) -> bool:
+    """Whether a module's source assigns ``METHODS`` at its top level (read, not imported: the scan stays cheap)."""
+    path = Path(getattr(info.module_finder, "path", "")) / f"{info.name}.py"
+    try:
+        return _METHODS_LINE.search(path.read_text(encoding="utf-8")) is not None
+    except OSError:  # not a plain source file: import it to see
+        return True
+
+
+_METHODS_LINE = re.compile(r"^METHODS\s*(?::[^=\n]*)?=", re.M)
+
+
+def method_names(task: str) -> tuple[str, ...]:
+    """The names of the methods of `task`, in table order (:func:`method_specs`).
+
+    Parameters
+    ----------
+    task : str
+        The scenario.
+
+    Returns
+    -------
+    tuple of str
+        The names.
+
+    Examples
+    --------
+    >>> from mascore.estimation import method_names
+    >>> method_names("localization")[-1]
+    'ci-diffusion'
+    """
+    return tuple(s.name for s in method_specs(task))
+
+
+def method_spec(name: str, task: str | None = None) -> MethodSpec:
+    """The spec of method `name` (of `task`, if given), by name.
+
+    Parameters
+    ----------
+    name : str
+        The method's name.
+    task : str, optional
+        The scenario (needed when methods of several tasks share the name).
+
+    Returns
+    -------
+    MethodSpec
+        Its spec.
+
+    Raises
+    ------
+    ValueError
+        No such method (for that task), naming the known ones.
+
+    Examples
+    --------
+    >>> from mascore.estimation import method_spec
+    >>> method_spec("centralized", "target").whole_filter
+    True
+    """
+    specs = method_specs(task)
+    matches = [spec for spec in specs if spec.name == name]
+    if len(matches) > 1:
+        raise ValueError(f"method {name!r} names methods of several tasks; give the task")
+    if matches:
+        return matches[0]
+    where = f" for task {task!r}" if task is not None else ""
+    raise ValueError(f"method must be one of {tuple(s.name for s in specs)}{where}; got {name!r}")

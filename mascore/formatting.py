@@ -1,0 +1,140 @@
+"""How the book prints a number, a value with its unit, a list or a mapping: one place for every page."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+__all__ = ["format_number", "format_value"]
+
+
+_SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079")
+
+
+def format_number(x: float, digits: int = 4) -> str:
+    """One number as the book prints it: `digits` significant digits, no ``e`` notation.
+
+    Numbers from 1e-3 to below 1e6 are written out (``0.07681``, ``2.462``, ``136.4``,
+    ``12,346``); smaller and larger ones as ``2.776 × 10⁻¹⁷``. Integers are written
+    exactly. Trailing zeros are dropped.
+
+    Parameters
+    ----------
+    x : float
+        The number.
+    digits : int
+        Significant digits.
+
+    Returns
+    -------
+    str
+        The number as printed.
+
+    Examples
+    --------
+    >>> format_number(0.076812345), format_number(2.7755575615628914e-17), format_number(5.0)
+    ('0.07681', '2.776 × 10⁻¹⁷', '5')
+    """
+    if isinstance(digits, bool) or not isinstance(digits, int | np.integer):
+        raise TypeError(f"digits must be an integer >= 1 (significant digits); got {type(digits).__name__} {digits!r}")
+    if digits < 1:
+        raise ValueError(f"digits must be an integer >= 1 (significant digits); got {digits}")
+    digits = int(digits)
+    if isinstance(x, bool | np.bool_):
+        return str(bool(x))
+    if isinstance(x, int | np.integer):
+        return f"{int(x):,}" if abs(int(x)) >= 10_000 else str(int(x))
+    if isinstance(x, str | bytes) or not hasattr(x, "__float__"):
+        raise TypeError(f"x must be a real number; got {type(x).__name__} {x!r}")
+    x = float(x)
+    if not math.isfinite(x):
+        return str(x)
+    if x == 0.0:
+        return "0"
+    exponent = math.floor(math.log10(abs(x)))
+    if -3 <= exponent < 6:
+        decimals = max(digits - 1 - exponent, 0)
+        text = f"{x:,.{decimals}f}"
+        if "." in text:
+            text = text.rstrip("0").rstrip(".")
+        return "0" if text in ("-0", "") else text
+    mantissa = f"{x / 10.0**exponent:.{digits - 1}f}".rstrip("0").rstrip(".")
+    if mantissa in ("10", "-10"):  # rounding carried into the next decade
+        mantissa, exponent = mantissa[:-1], exponent + 1
+    return f"{mantissa} \u00d7 10{str(exponent).translate(_SUPERSCRIPT)}"
+
+
+def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = "",
+                 labels: Sequence[str] | None = None) -> str:
+    """A short human-readable form of a claim value.
+
+    Numbers through :func:`format_number` (with `unit` appended), lists labelled by
+    `labels` when given and cut after `max_items` entries (marked with an ellipsis),
+    dicts as ``label = value`` pairs (underscores in labels read as spaces), ``None``
+    as a dash. Any value is shown, by design: NaN and infinities print as ``nan`` and
+    ``inf``, a string as itself (this is a display helper; :class:`Claim` refuses them).
+
+    Parameters
+    ----------
+    value : object
+        A number, list, dict or None.
+    digits : int
+        Significant digits of each number.
+    max_items : int
+        Entries shown of a list.
+    unit : str
+        Appended to numbers.
+    labels : sequence of str, optional
+        Names of a list's entries.
+
+    Returns
+    -------
+    str
+        The value as printed.
+
+    Examples
+    --------
+    >>> from mascore.ledger import format_value
+    >>> format_value([1.5, 2.25], labels=["mean", "rms"], unit="m")
+    'mean: 1.5; rms: 2.25 (m)'
+    """
+    for name, count in (("digits", digits), ("max_items", max_items)):
+        if isinstance(count, bool) or not isinstance(count, int | np.integer):
+            raise TypeError(f"{name} must be an integer >= 1; got {type(count).__name__} {count!r}")
+        if count < 1:
+            raise ValueError(f"{name} must be an integer >= 1; got {count}")
+    if not isinstance(unit, str):
+        raise TypeError(f"unit must be a string; got {type(unit).__name__}")
+    suffix = f"\u00a0{unit}" if unit else ""
+    if value is None:
+        return "\u2014"
+    if isinstance(value, bool | np.bool_):
+        return str(bool(value))
+    if isinstance(value, int | float | np.integer | np.floating):
+        return format_number(value, digits) + suffix
+    if isinstance(value, str):
+        return value
+    if isinstance(value, dict):
+        def item(v: Any) -> str:
+            text = format_value(v, digits, max_items)
+            return "(" + text + ")" if isinstance(v, dict) else text
+
+        items = [f"{_label(k)} = {item(v)}" for k, v in list(value.items())[:2 * max_items]]
+        more = len(value) > 2 * max_items
+        return "; ".join(items) + ("; \u2026" if more else "") + (f" ({unit})" if unit else "")
+    if isinstance(value, list | tuple | np.ndarray):
+        value = list(value)
+        if labels is not None and len(labels) == len(value):
+            pairs = [f"{lab}: {format_value(v, digits, max_items)}" for lab, v in zip(labels, value)]
+            return "; ".join(pairs) + (f" ({unit})" if unit else "")
+        items = [format_value(v, digits, max_items) for v in value[:max_items]]
+        return "[" + ", ".join(items) + (", \u2026" if len(value) > max_items else "") + "]" + suffix
+    return str(value)
+
+
+def _label(key: Any) -> str:
+    """A mapping key as text: underscores as spaces."""
+    return str(key).replace("_", " ")

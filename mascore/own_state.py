@@ -1,0 +1,513 @@
+"""Filters of each agent's own state from the measurements its team takes of it.
+
+N agents with the same linear dynamics ``x_i[k+1] = A x_i[k] + B u_i[k] + w_i[k]``; at a
+step, agent j measures agent i (itself included) on each link that delivers,
+``z_ji = H x_i + nu_ji``, ``nu_ji ~ N(0, R)`` independent. With the inputs known, the
+team's filter splits into one filter per agent, and agent i's exact Kalman filter fuses
+the measurements of x_i that reach it over one hop:
+
+=====================================  ==========================================================
+:class:`OwnStateForwardingFilter`      agent i: its prior and every delivered ``z_ji``, in
+                                       information form (one covariance per agent and run)
+:class:`CentralizedOutputFilter`       one Kalman filter of the team's states with every
+                                       delivered output measurement ``z_ji = C x_i + nu_ji``
+                                       (the bound: the centre's)
+=====================================  ==========================================================
+
+Shapes: estimates ``(R, N, n)`` (R runs), covariances ``(R, N, n, n)``, measurements
+``Z[r, j, i] = z_ji`` of shape ``(R, N, N, m)``, delivered links ``S[r, j, i]`` (bool,
+``(R or 1, N, N)``, the diagonal true: an agent measures itself).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._validation import as_matrix, check_covariance, check_positive, check_positive_int, check_square
+from .estimation import Message
+
+__all__ = ["CentralizedOutputFilter", "OwnStateForwardingFilter"]
+
+
+class OwnStateForwardingFilter:
+    """Measurement forwarding on the own states: agent i corrects with every delivered measurement of x_i.
+
+    ``P_i+ = (P_i-^{-1} + c_i H^T R^{-1} H)^{-1}``, ``x_i+ = P_i+ (P_i-^{-1} x_i- + H^T R^{-1} sum_j z_ji)``,
+    with ``c_i`` the number of delivered measurements of x_i (its own and its neighbours'); then
+    ``x_i- = A x_i + B u_i``, ``P_i- = A P_i A^T + Q``. Each neighbour sends agent i its ``m``
+    numbers ``z_ji`` per step. With full-state sensing (``H = I``) this one-hop filter *is* the
+    centralized filter of the team.
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        One agent's dynamics.
+    B : (n, k) array_like
+        Its input matrix.
+    Q : (n, n) array_like
+        The process-noise covariance the filter assumes.
+    H : (m, n) array_like
+        The output each measurement sees.
+    R : (m, m) array_like
+        The covariance of one measurement's noise, positive definite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore.own_state import OwnStateForwardingFilter
+    >>> f = OwnStateForwardingFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1))
+    >>> S = np.ones((1, 2, 2), bool)                                # both measure both
+    >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])            # z_ji = 1 for agent 0, 3 for agent 1
+    >>> x, P = f.update(np.zeros((1, 2, 1)), np.ones((1, 2, 1, 1)), Z, S)
+    >>> x[0, :, 0], P[0, :, 0, 0]                                   # prior 0 with information 1, two at 1 or 3
+    (array([0.66666667, 2.        ]), array([0.33333333, 0.33333333]))
+    """
+
+    __slots__ = ("A", "B", "Q", "H", "R", "information", "to_state")
+
+    def __init__(self, A: ArrayLike, B: ArrayLike, Q: ArrayLike, H: ArrayLike, R: ArrayLike) -> None:
+        A = check_square(A, "A")
+        n = A.shape[0]
+        B, H = as_matrix(B, "B"), as_matrix(H, "H")
+        if B.shape[0] != n or H.shape[1] != n:
+            raise ValueError(f"B must have n = {n} rows and H n columns; got B {B.shape}, H {H.shape}")
+        Q = check_covariance(Q, "Q", n)
+        R = check_covariance(R, "R", H.shape[0], definite=True)
+        Rinv = np.linalg.inv(R)
+        for name, value in (("A", A), ("B", B), ("Q", Q), ("H", H), ("R", R), ("information", H.T @ Rinv @ H),
+                            ("to_state", Rinv.T @ H)):
+            value = np.array(value, dtype=float)
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    def __setattr__(self, name: str, value: object) -> None:
+        raise AttributeError(f"an OwnStateForwardingFilter is frozen (cannot set {name!r}); build a new one")
+
+    def __reduce__(self) -> tuple:
+        return (type(self), (self.A, self.B, self.Q, self.H, self.R))
+
+    def update(self, x: np.ndarray, P: np.ndarray, Z: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every agent's correction with the delivered measurements of its own state, batched over runs.
+
+        Parameters
+        ----------
+        x : (R, N, n) ndarray
+            Predicted estimates.
+        P : (R, N, n, n) ndarray
+            Their covariances.
+        Z : (R, N, N, m) ndarray
+            ``Z[r, j, i] = z_ji``, agent j's measurement of agent i.
+        S : (R or 1, N, N) bool ndarray
+            ``S[r, j, i]``: z_ji delivered.
+
+        Returns
+        -------
+        x, P : ndarray
+            The corrected estimates ``(R, N, n)`` and covariances ``(R, N, n, n)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import OwnStateForwardingFilter
+        >>> f = OwnStateForwardingFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1))
+        >>> x, P, S = np.zeros((1, 2, 1)), np.ones((1, 2, 1, 1)), np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])      # z_ji = 1 for agent 0, 3 for agent 1
+        >>> f.update(x, P, Z, S)[0][0, :, 0]
+        array([0.66666667, 2.        ])
+        """
+        St = np.swapaxes(np.broadcast_to(S, (Z.shape[0], *S.shape[1:])), -1, -2)  # St[r, i, j] = S[r, j, i]
+        count = St.sum(-1).astype(float)                                        # (R, N)
+        zsum = np.einsum("rij,rjid->rid", St, Z)                                 # sum_j z_ji
+        prior_info = np.linalg.inv(P)
+        P = np.linalg.inv(prior_info + count[..., None, None] * self.information)
+        P = 0.5 * (P + np.swapaxes(P, -1, -2))
+        rhs = np.einsum("...ij,...j->...i", prior_info, x) + zsum @ self.to_state
+        return np.einsum("...ij,...j->...i", P, rhs), P
+
+    def predict(self, x: np.ndarray, P: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The prediction ``x_i <- A x_i + B u_i``, ``P_i <- A P_i A^T + Q`` of every agent and run.
+
+        Parameters
+        ----------
+        x : (R, N, n) ndarray
+            The estimates.
+        P : (R, N, n, n) ndarray
+            Their covariances.
+        u : (R, N, k) ndarray
+            The inputs applied.
+
+        Returns
+        -------
+        x, P : ndarray
+            The predictions, same shapes.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import OwnStateForwardingFilter
+        >>> f = OwnStateForwardingFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1))
+        >>> x, P, S = np.zeros((1, 2, 1)), np.ones((1, 2, 1, 1)), np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])      # z_ji = 1 for agent 0, 3 for agent 1
+        >>> f.predict(x, P, np.ones((1, 2, 1)))[0][0, :, 0]
+        array([1., 1.])
+        """
+        return x @ self.A.T + u @ self.B.T, self.A @ P @ self.A.T + self.Q
+
+    def agent_inputs(self, x: np.ndarray, P: np.ndarray, Z: np.ndarray, S: np.ndarray, u: np.ndarray,
+                     i: int) -> tuple[dict, tuple]:
+        """Agent i's prior, own measurement and input, and the measurements of x_i its neighbours send it.
+
+        Parameters
+        ----------
+        x : (N, n) ndarray
+            The team's estimates before the step (one run).
+        P : (N, n, n) ndarray
+            Their covariances.
+        Z : (N, N, m) ndarray
+            The step's measurements, ``Z[j, i] = z_ji``.
+        S : (N, N) bool ndarray
+            The delivered links, ``S[j, i]``.
+        u : (N, k) ndarray
+            The inputs applied at the step.
+        i : int
+            The agent.
+
+        Returns
+        -------
+        own : dict
+            Its prior ``x``, ``P``, its input ``u``, its own measurement ``z`` and its ``index`` among
+            the senders of measurements of x_i.
+        messages : tuple
+            One round: the neighbours' delivered measurements ``z_ji`` of x_i, ``(c_i - 1, m)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import OwnStateForwardingFilter
+        >>> f = OwnStateForwardingFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1))
+        >>> x, P, S = np.zeros((1, 2, 1)), np.ones((1, 2, 1, 1)), np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])      # z_ji = 1 for agent 0, 3 for agent 1
+        >>> own, messages = f.agent_inputs(x[0], P[0], Z[0], S[0], np.zeros((2, 1)), 1)
+        >>> messages[0]                                            # agent 0's measurement of agent 1
+        array([[3.]])
+        """
+        senders = np.flatnonzero(S[:, i])  # i and the neighbours whose z_ji reached it, ascending
+        return ({"x": x[i].copy(), "P": P[i].copy(), "u": u[i].copy(), "index": int(np.flatnonzero(senders == i)[0]),
+                 "z": Z[i, i].copy()}, (Z[senders[senders != i], i].copy(),))
+
+    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        """Agent i's correction with its own and the received measurements of x_i, then its prediction.
+
+        Parameters
+        ----------
+        i : int
+            The agent.
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        x_i, P_i : ndarray
+            Its predicted estimate ``(n,)`` and covariance ``(n, n)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import OwnStateForwardingFilter
+        >>> f = OwnStateForwardingFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1))
+        >>> x, P, S = np.zeros((1, 2, 1)), np.ones((1, 2, 1, 1)), np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])      # z_ji = 1 for agent 0, 3 for agent 1
+        >>> u = np.zeros((1, 2, 1))
+        >>> x_i, P_i = f.agent_step(1, *f.agent_inputs(x[0], P[0], Z[0], S[0], u[0], 1))
+        >>> bool(np.allclose(x_i, f.predict(*f.update(x, P, Z, S), u)[0][0, 1]))
+        True
+        """
+        z_in = np.insert(messages[0], own["index"], own["z"], axis=0)
+        info = np.linalg.inv(own["P"])
+        P = np.linalg.inv(info + len(z_in) * self.information)
+        P = 0.5 * (P + P.T)
+        x = P @ (info @ own["x"] + self.to_state.T @ z_in.sum(0))
+        return self.A @ x + self.B @ own["u"], self.A @ P @ self.A.T + self.Q
+
+    def messages(self, i: int = 0) -> tuple[Message, ...]:
+        """What agent i sends per step: to each neighbour, its measurement of that neighbour (m floats).
+
+        Parameters
+        ----------
+        i : int
+            The agent (all send the same).
+
+        Returns
+        -------
+        tuple of Message
+            The message (floats per neighbour).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import OwnStateForwardingFilter
+        >>> f = OwnStateForwardingFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1))
+        >>> x, P, S = np.zeros((1, 2, 1)), np.ones((1, 2, 1, 1)), np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])      # z_ji = 1 for agent 0, 3 for agent 1
+        >>> f.messages()[0].floats
+        1.0
+        """
+        return (Message("measurement z_ij of each neighbour j", float(self.to_state.shape[0])),)
+
+
+class CentralizedOutputFilter:
+    """One Kalman filter over the team state ``(N n,)`` with every delivered output measurement (information form).
+
+    ``P^{-1} = P-^{-1} + H^T R^{-1} H`` with one row block ``[0 .. C .. 0]`` per delivered
+    ``z_ji`` (block i), ``R = r I``; ``x = x- + P H^T R^{-1} (z - H x-)``; then
+    ``x- = (I_N kron A) x + (I_N kron B) u``, ``P- = (I_N kron A) P (I_N kron A)^T + I_N kron Q``.
+    The team covariance is ``(B, N n, N n)``: shared by the runs (B = 1) or one per run when
+    links drop. Each agent sends its measurements to the centre.
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        One agent's dynamics.
+    B : (n, k) array_like
+        Its input matrix.
+    Q : (n, n) array_like
+        The process-noise covariance the filter assumes (the agents' noises independent).
+    C : (p, n) array_like
+        The output each measurement sees.
+    r : float
+        The variance of each output's noise (``R = r I_p``), > 0.
+    n_agents : int
+        N.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore.own_state import CentralizedOutputFilter
+    >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
+    >>> S = np.ones((1, 2, 2), bool)
+    >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
+    >>> x, P = f.update(np.zeros((1, 2, 1)), np.eye(2)[None], Z, S)
+    >>> x[0, :, 0], np.diag(P[0])                          # as forwarding: the agents are independent
+    (array([0.66666667, 2.        ]), array([0.33333333, 0.33333333]))
+    """
+
+    __slots__ = ("A", "B", "Q", "C", "r", "n_agents", "A_team", "Q_team", "information")
+
+    def __init__(self, A: ArrayLike, B: ArrayLike, Q: ArrayLike, C: ArrayLike, r: float, n_agents: int) -> None:
+        A = check_square(A, "A")
+        n = A.shape[0]
+        B, C = as_matrix(B, "B"), as_matrix(C, "C")
+        if B.shape[0] != n or C.shape[1] != n:
+            raise ValueError(f"B must have n = {n} rows and C n columns; got B {B.shape}, C {C.shape}")
+        Q = check_covariance(Q, "Q", n)
+        r = check_positive(r, "r")
+        N = check_positive_int(n_agents, "n_agents")
+        for name, value in (("A", A), ("B", B), ("Q", Q), ("C", C), ("A_team", np.kron(np.eye(N), A)),
+                            ("Q_team", np.kron(np.eye(N), Q)), ("information", C.T @ C / r)):
+            value = np.array(value, dtype=float)
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "r", float(r))
+        object.__setattr__(self, "n_agents", N)
+
+    def __setattr__(self, name: str, value: object) -> None:
+        raise AttributeError(f"a CentralizedOutputFilter is frozen (cannot set {name!r}); build a new one")
+
+    def __reduce__(self) -> tuple:
+        return (type(self), (self.A, self.B, self.Q, self.C, self.r, self.n_agents))
+
+    def update(self, x: np.ndarray, P: np.ndarray, Z: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The centre's correction with every delivered measurement.
+
+        Parameters
+        ----------
+        x : (R, N, n) ndarray
+            The team's predicted states, per run.
+        P : (B, N n, N n) ndarray
+            The team covariance (B = 1: shared by the runs).
+        Z : (R, N, N, p) ndarray
+            ``Z[r, j, i] = z_ji``.
+        S : (R or 1, N, N) bool ndarray
+            ``S[r, j, i]``: z_ji delivered.
+
+        Returns
+        -------
+        x, P : ndarray
+            ``(R, N, n)``, and ``(B', N n, N n)`` with ``B'`` the runs of `S` (one covariance per run when links drop).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import CentralizedOutputFilter
+        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
+        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
+        >>> f.update(x, P, Z, S)[0][0, :, 0]
+        array([0.66666667, 2.        ])
+        """
+        R_, N, n = x.shape
+        count = S.sum(-2).astype(float)                                   # (B, N): measurements of x_j
+        info = np.linalg.inv(P)
+        if info.shape[0] != count.shape[0]:                               # links drop per run: one P per run
+            info = np.broadcast_to(info, (count.shape[0], *info.shape[1:])).copy()
+        diag = count[..., None, None] * self.information                  # (B, N, n, n)
+        idx = np.arange(N)
+        blocks = info.reshape(-1, N, n, N, n)
+        blocks[:, idx, :, idx, :] += np.moveaxis(diag, 1, 0)              # H^T R^-1 H is block-diagonal
+        P = np.linalg.inv(blocks.reshape(info.shape))
+        P = 0.5 * (P + np.swapaxes(P, -1, -2))
+        resid = np.where(S[..., None], Z - (x @ self.C.T)[:, None], 0.0)   # z_ji - C x_i, (R, N, N, p)
+        rhs = resid.sum(1) @ self.C / self.r                              # H^T R^-1 (z - H x), (R, N, n)
+        return x + (P @ rhs.reshape(R_, n * N, 1)).reshape(R_, N, n), P
+
+    def predict(self, x: np.ndarray, P: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The team's prediction.
+
+        Parameters
+        ----------
+        x : (R, N, n) ndarray
+            The states.
+        P : (B, N n, N n) ndarray
+            The team covariance.
+        u : (R, N, k) ndarray
+            The inputs applied.
+
+        Returns
+        -------
+        x, P : ndarray
+            The predictions, same shapes.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import CentralizedOutputFilter
+        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
+        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
+        >>> f.predict(x, P, np.ones((1, 2, 1)))[0][0, :, 0]
+        array([1., 1.])
+        """
+        return x @ self.A.T + u @ self.B.T, self.A_team @ P @ self.A_team.T + self.Q_team
+
+    def own_covariances(self, P: np.ndarray) -> np.ndarray:
+        """Agent i's own block of the team covariance, for every agent.
+
+        Parameters
+        ----------
+        P : (B, N n, N n) ndarray
+            The team covariance.
+
+        Returns
+        -------
+        (B, N, n, n) ndarray
+            The diagonal blocks.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import CentralizedOutputFilter
+        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
+        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
+        >>> f.own_covariances(2 * P)[0, :, 0, 0]
+        array([2., 2.])
+        """
+        N, n = self.n_agents, self.A.shape[0]
+        idx = np.arange(N)
+        return np.moveaxis(P.reshape(-1, N, n, N, n)[:, idx, :, idx, :], 0, 1)
+
+    def agent_inputs(self, x: np.ndarray, P: np.ndarray, Z: np.ndarray, S: np.ndarray, u: np.ndarray,
+                     i: int) -> tuple[dict, tuple]:
+        """The centre's data of one step (the whole filter's: it is the busiest node).
+
+        Parameters
+        ----------
+        x : (N, n) ndarray
+            The team's states before the step (one run).
+        P : (N n, N n) ndarray
+            The team covariance.
+        Z : (N, N, p) ndarray
+            The step's measurements.
+        S : (N, N) bool ndarray
+            The delivered links.
+        u : (N, k) ndarray
+            The inputs applied.
+        i : int
+            Unused: the centre's step is the same for every agent.
+
+        Returns
+        -------
+        own : dict
+            The team's data, with a run axis of one.
+        messages : tuple
+            Empty: the measurements are part of the centre's data.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import CentralizedOutputFilter
+        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
+        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
+        >>> own, messages = f.agent_inputs(x[0], P[0], Z[0], S[0], np.zeros((2, 1)), 0)
+        >>> own["x"].shape, messages
+        ((1, 2, 1), ())
+        """
+        return {"x": x[None].copy(), "P": P[None].copy(), "Z": Z[None].copy(), "S": S[None].copy(),
+                "u": u[None].copy()}, ()
+
+    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        """The centre's step: the whole team's correction and prediction.
+
+        Parameters
+        ----------
+        i : int
+            Unused (the centre).
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        x, P : ndarray
+            The team's predicted states ``(1, N, n)`` and covariance ``(1, N n, N n)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import CentralizedOutputFilter
+        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
+        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
+        >>> x1, P1 = f.agent_step(0, *f.agent_inputs(x[0], P[0], Z[0], S[0], np.zeros((2, 1)), 0))
+        >>> x1[0, :, 0]
+        array([0.66666667, 2.        ])
+        """
+        return self.predict(*self.update(own["x"], own["P"], own["Z"], own["S"]), own["u"])
+
+    def messages(self, i: int = 0) -> tuple[Message, ...]:
+        """What each agent sends the centre per step: p floats per agent it measures (itself included).
+
+        Parameters
+        ----------
+        i : int
+            The agent (all send the same).
+
+        Returns
+        -------
+        tuple of Message
+            The message (floats per agent measured).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.own_state import CentralizedOutputFilter
+        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
+        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
+        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
+        >>> f.messages()[0].floats
+        1.0
+        """
+        return (Message("measurements z_ij of itself and its neighbours, to the centre", float(self.C.shape[0])),)

@@ -1,0 +1,140 @@
+"""The estimator protocol and the method specs: every filter declared once, found by the comparison and the cost table."""
+
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import mascore
+from mascore import agent_cost, compare, estimation, fusion
+
+TOY_FILTER = '''
+"""A toy filter: each agent's own Kalman filter, written from scratch, with its spec."""
+
+import numpy as np
+
+from mascore import kalman
+from mascore.estimation import Message, MethodSpec
+
+
+class OwnOnlyFilter:
+    def __init__(self, model):
+        self.model = model
+
+    def predict(self, x, P):
+        F, Q = self.model.F, self.model.Q
+        return x @ F.T, F @ P @ F.T + Q
+
+    def update(self, x, P, z):
+        m = self.model
+        out = [kalman.update(x[..., i, :], P[..., i, :, :], m.agent_measurement(z, i), m.H[i], m.R[i])
+               for i in range(m.n_agents)]
+        return np.stack([a for a, _ in out], -2), np.stack([b for _, b in out], -3)
+
+    def run(self, x0, P0, z):
+        x, P = self.model.check_state(x0, P0)
+        xs, Ps = [], []
+        for zk in z:
+            x, P = self.update(*self.predict(x, P), zk)
+            xs.append(x)
+            Ps.append(P)
+        return np.stack(xs), np.stack(Ps)
+
+    def agent_inputs(self, x, P, z, i):
+        return {"x": x[i], "P": P[i], "z": self.model.agent_measurement(z, i)}, ()
+
+    def agent_step(self, i, own, messages):
+        F, Q, m = self.model.F, self.model.Q, self.model
+        return kalman.update(F @ own["x"], F @ own["P"] @ F.T + Q, own["z"], m.H[i], m.R[i])
+
+    def messages(self, i=0):
+        return ()
+
+
+METHODS = (MethodSpec("toy-own", ("target",), OwnOnlyFilter, lambda n, q, d, N: (0.0, 12.0 * n**3),
+                      {"target": ("O(n^3)", "O(n^2)")}, lambda n, q, d, N: float(n**2 + n), position=99),)
+'''
+
+
+@pytest.fixture
+def toy_module(tmp_path, monkeypatch):
+    """``mascore.toyfilter2099``: one class and one spec in one new file, and nothing else touched."""
+    (tmp_path / "toyfilter2099.py").write_text(TOY_FILTER)
+    monkeypatch.setattr(mascore, "__path__", [*mascore.__path__, str(tmp_path)])
+    monkeypatch.delitem(sys.modules, "mascore.toyfilter2099", raising=False)
+    yield "toy-own"
+    sys.modules.pop("mascore.toyfilter2099", None)
+    vars(mascore).pop("toyfilter2099", None)
+
+
+def test_a_new_filter_is_one_class_and_one_spec_in_one_module(toy_module):
+    assert toy_module in compare.target_methods("target")
+    assert toy_module not in compare.target_methods("localization")  # its spec says where it applies
+    target_cells = [c for c in compare.grid_cells("quick") if c["task"] == "target"]
+    assert {c["method"] for c in target_cells} == set(compare.target_methods("target"))
+    # the sweep: one cell of it and of the bound, the same data; the headline table
+    cell = {"study": "target", "task": "target", "n_agents": 8, "graph": "ring", "noise": "gaussian",
+            "dropout": 0.0, "q_scale": 1.0, "block": 0}
+    rows = [{**r, **cell, "method": m, "cell": m} for m in ("centralized", "local", toy_module)
+            for r in compare.run_cell({**cell, "method": m})]
+    summary = compare.summarize(pd.DataFrame(rows))
+    table = compare.headline(summary, "target")
+    assert toy_module in table.index and table.loc[toy_module, "flops/agent/step"] == 12 * 4**3
+    # the toy is each agent's own Kalman filter, as is "local" (consensus on information with L = 0)
+    s = summary.set_index("method")
+    assert s.loc[toy_module, "rmse_own_mean"] == pytest.approx(s.loc["local", "rmse_own_mean"], rel=1e-9)
+    # the cost table: its own agent_step, checked against its team-wide update
+    assert toy_module in agent_cost.AGENT_METHODS["target"]
+    step = agent_cost.agent_step("target", toy_module, 6, agent=2)
+    assert agent_cost.max_deviation(step) < 1e-12
+    cost = agent_cost.agent_costs((4,), ("target",), (toy_module,), repeats=1, min_time=0.0)
+    assert cost["method"].tolist() == [toy_module] and cost["work"].iloc[0] == "O(n^3)"
+
+
+def test_the_toy_is_gone_with_its_module():
+    assert "toy-own" not in compare.target_methods()
+
+
+@pytest.mark.parametrize("spec", estimation.method_specs("target"), ids=lambda s: s.name)
+def test_every_fusion_filter_implements_the_protocol_and_declares_what_it_sends(spec):
+    model = compare.target_model(8)
+    filt = spec.build(model)
+    assert isinstance(filt, estimation.Estimator)
+    declared = sum(m.floats for m in filt.messages())
+    floats, _ = spec.cost(4, 1, 2, 8)  # n = 4, one measurement per agent, degree 2
+    assert declared == pytest.approx(floats)
+
+
+@pytest.mark.parametrize("spec", [s for s in estimation.method_specs("localization") if not s.whole_filter],
+                         ids=lambda s: s.name)
+def test_agent_step_is_the_agents_row_of_the_team_wide_update(spec):
+    model = compare.localization_model(6)
+    filt = spec.build(model)
+    rng = np.random.default_rng(5)
+    n = model.n_states
+    _, z = model.simulate(np.zeros(n), np.eye(n), 2, rng)
+    x, P = model.check_state(rng.standard_normal((6, n)), np.eye(n))
+    x, P = filt.update(*filt.predict(x, P), z[0])
+    xr, Pr = filt.update(*filt.predict(x, P), z[1])
+    for i in (0, 3):
+        xi, Pi = filt.agent_step(i, *filt.agent_inputs(x, P, z[1], i))
+        np.testing.assert_allclose(xi, xr[i], atol=1e-12 * (1 + np.abs(xr[i]).max()))
+        np.testing.assert_allclose(Pi, Pr[i], atol=1e-12 * (1 + np.abs(Pr[i]).max()))
+
+
+def test_agent_inputs_refuse_a_batch_and_a_bad_agent():
+    model = compare.target_model(4)
+    filt = fusion.ConsensusOnInformationFilter(model, 2)
+    x, P = model.check_state(np.zeros(4), np.eye(4))
+    with pytest.raises(ValueError, match="one run"):
+        filt.agent_inputs(np.stack([x, x]), P, np.zeros(4), 0)
+    with pytest.raises(ValueError, match="agent index below N = 4"):
+        filt.agent_inputs(x, P, np.zeros(4), 4)
+
+
+def test_a_spec_is_checked_when_declared():
+    with pytest.raises(ValueError, match="order must give"):
+        estimation.MethodSpec("x", ("target",), fusion.CentralizedFilter, lambda *a: (0.0, 0.0), {})
+    with pytest.raises(ValueError, match="method must be one of"):
+        estimation.method_spec("no-such-method", "target")

@@ -1,0 +1,116 @@
+"""The layers of the package: what the core and the cost tables load, and no module using another's private names.
+
+The layers themselves (core < benchmark < studies < CLI and book tools) are an import-linter
+contract in ``pyproject.toml``, checked by ``lint-imports`` (``make lint``).
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+PACKAGE = Path(__file__).parents[1] / "mascore"
+
+#: Private names still used across modules, to be folded into public ones (issue 28, item 5); none may be added.
+KNOWN_PRIVATE_USES = {
+    ("mascore._kf_reference", "mascore.sensing._check_adjacency"),
+    ("mascore.agent_cost", "mascore.distributed_kf._F1_rows"),
+    ("mascore.distributed_kf", "mascore.sensing._check_adjacency"),
+    ("mascore.distributed_kf", "mascore.sensing._check_flag"),
+    ("mascore.distributed_kf", "mascore.sensing._check_mask_values"),
+    ("mascore.graphs", "mascore._validation._is_graph"),
+    ("mascore.rendezvous", "mascore.distributed_kf._check_laplacian"),
+    ("mascore.rendezvous", "mascore.noise._psd_factor"),
+    ("mascore.rendezvous", "mascore.sensing._check_adjacency"),
+    ("mascore.rendezvous", "mascore.sensing._check_flag"),
+    ("mascore.rendezvous", "mascore.sensing._measure"),
+    ("mascore.sensing", "mascore.noise._psd_factor"),
+    ("mascore.sensing", "mascore.noise._sample_shape"),
+    ("mascore.set_membership", "mascore.ellipsoids._broadcast"),
+    ("mascore.set_membership", "mascore.ellipsoids._intersection_min_trace"),
+    ("mascore.set_membership", "mascore.ellipsoids._max_innovation_form"),
+    ("mascore.set_membership", "mascore.ellipsoids._points"),
+    ("mascore.set_membership", "mascore.ellipsoids._shape_matrix"),
+    ("mascore.set_membership", "mascore.ellipsoids._sqrt_trace"),
+    ("mascore.set_membership", "mascore.ellipsoids._sum_min_trace"),
+}
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _is_module(dotted: str) -> bool:
+    """A private *module* (``mascore._validation``) is the package's own: importing it is allowed."""
+    rel = Path(*dotted.split(".")[1:])
+    return (PACKAGE / rel).with_suffix(".py").exists() or (PACKAGE / rel / "__init__.py").exists()
+
+
+def private_uses(source: str, module: str, is_package: bool = False) -> set[tuple[str, str]]:
+    """``(module, name)`` for every ``_private`` name of another mascore module that `source` imports or reads."""
+    tree = ast.parse(source)
+    package = module if is_package else module.rpartition(".")[0]
+    aliases: dict[str, str] = {}
+    found = set()
+
+    def origin(node: ast.ImportFrom) -> str:
+        if node.level == 0:
+            return node.module or ""
+        base = package.split(".")[:len(package.split(".")) - node.level + 1]
+        return ".".join(base + ([node.module] if node.module else []))
+
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and origin(node).startswith("mascore"):
+            src = origin(node)
+            for a in node.names:
+                full = f"{src}.{a.name}"
+                if a.name.startswith("_") and not a.name.startswith("__") and not _is_module(full):
+                    found.add((module, full))
+                else:
+                    aliases[a.asname or a.name] = full
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.startswith("mascore"):
+                    aliases[a.asname or a.name.split(".")[0]] = a.name if a.asname else "mascore"
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in aliases
+                and node.attr.startswith("_") and not node.attr.startswith("__")):
+            full = f"{aliases[node.value.id]}.{node.attr}"
+            if not _is_module(full) and not full.startswith(f"{module}."):
+                found.add((module, full))
+    return found
+
+
+def test_no_module_uses_another_modules_private_names():
+    found = set()
+    for path in sorted(PACKAGE.rglob("*.py")):
+        found |= private_uses(path.read_text(), _module_name(path), path.name == "__init__.py")
+    assert found - KNOWN_PRIVATE_USES == set(), "a module uses another's private names: make them public there"
+    assert KNOWN_PRIVATE_USES - found == set(), "a known private use is gone: remove it from KNOWN_PRIVATE_USES"
+
+
+def test_the_private_names_check_can_fail():
+    source = "from .sensing import _check_flag\nfrom . import fusion\nfusion._mix(1, 2, 1)\n"
+    assert private_uses(source, "mascore.toy") == {("mascore.toy", "mascore.sensing._check_flag"),
+                                                   ("mascore.toy", "mascore.fusion._mix")}
+    assert private_uses("from . import _validation\n", "mascore.toy") == set()
+
+
+def test_the_cost_tables_and_the_specs_load_neither_the_studies_nor_pandas_matplotlib_dask():
+    code = textwrap.dedent("""
+        import json, sys
+        import mascore.agent_cost
+        from mascore import estimation
+        estimation.method_specs()
+        heavy = ("pandas", "matplotlib", "dask", "cvxpy", "mascore.registry", "mascore.ledger", "mascore.papers",
+                 "mascore.compare.grid", "mascore.compare.verdicts")
+        print(json.dumps([m for m in heavy if m in sys.modules]))
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout.strip().splitlines()[-1]) == []
