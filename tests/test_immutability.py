@@ -15,7 +15,7 @@ import warnings
 import numpy as np
 import pytest
 
-from mascore import agents, consensus, ellipsoids, fusion, graphs, kalman, lqr, rendezvous, sensing
+from mascore import agents, consensus, ellipsoids, fusion, graphs, kalman, lqr, observers, own_state, rendezvous, sensing
 from mascore import distributed_ekf as dekf
 from mascore import distributed_kf as dkf
 from mascore import set_membership as smf
@@ -60,6 +60,12 @@ MODELS = {  # every checked model or value class: a builder of one instance
     "BottomUpLQR": lambda: lqr.BottomUpLQR(np.array([[1.0, 2.0]]), np.array([[0.5, 1.0]]), Phi=np.array([[0.5]]),
                                            bound=3.0),
     "FlockingGains": lambda: GAINS,
+    "OwnStateForwardingFilter": lambda: own_state.OwnStateForwardingFilter(np.eye(2), np.ones((2, 1)), 0.01 * np.eye(2),
+                                                                           np.eye(2), np.eye(2)),
+    "CentralizedOutputFilter": lambda: own_state.CentralizedOutputFilter(np.eye(2), np.ones((2, 1)), 0.01 * np.eye(2),
+                                                                         [[1.0, 0.0]], 0.5, 3),
+    "DiscreteNetworkObserver": lambda: observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3),
+                                                                         [[1, 0.1], [0, 1]], [[0.0], [0.1]], [[1.0, 0.0]]),
 }
 
 
