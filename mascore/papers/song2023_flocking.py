@@ -736,8 +736,8 @@ def plot_beyond(table: pd.DataFrame, settings: FlockingSettings = SETTINGS) -> p
         unstable = data.loc[data["unstable"] != "-", x]
         if len(unstable):  # from the last stable point to the last point
             for ax in (ax_d, ax_e):
-                ax.axvspan(data.loc[data["unstable"] == "-", x].max(), unstable.max(), color="0.9", lw=0,
-                           label="(ii), (iii) lose stability")
+                ax.axvspan(data.loc[data["unstable"] == "-", x].max(), unstable.min(), color="0.9", lw=0,
+                           label="(ii), (iii) become unstable\nsomewhere in this band")
     for ax, letter in zip(axes.flat, "abcd"):
         ax.set_title(f"({letter})", loc="left")
     handles, labels = axes[0, 1].get_legend_handles_labels()
@@ -1026,6 +1026,22 @@ def ekf_step_seconds(settings: FlockingSettings = SETTINGS, seed: int = 0, repea
     return median_time(lambda: ekf_flocking_step(*args), repeat=repeat)
 
 
+def _fig4_caption_values(result: FlockingResult) -> dict[str, float]:
+    """The numbers the caption of Fig. 4 quotes: agent 1's statistical error in and out of range, the peak error."""
+    s = fig4_statistics(result.fig4, result.settings.transient)
+    return {"sigma_in": s["mean_sigma_neighbours"], "sigma_out": s["mean_sigma_non_neighbours"],
+            "max_out": s["max_error_non_neighbours"], "transient": result.settings.transient}
+
+
+def _beyond_caption_values(result: FlockingResult) -> dict[str, float]:
+    """The band of the team-size sweep: the largest N with every case stable, the first N with one unstable."""
+    by_n = result.beyond[result.beyond["r (m)"] == result.settings.sensing_range]
+    stable = by_n["unstable"] == "-"
+    unstable = by_n.loc[~stable, "N"]
+    return {"n_stable": float(by_n.loc[stable, "N"].max()),
+            "n_unstable": float(unstable.min()) if len(unstable) else float("nan")}
+
+
 # ----------------------------------------------------------------------------- the study
 
 
@@ -1037,11 +1053,12 @@ FIGURES = (
         "(c) true and (d) estimated trajectories (markers at the end: ▲ agent 1, ● its neighbours, "
         "□ and dashed lines its non-neighbours at the end); (e) agent 1's position error of every other agent "
         "and (f) its statistical error $\\sqrt{\\operatorname{tr}\\Sigma_{1,p_j}}$. Look for: (d) follows (c) "
-        "closely; the errors and the statistical error of an agent sit near 1 m while it is in range; while it "
-        "is out of range the statistical error (f) rises to a bounded plateau of about 5 m, and the actual "
-        "error (e) swings well above that plateau (the ledger gives its peak); both drop at once when the "
-        "agent comes back.",
+        "closely; while an agent is in range, its statistical error (f) is small (on average {{sigma_in:.1f}} m "
+        "after the first {{transient:.0f}} s); out of range it rises to a bounded plateau (on average "
+        "{{sigma_out:.1f}} m), and the actual error (e) swings well above that plateau (up to {{max_out:.0f}} m); "
+        "both drop at once when the agent comes back.",
         lambda result: plot_fig4(result.fig4, result.settings),
+        lambda result: _fig4_caption_values(result),
     ),
     FigureSpec(
         "fig5", "Fig. 5",
@@ -1049,7 +1066,8 @@ FIGURES = (
         "$R = 10\\,I$, the same initial states for the three cases): (i) flocking from measurements on the "
         "proximity graph, (ii) the same on a fixed fully-connected network, (iii) estimation-based flocking on "
         "the virtual fully-connected network. Look for: (ii) and (iii) (dashed and dotted) nearly coincide and "
-        "settle far below (i); the shaded last 20 s give the settled values of the ledger.",
+        "settle far below (i) in position, somewhat below it in velocity; the shaded last 20 s give the settled "
+        "values of the ledger.",
         lambda result: plot_fig5(result.fig5),
     ),
     FigureSpec(
@@ -1066,10 +1084,13 @@ FIGURES = (
         "(right, $r = 150$ m), median of 2 runs of 40 s per point: (a), (b) farthest agent from the centre of "
         "mass at the end, with $\\mathcal R$; (c), (d) settled RMS position error of the estimators of (iii). "
         "Look for: (i) needs $r$ well above $\\mathcal R$ to stay inside it while (ii) and (iii) do not depend "
-        "on $r$; the estimation error grows as $r$ shrinks or $N$ grows; between $N = 16$ and $24$ (shaded; near "
-        "$N = 18$ by the spectral radius computed in the chapter) the fully-connected law, real or virtual, "
-        "loses stability with the paper's gains and $\\Delta t$, so (ii) and (iii) have no point at $N = 24$.",
+        "on $r$; the estimation error grows as $r$ shrinks or $N$ grows. The shaded band runs from "
+        "the largest team at which all three cases are stable ($N$ = {{n_stable:.0f}}) to the first at which the "
+        "fully-connected law, real (ii) or virtual (iii), has diverged with the paper's gains and $\\Delta t$ "
+        "($N$ = {{n_unstable:.0f}}): stability is lost somewhere inside the band, and (ii) and (iii) have no point "
+        "at its right end.",
         lambda result: plot_beyond(result.beyond, result.settings),
+        lambda result: _beyond_caption_values(result),
     ),
 )
 
@@ -1094,7 +1115,7 @@ FLOCKING_STUDY = STUDY
 FLOCKING_ERRATA = (
     "Flocking, Fig. 4: the noise is 'the same as in the previous rendezvous problem'; we read it as Fig. 2's $R = I$, not Fig. 3's $R = 100\\,I$.",
     "Flocking, Fig. 5: the 'root-mean-square STD' is not defined; we read it as the spread of the agents about their mean, $\\sqrt{\\tfrac1N\\sum_i\\lVert p_i-\\bar p\\rVert^2}$, root-mean-square over the runs.",
-    "Flocking, eqs. (38), (40): the EKF prediction assumes the other agents act on the true state, though each acts on its own estimate (the linear part carries this through eqs. (29)-(34)); the flocking filter is therefore somewhat over-confident: the mean squared error is 1.65 times its variance in Fig. 4's run.",
-    "Flocking, Fig. 6: the bound $\\mathcal R$ holds only for a fully-connected flock: at a noiseless equilibrium every agent is within $\\mathcal R(N-1)/N$ (105 m for N = 8) of the centre of mass. With noise, case (iii) exceeds that in its worst run (108 m) but stays within $\\mathcal R$.",
+    "Flocking, eqs. (38), (40): the EKF prediction assumes the other agents act on the true state, though each acts on its own estimate (the linear part carries this through eqs. (29)-(34)); the flocking filter is therefore somewhat over-confident: its mean squared error exceeds its variance in Fig. 4's run (the chapter gives the ratio).",
+    "Flocking, Fig. 6: the bound $\\mathcal R$ holds only for a fully-connected flock: at a noiseless equilibrium every agent is within $\\mathcal R(N-1)/N$ of the centre of mass. With noise, case (iii) can exceed that in its worst run (the chapter gives the distances) but stays within $\\mathcal R$.",
     "Flocking, Fig. 6: case (i) fails because $r = 150$ m is only 30 m above $\\mathcal R$, not because it lacks an estimator: at $r = 200$ m the proximity-graph flock is as tight as the fully-connected one.",
 )
