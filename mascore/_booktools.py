@@ -195,7 +195,7 @@ def page_problems(html: str) -> list[str]:
 
 
 #: Measures a page as the reader sees it, once MathJax has typeset it: the text column's width,
-#: formulas MathJax reports as errors, every display equation and table wider than it, cells
+#: the words shown, formulas MathJax reports as errors, every display equation and table wider than it, cells
 #: showing NaN, and how much each figure's image is shrunk. Written as JSON into
 #: ``<pre id="mascore-measure">`` for ``--dump-dom``.
 _MEASURE_JS = r"""
@@ -230,6 +230,8 @@ _MEASURE_JS = r"""
         if (/^(nan|NaN|<NA>|None|NaT)$/.test(text)) out.nan.push(head);
       }
     }
+    // Words a reader sees: the article's rendered text (closed dropdowns and hidden cells do not render).
+    out.words = article.innerText.split(/\s+/).filter((w) => /[A-Za-z0-9]/.test(w)).length;
     out.images = [];
     for (const img of document.querySelectorAll("article figure img")) {
       if (!img.naturalWidth) continue;
@@ -258,7 +260,8 @@ def chromium() -> str | None:
 def measure_page(path: str | Path, width: int = 1280, browser: str | None = None) -> dict:
     """Render one built page in headless Chromium at `width` px, offline, and measure it.
 
-    Returns a dict with ``column`` (width of the text column, px), ``math_errors`` (formulas
+    Returns a dict with ``column`` (width of the text column, px), ``words`` (words of the
+    article's rendered text: collapsed blocks left out), ``math_errors`` (formulas
     MathJax could not typeset), ``equations`` and
     ``tables`` (those wider than the column: width and what they start with), ``nan``
     (tables with a cell showing NaN or None) and ``images`` (natural and shown width of

@@ -287,9 +287,9 @@ def _team_step(method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> 
             filt.update(Z, S)
             if method == "centralized":
                 filt.predict(U)
-                return filt.x_hat, filt.P
+                return filt.view("x_hat"), filt.view("P")
             filt.predict()
-            return filt.X_hat, filt.Sigma
+            return filt.view("X_hat"), filt.view("Sigma")
 
         return AgentStep("team", method, N, i, len(nbrs), "whole filter", run)
 

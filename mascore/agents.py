@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_matrix, check_positive, check_positive_int, check_square
+from ._validation import Frozen, as_matrix, check_positive, check_positive_int, check_square, frozen_copy
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 
@@ -29,8 +29,8 @@ __all__ = [
 ]
 
 
-@dataclass(frozen=True)
-class LTIAgent:
+@dataclass(frozen=True, eq=False)
+class LTIAgent(Frozen):
     """A discrete-time linear agent ``x[k+1] = A x[k] + B u[k]``.
 
     Parameters
@@ -77,10 +77,9 @@ class LTIAgent:
         if A.shape[0] == 0:
             raise ValueError("A must be at least 1 x 1 (an agent with no state)")
         B = as_matrix(_float_array(self.B, "B"), "B", (A.shape[0], None))
-        object.__setattr__(self, "A", A)
-        object.__setattr__(self, "B", B)
+        self._set(A=frozen_copy(A), B=frozen_copy(B))
         if self.dt is not None:
-            object.__setattr__(self, "dt", check_positive(self.dt, "dt", "seconds (the sampling time)"))
+            self._set(dt=check_positive(self.dt, "dt", "seconds (the sampling time)"))
         if (self.A_c is None) != (self.B_c is None):
             raise ValueError("give both A_c and B_c (the continuous-time agent), or neither")
         if self.A_c is not None:
@@ -96,9 +95,8 @@ class LTIAgent:
                         f"(largest difference {float(np.abs(given - sampled).max()):.3g}): the time base contradicts "
                         f"the matrices; use LTIAgent.from_continuous(A_c, B_c, dt)"
                     )
-            object.__setattr__(self, "A_c", A_c)
-            object.__setattr__(self, "B_c", B_c)
-            object.__setattr__(self, "A", _SampledMatrix.tag(A, self.dt))  # so a later contradicting dt is caught
+            self._set(A_c=frozen_copy(A_c), B_c=frozen_copy(B_c))
+            self._set(A=_SampledMatrix.tag(A, self.dt))  # so a later contradicting dt is caught
 
     @classmethod
     def from_continuous(cls, A_c: ArrayLike, B_c: ArrayLike, dt: float) -> LTIAgent:

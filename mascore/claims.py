@@ -30,7 +30,7 @@ VERDICTS = ("reproduces", "approximately", "does-not-reproduce", "holds", "fails
 _CLAIM_ID = re.compile(r"[a-z][a-z0-9_]*/\S+")
 
 _RECORD_KEYS = ("id", "where", "statement", "paper_value", "value", "tolerance", "verdict", "note")
-_OPTIONAL_KEYS = ("unit", "labels", "rule", "band_reason", "study")
+_OPTIONAL_KEYS = ("unit", "labels", "rule", "band_reason", "study", "why")
 
 
 @dataclass(frozen=True)
@@ -70,6 +70,9 @@ class Claim:
         Required when the band of "approximately" is wider than 3t: why.
     study : str
         The study (book chapter) that computed the claim; set by the writer.
+    why : str
+        For a claim that does not fully reproduce: one sentence, in a reader's words, of why
+        (the reproduction report shows it; the `note` gives the evidence).
     holds : bool, optional
         The decided condition of a qualitative claim (use :meth:`qualitative`).
 
@@ -93,13 +96,14 @@ class Claim:
     rule: str = ""
     band_reason: str = ""
     study: str = ""
+    why: str = ""
     holds: bool | None = None
     verdict: str = field(default="", init=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.id, str) or not _CLAIM_ID.fullmatch(self.id):
             raise ValueError(f"claim id must look like 'PAPER/short-name' with PAPER a ledger's key; got {self.id!r}")
-        for name in ("where", "statement", "note", "unit", "rule", "band_reason", "study"):
+        for name in ("where", "statement", "note", "unit", "rule", "band_reason", "study", "why"):
             if not isinstance(getattr(self, name), str):
                 raise TypeError(f"{self.id}: {name} must be a string; got {type(getattr(self, name)).__name__}")
         if self.tolerance is not None and not isinstance(self.tolerance, dict):
@@ -131,7 +135,7 @@ class Claim:
     @classmethod
     def qualitative(
         cls, id: str, where: str, statement: str, value: Any, holds: bool | np.bool_, note: str = "",
-        *, rule: str = "", unit: str = "",
+        *, rule: str = "", unit: str = "", why: str = "",
     ) -> Claim:
         """A claim without a published number, decided by a measured condition.
 
@@ -153,6 +157,8 @@ class Claim:
             The condition in words or symbols (``"max_ratio <= 1"``).
         unit : str
             Unit of `value`.
+        why : str
+            When it fails: one sentence of why, for the reproduction report.
 
         Returns
         -------
@@ -166,7 +172,7 @@ class Claim:
         ...                   rule="spread < 1e-6").verdict
         'holds'
         """
-        return cls(id, where, statement, None, value, None, note, unit=unit, rule=rule, holds=bool(holds))
+        return cls(id, where, statement, None, value, None, note, unit=unit, rule=rule, why=why, holds=bool(holds))
 
     @property
     def deviation(self) -> float | None:

@@ -74,6 +74,7 @@ from numpy.typing import ArrayLike
 from ._masked_gain import masked_gain, observed_indices
 from ._systems import design_args, full_state_only
 from ._validation import (
+    Frozen,
     as_matrix,
     check_covariance,
     check_laplacian,
@@ -82,6 +83,7 @@ from ._validation import (
     check_square,
     finite_result,
     frozen_copy,
+    state_view,
     symmetric_part,
 )
 from ._validation import float_array as _float_array
@@ -126,8 +128,8 @@ __all__ = [
 # ----------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class TeamFilterModel:
+@dataclass(frozen=True, eq=False)
+class TeamFilterModel(Frozen):
     """What every agent knows (Assumption 1): ``A``, ``BK``, ``Q``, ``R``, checked once when built.
 
     Build it with :func:`team_filter_model` (which also finds the Kronecker factor) or
@@ -203,20 +205,14 @@ class TeamFilterModel:
         kron = check_positive_int(self.kron, "kron")
         if m % kron:
             raise ValueError(f"kron must divide the agent state size m = {m}; got kron={kron}")
-        full = {"A": _read_only(A), "BK": _read_only(BK), "Q": _read_only(Q), "R": _read_only(R)}
+        full = {"A": frozen_copy(A), "BK": frozen_copy(BK), "Q": frozen_copy(Q), "R": frozen_copy(R)}
         for name, M in full.items():
             red = _kron_factor(M, kron)
             if red is None:
                 raise ValueError(f"{name} is not of the form {name}_r ⊗ I_{kron} (kron={kron}); "
                                  "build the model with team_filter_model, which finds the factor")
-            object.__setattr__(self, name, M)
-            object.__setattr__(self, f"{name}_r", red)  # a view of the read-only copy: read-only too
-        object.__setattr__(self, "n_agents", n_agents)
-        object.__setattr__(self, "kron", kron)
-
-    def __reduce__(self) -> tuple:
-        # pickle and copy rebuild through the constructor: the copy is checked and read-only too
-        return (type(self), (self.A, self.BK, self.Q, self.R, self.n_agents, self.kron))
+            self._set(**{name: M, f"{name}_r": red})  # a view of the read-only copy: read-only too
+        self._set(n_agents=n_agents, kron=kron)
 
     @property
     def m(self) -> int:
@@ -345,11 +341,6 @@ def closed_loop_matrices(A: ArrayLike, BK: ArrayLike, laplacian: ArrayLike) -> t
     L = check_laplacian(_float_array(laplacian, "laplacian"), "laplacian")
     if L.shape[0] == 0 or A.shape[0] == 0:
         raise ValueError(f"laplacian and A must be at least 1 x 1; got {L.shape} and {A.shape}")
-    return _closed_loop_matrices(A, BK, L)
-
-
-def _closed_loop_matrices(A: np.ndarray, BK: np.ndarray, L: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`closed_loop_matrices` without checks."""
     N, m = L.shape[0], A.shape[0]
     F1 = np.kron(np.eye(N), A) - np.kron(L, BK)
     Lp = np.zeros((m * N, m * N * N))
@@ -1050,22 +1041,48 @@ class TeamFilter:
 
     @property
     def X_hat(self) -> np.ndarray:
-        """Every agent's team estimate, ``(runs, N, N, m)`` (a read-only view, replaced by the next step)."""
-        return _view(self._X)
+        """Every agent's team estimate, ``(runs, N, N, m)`` (a copy; :meth:`view` gives the filter's own array)."""
+        return self._X.copy()
 
     @property
     def Sigma(self) -> np.ndarray:
         """The reduced covariance: ``(batch, N M_r, N M_r)`` (``"eb"``) or ``(batch, N, M_r, M_r)`` (``"mb"``).
 
-        A read-only view of the filter's own array, which the next step may overwrite in
-        place: copy it to keep it.
+        A copy, unchanged by later steps; :meth:`view` gives the filter's own array without copying.
         """
-        return _view(self._Sig)
+        return self._Sig.copy()
 
     @property
     def KH(self) -> np.ndarray:
-        """Reduced ``G_i H_i`` of the last update, ``(batch, N, M_r, M_r)`` (zero before the first update)."""
-        return _view(self._KH)
+        """Reduced ``G_i H_i`` of the last update, ``(batch, N, M_r, M_r)`` (zero before the first update; a copy)."""
+        return self._KH.copy()
+
+    def view(self, name: str) -> np.ndarray:
+        """The filter's own state array `name`, read-only and not copied (the fast read in a loop).
+
+        Parameters
+        ----------
+        name : {"X_hat", "Sigma", "KH"}
+            The state, as the property of that name.
+
+        Returns
+        -------
+        ndarray
+            A read-only view: the next step may overwrite it in place (copy it to keep it).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
+        >>> filt.view("Sigma").flags.writeable, np.array_equal(filt.view("Sigma"), filt.Sigma)
+        (False, True)
+        """
+        return state_view(self, name, {"X_hat": "_X", "Sigma": "_Sig", "KH": "_KH"})
 
     def agent_covariances(self) -> np.ndarray:
         """Each agent's own reduced covariance ``Σ̄_i``, ``(batch, N, M_r, M_r)`` (a new array).
@@ -1523,13 +1540,40 @@ class CentralizedTeamFilter:
 
     @property
     def x_hat(self) -> np.ndarray:
-        """Team estimates ``(runs, N, m)`` (a read-only view, replaced by the next step)."""
-        return _view(self._x)
+        """Team estimates ``(runs, N, m)`` (a copy; :meth:`view` gives the filter's own array)."""
+        return self._x.copy()
 
     @property
     def P(self) -> np.ndarray:
-        """Reduced covariance ``(batch, M_r, M_r)`` (a read-only view, replaced by the next step)."""
-        return _view(self._P)
+        """Reduced covariance ``(batch, M_r, M_r)`` (a copy; :meth:`view` gives the filter's own array)."""
+        return self._P.copy()
+
+    def view(self, name: str) -> np.ndarray:
+        """The filter's own state array `name`, read-only and not copied (the fast read in a loop).
+
+        Parameters
+        ----------
+        name : {"x_hat", "P"}
+            The state, as the property of that name.
+
+        Returns
+        -------
+        ndarray
+            A read-only view, replaced or overwritten by the next step (copy it to keep it).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = dkf.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> central.view("P").shape, central.view("P").flags.writeable
+        ((1, 6, 6), False)
+        """
+        return state_view(self, name, {"x_hat": "_x", "P": "_P"})
 
     def predict(self, U: ArrayLike) -> None:
         """Prediction with the applied inputs.
@@ -1833,7 +1877,7 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
         graph_test = _graph_observability(A, BK, L, S, tol)
         if graph_test is not None:
             return graph_test
-    F1, _ = _closed_loop_matrices(A, BK, L)
+    F1, _ = closed_loop_matrices(A, BK, L)
     out = []
     for row in S:
         H = np.kron(np.eye(row.size)[row], np.eye(m))
@@ -2183,18 +2227,6 @@ def _kron_factor(M: np.ndarray, k: int) -> np.ndarray | None:
     return None
 
 
-def _read_only(arr: np.ndarray) -> np.ndarray:
-    """A read-only copy of `arr`, handed out as a view (so its write flag cannot be set back)."""
-    return frozen_copy(arr)[...]
-
-
-def _view(arr: np.ndarray) -> np.ndarray:
-    """A read-only view of a filter's state array."""
-    v = arr.view()
-    v.flags.writeable = False
-    return v
-
-
 def _finite_state(what: str, *arrays: np.ndarray, diagonal_only: bool = False) -> None:
     """:func:`mascore._validation.finite_result` on a step's results (estimates first, covariance second).
 
@@ -2422,11 +2454,3 @@ def _observable(F: np.ndarray, H: np.ndarray, tol: float) -> bool:
         blk = blk @ F
     s = np.linalg.svd(np.vstack(blocks), compute_uv=False)
     return int(np.sum(s > tol * s[0])) == n
-
-
-def _orth_rows(M: np.ndarray, tol: float) -> np.ndarray:
-    _, s, Vt = np.linalg.svd(M, full_matrices=False)
-    if s.size == 0:
-        return Vt[:0]
-    rank = int(np.sum(s > tol * max(1.0, s[0])))
-    return Vt[:rank]

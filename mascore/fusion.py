@@ -74,6 +74,7 @@ from numpy.typing import ArrayLike
 
 from . import kalman
 from ._validation import (
+    Frozen,
     as_matrix,
     check_adjacency,
     check_covariance,
@@ -161,7 +162,7 @@ def _metropolis(links: np.ndarray) -> np.ndarray:
 # the model
 
 
-class SensorNetworkModel:
+class SensorNetworkModel(Frozen):
     """A common target sensed by N agents on an undirected graph, checked once, when it is built.
 
     ``x[k+1] = F x[k] + w[k]``, ``w ~ N(0, Q)``; agent i measures
@@ -283,32 +284,16 @@ class SensorNetworkModel:
                 info[i] = symmetric_part(Hi.T @ Ri_inv @ Hi)
         finite_result("model's information matrices", info, Rinv, advice="R is too close to singular")
         links = A > 0
-        put = object.__setattr__
-        put(self, "F", frozen_copy(F))
-        put(self, "Q", frozen_copy(Q))
-        put(self, "H", tuple(frozen_copy(h) for h in Hs))
-        put(self, "R", tuple(frozen_copy(r) for r in Rs))
-        put(self, "adjacency", frozen_copy(A))
-        put(self, "H_stacked", frozen_copy(H_st))
-        put(self, "R_stacked", frozen_copy(R_st))
-        put(self, "information_matrices", frozen_copy(info))
-        put(self, "weights", frozen_copy(_metropolis(links)))
-        put(self, "_kf", kalman.LinearGaussianModel(F, Q, H_st, R_st))
-        put(self, "_owner", frozen_copy(owner))
-        put(self, "_Rinv", frozen_copy(Rinv))
-        put(self, "_neighbourhood", frozen_copy(links + np.eye(N)))  # N_i together with i
-        put(self, "_sqrt_Q", frozen_copy(_psd_sqrt(Q)))
-        put(self, "_sqrt_R", frozen_copy(_psd_sqrt(R_st)))
-        put(self, "_slices", tuple(slices))
+        self._set(F=frozen_copy(F), Q=frozen_copy(Q), H=tuple(frozen_copy(h) for h in Hs),
+                  R=tuple(frozen_copy(r) for r in Rs), adjacency=frozen_copy(A), H_stacked=frozen_copy(H_st),
+                  R_stacked=frozen_copy(R_st), information_matrices=frozen_copy(info),
+                  weights=frozen_copy(_metropolis(links)), _kf=kalman.LinearGaussianModel(F, Q, H_st, R_st),
+                  _owner=frozen_copy(owner), _Rinv=frozen_copy(Rinv),
+                  _neighbourhood=frozen_copy(links + np.eye(N)),  # N_i together with i
+                  _sqrt_Q=frozen_copy(_psd_sqrt(Q)), _sqrt_R=frozen_copy(_psd_sqrt(R_st)), _slices=tuple(slices))
 
-    def __setattr__(self, name: str, value: object) -> None:
-        raise AttributeError(f"a SensorNetworkModel is frozen (cannot set {name!r}); build a new model")
-
-    def __delattr__(self, name: str) -> None:
-        raise AttributeError(f"a SensorNetworkModel is frozen (cannot delete {name!r})")
-
-    def __reduce__(self) -> tuple:
-        return (type(self), (self.F, self.Q, self.H, self.R, self.adjacency))
+    def _args(self) -> tuple:
+        return (self.F, self.Q, self.H, self.R, self.adjacency)
 
     def __repr__(self) -> str:
         return (f"SensorNetworkModel(N = {self.n_agents} agents, n = {self.n_states} states, "
@@ -528,7 +513,7 @@ class SensorNetworkModel:
 # the filters
 
 
-class _NetworkFilter:
+class _NetworkFilter(Frozen):
     """Shared predict / update / run of the filters (each defines ``_correct``)."""
 
     __slots__ = ("model",)
@@ -538,10 +523,7 @@ class _NetworkFilter:
     def __init__(self, model: SensorNetworkModel) -> None:
         if not isinstance(model, SensorNetworkModel):
             raise TypeError(f"model must be a SensorNetworkModel; got {type(model).__name__}")
-        object.__setattr__(self, "model", model)
-
-    def __setattr__(self, name: str, value: object) -> None:
-        raise AttributeError(f"a {type(self).__name__} is frozen (cannot set {name!r}); build a new filter")
+        self._set(model=model)
 
     def __reduce__(self) -> tuple:
         return (type(self), (self.model, *self._args()))
@@ -900,7 +882,7 @@ class MeasurementForwardingFilter(_NetworkFilter):
 
     def __init__(self, model: SensorNetworkModel) -> None:
         super().__init__(model)
-        object.__setattr__(self, "_S", frozen_copy(_mix(model._neighbourhood, model.information_matrices, 2)))
+        self._set(_S=frozen_copy(_mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
         i = _mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
@@ -955,8 +937,7 @@ class DiffusionKalmanFilter(_NetworkFilter):
             C = model.weights
         else:
             C = _check_stochastic(weights, "weights", model)
-        object.__setattr__(self, "weights", frozen_copy(C))
-        object.__setattr__(self, "_S", frozen_copy(_mix(model._neighbourhood, model.information_matrices, 2)))
+        self._set(weights=frozen_copy(C), _S=frozen_copy(_mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
         i = _mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
@@ -1053,10 +1034,8 @@ class ConsensusOnInformationFilter(_NetworkFilter):
             if w < 1:
                 raise ValueError(f"novelty_weight must be >= 1 (1: CI, N: HCMCI); got {novelty_weight!r}")
         WL = np.linalg.matrix_power(model.weights, L)
-        object.__setattr__(self, "n_consensus", L)
-        object.__setattr__(self, "novelty_weight", w)
-        object.__setattr__(self, "_WL", frozen_copy(WL))
-        object.__setattr__(self, "_SL", frozen_copy(w * _mix(WL, model.information_matrices, 2)))
+        self._set(n_consensus=L, novelty_weight=w, _WL=frozen_copy(WL))
+        self._set(_SL=frozen_copy(w * _mix(WL, model.information_matrices, 2)))
 
     def _messages(self, q, pair):
         pairs = "the prior and the novelty pairs" if self.novelty_weight != 1.0 else "information pair (Omega, q)"
@@ -1151,10 +1130,8 @@ class InformationConsensusFilter(_NetworkFilter):
                                  f"d_max = {d_max}; got {rate!r}")
         Lap = np.diag(links.sum(axis=1).astype(float)) - links
         WK = np.linalg.matrix_power(np.eye(model.n_agents) - eps * Lap, K)
-        object.__setattr__(self, "n_iterations", K)
-        object.__setattr__(self, "rate", eps)
-        object.__setattr__(self, "_WK", frozen_copy(WK))
-        object.__setattr__(self, "_SK", frozen_copy(_mix(WK, model.information_matrices, 2)))
+        self._set(n_iterations=K, rate=eps, _WK=frozen_copy(WK))
+        self._set(_SK=frozen_copy(_mix(WK, model.information_matrices, 2)))
 
     def _messages(self, q, pair):
         return (Message("information pair (V, v), per consensus iteration", self.n_iterations * pair),)
@@ -1246,10 +1223,8 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         if measurements not in ("neighbourhood", "own"):
             raise ValueError(f"measurements must be 'neighbourhood' or 'own'; got {measurements!r}")
         M = model._neighbourhood if measurements == "neighbourhood" else np.eye(model.n_agents)
-        object.__setattr__(self, "criterion", criterion)
-        object.__setattr__(self, "measurements", measurements)
-        object.__setattr__(self, "_S", frozen_copy(_mix(M, model.information_matrices, 2)))
-        object.__setattr__(self, "_hood", tuple(np.flatnonzero(row) for row in model._neighbourhood))
+        self._set(criterion=criterion, measurements=measurements, _S=frozen_copy(_mix(M, model.information_matrices, 2)),
+                  _hood=tuple(frozen_copy(np.flatnonzero(row), int) for row in model._neighbourhood))
 
     def _correct(self, x, P, z):
         M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)

@@ -48,7 +48,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import check_covariance, check_positive_int, finite_result, frozen_copy, symmetric_part
+from ._validation import Frozen, check_covariance, check_positive_int, finite_result, frozen_copy, symmetric_part
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .agents import is_system, system_matrices
@@ -65,7 +65,7 @@ _F64 = np.dtype(float)
 # ----------------------------------------------------------------------------
 
 
-class LinearGaussianModel:
+class LinearGaussianModel(Frozen):
     """A linear Gaussian state-space model, checked once, when it is built.
 
     ``x[k+1] = F x[k] + B u[k] + w[k]``, ``w[k] ~ N(0, Q)``;
@@ -134,19 +134,11 @@ class LinearGaussianModel:
             B = B_sys if B is None else B
         F, Q, B = _checked_dynamics(F, Q, B)
         H, R = _checked_measurement(H, R, F.shape[-1], f"F of shape {F.shape}")
-        for name, value in (("F", F), ("Q", Q), ("H", H), ("R", R)):
-            object.__setattr__(self, name, frozen_copy(value))
-        object.__setattr__(self, "B", None if B is None else frozen_copy(B))
-        object.__setattr__(self, "_eye", frozen_copy(np.eye(F.shape[-1])))  # I of the Joseph form
+        self._set(F=frozen_copy(F), Q=frozen_copy(Q), H=frozen_copy(H), R=frozen_copy(R),
+                  B=None if B is None else frozen_copy(B), _eye=frozen_copy(np.eye(F.shape[-1])))  # I of Joseph
 
-    def __setattr__(self, name: str, value: object) -> None:
-        raise AttributeError(f"a LinearGaussianModel is frozen (cannot set {name!r}); build a new model")
-
-    def __delattr__(self, name: str) -> None:
-        raise AttributeError(f"a LinearGaussianModel is frozen (cannot delete {name!r})")
-
-    def __reduce__(self) -> tuple:
-        return (type(self), (self.F, self.Q, self.H, self.R, self.B))
+    def _args(self) -> tuple:
+        return (self.F, self.Q, self.H, self.R, self.B)
 
     def __repr__(self) -> str:
         input_ = "" if self.B is None else f", p = {self.B.shape[-1]} inputs"

@@ -42,12 +42,14 @@ __all__ = [
     "Claim",
     "ClaimsView",
     "claims_table",
+    "deviation_sentence",
     "format_number",
     "format_value",
     "ledger_summary",
     "load_claims",
     "output_hashes",
     "show_claims",
+    "verdict_words",
     "verify_outputs",
     "write_claims",
 ]
@@ -304,16 +306,74 @@ class ClaimsView:
     __str__ = _repr_markdown_
 
 
-def _verdict_text(record: dict) -> str:
-    verdict = f"**{record['verdict']}**"
+def verdict_words(verdict: str) -> str:
+    """A verdict as the book prints it: ``"does-not-reproduce"`` reads ``"does not reproduce"``.
+
+    Parameters
+    ----------
+    verdict : str
+        One of :data:`VERDICTS`.
+
+    Returns
+    -------
+    str
+        The verdict in plain words.
+
+    Examples
+    --------
+    >>> from mascore.ledger import verdict_words
+    >>> verdict_words("does-not-reproduce"), verdict_words("holds")
+    ('does not reproduce', 'holds')
+    """
+    if verdict not in VERDICTS:
+        raise ValueError(f"verdict must be one of {VERDICTS}; got {verdict!r}")
+    return verdict.replace("-", " ")
+
+
+def deviation_sentence(record: dict) -> str:
+    """How far a quantitative claim is off, against its tolerance, in one sentence ("" for a qualitative claim).
+
+    The sentence agrees with the verdict (a non-breaking space before ``%``):
+    ``"0.74 % off; tolerance 5 %"`` when it reproduces,
+    ``"9.9 % off; tolerance 5 %, approximately within 15 %"`` when approximately reproduced,
+    ``"40 % off; more than the 15 % of 'approximately'"`` when it does not reproduce.
+
+    Parameters
+    ----------
+    record : dict
+        A claim record (:meth:`Claim.to_dict`) with ``paper_value``, ``value``, ``tolerance``, ``verdict``.
+
+    Returns
+    -------
+    str
+        The sentence.
+
+    Examples
+    --------
+    >>> from mascore.ledger import Claim, deviation_sentence
+    >>> record = Claim("ren2005/x", "Fig. 1", "A number.", 1.0, 1.099, {"rel": 0.05}).to_dict()
+    >>> print(deviation_sentence(record).replace("\\xa0", " "))
+    9.9 % off; tolerance 5 %, approximately within 15 %
+    """
     tol = record.get("tolerance")
     if not tol:
-        return verdict
+        return ""
     kind = "rel" if "rel" in tol else "abs"
-    fmt = (lambda v: format_number(100 * v, 3) + " %") if kind == "rel" else format_number
-    dev = worst_deviation(record["paper_value"], record["value"], kind)
-    return (f"{verdict}<br>off by {fmt(dev)}; reproduces within {fmt(tol[kind])}, "
-            f"approximately within {fmt(tol[f'approx_{kind}'])}")
+    unit = f"\u00a0{record['unit']}" if record.get("unit") else ""
+    fmt = (lambda v: format_number(100 * v, 3) + "\u00a0%") if kind == "rel" else (lambda v: format_number(v) + unit)
+    off = f"{fmt(worst_deviation(record['paper_value'], record['value'], kind))} off"
+    band = fmt(tol[f"approx_{kind}"])
+    if record["verdict"] == "reproduces":
+        return f"{off}; tolerance {fmt(tol[kind])}"
+    if record["verdict"] == "approximately":
+        return f"{off}; tolerance {fmt(tol[kind])}, approximately within {band}"
+    return f"{off}; more than the {band} of 'approximately'"
+
+
+def _verdict_text(record: dict) -> str:
+    verdict = f"**{verdict_words(record['verdict'])}**"
+    sentence = deviation_sentence(record)
+    return f"{verdict}<br>{sentence}" if sentence else verdict
 
 
 def _notes_markdown(records: Sequence[dict]) -> list[str]:

@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike
 
 from ._systems import design_args
 from ._validation import (
+    Frozen,
     as_matrix,
     check_adjacency,
     check_covariance,
@@ -467,8 +468,8 @@ def borrelli_keviczky_structure(
     return {"P": P, "P2": P2, "K1": K1, "K2": K2, "P_network": P_network, "K_network": K_network}
 
 
-@dataclass(frozen=True)
-class DistributedGain:
+@dataclass(frozen=True, eq=False)
+class DistributedGain(Frozen):
     """A network gain ``U = -(I_N (x) K_self + Lap (x) K_coupling) X``.
 
     Parameters
@@ -494,11 +495,13 @@ class DistributedGain:
         # checked once when built (finite (m, n) blocks of one shape), kept as read-only copies
         Ks = as_matrix(_float_array(self.K_self, "K_self"), "K_self")
         Kc = as_matrix(_float_array(self.K_coupling, "K_coupling"), "K_coupling", Ks.shape)
-        object.__setattr__(self, "K_self", frozen_copy(Ks))
-        object.__setattr__(self, "K_coupling", frozen_copy(Kc))
+        self._set(K_self=frozen_copy(Ks), K_coupling=frozen_copy(Kc))
+        for name in ("lam", "Phi"):  # the arrays of the subclasses, kept frozen too
+            if isinstance(getattr(self, name, None), np.ndarray):
+                self._set(**{name: frozen_copy(getattr(self, name))})
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class TopDownLQR(DistributedGain):
     """Borrelli-Keviczky distributed LQR (eq. (17)).
 
@@ -535,7 +538,7 @@ class TopDownLQR(DistributedGain):
     spectral_abscissa: float = np.nan
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class BottomUpLQR(DistributedGain):
     """Deshpande et al. bottom-up distributed LQR (eq. (18)): ``K_coupling = Phi K``.
 

@@ -38,7 +38,7 @@ from ._conic import ConicProgram, clarabel, solve, svec, svec_size, sym_basis
 from ._optional import require
 from ._solver import SolverError
 from ._systems import design_args
-from ._validation import as_matrix, check_adjacency, check_covariance, check_laplacian, finite_result
+from ._validation import Frozen, as_matrix, check_adjacency, check_covariance, check_laplacian, finite_result, frozen_copy
 from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
@@ -1253,7 +1253,7 @@ def _check_trace_in(trace_in) -> None:
 # the observer in discrete time, on a team (the comparison's estimator)
 
 
-class DiscreteNetworkObserver:
+class DiscreteNetworkObserver(Frozen):
     """The distributed observer of Vlahakis and Halikias, discretized (forward Euler), on N agents at once.
 
     Agent i measures its own output ``z_ii = C x_i + nu_i`` and, on each link delivered at
@@ -1311,18 +1311,11 @@ class DiscreteNetworkObserver:
             raise ValueError(f"B must have n = {n} rows; got shape {B.shape}")
         if not np.isfinite(coupling):
             raise ValueError(f"coupling must be a finite number; got {coupling!r}")
-        for name, value in (("gain", gain), ("coupling", float(coupling)), ("adjacency", check_adjacency(adjacency)),
-                            ("A", A), ("B", B), ("C", C)):
-            if isinstance(value, np.ndarray):
-                value = value.copy()
-                value.setflags(write=False)
-            object.__setattr__(self, name, value)
+        self._set(gain=frozen_copy(gain), coupling=float(coupling), adjacency=frozen_copy(check_adjacency(adjacency)),
+                  A=frozen_copy(A), B=frozen_copy(B), C=frozen_copy(C))
 
-    def __setattr__(self, name: str, value: object) -> None:
-        raise AttributeError(f"a DiscreteNetworkObserver is frozen (cannot set {name!r}); build a new one")
-
-    def __reduce__(self) -> tuple:
-        return (type(self), (self.gain, self.coupling, self.adjacency, self.A, self.B, self.C))
+    def _args(self) -> tuple:
+        return (self.gain, self.coupling, self.adjacency, self.A, self.B, self.C)
 
     def update(self, x_hat: np.ndarray, z: np.ndarray, links: np.ndarray) -> np.ndarray:
         """Every agent's correction, batched over runs.

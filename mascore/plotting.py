@@ -21,28 +21,36 @@ from matplotlib.layout_engine import ConstrainedLayoutEngine, TightLayoutEngine 
 
 __all__ = [
     "COLUMN_WIDTH",
+    "PIXEL_RATIO",
     "STYLE",
     "agent_colors",
     "fit_to_column",
+    "legend_overlaps",
     "new_axes",
     "plot_band",
     "plot_graph",
     "plot_trajectories",
     "save_figure",
+    "unlabelled_lines",
     "use_style",
 ]
 
-#: Width (inches) of the book's figures at 100 dpi: a figure's image is 660 px wide at most in the
-#: text column of a 1280 px window. A wider
-#: figure would be shrunk by the browser, and its 10 pt tick labels with it (below 9 px at 13 in).
+#: Width (inches) of the book's figures at 100 dpi: a figure's image is 650 CSS px wide at most, the
+#: text column of a 1280 px window. A wider figure would be shrunk by the browser, and its 10 pt tick
+#: labels with it (below 9 px at 13 in).
 COLUMN_WIDTH = 6.5
 
+#: Device pixels per CSS pixel of the book's images: every figure is rendered at twice its size
+#: (200 dpi for a 100 dpi layout) and shown at its size, sharp on a HiDPI ("retina") screen.
+PIXEL_RATIO = 2
+
 #: rcParams of the book's figures. ``figure.hooks`` fits every pyplot figure to the column
-#: (:func:`fit_to_column`), so a figure drawn wider keeps its fonts readable.
+#: (:func:`fit_to_column`), so a figure drawn wider keeps its fonts readable. Files are saved at
+#: :data:`PIXEL_RATIO` x 100 dpi; a notebook shows its figures the same way (:func:`use_style`).
 STYLE = {
     "figure.figsize": (6.4, 4.0),
     "figure.dpi": 100,
-    "savefig.dpi": 150,
+    "savefig.dpi": 100 * PIXEL_RATIO,
     "savefig.bbox": "tight",
     "axes.grid": True,
     "grid.alpha": 0.3,
@@ -62,7 +70,9 @@ STYLE = {
 def use_style() -> None:
     """Apply the book's figure style (:data:`STYLE`) to matplotlib's global rcParams.
 
-    Call it once per notebook, before drawing.
+    Call it once per notebook, before drawing. In a notebook (IPython's inline backend) it also
+    shows figures at twice their pixels ("retina" PNG: 200 dpi, displayed at the size of 100 dpi),
+    as the files of :func:`save_figure` are saved.
 
     Examples
     --------
@@ -73,6 +83,23 @@ def use_style() -> None:
     True
     """
     mpl.rcParams.update(STYLE)
+    _inline_at_pixel_ratio()
+
+
+def _inline_at_pixel_ratio() -> None:
+    """Inline figures of a running IPython kernel as 2x PNG shown at 1x (nothing outside IPython)."""
+    import sys
+
+    if "IPython" not in sys.modules:
+        return
+    from IPython import get_ipython
+
+    shell = get_ipython()
+    if shell is None or getattr(shell, "kernel", None) is None:
+        return
+    from matplotlib_inline.backend_inline import set_matplotlib_formats
+
+    set_matplotlib_formats("retina")
 
 
 def fit_to_column(fig: plt.Figure, width: float = COLUMN_WIDTH) -> plt.Figure:
@@ -317,24 +344,42 @@ def plot_graph(
             ax.add_patch(plt.Circle(p[i], sensing_range, fill=False, ls="--", lw=0.8, color=color))
         ax.plot(*p[i], "o", color=color, ms=9, zorder=2)
     if node_labels:
-        _node_labels(ax, p, colors)
+        _node_labels(ax, p, colors, np.argwhere(A + A.T > 0))
     return _plane_axes(ax, unit)
 
 
-def _node_labels(ax: plt.Axes, p: np.ndarray, colors: list) -> None:
+def _node_labels(ax: plt.Axes, p: np.ndarray, colors: list, edges: np.ndarray) -> None:
     """Number the agents inside their markers; an agent crowded by a neighbour gets its number
-    beside the marker, on the side away from that neighbour, so that no number is covered."""
+    beside the marker, in the free direction: of eight around it, the one farthest from the other
+    agents, the edges (pairs of agent indices) and the numbers already placed, so that no number is
+    covered or runs into another."""
     ax.autoscale_view()
     span = max(np.ptp(ax.get_xlim()), np.ptp(ax.get_ylim()))
     d = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.diag(np.full(len(p), np.inf))
+    angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    compass = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    placed: list[np.ndarray] = []
     for i, color in enumerate(colors):
-        j = int(np.argmin(d[i]))
-        if len(p) > 1 and d[i, j] < 0.08 * span:
-            away = (p[i] - p[j]) / max(d[i, j], 1e-12)
+        if len(p) > 1 and d[i].min() < 0.08 * span:
+            spots = p[i] + 0.045 * span * compass
+            obstacles = [np.delete(p, i, axis=0), *placed]
+            clearance = np.min(np.linalg.norm(spots[:, None] - np.concatenate(
+                [np.reshape(o, (-1, 2)) for o in obstacles])[None], axis=-1), axis=1)
+            for a, b in edges:
+                clearance = np.minimum(clearance, _distance_to_segment(spots, p[a], p[b]))
+            away = compass[int(np.argmax(clearance))]
+            placed.append(spots[int(np.argmax(clearance))])
             ax.annotate(str(i + 1), p[i], xytext=11 * away, textcoords="offset points", ha="center", va="center",
                         fontsize=8, fontweight="bold", color=color, zorder=3)
         else:
             ax.annotate(str(i + 1), p[i], ha="center", va="center", fontsize=7, color="white", zorder=3)
+
+
+def _distance_to_segment(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance of each point of `x` (k, 2) to the segment from `a` to `b`."""
+    ab = b - a
+    t = np.clip(((x - a) @ ab) / max(float(ab @ ab), 1e-300), 0.0, 1.0)
+    return np.linalg.norm(x - (a + t[:, None] * ab), axis=1)
 
 
 def _plane_axes(ax: plt.Axes, unit: str) -> plt.Axes:
@@ -431,3 +476,156 @@ def save_figure(fig: plt.Figure, path: str | Path) -> Path:
     fig.savefig(path)
     plt.close(fig)
     return path
+
+
+def legend_overlaps(fig: plt.Figure, samples_per_px: float = 0.5, margin_px: float = 2.0) -> list[str]:
+    """Legends of `fig` that cover plotted data: one line per (legend, artist) pair that overlaps.
+
+    Every legend (of an Axes or of the figure) is checked against the data of every Axes it
+    lies over, in display pixels after the figure is drawn: the vertices of each visible line
+    and the segments between them (sampled every ``1 / samples_per_px`` px, so a line crossing
+    the legend between two vertices counts), the outlines of its patches (circles, ellipses,
+    polygons) and the points of each scatter. Grid lines and a legend's own handles do not
+    count. A legend placed outside the axes covers nothing.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure, as it will be saved.
+    samples_per_px : float
+        Sampling density of line segments (points per display pixel).
+    margin_px : float
+        Data closer than this to the legend's box counts as covered (display pixels at the
+        figure's dpi): a legend touching a curve reads as lying on it.
+
+    Returns
+    -------
+    list of str
+        ``"panel 2 ('title'): legend covers line 'agent 3'"`` for each overlap; empty when no
+        legend covers data.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.plotting import legend_overlaps
+    >>> fig, ax = plt.subplots()
+    >>> _ = ax.plot([0, 1], [0, 1], label="rising")
+    >>> _ = ax.legend(loc="center")
+    >>> legend_overlaps(fig)
+    ["panel 1: legend covers line 'rising'"]
+    >>> _ = ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1))
+    >>> legend_overlaps(fig)
+    []
+    >>> plt.close(fig)
+    """
+    if not isinstance(fig, mpl.figure.Figure):
+        raise TypeError(f"fig must be a matplotlib Figure; got {type(fig).__name__}")
+    fig.canvas.draw()
+    axes = [ax for ax in fig.axes if ax.get_visible()]
+    legends = [(ax.get_legend(), [ax]) for ax in axes if ax.get_legend() is not None]
+    legends += [(leg, axes) for leg in fig.legends]
+    out = []
+    for legend, covered in legends:
+        if not legend.get_visible():
+            continue
+        box = legend.get_window_extent().padded(margin_px)
+        for ax in covered:
+            name = f"panel {fig.axes.index(ax) + 1}" + (f" ({ax.get_title()!r})" if ax.get_title() else "")
+            for artist, kind, points in _data_points(ax, samples_per_px):
+                inside = ((points[:, 0] > box.x0) & (points[:, 0] < box.x1)
+                          & (points[:, 1] > box.y0) & (points[:, 1] < box.y1))
+                clip = ax.get_window_extent()  # data outside the panel is not drawn
+                inside &= ((points[:, 0] >= clip.x0) & (points[:, 0] <= clip.x1)
+                           & (points[:, 1] >= clip.y0) & (points[:, 1] <= clip.y1))
+                if inside.any():
+                    label = artist.get_label()
+                    out.append(f"{name}: legend covers {kind}" + (f" {label!r}" if not label.startswith("_") else ""))
+    return out
+
+
+def _style(line) -> tuple[str, str]:
+    """Colour and line style of a line, the way a legend entry shows it."""
+    return mpl.colors.to_hex(line.get_color()), str(line.get_linestyle())
+
+
+def _data_points(ax: plt.Axes, samples_per_px: float):
+    """(artist, kind, display points) of the visible lines and patch outlines (sampled along their
+    segments) and scatters."""
+    for line in ax.get_lines():
+        if not line.get_visible():
+            continue
+        xy = line.get_transform().transform(np.asarray(line.get_xydata(), dtype=float))
+        if line.get_linestyle() not in ("None", "none", "", " "):
+            xy = _along(xy, samples_per_px)
+        if len(xy):
+            yield line, "line", xy[np.all(np.isfinite(xy), axis=1)]
+    for patch in ax.patches:
+        if patch.get_visible():
+            path = patch.get_path().interpolated(8)
+            xy = _along(patch.get_transform().transform(path.vertices), samples_per_px)
+            if len(xy):
+                yield patch, "outline", xy
+    for coll in ax.collections:
+        if coll.get_visible() and isinstance(coll, mpl.collections.PathCollection) and len(coll.get_offsets()):
+            xy = coll.get_offset_transform().transform(np.asarray(coll.get_offsets(), dtype=float))
+            yield coll, "markers", xy[np.all(np.isfinite(xy), axis=1)]
+
+
+def _along(xy: np.ndarray, samples_per_px: float) -> np.ndarray:
+    """Points along the polyline `xy` (k, 2), about `samples_per_px` per pixel (non-finite vertices dropped)."""
+    xy = xy[np.all(np.isfinite(xy), axis=1)]
+    if len(xy) < 2:
+        return xy
+    steps = np.maximum(np.ceil(np.linalg.norm(np.diff(xy, axis=0), axis=1) * samples_per_px), 1).astype(int)
+    return np.concatenate([np.linspace(a, b, n, endpoint=False) for a, b, n in zip(xy[:-1], xy[1:], steps)]
+                          + [xy[-1:]])
+
+
+def unlabelled_lines(fig: plt.Figure, limit: int = 5) -> list[str]:
+    """Panels of `fig` with more than `limit` data lines a reader cannot tell apart by a legend entry.
+
+    A line counts as labelled when its label is the text of an entry of a legend of the figure (its
+    panel's or a figure legend), or when it has the colour and line style of an entry's handle (a
+    legend of the agents' colours drawn once for all panels); reference lines drawn across the whole panel (``axhline``,
+    ``axvline``, any line of two points) do not count.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure.
+    limit : int
+        Most unlabelled lines a panel may show.
+
+    Returns
+    -------
+    list of str
+        ``"panel 2 ('title'): 8 unlabelled lines"`` for each panel over the limit.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from mascore.plotting import unlabelled_lines
+    >>> fig, ax = plt.subplots()
+    >>> _ = ax.plot([[0, 1, 2, 3, 4, 5]] * 3)  # six lines of three points
+    >>> unlabelled_lines(fig)
+    ['panel 1: 6 unlabelled lines']
+    >>> for i, line in enumerate(ax.get_lines()):
+    ...     line.set_label(f"agent {i}")
+    >>> _ = ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    >>> unlabelled_lines(fig)
+    []
+    >>> plt.close(fig)
+    """
+    if not isinstance(fig, mpl.figure.Figure):
+        raise TypeError(f"fig must be a matplotlib Figure; got {type(fig).__name__}")
+    legends = [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None] + list(fig.legends)
+    entries = {t.get_text() for leg in legends for t in leg.get_texts()}
+    styles = {_style(h) for leg in legends for h in leg.legend_handles if isinstance(h, mpl.lines.Line2D)}
+    out = []
+    for n, ax in enumerate(fig.axes, 1):
+        lines = [ln for ln in ax.get_lines() if ln.get_visible() and len(ln.get_xydata()) > 2
+                 and ln.get_label() not in entries and _style(ln) not in styles]
+        if len(lines) > limit:
+            out.append(f"panel {n}" + (f" ({ax.get_title()!r})" if ax.get_title() else "")
+                       + f": {len(lines)} unlabelled lines")
+    return out

@@ -737,6 +737,10 @@ def paper_registry(key: str) -> PaperRegistry:
 def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | Path) -> list[Claim]:
     """Write a study's figures (PNG) and tables (CSV) into `out_dir`; return its claims.
 
+    Beside each figure, ``NAME.layout.json`` lists the legends that cover its data
+    (:func:`mascore.plotting.legend_overlaps`) and the panels with more than five unlabelled
+    lines (:func:`mascore.plotting.unlabelled_lines`); both empty when none.
+
     Each claim is tagged with the study's name (``Claim.study``), so the report can
     link it to its chapter.
 
@@ -775,11 +779,17 @@ def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | 
         raise TypeError(f"out_dir must be a path (str or pathlib.Path); got {type(out_dir).__name__}")
     plt = require("matplotlib.pyplot", "drawing a registered figure")
 
-    from .plotting import save_figure
+    import json
+
+    from .plotting import legend_overlaps, save_figure, unlabelled_lines
 
     out_dir = Path(out_dir)
     for spec in study.figures:
-        save_figure(study.draw(spec.name, result), out_dir / "figures" / f"{spec.name}.png")
+        fig = study.draw(spec.name, result)
+        layout = {"legend_overlaps": legend_overlaps(fig),  # read by the book's tests: no legend over data,
+                  "unlabelled_lines": unlabelled_lines(fig)}  # no panel with more than five unlabelled lines
+        save_figure(fig, out_dir / "figures" / f"{spec.name}.png")
+        (out_dir / "figures" / f"{spec.name}.layout.json").write_text(json.dumps(layout, indent=1) + "\n")
         plt.close("all")
     for spec in study.tables:
         (out_dir / "tables").mkdir(parents=True, exist_ok=True)

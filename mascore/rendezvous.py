@@ -25,6 +25,7 @@ from . import distributed_kf as dkf
 from ._progress import progress_bar
 from ._systems import full_state_only
 from ._validation import (
+    Frozen,
     as_matrix,
     check_covariance,
     check_fits_in_memory,
@@ -247,8 +248,8 @@ def team_spread(values: ArrayLike) -> np.ndarray:
     return np.sqrt(np.mean(np.sum(dev**2, axis=-1), axis=-1))
 
 
-@dataclass(frozen=True)
-class RendezvousModel:
+@dataclass(frozen=True, eq=False)
+class RendezvousModel(Frozen):
     """The rendezvous loop's model: identical agents, consensus gain and noise (Song et al. eqs. (1)-(4)).
 
     Checked once when built, then passed to :func:`simulate_rendezvous` and
@@ -322,9 +323,8 @@ class RendezvousModel:
             raise ValueError(f"dt must be a positive sampling time in seconds; got {dt!r}")
         _check_time_base(A, B, float(dt))
         check_sampling_time(self.A, float(dt))  # an A from LTIAgent.from_continuous knows its dt
-        for name, value in (("A", A), ("B", B), ("K", K), ("Q", Q), ("R", R)):
-            object.__setattr__(self, name, frozen_copy(value))
-        object.__setattr__(self, "dt", float(dt))
+        self._set(A=frozen_copy(A), B=frozen_copy(B), K=frozen_copy(K), Q=frozen_copy(Q), R=frozen_copy(R),
+                  dt=float(dt))
 
     @classmethod
     def from_agent(
@@ -377,10 +377,6 @@ class RendezvousModel:
             raise ValueError(f"dt = {dt!r} s contradicts the agent's sampling time agent.dt = {agent.dt!r} s that its "
                              "A and B were discretized with: leave dt out, or rebuild the agent with this dt")
         return cls(agent.A, agent.B, K, Q, R, agent.dt if agent.dt is not None else dt)
-
-    def __reduce__(self) -> tuple:
-        # pickle and copy rebuild through the constructor: the copy is checked and read-only too
-        return (type(self), (self.A, self.B, self.K, self.Q, self.R, self.dt))
 
     @property
     def m(self) -> int:
@@ -688,7 +684,7 @@ def simulate_rendezvous(
                                          x_hat0[None], P0, mode="eb")       # every agent's x̂_i(0)
         Z, S = sensing.measure(meas_rng, x, adjacency, R)                    # step 0 (law (5) uses it)
         for k in range(n_steps):
-            U = consensus_control(team.X_hat, L, K)     # eq. (21): u_i from agent i's own estimates
+            U = consensus_control(team.view("X_hat"), L, K)  # eq. (21): u_i from agent i's own estimates
             x = propagate_team(proc_rng, x, U, A, B, Q) # eq. (1)
             team.predict()                              # eqs. (29), (30), (32), (34)
             Z, S = sensing.measure(meas_rng, x, adjacency, R)   # eq. (2): z_{i,x_j} = x_j + nu_ij
@@ -764,7 +760,7 @@ def simulate_rendezvous(
         # one covariance for a shared topology (fixed or switching), else one per run's fixed graph
         team = dkf.TeamFilter(filter_model, topology(0)[2], xh0, P0, mode="eb" if mode == "estimation" else "mb",
                               exact_control_noise=exact_control_noise and mode == "measurement-filter")
-        nb = team.Sigma.shape[0]
+        nb = team.view("Sigma").shape[0]
         n = filter_model.kron
         pos = _position_index(filter_model)
         out["pos_error"] = np.empty((n_steps + 1, n_runs, N))
@@ -784,21 +780,21 @@ def simulate_rendezvous(
 
         def record(k: int) -> None:
             Sig_i = team.agent_covariances()
-            e = x[:, None] - team.X_hat
+            e = x[:, None] - team.view("X_hat")
             err = e[..., pos_slice]
             out["pos_error"][k] = np.sqrt(np.sum(err**2, axis=(-1, -2)))
             diag = np.diagonal(Sig_i, axis1=-2, axis2=-1)[..., pos]
             out["pos_std"][k] = np.sqrt(n * diag.sum(axis=-1))
             out["nees"][k] = team.nees(x)
             if return_estimates:
-                out["estimates"][k] = team.X_hat
+                out["estimates"][k] = team.view("X_hat")
             if nb == 1:
                 out["sigma_i"][k] = Sig_i[0]
-                out["gains"][k] = team.KH[0]
+                out["gains"][k] = team.view("KH")[0]
                 if mode == "estimation":
                     out["f2_cross"][k] = team.f2_cross(topology(k)[2])[0]
             if central:
-                Pc, xc = central_filter.P, central_filter.x_hat
+                Pc, xc = central_filter.view("P"), central_filter.view("x_hat")
                 out["central_pos_std"][k] = np.sqrt(n * np.diagonal(Pc, axis1=-2, axis2=-1)[..., pos].sum(-1))
                 out["central_pos_error"][k] = np.sqrt(np.sum((x - xc)[..., pos_slice] ** 2, axis=(-1, -2)))
 
@@ -812,7 +808,7 @@ def simulate_rendezvous(
         elif mode in ("measurement", "measurement-filter"):
             U = consensus_control(Z, Lap, K)
         else:
-            U = consensus_control(team.X_hat, Lap, K)
+            U = consensus_control(team.view("X_hat"), Lap, K)
         x_new = propagate_team(proc_rng, x, U, A, B, Q)
         if central_filter is not None:
             central_filter.predict(U)

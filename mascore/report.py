@@ -13,10 +13,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ._optional import require
-from .ledger import VERDICTS
+from .ledger import VERDICTS, deviation_sentence, verdict_words
 from .registry import paper_keys, paper_registry
 
-__all__ = ["MarkdownText", "attention_list", "errata_list", "math_text", "verdict_summary"]
+__all__ = ["MarkdownText", "attention_list", "best_methods", "errata_list", "math_text", "reading_paths", "verdict_summary",
+           "why"]
 
 #: Verdicts the report lists one by one (everything else is counted only).
 ATTENTION = ("approximately", "does-not-reproduce", "fails")
@@ -90,7 +91,7 @@ def math_text(text: str) -> str:
 
 
 def verdict_summary(records: Sequence[dict]):
-    """Claims per paper (rows, book order) and verdict (columns), with totals.
+    """Claims per paper (rows, book order, by the papers' names) and verdict (columns, in words), with totals.
 
     Parameters
     ----------
@@ -100,7 +101,8 @@ def verdict_summary(records: Sequence[dict]):
     Returns
     -------
     pandas.DataFrame
-        Counts, with a total row and column.
+        Counts, with a total row and column; rows named by the papers' citations
+        (``"Ren, Beard and Kingston 2005"``), columns by the verdicts in words (``"does not reproduce"``).
 
     Examples
     --------
@@ -108,8 +110,8 @@ def verdict_summary(records: Sequence[dict]):
     >>> ok = Claim("ren2005/a", "Sec. 2", "A number.", 2.0, 2.01, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
     >>> off = Claim("ren2005/b", "Sec. 3", "Another.", 2.0, 3.0, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
     >>> from mascore.report import verdict_summary
-    >>> int(verdict_summary([ok, off]).loc["ren2005", "reproduces"])
-    1
+    >>> verdict_summary([ok, off]).loc["Ren, Beard and Kingston 2005"].to_dict()
+    {'reproduces': 1, 'does not reproduce': 1, 'total': 2}
     """
     pd = require("pandas", "this table")
 
@@ -121,6 +123,8 @@ def verdict_summary(records: Sequence[dict]):
     table = table.loc[:, table.sum() > 0]
     table["total"] = table.sum(axis=1)
     table.loc["all papers"] = table.sum()
+    table.index = [paper_registry(p).citation if p in papers else p for p in table.index]
+    table.columns = [verdict_words(c) if c in VERDICTS else c for c in table.columns]
     return table
 
 
@@ -130,7 +134,7 @@ def ledger_label(paper: str, study: str) -> str:
 
 
 def attention_list(records: Sequence[dict]) -> MarkdownText:
-    """A table of every claim that is approximate, does not reproduce or fails, linked to its ledger.
+    """A table of every claim that is approximate, does not reproduce or fails, linked to its ledger, with why.
 
     Parameters
     ----------
@@ -153,15 +157,75 @@ def attention_list(records: Sequence[dict]) -> MarkdownText:
     (True, False)
     """
     _check_records(records, ("paper", "verdict", "where", "statement"))
-    rows = ["| verdict | where | claim |", "|---|---|---|"]
+    rows = ["| verdict | paper, where | claim | why |", "|---|---|---|---|"]
     for verdict in ATTENTION:
         for r in (r for r in records if r["verdict"] == verdict):
             reg = paper_registry(r["paper"])
             study = r.get("study") or reg.studies[0].name
-            cells = (f"**{verdict}**", f"{reg.citation}, {r['where']}",
-                     f"{math_text(r['statement'])} ({{ref}}`ledger <{ledger_label(r['paper'], study)}>`)")
+            cells = (f"**{verdict_words(verdict)}**", f"{reg.citation}, {r['where']}",
+                     f"{math_text(r['statement'])} ({{ref}}`ledger <{ledger_label(r['paper'], study)}>`)",
+                     math_text(why(r)))
             rows.append("| " + " | ".join(c.replace("|", "\\|").replace("\n", " ") for c in cells) + " |")
     return MarkdownText("\n".join(rows) if len(rows) > 2 else "Every claim reproduces or holds.")
+
+
+def _module_whys() -> dict[str, str]:
+    """Claim id -> why, from the ``WHY`` mappings of the papers' study modules."""
+    from .registry import study_modules
+
+    out: dict[str, str] = {}
+    for module in study_modules():
+        out |= {k: v for k, v in dict(getattr(module, "WHY", None) or {}).items() if isinstance(v, str)}
+    return out
+
+
+#: Words that mark a note's sentence as a reason (a fallback when a claim states no ``why``).
+_REASON = re.compile(r"\b(why|because|systematic|not numerical|rounded|does not determine|no reading|cannot|"
+                     r"dominated|indistinguishable|slip|misprint|instead)\b", re.I)
+
+
+def why(record: dict, max_words: int = 25) -> str:
+    """Why a claim does not fully reproduce, in one or two sentences for the report's table.
+
+    For a published number, how far it is off (:func:`mascore.ledger.deviation_sentence`); then the
+    claim's own ``why`` when it states one, or the sentence its paper module gives it (a module-level
+    ``WHY`` mapping, claim id -> sentence), or else the first sentence of its note that gives a
+    reason, cut at `max_words` words (the ledger holds the rest).
+
+    Parameters
+    ----------
+    record : dict
+        A claim record.
+    max_words : int
+        Longest reason taken from the note.
+
+    Returns
+    -------
+    str
+        The reason.
+
+    Examples
+    --------
+    >>> from mascore.ledger import Claim
+    >>> from mascore.report import why
+    >>> off = Claim("ren2005/b", "Sec. 3", "Another.", 2.0, 3.0, {"rel": 0.01},
+    ...             note="Ours is run 0. The gap is systematic: the paper rounds.").to_dict()
+    >>> print(why(off).replace("\\xa0", " "))
+    50 % off; more than the 3 % of 'approximately'. The gap is systematic: the paper rounds.
+    """
+    deviation = deviation_sentence(record) if record.get("paper_value") is not None else ""
+    stated = record.get("why") or _module_whys().get(record.get("id", ""))
+    if stated:
+        return ". ".join(t for t in (deviation, stated) if t)
+    paragraphs = [" ".join(p.split()) for p in (record.get("note") or "").split("\n\n") if p.strip()]
+    stated = [p.split(":", 1)[1].strip() for p in paragraphs if re.match(r"Why\b[^:]*:", p)]
+    sentences = [s for p in stated + paragraphs for s in re.split(r"(?<=[.;])\s+(?=[A-Z])", p)]
+    reason = next((s for s in sentences if _REASON.search(s)), sentences[0] if sentences else "")
+    words = reason.split()
+    if len(words) > max_words:
+        reason = " ".join(words[:max_words]).rstrip(",;:") + " \u2026"
+    reason = reason[:1].upper() + reason[1:]
+    return ". ".join(t for t in (deviation, reason) if t)
 
 
 def errata_list(papers: Sequence[str] | None = None) -> MarkdownText:
@@ -209,3 +273,110 @@ def _check_records(records: object, keys: tuple[str, ...]) -> None:
             raise ValueError(f"records[{i}] lacks the keys {missing} of a claim record")
         if r["verdict"] not in VERDICTS:
             raise ValueError(f"records[{i}]['verdict'] must be one of {VERDICTS}; got {r['verdict']!r}")
+
+
+#: The comparison's scenarios in the intro's answer: task, the reader's name, and the study that holds it.
+_SCENARIOS = (("team", "own state", "scaling"), ("target", "common target", None),
+              ("localization", "cooperative localization", None))
+
+
+def best_methods(summary, n_agents: int = 8) -> dict[str, tuple[str, float]]:
+    """Per scenario of the comparison, the method closest to the centralized filter and its RMSE ratio.
+
+    On the ring of `n_agents` without drop-outs (the comparison's headline tables), among the
+    methods other than the centralized filter (the bound, ratio 1).
+
+    Parameters
+    ----------
+    summary : pandas.DataFrame
+        :func:`mascore.compare.summarize` of the sweep.
+    n_agents : int
+        Team size of the headline tables.
+
+    Returns
+    -------
+    dict
+        Scenario name (``"own state"``, ``"common target"``, ``"cooperative localization"``) ->
+        (method, mean RMSE ratio to the centralized filter), for the scenarios in `summary`.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore.report import best_methods
+    >>> s = pd.DataFrame({"task": "target", "study": "scaling", "graph": "ring", "n_agents": 8, "dropout": 0.0,
+    ...                   "method": ["centralized", "local", "ci-L5"], "ratio_mean": [1.0, 1.9, 1.2]})
+    >>> best_methods(s)
+    {'common target': ('ci-L5', 1.2)}
+    """
+    frame = summary[(summary["n_agents"] == n_agents) & (summary["dropout"] == 0.0)
+                    & (summary["graph"] == "ring") & (summary["method"] != "centralized")]
+    out = {}
+    for task, name, study in _SCENARIOS:
+        rows = frame[(frame["task"] == task) & ((frame["study"] == study) if study else True)]
+        rows = rows[rows["ratio_mean"].notna()]
+        if len(rows):
+            best = rows.loc[rows["ratio_mean"].idxmin()]
+            out[name] = (str(best["method"]), float(best["ratio_mean"]))
+    return out
+
+
+def reading_paths(records: Sequence[dict], best: dict[str, tuple[str, float]] | None = None,
+                  apply_examples: Sequence[str] = ()) -> MarkdownText:
+    """The intro's four questions, each with its page and a one-line answer computed from the results.
+
+    Parameters
+    ----------
+    records : sequence of dict
+        The papers' claim records (:func:`mascore.ledger.load_claims`).
+    best : dict, optional
+        :func:`best_methods` of the comparison's sweep; None when the sweep has not been run.
+    apply_examples : sequence of str
+        Titles of the apply chapter's worked examples.
+
+    Returns
+    -------
+    MarkdownText
+        A Markdown list with links to the pages ({doc} roles from the book's root).
+
+    Examples
+    --------
+    >>> from mascore.ledger import Claim
+    >>> from mascore.report import reading_paths
+    >>> ok = Claim("ren2005/a", "Sec. 2", "A number.", 2.0, 2.01, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
+    >>> print(str(reading_paths([ok])).splitlines()[0].split(" ({doc}")[0])
+    - **Did it reproduce?** All 1 published claims reproduce or hold
+    """
+    _check_records(records, ("paper", "verdict"))
+    good = sum(r["verdict"] in ("reproduces", "holds") for r in records)
+    near = sum(r["verdict"] == "approximately" for r in records)
+    bad = len(records) - good - near
+    if good == len(records):
+        verdict = f"All {len(records)} published claims reproduce or hold"
+    else:
+        verdict = (f"{good} of {len(records)} published claims reproduce or hold, {near} approximately, "
+                   f"{bad} do not reproduce or fail; the report says which and why")
+    lines = [f"- **Did it reproduce?** {verdict} "
+             f"({{doc}}`the reproduction report </notebooks/reproduction_report>`)."]
+    if best:
+        closest = "; ".join(f"{name}: `{m}`, RMSE {ratio:.2f} times the centralized filter's"
+                            for name, (m, ratio) in best.items())
+        lines.append(f"- **Which method for my team?** It depends on what the team estimates. Closest to the "
+                     f"centralized filter on a ring of 8 agents, {closest} "
+                     f"({{doc}}`the comparison and its decision table </notebooks/comparing_methods>`).")
+    else:
+        lines.append("- **Which method for my team?** The comparison puts every method on the same problems "
+                     "({doc}`comparing the methods </notebooks/comparing_methods>`).")
+    examples = f": {len(apply_examples)} worked examples ({'; '.join(apply_examples)})" if apply_examples else ""
+    lines.append(f"- **How do I use it on my system?** Each method on a system of our own, in a few lines of "
+                 f"code, each ending with the theory's check{examples} "
+                 f"({{doc}}`apply it to your own system </notebooks/apply_your_system>`).")
+    papers = []
+    for key in paper_keys():
+        reg = paper_registry(key)
+        mine = [r for r in records if r["paper"] == key]
+        ok = sum(r["verdict"] in ("reproduces", "holds") for r in mine)
+        links = ", ".join(f"{{doc}}`{s.name.replace('-', ' ').capitalize()} </notebooks/{s.chapter}>`" for s in reg.studies)
+        papers.append(f"{reg.citation} ({links}: {ok} of {len(mine)} claims reproduce or hold)")
+    lines.append("- **How does paper X work?** Each paper has its chapter, its derivation and its ledger: "
+                 + "; ".join(papers) + ".")
+    return MarkdownText("\n".join(lines))

@@ -191,6 +191,36 @@ def allowed_values(meta: Mapping[str, Any]) -> str:
     return text
 
 
+def _reader_range(meta: Mapping[str, Any]) -> str:
+    """The values a setting takes, as the settings table shows them to a reader: ``"> 0"``,
+    ``"0 to 1"``, ``"whole number ≥ 1"``, ``"'sdp' or 'closed_form'"`` (:func:`allowed_values` words
+    it for error messages)."""
+    low, high = meta.get("low"), meta.get("high")
+    lo = None if low is None else ("> " if meta.get("low_open") else "\u2265 ") + _fmt_bound(low)
+    hi = None if high is None else ("< " if meta.get("high_open") else "\u2264 ") + _fmt_bound(high)
+    if lo and hi and not meta.get("low_open") and not meta.get("high_open"):
+        bounds = f"{_fmt_bound(low)} to {_fmt_bound(high)}"
+    else:
+        bounds = ", ".join(b for b in (lo, hi) if b)
+    kind = meta.get("kind")
+    if kind == "choice":
+        choices = [repr(c) for c in meta["choices"]]
+        return " or ".join(choices) if len(choices) <= 2 else ", ".join(choices[:-1]) + " or " + choices[-1]
+    if kind == "bool":
+        return "yes or no"
+    if kind == "text":
+        return "text"
+    if kind == "matrix":
+        return "a matrix"
+    if kind in ("reals", "integers"):
+        what = "whole numbers" if kind == "integers" else "numbers"
+        count = f"{meta['length']} {what}" if meta.get("length") else what
+        return f"{count}, each {bounds}" if bounds else count
+    if kind == "integer":
+        return f"whole number {bounds}".strip()
+    return bounds or "any number"
+
+
 def _setting_error(settings: Any, f: dataclasses.Field, value: Any, what: str | None = None,
                    error: type[Exception] = ValueError) -> Exception:
     meta = f.metadata
@@ -403,13 +433,13 @@ class SettingsView:
     >>> from mascore.papers import ren2005
     >>> from mascore.settings import SettingsView
     >>> str(SettingsView(ren2005.SETTINGS)).splitlines()[0]
-    '| setting | value | allowed | from | note |'
+    '| setting | value | allowed values | from | note |'
     """
 
     settings: Any
 
     def _repr_markdown_(self) -> str:
-        rows = ["| setting | value | allowed | from | note |", "|---|---|---|---|---|"]
+        rows = ["| setting | value | allowed values | from | note |", "|---|---|---|---|---|"]
         for f in dataclasses.fields(self.settings):
             meta = f.metadata
             value = format_value(getattr(self.settings, f.name), max_items=12)
@@ -418,7 +448,7 @@ class SettingsView:
             origin = {"paper": "paper", "chosen": "**our choice**", "derived": "derived"}.get(meta.get("source"), "")
             if meta.get("where"):
                 origin += f" ({meta['where']})"
-            allowed = allowed_values(meta) if meta.get("kind") else ""
+            allowed = _reader_range(meta) if meta.get("kind") else ""
             rows.append(f"| `{f.name}` | {_cell(value)} | {_cell(allowed)} | {_cell(origin)} "
                         f"| {_cell(meta.get('note', ''))} |")
         return "\n".join(rows)

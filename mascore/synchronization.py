@@ -43,8 +43,8 @@ import scipy.linalg
 from numpy.typing import ArrayLike
 
 from . import graphs
-from ._validation import as_matrix as _matrix
 from ._validation import (
+    Frozen,
     as_vector,
     check_adjacency,
     check_covariance,
@@ -53,6 +53,7 @@ from ._validation import (
     frozen_copy,
     require_finite,
 )
+from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
 from .agents import is_system, system_matrices
@@ -832,7 +833,7 @@ def design_synchronization(
                       Gamma=Gamma, eigs=eigs, in_circle=inside, A_c=Ac, B_c=Bc, rho=spectral_radius(Ac))
 
 
-class SynchronizationLaw:
+class SynchronizationLaw(Frozen):
     """The law of Sec. 4.2 on a fixed graph and gain, checked once.
 
     The graph may be directed; it is checked (finite, non-negative, no self-loops) but
@@ -862,7 +863,7 @@ class SynchronizationLaw:
     array([0.5, 0.5])
     """
 
-    __slots__ = ("g", "K", "c", "_Lp", "_scale")
+    __slots__ = ("adjacency", "g", "K", "c", "_Lp", "_scale")
 
     def __init__(self, adjacency: ArrayLike, pinning: ArrayLike, K: ArrayLike, c: float) -> None:
         c = _real(c, "c")
@@ -870,9 +871,12 @@ class SynchronizationLaw:
             raise ValueError(f"c (the coupling gain) must be >= 0; got {c}")
         Aadj, g = _check_graph(adjacency, pinning)
         K = _matrix(K, "K")
-        self.g, self.K, self.c = frozen_copy(g), frozen_copy(K), c
-        self._Lp = frozen_copy(graphs.laplacian(Aadj) + np.diag(g))  # L + diag(g)
-        self._scale = frozen_copy(c / (1.0 + Aadj.sum(axis=1) + g))  # c / (1 + d_i + g_i)
+        self._set(adjacency=frozen_copy(Aadj), g=frozen_copy(g), K=frozen_copy(K), c=c,
+                  _Lp=frozen_copy(graphs.laplacian(Aadj) + np.diag(g)),  # L + diag(g)
+                  _scale=frozen_copy(c / (1.0 + Aadj.sum(axis=1) + g)))  # c / (1 + d_i + g_i)
+
+    def _args(self) -> tuple:
+        return (self.adjacency, self.g, self.K, self.c)
 
     def __call__(self, xhat: ArrayLike, x_leader: ArrayLike) -> np.ndarray:
         """The inputs of all agents, batched.

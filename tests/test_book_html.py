@@ -5,9 +5,11 @@ registered figure of every paper is an image with its numbered caption in its
 chapter, numbered in its chapter and with its caption as alt text, every chapter
 shows its ledger table, no page shows raw LaTeX, an error or stderr block, or loads
 anything from the network. In headless Chromium at 1280 px (offline), no display
-equation or table is wider than the text column, no table cell shows NaN, and no
-figure is shrunk below legibility. Tests at the end show that each check fails on
-a page with a figure removed, a formula broken or the layout overflowing.
+equation or table is wider than the text column, no table cell shows NaN, no
+figure is shrunk below legibility or has fewer than two image pixels per CSS pixel,
+and no page shows more than about 4,000 words. The intro opens with its four reading
+paths. Tests at the end show that each check fails on a page with a figure removed,
+a formula broken or the layout overflowing.
 """
 
 from __future__ import annotations
@@ -166,8 +168,10 @@ def test_every_image_of_a_chapter_is_a_captioned_figure():
 # ---------------------------------------------------------------- the pages as a reader sees them, at 1280 px
 
 #: The style's tick labels are 10 pt at 100 dpi, 13.9 px per em (digits 10 px high): an image shown at
-#: less than 90 % of its width puts them under 9 px.
+#: less than 90 % of its layout width (its pixels over PIXEL_RATIO) puts them under 9 px.
 MIN_IMAGE_SCALE = 0.9
+#: Visible words a page may show (collapsed blocks excluded): about 15 minutes of reading.
+MAX_WORDS = 4000
 READ_PAGES = sorted({*(HTML / "notebooks").glob("*.html"), HTML / "notation.html", HTML / "intro.html",
                      HTML / "bibliography.html"}) if HTML.exists() else []
 READ_PAGES = [p for p in READ_PAGES if p.exists() and not p.name.startswith(".")]
@@ -190,22 +194,33 @@ def layout_problems(m: dict) -> list[str]:
     out += [f"display equation {e['width']} px wide in a {m['column']:.0f} px column: {e['what']}" for e in m["equations"]]
     out += [f"table {t['width']} px wide in a {m['column']:.0f} px column: {t['what']}" for t in m["tables"]]
     out += [f"a table cell shows NaN/None: {head}" for head in sorted(set(m["nan"]))]
-    out += [f"figure {i['id']} shrunk to {i['shown'] / i['natural']:.0%} of its width (tick labels under 9 px)"
-            for i in m["images"] if i["shown"] < MIN_IMAGE_SCALE * i["natural"]]
+    from mascore.plotting import PIXEL_RATIO
+
+    for i in m["images"]:
+        layout = i["natural"] / PIXEL_RATIO  # the width the figure was laid out for, in CSS px
+        if i["shown"] < MIN_IMAGE_SCALE * layout:
+            out.append(f"figure {i['id']} shrunk to {i['shown'] / layout:.0%} of its width (tick labels under 9 px)")
+        if i["natural"] < 1.95 * i["shown"]:
+            out.append(f"figure {i['id']} has {i['natural'] / i['shown']:.2g} image pixels per CSS pixel "
+                       f"(blurred on a HiDPI screen; {PIXEL_RATIO} needed)")
+    if m.get("words", 0) > MAX_WORDS:
+        out.append(f"{m['words']} visible words (more than about {MAX_WORDS}: split the page into sub-pages, "
+                   "or collapse what a first reading can skip)")
     return out
 
 
 @pytest.mark.parametrize("path", READ_PAGES, ids=lambda p: p.relative_to(HTML).as_posix())
 def test_page_fits_its_column_at_1280px(path):
     """No formula MathJax rejects, no display equation or table wider than the column, no NaN cell, no
-    figure shrunk (headless Chromium)."""
+    figure shrunk or blurred (2 image pixels per CSS pixel), at most about 4,000 visible words (headless
+    Chromium)."""
     from mascore._booktools import measure_page
 
     problems = layout_problems(measure_page(path, browser=_browser()))
     assert not problems, "\n".join(problems)
 
 
-def test_layout_check_fails_on_wide_math_tables_nan_and_shrunk_figures():
+def test_layout_check_fails_on_wide_math_tables_nan_shrunk_or_blurry_figures_and_long_pages():
     path = HTML / "notebooks" / "building_blocks.html"
     wide_math = "\\[" + " + ".join(f"x_{{{i}}}^{{2}}" for i in range(80)) + "\\]"
     bad = ('<div class="math notranslate nohighlight">' + wide_math + "</div>"
@@ -213,7 +228,10 @@ def test_layout_check_fails_on_wide_math_tables_nan_and_shrunk_figures():
            "<table><tr>" + "<td>wide_column_name_without_breaks_anywhere</td>" * 30 + "</tr>"
            "<tr><td>NaN</td></tr></table>"
            '<figure id="fig-shrunk"><img src="data:image/svg+xml;utf8,'
-           "%3Csvg xmlns='http://www.w3.org/2000/svg' width='2000' height='10'%3E%3C/svg%3E\"></figure>")
+           "%3Csvg xmlns='http://www.w3.org/2000/svg' width='2000' height='10'%3E%3C/svg%3E\"></figure>"
+           '<figure id="fig-blurry"><img style="width: 300px" src="data:image/svg+xml;utf8,'
+           "%3Csvg xmlns='http://www.w3.org/2000/svg' width='300' height='10'%3E%3C/svg%3E\"></figure>"
+           "<p>" + "word " * MAX_WORDS + "</p>")
     probe = path.with_name(".layout-selftest.html")
     probe.write_text(path.read_text().replace('<article class="bd-article">', '<article class="bd-article">' + bad, 1))
     from mascore._booktools import measure_page
@@ -225,6 +243,8 @@ def test_layout_check_fails_on_wide_math_tables_nan_and_shrunk_figures():
     assert "display equation" in problems and "table" in problems and "NaN" in problems, problems
     assert "MathJax cannot typeset" in problems, problems
     assert "fig-shrunk" in problems, problems
+    assert "fig-blurry has 1 image pixels per CSS pixel" in problems, problems
+    assert "visible words" in problems, problems
 
 
 def _next_page(path: Path) -> str:
@@ -269,9 +289,31 @@ def test_api_pages_show_formulas_as_math_not_code(path):
     assert not tex, tex[:5]
 
 
-@pytest.mark.parametrize("chapter", sorted({s.chapter for _, s in STUDIES} | {"building_blocks", "apply_your_system"}))
+@pytest.mark.parametrize("chapter", sorted({s.chapter for _, s in STUDIES} | {"building_blocks", "apply_your_system",
+                                                                         "apply_control_designs"}))
 def test_a_tagged_equation_has_one_number(chapter):
     """An equation that carries the paper's number (``\\tag``) gets no second, Sphinx number beside it."""
     blocks = re.findall(r'<div class="[^"]*\bmath\b[^"]*"[^>]*>(.*?)</div>', _page(chapter), re.S)
     double = [b[:80] for b in blocks if 'class="eqno"' in b and "\\tag" in b]
     assert not double, double
+
+
+def test_the_intro_opens_with_four_reading_paths():
+    """Each question on the intro's first screen, with its one-line answer and a link to its page."""
+    html = (HTML / "intro.html").read_text()
+    article = html[html.index('<article class="bd-article">'):]
+    first = html_module.unescape(re.sub(r"<[^>]+>", "", article))[:4000]
+    targets = {"Did it reproduce?": "reproduction_report.html", "Which method for my team?": "comparing_methods.html",
+               "How do I use it on my system?": "apply_your_system.html",
+               "How does paper X work?": "ren2005_kalman_consensus.html"}
+    for question, page in targets.items():
+        assert question in first, f"{question!r} is not on the intro's first screen"
+        item = re.search(rf"{re.escape(question)}</strong>(.*?)</li>", article, re.S)
+        assert item and f"notebooks/{page}" in item.group(1), f"{question!r} does not link to {page}"
+        assert re.search(r"\d", re.sub(r"<[^>]+>", "", item.group(1))), f"{question!r}: no computed answer"
+
+
+def test_the_apply_chapter_ends_with_the_comparison():
+    html = (HTML / "notebooks" / "apply_your_system.html").read_text()
+    last = re.search(r'<section id="where-to-go-from-here">(.*?)</section>', html, re.S)
+    assert last and "comparing_methods.html" in last.group(1), "the apply chapter does not point to the comparison"

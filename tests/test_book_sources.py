@@ -33,6 +33,13 @@ def test_papers_are_in_the_order_of_the_table_of_contents():
     assert list(dict.fromkeys(in_book)) == list(paper_keys())
 
 
+def test_the_apply_chapter_comes_after_the_papers():
+    """It uses the papers' equations and theorems by number: the reader meets them first."""
+    toc = re.findall(r"file:\s*notebooks/(\w+)", (ROOT / "book" / "_toc.yml").read_text())
+    last_paper = max(toc.index(c) for c in CHAPTERS)
+    assert toc.index("apply_your_system") > last_paper, toc
+
+
 @pytest.mark.parametrize("chapter", sorted(CHAPTERS))
 def test_each_registered_figure_is_drawn_once_with_the_registry_caption(chapter):
     reg, study = CHAPTERS[chapter]
@@ -166,3 +173,145 @@ def test_captions_quote_computed_values_not_typed_ones(chapter):
         sources = "".join("".join(c["source"]) for c in _cells(chapter) if c["cell_type"] == "code")
         assert "glue_caption_values(STUDY, result)" in sources, (
             f"{chapter}: the captions of {quoting} quote computed values, but the chapter does not glue them")
+
+
+# ---------------------------------------------------------------- figures: no legend over the data
+
+RESULTS = ROOT / "results"
+
+
+@pytest.mark.parametrize("key,what", [("legend_overlaps", "legends over the data"),
+                                      ("unlabelled_lines", "panels with more than five unlabelled lines")])
+def test_registered_figures_keep_their_legends_off_the_data_and_label_their_lines(key, what):
+    """Every registered figure, as `mascore reproduce` drew it: no legend covers a data line or marker
+    (measured from the artists' extents, :func:`mascore.plotting.legend_overlaps`), no panel shows more
+    than five lines without a legend entry (:func:`mascore.plotting.unlabelled_lines`); both are written
+    beside each figure."""
+    from mascore.registry import all_figures
+
+    missing, offenders = [], []
+    for reg, _, spec in all_figures():
+        layout = RESULTS / reg.key / "figures" / f"{spec.name}.layout.json"
+        if not layout.exists():
+            missing.append(f"{reg.key}/{spec.name}")
+            continue
+        record = json.loads(layout.read_text())
+        if key not in record:
+            missing.append(f"{reg.key}/{spec.name}")
+        offenders += [f"{reg.figure_label(spec.name)}: {o}" for o in record.get(key, [])]
+    if len(missing) == len(all_figures()):
+        pytest.skip(f"no figure layouts in {RESULTS}: run `python -m mascore reproduce all --out results` first")
+    assert not missing, f"figures without a layout record (rerun `mascore reproduce`): {missing}"
+    assert not offenders, f"{what}:\n" + "\n".join(offenders)
+
+
+# ---------------------------------------------------------------- glossary and bibliography complete
+
+def _reader_texts() -> list[tuple[str, str]]:
+    """(where, text) of what the book shows in words: Markdown of the notebooks and book pages, figure
+    captions, the ledgers' statements, notes and rules (when results/ exists), the errata, docstrings."""
+    from mascore.ledger import load_claims
+    from mascore.registry import all_figures, paper_registries
+
+    out = [(where, text) for where, text in _markdown_cells()]
+    out += [(p.name, p.read_text()) for p in sorted((ROOT / "book").glob("*.md"))]
+    out += [(reg.figure_label(spec.name), spec.caption) for reg, _, spec in all_figures()]
+    out += [(f"{reg.key} errata", e) for reg in paper_registries() for e in reg.errata]
+    if (RESULTS / "song2023" / "claims.json").exists():
+        out += [(r["id"], " ".join((r["statement"], r.get("note", ""), r.get("rule", ""))))
+                for r in load_claims(RESULTS, verify=False)]
+    return out
+
+
+def _prose(text: str) -> str:
+    """Text without code blocks, inline code, math, roles' targets and link targets."""
+    text = re.sub(r"```.*?```|\$\$.*?\$\$", " ", text, flags=re.S)
+    text = re.sub(r"\{[a-z:]+\}`[^`]*`|`[^`]*`|\$[^$]*\$|\]\([^)]*\)", " ", text)
+    return text
+
+
+#: Capitalized words that are not abbreviations (names, Roman numerals, a logical AND in a rule).
+NOT_ABBREVIATIONS = {"II", "III", "IV", "VI", "MATLAB", "NumPy", "SciPy", "NaN", "AND", "OR", "CPU", "JupyterLab"}
+
+
+def glossary_terms() -> set[str]:
+    block = re.search(r"```\{glossary\}\n(.*?)```", (ROOT / "book" / "notation.md").read_text(), re.S).group(1)
+    return {line.strip() for line in block.splitlines() if line.strip() and not line.startswith(" ")}
+
+
+def abbreviations(text: str) -> set[str]:
+    """Words of two or more capitals (``EKF``, ``CoM``, ``SDPs`` as ``SDP``) in the prose of `text`."""
+    words = re.findall(r"\b(?:[A-Z]{2,}[a-z]?|[A-Z][a-z]?[A-Z]+)s?\b", _prose(text))
+    return {w[:-1] if w.endswith("s") and w[:-1].isupper() else w for w in words} - NOT_ABBREVIATIONS
+
+
+def test_every_abbreviation_is_in_the_glossary():
+    terms = glossary_terms()
+    missing = {}
+    for where, text in _reader_texts():
+        for word in abbreviations(text) - terms:
+            missing.setdefault(word, where)
+    assert not missing, f"abbreviations without a glossary entry (book/notation.md): {missing}"
+
+
+def test_the_abbreviation_check_sees_abbreviations():
+    assert abbreviations("The EKF and two SDPs about the CoM; $LMI$ and `DARE` are not prose.") == {"EKF", "SDP", "CoM"}
+    assert {"DARE", "EKF", "SMF", "ISS", "CoM", "HCMCI", "ICF"} <= glossary_terms()
+
+
+def bibliography_surnames() -> set[str]:
+    bib = (ROOT / "book" / "references.bib").read_text()
+    names = set()
+    for authors in re.findall(r"author\s*=\s*\{(.*)\},?\n", bib):
+        for person in authors.split(" and "):
+            names.add(person.split(",")[0].strip().strip("{}"))
+    return names
+
+
+_SURNAME = r"[A-Z][a-z]+(?:-[A-Z][a-z]+)?"
+
+
+def cited_surnames(text: str) -> set[str]:
+    """Surnames cited in prose: ``Kamal et al.``, ``Cattivelli and Sayed``, ``Xiao, Boyd and Lall 2005``."""
+    text = _prose(text)
+    names = set(re.findall(rf"\b({_SURNAME}) et al\.", text))
+    for m in re.finditer(rf"\b((?:{_SURNAME}, )*{_SURNAME}) and ({_SURNAME})\b(?=\)|,|;|'s| \(?\d{{4}}| \{{cite)", text):
+        names |= {n.strip() for n in m.group(1).split(",")} | {m.group(2)}
+    return names
+
+
+#: Capitalized pairs that read like "A and B" citations but are not people.
+NOT_PEOPLE = {"Graphs", "Laplacians", "Theorems", "Figs", "Tables", "Sec", "Secs", "Lemma", "Kalman", "Riccati",
+              "Gaussian", "Song", "Remark"}
+
+
+def test_every_name_cited_has_a_bibliography_entry():
+    """A name cited in the book's prose, captions, ledgers or docstrings is an author in book/references.bib."""
+    known = bibliography_surnames()
+    texts = _reader_texts() + [(p.name, p.read_text()) for p in sorted((ROOT / "mascore").rglob("*.py"))]
+    missing = {}
+    for where, text in texts:
+        for name in cited_surnames(text) - known - NOT_PEOPLE:
+            missing.setdefault(name, where)
+    assert not missing, f"names cited without a bibliography entry: {missing}"
+
+
+def test_the_citation_check_sees_citations():
+    text = "(`ci-L1`, Battistelli and Chisci), Kamal et al. and Hu, Xie and Zhang 2012; Graphs and Laplacians"
+    assert cited_surnames(text) == {"Battistelli", "Chisci", "Kamal", "Hu", "Xie", "Zhang"}
+    assert {"Battistelli", "Chisci", "Kamal", "Cattivelli", "Sayed", "Hu", "Deshpande"} <= bibliography_surnames()
+
+
+def test_alt_text_has_no_placeholder():
+    """Alt text is the caption as the reader sees it, with the run's values in place (no '(the value of this run)')."""
+    from mascore._booktools import plain_text
+    from mascore.registry import all_figures
+
+    placeholders = [reg.figure_label(spec.name) for reg, _, spec in all_figures()
+                    if re.search(r"value of this run|glue|\{\{", plain_text(reg.full_caption(spec)))]
+    for path in sorted((ROOT / "notebooks").glob("*.ipynb")):
+        for cell in json.loads(path.read_text())["cells"]:
+            alt = cell["metadata"].get("mystnb", {}).get("image", {}).get("alt", "")
+            if "value of this run" in alt:
+                placeholders.append(f"{path.stem}: {cell['metadata']['mystnb']['figure']['name']}")
+    assert not placeholders, f"alt text with a placeholder instead of the run's value: {sorted(set(placeholders))}"

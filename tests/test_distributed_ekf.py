@@ -303,10 +303,11 @@ def test_model_and_filter_arrays_are_read_only_copies():
     Q[0, 0] = R[0, 0] = -5.0  # the caller's arrays, spoiled after the check
     Sigma0[:] = np.nan
     X_hat[:] = np.nan
-    for arr in (model.Q_team, model.R, ekf.X_hat, ekf.Sigma):
+    for arr in (model.Q_team, model.R, ekf.view("X_hat"), ekf.view("Sigma")):
         assert not arr.flags.writeable
         with pytest.raises(ValueError, match="read-only"):
             arr[..., 0, 0] = 1.0
+    ekf.X_hat[..., 0, 0] = ekf.Sigma[..., 0, 0] = 1.0  # copies: writing into them cannot reach the filter
     with pytest.raises(AttributeError):
         model.dt = 1.0
     observed = np.ones((2, N, N), bool)

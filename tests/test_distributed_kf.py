@@ -556,8 +556,11 @@ def test_model_arrays_are_read_only_and_copied():
         team.predict()
         team.update(Z, S[0])
     assert np.linalg.eigvalsh(team.Sigma[0]).min() > 0
+    kept = team.Sigma
+    kept[0, 0, 0] = 0.0  # the state the filter hands out is a copy: writing into it cannot reach the filter
+    assert team.Sigma[0, 0, 0] > 0
     with pytest.raises(ValueError, match="read-only"):
-        team.Sigma[0, 0, 0] = 0.0  # the state the filter hands out cannot be written either
+        team.view("Sigma")[0, 0, 0] = 0.0  # nor can its view, asked for by name
 
 
 def test_model_constructor_checks_everything():

@@ -110,7 +110,7 @@ def test_show_claims_numbers_claims_states_them_and_prints_a_shared_note_once():
     rows = [line for line in text.splitlines() if line.startswith("| 1 ") or line.startswith("| 2 ")]
     assert len(rows) == 2
     assert rows[0].count(" | ") == 4  # the '|' inside 'where' is escaped, not a new column
-    assert "First statement." in rows[0] and "**reproduces**" in rows[0] and "within 0.1" in rows[0]
+    assert "First statement." in rows[0] and "**reproduces**" in rows[0] and "tolerance 0.1" in rows[0]
     assert "**fails**" in rows[1] and "Decided by:* max < 1" in rows[1]
     assert text.count(shared) == 1 and "Claims 1, 2." in text and "Claim 1.* own a" in text
 
@@ -121,3 +121,72 @@ def test_write_claims_refuses_an_unknown_ledger_or_a_foreign_claim(tmp_path):
         ledger.write_claims([claim], tmp_path / "claims.json", "vlahakis2", 1, "cmd")
     with pytest.raises(ValueError, match="ids 'ren2005/...'"):
         ledger.write_claims([claim], tmp_path / "claims.json", "ren2005", 1, "cmd")
+
+
+@pytest.mark.parametrize("value,verdict,sentence", [
+    (1.00736, "reproduces", "0.736 % off; tolerance 5 %"),
+    (1.099, "approximately", "9.9 % off; tolerance 5 %, approximately within 15 %"),
+    (1.4, "does-not-reproduce", "40 % off; more than the 15 % of 'approximately'"),
+])
+def test_one_verdict_sentence_per_number_agrees_with_the_verdict(value, verdict, sentence):
+    """The ledger's verdict cell says the verdict once, in words, and a deviation sentence that does not
+    contradict it (no 'reproduces within 5 %' under a number that does not)."""
+    record = Claim("ren2005/x", "Fig. 1", "A number.", 1.0, value, {"rel": 0.05}).to_dict()
+    assert record["verdict"] == verdict
+    assert ledger.deviation_sentence(record).replace("\xa0", " ") == sentence
+    cell = ledger._verdict_text(record).replace("\xa0", " ")
+    assert cell == f"**{ledger.verdict_words(verdict)}**<br>{sentence}"
+    assert "-" not in cell.split("<br>")[0] and cell.count("reproduce") <= 1
+
+
+def test_verdict_words_refuses_an_unknown_verdict():
+    with pytest.raises(ValueError, match="verdict must be one of"):
+        ledger.verdict_words("reproduced")
+
+
+def test_deviation_sentence_carries_the_unit_of_an_absolute_tolerance():
+    record = Claim("ren2005/x", "Fig. 1", "A number.", 1.5, 1.56, {"abs": 0.05}, unit="m").to_dict()
+    assert ledger.deviation_sentence(record).replace("\xa0", " ") == "0.06 m off; tolerance 0.05 m, approximately within 0.15 m"
+
+
+def test_why_is_kept_in_the_record():
+    claim = Claim("ren2005/x", "Fig. 1", "A number.", 1.0, 1.4, {"rel": 0.05}, why="The paper rounds.")
+    assert claim.to_dict()["why"] == "The paper rounds." and Claim.from_dict(claim.to_dict()) == claim
+    assert "why" not in Claim("ren2005/x", "Fig. 1", "A number.", 1.0, 1.0, {"rel": 0.05}).to_dict()
+
+
+def _paper_records():
+    ok = Claim("ren2005/a", "Sec. 2", "A number.", 2.0, 2.01, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
+    off = Claim("ren2005/b", "Sec. 3", "Another.", 2.0, 3.0, {"rel": 0.01},
+                note="Ours is run 0.\n\nThe gap is systematic: the paper rounds.").to_dict() | {"paper": "ren2005"}
+    told = Claim("ren2005/c", "Sec. 4", "A third.", 2.0, 3.0, {"rel": 0.01}, note="Ours.",
+                 why="The printed value is a misprint.").to_dict() | {"paper": "ren2005"}
+    return ok, off, told
+
+
+def test_report_names_papers_and_verdicts_in_words():
+    from mascore.report import verdict_summary
+
+    table = verdict_summary(list(_paper_records()))
+    assert list(table.index) == ["Ren, Beard and Kingston 2005", "all papers"]
+    assert list(table.columns) == ["reproduces", "does not reproduce", "total"]
+
+
+def test_report_says_why_each_claim_to_look_at_is_there():
+    from mascore.report import attention_list
+
+    text = str(attention_list(list(_paper_records()))).replace("\xa0", " ")
+    header, _, *rows = text.splitlines()
+    assert header == "| verdict | paper, where | claim | why |" and len(rows) == 2
+    assert rows[0].endswith("| 50 % off; more than the 3 % of 'approximately'. The gap is systematic: the paper rounds. |")
+    assert rows[1].endswith("| 50 % off; more than the 3 % of 'approximately'. The printed value is a misprint. |")
+    assert "does-not-reproduce" not in text and "ren2005 " not in text and "**does not reproduce**" in text
+
+
+def test_report_takes_the_why_its_paper_module_states(monkeypatch):
+    from mascore.papers import ren2005
+    from mascore.report import attention_list
+
+    monkeypatch.setattr(ren2005, "WHY", {"ren2005/b": "The paper's schedule is not ours."}, raising=False)
+    rows = str(attention_list([_paper_records()[1]])).splitlines()
+    assert rows[2].endswith("'approximately'. The paper's schedule is not ours. |")

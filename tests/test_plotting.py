@@ -71,3 +71,63 @@ def test_crowded_agents_keep_their_numbers_visible():
     crowded = [t for t in ax.texts if t.get_text() in "12"]
     assert all(t.get_anncoords() == "offset points" for t in crowded)  # beside the marker, not under it
     plt.close("all")
+
+
+def test_legend_overlap_is_measured_from_the_artists():
+    """A legend over a line, over scatter markers, or a figure legend over a panel is found; one outside is not."""
+    plotting.use_style()
+    fig, (a, b) = plt.subplots(1, 2, figsize=(6.4, 3))
+    a.plot([0, 1], [0.5, 0.5], label="flat")  # crosses the middle of the panel, between its two vertices only
+    a.legend(loc="center")
+    b.scatter([0.5], [0.5], label="dot")
+    b.set(xlim=(0, 1), ylim=(0, 1))
+    b.legend(loc="center")
+    found = plotting.legend_overlaps(fig)
+    assert found == ["panel 1: legend covers line 'flat'", "panel 2: legend covers markers 'dot'"], found
+    for ax in (a, b):
+        ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    assert plotting.legend_overlaps(fig) == []
+    a.get_legend().remove()
+    b.get_legend().remove()
+    fig.legend(*a.get_legend_handles_labels(), loc="center", bbox_to_anchor=(0.3, 0.5))  # a figure legend over panel 1
+    a.set_xlim(-1, 2)
+    assert any("line 'flat'" in o for o in plotting.legend_overlaps(fig))
+    plt.close(fig)
+
+
+def test_saved_figures_have_two_device_pixels_per_css_pixel(tmp_path):
+    """A saved figure has twice the pixels of its layout at 100 dpi (the book shows it at that size)."""
+    plotting.use_style()
+    fig, ax = plt.subplots(figsize=(5.0, 3.0))
+    ax.plot([0, 1], [0, 1])
+    fig.canvas.draw()
+    inches = fig.get_tightbbox(fig.canvas.get_renderer()).width
+    path = plotting.save_figure(fig, tmp_path / "f.png")
+    width = int.from_bytes(path.read_bytes()[16:20], "big")  # PNG header: IHDR width
+    inches += 2 * matplotlib.rcParams["savefig.pad_inches"]  # the tight box and its padding
+    assert width == pytest.approx(plotting.PIXEL_RATIO * 100 * inches, abs=3)
+    assert plotting.PIXEL_RATIO >= 2
+
+
+def test_legend_overlap_counts_patch_outlines_and_near_misses():
+    plotting.use_style()
+    fig, ax = plt.subplots(figsize=(4, 4))
+    ax.add_patch(plt.Circle((0.5, 0.5), 0.05, fill=False, label="circle"))
+    ax.set(xlim=(0, 1), ylim=(0, 1))
+    ax.plot([0.5], [0.5], "o", label="centre")
+    ax.legend(loc="center")
+    assert any("outline" in o for o in plotting.legend_overlaps(fig))
+    plt.close(fig)
+
+
+def test_lines_labelled_by_a_shared_legend_of_colours_count_as_labelled():
+    plotting.use_style()
+    fig, (a, b) = plt.subplots(1, 2)
+    for ax in (a, b):
+        for i in range(6):
+            ax.plot([0, 1, 2], [i, i + 1, i], color=f"C{i}")
+    assert len(plotting.unlabelled_lines(fig)) == 2
+    proxies = [plt.Line2D([], [], color=f"C{i}", label=f"agent {i + 1}") for i in range(6)]
+    fig.legend(handles=proxies, loc="outside lower center", ncol=6)
+    assert plotting.unlabelled_lines(fig) == []
+    plt.close(fig)

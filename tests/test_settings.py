@@ -98,8 +98,9 @@ def test_settings_table_shows_the_allowed_values():
     from mascore.papers import ren2005
 
     table = str(show_settings(ren2005.SETTINGS))
-    assert table.splitlines()[0] == "| setting | value | allowed | from | note |"
-    assert "| `n_steps` | 100 | an integer >= 1 |" in table
+    assert table.splitlines()[0] == "| setting | value | allowed values | from | note |"
+    assert "| `n_steps` | 100 | whole number \u2265 1 |" in table  # a reader's words, not the validator's
+    assert "finite" not in table and "tuple" not in table
     assert "Allowed: a finite number > 0 h²." in ren2005.KalmanConsensusSettings.__doc__
 
 

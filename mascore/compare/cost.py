@@ -14,10 +14,6 @@ from .team import simulate_team
 # --------------------------------------------------------------------------------------------
 # the cost of one node, one run, one thread
 
-#: Team methods whose busiest node runs the whole team's filter: the centre, or every agent (Song et al., Remark 4).
-WHOLE_TEAM = ("centralized", "song-mb", "song-eb")
-
-
 def node_cost(method: str, n_agents: int, n_steps: int = 20, repeats: int = 3, seed: int = 0,
               settings: BenchmarkSettings = SETTINGS) -> float:
     """CPU (µs) per step of the busiest node: one run, this thread only, the best of `repeats`.

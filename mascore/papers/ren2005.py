@@ -1045,7 +1045,7 @@ def _draw_noise_continuous(result: KalmanConsensusResult) -> plt.Figure:
     axes[1].semilogy(nc["t"], nc["rms_quiet"], "k:", label="no communication noise")
     axes[1].set_title("(b) RMS disagreement")
     axes[1].set_ylabel("RMS disagreement")
-    axes[1].legend(loc="lower left")
+    fig.legend(*axes[1].get_legend_handles_labels(), loc="outside lower center", ncol=2)  # below, off the data
     for ax in axes:
         ax.set_xlabel("time t (s)")
     return fig
