@@ -21,10 +21,18 @@ Divided by this machine's single-thread dense matmul rate (a 512 x 512
 ``A @ B``), measured in the same run with the repeats interleaved; medians.
 Everything else the step does (the Jacobian's pair terms, the products by
 the double integrator, gathers) is overhead above that floor.
+
+``default_threads_ms`` times the same step in a fresh process whose BLAS runs with its
+default number of threads (``OMP_NUM_THREADS`` and its kin unset), ``ours_ms`` being
+the one-thread time (``make bench`` pins one thread): the default configuration should
+be no slower. Under load, timings are indicative only.
 """
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import time
 from dataclasses import replace
 
@@ -87,6 +95,27 @@ def _time_public(X_hat, Sigma, Z, S, R, Q) -> float:
     return time.perf_counter() - t
 
 
+#: Environment variables that pin the BLAS's threads; unset for the default configuration.
+_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
+
+
+def step_ms(N: int, repeat: int = 5) -> float:
+    """Median ms of one public FlockingEKF.step at N agents in this process (its BLAS threads as they are)."""
+    rng = np.random.default_rng(0)
+    X_hat, Sigma, Z, S, R, Q = _setup(N, rng)
+    model = dekf.EKFModel(N, s.DT, s.GAINS, Q, R)
+    _time_step(model, X_hat, Sigma, Z, S)  # warm-up
+    return 1e3 * float(np.median([_time_step(model, X_hat, Sigma, Z, S) for _ in range(repeat)]))
+
+
+def default_threads_ms(N: int, repeat: int = 5) -> float:
+    """:func:`step_ms` in a fresh process with the BLAS's default threads (the configuration a user gets)."""
+    env = {k: v for k, v in os.environ.items() if k not in _THREAD_VARS}
+    code = f"from benchmarks.bench_song2023_flocking import step_ms; print(step_ms({int(N)}, {int(repeat)}))"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+    return float(done.stdout.strip().splitlines()[-1])
+
+
 def run(sizes=SIZES) -> pd.DataFrame:
     """Median milliseconds of one EKF step of all N filters (public FlockingEKF.step) against the FLOP floor.
 
@@ -113,6 +142,7 @@ def run(sizes=SIZES) -> pd.DataFrame:
         rows.append({"work": "Song flocking EKF step, all agents", "N": N, "ours_ms": ours_ms,
                      "floor_ms": floor_ms, "ratio_to_floor": ours_ms / floor_ms,
                      "checked_call_ms": 1e3 * float(np.median(checked)) if checked else np.nan,
+                     "default_threads_ms": default_threads_ms(N, repeat) if N <= 64 else np.nan,
                      "matmul_gflops": rate})
     return pd.DataFrame(rows)
 

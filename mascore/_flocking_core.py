@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import MAX_STEPS, check_covariance, check_positive, check_positive_int, float_array
+from ._validation import MAX_STEPS, Frozen, check_covariance, check_positive, check_positive_int, float_array
 from .exceptions import DivergenceError
 
 __all__ = [
@@ -52,8 +52,8 @@ __all__ = [
 DIVERGENCE_LIMIT = 1e7
 
 
-@dataclass(frozen=True)
-class FlockingGains:
+@dataclass(frozen=True, eq=False)
+class FlockingGains(Frozen):
     """Gains of the augmented Cucker-Smale law, eq. (6).
 
     Parameters

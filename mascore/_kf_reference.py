@@ -2,10 +2,10 @@
 
 Written with explicit dense ``F_1``, ``F_2``, ``H_i`` and ``G_i`` and loops
 over agents and agent pairs (``O(N^6 m^3)`` for the estimation-based step):
-the independent implementation the tests and the benchmark compare
+the independent implementation that the tests, the benchmark and
+:func:`mascore.papers.song2023.estimator_step_seconds` compare
 :mod:`mascore.distributed_kf`'s structured recursions with. Not part of the
-public API (``mascore.distributed_kf`` still resolves the two step names,
-for callers written before they moved here).
+public API: import the steps from this module.
 """
 
 from __future__ import annotations

@@ -4,10 +4,9 @@ Kept apart from :mod:`mascore.set_membership` so that its closed form runs witho
 importing cvxpy: this module is imported only when ``method="sdp"``.
 
 No module-level cache: :func:`correction_sdp` and :func:`prediction_sdp` build a new program
-each call; the owner (:class:`mascore.set_membership.SetMembershipModel`) keeps it and reuses
-it, step after step. A program holds its parameter values and solution between
-``__call__`` and return, so one object must not be solved from two threads at once
-(one model per thread).
+each call; its owner (one call of the filter, or the caller's ``programs`` dict, never the
+model) reuses it step after step. A program holds its parameter values and solution between
+``__call__`` and return, so one object must not be solved from two threads at once.
 """
 
 from __future__ import annotations

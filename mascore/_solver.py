@@ -10,7 +10,6 @@ default is :data:`SOLVER_OPTIONS`.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Mapping
 from typing import Any
 
@@ -91,13 +90,17 @@ def solve(problem: cp.Problem, what: str, options: Mapping[str, Any] | None = No
     if not isinstance(what, str):
         raise TypeError(f"what must be a string naming the program; got {type(what).__name__}")
     opts = solver_options(options)
+    # problem.solve in its public steps, deciding from the status instead of cvxpy's warning (so that no
+    # process-wide warning filter is touched): compile (cached by cvxpy for a parametrized program), solve, invert
+    data, chain, inverse = problem.get_problem_data(SOLVER, solver_opts=opts)
     try:
-        with warnings.catch_warnings():  # the status is checked below and reported in a SolverError
-            warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-            value = problem.solve(solver=SOLVER, **opts)
+        solution = chain.invert(chain.solve_via_data(problem, data, True, False, opts), inverse)
     except cp.error.SolverError as exc:
         raise SolverError(f"{what}: the solver {SOLVER} failed: {exc}") from exc
-    return optimal_value(what, problem.status, value)
+    if solution.status in cp.settings.ERROR:
+        raise SolverError(f"{what}: the solver {SOLVER} failed (status {solution.status!r})")
+    problem.unpack(solution)  # status, value and variables, as problem.solve leaves them (infeasible included)
+    return optimal_value(what, problem.status, problem.value)
 
 
 def optimal_value(what: str, status: str, value: float | None) -> float:

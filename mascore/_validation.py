@@ -6,6 +6,7 @@ what was expected, so that bad input never travels on into NaNs.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -18,6 +19,8 @@ __all__ = [
     "graph_adjacency",
     "finite_result",
     "frozen_copy",
+    "Frozen",
+    "state_view",
     "require_finite",
     "symmetric_part",
     "check_adjacency",
@@ -28,6 +31,7 @@ __all__ = [
     "check_positive_int",
     "check_seed",
     "check_steps",
+    "check_budget",
     "check_probability",
     "check_square",
 ]
@@ -37,6 +41,10 @@ SYMMETRY_RTOL = 1e-8
 
 #: Most time steps one simulation call accepts (a larger request is refused, not run).
 MAX_STEPS = 10_000_000
+
+#: Most elementary steps (steps x runs x repeats x agents) one call accepts: a larger request would run
+#: for days, so it is refused before any work starts.
+STEP_BUDGET = 10**9
 
 
 def as_vector(x: ArrayLike, name: str, size: int | None = None) -> np.ndarray:
@@ -198,6 +206,18 @@ def check_steps(n_steps: object, name: str = "n_steps") -> int:
     if n_steps > MAX_STEPS:
         raise ValueError(f"{name} = {n_steps} is more than MAX_STEPS = {MAX_STEPS}; run fewer steps (in chunks)")
     return n_steps
+
+
+def check_budget(name: str, *counts: float, budget: float = STEP_BUDGET, what: str = "steps") -> None:
+    """Refuse up front (``ValueError`` naming `name`) a request of more than `budget` elementary `what`.
+
+    `counts` are the factors of the request (e.g. steps, runs, repeats), already checked one by one;
+    their product must not exceed `budget` (:data:`STEP_BUDGET`).
+    """
+    total = math.prod(float(c) for c in counts)
+    if not math.isfinite(total) or total > budget:
+        raise ValueError(f"{name} asks for too much work: {total:.3g} {what} in one call, more than the budget of "
+                         f"{budget:.3g}; ask for fewer (or split the work into several calls)")
 
 
 def check_positive(x: object, name: str, unit: str = "", allow_zero: bool = False) -> float:
@@ -398,14 +418,85 @@ def symmetric_part(M: np.ndarray) -> np.ndarray:
     return 0.5 * (M + np.swapaxes(M, -1, -2))
 
 
-def frozen_copy(arr: ArrayLike) -> np.ndarray:
-    """A read-only float copy of `arr`: what a checked model stores, so no later change slips past its check.
+def frozen_copy(arr: ArrayLike, dtype: type = float) -> np.ndarray:
+    """A read-only copy of `arr` (float by default): what a checked model stores, so no later change slips past
+    its check.
 
-    The copy is returned as a view of read-only memory, so its ``writeable`` flag cannot be set back.
+    The copy lives in an immutable ``bytes`` buffer: neither it nor any array along its ``.base``
+    chain can be made writeable again (``setflags(write=True)`` raises on each).
     """
-    out = np.array(arr, dtype=float, copy=True)
-    out.setflags(write=False)
-    return out.view()
+    arr = np.asarray(arr, dtype=dtype)
+    return np.frombuffer(arr.tobytes(), dtype=arr.dtype).reshape(arr.shape)
+
+
+def state_view(obj: object, name: str, fields: dict[str, str]) -> np.ndarray:
+    """A read-only view of the state array `name` of a filter `obj` (``fields`` maps names to attributes).
+
+    What a filter's ``view(name)`` returns: no copy, but the next step may overwrite it.
+    """
+    if name not in fields:
+        raise ValueError(f"name must be one of {tuple(fields)}; got {name!r}")
+    view = getattr(obj, fields[name]).view()
+    view.flags.writeable = False
+    return view
+
+
+def _same(a: object, b: object) -> bool:
+    """``a == b`` for the constructor arguments of a :class:`Frozen` (arrays by shape and value)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.shape(a) == np.shape(b) and bool(np.array_equal(a, b))
+    if isinstance(a, tuple) and isinstance(b, tuple):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    return bool(a == b)
+
+
+class Frozen:
+    """Base of every checked model and value object: set once in the constructor, never again.
+
+    A subclass checks its arguments in ``__init__`` (or a dataclass's ``__post_init__``), stores
+    them with :meth:`_set` (arrays through :func:`frozen_copy`) and says in :meth:`_args` which
+    constructor arguments rebuild it (a frozen dataclass: its ``init`` fields, by default). Then:
+    setting or deleting an attribute raises ``AttributeError`` naming it; pickle, ``copy.copy`` and
+    ``copy.deepcopy`` rebuild through the constructor (so the copy is checked and frozen too); two
+    objects are ``==`` when they are of one type built from equal arguments.
+    """
+
+    __slots__ = ()
+
+    def __setattr__(self, name: str, value: object) -> None:
+        raise AttributeError(f"a {type(self).__name__} is frozen: cannot set {name!r} (build a new one)")
+
+    def __delattr__(self, name: str) -> None:
+        raise AttributeError(f"a {type(self).__name__} is frozen: cannot delete {name!r}")
+
+    def _set(self, **values: object) -> None:
+        """Store attributes (constructor only)."""
+        for name, value in values.items():
+            object.__setattr__(self, name, value)
+
+    def _args(self) -> tuple:
+        """The constructor's positional arguments that rebuild this object (pickle, copy, ``==``)."""
+        return tuple(getattr(self, f.name) for f in dataclasses.fields(self) if f.init)  # type: ignore[arg-type]
+
+    def __reduce__(self) -> tuple:
+        return (type(self), self._args())
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return other is self or _same(self.__reduce__()[1], other.__reduce__()[1])
+
+    def __hash__(self) -> int:  # consistent with ==: arrays enter by shape, hashable values by value
+        return hash((type(self), *map(_hash_key, self.__reduce__()[1])))
+
+
+def _hash_key(a: object) -> object:
+    if isinstance(a, np.ndarray):
+        return a.shape
+    try:
+        return hash(a)
+    except TypeError:
+        return None
 
 
 def available_memory_bytes() -> int:

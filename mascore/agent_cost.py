@@ -44,7 +44,7 @@ import numpy as np
 
 from . import distributed_kf as dkf
 from . import estimation, fusion, kalman, rendezvous, set_membership
-from ._validation import check_positive_int
+from ._validation import check_budget, check_positive_int
 from .compare.benchmark import SETTINGS, BenchmarkSettings, check_n_agents
 from .compare.target import localization_model, target_model
 from .compare.team import make_estimator, team_setup
@@ -83,6 +83,9 @@ MAX_AGENTS = {
     ("team", "song-eb"): (32, "its joint covariance of all agents' team estimates holds (2 N^2)^2 floats (per "
                               "axis): 0.5 GB at N = 64, 8.6 GB at 128"),
 }
+
+#: Longest timing (s of CPU, repeats x min_time) :func:`agent_step_cost` accepts.
+_MAX_TIMING_S = 3600.0
 
 #: Leading-order work and memory of one team-task agent per step (n = 4 the state size; d the degree, N the team
 #: size); those of the target and localization tasks are their specs' orders (:data:`AGENT_ORDER`).
@@ -284,9 +287,9 @@ def _team_step(method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> 
             filt.update(Z, S)
             if method == "centralized":
                 filt.predict(U)
-                return filt.x_hat, filt.P
+                return filt.view("x_hat"), filt.view("P")
             filt.predict()
-            return filt.X_hat, filt.Sigma
+            return filt.view("X_hat"), filt.view("Sigma")
 
         return AgentStep("team", method, N, i, len(nbrs), "whole filter", run)
 
@@ -492,6 +495,10 @@ def agent_step_cost(task: str, method: str, n_agents: int, *, repeats: int = 7, 
     repeats = check_positive_int(repeats, "repeats")
     if not (isinstance(min_time, (int, float)) and np.isfinite(min_time) and min_time >= 0):
         raise ValueError(f"min_time must be a finite number of seconds >= 0; got {min_time!r}")
+    if repeats * min_time > _MAX_TIMING_S:
+        raise ValueError(f"min_time: repeats x min_time = {repeats * min_time:.3g} s of timing is more than an hour "
+                         f"({_MAX_TIMING_S:g} s); ask for fewer repeats or a shorter min_time")
+    check_budget("repeats", repeats, what="timed repeats")
     step = agent_step(task, method, n_agents, agent=agent, seed=seed, settings=settings)
     with _one_thread():
         tic = time.thread_time()
@@ -724,6 +731,8 @@ def slopes(table, top: int | None = None):
     """
     import pandas as pd
 
+    if top is not None and check_positive_int(top, "top") < 2:
+        raise ValueError(f"top must be at least 2 (a slope needs two team sizes); got {top!r}")
     out = {}
     for (task, method), g in table.groupby(["task", "method"], sort=False):
         g = g.dropna(subset=["us_per_step"]).sort_values("n_agents")

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_matrix, check_positive, check_positive_int, check_square
+from ._validation import Frozen, as_matrix, check_positive, check_positive_int, check_square, frozen_copy
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 
@@ -20,14 +20,17 @@ __all__ = [
     "LTIAgent",
     "double_integrator",
     "zoh",
+    "is_system",
+    "system_matrices",
+    "check_sampling_time",
     "team_matrices",
     "team_state",
     "agent_states",
 ]
 
 
-@dataclass(frozen=True)
-class LTIAgent:
+@dataclass(frozen=True, eq=False)
+class LTIAgent(Frozen):
     """A discrete-time linear agent ``x[k+1] = A x[k] + B u[k]``.
 
     Parameters
@@ -68,14 +71,15 @@ class LTIAgent:
     B_c: np.ndarray | None = None
 
     def __post_init__(self) -> None:
+        if _sampled_with(self.A) is not None:
+            object.__setattr__(self, "dt", check_sampling_time(self.A, self.dt))
         A = check_square(_float_array(self.A, "A"), "A")
         if A.shape[0] == 0:
             raise ValueError("A must be at least 1 x 1 (an agent with no state)")
         B = as_matrix(_float_array(self.B, "B"), "B", (A.shape[0], None))
-        object.__setattr__(self, "A", A)
-        object.__setattr__(self, "B", B)
+        self._set(A=frozen_copy(A), B=frozen_copy(B))
         if self.dt is not None:
-            object.__setattr__(self, "dt", check_positive(self.dt, "dt", "seconds (the sampling time)"))
+            self._set(dt=check_positive(self.dt, "dt", "seconds (the sampling time)"))
         if (self.A_c is None) != (self.B_c is None):
             raise ValueError("give both A_c and B_c (the continuous-time agent), or neither")
         if self.A_c is not None:
@@ -91,8 +95,8 @@ class LTIAgent:
                         f"(largest difference {float(np.abs(given - sampled).max()):.3g}): the time base contradicts "
                         f"the matrices; use LTIAgent.from_continuous(A_c, B_c, dt)"
                     )
-            object.__setattr__(self, "A_c", A_c)
-            object.__setattr__(self, "B_c", B_c)
+            self._set(A_c=frozen_copy(A_c), B_c=frozen_copy(B_c))
+            self._set(A=_SampledMatrix.tag(A, self.dt))  # so a later contradicting dt is caught
 
     @classmethod
     def from_continuous(cls, A_c: ArrayLike, B_c: ArrayLike, dt: float) -> LTIAgent:
@@ -264,7 +268,8 @@ def double_integrator(n: int, dt: float) -> LTIAgent:
     Returns
     -------
     LTIAgent
-        ``2n`` states, ``n`` inputs, carrying `dt`.
+        ``2n`` states, ``n`` inputs, carrying `dt` and both time bases: the sampled
+        ``(A, B)`` and the continuous ``A_c = [[0, I], [0, 0]]``, ``B_c = [[0], [I]]``.
 
     Examples
     --------
@@ -276,13 +281,18 @@ def double_integrator(n: int, dt: float) -> LTIAgent:
     >>> agent.B
     array([[0.005],
            [0.1  ]])
+    >>> agent.A_c                                          # the continuous-time agent it samples
+    array([[0., 1.],
+           [0., 0.]])
     """
     n = check_positive_int(n, "n")
     check_positive(dt, "dt", "seconds (the sampling time)")
-    eye = np.eye(n)
-    A = np.block([[eye, dt * eye], [np.zeros((n, n)), eye]])
+    eye, zero = np.eye(n), np.zeros((n, n))
+    A = np.block([[eye, dt * eye], [zero, eye]])
     B = np.vstack([0.5 * dt**2 * eye, dt * eye])
-    return LTIAgent(A, B, dt=float(dt))
+    A_c = np.block([[zero, eye], [zero, zero]])
+    B_c = np.vstack([zero, eye])
+    return LTIAgent(A, B, dt=float(dt), A_c=A_c, B_c=B_c)
 
 
 def team_matrices(A: ArrayLike, B: ArrayLike, n_agents: int) -> tuple[np.ndarray, np.ndarray]:
@@ -378,3 +388,204 @@ def agent_states(team: ArrayLike, n_states: int) -> np.ndarray:
             f"team state length {X.shape[-1]} is not a multiple of n_states={n_states}"
         )
     return X.reshape(*X.shape[:-1], X.shape[-1] // n_states, n_states)
+
+
+def is_system(obj: object) -> bool:
+    """Whether `obj` is a system a design function takes in place of ``(A, B)``.
+
+    An :class:`LTIAgent`, or any object with ``A``, ``B`` and ``dt`` (python-control's
+    ``StateSpace``, duck-typed: no import needed); not an array.
+
+    Parameters
+    ----------
+    obj : object
+        Anything.
+
+    Returns
+    -------
+    bool
+        True for a system (read it with :func:`system_matrices`).
+
+    Examples
+    --------
+    >>> from mascore import agents
+    >>> agents.is_system(agents.double_integrator(1, 0.1)), agents.is_system([[1.0]])
+    (True, False)
+    """
+    if isinstance(obj, LTIAgent):
+        return True
+    return not isinstance(obj, np.ndarray) and all(hasattr(obj, name) for name in ("A", "B", "dt"))
+
+
+def system_matrices(system: object, time: str | None = None, name: str = "sys",
+                    needed_by: str = "") -> tuple[np.ndarray, np.ndarray, float | bool]:
+    """``(A, B, dt)`` of a linear system given as an :class:`LTIAgent` or a python-control ``StateSpace``.
+
+    One notion of a system for every design function: an :class:`LTIAgent` (discrete,
+    and continuous too when it carries ``A_c, B_c``) or any object with ``A``, ``B``
+    and ``dt`` (python-control's ``StateSpace``: ``dt`` 0 or None is continuous time,
+    ``dt > 0`` or True discrete). The time base is checked against what the caller
+    expects, and a ``dt`` that is negative, NaN or infinite is refused by name.
+
+    Parameters
+    ----------
+    system : LTIAgent or StateSpace
+        The system.
+    time : {"continuous", "discrete"}, optional
+        The time base the caller needs (default: the system's own). An
+        :class:`LTIAgent` built with :meth:`LTIAgent.from_continuous` (or
+        :func:`double_integrator`) gives either.
+    name : str
+        The argument's name in error messages.
+    needed_by : str
+        What needs that time base, for the error message (e.g. ``"top_down_lqr"``).
+
+    Returns
+    -------
+    A : (n, n) ndarray
+        State matrix (1/s in continuous time, per step in discrete time).
+    B : (n, m) ndarray
+        Input matrix.
+    dt : float or True
+        0.0 for continuous time; the sampling time (s), or True when a discrete
+        ``StateSpace`` leaves it unspecified.
+
+    Raises
+    ------
+    TypeError
+        `system` is neither an :class:`LTIAgent` nor a state-space object.
+    ValueError
+        A bad ``dt``, or a system in the other time base (the message says how to convert).
+
+    Examples
+    --------
+    >>> from mascore import agents
+    >>> agent = agents.double_integrator(1, 0.1)
+    >>> A, B, dt = agents.system_matrices(agent, "continuous")
+    >>> A.tolist(), dt
+    ([[0.0, 1.0], [0.0, 0.0]], 0.0)
+    >>> agents.system_matrices(agent, "discrete")[2]
+    0.1
+    """
+    if time not in (None, "continuous", "discrete"):
+        raise ValueError(f"time must be 'continuous', 'discrete' or None; got {time!r}")
+    who = f" ({needed_by} needs {time} time)" if needed_by and time else ""
+    if isinstance(system, LTIAgent):
+        if time == "continuous":
+            if system.A_c is None:
+                raise ValueError(
+                    f"{name} is a discrete-time LTIAgent without its continuous-time matrices{who}; build it "
+                    f"with LTIAgent.from_continuous(A_c, B_c, dt) so that it carries both, or pass (A_c, B_c)")
+            return system.A_c, system.B_c, 0.0
+        return system.A, system.B, (system.dt if system.dt is not None else True)
+    if isinstance(system, np.ndarray) or not all(hasattr(system, a) for a in ("A", "B", "dt")):
+        raise TypeError(f"{name} must be an LTIAgent or a state-space system with A, B and dt (a python-control "
+                        f"StateSpace); got {type(system).__name__}")
+    dt = system.dt
+    if dt is None or (dt is not True and isinstance(dt, (int, float, np.integer, np.floating))
+                      and not isinstance(dt, bool) and dt == 0):
+        dt = 0.0
+    elif dt is not True:
+        if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)) or not (
+                np.isfinite(dt) and dt > 0):
+            raise ValueError(f"{name}.dt must be 0 or None (continuous time), True or a finite sampling time > 0 s "
+                             f"(discrete time); got {dt!r}")
+        dt = float(dt)
+    A = check_square(_finite(_float_array(system.A, f"{name}.A"), f"{name}.A"), f"{name}.A")
+    B = as_matrix(_finite(_float_array(system.B, f"{name}.B"), f"{name}.B"), f"{name}.B", (A.shape[0], None))
+    if time == "continuous" and dt != 0:
+        raise ValueError(f"{name} is a discrete-time system (dt = {dt!r}){who}; pass the continuous-time system "
+                         f"(before control.c2d), or an LTIAgent built with LTIAgent.from_continuous")
+    if time == "discrete" and dt == 0:
+        raise ValueError(f"{name} is a continuous-time system (dt = 0){who}; sample it first: control.c2d(sys, dt) "
+                         f"or LTIAgent.from_continuous(sys.A, sys.B, dt)")
+    return A, B, dt
+
+
+def check_sampling_time(A: ArrayLike, dt: float | None = None, name: str = "dt") -> float | None:
+    """The sampling time of a model built on `A`: `dt`, checked against the one `A` was sampled with.
+
+    The ``A`` of an agent that carries its continuous-time matrices (built by
+    :meth:`LTIAgent.from_continuous` or :func:`double_integrator`) remembers the `dt` it
+    was sampled with; a `dt` that contradicts it is refused (the time axis would be
+    wrong), and a missing `dt` is taken from it. Arrays computed from such an ``A``
+    (products, copies, slices) carry nothing, and then `dt` is returned as given.
+
+    Parameters
+    ----------
+    A : (m, m) array_like
+        State matrix, finite.
+    dt : float, optional
+        The sampling time (s) the caller was given, if any.
+    name : str
+        Its name in error messages.
+
+    Returns
+    -------
+    float or None
+        The sampling time to use.
+
+    Raises
+    ------
+    ValueError
+        A `dt` that contradicts ``A``, a bad `dt`, or a non-finite or non-square ``A``.
+
+    Examples
+    --------
+    >>> from mascore import agents
+    >>> A = agents.double_integrator(2, 0.05).A
+    >>> agents.check_sampling_time(A, None)
+    0.05
+    >>> agents.check_sampling_time(A, 0.1)                   # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+        ...
+    ValueError: dt = 0.1 s contradicts A, which was sampled over dt = 0.05 s (LTIAgent.from_continuous); ...
+    """
+    tagged = _sampled_with(A)
+    check_square(_finite(_float_array(A, "A"), "A"), "A")
+    if dt is not None:
+        dt = check_positive(dt, name, "seconds (the sampling time)")
+    if tagged is None:
+        return dt
+    if dt is None:
+        return tagged
+    if not np.isclose(dt, tagged, rtol=1e-9, atol=0):
+        raise ValueError(f"{name} = {dt!r} s contradicts A, which was sampled over dt = {tagged:g} s "
+                         f"(LTIAgent.from_continuous); pass {name} = {tagged:g}, or sample the continuous agent again "
+                         f"with LTIAgent.from_continuous(A_c, B_c, {dt!r})")
+    return dt
+
+
+def _sampled_with(A: object) -> float | None:
+    """The sampling time (s) remembered by a state matrix of :meth:`LTIAgent.from_continuous`, else None."""
+    return getattr(A, "_sampled_dt", None) if isinstance(A, _SampledMatrix) else None
+
+
+class _SampledMatrix(np.ndarray):
+    """A read-only state matrix that remembers its sampling time (see :func:`check_sampling_time`)."""
+
+    _sampled_dt: float | None = None
+
+    @classmethod
+    def tag(cls, A: np.ndarray, dt: float) -> np.ndarray:
+        out = np.array(A, dtype=float)
+        out.setflags(write=False)
+        view = out.view(cls)
+        view._sampled_dt = float(dt)
+        return view
+
+    def __array_finalize__(self, obj: object) -> None:
+        self._sampled_dt = None  # derived arrays (slices, copies, transposes) do not carry the tag
+
+    def __array_wrap__(self, arr, context=None, return_scalar=False):
+        arr = np.asarray(arr)  # results of arithmetic are plain arrays
+        return arr[()] if return_scalar else arr
+
+    def __reduce__(self):
+        return (np.array, (np.asarray(self),))
+
+    def __repr__(self) -> str:
+        return repr(np.asarray(self))
+
+    def __str__(self) -> str:
+        return str(np.asarray(self))

@@ -79,11 +79,13 @@ from scipy.integrate import solve_ivp
 
 from ._validation import (
     MAX_STEPS,
+    Frozen,
     check_covariance,
     check_generator,
     check_positive,
     check_positive_int,
     check_steps,
+    frozen_copy,
     symmetric_part,
 )
 from ._validation import float_array as _float_array
@@ -169,8 +171,8 @@ class ConsensusResult:
         return self.xi[-1].mean(axis=-1 if self.scalar else -2)
 
 
-@dataclass(frozen=True)
-class SwitchingTopology:
+@dataclass(frozen=True, eq=False)
+class SwitchingTopology(Frozen):
     """A piecewise-constant topology ``G(t)`` for continuous-time consensus.
 
     Graph ``graphs[k]`` is active on ``[times[k], times[k+1])``; the last one
@@ -206,8 +208,7 @@ class SwitchingTopology:
             raise ValueError("times must be finite and strictly increasing")
         if graphs.ndim != 3:
             raise ValueError(f"graphs must have shape (S, n, n) (one graph per switching time); got {graphs.shape}")
-        object.__setattr__(self, "times", times)
-        object.__setattr__(self, "graphs", graphs)
+        self._set(times=frozen_copy(times), graphs=frozen_copy(graphs))
 
     @property
     def n_agents(self) -> int:

@@ -78,11 +78,13 @@ from ._flocking_core import float_array as _float_array
 from ._progress import progress_bar
 from ._validation import (
     SYMMETRY_RTOL,
+    Frozen,
     check_covariance,
     check_generator,
     check_positive_int,
     finite_result,
     frozen_copy,
+    state_view,
 )
 from .flocking import FlockingRun
 from .graphs import proximity_graph
@@ -101,7 +103,7 @@ __all__ = [
 ]
 
 
-class EKFModel:
+class EKFModel(Frozen):
     """The constant data of the agents' EKFs, checked once: team size, ``dt``, gains, ``I_N kron Q``, ``R``.
 
     The constructor checks every argument (``dt > 0``, a :class:`~mascore.flocking.FlockingGains`,
@@ -174,15 +176,11 @@ class EKFModel:
         m = M // N
         if Q is not None:
             Qb = _block_diagonal(Q, N, m)
-        put = object.__setattr__
-        for name, value in (("n_agents", N), ("state_dim", m), ("dt", dt), ("gains", gains),
-                            ("Q_team", None if Q is None else frozen_copy(Q)),
-                            ("R", None if R is None else frozen_copy(R)),
-                            ("Q_blocks", None if Qb is None else frozen_copy(Qb))):
-            put(self, name, value)
+        self._set(n_agents=N, state_dim=m, dt=dt, gains=gains, Q_team=None if Q is None else frozen_copy(Q),
+                  R=None if R is None else frozen_copy(R), Q_blocks=None if Qb is None else frozen_copy(Qb))
 
-    def __setattr__(self, name, value):
-        raise AttributeError(f"EKFModel is frozen: build a new model instead of setting {name}")
+    def _args(self) -> tuple:
+        return (self.n_agents, self.dt, self.gains, self.Q_team, self.R, self.state_dim)
 
     def __repr__(self) -> str:
         return (f"EKFModel(n_agents={self.n_agents}, state_dim={self.state_dim}, dt={self.dt!r}, "
@@ -251,8 +249,8 @@ class FlockingEKF:
     -----
     No state is shared between filters, so independent filters run in parallel threads.
     One filter object is not for concurrent use: its state and work arrays change at
-    every call. :attr:`X_hat` and :attr:`Sigma` are read-only views of the filter's state,
-    changed by the next call (copy them to keep them); on an error the state is undefined.
+    every call. :attr:`X_hat` and :attr:`Sigma` are copies of the filter's state (:meth:`view` gives a
+    read-only view, changed by the next call); on an error the state is undefined.
 
     Examples
     --------
@@ -303,15 +301,39 @@ class FlockingEKF:
 
     @property
     def X_hat(self) -> np.ndarray:
-        """``(..., N, 2n)`` current estimates (read-only; predicted after :meth:`step` or :meth:`predict`)."""
-        return self._X
+        """``(..., N, 2n)`` current estimates (a copy; predicted after :meth:`step` or :meth:`predict`)."""
+        return self._X.copy()
 
     @property
     def Sigma(self) -> np.ndarray:
-        """``(..., 2nN, 2nN)`` current covariances (a read-only view, overwritten by the next call)."""
-        view = self._P.view()
-        view.flags.writeable = False
-        return view
+        """``(..., 2nN, 2nN)`` current covariances (a copy; :meth:`view` gives the filter's own array)."""
+        return self._P.copy()
+
+    def view(self, name: str) -> np.ndarray:
+        """The filter's own state array `name`, read-only and not copied (the fast read in a loop).
+
+        Parameters
+        ----------
+        name : {"X_hat", "Sigma"}
+            The state, as the property of that name.
+
+        Returns
+        -------
+        ndarray
+            A read-only view: the next call may replace or overwrite it in place (copy it to keep it).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import distributed_ekf as dekf
+        >>> from mascore.flocking import FlockingGains
+        >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+        >>> ekf = dekf.FlockingEKF(dekf.EKFModel(2, 0.1, gains, 0.01 * np.eye(8), np.eye(8)), np.zeros((2, 4)),
+        ...                        np.eye(8))
+        >>> ekf.view("Sigma").shape, ekf.view("Sigma").flags.writeable
+        ((8, 8), False)
+        """
+        return state_view(self, name, {"X_hat": "_X", "Sigma": "_P"})
 
     def update(self, z: ArrayLike, observed: ArrayLike) -> np.ndarray:
         """Kalman update with the states of the `observed` agents, eqs. (16)-(20), in place.
@@ -448,6 +470,9 @@ class FlockingEKF:
                     or not posterior_out.flags.writeable):
                 raise ValueError(f"posterior_out must be a writeable array of shape {self._P.shape}")
         own = np.arange(K) % N  # filter k is agent k % N's
+        if not obs[np.arange(K), own].all():
+            raise ValueError("observed must include every agent itself (observed[..., i, i] True): agent i's "
+                             "closed neighbourhood holds i, whose own state its control uses (eq. (39))")
         X_post, diag = np.empty(X.shape), np.empty((K, M))
         U, X_next = (np.empty((K, n)), np.empty(X.shape)) if predict else (None, None)
         scale = 0.5 if predict else 1.0  # the prediction starts from Sigma_post / 2
@@ -893,7 +918,7 @@ def simulate_estimation_based_flocking(
         X = _core.propagate(X, U, dt) + rng.standard_normal((*batch, N, m)) @ Lq.T  # eq. (1)
         _core.check_divergence(X, k + 1, dt)
         _core.check_divergence(X_next, k + 1, dt, "estimate")
-        _core.check_divergence(np.sqrt(np.abs(np.diagonal(ekf.Sigma, axis1=-2, axis2=-1))), k + 1, dt,
+        _core.check_divergence(np.sqrt(np.abs(np.diagonal(ekf.view("Sigma"), axis1=-2, axis2=-1))), k + 1, dt,
                                "estimated std")
     t = dt * np.arange(n_steps + 1)
     mv = lambda a, nd: np.moveaxis(a, 0, a.ndim - nd - 1)  # noqa: E731  (put time after the batch axes)

@@ -72,7 +72,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._masked_gain import masked_gain, observed_indices
+from ._systems import design_args, full_state_only
 from ._validation import (
+    Frozen,
     as_matrix,
     check_covariance,
     check_laplacian,
@@ -81,6 +83,7 @@ from ._validation import (
     check_square,
     finite_result,
     frozen_copy,
+    state_view,
     symmetric_part,
 )
 from ._validation import float_array as _float_array
@@ -125,8 +128,8 @@ __all__ = [
 # ----------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class TeamFilterModel:
+@dataclass(frozen=True, eq=False)
+class TeamFilterModel(Frozen):
     """What every agent knows (Assumption 1): ``A``, ``BK``, ``Q``, ``R``, checked once when built.
 
     Build it with :func:`team_filter_model` (which also finds the Kronecker factor) or
@@ -202,20 +205,14 @@ class TeamFilterModel:
         kron = check_positive_int(self.kron, "kron")
         if m % kron:
             raise ValueError(f"kron must divide the agent state size m = {m}; got kron={kron}")
-        full = {"A": _read_only(A), "BK": _read_only(BK), "Q": _read_only(Q), "R": _read_only(R)}
+        full = {"A": frozen_copy(A), "BK": frozen_copy(BK), "Q": frozen_copy(Q), "R": frozen_copy(R)}
         for name, M in full.items():
             red = _kron_factor(M, kron)
             if red is None:
                 raise ValueError(f"{name} is not of the form {name}_r ⊗ I_{kron} (kron={kron}); "
                                  "build the model with team_filter_model, which finds the factor")
-            object.__setattr__(self, name, M)
-            object.__setattr__(self, f"{name}_r", red)  # a view of the read-only copy: read-only too
-        object.__setattr__(self, "n_agents", n_agents)
-        object.__setattr__(self, "kron", kron)
-
-    def __reduce__(self) -> tuple:
-        # pickle and copy rebuild through the constructor: the copy is checked and read-only too
-        return (type(self), (self.A, self.BK, self.Q, self.R, self.n_agents, self.kron))
+            self._set(**{name: M, f"{name}_r": red})  # a view of the read-only copy: read-only too
+        self._set(n_agents=n_agents, kron=kron)
 
     @property
     def m(self) -> int:
@@ -235,21 +232,23 @@ class TeamFilterModel:
 
 def team_filter_model(
     A: ArrayLike,
-    B: ArrayLike,
-    K: ArrayLike,
-    Q: ArrayLike,
-    R: ArrayLike,
-    n_agents: int,
+    B: ArrayLike | None = None,
+    K: ArrayLike | None = None,
+    Q: ArrayLike | None = None,
+    R: ArrayLike | None = None,
+    n_agents: int | None = None,
     reduce: bool = True,
 ) -> TeamFilterModel:
     """Validate the team model and find its Kronecker factor.
 
     Parameters
     ----------
-    A : (m, m) array_like
-        Agent transition matrix (eq. (1)).
-    B : (m, p) array_like
-        Agent input matrix.
+    A : (m, m) array_like, or LTIAgent or StateSpace
+        Agent transition matrix (eq. (1)), or the discrete-time agent as a system (an
+        :class:`~mascore.agents.LTIAgent` or a discrete python-control ``StateSpace``), then
+        without B: ``team_filter_model(agent, K, Q, R, n_agents)``.
+    B : (m, p) array_like, optional
+        Agent input matrix (not with a system).
     K : (p, m) array_like
         Consensus gain of eq. (4).
     Q : (m, m) array_like
@@ -279,6 +278,8 @@ def team_filter_model(
     >>> model.kron, model.M_r                                   # the recursions run on one axis
     (2, 10)
     """
+    A, B, (K, Q, R, n_agents), _ = design_args("team_filter_model", A, B, dict(K=K, Q=Q, R=R, n_agents=n_agents), None,
+                                               time="discrete")
     A = check_square(_float_array(A, "A"), "A")
     m = A.shape[0]
     if m == 0:
@@ -288,6 +289,9 @@ def team_filter_model(
     Q = check_covariance(_float_array(Q, "Q"), "Q", size=m)
     n_agents = check_positive_int(n_agents, "n_agents", minimum=2)
     _check_flag(reduce, "reduce")
+    R_arr = _float_array(R, "R")
+    if R_arr.ndim == 2 and R_arr.shape[0] == R_arr.shape[1] and 0 < R_arr.shape[0] < m:  # partial sensing
+        raise ValueError(full_state_only(m, R_arr.shape))
     R_team = team_noise_covariance(R, n_agents, m)
     check_covariance(R_team, "R", definite=True)
     BK = B @ K
@@ -337,11 +341,6 @@ def closed_loop_matrices(A: ArrayLike, BK: ArrayLike, laplacian: ArrayLike) -> t
     L = check_laplacian(_float_array(laplacian, "laplacian"), "laplacian")
     if L.shape[0] == 0 or A.shape[0] == 0:
         raise ValueError(f"laplacian and A must be at least 1 x 1; got {L.shape} and {A.shape}")
-    return _closed_loop_matrices(A, BK, L)
-
-
-def _closed_loop_matrices(A: np.ndarray, BK: np.ndarray, L: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`closed_loop_matrices` without checks."""
     N, m = L.shape[0], A.shape[0]
     F1 = np.kron(np.eye(N), A) - np.kron(L, BK)
     Lp = np.zeros((m * N, m * N * N))
@@ -979,7 +978,7 @@ class TeamFilter:
         if exact_control_noise and mode != "mb":
             raise ValueError("exact_control_noise applies to the measurement-based loop (mode='mb') only")
         N, m, Mr = model.n_agents, model.m, model.M_r
-        L = _check_laplacian(laplacian, N)
+        L = _check_laplacian(laplacian, N, undirected=True)
         X = _float_array(x_hat0, "x_hat0")
         if X.ndim == 2 and X.shape[1] == N * m:
             X = np.broadcast_to(X.reshape(X.shape[0], 1, N, m), (X.shape[0], N, N, m))
@@ -1042,22 +1041,48 @@ class TeamFilter:
 
     @property
     def X_hat(self) -> np.ndarray:
-        """Every agent's team estimate, ``(runs, N, N, m)`` (a read-only view, replaced by the next step)."""
-        return _view(self._X)
+        """Every agent's team estimate, ``(runs, N, N, m)`` (a copy; :meth:`view` gives the filter's own array)."""
+        return self._X.copy()
 
     @property
     def Sigma(self) -> np.ndarray:
         """The reduced covariance: ``(batch, N M_r, N M_r)`` (``"eb"``) or ``(batch, N, M_r, M_r)`` (``"mb"``).
 
-        A read-only view of the filter's own array, which the next step may overwrite in
-        place: copy it to keep it.
+        A copy, unchanged by later steps; :meth:`view` gives the filter's own array without copying.
         """
-        return _view(self._Sig)
+        return self._Sig.copy()
 
     @property
     def KH(self) -> np.ndarray:
-        """Reduced ``G_i H_i`` of the last update, ``(batch, N, M_r, M_r)`` (zero before the first update)."""
-        return _view(self._KH)
+        """Reduced ``G_i H_i`` of the last update, ``(batch, N, M_r, M_r)`` (zero before the first update; a copy)."""
+        return self._KH.copy()
+
+    def view(self, name: str) -> np.ndarray:
+        """The filter's own state array `name`, read-only and not copied (the fast read in a loop).
+
+        Parameters
+        ----------
+        name : {"X_hat", "Sigma", "KH"}
+            The state, as the property of that name.
+
+        Returns
+        -------
+        ndarray
+            A read-only view: the next step may overwrite it in place (copy it to keep it).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2))
+        >>> filt.view("Sigma").flags.writeable, np.array_equal(filt.view("Sigma"), filt.Sigma)
+        (False, True)
+        """
+        return state_view(self, name, {"X_hat": "_X", "Sigma": "_Sig", "KH": "_KH"})
 
     def agent_covariances(self) -> np.ndarray:
         """Each agent's own reduced covariance ``Σ̄_i``, ``(batch, N, M_r, M_r)`` (a new array).
@@ -1143,7 +1168,7 @@ class TeamFilter:
         """
         if self._mode != "eb":
             raise ValueError("f2_cross needs the augmented covariance of the estimation-based loop (mode='eb')")
-        L = self._L if laplacian is None else _check_laplacian(laplacian, self._model.n_agents)
+        L = self._L if laplacian is None else _check_laplacian(laplacian, self._model.n_agents, undirected=True)
         _check_batch(L, self._Sig, "laplacian", "Sigma")
         return _f2_cross(self._model, self._Sig, L)
 
@@ -1177,7 +1202,7 @@ class TeamFilter:
         True
         """
         if laplacian is not None:
-            L = _check_laplacian(laplacian, self._model.n_agents)
+            L = _check_laplacian(laplacian, self._model.n_agents, undirected=True)
             if L.shape != self._L.shape or not np.array_equal(L, self._L):
                 _check_batch(L, self._Sig, "laplacian", "Sigma", self._X)
                 self._set_topology(L)
@@ -1515,13 +1540,40 @@ class CentralizedTeamFilter:
 
     @property
     def x_hat(self) -> np.ndarray:
-        """Team estimates ``(runs, N, m)`` (a read-only view, replaced by the next step)."""
-        return _view(self._x)
+        """Team estimates ``(runs, N, m)`` (a copy; :meth:`view` gives the filter's own array)."""
+        return self._x.copy()
 
     @property
     def P(self) -> np.ndarray:
-        """Reduced covariance ``(batch, M_r, M_r)`` (a read-only view, replaced by the next step)."""
-        return _view(self._P)
+        """Reduced covariance ``(batch, M_r, M_r)`` (a copy; :meth:`view` gives the filter's own array)."""
+        return self._P.copy()
+
+    def view(self, name: str) -> np.ndarray:
+        """The filter's own state array `name`, read-only and not copied (the fast read in a loop).
+
+        Parameters
+        ----------
+        name : {"x_hat", "P"}
+            The state, as the property of that name.
+
+        Returns
+        -------
+        ndarray
+            A read-only view, replaced or overwritten by the next step (copy it to keep it).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, rendezvous
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = dkf.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                               0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = dkf.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> central.view("P").shape, central.view("P").flags.writeable
+        ((1, 6, 6), False)
+        """
+        return state_view(self, name, {"x_hat": "_x", "P": "_P"})
 
     def predict(self, U: ArrayLike) -> None:
         """Prediction with the applied inputs.
@@ -1825,7 +1877,7 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
         graph_test = _graph_observability(A, BK, L, S, tol)
         if graph_test is not None:
             return graph_test
-    F1, _ = _closed_loop_matrices(A, BK, L)
+    F1, _ = closed_loop_matrices(A, BK, L)
     out = []
     for row in S:
         H = np.kron(np.eye(row.size)[row], np.eye(m))
@@ -2008,8 +2060,13 @@ def team_nees(model: TeamFilterModel, X_true: ArrayLike, X_hat: ArrayLike, Sigma
 
 def _team_nees(model, X_true, X_hat, Sigma_i):
     """:func:`team_nees` without checks."""
-    e = (X_true[:, None] - X_hat).reshape(X_true.shape[0], model.n_agents, -1)
-    return _lyapunov_v(e, Sigma_i, model.kron)
+    with np.errstate(over="ignore", invalid="ignore"):
+        e = (X_true[:, None] - X_hat).reshape(X_true.shape[0], model.n_agents, -1)
+        out = _lyapunov_v(e, Sigma_i, model.kron)
+    if not np.isfinite(out).all():
+        raise ValueError(f"X_true: the NEES overflows floating point (largest error {float(np.abs(e).max()):.3g}); "
+                         "the true states and the estimates must be of moderate magnitude (rescale the units)")
+    return out
 
 
 def f2_cross(model: TeamFilterModel, Sigma: ArrayLike, laplacian: ArrayLike) -> np.ndarray:
@@ -2053,7 +2110,7 @@ def f2_cross(model: TeamFilterModel, Sigma: ArrayLike, laplacian: ArrayLike) -> 
     """
     model = _check_model(model)
     N, Mr = model.n_agents, model.M_r
-    L = _check_laplacian(laplacian, N)
+    L = _check_laplacian(laplacian, N, undirected=True)
     Sig = _check_covariances(Sigma, "Sigma", (None, N * Mr, N * Mr), kron=model.kron)
     _check_batch(L, Sig, "laplacian", "Sigma")
     return _f2_cross(model, Sig, L)
@@ -2170,18 +2227,6 @@ def _kron_factor(M: np.ndarray, k: int) -> np.ndarray | None:
     return None
 
 
-def _read_only(arr: np.ndarray) -> np.ndarray:
-    """A read-only copy of `arr`, handed out as a view (so its write flag cannot be set back)."""
-    return frozen_copy(arr)[...]
-
-
-def _view(arr: np.ndarray) -> np.ndarray:
-    """A read-only view of a filter's state array."""
-    v = arr.view()
-    v.flags.writeable = False
-    return v
-
-
 def _finite_state(what: str, *arrays: np.ndarray, diagonal_only: bool = False) -> None:
     """:func:`mascore._validation.finite_result` on a step's results (estimates first, covariance second).
 
@@ -2248,11 +2293,13 @@ def _check_batch(L: np.ndarray, Sig: np.ndarray, lname: str, sname: str, X: np.n
         raise ValueError(f"{sname} has batch {Sig.shape[0]} but there are {X.shape[0]} runs")
 
 
-def _check_laplacian(L: ArrayLike, N: int, name: str = "laplacian", any_batch: bool = False) -> np.ndarray:
+def _check_laplacian(L: ArrayLike, N: int, name: str = "laplacian", any_batch: bool = False,
+                     undirected: bool = False) -> np.ndarray:
     """One Laplacian ``(N, N)`` or a batch ``(batch, N, N)`` (``(..., N, N)`` with `any_batch`): finite, rows
     summing to zero, off-diagonal entries <= 0.
 
-    Directed graphs are allowed. An adjacency matrix passed by mistake is named as such.
+    Directed graphs are allowed unless `undirected` (the team filter: Song et al. assume a common sensing
+    range, hence an undirected graph). An adjacency matrix passed by mistake is named as such.
     """
     L = _float_array(L, name)
     if (L.ndim < 2 or (L.ndim > 3 and not any_batch) or L.shape[-2:] != (N, N) or L.size == 0):
@@ -2269,6 +2316,10 @@ def _check_laplacian(L: ArrayLike, N: int, name: str = "laplacian", any_batch: b
             f"{name} must be a graph Laplacian: rows summing to zero and off-diagonal entries <= 0 "
             "(pass mascore.graphs.laplacian(A))"
         )
+    if undirected and np.abs(L - np.swapaxes(L, -1, -2)).max() > tol:
+        raise ValueError(f"{name} must be symmetric (an undirected graph): Song et al.'s team filter assumes that "
+                         f"every agent senses the agents that sense it (a common sensing range, Sec. II); got a "
+                         f"directed Laplacian (symmetrize the adjacency, e.g. A + A.T > 0)")
     return L
 
 
@@ -2403,11 +2454,3 @@ def _observable(F: np.ndarray, H: np.ndarray, tol: float) -> bool:
         blk = blk @ F
     s = np.linalg.svd(np.vstack(blocks), compute_uv=False)
     return int(np.sum(s > tol * s[0])) == n
-
-
-def _orth_rows(M: np.ndarray, tol: float) -> np.ndarray:
-    _, s, Vt = np.linalg.svd(M, full_matrices=False)
-    if s.size == 0:
-        return Vt[:0]
-    rank = int(np.sum(s > tol * max(1.0, s[0])))
-    return Vt[:rank]

@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import (
+    Frozen,
     as_matrix,
     as_vector,
     check_covariance,
@@ -51,6 +52,7 @@ from ._validation import (
     check_positive,
     check_positive_int,
     finite_result,
+    frozen_copy,
 )
 from ._validation import float_array as _float_array
 from .noise import psd_factor, uniform_ellipsoid
@@ -74,8 +76,8 @@ __all__ = [
 ]
 
 
-@dataclass(frozen=True)
-class Ellipsoid:
+@dataclass(frozen=True, eq=False)
+class Ellipsoid(Frozen):
     """The ellipsoid ``E(c, P) = {x : (x - c)^T P^{-1} (x - c) <= 1}``.
 
     Parameters
@@ -102,8 +104,7 @@ class Ellipsoid:
         if P.ndim != 2:
             raise ValueError(f"shape must be a single (n, n) matrix; got shape {P.shape}")
         c = as_vector(_float_array(self.center, "center"), "center", P.shape[0])
-        object.__setattr__(self, "shape", 0.5 * (P + P.T))
-        object.__setattr__(self, "center", c)
+        self._set(shape=frozen_copy(0.5 * (P + P.T)), center=frozen_copy(c))
 
     @property
     def dim(self) -> int:

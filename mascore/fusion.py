@@ -65,6 +65,7 @@ and doubly stochastic; L consensus steps are applied as the precomputed power
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -73,9 +74,11 @@ from numpy.typing import ArrayLike
 
 from . import kalman
 from ._validation import (
+    Frozen,
     as_matrix,
     check_adjacency,
     check_covariance,
+    check_fits_in_memory,
     check_generator,
     check_positive,
     check_positive_int,
@@ -86,6 +89,7 @@ from ._validation import (
     require_finite,
     symmetric_part,
 )
+from .agents import is_system, system_matrices
 from .estimation import Message, MethodSpec
 
 __all__ = [
@@ -98,6 +102,7 @@ __all__ = [
     "CovarianceIntersectionFilter",
     "covariance_intersection",
     "error_covariance",
+    "track",
     "metropolis_weights",
     "FilterCost",
     "filter_cost",
@@ -157,7 +162,7 @@ def _metropolis(links: np.ndarray) -> np.ndarray:
 # the model
 
 
-class SensorNetworkModel:
+class SensorNetworkModel(Frozen):
     """A common target sensed by N agents on an undirected graph, checked once, when it is built.
 
     ``x[k+1] = F x[k] + w[k]``, ``w ~ N(0, Q)``; agent i measures
@@ -167,8 +172,8 @@ class SensorNetworkModel:
 
     Parameters
     ----------
-    F : (n, n) array_like
-        State-transition matrix, finite.
+    F : (n, n) array_like, or LTIAgent or StateSpace
+        State-transition matrix, finite; or a discrete-time system whose ``A`` it is.
     Q : (n, n) array_like
         Process-noise covariance, symmetric positive semidefinite.
     H : sequence of N (q_i, n) array_like
@@ -222,6 +227,8 @@ class SensorNetworkModel:
 
     def __init__(self, F: ArrayLike, Q: ArrayLike, H: Sequence[ArrayLike], R: Sequence[ArrayLike],
                  adjacency: ArrayLike) -> None:
+        if is_system(F):
+            F = system_matrices(F, "discrete", name="F", needed_by="SensorNetworkModel, x[k+1] = F x[k] + w[k],")[0]
         F = check_square(F, "F")
         n = F.shape[0]
         Q = check_covariance(Q, "Q", size=n)
@@ -277,32 +284,16 @@ class SensorNetworkModel:
                 info[i] = symmetric_part(Hi.T @ Ri_inv @ Hi)
         finite_result("model's information matrices", info, Rinv, advice="R is too close to singular")
         links = A > 0
-        put = object.__setattr__
-        put(self, "F", frozen_copy(F))
-        put(self, "Q", frozen_copy(Q))
-        put(self, "H", tuple(frozen_copy(h) for h in Hs))
-        put(self, "R", tuple(frozen_copy(r) for r in Rs))
-        put(self, "adjacency", frozen_copy(A))
-        put(self, "H_stacked", frozen_copy(H_st))
-        put(self, "R_stacked", frozen_copy(R_st))
-        put(self, "information_matrices", frozen_copy(info))
-        put(self, "weights", frozen_copy(_metropolis(links)))
-        put(self, "_kf", kalman.LinearGaussianModel(F, Q, H_st, R_st))
-        put(self, "_owner", frozen_copy(owner))
-        put(self, "_Rinv", frozen_copy(Rinv))
-        put(self, "_neighbourhood", frozen_copy(links + np.eye(N)))  # N_i together with i
-        put(self, "_sqrt_Q", frozen_copy(_psd_sqrt(Q)))
-        put(self, "_sqrt_R", frozen_copy(_psd_sqrt(R_st)))
-        put(self, "_slices", tuple(slices))
+        self._set(F=frozen_copy(F), Q=frozen_copy(Q), H=tuple(frozen_copy(h) for h in Hs),
+                  R=tuple(frozen_copy(r) for r in Rs), adjacency=frozen_copy(A), H_stacked=frozen_copy(H_st),
+                  R_stacked=frozen_copy(R_st), information_matrices=frozen_copy(info),
+                  weights=frozen_copy(_metropolis(links)), _kf=kalman.LinearGaussianModel(F, Q, H_st, R_st),
+                  _owner=frozen_copy(owner), _Rinv=frozen_copy(Rinv),
+                  _neighbourhood=frozen_copy(links + np.eye(N)),  # N_i together with i
+                  _sqrt_Q=frozen_copy(_psd_sqrt(Q)), _sqrt_R=frozen_copy(_psd_sqrt(R_st)), _slices=tuple(slices))
 
-    def __setattr__(self, name: str, value: object) -> None:
-        raise AttributeError(f"a SensorNetworkModel is frozen (cannot set {name!r}); build a new model")
-
-    def __delattr__(self, name: str) -> None:
-        raise AttributeError(f"a SensorNetworkModel is frozen (cannot delete {name!r})")
-
-    def __reduce__(self) -> tuple:
-        return (type(self), (self.F, self.Q, self.H, self.R, self.adjacency))
+    def _args(self) -> tuple:
+        return (self.F, self.Q, self.H, self.R, self.adjacency)
 
     def __repr__(self) -> str:
         return (f"SensorNetworkModel(N = {self.n_agents} agents, n = {self.n_states} states, "
@@ -507,6 +498,8 @@ class SensorNetworkModel:
         K = check_steps(n_steps)
         runs = () if n_runs is None else (check_positive_int(n_runs, "n_runs"),)
         q = self.n_measurements
+        check_fits_in_memory(8.0 * (K + 1) * math.prod(runs) * (n + q), "n_runs" if runs else "n_steps",
+                             "the states and measurements drawn")
         x = np.empty((K + 1, *runs, n))
         z = np.empty((K, *runs, q))
         x[0] = x0 + gen.standard_normal((*runs, n)) @ _psd_sqrt(P0).T
@@ -520,7 +513,7 @@ class SensorNetworkModel:
 # the filters
 
 
-class _NetworkFilter:
+class _NetworkFilter(Frozen):
     """Shared predict / update / run of the filters (each defines ``_correct``)."""
 
     __slots__ = ("model",)
@@ -530,10 +523,7 @@ class _NetworkFilter:
     def __init__(self, model: SensorNetworkModel) -> None:
         if not isinstance(model, SensorNetworkModel):
             raise TypeError(f"model must be a SensorNetworkModel; got {type(model).__name__}")
-        object.__setattr__(self, "model", model)
-
-    def __setattr__(self, name: str, value: object) -> None:
-        raise AttributeError(f"a {type(self).__name__} is frozen (cannot set {name!r}); build a new filter")
+        self._set(model=model)
 
     def __reduce__(self) -> tuple:
         return (type(self), (self.model, *self._args()))
@@ -608,6 +598,7 @@ class _NetworkFilter:
         (array([1., 1.]), array([0.33333333, 0.33333333]))
         """
         x, P = self._check_xP(x, P)
+        require_finite(P, "P")  # an information form would turn an infinite variance into silent zeros
         z = self.model._check_z(z)
         axis = 2 if self._per_agent else 1
         _broadcast("x", x.shape[:-axis], "z", z.shape[:-1])
@@ -656,10 +647,17 @@ class _NetworkFilter:
         ((50, 10, 3, 2), (50, 3, 2, 2))
         """
         x, P = self.model.check_state(x0, P0, ("x0", "P0"), per_agent=self._per_agent)
-        z = require_finite(self.model._check_z(z), "z")
+        z = self.model._check_z(z)
         if z.ndim < 2:
             raise ValueError(f"z must be (K, ..., {self.model.n_measurements}): one stacked measurement per step; "
                              f"got shape {z.shape}")
+        axis = 2 if self._per_agent else 1
+        batch = _broadcast("x0", x.shape[:-axis], "z", z.shape[1:-1])
+        n = self.model.n_states
+        per_run = n * (1 + n) * (self.model.n_agents if self._per_agent else 1)
+        check_fits_in_memory(8.0 * z.shape[0] * math.prod(batch) * per_run, "z",
+                             "the estimates and covariances of every step and run")
+        require_finite(z, "z")
         xs, Ps = [], []
         for k in range(z.shape[0]):
             x, P = self.predict(x, P)
@@ -884,7 +882,7 @@ class MeasurementForwardingFilter(_NetworkFilter):
 
     def __init__(self, model: SensorNetworkModel) -> None:
         super().__init__(model)
-        object.__setattr__(self, "_S", frozen_copy(_mix(model._neighbourhood, model.information_matrices, 2)))
+        self._set(_S=frozen_copy(_mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
         i = _mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
@@ -939,8 +937,7 @@ class DiffusionKalmanFilter(_NetworkFilter):
             C = model.weights
         else:
             C = _check_stochastic(weights, "weights", model)
-        object.__setattr__(self, "weights", frozen_copy(C))
-        object.__setattr__(self, "_S", frozen_copy(_mix(model._neighbourhood, model.information_matrices, 2)))
+        self._set(weights=frozen_copy(C), _S=frozen_copy(_mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
         i = _mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
@@ -1037,10 +1034,8 @@ class ConsensusOnInformationFilter(_NetworkFilter):
             if w < 1:
                 raise ValueError(f"novelty_weight must be >= 1 (1: CI, N: HCMCI); got {novelty_weight!r}")
         WL = np.linalg.matrix_power(model.weights, L)
-        object.__setattr__(self, "n_consensus", L)
-        object.__setattr__(self, "novelty_weight", w)
-        object.__setattr__(self, "_WL", frozen_copy(WL))
-        object.__setattr__(self, "_SL", frozen_copy(w * _mix(WL, model.information_matrices, 2)))
+        self._set(n_consensus=L, novelty_weight=w, _WL=frozen_copy(WL))
+        self._set(_SL=frozen_copy(w * _mix(WL, model.information_matrices, 2)))
 
     def _messages(self, q, pair):
         pairs = "the prior and the novelty pairs" if self.novelty_weight != 1.0 else "information pair (Omega, q)"
@@ -1135,10 +1130,8 @@ class InformationConsensusFilter(_NetworkFilter):
                                  f"d_max = {d_max}; got {rate!r}")
         Lap = np.diag(links.sum(axis=1).astype(float)) - links
         WK = np.linalg.matrix_power(np.eye(model.n_agents) - eps * Lap, K)
-        object.__setattr__(self, "n_iterations", K)
-        object.__setattr__(self, "rate", eps)
-        object.__setattr__(self, "_WK", frozen_copy(WK))
-        object.__setattr__(self, "_SK", frozen_copy(_mix(WK, model.information_matrices, 2)))
+        self._set(n_iterations=K, rate=eps, _WK=frozen_copy(WK))
+        self._set(_SK=frozen_copy(_mix(WK, model.information_matrices, 2)))
 
     def _messages(self, q, pair):
         return (Message("information pair (V, v), per consensus iteration", self.n_iterations * pair),)
@@ -1230,10 +1223,8 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         if measurements not in ("neighbourhood", "own"):
             raise ValueError(f"measurements must be 'neighbourhood' or 'own'; got {measurements!r}")
         M = model._neighbourhood if measurements == "neighbourhood" else np.eye(model.n_agents)
-        object.__setattr__(self, "criterion", criterion)
-        object.__setattr__(self, "measurements", measurements)
-        object.__setattr__(self, "_S", frozen_copy(_mix(M, model.information_matrices, 2)))
-        object.__setattr__(self, "_hood", tuple(np.flatnonzero(row) for row in model._neighbourhood))
+        self._set(criterion=criterion, measurements=measurements, _S=frozen_copy(_mix(M, model.information_matrices, 2)),
+                  _hood=tuple(frozen_copy(np.flatnonzero(row), int) for row in model._neighbourhood))
 
     def _correct(self, x, P, z):
         M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
@@ -1314,6 +1305,95 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         else:
             w = _ci_weights(infos, self.criterion)
         return _from_information(np.einsum("k,kab->ab", w, infos), w @ qs)
+
+
+def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
+          graphs: Sequence[object] | ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Run a sensor-network filter over measurements, on a fixed graph or one graph per step.
+
+    The one run loop for a user's own network: step k predicts, then fuses ``z[k]``
+    over graph k (the filter's own graph when `graphs` is None). A switching graph
+    rebuilds the filter, with its own settings, on the model with that step's graph
+    (each distinct graph once per call); the sensing ``H_i, R_i`` stays the model's.
+
+    Parameters
+    ----------
+    filt : fusion filter
+        One of this module's filters (e.g. :class:`ConsensusOnInformationFilter`), built on the
+        network's :class:`SensorNetworkModel`.
+    x0 : (..., N, n) or (n,) array_like
+        Initial means (one ``(n,)`` mean for every agent allowed), finite.
+    P0 : (..., N, n, n) or (n, n) array_like
+        Initial covariances, symmetric positive definite.
+    z : (K, ..., sum q_i) array_like
+        Measurements of steps 1..K (as :meth:`SensorNetworkModel.simulate` returns).
+    graphs : sequence of K adjacency matrices or networkx graphs, or (K, N, N) array_like, optional
+        The communication graph of each step (undirected, N agents; ``A[i, j] > 0``: i and j
+        exchange). Default: the model's graph at every step.
+
+    Returns
+    -------
+    x : (K, ..., N, n) ndarray
+        Each agent's corrected mean after each step (``(K, ..., n)`` for the centralized filter).
+    P : (K, ..., N, n, n) ndarray
+        Their covariances (leading axes those of `P0` and `x0`: they do not depend on the data).
+
+    Raises
+    ------
+    ValueError, TypeError
+        A bad filter, state, measurement or graph (named; a graph by its step), or more
+        graphs or steps than memory holds.
+
+    Examples
+    --------
+    >>> import networkx as nx
+    >>> import numpy as np
+    >>> from mascore import fusion, graphs
+    >>> model = fusion.SensorNetworkModel(np.eye(2), 0.01 * np.eye(2), [np.eye(2)] * 4, [np.eye(2)] * 4,
+    ...                                   graphs.ring_graph(4))
+    >>> x_true, z = model.simulate(np.zeros(2), np.eye(2), 20, rng=0)
+    >>> switching = [nx.path_graph(4) if k % 2 else nx.cycle_graph(4) for k in range(20)]
+    >>> x, P = fusion.track(fusion.ConsensusOnInformationFilter(model, 2), np.zeros(2), np.eye(2), z, switching)
+    >>> x.shape, P.shape
+    ((20, 4, 2), (20, 4, 2, 2))
+    """
+    if not isinstance(filt, _NetworkFilter):
+        raise TypeError(f"filt must be one of mascore.fusion's filters (e.g. ConsensusOnInformationFilter(model, "
+                        f"L)); got {type(filt).__name__}")
+    if graphs is None:
+        return filt.run(x0, P0, z)
+    model = filt.model
+    x, P = model.check_state(x0, P0, ("x0", "P0"), per_agent=filt._per_agent)
+    z = model._check_z(z)
+    if z.ndim < 2:
+        raise ValueError(f"z must be (K, ..., {model.n_measurements}): one stacked measurement per step; "
+                         f"got shape {z.shape}")
+    K = z.shape[0]
+    if isinstance(graphs, (str, bytes)) or not hasattr(graphs, "__len__"):
+        raise TypeError(f"graphs must be a sequence of K = {K} adjacency matrices or networkx graphs (one per "
+                        f"step); got {type(graphs).__name__}")
+    if len(graphs) != K:
+        raise ValueError(f"graphs must hold one graph per step: K = {K} (the steps of z); got {len(graphs)}")
+    axis = 2 if filt._per_agent else 1
+    batch = _broadcast("x0", x.shape[:-axis], "z", z.shape[1:-1])
+    n, N = model.n_states, model.n_agents
+    check_fits_in_memory(8.0 * K * math.prod(batch) * n * (1 + n) * (N if filt._per_agent else 1), "z",
+                         "the estimates and covariances of every step and run")
+    require_finite(z, "z")
+    built: dict[bytes, _NetworkFilter] = {}
+    xs, Ps = [], []
+    for k in range(K):
+        A = check_adjacency(float_array(graphs[k], f"graphs[{k}]"), f"graphs[{k}]", size=N, undirected=True,
+                            why="the consensus weights and the information exchange are symmetric")
+        key = A.tobytes()
+        if key not in built:
+            built[key] = filt if np.array_equal(A, model.adjacency) else type(filt)(
+                SensorNetworkModel(model.F, model.Q, model.H, model.R, A), *_settings_for_any_graph(filt))
+        step = built[key]
+        x, P = step.update(*step.predict(x, P), z[k])
+        xs.append(x)
+        Ps.append(P)
+    return np.stack(xs), np.stack(Ps)
 
 
 def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true: ArrayLike | None = None,
@@ -1721,6 +1801,21 @@ METHODS = (
 
 # --------------------------------------------------------------------------------------------
 # kernels (checked arguments)
+
+
+def _settings_for_any_graph(filt: _NetworkFilter) -> tuple:
+    """A filter's constructor arguments after the model, with its graph-dependent defaults left to the new graph."""
+    model = filt.model
+    if isinstance(filt, DiffusionKalmanFilter):
+        if not np.array_equal(filt.weights, model.weights):
+            raise ValueError("filt: a DiffusionKalmanFilter with its own weights matrix belongs to one graph; build it "
+                             "with weights='metropolis' to follow a switching graph")
+        return ("metropolis",)
+    if isinstance(filt, InformationConsensusFilter):
+        d_max = int((model.adjacency > 0).sum(axis=1).max())
+        default = 0.65 / d_max if d_max else 0.0
+        return (filt.n_iterations, None if filt.rate == default else filt.rate)
+    return filt._args()
 
 
 def _mix(W: np.ndarray, X: np.ndarray, axes: int) -> np.ndarray:

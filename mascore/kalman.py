@@ -48,9 +48,10 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import check_covariance, check_positive_int, finite_result, frozen_copy, symmetric_part
+from ._validation import Frozen, check_covariance, check_positive_int, finite_result, frozen_copy, symmetric_part
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
+from .agents import is_system, system_matrices
 
 __all__ = ["LinearGaussianModel", "predict", "update", "kalman_gain", "run_filter", "nees", "nees_interval",
            "symmetrize"]
@@ -64,7 +65,7 @@ _F64 = np.dtype(float)
 # ----------------------------------------------------------------------------
 
 
-class LinearGaussianModel:
+class LinearGaussianModel(Frozen):
     """A linear Gaussian state-space model, checked once, when it is built.
 
     ``x[k+1] = F x[k] + B u[k] + w[k]``, ``w[k] ~ N(0, Q)``;
@@ -78,8 +79,10 @@ class LinearGaussianModel:
 
     Parameters
     ----------
-    F : (m, m) or (..., m, m) array_like
-        State-transition matrix, finite, ``m >= 1``.
+    F : (m, m) or (..., m, m) array_like, or LTIAgent or StateSpace
+        State-transition matrix, finite, ``m >= 1``; or a discrete-time system (an
+        :class:`~mascore.agents.LTIAgent` or a discrete python-control ``StateSpace``): its
+        ``A``, and its ``B`` unless `B` is given.
     Q : (m, m) or (..., m, m) array_like
         Process-noise covariance, symmetric positive semidefinite.
     H : (q, m) or (..., q, m) array_like
@@ -125,21 +128,17 @@ class LinearGaussianModel:
     B: np.ndarray | None
 
     def __init__(self, F: ArrayLike, Q: ArrayLike, H: ArrayLike, R: ArrayLike, B: ArrayLike | None = None) -> None:
+        if is_system(F):
+            F, B_sys, _ = system_matrices(F, "discrete", name="F", needed_by="LinearGaussianModel, x[k+1] = F x[k] + "
+                                          "B u[k] + w[k],")
+            B = B_sys if B is None else B
         F, Q, B = _checked_dynamics(F, Q, B)
         H, R = _checked_measurement(H, R, F.shape[-1], f"F of shape {F.shape}")
-        for name, value in (("F", F), ("Q", Q), ("H", H), ("R", R)):
-            object.__setattr__(self, name, frozen_copy(value))
-        object.__setattr__(self, "B", None if B is None else frozen_copy(B))
-        object.__setattr__(self, "_eye", frozen_copy(np.eye(F.shape[-1])))  # I of the Joseph form
+        self._set(F=frozen_copy(F), Q=frozen_copy(Q), H=frozen_copy(H), R=frozen_copy(R),
+                  B=None if B is None else frozen_copy(B), _eye=frozen_copy(np.eye(F.shape[-1])))  # I of Joseph
 
-    def __setattr__(self, name: str, value: object) -> None:
-        raise AttributeError(f"a LinearGaussianModel is frozen (cannot set {name!r}); build a new model")
-
-    def __delattr__(self, name: str) -> None:
-        raise AttributeError(f"a LinearGaussianModel is frozen (cannot delete {name!r})")
-
-    def __reduce__(self) -> tuple:
-        return (type(self), (self.F, self.Q, self.H, self.R, self.B))
+    def _args(self) -> tuple:
+        return (self.F, self.Q, self.H, self.R, self.B)
 
     def __repr__(self) -> str:
         input_ = "" if self.B is None else f", p = {self.B.shape[-1]} inputs"
@@ -417,7 +416,10 @@ def update(
         z = _finite(_float_array(z, "z"), "z")
         if z.ndim < 1:
             raise ValueError(f"z must be a (..., q) array of measurements; got shape {z.shape}")
-        H, R = _checked_measurement(H, R, x.shape[-1], f"x of shape {x.shape} and z of shape {z.shape}", z.shape[-1])
+        q_z = z.shape[-1]  # blame H for a row count that z and R agree on, else z (checked against H below)
+        R = _float_array(R, "R")
+        q = q_z if R.ndim >= 2 and R.shape[-1] == q_z else None
+        H, R = _checked_measurement(H, R, x.shape[-1], f"x of shape {x.shape} and z of shape {z.shape}", q)
         I = np.eye(x.shape[-1])
     q, m = H.shape[-2:]
     if x.ndim == 0 or x.shape[-1] != m:

@@ -31,7 +31,9 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import ArrayLike
 
+from ._systems import design_args
 from ._validation import (
+    Frozen,
     as_matrix,
     check_adjacency,
     check_covariance,
@@ -42,6 +44,7 @@ from ._validation import (
 from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
+from .agents import is_system, system_matrices
 from .exceptions import RiccatiError
 from .graphs import WHY_UNDIRECTED as _WHY_SYMMETRIC
 from .graphs import laplacian as _graph_laplacian
@@ -184,13 +187,9 @@ def dlqr(
     """
     A, B, Q, R, N, dt = _lqr_args("dlqr", A, B, Q, R, N)
     if dt is not None and dt is not True and dt == 0:
-        raise ValueError("sys is a continuous-time system (dt = 0): use lqr, or discretize it first")
+        raise ValueError("sys is a continuous-time system (dt = 0): use lqr, or sample it first "
+                         "(control.c2d(sys, dt) or LTIAgent.from_continuous(sys.A, sys.B, dt))")
     return _solve_lqr(A, B, Q, R, N, discrete=True)
-
-
-def _is_system(obj: object) -> bool:
-    """A state-space system, duck-typed like python-control's ``StateSpace`` (``A``, ``B``, ``dt``)."""
-    return all(hasattr(obj, name) for name in ("A", "B", "dt")) and not isinstance(obj, np.ndarray)
 
 
 def _lqr_args(fname: str, A, B, Q, R, N):
@@ -199,8 +198,9 @@ def _lqr_args(fname: str, A, B, Q, R, N):
     With a system first, the positional slots after it hold ``Q, R[, N]`` (python-control's order);
     ``Q=``, ``R=``, ``N=`` by keyword work too.
     """
-    if _is_system(A):
-        sys, dt = A, A.dt
+    if is_system(A):
+        sys = A
+        A_sys, B_sys, dt = system_matrices(sys, name="sys")
         if B is not None:  # (sys, Q, R[, N]) positionally: shift the slots
             rest = [v for v in (Q, R) if v is not None]
             if not rest:
@@ -208,7 +208,7 @@ def _lqr_args(fname: str, A, B, Q, R, N):
             if len(rest) == 2 and N is not None:
                 raise TypeError(f"{fname}(sys, Q, R[, N]): N given twice")
             Q, R, N = B, rest[0], (rest[1] if len(rest) == 2 else N)
-        A, B = _float_array(sys.A, "sys.A"), _float_array(sys.B, "sys.B")
+        A, B = A_sys, B_sys
     else:
         dt = None
         if B is None:
@@ -331,7 +331,8 @@ def network_lqr_weights(
 
 
 def centralized_network_lqr(
-    A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike, laplacian: ArrayLike
+    A: ArrayLike, B: ArrayLike | None = None, Q1: ArrayLike | None = None, Q2: ArrayLike | None = None,
+    R: ArrayLike | None = None, laplacian: ArrayLike | None = None, *, dt: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centralized network LQR, eqs. (7)-(9), solved as one ``N n``-state Riccati equation.
 
@@ -340,10 +341,11 @@ def centralized_network_lqr(
 
     Parameters
     ----------
-    A : (n, n) array_like
-        Agent state matrix.
-    B : (n, m) array_like
-        Agent input matrix.
+    A : (n, n) array_like, or LTIAgent or StateSpace
+        Agent state matrix (continuous time unless `dt` is given), or the agent as a system
+        (then B is left out: ``f(sys, Q1, Q2, R, ...)``; its ``dt`` sets the time base).
+    B : (n, m) array_like, optional
+        Agent input matrix (not with a system).
     Q1 : (n, n) array_like
         Cost weight on each agent's own state (symmetric PSD), not a covariance; (cost unit)/(state unit)^2/s.
     Q2 : (n, n) array_like
@@ -353,6 +355,10 @@ def centralized_network_lqr(
         Input cost weight (symmetric positive definite), not a covariance; (cost unit)/(input unit)^2/s.
     laplacian : (N, N) array_like
         Laplacian of a connected undirected graph.
+    dt : float, optional
+        Sampling time (s) of a discrete-time agent ``x_{k+1} = A x_k + B u_k``: the design is then in
+        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: continuous time,
+        or the system's own time base.
 
     Returns
     -------
@@ -379,15 +385,18 @@ def centralized_network_lqr(
     >>> K.shape, bool(E.real.max() < 0)
     ((4, 8), True)
     """
-    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
+    A, B, (Q1, Q2, R, laplacian), dt = design_args("centralized_network_lqr", A, B,
+        dict(Q1=Q1, Q2=Q2, R=R, laplacian=laplacian), dt)
+    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R, discrete=dt != 0)
     laplacian_spectrum(laplacian)  # symmetric Laplacian of a connected graph, else ValueError
     Qt, Rt = network_lqr_weights(Q1, Q2, R, laplacian)
     N = Qt.shape[0] // A.shape[0]
-    return solve_care(np.kron(np.eye(N), A), np.kron(np.eye(N), B), Qt, Rt)
+    return _riccati(dt)(np.kron(np.eye(N), A), np.kron(np.eye(N), B), Qt, Rt)
 
 
 def borrelli_keviczky_structure(
-    A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike, n_agents: int
+    A: ArrayLike, B: ArrayLike | None = None, Q1: ArrayLike | None = None, Q2: ArrayLike | None = None,
+    R: ArrayLike | None = None, n_agents: int | None = None, *, dt: float | None = None,
 ) -> dict:
     """Closed-form blocks of the centralized solution for all-to-all weights, eqs. (13)-(16).
 
@@ -399,10 +408,11 @@ def borrelli_keviczky_structure(
 
     Parameters
     ----------
-    A : (n, n) array_like
-        Agent state matrix.
-    B : (n, m) array_like
-        Agent input matrix.
+    A : (n, n) array_like, or LTIAgent or StateSpace
+        Agent state matrix (continuous time unless `dt` is given), or the agent as a system
+        (then B is left out: ``f(sys, Q1, Q2, R, ...)``; its ``dt`` sets the time base).
+    B : (n, m) array_like, optional
+        Agent input matrix (not with a system).
     Q1 : (n, n) array_like
         Cost weight on each agent's own state (symmetric PSD), not a covariance; (cost unit)/(state unit)^2/s.
     Q2 : (n, n) array_like
@@ -412,6 +422,10 @@ def borrelli_keviczky_structure(
         Input cost weight (symmetric positive definite), not a covariance; (cost unit)/(input unit)^2/s.
     n_agents : int
         Team size N.
+    dt : float, optional
+        Sampling time (s) of a discrete-time agent ``x_{k+1} = A x_k + B u_k``: the design is then in
+        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: continuous time,
+        or the system's own time base.
 
     Returns
     -------
@@ -437,8 +451,12 @@ def borrelli_keviczky_structure(
     >>> bool(np.allclose(blocks["P_network"], P))            # the closed form equals the dense solution
     True
     """
-    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
+    A, B, (Q1, Q2, R, n_agents), dt = design_args("borrelli_keviczky_structure", A, B,
+        dict(Q1=Q1, Q2=Q2, R=R, n_agents=n_agents), dt)
+    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R, discrete=dt != 0)
     N = _check_agents(n_agents)
+    if dt != 0:
+        return _modal_structure(A, B, Q1, Q2, R, N)
     Rinv_Bt = np.linalg.solve(R, B.T)
     _, P, _ = solve_care(A, B, Q1, R)  # eq. (14)
     _, Pbar, _ = solve_care(A - B @ Rinv_Bt @ P, B, N * Q2, R)  # eq. (15), Pbar = -N P2~
@@ -450,8 +468,8 @@ def borrelli_keviczky_structure(
     return {"P": P, "P2": P2, "K1": K1, "K2": K2, "P_network": P_network, "K_network": K_network}
 
 
-@dataclass(frozen=True)
-class DistributedGain:
+@dataclass(frozen=True, eq=False)
+class DistributedGain(Frozen):
     """A network gain ``U = -(I_N (x) K_self + Lap (x) K_coupling) X``.
 
     Parameters
@@ -477,11 +495,13 @@ class DistributedGain:
         # checked once when built (finite (m, n) blocks of one shape), kept as read-only copies
         Ks = as_matrix(_float_array(self.K_self, "K_self"), "K_self")
         Kc = as_matrix(_float_array(self.K_coupling, "K_coupling"), "K_coupling", Ks.shape)
-        object.__setattr__(self, "K_self", frozen_copy(Ks))
-        object.__setattr__(self, "K_coupling", frozen_copy(Kc))
+        self._set(K_self=frozen_copy(Ks), K_coupling=frozen_copy(Kc))
+        for name in ("lam", "Phi"):  # the arrays of the subclasses, kept frozen too
+            if isinstance(getattr(self, name, None), np.ndarray):
+                self._set(**{name: frozen_copy(getattr(self, name))})
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class TopDownLQR(DistributedGain):
     """Borrelli-Keviczky distributed LQR (eq. (17)).
 
@@ -518,7 +538,7 @@ class TopDownLQR(DistributedGain):
     spectral_abscissa: float = np.nan
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class BottomUpLQR(DistributedGain):
     """Deshpande et al. bottom-up distributed LQR (eq. (18)): ``K_coupling = Phi K``.
 
@@ -551,7 +571,8 @@ class BottomUpLQR(DistributedGain):
 
 
 def top_down_lqr(
-    A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike, adjacency: ArrayLike
+    A: ArrayLike, B: ArrayLike | None = None, Q1: ArrayLike | None = None, Q2: ArrayLike | None = None,
+    R: ArrayLike | None = None, adjacency: ArrayLike | None = None, *, dt: float | None = None,
 ) -> TopDownLQR:
     """Top-down distributed LQR of Borrelli and Keviczky (2008), eq. (17).
 
@@ -564,12 +585,20 @@ def top_down_lqr(
     ``lambda_i > N_L / 2`` of eq. (17) is sufficient, not necessary. Both the
     condition and the actual closed-loop spectrum are returned.
 
+    In discrete time (a sampled agent: `dt`, an :class:`~mascore.agents.LTIAgent` or a discrete
+    ``StateSpace``) the all-to-all problem is solved by its two Laplacian modes with
+    :func:`dlqr`'s Riccati equation: ``K_self = K(Q1)`` and ``K_coupling = (K(Q1 + N_L Q2) -
+    K(Q1)) / N_L``, the same formulas as eqs. (14)-(17) give in continuous time. The gain margin
+    behind eq. (17)'s condition is a continuous-time fact: ``condition_holds`` then says whether
+    every closed-loop mode is stable, and ``spectral_abscissa`` is ``ln(rho) / dt``.
+
     Parameters
     ----------
-    A : (n, n) array_like
-        Agent state matrix.
-    B : (n, m) array_like
-        Agent input matrix.
+    A : (n, n) array_like, or LTIAgent or StateSpace
+        Agent state matrix (continuous time unless `dt` is given), or the agent as a system
+        (then B is left out: ``f(sys, Q1, Q2, R, ...)``; its ``dt`` sets the time base).
+    B : (n, m) array_like, optional
+        Agent input matrix (not with a system).
     Q1 : (n, n) array_like
         Cost weight on each agent's own state (symmetric PSD), not a covariance; (cost unit)/(state unit)^2/s.
     Q2 : (n, n) array_like
@@ -580,6 +609,10 @@ def top_down_lqr(
     adjacency : (N, N) array_like
         Symmetric adjacency of a connected graph: non-negative weights, no self-loops
         (a self-loop would count in the degree ``d_max`` but not in the Laplacian).
+    dt : float, optional
+        Sampling time (s) of a discrete-time agent ``x_{k+1} = A x_k + B u_k``: the design is then in
+        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: continuous time,
+        or the system's own time base.
 
     Returns
     -------
@@ -600,32 +633,48 @@ def top_down_lqr(
     >>> w = dict(Q1=np.eye(2), Q2=0.5 * np.eye(2), R=np.eye(1))
     >>> lqr.top_down_lqr(A, B, **w, adjacency=graphs.star_graph(5)).condition_holds
     False
+    >>> from mascore import agents
+    >>> sampled = lqr.top_down_lqr(agents.double_integrator(1, 0.1), **w, adjacency=graphs.ring_graph(4))
+    >>> bool(sampled.spectral_abscissa < 0)                               # discrete-time design, stable
+    True
     """
-    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
+    A, B, (Q1, Q2, R, adjacency), dt = design_args("top_down_lqr", A, B,
+        dict(Q1=Q1, Q2=Q2, R=R, adjacency=adjacency), dt)
+    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R, discrete=dt != 0)
     Adj, Lap = _undirected_adjacency(adjacency)
     lam, _ = laplacian_spectrum(Lap, "adjacency")
     d_max = int(round(float((Adj > 0).sum(axis=1).max())))
     n_local = d_max + 1
-    blocks = borrelli_keviczky_structure(A, B, Q1, Q2, R, n_local)
-    Rinv_Bt = np.linalg.solve(R, B.T)
-    K_self, K_coupling = Rinv_Bt @ blocks["P"], -Rinv_Bt @ blocks["P2"]
-    abscissa = _spectral_abscissa(A, B, K_self, K_coupling, lam)
+    if dt != 0:  # the modes of the all-to-all problem: K_self = K(Q1), K_coupling = (K(Q1 + N_L Q2) - K(Q1)) / N_L
+        blocks = _modal_structure(A, B, Q1, Q2, R, n_local)
+        K_self, K_coupling = blocks["K1"] + (n_local - 1) * blocks["K2"], -blocks["K2"]
+        abscissa = _spectral_abscissa(A, B, K_self, K_coupling, lam, dt)
+        holds = bool(abscissa < 0)  # the gain margin behind eq. (17) is a continuous-time fact
+    else:
+        blocks = borrelli_keviczky_structure(A, B, Q1, Q2, R, n_local)
+        Rinv_Bt = np.linalg.solve(R, B.T)
+        K_self, K_coupling = Rinv_Bt @ blocks["P"], -Rinv_Bt @ blocks["P2"]
+        abscissa = _spectral_abscissa(A, B, K_self, K_coupling, lam)
+        holds = bool(np.all(lam[1:] > n_local / 2))
     return TopDownLQR(
         K_self=K_self, K_coupling=K_coupling, n_local=n_local, lam=lam,
-        condition_holds=bool(np.all(lam[1:] > n_local / 2)), spectral_abscissa=abscissa,
+        condition_holds=holds, spectral_abscissa=abscissa,
     )
 
 
 def bottom_up_lqr(
     A: ArrayLike,
-    B: ArrayLike,
-    Q1: ArrayLike,
-    Q2: ArrayLike,
-    R: ArrayLike,
-    adjacency: ArrayLike,
+    B: ArrayLike | None = None,
+    Q1: ArrayLike | None = None,
+    Q2: ArrayLike | None = None,
+    R: ArrayLike | None = None,
+    adjacency: ArrayLike | None = None,
     solver_options: dict | None = None,
 ) -> BottomUpLQR:
     """Bottom-up distributed LQR (eq. (18), Deshpande et al. 2011): ``U = -(I (x) K + Lap (x) Phi K) X``.
+
+    Continuous time only (its convex program is a continuous-time Lyapunov inequality): a
+    discrete-time system is refused by name; :func:`top_down_lqr` designs in either.
 
     ``K`` is the node LQR gain for ``(Q1, R)`` (eq. (14)); ``Phi`` (m x m)
     minimizes an upper bound on the aggregate cost with weights
@@ -638,10 +687,11 @@ def bottom_up_lqr(
 
     Parameters
     ----------
-    A : (n, n) array_like
-        Agent state matrix.
-    B : (n, m) array_like
-        Agent input matrix; ``(A, B)`` stabilizable.
+    A : (n, n) array_like, or LTIAgent or StateSpace
+        Agent state matrix (continuous time unless `dt` is given), or the agent as a system
+        (then B is left out: ``f(sys, Q1, Q2, R, ...)``; its ``dt`` sets the time base).
+    B : (n, m) array_like, optional
+        Agent input matrix (not with a system); ``(A, B)`` stabilizable.
     Q1 : (n, n) array_like
         Cost weight on each agent's own state (symmetric PSD), not a covariance; (cost unit)/(state unit)^2/s.
     Q2 : (n, n) array_like
@@ -678,6 +728,8 @@ def bottom_up_lqr(
     """
     from .observers import coupled_gain_lmi
 
+    A, B, (Q1, Q2, R, adjacency), dt = design_args("bottom_up_lqr", A, B,
+        dict(Q1=Q1, Q2=Q2, R=R, adjacency=adjacency), None, time="continuous")
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
     _, Lap = _undirected_adjacency(adjacency)
     lam, _ = laplacian_spectrum(Lap, "adjacency")
@@ -733,8 +785,9 @@ def assemble_network_gain(gain: DistributedGain, laplacian: ArrayLike) -> np.nda
 
 
 def network_controller_cost(
-    A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike,
-    laplacian: ArrayLike, gain: DistributedGain,
+    A: ArrayLike, B: ArrayLike | None = None, Q1: ArrayLike | None = None, Q2: ArrayLike | None = None,
+    R: ArrayLike | None = None, laplacian: ArrayLike | None = None, gain: DistributedGain | None = None, *,
+    dt: float | None = None,
 ) -> float:
     """Aggregate LQR cost ``trace(P_K)`` of a distributed gain, by Laplacian modes.
 
@@ -746,10 +799,11 @@ def network_controller_cost(
 
     Parameters
     ----------
-    A : (n, n) array_like
-        Agent state matrix.
-    B : (n, m) array_like
-        Agent input matrix.
+    A : (n, n) array_like, or LTIAgent or StateSpace
+        Agent state matrix (continuous time unless `dt` is given), or the agent as a system
+        (then B is left out: ``f(sys, Q1, Q2, R, ...)``; its ``dt`` sets the time base).
+    B : (n, m) array_like, optional
+        Agent input matrix (not with a system).
     Q1 : (n, n) array_like
         Cost weight on each agent's own state (symmetric PSD), not a covariance; (cost unit)/(state unit)^2/s.
     Q2 : (n, n) array_like
@@ -761,6 +815,10 @@ def network_controller_cost(
         Laplacian of a connected undirected graph.
     gain : DistributedGain
         The controller.
+    dt : float, optional
+        Sampling time (s) of a discrete-time agent ``x_{k+1} = A x_k + B u_k``: the design is then in
+        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: continuous time,
+        or the system's own time base.
 
     Returns
     -------
@@ -779,6 +837,8 @@ def network_controller_cost(
     >>> bool(cost >= lqr.centralized_network_cost(A, B, **w, laplacian=Lap))     # the optimum is a lower bound
     True
     """
+    A, B, (Q1, Q2, R, laplacian, gain), dt = design_args("network_controller_cost", A, B,
+                                                             dict(Q1=Q1, Q2=Q2, R=R, laplacian=laplacian, gain=gain), dt)
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R, controllable=False)
     _check_gain(gain, B.shape[1], A.shape[0])
     lam, _ = laplacian_spectrum(laplacian)
@@ -786,24 +846,32 @@ def network_controller_cost(
     for l in lam:
         Ki = gain.K_self + l * gain.K_coupling
         Ai = A - B @ Ki
-        if np.max(np.linalg.eigvals(Ai).real) >= 0:
-            return float("inf")
-        Pi = sla.solve_continuous_lyapunov(Ai.T, -(Q1 + l * Q2 + Ki.T @ R @ Ki))
+        weight = Q1 + l * Q2 + Ki.T @ R @ Ki
+        if dt != 0:  # x_{k+1} = A_i x_k: P = A_i^T P A_i + weight
+            if np.max(np.abs(np.linalg.eigvals(Ai))) >= 1:
+                return float("inf")
+            Pi = sla.solve_discrete_lyapunov(Ai.T, weight)
+        else:
+            if np.max(np.linalg.eigvals(Ai).real) >= 0:
+                return float("inf")
+            Pi = sla.solve_continuous_lyapunov(Ai.T, -weight)
         total += float(np.trace(Pi))
     return total
 
 
 def centralized_network_cost(
-    A: ArrayLike, B: ArrayLike, Q1: ArrayLike, Q2: ArrayLike, R: ArrayLike, laplacian: ArrayLike
+    A: ArrayLike, B: ArrayLike | None = None, Q1: ArrayLike | None = None, Q2: ArrayLike | None = None,
+    R: ArrayLike | None = None, laplacian: ArrayLike | None = None, *, dt: float | None = None,
 ) -> float:
     """Optimal aggregate cost ``trace(P~)`` of eq. (9), as ``sum_i trace(ARE(A, B, Q1 + lam_i Q2, R))``.
 
     Parameters
     ----------
-    A : (n, n) array_like
-        Agent state matrix.
-    B : (n, m) array_like
-        Agent input matrix.
+    A : (n, n) array_like, or LTIAgent or StateSpace
+        Agent state matrix (continuous time unless `dt` is given), or the agent as a system
+        (then B is left out: ``f(sys, Q1, Q2, R, ...)``; its ``dt`` sets the time base).
+    B : (n, m) array_like, optional
+        Agent input matrix (not with a system).
     Q1 : (n, n) array_like
         Cost weight on each agent's own state (symmetric PSD), not a covariance; (cost unit)/(state unit)^2/s.
     Q2 : (n, n) array_like
@@ -813,6 +881,10 @@ def centralized_network_cost(
         Input cost weight (symmetric positive definite), not a covariance; (cost unit)/(input unit)^2/s.
     laplacian : (N, N) array_like
         Laplacian of a connected undirected graph.
+    dt : float, optional
+        Sampling time (s) of a discrete-time agent ``x_{k+1} = A x_k + B u_k``: the design is then in
+        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: continuous time,
+        or the system's own time base.
 
     Returns
     -------
@@ -836,13 +908,16 @@ def centralized_network_cost(
         Bad shapes or weights, ``(A, B)`` not controllable, or `laplacian` not the
         Laplacian of a connected undirected graph.
     """
-    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
+    A, B, (Q1, Q2, R, laplacian), dt = design_args("centralized_network_cost", A, B,
+        dict(Q1=Q1, Q2=Q2, R=R, laplacian=laplacian), dt)
+    A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R, discrete=dt != 0)
     lam, _ = laplacian_spectrum(laplacian)
-    return float(sum(np.trace(solve_care(A, B, Q1 + l * Q2, R)[1]) for l in lam))
+    solve = _riccati(dt)
+    return float(sum(np.trace(solve(A, B, Q1 + l * Q2, R)[1]) for l in lam))
 
 
-def _check_agent(A, B, Q1, Q2, R, controllable: bool = True):
-    """Validate the agent and weights; with `controllable`, also require ``(A, B)`` controllable (PBH)."""
+def _check_agent(A, B, Q1, Q2, R, controllable: bool = True, discrete: bool = False):
+    """Validate the agent and weights; with `controllable`, also require ``(A, B)`` stabilizable (PBH)."""
     A = _square(A, "A")
     n = A.shape[0]
     B = _matrix(B, "B", (n, None))
@@ -851,10 +926,32 @@ def _check_agent(A, B, Q1, Q2, R, controllable: bool = True):
     Q1 = _weight(Q1, "Q1", n)
     Q2 = _weight(Q2, "Q2", n)
     R = _weight(R, "R", B.shape[1], definite=True)
-    if controllable and not is_stabilizable(A, B):
-        raise ValueError("(A, B) is not stabilizable (a mode with Re s >= 0 is uncontrollable): "
+    if controllable and not is_stabilizable(A, B, discrete=discrete):
+        unstable = "|z| >= 1" if discrete else "Re s >= 0"
+        raise ValueError(f"(A, B) is not stabilizable (a mode with {unstable} is uncontrollable): "
                          "the LQR problem has no stabilizing solution")
     return A, B, Q1, Q2, R
+
+
+def _riccati(dt):
+    """The algebraic Riccati solver of the time base (``dt`` 0: continuous)."""
+    return solve_dare if dt != 0 else solve_care
+
+
+def _modal_structure(A, B, Q1, Q2, R, N: int) -> dict:
+    """:func:`borrelli_keviczky_structure` in discrete time, by the two modes of the complete graph.
+
+    The complete graph's Laplacian has eigenvalues 0 (the mean) and N (the rest): the network
+    Riccati solution is ``P_network = I (x) P_N + (1 1^T / N) (x) (P_0 - P_N)`` with ``P_l`` the
+    node solution for the weight ``Q1 + l Q2``, and likewise for the gain.
+    """
+    K0, P0, _ = solve_dare(A, B, Q1, R)
+    KN, PN, _ = solve_dare(A, B, Q1 + N * Q2, R)
+    ones = np.ones((N, N)) / N
+    P2, K2 = (P0 - PN) / N, (K0 - KN) / N
+    P_network = np.kron(np.eye(N), PN) + np.kron(ones, P0 - PN)
+    K_network = np.kron(np.eye(N), KN) + np.kron(ones, K0 - KN)
+    return {"P": P0, "P2": P2, "K1": KN + K2, "K2": K2, "P_network": P_network, "K_network": K_network}
 
 
 def _check_agents(n_agents: int) -> int:
@@ -875,5 +972,9 @@ def _check_gain(gain, m: int | None = None, n: int | None = None) -> None:
     as_matrix(_float_array(gain.K_coupling, "gain.K_coupling"), "gain.K_coupling", Ks.shape)
 
 
-def _spectral_abscissa(A, B, K_self, K_coupling, lam) -> float:
+def _spectral_abscissa(A, B, K_self, K_coupling, lam, dt=0.0) -> float:
+    """Largest real part of the closed-loop modes; in discrete time ``ln(rho) / dt`` (per step if dt is True)."""
+    if dt != 0:
+        rho = max(np.max(np.abs(np.linalg.eigvals(A - B @ (K_self + l * K_coupling)))) for l in lam)
+        return float(np.log(rho) / (1.0 if dt is True else dt)) if rho > 0 else -np.inf
     return float(max(np.max(np.linalg.eigvals(A - B @ (K_self + l * K_coupling)).real) for l in lam))

@@ -37,14 +37,15 @@ from numpy.typing import ArrayLike
 from ._conic import ConicProgram, clarabel, solve, svec, svec_size, sym_basis
 from ._optional import require
 from ._solver import SolverError
-from ._validation import as_matrix, check_adjacency, check_covariance, check_laplacian, finite_result
+from ._systems import design_args
+from ._validation import Frozen, as_matrix, check_adjacency, check_covariance, check_laplacian, finite_result, frozen_copy
 from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
 from .estimation import Message
 from .graphs import laplacian as graph_laplacian
 from .graphs import laplacian_spectrum
-from .riccati import RICCATI_RTOL, is_controllable, solve_care
+from .riccati import RICCATI_RTOL, is_controllable, solve_care, solve_dare
 
 cp = require("cvxpy", "mascore.observers (the LMI of eq. (55))")
 
@@ -141,16 +142,22 @@ class MinEnergyObserver:
 
 
 def min_energy_observer(
-    A: ArrayLike, Bbar: ArrayLike, C: ArrayLike, Q: ArrayLike, R: ArrayLike
+    A: ArrayLike, Bbar: ArrayLike | None = None, C: ArrayLike | None = None, Q: ArrayLike | None = None,
+    R: ArrayLike | None = None, *, dt: float | None = None,
 ) -> MinEnergyObserver:
     """Minimum-energy (deterministic Kalman-Bucy) observer, eqs. (19)-(25).
 
+    In discrete time (`dt`, or a sampled system) the dual of :func:`mascore.lqr.dlqr`: ``S``
+    solves the discrete-time Riccati equation of ``(A^T, C^T, Bbar R^{-1} Bbar^T, Q^{-1})``
+    and ``L = A S C^T (C S C^T + Q^{-1})^{-1}``, the predictor ``x_{k+1} = A x_k + L (y_k - C x_k)``.
+
     Parameters
     ----------
-    A : (n, n) array_like
-        Agent state matrix.
-    Bbar : (n, q) array_like
-        Disturbance input; ``(A, Bbar)`` must be controllable.
+    A : (n, n) array_like, or LTIAgent or StateSpace
+        Agent state matrix (continuous time unless `dt` is given), or the agent as a system whose
+        ``B`` is the disturbance input: then call ``min_energy_observer(sys, C, Q, R)``.
+    Bbar : (n, q) array_like, optional
+        Disturbance input (not with a system); ``(A, Bbar)`` must be controllable.
     C : (m, n) array_like
         ``(A, C)`` must be observable.
     Q : (m, m) array_like
@@ -160,6 +167,8 @@ def min_energy_observer(
     R : (q, q) array_like
         Cost weight on the disturbance ``d`` in cost (20), symmetric positive definite (large: trust the
         model). A weight, not a covariance: the *inverse* disturbance intensity, in 1/(disturbance unit)^2.
+    dt : float, optional
+        Sampling time (s) of a discrete-time agent (default: continuous time, or the system's own).
 
     Returns
     -------
@@ -179,9 +188,14 @@ def min_energy_observer(
     >>> me = observers.min_energy_observer(A, Bbar, C, np.eye(1), np.eye(1))
     >>> me.L.shape
     (2, 1)
+    >>> sampled = observers.min_energy_observer(A, Bbar, C, np.eye(1), np.eye(1), dt=0.1)   # A read per step
+    >>> bool(np.abs(sampled.E).max() < 1)
+    True
     """
+    A, Bbar, (C, Q, R), dt = design_args("min_energy_observer", A, Bbar, dict(C=C, Q=Q, R=R), dt, bname="Bbar")
     A, Bbar, C, Q, R = _check_observer(A, Bbar, C, Q, R)
-    K, S, E = solve_care(A.T, C.T, Bbar @ np.linalg.solve(R, Bbar.T), np.linalg.inv(Q))
+    solve = solve_dare if dt != 0 else solve_care
+    K, S, E = solve(A.T, C.T, Bbar @ np.linalg.solve(R, Bbar.T), np.linalg.inv(Q))
     return MinEnergyObserver(L=K.T, S=S, cost=float(np.trace(S)), E=E)
 
 
@@ -268,12 +282,12 @@ class DistributedObserver:
 
 def distributed_observer(
     A: ArrayLike,
-    Bbar: ArrayLike,
-    C: ArrayLike,
-    Q1: ArrayLike,
-    Q2: ArrayLike,
-    R: ArrayLike,
-    adjacency: ArrayLike,
+    Bbar: ArrayLike | None = None,
+    C: ArrayLike | None = None,
+    Q1: ArrayLike | None = None,
+    Q2: ArrayLike | None = None,
+    R: ArrayLike | None = None,
+    adjacency: ArrayLike | None = None,
     reading: str = "as-printed",
     trace_in: str = "transformed",
     solver_options: dict | None = None,
@@ -288,10 +302,16 @@ def distributed_observer(
        slack ``Z_i``; ``Phi = L2^{-1} W2^{-1} Y2``. Mode ``i`` uses the noise
        weight ``Q_i = Q1 + lambda_i Q2`` (eq. (61)).
 
+    Continuous time only (the LMI (56)-(62) is a continuous-time Lyapunov inequality): in place
+    of ``(A, Bbar)`` a continuous-time python-control ``StateSpace`` or an
+    :class:`~mascore.agents.LTIAgent` that carries its continuous-time matrices
+    (``LTIAgent.from_continuous``) is accepted, ``distributed_observer(sys, C, Q1, Q2, R, adjacency)``;
+    a discrete-time one is refused by name (:func:`min_energy_observer` designs in either).
+
     Parameters
     ----------
     A, Bbar, C : agent matrices, shapes (n, n), (n, q), (m, n), with ``m < n``,
-        ``(A, Bbar)`` controllable and ``(A, C)`` observable.
+        ``(A, Bbar)`` controllable and ``(A, C)`` observable (or a system in place of ``(A, Bbar)``).
     Q1, Q2 : (m, m) array_like
         Weights on the absolute and on the relative output errors (eq. (38));
         ``Q1`` positive definite, ``Q2`` positive semidefinite.
@@ -347,6 +367,8 @@ def distributed_observer(
     >>> obs.hurwitz, bool(obs.centralized_cost <= obs.cost <= obs.local_cost)
     (True, True)
     """
+    A, Bbar, (C, Q1, Q2, R, adjacency), _ = design_args("distributed_observer", A, Bbar,
+        dict(C=C, Q1=Q1, Q2=Q2, R=R, adjacency=adjacency), None, time="continuous", bname="Bbar")
     A, Bbar, C, Q1, R = _check_observer(A, Bbar, C, Q1, R, qname="Q1")
     m = C.shape[0]
     Q2 = check_covariance(np.atleast_2d(_float_array(Q2, "Q2")), "Q2", m)
@@ -1231,7 +1253,7 @@ def _check_trace_in(trace_in) -> None:
 # the observer in discrete time, on a team (the comparison's estimator)
 
 
-class DiscreteNetworkObserver:
+class DiscreteNetworkObserver(Frozen):
     """The distributed observer of Vlahakis and Halikias, discretized (forward Euler), on N agents at once.
 
     Agent i measures its own output ``z_ii = C x_i + nu_i`` and, on each link delivered at
@@ -1289,18 +1311,11 @@ class DiscreteNetworkObserver:
             raise ValueError(f"B must have n = {n} rows; got shape {B.shape}")
         if not np.isfinite(coupling):
             raise ValueError(f"coupling must be a finite number; got {coupling!r}")
-        for name, value in (("gain", gain), ("coupling", float(coupling)), ("adjacency", check_adjacency(adjacency)),
-                            ("A", A), ("B", B), ("C", C)):
-            if isinstance(value, np.ndarray):
-                value = value.copy()
-                value.setflags(write=False)
-            object.__setattr__(self, name, value)
+        self._set(gain=frozen_copy(gain), coupling=float(coupling), adjacency=frozen_copy(check_adjacency(adjacency)),
+                  A=frozen_copy(A), B=frozen_copy(B), C=frozen_copy(C))
 
-    def __setattr__(self, name: str, value: object) -> None:
-        raise AttributeError(f"a DiscreteNetworkObserver is frozen (cannot set {name!r}); build a new one")
-
-    def __reduce__(self) -> tuple:
-        return (type(self), (self.gain, self.coupling, self.adjacency, self.A, self.B, self.C))
+    def _args(self) -> tuple:
+        return (self.gain, self.coupling, self.adjacency, self.A, self.B, self.C)
 
     def update(self, x_hat: np.ndarray, z: np.ndarray, links: np.ndarray) -> np.ndarray:
         """Every agent's correction, batched over runs.

@@ -26,13 +26,13 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_matrix, check_covariance, check_positive, check_positive_int, check_square
+from ._validation import Frozen, as_matrix, check_covariance, check_positive, check_positive_int, check_square, frozen_copy
 from .estimation import Message
 
 __all__ = ["CentralizedOutputFilter", "OwnStateForwardingFilter"]
 
 
-class OwnStateForwardingFilter:
+class OwnStateForwardingFilter(Frozen):
     """Measurement forwarding on the own states: agent i corrects with every delivered measurement of x_i.
 
     ``P_i+ = (P_i-^{-1} + c_i H^T R^{-1} H)^{-1}``, ``x_i+ = P_i+ (P_i-^{-1} x_i- + H^T R^{-1} sum_j z_ji)``,
@@ -77,17 +77,11 @@ class OwnStateForwardingFilter:
         Q = check_covariance(Q, "Q", n)
         R = check_covariance(R, "R", H.shape[0], definite=True)
         Rinv = np.linalg.inv(R)
-        for name, value in (("A", A), ("B", B), ("Q", Q), ("H", H), ("R", R), ("information", H.T @ Rinv @ H),
-                            ("to_state", Rinv.T @ H)):
-            value = np.array(value, dtype=float)
-            value.setflags(write=False)
-            object.__setattr__(self, name, value)
+        self._set(A=frozen_copy(A), B=frozen_copy(B), Q=frozen_copy(Q), H=frozen_copy(H), R=frozen_copy(R),
+                  information=frozen_copy(H.T @ Rinv @ H), to_state=frozen_copy(Rinv.T @ H))
 
-    def __setattr__(self, name: str, value: object) -> None:
-        raise AttributeError(f"an OwnStateForwardingFilter is frozen (cannot set {name!r}); build a new one")
-
-    def __reduce__(self) -> tuple:
-        return (type(self), (self.A, self.B, self.Q, self.H, self.R))
+    def _args(self) -> tuple:
+        return (self.A, self.B, self.Q, self.H, self.R)
 
     def update(self, x: np.ndarray, P: np.ndarray, Z: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Every agent's correction with the delivered measurements of its own state, batched over runs.
@@ -258,7 +252,7 @@ class OwnStateForwardingFilter:
         return (Message("measurement z_ij of each neighbour j", float(self.to_state.shape[0])),)
 
 
-class CentralizedOutputFilter:
+class CentralizedOutputFilter(Frozen):
     """One Kalman filter over the team state ``(N n,)`` with every delivered output measurement (information form).
 
     ``P^{-1} = P-^{-1} + H^T R^{-1} H`` with one row block ``[0 .. C .. 0]`` per delivered
@@ -305,19 +299,12 @@ class CentralizedOutputFilter:
         Q = check_covariance(Q, "Q", n)
         r = check_positive(r, "r")
         N = check_positive_int(n_agents, "n_agents")
-        for name, value in (("A", A), ("B", B), ("Q", Q), ("C", C), ("A_team", np.kron(np.eye(N), A)),
-                            ("Q_team", np.kron(np.eye(N), Q)), ("information", C.T @ C / r)):
-            value = np.array(value, dtype=float)
-            value.setflags(write=False)
-            object.__setattr__(self, name, value)
-        object.__setattr__(self, "r", float(r))
-        object.__setattr__(self, "n_agents", N)
+        self._set(A=frozen_copy(A), B=frozen_copy(B), Q=frozen_copy(Q), C=frozen_copy(C),
+                  A_team=frozen_copy(np.kron(np.eye(N), A)), Q_team=frozen_copy(np.kron(np.eye(N), Q)),
+                  information=frozen_copy(C.T @ C / r), r=float(r), n_agents=N)
 
-    def __setattr__(self, name: str, value: object) -> None:
-        raise AttributeError(f"a CentralizedOutputFilter is frozen (cannot set {name!r}); build a new one")
-
-    def __reduce__(self) -> tuple:
-        return (type(self), (self.A, self.B, self.Q, self.C, self.r, self.n_agents))
+    def _args(self) -> tuple:
+        return (self.A, self.B, self.Q, self.C, self.r, self.n_agents)
 
     def update(self, x: np.ndarray, P: np.ndarray, Z: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The centre's correction with every delivered measurement.

@@ -23,18 +23,22 @@ from numpy.typing import ArrayLike
 
 from . import distributed_kf as dkf
 from ._progress import progress_bar
+from ._systems import full_state_only
 from ._validation import (
+    Frozen,
     as_matrix,
     check_covariance,
+    check_fits_in_memory,
     check_generator,
     check_positive,
     check_positive_int,
     check_square,
+    check_steps,
     frozen_copy,
 )
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
-from .agents import LTIAgent
+from .agents import LTIAgent, check_sampling_time
 from .graphs import laplacian as graph_laplacian
 from .graphs import require_connected
 from .noise import _psd_factor
@@ -244,8 +248,8 @@ def team_spread(values: ArrayLike) -> np.ndarray:
     return np.sqrt(np.mean(np.sum(dev**2, axis=-1), axis=-1))
 
 
-@dataclass(frozen=True)
-class RendezvousModel:
+@dataclass(frozen=True, eq=False)
+class RendezvousModel(Frozen):
     """The rendezvous loop's model: identical agents, consensus gain and noise (Song et al. eqs. (1)-(4)).
 
     Checked once when built, then passed to :func:`simulate_rendezvous` and
@@ -308,6 +312,8 @@ class RendezvousModel:
         if Q.ndim != 2:
             raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
         R = check_covariance(_float_array(self.R, "R"), "R")
+        if R.ndim == 2 and 0 < R.shape[0] < m:  # partial sensing: say where it is supported
+            raise ValueError(full_state_only(m, R.shape))
         if R.ndim != 2 or R.shape[0] % m:
             raise ValueError(f"R must be ({m}, {m}) per sensed agent or (m N, m N) for the team; got {R.shape}")
         dt = self.dt
@@ -316,9 +322,9 @@ class RendezvousModel:
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive sampling time in seconds; got {dt!r}")
         _check_time_base(A, B, float(dt))
-        for name, value in (("A", A), ("B", B), ("K", K), ("Q", Q), ("R", R)):
-            object.__setattr__(self, name, frozen_copy(value))
-        object.__setattr__(self, "dt", float(dt))
+        check_sampling_time(self.A, float(dt))  # an A from LTIAgent.from_continuous knows its dt
+        self._set(A=frozen_copy(A), B=frozen_copy(B), K=frozen_copy(K), Q=frozen_copy(Q), R=frozen_copy(R),
+                  dt=float(dt))
 
     @classmethod
     def from_agent(
@@ -371,10 +377,6 @@ class RendezvousModel:
             raise ValueError(f"dt = {dt!r} s contradicts the agent's sampling time agent.dt = {agent.dt!r} s that its "
                              "A and B were discretized with: leave dt out, or rebuild the agent with this dt")
         return cls(agent.A, agent.B, K, Q, R, agent.dt if agent.dt is not None else dt)
-
-    def __reduce__(self) -> tuple:
-        # pickle and copy rebuild through the constructor: the copy is checked and read-only too
-        return (type(self), (self.A, self.B, self.K, self.Q, self.R, self.dt))
 
     @property
     def m(self) -> int:
@@ -484,7 +486,8 @@ def expected_spread(
     x, single = _states(x0, model.m)
     n_runs, N, m = x.shape
     A, BK, Q, R = model.A, model.B @ model.K, model.Q, model.R
-    n_steps = check_positive_int(n_steps, "n_steps")
+    n_steps = check_steps(n_steps)
+    check_fits_in_memory(8.0 * (n_steps + 1) * n_runs * m, "n_steps", "the expected spreads")
     Adj = _check_adjacency(adjacency)
     sensing_mask(Adj)  # isolated-agent check
     if Adj.shape[-1] != N or Adj.ndim not in (2, 3) or (Adj.ndim == 3 and Adj.shape[0] != n_runs):
@@ -636,8 +639,9 @@ def simulate_rendezvous(
         filter), eq. (5) with every agent also running the filter of
         eqs. (8)-(20), or eq. (21) on the agents' own estimates with the
         filter of eqs. (29)-(34).
-    x_hat0 : (N m,) or (R, N m) array_like
-        Common initial team estimate of all agents (filter modes), one per run.
+    x_hat0 : (N m,), (R, N m), (N, m) or (R, N, m) array_like
+        Common initial team estimate of all agents (filter modes), one per run (the
+        per-agent rows ``(N, m)`` are stacked into the team vector).
     P0 : (m, m) or (m N, m N) array_like
         Covariance of the initial estimate error (filter modes): per agent, or the
         full team covariance.
@@ -680,7 +684,7 @@ def simulate_rendezvous(
                                          x_hat0[None], P0, mode="eb")       # every agent's x̂_i(0)
         Z, S = sensing.measure(meas_rng, x, adjacency, R)                    # step 0 (law (5) uses it)
         for k in range(n_steps):
-            U = consensus_control(team.X_hat, L, K)     # eq. (21): u_i from agent i's own estimates
+            U = consensus_control(team.view("X_hat"), L, K)  # eq. (21): u_i from agent i's own estimates
             x = propagate_team(proc_rng, x, U, A, B, Q) # eq. (1)
             team.predict()                              # eqs. (29), (30), (32), (34)
             Z, S = sensing.measure(meas_rng, x, adjacency, R)   # eq. (2): z_{i,x_j} = x_j + nu_ij
@@ -708,7 +712,9 @@ def simulate_rendezvous(
     n_runs, N, m = x.shape
     A, B, K, Q, R, dt = model.A, model.B, model.K, model.Q, model.R, model.dt
     R_team = team_noise_covariance(R, N, m)
-    n_steps = check_positive_int(n_steps, "n_steps")
+    n_steps = check_steps(n_steps)
+    check_fits_in_memory(8.0 * (n_steps + 1) * n_runs * N * m * (1 + (N if return_estimates else 0)), "n_steps",
+                         "the state histories")
     for flag, value in (("exact_control_noise", exact_control_noise), ("central", central),
                         ("progress", progress), ("switching", switching), ("return_estimates", return_estimates)):
         _check_flag(value, flag)
@@ -727,6 +733,19 @@ def simulate_rendezvous(
 
     filt = mode in ("measurement-filter", "estimation")
     filter_model = dkf.team_filter_model(A, B, K, Q, R, N) if filt else None
+    if filt:  # the shapes first, then the theory's conditions on the graph
+        if x_hat0 is None or P0 is None:
+            raise ValueError(f"mode {mode!r} needs x_hat0 and P0 (initial estimate and its covariance)")
+        xh0 = _float_array(x_hat0, "x_hat0")
+        if xh0.shape in ((N, m), (n_runs, N, m)):  # one row per agent: stack it into the team vector
+            xh0 = xh0.reshape(-1, N * m)
+        if single and xh0.shape == (N * m,):
+            xh0 = xh0[None]
+        if xh0.shape != (n_runs, N * m):
+            raise ValueError(f"Incompatible dimensions of x_hat0; expected the team estimate ({n_runs}, N m) = "
+                             f"({n_runs}, {N * m}) (or one row per agent, ({N}, {m})) but found {xh0.shape}")
+        if not np.all(np.isfinite(xh0)):
+            raise ValueError("x_hat0 contains NaN or infinite entries")
     if mode == "estimation":
         for adj in np.unique(Adj.reshape(-1, N, N), axis=0):  # each distinct graph once
             require_connected(adj, "mode 'estimation' (every agent estimates the whole team, system (43) "
@@ -738,19 +757,10 @@ def simulate_rendezvous(
     out: dict[str, np.ndarray | None] = {}
     team = central_filter = None
     if filt:
-        if x_hat0 is None or P0 is None:
-            raise ValueError(f"mode {mode!r} needs x_hat0 and P0 (initial estimate and its covariance)")
-        xh0 = _float_array(x_hat0, "x_hat0")
-        if single and xh0.shape == (N * m,):
-            xh0 = xh0[None]
-        if xh0.shape != (n_runs, N * m):
-            raise ValueError(f"Incompatible dimensions of x_hat0; expected ({n_runs}, {N * m}) but found {xh0.shape}")
-        if not np.all(np.isfinite(xh0)):
-            raise ValueError("x_hat0 contains NaN or infinite entries")
         # one covariance for a shared topology (fixed or switching), else one per run's fixed graph
         team = dkf.TeamFilter(filter_model, topology(0)[2], xh0, P0, mode="eb" if mode == "estimation" else "mb",
                               exact_control_noise=exact_control_noise and mode == "measurement-filter")
-        nb = team.Sigma.shape[0]
+        nb = team.view("Sigma").shape[0]
         n = filter_model.kron
         pos = _position_index(filter_model)
         out["pos_error"] = np.empty((n_steps + 1, n_runs, N))
@@ -770,21 +780,21 @@ def simulate_rendezvous(
 
         def record(k: int) -> None:
             Sig_i = team.agent_covariances()
-            e = x[:, None] - team.X_hat
+            e = x[:, None] - team.view("X_hat")
             err = e[..., pos_slice]
             out["pos_error"][k] = np.sqrt(np.sum(err**2, axis=(-1, -2)))
             diag = np.diagonal(Sig_i, axis1=-2, axis2=-1)[..., pos]
             out["pos_std"][k] = np.sqrt(n * diag.sum(axis=-1))
             out["nees"][k] = team.nees(x)
             if return_estimates:
-                out["estimates"][k] = team.X_hat
+                out["estimates"][k] = team.view("X_hat")
             if nb == 1:
                 out["sigma_i"][k] = Sig_i[0]
-                out["gains"][k] = team.KH[0]
+                out["gains"][k] = team.view("KH")[0]
                 if mode == "estimation":
                     out["f2_cross"][k] = team.f2_cross(topology(k)[2])[0]
             if central:
-                Pc, xc = central_filter.P, central_filter.x_hat
+                Pc, xc = central_filter.view("P"), central_filter.view("x_hat")
                 out["central_pos_std"][k] = np.sqrt(n * np.diagonal(Pc, axis1=-2, axis2=-1)[..., pos].sum(-1))
                 out["central_pos_error"][k] = np.sqrt(np.sum((x - xc)[..., pos_slice] ** 2, axis=(-1, -2)))
 
@@ -798,7 +808,7 @@ def simulate_rendezvous(
         elif mode in ("measurement", "measurement-filter"):
             U = consensus_control(Z, Lap, K)
         else:
-            U = consensus_control(team.X_hat, Lap, K)
+            U = consensus_control(team.view("X_hat"), Lap, K)
         x_new = propagate_team(proc_rng, x, U, A, B, Q)
         if central_filter is not None:
             central_filter.predict(U)

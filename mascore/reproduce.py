@@ -28,7 +28,8 @@ from ._progress import progress_bar
 from .ledger import Claim, output_hashes, write_claims
 from .registry import paper_keys, paper_registry, write_study
 
-__all__ = ["DEFAULT_SEED", "available_papers", "main", "reproduce_paper", "results_dir"]
+__all__ = ["DEFAULT_SEED", "apply_settings", "available_papers", "changed_claims", "main", "reproduce_paper",
+           "results_dir", "settings_folder"]
 
 #: Seed used when the caller gives none.
 DEFAULT_SEED = 1
@@ -85,7 +86,7 @@ def available_papers() -> list[str]:
 
 def reproduce_paper(
     paper: str, out: str | Path = "results", seed: int = DEFAULT_SEED, created_by: str | None = None,
-    progress: bool = True,
+    progress: bool = True, overrides: dict[str, str] | None = None,
 ) -> list[Claim]:
     """Run one paper's reproduction and write its figures, tables and ledger, all or nothing.
 
@@ -102,11 +103,15 @@ def reproduce_paper(
         ``mascore reproduce`` command, without paths).
     progress : bool
         Show progress bars of the long runs.
+    overrides : dict of str to str, optional
+        Settings to change, ``{name: value}`` as typed on the command line
+        (:func:`apply_settings`); the results then go to ``out/PAPER-set-NAME=VALUE.../``,
+        beside the default ones, which stay as they are.
 
     Returns
     -------
     list of Claim
-        The paper's claims, as written to ``out/PAPER/claims.json``.
+        The paper's claims, as written to ``claims.json``.
 
     Raises
     ------
@@ -135,13 +140,14 @@ def reproduce_paper(
     if out.exists() and not out.is_dir():
         raise ValueError(f"out must be a directory; {str(out)!r} is a file")
     registry = paper_registry(paper)
+    settings = apply_settings(paper, overrides or {})
     out.mkdir(parents=True, exist_ok=True)
-    final = out / paper
+    final = out / settings_folder(paper, overrides or {})
     staging = Path(tempfile.mkdtemp(prefix=f".{paper}-incomplete-", dir=out))
     try:
         claims: list[Claim] = []
         for study in registry.studies:
-            result = study.run(study.settings, seed, progress=progress)
+            result = study.run(settings[study.name], seed, progress=progress)
             claims += write_study(registry, study, result, staging)
         write_claims(claims, staging / "claims.json", paper, seed,
                      created_by or f"mascore reproduce {paper} --seed {seed}", files=output_hashes(staging))
@@ -150,6 +156,120 @@ def reproduce_paper(
         shutil.rmtree(staging, ignore_errors=True)
         raise
     return claims
+
+
+def apply_settings(paper: str, overrides: dict[str, str]) -> dict[str, object]:
+    """Each study's settings of `paper` with `overrides` applied, checked by the settings' own constraints.
+
+    A name is a field of one or more of the paper's settings dataclasses (``n_runs``), or
+    ``STUDY.name`` to change one study only. A value is read as a Python literal (``0.2``,
+    ``20``, ``(0.5, 1.5)``, ``'ring'``), else kept as text; the settings are rebuilt with
+    :func:`dataclasses.replace`, so a value outside the field's declared range is refused
+    with the field's name, range and unit.
+
+    Parameters
+    ----------
+    paper : str
+        A paper's key.
+    overrides : dict of str to str
+        ``{name: value}`` as typed after ``--set``.
+
+    Returns
+    -------
+    dict of str to settings
+        Study name -> its settings (the defaults where nothing was changed).
+
+    Raises
+    ------
+    ValueError, TypeError
+        An unknown name (the message lists the paper's settings) or a value the setting refuses.
+
+    Examples
+    --------
+    >>> from mascore.reproduce import apply_settings
+    >>> apply_settings("ren2005", {"n_steps": "20"})["kalman-consensus"].n_steps
+    20
+    >>> apply_settings("ren2005", {"n_steps": "0"})
+    Traceback (most recent call last):
+    ...
+    ValueError: KalmanConsensusSettings.n_steps must be an integer >= 1; got 0
+    """
+    import ast
+
+    registry = paper_registry(paper)
+    settings = {study.name: study.settings for study in registry.studies}
+    for name, text in overrides.items():
+        study_name, _, field = name.rpartition(".")
+        targets = [s for s in settings if (not study_name or s == study_name)
+                   and field in {f.name for f in dataclasses.fields(settings[s])}]
+        if not targets:
+            known = sorted({f"{s}.{f.name}" for s in settings for f in dataclasses.fields(settings[s])})
+            raise ValueError(f"--set {name}: {paper} has no setting of that name; its settings are "
+                             f"{', '.join(known)} (STUDY.name, or the name alone when only one study has it)")
+        try:
+            value = ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            value = text
+        for s in targets:
+            settings[s] = dataclasses.replace(settings[s], **{field: value})
+    return settings
+
+
+def settings_folder(paper: str, overrides: dict[str, str]) -> str:
+    """The folder name of a run at changed settings: ``PAPER`` alone for the defaults.
+
+    Parameters
+    ----------
+    paper : str
+        A paper's key.
+    overrides : dict of str to str
+        ``{name: value}`` as typed after ``--set``.
+
+    Returns
+    -------
+    str
+        ``PAPER-set-name=value+...`` (characters other than letters, digits, ``.``, ``=``, ``-``
+        and ``_`` replaced by ``_``), so that the default ledger is never overwritten.
+
+    Examples
+    --------
+    >>> from mascore.reproduce import settings_folder
+    >>> settings_folder("ren2005", {"n_steps": "20"})
+    'ren2005-set-n_steps=20'
+    """
+    import re
+
+    if not overrides:
+        return paper
+    tag = "+".join(f"{k}={v}" for k, v in sorted(overrides.items()))
+    return f"{paper}-set-" + re.sub(r"[^A-Za-z0-9.=_-]", "_", tag)
+
+
+def changed_claims(default: list[dict], changed: list[dict]) -> list[str]:
+    """The claims whose verdict differs between the default run and a run at other settings.
+
+    Parameters
+    ----------
+    default, changed : list of dict
+        Claim records (``claims.json``'s ``claims``) of the two runs.
+
+    Returns
+    -------
+    list of str
+        One line per claim whose verdict changed (``id: before -> after``), or that one run has
+        and the other has not.
+
+    Examples
+    --------
+    >>> from mascore.reproduce import changed_claims
+    >>> changed_claims([{"id": "p/a", "verdict": "holds"}], [{"id": "p/a", "verdict": "fails"}])
+    ['p/a: holds -> fails']
+    """
+    before = {c["id"]: c["verdict"] for c in default}
+    after = {c["id"]: c["verdict"] for c in changed}
+    lines = [f"{i}: {before.get(i, 'absent')} -> {after.get(i, 'absent')}"
+             for i in sorted(set(before) | set(after)) if before.get(i) != after.get(i)]
+    return lines
 
 
 def _replace_directory(final: Path, staging: Path) -> None:
@@ -172,6 +292,41 @@ def _seed_argument(text: str) -> int:
     if seed < 0:
         raise argparse.ArgumentTypeError(f"expected a non-negative integer seed, got {text!r}")
     return seed
+
+
+def _override_argument(text: str) -> tuple[str, str]:
+    name, eq, value = text.partition("=")
+    if not eq or not name.strip() or not value.strip():
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE (e.g. n_runs=20), got {text!r}")
+    return name.strip(), value.strip()
+
+
+def _reproduce_at(args: argparse.Namespace) -> int:
+    """``reproduce PAPER --set ...``: the run at other settings, its ledger beside the default, the changed claims."""
+    import json
+
+    overrides = dict(args.overrides)
+    command = (f"mascore reproduce {args.paper} --seed {args.seed} --set "
+               + " ".join(f"{k}={v}" for k, v in args.overrides))
+    try:
+        apply_settings(args.paper, overrides)  # refused before any work
+    except (ValueError, TypeError) as exc:
+        print(f"mascore: {exc}", file=sys.stderr)
+        return 2
+    start = time.perf_counter()
+    claims = reproduce_paper(args.paper, args.out, args.seed, created_by=command, overrides=overrides)
+    folder = args.out / settings_folder(args.paper, overrides)
+    print(f"{args.paper} at {', '.join(f'{k}={v}' for k, v in args.overrides)}: {len(claims)} claims in "
+          f"{time.perf_counter() - start:.1f} s -> {folder}")
+    default = args.out / args.paper / "claims.json"
+    if not default.exists():
+        print(f"no default ledger at {default} to compare with (run `mascore reproduce {args.paper}` first)")
+        return 0
+    lines = changed_claims(json.loads(default.read_text())["claims"], [c.to_dict() for c in claims])
+    print(f"{len(lines)} claim(s) changed verdict against {default}" + (":" if lines else ""))
+    for line in lines:
+        print(f"  {line}")
+    return 0
 
 
 def _out_argument(text: str) -> Path:
@@ -262,6 +417,8 @@ def main(argv: list[str] | None = None) -> int:
                      help="results directory (default: results/)")
     rep.add_argument("--seed", type=_seed_argument, default=DEFAULT_SEED,
                      help=f"random seed, a non-negative integer (default: {DEFAULT_SEED})")
+    rep.add_argument("--set", dest="overrides", metavar="NAME=VALUE", nargs="+", type=_override_argument,
+                     default=[], help="change a setting (one paper only); results go beside the default ones")
     cmp = sub.add_parser("compare", help="run the cross-method comparison sweep (Dask) and write its claims")
     cmp.add_argument("--grid", choices=["quick", "full"], default="quick", help="which sweep (default: quick)")
     cmp.add_argument("--out", type=_out_argument, default=Path("results"),
@@ -274,6 +431,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "compare":
         return _compare(args)
 
+    if args.overrides:
+        if args.paper == "all":
+            print("mascore: --set applies to one paper's settings; name the paper", file=sys.stderr)
+            return 2
+        return _reproduce_at(args)
     papers = available_papers() if args.paper == "all" else [args.paper]
     failed = False
     for paper in progress_bar(papers, enabled=len(papers) > 1, desc="papers", unit="paper"):

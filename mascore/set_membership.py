@@ -46,9 +46,9 @@ of each call (centre, shape, measurement, input) and the result. The functions
 :func:`correct`, :func:`predict` and :func:`run_filter` take the plain arrays and check every
 argument in full on every call (they build a model each time): for many steps with the
 same system, build the model once. No state is shared between models; a model is safe
-to use from several threads with ``method="closed_form"``; with ``method="sdp"`` it owns
-the compiled cvxpy programs, which must not be solved from two threads at once (one
-model per thread).
+to share between threads with either method: the compiled cvxpy programs of ``method="sdp"``
+belong to the call or to the caller (the `programs` dict of :meth:`SetMembershipModel.correct`),
+never to the model.
 
 Units: the state ``x`` and output ``y`` in the user's units; every ellipsoid shape matrix (``P``,
 and the disturbance bounds ``Q`` and ``R``, which are *shapes*, not covariances) in the unit of its
@@ -65,7 +65,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import ellipsoids
-from ._validation import as_matrix, check_square, frozen_copy, symmetric_part
+from ._validation import Frozen, as_matrix, check_square, frozen_copy, symmetric_part
 from ._validation import float_array as _float_array
 
 __all__ = [
@@ -345,7 +345,7 @@ def run_filter(
 
 
 @dataclass(frozen=True, eq=False)
-class SetMembershipModel:
+class SetMembershipModel(Frozen):
     """The system of eq. (1), checked once: the filter's constant matrices, stored read-only.
 
     Give the motion part (`A`, `G`, `Q`, optionally `B`) for :meth:`predict`, the
@@ -378,10 +378,10 @@ class SetMembershipModel:
 
     Notes
     -----
-    With ``method="closed_form"`` a model holds no mutable state and may be shared between
-    threads. With ``method="sdp"`` it compiles its cvxpy programs on first use and reuses
-    them; a cvxpy program keeps its parameter values while it is solved, so one model must
-    not run SDP steps from two threads at once: give each thread its own model.
+    A model holds no mutable state and may be shared between threads, with either method. The
+    compiled cvxpy programs of ``method="sdp"`` belong to the call (:meth:`run` compiles them once
+    for all its steps) or to the caller, who keeps them in the `programs` dict of
+    :meth:`correct` and :meth:`predict` across the steps of a loop (one dict per thread).
 
     Raises
     ------
@@ -415,7 +415,6 @@ class SetMembershipModel:
     W_error: str | None = field(init=False, repr=False, default=None)  #: why W cannot serve the consistency test
     GQG: np.ndarray | None = field(init=False, repr=False, default=None)  #: G Q G^T
     sqrt_tr_GQG: np.ndarray | None = field(init=False, repr=False, default=None)  #: sqrt(trace(G Q G^T))
-    _programs: dict = field(init=False, repr=False, default_factory=dict)  #: compiled SDPs (method="sdp")
 
     def __post_init__(self) -> None:
         motion = (self.A, self.G, self.Q)
@@ -431,37 +430,40 @@ class SetMembershipModel:
         n = self.n
         if n is None:
             n = (check_square(self.A, "A") if self.A is not None else as_matrix(self.C, "C", (None, None))).shape[1]
-        set_ = object.__setattr__
-        set_(self, "n", int(n))
+        self._set(n=int(n))
         if self.A is not None:
             A = check_square(self.A, "A", n)
             G = as_matrix(self.G, "G (disturbance matrix)", (n, None))
             Q = _check_pd_small(self.Q, "Q", G.shape[1])
-            GQG = G @ Q @ G.T
-            set_(self, "A", frozen_copy(A))
-            set_(self, "G", frozen_copy(G))
-            set_(self, "Q", frozen_copy(Q))
-            set_(self, "GQG", frozen_copy(GQG))
-            set_(self, "sqrt_tr_GQG", frozen_copy(ellipsoids._sqrt_trace(GQG)))
+            with np.errstate(over="ignore", invalid="ignore"):
+                GQG = G @ Q @ G.T
+            if not np.isfinite(GQG).all():
+                raise ValueError("G (disturbance matrix): G Q G^T overflows floating point; G and Q must be of "
+                                 "moderate magnitude (rescale the units of the state or of the disturbance)")
+            self._set(A=frozen_copy(A), G=frozen_copy(G), Q=frozen_copy(Q), GQG=frozen_copy(GQG))
+            self._set(sqrt_tr_GQG=frozen_copy(ellipsoids._sqrt_trace(GQG)))
             if self.B is not None:
-                set_(self, "B", frozen_copy(as_matrix(self.B, "B", (n, None))))
+                self._set(B=frozen_copy(as_matrix(self.B, "B", (n, None))))
         if self.C is not None:
             C = as_matrix(self.C, "C", (None, n))
             p = C.shape[0]
             D = as_matrix(self.D, "D", (p, None))
             R = _check_pd_small(self.R, "R", D.shape[1])
-            W = D @ R @ D.T
+            with np.errstate(over="ignore", invalid="ignore"):
+                W = D @ R @ D.T
+            if not np.isfinite(W).all():
+                raise ValueError("D: D R D^T overflows floating point; D and R must be of moderate magnitude "
+                                 "(rescale the units of the measurement or of its noise)")
             try:
                 _check_pd_small(W, "D R D^T (needed to test the consistency of y)", p)
             except ValueError as exc:
-                set_(self, "W_error", str(exc))
-            for name, value in (("C", C), ("D", D), ("R", R), ("W", W)):
-                set_(self, name, frozen_copy(value))
+                self._set(W_error=str(exc))
+            self._set(C=frozen_copy(C), D=frozen_copy(D), R=frozen_copy(R), W=frozen_copy(W))
 
     def correct(
         self, center: ArrayLike, shape: ArrayLike, y: ArrayLike, method: Method = "closed_form",
         step: int | None = None, agent: ArrayLike | None = None, check_consistency: bool = True,
-        solver_options: dict | None = None,
+        solver_options: dict | None = None, programs: dict | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Correction step, eqs. (2), (6)-(7), with this model's `C`, `D`, `R` (see :func:`correct`).
 
@@ -478,6 +480,10 @@ class SetMembershipModel:
             Measurement ``y_k``.
         method, step, agent, check_consistency, solver_options
             As in :func:`correct`.
+        programs : dict, optional
+            ``method="sdp"`` only: where the compiled SDPs are kept between calls. Pass one dict, empty at
+            first, to every step of a loop to compile once; it is the caller's (one per thread). By default
+            the call compiles its own.
 
         Returns
         -------
@@ -498,11 +504,12 @@ class SetMembershipModel:
         """
         method = _check_method(method)
         c, P = self._ellipsoid(center, shape, "correction", step, agent, self.C)
-        return self._correct(c, P, y, method, step, agent, check_consistency, solver_options)
+        return self._correct(c, P, y, method, step, agent, check_consistency, solver_options, programs)
 
     def predict(
         self, center: ArrayLike, shape: ArrayLike, u: ArrayLike | None = None, method: Method = "closed_form",
         step: int | None = None, agent: ArrayLike | None = None, solver_options: dict | None = None,
+        programs: dict | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Prediction step, eqs. (4), (8), with this model's `A`, `G`, `Q` (and `B`) (see :func:`predict`).
 
@@ -516,6 +523,8 @@ class SetMembershipModel:
             Known input, exactly when the model has `B`.
         method, step, agent, solver_options
             As in :func:`predict`.
+        programs : dict, optional
+            As in :meth:`correct`.
 
         Returns
         -------
@@ -537,7 +546,7 @@ class SetMembershipModel:
         c, P = self._ellipsoid(center, shape, "prediction", step, agent, self.A)
         if (self.B is None) != (u is None):
             raise ValueError("give both B and u, or neither")
-        return self._predict(c, P, u, method, step, agent, solver_options)
+        return self._predict(c, P, u, method, step, agent, solver_options, programs)
 
     def run(
         self, x0_hat: ArrayLike, P0: ArrayLike, y: ArrayLike, u: ArrayLike | None = None,
@@ -592,14 +601,7 @@ class SetMembershipModel:
                              f"model's state has size {self.n}")
         return c, P
 
-    def _program(self, key, build, *sizes):
-        """This model's compiled SDP `key` (built on first use, then reused; not for concurrent use)."""
-        sdp = self._programs.get(key)
-        if sdp is None:
-            sdp = self._programs[key] = build(*sizes)
-        return sdp
-
-    def _correct(self, c, P, y, method, step, agent, check_consistency, solver_options):
+    def _correct(self, c, P, y, method, step, agent, check_consistency, solver_options, programs=None):
         """Eqs. (2), (6)-(7) on a checked ellipsoid `c`, `P` (`y` checked here)."""
         if self.C is None:
             raise ValueError("this model has no C, D, R: it cannot run the correction step")
@@ -639,7 +641,7 @@ class SetMembershipModel:
             L = np.empty((*batch, n, p))
             from ._set_membership_sdp import correction_sdp
 
-            sdp = self._program("correction", correction_sdp, n, p, D.shape[1])
+            sdp = _program(programs, "correction", correction_sdp, n, p, D.shape[1])
             Rinv = np.linalg.inv(R)
             for idx in np.ndindex(*batch):
                 E = _cholesky(P[idx], "correction", step, agent, idx, batch)
@@ -649,7 +651,7 @@ class SetMembershipModel:
         _check_result(new_P, "correction", step, agent, batch)
         return new_c, new_P, L
 
-    def _predict(self, c, P, u, method, step, agent, solver_options):
+    def _predict(self, c, P, u, method, step, agent, solver_options, programs=None):
         """Eqs. (4), (8) on a checked ellipsoid `c`, `P` (`u` checked here)."""
         if self.A is None:
             raise ValueError("this model has no A, G, Q: it cannot run the prediction step")
@@ -676,7 +678,7 @@ class SetMembershipModel:
             new_P = np.empty_like(P)
             from ._set_membership_sdp import prediction_sdp
 
-            sdp = self._program("prediction", prediction_sdp, n, G.shape[1])
+            sdp = _program(programs, "prediction", prediction_sdp, n, G.shape[1])
             Qinv = np.linalg.inv(Q)
             for idx in np.ndindex(*batch):
                 E = _cholesky(P[idx], "prediction", step, agent, idx, batch)
@@ -688,13 +690,14 @@ class SetMembershipModel:
     def _run(self, c, P, y, u, method, agent, solver_options):
         """Algorithm 1 on checked data: correct with ``y[k]``, then predict, k = 0..T_f."""
         out: dict[str, list] = {k: [] for k in ("cc", "pc", "cp", "pp", "L")}
+        programs: dict = {}  # the run's compiled SDPs (method="sdp"), reused step after step
         for k in range(y.shape[0]):
-            c, P, L = self._correct(c, P, y[k], method, k, agent, True, solver_options)
+            c, P, L = self._correct(c, P, y[k], method, k, agent, True, solver_options, programs)
             out["cc"].append(c)
             out["pc"].append(P)
             out["L"].append(L)
             uk = None if u is None else u[k]
-            c, P = self._predict(c, P, uk, method, k, agent, solver_options)
+            c, P = self._predict(c, P, uk, method, k, agent, solver_options, programs)
             out["cp"].append(c)
             out["pp"].append(P)
         return FilterHistory(np.array(out["cc"]), np.array(out["pc"]), np.array(out["cp"]),
@@ -720,6 +723,15 @@ def _check_run_data(x0_hat, P0, y, B, u):
 
 
 # --------------------------------------------------------------------------- private
+
+
+def _program(programs, key, build, *sizes):
+    """The compiled SDP `key`: built anew without `programs`, else taken from (or built into) that dict."""
+    if programs is None:
+        return build(*sizes)
+    if key not in programs:
+        programs[key] = build(*sizes)
+    return programs[key]
 
 
 def _check_method(method: str) -> str:

@@ -370,8 +370,13 @@ def _results(pending: list[tuple[str, dict]], task: Callable, workers: int, sche
         # faulted in again (the N = 64 cells of the comparison ran 35-60 % slower, most of it in the
         # kernel, than in a serial run). The workers start with the C library's defaults, like a serial run.
         with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
-            cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                               dashboard_address=None, silence_logs=40)
+            try:
+                cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                   dashboard_address=None, silence_logs=40)
+            except RuntimeError as exc:
+                if not _unguarded_main(exc):
+                    raise
+                raise RuntimeError(_NO_MAIN_GUARD) from None
         client = distributed.Client(cluster, set_as_default=False)
     try:
         futures = [client.submit(_labelled, task, cid, cell, key=f"cell-{i}-{hashlib.sha1(cid.encode()).hexdigest()}",
@@ -385,6 +390,18 @@ def _results(pending: list[tuple[str, dict]], task: Callable, workers: int, sche
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+#: What to do when local Dask workers fail to start from a script without a main guard.
+_NO_MAIN_GUARD = ("local Dask workers could not start: the script that starts them must put its code under "
+                  "`if __name__ == \"__main__\":` (each worker process imports the main module again); "
+                  "or pass workers=0 to run serially")
+
+
+def _unguarded_main(exc: BaseException) -> bool:
+    """Whether a failure to start local workers is the spawn of a main module without ``__main__`` guard."""
+    text = "".join(str(e) for e in (exc, exc.__cause__, exc.__context__) if e is not None)
+    return any(key in text for key in ("Nanny failed to start", "bootstrapping phase", "freeze_support"))
 
 
 def demo_task(cell: Mapping[str, Any]) -> list[dict[str, Any]]:

@@ -43,8 +43,8 @@ import scipy.linalg
 from numpy.typing import ArrayLike
 
 from . import graphs
-from ._validation import as_matrix as _matrix
 from ._validation import (
+    Frozen,
     as_vector,
     check_adjacency,
     check_covariance,
@@ -53,8 +53,10 @@ from ._validation import (
     frozen_copy,
     require_finite,
 )
+from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
+from .agents import is_system, system_matrices
 
 __all__ = [
     "SyncDesign",
@@ -729,8 +731,8 @@ def default_circle(adjacency: ArrayLike, pinning: ArrayLike) -> tuple[float, flo
 
 
 def design_synchronization(
-    A: ArrayLike, B: ArrayLike, Q: ArrayLike, adjacency: ArrayLike, pinning: ArrayLike,
-    c0: float | None = None, r0: float | None = None,
+    A: ArrayLike, B: ArrayLike | None = None, Q: ArrayLike | None = None, adjacency: ArrayLike | None = None,
+    pinning: ArrayLike | None = None, c0: float | None = None, r0: float | None = None,
 ) -> SyncDesign:
     """Lemma 2: P from eq. (16), K, c = 1/c0, after checking the circle conditions.
 
@@ -739,10 +741,15 @@ def design_synchronization(
     (the paper's example uses ``C(2/3, 0.6)``), or `c0` alone to get the smallest
     radius about that centre.
 
+    Call as ``design_synchronization(A, B, Q, adjacency, pinning)`` or with a system
+    in place of ``(A, B)``: ``design_synchronization(sys, Q, adjacency, pinning)``,
+    ``sys`` a discrete-time python-control ``StateSpace`` (e.g. from ``control.c2d``)
+    or an :class:`mascore.agents.LTIAgent`; a continuous-time one is refused.
+
     Parameters
     ----------
-    A : (n, n) array_like
-        Agent state matrix (discrete time, one sampling period).
+    A : (n, n) array_like, or LTIAgent or StateSpace
+        Agent state matrix (discrete time, one sampling period), or the agent itself.
     B : (n, m) array_like
         Agent input matrix, full column rank.
     Q : (n, n) array_like
@@ -782,6 +789,17 @@ def design_synchronization(
     >>> bool(auto.r0 / auto.c0 < d.r0 / d.c0), bool(auto.rho < 1)
     (True, True)
     """
+    if is_system(A):
+        A_sys, B_sys, _ = system_matrices(A, "discrete", name="A", needed_by="design_synchronization (Lemma 2)")
+        if pinning is None:  # (sys, Q, adjacency, pinning) positionally
+            B, Q, adjacency, pinning = None, B, Q, adjacency
+        elif B is not None:
+            raise TypeError("design_synchronization(sys, Q, adjacency, pinning): B is the system's; do not pass it")
+        A, B = A_sys, B_sys
+    for name, value in (("B", B), ("Q", Q), ("adjacency", adjacency), ("pinning", pinning)):
+        if value is None:
+            raise TypeError(f"design_synchronization needs {name}: call (A, B, Q, adjacency, pinning) or "
+                            "(sys, Q, adjacency, pinning)")
     if c0 is None:
         if r0 is not None:
             raise ValueError("r0 was given without c0: pass both (the circle C(c0, r0)), c0 alone, or neither "
@@ -801,16 +819,21 @@ def design_synchronization(
     inside = circle_contains(eigs, c0, r0)
     if not np.all(inside):
         raise ValueError(f"Lemma 2: eigenvalues {eigs[~inside]} of Gamma (eq. (15), from adjacency and pinning) "
-                         f"lie outside C({c0}, {r0})")
+                         f"lie outside C({c0}, {r0}); pass a larger r0, or leave c0 and r0 out to have the circle "
+                         f"computed from the spectrum of Gamma")
     if not r0 / c0 < r:
-        raise ValueError(f"Lemma 2: r0/c0 = {r0 / c0:.4g} is not below r = {r:.4g}")
+        raise ValueError(
+            f"Lemma 2: r0/c0 = {r0 / c0:.4g} is not below r = {r:.4g}. r0/c0 comes from the graph (the eigenvalues "
+            f"of Gamma = L + diag(pinning)): pin more agents, raise the pinning gains or add edges to shrink it. "
+            f"r comes from the agent (A, B) and the shape of Q only: scaling Q does not change r (P scales with "
+            f"it); a less unstable A (e.g. a shorter sampling time) raises it")
     c = 1.0 / c0
     Ac, Bc = closed_loop_matrices(A, B, K, c, Gamma)
     return SyncDesign(P=P, residual=riccati_like_residual(A, B, Q, P), K=K, c=c, r=r, c0=c0, r0=r0,
                       Gamma=Gamma, eigs=eigs, in_circle=inside, A_c=Ac, B_c=Bc, rho=spectral_radius(Ac))
 
 
-class SynchronizationLaw:
+class SynchronizationLaw(Frozen):
     """The law of Sec. 4.2 on a fixed graph and gain, checked once.
 
     The graph may be directed; it is checked (finite, non-negative, no self-loops) but
@@ -840,7 +863,7 @@ class SynchronizationLaw:
     array([0.5, 0.5])
     """
 
-    __slots__ = ("g", "K", "c", "_Lp", "_scale")
+    __slots__ = ("adjacency", "g", "K", "c", "_Lp", "_scale")
 
     def __init__(self, adjacency: ArrayLike, pinning: ArrayLike, K: ArrayLike, c: float) -> None:
         c = _real(c, "c")
@@ -848,9 +871,12 @@ class SynchronizationLaw:
             raise ValueError(f"c (the coupling gain) must be >= 0; got {c}")
         Aadj, g = _check_graph(adjacency, pinning)
         K = _matrix(K, "K")
-        self.g, self.K, self.c = frozen_copy(g), frozen_copy(K), c
-        self._Lp = frozen_copy(graphs.laplacian(Aadj) + np.diag(g))  # L + diag(g)
-        self._scale = frozen_copy(c / (1.0 + Aadj.sum(axis=1) + g))  # c / (1 + d_i + g_i)
+        self._set(adjacency=frozen_copy(Aadj), g=frozen_copy(g), K=frozen_copy(K), c=c,
+                  _Lp=frozen_copy(graphs.laplacian(Aadj) + np.diag(g)),  # L + diag(g)
+                  _scale=frozen_copy(c / (1.0 + Aadj.sum(axis=1) + g)))  # c / (1 + d_i + g_i)
+
+    def _args(self) -> tuple:
+        return (self.adjacency, self.g, self.K, self.c)
 
     def __call__(self, xhat: ArrayLike, x_leader: ArrayLike) -> np.ndarray:
         """The inputs of all agents, batched.

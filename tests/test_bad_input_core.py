@@ -83,6 +83,9 @@ def baselines() -> dict[str, tuple]:
         "agents.team_state": (agents.team_state, dict(agent_states_=rng.normal(size=(3, 4)))),
         "agents.agent_states": (agents.agent_states, dict(team=rng.normal(size=12), n_states=4)),
         "agents.zoh": (agents.zoh, dict(A_c=[[0.0, 1.0], [0.0, -1.0]], B_c=[[0.0], [1.0]], dt=0.1)),
+        "agents.system_matrices": (agents.system_matrices, dict(system=AGENT, time="continuous")),
+        "agents.check_sampling_time": (agents.check_sampling_time, dict(A=AGENT.A)),
+        "agents.is_system": (agents.is_system, dict(obj=AGENT)),
         # graphs
         "graphs.adjacency_from_edges": (graphs.adjacency_from_edges, dict(n_agents=3, edges=[(0, 1), (1, 2, 0.5)])),
         "graphs.laplacian": (graphs.laplacian, dict(A=A)),

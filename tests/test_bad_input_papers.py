@@ -126,7 +126,7 @@ def test_bhattacharjee2021_refuses_nan_box_and_an_empty_horizon():
 
 
 def test_compare_refuses_bad_settings_cells_and_tables():
-    with pytest.raises(ValueError, match=r"BenchmarkSettings\.n_steps must be an integer >= 1"):
+    with pytest.raises(ValueError, match=r"BenchmarkSettings\.n_steps must be an integer (>= 1|in \[1, )"):
         compare.simulate_team("local", 4, 0, runs=3, settings=replace(compare.SETTINGS, n_steps=-1))
     with pytest.raises(ValueError, match=r"BenchmarkSettings\.init_pos must be a finite number in \[0, 1e\+06\] m"):
         replace(compare.SETTINGS, init_pos=1e300)  # used to give an RMSE of 0

@@ -243,6 +243,7 @@ def _run_ekf(seed, n_steps=20, N=4):
     out = []
     for k in range(n_steps):
         observed = rng.random((2, N, N)) < 0.7
+        observed[:, np.arange(N), np.arange(N)] = True  # row i is agent i's closed neighbourhood
         z = X[:, None] + rng.standard_normal((2, N, N, 4))
         step = ekf.step(z, observed, predict=k < n_steps - 1)
         out += [a.copy() for a in step if a is not None] + [ekf.Sigma.copy()]
@@ -302,10 +303,11 @@ def test_model_and_filter_arrays_are_read_only_copies():
     Q[0, 0] = R[0, 0] = -5.0  # the caller's arrays, spoiled after the check
     Sigma0[:] = np.nan
     X_hat[:] = np.nan
-    for arr in (model.Q_team, model.R, ekf.X_hat, ekf.Sigma):
+    for arr in (model.Q_team, model.R, ekf.view("X_hat"), ekf.view("Sigma")):
         assert not arr.flags.writeable
         with pytest.raises(ValueError, match="read-only"):
             arr[..., 0, 0] = 1.0
+    ekf.X_hat[..., 0, 0] = ekf.Sigma[..., 0, 0] = 1.0  # copies: writing into them cannot reach the filter
     with pytest.raises(AttributeError):
         model.dt = 1.0
     observed = np.ones((2, N, N), bool)
@@ -365,4 +367,4 @@ def test_an_overflowing_step_raises_naming_its_inputs():
     N = 4
     ekf = dekf.FlockingEKF(dekf.EKFModel(N, 10.0, GAINS, 0.01 * np.eye(M), np.eye(M)), X_hat, 1e307 * np.eye(M))
     with pytest.raises(ValueError, match=r"EKF step \(inputs X_hat, Sigma, z\) produced NaN or inf"):
-        ekf.step(X[:, None] + np.zeros((2, N, N, 4)), np.zeros((2, N, N), bool))
+        ekf.step(X[:, None] + np.zeros((2, N, N, 4)), np.broadcast_to(np.eye(N, dtype=bool), (2, N, N)))

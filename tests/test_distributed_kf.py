@@ -285,7 +285,7 @@ def test_bad_shapes_in_steps():
     [
         (dict(x0=np.full((1, 3, 4), np.nan)), "x0 contains NaN"),
         (dict(x_hat0=np.full((1, 12), np.inf)), "x_hat0 contains NaN"),
-        (dict(x_hat0=np.zeros((1, 3, 4))), "Incompatible dimensions of x_hat0"),
+        (dict(x_hat0=np.zeros((1, 3, 5))), "Incompatible dimensions of x_hat0"),
         (dict(P0=np.eye(3)), "Incompatible dimensions of P0"),
         (dict(P0=-np.eye(4)), "P0 must be positive semidefinite"),
         (dict(x0=np.zeros((1, 3, 3))), "x0 must hold states of the model's size m = 4"),
@@ -556,8 +556,11 @@ def test_model_arrays_are_read_only_and_copied():
         team.predict()
         team.update(Z, S[0])
     assert np.linalg.eigvalsh(team.Sigma[0]).min() > 0
+    kept = team.Sigma
+    kept[0, 0, 0] = 0.0  # the state the filter hands out is a copy: writing into it cannot reach the filter
+    assert team.Sigma[0, 0, 0] > 0
     with pytest.raises(ValueError, match="read-only"):
-        team.Sigma[0, 0, 0] = 0.0  # the state the filter hands out cannot be written either
+        team.view("Sigma")[0, 0, 0] = 0.0  # nor can its view, asked for by name
 
 
 def test_model_constructor_checks_everything():

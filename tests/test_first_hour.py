@@ -211,8 +211,9 @@ def test_rendezvous_model_refuses_a_dt_that_contradicts_A():
         rendezvous.RendezvousModel.from_agent(agent, K, Q, R, dt=0.1)
     from mascore.agents import LTIAgent
 
-    with pytest.raises(ValueError, match="carries no sampling time"):
-        rendezvous.RendezvousModel.from_agent(LTIAgent(agent.A, agent.B), K, Q, R)
+    with pytest.raises(ValueError, match="carries no sampling time"):  # plain arrays: no time base at all
+        rendezvous.RendezvousModel.from_agent(LTIAgent(np.array(agent.A), np.array(agent.B)), K, Q, R)
+    assert LTIAgent(agent.A, agent.B).dt == 0.05  # the A of a sampled agent remembers its dt
 
 
 def test_lti_agent_checks_its_continuous_time_origin():
@@ -222,8 +223,10 @@ def test_lti_agent_checks_its_continuous_time_origin():
     agent = LTIAgent.from_continuous(A_c, B_c, 0.05)
     assert agent.dt == 0.05
     LTIAgent(agent.A, agent.B, dt=0.05, A_c=A_c, B_c=B_c)  # consistent: accepted
-    with pytest.raises(ValueError, match="A is not the zero-order-hold sampling"):
+    with pytest.raises(ValueError, match="dt = 0.1 s contradicts A, which was sampled over dt = 0.05 s"):
         LTIAgent(agent.A, agent.B, dt=0.1, A_c=A_c, B_c=B_c)
+    with pytest.raises(ValueError, match="A is not the zero-order-hold sampling"):  # plain arrays: checked by zoh
+        LTIAgent(np.array(agent.A), agent.B, dt=0.1, A_c=A_c, B_c=B_c)
     with pytest.raises(ValueError, match="both A_c and B_c"):
         LTIAgent(agent.A, agent.B, dt=0.05, A_c=A_c)
 

@@ -70,7 +70,7 @@ def test_reproduce_writes_a_ledger_that_matches_its_files(tmp_path, fake):
     fake()
     reproduce.reproduce_paper("ren2005", tmp_path, seed=1, progress=False)
     doc = ledger.verify_outputs(tmp_path / "ren2005")
-    assert doc["seed"] == 1 and set(doc["files"]) == {"figures/fig1.png", "tables/table1.csv"}
+    assert doc["seed"] == 1 and set(doc["files"]) == {"figures/fig1.png", "figures/fig1.layout.json", "tables/table1.csv"}
     assert doc["claims"][0]["study"] == "fake"
     assert str(tmp_path) not in json.dumps(doc), "an absolute path in the ledger"
     (tmp_path / "ren2005" / "tables" / "table1.csv").write_text("seed\n7\n")

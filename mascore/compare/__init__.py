@@ -155,7 +155,7 @@ _NAMES = {
         '_concat', '_order', '_plain_ticks', '_plt', 'plot_cost', 'plot_pareto', 'plot_robustness'
     ),
     'cost': (
-        'NODE_ORDER', 'WHOLE_TEAM', 'node_cost', 'node_costs'
+        'NODE_ORDER', 'node_cost', 'node_costs'
     ),
 }
 _WHERE = {name: module for module, names in _NAMES.items() for name in names}

@@ -9,7 +9,15 @@ from typing import Any
 import numpy as np
 
 from .. import estimation, graphs
-from .._validation import check_fits_in_memory, check_positive, check_positive_int, check_probability, check_seed
+from .._validation import (
+    MAX_STEPS,
+    check_budget,
+    check_fits_in_memory,
+    check_positive,
+    check_positive_int,
+    check_probability,
+    check_seed,
+)
 from ..settings import check_settings, check_settings_type, setting
 
 #: Estimators of the team task, in table order.
@@ -106,7 +114,7 @@ class BenchmarkSettings:
     """
 
     dt: float = setting(0.1, source="chosen", unit="s", note="sampling time", low=0, low_open=True)
-    n_steps: int = setting(150, source="chosen", note="steps per run of the team task", low=1)
+    n_steps: int = setting(150, source="chosen", note="steps per run of the team task", low=1, high=MAX_STEPS)
     steady_from: int = setting(75, source="chosen", note="first step of the steady-state window", low=0)
     q_pos: float = setting(1e-4, source="chosen", unit="m²", note="process-noise variance per position entry",
                            low=0, high=_MAX_SCALE**2)
@@ -128,7 +136,8 @@ class BenchmarkSettings:
                                    low=0, low_open=True)
     mean_degree: float = setting(4.0, source="chosen", note="expected neighbours of the geometric graph",
                                  low=0, low_open=True)
-    shared_steps: int = setting(30, source="chosen", note="steps of the shared-quantity task", low=1)
+    shared_steps: int = setting(30, source="chosen", note="steps of the shared-quantity task", low=1,
+                                high=MAX_STEPS)
     shared_var: tuple[float, float] = setting((0.5, 5.0), source="chosen", unit="m²",
                                               note="range of the prior variances of the shared task",
                                               length=2, low=0, low_open=True)
@@ -302,7 +311,10 @@ def floats_per_step(method: str, n_agents: int, degree: float = 2.0, sensing: st
 
 
 def check_n_agents(n_agents: object) -> int:
-    return check_positive_int(n_agents, "n_agents", minimum=3)
+    """A team size N >= 3 whose team covariances (a few (4N, 4N) arrays) fit in memory."""
+    n_agents = check_positive_int(n_agents, "n_agents", minimum=3)
+    check_fits_in_memory(8.0 * 4 * (4 * n_agents) ** 2, "n_agents", "a few of the team's (4N, 4N) covariances")
+    return n_agents
 
 
 def check_run(n_agents: object, noise: object, dropout: object, q_scale: object, runs: object,
@@ -318,6 +330,7 @@ def check_run(n_agents: object, noise: object, dropout: object, q_scale: object,
         raise ValueError("dropout must be below 1 (every link lost at every step leaves nothing to compare)")
     check_positive(q_scale, "q_scale", "(the filters' Q over the true Q)")
     runs = check_positive_int(settings.runs if runs is None else runs, "runs")
+    check_budget("runs", runs, settings.n_steps, n_agents, what="agent-steps (runs x BenchmarkSettings.n_steps x N)")
     # the team filters hold (runs, N, N, 4) views and up to (runs, 4N, 4N) covariances at once
     check_fits_in_memory(8.0 * runs * (n_agents**2 * 4 * 8 + (4 * n_agents) ** 2 * 3), "runs",
                          "the estimates and covariances of one step")

@@ -7,16 +7,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from .._validation import check_positive_int
-from .benchmark import CORE_METHODS, SETTINGS, BenchmarkSettings
+from .._validation import check_budget, check_positive_int, check_steps
+from .benchmark import CORE_METHODS, SETTINGS, BenchmarkSettings, check_n_agents
 from .team import simulate_team
 
 # --------------------------------------------------------------------------------------------
 # the cost of one node, one run, one thread
-
-#: Team methods whose busiest node runs the whole team's filter: the centre, or every agent (Song et al., Remark 4).
-WHOLE_TEAM = ("centralized", "song-mb", "song-eb")
-
 
 def node_cost(method: str, n_agents: int, n_steps: int = 20, repeats: int = 3, seed: int = 0,
               settings: BenchmarkSettings = SETTINGS) -> float:
@@ -64,9 +60,12 @@ def node_cost(method: str, n_agents: int, n_steps: int = 20, repeats: int = 3, s
     >>> compare.node_cost("local", 8, n_steps=5) > 0
     True
     """
-    short = replace(settings, n_steps=int(n_steps), steady_from=0)
+    n_steps = check_steps(n_steps)
+    repeats = check_positive_int(repeats, "repeats")
+    check_budget("repeats", repeats, n_steps, what="timed steps (repeats x n_steps)")
+    short = replace(settings, n_steps=n_steps, steady_from=0)
     best = min(float(simulate_team(method, n_agents, seed, runs=1, settings=short)["cpu_s"][0])
-               for _ in range(check_positive_int(repeats, "repeats")))
+               for _ in range(repeats))
     return 1e6 * best / short.n_steps
 
 
@@ -116,6 +115,14 @@ def node_costs(sizes: Sequence[int] = (4, 8, 16), methods: Sequence[str] = CORE_
     """
     import pandas as pd
 
+    sizes = [check_n_agents(n) for n in sizes]
+    if len(sizes) < 2:
+        raise ValueError(f"sizes must hold at least two team sizes (a slope in N needs two); got {sizes!r}")
+    methods = list(methods)
+    if not methods:
+        raise ValueError("methods must name at least one method of TEAM_METHODS; got none")
+    n_steps = check_steps(n_steps)
+    check_budget("n_steps", n_steps, len(sizes), len(methods), what="timed steps (n_steps x sizes x methods)")
     rows = {}
     for m in methods:
         costs = {n: node_cost(m, n, n_steps, settings=settings) for n in sizes if not (m == "song-eb" and n > 32)}

@@ -10,6 +10,7 @@ import numpy as np
 
 from .. import distributed_kf as dkf
 from .. import graphs, kalman, rendezvous, set_membership
+from .._validation import frozen_copy
 from ..agents import double_integrator
 from ..own_state import CentralizedOutputFilter, OwnStateForwardingFilter
 from .benchmark import (
@@ -155,7 +156,7 @@ class _Song(_Estimator):
     def update(self, Z, S):
         self.filter.update(Z, S)
         N = self.t.N
-        self.own = self.filter.X_hat[:, np.arange(N), np.arange(N)]
+        self.own = self.filter.view("X_hat")[:, np.arange(N), np.arange(N)]  # fancy indexing copies
 
     def views(self, Z, S):
         return self.filter.X_hat if self.eb else Z
@@ -327,8 +328,7 @@ class _SetMembership(_Estimator):
 # ---------------------------------------------------------------- position-only sensing: z_ij = C x_j + nu_ij
 
 #: The position-only output matrix of one agent, ``C = [I_2 0]`` (m).
-_C_POS = np.hstack([np.eye(2), np.zeros((2, 2))])
-_C_POS.setflags(write=False)
+_C_POS = frozen_copy(np.hstack([np.eye(2), np.zeros((2, 2))]))
 
 
 class _CentralizedPosition(_Estimator):

@@ -581,12 +581,13 @@ def simulate(
     leader = s.matrix("leader_x0")
     model = smf.SetMembershipModel(A=A_, G=G_, C=C_, D=D_, Q=setting.Q, R=setting.R, B=B_)  # checked once
     law = sync.SynchronizationLaw(adjacency, pin, des.K, des.c)
+    programs: dict = {}  # this run's compiled SDPs (method="sdp"), reused step after step
     xs, xh, Ps, us, ls, xp, Pp = [], [], [], [], [], [], []
     for k in progress_bar(range(t_f + 1), enabled=progress, desc=f"closed loop ({method})", leave=False):
         y = x @ C_.T + v[:, k] @ D_.T
         xp.append(c)
         Pp.append(P)
-        c, P, _ = model.correct(c, P, y, method=method, step=k, agent=agent)
+        c, P, _ = model.correct(c, P, y, method=method, step=k, agent=agent, programs=programs)
         xs.append(x)
         xh.append(c)
         Ps.append(P)
@@ -595,7 +596,7 @@ def simulate(
             break
         u = law(c, leader)
         x = x @ A_.T + u @ B_.T + w[:, k] @ G_.T
-        c, P = model.predict(c, P, u=u, method=method, step=k, agent=agent)
+        c, P = model.predict(c, P, u=u, method=method, step=k, agent=agent, programs=programs)
         leader = A_ @ leader
         us.append(u)
     x, xhat, P = np.stack(xs, 1), np.stack(xh, 1), np.stack(Ps, 1)

@@ -857,7 +857,7 @@ def simulate_remark6(
     states[0] = x = x0
     measure(meas_rng, x, adjacency, R)  # the draw simulate_rendezvous makes at k = 0 (same noise streams)
     for k in progress_bar(range(n_steps), enabled=progress, desc="rendezvous (Remark 6)", leave=False):
-        x = propagate_team(proc_rng, x, consensus_control(team.X_hat, Lc, s.K), s.A, s.B, Q)
+        x = propagate_team(proc_rng, x, consensus_control(team.view("X_hat"), Lc, s.K), s.A, s.B, Q)
         team.predict()
         Z, _ = measure(meas_rng, x, adjacency, R)
         team.update(Z, mask)

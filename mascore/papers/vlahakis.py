@@ -299,7 +299,9 @@ def design(Q2: float, reading: str = "as-printed", trace_in: str = "transformed"
     Q2 = _check_q2(Q2)
     if n_agents is not None:
         settings = dataclasses.replace(settings, n_agents=_check_n_agents(n_agents))
-    return _design(settings, Q2, reading, trace_in)
+    A, Bbar, C = settings.arrays()
+    return observers.distributed_observer(A, Bbar, C, settings.Q1, Q2, settings.R, settings.adjacency(),
+                                          reading=reading, trace_in=trace_in)
 
 
 def _check_q2(Q2: object) -> float:
@@ -310,12 +312,6 @@ def _check_q2(Q2: object) -> float:
 def _check_n_agents(n_agents: object) -> int | None:
     """`n_agents` as an int (None keeps the settings'); the graph builders require at least 3."""
     return None if n_agents is None else check_positive_int(n_agents, "n_agents")
-
-
-def _design(s: ObserverSettings, Q2: float, reading: str, trace_in: str) -> observers.DistributedObserver:
-    A, Bbar, C = s.arrays()
-    return observers.distributed_observer(A, Bbar, C, s.Q1, Q2, s.R, s.adjacency(), reading=reading,
-                                          trace_in=trace_in)
 
 
 def _lam(s: ObserverSettings, n_agents: int | None = None) -> np.ndarray:
@@ -659,11 +655,7 @@ def readings_table(settings: ObserverSettings = SETTINGS) -> pd.DataFrame:
     (closed form, :func:`as_printed_phi_interval`).
     """
     check_settings_type(settings, ObserverSettings, "settings")
-    return _readings_table(settings)
-
-
-def _readings_table(s: ObserverSettings) -> pd.DataFrame:
-    rows = []
+    s, rows = settings, []
     for reading in observers.READINGS:
         for trace_in in ("transformed", "original"):
             for Q2 in s.Q2:
@@ -707,12 +699,9 @@ def lmi_variants_table(settings: ObserverSettings = SETTINGS) -> pd.DataFrame:
     recorded as such.
     """
     check_settings_type(settings, ObserverSettings, "settings")
-    return _lmi_variants_table(settings)
-
-
-def _lmi_variants_table(s: ObserverSettings) -> pd.DataFrame:
     from .._solver import SolverError
 
+    s = settings
     A, Bbar, C = s.arrays()
     own = _lam(s)
     full = np.linalg.eigvalsh(graphs.laplacian(graphs.complete_graph(s.n_agents)))

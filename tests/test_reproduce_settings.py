@@ -1,0 +1,52 @@
+"""``mascore reproduce PAPER --set name=value``: checked settings, a ledger beside the default, the changed claims."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from mascore import reproduce
+
+
+def test_a_setting_outside_its_range_or_unknown_is_refused_before_any_work(tmp_path, capsys):
+    assert reproduce.main(["reproduce", "ren2005", "--out", str(tmp_path), "--set", "n_steps=0"]) == 2
+    assert "KalmanConsensusSettings.n_steps must be an integer >= 1; got 0" in capsys.readouterr().err
+    assert reproduce.main(["reproduce", "ren2005", "--out", str(tmp_path), "--set", "n_step=3"]) == 2
+    assert "kalman-consensus.n_steps" in capsys.readouterr().err  # the message lists the paper's settings
+    assert reproduce.main(["reproduce", "all", "--out", str(tmp_path), "--set", "n_steps=3"]) == 2
+    assert not any(tmp_path.iterdir())
+    with pytest.raises(SystemExit):
+        reproduce.main(["reproduce", "ren2005", "--set", "n_steps"])
+
+
+def test_values_are_read_as_literals_and_scoped_by_study():
+    s = reproduce.apply_settings("song2023", {"rendezvous.dt": "0.05"})
+    assert s["rendezvous"].dt == 0.05 and s["flocking"].dt == reproduce.apply_settings("song2023", {})["flocking"].dt
+    assert reproduce.settings_folder("song2023", {"rendezvous.dt": "0.05"}) == "song2023-set-rendezvous.dt=0.05"
+    assert reproduce.settings_folder("song2023", {}) == "song2023"
+
+
+def test_changed_claims_lists_verdicts_that_moved():
+    a = [{"id": "p/x", "verdict": "holds"}, {"id": "p/y", "verdict": "reproduces"}]
+    b = [{"id": "p/x", "verdict": "holds"}, {"id": "p/y", "verdict": "does-not-reproduce"}, {"id": "p/z",
+                                                                                             "verdict": "holds"}]
+    assert reproduce.changed_claims(a, b) == ["p/y: reproduces -> does-not-reproduce", "p/z: absent -> holds"]
+
+
+def test_a_run_at_other_settings_writes_beside_the_default_and_names_the_changed_claims(tmp_path, capsys):
+    default = reproduce.results_dir() / "ren2005" / "claims.json"
+    if not default.exists():
+        pytest.skip("no default ren2005 ledger in results/ (run `mascore reproduce ren2005`)")
+    shutil.copytree(default.parent, tmp_path / "ren2005")
+    before = (tmp_path / "ren2005" / "claims.json").read_bytes()
+    code = reproduce.main(["reproduce", "ren2005", "--out", str(tmp_path), "--set", "n_steps=3"])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert (tmp_path / "ren2005" / "claims.json").read_bytes() == before       # the default is not overwritten
+    ledger = json.loads((tmp_path / "ren2005-set-n_steps=3" / "claims.json").read_text())
+    assert ledger["created_by"] == "mascore reproduce ren2005 --seed 1 --set n_steps=3"
+    moved = reproduce.changed_claims(json.loads(before)["claims"], ledger["claims"])
+    assert moved  # three steps are too few for consensus: some verdicts change, and the command says which
+    assert f"{len(moved)} claim(s) changed verdict" in out and all(line in out for line in moved)
