@@ -26,6 +26,7 @@ from __future__ import annotations
 import importlib
 import pkgutil
 import re
+import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -236,9 +237,13 @@ def method_specs(task: str | None = None) -> tuple[MethodSpec, ...]:
 
     found: dict[tuple[str, str], MethodSpec] = {}
     for info in pkgutil.iter_modules(package.__path__):
-        if info.name.startswith("_") or info.name in STUDY_LAYER or info.ispkg or not _declares_methods(info):
+        if info.name.startswith("_") or info.name in STUDY_LAYER or info.ispkg:
             continue
-        module = importlib.import_module(f"{package.__name__}.{info.name}")
+        module = sys.modules.get(f"{package.__name__}.{info.name}")  # imported already: nothing to read
+        if module is None:
+            if not _declares_methods(info):
+                continue
+            module = importlib.import_module(f"{package.__name__}.{info.name}")
         for spec in getattr(module, "METHODS", ()):
             if not isinstance(spec, MethodSpec):
                 continue
