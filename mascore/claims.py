@@ -59,7 +59,7 @@ class Claim:
     note : str
         Why it differs, what reading we chose, what setting the paper left out.
         Paragraphs are separated by a blank line; a paragraph shared word for
-        word by several claims is shown once by :func:`show_claims`.
+        word by several claims is shown once by :func:`mascore.ledger.show_claims`.
     unit : str
         Unit of the values (``"m"``, ``"s"``), ``""`` if dimensionless.
     labels : sequence of str, optional

@@ -75,7 +75,7 @@ def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = ""
     `labels` when given and cut after `max_items` entries (marked with an ellipsis),
     dicts as ``label = value`` pairs (underscores in labels read as spaces), ``None``
     as a dash. Any value is shown, by design: NaN and infinities print as ``nan`` and
-    ``inf``, a string as itself (this is a display helper; :class:`Claim` refuses them).
+    ``inf``, a string as itself (this is a display helper; :class:`mascore.claims.Claim` refuses them).
 
     Parameters
     ----------

@@ -17,7 +17,7 @@ from ..registry import FigureSpec, PaperRegistry, Study, TableSpec
 __all__ = ["FIGURES", "REGISTRY", "SETTINGS", "STUDY", "TABLES", "claims", "run"]
 
 def claims(result: CompareResult) -> list:
-    """The comparison's ledger (``compare/...`` claims), from `result` alone (:func:`compare_claims`).
+    """The comparison's ledger (``compare/...`` claims), from `result` alone (:func:`mascore.compare.compare_claims`).
 
     Parameters
     ----------
