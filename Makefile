@@ -37,8 +37,19 @@ book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book in
 	env -u MPLBACKEND $(BIN)/jupyter-book build book --all -W -n --keep-going
 	@echo "Open book/_build/html/index.html"
 
-test: $(STAMP) lint $(RESULTS) book  ## lint, build the book, then unit tests, doctests, published numbers, the rendered HTML and every notebook (nbmake)
-	$(HEADLESS) $(BIN)/python -m pytest -n $(JOBS) --nbmake --doctest-modules tests notebooks mascore
+# The book's build (one kernel at a time) runs beside the tests that do not read it, so that both
+# cores stay busy; the checks of the rendered HTML run once the book is built.
+BOOK_LOG := book/_build/build.log
+HTML_TESTS := tests/test_book_html.py
+
+test: $(STAMP) lint $(RESULTS)  ## lint, build the book beside the unit tests, doctests, published numbers and every notebook (nbmake), then check the rendered HTML
+	@mkdir -p book/_build
+	@env -u MPLBACKEND $(BIN)/jupyter-book build book --all -W -n --keep-going > $(BOOK_LOG) 2>&1 & book=$$!; \
+	$(HEADLESS) $(BIN)/python -m pytest -n $(JOBS) --nbmake --doctest-modules --ignore=$(HTML_TESTS) tests notebooks mascore; \
+	tests=$$?; wait $$book; built=$$?; \
+	if [ $$built -ne 0 ]; then tail -n 80 $(BOOK_LOG); echo "The book did not build (the whole log: $(BOOK_LOG))."; exit 1; fi; \
+	echo "The book is built (log: $(BOOK_LOG))."; exit $$tests
+	$(HEADLESS) $(BIN)/python -m pytest -n $(JOBS) $(HTML_TESTS)
 
 lint: $(STAMP)  ## ruff on the package, the tests and the benchmarks; the layers of the package (import-linter)
 	$(BIN)/ruff check mascore tests benchmarks
