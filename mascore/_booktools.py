@@ -365,9 +365,49 @@ def write_api_pages(folder: str | Path = "book/api") -> int:
     return changed
 
 
+def execute_notebooks(book: str | Path = "book", timeout: int = 900) -> list[str]:
+    """Execute the book's notebooks on every core into the cache that ``jupyter-book build`` reads.
+
+    The cache (``_build/.jupyter_cache`` of `book`) is emptied first, so no output of an
+    earlier build, made by other code, is reused; the build then takes each notebook's
+    outputs from it (``execute_notebooks: cache``) and executes itself only what is missing,
+    which it reports with its traceback.
+
+    Parameters
+    ----------
+    book : str or Path
+        The book's folder.
+    timeout : int
+        Seconds a cell may run.
+
+    Returns
+    -------
+    list of str
+        The notebooks that failed (the build executes them again and shows why).
+    """
+    import shutil
+
+    from jupyter_cache import get_cache
+    from jupyter_cache.executors import load_executor
+
+    folder = Path(book)
+    cache_path = folder / "_build" / ".jupyter_cache"
+    shutil.rmtree(cache_path, ignore_errors=True)
+    cache = get_cache(str(cache_path))
+    for notebook in sorted((folder / "notebooks").glob("*.ipynb")):
+        cache.add_nb_to_project(str(notebook))
+    result = load_executor("local-parallel", cache).run_and_cache(timeout=timeout)
+    return sorted(result.excepted + result.errored)
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m mascore._booktools sync [NOTEBOOK ...]`` (default: every notebook of a study)."""
+    """``python -m mascore._booktools sync [NOTEBOOK ...]`` (default: every notebook of a study), or ``execute``."""
     argv = sys.argv[1:] if argv is None else argv
+    if argv and argv[0] == "execute":
+        failed = execute_notebooks()
+        for uri in failed:
+            print(f"{uri}: failed (the book's build shows why)", file=sys.stderr)
+        return 0
     if not argv or argv[0] != "sync":
         print(__doc__.splitlines()[0], "\nusage: python -m mascore._booktools sync [NOTEBOOK ...]", file=sys.stderr)
         return 2
