@@ -568,9 +568,7 @@ class _SampledMatrix(np.ndarray):
 
     @classmethod
     def tag(cls, A: np.ndarray, dt: float) -> np.ndarray:
-        out = np.array(A, dtype=float)
-        out.setflags(write=False)
-        view = out.view(cls)
+        view = frozen_copy(A).view(cls)  # on immutable memory: no .base can be made writeable
         view._sampled_dt = float(dt)
         return view
 
