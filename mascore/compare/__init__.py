@@ -81,6 +81,12 @@ __all__ = [
     "TEAM_METHODS",
     "VLAHAKIS_PHI",
     "REN_Q",
+    "ALL_SHARED_METHODS",
+    "FUSION_KNOB_METHODS",
+    "KNOBS",
+    "Knob",
+    "knob_table",
+    "per_agent_costs",
     "CORE_METHODS",
     "BenchmarkSettings",
     "CompareResult",
@@ -123,7 +129,8 @@ __all__ = [
 #: The submodule of each name of the comparison (imported on first use: ``import mascore.compare`` is cheap).
 _NAMES = {
     'benchmark': (
-        'ALL_TEAM_METHODS', 'BenchmarkSettings', 'CORE_METHODS', 'GRAPHS', 'NOISES', 'POSITION_METHODS',
+        'ALL_SHARED_METHODS', 'ALL_TEAM_METHODS', 'BenchmarkSettings', 'CORE_METHODS', 'FUSION_KNOB_METHODS', 'GRAPHS',
+        'KNOBS', 'Knob', 'NOISES', 'POSITION_METHODS',
         'POSITION_NOT_APPLICABLE', 'REN_Q', 'SEED_AXES', 'SENSINGS', 'SETTINGS', 'SHARED_METHODS', 'SM_CONFIDENCE',
         'SWITCHING_GRAPHS', 'TEAM_METHODS', 'VLAHAKIS_PHI', '_MAX_SCALE', 'benchmark_graph', 'bound_scale',
         'check_cell', 'check_n_agents', 'check_run', 'draw_noise', 'floats_per_step', 'mean_degree', 'switching_graphs'
@@ -146,7 +153,8 @@ _NAMES = {
         'CompareResult', '_mean_ci', 'cell_cost', 'grid_cells', 'run', 'run_cell', 'run_compare', 'summarize'
     ),
     'tables': (
-        '_position_headline', 'fitted_slopes', 'headline', 'position_only_kf_rmse'
+        'CPU_COLUMN', 'NEAR_BOUND', '_position_headline', 'fitted_slopes', 'headline', 'knob_table',
+        'position_only_kf_rmse'
     ),
     'verdicts': (
         '_position_claims', 'compare_claims'
@@ -155,7 +163,7 @@ _NAMES = {
         '_concat', '_order', '_plain_ticks', '_plt', 'plot_cost', 'plot_pareto', 'plot_robustness'
     ),
     'cost': (
-        'NODE_ORDER', 'node_cost', 'node_costs'
+        'NODE_ORDER', 'node_cost', 'node_costs', 'per_agent_costs'
     ),
 }
 _WHERE = {name: module for module, names in _NAMES.items() for name in names}

@@ -23,14 +23,19 @@ from ..settings import check_settings, check_settings_type, setting
 #: Estimators of the team task, in table order.
 TEAM_METHODS = ("centralized", "local", "forwarding", "song-mb", "song-eb", "vlahakis", "vlahakis-phi0",
                 "vlahakis-phi1", "set-membership")
-#: The Vlahakis observer's coupling gain per team-method name: None is the LMI's choice (with our tie-break).
-VLAHAKIS_PHI = {"vlahakis": None, "vlahakis-phi0": 0.0, "vlahakis-phi1": 1.0}
+#: The Vlahakis observer's coupling gain per team-method name: None is the LMI's choice (with our tie-break);
+#: -0.1 and 1 are the ends of the interval where its program's value is optimal on the ring of 8
+#: (:func:`vlahakis_profile`), 0 and 0.5 points inside it.
+VLAHAKIS_PHI = {"vlahakis": None, "vlahakis-phi0": 0.0, "vlahakis-phi1": 1.0, "vlahakis-phi-0.1": -0.1,
+                "vlahakis-phi0.5": 0.5}
 #: The team methods at their own recipe (without the knob variants): the figures' methods.
-CORE_METHODS = tuple(m for m in TEAM_METHODS if m not in ("vlahakis-phi0", "vlahakis-phi1"))
-#: Estimators of the shared-quantity task.
+CORE_METHODS = tuple(m for m in TEAM_METHODS if m not in VLAHAKIS_PHI or m == "vlahakis")
+#: Estimators of the shared-quantity task at their own recipe (and Ren et al.'s untuned Q = 0).
 SHARED_METHODS = ("central-fusion", "no-fusion", "average-consensus", "ren-kc", "ren-kc-q0")
-#: Ren et al.'s (Q, Omega) per shared-method name: the paper's 0.1, and the untuned 0 as the knob's other end.
-REN_Q = {"ren-kc": 0.1, "ren-kc-q0": 0.0}
+#: Ren et al.'s (Q, Omega) per shared-method name: the paper's 0.1, and the knob swept from 0 to 1.
+REN_Q = {"ren-kc": 0.1, "ren-kc-q0": 0.0, "ren-kc-q0.3": 0.3, "ren-kc-q0.6": 0.6, "ren-kc-q1": 1.0}
+#: Every shared-method name a cell may carry (Ren et al.'s knob variants run at N = 8 on the ring).
+ALL_SHARED_METHODS = SHARED_METHODS + tuple(m for m in REN_Q if m not in SHARED_METHODS)
 #: Sensing/communication graphs: a ring, or the proximity graph of a random layout.
 GRAPHS = ("ring", "geometric")
 #: Graphs of the common-target and shared tasks: the fixed ones, and a switching proximity topology.
@@ -47,15 +52,20 @@ SENSINGS = ("full", "position")
 #: the probability mass of the Gaussian ellipsoids it is given as bounds (bounded noise: the guaranteed bound).
 SM_CONFIDENCE = {"set-membership": None, "set-membership-c90": 0.9, "set-membership-c99999": 0.99999}
 #: The team methods under position-only sensing, in table order.
-POSITION_METHODS = ("centralized", "local", "forwarding", "vlahakis", "vlahakis-phi0", "vlahakis-phi1",
-                    *SM_CONFIDENCE)
+POSITION_METHODS = ("centralized", "local", "forwarding", *VLAHAKIS_PHI, *SM_CONFIDENCE)
 #: Team methods that do not apply under position-only sensing, with the reason.
 POSITION_NOT_APPLICABLE = {
     "song-mb": "needs full-state measurements of its neighbours (eq. (2))",
     "song-eb": "needs full-state measurements of its neighbours (eq. (2))",
 }
-#: Every team-method name a cell may carry (the set-membership knob's variants run in the position study).
-ALL_TEAM_METHODS = TEAM_METHODS + tuple(m for m in SM_CONFIDENCE if m not in TEAM_METHODS)
+#: Every team-method name a cell may carry (the knobs' variants run in the studies ``knob`` and ``position``).
+ALL_TEAM_METHODS = TEAM_METHODS + tuple(m for m in (*VLAHAKIS_PHI, *SM_CONFIDENCE) if m not in TEAM_METHODS)
+#: The common-target and localization filters' knob variants (their specs in :mod:`mascore.fusion`): the
+#: consensus steps L in {1, 2, 5} and L = the graph's diameter, and HCMCI's novelty weight omega = N against
+#: the consistency-safe omega of its docstring (``omega max [W^L]_ij <= 1``). Swept at N = 8 on the ring
+#: (2 seed blocks); the headline tables keep the recipes (L = 1 and 5, omega = N).
+FUSION_KNOB_METHODS = ("ci-L2", "ci-Ldiam", "hcmci-L2", "hcmci-Ldiam", "hcmci-safe-L1", "hcmci-safe-L5",
+                       "icf-L2", "icf-Ldiam")
 
 
 #: Largest initial spread or noise std (m, m/s) the benchmark accepts: the squared errors stay far from overflow.
@@ -156,6 +166,59 @@ class BenchmarkSettings:
 
 #: The settings used by the chapter and the CLI (the study's settings, :data:`STUDY`).
 SETTINGS = BenchmarkSettings()
+
+
+@dataclass(frozen=True)
+class Knob:
+    """One method's knob, swept within its recipe: its settings, each a method of the sweep.
+
+    Parameters
+    ----------
+    name : str
+        The knob, as the chapter names it (e.g. ``"Ren et al.'s Q = Omega"``).
+    task : {"team", "target", "localization", "shared"}
+        The scenario it is swept on.
+    settings : tuple of (str, str, str)
+        ``(setting, study, method)`` per setting: the setting's label, the study of the sweep that
+        holds its cells (N = 8, ring, no drop-out) and the method name of that setting.
+    recipe : tuple of str
+        The labels of the paper's own settings (those of the headline tables).
+
+    Examples
+    --------
+    >>> from mascore.compare import KNOBS
+    >>> [s for s, _, _ in KNOBS[0].settings]
+    ['0', '0.1', '0.3', '0.6', '1']
+    """
+
+    name: str
+    task: str
+    settings: tuple[tuple[str, str, str], ...]
+    recipe: tuple[str, ...]
+
+
+def _consensus_knob(kind: str, label: str, task: str) -> Knob:
+    settings = tuple((s, task, f"{kind}-L{s}") for s in ("1", "2", "5"))
+    return Knob(f"{label}: consensus steps L", task, (*settings, ("diameter", task, f"{kind}-Ldiam")), ("1", "5"))
+
+
+#: Every knob swept within its recipe (the chapter's knob table, :func:`knob_table`).
+KNOBS = (
+    Knob("Ren et al.'s Q = Omega", "shared", tuple((f"{q:g}", "shared", m) for m, q in sorted(
+        REN_Q.items(), key=lambda kv: kv[1])), ("0.1",)),
+    Knob("Vlahakis's coupling gain Phi", "team", tuple(
+        ("LMI" if phi is None else f"{phi:g}", "scaling" if m in TEAM_METHODS else "knob", m)
+        for m, phi in VLAHAKIS_PHI.items()), ("LMI",)),
+    Knob("set-membership confidence (positions only)", "team", tuple(
+        (f"{SETTINGS.sm_confidence if c is None else c:g}", "position", m)
+        for m, c in sorted(SM_CONFIDENCE.items(), key=lambda kv: SETTINGS.sm_confidence if kv[1] is None else kv[1])),
+        (f"{SETTINGS.sm_confidence:g}",)),
+    *(_consensus_knob(kind, label, task) for task in ("target", "localization")
+      for kind, label in (("ci", "CI"), ("icf", "ICF"), ("hcmci", "HCMCI"))),
+    *(Knob(f"HCMCI novelty weight omega (L = {L})", task, (("N", task, f"hcmci-L{L}"),
+                                                          ("safe", task, f"hcmci-safe-L{L}")), ("N",))
+      for task in ("target", "localization") for L in (1, 5)),
+)
 
 
 def benchmark_graph(kind: str, n_agents: int, settings: BenchmarkSettings = SETTINGS) -> np.ndarray:
@@ -297,11 +360,12 @@ def floats_per_step(method: str, n_agents: int, degree: float = 2.0, sensing: st
         "centralized": 8.0 * (degree + 1), "local": 4.0, "forwarding": 4.0 * degree + 4.0,
         "song-mb": 0.0, "song-eb": 0.0, "vlahakis": 4.0, "vlahakis-phi0": 4.0, "vlahakis-phi1": 4.0,
         "set-membership": 4.0,
-        "central-fusion": 7.0, "no-fusion": 0.0, "average-consensus": 2.0, "ren-kc": 5.0, "ren-kc-q0": 5.0,
+        "central-fusion": 7.0, "no-fusion": 0.0, "average-consensus": 2.0,
     }
-    table.update({m: 4.0 for m in SM_CONFIDENCE})
+    table.update({m: 4.0 for m in (*SM_CONFIDENCE, *VLAHAKIS_PHI)})
+    table.update({m: 5.0 for m in REN_Q})
     if method not in table:
-        raise ValueError(f"method must be one of {ALL_TEAM_METHODS + SHARED_METHODS}; got {method!r}")
+        raise ValueError(f"method must be one of {ALL_TEAM_METHODS + ALL_SHARED_METHODS}; got {method!r}")
     if sensing == "position":
         if method in POSITION_NOT_APPLICABLE:
             raise ValueError(f"method {method!r} does not apply under position-only sensing: "
@@ -346,7 +410,7 @@ def check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[s
     if not isinstance(cell, Mapping):
         raise TypeError(f"{name} must be a mapping of the cell's coordinates (task, method, n_agents, noise, "
                         f"dropout, q_scale); got {type(cell).__name__}")
-    methods_of = {"team": ALL_TEAM_METHODS, "shared": SHARED_METHODS, "target": estimation.method_names("target"),
+    methods_of = {"team": ALL_TEAM_METHODS, "shared": ALL_SHARED_METHODS, "target": estimation.method_names("target"),
                   "localization": estimation.method_names("localization")}
     task = cell.get("task")
     if task not in methods_of:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -132,3 +133,45 @@ def node_costs(sizes: Sequence[int] = (4, 8, 16), methods: Sequence[str] = CORE_
         row["work"], row["memory"] = NODE_ORDER[m]
         rows[m] = row
     return pd.DataFrame.from_dict(rows, orient="index")
+
+
+def per_agent_costs(path: str | Path | None = None):
+    """The committed snapshot of one agent's CPU per step (one run, one thread): the comparison's one CPU column.
+
+    ``benchmarks/bench_agent_cost.py --snapshot`` measures it (:func:`mascore.agent_cost.agent_costs`
+    over N = 4 ... 128, the median of 7 repeats, BLAS on one thread) and commits it beside the
+    benchmarks; the headline tables (:func:`headline`), the cost figure (:func:`plot_cost`) and the
+    chapter's cost page all read this one table, so their numbers agree.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path, optional
+        The CSV (default: ``benchmarks/data/agent_cost.csv`` of the source checkout this package
+        is imported from).
+
+    Returns
+    -------
+    pandas.DataFrame
+        :func:`mascore.agent_cost.agent_costs`' columns (``task, method, n_agents, us_per_step,
+        flops, ...``).
+
+    Raises
+    ------
+    FileNotFoundError
+        No snapshot there (an installed package has none: measure with
+        ``mascore.agent_cost.agent_costs``, or pass the path of a snapshot).
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> costs = compare.per_agent_costs()                       # doctest: +SKIP
+    >>> costs.set_index(["task", "method", "n_agents"]).loc[("team", "local", 8), "us_per_step"]  # doctest: +SKIP
+    """
+    import pandas as pd
+
+    default = Path(__file__).resolve().parents[2] / "benchmarks" / "data" / "agent_cost.csv"
+    where = default if path is None else Path(path)
+    if not where.is_file():
+        raise FileNotFoundError(f"no per-agent cost snapshot at {where} (python -m benchmarks.bench_agent_cost "
+                                "--snapshot writes it; or measure with mascore.agent_cost.agent_costs)")
+    return pd.read_csv(where)

@@ -14,7 +14,9 @@ from ..settings import check_settings_type
 from ..sweep import Grid, cell_seed
 from .benchmark import (
     CORE_METHODS,
+    FUSION_KNOB_METHODS,
     POSITION_METHODS,
+    REN_Q,
     SEED_AXES,
     SETTINGS,
     SHARED_METHODS,
@@ -49,7 +51,10 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     and the switching topology (:func:`switching_graphs`): the shared and target tasks at
     N = 16, the own state at N = 16 (study ``switching``, without the Vlahakis observers,
     :data:`SWITCHING_NOT_APPLICABLE`) and localization at N = 8 (quick: 2 blocks) and 16
-    (full grid only);
+    (full grid only); every knob of :data:`KNOBS` at each of its settings, at N = 8 on the ring
+    (Ren et al.'s Q and the fusion filters' variants, :data:`FUSION_KNOB_METHODS`, in their task's
+    study; the Vlahakis gains not in the scaling study in the study ``knob``, with the centralized
+    filter; quick: 2 blocks, full: 4);
     each with ``blocks x settings.runs`` seeds (quick: 2 x 50, full: 4 x 50, N up to
     64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
     N = 8, position sensing, the shared, target and localization tasks).
@@ -107,6 +112,13 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
                        "n_agents": [16], "block": blocks if quick else blocks200}),
         ("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
                           "graph": ["switching"], "n_agents": [8], "block": blocks if quick else blocks200}),
+        # every knob swept within its recipe (KNOBS): at N = 8 on the ring, 2 seed blocks in the quick grid
+        ("knob", {**base, "method": ["centralized", *(m for m in VLAHAKIS_PHI if m not in TEAM_METHODS)],
+                  "n_agents": [8], "block": blocks if quick else blocks200}),
+        ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in SHARED_METHODS],
+                    "n_agents": [8], "block": blocks if quick else blocks200}),
+        *((task, {**base, "task": [task], "method": list(FUSION_KNOB_METHODS), "n_agents": [8],
+                  "block": blocks if quick else blocks200}) for task in ("target", "localization")),
     ]
     if not quick:
         studies.append(("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),

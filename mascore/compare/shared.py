@@ -8,9 +8,9 @@ import numpy as np
 
 from .. import consensus
 from .benchmark import (
+    ALL_SHARED_METHODS,
     REN_Q,
     SETTINGS,
-    SHARED_METHODS,
     BenchmarkSettings,
     benchmark_graph,
     check_run,
@@ -38,7 +38,7 @@ def simulate_shared(
     Parameters
     ----------
     method : str
-        One of :data:`SHARED_METHODS`.
+        One of :data:`SHARED_METHODS`, or a variant of Ren et al.'s knob (:data:`REN_Q`).
     n_agents : int
         Team size N (a ring, N >= 3).
     seed : numpy.random.SeedSequence or int
@@ -71,8 +71,8 @@ def simulate_shared(
     True
     """
     n_agents, runs = check_run(n_agents, noise, dropout, 1.0, runs, settings, seed)
-    if method not in SHARED_METHODS:
-        raise ValueError(f"method must be one of {SHARED_METHODS}; got {method!r}")
+    if method not in ALL_SHARED_METHODS:
+        raise ValueError(f"method must be one of {ALL_SHARED_METHODS}; got {method!r}")
     start = time.thread_time()
     init_rng, _, _, drop_rng = np.random.default_rng(seed).spawn(4)
     N = int(n_agents)

@@ -4,7 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from .benchmark import POSITION_METHODS, POSITION_NOT_APPLICABLE, SETTINGS, SHARED_METHODS, TEAM_METHODS, BenchmarkSettings
+from .benchmark import (
+    KNOBS,
+    POSITION_METHODS,
+    POSITION_NOT_APPLICABLE,
+    SETTINGS,
+    SHARED_METHODS,
+    TEAM_METHODS,
+    BenchmarkSettings,
+)
 from .target import LOCALIZATION_NOT_APPLICABLE, TARGET_NOT_APPLICABLE, target_cost, target_methods
 
 
@@ -34,7 +42,7 @@ def fitted_slopes(summary) -> dict[str, float]:
             for m, g in scaling.groupby("method", sort=False)}
 
 
-def headline(summary, task: str = "team"):
+def headline(summary, task: str = "team", costs=None):
     """The practitioner's table of one scenario: accuracy, consistency, messages and cost per method.
 
     Parameters
@@ -48,16 +56,24 @@ def headline(summary, task: str = "team"):
         ``position``, Gaussian noise; its own table, :func:`_position_headline`); ``"target"``,
         the common target at N = 8 on the ring; ``"shared"``,
         Ren et al.'s shared quantity at N = 8 without drop-outs.
+    costs : pandas.DataFrame, optional
+        One agent's CPU per step, one run, one thread (:func:`mascore.agent_cost.agent_costs`'
+        table, or the committed snapshot :func:`per_agent_costs`): the column
+        ``CPU µs/agent-step`` at N = 8 (the centre's step for a centralized filter; a dash
+        where the method's agent step is not measured: the position and shared tasks), and for
+        the team task the slope in N of that time over the three largest teams measured.
+        Without it the table has no CPU column (the sweep's batch CPU is not one agent's).
 
     Returns
     -------
     pandas.DataFrame
         Per method: RMSE ratio to the bound with its 95 % interval over the runs (200 seeds on
         the quick grid), consistency (NEES per dof, or containment for the set-membership
-        filter), floats sent per agent and step, CPU per agent and step (µs, a batch of
-        runs: see the chapter), and per scenario: the control spread and the CPU slope in N
-        (team), the analytic flops per agent and step (target). A dash where a quantity does
-        not exist; methods that do not apply are listed with the reason.
+        filter), floats sent and received per agent and step (a centralized filter's: each
+        agent's measurements up and the estimates it uses down), one agent's CPU per step if
+        `costs` is given, and per scenario: the control spread (team), the analytic flops per
+        agent and step (target, localization). A dash where a quantity does not exist; methods
+        that do not apply are listed with the reason.
 
     Examples
     --------
@@ -73,7 +89,7 @@ def headline(summary, task: str = "team"):
     if task not in ("team", "position", "target", "localization", "shared"):
         raise ValueError(f"task must be 'team', 'position', 'target', 'localization' or 'shared'; got {task!r}")
     if task == "position":
-        return _position_headline(summary)
+        return _position_headline(summary, costs)
     dash = "—"
     frame = summary[(summary["task"] == task) & (summary["n_agents"] == 8) & (summary["dropout"] == 0.0)]
     if task == "team":
@@ -81,7 +97,8 @@ def headline(summary, task: str = "team"):
     frame = frame[frame.get("graph", "ring") == "ring"].set_index("method")
     methods = {"team": TEAM_METHODS, "target": target_methods("target"),
                "localization": target_methods("localization"), "shared": SHARED_METHODS}[task]
-    slopes = fitted_slopes(summary) if task == "team" else {}
+    cpu = _agent_cpu(costs, task)
+    slopes = _agent_slopes(costs, task)
     rows = []
     for m in methods:
         if m not in frame.index:
@@ -91,12 +108,14 @@ def headline(summary, task: str = "team"):
         consistency = ((f"NEES {nees:.2f}" if nees < 100 else f"NEES {nees:.1e}") if np.isfinite(nees)
                        else f"contains {r['containment_mean']:.3f}" if np.isfinite(r["containment_mean"]) else dash)
         row = {"method": m, "RMSE ratio [95 %]": f"{r['ratio_mean']:.3f} [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]",
-               "seeds": int(r["n"]), "consistency": consistency, "floats/step": r["floats"],
-               "CPU µs/agent/step": round(r["cpu_us"], 2)}
+               "seeds": int(r["n"]), "consistency": consistency, "floats/step": r["floats"]}
+        if cpu is not None:
+            row[CPU_COLUMN] = _cpu_cell(cpu, m)
         if task == "team":
             row["spread (m)"] = round(r["spread_mean"], 3)
             row["non-neighbours' RMSE (m)"] = round(r["rmse_far_mean"], 3) if np.isfinite(r["rmse_far_mean"]) else dash
-            row["CPU slope in N"] = round(slopes[m], 2) if m in slopes else dash
+            if slopes is not None:
+                row["CPU slope in N"] = round(float(slopes[m]), 2) if m in slopes.index else dash
         if task in ("target", "localization"):
             row["flops/agent/step"] = round(target_cost(m, 8, 2, task)[1])
         rows.append(row)
@@ -104,18 +123,47 @@ def headline(summary, task: str = "team"):
         reasons = TARGET_NOT_APPLICABLE if task == "target" else LOCALIZATION_NOT_APPLICABLE
         for m, why in reasons.items():
             rows.append({"method": m, "RMSE ratio [95 %]": "not applicable", "seeds": 0, "consistency": why,
-                         "floats/step": dash, "CPU µs/agent/step": dash, "flops/agent/step": dash})
+                         "floats/step": dash, **({CPU_COLUMN: dash} if cpu is not None else {}),
+                         "flops/agent/step": dash})
     out = pd.DataFrame(rows).set_index("method")
     return out.astype({"seeds": int})
 
 
-def _position_headline(summary):
+#: The one CPU column of every table and figure: one agent's step, one run, one thread (µs).
+CPU_COLUMN = "CPU µs/agent-step"
+
+
+def _agent_cpu(costs, task: str):
+    """Method -> one agent's µs per step at N = 8 for `task` (None without `costs`; empty where not measured)."""
+    if costs is None:
+        return None
+    rows = costs[(costs["task"] == task) & (costs["n_agents"] == 8)]
+    return rows.set_index("method")["us_per_step"]
+
+
+def _agent_slopes(costs, task: str):
+    """Method -> slope in N of one agent's time over the three largest N measured (team task only; else None)."""
+    if costs is None or task != "team":
+        return None
+    from ..agent_cost import slopes
+
+    return slopes(costs[costs["task"] == "team"], top=3).loc["team", "slope"]
+
+
+def _cpu_cell(cpu, method: str):
+    """One agent's µs per step, 3 significant digits, or a dash where it is not measured."""
+    value = cpu.get(method, np.nan)
+    return float(f"{value:.3g}") if np.isfinite(value) else "—"
+
+
+def _position_headline(summary, costs=None):
     """:func:`headline` of the study ``position``: the own state at N = 8, positions only.
 
     Per method of :data:`POSITION_METHODS` (Gaussian noise, 200 seeds): the RMSE ratio to the
     centralized filter (same data) with its 95 % interval, the NEES per dof or the set's
     containment, the set's largest position semi-axis (m), the containment under uniform
-    (bounded) noise, floats and CPU; Song et al.'s filters as not applicable, with the reason.
+    (bounded) noise, floats (with `costs`, a dash for the CPU per agent: these agents' steps are
+    not measured); Song et al.'s filters as not applicable, with the reason.
     """
     import pandas as pd
 
@@ -139,10 +187,11 @@ def _position_headline(summary):
             if np.isfinite(inside) else dash,
             "set size (m)": round(float(size[m]), 3) if np.isfinite(size[m]) else dash,
             "contains, uniform": f"{bounded:.3f}" if np.isfinite(bounded) else dash,
-            "floats/step": r["floats"], "CPU µs/agent/step": round(r["cpu_us"], 2)})
+            "floats/step": r["floats"], **({CPU_COLUMN: dash} if costs is not None else {})})
     for m, why in POSITION_NOT_APPLICABLE.items():
         rows.append({"method": m, "RMSE ratio [95 %]": "not applicable", "consistency": why,
-                     "set size (m)": dash, "contains, uniform": dash, "floats/step": dash, "CPU µs/agent/step": dash})
+                     "set size (m)": dash, "contains, uniform": dash, "floats/step": dash,
+                     **({CPU_COLUMN: dash} if costs is not None else {})})
     return pd.DataFrame(rows).set_index("method")
 
 
@@ -164,3 +213,109 @@ def position_only_kf_rmse(settings: BenchmarkSettings = SETTINGS) -> tuple[float
         post = prior - prior @ C.T @ np.linalg.solve(C @ prior @ C.T + R, C @ prior)
         out.append(float(np.sqrt(2 * post[0, 0])))  # two axes
     return out[0], out[1]
+
+
+#: The accuracy band of the knob table's verdict: an RMSE within 5 % of the bound's.
+NEAR_BOUND = 1.05
+
+
+def knob_table(summary):
+    """Every knob swept within its recipe (:data:`KNOBS`), a verdict per setting, and whether a verdict flips.
+
+    Each setting's row is its method's summary row at N = 8 on the ring without drop-outs, in the
+    study that holds it (Gaussian noise). Two verdicts per setting, each from an interval, never
+    from a point: **accuracy**, ``"within 5 %"`` of the bound if the 95 % interval of the RMSE
+    ratio lies below :data:`NEAR_BOUND`, ``"not within 5 %"`` if it lies above, else
+    ``"undecided"``; **consistency**, from the 95 % interval of the mean NEES per dof over the
+    runs, ``"consistent"`` if it holds 1, ``"overconfident"`` above 1, ``"conservative"`` below
+    (for the set-membership filter: ``"contains"`` if its containment reaches its confidence,
+    else ``"leaks"``; a dash for an observer without a covariance).
+
+    Parameters
+    ----------
+    summary : pandas.DataFrame
+        Output of :func:`summarize` of a sweep that holds the knobs' cells (:func:`grid_cells`).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per knob and setting: ``knob``, ``scenario``, ``setting`` (``*``: the paper's own,
+        the headline's), ``method``, ``seeds``, ``RMSE ratio [95 %]``, ``consistency`` (NEES per dof
+        [95 %] or containment), the two verdicts, and ``flips``: the verdicts that differ between
+        the knob's settings (``"no"`` when none does). Settings whose cells the sweep lacks are left out.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore import compare
+    >>> rows = [dict(study="shared", task="shared", method=m, n_agents=8, graph="ring", dropout=0.0,
+    ...              noise="gaussian", n=100, ratio_mean=r, ratio_lo=r - 0.01, ratio_hi=r + 0.01, nees_own_mean=v,
+    ...              nees_own_lo=v - 0.05, nees_own_hi=v + 0.05, containment_mean=float("nan"))
+    ...         for m, r, v in (("ren-kc-q0", 1.0, 1e17), ("ren-kc", 0.98, 4.2), ("ren-kc-q0.6", 1.02, 0.75))]
+    >>> t = compare.knob_table(pd.DataFrame(rows))
+    >>> t["setting"].tolist(), t["consistency verdict"].tolist()
+    (['0', '0.1 *', '0.6'], ['overconfident', 'overconfident', 'conservative'])
+    >>> t["flips"].unique().tolist()                      # the knob decides whether Ren's P is honest
+    ['consistency']
+    """
+    import pandas as pd
+
+    from .benchmark import SM_CONFIDENCE
+
+    base = summary[(summary["n_agents"] == 8) & (summary["graph"] == "ring") & (summary["dropout"] == 0.0)
+                   & (summary["noise"] == "gaussian")]
+    rows = []
+    for knob in KNOBS:
+        found = []
+        for setting, study, method in knob.settings:
+            hit = base[(base["study"] == study) & (base["task"] == knob.task) & (base["method"] == method)]
+            if hit.empty:
+                continue
+            r = hit.iloc[0]
+            found.append({
+                "knob": knob.name, "scenario": knob.task,
+                "setting": setting + (" *" if setting in knob.recipe else ""), "method": method,
+                "seeds": int(r["n"]),
+                "RMSE ratio [95 %]": f"{r['ratio_mean']:.3f} [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]",
+                "consistency": _consistency_text(r),
+                "accuracy verdict": _interval_verdict(r["ratio_lo"], r["ratio_hi"], NEAR_BOUND,
+                                                      ("within 5 %", "not within 5 %")),
+                "consistency verdict": _consistency_verdict(r, float(setting) if method in SM_CONFIDENCE else None)})
+        for verdict in ("accuracy", "consistency"):
+            values = {row[f"{verdict} verdict"] for row in found} - {"—", "undecided"}
+            for row in found:
+                row.setdefault("flips", [])
+                if len(values) > 1:
+                    row["flips"].append(verdict)
+        for row in found:
+            row["flips"] = ", ".join(row["flips"]) or "no"
+        rows.extend(found)
+    return pd.DataFrame(rows)
+
+
+def _interval_verdict(lo: float, hi: float, band: float, words: tuple[str, str]) -> str:
+    """``words[0]`` if the interval lies below `band`, ``words[1]`` if above, else ``"undecided"``."""
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return "—"
+    return words[0] if hi <= band else words[1] if lo > band else "undecided"
+
+
+def _consistency_text(r) -> str:
+    nees = r["nees_own_mean"]
+    if np.isfinite(nees):
+        if nees >= 100:
+            return f"NEES {nees:.1e}"
+        return f"NEES {nees:.2f} [{r['nees_own_lo']:.2f}, {r['nees_own_hi']:.2f}]"
+    inside = r["containment_mean"]
+    return f"contains {inside:.4f}" if np.isfinite(inside) else "—"
+
+
+def _consistency_verdict(r, confidence: float | None) -> str:
+    """From the NEES interval against 1, or a set's containment against its confidence level."""
+    if confidence is not None:
+        inside = r["containment_mean"]
+        return "—" if not np.isfinite(inside) else "contains" if inside >= confidence else "leaks"
+    lo, hi = r["nees_own_lo"], r["nees_own_hi"]
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return "—"
+    return "overconfident" if lo > 1.0 else "conservative" if hi < 1.0 else "consistent"

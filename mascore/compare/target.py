@@ -9,6 +9,7 @@ import numpy as np
 from .. import estimation
 from ..agents import double_integrator
 from .benchmark import (
+    FUSION_KNOB_METHODS,
     SETTINGS,
     SWITCHING_GRAPHS,
     BenchmarkSettings,
@@ -22,18 +23,21 @@ from .benchmark import (
 # the common-target task (mascore.fusion)
 
 
-#: Filters of the common-target task, in table order (``-L<k>``: k consensus steps per update): the specs of
-#: :data:`mascore.fusion.METHODS` as found at import (:func:`target_methods` finds those added since).
-TARGET_METHODS = estimation.method_names("target")
+#: Filters of the common-target task at their recipes, in table order (``-L<k>``: k consensus steps per update):
+#: the specs of :data:`mascore.fusion.METHODS` as found at import, without the knob variants of
+#: :data:`FUSION_KNOB_METHODS` (:func:`target_methods` finds those added since).
+TARGET_METHODS = tuple(m for m in estimation.method_names("target") if m not in FUSION_KNOB_METHODS)
 
 
-def target_methods(task: str = "target") -> tuple[str, ...]:
+def target_methods(task: str = "target", knobs: bool = False) -> tuple[str, ...]:
     """The methods of the common-target (or localization) task, in table order, from their specs.
 
     Parameters
     ----------
     task : {"target", "localization"}
         The scenario.
+    knobs : bool
+        Include the knob variants (:data:`FUSION_KNOB_METHODS`, swept at N = 8 only).
 
     Returns
     -------
@@ -45,8 +49,11 @@ def target_methods(task: str = "target") -> tuple[str, ...]:
     >>> from mascore import compare
     >>> compare.target_methods()[:3]
     ('centralized', 'local', 'forwarding')
+    >>> "hcmci-safe-L1" in compare.target_methods(knobs=True), "hcmci-safe-L1" in compare.target_methods()
+    (True, False)
     """
-    return estimation.method_names(task)
+    names = estimation.method_names(task)
+    return names if knobs else tuple(m for m in names if m not in FUSION_KNOB_METHODS)
 #: Methods of the papers that do not apply to the common target, with the reason (the headline shows them).
 TARGET_NOT_APPLICABLE = {
     "song-mb, song-eb": "estimate the agents' own states in a rendezvous loop; there is no common target",
