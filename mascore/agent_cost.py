@@ -90,7 +90,7 @@ _MAX_TIMING_S = 3600.0
 #: Leading-order work and memory of one team-task agent per step (n = 4 the state size; d the degree, N the team
 #: size); those of the target and localization tasks are their specs' orders (:data:`AGENT_ORDER`).
 TEAM_ORDER = {
-    ("team", "centralized"): ("O(N^3 n^3) at the centre", "O(N^2 n^2)"),
+    ("team", "centralized"): ("O(N n^3) at the centre: N separate filters (the own state separates)", "O(N n^2)"),
     ("team", "local"): ("O(n^3)", "O(n^2)"),
     ("team", "forwarding"): ("O(d n + n^3)", "O(n^2 + d n)"),
     ("team", "song-mb"): ("O(N^3 n^3): its own covariance of the whole team", "O(N^2 n^2)"),
@@ -546,7 +546,8 @@ def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float
     update); forwarding one more inverse; the Vlahakis observer ``2 n^2 + 4 d``; Song et
     al.'s measurement-based filter one agent's own team covariance (dimension Nn, with its
     (d + 1) n measurements), the estimation-based one the joint covariance of all N team
-    estimates (dimension N^2 n) predicted densely; the centralized filter the team's.
+    estimates (dimension N^2 n) predicted densely; the centralized filter N filters of n states
+    (the own state separates: the inputs are known).
 
     Parameters
     ----------
@@ -586,8 +587,8 @@ def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float
         return float(kf + 2 * n**3)  # the closed-form correction, and the prediction's two products
     if method == "vlahakis":
         return float(2 * n**2 + 2 * n * 2 + 4 * d + 2 * n)
-    if method == "centralized":
-        return float(fusion.filter_cost("centralized", n=N * n, q=(d + 1) * n, degree=d, n_agents=N).flops)
+    if method == "centralized":  # the separable centre: N filters of n states, agent j's d + 1 measurements each
+        return float(N * (kf + 2 * (d + 1) * n))
     if method == "song-mb":  # one agent's own team covariance, dimension N n, its (d + 1) n measurements
         return float(fusion.filter_cost("measurement-forwarding", n=N * n, q=n, degree=d).flops)
     M = N * N * n  # song-eb: the joint covariance, predicted densely (two products of M^3 each)
@@ -623,7 +624,9 @@ def agent_memory(task: str, method: str, n_agents: int, degree: int = 2) -> floa
     n = 4
     if method == "song-eb":
         return float((N * N * n) ** 2)
-    if method in ("centralized", "song-mb"):  # the team's estimate and covariance (song-mb: agent i's own)
+    if method == "centralized":  # the separable centre: N estimates and covariances of n states
+        return float(N * (n**2 + n))
+    if method == "song-mb":  # agent i's own estimate and covariance of the team
         return float((N * n) ** 2 + N * n)
     if method == "vlahakis":
         return float(n + d * n)

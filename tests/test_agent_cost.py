@@ -46,7 +46,7 @@ def test_whole_filter_steps_run_the_team_filter(task, method):
 
 @pytest.mark.parametrize(("task", "method", "ratio"), [
     ("team", "local", 1.0), ("team", "forwarding", 1.0), ("team", "vlahakis", 1.0), ("team", "set-membership", 1.0),
-    ("team", "centralized", 8.0), ("team", "song-mb", 8.0), ("team", "song-eb", 64.0),
+    ("team", "centralized", 2.0), ("team", "song-mb", 8.0), ("team", "song-eb", 64.0),
     ("target", "local", 1.0), ("target", "ci-L5", 1.0), ("target", "hcmci-L5", 1.0), ("target", "icf-L5", 1.0),
     ("target", "diffusion", 1.0), ("target", "centralized", 2.0),
     ("localization", "local", 8.0), ("localization", "ci-L5", 8.0), ("localization", "forwarding", 8.0),
@@ -58,11 +58,12 @@ def test_analytic_flops_grow_as_the_stated_order(task, method, ratio):
     assert r == pytest.approx(ratio, rel=0.02)
     order = agent_cost._order(task, method)[0]
     p = round(np.log2(ratio))
-    assert (f"N^{p}" in order) if p > 1 else ("N" not in order.split(":")[0] if p == 0 else "N q" in order)
+    linear = "N q" in order or "N n" in order  # O(N q^2 + n^3) at the target's centre, O(N n^3) at the team's
+    assert (f"N^{p}" in order) if p > 1 else ("N" not in order.split(":")[0] if p == 0 else linear)
 
 
 @pytest.mark.parametrize(("task", "method", "ratio"), [
-    ("team", "song-eb", 16.0), ("team", "song-mb", 4.0), ("team", "centralized", 4.0), ("team", "local", 1.0),
+    ("team", "song-eb", 16.0), ("team", "song-mb", 4.0), ("team", "centralized", 2.0), ("team", "local", 1.0),
     ("localization", "ci-L1", 4.0), ("target", "ci-L1", 1.0),
 ])
 def test_analytic_memory_grows_as_the_stated_order(task, method, ratio):

@@ -12,6 +12,7 @@ import os
 import socket
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -48,15 +49,16 @@ def test_grid_cells_cover_the_studies_with_100_seeds():
     cells = compare.grid_cells("quick")
     studies = {c["study"] for c in cells}
     assert studies == {"scaling", "graph", "dropout", "noise", "wrong-q", "shared", "target", "localization",
-                       "position", "switching"}
+                       "position", "switching", "knob"}
     blocks = {c["block"] for c in cells}
     assert len(blocks) * compare.SETTINGS.runs >= 100
-    assert {c["method"] for c in cells if c["task"] == "team"} == set(compare.TEAM_METHODS) | set(compare.SM_CONFIDENCE)
-    assert {c["method"] for c in cells if c["task"] == "target"} == set(compare.TARGET_METHODS)
+    assert {c["method"] for c in cells if c["task"] == "team"} == set(compare.ALL_TEAM_METHODS)
+    assert {c["method"] for c in cells if c["task"] == "target"} == set(compare.target_methods(knobs=True))
     assert {c["method"] for c in cells if c.get("sensing") == "position"} == set(compare.POSITION_METHODS)
     assert all(c.get("sensing", "full") == "full" for c in cells if c["study"] != "position")  # old cells: no key
-    headline = [c for c in cells if c["task"] in ("shared", "target", "localization")
-                or (c["study"] in ("scaling", "position") and c["n_agents"] == 8)]
+    knobs = set(compare.FUSION_KNOB_METHODS) | set(compare.REN_Q) - set(compare.SHARED_METHODS)
+    headline = [c for c in cells if c["method"] not in knobs and (c["task"] in ("shared", "target", "localization")
+                or (c["study"] in ("scaling", "position") and c["n_agents"] == 8))]
     for c in headline:  # 200 seeds behind every headline number
         assert len({d["block"] for d in headline if d["method"] == c["method"] and d["task"] == c["task"]}) == 4
     assert len({sweep.cell_id(c) for c in cells}) == len(cells)
@@ -731,3 +733,67 @@ def test_localization_forwarding_on_switching_matches_the_exact_recursion():
     assert abs(mse.mean() - exact["forwarding"]) < 2 * half, (mse.mean(), exact["forwarding"], half)
     assert abs(m["nees_own"].mean() - 1) < 0.07
     assert exact["anchor reach, least"] > 0  # every agent meets an anchor within one hop now and then
+
+
+def test_every_knob_setting_is_swept_at_n_8_on_the_ring_beside_its_bound():
+    for grid in ("quick", "full"):
+        cells = compare.grid_cells(grid)
+        ring8 = {(c["study"], c["task"], c["method"]) for c in cells
+                 if c["n_agents"] == 8 and c["graph"] == "ring" and c["dropout"] == 0.0 and c["noise"] == "gaussian"}
+        for knob in compare.KNOBS:
+            assert len(knob.settings) >= 2 and set(knob.recipe) <= {s for s, _, _ in knob.settings}, knob.name
+            for setting, study, method in knob.settings:
+                assert (study, knob.task, method) in ring8, (grid, knob.name, setting)
+                bound = "central-fusion" if knob.task == "shared" else "centralized"
+                assert (study, knob.task, bound) in ring8, (grid, knob.name, study)
+    names = {m for k in compare.KNOBS for _, _, m in k.settings}
+    assert {f"ren-kc{q}" for q in ("-q0", "", "-q0.3", "-q0.6", "-q1")} <= names  # Q = Omega in {0, 0.1, 0.3, 0.6, 1}
+    assert {"ci-L1", "ci-L2", "ci-L5", "ci-Ldiam", "hcmci-safe-L1", "icf-Ldiam"} <= names
+
+
+def test_ren_knob_flips_the_consistency_verdict_and_the_table_says_so():
+    """Q = Omega = 0 counts the priors again (overconfident); at Q = Omega = 1 the P is conservative."""
+    cell = {"study": "shared", "task": "shared", "n_agents": 8, "graph": "ring", "noise": "gaussian",
+            "dropout": 0.0, "q_scale": 1.0, "block": 0}
+    rows = [{**r, **cell, "method": m, "cell": m} for m in ("central-fusion", *compare.REN_Q)
+            for r in compare.run_cell({**cell, "method": m})]
+    table = compare.knob_table(compare.summarize(pd.DataFrame(rows)))
+    ren = table[table["scenario"] == "shared"].set_index("setting")
+    assert list(ren.index) == ["0", "0.1 *", "0.3", "0.6", "1"]
+    assert ren.loc["0", "consistency verdict"] == "overconfident" and ren.loc["1", "consistency verdict"] == "conservative"
+    assert set(ren["flips"]) == {"accuracy, consistency"} or set(ren["flips"]) == {"consistency"}
+
+
+def test_headline_cpu_is_one_agents_step_from_the_per_agent_table():
+    """One CPU column everywhere: the headline's is the per-agent table's number at N = 8, never the batch's."""
+    costs = pd.DataFrame({"task": ["team", "team", "team", "team"], "method": ["centralized", "local"] * 2,
+                          "n_agents": [8, 8, 16, 16], "us_per_step": [40.0, 12.0, 80.0, 12.5],
+                          "flops": [1.0, 1.0, 8.0, 1.0]})
+    cell = {"study": "scaling", "task": "team", "n_agents": 8, "graph": "ring", "noise": "gaussian", "dropout": 0.0,
+            "q_scale": 1.0, "block": 0}
+    rows = [{**r, **cell, "method": m, "cell": m} for m in ("centralized", "local", "forwarding")
+            for r in compare.run_cell({**cell, "method": m}, settings=replace(compare.SETTINGS, runs=3))]
+    summary = compare.summarize(pd.DataFrame(rows))
+    table = compare.headline(summary, "team", costs)
+    assert table.loc["centralized", compare.CPU_COLUMN] == 40.0 and table.loc["local", compare.CPU_COLUMN] == 12.0
+    assert table.loc["forwarding", compare.CPU_COLUMN] == "—"  # not in the per-agent table: not measured
+    assert table.loc["centralized", "CPU slope in N"] == 1.0
+    assert compare.CPU_COLUMN not in compare.headline(summary, "team").columns  # no batch CPU without it
+    fig = compare.plot_cost(costs)
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["centralized (slope 1.00)", "local (slope 0.06)"]
+
+
+@pytest.mark.parametrize("task", ["team", "position", "target", "localization", "shared"])
+def test_accuracy_against_floats_is_drawn_for_every_scenario(task):
+    from mascore.compare import plots
+
+    study, bound, _ = plots.PARETO_SCENARIOS[task]
+    methods = plots._pareto_methods(task)[:3]
+    summary = pd.DataFrame({"study": study, "task": task, "method": methods, "n_agents": 8, "graph": "ring",
+                            "dropout": 0.0, "noise": "gaussian", "floats": [0.0, 4.0, 8.0],
+                            "ratio_mean": [1.0, 1.5, 1.2], "ratio_lo": [1.0, 1.4, 1.1], "ratio_hi": [1.0, 1.6, 1.3]})
+    fig = compare.plot_pareto(summary, task)
+    assert bound in fig.axes[0].get_ylabel()
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == list(methods)
+    with pytest.raises(ValueError, match="task must be one of"):
+        compare.plot_pareto(summary, "nowhere")

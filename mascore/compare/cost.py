@@ -72,7 +72,7 @@ def node_cost(method: str, n_agents: int, n_steps: int = 20, repeats: int = 3, s
 
 #: Leading-order work and memory per node and step of the team methods (state size n = 4, degree d, team N).
 NODE_ORDER = {
-    "centralized": ("O(N^3 n^3) at the centre", "O(N^2 n^2)"),
+    "centralized": ("O(N n^3) at the centre: N separate filters (the own state separates)", "O(N n^2)"),
     "local": ("O(n^3)", "O(n^2)"),
     "forwarding": ("O(d n^2 + n^3)", "O(n^2)"),
     "song-mb": ("O(N^3 n^3): the team's covariance, on every agent", "O(N^2 n^2)"),

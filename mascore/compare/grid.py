@@ -54,7 +54,7 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     (full grid only); every knob of :data:`KNOBS` at each of its settings, at N = 8 on the ring
     (Ren et al.'s Q and the fusion filters' variants, :data:`FUSION_KNOB_METHODS`, in their task's
     study; the Vlahakis gains not in the scaling study in the study ``knob``, with the centralized
-    filter; quick: 2 blocks, full: 4);
+    and local filters; quick: 2 blocks, full: 4);
     each with ``blocks x settings.runs`` seeds (quick: 2 x 50, full: 4 x 50, N up to
     64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
     N = 8, position sensing, the shared, target and localization tasks).
@@ -113,7 +113,7 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
         ("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
                           "graph": ["switching"], "n_agents": [8], "block": blocks if quick else blocks200}),
         # every knob swept within its recipe (KNOBS): at N = 8 on the ring, 2 seed blocks in the quick grid
-        ("knob", {**base, "method": ["centralized", *(m for m in VLAHAKIS_PHI if m not in TEAM_METHODS)],
+        ("knob", {**base, "method": ["centralized", "local", *(m for m in VLAHAKIS_PHI if m not in TEAM_METHODS)],
                   "n_agents": [8], "block": blocks if quick else blocks200}),
         ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in SHARED_METHODS],
                     "n_agents": [8], "block": blocks if quick else blocks200}),

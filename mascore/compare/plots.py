@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .benchmark import CORE_METHODS, NOISES
-from .tables import fitted_slopes
+from .benchmark import CORE_METHODS, NOISES, POSITION_METHODS, SHARED_METHODS
+from .target import target_methods
 
 
 def _plt():
@@ -14,95 +14,141 @@ def _plt():
     return require("matplotlib.pyplot", "the comparison's figures")
 
 
-def plot_pareto(summary):
-    """Accuracy against communication: RMSE ratio to the centralized filter vs floats sent per step.
+#: The scenarios of :func:`plot_pareto`: task -> (its study in the sweep, the bound's name, what is scored).
+PARETO_SCENARIOS = {
+    "team": ("scaling", "centralized", "own-position RMSE"),
+    "position": ("position", "centralized", "own-position RMSE"),
+    "target": ("target", "centralized", "target-position RMSE"),
+    "localization": ("localization", "centralized", "own-position RMSE"),
+    "shared": ("shared", "central fusion", "RMSE"),
+}
+
+
+def _pareto_methods(task: str) -> tuple[str, ...]:
+    if task == "team":
+        return CORE_METHODS
+    if task == "position":
+        return POSITION_METHODS
+    if task == "shared":
+        return SHARED_METHODS
+    return target_methods(task)
+
+
+def plot_pareto(summary, task: str = "team"):
+    """Accuracy against communication: RMSE ratio to the bound vs floats sent and received per agent and step.
 
     Parameters
     ----------
     summary : pandas.DataFrame
         Output of :func:`summarize`.
+    task : {"team", "position", "target", "localization", "shared"}
+        The scenario (:data:`PARETO_SCENARIOS`): its study's cells on the ring without drop-outs
+        (Gaussian noise), every method at its recipe, every team size the sweep holds.
 
     Returns
     -------
     matplotlib.figure.Figure
-        One point per method and team size (scaling study), with 95 % intervals.
+        One point per method and team size, with 95 % intervals; the floats are those of
+        :func:`floats_per_step` (:func:`target_cost` for the target and localization tasks),
+        a centralized filter's counted up and down.
 
     Examples
     --------
     >>> import pandas as pd
     >>> from mascore import compare
     >>> summary = pd.DataFrame({"study": "scaling", "method": ["centralized", "local"], "n_agents": 8,
+    ...                         "graph": "ring", "dropout": 0.0, "noise": "gaussian",
     ...                         "floats": [24.0, 4.0], "ratio_mean": [1.0, 1.4], "ratio_lo": [1.0, 1.38],
     ...                         "ratio_hi": [1.0, 1.42]})
     >>> compare.plot_pareto(summary).axes[0].get_ylabel()
     'own-position RMSE / centralized (log scale)'
     """
+    if task not in PARETO_SCENARIOS:
+        raise ValueError(f"task must be one of {tuple(PARETO_SCENARIOS)}; got {task!r}")
     plt = _plt()
-    base = summary[summary["study"] == "scaling"]
-    fig, ax = plt.subplots(figsize=(7, 4.2))
+    study, bound, scored = PARETO_SCENARIOS[task]
+    base = summary[(summary["study"] == study) & (summary["graph"] == "ring") & (summary["dropout"] == 0.0)
+                   & (summary["noise"] == "gaussian")]
+    if base.empty:
+        raise ValueError(f"summary has no row of the study {study!r} on the ring (rerun the sweep: grid_cells)")
+    methods = [m for m in _pareto_methods(task) if m in set(base["method"])]
+    fig, ax = plt.subplots(figsize=(7, 5))
     sizes = sorted(base["n_agents"].unique())
-    for i, m in enumerate(CORE_METHODS):
+    colours = plt.get_cmap("tab10" if len(methods) <= 10 else "tab20")
+    for i, m in enumerate(methods):
         g = base[base["method"] == m]
-        if g.empty:
-            continue
         jitter = 1 + 0.06 * (np.searchsorted(sizes, g["n_agents"]) - (len(sizes) - 1) / 2)
         x = (g["floats"] + 1) * jitter
         ax.errorbar(x, g["ratio_mean"], yerr=[g["ratio_mean"] - g["ratio_lo"], g["ratio_hi"] - g["ratio_mean"]],
-                    fmt="o", color=f"C{i}", label=m, capsize=2)
+                    fmt="o", color=colours(i), label=m, capsize=2)
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("floats sent per agent per step + 1 (log scale; points of one method: N = "
+    ax.set_xlabel("floats sent and received per agent per step + 1 (log scale; N = "
                   + ", ".join(map(str, sizes)) + ")")
-    ax.set_ylabel("own-position RMSE / centralized (log scale)")
+    ax.set_ylabel(f"{scored} / {bound} (log scale)")
     _plain_ticks(ax)
-    top = float(base["ratio_hi"].max())
-    ax.set_yticks([t for t in (1, 1.25, 1.5, 2, 3, 4, 6, 8) if t <= top * 1.05])
+    top = float(base.loc[base["method"].isin(methods), "ratio_hi"].max())
+    ticks = (1, 1.25, 1.5, 2, 3, 4, 6, 8) if top < 10 else (1, 1.5, 2, 3, 5, 10, 20, 50, 100, 200, 500, 1000)
+    ax.set_yticks([t for t in ticks if t <= top * 1.05])
     ax.axhline(1.0, color="0.5", lw=0.8, ls="--")
-    ax.legend(fontsize=8, ncol=2)
-    fig.tight_layout()
+    _legend_below(fig, ax)
     return fig
 
 
-def plot_cost(summary, slopes: dict | None = None):
-    """CPU per agent per step against team size, log-log, with the fitted slopes.
+def plot_cost(costs, task: str = "team"):
+    """One agent's CPU per step (one run, one thread) against team size, log-log, with the fitted slopes.
 
     Parameters
     ----------
-    summary : pandas.DataFrame
-        Output of :func:`summarize`.
-    slopes : dict, optional
-        Method -> CPU slope in N (:attr:`CompareResult.slopes`); fitted here if not given.
+    costs : pandas.DataFrame
+        :func:`mascore.agent_cost.agent_costs`' table (or the committed snapshot,
+        :func:`per_agent_costs`): the numbers of the headline tables' CPU column.
+    task : {"team", "target", "localization"}
+        The scenario.
 
     Returns
     -------
     matplotlib.figure.Figure
-        One line per method (scaling study).
+        One line per method of the task (the centre's step for a centralized filter), each
+        labelled with its slope over the three largest N measured.
 
     Examples
     --------
     >>> import pandas as pd
     >>> from mascore import compare
-    >>> summary = pd.DataFrame({"study": "scaling", "method": "local", "n_agents": [4, 8, 16],
-    ...                         "cpu_us": [0.4, 0.8, 1.6]})
-    >>> compare.plot_cost(summary).axes[0].get_legend_handles_labels()[1]     # a slope of 1: linear in N
-    ['local (slope 1.00)']
+    >>> costs = pd.DataFrame({"task": "team", "method": "local", "n_agents": [4, 8, 16],
+    ...                       "us_per_step": [10.0, 20.0, 40.0], "flops": [1.0, 2.0, 4.0]})
+    >>> compare.plot_cost(costs).legends[0].get_texts()[0].get_text()     # a slope of 1: linear in N
+    'local (slope 1.00)'
     """
+    from ..agent_cost import slopes as fitted
+
     plt = _plt()
-    slopes = fitted_slopes(summary) if slopes is None else slopes
-    base = summary[summary["study"] == "scaling"]
-    fig, ax = plt.subplots(figsize=(7, 4.2))
-    for i, m in enumerate(CORE_METHODS):
-        g = base[base["method"] == m]
-        if g.empty:
-            continue
-        ax.loglog(g["n_agents"], g["cpu_us"], "o-", color=f"C{i}", label=f"{m} (slope {slopes[m]:.2f})")
+    rows = costs[costs["task"] == task].dropna(subset=["us_per_step"])
+    if rows.empty:
+        raise ValueError(f"costs has no measured row of the task {task!r}")
+    slope = fitted(rows, top=3)["slope"]
+    fig, ax = plt.subplots(figsize=(7, 5))
+    methods = list(dict.fromkeys(rows["method"]))
+    colours = plt.get_cmap("tab10" if len(methods) <= 10 else "tab20")
+    for i, m in enumerate(methods):
+        g = rows[rows["method"] == m].sort_values("n_agents")
+        ax.loglog(g["n_agents"], g["us_per_step"], "o-", color=colours(i),
+                  label=f"{m} (slope {slope[(task, m)]:.2f})")
     ax.set_xlabel("team size N")
-    ax.set_ylabel("CPU per agent per step and run (µs)")
-    ax.set_xticks(sorted(base["n_agents"].unique()))
+    ax.set_ylabel("CPU of one agent per step, one run, one thread (µs)")
+    ax.set_xticks(sorted(rows["n_agents"].unique()))
     _plain_ticks(ax)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
+    _legend_below(fig, ax)
     return fig
+
+
+def _legend_below(fig, ax, ncol: int = 4) -> None:
+    """The axes' legend under the panel, off the data, in rows of `ncol` entries."""
+    handles, labels = ax.get_legend_handles_labels()
+    rows = -(-len(labels) // ncol)
+    fig.legend(handles, labels, loc="lower center", ncol=min(ncol, len(labels)), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.055 * rows + 0.01, 1, 1))
 
 
 def plot_robustness(summary):
