@@ -21,7 +21,7 @@ with ``threadpoolctl`` when it is installed; else set ``OMP_NUM_THREADS=1``, as
 the Makefile does), the median of several repeats after a warm-up.
 :func:`agent_costs` tabulates it over N with each method's log-log slope, beside
 the analytic flops per agent and step (:func:`agent_flops`, from
-:func:`mascore.fusion.filter_cost` for the fusion filters) and the orders of
+:func:`mascore.fusion_cost.filter_cost` for the fusion filters) and the orders of
 :data:`AGENT_ORDER`.
 
 Tasks and methods (:data:`AGENT_METHODS`): the team task of
@@ -43,9 +43,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import distributed_kf as dkf
-from . import estimation, fusion, kalman, rendezvous, set_membership
+from . import estimation, fusion_cost, kalman, rendezvous, set_membership
+from ._team_kernels import F1_rows
 from ._validation import check_budget, check_positive_int
-from .compare.benchmark import SETTINGS, BenchmarkSettings, check_n_agents
+from .compare.benchmark import FUSION_KNOB_METHODS, SETTINGS, BenchmarkSettings, check_n_agents
 from .compare.target import localization_model, target_model
 from .compare.team import make_estimator, team_setup
 
@@ -112,7 +113,8 @@ def agent_methods(task: str) -> tuple[str, ...]:
     -------
     tuple of str
         :data:`TEAM_METHODS`, or the names of the task's :class:`mascore.estimation.MethodSpec` (a new filter
-        module's included).
+        module's included; not the knobs' other settings, :data:`mascore.compare.FUSION_KNOB_METHODS`:
+        the same filters, whose costs follow from the counts).
 
     Examples
     --------
@@ -122,7 +124,9 @@ def agent_methods(task: str) -> tuple[str, ...]:
     """
     if task not in AGENT_TASKS:
         raise ValueError(f"task must be one of {AGENT_TASKS}; got {task!r}")
-    return TEAM_METHODS if task == "team" else estimation.method_names(task)
+    if task == "team":
+        return TEAM_METHODS
+    return tuple(m for m in estimation.method_names(task) if m not in FUSION_KNOB_METHODS)
 
 
 def __getattr__(name: str):
@@ -287,7 +291,7 @@ def _team_step(method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> 
             filt.update(Z, S)
             if method == "centralized":
                 filt.predict(U)
-                return filt.view("x_hat"), filt.view("P")
+                return filt.view("x_hat"), filt.view("P_blocks" if filt.separable else "P")
             filt.predict()
             return filt.view("X_hat"), filt.view("Sigma")
 
@@ -367,8 +371,8 @@ def _song_mb_step(before: dkf.TeamFilter, after: dkf.TeamFilter, Z_i: np.ndarray
         Psi = np.eye(Mr) - KH
         Sig = Psi @ Sig_i @ Psi.T + KH @ model.R_r @ KH.T  # Joseph form, eq. (20)
         X = X @ A.T - (L @ X) @ BK.T  # eq. (14)
-        T = dkf._F1_rows(model, Sig.reshape(N, mr, Mr), L).reshape(Mr, Mr).T
-        Sig = dkf._F1_rows(model, T.reshape(N, mr, Mr), L).reshape(Mr, Mr) + noise  # eq. (15)
+        T = F1_rows(model, Sig.reshape(N, mr, Mr), L).reshape(Mr, Mr).T
+        Sig = F1_rows(model, T.reshape(N, mr, Mr), L).reshape(Mr, Mr) + noise  # eq. (15)
         return X, 0.5 * (Sig + Sig.T)
 
     return AgentStep("team", "song-mb", N, i, degree, "one agent", run,
@@ -540,7 +544,7 @@ class _one_thread:
 def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float:
     """Analytic floating-point operations of one agent per step (leading terms; a multiply-add is 2).
 
-    The fusion filters (target and localization) count as :func:`mascore.fusion.filter_cost`
+    The fusion filters (target and localization) count as :func:`mascore.fusion_cost.filter_cost`
     (n = 4, q = 1; localization n = 2N, q = 2d). The team task counts the textbook
     algorithm at n = 4: a Kalman step ``4 n^3`` (prediction) plus ``26/3 n^3`` (information
     update); forwarding one more inverse; the Vlahakis observer ``2 n^2 + 4 d``; Song et
@@ -590,7 +594,7 @@ def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float
     if method == "centralized":  # the separable centre: N filters of n states, agent j's d + 1 measurements each
         return float(N * (kf + 2 * (d + 1) * n))
     if method == "song-mb":  # one agent's own team covariance, dimension N n, its (d + 1) n measurements
-        return float(fusion.filter_cost("measurement-forwarding", n=N * n, q=n, degree=d).flops)
+        return float(fusion_cost.filter_cost("measurement-forwarding", n=N * n, q=n, degree=d).flops)
     M = N * N * n  # song-eb: the joint covariance, predicted densely (two products of M^3 each)
     return float(4 * M**3)
 

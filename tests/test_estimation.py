@@ -72,7 +72,7 @@ def test_a_new_filter_is_one_class_and_one_spec_in_one_module(toy_module):
     assert toy_module in compare.target_methods("target")
     assert toy_module not in compare.target_methods("localization")  # its spec says where it applies
     target_cells = [c for c in compare.grid_cells("quick") if c["task"] == "target"]
-    assert {c["method"] for c in target_cells} == set(compare.target_methods("target"))
+    assert {c["method"] for c in target_cells} == set(compare.target_methods("target", knobs=True))
     # the sweep: one cell of it and of the bound, the same data; the headline table
     cell = {"study": "target", "task": "target", "n_agents": 8, "graph": "ring", "noise": "gaussian",
             "dropout": 0.0, "q_scale": 1.0, "block": 0}
