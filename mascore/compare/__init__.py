@@ -45,6 +45,12 @@ fusion (the bound), no fusion, average consensus and Ren et al.'s discrete
 Kalman consensus at the paper's Q = Omega = 0.1 (``ren-kc``) and at 0
 (``ren-kc-q0``), over the ring, a geometric graph or a switching one.
 
+**Every knob within its recipe** (:data:`KNOBS`, :func:`knob_table`): Ren et al.'s Q = Omega in
+{0, 0.1, 0.3, 0.6, 1}, the Vlahakis gain Phi over its optimal interval, the set-membership
+confidence, the consensus steps L of CI, ICF and HCMCI in {1, 2, 5} and the graph's diameter,
+and HCMCI's novelty weight at N and at its consistency-safe value, each at N = 8 on the ring,
+with a verdict per setting.
+
 **The common target** (:func:`target_model`) and **cooperative localization**
 (:func:`localization_model`): the field's filters of :mod:`mascore.fusion`
 (:data:`TARGET_METHODS`) on a target that no agent observes alone, and on the

@@ -337,11 +337,11 @@ def floats_per_step(method: str, n_agents: int, degree: float = 2.0, sensing: st
     float
         ``centralized``: its measurements up, ``4 (degree + 1)``, plus the
         estimates it needs down, ``4 (degree + 1)``, counted once at each end;
-        ``local``, ``vlahakis``, ``set-membership``: one broadcast of the own
-        estimate (4; Vlahakis's coupling uses its output part); ``forwarding``: each
+        ``local``, ``vlahakis`` (every gain of :data:`VLAHAKIS_PHI`), ``set-membership``: one broadcast
+        of the own estimate (4; Vlahakis's coupling uses its output part); ``forwarding``: each
         neighbour's measurement sent to that neighbour (``4 degree``) plus the broadcast estimate;
         ``song-mb``, ``song-eb``: 0 (they sense, they do not talk);
-        ``ren-kc``, ``ren-kc-q0``: the estimate and its covariance (2 + 3);
+        Ren et al.'s Kalman consensus at every Q (:data:`REN_Q`): the estimate and its covariance (2 + 3);
         ``average-consensus``: 2; ``central-fusion``: 5 up, 2 down; ``no-fusion``: 0.
 
     Examples

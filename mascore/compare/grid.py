@@ -53,8 +53,9 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     :data:`SWITCHING_NOT_APPLICABLE`) and localization at N = 8 (quick: 2 blocks) and 16
     (full grid only); every knob of :data:`KNOBS` at each of its settings, at N = 8 on the ring
     (Ren et al.'s Q and the fusion filters' variants, :data:`FUSION_KNOB_METHODS`, in their task's
-    study; the Vlahakis gains not in the scaling study in the study ``knob``, with the centralized
-    and local filters; quick: 2 blocks, full: 4);
+    study, Ren et al.'s also on the geometric and switching graphs of 16; the Vlahakis gains not in
+    the scaling study in the study ``knob``, with the centralized and local filters; quick: 2
+    blocks, full: 4);
     each with ``blocks x settings.runs`` seeds (quick: 2 x 50, full: 4 x 50, N up to
     64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
     N = 8, position sensing, the shared, target and localization tasks).
@@ -117,6 +118,8 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
                   "n_agents": [8], "block": blocks if quick else blocks200}),
         ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in SHARED_METHODS],
                     "n_agents": [8], "block": blocks if quick else blocks200}),
+        ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in SHARED_METHODS],
+                    "n_agents": [16], "graph": ["geometric", "switching"], "block": blocks200}),
         *((task, {**base, "task": [task], "method": list(FUSION_KNOB_METHODS), "n_agents": [8],
                   "block": blocks if quick else blocks200}) for task in ("target", "localization")),
     ]
