@@ -136,7 +136,7 @@ def plot_cost(costs, task: str = "team"):
         ax.loglog(g["n_agents"], g["us_per_step"], "o-", color=colours(i),
                   label=f"{m} (slope {slope[(task, m)]:.2f})")
     ax.set_xlabel("team size N")
-    ax.set_ylabel("CPU of one agent per step, one run, one thread (µs)")
+    ax.set_ylabel("one agent's CPU per step (µs)")
     ax.set_xticks(sorted(rows["n_agents"].unique()))
     _plain_ticks(ax)
     _legend_below(fig, ax)
@@ -144,8 +144,9 @@ def plot_cost(costs, task: str = "team"):
 
 
 def _legend_below(fig, ax, ncol: int = 4) -> None:
-    """The axes' legend under the panel, off the data, in rows of `ncol` entries."""
+    """The axes' legend under the panel, off the data, in rows of at most `ncol` entries that fit its width."""
     handles, labels = ax.get_legend_handles_labels()
+    ncol = max(1, min(ncol, 110 // (max(map(len, labels)) + 8)))  # about 110 characters of 8 pt across 7 in
     rows = -(-len(labels) // ncol)
     fig.legend(handles, labels, loc="lower center", ncol=min(ncol, len(labels)), fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.055 * rows + 0.01, 1, 1))
