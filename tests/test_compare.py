@@ -272,7 +272,7 @@ def test_claims_recompute_from_the_table():
     again = [c.to_dict() for c in compare.compare_claims(compare.summarize(table))]
     assert [c["id"] for c in written] == [c["id"] for c in again]
     for w, a in zip(written, again):
-        assert w["verdict"] == a["verdict"] == "holds", w["id"]
+        assert w["verdict"] == a["verdict"], w["id"]  # a claim may fail: Ren's does at Q = Omega >= 0.3
         assert json.dumps(w["value"], sort_keys=True) == json.dumps(a["value"], sort_keys=True)
 
 
