@@ -42,9 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import distributed_kf as dkf
-from . import estimation, fusion_cost, kalman, rendezvous, set_membership
-from ._team_kernels import F1_rows
+from . import estimation, fusion_cost, rendezvous
 from ._validation import check_budget, check_positive_int
 from .compare.benchmark import SETTINGS, BenchmarkSettings, check_n_agents
 from .compare.target import localization_model, target_model
@@ -282,98 +280,15 @@ def _team_step(method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> 
     Z = measure()
     if ("team", method) in TEAM_WHOLE_FILTER:
         U = control(Z)  # the inputs of the timed step (from the views before the update: the work is the same)
-        filt = est.filter
-
-        def run():
-            filt.update(Z, S)
-            if method == "centralized":
-                filt.predict(U)
-                return filt.view("x_hat"), filt.view("P")
-            filt.predict()
-            return filt.view("X_hat"), filt.view("Sigma")
-
-        return AgentStep("team", method, N, i, len(nbrs), "whole filter", run)
-
+        filt, own, messages = est.agent_inputs(Z, S, U, i)
+        return AgentStep("team", method, N, i, len(nbrs), "whole filter", lambda: filt.agent_step(i, own, messages))
     before = copy.deepcopy(est)  # agent i's prior, and the team's views of this step, from the same state
     est.update(Z, S)
     U = control(Z)
-    u_i = U[0, i].copy()
     est.predict(U)
-    z_own = Z[0, i, i].copy()
-    if method == "song-mb":
-        return _song_mb_step(before.filter, est.filter, Z[0, i].copy(), S[0, i], i, len(nbrs))
-    if method == "local":
-        model = kalman.LinearGaussianModel(team.A, team.Q_filter, np.eye(4), team.R, team.B)
-        x_i, P_i = before.own[0, i].copy(), np.array(before.P, dtype=float)
-
-        def run():
-            xu, Pu = kalman.update(x_i, P_i, z_own, model)
-            return kalman.predict(xu, Pu, model, u_i)
-
-        return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i], est.P))
-    if method == "forwarding":  # the filter's own agent step
-        filt = before.filter
-        own, messages = filt.agent_inputs(before.own[0], before.P[0], Z[0], S[0], U[0], i)
-
-        def run():
-            return filt.agent_step(i, own, messages)
-
-        return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i], est.P[0, i]))
-    if method == "vlahakis":  # the observer's own agent step, with the neighbours' broadcast output estimates
-        obs = before.observer
-        own, messages = obs.agent_inputs(before.own[0], Z[0, :, :, :2], U[0], i)
-
-        def run():
-            return obs.agent_step(i, own, messages)
-
-        return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i],))
-    # set-membership: the filter's public one-agent model
-    sm = set_membership.SetMembershipModel(A=team.A, G=np.eye(4), C=np.eye(4), D=np.eye(4), Q=before.W_proc,
-                                           R=before.W_meas, B=team.B)
-    c_i, E_i = before.own[0, i].copy(), before.shape[0, i].copy()
-
-    def run():
-        c, E, _ = sm.correct(c_i, E_i, z_own, check_consistency=False)
-        return sm.predict(c, E, u_i)
-
-    return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i], est.shape[0, i]))
-
-
-def _song_mb_step(before: dkf.TeamFilter, after: dkf.TeamFilter, Z_i: np.ndarray, seen: np.ndarray, i: int,
-                  degree: int) -> AgentStep:
-    """Agent i of Song et al.'s measurement-based filter: eqs. (16)-(20), then (14)-(15), on its own team filter.
-
-    The same kernels as :class:`mascore.distributed_kf.TeamFilter` with ``mode="mb"``, on agent i's
-    team estimate ``(N, m)`` and reduced covariance ``(N m_r, N m_r)`` only. The block-diagonal
-    process term of eq. (15) depends on the topology and the noise only: computed once.
-    """
-    from ._masked_gain import masked_gain
-
-    model = before.model
-    N, m, mr, Mr, k = model.n_agents, model.m, model.m_r, model.M_r, model.kron
-    L = np.array(before.laplacian, dtype=float)
-    X_i = np.array(before.X_hat[0, i])  # (N, m)
-    Sig_i = np.array(before.Sigma[0, i])  # (Mr, Mr)
-    d = np.repeat(seen, mr).astype(float)  # diag(D_i): the agents it measures
-    Rr = model.R_r.reshape(N, mr, N, mr)
-    Cj = np.einsum("jl,jk,lakc->jac", L, L, Rr)
-    noise = np.zeros((N, mr, N, mr))
-    noise[np.arange(N), :, np.arange(N), :] = model.BK_r @ Cj @ model.BK_r.T + model.Q_r
-    noise = noise.reshape(Mr, Mr)
-    A, BK = model.A, model.BK
-
-    def run():
-        KH = masked_gain(Sig_i, d, model.R_r)  # eq. (19): its own measurements
-        X = X_i + (KH @ (Z_i - X_i).reshape(Mr, k)).reshape(N, m)
-        Psi = np.eye(Mr) - KH
-        Sig = Psi @ Sig_i @ Psi.T + KH @ model.R_r @ KH.T  # Joseph form, eq. (20)
-        X = X @ A.T - (L @ X) @ BK.T  # eq. (14)
-        T = F1_rows(model, Sig.reshape(N, mr, Mr), L).reshape(Mr, Mr).T
-        Sig = F1_rows(model, T.reshape(N, mr, Mr), L).reshape(Mr, Mr) + noise  # eq. (15)
-        return X, 0.5 * (Sig + Sig.T)
-
-    return AgentStep("team", "song-mb", N, i, degree, "one agent", run,
-                     lambda: (after.X_hat[0, i], after.Sigma[0, i]))
+    filt, own, messages = before.agent_inputs(Z, S, U, i)
+    return AgentStep("team", method, N, i, len(nbrs), "one agent", lambda: filt.agent_step(i, own, messages),
+                     lambda: est.agent_state(i))
 
 
 def _fusion_step(task: str, method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> AgentStep:

@@ -58,6 +58,7 @@ Time is the step index ``k`` (discrete time).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -547,6 +548,92 @@ class SetMembershipModel(Frozen):
         if (self.B is None) != (u is None):
             raise ValueError("give both B and u, or neither")
         return self._predict(c, P, u, method, step, agent, solver_options, programs)
+
+    def agent_inputs(self, center: ArrayLike, shape: ArrayLike, y: ArrayLike, u: ArrayLike | None,
+                     i: int) -> tuple[dict, tuple]:
+        """Agent i's data of one step when every agent runs this set-membership filter on its own state.
+
+        Parameters
+        ----------
+        center : (N, n) array_like
+            The agents' set centres before the step.
+        shape : (n, n) or (N, n, n) array_like
+            Their shape matrices (one shared by all agents, or one each).
+        y : (N, p) array_like
+            Each agent's own measurement of the step.
+        u : (N, k) array_like or None
+            The inputs applied (None without ``B``).
+        i : int
+            The agent.
+
+        Returns
+        -------
+        own : dict
+            Its ``center``, ``shape``, measurement ``y`` and input ``u`` (copies).
+        messages : tuple
+            Empty: the filter uses the agent's own measurement only.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.set_membership import SetMembershipModel
+        >>> model = SetMembershipModel(A=np.eye(1), G=np.eye(1), C=np.eye(1), D=np.eye(1), Q=np.eye(1), R=np.eye(1))
+        >>> own, messages = model.agent_inputs(np.zeros((2, 1)), np.eye(1), [[0.5], [1.0]], None, 1)
+        >>> own["y"], messages
+        (array([1.]), ())
+        """
+        c, E, y = (np.asarray(a, dtype=float) for a in (center, shape, y))
+        return ({"center": c[i].copy(), "shape": (E if E.ndim == 2 else E[i]).copy(), "y": y[i].copy(),
+                 "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
+
+    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        """Agent i's closed-form correction with its own measurement, then its prediction (:meth:`correct`, :meth:`predict`).
+
+        Parameters
+        ----------
+        i : int
+            The agent.
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        center, shape : ndarray
+            Its predicted set ``(n,)``, ``(n, n)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.set_membership import SetMembershipModel
+        >>> model = SetMembershipModel(A=np.eye(1), G=np.eye(1), C=np.eye(1), D=np.eye(1), Q=np.eye(1), R=np.eye(1))
+        >>> c, E = model.agent_step(0, *model.agent_inputs(np.zeros((2, 1)), np.eye(1), [[0.5], [1.0]], None, 0))
+        >>> c.shape, E.shape
+        ((1,), (1, 1))
+        """
+        c, E, _ = self.correct(own["center"], own["shape"], own["y"], check_consistency=False)
+        return self.predict(c, E, own["u"])
+
+    def messages(self, i: int = 0) -> tuple:
+        """What an agent sends per step: nothing.
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+
+        Returns
+        -------
+        tuple
+            Empty.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.set_membership import SetMembershipModel
+        >>> SetMembershipModel(A=np.eye(1), G=np.eye(1), C=np.eye(1), D=np.eye(1), Q=np.eye(1), R=np.eye(1)).messages()
+        ()
+        """
+        return ()
 
     def run(
         self, x0_hat: ArrayLike, P0: ArrayLike, y: ArrayLike, u: ArrayLike | None = None,

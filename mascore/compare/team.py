@@ -86,6 +86,18 @@ class _Estimator:
     def containment(self, x: np.ndarray) -> np.ndarray | None:
         return None
 
+    def agent_inputs(self, Z: np.ndarray, S: np.ndarray, U: np.ndarray, i: int) -> tuple:
+        """``(estimator, own, messages)``: agent i's next step of run 0 (update with `Z`, `S`, prediction with `U`).
+
+        The estimator's own ``agent_inputs``, given the state this adapter holds; ``estimator.agent_step(i,
+        own, messages)`` is the step.
+        """
+        raise NotImplementedError(f"{type(self).__name__} has no agent-level step")
+
+    def agent_state(self, i: int) -> tuple:
+        """Agent i's state of run 0, as the estimator's ``agent_step`` returns it (to check one against the other)."""
+        raise NotImplementedError(f"{type(self).__name__} has no agent-level step")
+
 
 class _Centralized(_Estimator):
     link_borne = False
@@ -106,6 +118,9 @@ class _Centralized(_Estimator):
     @property
     def own_cov(self):
         return _own_blocks(self.filter.P, self.model)
+
+    def agent_inputs(self, Z, S, U, i):
+        return (self.filter, *self.filter.agent_inputs(Z, S, U, i))
 
 
 def _own_blocks(P: np.ndarray, model: team_model.TeamFilterModel) -> np.ndarray:
@@ -139,6 +154,14 @@ class _Local(_Estimator):
     @property
     def own_cov(self):
         return self.P
+
+    def agent_inputs(self, Z, S, U, i):
+        model = kalman.LinearGaussianModel(self.t.A, self.t.Q_filter, np.eye(4), self.t.R, self.t.B)
+        N = self.t.N
+        return (model, *model.agent_inputs(self.own[0], self.P, Z[0, np.arange(N), np.arange(N)], U[0], i))
+
+    def agent_state(self, i):
+        return self.own[0, i], self.P
 
 
 class _Song(_Estimator):
@@ -174,6 +197,12 @@ class _Song(_Estimator):
     @property
     def own_cov(self):
         return _own_blocks(self.filter.agent_covariances(), self.model)
+
+    def agent_inputs(self, Z, S, U, i):
+        return (self.filter, *self.filter.agent_inputs(Z, S, i))
+
+    def agent_state(self, i):
+        return self.filter.view("X_hat")[0, i], self.filter.view("Sigma")[0, i]
 
 
 def _vlahakis_gains(adjacency: np.ndarray, q_vel: float, r: float, dt: float,
@@ -266,6 +295,12 @@ class _Vlahakis(_Estimator):
     def predict(self, U):
         self.own = self.observer.predict(self.own, U)
 
+    def agent_inputs(self, Z, S, U, i):
+        return (self.observer, *self.observer.agent_inputs(self.own[0], Z[0, :, :, :2], U[0], i))
+
+    def agent_state(self, i):
+        return (self.own[0, i],)
+
 
 class _Forwarding(_Estimator):
     """Measurement forwarding on the own states (:class:`mascore.own_state.OwnStateForwardingFilter`).
@@ -292,6 +327,12 @@ class _Forwarding(_Estimator):
     @property
     def own_cov(self):
         return self.P
+
+    def agent_inputs(self, Z, S, U, i):
+        return (self.filter, *self.filter.agent_inputs(self.own[0], self.P[0], Z[0], S[0], U[0], i))
+
+    def agent_state(self, i):
+        return self.own[0, i], self.P[0, i]
 
 
 class _SetMembership(_Estimator):
@@ -323,6 +364,15 @@ class _SetMembership(_Estimator):
     def set_shape(self):
         """The set's shape matrices, broadcastable to ``(R, N, 4, 4)``."""
         return self.shape
+
+    def agent_inputs(self, Z, S, U, i):
+        model = set_membership.SetMembershipModel(A=self.t.A, G=np.eye(4), C=np.eye(4), D=np.eye(4), Q=self.W_proc,
+                                                  R=self.W_meas, B=self.t.B)
+        N = self.t.N
+        return (model, *model.agent_inputs(self.own[0], self.shape[0], Z[0, np.arange(N), np.arange(N)], U[0], i))
+
+    def agent_state(self, i):
+        return self.own[0, i], self.shape[0, i]
 
 
 # ---------------------------------------------------------------- position-only sensing: z_ij = C x_j + nu_ij
