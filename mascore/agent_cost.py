@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import estimation, fusion_cost, rendezvous
+from . import estimation, rendezvous
 from ._validation import check_budget, check_positive_int
 from .compare.benchmark import SETTINGS, BenchmarkSettings, check_n_agents
 from .compare.target import localization_model, target_model
@@ -53,8 +53,6 @@ __all__ = [
     "AGENT_ORDER",  # noqa: F822 (read from the specs by the module's __getattr__)
     "AGENT_TASKS",
     "TEAM_METHODS",
-    "TEAM_ORDER",
-    "TEAM_WHOLE_FILTER",
     "agent_methods",
     "MAX_AGENTS",
     "WHOLE_FILTER",  # noqa: F822 (read from the specs by the module's __getattr__)
@@ -71,12 +69,10 @@ __all__ = [
 
 #: Tasks whose per-agent cost is measured.
 AGENT_TASKS = ("team", "target", "localization")
-#: The team task's methods (the estimators of :mod:`mascore.compare`'s own-state task); the methods of the
-#: target and localization tasks are their specs' (:data:`mascore.fusion.METHODS`): see :func:`agent_methods`.
+#: The team task's methods timed (the estimators of :mod:`mascore.compare`'s own-state task at their own recipe;
+#: their specs sit beside their filters); the methods of the target and localization tasks are all their specs':
+#: see :func:`agent_methods`.
 TEAM_METHODS = ("centralized", "local", "forwarding", "song-mb", "song-eb", "vlahakis", "set-membership")
-#: Team methods whose busiest agent runs the whole filter: the centre, or every agent of Song et al.'s
-#: estimation-based filter, which needs the joint covariance of all agents' team estimates (their Remark 4).
-TEAM_WHOLE_FILTER = frozenset({("team", "centralized"), ("team", "song-eb")})
 #: Largest N measured per (task, method), with the reason; the others go to 128.
 MAX_AGENTS = {
     ("team", "song-eb"): (32, "its joint covariance of all agents' team estimates holds (2 N^2)^2 floats (per "
@@ -85,19 +81,6 @@ MAX_AGENTS = {
 
 #: Longest timing (s of CPU, repeats x min_time) :func:`agent_step_cost` accepts.
 _MAX_TIMING_S = 3600.0
-
-#: Leading-order work and memory of one team-task agent per step (n = 4 the state size; d the degree, N the team
-#: size); those of the target and localization tasks are their specs' orders (:data:`AGENT_ORDER`).
-TEAM_ORDER = {
-    ("team", "centralized"): ("O(N^3 n^3) at the centre", "O(N^2 n^2)"),
-    ("team", "local"): ("O(n^3)", "O(n^2)"),
-    ("team", "forwarding"): ("O(d n + n^3)", "O(n^2 + d n)"),
-    ("team", "song-mb"): ("O(N^3 n^3): its own covariance of the whole team", "O(N^2 n^2)"),
-    ("team", "song-eb"): ("O(N^6 n^3): the joint covariance of all team estimates (dense)", "O(N^4 n^2)"),
-    ("team", "vlahakis"): ("O(n^2 + d n)", "O(n + d n)"),
-    ("team", "set-membership"): ("O(n^3)", "O(n^2)"),
-}
-
 
 def agent_methods(task: str) -> tuple[str, ...]:
     """The methods whose per-agent cost is measured in `task`, in table order.
@@ -126,14 +109,12 @@ def agent_methods(task: str) -> tuple[str, ...]:
 
 def __getattr__(name: str):
     """``AGENT_METHODS``, ``WHOLE_FILTER`` and ``AGENT_ORDER``, read from the specs when asked (always current)."""
-    fusion_tasks = [t for t in AGENT_TASKS if t != "team"]
     if name == "AGENT_METHODS":  # methods per task
         return {t: agent_methods(t) for t in AGENT_TASKS}
     if name == "WHOLE_FILTER":  # (task, method) whose busiest agent runs the whole filter
-        return TEAM_WHOLE_FILTER | {(t, s.name) for t in fusion_tasks for s in estimation.method_specs(t)
-                                    if s.whole_filter}
+        return {(t, m) for t in AGENT_TASKS for m in agent_methods(t) if estimation.method_spec(m, t).whole_filter}
     if name == "AGENT_ORDER":  # (task, method) -> (work, memory) per agent and step
-        return {**TEAM_ORDER, **{(t, s.name): s.order[t] for t in fusion_tasks for s in estimation.method_specs(t)}}
+        return {(t, m): estimation.method_spec(m, t).order[t] for t in AGENT_TASKS for m in agent_methods(t)}
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -278,7 +259,7 @@ def _team_step(method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> 
         est.predict(U)
         x = x @ team.A.T + U @ team.B.T + np.sqrt(np.diag(team.Q)) * rng.standard_normal(x.shape)
     Z = measure()
-    if ("team", method) in TEAM_WHOLE_FILTER:
+    if estimation.method_spec(method, "team").whole_filter:
         U = control(Z)  # the inputs of the timed step (from the views before the update: the work is the same)
         filt, own, messages = est.agent_inputs(Z, S, U, i)
         return AgentStep("team", method, N, i, len(nbrs), "whole filter", lambda: filt.agent_step(i, own, messages))
@@ -456,8 +437,9 @@ class _one_thread:
 def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float:
     """Analytic floating-point operations of one agent per step (leading terms; a multiply-add is 2).
 
-    The fusion filters (target and localization) count as :func:`mascore.fusion_cost.filter_cost`
-    (n = 4, q = 1; localization n = 2N, q = 2d). The team task counts the textbook
+    Each method's spec counts them (:attr:`mascore.estimation.MethodSpec.cost`). The fusion filters
+    (target and localization) count as :func:`mascore.fusion_cost.filter_cost` (n = 4, q = 1;
+    localization n = 2N, q = 2d). The team task counts the textbook
     algorithm at n = 4: a Kalman step ``4 n^3`` (prediction) plus ``26/3 n^3`` (information
     update); forwarding one more inverse; the Vlahakis observer ``2 n^2 + 4 d``; Song et
     al.'s measurement-based filter one agent's own team covariance (dimension Nn, with its
@@ -489,25 +471,8 @@ def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float
     _check_task_method(task, method)
     N = check_positive_int(n_agents, "n_agents")
     d = check_positive_int(degree, "degree", minimum=0)
-    if task != "team":
-        n, q = _dimensions(task, N, d)
-        return float(estimation.method_spec(method, task).cost(n, q, d, N)[1])
-    n = 4
-    kf = 4 * n**3 + 2 * n**2 + 26 / 3 * n**3 + 8 * n**2  # prediction + information update
-    if method == "local":
-        return float(kf)
-    if method == "forwarding":
-        return float(kf + n**3 + 2 * (d + 1) * n)
-    if method == "set-membership":
-        return float(kf + 2 * n**3)  # the closed-form correction, and the prediction's two products
-    if method == "vlahakis":
-        return float(2 * n**2 + 2 * n * 2 + 4 * d + 2 * n)
-    if method == "centralized":
-        return float(fusion_cost.filter_cost("centralized", n=N * n, q=(d + 1) * n, degree=d, n_agents=N).flops)
-    if method == "song-mb":  # one agent's own team covariance, dimension N n, its (d + 1) n measurements
-        return float(fusion_cost.filter_cost("measurement-forwarding", n=N * n, q=n, degree=d).flops)
-    M = N * N * n  # song-eb: the joint covariance, predicted densely (two products of M^3 each)
-    return float(4 * M**3)
+    n, q = _dimensions(task, N, d)
+    return float(estimation.method_spec(method, task).cost(n, q, d, N)[1])
 
 
 def agent_memory(task: str, method: str, n_agents: int, degree: int = 2) -> float:
@@ -532,23 +497,14 @@ def agent_memory(task: str, method: str, n_agents: int, degree: int = 2) -> floa
     _check_task_method(task, method)
     N = check_positive_int(n_agents, "n_agents")
     d = check_positive_int(degree, "degree", minimum=0)
-    if task != "team":
-        n, q = _dimensions(task, N, d)
-        spec = estimation.method_spec(method, task)
-        return float(spec.memory(n, q, d, N)) if spec.memory else float("nan")
-    n = 4
-    if method == "song-eb":
-        return float((N * N * n) ** 2)
-    if method in ("centralized", "song-mb"):  # the team's estimate and covariance (song-mb: agent i's own)
-        return float((N * n) ** 2 + N * n)
-    if method == "vlahakis":
-        return float(n + d * n)
-    return float(n**2 + n + d * n)
+    n, q = _dimensions(task, N, d)
+    spec = estimation.method_spec(method, task)
+    return float(spec.memory(n, q, d, N)) if spec.memory else float("nan")
 
 
 def _dimensions(task: str, n_agents: int, degree: int) -> tuple[int, int]:
-    """State size n and measurements per agent q of the target (4, 1) and localization (2N, 2d) tasks."""
-    return (4, 1) if task == "target" else (2 * n_agents, 2 * degree)
+    """State size n and measurements per agent q: team (4, 4: its own full state), target (4, 1), localization (2N, 2d)."""
+    return {"team": (4, 4), "target": (4, 1)}.get(task, (2 * n_agents, 2 * degree))
 
 
 # --------------------------------------------------------------------------------------------
@@ -556,12 +512,12 @@ def _dimensions(task: str, n_agents: int, degree: int) -> tuple[int, int]:
 
 
 def _order(task: str, method: str) -> tuple[str, str]:
-    """The order of one agent's work and memory per step (:data:`TEAM_ORDER`, or the method's spec)."""
-    return TEAM_ORDER[(task, method)] if task == "team" else estimation.method_spec(method, task).order[task]
+    """The order of one agent's work and memory per step (the method's spec)."""
+    return estimation.method_spec(method, task).order[task]
 
 
 def _whole_filter(task: str, method: str) -> bool:
-    return (task, method) in TEAM_WHOLE_FILTER if task == "team" else estimation.method_spec(method, task).whole_filter
+    return estimation.method_spec(method, task).whole_filter
 
 
 def agent_costs(sizes: Sequence[int] = (4, 8, 16, 32, 64, 128), tasks: Sequence[str] = AGENT_TASKS,

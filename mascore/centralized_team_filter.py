@@ -33,8 +33,9 @@ from ._validation import (
 )
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
-from .estimation import Message
-from .team_model import TeamFilterModel, reduce_covariance
+from .estimation import Message, MethodSpec
+from .fusion_cost import filter_cost
+from .team_model import TeamFilterModel, reduce_covariance, team_filter_model
 
 __all__ = [
     "CentralizedTeamFilter",
@@ -108,6 +109,11 @@ class CentralizedTeamFilter:
                              f"but found {P0.shape}")
         self._model, self._B, self._x = model, frozen_copy(B), x
         self._P = np.broadcast_to(P, (batch, *P.shape)).copy()
+
+    @property
+    def model(self) -> TeamFilterModel:
+        """The team model."""
+        return self._model
 
     @property
     def x_hat(self) -> np.ndarray:
@@ -477,3 +483,15 @@ def _centralized_update(model, x_pred, P_pred, Z, S):
     total = (W @ innov).sum(axis=1)  # (runs, Mr, k); W broadcasts over runs when batch = 1
     x = x_pred + (P @ total).reshape(R_, N, m)
     return x, P
+
+
+#: The centralized filter of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost): the bound.
+METHODS = (
+    MethodSpec("centralized", ("team",),
+               lambda team, x_hat0: CentralizedTeamFilter(
+                   team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N), team.B, x_hat0, team.P0),
+               lambda n, q, d, N: (2.0 * n * (d + 1), filter_cost("centralized", n=N * n, q=(d + 1) * n, degree=d,
+                                                                  n_agents=N).flops),
+               {"team": ("O(N^3 n^3) at the centre", "O(N^2 n^2)")}, lambda n, q, d, N: float((N * n) ** 2 + N * n),
+               whole_filter=True, position=0),
+)

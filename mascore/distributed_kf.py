@@ -104,9 +104,10 @@ from ._validation import (
 )
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
-from .estimation import Message
+from .estimation import Message, MethodSpec
+from .fusion_cost import filter_cost
 from .sensing import team_noise_covariance
-from .team_model import TeamFilterModel, reduce_covariance
+from .team_model import TeamFilterModel, reduce_covariance, team_filter_model
 
 __all__ = [
     "TeamFilter",
@@ -1431,3 +1432,35 @@ class TeamFilter:
             Si = Sb[rows]  # row block i of Σ^-: read here only, so it is overwritten with its update
             np.subtract(Si, O, out=Si)
             Si[:, rows] += W[i] @ Rq[i] @ Wt[i]  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
+
+
+# ----------------------------------------------------------------------------
+# the methods of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost)
+# ----------------------------------------------------------------------------
+
+#: Why Song et al.'s filters do not apply elsewhere (the tables show it).
+_SONG_NOT_APPLICABLE = {
+    "target": "estimates the agents' own states in a rendezvous loop; there is no common target",
+    "localization": "needs absolute measurements of the neighbours' states (eq. (2)); here they are relative",
+    "position": "needs full-state measurements of its neighbours (eq. (2))",
+}
+
+
+def _song_filter(mode: str):
+    """``build(team, x_hat0)``: Song et al.'s filter of the team scenario, every agent from the common estimate."""
+    def build(team, x_hat0: np.ndarray) -> TeamFilter:
+        model = team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N)
+        runs, N, m = x_hat0.shape  # one common initial estimate; links dropping per run split the covariance
+        return TeamFilter(model, team.laplacian, x_hat0.reshape(runs, N * m), team.P0, mode=mode)
+    return build
+
+
+METHODS = (
+    MethodSpec("song-mb", ("team",), _song_filter("mb"),
+               lambda n, q, d, N: (0.0, filter_cost("measurement-forwarding", n=N * n, q=n, degree=d).flops),
+               {"team": ("O(N^3 n^3): its own covariance of the whole team", "O(N^2 n^2)")},
+               lambda n, q, d, N: float((N * n) ** 2 + N * n), _SONG_NOT_APPLICABLE, position=3),
+    MethodSpec("song-eb", ("team",), _song_filter("eb"), lambda n, q, d, N: (0.0, float(4 * (N * N * n) ** 3)),
+               {"team": ("O(N^6 n^3): the joint covariance of all team estimates (dense)", "O(N^4 n^2)")},
+               lambda n, q, d, N: float((N * N * n) ** 2), _SONG_NOT_APPLICABLE, whole_filter=True, position=4),
+)

@@ -53,7 +53,8 @@ from ._validation import Frozen, check_covariance, check_positive_int, finite_re
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .agents import is_system, system_matrices
-from .estimation import Message
+from .estimation import Message, MethodSpec
+from .fusion_cost import kalman_step_flops
 
 __all__ = ["LinearGaussianModel", "predict", "update", "kalman_gain", "run_filter", "nees", "nees_interval",
            "symmetrize"]
@@ -944,3 +945,16 @@ def _symmetrize_fresh(P):
     out += P
     out *= 0.5
     return out
+
+
+# ----------------------------------------------------------------------------
+# the method of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost)
+# ----------------------------------------------------------------------------
+
+#: ``local``: every agent's Kalman filter of its own state from its own full-state measurement.
+METHODS = (
+    MethodSpec("local", ("team",), lambda team, x_hat0: LinearGaussianModel(team.A, team.Q_filter, np.eye(team.A.shape[0]),
+                                                                            team.R, team.B),
+               lambda n, q, d, N: (float(n), kalman_step_flops(n)), {"team": ("O(n^3)", "O(n^2)")},
+               lambda n, q, d, N: float(n**2 + n + d * n), position=1),
+)
