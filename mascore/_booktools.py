@@ -40,7 +40,8 @@ __all__ = [
 #: are not listed here but discovered (:func:`api_groups`).
 API_GROUPS: dict[str, tuple[str, ...]] = {
     "Shared building blocks": ("agents", "graphs", "noise", "kalman", "sensing"),
-    "Consensus and cooperative control": ("consensus", "rendezvous", "flocking", "synchronization", "lqr", "riccati"),
+    "Consensus and cooperative control": ("consensus", "consensus_filters", "rendezvous", "flocking", "synchronization",
+                                          "lqr", "riccati"),
     "Estimation": ("estimation", "team_model", "distributed_kf", "centralized_team_filter", "team_observability",
                    "distributed_ekf", "sensor_network", "fusion", "fusion_cost", "own_state", "ellipsoids",
                    "set_membership", "observers", "network_observer"),
