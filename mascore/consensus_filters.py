@@ -54,11 +54,59 @@ class KalmanConsensusFilter(Frozen):
         return (self.Q, self.Omega)
 
     def predict(self, xi: ArrayLike, P: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """The quantity does not move: the prediction ``P + Q`` is inside eq. (4) of :meth:`update` (identity here)."""
+        """The quantity does not move: the prediction ``P + Q`` is inside eq. (4) of :meth:`update` (identity here).
+
+        Parameters
+        ----------
+        xi : (..., N, m) array_like
+            The estimates.
+        P : (..., N, m, m) array_like
+            Their covariances.
+
+        Returns
+        -------
+        xi, P : ndarray
+            The same, as float arrays.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs
+        >>> from mascore.consensus_filters import KalmanConsensusFilter
+        >>> f, G = KalmanConsensusFilter(0.1, 0.1), graphs.path_graph(3)
+        >>> xi, P = np.array([[0.0], [2.0], [4.0]]), np.ones((3, 1, 1))
+        >>> f.predict(xi, P)[0].shape
+        (3, 1)
+        """
         return np.asarray(xi, dtype=float), np.asarray(P, dtype=float)
 
     def update(self, xi: ArrayLike, P: ArrayLike, G: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """One step of eqs. (4)-(5) with the messages delivered on `G` (:func:`~mascore.consensus.kalman_consensus_step`)."""
+        """One step of eqs. (4)-(5) with the messages delivered on `G` (:func:`~mascore.consensus.kalman_consensus_step`).
+
+        Parameters
+        ----------
+        xi : (..., N, m) array_like
+            The estimates before the step.
+        P : (..., N, m, m) array_like
+            Their covariances.
+        G : (..., N, N) array_like
+            The links delivered at the step (``G[i, j] > 0``: i hears j).
+
+        Returns
+        -------
+        xi, P : ndarray
+            After the step.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs
+        >>> from mascore.consensus_filters import KalmanConsensusFilter
+        >>> f, G = KalmanConsensusFilter(0.1, 0.1), graphs.path_graph(3)
+        >>> xi, P = np.array([[0.0], [2.0], [4.0]]), np.ones((3, 1, 1))
+        >>> f.update(xi, P, G)[1][:, 0, 0].round(3)
+        array([0.367, 0.275, 0.367])
+        """
         return kalman_consensus_step(xi, P, G, Q=self.Q, Omega=self.Omega)
 
     def agent_inputs(self, xi: ArrayLike, P: ArrayLike, G: ArrayLike, i: int) -> tuple[dict, tuple]:
@@ -81,6 +129,17 @@ class KalmanConsensusFilter(Frozen):
             Its ``xi`` and ``P``.
         messages : tuple
             One round: the neighbours' ``(xi_j, P_j)`` stacked, ``(d, m)`` and ``(d, m, m)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs
+        >>> from mascore.consensus_filters import KalmanConsensusFilter
+        >>> f, G = KalmanConsensusFilter(0.1, 0.1), graphs.path_graph(3)
+        >>> xi, P = np.array([[0.0], [2.0], [4.0]]), np.ones((3, 1, 1))
+        >>> own, messages = f.agent_inputs(xi, P, G, 1)
+        >>> messages[0][0][:, 0]                                  # agents 0 and 2 send their states
+        array([0., 4.])
         """
         xi, P, G = _float_array(xi, "xi"), _float_array(P, "P"), _float_array(G, "G")
         heard = np.flatnonzero(G[i] > 0)
@@ -121,7 +180,26 @@ class KalmanConsensusFilter(Frozen):
         return xi[0], P[0]
 
     def messages(self, i: int = 0, m: int = 2) -> tuple[Message, ...]:
-        """What an agent broadcasts per step: its state and covariance (``m + m (m + 1) / 2`` floats)."""
+        """What an agent broadcasts per step: its state and covariance.
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+        m : int
+            The size of the quantity.
+
+        Returns
+        -------
+        tuple of Message
+            ``m + m (m + 1) / 2`` floats.
+
+        Examples
+        --------
+        >>> from mascore.consensus_filters import KalmanConsensusFilter
+        >>> KalmanConsensusFilter(0.1, 0.1).messages(m=2)[0].floats
+        5.0
+        """
         return (Message("state xi_i and covariance P_i", float(m + m * (m + 1) // 2)),)
 
 
@@ -147,11 +225,53 @@ class AverageConsensusFilter(Frozen):
         return ()
 
     def predict(self, xi: ArrayLike) -> np.ndarray:
-        """The quantity does not move (identity)."""
+        """The quantity does not move (identity).
+
+        Parameters
+        ----------
+        xi : (..., N, m) array_like
+            The estimates.
+
+        Returns
+        -------
+        ndarray
+            The same, as a float array.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs
+        >>> from mascore.consensus_filters import AverageConsensusFilter
+        >>> f, xi, G = AverageConsensusFilter(), np.array([[0.0], [3.0], [6.0]]), graphs.path_graph(3)
+        >>> f.predict(xi).shape
+        (3, 1)
+        """
         return np.asarray(xi, dtype=float)
 
     def update(self, xi: ArrayLike, G: ArrayLike) -> np.ndarray:
-        """One mixing step ``W xi`` on the delivered links `G` ``(..., N, N)``."""
+        """One mixing step ``W xi`` on the delivered links `G`.
+
+        Parameters
+        ----------
+        xi : (..., N, m) array_like
+            The estimates before the step.
+        G : (..., N, N) array_like
+            The links delivered at the step.
+
+        Returns
+        -------
+        ndarray
+            ``W xi``, the shape of `xi`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs
+        >>> from mascore.consensus_filters import AverageConsensusFilter
+        >>> f, xi, G = AverageConsensusFilter(), np.array([[0.0], [3.0], [6.0]]), graphs.path_graph(3)
+        >>> f.update(xi, G)[:, 0]
+        array([1., 3., 5.])
+        """
         G_k = np.asarray(G, dtype=float)
         deg = G_k.sum(-1)
         W = G_k / (1.0 + np.maximum(deg[..., :, None], deg[..., None, :]))
@@ -159,7 +279,33 @@ class AverageConsensusFilter(Frozen):
         return W @ np.asarray(xi, dtype=float)
 
     def agent_inputs(self, xi: ArrayLike, G: ArrayLike, i: int) -> tuple[dict, tuple]:
-        """Agent i's state and degree, and its neighbours' states and degrees at the step (one run)."""
+        """Agent i's state and degree, and its neighbours' states and degrees at the step (one run).
+
+        Parameters
+        ----------
+        xi : (N, m) array_like
+            The estimates before the step.
+        G : (N, N) array_like
+            The links delivered at the step.
+        i : int
+            The agent.
+
+        Returns
+        -------
+        own : dict
+            Its ``xi`` and ``degree``.
+        messages : tuple
+            One round: the neighbours' states ``(d, m)`` and degrees ``(d,)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs
+        >>> from mascore.consensus_filters import AverageConsensusFilter
+        >>> f, xi, G = AverageConsensusFilter(), np.array([[0.0], [3.0], [6.0]]), graphs.path_graph(3)
+        >>> f.agent_inputs(xi, G, 1)[1][0][1]                    # its neighbours' degrees
+        array([1., 1.])
+        """
         xi, G = _float_array(xi, "xi"), _float_array(G, "G")
         heard = np.flatnonzero(G[i] > 0)
         deg = G.sum(-1)
@@ -167,6 +313,18 @@ class AverageConsensusFilter(Frozen):
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray]:
         """Agent i's row of ``W xi``.
+
+        Parameters
+        ----------
+        i : int
+            The agent.
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        tuple of ndarray
+            Its estimate after the step ``(m,)``.
 
         Examples
         --------
@@ -182,7 +340,26 @@ class AverageConsensusFilter(Frozen):
         return ((1.0 - w.sum()) * own["xi"] + w @ xi_n,)
 
     def messages(self, i: int = 0, m: int = 2) -> tuple[Message, ...]:
-        """What an agent broadcasts per step: its state (m floats)."""
+        """What an agent broadcasts per step: its state.
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+        m : int
+            The size of the quantity.
+
+        Returns
+        -------
+        tuple of Message
+            ``m`` floats.
+
+        Examples
+        --------
+        >>> from mascore.consensus_filters import AverageConsensusFilter
+        >>> AverageConsensusFilter().messages(m=2)[0].floats
+        2.0
+        """
         return (Message("state xi_i", float(m)),)
 
 
