@@ -14,6 +14,7 @@ Shapes: ``xi`` ``(..., N, m)``, ``P`` ``(..., N, m, m)``, ``G`` ``(..., N, N)`` 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from types import MappingProxyType
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -364,10 +365,10 @@ class AverageConsensusFilter(Frozen):
 
 
 #: Why Ren et al.'s Kalman consensus does not apply elsewhere (the tables show it).
-_REN_NOT_APPLICABLE = {
+_REN_NOT_APPLICABLE = MappingProxyType({
     "target": "fuses priors of a quantity nobody measures; with measurements it becomes the consensus filters above",
     "localization": "fuses priors of a quantity nobody measures; there is no common quantity here",
-}
+})
 
 
 def _floats_flops_ren(n: int, q: int, d: int, N: int) -> tuple[float, float]:
