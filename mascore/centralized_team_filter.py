@@ -13,6 +13,8 @@ Shapes: estimates ``(runs, N, m)``, reduced covariance ``(batch, M_r, M_r)``.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -36,7 +38,8 @@ from ._validation import (
 )
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
-from .team_model import TeamFilterModel, reduce_covariance
+from .estimation import Message, MethodSpec
+from .team_model import TeamFilterModel, reduce_covariance, team_filter_model
 
 __all__ = [
     "CentralizedTeamFilter",
@@ -124,6 +127,11 @@ class CentralizedTeamFilter:
         self._Rinv = None if blocks is None else frozen_copy(inverses)  # (N, m_r, m_r): R_jj^{-1}, once
         P = P if blocks is None else blocks
         self._P = np.broadcast_to(P, (batch, *P.shape)).copy()
+
+    @property
+    def model(self) -> TeamFilterModel:
+        """The team model."""
+        return self._model
 
     @property
     def separable(self) -> bool:
@@ -278,6 +286,110 @@ class CentralizedTeamFilter:
         if not np.isfinite(self._x).all():
             _finite(Zt, "Z")
         finite_state("centralized update", self._x, self._P)
+
+
+    # ------------------------------------------------------------------ the centre (the estimator protocol)
+
+    def agent_inputs(self, Z: ArrayLike, mask: ArrayLike, U: ArrayLike, i: int) -> tuple[dict, tuple]:
+        """The centre's data of one step: the team's measurements and the inputs applied (it is the busiest node).
+
+        Parameters
+        ----------
+        Z : (runs, N, N, m) array_like
+            Every agent's measurements.
+        mask : (N, N) or (batch, N, N) array_like of bool
+            The sensing mask.
+        U : (runs, N, p) array_like
+            The inputs applied at the step.
+        i : int
+            Unused: the centre's step is the same whichever agent asks.
+
+        Returns
+        -------
+        own : dict
+            ``Z``, ``mask`` and ``U`` (copies).
+        messages : tuple
+            Empty: the measurements sent to the centre are part of its data.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, centralized_team_filter, graphs, rendezvous, sensing, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), graphs.path_graph(3), np.eye(2))
+        >>> own, messages = central.agent_inputs(Z, mask[0], np.zeros((1, 3, 1)), 0)
+        >>> sorted(own), messages
+        (['U', 'Z', 'mask'], ())
+        """
+        return {"Z": np.array(Z, dtype=float), "mask": np.array(mask), "U": np.array(U, dtype=float)}, ()
+
+    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        """The centre's step: :meth:`update` with the team's measurements, then :meth:`predict` (advances this filter).
+
+        Parameters
+        ----------
+        i : int
+            Unused (the centre).
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        x_hat, P : ndarray
+            The team estimates ``(runs, N, m)`` and the filter's own covariance after the step
+            (read-only views, as :meth:`view`): the reduced ``(batch, M_r, M_r)``, or the N blocks
+            ``(batch, N, m_r, m_r)`` of a :attr:`separable` filter.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, centralized_team_filter, graphs, rendezvous, sensing, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), graphs.path_graph(3), np.eye(2))
+        >>> x, P = central.agent_step(0, *central.agent_inputs(Z, mask[0], np.zeros((1, 3, 1)), 0))
+        >>> x.shape, P.shape                                     # separable: 3 filters of one agent's axis
+        ((1, 3, 2), (1, 3, 2, 2))
+        """
+        self.update(own["Z"], own["mask"])
+        self.predict(own["U"])
+        return self.view("x_hat"), self.view("P_blocks" if self.separable else "P")
+
+    def messages(self, i: int = 0, n_measured: int = 1) -> tuple[Message, ...]:
+        """What an agent sends per step, its measurements to the centre, and receives: the estimates it uses.
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+        n_measured : int
+            How many agents it measures (itself and its neighbours: degree + 1).
+
+        Returns
+        -------
+        tuple of Message
+            Its ``n_measured`` measurements of ``m`` numbers each, up; the centre's estimates of the same
+            agents (its own and its neighbours', what its control uses), down.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, centralized_team_filter, rendezvous, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> [m.floats for m in central.messages(0, n_measured=3)]
+        [6, 6]
+        """
+        floats = check_positive_int(n_measured, "n_measured") * self._model.m
+        return (Message("its measurements z_ij of itself and its neighbours, to the centre", floats),
+                Message("the centre's estimates of itself and its neighbours, back to it", floats))
 
 
 def centralized_predict(
@@ -498,3 +610,23 @@ def _separable_update(model, Rinv, x_pred, P, Z, S):
     measured = (S[..., None] * Z).sum(axis=1)  # (runs, N, m): the sum of the measurements of each agent
     innov = (measured - count[..., None] * x_pred).reshape(runs, N, mr, k)
     return x_pred + (P_new @ (Rinv @ innov)).reshape(runs, N, m), P_new
+
+
+#: The centralized filter of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost): the bound.
+METHODS = (
+    MethodSpec("centralized", ("team",),
+               lambda team, x_hat0: CentralizedTeamFilter(
+                   team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N), team.B, x_hat0, team.P0),
+               lambda n, q, d, N: (2.0 * n * (d + 1), _separable_centre_flops(n, d, N)),
+               {"team": ("O(N n^3) at the centre: N separate filters (the own state separates)", "O(N n^2)")},
+               lambda n, q, d, N: float(N * (n**2 + n)), whole_filter=True, position=0),
+)
+
+
+def _separable_centre_flops(n: int, d: int, N: int) -> float:
+    """The separable centre's flops per step: N filters of n states, agent j's d + 1 measurements each.
+
+    Per filter a prediction ``4 n^3 + 2 n^2`` and an information update ``26/3 n^3 + 8 n^2``
+    (:func:`mascore.fusion_cost.filter_cost`'s counts), plus the sum of its ``d + 1`` measurements.
+    """
+    return float(N * (4 * n**3 + 2 * n**2 + 26 / 3 * n**3 + 8 * n**2 + 2 * (d + 1) * n))
