@@ -194,7 +194,7 @@ def anees_bounds(n_runs: int, dimension: int) -> tuple[float, float]:
     >>> from mascore.compare.stats import anees_bounds
     >>> lo, hi = anees_bounds(100, 4)
     >>> round(lo, 3), round(hi, 3)
-    (0.865, 1.142)
+    (0.866, 1.143)
     """
     from scipy.stats import chi2
 

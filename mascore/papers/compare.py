@@ -35,7 +35,7 @@ def claims(result: CompareResult) -> list:
     >>> [c.id for c in compare.claims(compare.run())][:1]  # doctest: +SKIP
     ['compare/centralized-bound']
     """
-    return compare_claims(result.summary, phi=result.phi)
+    return compare_claims(result.table, phi=result.phi)
 
 
 FIGURES = (
