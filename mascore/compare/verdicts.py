@@ -100,19 +100,20 @@ def before(a: Interval, b: Interval) -> bool | None:
 
 
 def all_of(conditions: Iterable[bool | None]) -> bool | None:
-    """Three-valued AND: False if any condition fails, None if any is undecided, else True."""
-    out: bool | None = True
-    for c in conditions:
-        if c is False or (c is not None and not c):
-            return False
-        if c is None:
-            out = None
-    return out
+    """Three-valued AND: False if any condition fails, None if any is undecided, else True (all are evaluated)."""
+    values = list(conditions)
+    if any(c is not None and not c for c in values):
+        return False
+    return None if any(c is None for c in values) else True
 
 
 def scaled(iv: Interval, factor: float) -> Interval:
     """An interval times a positive constant (a known reference, such as a DARE value)."""
     return Interval(iv.value * factor, iv.lo * factor, iv.hi * factor)
+
+
+def _text(iv: Interval) -> str:
+    return f"{iv.value:.4g} [{iv.lo:.4g}, {iv.hi:.4g}]"
 
 
 def _shown(iv: Interval) -> list[float]:
@@ -146,6 +147,29 @@ class Evidence:
     def __init__(self, summary, runs, phi: Mapping[str, float]):
         self.summary, self.runs, self.phi = summary, runs, phi
         self.blocks: set[str] = set()
+        self.missed: list[tuple[bool | None, str]] = []
+
+    def check(self, label: str, result: bool | None) -> bool | None:
+        """Record a condition's outcome (`label` says what it tests) and return it."""
+        if result is not True:
+            self.missed.append((result, label))
+        return result
+
+    def inside(self, label: str, iv: Interval, lo: float, hi: float) -> bool | None:
+        """:func:`inside`, recorded under `label`."""
+        return self.check(f"{label} {_text(iv)} against ({lo:g}, {hi:g})", inside(iv, lo, hi))
+
+    def above(self, label: str, iv: Interval, x: float) -> bool | None:
+        """:func:`above`, recorded under `label`."""
+        return self.check(f"{label} {_text(iv)} against > {x:.4g}", above(iv, x))
+
+    def below(self, label: str, iv: Interval, x: float) -> bool | None:
+        """:func:`below`, recorded under `label`."""
+        return self.check(f"{label} {_text(iv)} against < {x:.4g}", below(iv, x))
+
+    def before(self, label: str, a: Interval, b: Interval) -> bool | None:
+        """:func:`before`, recorded under `label` (``"a < b"``)."""
+        return self.check(f"{label}: {_text(a)} against {_text(b)}", before(a, b))
 
     def rows(self, **where: Any):
         """The summary's rows with the given coordinates (a list or tuple: any of those values)."""
@@ -173,9 +197,12 @@ class Evidence:
         return Interval(*(float(r[f"{column}_{k}"]) for k in ("mean", "lo", "hi")))
 
     def consistent(self, method: str, **where: Any) -> bool:
-        """Whether the ANEES lies inside its two-sided 95 % chi-square bounds."""
+        """Whether the ANEES lies inside its two-sided 95 % chi-square bounds (recorded)."""
         r = self.row(method, **where)
-        return bool(r["nees_bound_lo"] <= r["nees_own_mean"] <= r["nees_bound_hi"])
+        at = ", ".join(f"{k} = {v}" for k, v in where.items() if k in ("n_agents", "graph", "dropout") and v != "ring")
+        label = (f"{method}{' (' + at + ')' if at else ''} ANEES {r['nees_own_mean']:.4g} against its chi-square "
+                 f"bounds [{r['nees_bound_lo']:.4g}, {r['nees_bound_hi']:.4g}]")
+        return bool(self.check(label, bool(r["nees_bound_lo"] <= r["nees_own_mean"] <= r["nees_bound_hi"])))
 
     def versus(self, method: str, reference: str, column: str = "rmse_own", ref_column: str = "rmse_own",
                **where: Any) -> Interval:
@@ -200,7 +227,12 @@ class Evidence:
                        f"was written from: the quick grid has no others for those cells)")
         else:
             decided = f"seed blocks {written}: the blocks it was written from (the quick grid has no others here)"
-        return Claim.qualitative(f"compare/{short}", _WHERE, statement, value, holds, rule=rule,
+        failed = [label for result, label in self.missed if result is False]
+        open_ = [label for result, label in self.missed if result is None]
+        why = ("Fails: " + "; ".join(failed) + "." if holds is False and failed else
+               "Undecided: the 95 % interval crosses the band's edge: " + "; ".join(open_) + "." if holds is None
+               and open_ else "")
+        return Claim.qualitative(f"compare/{short}", _WHERE, statement, value, holds, rule=rule, why=why,
                                  written_from=f"seed blocks {written}", decided_on=decided, **extra)
 
 
@@ -266,8 +298,8 @@ def centralized_bound(ev: Evidence):
     worst, verdicts = {}, []
     for (task, m), g in s.groupby(["task", "method"]):
         worst[f"{task}: {m}"] = round(float(g["ratio_lo"].min()), 6)
-        verdicts += [inside(Interval(v, lo, hi), 1.0 - 1e-9) for v, lo, hi in g[["ratio_mean", "ratio_lo",
-                                                                                  "ratio_hi"]].to_numpy()]
+        verdicts += [ev.above(f"{task}: {m}", Interval(v, lo, hi), 1.0 - 1e-9)
+                     for v, lo, hi in g[["ratio_mean", "ratio_lo", "ratio_hi"]].to_numpy()]
     return ev.claim(
         "centralized-bound",
         "The centralized Kalman filter's RMSE lower-bounds every other method's in every condition of the own-state, "
@@ -285,7 +317,8 @@ def own_state_separable(ev: Evidence):
         "controls are known, so the team filter splits into one filter per agent, and forwarding to agent i its "
         "neighbours' measurements of i gives the centralized filter's estimates (in every condition, drop-outs "
         "included), with 4 floats per neighbour and a broadcast estimate instead of all-to-all links.",
-        {"max |ratio - 1|": gap, "floats": float(fwd["floats"].iloc[0])}, gap < 1e-9, "|ratio - 1| < 1e-9")
+        {"max |ratio - 1|": gap, "floats": float(fwd["floats"].iloc[0])},
+        ev.check(f"max |ratio - 1| = {gap:.3g}", gap < 1e-9), "|ratio - 1| < 1e-9")
 
 
 def set_membership_is_the_measurement(ev: Evidence):
@@ -302,7 +335,7 @@ def set_membership_is_the_measurement(ev: Evidence):
         "Q). The containment figures below describe the measurement ellipsoid, not the filter; this benchmark "
         "cannot test the paper's filter, whose own scenario (a partial output C) is in its chapter.",
         {k: _shown(v) for k, v in over.items()},
-        all_of([len(over) >= 3] + [inside(v, 0.97, 1.03) for v in over.values()]),
+        all_of([ev.check("three settings of Q", len(over) >= 3)] + [ev.inside(k, v, 0.97, 1.03) for k, v in over.items()]),
         "RMSE / sqrt(2 r) inside (0.97, 1.03) at every Q")
 
 
@@ -312,7 +345,8 @@ def set_membership_contains(ev: Evidence):
     return ev.claim(
         "set-membership-contains",
         "Under bounded (uniform) noise the set-membership ellipsoid (here: the measurement's) contains the true state "
-        "at every agent-step of every run.", {"containment": float(c.min())}, float(c.min()) == 1.0,
+        "at every agent-step of every run.", {"containment": float(c.min())},
+        ev.check(f"containment {float(c.min()):.6g}", float(c.min()) == 1.0),
         "containment == 1 (a guarantee: every run, no interval)")
 
 
@@ -321,7 +355,7 @@ def set_membership_unbounded(ev: Evidence):
     return ev.claim(
         "set-membership-unbounded",
         "Given a 99.7 % ellipsoid for heavy-tailed (Student-t) noise, the set-membership ellipsoid loses the true "
-        "state more often than the 0.3 % the bound admits.", {"containment": _shown(iv)}, below(iv, 0.997),
+        "state more often than the 0.3 % the bound admits.", {"containment": _shown(iv)}, ev.below("containment", iv, 0.997),
         "containment interval below 0.997")
 
 
@@ -338,7 +372,8 @@ def consistent_baseline(ev: Evidence):
         "estimation-based filters are consistent (ANEES inside its 95 % chi-square bounds); Song et al.'s "
         "measurement-based filter is not: eq. (15) neglects the correlation of an agent's own measurement noise in "
         "its control and in its estimate.", {"nees": nees, "chi-square bounds": bounds},
-        all_of([ev.consistent(m, **_BASE8) for m in _HONEST] + [above(ev.mean("nees_own", "song-mb", **_BASE8), 1.1)]),
+        all_of([ev.consistent(m, **_BASE8) for m in _HONEST]
+               + [ev.above("song-mb ANEES", ev.mean("nees_own", "song-mb", **_BASE8), 1.1)]),
         "ANEES inside its chi-square bounds for centralized, local, forwarding, song-eb; song-mb interval above 1.1")
 
 
@@ -361,8 +396,8 @@ def wrong_q(ev: Evidence):
         "The filters' Q is the knob of every Kalman-type filter here: ten times too small, every one becomes "
         "overconfident (NEES per dof above 1.1); ten times too large, every one becomes conservative (below 0.9).",
         {"Q x 0.1": _nees_table(ev, _STOCHASTIC, **low), "Q x 10": _nees_table(ev, _STOCHASTIC, **high)},
-        all_of([above(ev.mean("nees_own", m, **low), 1.1) for m in _STOCHASTIC]
-               + [below(ev.mean("nees_own", m, **high), 0.9) for m in _STOCHASTIC]),
+        all_of([ev.above(f"{m} ANEES at Q x 0.1", ev.mean("nees_own", m, **low), 1.1) for m in _STOCHASTIC]
+               + [ev.below(f"{m} ANEES at Q x 10", ev.mean("nees_own", m, **high), 0.9) for m in _STOCHASTIC]),
         "ANEES interval above 1.1 at Q x 0.1 and below 0.9 at Q x 10, for all")
 
 
@@ -373,7 +408,7 @@ def song_own_state(ev: Evidence):
         "Song et al.'s filters estimate the whole team, but an agent's estimate of its own state is no better than "
         "a local Kalman filter's (within 3 %): the neighbours' measurements of agent i are never sent to i. "
         "What they buy is the estimate of the others, without any communication.",
-        {m: _shown(v) for m, v in gain.items()}, all_of(inside(v, 0.97, 1.03) for v in gain.values()),
+        {m: _shown(v) for m, v in gain.items()}, all_of(ev.inside(f"{m} / local", v, 0.97, 1.03) for m, v in gain.items()),
         "RMS ratio to the local filter inside (0.97, 1.03)")
 
 
@@ -383,7 +418,8 @@ def song_non_neighbours(ev: Evidence):
     far = {(m, n): ev.versus(m, m, "rmse_far", "rmse_own", n_agents=n, **at) for m in ("song-mb", "song-eb")
            for n in sizes}
     spread = {(m, n): ev.versus(m, m, "rmse_far", "spread", n_agents=n, **at) for m, n in far}
-    grows = [before(far[m, min(sizes)], far[m, max(sizes)]) for m in ("song-mb", "song-eb")]
+    grows = [ev.before(f"{m} far / own, N = {min(sizes)} < N = {max(sizes)}", far[m, min(sizes)], far[m, max(sizes)])
+             for m in ("song-mb", "song-eb")]
     return ev.claim(
         "song-non-neighbours",
         "What Song et al.'s filters sell, an estimate of the agents one neither senses nor hears from, is measured "
@@ -392,8 +428,9 @@ def song_non_neighbours(ev: Evidence):
         "(between half of it and the spread itself), the error of an agent that would only know where the "
         "team's centre is.",
         {f"{m}, N = {n}": {"far / own": _shown(far[m, n]), "far / spread": _shown(spread[m, n])} for m, n in far},
-        all_of([len(sizes) >= 2] + [above(v, 1.5) for v in far.values()]
-               + [inside(v, 0.5, 1.0) for v in spread.values()] + grows),
+        all_of([ev.check("two team sizes", len(sizes) >= 2)]
+               + [ev.above(f"{m} far / own, N = {n}", v, 1.5) for (m, n), v in far.items()]
+               + [ev.inside(f"{m} far / spread, N = {n}", v, 0.5, 1.0) for (m, n), v in spread.items()] + grows),
         "far / own above 1.5 and far / spread inside (0.5, 1) for song-mb and song-eb at every N; far / own "
         "larger at the largest N than at the smallest",
         post_hoc="The band of far / spread (0.5 to 1) was fitted to the sweep's values after they were seen.")
@@ -411,7 +448,8 @@ def vlahakis_phi_undetermined(ev: Evidence):
         "the own-position RMSE grows from the LMI's Phi to Phi = 1 by more than 50 %.",
         {"Gamma relative spread": flat, "RMSE(Phi = 1) / RMSE(LMI)": _shown(jump),
          "RMSE / local": {m: _shown(ev.versus(m, "local", **_BASE8)) for m in VLAHAKIS_PHI}},
-        all_of([flat < 1e-4, above(jump, 1.5)]), "spread < 1e-4; RMS ratio Phi = 1 to the LMI's above 1.5")
+        all_of([ev.check(f"Gamma's relative spread {flat:.3g}", flat < 1e-4),
+                ev.above("RMSE(Phi = 1) / RMSE(LMI)", jump, 1.5)]), "spread < 1e-4; RMS ratio Phi = 1 to the LMI's above 1.5")
 
 
 def vlahakis_position_only(ev: Evidence):
@@ -425,7 +463,7 @@ def vlahakis_position_only(ev: Evidence):
         "value), which is itself less accurate than the local filter that also measures velocity. Its deficit "
         "here is the sensing, not the design.",
         {"RMSE / local": {m: _shown(v) for m, v in vl.items()}, "position-only KF / local (DARE)": kf},
-        all_of(inside(scaled(v, 1 / kf), 0.97, 1.03) for v in vl.values()),
+        all_of(ev.inside(f"{m} / position-only KF", scaled(v, 1 / kf), 0.97, 1.03) for m, v in vl.items()),
         "ratio / ratio_KF,position inside (0.97, 1.03) at Phi = LMI and 0")
 
 
@@ -453,7 +491,8 @@ def position_set_membership_accuracy(ev: Evidence):
         "minimum-variance estimate; the confidence level barely moves it).",
         {"RMSE / sqrt(2 r)": {k: _shown(v) for k, v in over_raw.items()},
          "RMSE / local KF": {k: _shown(v) for k, v in over_local.items()}},
-        all_of([below(v, 0.8) for v in over_raw.values()] + [above(v, 1.3) for v in over_local.values()]),
+        all_of([ev.below(f"{k}: RMSE / sqrt(2 r)", v, 0.8) for k, v in over_raw.items()]
+               + [ev.above(f"{k}: RMSE / local", v, 1.3) for k, v in over_local.items()]),
         "RMSE / sqrt(2 r) interval below 0.8 and RMS ratio to the local filter above 1.3 at confidence 0.9, 0.997, "
         "0.99999 and uniform")
 
@@ -475,9 +514,10 @@ def position_set_membership_contains(ev: Evidence):
         "0.99999 as bounds, it holds the truth at least as often as that confidence, and the set grows with it.",
         {"containment, uniform": bounded, "containment, Gaussian": {k: _shown(v) for k, v in inside_g.items()},
          "set size (m)": {k: _shown(v) for k, v in size.items()}, "set size / RMSE, uniform": _shown(per_rmse)},
-        all_of([bounded == 1.0, above(per_rmse, 3.0)]
-               + [above(inside_g[name], level) for level, name in names.values()]
-               + [before(size[a], size[b]) for a, b in zip(order, order[1:])]),
+        all_of([ev.check(f"containment under uniform noise {bounded:.6g}", bounded == 1.0),
+                ev.above("set size / RMSE, uniform", per_rmse, 3.0)]
+               + [ev.above(f"containment at {name}", inside_g[name], level) for level, name in names.values()]
+               + [ev.before(f"set size, {a} < {b}", size[a], size[b]) for a, b in zip(order, order[1:])]),
         "containment == 1 under uniform noise and its interval above the confidence under Gaussian noise; "
         "size / RMSE above 3; size increasing in the confidence")
 
@@ -494,8 +534,9 @@ def position_vlahakis_vs_local(ev: Evidence):
         "DARE's value; at Phi = 1, an equally optimal point of its program, it is more than 1.5 times less "
         "accurate. Its relative measurements add nothing at the LMI's gains: the observer is a local filter.",
         {"RMSE / local KF (simulated)": {m: _shown(v) for m, v in vl.items()}, "local KF / DARE": _shown(local)},
-        all_of([inside(vl[m], 0.97, 1.03) for m in ("vlahakis", "vlahakis-phi0")]
-               + [above(vl["vlahakis-phi1"], 1.5), inside(local, 0.97, 1.03)]),
+        all_of([ev.inside(f"{m} / local", vl[m], 0.97, 1.03) for m in ("vlahakis", "vlahakis-phi0")]
+               + [ev.above("vlahakis-phi1 / local", vl["vlahakis-phi1"], 1.5),
+                  ev.inside("local / DARE", local, 0.97, 1.03)]),
         "RMS ratio inside (0.97, 1.03) at Phi = LMI and 0, above 1.5 at Phi = 1; local / DARE inside (0.97, 1.03)")
 
 
@@ -508,7 +549,8 @@ def position_separable(ev: Evidence):
         "With positions only the own-state task still splits into one filter per agent (the controls are known): "
         "forwarding to agent i its neighbours' position measurements of i gives the centralized filter's estimates, "
         "and the centralized filter's gain over the local one is the neighbours' measurements of i.",
-        {"max |ratio - 1|": gap, "local ratio": _shown(local)}, all_of([gap < 1e-9, above(local, 1.0)]),
+        {"max |ratio - 1|": gap, "local ratio": _shown(local)}, all_of([ev.check(f"max |ratio - 1| = {gap:.3g}", gap < 1e-9),
+                                                              ev.above("local ratio", local, 1.0)]),
         "|ratio - 1| < 1e-9 for forwarding; the local filter's ratio above 1")
 
 
@@ -525,8 +567,9 @@ def ren_accurate_overconfident(ev: Evidence):
         "above 2): it counts the same information again. How far depends on the knob: a few times at the paper's "
         "setting, by many orders of magnitude without process noise.",
         {m: {"ratio": _shown(ratio[m]), "nees": _shown(nees[m])} for m in REN_Q},
-        all_of([inside(ratio[m], 0.95, 1.05) for m in REN_Q] + [above(nees[m], 2.0) for m in REN_Q]
-               + [above(nees["ren-kc-q0"], 1e3 * nees["ren-kc"].hi)]),
+        all_of([ev.inside(f"{m} ratio", ratio[m], 0.95, 1.05) for m in REN_Q]
+               + [ev.above(f"{m} ANEES", nees[m], 2.0) for m in REN_Q]
+               + [ev.above("ren-kc-q0 ANEES over 1e3 ren-kc's", nees["ren-kc-q0"], 1e3 * nees["ren-kc"].hi)]),
         "ratio inside (0.95, 1.05) and ANEES above 2 at both; ANEES(Q = 0) above 1e3 ANEES(Q = 0.1)",
         note="Noise-free messages; Omega weights them as in the paper's Fig. 1.",
         post_hoc="Loosened after the data were seen: first written as 'within 2 %, NEES above 10'.")
@@ -550,7 +593,8 @@ def target_needs_cooperation(ev: Evidence):
         "already makes the target observable.",
         {"local": {f"N = {n}": _shown(v) for n, v in local.items()},
          "forwarding": {f"N = {n}": _shown(v) for n, v in fwd.items()}},
-        all_of([above(v, 10) for v in local.values()] + [below(v, 2) for v in fwd.values()]),
+        all_of([ev.above(f"local, N = {n}", v, 10) for n, v in local.items()]
+               + [ev.below(f"forwarding, N = {n}", v, 2) for n, v in fwd.items()]),
         "local ratio above 10, forwarding below 2")
 
 
@@ -563,8 +607,9 @@ def target_consensus_steps(ev: Evidence):
         "gets closer to the centralized one, and the hybrid (HCMCI) and information-weighted (ICF) filters come "
         "within 10 % of it at L = 5 while consensus on information alone stays further away (N = 8, ring).",
         {m: {L: _shown(v) for L, v in d.items()} for m, d in knob.items()},
-        all_of([before(v[5], v[1]) for v in knob.values()]
-               + [below(knob["hcmci"][5], 1.1), below(knob["icf"][5], 1.1), before(knob["hcmci"][5], knob["ci"][5])]),
+        all_of([ev.before(f"{m}: L = 5 < L = 1", v[5], v[1]) for m, v in knob.items()]
+               + [ev.below("hcmci-L5", knob["hcmci"][5], 1.1), ev.below("icf-L5", knob["icf"][5], 1.1),
+                  ev.before("hcmci-L5 < ci-L5", knob["hcmci"][5], knob["ci"][5])]),
         "ratio(L = 5) below ratio(L = 1); HCMCI, ICF below 1.1 at L = 5; CI above HCMCI at L = 5")
 
 
@@ -580,14 +625,25 @@ def target_consistency(ev: Evidence):
         "and ICF are overconfident until the consensus has nearly converged (above 1.1 at L = 1 for every N; at "
         "L = 5 consistent on the ring of 8); the Kalman filters (centralized, forwarding) are consistent.",
         {f"N = {n}": {m: _shown(v) for m, v in d.items()} for n, d in nees.items()},
-        all_of([below(d[m], 0.9) for d in nees.values() for m in ("ci-L1", "ci-L5", "ci-diffusion")]
-               + [above(d[m], 1.1) for d in nees.values() for m in ("hcmci-L1", "icf-L1")]
+        all_of([ev.below(f"{m} ANEES, N = {n}", d[m], 0.9) for n, d in nees.items()
+                for m in ("ci-L1", "ci-L5", "ci-diffusion")]
+               + [ev.above(f"{m} ANEES, N = {n}", d[m], 1.1) for n, d in nees.items() for m in ("hcmci-L1", "icf-L1")]
                + [ev.consistent(m, n_agents=8, **_TARGET) for m in ("hcmci-L5", "icf-L5")]
                + [ev.consistent(m, n_agents=n, **_TARGET) for n in sizes for m in ("forwarding", "centralized")]),
         "CI intervals below 0.9 at all L, N; HCMCI, ICF above 1.1 at L = 1; ANEES inside its chi-square bounds "
         "for HCMCI, ICF at L = 5, N = 8 and for the Kalman filters at every N",
+        note=_excludes_one(nees.get(8, {}), ("hcmci-L5", "icf-L5")),
         post_hoc="Narrowed after the data were seen: 'consistent at L = 5' was first claimed at every N, and "
                  "narrowed to N = 8 when N = 16 gave an ANEES of 1.32.")
+
+
+def _excludes_one(nees: Mapping[str, Interval], methods: Sequence[str]) -> str:
+    """A note on the filters whose ANEES interval excludes 1 although the chi-square bounds accept them."""
+    off = [f"{m} {_text(nees[m])}" for m in methods if m in nees and not nees[m].lo <= 1.0 <= nees[m].hi]
+    if not off:
+        return ""
+    return ("At N = 8 the ANEES interval of " + ", ".join(off) + " excludes 1: a small overconfidence that the "
+            "chi-square bounds (one NEES per run, see mascore.compare.stats.anees_bounds) do not reject.")
 
 
 def switching_target(ev: Evidence):
@@ -606,10 +662,11 @@ def switching_target(ev: Evidence):
         "(above 1.5) at L = 1 and L = 5.",
         {"nees": {m: _shown(v) for m, v in nees.items()}, "ratio": {m: _shown(v) for m, v in ratio.items()},
          "diffusion ratio, ring of 16": _shown(ring)},
-        all_of([below(nees[m], 0.9) for m in ("ci-L1", "ci-L5")]
-               + [below(nees["ci-diffusion"], 1.1), above(nees["diffusion"], 2.0),
-                  above(ratio["diffusion"], 3 * ring.hi)]
-               + [above(nees[f"{m}-L{L}"], 1.5) for m in ("hcmci", "icf") for L in (1, 5)]),
+        all_of([ev.below(f"{m} ANEES", nees[m], 0.9) for m in ("ci-L1", "ci-L5")]
+               + [ev.below("ci-diffusion ANEES", nees["ci-diffusion"], 1.1),
+                  ev.above("diffusion ANEES", nees["diffusion"], 2.0),
+                  ev.above("diffusion ratio over 3 x the ring's", ratio["diffusion"], 3 * ring.hi)]
+               + [ev.above(f"{m}-L{L} ANEES", nees[f"{m}-L{L}"], 1.5) for m in ("hcmci", "icf") for L in (1, 5)]),
         "CI below 0.9 (L = 1, 5), CI-diffusion below 1.1; diffusion ANEES above 2 and ratio above 3 x the ring's "
         "upper end; HCMCI, ICF above 1.5")
 
@@ -624,8 +681,8 @@ def switching_ren(ev: Evidence):
         "steps on the switching topology of 16 Ren et al.'s Kalman consensus stays more than 1.5 times the "
         "central fusion's RMSE, further from it than on the fixed geometric graph of 16, at both settings of "
         "its Q = Omega knob.", {m: {g: _shown(v) for g, v in d.items()} for m, d in ren.items()},
-        all_of([above(v["switching"], 1.5) for v in ren.values()]
-               + [before(v["geometric"], v["switching"]) for v in ren.values()]),
+        all_of([ev.above(f"{m} on the switching graph", v["switching"], 1.5) for m, v in ren.items()]
+               + [ev.before(f"{m}: geometric < switching", v["geometric"], v["switching"]) for m, v in ren.items()]),
         "ratio above 1.5 on the switching graph and above the fixed graph's, at Q = Omega = 0.1 and 0")
 
 
@@ -639,7 +696,8 @@ def switching_own_state(ev: Evidence):
         "filter (within 3 %, measurement- and estimation-based alike), and the centralized, local, forwarding "
         "and estimation-based filters stay consistent (ANEES inside its chi-square bounds).",
         {"RMSE / local": {m: _shown(v) for m, v in song.items()}, "nees": _nees_table(ev, _STOCHASTIC, **at)},
-        all_of([inside(v, 0.97, 1.03) for v in song.values()] + [ev.consistent(m, **at) for m in _HONEST]),
+        all_of([ev.inside(f"{m} / local", v, 0.97, 1.03) for m, v in song.items()]
+               + [ev.consistent(m, **at) for m in _HONEST]),
         "RMS ratio to the local filter inside (0.97, 1.03) for song-mb, song-eb; ANEES inside its chi-square "
         "bounds for centralized, local, forwarding, song-eb")
 
@@ -657,8 +715,8 @@ def switching_localization_consensus(ev: Evidence):
         "dof below 0.9) at both.",
         {f"N = {n}": {"ratio": {m: _shown(v) for m, v in ratio[n].items()},
                       "nees CI": {m: _shown(v) for m, v in nees[n].items()}} for n in sizes},
-        all_of([below(v, 1.25) for d in ratio.values() for v in d.values()]
-               + [below(v, 0.9) for d in nees.values() for v in d.values()]),
+        all_of([ev.below(f"{m}, N = {n}", v, 1.25) for n, d in ratio.items() for m, v in d.items()]
+               + [ev.below(f"{m} ANEES, N = {n}", v, 0.9) for n, d in nees.items() for m, v in d.items()]),
         "ratio below 1.25 for CI, HCMCI, ICF at L = 1 and 5; CI ANEES below 0.9 at L = 1 and 5; at every N")
 
 
@@ -678,8 +736,9 @@ def switching_localization_diffusion(ev: Evidence):
         "below 3 times its value on the fixed ring of the same size (the target's thresholds, negated).",
         {f"N = {n}": {"ratio, switching": _shown(d["switching"]), "ratio, ring": _shown(d["ring"]),
                       "nees, switching": _shown(d["nees"])} for n, d in diff.items()},
-        all_of([below(d["nees"], 2.0) for d in diff.values()]
-               + [below(d["switching"], 3 * d["ring"].lo) for d in diff.values()]),
+        all_of([ev.below(f"ANEES, N = {n}", d["nees"], 2.0) for n, d in diff.items()]
+               + [ev.below(f"ratio over 3 x the ring's, N = {n}", d["switching"], 3 * d["ring"].lo)
+                  for n, d in diff.items()]),
         "ANEES below 2 and ratio below 3 x the ring's lower end, at every N with both graphs",
         note="The quick grid decides it at N = 8 only; the full grid adds N = 16, where the diffusion "
              "filter is already overconfident on the fixed ring in localization, and the rule fails there "
@@ -699,8 +758,9 @@ def localization_needs_hops(ev: Evidence):
         "carry information over many hops, come within 25 % at both L = 1 and L = 5.",
         {"forwarding": _shown(ratio["forwarding"]), "local": _shown(ratio["local"]),
          "consensus": {m: _shown(ratio[m]) for m in _CONSENSUS}},
-        all_of([above(ratio["forwarding"], 2.0), before(ratio["forwarding"], ratio["local"])]
-               + [below(ratio[m], 1.25) for m in _CONSENSUS]),
+        all_of([ev.above("forwarding", ratio["forwarding"], 2.0),
+                ev.before("forwarding < local", ratio["forwarding"], ratio["local"])]
+               + [ev.below(m, ratio[m], 1.25) for m in _CONSENSUS]),
         "forwarding above 2 and below local; every consensus filter below 1.25 at L = 1 and 5")
 
 
@@ -715,11 +775,12 @@ def localization_knob(ev: Evidence):
         "at L = 5, while consensus on information stays conservative at both (below 0.9).",
         {"ratio": {m: {L: _shown(v) for L, v in d.items()} for m, d in ratio.items()},
          "nees": {m: _shown(v) for m, v in nees.items()}},
-        all_of([before(ratio["hcmci"][5], ratio["hcmci"][1]), before(ratio["icf"][5], ratio["icf"][1]),
-                before(ratio["ci"][1], ratio["ci"][5])]
-               + [c for m in ("hcmci", "icf") for c in (above(nees[f"{m}-L1"], 1.1), above(nees[f"{m}-L5"], 1.0),
-                                                        before(nees[f"{m}-L5"], nees[f"{m}-L1"]))]
-               + [below(nees[f"ci-L{L}"], 0.9) for L in (1, 5)]),
+        all_of([ev.before(f"{m} ratio: L = 5 < L = 1", ratio[m][5], ratio[m][1]) for m in ("hcmci", "icf")]
+               + [ev.before("ci ratio: L = 1 < L = 5", ratio["ci"][1], ratio["ci"][5])]
+               + [c for m in ("hcmci", "icf") for c in (
+                   ev.above(f"{m}-L1 ANEES", nees[f"{m}-L1"], 1.1), ev.above(f"{m}-L5 ANEES", nees[f"{m}-L5"], 1.0),
+                   ev.before(f"{m} ANEES: L = 5 < L = 1", nees[f"{m}-L5"], nees[f"{m}-L1"]))]
+               + [ev.below(f"ci-L{L} ANEES", nees[f"ci-L{L}"], 0.9) for L in (1, 5)]),
         "ratio falls with L for HCMCI, ICF and rises for CI; HCMCI, ICF: ANEES above 1.1 at L = 1, above 1 and below "
         "that at L = 5; CI below 0.9 at L = 1, 5",
         post_hoc="Its bands (the NEES at L = 5 'between 1 and that at L = 1') were fitted to the sweep's values "
