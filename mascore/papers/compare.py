@@ -39,8 +39,8 @@ def claims(result: CompareResult) -> list:
 
 
 FIGURES = (
-    FigureSpec("pareto", "", "Accuracy against communication: each method's own-position RMSE over the centralized "
-               "filter's (run by run, with 95 % intervals) against the floats it sends per agent and step, for "
+    FigureSpec("pareto", "", "Accuracy against communication: each method's own-position RMS error over the "
+               "centralized filter's on the same runs (with 95 % paired bootstrap intervals) against the floats it sends per agent and step, for "
                "N = 4, 8 and 16 on the ring.", lambda r: plot_pareto(r.summary)),
     FigureSpec("cost", "", "CPU time per agent, step and run against the team size, log-log, with each method's "
                "fitted slope: the whole-team filters grow much faster than the per-agent ones.",
