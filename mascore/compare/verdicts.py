@@ -293,6 +293,7 @@ _BASE8 = {**_TEAM, "study": "scaling", "n_agents": 8}
 
 
 def centralized_bound(ev: Evidence):
+    """The centralized filter's RMS error is the lowest in every own-state, target and localization cell."""
     s = ev.rows(task=["team", "target", "localization"])
     s = s[s["method"] != "centralized"]
     worst, verdicts = {}, []
@@ -309,6 +310,7 @@ def centralized_bound(ev: Evidence):
 
 
 def own_state_separable(ev: Evidence):
+    """Forwarding is the centralized filter on the own-state task (ratio 1 to rounding)."""
     fwd = ev.rows(method="forwarding", **_TEAM)
     gap = float((fwd[["ratio_lo", "ratio_hi"]] - 1.0).abs().to_numpy().max())
     return ev.claim(
@@ -322,6 +324,7 @@ def own_state_separable(ev: Evidence):
 
 
 def set_membership_is_the_measurement(ev: Evidence):
+    """With H = I the set-membership centre is the raw measurement, at every Q."""
     raw = float(np.sqrt(2 * SETTINGS.r))
     sm = ev.rows(method="set-membership", noise="gaussian", dropout=0.0, n_agents=8, study=["scaling", "wrong-q"],
                  **_TEAM)
@@ -340,6 +343,7 @@ def set_membership_is_the_measurement(ev: Evidence):
 
 
 def set_membership_contains(ev: Evidence):
+    """Under bounded noise the set-membership ellipsoid always holds the truth."""
     c = ev.rows(method="set-membership", noise="uniform", **_TEAM)
     c = c[c["study"] != "position"]["containment_mean"]
     return ev.claim(
@@ -351,6 +355,7 @@ def set_membership_contains(ev: Evidence):
 
 
 def set_membership_unbounded(ev: Evidence):
+    """Under Student-t noise the 99.7 % ellipsoid loses the truth more than 0.3 % of the time."""
     iv = ev.mean("containment", "set-membership", study="noise", noise="student-t", **_TEAM)
     return ev.claim(
         "set-membership-unbounded",
@@ -364,6 +369,7 @@ def _nees_table(ev: Evidence, methods: Sequence[str], **where: Any) -> dict:
 
 
 def consistent_baseline(ev: Evidence):
+    """On the baseline the Kalman-type filters are consistent; song-mb is overconfident."""
     nees = _nees_table(ev, _STOCHASTIC, **_BASE8)
     bounds = ev.row("centralized", **_BASE8)[["nees_bound_lo", "nees_bound_hi"]].round(4).tolist()
     return ev.claim(
@@ -378,6 +384,7 @@ def consistent_baseline(ev: Evidence):
 
 
 def consistent_dropouts(ev: Evidence):
+    """With 30 % drop-outs the consistent filters stay consistent."""
     at = {**_TEAM, "study": "dropout", "dropout": 0.3}
     return ev.claim(
         "consistent-dropouts",
@@ -390,6 +397,7 @@ def consistent_dropouts(ev: Evidence):
 
 
 def wrong_q(ev: Evidence):
+    """A Q ten times too small makes every filter overconfident; ten times too large, conservative."""
     low, high = ({**_TEAM, "study": "wrong-q", "q_scale": q} for q in (0.1, 10.0))
     return ev.claim(
         "wrong-q",
@@ -402,6 +410,7 @@ def wrong_q(ev: Evidence):
 
 
 def song_own_state(ev: Evidence):
+    """Song et al.'s filters estimate an agent's own state as a local Kalman filter does."""
     gain = {m: ev.versus(m, "local", **_BASE8) for m in ("song-mb", "song-eb")}
     return ev.claim(
         "song-own-state",
@@ -413,6 +422,7 @@ def song_own_state(ev: Evidence):
 
 
 def song_non_neighbours(ev: Evidence):
+    """Song et al.'s estimate of the non-neighbours: far worse than the own state, of the team's spread."""
     at = {**_TEAM, "study": "scaling"}
     sizes = sorted(int(n) for n in ev.rows(method="song-eb", **at)["n_agents"].unique())
     far = {(m, n): ev.versus(m, m, "rmse_far", "rmse_own", n_agents=n, **at) for m in ("song-mb", "song-eb")
@@ -437,6 +447,7 @@ def song_non_neighbours(ev: Evidence):
 
 
 def vlahakis_phi_undetermined(ev: Evidence):
+    """The Vlahakis program is flat in Phi while equally optimal gains differ in accuracy."""
     gammas = [v for k, v in ev.phi.items() if k.startswith("Phi =")]
     flat = (max(gammas) - min(gammas)) / min(gammas)
     jump = ev.versus("vlahakis-phi1", "vlahakis", **_BASE8)
@@ -453,6 +464,7 @@ def vlahakis_phi_undetermined(ev: Evidence):
 
 
 def vlahakis_position_only(ev: Evidence):
+    """The Vlahakis observer is as accurate as a position-only Kalman filter (DARE)."""
     pos_only, full = position_only_kf_rmse()
     kf = pos_only / full
     vl = {m: ev.versus(m, "local", **_BASE8) for m in ("vlahakis", "vlahakis-phi0")}
@@ -476,6 +488,7 @@ def _confidence_names() -> dict[str, tuple[float, str]]:
 
 
 def position_set_membership_accuracy(ev: Evidence):
+    """With positions only the set-membership centre beats the raw measurement, not the local KF."""
     raw = float(np.sqrt(2 * SETTINGS.r))
     names = _confidence_names()
     cases = {name: ({**_POS, "noise": "gaussian"}, m) for m, (_, name) in names.items()}
@@ -498,6 +511,7 @@ def position_set_membership_accuracy(ev: Evidence):
 
 
 def position_set_membership_contains(ev: Evidence):
+    """With positions only the set holds the truth as often as its confidence, at a price in size."""
     names = _confidence_names()
     gauss, uni = {**_POS, "noise": "gaussian"}, {**_POS, "noise": "uniform"}
     size = {name: ev.mean("set_size", m, **gauss) for m, (_, name) in names.items()}
@@ -523,6 +537,7 @@ def position_set_membership_contains(ev: Evidence):
 
 
 def position_vlahakis_vs_local(ev: Evidence):
+    """With positions only the Vlahakis observer at the LMI's Phi is the local Kalman filter."""
     pos_only, _ = position_only_kf_rmse()
     gauss = {**_POS, "noise": "gaussian"}
     vl = {m: ev.versus(m, "local", **gauss) for m in VLAHAKIS_PHI}
@@ -541,6 +556,7 @@ def position_vlahakis_vs_local(ev: Evidence):
 
 
 def position_separable(ev: Evidence):
+    """With positions only forwarding is still the centralized filter."""
     fwd = ev.rows(method="forwarding", **_POS)
     gap = float((fwd[["ratio_lo", "ratio_hi"]] - 1.0).abs().to_numpy().max())
     local = ev.ratio("local", noise="gaussian", **_POS)
@@ -558,6 +574,7 @@ _SHARED8 = {"task": "shared", "dropout": 0.0, "graph": "ring", "n_agents": 8}
 
 
 def ren_accurate_overconfident(ev: Evidence):
+    """Ren et al.'s Kalman consensus: within 5 % of the central fusion, overconfident."""
     ratio = {m: ev.ratio(m, **_SHARED8) for m in REN_Q}
     nees = {m: ev.mean("nees_own", m, **_SHARED8) for m in REN_Q}
     return ev.claim(
@@ -583,6 +600,7 @@ def _sizes(ev: Evidence, **where: Any) -> list[int]:
 
 
 def target_needs_cooperation(ev: Evidence):
+    """On the common target the local filter diverges and one hop of forwarding suffices."""
     sizes = _sizes(ev, **_TARGET)
     local = {n: ev.ratio("local", n_agents=n, **_TARGET) for n in sizes}
     fwd = {n: ev.ratio("forwarding", n_agents=n, **_TARGET) for n in sizes}
@@ -599,6 +617,7 @@ def target_needs_cooperation(ev: Evidence):
 
 
 def target_consensus_steps(ev: Evidence):
+    """On the common target more consensus steps bring every consensus filter closer to the centre."""
     at = {**_TARGET, "n_agents": 8}
     knob = {m: {L: ev.ratio(f"{m}-L{L}", **at) for L in (1, 5)} for m in ("ci", "hcmci", "icf")}
     return ev.claim(
@@ -614,6 +633,7 @@ def target_consensus_steps(ev: Evidence):
 
 
 def target_consistency(ev: Evidence):
+    """On the common target CI is conservative, HCMCI and ICF overconfident at L = 1, the KFs consistent."""
     sizes = _sizes(ev, **_TARGET)
     shown = ("ci-L1", "ci-L5", "ci-diffusion", "hcmci-L1", "hcmci-L5", "icf-L1", "icf-L5", "forwarding",
              "centralized")
@@ -647,6 +667,7 @@ def _excludes_one(nees: Mapping[str, Interval], methods: Sequence[str]) -> str:
 
 
 def switching_target(ev: Evidence):
+    """On the switching topology CI filters stay conservative, diffusion becomes overconfident."""
     sw = {"task": "target", "graph": "switching"}
     ev.rows(**sw)
     nees = {m: ev.mean("nees_own", m, **sw) for m in TARGET_METHODS}
@@ -672,6 +693,7 @@ def switching_target(ev: Evidence):
 
 
 def switching_ren(ev: Evidence):
+    """On the switching topology Ren et al.'s consensus stays far from the central fusion."""
     at = {"task": "shared", "dropout": 0.0, "n_agents": 16}
     ev.rows(graph=["geometric", "switching"], **at)
     ren = {m: {g: ev.ratio(m, graph=g, **at) for g in ("geometric", "switching")} for m in REN_Q}
@@ -687,6 +709,7 @@ def switching_ren(ev: Evidence):
 
 
 def switching_own_state(ev: Evidence):
+    """On the switching topology the own-state results of the fixed ring hold."""
     at = {**_TEAM, "graph": "switching"}
     song = {m: ev.versus(m, "local", **at) for m in ("song-mb", "song-eb")}
     return ev.claim(
@@ -703,6 +726,7 @@ def switching_own_state(ev: Evidence):
 
 
 def switching_localization_consensus(ev: Evidence):
+    """In localization on the switching topology the consensus filters keep their accuracy."""
     at = {"task": "localization", "graph": "switching"}
     sizes = _sizes(ev, **at)
     ratio = {n: {m: ev.ratio(m, n_agents=n, **at) for m in _CONSENSUS} for n in sizes}
@@ -721,6 +745,7 @@ def switching_localization_consensus(ev: Evidence):
 
 
 def switching_localization_diffusion(ev: Evidence):
+    """In localization on the switching topology the diffusion filter does not break."""
     at = {"task": "localization", "method": "diffusion"}
     sizes = sorted(set(_sizes(ev, graph="switching", **at)) & set(_sizes(ev, graph="ring", **at)))
     if not sizes:
@@ -749,6 +774,7 @@ _LOC8 = {"task": "localization", "n_agents": 8, "graph": "ring"}
 
 
 def localization_needs_hops(ev: Evidence):
+    """In localization one hop of forwarding is not enough; consensus is."""
     ratio = {m: ev.ratio(m, **_LOC8) for m in ("forwarding", "local", *_CONSENSUS)}
     return ev.claim(
         "localization-needs-hops",
@@ -765,6 +791,7 @@ def localization_needs_hops(ev: Evidence):
 
 
 def localization_knob(ev: Evidence):
+    """In localization more consensus steps help HCMCI and ICF but not CI."""
     ratio = {m: {L: ev.ratio(f"{m}-L{L}", **_LOC8) for L in (1, 5)} for m in ("ci", "hcmci", "icf")}
     nees = {m: ev.mean("nees_own", m, **_LOC8) for m in _CONSENSUS}
     return ev.claim(
