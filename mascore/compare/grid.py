@@ -253,16 +253,16 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
     t = t.join(ref, on=keys)
     steps = np.where(t["task"] == "shared", settings.shared_steps, settings.n_steps)
     t["cpu_us"] = 1e6 * t["cpu_s"] / (t["n_agents"] * steps * t.groupby("cell")["run"].transform("size"))
-    out = []
+    out, memo = [], {}  # memo: the bootstrap's resamples, drawn once per number of runs in this call
     for key, g in t.groupby(by, sort=False, dropna=False):
         row = dict(zip(by, key if isinstance(key, tuple) else (key,)))
         row["n"] = len(g)
         g = g.sort_values(["block", "run"], kind="stable")  # the runs in one order: the bootstrap pairs them
         for col in ("rmse_own", "ratio", "nees_own", "containment", "spread", "rmse_far", "set_size"):
             if col == "ratio":
-                m, lo, hi = rms_ratio(g["rmse_own"].to_numpy(), g["bound_rmse"].to_numpy())
+                m, lo, hi = rms_ratio(g["rmse_own"].to_numpy(), g["bound_rmse"].to_numpy(), memo=memo)
             elif col == "nees_own":
-                m, lo, hi = mean_interval(g[col].to_numpy())
+                m, lo, hi = mean_interval(g[col].to_numpy(), memo=memo)
             else:
                 m, half = _mean_ci(g[col].to_numpy())
                 lo, hi = m - half, m + half

@@ -82,7 +82,7 @@ def resample_indices(n_runs: int, resamples: int = BOOTSTRAP_RESAMPLES, seed: in
 
 
 def rms_ratio(err: np.ndarray, ref: np.ndarray, *, resamples: int = BOOTSTRAP_RESAMPLES,
-              seed: int = BOOTSTRAP_SEED) -> Interval:
+              seed: int = BOOTSTRAP_SEED, memo: dict | None = None) -> Interval:
     """Ratio of RMS errors over runs, with its 95 % paired percentile bootstrap interval.
 
     ``value = sqrt(mean(err^2) / mean(ref^2))``; each resample draws runs with replacement,
@@ -99,6 +99,9 @@ def rms_ratio(err: np.ndarray, ref: np.ndarray, *, resamples: int = BOOTSTRAP_RE
         Bootstrap resamples.
     seed : int
         The bootstrap's seed.
+    memo : dict, optional
+        The caller's store of resamples, to draw them once per sample size over many calls
+        (the same indices as without it; the caller owns it, nothing is kept between calls).
 
     Returns
     -------
@@ -120,13 +123,14 @@ def rms_ratio(err: np.ndarray, ref: np.ndarray, *, resamples: int = BOOTSTRAP_RE
     value = float(np.sqrt(e2.mean() / c2.mean()))
     if e.size < 2:
         return Interval(value, float("nan"), float("nan"))
-    idx = resample_indices(e.size, resamples, seed)
+    idx = _draws(e.size, resamples, seed, memo)
     boot = np.sqrt(e2[idx].mean(axis=1) / c2[idx].mean(axis=1))
     lo, hi = np.percentile(boot, [2.5, 97.5])
     return Interval(value, float(lo), float(hi))
 
 
-def mean_interval(x: np.ndarray, *, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED) -> Interval:
+def mean_interval(x: np.ndarray, *, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED,
+                  memo: dict | None = None) -> Interval:
     """Mean over runs with its 95 % percentile bootstrap interval (non-finite runs left out).
 
     Parameters
@@ -137,6 +141,8 @@ def mean_interval(x: np.ndarray, *, resamples: int = BOOTSTRAP_RESAMPLES, seed: 
         Bootstrap resamples.
     seed : int
         The bootstrap's seed.
+    memo : dict, optional
+        The caller's store of resamples (see :func:`rms_ratio`).
 
     Returns
     -------
@@ -158,7 +164,7 @@ def mean_interval(x: np.ndarray, *, resamples: int = BOOTSTRAP_RESAMPLES, seed: 
         return Interval(float("nan"), float("nan"), float("nan"))
     if x.size < 2:
         return Interval(float(x.mean()), float("nan"), float("nan"))
-    boot = x[resample_indices(x.size, resamples, seed)].mean(axis=1)
+    boot = x[_draws(x.size, resamples, seed, memo)].mean(axis=1)
     lo, hi = np.percentile(boot, [2.5, 97.5])
     return Interval(float(x.mean()), float(lo), float(hi))
 
@@ -196,14 +202,24 @@ def anees_bounds(n_runs: int, dimension: int) -> tuple[float, float]:
     >>> round(lo, 3), round(hi, 3)
     (0.866, 1.143)
     """
-    from scipy.stats import chi2
+    from scipy.special import gammaincinv  # chi2.ppf(q, k) = 2 gammaincinv(k / 2, q), without scipy.stats' import
 
     for name, v in (("n_runs", n_runs), ("dimension", dimension)):
         if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
             raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
     dof = int(n_runs) * int(dimension)
-    lo, hi = chi2.ppf([0.025, 0.975], dof) / dof
+    lo, hi = 2.0 * gammaincinv(dof / 2.0, np.array([0.025, 0.975])) / dof
     return float(lo), float(hi)
+
+
+def _draws(n_runs: int, resamples: int, seed: int, memo: dict | None) -> np.ndarray:
+    """:func:`resample_indices`, looked up in (and added to) the caller's `memo` when given."""
+    if memo is None:
+        return resample_indices(n_runs, resamples, seed)
+    key = (int(n_runs), int(resamples), int(seed))
+    if key not in memo:
+        memo[key] = resample_indices(n_runs, resamples, seed)
+    return memo[key]
 
 
 def _paired(err: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
