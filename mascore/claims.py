@@ -24,13 +24,14 @@ APPROX_FACTOR = 3.0
 PAPER_DIGITS = 6
 
 #: Allowed verdicts.
-VERDICTS = ("reproduces", "approximately", "does-not-reproduce", "holds", "fails", "undecided")
+VERDICTS = ("reproduces", "approximately", "does-not-reproduce", "holds", "fails")
 
 #: A claim id: the ledger's key (a paper, :func:`mascore.registry.ledger_keys`), a slash, a short name.
 _CLAIM_ID = re.compile(r"[a-z][a-z0-9_]*/\S+")
 
 _RECORD_KEYS = ("id", "where", "statement", "paper_value", "value", "tolerance", "verdict", "note")
-_OPTIONAL_KEYS = ("unit", "labels", "rule", "band_reason", "study", "why", "written_from", "decided_on", "post_hoc")
+_OPTIONAL_KEYS = ("unit", "labels", "rule", "band_reason", "study", "why", "written_from", "decided_on", "post_hoc",
+                  "undecided")
 
 
 @dataclass(frozen=True)
@@ -82,8 +83,9 @@ class Claim:
     holds : bool, optional
         The decided condition of a qualitative claim (use :meth:`qualitative`).
     undecided : bool
-        A qualitative claim whose data cannot decide it (verdict ``"undecided"``; use
-        :meth:`qualitative` with ``holds=None``).
+        A qualitative claim whose data cannot decide it (an interval across the edge of its
+        band; use :meth:`qualitative` with ``holds=None``). Its verdict is ``"fails"``: the
+        claim is not shown by the data. The record keeps ``"undecided": true`` to say why.
 
     Examples
     --------
@@ -137,7 +139,7 @@ class Claim:
                 raise ValueError(f"{self.id}: qualitative claims must be built with Claim.qualitative")
             object.__setattr__(self, "holds", bool(self.holds))
             object.__setattr__(self, "undecided", bool(self.undecided))
-            verdict = "undecided" if self.undecided else "holds" if self.holds else "fails"
+            verdict = "holds" if self.holds and not self.undecided else "fails"  # undecided: not shown
             object.__setattr__(self, "verdict", verdict)
             return
         if not _all_numbers(self.paper_value):
@@ -184,7 +186,7 @@ class Claim:
         Returns
         -------
         Claim
-            With verdict ``"holds"``, ``"fails"`` or ``"undecided"``.
+            With verdict ``"holds"`` or ``"fails"`` (also when undecided).
 
         Examples
         --------
@@ -250,7 +252,7 @@ class Claim:
         keys = {k: record[k] for k in (*_RECORD_KEYS, *_OPTIONAL_KEYS) if k in record and k != "verdict"}
         if keys.get("paper_value") is None:
             keys["holds"] = record["verdict"] == "holds"
-            keys["undecided"] = record["verdict"] == "undecided"
+            keys["undecided"] = bool(record.get("undecided", False))
         return cls(**keys)
 
 

@@ -476,8 +476,7 @@ def ledger_summary(claims: Iterable[Claim | dict], why: Mapping[str, str] | None
         n = len(statements)
         lead = "Of the" if numbers else "The paper prints no number we check; of its"
         sentences.append(f"{lead} {n} statement{'s' if n != 1 else ''} without a number, "
-                         + counted(statements, (("holds", "holds", "hold"), ("fails", "fails", "fail"),
-                                                     ("undecided", "is undecided", "are undecided"))) + ".")
+                         + counted(statements, (("holds", "holds", "hold"), ("fails", "fails", "fail"))) + ".")
     lines = [" ".join(sentences)]
     missed = [r for r in records if r["verdict"] not in ("reproduces", "holds")]
     if missed:

@@ -6,7 +6,9 @@ on the held-out blocks :data:`HELD_OUT` wherever the sweep has them (the quick g
 was written from, and says so (:attr:`Claim.decided_on`). A rule is a band for an interval
 (:func:`inside`, :func:`above`, :func:`below`, :func:`before`): the interval inside the band holds,
 outside it fails, across its edge is undecided; a claim holds if all its conditions hold, fails if
-one fails, and is undecided otherwise. Consistency is the ANEES inside its chi-square bounds
+one fails, and is undecided otherwise. An undecided claim is not shown by the data: its ledger
+verdict is ``fails``, its record says ``"undecided": true`` and its why says which interval
+crosses which edge. Consistency is the ANEES inside its chi-square bounds
 (:func:`mascore.compare.stats.anees_bounds`). Four claims were changed after their data were seen;
 they say what changed (:attr:`Claim.post_hoc`).
 """
@@ -849,8 +851,8 @@ def compare_claims(table, phi: dict | None = None, *, held_out: Sequence[int] = 
     Returns
     -------
     list of mascore.ledger.Claim
-        Qualitative claims (``holds``, ``fails`` or ``undecided``), each with the quantities that
-        decide it, the blocks it was written from and decided on, and what was changed after
+        Qualitative claims (``holds`` or ``fails``; an undecided one fails, flagged ``undecided``),
+        each with the quantities that decide it, the blocks it was written from and decided on, and what was changed after
         the data were seen.
 
     Examples
@@ -900,8 +902,9 @@ def differing_claims(first: Iterable, second: Iterable) -> list[dict[str, str]]:
     Returns
     -------
     list of dict
-        Per claim id in both with different verdicts: ``id``, ``first`` and ``second`` verdicts;
-        a claim in one list only is listed with ``"absent"`` on the other side.
+        Per claim id in both with different verdicts: ``id``, ``first`` and ``second`` verdicts
+        (``"fails (undecided)"`` for a claim its data cannot decide); a claim in one list only is
+        listed with ``"absent"`` on the other side.
 
     Examples
     --------
@@ -913,7 +916,7 @@ def differing_claims(first: Iterable, second: Iterable) -> list[dict[str, str]]:
         out = {}
         for c in claims:
             record = c if isinstance(c, Mapping) else c.to_dict()
-            out[str(record["id"])] = str(record["verdict"])
+            out[str(record["id"])] = str(record["verdict"]) + (" (undecided)" if record.get("undecided") else "")
         return out
 
     a, b = verdicts(first), verdicts(second)
