@@ -24,7 +24,8 @@ SUBMODULES = (
     # consensus and cooperative control
     "consensus", "rendezvous", "flocking", "synchronization", "lqr",
     # estimation
-    "estimation", "sensing", "distributed_kf", "distributed_ekf", "fusion", "own_state", "ellipsoids", "set_membership",
+    "estimation", "sensing", "team_model", "distributed_kf", "centralized_team_filter", "team_observability",
+    "distributed_ekf", "sensor_network", "fusion", "fusion_cost", "own_state", "ellipsoids", "set_membership",
     "observers", "riccati",
     # comparing the methods, sweeps on Dask
     "compare", "agent_cost", "sweep",

@@ -41,7 +41,8 @@ __all__ = [
 API_GROUPS: dict[str, tuple[str, ...]] = {
     "Shared building blocks": ("agents", "graphs", "noise", "kalman", "sensing"),
     "Consensus and cooperative control": ("consensus", "rendezvous", "flocking", "synchronization", "lqr", "riccati"),
-    "Estimation": ("estimation", "distributed_kf", "distributed_ekf", "fusion", "own_state", "ellipsoids",
+    "Estimation": ("estimation", "team_model", "distributed_kf", "centralized_team_filter", "team_observability",
+                   "distributed_ekf", "sensor_network", "fusion", "fusion_cost", "own_state", "ellipsoids",
                    "set_membership", "observers"),
     "Comparing the methods": ("compare", "papers.compare", "agent_cost", "sweep"),
     "Reproduction and the book": ("registry", "settings", "claims", "ledger", "formatting", "report", "reproduce",

@@ -21,7 +21,7 @@ with ``threadpoolctl`` when it is installed; else set ``OMP_NUM_THREADS=1``, as
 the Makefile does), the median of several repeats after a warm-up.
 :func:`agent_costs` tabulates it over N with each method's log-log slope, beside
 the analytic flops per agent and step (:func:`agent_flops`, from
-:func:`mascore.fusion.filter_cost` for the fusion filters) and the orders of
+:func:`mascore.fusion_cost.filter_cost` for the fusion filters) and the orders of
 :data:`AGENT_ORDER`.
 
 Tasks and methods (:data:`AGENT_METHODS`): the team task of
@@ -43,7 +43,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import distributed_kf as dkf
-from . import estimation, fusion, kalman, rendezvous, set_membership
+from . import estimation, fusion_cost, kalman, rendezvous, set_membership
+from ._team_kernels import F1_rows
 from ._validation import check_budget, check_positive_int
 from .compare.benchmark import SETTINGS, BenchmarkSettings, check_n_agents
 from .compare.target import localization_model, target_model
@@ -367,8 +368,8 @@ def _song_mb_step(before: dkf.TeamFilter, after: dkf.TeamFilter, Z_i: np.ndarray
         Psi = np.eye(Mr) - KH
         Sig = Psi @ Sig_i @ Psi.T + KH @ model.R_r @ KH.T  # Joseph form, eq. (20)
         X = X @ A.T - (L @ X) @ BK.T  # eq. (14)
-        T = dkf._F1_rows(model, Sig.reshape(N, mr, Mr), L).reshape(Mr, Mr).T
-        Sig = dkf._F1_rows(model, T.reshape(N, mr, Mr), L).reshape(Mr, Mr) + noise  # eq. (15)
+        T = F1_rows(model, Sig.reshape(N, mr, Mr), L).reshape(Mr, Mr).T
+        Sig = F1_rows(model, T.reshape(N, mr, Mr), L).reshape(Mr, Mr) + noise  # eq. (15)
         return X, 0.5 * (Sig + Sig.T)
 
     return AgentStep("team", "song-mb", N, i, degree, "one agent", run,
@@ -540,7 +541,7 @@ class _one_thread:
 def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float:
     """Analytic floating-point operations of one agent per step (leading terms; a multiply-add is 2).
 
-    The fusion filters (target and localization) count as :func:`mascore.fusion.filter_cost`
+    The fusion filters (target and localization) count as :func:`mascore.fusion_cost.filter_cost`
     (n = 4, q = 1; localization n = 2N, q = 2d). The team task counts the textbook
     algorithm at n = 4: a Kalman step ``4 n^3`` (prediction) plus ``26/3 n^3`` (information
     update); forwarding one more inverse; the Vlahakis observer ``2 n^2 + 4 d``; Song et
@@ -587,9 +588,9 @@ def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float
     if method == "vlahakis":
         return float(2 * n**2 + 2 * n * 2 + 4 * d + 2 * n)
     if method == "centralized":
-        return float(fusion.filter_cost("centralized", n=N * n, q=(d + 1) * n, degree=d, n_agents=N).flops)
+        return float(fusion_cost.filter_cost("centralized", n=N * n, q=(d + 1) * n, degree=d, n_agents=N).flops)
     if method == "song-mb":  # one agent's own team covariance, dimension N n, its (d + 1) n measurements
-        return float(fusion.filter_cost("measurement-forwarding", n=N * n, q=n, degree=d).flops)
+        return float(fusion_cost.filter_cost("measurement-forwarding", n=N * n, q=n, degree=d).flops)
     M = N * N * n  # song-eb: the joint covariance, predicted densely (two products of M^3 each)
     return float(4 * M**3)
 

@@ -70,7 +70,7 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
 
     Returns
     -------
-    mascore.fusion.SensorNetworkModel
+    mascore.sensor_network.SensorNetworkModel
         No agent observes the target alone; the team does.
 
     Examples
@@ -79,7 +79,7 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
     >>> compare.target_model(8)
     SensorNetworkModel(N = 8 agents, n = 4 states, q = (1, 1, 1, 1, 1, 1, 1, 1) measurements)
     """
-    from .. import fusion
+    from .. import sensor_network
 
     n_agents = check_n_agents(n_agents)
     s = settings
@@ -87,7 +87,7 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
     Q = np.diag([s.q_pos, s.q_pos, s.q_vel, s.q_vel])
     H = [np.eye(4)[[i % 2]] for i in range(n_agents)]
     R = [s.r * np.eye(1)] * n_agents
-    return fusion.SensorNetworkModel(F, Q, H, R, benchmark_graph(graph, n_agents, s))
+    return sensor_network.SensorNetworkModel(F, Q, H, R, benchmark_graph(graph, n_agents, s))
 
 
 #: The papers' methods on cooperative localization: none applies as published, for these reasons.
@@ -119,7 +119,7 @@ def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSe
 
     Returns
     -------
-    mascore.fusion.SensorNetworkModel
+    mascore.sensor_network.SensorNetworkModel
         Without the anchors the positions would be observable only up to a common shift.
 
     Examples
@@ -128,7 +128,7 @@ def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSe
     >>> compare.localization_model(4).measurement_sizes
     (6, 4, 6, 4)
     """
-    from .. import fusion
+    from .. import sensor_network
 
     n_agents = check_n_agents(n_agents)
     s = settings
@@ -144,7 +144,7 @@ def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSe
             rows.append(np.kron(np.eye(n_agents)[j] - np.eye(n_agents)[i], I2))
         H.append(np.vstack(rows))
         R.append(s.r * np.eye(H[-1].shape[0]))
-    return fusion.SensorNetworkModel(np.eye(n), s.q_pos * np.eye(n), H, R, A)
+    return sensor_network.SensorNetworkModel(np.eye(n), s.q_pos * np.eye(n), H, R, A)
 
 
 def _localization_switching(n_agents: int, settings: BenchmarkSettings):
@@ -153,15 +153,15 @@ def _localization_switching(n_agents: int, settings: BenchmarkSettings):
 
     Returns
     -------
-    union : mascore.fusion.SensorNetworkModel
+    union : mascore.sensor_network.SensorNetworkModel
         :func:`localization_model`'s sensing over the union of the step graphs (it draws the data:
         each possible link's measurement has its own noise; a step keeps its current links' rows).
-    steps : list of (mascore.fusion.SensorNetworkModel, ndarray of int)
+    steps : list of (mascore.sensor_network.SensorNetworkModel, ndarray of int)
         Per step k: the model of graph k (anchors' rows, then the relative rows of its current
         links, as :func:`localization_model` orders them) and the indices of its rows in ``union``'s
         stacked measurement.
     """
-    from .. import fusion
+    from .. import sensor_network
 
     G = switching_graphs(n_agents, settings.n_steps, settings) > 0
     union_adj = G.any(0)
@@ -183,7 +183,7 @@ def _localization_switching(n_agents: int, settings: BenchmarkSettings):
         R.append(settings.r * np.eye(H[-1].shape[0]) if blocks else None)
         rows_of.append(where)
     F, Q = np.eye(n), settings.q_pos * np.eye(n)
-    union = fusion.SensorNetworkModel(F, Q, H, R, union_adj.astype(float))
+    union = sensor_network.SensorNetworkModel(F, Q, H, R, union_adj.astype(float))
     steps = []
     for A in G:
         Hk, Rk, idx = [], [], []
@@ -193,7 +193,7 @@ def _localization_switching(n_agents: int, settings: BenchmarkSettings):
             idx.append(rows)
             Hk.append(union.H_stacked[rows])
             Rk.append(settings.r * np.eye(len(rows)) if len(rows) else None)
-        steps.append((fusion.SensorNetworkModel(F, Q, Hk, Rk, A.astype(float)), np.concatenate(idx)))
+        steps.append((sensor_network.SensorNetworkModel(F, Q, Hk, Rk, A.astype(float)), np.concatenate(idx)))
     return union, steps
 
 
@@ -275,7 +275,7 @@ def target_filter(method: str, model, task: str = "target"):
     ----------
     method : str
         One of :func:`target_methods`.
-    model : mascore.fusion.SensorNetworkModel
+    model : mascore.sensor_network.SensorNetworkModel
         The sensing and the graph.
     task : {"target", "localization"}
         The scenario whose methods are searched.
@@ -295,7 +295,7 @@ def target_filter(method: str, model, task: str = "target"):
 
 
 def target_cost(method: str, n_agents: int, degree: float, task: str = "target") -> tuple[float, float]:
-    """Floats sent and flops per agent per step of a common-target method (:func:`mascore.fusion.filter_cost`).
+    """Floats sent and flops per agent per step of a common-target method (:func:`mascore.fusion_cost.filter_cost`).
 
     Parameters
     ----------
@@ -388,11 +388,11 @@ def simulate_target(
     P0 = s.p0 * np.eye(n)
     x_true, z = model.simulate(np.zeros(n), P0, s.n_steps, np.random.default_rng(seed), n_runs=runs)
     if graph == "switching":  # the filters hold no state: one filter per step's graph
-        from .. import fusion
+        from .. import sensor_network
 
         if task == "target":
             G = switching_graphs(n_agents, s.n_steps, s)
-            steps = [(fusion.SensorNetworkModel(model.F, model.Q, model.H, model.R, A), slice(None)) for A in G]
+            steps = [(sensor_network.SensorNetworkModel(model.F, model.Q, model.H, model.R, A), slice(None)) for A in G]
         filters = [target_filter(method, m, task) for m, _ in steps]
         tic = time.thread_time()
         xk, Pk = model.check_state(np.zeros(n), P0, per_agent=not spec.whole_filter)

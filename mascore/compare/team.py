@@ -8,8 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import centralized_team_filter, graphs, kalman, rendezvous, set_membership, team_model
 from .. import distributed_kf as dkf
-from .. import graphs, kalman, rendezvous, set_membership
 from .._validation import frozen_copy
 from ..agents import double_integrator
 from ..own_state import CentralizedOutputFilter, OwnStateForwardingFilter
@@ -92,8 +92,8 @@ class _Centralized(_Estimator):
 
     def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
         super().__init__(team, x_hat0)
-        self.model = dkf.team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N)
-        self.filter = dkf.CentralizedTeamFilter(self.model, team.B, x_hat0, team.P0)
+        self.model = team_model.team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N)
+        self.filter = centralized_team_filter.CentralizedTeamFilter(self.model, team.B, x_hat0, team.P0)
 
     def update(self, Z, S):
         self.filter.update(Z, S)
@@ -108,7 +108,7 @@ class _Centralized(_Estimator):
         return _own_blocks(self.filter.P, self.model)
 
 
-def _own_blocks(P: np.ndarray, model: dkf.TeamFilterModel) -> np.ndarray:
+def _own_blocks(P: np.ndarray, model: team_model.TeamFilterModel) -> np.ndarray:
     """Agent i's own ``(4, 4)`` covariance from reduced team covariances: ``(B, N, 4, 4)``.
 
     `P` is ``(B, N m_r, N m_r)`` (one team covariance) or ``(B, N, N m_r, N m_r)`` (agent i's own
@@ -119,7 +119,7 @@ def _own_blocks(P: np.ndarray, model: dkf.TeamFilterModel) -> np.ndarray:
     blocks = np.moveaxis(blocks, 0, -3)
     if P.ndim == 4:  # (B, N agents, N blocks, mr, mr): agent i's block i
         blocks = blocks[:, np.arange(N), np.arange(N)]
-    return dkf.expand_covariance(blocks, model.kron)
+    return team_model.expand_covariance(blocks, model.kron)
 
 
 class _Local(_Estimator):
@@ -148,7 +148,7 @@ class _Song(_Estimator):
         super().__init__(team, x_hat0)
         self.eb = estimation_based
         self.link_borne = not estimation_based
-        self.model = dkf.team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N)
+        self.model = team_model.team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N)
         R, N, m = x_hat0.shape  # one common initial estimate; links dropping per run split the covariance
         self.filter = dkf.TeamFilter(self.model, team.laplacian, x_hat0.reshape(R, N * m), team.P0,
                                      mode="eb" if estimation_based else "mb")
