@@ -26,7 +26,7 @@ SUBMODULES = (
     # estimation
     "estimation", "sensing", "team_model", "distributed_kf", "centralized_team_filter", "team_observability",
     "distributed_ekf", "sensor_network", "fusion", "fusion_cost", "own_state", "ellipsoids", "set_membership",
-    "observers", "riccati",
+    "observers", "network_observer", "riccati",
     # comparing the methods, sweeps on Dask
     "compare", "agent_cost", "sweep",
     # errors

@@ -9,6 +9,8 @@ on every call. Shapes: estimates ``(runs, N, m)``, reduced covariance ``(batch, 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -31,7 +33,9 @@ from ._validation import (
 )
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
-from .team_model import TeamFilterModel, reduce_covariance
+from .estimation import Message, MethodSpec
+from .fusion_cost import filter_cost
+from .team_model import TeamFilterModel, reduce_covariance, team_filter_model
 
 __all__ = [
     "CentralizedTeamFilter",
@@ -105,6 +109,11 @@ class CentralizedTeamFilter:
                              f"but found {P0.shape}")
         self._model, self._B, self._x = model, frozen_copy(B), x
         self._P = np.broadcast_to(P, (batch, *P.shape)).copy()
+
+    @property
+    def model(self) -> TeamFilterModel:
+        """The team model."""
+        return self._model
 
     @property
     def x_hat(self) -> np.ndarray:
@@ -222,6 +231,107 @@ class CentralizedTeamFilter:
         if not np.isfinite(self._x).all():
             _finite(Zt, "Z")
         finite_state("centralized update", self._x, self._P)
+
+
+    # ------------------------------------------------------------------ the centre (the estimator protocol)
+
+    def agent_inputs(self, Z: ArrayLike, mask: ArrayLike, U: ArrayLike, i: int) -> tuple[dict, tuple]:
+        """The centre's data of one step: the team's measurements and the inputs applied (it is the busiest node).
+
+        Parameters
+        ----------
+        Z : (runs, N, N, m) array_like
+            Every agent's measurements.
+        mask : (N, N) or (batch, N, N) array_like of bool
+            The sensing mask.
+        U : (runs, N, p) array_like
+            The inputs applied at the step.
+        i : int
+            Unused: the centre's step is the same whichever agent asks.
+
+        Returns
+        -------
+        own : dict
+            ``Z``, ``mask`` and ``U`` (copies).
+        messages : tuple
+            Empty: the measurements sent to the centre are part of its data.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, centralized_team_filter, graphs, rendezvous, sensing, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), graphs.path_graph(3), np.eye(2))
+        >>> own, messages = central.agent_inputs(Z, mask[0], np.zeros((1, 3, 1)), 0)
+        >>> sorted(own), messages
+        (['U', 'Z', 'mask'], ())
+        """
+        return {"Z": np.array(Z, dtype=float), "mask": np.array(mask), "U": np.array(U, dtype=float)}, ()
+
+    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        """The centre's step: :meth:`update` with the team's measurements, then :meth:`predict` (advances this filter).
+
+        Parameters
+        ----------
+        i : int
+            Unused (the centre).
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        x_hat, P : ndarray
+            The team estimates ``(runs, N, m)`` and reduced covariance ``(batch, M_r, M_r)`` after the
+            step (read-only views, as :meth:`view`).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, centralized_team_filter, graphs, rendezvous, sensing, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), graphs.path_graph(3), np.eye(2))
+        >>> x, P = central.agent_step(0, *central.agent_inputs(Z, mask[0], np.zeros((1, 3, 1)), 0))
+        >>> x.shape, P.shape
+        ((1, 3, 2), (1, 6, 6))
+        """
+        self.update(own["Z"], own["mask"])
+        self.predict(own["U"])
+        return self.view("x_hat"), self.view("P")
+
+    def messages(self, i: int = 0, n_measured: int = 1) -> tuple[Message, ...]:
+        """What an agent sends per step: its measurements, to the centre.
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+        n_measured : int
+            How many agents it measures (itself and its neighbours: degree + 1).
+
+        Returns
+        -------
+        tuple of Message
+            Its ``n_measured`` measurements of ``m`` numbers each.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, centralized_team_filter, rendezvous, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> central.messages(0, n_measured=3)[0].floats
+        6
+        """
+        return (Message("its measurements z_ij of itself and its neighbours, to the centre",
+                        check_positive_int(n_measured, "n_measured") * self._model.m),)
 
 
 def centralized_predict(
@@ -373,3 +483,15 @@ def _centralized_update(model, x_pred, P_pred, Z, S):
     total = (W @ innov).sum(axis=1)  # (runs, Mr, k); W broadcasts over runs when batch = 1
     x = x_pred + (P @ total).reshape(R_, N, m)
     return x, P
+
+
+#: The centralized filter of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost): the bound.
+METHODS = (
+    MethodSpec("centralized", ("team",),
+               lambda team, x_hat0: CentralizedTeamFilter(
+                   team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N), team.B, x_hat0, team.P0),
+               lambda n, q, d, N: (2.0 * n * (d + 1), filter_cost("centralized", n=N * n, q=(d + 1) * n, degree=d,
+                                                                  n_agents=N).flops),
+               {"team": ("O(N^3 n^3) at the centre", "O(N^2 n^2)")}, lambda n, q, d, N: float((N * n) ** 2 + N * n),
+               whole_filter=True, position=0),
+)

@@ -67,6 +67,8 @@ state), reduced covariances are ``(batch, N, M_r, M_r)`` per agent or
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -102,8 +104,10 @@ from ._validation import (
 )
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
+from .estimation import Message, MethodSpec
+from .fusion_cost import filter_cost
 from .sensing import team_noise_covariance
-from .team_model import TeamFilterModel, reduce_covariance
+from .team_model import TeamFilterModel, reduce_covariance, team_filter_model
 
 __all__ = [
     "TeamFilter",
@@ -1088,6 +1092,141 @@ class TeamFilter:
 
     # ------------------------------------------------------------------ kernels
 
+    # ------------------------------------------------------------------ one agent (the estimator protocol)
+
+    def agent_inputs(self, Z: ArrayLike, mask: ArrayLike, i: int, run: int = 0) -> tuple[dict, tuple]:
+        """Agent i's data of the next step (update with `Z`, then prediction), cut out of this filter's state.
+
+        Measurement-based loop: agent i's own team estimate ``(N, m)`` and reduced covariance
+        ``(M_r, M_r)``, its measurements of the team and which agents it measures, the topology
+        and the process term of eq. (15) (which depends on the topology and the noise only).
+        Estimation-based loop: the step needs the joint covariance of all agents' team
+        estimates (Remark 4), so the agent's data is the whole filter's (the team's measurements).
+
+        Parameters
+        ----------
+        Z : (runs, N, N, m) array_like
+            The step's measurements.
+        mask : (N, N) or (batch, N, N) array_like of bool
+            The sensing mask.
+        i : int
+            The agent.
+        run : int
+            The Monte Carlo run whose agent i is cut out (measurement-based loop).
+
+        Returns
+        -------
+        own : dict
+            Its data (copies).
+        messages : tuple
+            Empty: the agents exchange no estimate (Song et al.'s filters use their own measurements only).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous, sensing, team_model
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> path = graphs.path_graph(3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(path), np.zeros((1, 6)), P0=np.eye(2), mode="mb")
+        >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), path, np.eye(2))
+        >>> own, messages = filt.agent_inputs(Z, mask[0], 1)
+        >>> own["X"].shape, own["Sigma"].shape, messages
+        ((3, 2), (6, 6), ())
+        """
+        model = self._model
+        N = model.n_agents
+        Zt = check_estimates(model, Z, "Z")
+        S = check_mask(mask, N)
+        if self._mode == "eb":
+            return {"Z": Zt.copy(), "mask": S.copy()}, ()
+        b = run if self._Sig.shape[0] > 1 else 0
+        Lb = self._L if self._L.ndim == 3 else self._L[None]
+        L = Lb[run if Lb.shape[0] > 1 else 0]
+        return ({"X": self._X[run, i].copy(), "Sigma": self._Sig[b, i].copy(), "z": Zt[run, i].copy(),
+                 "d": mask_vec(model, S[run if S.shape[0] > 1 else 0][None])[0, i], "L": np.array(L),
+                 "noise": self._mb_noise(L[None])[0]}, ())
+
+    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        """Agent i's update with its own measurements (eqs. (16)-(20)), then its prediction (eqs. (14)-(15)).
+
+        Measurement-based loop: agent i's own team filter alone, the same kernels as
+        :meth:`update` and :meth:`predict` on its estimate and covariance. Estimation-based loop:
+        the whole filter's step (every agent needs all agents' joint covariance), which advances
+        this filter.
+
+        Parameters
+        ----------
+        i : int
+            The agent.
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        X_i, Sigma_i : ndarray
+            Its predicted team estimate ``(N, m)`` and reduced covariance ``(M_r, M_r)``; for the
+            estimation-based loop the filter's ``X_hat`` and ``Sigma`` (read-only views).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous, sensing, team_model
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> path = graphs.path_graph(3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(path), np.zeros((1, 6)), P0=np.eye(2), mode="mb")
+        >>> Z, mask = sensing.measure(1, np.ones((1, 3, 2)), path, np.eye(2))
+        >>> X_1, Sigma_1 = filt.agent_step(1, *filt.agent_inputs(Z, mask[0], 1))
+        >>> filt.update(Z, mask[0]); filt.predict()                   # the whole team, batched
+        >>> bool(np.allclose(X_1, filt.X_hat[0, 1]) and np.allclose(Sigma_1, filt.Sigma[0, 1]))
+        True
+        """
+        if self._mode == "eb":
+            self.update(own["Z"], own["mask"])
+            self.predict()
+            return self.view("X_hat"), self.view("Sigma")
+        model = self._model
+        N, m, mr, Mr = model.n_agents, model.m, model.m_r, model.M_r
+        X, Sig, L = own["X"], own["Sigma"], own["L"]
+        KH = masked_gain(Sig, own["d"], model.R_r)  # eq. (19): its own measurements
+        X = X + (KH @ (own["z"] - X).reshape(Mr, model.kron)).reshape(N, m)
+        Sig = joseph(Sig, KH, model.R_r)  # eq. (20)
+        X = X @ model.A.T - (L @ X) @ model.BK.T  # eq. (14): F_1 X̂_i
+        T = F1_rows(model, Sig.reshape(N, mr, Mr), L).reshape(Mr, Mr).T
+        Sig = F1_rows(model, T.reshape(N, mr, Mr), L).reshape(Mr, Mr) + own["noise"]  # eq. (15)
+        return X, symmetric_part(Sig)
+
+    def messages(self, i: int = 0) -> tuple[Message, ...]:
+        """What an agent sends per step: nothing (its filter uses its own measurements only).
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+
+        Returns
+        -------
+        tuple of Message
+            Empty.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous, team_model
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2)).messages()
+        ()
+        """
+        return ()
+
     def _set_topology(self, L: np.ndarray | None) -> None:
         """Store the (checked) topology and, for the estimation-based loop, its ``Φ`` blocks.
 
@@ -1123,12 +1262,7 @@ class TeamFilter:
         P = F1_rows(model, T.reshape(*Sig.shape[:2], N, mr, Mr), Lb[:, None]).reshape(*Sig.shape)
         # eq. (15): (I ⊗ BK) E[nu_bar nu_bar^T] (I ⊗ BK)^T + Q (block diagonal)
         Rr = model.R_r.reshape(N, mr, N, mr)
-        # cov of (L_j ⊗ I) nu_j: sum_{l,l'} L_jl L_jl' R[l, l']
-        Cj = np.einsum("bjl,bjk,lakc->bjac", Lb, Lb, Rr)  # (batch, N, mr, mr)
-        noise = model.BK_r @ Cj @ model.BK_r.T + model.Q_r  # (batch, N, mr, mr)
-        blk = np.zeros((Lb.shape[0], N, mr, N, mr))
-        blk[:, np.arange(N), :, np.arange(N), :] = np.moveaxis(noise, 1, 0)
-        P = P + blk.reshape(Lb.shape[0], 1, Mr, Mr)
+        P = P + self._mb_noise(Lb)[:, None]
         if self._exact:
             KH = self._KH
             # E[e_i nu_bar_i^T] = -KH_i R (L_i ⊗ I)^T, column block i of E[e_i nu_bar^T]
@@ -1141,6 +1275,21 @@ class TeamFilter:
             full = full.reshape(*corr.shape[:2], Mr, Mr)
             P = P + full + np.swapaxes(full, -1, -2)
         self._Sig = symmetric_part(P)
+
+    def _mb_noise(self, Lb: np.ndarray) -> np.ndarray:
+        """The process term of eq. (15), ``(I ⊗ BK) E[nu_bar nu_bar^T] (I ⊗ BK)^T + Q``: ``(batch, M_r, M_r)``.
+
+        Block diagonal; it depends on the topology `Lb` ``(batch, N, N)`` and the noise only.
+        """
+        model = self._model
+        N, mr, Mr = model.n_agents, model.m_r, model.M_r
+        Rr = model.R_r.reshape(N, mr, N, mr)
+        # cov of (L_j ⊗ I) nu_j: sum_{l,l'} L_jl L_jl' R[l, l']
+        Cj = np.einsum("bjl,bjk,lakc->bjac", Lb, Lb, Rr)  # (batch, N, mr, mr)
+        noise = model.BK_r @ Cj @ model.BK_r.T + model.Q_r  # (batch, N, mr, mr)
+        blk = np.zeros((Lb.shape[0], N, mr, N, mr))
+        blk[:, np.arange(N), :, np.arange(N), :] = np.moveaxis(noise, 1, 0)
+        return blk.reshape(Lb.shape[0], Mr, Mr)
 
     def _mb_update(self, Z: np.ndarray, S: np.ndarray) -> None:
         """Eqs. (16)-(20), Joseph form, all agents and runs at once."""
@@ -1283,3 +1432,35 @@ class TeamFilter:
             Si = Sb[rows]  # row block i of Σ^-: read here only, so it is overwritten with its update
             np.subtract(Si, O, out=Si)
             Si[:, rows] += W[i] @ Rq[i] @ Wt[i]  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
+
+
+# ----------------------------------------------------------------------------
+# the methods of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost)
+# ----------------------------------------------------------------------------
+
+#: Why Song et al.'s filters do not apply elsewhere (the tables show it).
+_SONG_NOT_APPLICABLE = {
+    "target": "estimates the agents' own states in a rendezvous loop; there is no common target",
+    "localization": "needs absolute measurements of the neighbours' states (eq. (2)); here they are relative",
+    "position": "needs full-state measurements of its neighbours (eq. (2))",
+}
+
+
+def _song_filter(mode: str):
+    """``build(team, x_hat0)``: Song et al.'s filter of the team scenario, every agent from the common estimate."""
+    def build(team, x_hat0: np.ndarray) -> TeamFilter:
+        model = team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N)
+        runs, N, m = x_hat0.shape  # one common initial estimate; links dropping per run split the covariance
+        return TeamFilter(model, team.laplacian, x_hat0.reshape(runs, N * m), team.P0, mode=mode)
+    return build
+
+
+METHODS = (
+    MethodSpec("song-mb", ("team",), _song_filter("mb"),
+               lambda n, q, d, N: (0.0, filter_cost("measurement-forwarding", n=N * n, q=n, degree=d).flops),
+               {"team": ("O(N^3 n^3): its own covariance of the whole team", "O(N^2 n^2)")},
+               lambda n, q, d, N: float((N * n) ** 2 + N * n), _SONG_NOT_APPLICABLE, position=3),
+    MethodSpec("song-eb", ("team",), _song_filter("eb"), lambda n, q, d, N: (0.0, float(4 * (N * N * n) ** 3)),
+               {"team": ("O(N^6 n^3): the joint covariance of all team estimates (dense)", "O(N^4 n^2)")},
+               lambda n, q, d, N: float((N * N * n) ** 2), _SONG_NOT_APPLICABLE, whole_filter=True, position=4),
+)

@@ -16,6 +16,7 @@ from ._validation import (
 __all__ = [
     "FilterCost",
     "filter_cost",
+    "kalman_step_flops",
 ]
 
 
@@ -144,3 +145,28 @@ def filter_cost(method: str, n: int, q: int, degree: int, iterations: int = 1, n
                       "(d + 1) (2 q^2 + 2 q n + n) + 32/3 n^3 + 12 n^2 + L (2 (d + 1) n^2 + n^3) "
                       "+ 2 (d + 1) (n (n + 1) / 2 + n)",
                       "measurements, then the information pair; L = evaluations of the weight search (about 10-30)")
+
+
+def kalman_step_flops(n: int) -> float:
+    """Flops of one Kalman step of an agent on its own state of size n: the prediction and an information update.
+
+    ``4 n^3 + 2 n^2`` (prediction) ``+ 26/3 n^3 + 8 n^2`` (update; the counts of :func:`filter_cost`).
+
+    Parameters
+    ----------
+    n : int
+        State size.
+
+    Returns
+    -------
+    float
+        Flops per step.
+
+    Examples
+    --------
+    >>> from mascore.fusion_cost import kalman_step_flops
+    >>> round(kalman_step_flops(4), 2)
+    970.67
+    """
+    n = check_positive_int(n, "n")
+    return float(4 * n**3 + 2 * n**2 + 26 / 3 * n**3 + 8 * n**2)

@@ -24,7 +24,7 @@ from mascore import (
     graphs,
     kalman,
     lqr,
-    observers,
+    network_observer,
     own_state,
     rendezvous,
     sensing,
@@ -79,7 +79,7 @@ MODELS = {  # every checked model or value class: a builder of one instance
                                                                            np.eye(2), np.eye(2)),
     "CentralizedOutputFilter": lambda: own_state.CentralizedOutputFilter(np.eye(2), np.ones((2, 1)), 0.01 * np.eye(2),
                                                                          [[1.0, 0.0]], 0.5, 3),
-    "DiscreteNetworkObserver": lambda: observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3),
+    "DiscreteNetworkObserver": lambda: network_observer.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3),
                                                                          [[1, 0.1], [0, 1]], [[0.0], [0.1]], [[1.0, 0.0]]),
 }
 

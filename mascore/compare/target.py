@@ -49,9 +49,7 @@ def target_methods(task: str = "target") -> tuple[str, ...]:
     return estimation.method_names(task)
 #: Methods of the papers that do not apply to the common target, with the reason (the headline shows them).
 TARGET_NOT_APPLICABLE = {
-    "song-mb, song-eb": "estimate the agents' own states in a rendezvous loop; there is no common target",
-    "vlahakis": "an observer of each agent's own state, coupled by relative outputs; there is no common target",
-    "set-membership": "a single agent's filter; alone, an agent that senses one coordinate cannot observe the target",
+    **estimation.not_applicable("target"),  # the team task's methods, as their specs say
     "ren-kc": "fuses priors of a quantity nobody measures; with measurements it becomes the consensus filters above",
 }
 
@@ -92,9 +90,7 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
 
 #: The papers' methods on cooperative localization: none applies as published, for these reasons.
 LOCALIZATION_NOT_APPLICABLE = {
-    "song-mb, song-eb": "need absolute measurements of the neighbours' states (eq. (2)); here they are relative",
-    "vlahakis": "needs every agent to measure its own output (the Q1 term); here only the anchors do",
-    "set-membership": "a single agent's filter; without an anchor an agent's relative measurements do not fix it",
+    **estimation.not_applicable("localization"),  # the team task's methods, as their specs say
     "ren-kc": "fuses priors of a quantity nobody measures; there is no common quantity here",
 }
 
