@@ -22,7 +22,7 @@ SUBMODULES = (
     # shared building blocks
     "agents", "graphs", "kalman", "noise", "plotting", "settings", "claims", "ledger", "reproduce",
     # consensus and cooperative control
-    "consensus", "rendezvous", "flocking", "synchronization", "lqr",
+    "consensus", "consensus_filters", "rendezvous", "flocking", "synchronization", "lqr",
     # estimation
     "estimation", "sensing", "team_model", "distributed_kf", "centralized_team_filter", "team_observability",
     "distributed_ekf", "sensor_network", "fusion", "fusion_cost", "own_state", "ellipsoids", "set_membership",

@@ -68,6 +68,7 @@ state), reduced covariances are ``(batch, N, M_r, M_r)`` per agent or
 from __future__ import annotations
 
 from collections.abc import Sequence
+from types import MappingProxyType
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -1439,11 +1440,11 @@ class TeamFilter:
 # ----------------------------------------------------------------------------
 
 #: Why Song et al.'s filters do not apply elsewhere (the tables show it).
-_SONG_NOT_APPLICABLE = {
+_SONG_NOT_APPLICABLE = MappingProxyType({
     "target": "estimates the agents' own states in a rendezvous loop; there is no common target",
     "localization": "needs absolute measurements of the neighbours' states (eq. (2)); here they are relative",
     "position": "needs full-state measurements of its neighbours (eq. (2))",
-}
+})
 
 
 def _song_filter(mode: str):

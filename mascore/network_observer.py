@@ -9,6 +9,7 @@ comparison's team task runs. Its gains come from the continuous-time design of
 from __future__ import annotations
 
 from collections.abc import Sequence
+from types import MappingProxyType
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -247,12 +248,12 @@ class DiscreteNetworkObserver(Frozen):
 # the methods of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost)
 
 #: Why the Vlahakis observer does not apply elsewhere (the tables show it).
-_VLAHAKIS_NOT_APPLICABLE = {
+_VLAHAKIS_NOT_APPLICABLE = MappingProxyType({
     "target": "an observer of each agent's own state, coupled by relative outputs; there is no common target",
     "localization": "needs every agent to measure its own output (the Q1 term); here only the anchors do",
     "switching": "its gains come from an LMI over the eigenvalues of one fixed Laplacian (eqs. (56)-(62)); for a "
     "graph that changes at every step, often disconnected, the paper gives no design and no stability guarantee",
-}
+})
 
 
 def _team_observer(phi: float | None):

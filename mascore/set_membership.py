@@ -60,6 +60,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Literal
 
 import numpy as np
@@ -930,10 +931,10 @@ def _cholesky(P, what, step, agent, idx, batch):
 # the methods of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost)
 
 #: Why the set-membership filter of one agent does not apply elsewhere (the tables show it).
-_SM_NOT_APPLICABLE = {
+_SM_NOT_APPLICABLE = MappingProxyType({
     "target": "a single agent's filter; alone, an agent that senses one coordinate cannot observe the target",
     "localization": "a single agent's filter; without an anchor an agent's relative measurements do not fix it",
-}
+})
 
 
 def _team_set_filter(confidence: float | None):

@@ -210,3 +210,24 @@ def test_the_toy_scenario_is_gone_with_its_module():
 
     assert "toy-walk" not in scenarios()
     assert not any(c["task"] == "toy-walk" for c in compare.grid_cells("quick"))
+
+
+def test_the_not_applicable_tables_are_the_specs_one_method_per_key():
+    tables = {"target": compare.TARGET_NOT_APPLICABLE, "localization": compare.LOCALIZATION_NOT_APPLICABLE,
+              "switching": compare.SWITCHING_NOT_APPLICABLE, "position": compare.POSITION_NOT_APPLICABLE}
+    names = {s.name for s in estimation.method_specs()}
+    for scenario, table in tables.items():
+        assert table and set(table) <= names  # every key is one declared method
+        for name, why in table.items():
+            assert any(s.name == name and s.not_applicable.get(scenario) == why for s in estimation.method_specs())
+    assert list(compare.SWITCHING_NOT_APPLICABLE) == ["vlahakis", "vlahakis-phi0", "vlahakis-phi1"]
+    assert "song-mb" in compare.TARGET_NOT_APPLICABLE and "song-eb" in compare.TARGET_NOT_APPLICABLE
+
+
+@pytest.mark.parametrize("spec", estimation.method_specs("team"), ids=lambda s: s.name)
+def test_every_team_method_is_built_by_its_spec_and_declares_its_cost(spec):
+    team = compare.team_setup(4, "gaussian", 1.0, compare.SETTINGS)
+    filt = spec.build(team, np.zeros((1, 4, 4)))
+    assert callable(filt.agent_step) and callable(filt.messages)
+    floats, flops = spec.cost(4, 4, 2, 4)
+    assert floats == compare.floats_per_step(spec.name, 4, 2.0) and flops > 0

@@ -48,10 +48,7 @@ def target_methods(task: str = "target") -> tuple[str, ...]:
     """
     return estimation.method_names(task)
 #: Methods of the papers that do not apply to the common target, with the reason (the headline shows them).
-TARGET_NOT_APPLICABLE = {
-    **estimation.not_applicable("target"),  # the team task's methods, as their specs say
-    "ren-kc": "fuses priors of a quantity nobody measures; with measurements it becomes the consensus filters above",
-}
+TARGET_NOT_APPLICABLE = estimation.not_applicable("target")  # as the other tasks' specs say
 
 
 def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
@@ -89,10 +86,7 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
 
 
 #: The papers' methods on cooperative localization: none applies as published, for these reasons.
-LOCALIZATION_NOT_APPLICABLE = {
-    **estimation.not_applicable("localization"),  # the team task's methods, as their specs say
-    "ren-kc": "fuses priors of a quantity nobody measures; there is no common quantity here",
-}
+LOCALIZATION_NOT_APPLICABLE = estimation.not_applicable("localization")  # as the other tasks' specs say
 
 
 def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
