@@ -673,9 +673,11 @@ def caption_values(study: Study, result: Any) -> dict[str, float]:
 
     Examples
     --------
+    >>> import dataclasses
     >>> from mascore.papers import ren2005
     >>> study = ren2005.REGISTRY.study("kalman-consensus")
-    >>> values = caption_values(study, ren2005.run(ren2005.SETTINGS, seed=1))
+    >>> fewer = dataclasses.replace(ren2005.SETTINGS, noise_runs=20, noise_paths=4, bias_runs=50)  # fewer runs
+    >>> values = caption_values(study, ren2005.run(fewer, seed=1))
     >>> round(values["bias-fused"], 3)
     6.985
     """
