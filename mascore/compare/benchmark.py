@@ -55,7 +55,7 @@ SM_CONFIDENCE = {"set-membership": None, "set-membership-c90": 0.9, "set-members
 POSITION_METHODS = ("centralized", "local", "forwarding", *VLAHAKIS_PHI, *SM_CONFIDENCE)
 #: Team methods that do not apply under position-only sensing, with the reason.
 POSITION_NOT_APPLICABLE = estimation.not_applicable("position")
-#: Every team-method name a cell may carry (the knobs' variants run in the studies ``knob`` and ``position``).
+#: Every team-method name a cell may carry (the knobs' variants run at N = 8 in the studies ``scaling``, ``position``).
 ALL_TEAM_METHODS = TEAM_METHODS + tuple(m for m in (*VLAHAKIS_PHI, *SM_CONFIDENCE) if m not in TEAM_METHODS)
 #: The common-target and localization filters' knob variants (their specs in :mod:`mascore.fusion`): the
 #: consensus steps L in {1, 2, 5} and L = the graph's diameter, and HCMCI's novelty weight omega = N against
@@ -204,7 +204,7 @@ KNOBS = (
     Knob("Ren et al.'s Q = Omega", "shared", tuple((f"{q:g}", "shared", m) for m, q in sorted(
         REN_Q.items(), key=lambda kv: kv[1])), ("0.1",)),
     Knob("Vlahakis's coupling gain Phi", "team", tuple(
-        ("LMI" if phi is None else f"{phi:g}", "scaling" if m in TEAM_METHODS else "knob", m)
+        ("LMI" if phi is None else f"{phi:g}", "scaling", m)
         for m, phi in VLAHAKIS_PHI.items()), ("LMI",)),
     Knob("set-membership confidence (positions only)", "team", tuple(
         (f"{SETTINGS.sm_confidence if c is None else c:g}", "position", m)

@@ -27,7 +27,8 @@ def fitted_slopes(summary) -> dict[str, float]:
     Returns
     -------
     dict of str to float
-        Method to the least-squares slope of ``log(cpu_us)`` on ``log(N)``.
+        Method to the least-squares slope of ``log(cpu_us)`` on ``log(N)`` (methods run at two team
+        sizes or more).
 
     Examples
     --------
@@ -39,7 +40,7 @@ def fitted_slopes(summary) -> dict[str, float]:
     """
     scaling = summary[summary["study"] == "scaling"]
     return {m: float(np.polyfit(np.log(g["n_agents"]), np.log(g["cpu_us"]), 1)[0])
-            for m, g in scaling.groupby("method", sort=False)}
+            for m, g in scaling.groupby("method", sort=False) if g["n_agents"].nunique() > 1}  # a knob: N = 8 only
 
 
 def headline(summary, task: str = "team", costs=None):
@@ -67,13 +68,14 @@ def headline(summary, task: str = "team", costs=None):
     Returns
     -------
     pandas.DataFrame
-        Per method: RMSE ratio to the bound with its 95 % interval over the runs (200 seeds on
-        the quick grid), consistency (NEES per dof, or containment for the set-membership
-        filter), floats sent and received per agent and step (a centralized filter's: each
-        agent's measurements up and the estimates it uses down), one agent's CPU per step if
-        `costs` is given, and per scenario: the control spread (team), the analytic flops per
-        agent and step (target, localization). A dash where a quantity does not exist; methods
-        that do not apply are listed with the reason.
+        Per method: the ratio of RMS errors to the bound's with its 95 % paired bootstrap
+        interval over the runs (200 seeds on the quick grid), consistency (the ANEES and whether
+        it lies inside its 95 % chi-square bounds, :func:`consistency_text`; or containment for
+        the set-membership filter), floats sent and received per agent and step (a centralized
+        filter's: each agent's measurements up and the estimates it uses down), one agent's CPU
+        per step if `costs` is given, and per scenario: the control spread (team), the analytic
+        flops per agent and step (target, localization). A dash where a quantity does not exist;
+        methods that do not apply are listed with the reason.
 
     Examples
     --------
@@ -104,9 +106,7 @@ def headline(summary, task: str = "team", costs=None):
         if m not in frame.index:
             continue
         r = frame.loc[m]
-        nees = r["nees_own_mean"]
-        consistency = ((f"NEES {nees:.2f}" if nees < 100 else f"NEES {nees:.1e}") if np.isfinite(nees)
-                       else f"contains {r['containment_mean']:.3f}" if np.isfinite(r["containment_mean"]) else dash)
+        consistency = consistency_text(r)
         row = {"method": m, "RMSE ratio [95 %]": f"{r['ratio_mean']:.3f} [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]",
                "seeds": int(r["n"]), "consistency": consistency, "floats/step": r["floats"]}
         if cpu is not None:
@@ -179,12 +179,10 @@ def _position_headline(summary, costs=None):
         if m not in gauss.index:
             continue
         r = gauss.loc[m]
-        nees, inside = r["nees_own_mean"], r["containment_mean"]
         bounded = uniform["containment_mean"].get(m, np.nan)
         rows.append({
             "method": m, "RMSE ratio [95 %]": f"{r['ratio_mean']:.3f} [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]",
-            "consistency": f"NEES {nees:.2f}" if np.isfinite(nees) else f"contains {inside:.3f}"
-            if np.isfinite(inside) else dash,
+            "consistency": consistency_text(r),
             "set size (m)": round(float(size[m]), 3) if np.isfinite(size[m]) else dash,
             "contains, uniform": f"{bounded:.3f}" if np.isfinite(bounded) else dash,
             "floats/step": r["floats"], **({CPU_COLUMN: dash} if costs is not None else {})})
@@ -193,6 +191,51 @@ def _position_headline(summary, costs=None):
                      "set size (m)": dash, "contains, uniform": dash, "floats/step": dash,
                      **({CPU_COLUMN: dash} if costs is not None else {})})
     return pd.DataFrame(rows).set_index("method")
+
+
+def consistency_text(row) -> str:
+    """A summary row's consistency in words: the ANEES and its verdict against the chi-square bounds.
+
+    Parameters
+    ----------
+    row : pandas.Series
+        A row of :func:`mascore.compare.summarize` (``nees_own_mean``, ``nees_bound_lo``/``hi``,
+        ``containment_mean``).
+
+    Returns
+    -------
+    str
+        ``"ANEES 1.02, consistent"`` (inside its 95 % chi-square bounds), ``"..., overconfident"`` (above),
+        ``"..., conservative"`` (below); the containment for a set-valued filter; a dash without either.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore.compare.tables import consistency_text
+    >>> consistency_text(pd.Series({"nees_own_mean": 1.3, "nees_bound_lo": 0.87, "nees_bound_hi": 1.14,
+    ...                             "containment_mean": float("nan")}))
+    'ANEES 1.30, overconfident'
+    """
+    nees, inside = row["nees_own_mean"], row["containment_mean"]
+    if np.isfinite(nees):
+        word = anees_verdict(row)
+        return f"ANEES {nees:.2f}, {word}" if nees < 100 else f"ANEES {nees:.1e}, {word}"
+    return f"contains {inside:.3f}" if np.isfinite(inside) else "—"
+
+
+def anees_verdict(row) -> str:
+    """``"consistent"`` if a summary row's ANEES lies inside its 95 % chi-square bounds, else over/conservative.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore.compare.tables import anees_verdict
+    >>> anees_verdict(pd.Series({"nees_own_mean": 0.8, "nees_bound_lo": 0.87, "nees_bound_hi": 1.14}))
+    'conservative'
+    """
+    nees = row["nees_own_mean"]
+    return "overconfident" if nees > row["nees_bound_hi"] else "conservative" if nees < row["nees_bound_lo"] \
+        else "consistent"
 
 
 def position_only_kf_rmse(settings: BenchmarkSettings = SETTINGS) -> tuple[float, float]:
@@ -226,10 +269,10 @@ def knob_table(summary):
     study that holds it (Gaussian noise). Two verdicts per setting, each from an interval, never
     from a point: **accuracy**, ``"within 5 %"`` of the bound if the 95 % interval of the RMSE
     ratio lies below :data:`NEAR_BOUND`, ``"not within 5 %"`` if it lies above, else
-    ``"undecided"``; **consistency**, from the 95 % interval of the mean NEES per dof over the
-    runs, ``"consistent"`` if it holds 1, ``"overconfident"`` above 1, ``"conservative"`` below
-    (for the set-membership filter: ``"contains"`` if its containment reaches its confidence,
-    else ``"leaks"``; a dash for an observer without a covariance).
+    ``"undecided"``; **consistency**, the ANEES against its two-sided 95 % chi-square bounds
+    (:func:`anees_verdict`, as in the headline tables: ``"consistent"`` inside, ``"overconfident"``
+    above, ``"conservative"`` below; for the set-membership filter ``"contains"`` if its
+    containment reaches its confidence, else ``"leaks"``; a dash for an observer without a covariance).
 
     Parameters
     ----------
@@ -240,8 +283,8 @@ def knob_table(summary):
     -------
     pandas.DataFrame
         One row per knob and setting: ``knob``, ``scenario``, ``setting`` (``*``: the paper's own,
-        the headline's), ``method``, ``seeds``, ``RMSE ratio [95 %]``, ``consistency`` (NEES per dof
-        [95 %] or containment), the two verdicts, and ``flips``: the verdicts that differ between
+        the headline's), ``method``, ``seeds``, ``RMSE ratio [95 %]``, ``consistency`` (the ANEES or
+        the containment, :func:`consistency_text`), the two verdicts, and ``flips``: the verdicts that differ between
         the knob's settings (``"no"`` when none does). Settings whose cells the sweep lacks are left out.
 
     Examples
@@ -250,7 +293,7 @@ def knob_table(summary):
     >>> from mascore import compare
     >>> rows = [dict(study="shared", task="shared", method=m, n_agents=8, graph="ring", dropout=0.0,
     ...              noise="gaussian", n=100, ratio_mean=r, ratio_lo=r - 0.01, ratio_hi=r + 0.01, nees_own_mean=v,
-    ...              nees_own_lo=v - 0.05, nees_own_hi=v + 0.05, containment_mean=float("nan"))
+    ...              nees_bound_lo=0.8, nees_bound_hi=1.2, containment_mean=float("nan"))
     ...         for m, r, v in (("ren-kc-q0", 1.0, 1e17), ("ren-kc", 0.98, 4.2), ("ren-kc-q0.6", 1.02, 0.75))]
     >>> t = compare.knob_table(pd.DataFrame(rows))
     >>> t["setting"].tolist(), t["consistency verdict"].tolist()
@@ -277,7 +320,7 @@ def knob_table(summary):
                 "setting": setting + (" *" if setting in knob.recipe else ""), "method": method,
                 "seeds": int(r["n"]),
                 "RMSE ratio [95 %]": f"{r['ratio_mean']:.3f} [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]",
-                "consistency": _consistency_text(r),
+                "consistency": consistency_text(r),
                 "accuracy verdict": _interval_verdict(r["ratio_lo"], r["ratio_hi"], NEAR_BOUND,
                                                       ("within 5 %", "not within 5 %")),
                 "consistency verdict": _consistency_verdict(r, float(setting) if method in SM_CONFIDENCE else None)})
@@ -300,22 +343,9 @@ def _interval_verdict(lo: float, hi: float, band: float, words: tuple[str, str])
     return words[0] if hi <= band else words[1] if lo > band else "undecided"
 
 
-def _consistency_text(r) -> str:
-    nees = r["nees_own_mean"]
-    if np.isfinite(nees):
-        if nees >= 100:
-            return f"NEES {nees:.1e}"
-        return f"NEES {nees:.2f} [{r['nees_own_lo']:.2f}, {r['nees_own_hi']:.2f}]"
-    inside = r["containment_mean"]
-    return f"contains {inside:.4f}" if np.isfinite(inside) else "—"
-
-
 def _consistency_verdict(r, confidence: float | None) -> str:
-    """From the NEES interval against 1, or a set's containment against its confidence level."""
+    """The ANEES against its chi-square bounds (:func:`anees_verdict`), or a set's containment against its confidence."""
     if confidence is not None:
         inside = r["containment_mean"]
         return "—" if not np.isfinite(inside) else "contains" if inside >= confidence else "leaks"
-    lo, hi = r["nees_own_lo"], r["nees_own_hi"]
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        return "—"
-    return "overconfident" if lo > 1.0 else "conservative" if hi < 1.0 else "consistent"
+    return anees_verdict(r) if np.isfinite(r["nees_own_mean"]) else "—"

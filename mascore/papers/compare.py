@@ -36,7 +36,7 @@ def claims(result: CompareResult) -> list:
     >>> [c.id for c in compare.claims(compare.run())][:1]  # doctest: +SKIP
     ['compare/centralized-bound']
     """
-    return compare_claims(result.summary, phi=result.phi)
+    return compare_claims(result.table, phi=result.phi)
 
 
 def _costs():
@@ -48,12 +48,13 @@ def _costs():
 
 
 FIGURES = (
-    FigureSpec("pareto", "", "Accuracy against communication, own state: each method's own-position RMSE over the "
-               "centralized filter's (run by run, with 95 % intervals) against the floats it sends and receives per "
-               "agent and step, for N = 4, 8 and 16 on the ring.", lambda r: plot_pareto(r.summary)),
-    *(FigureSpec(f"pareto_{task}", "", f"Accuracy against communication, {name}: each method's RMSE over the "
-                 f"{bound}'s (95 % intervals) against the floats it sends and receives per agent and step, on the "
-                 "ring.", lambda r, task=task: plot_pareto(r.summary, task))
+    FigureSpec("pareto", "", "Accuracy against communication, own state: each method's own-position RMS error over "
+               "the centralized filter's on the same runs (with 95 % paired bootstrap intervals) against the floats "
+               "it sends and receives per agent and step, for N = 4, 8 and 16 on the ring.",
+               lambda r: plot_pareto(r.summary)),
+    *(FigureSpec(f"pareto_{task}", "", f"Accuracy against communication, {name}: each method's RMS error over "
+                 f"the {bound}'s on the same runs (95 % paired bootstrap intervals) against the floats it sends "
+                 "and receives per agent and step, on the ring.", lambda r, task=task: plot_pareto(r.summary, task))
       for task, name, bound in (("target", "common target", "centralized filter"),
                                 ("localization", "cooperative localization", "centralized filter"),
                                 ("shared", "shared quantity", "central fusion"))),
