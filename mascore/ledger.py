@@ -34,7 +34,7 @@ import numpy as np
 
 from ._optional import require
 from .claims import APPROX_FACTOR, PAPER_DIGITS, VERDICTS, Claim, worst_deviation
-from .formatting import format_number, format_value
+from .formatting import format_number, format_value, math_text
 
 __all__ = [
     "APPROX_FACTOR",
@@ -294,9 +294,9 @@ class ClaimsView:
         lines = ["| # | claim (where the paper says it) | paper | ours | verdict |", "|---|---|---|---|---|"]
         for n, r in enumerate(self.records, 1):
             unit, labels = r.get("unit", ""), r.get("labels")
-            claim = f"{_cell(r.get('statement', ''))} *({_cell(r.get('where', ''))})*"
+            claim = f"{_cell(math_text(r.get('statement', '')))} *({_cell(r.get('where', ''))})*"
             if r.get("rule"):
-                claim += f"<br>*Decided by:* {_cell(r['rule'])}"
+                claim += f"<br>*Decided by:* {_cell(math_text(r['rule']))}"
             lines.append(
                 f"| {n} | {claim} | {_cell(format_value(r.get('paper_value'), PAPER_DIGITS, unit=unit, labels=labels))} "
                 f"| {_cell(format_value(r.get('value'), unit=unit, labels=labels))} | {_cell(_verdict_text(r))} |"
@@ -492,5 +492,5 @@ def ledger_summary(claims: Iterable[Claim | dict], why: Mapping[str, str] | None
             reason = ""  # a reason shared by the next claims is given once, after the last of them
         reason = f" {reason}" if reason else ""
         verdict = {"approximately": "reproduces approximately"}.get(r["verdict"], r["verdict"].replace("-", " "))
-        lines.append(f"- {r['statement']} ({r['where']}){values} {verdict}.{reason}")
+        lines.append(f"- {math_text(r['statement'])} ({r['where']}){values} {verdict}.{reason}")
     return "\n".join(lines)

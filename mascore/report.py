@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ._optional import require
+from .formatting import math_text
 from .ledger import VERDICTS, deviation_sentence, verdict_words
 from .registry import paper_keys, paper_registry
 
@@ -46,48 +47,6 @@ class MarkdownText:
 
     def __str__(self) -> str:
         return self.text
-
-
-_GREEK = ("alpha", "beta", "gamma", "delta", "epsilon", "lambda", "mu", "nu", "xi", "rho", "sigma", "tau", "phi",
-          "omega", "Gamma", "Delta", "Lambda", "Sigma", "Phi", "Omega")
-_NAME = r"(?:" + "|".join(_GREEK) + r"|[A-Za-z])(?:_(?:bar|hat|[A-Za-z0-9]+))*"
-
-
-def _tex(name: str) -> str:
-    """``delta_bar_k`` -> ``\\bar\\delta_{k}``; ``P_0`` -> ``P_{0}``."""
-    base, *parts = name.split("_")
-    tex = f"\\{base}" if base in _GREEK else base
-    for accent in ("bar", "hat"):
-        if accent in parts:
-            parts.remove(accent)
-            tex = f"\\{accent}{{{tex}}}"
-    return tex + (f"_{{{','.join(parts)}}}" if parts else "")
-
-
-def math_text(text: str) -> str:
-    r"""A ledger statement's ASCII math as MyST math: ``|delta_bar_k|``, ``alpha_w``, ``P_0``, ``Q2``.
-
-    Parameters
-    ----------
-    text : str
-        Plain text with names written in ASCII (``alpha_w``, ``trace P_0``).
-
-    Returns
-    -------
-    str
-        The text with those names in ``$...$``.
-
-    Examples
-    --------
-    >>> from mascore.report import math_text
-    >>> print(math_text("Mean of |delta_bar_k| with alpha_w = 0.05, trace P_0 = 4 and Q2 = 5."))
-    Mean of $\lvert\bar{\delta}_{k}\rvert$ with $\alpha_{w}$ = 0.05, trace $P_{0}$ = 4 and $Q_2$ = 5.
-    """
-    out = re.sub(rf"\|({_NAME})\|", lambda m: f"$\\lvert{_tex(m.group(1))}\\rvert$", text)
-    greek = "|".join(_GREEK)
-    out = re.sub(rf"(?<![\\$\w])((?:{greek})(?:_(?:bar|hat|[A-Za-z0-9]+))*|[A-Za-z]_[A-Za-z0-9]+)(?![\w$])",
-                 lambda m: f"${_tex(m.group(1))}$", out)
-    return re.sub(r"(?<![\w$])(Q|R)([12])(?![\w$])", r"$\1_\2$", out)
 
 
 def verdict_summary(records: Sequence[dict]):

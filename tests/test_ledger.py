@@ -5,6 +5,7 @@ import json
 import pytest
 
 from mascore import ledger, reproduce
+from mascore.formatting import math_text
 from mascore.ledger import Claim
 
 RESULTS_FIELDS = {"id", "where", "statement", "paper_value", "value", "tolerance", "verdict", "note"}
@@ -113,6 +114,21 @@ def test_show_claims_numbers_claims_states_them_and_prints_a_shared_note_once():
     assert "First statement." in rows[0] and "**reproduces**" in rows[0] and "tolerance 0.1" in rows[0]
     assert "**fails**" in rows[1] and "Decided by:* max < 1" in rows[1]
     assert text.count(shared) == 1 and "Claims 1, 2." in text and "Claim 1.* own a" in text
+
+
+def test_ledger_table_and_summary_show_ascii_symbols_as_math_and_leave_written_math_alone():
+    claim = Claim("bhattacharjee2021/a", "Table 1", "Mean of |delta_bar_k| with alpha_w = 0.05.", 1.0, 1.5,
+                  {"rel": 0.05})
+    rule = Claim.qualitative("bhattacharjee2021/b", "Fig. 2", "|A_c^k| <= 1.1 * 0.9^k for all k.", {"max": 1.0},
+                             True, rule="max over k of |A_c^k| / (alpha mu^k) <= 1")
+    table = ledger.show_claims([claim, rule])._repr_markdown_()
+    summary = ledger.ledger_summary([claim, rule])
+    for text in (table, summary):
+        assert r"$\lvert \bar{\delta}_{k} \rvert$" in text and r"$\alpha_{w}$" in text
+        assert "|delta_bar_k|" not in text and "alpha_w" not in text
+    assert r"$\lvert A_{c}^{k} \rvert$ ≤ 1.1 × $0.9^{k}$" in table and "<=" not in table
+    written = r"spread $\sqrt{\mathrm{mean}_i \lVert y_i - \bar y\rVert^2}$ of P_0"
+    assert math_text(written) == r"spread $\sqrt{\mathrm{mean}_i \lVert y_i - \bar y\rVert^2}$ of $P_{0}$"
 
 
 def test_write_claims_refuses_an_unknown_ledger_or_a_foreign_claim(tmp_path):
