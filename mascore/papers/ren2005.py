@@ -1287,7 +1287,7 @@ def _beyond_claims(result: KalmanConsensusResult) -> list[Claim]:
         f"{study['values'].size} pairing schedules (standard deviation {format_number(study['std'])} h over "
         "them). The bias shrinks when Q = 0 and nearly vanishes when also Ω → 0 and the self term is dropped; "
         "a schedule-dependent scatter remains. With Q = 0 the run has not finished agreeing after "
-        f"{s.n_steps} steps (tables/bias_by_variant.csv, largest final spread).\n\n" + _BEYOND,
+        f"{s.n_steps} steps (the largest final spread in the table of the variants of the scheme).\n\n" + _BEYOND,
         rule="abs(bias) > 5 standard errors", unit="h")
     oc = result.overconfidence
     ratio = {k: float(np.mean(v["actual"][-1] / v["believed"][-1])) for k, v in oc["variants"].items()}
