@@ -164,6 +164,11 @@ def _tex(name: str) -> str:
     return tex
 
 
+def _root(name: str) -> str:
+    """What ``sqrt(...)`` holds, in TeX: a symbol (``q_bar``, ``p0``) or an operator written out (``trace``)."""
+    return f"\\operatorname{{{name}}}" if re.fullmatch(r"[a-z]{4,}", name) else _tex(name)
+
+
 def math_text(text: str) -> str:
     r"""A ledger statement's ASCII math as MyST math: ``|delta_bar_k|``, ``alpha_w``, ``P_0``, ``Q2``, ``0.9^k``.
 
@@ -185,8 +190,8 @@ def math_text(text: str) -> str:
     >>> from mascore.formatting import math_text
     >>> print(math_text("Mean of |delta_bar_k| with alpha_w = 0.05, trace P_0 = 4 and Q2 = 5."))
     Mean of $\lvert \bar{\delta}_{k} \rvert$ with $\alpha_{w}$ = 0.05, trace $P_{0}$ = 4 and $Q_2$ = 5.
-    >>> print(math_text("|A_c^k| <= 1.1 * 0.9^k for all k; |B_c| sqrt(q_bar)"))
-    $\lvert A_{c}^{k} \rvert$ ≤ 1.1 × $0.9^{k}$ for all k; $\lvert B_{c} \rvert$ $\sqrt{\bar{q}}$
+    >>> print(math_text("|A_c^k| <= 1.1 * 0.9^k for all k; |B_c| sqrt(q_bar); sqrt(trace)"))
+    $\lvert A_{c}^{k} \rvert$ ≤ 1.1 × $0.9^{k}$ for all k; $\lvert B_{c} \rvert$ $\sqrt{\bar{q}}$; $\sqrt{\operatorname{trace}}$
     """
     pieces = re.split(r"(\$[^$]*\$)", text)  # math already written as $...$ stays as it is
     return "".join(p if p.startswith("$") else _ascii_math(p) for p in pieces)
@@ -195,7 +200,7 @@ def math_text(text: str) -> str:
 def _ascii_math(text: str) -> str:
     """:func:`math_text` on a piece of text without ``$...$``."""
     out = re.sub(rf"\|({_NAME})\|", lambda m: f"$\\lvert {_tex(m.group(1))} \\rvert$", text)
-    out = re.sub(rf"sqrt\(({_NAME}|[A-Za-z]\w*)\)", lambda m: f"$\\sqrt{{{_tex(m.group(1))}}}$", out)
+    out = re.sub(rf"sqrt\(({_NAME}|[A-Za-z]\w*)\)", lambda m: f"$\\sqrt{{{_root(m.group(1))}}}$", out)
     out = re.sub(r"(?<![\w$^])(\d+(?:\.\d+)?|[α-ω])\^([A-Za-z])\b", r"$\1^{\2}$", out)
     out = re.sub(r"\bsup_k\b", r"$\\sup_k$", out)
     out = out.replace("<=", "≤").replace(" * ", " × ")

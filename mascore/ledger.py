@@ -466,16 +466,23 @@ def ledger_summary(claims: Iterable[Claim | dict], why: Mapping[str, str] | None
         return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
 
     sentences = []
-    if numbers:
+    if len(numbers) == 1:  # "the one published number checked here reproduces", not "of the 1, 1 reproduces"
+        verdict = {"approximately": "reproduces approximately"}.get(numbers[0]["verdict"],
+                                                                    verdict_words(numbers[0]["verdict"]))
+        sentences.append(f"The one published number checked here {verdict}.")
+    elif numbers:
         sentences.append(
-            f"Of the {len(numbers)} published number{'s' if len(numbers) != 1 else ''} checked here, "
+            f"Of the {len(numbers)} published numbers checked here, "
             + counted(numbers, (("reproduces", "reproduces", "reproduce"),
                                 ("approximately", "reproduces approximately", "reproduce approximately"),
                                 ("does-not-reproduce", "does not", "do not"))) + ".")
-    if statements:
+    if len(statements) == 1:
+        lead = "Its" if numbers else "The paper prints no number we check; its"
+        sentences.append(f"{lead} one statement without a number {statements[0]['verdict']}.")
+    elif statements:
         n = len(statements)
         lead = "Of the" if numbers else "The paper prints no number we check; of its"
-        sentences.append(f"{lead} {n} statement{'s' if n != 1 else ''} without a number, "
+        sentences.append(f"{lead} {n} statements without a number, "
                          + counted(statements, (("holds", "holds", "hold"), ("fails", "fails", "fail"))) + ".")
     lines = [" ".join(sentences)]
     missed = [r for r in records if r["verdict"] not in ("reproduces", "holds")]

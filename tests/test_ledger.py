@@ -206,3 +206,13 @@ def test_report_takes_the_why_its_paper_module_states(monkeypatch):
     monkeypatch.setattr(ren2005, "WHY", {"ren2005/b": "The paper's schedule is not ours."}, raising=False)
     rows = str(attention_list([_paper_records()[1]])).splitlines()
     assert rows[2].endswith("'approximately'. The paper's schedule is not ours. |")
+
+
+def test_ledger_summary_says_one_number_in_words():
+    one = Claim("ren2005/a", "Fig. 1", "A number.", 2.0, 2.01, {"rel": 0.05})
+    statement = Claim.qualitative("ren2005/b", "Sec. 2", "A statement.", {"x": 1.0}, False, rule="x < 1")
+    assert ledger.ledger_summary([one]) == "The one published number checked here reproduces."
+    assert ledger.ledger_summary([one, statement]).splitlines()[0] == (
+        "The one published number checked here reproduces. Its one statement without a number fails.")
+    assert ledger.ledger_summary([statement]).splitlines()[0] == (
+        "The paper prints no number we check; its one statement without a number fails.")
