@@ -17,8 +17,8 @@ from .formatting import math_text
 from .ledger import VERDICTS, deviation_sentence, verdict_words
 from .registry import paper_keys, paper_registry
 
-__all__ = ["MarkdownText", "attention_list", "best_methods", "errata_list", "math_text", "reading_paths", "verdict_summary",
-           "why"]
+__all__ = ["MarkdownText", "attention_list", "best_methods", "errata_list", "math_text", "method_words",
+           "reading_paths", "verdict_summary", "why"]
 
 #: Verdicts the report lists one by one (everything else is counted only).
 ATTENTION = ("approximately", "does-not-reproduce", "fails")
@@ -279,6 +279,39 @@ def best_methods(summary, n_agents: int = 8) -> dict[str, tuple[str, float]]:
     return out
 
 
+#: Abbreviations of the methods' names, as the glossary writes them.
+_ACRONYMS = {"ci": "CI", "hcmci": "HCMCI", "icf": "ICF", "kf": "KF", "ekf": "EKF"}
+
+
+def method_words(name: str) -> str:
+    """A comparison method's name as prose writes it: ``"hcmci-L5"`` reads ``"HCMCI, 5 consensus steps"``.
+
+    Parameters
+    ----------
+    name : str
+        The method's name in the comparison's tables (``"ci-diffusion"``, ``"hcmci-L1"``, ``"forwarding"``).
+
+    Returns
+    -------
+    str
+        The name with its abbreviations in capitals and its number of consensus steps in words.
+
+    Examples
+    --------
+    >>> from mascore.report import method_words
+    >>> method_words("hcmci-L5"), method_words("hcmci-L1"), method_words("ci-diffusion"), method_words("forwarding")
+    ('HCMCI, 5 consensus steps', 'HCMCI, 1 consensus step', 'CI diffusion', 'forwarding')
+    """
+    words, steps = [], ""
+    for part in name.split("-"):
+        if re.fullmatch(r"L\d+", part):
+            n = int(part[1:])
+            steps = f", {n} consensus step{'s' if n != 1 else ''}"
+        else:
+            words.append(_ACRONYMS.get(part, part))
+    return " ".join(words) + steps
+
+
 def reading_paths(records: Sequence[dict], best: dict[str, tuple[str, float]] | None = None,
                   apply_examples: Sequence[str] = ()) -> MarkdownText:
     """The intro's four questions, each with its page and a one-line answer computed from the results.
@@ -317,7 +350,7 @@ def reading_paths(records: Sequence[dict], best: dict[str, tuple[str, float]] | 
     lines = [f"- **Did it reproduce?** {verdict} "
              f"({{doc}}`the reproduction report </notebooks/reproduction_report>`)."]
     if best:
-        closest = "; ".join(f"{name}: `{m}`, RMSE {ratio:.2f} times the centralized filter's"
+        closest = "; ".join(f"{name}: {method_words(m)}, RMSE {ratio:.2f} times the centralized filter's"
                             for name, (m, ratio) in best.items())
         lines.append(f"- **Which method for my team?** It depends on what the team estimates. Closest to the "
                      f"centralized filter on a ring of 8 agents, {closest} "

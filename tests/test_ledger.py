@@ -216,3 +216,14 @@ def test_ledger_summary_says_one_number_in_words():
         "The one published number checked here reproduces. Its one statement without a number fails.")
     assert ledger.ledger_summary([statement]).splitlines()[0] == (
         "The paper prints no number we check; its one statement without a number fails.")
+
+
+def test_intro_names_the_closest_methods_in_words_not_by_their_table_ids():
+    from mascore.report import method_words, reading_paths
+
+    ok = Claim("ren2005/a", "Sec. 2", "A number.", 2.0, 2.01, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
+    best = {"common target": ("hcmci-L5", 1.03), "own state": ("forwarding", 1.0)}
+    line = str(reading_paths([ok], best)).splitlines()[1]
+    assert "common target: HCMCI, 5 consensus steps, RMSE 1.03" in line and "own state: forwarding, RMSE 1.00" in line
+    assert "hcmci-L5" not in line and "`forwarding`" not in line
+    assert method_words("ci-L1") == "CI, 1 consensus step" and method_words("icf-L5") == "ICF, 5 consensus steps"
