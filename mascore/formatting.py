@@ -166,14 +166,16 @@ def _tex(name: str) -> str:
 
 def _root(name: str) -> str:
     """What ``sqrt(...)`` holds, in TeX: a symbol (``q_bar``, ``p0``) or an operator written out (``trace``)."""
+    if name == "eps":
+        return "\\varepsilon"
     return f"\\operatorname{{{name}}}" if re.fullmatch(r"[a-z]{4,}", name) else _tex(name)
 
 
 def math_text(text: str) -> str:
     r"""A ledger statement's ASCII math as MyST math: ``|delta_bar_k|``, ``alpha_w``, ``P_0``, ``Q2``, ``0.9^k``.
 
-    Bars around a name read as a norm, ``sqrt(x)`` as a root, ``<=`` as ``≤`` and ``sup_k`` as a supremum;
-    text without such names, and math already in ``$...$``, come back unchanged.
+    Bars around a name read as a norm, ``sqrt(x)`` as a root, ``xhat_0`` as :math:`\hat x_0`, ``<=`` as ``≤``
+    and ``sup_k`` as a supremum; text without such names, and math already in ``$...$``, come back unchanged.
 
     Parameters
     ----------
@@ -203,6 +205,7 @@ def _ascii_math(text: str) -> str:
     out = re.sub(rf"sqrt\(({_NAME}|[A-Za-z]\w*)\)", lambda m: f"$\\sqrt{{{_root(m.group(1))}}}$", out)
     out = re.sub(r"(?<![\w$^])(\d+(?:\.\d+)?|[α-ω])\^([A-Za-z])\b", r"$\1^{\2}$", out)
     out = re.sub(r"\bsup_k\b", r"$\\sup_k$", out)
+    out = re.sub(r"\b([a-z])hat_([A-Za-z0-9]+)\b", r"$\\hat{\1}_{\2}$", out)
     out = out.replace("<=", "≤").replace(" * ", " × ")
     greek = "|".join(_GREEK)
     out = re.sub(rf"(?<![\\$\w{{])((?:{greek}){_SUB}*{_SUP}?|[A-Za-z]{_SUB}+{_SUP}?|[A-Za-z]\^(?:T|-?[0-9]+))(?![\w$])",

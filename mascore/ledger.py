@@ -380,7 +380,7 @@ def _notes_markdown(records: Sequence[dict]) -> list[str]:
     """Notes by claim number; a paragraph shared by several claims is printed once."""
     owners: dict[str, list[int]] = {}
     for n, r in enumerate(records, 1):
-        paragraphs = [p.strip() for p in (r.get("note") or "").split("\n\n") if p.strip()]
+        paragraphs = [math_text(p.strip()) for p in (r.get("note") or "").split("\n\n") if p.strip()]
         if r.get("band_reason"):
             paragraphs.append(f"Band of 'approximately' wider than 3 tolerances: {r['band_reason']}")
         for p in paragraphs:
