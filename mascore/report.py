@@ -284,7 +284,7 @@ _ACRONYMS = {"ci": "CI", "hcmci": "HCMCI", "icf": "ICF", "kf": "KF", "ekf": "EKF
 
 
 def method_words(name: str) -> str:
-    """A comparison method's name as prose writes it: ``"hcmci-L5"`` reads ``"HCMCI, 5 consensus steps"``.
+    """A comparison method's name as prose writes it: ``"hcmci-L5"`` reads ``"HCMCI with 5 consensus steps"``.
 
     Parameters
     ----------
@@ -300,13 +300,13 @@ def method_words(name: str) -> str:
     --------
     >>> from mascore.report import method_words
     >>> method_words("hcmci-L5"), method_words("hcmci-L1"), method_words("ci-diffusion"), method_words("forwarding")
-    ('HCMCI, 5 consensus steps', 'HCMCI, 1 consensus step', 'CI diffusion', 'forwarding')
+    ('HCMCI with 5 consensus steps', 'HCMCI with 1 consensus step', 'CI diffusion', 'forwarding')
     """
     words, steps = [], ""
     for part in name.split("-"):
         if re.fullmatch(r"L\d+", part):
             n = int(part[1:])
-            steps = f", {n} consensus step{'s' if n != 1 else ''}"
+            steps = f" with {n} consensus step{'s' if n != 1 else ''}"
         else:
             words.append(_ACRONYMS.get(part, part))
     return " ".join(words) + steps

@@ -224,6 +224,6 @@ def test_intro_names_the_closest_methods_in_words_not_by_their_table_ids():
     ok = Claim("ren2005/a", "Sec. 2", "A number.", 2.0, 2.01, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
     best = {"common target": ("hcmci-L5", 1.03), "own state": ("forwarding", 1.0)}
     line = str(reading_paths([ok], best)).splitlines()[1]
-    assert "common target: HCMCI, 5 consensus steps, RMSE 1.03" in line and "own state: forwarding, RMSE 1.00" in line
+    assert "common target: HCMCI with 5 consensus steps, RMSE 1.03" in line and "own state: forwarding, RMSE 1.00" in line
     assert "hcmci-L5" not in line and "`forwarding`" not in line
-    assert method_words("ci-L1") == "CI, 1 consensus step" and method_words("icf-L5") == "ICF, 5 consensus steps"
+    assert method_words("ci-L1") == "CI with 1 consensus step" and method_words("icf-L5") == "ICF with 5 consensus steps"
