@@ -137,8 +137,10 @@ def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = ""
 
 
 def _label(key: Any) -> str:
-    """A mapping key as text: underscores as spaces."""
-    return str(key).replace("_", " ")
+    """A mapping key as text: an identifier's underscores as spaces (``last_k`` -> ``last k``); a label
+    already written in words keeps its symbols (``largest |A_c^k|``)."""
+    text = str(key)
+    return text if " " in text else text.replace("_", " ")
 
 
 _GREEK = ("alpha", "beta", "gamma", "delta", "epsilon", "lambda", "mu", "nu", "xi", "rho", "sigma", "tau", "phi",

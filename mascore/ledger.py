@@ -298,8 +298,9 @@ class ClaimsView:
             if r.get("rule"):
                 claim += f"<br>*Decided by:* {_cell(math_text(r['rule']))}"
             lines.append(
-                f"| {n} | {claim} | {_cell(format_value(r.get('paper_value'), PAPER_DIGITS, unit=unit, labels=labels))} "
-                f"| {_cell(format_value(r.get('value'), unit=unit, labels=labels))} | {_cell(_verdict_text(r))} |"
+                f"| {n} | {claim} "
+                f"| {_cell(math_text(format_value(r.get('paper_value'), PAPER_DIGITS, unit=unit, labels=labels)))} "
+                f"| {_cell(math_text(format_value(r.get('value'), unit=unit, labels=labels)))} | {_cell(_verdict_text(r))} |"
             )
         return "\n".join(lines + _notes_markdown(self.records))
 
