@@ -338,6 +338,7 @@ def deviation_sentence(record: dict) -> str:
     ``"0.74 % off; tolerance 5 %"`` when it reproduces,
     ``"9.9 % off; tolerance 5 %, approximately within 15 %"`` when approximately reproduced,
     ``"40 % off; more than the 15 % of 'approximately'"`` when it does not reproduce.
+    A vector's deviation is that of its worst entry (``"worst entry 20.75 off; ..."``).
 
     Parameters
     ----------
@@ -362,7 +363,8 @@ def deviation_sentence(record: dict) -> str:
     kind = "rel" if "rel" in tol else "abs"
     unit = f"\u00a0{record['unit']}" if record.get("unit") else ""
     fmt = (lambda v: format_number(100 * v, 3) + "\u00a0%") if kind == "rel" else (lambda v: format_number(v) + unit)
-    off = f"{fmt(worst_deviation(record['paper_value'], record['value'], kind))} off"
+    several = np.size(record["paper_value"]) > 1  # a vector: the deviation is that of its worst entry
+    off = f"{'worst entry ' if several else ''}{fmt(worst_deviation(record['paper_value'], record['value'], kind))} off"
     band = fmt(tol[f"approx_{kind}"])
     if record["verdict"] == "reproduces":
         return f"{off}; tolerance {fmt(tol[kind])}"

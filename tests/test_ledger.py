@@ -227,3 +227,10 @@ def test_intro_names_the_closest_methods_in_words_not_by_their_table_ids():
     assert "common target: HCMCI with 5 consensus steps, RMSE 1.03" in line and "own state: forwarding, RMSE 1.00" in line
     assert "hcmci-L5" not in line and "`forwarding`" not in line
     assert method_words("ci-L1") == "CI with 1 consensus step" and method_words("icf-L5") == "ICF with 5 consensus steps"
+
+
+def test_deviation_of_a_vector_names_its_worst_entry():
+    record = Claim("vlahakis/v", "Sec. 5", "A gain.", [2.6, 22.8], [2.1, 2.05], {"abs": 1e-4}).to_dict()
+    assert ledger.deviation_sentence(record).startswith("worst entry 20.75 off;")
+    scalar = Claim("vlahakis/s", "Sec. 5", "A number.", 2.0, 3.0, {"abs": 1e-4}).to_dict()
+    assert ledger.deviation_sentence(scalar).startswith("1 off;")
