@@ -41,16 +41,21 @@ book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book in
 	$(BUILD_BOOK)
 	@echo "Open book/_build/html/index.html"
 
-# The book's build (one kernel at a time) runs beside the tests that do not read it, so that both
-# cores stay busy; the checks of the rendered HTML run once the book is built.
+# `make test` executes every notebook once, as a test: nbmake runs copies of them (results/notebooks)
+# and writes their outputs back (--overwrite); the book is then rendered from those outputs
+# (python -m mascore._booktools cache), and the checks of the rendered HTML run last. The notebooks'
+# kernels need ipykernel's inline backend to draw their figures, so MPLBACKEND stays unset here
+# (tests/conftest.py gives the test processes themselves a headless backend).
+EXECUTED := results/notebooks
 BOOK_LOG := book/_build/build.log
 HTML_TESTS := tests/test_book_html.py
 
-test: $(STAMP) lint $(RESULTS)  ## lint, build the book beside the unit tests, doctests, published numbers and every notebook (nbmake), then check the rendered HTML
-	@mkdir -p book/_build
-	@$(BUILD_BOOK) > $(BOOK_LOG) 2>&1 & book=$$!; \
-	$(HEADLESS) $(BIN)/python -m pytest -n $(JOBS) --nbmake --doctest-modules --ignore=$(HTML_TESTS) tests notebooks mascore; \
-	tests=$$?; wait $$book; built=$$?; \
+test: $(STAMP) lint $(RESULTS)  ## lint, the unit tests, doctests, published numbers and every notebook (nbmake), then render the book and check its HTML
+	@rm -rf $(EXECUTED) && mkdir -p $(EXECUTED) book/_build && cp notebooks/*.ipynb $(EXECUTED)/
+	@env -u MPLBACKEND $(BIN)/python -m pytest -n $(JOBS) --nbmake --overwrite --doctest-modules \
+	    --ignore=$(HTML_TESTS) tests $(EXECUTED) mascore; tests=$$?; \
+	$(BIN)/python -m mascore._booktools cache $(EXECUTED) && \
+	env -u MPLBACKEND $(BIN)/jupyter-book build book --all -W -n --keep-going > $(BOOK_LOG) 2>&1; built=$$?; \
 	if [ $$built -ne 0 ]; then tail -n 80 $(BOOK_LOG); echo "The book did not build (the whole log: $(BOOK_LOG))."; exit 1; fi; \
 	echo "The book is built (log: $(BOOK_LOG))."; exit $$tests
 	$(HEADLESS) $(BIN)/python -m pytest -n $(JOBS) $(HTML_TESTS)
@@ -77,10 +82,13 @@ reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json, a
 	@$(MAKE) --no-print-directory $(RESULTS)
 
 # book and test reuse results/ while no source file of the package has changed since.
-$(RESULTS): $(STAMP) $(wildcard mascore/*.py mascore/papers/*.py)
-	$(HEADLESS) $(BIN)/python -m mascore reproduce all --out results
-	rm -rf results/compare  # the package changed: no cell of an older table is reused
-	$(HEADLESS) $(BIN)/python -m mascore compare --grid quick --out results --workers $(JOBS)
+# The papers' studies (one process) run beside the quick comparison's workers: both cores stay busy.
+$(RESULTS): $(STAMP) $(wildcard mascore/*.py mascore/*/*.py)
+	rm -rf results/compare && mkdir -p results  # the package changed: no cell of an older table is reused
+	@$(HEADLESS) $(BIN)/python -m mascore reproduce all --out results > results/reproduce.log 2>&1 & papers=$$!; \
+	$(HEADLESS) $(BIN)/python -m mascore compare --grid quick --out results --workers $(JOBS); grid=$$?; \
+	wait $$papers; reproduced=$$?; cat results/reproduce.log; \
+	test $$reproduced -eq 0 -a $$grid -eq 0
 	@touch $(RESULTS)
 
 lab: $(STAMP)  ## JupyterLab on notebooks/ with the project's environment

@@ -15,7 +15,7 @@ import sys
 import pandas as pd
 
 MODULES = ("mascore", "mascore.kalman", "mascore.graphs", "mascore.set_membership", "mascore.consensus",
-           "mascore.distributed_kf", "mascore.lqr", "mascore.observers", "mascore.papers.song2023")
+           "mascore.distributed_kf", "mascore.team_model", "mascore.lqr", "mascore.observers", "mascore.papers.song2023")
 HEAVY = ("cvxpy", "matplotlib", "pandas", "scipy.stats", "networkx", "dask")
 REPEATS = 5
 

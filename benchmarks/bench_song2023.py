@@ -24,6 +24,7 @@ import pandas as pd
 
 from mascore import _kf_reference as ref
 from mascore import distributed_kf as dkf
+from mascore import team_model
 from mascore.graphs import laplacian, ring_graph
 from mascore.papers.song2023 import setup
 from mascore.sensing import measure, stacked_measurement
@@ -36,7 +37,7 @@ TARGETS = {32: ("structured >= 30x faster", lambda speedup: speedup >= 30.0), 64
 def _case(N: int):
     s = setup(N)
     noise = np.eye(2 * s.n)
-    model = dkf.team_filter_model(s.A, s.B, s.K, noise, noise, N)
+    model = team_model.team_filter_model(s.A, s.B, s.K, noise, noise, N)
     rng = np.random.default_rng(N)
     adj = ring_graph(N)
     L = laplacian(adj)
@@ -75,7 +76,7 @@ def run(sizes=SIZES) -> pd.DataFrame:
     rows = []
     for N in sizes:
         (team, Z, S), plain, model = _case(N)
-        Sig_full = dkf.expand_covariance(team.Sigma[0], model.kron)  # the initial covariance, full size
+        Sig_full = team_model.expand_covariance(team.Sigma[0], model.kron)  # the initial covariance, full size
         need_gb = 5 * Sig_full.nbytes / 1e9  # the plain step holds about five augmented covariances
         plain_repeat = 0 if need_gb > 0.6 * _memory_gb() else (5 if N <= 16 else (3 if N <= 32 else 1))
         repeat = max(plain_repeat, 5 if N <= 32 else 3)

@@ -56,7 +56,8 @@ import numpy as np
 
 #: Concept modules swept (the paper modules, plotting and the ledger are not).
 MODULES = ("agents", "graphs", "kalman", "noise", "consensus", "rendezvous", "flocking", "synchronization",
-           "lqr", "sensing", "distributed_kf", "distributed_ekf", "ellipsoids", "set_membership", "observers")
+           "lqr", "sensing", "team_model", "distributed_kf", "centralized_team_filter", "team_observability",
+           "distributed_ekf", "ellipsoids", "set_membership", "observers")
 
 #: Arguments whose zero or negative values are always invalid.
 POSITIVE_NAMES = re.compile(r"^(dt|t_final|horizon|sensing_range|.*_range|rtol|atol|tol|dwell|.*_time)$")

@@ -22,10 +22,11 @@ SUBMODULES = (
     # shared building blocks
     "agents", "graphs", "kalman", "noise", "plotting", "settings", "claims", "ledger", "reproduce",
     # consensus and cooperative control
-    "consensus", "rendezvous", "flocking", "synchronization", "lqr",
+    "consensus", "consensus_filters", "rendezvous", "flocking", "synchronization", "lqr",
     # estimation
-    "estimation", "sensing", "distributed_kf", "distributed_ekf", "fusion", "own_state", "ellipsoids", "set_membership",
-    "observers", "riccati",
+    "estimation", "sensing", "team_model", "distributed_kf", "centralized_team_filter", "team_observability",
+    "distributed_ekf", "sensor_network", "fusion", "fusion_cost", "own_state", "ellipsoids", "set_membership",
+    "observers", "network_observer", "riccati",
     # comparing the methods, sweeps on Dask
     "compare", "agent_cost", "sweep",
     # errors

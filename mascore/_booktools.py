@@ -40,9 +40,11 @@ __all__ = [
 #: are not listed here but discovered (:func:`api_groups`).
 API_GROUPS: dict[str, tuple[str, ...]] = {
     "Shared building blocks": ("agents", "graphs", "noise", "kalman", "sensing"),
-    "Consensus and cooperative control": ("consensus", "rendezvous", "flocking", "synchronization", "lqr", "riccati"),
-    "Estimation": ("estimation", "distributed_kf", "distributed_ekf", "fusion", "own_state", "ellipsoids",
-                   "set_membership", "observers"),
+    "Consensus and cooperative control": ("consensus", "consensus_filters", "rendezvous", "flocking", "synchronization",
+                                          "lqr", "riccati"),
+    "Estimation": ("estimation", "team_model", "distributed_kf", "centralized_team_filter", "team_observability",
+                   "distributed_ekf", "sensor_network", "fusion", "fusion_cost", "own_state", "ellipsoids",
+                   "set_membership", "observers", "network_observer"),
     "Comparing the methods": ("compare", "papers.compare", "agent_cost", "sweep"),
     "Reproduction and the book": ("registry", "settings", "claims", "ledger", "formatting", "report", "reproduce",
                                   "plotting", "exceptions"),
@@ -400,9 +402,62 @@ def execute_notebooks(book: str | Path = "book", timeout: int = 900) -> list[str
     return sorted(result.excepted + result.errored)
 
 
+def cache_executed(executed: str | Path, book: str | Path = "book") -> list[str]:
+    """Put the book's notebooks, executed elsewhere, into the emptied cache that ``jupyter-book build`` reads.
+
+    ``make test`` executes copies of the notebooks once, as tests (``pytest --nbmake --overwrite`` on
+    ``book/_build/executed``); this function carries their outputs into the book's cache, so that the
+    build renders them instead of executing every notebook a second time. A copy is taken only if its
+    code cells are the source notebook's, in order, and no output is an error; any other notebook is left
+    out, and the build executes it (and shows why it fails, if it does).
+
+    Parameters
+    ----------
+    executed : str or Path
+        The folder of the executed copies (same file names as ``book/notebooks``).
+    book : str or Path
+        The book's folder.
+
+    Returns
+    -------
+    list of str
+        The notebooks left out (missing, changed or failed).
+    """
+    import shutil
+
+    import nbformat
+    from jupyter_cache import get_cache
+    from jupyter_cache.base import CacheBundleIn
+
+    folder = Path(book)
+    cache_path = folder / "_build" / ".jupyter_cache"
+    shutil.rmtree(cache_path, ignore_errors=True)
+    cache = get_cache(str(cache_path))
+    left_out = []
+    for source in sorted((folder / "notebooks").glob("*.ipynb")):
+        copy = Path(executed) / source.name
+        nb = nbformat.read(source, as_version=4)
+        run = nbformat.read(copy, as_version=4) if copy.exists() else None
+        code = [c for c in nb.cells if c.cell_type == "code"]
+        code_run = [c for c in run.cells if c.cell_type == "code"] if run is not None else []
+        if (run is None or [c.source for c in code] != [c.source for c in code_run]
+                or any(o.get("output_type") == "error" for c in code_run for o in c.outputs)):
+            left_out.append(source.name)
+            continue
+        for cell, done in zip(code, code_run):  # the source's cells and metadata, the copy's outputs
+            cell.outputs, cell.execution_count = done.outputs, done.execution_count
+        cache.cache_notebook_bundle(CacheBundleIn(nb, str(source)), check_validity=False, overwrite=True)
+    return left_out
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m mascore._booktools sync [NOTEBOOK ...]`` (default: every notebook of a study), or ``execute``."""
+    """``python -m mascore._booktools sync [NOTEBOOK ...]`` (default: every notebook of a study), ``execute``,
+    or ``cache FOLDER`` (:func:`cache_executed`)."""
     argv = sys.argv[1:] if argv is None else argv
+    if argv and argv[0] == "cache":
+        for name in cache_executed(argv[1]):
+            print(f"{name}: not executed by the tests (the book's build executes it)", file=sys.stderr)
+        return 0
     if argv and argv[0] == "execute":
         failed = execute_notebooks()
         for uri in failed:

@@ -13,12 +13,12 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import check_covariance, check_square, finite_result
+from ._validation import check_adjacency_stack, check_covariance, check_square, finite_result
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
-from .distributed_kf import closed_loop_matrices
 from .graphs import laplacian as graph_laplacian
-from .sensing import _check_adjacency, selection_matrices, sensing_mask, team_noise_covariance
+from .sensing import selection_matrices, sensing_mask, team_noise_covariance
+from .team_model import closed_loop_matrices
 
 __all__ = ["plain_estimation_based_step", "plain_estimation_based_kernel", "plain_measurement_based_step"]
 
@@ -167,7 +167,7 @@ def plain_measurement_based_step(
 
 
 def _check_plain_adjacency(adjacency: ArrayLike, N: int, name: str = "adjacency") -> np.ndarray:
-    Adj = _check_adjacency(adjacency, name)
+    Adj = check_adjacency_stack(adjacency, name)
     if Adj.shape != (N, N):
         raise ValueError(f"Incompatible dimensions of {name}; expected ({N}, {N}) for {N} agents but found {Adj.shape}")
     sensing_mask(Adj)  # an isolated agent has no H_i: refused here, naming the agent

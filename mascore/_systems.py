@@ -71,4 +71,4 @@ def full_state_only(m: int, shape: tuple) -> str:
             f"measures every state of each sensed agent. For partial sensing "
             f"(positions only, a subset of states) use a method that takes an output matrix: mascore.compare's "
             f"POSITION_METHODS (centralized, local, forwarding, vlahakis, set-membership) on the team, or "
-            f"mascore.fusion's filters with your own H_i (fusion.SensorNetworkModel)")
+            f"mascore.fusion's filters with your own H_i (sensor_network.SensorNetworkModel)")

@@ -284,6 +284,66 @@ def check_laplacian(
                          "got a directed Laplacian")
     return arr
 
+def check_adjacency_stack(adjacency: ArrayLike, name: str = "adjacency") -> np.ndarray:
+    """One adjacency ``(N, N)`` or a stack ``(..., N, N)``: finite, non-negative, zero diagonal, N >= 1."""
+    A = float_array(adjacency, name)
+    if A.ndim < 2 or A.shape[-1] != A.shape[-2] or A.shape[-1] == 0:
+        raise ValueError(f"{name} must have shape (..., N, N) with N >= 1; got {A.shape}")
+    if not np.all(np.isfinite(A)):
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    n = A.shape[-1]
+    diag = A[..., np.arange(n), np.arange(n)]
+    if np.any(diag != 0):
+        off = A * (1 - np.eye(n))
+        if np.all(off <= 0) and np.allclose(A.sum(axis=-1), 0):
+            raise ValueError(
+                f"{name} looks like a Laplacian (rows sum to zero, negative off-diagonal entries); "
+                "pass the adjacency matrix instead (A = diag(diag(L)) - L)"
+            )
+        raise ValueError(f"{name} must have a zero diagonal (self-sensing is implicit in N̄_i)")
+    if np.any(A < 0):
+        raise ValueError(f"{name} entries must be non-negative (edge weights); smallest is {A.min():.3g}")
+    return A
+
+def check_flag(value: object, name: str) -> bool:
+    """`value` as a bool: True or False only (numpy bools too; no 0/1, no None)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False; got {type(value).__name__} {value!r}")
+    return bool(value)
+
+def check_mask_values(mask: ArrayLike, name: str = "mask") -> np.ndarray:
+    """A sensing mask as a bool array: bool, or numbers that are all exactly 0 or 1 (NaN is refused)."""
+    if isinstance(mask, (str, bytes)) or mask is None:
+        raise TypeError(f"{name} must be a boolean array (a sensing mask); got {mask!r}")
+    S = np.asarray(mask)
+    if S.dtype == bool:
+        return S
+    if S.dtype.kind not in "iuf":
+        raise TypeError(f"{name} must be a boolean array (a sensing mask); got dtype {S.dtype}")
+    if not np.all((S == 0) | (S == 1)):
+        raise ValueError(
+            f"{name} must be a boolean array (or hold only 0 and 1); got other values"
+            f"{' (NaN)' if S.dtype.kind == 'f' and np.isnan(S).any() else ''}"
+        )
+    return S.astype(bool)
+
+
+def kron_factor(M: np.ndarray, k: int) -> np.ndarray | None:
+    """``M_r`` with ``M = M_r ⊗ I_k`` over the last two axes, or ``None``."""
+    M = np.asarray(M, dtype=float)
+    if k == 1:
+        return M
+    r, c = M.shape[-2:]
+    if r % k or c % k:
+        return None
+    blocks = M.reshape(*M.shape[:-2], r // k, k, c // k, k)
+    red = blocks[..., :, 0, :, 0]
+    rebuilt = red[..., :, None, :, None] * np.eye(k)[:, None, :]
+    scale = max(1.0, float(np.max(np.abs(M)))) if M.size else 1.0
+    if np.allclose(blocks, rebuilt, rtol=0, atol=1e-12 * scale):
+        return red
+    return None
+
 
 def _check_finite(arr: np.ndarray, name: str) -> None:
     if not np.all(np.isfinite(arr)):

@@ -21,7 +21,7 @@ with ``threadpoolctl`` when it is installed; else set ``OMP_NUM_THREADS=1``, as
 the Makefile does), the median of several repeats after a warm-up.
 :func:`agent_costs` tabulates it over N with each method's log-log slope, beside
 the analytic flops per agent and step (:func:`agent_flops`, from
-:func:`mascore.fusion.filter_cost` for the fusion filters) and the orders of
+:func:`mascore.fusion_cost.filter_cost` for the fusion filters) and the orders of
 :data:`AGENT_ORDER`.
 
 Tasks and methods (:data:`AGENT_METHODS`): the team task of
@@ -42,8 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import distributed_kf as dkf
-from . import estimation, fusion, kalman, rendezvous, set_membership
+from . import estimation, rendezvous
 from ._validation import check_budget, check_positive_int
 from .compare.benchmark import SETTINGS, BenchmarkSettings, check_n_agents
 from .compare.target import localization_model, target_model
@@ -54,8 +53,6 @@ __all__ = [
     "AGENT_ORDER",  # noqa: F822 (read from the specs by the module's __getattr__)
     "AGENT_TASKS",
     "TEAM_METHODS",
-    "TEAM_ORDER",
-    "TEAM_WHOLE_FILTER",
     "agent_methods",
     "MAX_AGENTS",
     "WHOLE_FILTER",  # noqa: F822 (read from the specs by the module's __getattr__)
@@ -72,12 +69,10 @@ __all__ = [
 
 #: Tasks whose per-agent cost is measured.
 AGENT_TASKS = ("team", "target", "localization")
-#: The team task's methods (the estimators of :mod:`mascore.compare`'s own-state task); the methods of the
-#: target and localization tasks are their specs' (:data:`mascore.fusion.METHODS`): see :func:`agent_methods`.
+#: The team task's methods timed (the estimators of :mod:`mascore.compare`'s own-state task at their own recipe;
+#: their specs sit beside their filters); the methods of the target and localization tasks are all their specs':
+#: see :func:`agent_methods`.
 TEAM_METHODS = ("centralized", "local", "forwarding", "song-mb", "song-eb", "vlahakis", "set-membership")
-#: Team methods whose busiest agent runs the whole filter: the centre, or every agent of Song et al.'s
-#: estimation-based filter, which needs the joint covariance of all agents' team estimates (their Remark 4).
-TEAM_WHOLE_FILTER = frozenset({("team", "centralized"), ("team", "song-eb")})
 #: Largest N measured per (task, method), with the reason; the others go to 128.
 MAX_AGENTS = {
     ("team", "song-eb"): (32, "its joint covariance of all agents' team estimates holds (2 N^2)^2 floats (per "
@@ -86,19 +81,6 @@ MAX_AGENTS = {
 
 #: Longest timing (s of CPU, repeats x min_time) :func:`agent_step_cost` accepts.
 _MAX_TIMING_S = 3600.0
-
-#: Leading-order work and memory of one team-task agent per step (n = 4 the state size; d the degree, N the team
-#: size); those of the target and localization tasks are their specs' orders (:data:`AGENT_ORDER`).
-TEAM_ORDER = {
-    ("team", "centralized"): ("O(N^3 n^3) at the centre", "O(N^2 n^2)"),
-    ("team", "local"): ("O(n^3)", "O(n^2)"),
-    ("team", "forwarding"): ("O(d n + n^3)", "O(n^2 + d n)"),
-    ("team", "song-mb"): ("O(N^3 n^3): its own covariance of the whole team", "O(N^2 n^2)"),
-    ("team", "song-eb"): ("O(N^6 n^3): the joint covariance of all team estimates (dense)", "O(N^4 n^2)"),
-    ("team", "vlahakis"): ("O(n^2 + d n)", "O(n + d n)"),
-    ("team", "set-membership"): ("O(n^3)", "O(n^2)"),
-}
-
 
 def agent_methods(task: str) -> tuple[str, ...]:
     """The methods whose per-agent cost is measured in `task`, in table order.
@@ -127,14 +109,12 @@ def agent_methods(task: str) -> tuple[str, ...]:
 
 def __getattr__(name: str):
     """``AGENT_METHODS``, ``WHOLE_FILTER`` and ``AGENT_ORDER``, read from the specs when asked (always current)."""
-    fusion_tasks = [t for t in AGENT_TASKS if t != "team"]
     if name == "AGENT_METHODS":  # methods per task
         return {t: agent_methods(t) for t in AGENT_TASKS}
     if name == "WHOLE_FILTER":  # (task, method) whose busiest agent runs the whole filter
-        return TEAM_WHOLE_FILTER | {(t, s.name) for t in fusion_tasks for s in estimation.method_specs(t)
-                                    if s.whole_filter}
+        return {(t, m) for t in AGENT_TASKS for m in agent_methods(t) if estimation.method_spec(m, t).whole_filter}
     if name == "AGENT_ORDER":  # (task, method) -> (work, memory) per agent and step
-        return {**TEAM_ORDER, **{(t, s.name): s.order[t] for t in fusion_tasks for s in estimation.method_specs(t)}}
+        return {(t, m): estimation.method_spec(m, t).order[t] for t in AGENT_TASKS for m in agent_methods(t)}
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -279,100 +259,17 @@ def _team_step(method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> 
         est.predict(U)
         x = x @ team.A.T + U @ team.B.T + np.sqrt(np.diag(team.Q)) * rng.standard_normal(x.shape)
     Z = measure()
-    if ("team", method) in TEAM_WHOLE_FILTER:
+    if estimation.method_spec(method, "team").whole_filter:
         U = control(Z)  # the inputs of the timed step (from the views before the update: the work is the same)
-        filt = est.filter
-
-        def run():
-            filt.update(Z, S)
-            if method == "centralized":
-                filt.predict(U)
-                return filt.view("x_hat"), filt.view("P")
-            filt.predict()
-            return filt.view("X_hat"), filt.view("Sigma")
-
-        return AgentStep("team", method, N, i, len(nbrs), "whole filter", run)
-
+        filt, own, messages = est.agent_inputs(Z, S, U, i)
+        return AgentStep("team", method, N, i, len(nbrs), "whole filter", lambda: filt.agent_step(i, own, messages))
     before = copy.deepcopy(est)  # agent i's prior, and the team's views of this step, from the same state
     est.update(Z, S)
     U = control(Z)
-    u_i = U[0, i].copy()
     est.predict(U)
-    z_own = Z[0, i, i].copy()
-    if method == "song-mb":
-        return _song_mb_step(before.filter, est.filter, Z[0, i].copy(), S[0, i], i, len(nbrs))
-    if method == "local":
-        model = kalman.LinearGaussianModel(team.A, team.Q_filter, np.eye(4), team.R, team.B)
-        x_i, P_i = before.own[0, i].copy(), np.array(before.P, dtype=float)
-
-        def run():
-            xu, Pu = kalman.update(x_i, P_i, z_own, model)
-            return kalman.predict(xu, Pu, model, u_i)
-
-        return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i], est.P))
-    if method == "forwarding":  # the filter's own agent step
-        filt = before.filter
-        own, messages = filt.agent_inputs(before.own[0], before.P[0], Z[0], S[0], U[0], i)
-
-        def run():
-            return filt.agent_step(i, own, messages)
-
-        return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i], est.P[0, i]))
-    if method == "vlahakis":  # the observer's own agent step, with the neighbours' broadcast output estimates
-        obs = before.observer
-        own, messages = obs.agent_inputs(before.own[0], Z[0, :, :, :2], U[0], i)
-
-        def run():
-            return obs.agent_step(i, own, messages)
-
-        return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i],))
-    # set-membership: the filter's public one-agent model
-    sm = set_membership.SetMembershipModel(A=team.A, G=np.eye(4), C=np.eye(4), D=np.eye(4), Q=before.W_proc,
-                                           R=before.W_meas, B=team.B)
-    c_i, E_i = before.own[0, i].copy(), before.shape[0, i].copy()
-
-    def run():
-        c, E, _ = sm.correct(c_i, E_i, z_own, check_consistency=False)
-        return sm.predict(c, E, u_i)
-
-    return AgentStep("team", method, N, i, len(nbrs), "one agent", run, lambda: (est.own[0, i], est.shape[0, i]))
-
-
-def _song_mb_step(before: dkf.TeamFilter, after: dkf.TeamFilter, Z_i: np.ndarray, seen: np.ndarray, i: int,
-                  degree: int) -> AgentStep:
-    """Agent i of Song et al.'s measurement-based filter: eqs. (16)-(20), then (14)-(15), on its own team filter.
-
-    The same kernels as :class:`mascore.distributed_kf.TeamFilter` with ``mode="mb"``, on agent i's
-    team estimate ``(N, m)`` and reduced covariance ``(N m_r, N m_r)`` only. The block-diagonal
-    process term of eq. (15) depends on the topology and the noise only: computed once.
-    """
-    from ._masked_gain import masked_gain
-
-    model = before.model
-    N, m, mr, Mr, k = model.n_agents, model.m, model.m_r, model.M_r, model.kron
-    L = np.array(before.laplacian, dtype=float)
-    X_i = np.array(before.X_hat[0, i])  # (N, m)
-    Sig_i = np.array(before.Sigma[0, i])  # (Mr, Mr)
-    d = np.repeat(seen, mr).astype(float)  # diag(D_i): the agents it measures
-    Rr = model.R_r.reshape(N, mr, N, mr)
-    Cj = np.einsum("jl,jk,lakc->jac", L, L, Rr)
-    noise = np.zeros((N, mr, N, mr))
-    noise[np.arange(N), :, np.arange(N), :] = model.BK_r @ Cj @ model.BK_r.T + model.Q_r
-    noise = noise.reshape(Mr, Mr)
-    A, BK = model.A, model.BK
-
-    def run():
-        KH = masked_gain(Sig_i, d, model.R_r)  # eq. (19): its own measurements
-        X = X_i + (KH @ (Z_i - X_i).reshape(Mr, k)).reshape(N, m)
-        Psi = np.eye(Mr) - KH
-        Sig = Psi @ Sig_i @ Psi.T + KH @ model.R_r @ KH.T  # Joseph form, eq. (20)
-        X = X @ A.T - (L @ X) @ BK.T  # eq. (14)
-        T = dkf._F1_rows(model, Sig.reshape(N, mr, Mr), L).reshape(Mr, Mr).T
-        Sig = dkf._F1_rows(model, T.reshape(N, mr, Mr), L).reshape(Mr, Mr) + noise  # eq. (15)
-        return X, 0.5 * (Sig + Sig.T)
-
-    return AgentStep("team", "song-mb", N, i, degree, "one agent", run,
-                     lambda: (after.X_hat[0, i], after.Sigma[0, i]))
+    filt, own, messages = before.agent_inputs(Z, S, U, i)
+    return AgentStep("team", method, N, i, len(nbrs), "one agent", lambda: filt.agent_step(i, own, messages),
+                     lambda: est.agent_state(i))
 
 
 def _fusion_step(task: str, method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> AgentStep:
@@ -540,8 +437,9 @@ class _one_thread:
 def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float:
     """Analytic floating-point operations of one agent per step (leading terms; a multiply-add is 2).
 
-    The fusion filters (target and localization) count as :func:`mascore.fusion.filter_cost`
-    (n = 4, q = 1; localization n = 2N, q = 2d). The team task counts the textbook
+    Each method's spec counts them (:attr:`mascore.estimation.MethodSpec.cost`). The fusion filters
+    (target and localization) count as :func:`mascore.fusion_cost.filter_cost` (n = 4, q = 1;
+    localization n = 2N, q = 2d). The team task counts the textbook
     algorithm at n = 4: a Kalman step ``4 n^3`` (prediction) plus ``26/3 n^3`` (information
     update); forwarding one more inverse; the Vlahakis observer ``2 n^2 + 4 d``; Song et
     al.'s measurement-based filter one agent's own team covariance (dimension Nn, with its
@@ -573,25 +471,8 @@ def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float
     _check_task_method(task, method)
     N = check_positive_int(n_agents, "n_agents")
     d = check_positive_int(degree, "degree", minimum=0)
-    if task != "team":
-        n, q = _dimensions(task, N, d)
-        return float(estimation.method_spec(method, task).cost(n, q, d, N)[1])
-    n = 4
-    kf = 4 * n**3 + 2 * n**2 + 26 / 3 * n**3 + 8 * n**2  # prediction + information update
-    if method == "local":
-        return float(kf)
-    if method == "forwarding":
-        return float(kf + n**3 + 2 * (d + 1) * n)
-    if method == "set-membership":
-        return float(kf + 2 * n**3)  # the closed-form correction, and the prediction's two products
-    if method == "vlahakis":
-        return float(2 * n**2 + 2 * n * 2 + 4 * d + 2 * n)
-    if method == "centralized":
-        return float(fusion.filter_cost("centralized", n=N * n, q=(d + 1) * n, degree=d, n_agents=N).flops)
-    if method == "song-mb":  # one agent's own team covariance, dimension N n, its (d + 1) n measurements
-        return float(fusion.filter_cost("measurement-forwarding", n=N * n, q=n, degree=d).flops)
-    M = N * N * n  # song-eb: the joint covariance, predicted densely (two products of M^3 each)
-    return float(4 * M**3)
+    n, q = _dimensions(task, N, d)
+    return float(estimation.method_spec(method, task).cost(n, q, d, N)[1])
 
 
 def agent_memory(task: str, method: str, n_agents: int, degree: int = 2) -> float:
@@ -616,23 +497,14 @@ def agent_memory(task: str, method: str, n_agents: int, degree: int = 2) -> floa
     _check_task_method(task, method)
     N = check_positive_int(n_agents, "n_agents")
     d = check_positive_int(degree, "degree", minimum=0)
-    if task != "team":
-        n, q = _dimensions(task, N, d)
-        spec = estimation.method_spec(method, task)
-        return float(spec.memory(n, q, d, N)) if spec.memory else float("nan")
-    n = 4
-    if method == "song-eb":
-        return float((N * N * n) ** 2)
-    if method in ("centralized", "song-mb"):  # the team's estimate and covariance (song-mb: agent i's own)
-        return float((N * n) ** 2 + N * n)
-    if method == "vlahakis":
-        return float(n + d * n)
-    return float(n**2 + n + d * n)
+    n, q = _dimensions(task, N, d)
+    spec = estimation.method_spec(method, task)
+    return float(spec.memory(n, q, d, N)) if spec.memory else float("nan")
 
 
 def _dimensions(task: str, n_agents: int, degree: int) -> tuple[int, int]:
-    """State size n and measurements per agent q of the target (4, 1) and localization (2N, 2d) tasks."""
-    return (4, 1) if task == "target" else (2 * n_agents, 2 * degree)
+    """State size n and measurements per agent q: team (4, 4: its own full state), target (4, 1), localization (2N, 2d)."""
+    return {"team": (4, 4), "target": (4, 1)}.get(task, (2 * n_agents, 2 * degree))
 
 
 # --------------------------------------------------------------------------------------------
@@ -640,12 +512,12 @@ def _dimensions(task: str, n_agents: int, degree: int) -> tuple[int, int]:
 
 
 def _order(task: str, method: str) -> tuple[str, str]:
-    """The order of one agent's work and memory per step (:data:`TEAM_ORDER`, or the method's spec)."""
-    return TEAM_ORDER[(task, method)] if task == "team" else estimation.method_spec(method, task).order[task]
+    """The order of one agent's work and memory per step (the method's spec)."""
+    return estimation.method_spec(method, task).order[task]
 
 
 def _whole_filter(task: str, method: str) -> bool:
-    return (task, method) in TEAM_WHOLE_FILTER if task == "team" else estimation.method_spec(method, task).whole_filter
+    return estimation.method_spec(method, task).whole_filter
 
 
 def agent_costs(sizes: Sequence[int] = (4, 8, 16, 32, 64, 128), tasks: Sequence[str] = AGENT_TASKS,

@@ -75,7 +75,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.integrate import solve_ivp
 
 from ._validation import (
     MAX_STEPS,
@@ -1109,6 +1108,8 @@ def _scalar_matvec(M: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def _integrate_ode(xi, P, breaks, graphs, Q, Om, t_eval, include_self, rtol, atol):
+    from scipy.integrate import solve_ivp  # the continuous-time runs only: the discrete steps load no ODE solver
+
     split = xi.size
     t_final = breaks[-1]
     count = [0]

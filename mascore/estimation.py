@@ -43,6 +43,7 @@ __all__ = [
     "method_specs",
     "method_spec",
     "method_names",
+    "not_applicable",
     "STUDY_LAYER",
 ]
 
@@ -323,3 +324,26 @@ def method_spec(name: str, task: str | None = None) -> MethodSpec:
         return matches[0]
     where = f" for task {task!r}" if task is not None else ""
     raise ValueError(f"method must be one of {tuple(s.name for s in specs)}{where}; got {name!r}")
+
+
+def not_applicable(scenario: str) -> dict[str, str]:
+    """The methods that do not apply to `scenario`, each with the reason its spec gives, in table order.
+
+    Parameters
+    ----------
+    scenario : str
+        A task (``"target"``, ``"localization"``) or a variant of one (``"position"``: position-only
+        sensing of the team task; ``"switching"``: a switching graph).
+
+    Returns
+    -------
+    dict of str to str
+        Method name -> why (:attr:`MethodSpec.not_applicable`).
+
+    Examples
+    --------
+    >>> from mascore.estimation import not_applicable
+    >>> list(not_applicable("position"))
+    ['song-mb', 'song-eb']
+    """
+    return {s.name: s.not_applicable[scenario] for s in method_specs() if scenario in s.not_applicable}

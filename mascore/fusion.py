@@ -3,8 +3,8 @@
 N agents track one common target ``x[k+1] = F x[k] + w[k]``, ``w ~ N(0, Q)``;
 agent i senses ``z_i[k] = H_i x[k] + v_i[k]``, ``v_i ~ N(0, R_i)`` (``q_i``
 numbers; ``q_i = 0`` for an agent that does not sense), the noises independent
-across agents and time. A :class:`SensorNetworkModel` holds this sensing and an
-undirected communication graph, checked once; every filter below is built on
+across agents and time. A :class:`~mascore.sensor_network.SensorNetworkModel` holds this sensing and
+an undirected communication graph, checked once; every filter below is built on
 the same model, so every method sees exactly the same sensing.
 
 =====================================  ==========================================================
@@ -21,7 +21,7 @@ the same model, so every method sees exactly the same sensing.
                                        neighbours' estimates (Hu, Xie and Zhang 2012)
 :func:`covariance_intersection`        fusion under unknown correlation (Julier and Uhlmann 1997)
 :func:`error_covariance`               a filter's exact error covariance (no Monte Carlo)
-:func:`filter_cost`                    floats sent and flops per agent per step
+:mod:`mascore.fusion_cost`             floats sent and flops per agent per step
 =====================================  ==========================================================
 
 Shapes: every distributed filter's state is ``x`` of shape ``(..., N, n)`` and
@@ -39,7 +39,7 @@ covariances, a symmetric graph) and keeps read-only copies; a step checks only
 the shapes of what it is given and that its result is finite (naming the input
 that holds a NaN or inf). Filters hold no estimates and no caches: a filter
 object is immutable and safe to share between threads. Randomness
-(:meth:`SensorNetworkModel.simulate`) comes only from the generator passed in.
+(:meth:`~mascore.sensor_network.SensorNetworkModel.simulate`) comes only from the generator passed in.
 
 References
 ----------
@@ -58,7 +58,7 @@ References
 - Xiao, L., Boyd, S., Lall, S. (2005). A scheme for robust distributed sensor fusion based on average
   consensus. Proc. IPSN, 63-70 (Metropolis weights).
 
-Consensus weights are Metropolis weights (:func:`metropolis_weights`), symmetric
+Consensus weights are Metropolis weights (:func:`~mascore.sensor_network.metropolis_weights`), symmetric
 and doubly stochastic; L consensus steps are applied as the precomputed power
 ``W^L`` (the same numbers as L rounds, up to rounding).
 """
@@ -67,19 +67,27 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from . import kalman
+from ._fusion_kernels import (
+    broadcast_batch,
+    ci_weights,
+    consensus_agent,
+    consensus_rounds,
+    from_information,
+    information_pair,
+    information_update,
+    mix,
+    psd_sqrt,
+)
 from ._validation import (
     Frozen,
-    as_matrix,
     check_adjacency,
     check_covariance,
     check_fits_in_memory,
-    check_generator,
     check_positive,
     check_positive_int,
     check_square,
@@ -89,11 +97,11 @@ from ._validation import (
     require_finite,
     symmetric_part,
 )
-from .agents import is_system, system_matrices
 from .estimation import Message, MethodSpec
+from .fusion_cost import filter_cost
+from .sensor_network import SensorNetworkModel
 
 __all__ = [
-    "SensorNetworkModel",
     "CentralizedFilter",
     "MeasurementForwardingFilter",
     "ConsensusOnInformationFilter",
@@ -103,410 +111,8 @@ __all__ = [
     "covariance_intersection",
     "error_covariance",
     "track",
-    "metropolis_weights",
-    "FilterCost",
-    "filter_cost",
     "METHODS",
 ]
-
-
-# --------------------------------------------------------------------------------------------
-# graph weights
-
-
-def metropolis_weights(adjacency: ArrayLike) -> np.ndarray:
-    """Metropolis consensus weights of an undirected graph (Xiao, Boyd and Lall 2005).
-
-    ``W[i, j] = 1 / (1 + max(d_i, d_j))`` for each neighbour j of i,
-    ``W[i, i] = 1 - sum_j W[i, j]``, 0 elsewhere; ``d_i`` is the number of
-    neighbours of i. W is symmetric and doubly stochastic, so ``W^L -> 11^T / N``
-    on a connected graph.
-
-    Parameters
-    ----------
-    adjacency : (N, N) array_like
-        Symmetric adjacency (``adjacency[i, j] > 0``: i and j communicate); weights
-        other than zero/non-zero are ignored.
-
-    Returns
-    -------
-    (N, N) ndarray
-        The weights.
-
-    Raises
-    ------
-    ValueError
-        `adjacency` not a symmetric, non-negative matrix with a zero diagonal.
-
-    Examples
-    --------
-    >>> from mascore import fusion, graphs
-    >>> fusion.metropolis_weights(graphs.path_graph(3))
-    array([[0.66666667, 0.33333333, 0.        ],
-           [0.33333333, 0.33333333, 0.33333333],
-           [0.        , 0.33333333, 0.66666667]])
-    """
-    A = check_adjacency(float_array(adjacency, "adjacency"), "adjacency", undirected=True,
-                        why="Metropolis weights are defined on undirected graphs")
-    return _metropolis(A > 0)
-
-
-def _metropolis(links: np.ndarray) -> np.ndarray:
-    deg = links.sum(axis=1)
-    W = np.where(links, 1.0 / (1.0 + np.maximum(deg[:, None], deg[None, :])), 0.0)
-    W[np.diag_indices_from(W)] = 1.0 - W.sum(axis=1)
-    return W
-
-
-# --------------------------------------------------------------------------------------------
-# the model
-
-
-class SensorNetworkModel(Frozen):
-    """A common target sensed by N agents on an undirected graph, checked once, when it is built.
-
-    ``x[k+1] = F x[k] + w[k]``, ``w ~ N(0, Q)``; agent i measures
-    ``z_i[k] = H_i x[k] + v_i[k]``, ``v_i ~ N(0, R_i)``, independent across agents
-    and steps. The constructor checks every matrix and keeps read-only copies; the
-    filters built on the model check only the per-step arrays.
-
-    Parameters
-    ----------
-    F : (n, n) array_like, or LTIAgent or StateSpace
-        State-transition matrix, finite; or a discrete-time system whose ``A`` it is.
-    Q : (n, n) array_like
-        Process-noise covariance, symmetric positive semidefinite.
-    H : sequence of N (q_i, n) array_like
-        Measurement matrices; ``q_i = 0`` (an array of shape ``(0, n)``) for an
-        agent that does not sense. At least one agent must sense.
-    R : sequence of N (q_i, q_i) array_like
-        Measurement-noise covariances, symmetric positive definite (``(0, 0)`` or
-        None for an agent that does not sense).
-    adjacency : (N, N) array_like
-        Undirected communication graph (``adjacency[i, j] > 0``: i and j exchange
-        messages), symmetric, no self-loops. It need not be connected, but the
-        consensus filters approach the centralized one only on a connected graph.
-
-    Attributes
-    ----------
-    F, Q : ndarray (read-only)
-        The dynamics.
-    H, R : tuple of ndarray (read-only)
-        Each agent's sensing.
-    adjacency : (N, N) ndarray (read-only)
-        The graph.
-    H_stacked, R_stacked : ndarray (read-only)
-        ``H = [H_1; ...; H_N]`` of shape ``(sum q_i, n)`` and ``R = blockdiag(R_i)``:
-        the centralized measurement model.
-    information_matrices : (N, n, n) ndarray (read-only)
-        ``H_i^T R_i^{-1} H_i`` (zero for an agent that does not sense).
-    weights : (N, N) ndarray (read-only)
-        The Metropolis weights of the graph (:func:`metropolis_weights`).
-
-    Raises
-    ------
-    ValueError, TypeError
-        A bad matrix, named in the message (``H[2]``, ``R[0]``, ``adjacency``).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from mascore import fusion, graphs
-    >>> F = [[1.0, 0.1], [0.0, 1.0]]                                      # position, velocity; dt = 0.1 s
-    >>> H = [[[1.0, 0.0]], np.zeros((0, 2)), [[1.0, 0.0]]]                # agent 1 does not sense
-    >>> R = [[[0.5]], None, [[2.0]]]
-    >>> model = fusion.SensorNetworkModel(F, 0.01 * np.eye(2), H, R, graphs.path_graph(3))
-    >>> model
-    SensorNetworkModel(N = 3 agents, n = 2 states, q = (1, 0, 1) measurements)
-    >>> model.information_matrices[:, 0, 0]                                # 1 / R_i
-    array([2. , 0. , 0.5])
-    """
-
-    __slots__ = ("F", "Q", "H", "R", "adjacency", "H_stacked", "R_stacked", "information_matrices", "weights",
-                 "_kf", "_owner", "_Rinv", "_neighbourhood", "_sqrt_Q", "_sqrt_R", "_slices")
-
-    def __init__(self, F: ArrayLike, Q: ArrayLike, H: Sequence[ArrayLike], R: Sequence[ArrayLike],
-                 adjacency: ArrayLike) -> None:
-        if is_system(F):
-            F = system_matrices(F, "discrete", name="F", needed_by="SensorNetworkModel, x[k+1] = F x[k] + w[k],")[0]
-        F = check_square(F, "F")
-        n = F.shape[0]
-        Q = check_covariance(Q, "Q", size=n)
-        A = check_adjacency(float_array(adjacency, "adjacency"), "adjacency", undirected=True,
-                            why="the consensus weights and the information exchange are symmetric")
-        N = A.shape[0]
-        if isinstance(H, np.ndarray) and H.ndim == 3:
-            H = list(H)
-        if isinstance(R, np.ndarray) and R.ndim == 3:
-            R = list(R)
-        for name, seq in (("H", H), ("R", R)):
-            if isinstance(seq, (str, bytes, np.ndarray)) or not hasattr(seq, "__len__"):
-                raise TypeError(f"{name} must be a sequence of N = {N} matrices (one per agent); got "
-                                f"{type(seq).__name__}")
-            if len(seq) != N:
-                raise ValueError(f"{name} must hold one matrix per agent: N = {N} (the adjacency's size); got "
-                                 f"{len(seq)}")
-        Hs, Rs = [], []
-        for i in range(N):
-            Hi = as_matrix(H[i], f"H[{i}]", (None, n))
-            q = Hi.shape[0]
-            if q == 0:
-                if R[i] is not None and float_array(R[i], f"R[{i}]").size:
-                    raise ValueError(f"R[{i}] must be empty (shape (0, 0)) or None: agent {i} has no measurement "
-                                     f"(H[{i}] has 0 rows)")
-                Ri = np.zeros((0, 0))
-            else:
-                if R[i] is None:
-                    raise TypeError(f"R[{i}] must be a ({q}, {q}) covariance for H[{i}] of shape {Hi.shape}; "
-                                    "got None")
-                Ri = check_covariance(float_array(R[i], f"R[{i}]"), f"R[{i}]", size=q, definite=True)
-            Hs.append(Hi)
-            Rs.append(Ri)
-        sizes = [h.shape[0] for h in Hs]
-        total = sum(sizes)
-        if total == 0:
-            raise ValueError("no agent senses (every H[i] has 0 rows): at least one measurement is needed")
-        H_st = np.concatenate(Hs, axis=0)
-        R_st = np.zeros((total, total))
-        Rinv = np.zeros((total, total))
-        owner = np.zeros((N, total))
-        slices, start = [], 0
-        info = np.zeros((N, n, n))
-        for i, (Hi, Ri) in enumerate(zip(Hs, Rs)):
-            sl = slice(start, start + sizes[i])
-            slices.append(sl)
-            start += sizes[i]
-            if sizes[i]:
-                R_st[sl, sl] = Ri
-                Ri_inv = symmetric_part(np.linalg.inv(Ri))
-                Rinv[sl, sl] = Ri_inv
-                owner[i, sl] = 1.0
-                info[i] = symmetric_part(Hi.T @ Ri_inv @ Hi)
-        finite_result("model's information matrices", info, Rinv, advice="R is too close to singular")
-        links = A > 0
-        self._set(F=frozen_copy(F), Q=frozen_copy(Q), H=tuple(frozen_copy(h) for h in Hs),
-                  R=tuple(frozen_copy(r) for r in Rs), adjacency=frozen_copy(A), H_stacked=frozen_copy(H_st),
-                  R_stacked=frozen_copy(R_st), information_matrices=frozen_copy(info),
-                  weights=frozen_copy(_metropolis(links)), _kf=kalman.LinearGaussianModel(F, Q, H_st, R_st),
-                  _owner=frozen_copy(owner), _Rinv=frozen_copy(Rinv),
-                  _neighbourhood=frozen_copy(links + np.eye(N)),  # N_i together with i
-                  _sqrt_Q=frozen_copy(_psd_sqrt(Q)), _sqrt_R=frozen_copy(_psd_sqrt(R_st)), _slices=tuple(slices))
-
-    def _args(self) -> tuple:
-        return (self.F, self.Q, self.H, self.R, self.adjacency)
-
-    def __repr__(self) -> str:
-        return (f"SensorNetworkModel(N = {self.n_agents} agents, n = {self.n_states} states, "
-                f"q = {self.measurement_sizes} measurements)")
-
-    @property
-    def n_agents(self) -> int:
-        """N, the number of agents."""
-        return self.adjacency.shape[0]
-
-    @property
-    def n_states(self) -> int:
-        """n, the length of the state."""
-        return self.F.shape[0]
-
-    @property
-    def measurement_sizes(self) -> tuple[int, ...]:
-        """``(q_1, ..., q_N)``, the length of each agent's measurement."""
-        return tuple(h.shape[0] for h in self.H)
-
-    @property
-    def n_measurements(self) -> int:
-        """``sum q_i``, the length of the stacked measurement ``z``."""
-        return self.H_stacked.shape[0]
-
-    def agent_measurement(self, z: ArrayLike, i: int) -> np.ndarray:
-        """Agent i's part ``z_i`` of a stacked measurement.
-
-        Parameters
-        ----------
-        z : (..., sum q_i) array_like
-            Stacked measurement(s).
-        i : int
-            Agent index, ``0 <= i < N``.
-
-        Returns
-        -------
-        (..., q_i) ndarray
-            A view of `z`.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> model = fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2), np.eye(1, 2)],
-        ...                                   [np.eye(2), np.eye(1)], graphs.path_graph(2))
-        >>> model.agent_measurement([1.0, 2.0, 3.0], 1)
-        array([3.])
-        """
-        z = self._check_z(z)
-        i = check_positive_int(i, "i", minimum=0)
-        if i >= self.n_agents:
-            raise ValueError(f"i must be an agent index below N = {self.n_agents}; got {i}")
-        return z[..., self._slices[i]]
-
-    def information_vectors(self, z: ArrayLike) -> np.ndarray:
-        """Each agent's information vector ``H_i^T R_i^{-1} z_i`` (zero for an agent that does not sense).
-
-        Parameters
-        ----------
-        z : (..., sum q_i) array_like
-            Stacked measurement(s), finite.
-
-        Returns
-        -------
-        (..., N, n) ndarray
-            Row i is agent i's vector.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> model = fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2), np.eye(1, 2)],
-        ...                                   [4.0 * np.eye(2), np.eye(1)], graphs.path_graph(2))
-        >>> model.information_vectors([1.0, 2.0, 3.0])
-        array([[0.25, 0.5 ],
-               [3.  , 0.  ]])
-        """
-        z = require_finite(self._check_z(z), "z")
-        return self._information_vectors(z)
-
-    def _information_vectors(self, z: np.ndarray) -> np.ndarray:
-        y = z @ self._Rinv  # (..., sum q): R^{-1} z, block by block
-        # agent i: sum over its rows r of y_r H_r  ->  owner (N, sum q) @ (y_r H_r) (..., sum q, n)
-        return self._owner @ (y[..., :, None] * self.H_stacked)
-
-    def _check_z(self, z: ArrayLike, name: str = "z") -> np.ndarray:
-        z = float_array(z, name)
-        if z.ndim < 1 or z.shape[-1] != self.n_measurements:
-            raise ValueError(f"Incompatible dimensions of {name}; expected (..., {self.n_measurements}) (the stacked "
-                             f"measurements z_1..z_N of sizes {self.measurement_sizes}) but found {z.shape}")
-        return z
-
-    def check_state(self, x: ArrayLike, P: ArrayLike, names: tuple[str, str] = ("x0", "P0"),
-                    per_agent: bool = True) -> tuple[np.ndarray, np.ndarray]:
-        """An initial state, checked in full: what a filter's ``run`` does once.
-
-        Parameters
-        ----------
-        x : (..., N, n) or (n,) array_like
-            Mean(s), finite; an ``(n,)`` mean is given to every agent.
-        P : (..., N, n, n) or (n, n) array_like
-            Covariance(s), symmetric positive definite (the information filters invert it).
-        names : (str, str)
-            Names of `x` and `P` in error messages.
-        per_agent : bool
-            True: the state of N agents, ``(..., N, n)``; False: one (centralized)
-            state ``(..., n)``.
-
-        Returns
-        -------
-        x, P : ndarray
-            Float arrays of shapes ``(..., N, n)``, ``(..., N, n, n)`` (or ``(..., n)``,
-            ``(..., n, n)``), copies.
-
-        Raises
-        ------
-        ValueError, TypeError
-            A bad mean or covariance, named.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> model = fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
-        ...                                   graphs.ring_graph(3))
-        >>> x, P = model.check_state(np.zeros(2), np.eye(2))
-        >>> x.shape, P.shape
-        ((3, 2), (3, 2, 2))
-        """
-        xname, Pname = names
-        n, N = self.n_states, self.n_agents
-        x = require_finite(float_array(x, xname), xname)
-        if x.ndim < 1 or x.shape[-1] != n:
-            raise ValueError(f"Incompatible dimensions of {xname}; expected (..., {n}) but found {x.shape}")
-        P = check_covariance(float_array(P, Pname), Pname, size=n, definite=True)
-        if per_agent:
-            if x.ndim == 1:
-                x = np.broadcast_to(x, (N, n))
-            if P.ndim == 2:
-                P = np.broadcast_to(P, (N, n, n))
-            if x.shape[-2] != N or P.shape[-3] != N:
-                raise ValueError(f"Incompatible dimensions of {xname} {x.shape} and {Pname} {P.shape}; expected "
-                                 f"(..., N, n) = (..., {N}, {n}) and (..., {N}, {n}, {n}) (or one (n,) mean and "
-                                 f"(n, n) covariance for every agent)")
-            batch = _broadcast(xname, x.shape[:-2], Pname, P.shape[:-3])
-            shape = (*batch, N, n)
-        else:
-            batch = _broadcast(xname, x.shape[:-1], Pname, P.shape[:-2])
-            shape = (*batch, n)
-        return np.broadcast_to(x, shape).copy(), np.broadcast_to(P, (*shape, n)).copy()
-
-    def simulate(self, x0: ArrayLike, P0: ArrayLike, n_steps: int, rng: np.random.Generator | int,
-                 n_runs: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Draw a target trajectory and every agent's measurements: the same data for every filter.
-
-        ``x[0] ~ N(x0, P0)``; for ``k = 1..n_steps``: ``x[k] = F x[k-1] + w``,
-        ``z[k] = H x[k] + v`` (stacked over agents).
-
-        Parameters
-        ----------
-        x0 : (n,) array_like
-            Mean of the initial state.
-        P0 : (n, n) array_like
-            Its covariance, symmetric positive semidefinite.
-        n_steps : int
-            K >= 1 steps.
-        rng : numpy.random.Generator or int
-            The only source of randomness (an int seeds ``default_rng``).
-        n_runs : int, optional
-            Independent runs along a leading axis (default: one run, no axis).
-
-        Returns
-        -------
-        x_true : (K + 1, [n_runs,] n) ndarray
-            States ``x[0..K]``.
-        z : (K, [n_runs,] sum q_i) ndarray
-            Measurements of steps 1..K.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> model = fusion.SensorNetworkModel(np.eye(2), 0.01 * np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
-        ...                                   graphs.ring_graph(3))
-        >>> x, z = model.simulate(np.zeros(2), np.eye(2), 10, rng=1)
-        >>> x.shape, z.shape
-        ((11, 2), (10, 6))
-        >>> bool(np.array_equal(z, model.simulate(np.zeros(2), np.eye(2), 10, rng=1)[1]))   # seeded: identical
-        True
-        """
-        gen = check_generator(rng)
-        n = self.n_states
-        x0 = require_finite(float_array(x0, "x0"), "x0")
-        if x0.shape != (n,):
-            raise ValueError(f"Incompatible dimensions of x0; expected ({n},) but found {x0.shape}")
-        P0 = check_covariance(float_array(P0, "P0"), "P0", size=n)
-        if P0.ndim != 2:
-            raise ValueError(f"P0 must be one ({n}, {n}) covariance; got shape {P0.shape}")
-        from ._validation import check_steps
-
-        K = check_steps(n_steps)
-        runs = () if n_runs is None else (check_positive_int(n_runs, "n_runs"),)
-        q = self.n_measurements
-        check_fits_in_memory(8.0 * (K + 1) * math.prod(runs) * (n + q), "n_runs" if runs else "n_steps",
-                             "the states and measurements drawn")
-        x = np.empty((K + 1, *runs, n))
-        z = np.empty((K, *runs, q))
-        x[0] = x0 + gen.standard_normal((*runs, n)) @ _psd_sqrt(P0).T
-        for k in range(K):
-            x[k + 1] = x[k] @ self.F.T + gen.standard_normal((*runs, n)) @ self._sqrt_Q.T
-            z[k] = x[k + 1] @ self.H_stacked.T + gen.standard_normal((*runs, q)) @ self._sqrt_R.T
-        return x, z
 
 
 # --------------------------------------------------------------------------------------------
@@ -554,8 +160,8 @@ class _NetworkFilter(Frozen):
         Examples
         --------
         >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> model = fusion.SensorNetworkModel([[1.0]], [[0.5]], [[[1.0]]] * 2, [[[1.0]]] * 2, graphs.path_graph(2))
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.5]], [[[1.0]]] * 2, [[[1.0]]] * 2, graphs.path_graph(2))
         >>> x, P = fusion.MeasurementForwardingFilter(model).predict(np.ones((2, 1)), np.ones((2, 1, 1)))
         >>> P[:, 0, 0]                                             # 1 + Q
         array([1.5, 1.5])
@@ -591,8 +197,8 @@ class _NetworkFilter(Frozen):
         Examples
         --------
         >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 2, [[[1.0]]] * 2, graphs.path_graph(2))
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 2, [[[1.0]]] * 2, graphs.path_graph(2))
         >>> x, P = fusion.MeasurementForwardingFilter(model).update(np.zeros((2, 1)), np.ones((2, 1, 1)), [3.0, 0.0])
         >>> x[:, 0], P[:, 0, 0]                                    # both hear both: information 1 + 2
         (array([1., 1.]), array([0.33333333, 0.33333333]))
@@ -601,7 +207,7 @@ class _NetworkFilter(Frozen):
         require_finite(P, "P")  # an information form would turn an infinite variance into silent zeros
         z = self.model._check_z(z)
         axis = 2 if self._per_agent else 1
-        _broadcast("x", x.shape[:-axis], "z", z.shape[:-1])
+        broadcast_batch("x", x.shape[:-axis], "z", z.shape[:-1])
         try:
             with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
                 out = self._correct(x, P, z)
@@ -624,7 +230,7 @@ class _NetworkFilter(Frozen):
         P0 : (..., N, n, n) or (n, n) array_like
             Initial covariances, symmetric positive definite.
         z : (K, ..., sum q_i) array_like
-            Measurements of steps 1..K (as :meth:`SensorNetworkModel.simulate` returns).
+            Measurements of steps 1..K (as :meth:`~mascore.sensor_network.SensorNetworkModel.simulate` returns).
 
         Returns
         -------
@@ -638,9 +244,9 @@ class _NetworkFilter(Frozen):
         Examples
         --------
         >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> model = fusion.SensorNetworkModel(np.eye(2), 0.01 * np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
-        ...                                   graphs.ring_graph(3))
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel(np.eye(2), 0.01 * np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
+        ...                                           graphs.ring_graph(3))
         >>> x_true, z = model.simulate(np.zeros(2), np.eye(2), 50, rng=0, n_runs=10)   # the same data for all
         >>> x, P = fusion.ConsensusOnInformationFilter(model, 2).run(np.zeros(2), np.eye(2), z)
         >>> x.shape, P.shape                                       # (K, runs, N, n); P shared by the runs
@@ -652,7 +258,7 @@ class _NetworkFilter(Frozen):
             raise ValueError(f"z must be (K, ..., {self.model.n_measurements}): one stacked measurement per step; "
                              f"got shape {z.shape}")
         axis = 2 if self._per_agent else 1
-        batch = _broadcast("x0", x.shape[:-axis], "z", z.shape[1:-1])
+        batch = broadcast_batch("x0", x.shape[:-axis], "z", z.shape[1:-1])
         n = self.model.n_states
         per_run = n * (1 + n) * (self.model.n_agents if self._per_agent else 1)
         check_fits_in_memory(8.0 * z.shape[0] * math.prod(batch) * per_run, "z",
@@ -698,9 +304,9 @@ class _NetworkFilter(Frozen):
         Examples
         --------
         >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> model = fusion.SensorNetworkModel(np.eye(2), 0.1 * np.eye(2), [np.eye(2)] * 4, [np.eye(2)] * 4,
-        ...                                   graphs.ring_graph(4))
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel(np.eye(2), 0.1 * np.eye(2), [np.eye(2)] * 4, [np.eye(2)] * 4,
+        ...                                           graphs.ring_graph(4))
         >>> filt = fusion.ConsensusOnInformationFilter(model, 3)
         >>> x, P, z = np.zeros((4, 2)), np.broadcast_to(np.eye(2), (4, 2, 2)), np.arange(8.0)
         >>> own, messages = filt.agent_inputs(x, P, z, 1)
@@ -758,9 +364,9 @@ class _NetworkFilter(Frozen):
         Examples
         --------
         >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> model = fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(1, 2)] * 3, [np.eye(1)] * 3,
-        ...                                   graphs.ring_graph(3))
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(1, 2)] * 3, [np.eye(1)] * 3,
+        ...                                           graphs.ring_graph(3))
         >>> fusion.ConsensusOnInformationFilter(model, 2).messages()
         (Message(what='information pair (Omega, q), per consensus round', floats=10.0),)
         """
@@ -799,13 +405,13 @@ class _NetworkFilter(Frozen):
             if P.ndim < 3 or P.shape[-3:] != (N, n, n):
                 raise ValueError(f"Incompatible dimensions of P; expected (..., N, n, n) = (..., {N}, {n}, {n}) but "
                                  f"found {P.shape}")
-            _broadcast("x", x.shape[:-2], "P", P.shape[:-3])
+            broadcast_batch("x", x.shape[:-2], "P", P.shape[:-3])
         else:
             if x.ndim < 1 or x.shape[-1] != n:
                 raise ValueError(f"Incompatible dimensions of x; expected (..., {n}) but found {x.shape}")
             if P.ndim < 2 or P.shape[-2:] != (n, n):
                 raise ValueError(f"Incompatible dimensions of P; expected (..., {n}, {n}) but found {P.shape}")
-            _broadcast("x", x.shape[:-1], "P", P.shape[:-2])
+            broadcast_batch("x", x.shape[:-1], "P", P.shape[:-2])
         return x, P
 
     def _correct(self, x: np.ndarray, P: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -829,8 +435,8 @@ class CentralizedFilter(_NetworkFilter):
     Examples
     --------
     >>> import numpy as np
-    >>> from mascore import fusion, graphs
-    >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.ring_graph(4))
+    >>> from mascore import fusion, graphs, sensor_network
+    >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.ring_graph(4))
     >>> x, P = fusion.CentralizedFilter(model).run([0.0], [[1.0]], np.ones((1, 4)))
     >>> x[-1], P[-1]                                           # prior 1 and four unit measurements: 1/5
     (array([0.8]), array([[0.2]]))
@@ -870,8 +476,8 @@ class MeasurementForwardingFilter(_NetworkFilter):
     Examples
     --------
     >>> import numpy as np
-    >>> from mascore import fusion, graphs
-    >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.path_graph(4))
+    >>> from mascore import fusion, graphs, sensor_network
+    >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.path_graph(4))
     >>> x, P = fusion.MeasurementForwardingFilter(model).run([0.0], [[1.0]], np.ones((1, 4)))
     >>> P[-1, :, 0, 0]                                         # end agents hear 2 measurements, inner ones 3
     array([0.33333333, 0.25      , 0.25      , 0.33333333])
@@ -882,11 +488,11 @@ class MeasurementForwardingFilter(_NetworkFilter):
 
     def __init__(self, model: SensorNetworkModel) -> None:
         super().__init__(model)
-        self._set(_S=frozen_copy(_mix(model._neighbourhood, model.information_matrices, 2)))
+        self._set(_S=frozen_copy(mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
-        i = _mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
-        return _information_update(x, P, self._S, i)
+        i = mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
+        return information_update(x, P, self._S, i)
 
 
 class DiffusionKalmanFilter(_NetworkFilter):
@@ -915,8 +521,8 @@ class DiffusionKalmanFilter(_NetworkFilter):
     Examples
     --------
     >>> import numpy as np
-    >>> from mascore import fusion, graphs
-    >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.path_graph(3))
+    >>> from mascore import fusion, graphs, sensor_network
+    >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.path_graph(3))
     >>> dkf = fusion.DiffusionKalmanFilter(model)
     >>> x, P = dkf.update(np.zeros((3, 1)), np.ones((3, 1, 1)), [3.0, 0.0, 0.0])
     >>> x[:, 0]                                   # psi = (1, 0.75, 0), then mixed with the Metropolis weights
@@ -937,18 +543,18 @@ class DiffusionKalmanFilter(_NetworkFilter):
             C = model.weights
         else:
             C = _check_stochastic(weights, "weights", model)
-        self._set(weights=frozen_copy(C), _S=frozen_copy(_mix(model._neighbourhood, model.information_matrices, 2)))
+        self._set(weights=frozen_copy(C), _S=frozen_copy(mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
-        i = _mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
-        psi, P_new = _information_update(x, P, self._S, i)
-        return _mix(self.weights, psi, 1), P_new
+        i = mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
+        psi, P_new = information_update(x, P, self._S, i)
+        return mix(self.weights, psi, 1), P_new
 
     def _messages(self, q, pair):
         return (Message("measurement z_i", q), Message("incremental estimate psi_i", float(self.model.n_states)))
 
     def _agent_messages(self, own, xm, Pm, z, i):
-        psi, _ = _information_update(xm, Pm, self._S, _mix(self.model._neighbourhood,
+        psi, _ = information_update(xm, Pm, self._S, mix(self.model._neighbourhood,
                                                              self.model._information_vectors(z), 1))
         return (*super()._agent_messages(own, xm, Pm, z, i), psi[own["nbrs"]].copy())
 
@@ -1005,8 +611,8 @@ class ConsensusOnInformationFilter(_NetworkFilter):
     Examples
     --------
     >>> import numpy as np
-    >>> from mascore import fusion, graphs
-    >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.complete_graph(4))
+    >>> from mascore import fusion, graphs, sensor_network
+    >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.complete_graph(4))
     >>> ci = fusion.ConsensusOnInformationFilter(model, n_consensus=1)
     >>> x, P = ci.update(np.zeros((4, 1)), np.ones((4, 1, 1)), [4.0, 0.0, 0.0, 0.0])
     >>> x[:, 0], P[:, 0, 0]                       # prior 1 + the average measurement information 1
@@ -1035,7 +641,7 @@ class ConsensusOnInformationFilter(_NetworkFilter):
                 raise ValueError(f"novelty_weight must be >= 1 (1: CI, N: HCMCI); got {novelty_weight!r}")
         WL = np.linalg.matrix_power(model.weights, L)
         self._set(n_consensus=L, novelty_weight=w, _WL=frozen_copy(WL))
-        self._set(_SL=frozen_copy(w * _mix(WL, model.information_matrices, 2)))
+        self._set(_SL=frozen_copy(w * mix(WL, model.information_matrices, 2)))
 
     def _messages(self, q, pair):
         pairs = "the prior and the novelty pairs" if self.novelty_weight != 1.0 else "information pair (Omega, q)"
@@ -1043,27 +649,27 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         return (Message(f"{pairs}, per consensus round", k * self.n_consensus * pair),)
 
     def _agent_messages(self, own, xm, Pm, z, i):
-        Om, q = _information_pair(xm, Pm)
+        Om, q = information_pair(xm, Pm)
         I, iv = self.model.information_matrices, self.model._information_vectors(z)
         pairs = [(Om, q), (np.broadcast_to(I, Om.shape), iv)] if self.novelty_weight != 1.0 else [(Om + I, q + iv)]
-        return _consensus_rounds(self.model.weights, pairs, own["nbrs"], self.n_consensus)
+        return consensus_rounds(self.model.weights, pairs, own["nbrs"], self.n_consensus)
 
     def _agent_step(self, i, own, messages):
         W = self.model.weights
         xp, Pp = self.model.F @ own["x"], self.model.F @ own["P"] @ self.model.F.T + self.model.Q
-        Om, qv = _information_pair(xp, Pp)
+        Om, qv = information_pair(xp, Pp)
         iv = own["HtRinv"][own["index"]] @ own["z"]
         cur = [(Om, qv), (own["I"], iv)] if self.novelty_weight != 1.0 else [(Om + own["I"], qv + iv)]
-        cur = _consensus_agent(cur, messages, W[i, i], W[i, own["nbrs"]])
+        cur = consensus_agent(cur, messages, W[i, i], W[i, own["nbrs"]])
         if self.novelty_weight != 1.0:
-            return _from_information(cur[0][0] + self.novelty_weight * cur[1][0], cur[0][1] + self.novelty_weight * cur[1][1])
-        return _from_information(*cur[0])
+            return from_information(cur[0][0] + self.novelty_weight * cur[1][0], cur[0][1] + self.novelty_weight * cur[1][1])
+        return from_information(*cur[0])
 
     def _correct(self, x, P, z):
-        Om, q = _information_pair(x, P)
-        Om = _mix(self._WL, Om, 2) + self._SL
-        q = _mix(self._WL, q, 1) + self.novelty_weight * _mix(self._WL, self.model._information_vectors(z), 1)
-        return _from_information(Om, q)
+        Om, q = information_pair(x, P)
+        Om = mix(self._WL, Om, 2) + self._SL
+        q = mix(self._WL, q, 1) + self.novelty_weight * mix(self._WL, self.model._information_vectors(z), 1)
+        return from_information(Om, q)
 
 
 class InformationConsensusFilter(_NetworkFilter):
@@ -1102,8 +708,8 @@ class InformationConsensusFilter(_NetworkFilter):
     Examples
     --------
     >>> import numpy as np
-    >>> from mascore import fusion, graphs
-    >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.ring_graph(4))
+    >>> from mascore import fusion, graphs, sensor_network
+    >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.ring_graph(4))
     >>> icf = fusion.InformationConsensusFilter(model, n_iterations=60)
     >>> x, P = icf.update(np.zeros((4, 1)), np.ones((4, 1, 1)), [4.0, 0.0, 0.0, 0.0])
     >>> np.round(x[:, 0], 6), np.round(P[:, 0, 0], 6)         # centralized: 0.8, 0.2
@@ -1131,7 +737,7 @@ class InformationConsensusFilter(_NetworkFilter):
         Lap = np.diag(links.sum(axis=1).astype(float)) - links
         WK = np.linalg.matrix_power(np.eye(model.n_agents) - eps * Lap, K)
         self._set(n_iterations=K, rate=eps, _WK=frozen_copy(WK))
-        self._set(_SK=frozen_copy(_mix(WK, model.information_matrices, 2)))
+        self._set(_SK=frozen_copy(mix(WK, model.information_matrices, 2)))
 
     def _messages(self, q, pair):
         return (Message("information pair (V, v), per consensus iteration", self.n_iterations * pair),)
@@ -1142,24 +748,24 @@ class InformationConsensusFilter(_NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         N = self.model.n_agents
-        Om, q = _information_pair(xm, Pm)
+        Om, q = information_pair(xm, Pm)
         pairs = [(Om / N + self.model.information_matrices, q / N + self.model._information_vectors(z))]
-        return _consensus_rounds(self._consensus_matrix(), pairs, own["nbrs"], self.n_iterations)
+        return consensus_rounds(self._consensus_matrix(), pairs, own["nbrs"], self.n_iterations)
 
     def _agent_step(self, i, own, messages):
         N, W = self.model.n_agents, self._consensus_matrix()
         xp, Pp = self.model.F @ own["x"], self.model.F @ own["P"] @ self.model.F.T + self.model.Q
-        Om, qv = _information_pair(xp, Pp)
+        Om, qv = information_pair(xp, Pp)
         iv = own["HtRinv"][own["index"]] @ own["z"]
-        (Om_f, q_f), = _consensus_agent([(Om / N + own["I"], qv / N + iv)], messages, W[i, i], W[i, own["nbrs"]])
-        x_f, P_f = _from_information(Om_f, q_f)
+        (Om_f, q_f), = consensus_agent([(Om / N + own["I"], qv / N + iv)], messages, W[i, i], W[i, own["nbrs"]])
+        x_f, P_f = from_information(Om_f, q_f)
         return x_f, P_f / N
 
     def _correct(self, x, P, z):
         N = self.model.n_agents
-        J, q = _information_pair(x, P)
-        V = _mix(self._WK, J, 2) / N + self._SK
-        v = _mix(self._WK, q, 1) / N + _mix(self._WK, self.model._information_vectors(z), 1)
+        J, q = information_pair(x, P)
+        V = mix(self._WK, J, 2) / N + self._SK
+        v = mix(self._WK, q, 1) / N + mix(self._WK, self.model._information_vectors(z), 1)
         Vinv = symmetric_part(np.linalg.inv(V))
         return (Vinv @ v[..., None])[..., 0], Vinv / N
 
@@ -1201,8 +807,8 @@ class CovarianceIntersectionFilter(_NetworkFilter):
     Examples
     --------
     >>> import numpy as np
-    >>> from mascore import fusion, graphs
-    >>> model = fusion.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.path_graph(3))
+    >>> from mascore import fusion, graphs, sensor_network
+    >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.path_graph(3))
     >>> cif = fusion.CovarianceIntersectionFilter(model, measurements="own")
     >>> x, P = cif.update(np.zeros((3, 1)), np.ones((3, 1, 1)), [3.0, 0.0, 0.0])
     >>> x[:, 0], P[:, 0, 0]              # local estimates 1.5, 0, 0, all with P = 1/2: equal weights
@@ -1223,13 +829,13 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         if measurements not in ("neighbourhood", "own"):
             raise ValueError(f"measurements must be 'neighbourhood' or 'own'; got {measurements!r}")
         M = model._neighbourhood if measurements == "neighbourhood" else np.eye(model.n_agents)
-        self._set(criterion=criterion, measurements=measurements, _S=frozen_copy(_mix(M, model.information_matrices, 2)),
+        self._set(criterion=criterion, measurements=measurements, _S=frozen_copy(mix(M, model.information_matrices, 2)),
                   _hood=tuple(frozen_copy(np.flatnonzero(row), int) for row in model._neighbourhood))
 
     def _correct(self, x, P, z):
         M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
-        psi, P_loc = _information_update(x, P, self._S, _mix(M, self.model._information_vectors(z), 1))
-        Om, q = _information_pair(psi, P_loc)  # (..., N, n, n), (..., N, n)
+        psi, P_loc = information_update(x, P, self._S, mix(M, self.model._information_vectors(z), 1))
+        Om, q = information_pair(psi, P_loc)  # (..., N, n, n), (..., N, n)
         C = np.zeros((*P_loc.shape[:-3], self.model.n_agents, self.model.n_agents))
         for idx in np.ndindex(*P_loc.shape[:-3]):  # the weights: from the covariances only
             for i, hood in enumerate(self._hood):
@@ -1237,11 +843,11 @@ class CovarianceIntersectionFilter(_NetworkFilter):
                 if self.criterion is None:
                     C[idx + (i, hood)] = 1.0 / len(hood)
                 else:
-                    C[idx + (i, hood)] = _ci_weights(infos, self.criterion)
+                    C[idx + (i, hood)] = ci_weights(infos, self.criterion)
         # agent i: Omega_i = sum_j C_ij Omega_j, q_i = sum_j C_ij q_j
         Om_f = np.einsum("...ij,...jab->...iab", C, Om)
         q_f = np.einsum("...ij,...ja->...ia", C, q)
-        return _from_information(Om_f, q_f)
+        return from_information(Om_f, q_f)
 
     def _messages(self, q, pair):
         return (Message("measurement z_i", q if self.measurements == "neighbourhood" else 0.0),
@@ -1249,8 +855,8 @@ class CovarianceIntersectionFilter(_NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
-        psi, P_loc = _information_update(xm, Pm, self._S, _mix(M, self.model._information_vectors(z), 1))
-        Om, q = _information_pair(psi[own["nbrs"]], P_loc[own["nbrs"]])
+        psi, P_loc = information_update(xm, Pm, self._S, mix(M, self.model._information_vectors(z), 1))
+        Om, q = information_pair(psi[own["nbrs"]], P_loc[own["nbrs"]])
         received = super()._agent_messages(own, xm, Pm, z, i)
         return (received[0] if self.measurements == "neighbourhood" else (), (Om, q))
 
@@ -1280,9 +886,9 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         Examples
         --------
         >>> import numpy as np
-        >>> from mascore import fusion, graphs
-        >>> model = fusion.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
-        ...                                   graphs.ring_graph(3))
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
+        ...                                           graphs.ring_graph(3))
         >>> filt = fusion.CovarianceIntersectionFilter(model)
         >>> own, messages = filt.agent_inputs(np.zeros((3, 2)), np.broadcast_to(np.eye(2), (3, 2, 2)), np.ones(6), 0)
         >>> len(messages[0]), messages[1][0].shape                  # two measurements; two information matrices
@@ -1295,7 +901,7 @@ class CovarianceIntersectionFilter(_NetworkFilter):
 
     def _agent_step(self, i, own, messages):
         psi, Pn = self._incremental(own, messages[0])
-        Om, qv = _information_pair(psi, Pn)
+        Om, qv = information_pair(psi, Pn)
         Om_nb, q_nb = messages[1]
         k = int((own["nbrs"] < i).sum())  # i's place in its neighbourhood
         infos = np.insert(Om_nb, k, Om, axis=0)
@@ -1303,8 +909,8 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         if self.criterion is None:
             w = np.full(len(infos), 1.0 / len(infos))
         else:
-            w = _ci_weights(infos, self.criterion)
-        return _from_information(np.einsum("k,kab->ab", w, infos), w @ qs)
+            w = ci_weights(infos, self.criterion)
+        return from_information(np.einsum("k,kab->ab", w, infos), w @ qs)
 
 
 def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
@@ -1320,13 +926,13 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     ----------
     filt : fusion filter
         One of this module's filters (e.g. :class:`ConsensusOnInformationFilter`), built on the
-        network's :class:`SensorNetworkModel`.
+        network's :class:`~mascore.sensor_network.SensorNetworkModel`.
     x0 : (..., N, n) or (n,) array_like
         Initial means (one ``(n,)`` mean for every agent allowed), finite.
     P0 : (..., N, n, n) or (n, n) array_like
         Initial covariances, symmetric positive definite.
     z : (K, ..., sum q_i) array_like
-        Measurements of steps 1..K (as :meth:`SensorNetworkModel.simulate` returns).
+        Measurements of steps 1..K (as :meth:`~mascore.sensor_network.SensorNetworkModel.simulate` returns).
     graphs : sequence of K adjacency matrices or networkx graphs, or (K, N, N) array_like, optional
         The communication graph of each step (undirected, N agents; ``A[i, j] > 0``: i and j
         exchange). Default: the model's graph at every step.
@@ -1348,9 +954,9 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     --------
     >>> import networkx as nx
     >>> import numpy as np
-    >>> from mascore import fusion, graphs
-    >>> model = fusion.SensorNetworkModel(np.eye(2), 0.01 * np.eye(2), [np.eye(2)] * 4, [np.eye(2)] * 4,
-    ...                                   graphs.ring_graph(4))
+    >>> from mascore import fusion, graphs, sensor_network
+    >>> model = sensor_network.SensorNetworkModel(np.eye(2), 0.01 * np.eye(2), [np.eye(2)] * 4, [np.eye(2)] * 4,
+    ...                                           graphs.ring_graph(4))
     >>> x_true, z = model.simulate(np.zeros(2), np.eye(2), 20, rng=0)
     >>> switching = [nx.path_graph(4) if k % 2 else nx.cycle_graph(4) for k in range(20)]
     >>> x, P = fusion.track(fusion.ConsensusOnInformationFilter(model, 2), np.zeros(2), np.eye(2), z, switching)
@@ -1375,7 +981,7 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     if len(graphs) != K:
         raise ValueError(f"graphs must hold one graph per step: K = {K} (the steps of z); got {len(graphs)}")
     axis = 2 if filt._per_agent else 1
-    batch = _broadcast("x0", x.shape[:-axis], "z", z.shape[1:-1])
+    batch = broadcast_batch("x0", x.shape[:-axis], "z", z.shape[1:-1])
     n, N = model.n_states, model.n_agents
     check_fits_in_memory(8.0 * K * math.prod(batch) * n * (1 + n) * (N if filt._per_agent else 1), "z",
                          "the estimates and covariances of every step and run")
@@ -1436,9 +1042,9 @@ def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true:
     Examples
     --------
     >>> import numpy as np
-    >>> from mascore import fusion, graphs
-    >>> model = fusion.SensorNetworkModel(np.eye(2), 0.1 * np.eye(2), [np.eye(2), np.eye(1, 2), np.zeros((0, 2))],
-    ...                                   [np.eye(2), np.eye(1), None], graphs.path_graph(3))
+    >>> from mascore import fusion, graphs, sensor_network
+    >>> model = sensor_network.SensorNetworkModel(np.eye(2), 0.1 * np.eye(2), [np.eye(2), np.eye(1, 2), np.zeros((0, 2))],
+    ...                                           [np.eye(2), np.eye(1), None], graphs.path_graph(3))
     >>> C, P = fusion.error_covariance(fusion.ConsensusOnInformationFilter(model, 2), np.eye(2), 20)
     >>> bool(np.linalg.eigvalsh(P - C).min() >= 0)             # consistent
     True
@@ -1463,7 +1069,7 @@ def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true:
         raise ValueError(f"P0_true must be one ({n}, {n}) covariance; got shape {P0_true.shape}")
     D = n + K * (n + q)
     truth = np.zeros((D, n))
-    truth[:n] = _psd_sqrt(P0_true).T
+    truth[:n] = psd_sqrt(P0_true).T
     x = np.zeros((D, *x.shape))
     C_out = np.empty((K, *P.shape))
     P_out = np.empty((K, *P.shape))
@@ -1552,7 +1158,7 @@ def covariance_intersection(means: ArrayLike, covs: ArrayLike, weights: str | Ar
         if weights is None:
             w = np.full(k, 1.0 / k)
         elif weights in ("trace", "det"):
-            w = _ci_weights(infos, weights)
+            w = ci_weights(infos, weights)
         else:
             raise ValueError(f"weights must be 'trace', 'det', None or a (k,) array; got {weights!r}")
     else:
@@ -1567,182 +1173,15 @@ def covariance_intersection(means: ArrayLike, covs: ArrayLike, weights: str | Ar
     return finite_result("covariance intersection", x, P, w, advice="the covariances are too close to singular")
 
 
-def _ci_objective(infos: np.ndarray, criterion: str):
-    def f(w):
-        info = np.einsum("k,kij->ij", w, infos)
-        if criterion == "det":
-            sign, logdet = np.linalg.slogdet(info)
-            return -logdet if sign > 0 else np.inf
-        return float(np.trace(np.linalg.inv(info)))
-
-    def grad(w):
-        inv = np.linalg.inv(np.einsum("k,kij->ij", w, infos))
-        if criterion == "det":  # d(-log det) / dw_k = -tr(Om^{-1} Om_k)
-            return -np.einsum("ij,kji->k", inv, infos)
-        return -np.einsum("ij,kjl,li->k", inv, infos, inv)  # d tr(Om^{-1}) / dw_k = -tr(Om^-1 Om_k Om^-1)
-
-    return f, grad
-
-
-def _ci_weights(infos: np.ndarray, criterion: str) -> np.ndarray:
-    """The simplex weights minimizing trace or det of the fused covariance (a convex problem)."""
-    from scipy import optimize
-
-    k = infos.shape[0]
-    if k == 1:
-        return np.ones(1)
-    f, grad = _ci_objective(infos, criterion)
-    w0 = np.full(k, 1.0 / k)
-    if k == 2:
-        res = optimize.minimize_scalar(lambda a: f(np.array([a, 1.0 - a])), bounds=(0.0, 1.0), method="bounded",
-                                       options={"xatol": 1e-12})
-        # the bounded search never returns an end point: take one if it is better
-        w = min((np.array([t, 1.0 - t]) for t in (float(res.x), 0.0, 1.0)), key=f)
-    else:
-        res = optimize.minimize(f, w0, jac=grad, method="SLSQP", bounds=[(0.0, 1.0)] * k,
-                                constraints=({"type": "eq", "fun": lambda w: w.sum() - 1.0,
-                                              "jac": lambda w: np.ones_like(w)},),
-                                options={"ftol": 1e-14, "maxiter": 500})
-        w = np.clip(res.x, 0.0, None)
-        w = w / w.sum()
-    # a tie (a flat criterion, e.g. equal covariances) keeps the equal weights: the result does not depend on
-    # where the search stopped
-    return w if f(w) < f(w0) * (1 - 1e-12) else w0
-
-
-# --------------------------------------------------------------------------------------------
-# cost model
-
-
-@dataclass(frozen=True)
-class FilterCost:
-    """Floats sent and flops per agent per step of one filter, with the formulas.
-
-    Parameters
-    ----------
-    method : str
-        The filter.
-    floats_sent : float
-        Numbers each agent broadcasts per step (a broadcast reaches every neighbour).
-    flops : float
-        Floating-point operations per agent per step (leading terms; a multiply-add is 2).
-    floats_formula, flops_formula : str
-        The same as formulas of n, q, d (degree), L (iterations), N.
-    note : str
-        What the count assumes.
-
-    Examples
-    --------
-    >>> from mascore.fusion import filter_cost
-    >>> filter_cost("measurement-forwarding", n=4, q=2, degree=2).floats_sent
-    2.0
-    """
-
-    method: str
-    floats_sent: float
-    flops: float
-    floats_formula: str
-    flops_formula: str
-    note: str = ""
-
-
-#: The methods :func:`filter_cost` knows.
-_COST_METHODS = ("centralized", "measurement-forwarding", "consensus-on-information", "hcmci",
-                 "information-consensus", "diffusion-kf", "covariance-intersection")
-
-
-def filter_cost(method: str, n: int, q: int, degree: int, iterations: int = 1, n_agents: int = 1) -> FilterCost:
-    """Floats sent and flops per agent per step of a filter, as formulas of (n, q, d, L, N).
-
-    Leading-order counts for a time-invariant model (``H_j^T R_j^{-1} H_j`` and
-    ``R_j^{-1}`` computed once): a matrix product ``2 n^3``, an inverse of a
-    symmetric positive definite matrix ``n^3``, a solve with n right-hand sides
-    ``8/3 n^3``; a symmetric matrix is sent as its ``n (n + 1) / 2`` distinct
-    entries. Per step: the prediction ``4 n^3``; the local information vector
-    ``2 q^2 + 2 q n``; a consensus step mixes ``d + 1`` pairs.
-
-    Parameters
-    ----------
-    method : str
-        ``"centralized"`` (floats: sent to the centre; flops: the centre's),
-        ``"measurement-forwarding"``, ``"consensus-on-information"`` (CI),
-        ``"hcmci"``, ``"information-consensus"`` (ICF), ``"diffusion-kf"``,
-        ``"covariance-intersection"`` (:class:`CovarianceIntersectionFilter`:
-        ``iterations`` = evaluations of the weight search).
-    n : int
-        State dimension.
-    q : int
-        Measurement dimension per agent (0 allowed).
-    degree : int
-        d, neighbours per agent.
-    iterations : int
-        L (or K): consensus steps per update (evaluations of the weight search for
-        covariance intersection).
-    n_agents : int
-        N (used by the centralized count only).
-
-    Returns
-    -------
-    FilterCost
-        The counts and formulas.
-
-    Examples
-    --------
-    >>> from mascore.fusion import filter_cost
-    >>> c = filter_cost("consensus-on-information", n=4, q=2, degree=2, iterations=3)
-    >>> c.floats_sent, c.floats_formula
-    (42.0, 'L (n (n + 1) / 2 + n)')
-    """
-    if method not in _COST_METHODS:
-        raise ValueError(f"method must be one of {_COST_METHODS}; got {method!r}")
-    n = check_positive_int(n, "n")
-    q = check_positive_int(q, "q", minimum=0)
-    d = check_positive_int(degree, "degree", minimum=0)
-    L = check_positive_int(iterations, "iterations", minimum=0)
-    N = check_positive_int(n_agents, "n_agents")
-    pair = n * (n + 1) / 2 + n  # a symmetric matrix and a vector
-    predict = 4 * n**3 + 2 * n**2
-    local = 2 * q**2 + 2 * q * n
-    info_update = 2 * n**3 + 8 / 3 * n**3 + 6 * n**2  # P S, solve (I + P S) X = P, the mean
-    to_info = n**3 + 2 * n**2  # Omega = P^{-1}, q = Omega x
-    from_info = n**3 + 2 * n**2  # P = Omega^{-1}, x = P q
-    mix = 2 * (d + 1) * pair
-    if method == "centralized":
-        return FilterCost(method, float(q), N * local + predict + info_update, "q",
-                          "N (2 q^2 + 2 q n) + 26/3 n^3 + 8 n^2",
-                          "floats: each agent to the centre; flops: the centre's, information form")
-    if method == "measurement-forwarding":
-        return FilterCost(method, float(q), (d + 1) * local + (d + 1) * n + predict + info_update, "q",
-                          "(d + 1) (2 q^2 + 2 q n + n) + 26/3 n^3 + 8 n^2")
-    if method == "diffusion-kf":
-        return FilterCost(method, float(q + n), (d + 1) * local + (d + 1) * n + predict + info_update
-                          + 2 * (d + 1) * n, "q + n", "(d + 1) (2 q^2 + 2 q n + 3 n) + 26/3 n^3 + 8 n^2",
-                          "measurements for the incremental step, then psi_i for the diffusion")
-    if method in ("consensus-on-information", "information-consensus"):
-        return FilterCost(method, L * pair, predict + to_info + local + L * mix + from_info,
-                          "L (n (n + 1) / 2 + n)",
-                          "6 n^3 + 2 q^2 + 2 q n + 2 L (d + 1) (n (n + 1) / 2 + n) + 6 n^2")
-    if method == "hcmci":
-        return FilterCost(method, 2 * L * pair, predict + to_info + local + 2 * L * mix + from_info,
-                          "2 L (n (n + 1) / 2 + n)",
-                          "6 n^3 + 2 q^2 + 2 q n + 4 L (d + 1) (n (n + 1) / 2 + n) + 6 n^2",
-                          "the prior and the novelty pairs, each L steps")
-    # CovarianceIntersectionFilter: incremental update with the neighbourhood's measurements, then one covariance
-    # intersection of the d + 1 neighbourhood estimates (each sent as an information pair)
-    incremental = (d + 1) * local + (d + 1) * n + predict + info_update
-    fuse = to_info + L * (2 * (d + 1) * n**2 + n**3) + 2 * (d + 1) * pair + from_info
-    return FilterCost(method, q + pair, incremental + fuse, "q + n (n + 1) / 2 + n",
-                      "(d + 1) (2 q^2 + 2 q n + n) + 32/3 n^3 + 12 n^2 + L (2 (d + 1) n^2 + n^3) "
-                      "+ 2 (d + 1) (n (n + 1) / 2 + n)",
-                      "measurements, then the information pair; L = evaluations of the weight search (about 10-30)")
-
-
 # --------------------------------------------------------------------------------------------
 # the methods of the common-target and localization tasks (mascore.compare, mascore.agent_cost)
 
 
 def _cost(name: str, iterations: int = 1, degree: bool = True):
-    """``cost(n, q, degree, n_agents) -> (floats, flops)`` of :func:`filter_cost` for `name` (no neighbours if not `degree`)."""
+    """``cost(n, q, degree, n_agents) -> (floats, flops)`` of :func:`~mascore.fusion_cost.filter_cost` for `name`.
+
+    No neighbours if not `degree`.
+    """
     def cost(n: int, q: int, d: int, n_agents: int) -> tuple[float, float]:
         c = filter_cost(name, n=n, q=q, degree=d if degree else 0, iterations=iterations, n_agents=n_agents)
         return c.floats_sent, c.flops
@@ -1818,65 +1257,6 @@ def _settings_for_any_graph(filt: _NetworkFilter) -> tuple:
     return filt._args()
 
 
-def _mix(W: np.ndarray, X: np.ndarray, axes: int) -> np.ndarray:
-    """``Y_i = sum_j W[i, j] X_j`` over the agent axis of X ``(..., N, *rest)``, rest of `axes` (1 or 2) axes."""
-    rest = X.shape[X.ndim - axes:]
-    flat = X.reshape(*X.shape[:X.ndim - axes], -1)
-    return (W @ flat).reshape(*flat.shape[:-2], W.shape[0], *rest)
-
-
-def _information_update(x, P, S, i):
-    """``P+ = (P^{-1} + S)^{-1} = (I + P S)^{-1} P``, ``x+ = x + P+ (i - S x)`` (no inverse of P)."""
-    n = x.shape[-1]
-    P_new = symmetric_part(np.linalg.solve(np.eye(n) + P @ S, P))
-    r = i - (S @ x[..., None])[..., 0]
-    return x + (P_new @ r[..., None])[..., 0], P_new
-
-
-def _consensus_rounds(W: np.ndarray, pairs: list, nbrs: np.ndarray, rounds: int) -> tuple:
-    """The neighbours' pairs of each consensus round, from the team's initial pairs (round l: after l mixes)."""
-    out = []
-    for _ in range(rounds):
-        out.append(tuple((M[nbrs].copy(), v[nbrs].copy()) for M, v in pairs))
-        pairs = [(_mix(W, M, 2), _mix(W, v, 1)) for M, v in pairs]
-    return tuple(out)
-
-
-def _consensus_agent(pairs: list, rounds: Sequence, w_self: float, w_nb: np.ndarray) -> list:
-    """One agent's consensus rounds: its own pairs weighted, plus its neighbours' received pairs, per round."""
-    for received in rounds:
-        pairs = [(w_self * M + np.einsum("k,kab->ab", w_nb, Mn), w_self * v + w_nb @ vn)
-                 for (M, v), (Mn, vn) in zip(pairs, received)]
-    return pairs
-
-
-def _information_pair(x, P):
-    """``(P^{-1}, P^{-1} x)``."""
-    Om = symmetric_part(np.linalg.inv(P))
-    return Om, (Om @ x[..., None])[..., 0]
-
-
-def _from_information(Om, q):
-    """``(Om^{-1} q, Om^{-1})``."""
-    P = symmetric_part(np.linalg.inv(Om))
-    return (P @ q[..., None])[..., 0], P
-
-
-def _psd_sqrt(M: np.ndarray) -> np.ndarray:
-    """A square root S of a PSD matrix (``S S^T = M``), from its eigen-decomposition."""
-    if M.size == 0:
-        return np.zeros_like(M)
-    lam, V = np.linalg.eigh(M)
-    return V * np.sqrt(np.clip(lam, 0.0, None))
-
-
-def _broadcast(aname: str, a: tuple, bname: str, b: tuple) -> tuple:
-    try:
-        return np.broadcast_shapes(a, b)
-    except ValueError:
-        raise ValueError(f"the batch axes of {aname} {a} and {bname} {b} do not broadcast") from None
-
-
 def _check_stochastic(C: ArrayLike, name: str, model: SensorNetworkModel) -> np.ndarray:
     """Row-stochastic weights on the graph and the diagonal."""
     N = model.n_agents
@@ -1888,4 +1268,3 @@ def _check_stochastic(C: ArrayLike, name: str, model: SensorNetworkModel) -> np.
         raise ValueError(f"{name} must be zero where the graph has no link (C[i, l] > 0 needs l = i or "
                          "adjacency[i, l] > 0)")
     return C
-

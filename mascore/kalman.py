@@ -44,6 +44,7 @@ factor ``(I - K H)^T`` is formed explicitly, and the result is symmetrized.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -52,6 +53,8 @@ from ._validation import Frozen, check_covariance, check_positive_int, finite_re
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .agents import is_system, system_matrices
+from .estimation import Message, MethodSpec
+from .fusion_cost import kalman_step_flops
 
 __all__ = ["LinearGaussianModel", "predict", "update", "kalman_gain", "run_filter", "nees", "nees_interval",
            "symmetrize"]
@@ -194,6 +197,94 @@ class LinearGaussianModel(Frozen):
             raise ValueError(f"Incompatible dimensions of {names[0]}; expected (..., {self.n_states}) for the "
                              f"model's F of shape {self.F.shape} but found {x.shape}")
         return x, P
+
+
+    # ------------------------------------------------------------------ one agent's filter (the estimator protocol)
+
+    def agent_inputs(self, x: ArrayLike, P: ArrayLike, z: ArrayLike, u: ArrayLike | None, i: int) -> tuple[dict, tuple]:
+        """Agent i's data of one step when every agent runs this Kalman filter on its own state.
+
+        Parameters
+        ----------
+        x : (N, m) array_like
+            The agents' estimates before the step.
+        P : (m, m) or (N, m, m) array_like
+            Their covariance(s) (one shared by all agents, or one each).
+        z : (N, q) array_like
+            Each agent's own measurement of the step.
+        u : (N, p) array_like or None
+            The inputs applied (None without ``B``).
+        i : int
+            The agent.
+
+        Returns
+        -------
+        own : dict
+            Its prior ``x``, ``P``, its measurement ``z`` and input ``u`` (copies).
+        messages : tuple
+            Empty: the filter uses the agent's own measurement only.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import kalman
+        >>> model = kalman.LinearGaussianModel(np.eye(1), 0.1 * np.eye(1), np.eye(1), np.eye(1))
+        >>> own, messages = model.agent_inputs(np.zeros((2, 1)), np.eye(1), [[1.0], [3.0]], None, 1)
+        >>> own["z"], messages
+        (array([3.]), ())
+        """
+        x, P, z = np.asarray(x, dtype=float), np.asarray(P, dtype=float), np.asarray(z, dtype=float)
+        return ({"x": x[i].copy(), "P": (P if P.ndim == 2 else P[i]).copy(), "z": z[i].copy(),
+                 "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
+
+    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        """Agent i's Kalman update with its own measurement, then its prediction (:func:`update`, :func:`predict`).
+
+        Parameters
+        ----------
+        i : int
+            The agent.
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        x_i, P_i : ndarray
+            Its predicted estimate ``(m,)`` and covariance ``(m, m)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import kalman
+        >>> model = kalman.LinearGaussianModel(np.eye(1), 0.1 * np.eye(1), np.eye(1), np.eye(1))
+        >>> x, P = model.agent_step(1, *model.agent_inputs(np.zeros((2, 1)), np.eye(1), [[1.0], [3.0]], None, 1))
+        >>> x, P
+        (array([1.5]), array([[0.6]]))
+        """
+        x, P = update(own["x"], own["P"], own["z"], self)
+        return predict(x, P, self, own["u"])
+
+    def messages(self, i: int = 0) -> tuple[Message, ...]:
+        """What an agent sends per step: nothing.
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+
+        Returns
+        -------
+        tuple of Message
+            Empty.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import kalman
+        >>> kalman.LinearGaussianModel(np.eye(1), np.eye(1), np.eye(1), np.eye(1)).messages()
+        ()
+        """
+        return ()
 
 
 def _checked_dynamics(F: ArrayLike, Q: ArrayLike, B: ArrayLike | None, x_shape: tuple | None = None) -> tuple:
@@ -854,3 +945,16 @@ def _symmetrize_fresh(P):
     out += P
     out *= 0.5
     return out
+
+
+# ----------------------------------------------------------------------------
+# the method of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost)
+# ----------------------------------------------------------------------------
+
+#: ``local``: every agent's Kalman filter of its own state from its own full-state measurement.
+METHODS = (
+    MethodSpec("local", ("team",), lambda team, x_hat0: LinearGaussianModel(team.A, team.Q_filter, np.eye(team.A.shape[0]),
+                                                                            team.R, team.B),
+               lambda n, q, d, N: (float(n), kalman_step_flops(n)), {"team": ("O(n^3)", "O(n^2)")},
+               lambda n, q, d, N: float(n**2 + n + d * n), position=1),
+)

@@ -38,16 +38,13 @@ from ._conic import ConicProgram, clarabel, solve, svec, svec_size, sym_basis
 from ._optional import require
 from ._solver import SolverError
 from ._systems import design_args
-from ._validation import Frozen, as_matrix, check_adjacency, check_covariance, check_laplacian, finite_result, frozen_copy
+from ._validation import as_matrix, check_adjacency, check_covariance, check_laplacian, finite_result
 from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
-from .estimation import Message
 from .graphs import laplacian as graph_laplacian
 from .graphs import laplacian_spectrum
 from .riccati import RICCATI_RTOL, is_controllable, solve_care, solve_dare
-
-cp = require("cvxpy", "mascore.observers (the LMI of eq. (55))")
 
 #: Why the observer functions need an undirected graph (quoted in their errors).
 _WHY_SYMMETRIC = ("the observer (42) is designed mode by mode on the orthogonal eigenvectors of a symmetric "
@@ -55,7 +52,6 @@ _WHY_SYMMETRIC = ("the observer (42) is designed mode by mode on the orthogonal 
 
 __all__ = [
     "READINGS",
-    "DiscreteNetworkObserver",
     "DistributedObserver",
     "MinEnergyObserver",
     "achieved_cost",
@@ -724,6 +720,7 @@ def bound_at_fixed_phi(
     Qinv = [np.linalg.inv(check_covariance(np.atleast_2d(q), f"noise_weights[{k}]", m, definite=True))
             for k, q in enumerate(noise_weights)]
     weight = Tinv.T @ Tinv if trace_in == "original" else np.eye(n)
+    cp = require("cvxpy", "mascore.observers.bound_at_fixed_phi (the program of eqs. (56)-(58))")
     # one parametrized problem: mode matrix A_i and constant term of eq. (57) per mode
     S2 = cp.Variable((m, m), symmetric=True)
     constraints, objective, params = [S2 >> 0], 0, []
@@ -1247,226 +1244,3 @@ _GROWTH_ADVICE = "the error matrix grows too fast over this horizon; shorten t o
 def _check_trace_in(trace_in) -> None:
     if not isinstance(trace_in, str) or trace_in not in ("transformed", "original"):
         raise ValueError(f"trace_in must be 'transformed' or 'original'; got {trace_in!r}")
-
-
-# --------------------------------------------------------------------------------------------
-# the observer in discrete time, on a team (the comparison's estimator)
-
-
-class DiscreteNetworkObserver(Frozen):
-    """The distributed observer of Vlahakis and Halikias, discretized (forward Euler), on N agents at once.
-
-    Agent i measures its own output ``z_ii = C x_i + nu_i`` and, on each link delivered at
-    the step, the output of neighbour j, ``z_ij = C x_j + nu_ij``; it receives the output
-    estimates ``C x_hat_j`` its neighbours broadcast. Its correction is eq. (3) of the paper
-    in discrete time::
-
-        x_i <- x_i + G ((z_ii - C x_i) + Phi sum_j a_ij s_ij ((z_ii - z_ij) - C (x_i - x_j))),
-
-    with ``G = dt L`` the discretized gain and ``s_ij`` 1 if the link delivered; the
-    prediction is ``x_i <- A x_i + B u_i``. The gains come from :func:`distributed_observer`
-    (the design), so this object holds no estimate: each step returns a new one.
-
-    Parameters
-    ----------
-    gain : (n, p) array_like
-        G: the correction's gain on the output innovation.
-    coupling : float
-        Phi, the gain of the relative-output term.
-    adjacency : (N, N) array_like
-        The weights ``a_ij`` of the graph.
-    A : (n, n) array_like
-        The discrete-time dynamics of one agent.
-    B : (n, k) array_like
-        Its input matrix.
-    C : (p, n) array_like
-        Its output matrix.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from mascore import graphs, observers
-    >>> obs = observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
-    ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
-    >>> x = np.zeros((1, 3, 2))
-    >>> z = np.ones((1, 3, 3, 1))                          # every output measured as 1
-    >>> obs.update(x, z, np.ones((1, 3, 3)))[0, :, 0]      # G (z_ii - C x_i): the relative terms cancel
-    array([0.5, 0.5, 0.5])
-    """
-
-    __slots__ = ("gain", "coupling", "adjacency", "A", "B", "C")
-
-    def __init__(self, gain: ArrayLike, coupling: float, adjacency: ArrayLike, A: ArrayLike, B: ArrayLike,
-                 C: ArrayLike) -> None:
-        A = _square(A, "A")
-        n = A.shape[0]
-        C = as_matrix(C, "C")
-        if C.shape[1] != n:
-            raise ValueError(f"C must have n = {n} columns (the state of A); got shape {C.shape}")
-        gain = as_matrix(gain, "gain")
-        if gain.shape != (n, C.shape[0]):
-            raise ValueError(f"gain must be (n, p) = ({n}, {C.shape[0]}); got shape {gain.shape}")
-        B = as_matrix(B, "B")
-        if B.shape[0] != n:
-            raise ValueError(f"B must have n = {n} rows; got shape {B.shape}")
-        if not np.isfinite(coupling):
-            raise ValueError(f"coupling must be a finite number; got {coupling!r}")
-        self._set(gain=frozen_copy(gain), coupling=float(coupling), adjacency=frozen_copy(check_adjacency(adjacency)),
-                  A=frozen_copy(A), B=frozen_copy(B), C=frozen_copy(C))
-
-    def _args(self) -> tuple:
-        return (self.gain, self.coupling, self.adjacency, self.A, self.B, self.C)
-
-    def update(self, x_hat: np.ndarray, z: np.ndarray, links: np.ndarray) -> np.ndarray:
-        """Every agent's correction, batched over runs.
-
-        Parameters
-        ----------
-        x_hat : (R, N, n) ndarray
-            The estimates.
-        z : (R, N, N, p) ndarray
-            ``z[r, i, j]``: agent i's measurement of agent j's output (``z[r, i, i]`` its own).
-        links : (R, N, N) ndarray
-            1 where the link (i, j) delivered at this step, else 0.
-
-        Returns
-        -------
-        (R, N, n) ndarray
-            The corrected estimates.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs, observers
-        >>> obs = observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
-        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
-        >>> obs.update(np.zeros((1, 3, 2)), np.ones((1, 3, 3, 1)), np.ones((1, 3, 3))).shape
-        (1, 3, 2)
-        """
-        N = x_hat.shape[-2]
-        p_hat = x_hat @ self.C.T
-        own_z = z[:, np.arange(N), np.arange(N)]
-        delivered = self.adjacency * links              # links delivered at this step, (R, N, N)
-        rel_meas = own_z[:, :, None] - z                # y_i - y_j measured
-        rel_est = p_hat[:, :, None] - p_hat[:, None]
-        coupling = np.einsum("rij,rijd->rid", delivered, rel_meas - rel_est)
-        innovation = (own_z - p_hat) + self.coupling * coupling
-        return x_hat + innovation @ self.gain.T
-
-    def predict(self, x_hat: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """The prediction ``x_i <- A x_i + B u_i`` of every agent.
-
-        Parameters
-        ----------
-        x_hat : (R, N, n) ndarray
-            The estimates.
-        u : (R, N, k) ndarray
-            The inputs applied.
-
-        Returns
-        -------
-        (R, N, n) ndarray
-            The predictions.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs, observers
-        >>> obs = observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
-        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
-        >>> obs.predict(np.ones((1, 3, 2)), np.zeros((1, 3, 1)))[0, 0]
-        array([1.1, 1. ])
-        """
-        return x_hat @ self.A.T + u @ self.B.T
-
-    def agent_inputs(self, x_hat: np.ndarray, z: np.ndarray, u: np.ndarray, i: int) -> tuple[dict, tuple]:
-        """Agent i's own data (its estimate, its measurements, its input) and its neighbours' broadcast outputs.
-
-        Parameters
-        ----------
-        x_hat : (N, n) ndarray
-            The team's estimates before the step (one run).
-        z : (N, N, p) ndarray
-            The measurements of the step.
-        u : (N, k) ndarray
-            The inputs applied.
-        i : int
-            The agent.
-
-        Returns
-        -------
-        own : dict
-            ``x``, ``z`` (its own output measurement), ``z_nbrs`` (its measurements of its neighbours),
-            ``u``, ``a`` (its weights of its neighbours).
-        messages : tuple
-            One round: the neighbours' broadcast output estimates ``C x_hat_j``, ``(d, p)``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs, observers
-        >>> obs = observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
-        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
-        >>> own, messages = obs.agent_inputs(np.zeros((3, 2)), np.ones((3, 3, 1)), np.zeros((3, 1)), 0)
-        >>> messages[0].shape                                  # two neighbours, one output each
-        (2, 1)
-        """
-        nbrs = np.flatnonzero(self.adjacency[i])
-        own = {"x": x_hat[i].copy(), "z": z[i, i].copy(), "z_nbrs": z[i, nbrs].copy(), "u": u[i].copy(),
-               "a": self.adjacency[i, nbrs].copy()}
-        return own, ((x_hat[nbrs] @ self.C.T).copy(),)
-
-    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray]:
-        """Agent i's correction with its neighbours' output estimates, then its prediction.
-
-        Parameters
-        ----------
-        i : int
-            The agent.
-        own, messages
-            From :meth:`agent_inputs`.
-
-        Returns
-        -------
-        tuple of ndarray
-            ``(x_i,)``, its estimate after the step, ``(n,)``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs, observers
-        >>> obs = observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
-        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
-        >>> x, z, u = np.zeros((3, 2)), np.ones((3, 3, 1)), np.zeros((3, 1))
-        >>> x_i, = obs.agent_step(1, *obs.agent_inputs(x, z, u, 1))
-        >>> bool(np.allclose(x_i, obs.predict(obs.update(x[None], z[None], np.ones((1, 3, 3))), u[None])[0, 1]))
-        True
-        """
-        p = self.C @ own["x"]
-        coupling = own["a"] @ ((own["z"] - own["z_nbrs"]) - (p - messages[0]))
-        xu = own["x"] + self.gain @ ((own["z"] - p) + self.coupling * coupling)
-        return (self.A @ xu + self.B @ own["u"],)
-
-    def messages(self, i: int = 0) -> tuple:
-        """What agent i sends per step: its output estimate ``C x_hat_i``, p floats (a broadcast).
-
-        Parameters
-        ----------
-        i : int
-            The agent (all send the same).
-
-        Returns
-        -------
-        tuple of Message
-            The message.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs, observers
-        >>> obs = observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
-        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
-        >>> obs.messages()[0].floats
-        1.0
-        """
-        return (Message("output estimate C x_i", float(self.C.shape[0])),)

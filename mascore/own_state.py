@@ -27,7 +27,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import Frozen, as_matrix, check_covariance, check_positive, check_positive_int, check_square, frozen_copy
-from .estimation import Message
+from .estimation import Message, MethodSpec
+from .fusion_cost import kalman_step_flops
 
 __all__ = ["CentralizedOutputFilter", "OwnStateForwardingFilter"]
 
@@ -498,3 +499,13 @@ class CentralizedOutputFilter(Frozen):
         1.0
         """
         return (Message("measurements z_ij of itself and its neighbours, to the centre", float(self.C.shape[0])),)
+
+
+#: ``forwarding`` on the team task: the one-hop filter of each agent's own state (its neighbours' measurements of it).
+METHODS = (
+    MethodSpec("forwarding", ("team",),
+               lambda team, x_hat0: OwnStateForwardingFilter(team.A, team.B, team.Q_filter, np.eye(team.A.shape[0]),
+                                                             team.R),
+               lambda n, q, d, N: (float(n * d + n), kalman_step_flops(n) + n**3 + 2 * (d + 1) * n),
+               {"team": ("O(d n + n^3)", "O(n^2 + d n)")}, lambda n, q, d, N: float(n**2 + n + d * n), position=2),
+)

@@ -336,6 +336,113 @@ class Study:
                             f"its draw returned {type(fig).__name__}")
         return fig
 
+    def run_key(self, settings: Any, seed: int) -> str:
+        """The identity of one run: the study, its settings, the seed and the package's source code.
+
+        Two runs with the same key give the same numbers, byte for byte; a run stored under
+        another key (other settings, another seed, or any edited module) is never reused.
+
+        Parameters
+        ----------
+        settings : frozen dataclass
+            The run's settings.
+        seed : int
+            The run's seed.
+
+        Returns
+        -------
+        str
+            A SHA-256 digest (64 hexadecimal digits).
+
+        Examples
+        --------
+        >>> from mascore.papers import ren2005
+        >>> study = ren2005.REGISTRY.study("kalman-consensus")
+        >>> study.run_key(study.settings, 0) == study.run_key(study.settings, 1)
+        False
+        """
+        import hashlib
+        import pickle
+
+        digest = hashlib.sha256(pickle.dumps((self.name, self.chapter, settings, seed), protocol=4))
+        digest.update(source_digest().encode())
+        return digest.hexdigest()
+
+    def save_run(self, settings: Any, seed: int, result: Any, store: str | Path) -> Path:
+        """Store a run's result in `store` for :meth:`load_or_run` (``store/runs/NAME.pickle``).
+
+        ``python -m mascore reproduce`` stores every run it makes in the paper's results
+        folder, so that the chapters draw the very run the ledger was computed from.
+
+        Parameters
+        ----------
+        settings : frozen dataclass
+            The settings the result was computed with.
+        seed : int
+            Its seed.
+        result : object
+            The output of ``self.run(settings, seed)``.
+        store : str or pathlib.Path
+            The folder (a paper's results folder).
+
+        Returns
+        -------
+        pathlib.Path
+            The file written.
+        """
+        import pickle
+
+        path = Path(store) / "runs" / f"{self.name}.pickle"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("wb") as f:
+            pickle.dump(self.run_key(settings, seed), f, protocol=4)  # read first: a stale file is never unpickled
+            pickle.dump(result, f, protocol=4)
+        return path
+
+    def load_or_run(self, settings: Any, seed: int, store: str | Path | None = None, progress: bool = False) -> Any:
+        """The study's result: read from `store` if this exact run is stored there, else computed.
+
+        A stored run is used only if its :meth:`run_key` is this one (same settings, seed and
+        package source); otherwise, or without a store, the run is computed with
+        ``self.run(settings, seed)``. Only read stores you wrote yourself (the file is a pickle).
+
+        Parameters
+        ----------
+        settings : frozen dataclass
+            The run's settings.
+        seed : int
+            The run's seed.
+        store : str or pathlib.Path, optional
+            A folder that :meth:`save_run` wrote to (a paper's results folder).
+        progress : bool
+            Show progress bars if the run is computed.
+
+        Returns
+        -------
+        object
+            The result, equal to ``self.run(settings, seed)``.
+
+        Examples
+        --------
+        >>> import dataclasses, tempfile
+        >>> from mascore.papers import ren2005
+        >>> study = ren2005.REGISTRY.study("kalman-consensus")
+        >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50)
+        >>> folder = tempfile.mkdtemp()
+        >>> path = study.save_run(fewer, 1, study.run(fewer, 1), folder)
+        >>> study.load_or_run(fewer, 1, folder).settings == fewer  # read, not recomputed
+        True
+        """
+        if store is not None:
+            import pickle
+
+            path = Path(store) / "runs" / f"{self.name}.pickle"
+            if path.is_file():
+                with path.open("rb") as f:
+                    if pickle.load(f) == self.run_key(settings, seed):
+                        return pickle.load(f)
+        return self.run(settings, seed, progress=progress)
+
     def build(self, name: str, result: Any) -> pd.DataFrame:
         """Build table `name` from `result`.
 
@@ -486,6 +593,23 @@ class PaperRegistry:
                 lambda m: f"{{glue:text}}`{glue_key(spec, m.group(1))}{':' + m.group(2) if m.group(2) else ''}`",
                 caption)
         return source + caption
+
+
+def source_digest() -> str:
+    """SHA-256 of the package's source: every ``.py`` file of ``mascore``, by path and content.
+
+    Returns
+    -------
+    str
+        64 hexadecimal digits; it changes when any module of the package changes.
+    """
+    import hashlib
+
+    root = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()
 
 
 def glue_key(spec: FigureSpec, name: str) -> str:

@@ -21,14 +21,18 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from . import centralized_team_filter, team_model, team_observability
 from . import distributed_kf as dkf
 from ._progress import progress_bar
 from ._systems import full_state_only
+from ._team_kernels import check_team_laplacian
 from ._validation import (
     Frozen,
     as_matrix,
+    check_adjacency_stack,
     check_covariance,
     check_fits_in_memory,
+    check_flag,
     check_generator,
     check_positive,
     check_positive_int,
@@ -42,7 +46,7 @@ from .agents import LTIAgent, check_sampling_time
 from .graphs import laplacian as graph_laplacian
 from .graphs import require_connected
 from .noise import _psd_factor
-from .sensing import _check_adjacency, _check_flag, _measure, sensing_mask, team_noise_covariance
+from .sensing import _measure, sensing_mask, team_noise_covariance
 
 __all__ = [
     "MODES",
@@ -118,7 +122,7 @@ def consensus_control(views: ArrayLike, laplacian: ArrayLike, K: ArrayLike) -> n
     if Y.ndim < 3 or Y.shape[-3] != Y.shape[-2] or Y.shape[-2] == 0 or Y.shape[-1] == 0:
         raise ValueError(f"views must have shape (..., N, N, m) with N, m >= 1; got {Y.shape}")
     N, m = Y.shape[-2:]
-    L = dkf._check_laplacian(laplacian, N, any_batch=True)
+    L = check_team_laplacian(laplacian, N, any_batch=True)
     K = as_matrix(_float_array(K, "K"), "K", (None, m))
     try:
         np.broadcast_shapes(L.shape[:-2], Y.shape[:-3])
@@ -488,13 +492,13 @@ def expected_spread(
     A, BK, Q, R = model.A, model.B @ model.K, model.Q, model.R
     n_steps = check_steps(n_steps)
     check_fits_in_memory(8.0 * (n_steps + 1) * n_runs * m, "n_steps", "the expected spreads")
-    Adj = _check_adjacency(adjacency)
+    Adj = check_adjacency_stack(adjacency)
     sensing_mask(Adj)  # isolated-agent check
     if Adj.shape[-1] != N or Adj.ndim not in (2, 3) or (Adj.ndim == 3 and Adj.shape[0] != n_runs):
         raise ValueError(f"adjacency must be ({N}, {N}) or ({n_runs}, {N}, {N}); got {Adj.shape}")
     Lb = graph_laplacian(Adj).reshape(-1, N, N)  # (G, N, N), G = 1 or R
     Nm = N * m
-    F1 = np.stack([dkf.closed_loop_matrices(A, BK, Lg)[0] for Lg in Lb])  # eq. (11), one per graph
+    F1 = np.stack([team_model.closed_loop_matrices(A, BK, Lg)[0] for Lg in Lb])  # eq. (11), one per graph
     noise = np.broadcast_to(Q, (Lb.shape[0], N, m, m)).copy()
     if mode == "measurement":
         Rr = team_noise_covariance(R, N, m).reshape(N, m, N, m)
@@ -589,7 +593,7 @@ class RendezvousResult:
     sigma_i: np.ndarray | None = None
     gains: np.ndarray | None = None
     f2_cross: np.ndarray | None = None
-    model: dkf.TeamFilterModel | None = None
+    model: team_model.TeamFilterModel | None = None
     estimates: np.ndarray | None = None
 
     @property
@@ -717,8 +721,8 @@ def simulate_rendezvous(
                          "the state histories")
     for flag, value in (("exact_control_noise", exact_control_noise), ("central", central),
                         ("progress", progress), ("switching", switching), ("return_estimates", return_estimates)):
-        _check_flag(value, flag)
-    Adj = _check_adjacency(adjacency)
+        check_flag(value, flag)
+    Adj = check_adjacency_stack(adjacency)
     S = sensing_mask(Adj)  # raises on isolated agents
     if switching:
         if S.shape != (n_steps + 1, N, N):
@@ -732,7 +736,7 @@ def simulate_rendezvous(
         return (Adj[k], S[k], Laps[k]) if switching else (Adj, S, Laps)
 
     filt = mode in ("measurement-filter", "estimation")
-    filter_model = dkf.team_filter_model(A, B, K, Q, R, N) if filt else None
+    filter_model = team_model.team_filter_model(A, B, K, Q, R, N) if filt else None
     if filt:  # the shapes first, then the theory's conditions on the graph
         if x_hat0 is None or P0 is None:
             raise ValueError(f"mode {mode!r} needs x_hat0 and P0 (initial estimate and its covariance)")
@@ -750,7 +754,7 @@ def simulate_rendezvous(
         for adj in np.unique(Adj.reshape(-1, N, N), axis=0):  # each distinct graph once
             require_connected(adj, "mode 'estimation' (every agent estimates the whole team, system (43) "
                               "observable)", "adjacency" if Adj.ndim == 2 else "a graph of adjacency")
-            dkf.require_observable(filter_model.A, filter_model.BK, adj)
+            team_observability.require_observable(filter_model.A, filter_model.BK, adj)
     proc_rng, meas_rng = rng.spawn(2)
     states = np.empty((n_steps + 1, n_runs, N, m))
     states[0] = x
@@ -774,7 +778,7 @@ def simulate_rendezvous(
             if mode == "estimation":
                 out["f2_cross"] = np.empty((n_steps + 1, N, filter_model.M_r, filter_model.M_r))
         if central:
-            central_filter = dkf.CentralizedTeamFilter(filter_model, B, xh0, P0, batch=nb)
+            central_filter = centralized_team_filter.CentralizedTeamFilter(filter_model, B, xh0, P0, batch=nb)
             out["central_pos_std"] = np.empty((n_steps + 1, nb))
             out["central_pos_error"] = np.empty((n_steps + 1, n_runs))
 
@@ -841,7 +845,7 @@ def simulate_rendezvous(
     return RendezvousResult(mode=mode, dt=float(dt), states=states, model=filter_model, **out)
 
 
-def _position_index(model: dkf.TeamFilterModel) -> np.ndarray:
+def _position_index(model: team_model.TeamFilterModel) -> np.ndarray:
     """Reduced-coordinate indices of the position entries (first half of each agent block)."""
     mr = model.m_r
     half = model.m // 2

@@ -149,6 +149,7 @@ def reproduce_paper(
         for study in registry.studies:
             result = study.run(settings[study.name], seed, progress=progress)
             claims += write_study(registry, study, result, staging)
+            study.save_run(settings[study.name], seed, result, staging)  # the chapters draw this very run
         write_claims(claims, staging / "claims.json", paper, seed,
                      created_by or f"mascore reproduce {paper} --seed {seed}", files=output_hashes(staging))
         _replace_directory(final, staging)

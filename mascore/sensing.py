@@ -31,7 +31,14 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import check_covariance, check_generator, check_positive_int
+from ._validation import (
+    check_adjacency_stack,
+    check_covariance,
+    check_flag,
+    check_generator,
+    check_mask_values,
+    check_positive_int,
+)
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .exceptions import IsolatedAgentError
@@ -75,8 +82,8 @@ def sensing_mask(adjacency: ArrayLike, allow_isolated: bool = False) -> np.ndarr
            [1, 1, 1],
            [0, 1, 1]])
     """
-    A = _check_adjacency(adjacency)
-    _check_flag(allow_isolated, "allow_isolated")
+    A = check_adjacency_stack(adjacency)
+    check_flag(allow_isolated, "allow_isolated")
     S = A > 0
     if not allow_isolated:
         isolated = ~np.any(S, axis=-1)
@@ -382,7 +389,7 @@ def stacked_measurement(Z: ArrayLike, mask: ArrayLike, agent: int) -> np.ndarray
     array([0., 1., 2., 3.])
     """
     Z = _finite(_float_array(Z, "Z"), "Z")
-    mask = _check_mask_values(mask, "mask")
+    mask = check_mask_values(mask, "mask")
     if Z.ndim != 3 or Z.shape[0] != Z.shape[1]:
         raise ValueError(f"Z must have shape (N, N, m); got {Z.shape}")
     if mask.shape != Z.shape[:2]:
@@ -392,48 +399,3 @@ def stacked_measurement(Z: ArrayLike, mask: ArrayLike, agent: int) -> np.ndarray
     if not 0 <= agent < Z.shape[0]:
         raise ValueError(f"agent must be in 0..{Z.shape[0] - 1}; got {agent}")
     return Z[agent, mask[agent]].reshape(-1)
-
-
-def _check_adjacency(adjacency: ArrayLike, name: str = "adjacency") -> np.ndarray:
-    """One adjacency ``(N, N)`` or a stack ``(..., N, N)``: finite, non-negative, zero diagonal, N >= 1."""
-    A = _float_array(adjacency, name)
-    if A.ndim < 2 or A.shape[-1] != A.shape[-2] or A.shape[-1] == 0:
-        raise ValueError(f"{name} must have shape (..., N, N) with N >= 1; got {A.shape}")
-    if not np.all(np.isfinite(A)):
-        raise ValueError(f"{name} contains NaN or infinite entries")
-    n = A.shape[-1]
-    diag = A[..., np.arange(n), np.arange(n)]
-    if np.any(diag != 0):
-        off = A * (1 - np.eye(n))
-        if np.all(off <= 0) and np.allclose(A.sum(axis=-1), 0):
-            raise ValueError(
-                f"{name} looks like a Laplacian (rows sum to zero, negative off-diagonal entries); "
-                "pass the adjacency matrix instead (A = diag(diag(L)) - L)"
-            )
-        raise ValueError(f"{name} must have a zero diagonal (self-sensing is implicit in N̄_i)")
-    if np.any(A < 0):
-        raise ValueError(f"{name} entries must be non-negative (edge weights); smallest is {A.min():.3g}")
-    return A
-
-
-def _check_flag(value: object, name: str) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be True or False; got {type(value).__name__} {value!r}")
-    return bool(value)
-
-
-def _check_mask_values(mask: ArrayLike, name: str = "mask") -> np.ndarray:
-    """A sensing mask as a bool array: bool, or numbers that are all exactly 0 or 1 (NaN is refused)."""
-    if isinstance(mask, (str, bytes)) or mask is None:
-        raise TypeError(f"{name} must be a boolean array (a sensing mask); got {mask!r}")
-    S = np.asarray(mask)
-    if S.dtype == bool:
-        return S
-    if S.dtype.kind not in "iuf":
-        raise TypeError(f"{name} must be a boolean array (a sensing mask); got dtype {S.dtype}")
-    if not np.all((S == 0) | (S == 1)):
-        raise ValueError(
-            f"{name} must be a boolean array (or hold only 0 and 1); got other values"
-            f"{' (NaN)' if S.dtype.kind == 'f' and np.isnan(S).any() else ''}"
-        )
-    return S.astype(bool)

@@ -58,7 +58,9 @@ Time is the step index ``k`` (discrete time).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Literal
 
 import numpy as np
@@ -67,8 +69,11 @@ from numpy.typing import ArrayLike
 from . import ellipsoids
 from ._validation import Frozen, as_matrix, check_square, frozen_copy, symmetric_part
 from ._validation import float_array as _float_array
+from .estimation import MethodSpec
+from .fusion_cost import kalman_step_flops
 
 __all__ = [
+    "SOLVERS",
     "METHODS",
     "FilterHistory",
     "SetMembershipModel",
@@ -78,7 +83,7 @@ __all__ = [
 ]
 
 #: Available implementations of each step.
-METHODS = ("sdp", "closed_form")
+SOLVERS = ("sdp", "closed_form")
 
 #: Tolerance of the consistency test y_k vs. the prior ellipsoid (relative, on the quadratic form).
 CONSISTENCY_RTOL = 1e-6
@@ -548,6 +553,92 @@ class SetMembershipModel(Frozen):
             raise ValueError("give both B and u, or neither")
         return self._predict(c, P, u, method, step, agent, solver_options, programs)
 
+    def agent_inputs(self, center: ArrayLike, shape: ArrayLike, y: ArrayLike, u: ArrayLike | None,
+                     i: int) -> tuple[dict, tuple]:
+        """Agent i's data of one step when every agent runs this set-membership filter on its own state.
+
+        Parameters
+        ----------
+        center : (N, n) array_like
+            The agents' set centres before the step.
+        shape : (n, n) or (N, n, n) array_like
+            Their shape matrices (one shared by all agents, or one each).
+        y : (N, p) array_like
+            Each agent's own measurement of the step.
+        u : (N, k) array_like or None
+            The inputs applied (None without ``B``).
+        i : int
+            The agent.
+
+        Returns
+        -------
+        own : dict
+            Its ``center``, ``shape``, measurement ``y`` and input ``u`` (copies).
+        messages : tuple
+            Empty: the filter uses the agent's own measurement only.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.set_membership import SetMembershipModel
+        >>> model = SetMembershipModel(A=np.eye(1), G=np.eye(1), C=np.eye(1), D=np.eye(1), Q=np.eye(1), R=np.eye(1))
+        >>> own, messages = model.agent_inputs(np.zeros((2, 1)), np.eye(1), [[0.5], [1.0]], None, 1)
+        >>> own["y"], messages
+        (array([1.]), ())
+        """
+        c, E, y = (np.asarray(a, dtype=float) for a in (center, shape, y))
+        return ({"center": c[i].copy(), "shape": (E if E.ndim == 2 else E[i]).copy(), "y": y[i].copy(),
+                 "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
+
+    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        """Agent i's closed-form correction with its own measurement, then its prediction (:meth:`correct`, :meth:`predict`).
+
+        Parameters
+        ----------
+        i : int
+            The agent.
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        center, shape : ndarray
+            Its predicted set ``(n,)``, ``(n, n)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.set_membership import SetMembershipModel
+        >>> model = SetMembershipModel(A=np.eye(1), G=np.eye(1), C=np.eye(1), D=np.eye(1), Q=np.eye(1), R=np.eye(1))
+        >>> c, E = model.agent_step(0, *model.agent_inputs(np.zeros((2, 1)), np.eye(1), [[0.5], [1.0]], None, 0))
+        >>> c.shape, E.shape
+        ((1,), (1, 1))
+        """
+        c, E, _ = self.correct(own["center"], own["shape"], own["y"], check_consistency=False)
+        return self.predict(c, E, own["u"])
+
+    def messages(self, i: int = 0) -> tuple:
+        """What an agent sends per step: nothing.
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+
+        Returns
+        -------
+        tuple
+            Empty.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.set_membership import SetMembershipModel
+        >>> SetMembershipModel(A=np.eye(1), G=np.eye(1), C=np.eye(1), D=np.eye(1), Q=np.eye(1), R=np.eye(1)).messages()
+        ()
+        """
+        return ()
+
     def run(
         self, x0_hat: ArrayLike, P0: ArrayLike, y: ArrayLike, u: ArrayLike | None = None,
         method: Method = "closed_form", agent: ArrayLike | None = None, solver_options: dict | None = None,
@@ -736,9 +827,9 @@ def _program(programs, key, build, *sizes):
 
 def _check_method(method: str) -> str:
     if not isinstance(method, str):
-        raise TypeError(f"method must be one of {METHODS}; got {type(method).__name__} {method!r}")
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}; got {method!r}")
+        raise TypeError(f"method must be one of {SOLVERS}; got {type(method).__name__} {method!r}")
+    if method not in SOLVERS:
+        raise ValueError(f"method must be one of {SOLVERS}; got {method!r}")
     return method
 
 
@@ -834,3 +925,40 @@ def _cholesky(P, what, step, agent, idx, batch):
         return np.linalg.cholesky(P)
     except np.linalg.LinAlgError as exc:  # pragma: no cover - caught by _check_ellipsoid first
         raise ValueError(f"{_where(what, step, agent, idx, batch)}: shape matrix is not positive definite") from exc
+
+
+# --------------------------------------------------------------------------------------------
+# the methods of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost)
+
+#: Why the set-membership filter of one agent does not apply elsewhere (the tables show it).
+_SM_NOT_APPLICABLE = MappingProxyType({
+    "target": "a single agent's filter; alone, an agent that senses one coordinate cannot observe the target",
+    "localization": "a single agent's filter; without an anchor an agent's relative measurements do not fix it",
+})
+
+
+def _team_set_filter(confidence: float | None):
+    """``build(team, x_hat0)``: each agent's closed-form filter of its own state, its noise sets scaled by the scenario.
+
+    ``team.bound_scale(dim, confidence)`` is the scale of the covariance ellipsoid given as the bound (the
+    scenario knows its noise: a guaranteed bound for bounded noise, else a confidence level; None: the
+    scenario's default level).
+    """
+    def build(team, x_hat0: np.ndarray) -> SetMembershipModel:
+        n = team.A.shape[0]
+        scale = team.bound_scale(n, confidence)
+        return SetMembershipModel(A=team.A, G=np.eye(n), C=np.eye(n), D=np.eye(n), Q=scale * team.Q_filter,
+                                  R=scale * team.R, B=team.B)
+    return build
+
+
+def _set_membership_spec(name: str, confidence: float | None, position: float) -> MethodSpec:
+    return MethodSpec(name, ("team",), _team_set_filter(confidence),
+                      lambda n, q, d, N: (float(n), kalman_step_flops(n) + 2 * n**3), {"team": ("O(n^3)", "O(n^2)")},
+                      lambda n, q, d, N: float(n**2 + n + d * n), _SM_NOT_APPLICABLE if confidence is None else {},
+                      position=position)
+
+
+#: The set-membership filter at the scenario's confidence level, and at two others (its knob).
+METHODS = (_set_membership_spec("set-membership", None, 8), _set_membership_spec("set-membership-c90", 0.9, 9),
+           _set_membership_spec("set-membership-c99999", 0.99999, 10))

@@ -10,6 +10,15 @@ import os
 import pytest
 from hypothesis import settings
 
+# The test processes draw without a display. The variable MPLBACKEND is not set for them: the notebooks'
+# kernels that nbmake starts inherit the environment and need ipykernel's inline backend to keep figures.
+try:
+    import matplotlib
+except ImportError:  # the core's tests on its minimum versions (make test-min) have no matplotlib
+    pass
+else:
+    matplotlib.use("Agg")
+
 settings.register_profile("reproducible", derandomize=True, database=None)
 settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "reproducible"))

@@ -1,6 +1,7 @@
 """Bad input to the core modules (issue 14, "Nothing silent").
 
-kalman, noise, agents, graphs, sensing, distributed_kf and rendezvous: every public function refuses a
+kalman, noise, agents, graphs, sensing, the team filters (team_model, distributed_kf,
+centralized_team_filter, team_observability) and rendezvous: every public function refuses a
 spoiled argument with a ``ValueError``/``TypeError`` whose message names the argument, never returns
 NaN/inf from finite valid input, and a Kalman step never lets a modified argument through unchecked (the
 plain-array steps check in full on every call; a model's matrices are read-only copies).
@@ -18,7 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mascore import _kf_reference as reference
-from mascore import agents, graphs, kalman, noise, sensing
+from mascore import agents, centralized_team_filter, graphs, kalman, noise, sensing, team_model, team_observability
 from mascore import distributed_kf as dk
 from mascore import rendezvous as rv
 
@@ -29,7 +30,7 @@ N = 3
 
 
 def _model(N=N):
-    return dk.team_filter_model(AGENT.A, AGENT.B, K_GAIN, np.eye(4), 2.0 * np.eye(4), N)
+    return team_model.team_filter_model(AGENT.A, AGENT.B, K_GAIN, np.eye(4), 2.0 * np.eye(4), N)
 
 
 def _spd(rng, n, batch=()):
@@ -53,7 +54,7 @@ def baselines() -> dict[str, tuple]:
     Z, _ = sensing.measure(1, rng.normal(size=(2, N, 4)), A, 2.0 * np.eye(4))
     Sig_aug = dk.eb_initial_covariance(model, np.eye(4))
     Sig_i = np.broadcast_to(np.eye(model.M_r), (1, N, model.M_r, model.M_r)).copy()
-    Sig_full = dk.expand_covariance(dk.eb_initial_covariance(model, np.eye(4), common=False)[0], model.kron)
+    Sig_full = team_model.expand_covariance(dk.eb_initial_covariance(model, np.eye(4), common=False)[0], model.kron)
     z_lists = [rng.normal(size=4 * len(s)) for s in sensing.neighbor_sets(A)]
     rv_model = rv.RendezvousModel(AGENT.A, AGENT.B, K_GAIN, 0.1 * np.eye(4), 0.5 * np.eye(4), 0.1)
     res = rv.simulate_rendezvous(1, rv_model, rng.normal(size=(1, N, 4)), A, 3, "estimation",
@@ -115,11 +116,11 @@ def baselines() -> dict[str, tuple]:
         "sensing.measure": (sensing.measure, dict(rng=1, states=rng.normal(size=(2, N, 4)), adjacency=A, R=np.eye(4))),
         "sensing.stacked_measurement": (sensing.stacked_measurement, dict(Z=Z[0], mask=S, agent=1)),
         # distributed_kf
-        "distributed_kf.team_filter_model": (dk.team_filter_model, dict(A=AGENT.A, B=AGENT.B, K=K_GAIN, Q=np.eye(4),
+        "team_model.team_filter_model": (team_model.team_filter_model, dict(A=AGENT.A, B=AGENT.B, K=K_GAIN, Q=np.eye(4),
                                                                         R=2.0 * np.eye(4), n_agents=N)),
-        "distributed_kf.closed_loop_matrices": (dk.closed_loop_matrices, dict(A=AGENT.A, BK=BK, laplacian=L)),
-        "distributed_kf.reduce_covariance": (dk.reduce_covariance, dict(P=np.kron(_spd(rng, 3), np.eye(2)), kron=2)),
-        "distributed_kf.expand_covariance": (dk.expand_covariance, dict(P_r=_spd(rng, 3), kron=2)),
+        "team_model.closed_loop_matrices": (team_model.closed_loop_matrices, dict(A=AGENT.A, BK=BK, laplacian=L)),
+        "team_model.reduce_covariance": (team_model.reduce_covariance, dict(P=np.kron(_spd(rng, 3), np.eye(2)), kron=2)),
+        "team_model.expand_covariance": (team_model.expand_covariance, dict(P_r=_spd(rng, 3), kron=2)),
         "distributed_kf.agent_update": (dk.agent_update, dict(X_pred=X, Sigma_pred=np.broadcast_to(
             np.eye(12), (1, N, 12, 12)).copy(), Z=Z, mask=S, R=2.0 * np.eye(4))),
         "distributed_kf.mb_predict": (dk.mb_predict, dict(model=model, X_hat=X, Sigma=Sig_i, laplacian=L,
@@ -136,18 +137,20 @@ def baselines() -> dict[str, tuple]:
         "distributed_kf.plain_measurement_based_step": (reference.plain_measurement_based_step, dict(
             X_hat=rng.normal(size=(N, 4 * N)), Sigma=np.broadcast_to(np.eye(4 * N), (N, 4 * N, 4 * N)).copy(),
             A=AGENT.A, BK=BK, Q=np.eye(4), R=2.0 * np.eye(4 * N), adjacency=A, z=z_lists)),
-        "distributed_kf.centralized_predict": (dk.centralized_predict, dict(model=model, x=rng.normal(size=(2, N, 4)),
-                                                                            P=np.eye(model.M_r)[None],
-                                                                            U=np.ones((2, N, 2)), B=AGENT.B)),
-        "distributed_kf.centralized_update": (dk.centralized_update, dict(
+        "centralized_team_filter.centralized_predict": (centralized_team_filter.centralized_predict, dict(
+            model=model, x=rng.normal(size=(2, N, 4)), P=np.eye(model.M_r)[None], U=np.ones((2, N, 2)), B=AGENT.B)),
+        "centralized_team_filter.centralized_update": (centralized_team_filter.centralized_update, dict(
             model=model, x_pred=rng.normal(size=(2, N, 4)), P_pred=np.eye(model.M_r)[None], Z=Z, mask=S)),
-        "distributed_kf.observable_agents": (dk.observable_agents, dict(A=AGENT.A, BK=BK, adjacency=A, tol=1e-8)),
-        "distributed_kf.require_observable": (dk.require_observable, dict(A=AGENT.A, BK=BK, adjacency=A)),
-        "distributed_kf.lyapunov_v": (dk.lyapunov_v, dict(error=rng.normal(size=12), Sigma_r=_spd(rng, 6), kron=2)),
+        "team_observability.observable_agents": (team_observability.observable_agents, dict(
+            A=AGENT.A, BK=BK, adjacency=A, tol=1e-8)),
+        "team_observability.require_observable": (team_observability.require_observable, dict(
+            A=AGENT.A, BK=BK, adjacency=A)),
+        "team_observability.lyapunov_v": (team_observability.lyapunov_v, dict(
+            error=rng.normal(size=12), Sigma_r=_spd(rng, 6), kron=2)),
         "distributed_kf.team_nees": (dk.team_nees, dict(model=model, X_true=rng.normal(size=(2, N, 4)), X_hat=X,
                                                         Sigma_i=Sig_i)),
         "distributed_kf.f2_cross": (dk.f2_cross, dict(model=model, Sigma=Sig_aug, laplacian=L)),
-        "distributed_kf.theorem1_min_eigenvalues": (dk.theorem1_min_eigenvalues, dict(
+        "team_observability.theorem1_min_eigenvalues": (team_observability.theorem1_min_eigenvalues, dict(
             model=res.model, laplacian=L, KH=res.gains, Sigma_i=res.sigma_i, F2_cross=res.f2_cross)),
         # rendezvous
         "rendezvous.rendezvous_gain": (rv.rendezvous_gain, dict(rho1=0.5, rho2=1.5, n=2)),
@@ -168,7 +171,7 @@ def baselines() -> dict[str, tuple]:
 
 
 BASELINES = baselines()
-MODULES = (kalman, noise, agents, graphs, sensing, dk, rv)
+MODULES = (kalman, noise, agents, graphs, sensing, team_model, dk, centralized_team_filter, team_observability, rv)
 
 
 def _has_nonfinite(value) -> bool:
@@ -288,7 +291,7 @@ def test_bad_seed_is_refused_by_name(key, bad, exc):
 
 
 FLAGS = [("sensing.sensing_mask", "allow_isolated"), ("distributed_kf.eb_initial_covariance", "common"),
-         ("distributed_kf.team_filter_model", "reduce"), ("rendezvous.simulate_rendezvous", "central"),
+         ("team_model.team_filter_model", "reduce"), ("rendezvous.simulate_rendezvous", "central"),
          ("rendezvous.simulate_rendezvous", "switching")]
 
 
@@ -307,8 +310,8 @@ COVARIANCES = [
     ("kalman.nees", "P", True), ("noise.psd_factor", "M", False), ("noise.gaussian", "cov", False),
     ("noise.uniform_ellipsoid", "shape", False), ("sensing.team_noise_covariance", "R", False),
     ("sensing.measurement_noise", "R", False), ("sensing.measure", "R", False),
-    ("distributed_kf.team_filter_model", "Q", False), ("distributed_kf.team_filter_model", "R", True),
-    ("distributed_kf.reduce_covariance", "P", False),
+    ("team_model.team_filter_model", "Q", False), ("team_model.team_filter_model", "R", True),
+    ("team_model.reduce_covariance", "P", False),
     ("distributed_kf.agent_update", "Sigma_pred", False), ("distributed_kf.agent_update", "R", True),
     ("distributed_kf.mb_predict", "Sigma", False), ("distributed_kf.mb_update", "Sigma_pred", False),
     ("distributed_kf.eb_initial_covariance", "P0", False), ("distributed_kf.eb_predict", "Sigma", False),
@@ -317,9 +320,9 @@ COVARIANCES = [
     ("distributed_kf.plain_estimation_based_step", "Q", False),
     ("distributed_kf.plain_estimation_based_step", "R", True),
     ("distributed_kf.plain_measurement_based_step", "Sigma", False),
-    ("distributed_kf.centralized_predict", "P", False), ("distributed_kf.centralized_update", "P_pred", True),
-    ("distributed_kf.lyapunov_v", "Sigma_r", True), ("distributed_kf.team_nees", "Sigma_i", True),
-    ("distributed_kf.f2_cross", "Sigma", False), ("distributed_kf.theorem1_min_eigenvalues", "Sigma_i", True),
+    ("centralized_team_filter.centralized_predict", "P", False), ("centralized_team_filter.centralized_update", "P_pred", True),
+    ("team_observability.lyapunov_v", "Sigma_r", True), ("distributed_kf.team_nees", "Sigma_i", True),
+    ("distributed_kf.f2_cross", "Sigma", False), ("team_observability.theorem1_min_eigenvalues", "Sigma_i", True),
     ("rendezvous.propagate_team", "Q", False), ("rendezvous.RendezvousModel", "Q", False),
     ("rendezvous.RendezvousModel", "R", False), ("rendezvous.simulate_rendezvous", "P0", False),
 ]
@@ -365,16 +368,16 @@ def test_covariance_of_the_wrong_size_is_refused(key, arg, definite):
 # graph meaning: adjacency vs Laplacian, self-loops, weights
 # ----------------------------------------------------------------------------
 
-LAPLACIAN_ARGS = [("distributed_kf.closed_loop_matrices", "laplacian"), ("distributed_kf.mb_predict", "laplacian"),
+LAPLACIAN_ARGS = [("team_model.closed_loop_matrices", "laplacian"), ("distributed_kf.mb_predict", "laplacian"),
                   ("distributed_kf.eb_predict", "laplacian"), ("distributed_kf.f2_cross", "laplacian"),
-                  ("distributed_kf.theorem1_min_eigenvalues", "laplacian"),
+                  ("team_observability.theorem1_min_eigenvalues", "laplacian"),
                   ("rendezvous.consensus_control", "laplacian")]
 ADJACENCY_ARGS = [("graphs.laplacian", "A"), ("graphs.spanning_tree_roots", "A"), ("graphs.is_connected", "A"),
                   ("graphs.connected_components", "A"), ("graphs.require_connected", "A"),
                   ("graphs.has_spanning_tree", "A"), ("graphs.to_networkx", "A"),
                   ("sensing.sensing_mask", "adjacency"), ("sensing.neighbor_sets", "adjacency"),
                   ("sensing.selection_matrices", "adjacency"), ("sensing.measure", "adjacency"),
-                  ("distributed_kf.observable_agents", "adjacency"), ("distributed_kf.require_observable", "adjacency"),
+                  ("team_observability.observable_agents", "adjacency"), ("team_observability.require_observable", "adjacency"),
                   ("distributed_kf.plain_estimation_based_step", "adjacency"),
                   ("distributed_kf.plain_measurement_based_step", "adjacency"),
                   ("rendezvous.expected_spread", "adjacency"), ("rendezvous.simulate_rendezvous", "adjacency")]
@@ -395,7 +398,7 @@ def test_non_laplacian_is_refused(key, arg):
 def test_directed_laplacian_is_allowed_where_the_math_allows_it():
     """F_1 = I ⊗ A - L ⊗ BK and the consensus law hold for any Laplacian: directed rings are fine."""
     L = graphs.laplacian(graphs.adjacency_from_edges(3, [(0, 1), (1, 2), (2, 0)], directed=True))
-    F1, F2 = dk.closed_loop_matrices(AGENT.A, BK, L)
+    F1, F2 = team_model.closed_loop_matrices(AGENT.A, BK, L)
     assert np.all(np.isfinite(F1)) and np.all(np.isfinite(F2))
     assert np.all(np.isfinite(rv.consensus_control(np.ones((N, N, 4)), L, K_GAIN)))
 
@@ -436,7 +439,7 @@ def test_mask_holding_nan_is_refused():
     """Issue 14: a NaN in a mask used to be read as True."""
     S = sensing.sensing_mask(graphs.path_graph(N)).astype(float)
     S[0, 2] = np.nan
-    for key in ("distributed_kf.mb_update", "distributed_kf.eb_update", "distributed_kf.centralized_update",
+    for key in ("distributed_kf.mb_update", "distributed_kf.eb_update", "centralized_team_filter.centralized_update",
                 "distributed_kf.agent_update", "sensing.stacked_measurement"):
         _refused(key, "mask", S, ValueError)
     S[0, 2] = 0.5
@@ -457,13 +460,13 @@ def test_mask_holding_nan_is_refused():
     ("noise.uniform_box", "high", [1.0], ValueError),
     ("kalman.nees_interval", "confidence", 1.0, ValueError), ("kalman.nees_interval", "confidence", "0.9", TypeError),
     ("kalman.nees_interval", "confidence", np.nan, ValueError),
-    ("distributed_kf.reduce_covariance", "P", np.eye(5), ValueError),
+    ("team_model.reduce_covariance", "P", np.eye(5), ValueError),
     ("distributed_kf.eb_initial_covariance", "P0", np.eye(3), ValueError),
     ("distributed_kf.mb_predict", "model", "model", TypeError),
     ("distributed_kf.eb_update", "model", None, TypeError),
     ("distributed_kf.plain_estimation_based_step", "z", [np.ones(3)] * N, ValueError),
     ("distributed_kf.plain_estimation_based_step", "z", "z", TypeError),
-    ("distributed_kf.lyapunov_v", "error", np.ones(5), ValueError),
+    ("team_observability.lyapunov_v", "error", np.ones(5), ValueError),
     ("rendezvous.expected_spread", "mode", "estimation", ValueError),
     ("rendezvous.simulate_rendezvous", "mode", 3, ValueError),
     ("rendezvous.simulate_rendezvous", "x_hat0", np.zeros((1, 5)), ValueError),
@@ -507,8 +510,8 @@ def test_issue_examples_of_the_team_filter():
     _refused(key, "Sigma_pred", Sig, ValueError, match="Sigma_pred contains NaN")
     Sig = -dk.eb_initial_covariance(model, np.eye(4))  # negative semidefinite
     _refused("distributed_kf.eb_predict", "Sigma", Sig, ValueError, match="Sigma must be positive semidefinite")
-    _refused("distributed_kf.centralized_predict", "x", np.full((2, N, 4), np.nan), ValueError)
-    _refused("distributed_kf.closed_loop_matrices", "laplacian", graphs.ring_graph(3), ValueError,
+    _refused("centralized_team_filter.centralized_predict", "x", np.full((2, N, 4), np.nan), ValueError)
+    _refused("team_model.closed_loop_matrices", "laplacian", graphs.ring_graph(3), ValueError,
              match="looks like an adjacency")
     with pytest.raises(ValueError, match="edges"):
         graphs.adjacency_from_edges(3, [(0, 1, np.nan)])

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mascore import agent_cost, agents, compare, fusion, graphs, kalman, lqr
+from mascore import agent_cost, agents, compare, fusion, graphs, kalman, lqr, team_model
 from mascore import distributed_ekf as dekf
 from mascore import distributed_kf as dk
 from mascore import rendezvous as rv
@@ -86,7 +86,7 @@ def test_information_filters_refuse_an_infinite_variance(make):
 
 
 def test_team_filter_nees_refuses_an_overflow_by_name():
-    model = dk.team_filter_model(AGENT.A, AGENT.B, K_GAIN, 0.01 * np.eye(4), np.eye(4), 3)
+    model = team_model.team_filter_model(AGENT.A, AGENT.B, K_GAIN, 0.01 * np.eye(4), np.eye(4), 3)
     filt = dk.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 12)), P0=np.eye(4))
     with pytest.raises(ValueError, match=r"X_true: the NEES overflows"):
         filt.nees(np.full((1, 3, 4), 1e300))
@@ -149,7 +149,7 @@ def _directed_laplacian(N=3):
 
 @pytest.mark.parametrize("mode", ["eb", "mb"])
 def test_team_filter_refuses_a_directed_graph(mode):
-    model = dk.team_filter_model(AGENT.A, AGENT.B, K_GAIN, 0.01 * np.eye(4), np.eye(4), 3)
+    model = team_model.team_filter_model(AGENT.A, AGENT.B, K_GAIN, 0.01 * np.eye(4), np.eye(4), 3)
     with pytest.raises(ValueError, match=r"laplacian must be symmetric .*Song et al."):
         dk.TeamFilter(model, _directed_laplacian(), np.zeros((1, 12)), P0=np.eye(4), mode=mode)
     filt = dk.TeamFilter(model, graphs.laplacian(graphs.ring_graph(3)), np.zeros((1, 12)), P0=np.eye(4), mode=mode)
@@ -255,7 +255,7 @@ def test_dask_without_a_main_guard_is_explained_in_one_line(tmp_path):
 def test_partial_sensing_for_songs_filters_names_the_methods_that_take_it():
     agent = agents.double_integrator(2, 0.1)
     for call in (lambda: rv.RendezvousModel(agent.A, agent.B, K_GAIN, np.eye(4), 0.01 * np.eye(2), 0.1),
-                 lambda: dk.team_filter_model(agent, K_GAIN, np.eye(4), 0.01 * np.eye(2), 3)):
+                 lambda: team_model.team_filter_model(agent, K_GAIN, np.eye(4), 0.01 * np.eye(2), 3)):
         with pytest.raises(ValueError, match=r"got \(2, 2\)\. Song et al.'s whole-team filters .*full-state .*"
-                                             r"POSITION_METHODS .*fusion.SensorNetworkModel"):
+                                             r"POSITION_METHODS .*sensor_network.SensorNetworkModel"):
             call()

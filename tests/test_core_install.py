@@ -18,7 +18,8 @@ import pytest
 #: Modules a user of the filters, consensus and closed forms imports (no extra needed).
 CORE_MODULES = (
     "agents", "graphs", "noise", "kalman", "sensing", "consensus", "rendezvous", "flocking",
-    "synchronization", "lqr", "distributed_kf", "distributed_ekf", "fusion", "ellipsoids", "set_membership",
+    "synchronization", "lqr", "team_model", "distributed_kf", "centralized_team_filter", "team_observability",
+    "distributed_ekf", "sensor_network", "fusion", "fusion_cost", "ellipsoids", "set_membership",
 )
 #: Optional packages (and slow-to-import parts of required ones) that the core must not load.
 HEAVY = ("cvxpy", "clarabel", "matplotlib", "pandas", "tqdm", "dask", "distributed", "scipy.stats", "networkx")

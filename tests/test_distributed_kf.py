@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from mascore import _kf_reference as ref
+from mascore import _team_kernels, centralized_team_filter, team_model, team_observability
 from mascore import distributed_kf as dk
 from mascore.agents import double_integrator
 from mascore.graphs import complete_graph, laplacian, path_graph, ring_graph, star_graph
@@ -26,7 +27,7 @@ def _rv(**changes) -> RendezvousModel:
 def _model(N, reduce=True, Q=None, R=None):
     Q = np.eye(4) if Q is None else Q
     R = 2.0 * np.eye(4) if R is None else R
-    return dk.team_filter_model(AGENT.A, AGENT.B, K, Q, R, N, reduce=reduce)
+    return team_model.team_filter_model(AGENT.A, AGENT.B, K, Q, R, N, reduce=reduce)
 
 
 def _random_sigma(model, rng, B=1):
@@ -50,9 +51,9 @@ def test_structured_estimation_based_step_equals_plain_eqs_29_34(reduce, graph):
     Xn, Sn, _ = dk.eb_update(model, Xp, Sp, Z, S[0])
     z = [stacked_measurement(Z[0], S[0], i) for i in range(N)]
     Xn2, Sn2 = ref.plain_estimation_based_step(
-        Xh[0].reshape(N, -1), dk.expand_covariance(Sig[0], model.kron), AGENT.A, BK, np.eye(4), model.R, graph, z)
+        Xh[0].reshape(N, -1), team_model.expand_covariance(Sig[0], model.kron), AGENT.A, BK, np.eye(4), model.R, graph, z)
     np.testing.assert_allclose(Xn[0].reshape(N, -1), Xn2, atol=1e-10)
-    np.testing.assert_allclose(dk.expand_covariance(Sn[0], model.kron), Sn2, atol=1e-10)
+    np.testing.assert_allclose(team_model.expand_covariance(Sn[0], model.kron), Sn2, atol=1e-10)
 
 
 @pytest.mark.parametrize("graph", [ring_graph(16), path_graph(14)])
@@ -60,7 +61,7 @@ def test_sparse_row_block_recursion_equals_plain_eqs_29_34(graph):
     """Large enough for the sparse F_1, F_2 and rank-q row-block path (N M_r > 384): still eqs. (29)-(34)."""
     N = graph.shape[0]
     model = _model(N)
-    assert N * model.M_r > dk._DENSE_MAX
+    assert N * model.M_r > _team_kernels.DENSE_MAX
     rng = np.random.default_rng(5)
     Sig = _random_sigma(model, rng)
     Xh = rng.normal(size=(1, N, N, 4))
@@ -68,9 +69,9 @@ def test_sparse_row_block_recursion_equals_plain_eqs_29_34(graph):
     Xn, Sn, _ = dk.eb_update(model, *dk.eb_predict(model, Xh, Sig, laplacian(graph)), Z, S[0])
     z = [stacked_measurement(Z[0], S[0], i) for i in range(N)]
     Xn2, Sn2 = ref.plain_estimation_based_step(
-        Xh[0].reshape(N, -1), dk.expand_covariance(Sig[0], model.kron), AGENT.A, BK, np.eye(4), model.R, graph, z)
+        Xh[0].reshape(N, -1), team_model.expand_covariance(Sig[0], model.kron), AGENT.A, BK, np.eye(4), model.R, graph, z)
     np.testing.assert_allclose(Xn[0].reshape(N, -1), Xn2, atol=1e-9)
-    np.testing.assert_allclose(dk.expand_covariance(Sn[0], model.kron), Sn2, atol=1e-9)
+    np.testing.assert_allclose(team_model.expand_covariance(Sn[0], model.kron), Sn2, atol=1e-9)
 
 
 def test_rank_q_gain_equals_masked_full_solve():
@@ -121,9 +122,9 @@ def test_measurement_based_step_equals_plain_eqs_14_20(reduce):
     Xn, Sn, _ = dk.mb_update(model, Xp, Sp, Z, S[0])
     z = [stacked_measurement(Z[0], S[0], i) for i in range(N)]
     Xn2, Sn2 = ref.plain_measurement_based_step(
-        Xh[0].reshape(N, -1), dk.expand_covariance(Si[0], model.kron), AGENT.A, BK, np.eye(4), model.R, A, z)
+        Xh[0].reshape(N, -1), team_model.expand_covariance(Si[0], model.kron), AGENT.A, BK, np.eye(4), model.R, A, z)
     np.testing.assert_allclose(Xn[0].reshape(N, -1), Xn2, atol=1e-10)
-    np.testing.assert_allclose(dk.expand_covariance(Sn[0], model.kron), Sn2, atol=1e-10)
+    np.testing.assert_allclose(team_model.expand_covariance(Sn[0], model.kron), Sn2, atol=1e-10)
 
 
 def test_agent_update_equals_textbook_update_with_selection_matrices():
@@ -151,14 +152,14 @@ def test_centralized_update_equals_stacked_kalman_update_and_bounds_every_agent(
     Pr = dk.agent_covariances(model, _random_sigma(model, rng))[:, 0]  # (1, Mr, Mr)
     x = rng.normal(size=(1, N, 4))
     Z, S = measure(7, rng.normal(size=(1, N, 4)), A, 2.0 * np.eye(4))
-    xc, Pc = dk.centralized_update(model, x, Pr, Z, S[0])
+    xc, Pc = centralized_team_filter.centralized_update(model, x, Pr, Z, S[0])
     Hs = selection_matrices(A, 4)
     H = np.vstack(Hs)
     z = np.concatenate([stacked_measurement(Z[0], S[0], i) for i in range(N)])
     Rbig = np.kron(np.eye(H.shape[0] // 4), 2.0 * np.eye(4))
-    x_ref, P_ref = update(x[0].reshape(-1), dk.expand_covariance(Pr[0], 2), z, H, Rbig)
+    x_ref, P_ref = update(x[0].reshape(-1), team_model.expand_covariance(Pr[0], 2), z, H, Rbig)
     np.testing.assert_allclose(xc[0].reshape(-1), x_ref, atol=1e-10)
-    np.testing.assert_allclose(dk.expand_covariance(Pc[0], 2), P_ref, atol=1e-10)
+    np.testing.assert_allclose(team_model.expand_covariance(Pc[0], 2), P_ref, atol=1e-10)
     # every agent alone (same prior) is less certain: P_i - P_c is PSD
     Xh = np.broadcast_to(x[:, None], (1, N, N, 4)).copy()
     _, Pi, _ = dk.mb_update(model, Xh, np.broadcast_to(Pr[:, None], (1, N, *Pr.shape[1:])), Z, S[0])
@@ -170,7 +171,7 @@ def test_lyapunov_v_is_nees():
     G = rng.normal(size=(6, 6))
     P_r = G @ G.T + np.eye(6)
     e = rng.normal(size=12)
-    np.testing.assert_allclose(dk.lyapunov_v(e, P_r, kron=2), nees(e, dk.expand_covariance(P_r, 2)))
+    np.testing.assert_allclose(team_observability.lyapunov_v(e, P_r, kron=2), nees(e, team_model.expand_covariance(P_r, 2)))
 
 
 def test_lemma1_initial_map_gives_F_i1_equal_I_kron_A():
@@ -190,7 +191,7 @@ def test_closed_loop_matrices_reproduce_the_control_laws():
     rng = np.random.default_rng(9)
     Adj = ring_graph(N)
     L = laplacian(Adj)
-    F1, F2 = dk.closed_loop_matrices(AGENT.A, BK, L)
+    F1, F2 = team_model.closed_loop_matrices(AGENT.A, BK, L)
     x = rng.normal(size=(N, 4))
     Xh = rng.normal(size=(N, N, 4))
     U_true = consensus_control(np.broadcast_to(x, (N, N, 4)), L, K)
@@ -206,10 +207,10 @@ def test_closed_loop_matrices_reproduce_the_control_laws():
 
 def test_observability_of_system_43():
     """Star seen from a leaf hides the antisymmetric modes of the other leaves; paths and rings do not."""
-    assert dk.observable_agents(AGENT.A, BK, star_graph(5)).tolist() == [True, False, False, False, False]
-    assert dk.observable_agents(AGENT.A, BK, path_graph(6)).all()
-    assert dk.observable_agents(AGENT.A, BK, ring_graph(6)).all()
-    assert dk.observable_agents(AGENT.A, BK, complete_graph(4)).all()
+    assert team_observability.observable_agents(AGENT.A, BK, star_graph(5)).tolist() == [True, False, False, False, False]
+    assert team_observability.observable_agents(AGENT.A, BK, path_graph(6)).all()
+    assert team_observability.observable_agents(AGENT.A, BK, ring_graph(6)).all()
+    assert team_observability.observable_agents(AGENT.A, BK, complete_graph(4)).all()
 
 
 def test_graph_observability_agrees_with_observability_matrix():
@@ -221,18 +222,18 @@ def test_graph_observability_agrees_with_observability_matrix():
         A = A + A.T
         if np.any(A.sum(1) == 0):
             continue
-        fast = dk.observable_agents(AGENT.A, BK, A)
-        F1, _ = dk.closed_loop_matrices(Ar, BKr, laplacian(A))
+        fast = team_observability.observable_agents(AGENT.A, BK, A)
+        F1, _ = team_model.closed_loop_matrices(Ar, BKr, laplacian(A))
         for i in range(5):
             row = A[i] > 0
             row[i] = True
             H = np.kron(np.eye(5)[row], np.eye(2))
-            assert dk._observable(F1, H, 1e-9) == fast[i]
+            assert team_observability._observable(F1, H, 1e-9) == fast[i]
 
 
 def test_require_observable_and_simulation_refuse_unobservable_graph():
     with pytest.raises(ValueError, match=r"not observable for agent\(s\) \[1, 2, 3\]"):
-        dk.require_observable(AGENT.A, BK, star_graph(4))
+        team_observability.require_observable(AGENT.A, BK, star_graph(4))
     x0 = np.zeros((1, 4, 4))
     with pytest.raises(ValueError, match="system \\(43\\)"):
         simulate_rendezvous(0, _rv(), x0, star_graph(4), 5, "estimation", x_hat0=np.zeros((1, 16)), P0=np.eye(4))
@@ -262,7 +263,7 @@ def test_bad_model_input(kwargs, match):
     args = dict(A=AGENT.A, B=AGENT.B, K=K, Q=np.eye(4), R=np.eye(4), n_agents=4)
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
-        dk.team_filter_model(**args)
+        team_model.team_filter_model(**args)
 
 
 def test_bad_shapes_in_steps():
@@ -384,7 +385,7 @@ def test_theorem1_M_positive_along_run():
     x0 = rng.normal(scale=30, size=(1, N, 4))
     res = simulate_rendezvous(18, _rv(), x0, path_graph(N), 80, "estimation", x_hat0=(x0 + 5).reshape(1, -1),
                               P0=25 * np.eye(4))
-    th = dk.theorem1_min_eigenvalues(res.model, laplacian(path_graph(N)), res.gains, res.sigma_i, res.f2_cross)
+    th = team_observability.theorem1_min_eigenvalues(res.model, laplacian(path_graph(N)), res.gains, res.sigma_i, res.f2_cross)
     assert th["min_eig"].shape == (80, N)
     assert th["min_eig"].min() > 0
     assert np.all(th["min_eig_rel"] <= 1 + 1e-9)
@@ -397,7 +398,7 @@ def test_exact_control_noise_correlation_matches_monte_carlo_and_eq15_does_not()
     sample covariance of the true prediction error; the paper's eq. (15) is visibly off for R = 10 I.
     """
     N, Rv, n = 3, 10.0, 100_000
-    model = dk.team_filter_model(AGENT.A, AGENT.B, K, np.eye(4), Rv * np.eye(4), N, reduce=False)
+    model = team_model.team_filter_model(AGENT.A, AGENT.B, K, np.eye(4), Rv * np.eye(4), N, reduce=False)
     A = path_graph(N)
     L = laplacian(A)
     S = A > 0
@@ -408,7 +409,7 @@ def test_exact_control_noise_correlation_matches_monte_carlo_and_eq15_does_not()
     Sp = G @ np.swapaxes(G, -1, -2) / M * 20 + np.eye(M)
     X0 = np.zeros((1, N, N, 4))
     _, Spost, KH = dk.mb_update(model, X0, Sp[None], X0, S)
-    F1, _ = dk.closed_loop_matrices(AGENT.A, model.BK, L)
+    F1, _ = team_model.closed_loop_matrices(AGENT.A, model.BK, L)
     IBK = np.kron(np.eye(N), model.BK)
     nu = rng.normal(size=(n, N, M)) * np.sqrt(Rv)  # nu[:, j] = observer j's noise vector
     nubar = np.einsum("jl,njlm->njm", L, nu.reshape(n, N, N, 4)).reshape(n, M)
@@ -465,7 +466,7 @@ def test_switching_sequence_of_the_wrong_length_is_refused():
 def test_covariance_shape_errors_say_what_to_do():
     """A full covariance for a reduced model names reduce_covariance; a missing batch axis says to add it."""
     planar = double_integrator(2, 0.1)
-    model = dk.team_filter_model(planar.A, planar.B, rendezvous_gain(0.5, 1.5, 2), np.eye(4), np.eye(4), 3)
+    model = team_model.team_filter_model(planar.A, planar.B, rendezvous_gain(0.5, 1.5, 2), np.eye(4), np.eye(4), 3)
     Lap = laplacian(path_graph(3))
     X = np.zeros((1, 3, 3, 4))
     with pytest.raises(ValueError, match=r"reduce_covariance\(Sigma, 2\)"):
@@ -542,7 +543,7 @@ def test_model_arrays_are_read_only_and_copied():
     """The hole of the value caches: R_r changed in place after the check. Now refused, and the arrays the
     model was built from are copied (changing them later cannot reach the model)."""
     R = 2.0 * np.eye(4)
-    model = dk.team_filter_model(AGENT.A, AGENT.B, K, np.eye(4), R, 4)
+    model = team_model.team_filter_model(AGENT.A, AGENT.B, K, np.eye(4), R, 4)
     for name in ("A", "BK", "Q", "R", "A_r", "BK_r", "Q_r", "R_r"):
         arr = getattr(model, name)
         with pytest.raises(ValueError, match="read-only"):
@@ -566,16 +567,16 @@ def test_model_arrays_are_read_only_and_copied():
 def test_model_constructor_checks_everything():
     A = AGENT.A
     with pytest.raises(ValueError, match="R must be positive definite"):
-        dk.TeamFilterModel(A, BK, np.eye(4), np.zeros((12, 12)), 3)
+        team_model.TeamFilterModel(A, BK, np.eye(4), np.zeros((12, 12)), 3)
     with pytest.raises(ValueError, match="Q must be positive semidefinite"):
-        dk.TeamFilterModel(A, BK, -np.eye(4), np.eye(12), 3)
+        team_model.TeamFilterModel(A, BK, -np.eye(4), np.eye(12), 3)
     with pytest.raises(ValueError, match="Incompatible dimensions of R"):
-        dk.TeamFilterModel(A, BK, np.eye(4), np.eye(8), 3)
+        team_model.TeamFilterModel(A, BK, np.eye(4), np.eye(8), 3)
     with pytest.raises(ValueError, match="BK contains NaN"):
-        dk.TeamFilterModel(A, np.full((4, 4), np.nan), np.eye(4), np.eye(12), 3)
+        team_model.TeamFilterModel(A, np.full((4, 4), np.nan), np.eye(4), np.eye(12), 3)
     with pytest.raises(ValueError, match=r"Q is not of the form Q_r ⊗ I_2"):
-        dk.TeamFilterModel(A, BK, np.diag([1.0, 2.0, 1.0, 1.0]), np.eye(12), 3, kron=2)
-    model = dk.TeamFilterModel(A, BK, np.eye(4), np.eye(12), 3, kron=2)
+        team_model.TeamFilterModel(A, BK, np.diag([1.0, 2.0, 1.0, 1.0]), np.eye(12), 3, kron=2)
+    model = team_model.TeamFilterModel(A, BK, np.eye(4), np.eye(12), 3, kron=2)
     assert model.R_r.shape == (6, 6) and model.M_r == 6
 
 
@@ -680,11 +681,13 @@ def test_no_module_level_memory_or_private_scipy():
 
     import mascore.rendezvous as rv
 
-    for module in (dk, rv):
+    modules = (dk, rv, team_model, centralized_team_filter, team_observability, _team_kernels)
+    for module in modules:
         text = inspect.getsource(module)
         for banned in ("_sparsetools", "getrefcount", "threading", "_ValueMemo", "_RecentArrays", "cached_"):
             assert banned not in text, (module.__name__, banned)
-    assert not [k for k, v in vars(dk).items() if isinstance(v, dict) and not k.startswith("__")]
+    for module in modules[:1] + modules[2:]:
+        assert not [k for k, v in vars(module).items() if isinstance(v, dict) and not k.startswith("__")]
 
 
 def test_rendezvous_model_keeps_read_only_copies():

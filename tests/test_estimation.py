@@ -138,3 +138,96 @@ def test_a_spec_is_checked_when_declared():
         estimation.MethodSpec("x", ("target",), fusion.CentralizedFilter, lambda *a: (0.0, 0.0), {})
     with pytest.raises(ValueError, match="method must be one of"):
         estimation.method_spec("no-such-method", "target")
+
+
+TOY_SCENARIO = '''
+"""A toy scenario: N agents measure one scalar random walk; each filters alone, or one centre filters all."""
+
+import numpy as np
+
+from mascore.compare.scenario import Scenario
+
+
+def simulate(method, n_agents, seed, *, noise="gaussian", dropout=0.0, graph="ring", settings=None):
+    rng = np.random.default_rng(seed)
+    runs, steps = 20, 40
+    x, xh, P, sq = np.zeros(runs), np.zeros((runs, n_agents)), 1.0, np.zeros(runs)
+    R = 1.0 / n_agents if method == "centralized" else 1.0  # the centre: the mean of the N measurements
+    for _ in range(steps):
+        x = x + 0.1 * rng.standard_normal(runs)
+        z = x[:, None] + rng.standard_normal((runs, n_agents))
+        if method == "centralized":
+            z = np.broadcast_to(z.mean(1, keepdims=True), z.shape)
+        P = P + 0.01
+        K = P / (P + R)
+        xh, P = xh + K * (z - xh), (1 - K) * P
+        sq += np.mean((xh - x[:, None]) ** 2, 1)
+    return {"rmse_own": np.sqrt(sq / steps), "cpu_s": np.zeros(runs)}
+
+
+def cells(name):
+    return [{"study": "toy", "task": "toy-walk", "method": m, "n_agents": 4, "graph": "ring", "noise": "gaussian",
+             "dropout": 0.0, "q_scale": 1.0, "block": 0} for m in ("centralized", "alone")]
+
+
+SCENARIO = Scenario("toy-walk", lambda: ("centralized", "alone"), simulate,
+                    lambda method, n_agents, degree: float(n_agents) if method == "centralized" else 0.0, cells)
+'''
+
+
+@pytest.fixture
+def toy_scenario(tmp_path, monkeypatch):
+    """``mascore.compare.toyscenario2099``: one new scenario in one new file, and nothing else touched."""
+    (tmp_path / "toyscenario2099.py").write_text(TOY_SCENARIO)
+    monkeypatch.setattr(compare, "__path__", [*compare.__path__, str(tmp_path)])
+    monkeypatch.delitem(sys.modules, "mascore.compare.toyscenario2099", raising=False)
+    yield "toy-walk"
+    sys.modules.pop("mascore.compare.toyscenario2099", None)
+    vars(compare).pop("toyscenario2099", None)
+
+
+def test_a_new_scenario_is_one_module(toy_scenario):
+    from mascore.compare.scenario import scenarios
+
+    assert toy_scenario in scenarios()
+    cells = [c for c in compare.grid_cells("quick") if c["task"] == toy_scenario]  # the sweep has its cells
+    assert {c["method"] for c in cells} == {"centralized", "alone"}
+    rows = [{**r, **c, "cell": c["method"]} for c in cells for r in compare.run_cell(c)]
+    table = pd.DataFrame(rows)
+    assert set(table["floats"]) == {4.0, 0.0} and np.isnan(table["containment"]).all()
+    rmse = table.groupby("method")["rmse_own"].mean()
+    # the centre averages N = 4 measurements of the walk: its error is below an agent's alone
+    assert rmse["centralized"] < 0.8 * rmse["alone"]
+    summary = compare.summarize(table)
+    ratio = summary.set_index("method").loc["alone", "ratio_mean"]
+    assert ratio == pytest.approx(rmse["alone"] / rmse["centralized"], rel=0.05)
+    with pytest.raises(ValueError, match="must be one of"):
+        compare.run_cell({**cells[0], "method": "no-such-method"})
+
+
+def test_the_toy_scenario_is_gone_with_its_module():
+    from mascore.compare.scenario import scenarios
+
+    assert "toy-walk" not in scenarios()
+    assert not any(c["task"] == "toy-walk" for c in compare.grid_cells("quick"))
+
+
+def test_the_not_applicable_tables_are_the_specs_one_method_per_key():
+    tables = {"target": compare.TARGET_NOT_APPLICABLE, "localization": compare.LOCALIZATION_NOT_APPLICABLE,
+              "switching": compare.SWITCHING_NOT_APPLICABLE, "position": compare.POSITION_NOT_APPLICABLE}
+    names = {s.name for s in estimation.method_specs()}
+    for scenario, table in tables.items():
+        assert table and set(table) <= names  # every key is one declared method
+        for name, why in table.items():
+            assert any(s.name == name and s.not_applicable.get(scenario) == why for s in estimation.method_specs())
+    assert list(compare.SWITCHING_NOT_APPLICABLE) == ["vlahakis", "vlahakis-phi0", "vlahakis-phi1"]
+    assert "song-mb" in compare.TARGET_NOT_APPLICABLE and "song-eb" in compare.TARGET_NOT_APPLICABLE
+
+
+@pytest.mark.parametrize("spec", estimation.method_specs("team"), ids=lambda s: s.name)
+def test_every_team_method_is_built_by_its_spec_and_declares_its_cost(spec):
+    team = compare.team_setup(4, "gaussian", 1.0, compare.SETTINGS)
+    filt = spec.build(team, np.zeros((1, 4, 4)))
+    assert callable(filt.agent_step) and callable(filt.messages)
+    floats, flops = spec.cost(4, 4, 2, 4)
+    assert floats == compare.floats_per_step(spec.name, 4, 2.0) and flops > 0

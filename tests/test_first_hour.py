@@ -169,7 +169,7 @@ def _rendezvous_case(dt=0.1):
 
 def test_the_written_out_loop_is_simulate_rendezvous():
     """The loop of simulate_rendezvous's docstring (and the apply chapter), run by hand, gives its states and estimates."""
-    from mascore import distributed_kf
+    from mascore import distributed_kf, team_model
 
     agent, K, Q, R = _rendezvous_case()
     model = rendezvous.RendezvousModel.from_agent(agent, K, Q, R)
@@ -180,7 +180,7 @@ def test_the_written_out_loop_is_simulate_rendezvous():
                                          return_estimates=True)
     proc_rng, meas_rng = np.random.default_rng(7).spawn(2)
     x, L = x0[None], graphs.laplacian(adjacency)
-    team = distributed_kf.TeamFilter(distributed_kf.team_filter_model(agent.A, agent.B, K, Q, R, N), L,
+    team = distributed_kf.TeamFilter(team_model.team_filter_model(agent.A, agent.B, K, Q, R, N), L,
                                      x0.ravel()[None], np.eye(4), mode="eb")
     Z, S = sensing.measure(meas_rng, x, adjacency, R)
     estimates = [team.X_hat.copy()]
@@ -364,7 +364,8 @@ def test_every_q_and_r_parameter_says_what_it_is():
     words = ("covariance", "weight", "shape", "intensity", "as in")
     exempt = {("flocking.FlockingGains", "R")}  # the spring's rest length (m), Song et al.'s calligraphic R
     missing = []
-    for mod in ("kalman", "distributed_kf", "rendezvous", "sensing", "distributed_ekf", "flocking", "consensus",
+    for mod in ("kalman", "team_model", "distributed_kf", "centralized_team_filter", "team_observability",
+                "rendezvous", "sensing", "distributed_ekf", "flocking", "consensus",
                 "set_membership", "ellipsoids", "synchronization", "lqr", "observers", "noise"):
         module = importlib.import_module(f"mascore.{mod}")
         for name in module.__all__:

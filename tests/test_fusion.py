@@ -16,7 +16,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from mascore import fusion, graphs, kalman
+from mascore import fusion, fusion_cost, graphs, kalman, sensor_network
 
 DT = 0.5
 F = np.array([[1.0, DT], [0.0, 1.0]])
@@ -30,7 +30,7 @@ K_STEPS = 15
 
 
 def _model(adjacency=None, R=R5):
-    return fusion.SensorNetworkModel(F, Q, H5, R, graphs.ring_graph(5) if adjacency is None else adjacency)
+    return sensor_network.SensorNetworkModel(F, Q, H5, R, graphs.ring_graph(5) if adjacency is None else adjacency)
 
 
 def _sqrt(M):
@@ -353,7 +353,7 @@ def test_filters_share_one_filter_object_across_threads():
 
 def test_model_is_frozen_and_keeps_copies():
     H = [h.copy() for h in H5]
-    model = fusion.SensorNetworkModel(F, Q, H, R5, graphs.ring_graph(5))
+    model = sensor_network.SensorNetworkModel(F, Q, H, R5, graphs.ring_graph(5))
     H[0][0, 0] = 99.0
     assert model.H[0][0, 0] == 1.0
     with pytest.raises(ValueError, match="read-only"):
@@ -380,7 +380,7 @@ _GOOD = dict(F=F, Q=Q, H=H5, R=R5, adjacency=graphs.ring_graph(5))
 
 
 def _with(**changes):
-    return lambda: fusion.SensorNetworkModel(**{**_GOOD, **changes})
+    return lambda: sensor_network.SensorNetworkModel(**{**_GOOD, **changes})
 
 
 def _bad_H():
@@ -447,9 +447,9 @@ _Z = np.zeros(_MODEL.n_measurements)
      "weights must be non-negative and sum to 1"),
     (lambda: fusion.covariance_intersection([[0.0], [1.0]], [[[1.0]], [[1.0]]], "max"), ValueError, "weights must be"),
     (lambda: fusion.covariance_intersection([[np.nan], [1.0]], [[[1.0]], [[1.0]]]), ValueError, "means contains NaN"),
-    (lambda: fusion.filter_cost("kalman", 2, 1, 2), ValueError, "method must be one of"),
-    (lambda: fusion.filter_cost("hcmci", 2, -1, 2), ValueError, "q must be"),
-    (lambda: fusion.metropolis_weights(graphs.adjacency_from_edges(3, [(0, 1)], directed=True)), ValueError,
+    (lambda: fusion_cost.filter_cost("kalman", 2, 1, 2), ValueError, "method must be one of"),
+    (lambda: fusion_cost.filter_cost("hcmci", 2, -1, 2), ValueError, "q must be"),
+    (lambda: sensor_network.metropolis_weights(graphs.adjacency_from_edges(3, [(0, 1)], directed=True)), ValueError,
      "adjacency must be symmetric"),
 ])
 def test_bad_input_is_refused_by_name(call, error, match):
@@ -462,16 +462,16 @@ def test_bad_input_is_refused_by_name(call, error, match):
 
 def test_cost_model_counts():
     n, q, d, L = 4, 2, 3, 5
-    costs = {m: fusion.filter_cost(m, n, q, d, L, n_agents=10) for m in fusion._COST_METHODS}
+    costs = {m: fusion_cost.filter_cost(m, n, q, d, L, n_agents=10) for m in fusion_cost._COST_METHODS}
     assert costs["measurement-forwarding"].floats_sent == q
     assert costs["diffusion-kf"].floats_sent == q + n
     assert costs["consensus-on-information"].floats_sent == L * (n * (n + 1) / 2 + n)
     assert costs["hcmci"].floats_sent == 2 * costs["consensus-on-information"].floats_sent
     assert costs["information-consensus"].floats_sent == costs["consensus-on-information"].floats_sent
     for m in ("consensus-on-information", "hcmci", "information-consensus"):
-        more = fusion.filter_cost(m, n, q, d, L + 1)
+        more = fusion_cost.filter_cost(m, n, q, d, L + 1)
         assert more.floats_sent > costs[m].floats_sent and more.flops > costs[m].flops
-        assert fusion.filter_cost(m, n, q, d + 1, L).flops > costs[m].flops
+        assert fusion_cost.filter_cost(m, n, q, d + 1, L).flops > costs[m].flops
     assert all(c.flops > 0 and c.floats_formula and c.flops_formula for c in costs.values())
 
 
@@ -483,10 +483,10 @@ def _evaluate(formula, **values):
     return eval(expr, {}, values)  # noqa: S307 (our own formula strings)
 
 
-@pytest.mark.parametrize("method", fusion._COST_METHODS)
+@pytest.mark.parametrize("method", fusion_cost._COST_METHODS)
 def test_cost_formulas_give_the_counted_numbers(method):
     for n, q, d, L, N in ((4, 2, 3, 5, 10), (1, 0, 0, 0, 1), (6, 3, 7, 2, 20)):
-        c = fusion.filter_cost(method, n, q, d, L, n_agents=N)
+        c = fusion_cost.filter_cost(method, n, q, d, L, n_agents=N)
         values = dict(n=n, q=q, d=d, L=L, N=N)
         assert _evaluate(c.floats_formula, **values) == pytest.approx(c.floats_sent, rel=1e-12)
         assert _evaluate(c.flops_formula, **values) == pytest.approx(c.flops, rel=1e-12)
@@ -556,7 +556,7 @@ def test_error_covariance_with_a_conservative_initial_covariance():
 def test_one_agent_and_a_graph_without_links():
     """N = 1: every filter is the centralized one. No links: forwarding, CI, diffusion and CI-diffusion are the
     local filter (CI with L = 0); HCMCI and ICF are not (they count their own measurement N times)."""
-    one = fusion.SensorNetworkModel(F, Q, [np.eye(2)], [np.eye(2)], np.zeros((1, 1)))
+    one = sensor_network.SensorNetworkModel(F, Q, [np.eye(2)], [np.eye(2)], np.zeros((1, 1)))
     _, z = one.simulate(X0, P0, 10, rng=1)
     xc, Pc = fusion.CentralizedFilter(one).run(X0, P0, z)
     for filt in _filters(one):

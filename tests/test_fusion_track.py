@@ -6,14 +6,14 @@ import networkx as nx
 import numpy as np
 import pytest
 
-from mascore import fusion, graphs
+from mascore import fusion, graphs, sensor_network
 
 N, K = 5, 12
 
 
 def _model():
     H = [np.eye(4)[[i % 2]] for i in range(N)]  # each agent one coordinate: nobody observes alone
-    return fusion.SensorNetworkModel(np.block([[np.eye(2), 0.1 * np.eye(2)], [np.zeros((2, 2)), np.eye(2)]]),
+    return sensor_network.SensorNetworkModel(np.block([[np.eye(2), 0.1 * np.eye(2)], [np.zeros((2, 2)), np.eye(2)]]),
                                      1e-3 * np.eye(4), H, [0.04 * np.eye(1)] * N, graphs.ring_graph(N))
 
 
@@ -54,7 +54,7 @@ def test_on_a_switching_graph_track_is_the_filter_of_each_steps_graph(make):
     per_agent = make(model)._per_agent
     xk, Pk = model.check_state(np.zeros(4), np.eye(4), per_agent=per_agent)
     for k, A in enumerate(G):
-        f = make(fusion.SensorNetworkModel(model.F, model.Q, model.H, model.R, A))
+        f = make(sensor_network.SensorNetworkModel(model.F, model.Q, model.H, model.R, A))
         xk, Pk = f.update(*f.predict(xk, Pk), z[k])
         np.testing.assert_allclose(x[k], xk, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(P[k], Pk, rtol=1e-12, atol=1e-12)

@@ -15,7 +15,22 @@ import warnings
 import numpy as np
 import pytest
 
-from mascore import agents, consensus, ellipsoids, fusion, graphs, kalman, lqr, observers, own_state, rendezvous, sensing
+from mascore import (
+    agents,
+    centralized_team_filter,
+    consensus,
+    ellipsoids,
+    fusion,
+    graphs,
+    kalman,
+    lqr,
+    network_observer,
+    own_state,
+    rendezvous,
+    sensing,
+    sensor_network,
+    team_model,
+)
 from mascore import distributed_ekf as dekf
 from mascore import distributed_kf as dkf
 from mascore import set_membership as smf
@@ -30,14 +45,14 @@ SM_KW = dict(A=[[1.0, 0.1], [0.0, 1.0]], G=np.eye(2), C=[[1.0, 0.0]], D=[[1.0]],
 
 def _sensor_network():
     H = [[[1.0, 0.0]], np.zeros((0, 2)), [[1.0, 0.0]]]
-    return fusion.SensorNetworkModel([[1.0, 0.1], [0.0, 1.0]], 0.01 * np.eye(2), H, [[[0.5]], None, [[2.0]]],
+    return sensor_network.SensorNetworkModel([[1.0, 0.1], [0.0, 1.0]], 0.01 * np.eye(2), H, [[[0.5]], None, [[2.0]]],
                                      graphs.path_graph(3))
 
 
 MODELS = {  # every checked model or value class: a builder of one instance
     "LinearGaussianModel": lambda: kalman.LinearGaussianModel(F=[[1.0, 0.1], [0.0, 1.0]], Q=0.01 * np.eye(2),
                                                               H=[[1.0, 0.0]], R=[[0.5]], B=[[0.0], [0.1]]),
-    "TeamFilterModel": lambda: dkf.team_filter_model(AGENT.A, AGENT.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+    "TeamFilterModel": lambda: team_model.team_filter_model(AGENT.A, AGENT.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
                                                      0.01 * np.eye(2), np.eye(2), n_agents=3),
     "SetMembershipModel": lambda: smf.SetMembershipModel(**SM_KW),
     "EKFModel": lambda: dekf.EKFModel(3, 0.1, GAINS, 0.01 * np.eye(12), np.eye(12)),
@@ -64,7 +79,7 @@ MODELS = {  # every checked model or value class: a builder of one instance
                                                                            np.eye(2), np.eye(2)),
     "CentralizedOutputFilter": lambda: own_state.CentralizedOutputFilter(np.eye(2), np.ones((2, 1)), 0.01 * np.eye(2),
                                                                          [[1.0, 0.0]], 0.5, 3),
-    "DiscreteNetworkObserver": lambda: observers.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3),
+    "DiscreteNetworkObserver": lambda: network_observer.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3),
                                                                          [[1, 0.1], [0, 1]], [[0.0], [0.1]], [[1.0, 0.0]]),
 }
 
@@ -299,7 +314,7 @@ def test_an_inaccurate_solve_raises_from_its_status_without_a_warning():
 
 def _team_filter(mode="eb", n_agents=3):
     """A whole-team filter; 14 agents make ``N M_r > 384``: the estimation-based step then runs in place."""
-    model = dkf.team_filter_model(AGENT.A, AGENT.B, rendezvous.rendezvous_gain(0.5, 1.5, 1), 0.01 * np.eye(2),
+    model = team_model.team_filter_model(AGENT.A, AGENT.B, rendezvous.rendezvous_gain(0.5, 1.5, 1), 0.01 * np.eye(2),
                                   np.eye(2), n_agents=n_agents)
     path = graphs.path_graph(n_agents)
     filt = dkf.TeamFilter(model, graphs.laplacian(path), np.zeros((1, 2 * n_agents)), P0=np.eye(2), mode=mode)
@@ -312,7 +327,7 @@ def _measure(k, n_agents=3):
 
 
 def _central_filter():
-    filt = dkf.CentralizedTeamFilter(MODELS["TeamFilterModel"](), AGENT.B, np.zeros((1, 6)), np.eye(2))
+    filt = centralized_team_filter.CentralizedTeamFilter(MODELS["TeamFilterModel"](), AGENT.B, np.zeros((1, 6)), np.eye(2))
     return filt, lambda k: (filt.predict(np.zeros((1, 3, 1))), filt.update(*_measure(k)))
 
 

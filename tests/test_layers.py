@@ -17,16 +17,8 @@ PACKAGE = Path(__file__).parents[1] / "mascore"
 
 #: Private names still used across modules, to be folded into public ones (issue 28, item 5); none may be added.
 KNOWN_PRIVATE_USES = {
-    ("mascore._kf_reference", "mascore.sensing._check_adjacency"),
-    ("mascore.agent_cost", "mascore.distributed_kf._F1_rows"),
-    ("mascore.distributed_kf", "mascore.sensing._check_adjacency"),
-    ("mascore.distributed_kf", "mascore.sensing._check_flag"),
-    ("mascore.distributed_kf", "mascore.sensing._check_mask_values"),
     ("mascore.graphs", "mascore._validation._is_graph"),
-    ("mascore.rendezvous", "mascore.distributed_kf._check_laplacian"),
     ("mascore.rendezvous", "mascore.noise._psd_factor"),
-    ("mascore.rendezvous", "mascore.sensing._check_adjacency"),
-    ("mascore.rendezvous", "mascore.sensing._check_flag"),
     ("mascore.rendezvous", "mascore.sensing._measure"),
     ("mascore.sensing", "mascore.noise._psd_factor"),
     ("mascore.sensing", "mascore.noise._sample_shape"),

@@ -8,7 +8,7 @@ import matplotlib
 import numpy as np
 import pytest
 
-from mascore import distributed_kf as dk
+from mascore import team_observability
 from mascore.graphs import is_connected
 from mascore.ledger import VERDICTS
 from mascore.papers import song2023 as S
@@ -64,7 +64,7 @@ def test_random_initial_states_are_connected_and_observable():
     for _ in range(3):
         x0, A = S.random_initial_states(rng, s)
         assert x0.shape == (8, 4) and is_connected(A)
-        assert dk.observable_agents(s.A, s.BK, A).all()
+        assert team_observability.observable_agents(s.A, s.BK, A).all()
         d = np.linalg.norm(x0[:, None, :2] - x0[None, :, :2], axis=-1)
         np.testing.assert_array_equal(A > 0, (d <= 150.0) & ~np.eye(8, dtype=bool))
 

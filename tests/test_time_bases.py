@@ -10,8 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mascore import agents, fusion, graphs, kalman, lqr, observers
-from mascore import distributed_kf as dk
+from mascore import agents, graphs, kalman, lqr, observers, sensor_network, team_model
 from mascore import rendezvous as rv
 from mascore import synchronization as sync
 
@@ -130,12 +129,12 @@ def test_design_synchronization_takes_a_sampled_state_space():
 def test_filter_models_take_a_system():
     agent = agents.double_integrator(1, 0.1)
     gain = rv.rendezvous_gain(0.5, 1.5, 1)
-    a = dk.team_filter_model(agent, gain, np.eye(2), np.eye(2), 3)
-    b = dk.team_filter_model(agent.A, agent.B, gain, np.eye(2), np.eye(2), 3)
+    a = team_model.team_filter_model(agent, gain, np.eye(2), np.eye(2), 3)
+    b = team_model.team_filter_model(agent.A, agent.B, gain, np.eye(2), np.eye(2), 3)
     np.testing.assert_array_equal(a.A, b.A)
     model = kalman.LinearGaussianModel(agent, 0.01 * np.eye(2), [[1.0, 0.0]], [[1.0]])
     np.testing.assert_array_equal(model.B, agent.B)
-    net = fusion.SensorNetworkModel(agent, 0.01 * np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3, graphs.ring_graph(3))
+    net = sensor_network.SensorNetworkModel(agent, 0.01 * np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3, graphs.ring_graph(3))
     np.testing.assert_array_equal(net.F, agent.A)
     K1, _, _ = lqr.lqr(agent, np.eye(2), np.eye(1))  # a sampled agent: python-control's lqr -> dlqr
     np.testing.assert_allclose(K1, control.dlqr(agent.A, agent.B, np.eye(2), np.eye(1))[0], rtol=1e-10)

@@ -50,10 +50,7 @@ SM_CONFIDENCE = {"set-membership": None, "set-membership-c90": 0.9, "set-members
 POSITION_METHODS = ("centralized", "local", "forwarding", "vlahakis", "vlahakis-phi0", "vlahakis-phi1",
                     *SM_CONFIDENCE)
 #: Team methods that do not apply under position-only sensing, with the reason.
-POSITION_NOT_APPLICABLE = {
-    "song-mb": "needs full-state measurements of its neighbours (eq. (2))",
-    "song-eb": "needs full-state measurements of its neighbours (eq. (2))",
-}
+POSITION_NOT_APPLICABLE = estimation.not_applicable("position")
 #: Every team-method name a cell may carry (the set-membership knob's variants run in the position study).
 ALL_TEAM_METHODS = TEAM_METHODS + tuple(m for m in SM_CONFIDENCE if m not in TEAM_METHODS)
 
@@ -346,8 +343,11 @@ def check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[s
     if not isinstance(cell, Mapping):
         raise TypeError(f"{name} must be a mapping of the cell's coordinates (task, method, n_agents, noise, "
                         f"dropout, q_scale); got {type(cell).__name__}")
+    from .scenario import scenarios
+
     methods_of = {"team": ALL_TEAM_METHODS, "shared": SHARED_METHODS, "target": estimation.method_names("target"),
-                  "localization": estimation.method_names("localization")}
+                  "localization": estimation.method_names("localization"),
+                  **{task: s.methods() for task, s in scenarios().items()}}
     task = cell.get("task")
     if task not in methods_of:
         raise ValueError(f"{name}['task'] must be one of {tuple(methods_of)}; got {task!r}")
@@ -368,7 +368,7 @@ def check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[s
     if cell.get("graph", "ring") not in SWITCHING_GRAPHS:
         raise ValueError(f"{name}['graph'] of a {task} cell must be one of {SWITCHING_GRAPHS}; "
                          f"got {cell.get('graph')!r}")
-    if task == "team" and cell.get("graph") == "switching" and cell["method"] in VLAHAKIS_PHI:
+    if task == "team" and cell.get("graph") == "switching" and cell["method"] in estimation.not_applicable("switching"):
         raise ValueError(f"{name}: {cell['method']} does not apply on the switching graph "
                          "(SWITCHING_NOT_APPLICABLE)")
     sensing = cell.get("sensing", "full")

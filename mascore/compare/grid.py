@@ -25,6 +25,7 @@ from .benchmark import (
     floats_per_step,
     mean_degree,
 )
+from .scenario import scenarios
 from .shared import simulate_shared
 from .tables import fitted_slopes
 from .target import simulate_target, target_cost, target_methods
@@ -117,6 +118,8 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
             if cell["method"] == "song-eb" and cell["n_agents"] > 32:
                 continue  # its joint covariance is (2 N^2)^2 floats: 0.5 GB at N = 64
             cells.append({"study": study, **cell})
+    for scenario in scenarios().values():  # the scenarios declared in their own modules, after the book's
+        cells += [dict(c) for c in scenario.cells(name)]
     return cells
 
 
@@ -156,11 +159,18 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
     sensing = cell.get("sensing", "full")
     seed = cell_seed(cell, SEED_AXES if sensing == "full" else (*SEED_AXES, "sensing"), base_seed)
     common = {"noise": cell["noise"], "dropout": float(cell["dropout"])}
+    new = scenarios()
     if cell["task"] in ("target", "localization"):
         metrics = simulate_target(cell["method"], int(cell["n_agents"]), seed, graph=cell.get("graph", "ring"),
                                   settings=settings, task=cell["task"])
         nan = np.full_like(metrics["rmse_own"], np.nan)
         metrics.update(rmse_view=nan, containment=nan, spread=nan, rmse_far=nan, set_size=nan)
+    elif cell["task"] in new:  # a scenario declared in its own module
+        metrics = dict(new[cell["task"]].simulate(cell["method"], int(cell["n_agents"]), seed, settings=settings,
+                                                  graph=cell.get("graph", "ring"), **common))
+        nan = np.full_like(metrics["rmse_own"], np.nan)
+        for k in ("rmse_view", "containment", "spread", "rmse_far", "set_size", "nees_own", "cpu_s"):
+            metrics.setdefault(k, nan)
     elif cell["task"] == "team":
         metrics = simulate_team(cell["method"], int(cell["n_agents"]), seed, q_scale=float(cell["q_scale"]),
                                 graph=cell.get("graph", "ring"), settings=settings, sensing=sensing, **common)
@@ -173,6 +183,8 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
     degree = mean_degree(cell.get("graph", "ring"), int(cell["n_agents"]), settings)
     if cell["task"] in ("target", "localization"):
         floats = target_cost(cell["method"], int(cell["n_agents"]), degree, cell["task"])[0]
+    elif cell["task"] in new:
+        floats = float(new[cell["task"]].floats(cell["method"], int(cell["n_agents"]), degree))
     else:
         floats = floats_per_step(cell["method"], int(cell["n_agents"]), degree=degree, sensing=sensing)
     runs = len(metrics["rmse_own"])

@@ -7,6 +7,7 @@ import time
 import numpy as np
 
 from .. import consensus
+from ..estimation import method_spec
 from .benchmark import (
     REN_Q,
     SETTINGS,
@@ -90,23 +91,16 @@ def simulate_shared(
     elif method == "average-consensus" or method in REN_Q:
         A_k = adjacency[:, None] if adjacency.ndim == 3 else adjacency  # (steps, 1, N, N) when switching
         G = A_k * (drop_rng.random((settings.shared_steps, runs, N, N)) >= dropout)
+        filt = method_spec(method, "shared").build(None)  # REN_Q: the paper's Q = Omega = 0.1 (Sec. 5), and 0
         if method == "average-consensus":
-            xi, P = _average(xi, G), None
+            for G_k in G:
+                xi = filt.update(xi, G_k)
+            P = None
         else:
-            for G_k in G:  # the paper's Q = Omega = 0.1 (Sec. 5); noise-free messages
-                xi, P = consensus.kalman_consensus_step(xi, P, G_k, Q=REN_Q[method], Omega=REN_Q[method])
+            for G_k in G:  # noise-free messages
+                xi, P = filt.update(xi, P, G_k)
     err = np.sum(xi**2, -1)
     nees = nan if P is None else np.mean(np.einsum("...i,...i->...", xi, np.linalg.solve(P, xi[..., None])[..., 0]),
                                          -1) / 2
     cpu = time.thread_time() - start
     return {"rmse_own": np.sqrt(err.mean(-1)), "nees_own": nees, "cpu_s": np.full(runs, cpu)}
-
-
-def _average(xi: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """Average consensus with Metropolis weights on the delivered links, step by step."""
-    for G_k in G:
-        deg = G_k.sum(-1)
-        W = G_k / (1.0 + np.maximum(deg[..., :, None], deg[..., None, :]))
-        W = W + np.eye(G_k.shape[-1]) * (1.0 - W.sum(-1))[..., None]
-        xi = W @ xi
-    return xi

@@ -48,12 +48,7 @@ def target_methods(task: str = "target") -> tuple[str, ...]:
     """
     return estimation.method_names(task)
 #: Methods of the papers that do not apply to the common target, with the reason (the headline shows them).
-TARGET_NOT_APPLICABLE = {
-    "song-mb, song-eb": "estimate the agents' own states in a rendezvous loop; there is no common target",
-    "vlahakis": "an observer of each agent's own state, coupled by relative outputs; there is no common target",
-    "set-membership": "a single agent's filter; alone, an agent that senses one coordinate cannot observe the target",
-    "ren-kc": "fuses priors of a quantity nobody measures; with measurements it becomes the consensus filters above",
-}
+TARGET_NOT_APPLICABLE = estimation.not_applicable("target")  # as the other tasks' specs say
 
 
 def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
@@ -70,7 +65,7 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
 
     Returns
     -------
-    mascore.fusion.SensorNetworkModel
+    mascore.sensor_network.SensorNetworkModel
         No agent observes the target alone; the team does.
 
     Examples
@@ -79,7 +74,7 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
     >>> compare.target_model(8)
     SensorNetworkModel(N = 8 agents, n = 4 states, q = (1, 1, 1, 1, 1, 1, 1, 1) measurements)
     """
-    from .. import fusion
+    from .. import sensor_network
 
     n_agents = check_n_agents(n_agents)
     s = settings
@@ -87,16 +82,11 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
     Q = np.diag([s.q_pos, s.q_pos, s.q_vel, s.q_vel])
     H = [np.eye(4)[[i % 2]] for i in range(n_agents)]
     R = [s.r * np.eye(1)] * n_agents
-    return fusion.SensorNetworkModel(F, Q, H, R, benchmark_graph(graph, n_agents, s))
+    return sensor_network.SensorNetworkModel(F, Q, H, R, benchmark_graph(graph, n_agents, s))
 
 
 #: The papers' methods on cooperative localization: none applies as published, for these reasons.
-LOCALIZATION_NOT_APPLICABLE = {
-    "song-mb, song-eb": "need absolute measurements of the neighbours' states (eq. (2)); here they are relative",
-    "vlahakis": "needs every agent to measure its own output (the Q1 term); here only the anchors do",
-    "set-membership": "a single agent's filter; without an anchor an agent's relative measurements do not fix it",
-    "ren-kc": "fuses priors of a quantity nobody measures; there is no common quantity here",
-}
+LOCALIZATION_NOT_APPLICABLE = estimation.not_applicable("localization")  # as the other tasks' specs say
 
 
 def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
@@ -119,7 +109,7 @@ def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSe
 
     Returns
     -------
-    mascore.fusion.SensorNetworkModel
+    mascore.sensor_network.SensorNetworkModel
         Without the anchors the positions would be observable only up to a common shift.
 
     Examples
@@ -128,7 +118,7 @@ def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSe
     >>> compare.localization_model(4).measurement_sizes
     (6, 4, 6, 4)
     """
-    from .. import fusion
+    from .. import sensor_network
 
     n_agents = check_n_agents(n_agents)
     s = settings
@@ -144,7 +134,7 @@ def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSe
             rows.append(np.kron(np.eye(n_agents)[j] - np.eye(n_agents)[i], I2))
         H.append(np.vstack(rows))
         R.append(s.r * np.eye(H[-1].shape[0]))
-    return fusion.SensorNetworkModel(np.eye(n), s.q_pos * np.eye(n), H, R, A)
+    return sensor_network.SensorNetworkModel(np.eye(n), s.q_pos * np.eye(n), H, R, A)
 
 
 def _localization_switching(n_agents: int, settings: BenchmarkSettings):
@@ -153,15 +143,15 @@ def _localization_switching(n_agents: int, settings: BenchmarkSettings):
 
     Returns
     -------
-    union : mascore.fusion.SensorNetworkModel
+    union : mascore.sensor_network.SensorNetworkModel
         :func:`localization_model`'s sensing over the union of the step graphs (it draws the data:
         each possible link's measurement has its own noise; a step keeps its current links' rows).
-    steps : list of (mascore.fusion.SensorNetworkModel, ndarray of int)
+    steps : list of (mascore.sensor_network.SensorNetworkModel, ndarray of int)
         Per step k: the model of graph k (anchors' rows, then the relative rows of its current
         links, as :func:`localization_model` orders them) and the indices of its rows in ``union``'s
         stacked measurement.
     """
-    from .. import fusion
+    from .. import sensor_network
 
     G = switching_graphs(n_agents, settings.n_steps, settings) > 0
     union_adj = G.any(0)
@@ -183,7 +173,7 @@ def _localization_switching(n_agents: int, settings: BenchmarkSettings):
         R.append(settings.r * np.eye(H[-1].shape[0]) if blocks else None)
         rows_of.append(where)
     F, Q = np.eye(n), settings.q_pos * np.eye(n)
-    union = fusion.SensorNetworkModel(F, Q, H, R, union_adj.astype(float))
+    union = sensor_network.SensorNetworkModel(F, Q, H, R, union_adj.astype(float))
     steps = []
     for A in G:
         Hk, Rk, idx = [], [], []
@@ -193,7 +183,7 @@ def _localization_switching(n_agents: int, settings: BenchmarkSettings):
             idx.append(rows)
             Hk.append(union.H_stacked[rows])
             Rk.append(settings.r * np.eye(len(rows)) if len(rows) else None)
-        steps.append((fusion.SensorNetworkModel(F, Q, Hk, Rk, A.astype(float)), np.concatenate(idx)))
+        steps.append((sensor_network.SensorNetworkModel(F, Q, Hk, Rk, A.astype(float)), np.concatenate(idx)))
     return union, steps
 
 
@@ -275,7 +265,7 @@ def target_filter(method: str, model, task: str = "target"):
     ----------
     method : str
         One of :func:`target_methods`.
-    model : mascore.fusion.SensorNetworkModel
+    model : mascore.sensor_network.SensorNetworkModel
         The sensing and the graph.
     task : {"target", "localization"}
         The scenario whose methods are searched.
@@ -295,7 +285,7 @@ def target_filter(method: str, model, task: str = "target"):
 
 
 def target_cost(method: str, n_agents: int, degree: float, task: str = "target") -> tuple[float, float]:
-    """Floats sent and flops per agent per step of a common-target method (:func:`mascore.fusion.filter_cost`).
+    """Floats sent and flops per agent per step of a common-target method (:func:`mascore.fusion_cost.filter_cost`).
 
     Parameters
     ----------
@@ -388,11 +378,11 @@ def simulate_target(
     P0 = s.p0 * np.eye(n)
     x_true, z = model.simulate(np.zeros(n), P0, s.n_steps, np.random.default_rng(seed), n_runs=runs)
     if graph == "switching":  # the filters hold no state: one filter per step's graph
-        from .. import fusion
+        from .. import sensor_network
 
         if task == "target":
             G = switching_graphs(n_agents, s.n_steps, s)
-            steps = [(fusion.SensorNetworkModel(model.F, model.Q, model.H, model.R, A), slice(None)) for A in G]
+            steps = [(sensor_network.SensorNetworkModel(model.F, model.Q, model.H, model.R, A), slice(None)) for A in G]
         filters = [target_filter(method, m, task) for m, _ in steps]
         tic = time.thread_time()
         xk, Pk = model.check_state(np.zeros(n), P0, per_agent=not spec.whole_filter)

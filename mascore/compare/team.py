@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import distributed_kf as dkf
-from .. import graphs, kalman, rendezvous, set_membership
+from .. import estimation, graphs, kalman, rendezvous, set_membership, team_model
 from .._validation import frozen_copy
 from ..agents import double_integrator
+from ..estimation import method_spec
 from ..own_state import CentralizedOutputFilter, OwnStateForwardingFilter
 from .benchmark import (
     ALL_TEAM_METHODS,
@@ -52,6 +52,19 @@ class _Team:
     s: BenchmarkSettings
     switching: bool = False  # adjacency and laplacian are this step's (simulate_team sets them at every step)
 
+    def bound_scale(self, dim: int, confidence: float | None = None) -> float:
+        """The scale of the covariance ellipsoid given to a set-membership filter as its bound (:func:`bound_scale`)."""
+        return bound_scale(self.noise, dim, self.s.sm_confidence if confidence is None else confidence)
+
+    def vlahakis_design(self, phi: float | None) -> tuple[np.ndarray, float, np.ndarray]:
+        """The Vlahakis observer's discrete gain ``(4, 2)``, coupling ``Phi`` and output matrix on this team.
+
+        The gains of :func:`_vlahakis_gains` (per axis, from the filter's noise), on ``[p; v]`` of both axes
+        sampled at ``dt``; the outputs are the positions.
+        """
+        L, Phi = _vlahakis_gains(self.adjacency, self.Q_filter[2, 2], self.s.r, self.s.dt, phi)
+        return self.s.dt * np.kron(L, np.eye(2)), Phi, _C_POS
+
 
 def team_setup(n_agents: int, noise: str, q_scale: float, s: BenchmarkSettings, graph: str = "ring") -> _Team:
     agent = double_integrator(2, s.dt)
@@ -86,14 +99,26 @@ class _Estimator:
     def containment(self, x: np.ndarray) -> np.ndarray | None:
         return None
 
+    def agent_inputs(self, Z: np.ndarray, S: np.ndarray, U: np.ndarray, i: int) -> tuple:
+        """``(estimator, own, messages)``: agent i's next step of run 0 (update with `Z`, `S`, prediction with `U`).
+
+        The estimator's own ``agent_inputs``, given the state this adapter holds; ``estimator.agent_step(i,
+        own, messages)`` is the step.
+        """
+        raise NotImplementedError(f"{type(self).__name__} has no agent-level step")
+
+    def agent_state(self, i: int) -> tuple:
+        """Agent i's state of run 0, as the estimator's ``agent_step`` returns it (to check one against the other)."""
+        raise NotImplementedError(f"{type(self).__name__} has no agent-level step")
+
 
 class _Centralized(_Estimator):
     link_borne = False
 
     def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
         super().__init__(team, x_hat0)
-        self.model = dkf.team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N)
-        self.filter = dkf.CentralizedTeamFilter(self.model, team.B, x_hat0, team.P0)
+        self.filter = method_spec("centralized", "team").build(team, x_hat0)
+        self.model = self.filter.model
 
     def update(self, Z, S):
         self.filter.update(Z, S)
@@ -107,8 +132,11 @@ class _Centralized(_Estimator):
     def own_cov(self):
         return _own_blocks(self.filter.P, self.model)
 
+    def agent_inputs(self, Z, S, U, i):
+        return (self.filter, *self.filter.agent_inputs(Z, S, U, i))
 
-def _own_blocks(P: np.ndarray, model: dkf.TeamFilterModel) -> np.ndarray:
+
+def _own_blocks(P: np.ndarray, model: team_model.TeamFilterModel) -> np.ndarray:
     """Agent i's own ``(4, 4)`` covariance from reduced team covariances: ``(B, N, 4, 4)``.
 
     `P` is ``(B, N m_r, N m_r)`` (one team covariance) or ``(B, N, N m_r, N m_r)`` (agent i's own
@@ -119,7 +147,7 @@ def _own_blocks(P: np.ndarray, model: dkf.TeamFilterModel) -> np.ndarray:
     blocks = np.moveaxis(blocks, 0, -3)
     if P.ndim == 4:  # (B, N agents, N blocks, mr, mr): agent i's block i
         blocks = blocks[:, np.arange(N), np.arange(N)]
-    return dkf.expand_covariance(blocks, model.kron)
+    return team_model.expand_covariance(blocks, model.kron)
 
 
 class _Local(_Estimator):
@@ -140,6 +168,14 @@ class _Local(_Estimator):
     def own_cov(self):
         return self.P
 
+    def agent_inputs(self, Z, S, U, i):
+        model = method_spec("local", "team").build(self.t, self.own)
+        N = self.t.N
+        return (model, *model.agent_inputs(self.own[0], self.P, Z[0, np.arange(N), np.arange(N)], U[0], i))
+
+    def agent_state(self, i):
+        return self.own[0, i], self.P
+
 
 class _Song(_Estimator):
     """Song et al.'s filters; ``X`` is every agent's estimate of the team, ``(R, N, N, 4)``."""
@@ -148,10 +184,8 @@ class _Song(_Estimator):
         super().__init__(team, x_hat0)
         self.eb = estimation_based
         self.link_borne = not estimation_based
-        self.model = dkf.team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N)
-        R, N, m = x_hat0.shape  # one common initial estimate; links dropping per run split the covariance
-        self.filter = dkf.TeamFilter(self.model, team.laplacian, x_hat0.reshape(R, N * m), team.P0,
-                                     mode="eb" if estimation_based else "mb")
+        self.filter = method_spec("song-eb" if estimation_based else "song-mb", "team").build(team, x_hat0)
+        self.model = self.filter.model
 
     def update(self, Z, S):
         self.filter.update(Z, S)
@@ -174,6 +208,12 @@ class _Song(_Estimator):
     @property
     def own_cov(self):
         return _own_blocks(self.filter.agent_covariances(), self.model)
+
+    def agent_inputs(self, Z, S, U, i):
+        return (self.filter, *self.filter.agent_inputs(Z, S, i))
+
+    def agent_state(self, i):
+        return self.filter.view("X_hat")[0, i], self.filter.view("Sigma")[0, i]
 
 
 def _vlahakis_gains(adjacency: np.ndarray, q_vel: float, r: float, dt: float,
@@ -248,23 +288,23 @@ def vlahakis_profile(n_agents: int = 8, phis: Sequence[float] = (-0.1, 0.0, 0.31
 
 
 class _Vlahakis(_Estimator):
-    """The Vlahakis observer (:class:`mascore.observers.DiscreteNetworkObserver`) with its gains from the LMI."""
+    """The Vlahakis observer (:class:`mascore.network_observer.DiscreteNetworkObserver`) with its gains from the LMI."""
 
-    def __init__(self, team: _Team, x_hat0: np.ndarray, phi: float | None = None) -> None:
+    def __init__(self, team: _Team, x_hat0: np.ndarray, name: str = "vlahakis") -> None:
         super().__init__(team, x_hat0)
-        s = team.s
-        from .. import observers
-
-        L, Phi = _vlahakis_gains(team.adjacency, team.Q_filter[2, 2], s.r, s.dt, phi)  # the filter's Q
-        # (4, 2): per-axis gain on [p; v]; the outputs are the positions
-        self.observer = observers.DiscreteNetworkObserver(s.dt * np.kron(L, np.eye(2)), Phi, team.adjacency, team.A,
-                                                          team.B, _C_POS)
+        self.observer = method_spec(name, "team").build(team, x_hat0)  # the gains of the filter's Q
 
     def update(self, Z, S):
         self.own = self.observer.update(self.own, Z[..., :2], S)  # z_ij positions; the links delivered
 
     def predict(self, U):
         self.own = self.observer.predict(self.own, U)
+
+    def agent_inputs(self, Z, S, U, i):
+        return (self.observer, *self.observer.agent_inputs(self.own[0], Z[0, :, :, :2], U[0], i))
+
+    def agent_state(self, i):
+        return (self.own[0, i],)
 
 
 class _Forwarding(_Estimator):
@@ -293,11 +333,19 @@ class _Forwarding(_Estimator):
     def own_cov(self):
         return self.P
 
+    def agent_inputs(self, Z, S, U, i):
+        return (self.filter, *self.filter.agent_inputs(self.own[0], self.P[0], Z[0], S[0], U[0], i))
+
+    def agent_state(self, i):
+        return self.own[0, i], self.P[0, i]
+
 
 class _SetMembership(_Estimator):
-    def __init__(self, team: _Team, x_hat0: np.ndarray, confidence: float | None = None) -> None:
+    def __init__(self, team: _Team, x_hat0: np.ndarray, confidence: float | None = None,
+                 name: str = "set-membership") -> None:
         super().__init__(team, x_hat0)
         s = team.s
+        self.name = name
         confidence = s.sm_confidence if confidence is None else confidence
         self.shape = np.broadcast_to(bound_scale("gaussian", 4, confidence) * team.P0,
                                      (*x_hat0.shape[:2], 4, 4)).copy()
@@ -323,6 +371,14 @@ class _SetMembership(_Estimator):
     def set_shape(self):
         """The set's shape matrices, broadcastable to ``(R, N, 4, 4)``."""
         return self.shape
+
+    def agent_inputs(self, Z, S, U, i):
+        model = method_spec(self.name, "team").build(self.t, self.own)
+        N = self.t.N
+        return (model, *model.agent_inputs(self.own[0], self.shape[0], Z[0, np.arange(N), np.arange(N)], U[0], i))
+
+    def agent_state(self, i):
+        return self.own[0, i], self.shape[0, i]
 
 
 # ---------------------------------------------------------------- position-only sensing: z_ij = C x_j + nu_ij
@@ -423,7 +479,7 @@ def make_estimator(method: str, team: _Team, x_hat0: np.ndarray, sensing: str = 
             raise ValueError(f"method {method!r} does not apply under position-only sensing: "
                              f"{POSITION_NOT_APPLICABLE[method]}")
     if method in SM_CONFIDENCE and method != "set-membership":
-        return _SetMembership(team, x_hat0, SM_CONFIDENCE[method])
+        return _SetMembership(team, x_hat0, SM_CONFIDENCE[method], method)
     if method == "centralized":
         return _Centralized(team, x_hat0)
     if method == "local":
@@ -431,7 +487,7 @@ def make_estimator(method: str, team: _Team, x_hat0: np.ndarray, sensing: str = 
     if method in ("song-mb", "song-eb"):
         return _Song(team, x_hat0, estimation_based=method == "song-eb")
     if method in VLAHAKIS_PHI:
-        return _Vlahakis(team, x_hat0, VLAHAKIS_PHI[method])
+        return _Vlahakis(team, x_hat0, method)
     if method == "forwarding":
         return _Forwarding(team, x_hat0)
     if method == "set-membership":
@@ -440,11 +496,7 @@ def make_estimator(method: str, team: _Team, x_hat0: np.ndarray, sensing: str = 
 
 
 #: Team methods that do not apply on the switching topology, with the reason (the chapter shows them).
-SWITCHING_NOT_APPLICABLE = {
-    "vlahakis, vlahakis-phi0, vlahakis-phi1": "its gains come from an LMI over the eigenvalues of one fixed "
-    "Laplacian (eqs. (56)-(62)); for a graph that changes at every step, often disconnected, the paper gives "
-    "no design and no stability guarantee",
-}
+SWITCHING_NOT_APPLICABLE = estimation.not_applicable("switching")
 
 
 def simulate_team(
@@ -533,9 +585,8 @@ def simulate_team(
                          f"{POSITION_NOT_APPLICABLE[method]}")
     if graph not in SWITCHING_GRAPHS:
         raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
-    if graph == "switching" and method in VLAHAKIS_PHI:
-        raise ValueError(f"{method} does not apply on graph='switching': "
-                         f"{SWITCHING_NOT_APPLICABLE['vlahakis, vlahakis-phi0, vlahakis-phi1']}")
+    if graph == "switching" and method in SWITCHING_NOT_APPLICABLE:
+        raise ValueError(f"{method} does not apply on graph='switching': {SWITCHING_NOT_APPLICABLE[method]}")
     team = team_setup(int(n_agents), noise, float(q_scale), settings, graph)
     topology = switching_graphs(int(n_agents), settings.n_steps, settings) > 0 if team.switching else None
     init_rng, proc_rng, meas_rng, drop_rng = np.random.default_rng(seed).spawn(4)

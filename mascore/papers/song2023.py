@@ -25,6 +25,7 @@ import pandas as pd
 from matplotlib.ticker import FuncFormatter
 
 from .. import distributed_kf as dkf
+from .. import team_model, team_observability
 from .._kf_reference import plain_estimation_based_step
 from .._progress import progress_bar
 from .._timing import median_time
@@ -312,14 +313,14 @@ def estimator_step_seconds(n_agents: int, repeat: int = 5, plain_repeat: int = 3
         raise ValueError(f"plain_repeat must be an integer in [1, {MAX_REPEAT}] (timed repeats); got {plain_repeat}")
     s = setup(n_agents)
     noise = np.eye(2 * s.n)
-    model = dkf.team_filter_model(s.A, s.B, s.K, noise, noise, n_agents)
+    model = team_model.team_filter_model(s.A, s.B, s.K, noise, noise, n_agents)
     rng = np.random.default_rng(n_agents)
     adj = ring_graph(n_agents)
     L = laplacian(adj)
     Sig = dkf.eb_initial_covariance(model, s.P0(), common=False)
     X_hat = rng.normal(size=(1, n_agents, n_agents, 2 * s.n))
     Z, S = measure(rng, rng.normal(size=(1, n_agents, 2 * s.n)), adj, noise)
-    Sig_full = dkf.expand_covariance(Sig[0], model.kron)
+    Sig_full = team_model.expand_covariance(Sig[0], model.kron)
     z = [stacked_measurement(Z[0], S[0], i) for i in range(n_agents)]
     team = dkf.TeamFilter(model, L, X_hat, s.P0(), common=False)
 
@@ -360,7 +361,7 @@ def random_initial_states(
         A = proximity_graph(p, s.sensing_range)
         if not is_connected(A) or A.sum() > max_edge_fraction * N * (N - 1):
             continue
-        if np.all(dkf.observable_agents(s.A, s.BK, A)):
+        if np.all(team_observability.observable_agents(s.A, s.BK, A)):
             return np.hstack([p, v]), A
     raise ValueError(f"no connected, observable configuration found in {max_tries} draws (max_tries); "
                      "increase the sensing range or max_edge_fraction")
@@ -550,7 +551,7 @@ def theorem1(res: Fig2Result) -> dict[str, np.ndarray]:
     ['min_eig', 'min_eig_rel']
     """
     e = res.estimation
-    return dkf.theorem1_min_eigenvalues(e.model, laplacian(res.adjacency), e.gains, e.sigma_i, e.f2_cross)
+    return team_observability.theorem1_min_eigenvalues(e.model, laplacian(res.adjacency), e.gains, e.sigma_i, e.f2_cross)
 
 
 # ----------------------------------------------------------------------------
@@ -849,7 +850,7 @@ def simulate_remark6(
         check_adjacency(control_adjacency, "control_adjacency", size=N)
     Lc = laplacian(complete_graph(N) if control_adjacency is None else control_adjacency)
     mask = sensing_mask(adjacency)
-    model = dkf.team_filter_model(s.A, s.B, s.K, Q, R, N)
+    model = team_model.team_filter_model(s.A, s.B, s.K, Q, R, N)
     proc_rng, meas_rng = rng.spawn(2)
     # one covariance for a shared graph; a graph per run gives every run its own at the first update
     team = dkf.TeamFilter(model, Lc, x_hat0, s.P0(), common=True)

@@ -1,0 +1,234 @@
+"""The checks and structured kernels shared by the team filters (no checks of their own: callers check).
+
+Used by :mod:`mascore.distributed_kf`, :mod:`mascore.centralized_team_filter` and
+:mod:`mascore.team_observability`; shapes as in :mod:`mascore.distributed_kf` (reduced
+covariances ``(batch, N, M_r, M_r)`` per agent or ``(batch, N M_r, N M_r)`` augmented).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._validation import (
+    check_covariance,
+    check_mask_values,
+    finite_result,
+    symmetric_part,
+)
+from ._validation import float_array as _float_array
+from ._validation import require_finite as _finite
+from .team_model import TeamFilterModel
+
+
+def finite_state(what: str, *arrays: np.ndarray, diagonal_only: bool = False) -> None:
+    """:func:`mascore._validation.finite_result` on a step's results (estimates first, covariance second).
+
+    With `diagonal_only` the covariance is tested on its diagonal only: the update that follows
+    every prediction tests all of it (a NaN of the prediction stays in place through the update).
+    """
+    if diagonal_only:
+        arrays = (arrays[0], np.diagonal(arrays[1], axis1=-2, axis2=-1), *arrays[2:])
+    finite_result(what, *arrays)
+
+
+def check_model(model: object) -> TeamFilterModel:
+    if not isinstance(model, TeamFilterModel):
+        raise TypeError(
+            f"model must be a TeamFilterModel (build it with team_filter_model); got {type(model).__name__}"
+        )
+    return model
+
+
+def check_estimates(model: TeamFilterModel, X: ArrayLike, name: str) -> np.ndarray:
+    """Team estimates or measurements ``(runs, N, N, m)``, finite."""
+    X = _float_array(X, name)
+    N, m = model.n_agents, model.m
+    if X.ndim != 4 or X.shape[1:] != (N, N, m):
+        raise ValueError(f"Incompatible dimensions of {name}; expected (runs, {N}, {N}, {m}) but found {X.shape}")
+    return _finite(X, name)
+
+
+def check_covariances(P: ArrayLike, name: str, shape: tuple, definite: bool = False, kron: int = 1) -> np.ndarray:
+    """A stack of covariances of the given shape (None: any batch size >= 1), symmetric PSD (or PD), checked in full.
+
+    The error says what to do for the two common slips: a missing batch axis, and a full covariance
+    where the model works on the reduced one (``kron > 1``).
+    """
+    P = _float_array(P, name)
+    if P.ndim != len(shape) or any(w is not None and g != w for g, w in zip(P.shape, shape)) or P.shape[0] == 0:
+        want = tuple("batch" if w is None else w for w in shape)
+        hint = ""
+        if P.ndim == len(shape) - 1 and P.shape == tuple(shape[1:]):
+            hint = f"; add the leading batch axis ({name}[None]) for one run"
+        elif kron > 1 and P.ndim >= 2 and P.shape[-1] == kron * shape[-1]:
+            hint = (f"; this model works on the reduced covariance (its Kronecker factor is {kron}): "
+                    f"pass mascore.team_model.reduce_covariance({name}, {kron})")
+        raise ValueError(f"Incompatible dimensions of {name}; expected {want} but found {P.shape}".replace("'", "")
+                         + hint)
+    return check_covariance(P, name, definite=definite)
+
+
+def check_runs(X: np.ndarray, Y: np.ndarray, xname: str, yname: str) -> None:
+    if X.shape[0] != Y.shape[0]:
+        raise ValueError(f"{yname} has {Y.shape[0]} runs but {xname} has {X.shape[0]}")
+
+
+def check_batch(L: np.ndarray, Sig: np.ndarray, lname: str, sname: str, X: np.ndarray | None = None) -> None:
+    """A batch of topologies must match the covariance batch and the runs (or be a single topology)."""
+    if L.ndim == 3 and L.shape[0] not in (1, Sig.shape[0]):
+        raise ValueError(
+            f"{lname} has {L.shape[0]} topologies but {sname} has batch {Sig.shape[0]}: one covariance per "
+            "topology (or a single topology for all)"
+        )
+    if X is not None and L.ndim == 3 and L.shape[0] not in (1, X.shape[0]):
+        raise ValueError(f"{lname} has {L.shape[0]} topologies but there are {X.shape[0]} runs")
+    if X is not None and Sig.shape[0] not in (1, X.shape[0]):
+        raise ValueError(f"{sname} has batch {Sig.shape[0]} but there are {X.shape[0]} runs")
+
+
+def check_team_laplacian(L: ArrayLike, N: int, name: str = "laplacian", any_batch: bool = False,
+                     undirected: bool = False) -> np.ndarray:
+    """One Laplacian ``(N, N)`` or a batch ``(batch, N, N)`` (``(..., N, N)`` with `any_batch`): finite, rows
+    summing to zero, off-diagonal entries <= 0.
+
+    Directed graphs are allowed unless `undirected` (the team filter: Song et al. assume a common sensing
+    range, hence an undirected graph). An adjacency matrix passed by mistake is named as such.
+    """
+    L = _float_array(L, name)
+    if (L.ndim < 2 or (L.ndim > 3 and not any_batch) or L.shape[-2:] != (N, N) or L.size == 0):
+        want = f"(..., {N}, {N})" if any_batch else f"({N}, {N}) or (batch, {N}, {N})"
+        raise ValueError(f"Incompatible dimensions of {name}; expected {want} but found {L.shape}")
+    _finite(L, name)
+    tol = 1e-8 * max(1.0, float(np.abs(L).max()))
+    off = L.copy()
+    off[..., np.arange(N), np.arange(N)] = 0.0
+    if off.max() > tol or np.abs(L.sum(axis=-1)).max() > tol:
+        if np.all(L >= 0) and np.all(L[..., np.arange(N), np.arange(N)] == 0):
+            raise ValueError(f"{name} looks like an adjacency matrix; pass mascore.graphs.laplacian(A) instead")
+        raise ValueError(
+            f"{name} must be a graph Laplacian: rows summing to zero and off-diagonal entries <= 0 "
+            "(pass mascore.graphs.laplacian(A))"
+        )
+    if undirected and np.abs(L - np.swapaxes(L, -1, -2)).max() > tol:
+        raise ValueError(f"{name} must be symmetric (an undirected graph): Song et al.'s team filter assumes that "
+                         f"every agent senses the agents that sense it (a common sensing range, Sec. II); got a "
+                         f"directed Laplacian (symmetrize the adjacency, e.g. A + A.T > 0)")
+    return L
+
+
+def check_mask(mask: ArrayLike, N: int) -> np.ndarray:
+    S = check_mask_values(mask, "mask")
+    if S.shape[-2:] != (N, N) or S.ndim not in (2, 3):
+        raise ValueError(
+            f"Incompatible dimensions of mask; expected ({N}, {N}) or (batch, {N}, {N}) but found {S.shape}"
+        )
+    if not np.all(S[..., np.arange(N), np.arange(N)]):
+        raise ValueError("mask must include every agent itself (closed neighbourhoods); use sensing_mask(A)")
+    return S if S.ndim == 3 else S[None]
+
+
+def mask_vec(model: TeamFilterModel, S: np.ndarray) -> np.ndarray:
+    """(batch, N, N) mask -> (batch, N, M_r) 0/1 vectors ``diag(D_i)`` in reduced coordinates."""
+    return np.repeat(S, model.m_r, axis=-1).astype(float)
+
+
+def joseph(Sig: np.ndarray, KH: np.ndarray, R: np.ndarray) -> np.ndarray:
+    Psi = np.eye(Sig.shape[-1]) - KH
+    KHt = np.swapaxes(KH, -1, -2)
+    return symmetric_part(Psi @ Sig @ np.swapaxes(Psi, -1, -2) + KH @ R @ KHt)
+
+
+def apply_gain(model: TeamFilterModel, X_pred: np.ndarray, Z: np.ndarray, KH: np.ndarray) -> np.ndarray:
+    """``X̂_i = X̂_i^- + G_i H_i (Z_i - X̂_i^-)`` with the reduced gain on the Kronecker axes."""
+    N, k, Mr = model.n_agents, model.kron, model.M_r
+    innov = (Z - X_pred).reshape(X_pred.shape[0], N, Mr, k)
+    return X_pred + (KH @ innov).reshape(X_pred.shape)
+
+
+def F1_means(model: TeamFilterModel, X: np.ndarray, L: np.ndarray) -> np.ndarray:
+    """``F_1 X̂_i`` for every run and agent: ``A x̂_{i,j} - BK sum_l L_jl x̂_{i,l}`` (eq. (14))."""
+    N, m = model.n_agents, model.m
+    Lx = L[:, None] if L.ndim == 3 else L  # (batch,1,N,N) or (N,N)
+    LX = Lx @ X.reshape(X.shape[0], N, N, m) if L.ndim == 2 else np.matmul(Lx, X)
+    return X @ model.A.T - LX @ model.BK.T
+
+
+def F1_rows(model: TeamFilterModel, T: np.ndarray, L: np.ndarray) -> np.ndarray:
+    """Apply ``F_1`` (reduced) to tensors ``T[..., j, a, c]`` along (j, a).
+
+    ``(F_1 T)[j] = A T[j] - BK sum_l L_jl T[l]``; `L` broadcasts as ``(..., N, N)``.
+    """
+    shp = T.shape
+    N, mr, C = shp[-3:]
+    LT = (L @ T.reshape(*shp[:-3], N, mr * C)).reshape(*np.broadcast_shapes(L.shape[:-2], shp[:-3]), N, mr, C)
+    return model.A_r @ T - model.BK_r @ LT
+
+
+def diagonal_blocks(model: TeamFilterModel, Sig: np.ndarray) -> np.ndarray:
+    """Diagonal blocks of reduced augmented covariances ``(batch, N M_r, N M_r)`` -> ``(batch, N, M_r, M_r)``."""
+    N, Mr = model.n_agents, model.M_r
+    blocks = Sig.reshape(Sig.shape[0], N, Mr, N, Mr)
+    return np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)
+
+
+#: Augmented covariances up to this size (N M_r) are propagated with dense products, larger ones one row
+#: block at a time with the sparse F_1, F_2 (the crossover on one core is near N M_r = 256-512).
+DENSE_MAX = 384
+
+
+def phi_blocks(model: TeamFilterModel, L: np.ndarray, rows: bool) -> tuple:
+    """What the estimation-based prediction needs of one topology ``L`` ``(N, N)``.
+
+    ``Φ = I_N ⊗ F_1 + 1_N ⊗ F_2`` with ``F_1 = I ⊗ A - L ⊗ BK`` and ``(F_2 e)[j] = BK sum_l L_jl e[j, l]``:
+    a row of either block has about ``m_r (1 + nnz(L_j))`` non-zeros instead of ``M_r``.
+
+    Returns ``(Φ,)`` dense for a small team; for the row-block path ``(F1aug, F_1, F_1^T, F_2, K2t)``:
+    ``F1aug = [F_1, I]`` sparse ``(M_r, 2 M_r)`` with the identity entry first in every row, dense
+    ``F_1`` and ``F_1^T``, sparse ``F_2`` ``(M_r, N M_r)`` and ``K2t[j] = (L_j ⊗ BK)^T`` ``(N, M_r, m_r)``
+    (column block ``j`` of ``X F_2^T`` is ``X[:, j] @ K2t[j]`` for ``X`` of shape ``(M_r, N M_r)``).
+    """
+    from scipy import sparse
+
+    N, mr, Mr = model.n_agents, model.m_r, model.M_r
+    F1 = sparse.csr_array(sparse.kron(sparse.identity(N), model.A_r) - sparse.kron(sparse.csr_array(L), model.BK_r))
+    j, l = np.nonzero(L)
+    a, b = np.nonzero(np.ones((mr, mr)))
+    rws = (j[:, None] * mr + a[None, :]).ravel()
+    cols = (j[:, None] * Mr + l[:, None] * mr + b[None, :]).ravel()
+    vals = (L[j, l][:, None] * model.BK_r[a, b][None, :]).ravel()
+    F2 = sparse.csr_array((vals, (rws, cols)), shape=(Mr, N * Mr))
+    if not rows:
+        return (np.kron(np.eye(N), F1.toarray()) + np.kron(np.ones((N, 1)), F2.toarray()),)
+    counts = np.diff(F1.indptr)
+    indptr = np.concatenate([[0], np.cumsum(counts + 1)]).astype(F1.indptr.dtype)
+    first = indptr[:-1]
+    rest = np.ones(indptr[-1], dtype=bool)
+    rest[first] = False
+    indices = np.empty(indptr[-1], dtype=F1.indices.dtype)
+    data = np.empty(indptr[-1])
+    indices[first], data[first] = Mr + np.arange(Mr), 1.0
+    indices[rest], data[rest] = F1.indices, F1.data
+    F1aug = sparse.csr_array((data, indices, indptr), shape=(Mr, 2 * Mr))
+    F1d = F1.toarray()
+    K2 = (L[:, None, :, None] * model.BK_r[None, :, None, :]).reshape(N, mr, Mr)
+    K2t = np.ascontiguousarray(np.swapaxes(K2, -1, -2))
+    return F1aug, F1d, F1d.T, F2, K2t
+
+
+def gemm_acc(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> None:
+    """``C += A @ B`` in place for C-contiguous `C` (BLAS ``dgemm`` with ``beta = 1`` on the transposes)."""
+    from scipy.linalg.blas import dgemm
+
+    Ct = C.T  # Fortran-contiguous: Ct += B^T A^T
+    r = dgemm(1.0, B.T, A.T, 1.0, Ct, overwrite_c=1)
+    if r.ctypes.data != Ct.ctypes.data:  # pragma: no cover - dgemm had to copy
+        Ct[...] = r
+
+
+def reduced_nees(e, P, kron):
+    """:func:`~mascore.team_observability.lyapunov_v` without checks."""
+    Mr = P.shape[-1]
+    E = e.reshape(*e.shape[:-1], Mr, kron)
+    sol = np.linalg.solve(P, E)
+    return np.einsum("...ik,...ik->...", E, sol)

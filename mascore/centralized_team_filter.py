@@ -1,0 +1,497 @@
+"""The centralized Kalman filter over all agents' measurements: the reference of the team filters.
+
+One filter sees every agent's measurements of the team (Song et al. 2023, eq. (3)) and knows
+the inputs the agents applied: its covariance is a lower bound of every agent's in
+:mod:`mascore.distributed_kf`. :class:`CentralizedTeamFilter` is the fast path (checked once,
+then stepped); :func:`centralized_predict` and :func:`centralized_update` check every argument
+on every call. Shapes: estimates ``(runs, N, m)``, reduced covariance ``(batch, M_r, M_r)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._team_kernels import (
+    check_covariances,
+    check_estimates,
+    check_mask,
+    check_model,
+    finite_state,
+    mask_vec,
+)
+from ._validation import (
+    as_matrix,
+    check_covariance,
+    check_positive_int,
+    finite_result,
+    frozen_copy,
+    state_view,
+    symmetric_part,
+)
+from ._validation import float_array as _float_array
+from ._validation import require_finite as _finite
+from .estimation import Message, MethodSpec
+from .fusion_cost import filter_cost
+from .team_model import TeamFilterModel, reduce_covariance, team_filter_model
+
+__all__ = [
+    "CentralizedTeamFilter",
+    "centralized_predict",
+    "centralized_update",
+]
+
+
+class CentralizedTeamFilter:
+    """The centralized Kalman filter over all agents' measurements, applied inputs known (the reference).
+
+    Holds the team estimate and its reduced covariance; :meth:`predict` and
+    :meth:`update` run :func:`centralized_predict` and :func:`centralized_update`
+    without re-checking the state this filter produced (the model, `B` and `P0` are
+    checked here, once).
+
+    Parameters
+    ----------
+    model : TeamFilterModel
+        The team model (:func:`~mascore.team_model.team_filter_model`).
+    B : (m, p) array_like
+        Input matrix of one agent.
+    x_hat0 : (runs, N m) or (runs, N, m) array_like
+        Initial team estimate, per run.
+    P0 : (m, m) or (m N, m N) array_like
+        Covariance of the initial estimate error, per agent or of the team; positive definite.
+    batch : int
+        Number of covariances kept (1: shared by all runs, or one per run).
+
+    Raises
+    ------
+    ValueError
+        Bad shapes or values, or `P0` not positive definite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import centralized_team_filter, team_model
+    >>> agent = agents.double_integrator(1, 0.1)
+    >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+    ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+    >>> central.predict(np.zeros((1, 3, 1)))
+    >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), graphs.path_graph(3), np.eye(2))
+    >>> central.update(Z, mask[0])
+    >>> central.x_hat.shape, central.P.shape
+    ((1, 3, 2), (1, 6, 6))
+    """
+
+    def __init__(self, model: TeamFilterModel, B: ArrayLike, x_hat0: ArrayLike, P0: ArrayLike,
+                 batch: int = 1) -> None:
+        model = check_model(model)
+        N, m = model.n_agents, model.m
+        B = as_matrix(_float_array(B, "B"), "B", (m, None))
+        x = _float_array(x_hat0, "x_hat0")
+        if x.ndim == 2 and x.shape[1] == N * m:
+            x = x.reshape(x.shape[0], N, m)
+        if x.ndim != 3 or x.shape[1:] != (N, m) or x.shape[0] == 0:
+            raise ValueError(f"Incompatible dimensions of x_hat0; expected (runs, {N * m}) or (runs, {N}, {m}) "
+                             f"but found {x.shape}")
+        x = _finite(np.array(x, dtype=float, order="C"), "x_hat0")
+        batch = check_positive_int(batch, "batch")
+        P0 = _finite(_float_array(P0, "P0"), "P0")
+        if P0.shape == (m, m):
+            P = np.kron(np.eye(N), reduce_covariance(check_covariance(P0, "P0", definite=True), model.kron, "P0"))
+        elif P0.shape == (m * N, m * N):
+            P = reduce_covariance(check_covariance(P0, "P0", definite=True), model.kron, "P0")
+        else:
+            raise ValueError(f"Incompatible dimensions of P0; expected ({m}, {m}) per agent or ({m * N}, {m * N}) "
+                             f"but found {P0.shape}")
+        self._model, self._B, self._x = model, frozen_copy(B), x
+        self._P = np.broadcast_to(P, (batch, *P.shape)).copy()
+
+    @property
+    def model(self) -> TeamFilterModel:
+        """The team model."""
+        return self._model
+
+    @property
+    def x_hat(self) -> np.ndarray:
+        """Team estimates ``(runs, N, m)`` (a copy; :meth:`view` gives the filter's own array)."""
+        return self._x.copy()
+
+    @property
+    def P(self) -> np.ndarray:
+        """Reduced covariance ``(batch, M_r, M_r)`` (a copy; :meth:`view` gives the filter's own array)."""
+        return self._P.copy()
+
+    def view(self, name: str) -> np.ndarray:
+        """The filter's own state array `name`, read-only and not copied (the fast read in a loop).
+
+        Parameters
+        ----------
+        name : {"x_hat", "P"}
+            The state, as the property of that name.
+
+        Returns
+        -------
+        ndarray
+            A read-only view, replaced or overwritten by the next step (copy it to keep it).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, rendezvous
+        >>> from mascore import centralized_team_filter, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> central.view("P").shape, central.view("P").flags.writeable
+        ((1, 6, 6), False)
+        """
+        return state_view(self, name, {"x_hat": "_x", "P": "_P"})
+
+    def predict(self, U: ArrayLike) -> None:
+        """Prediction with the applied inputs.
+
+        Parameters
+        ----------
+        U : (runs, N, p) array_like
+            The inputs every agent applied.
+
+        Raises
+        ------
+        ValueError
+            Bad shape of `U`, or NaN/inf in the result (naming `U` when it holds them).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, rendezvous
+        >>> from mascore import centralized_team_filter, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> central.predict(np.ones((1, 3, 1)))                    # p = dt^2 / 2, v = dt
+        >>> central.x_hat[0, 0]
+        array([0.005, 0.1  ])
+        """
+        model, B = self._model, self._B
+        Ut = _float_array(U, "U")
+        if Ut.shape != (self._x.shape[0], model.n_agents, B.shape[1]):
+            raise ValueError(f"Incompatible dimensions of U; expected ({self._x.shape[0]}, {model.n_agents}, "
+                             f"{B.shape[1]}) but found {Ut.shape}")
+        self._x, self._P = _centralized_predict(model, self._x, self._P, Ut, B)
+        if not np.isfinite(self._x).all():
+            _finite(Ut, "U")
+        finite_state("centralized prediction", self._x, self._P)
+
+    def update(self, Z: ArrayLike, mask: ArrayLike) -> None:
+        """Update with every agent's measurements (information form).
+
+        Parameters
+        ----------
+        Z : (runs, N, N, m) array_like
+            Every agent's measurements.
+        mask : (N, N) or (batch, N, N) array_like of bool
+            Sensing mask; a mask per run gives every run its own covariance.
+
+        Raises
+        ------
+        ValueError
+            Bad shapes or mask values, or NaN/inf in the result (naming `Z` when it holds them).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous, sensing
+        >>> from mascore import centralized_team_filter, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), graphs.path_graph(3), np.eye(2))
+        >>> central.update(Z, mask[0])
+        >>> bool(np.trace(central.P[0]) < 6.0)
+        True
+        """
+        model = self._model
+        N, m = model.n_agents, model.m
+        Zt = _float_array(Z, "Z")
+        if Zt.shape != (self._x.shape[0], N, N, m):
+            raise ValueError(f"Incompatible dimensions of Z; expected ({self._x.shape[0]}, {N}, {N}, {m}) "
+                             f"but found {Zt.shape}")
+        S = check_mask(mask, N)
+        if S.shape[0] not in (1, self._x.shape[0]) or self._P.shape[0] not in (1, S.shape[0], self._x.shape[0]):
+            raise ValueError(f"mask has batch {S.shape[0]} but there are {self._x.shape[0]} runs and "
+                             f"{self._P.shape[0]} covariances")
+        self._x, self._P = _centralized_update(model, self._x, self._P, Zt, S)
+        if not np.isfinite(self._x).all():
+            _finite(Zt, "Z")
+        finite_state("centralized update", self._x, self._P)
+
+
+    # ------------------------------------------------------------------ the centre (the estimator protocol)
+
+    def agent_inputs(self, Z: ArrayLike, mask: ArrayLike, U: ArrayLike, i: int) -> tuple[dict, tuple]:
+        """The centre's data of one step: the team's measurements and the inputs applied (it is the busiest node).
+
+        Parameters
+        ----------
+        Z : (runs, N, N, m) array_like
+            Every agent's measurements.
+        mask : (N, N) or (batch, N, N) array_like of bool
+            The sensing mask.
+        U : (runs, N, p) array_like
+            The inputs applied at the step.
+        i : int
+            Unused: the centre's step is the same whichever agent asks.
+
+        Returns
+        -------
+        own : dict
+            ``Z``, ``mask`` and ``U`` (copies).
+        messages : tuple
+            Empty: the measurements sent to the centre are part of its data.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, centralized_team_filter, graphs, rendezvous, sensing, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), graphs.path_graph(3), np.eye(2))
+        >>> own, messages = central.agent_inputs(Z, mask[0], np.zeros((1, 3, 1)), 0)
+        >>> sorted(own), messages
+        (['U', 'Z', 'mask'], ())
+        """
+        return {"Z": np.array(Z, dtype=float), "mask": np.array(mask), "U": np.array(U, dtype=float)}, ()
+
+    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        """The centre's step: :meth:`update` with the team's measurements, then :meth:`predict` (advances this filter).
+
+        Parameters
+        ----------
+        i : int
+            Unused (the centre).
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        x_hat, P : ndarray
+            The team estimates ``(runs, N, m)`` and reduced covariance ``(batch, M_r, M_r)`` after the
+            step (read-only views, as :meth:`view`).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, centralized_team_filter, graphs, rendezvous, sensing, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), graphs.path_graph(3), np.eye(2))
+        >>> x, P = central.agent_step(0, *central.agent_inputs(Z, mask[0], np.zeros((1, 3, 1)), 0))
+        >>> x.shape, P.shape
+        ((1, 3, 2), (1, 6, 6))
+        """
+        self.update(own["Z"], own["mask"])
+        self.predict(own["U"])
+        return self.view("x_hat"), self.view("P")
+
+    def messages(self, i: int = 0, n_measured: int = 1) -> tuple[Message, ...]:
+        """What an agent sends per step: its measurements, to the centre.
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+        n_measured : int
+            How many agents it measures (itself and its neighbours: degree + 1).
+
+        Returns
+        -------
+        tuple of Message
+            Its ``n_measured`` measurements of ``m`` numbers each.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, centralized_team_filter, rendezvous, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> central.messages(0, n_measured=3)[0].floats
+        6
+        """
+        return (Message("its measurements z_ij of itself and its neighbours, to the centre",
+                        check_positive_int(n_measured, "n_measured") * self._model.m),)
+
+
+def centralized_predict(
+    model: TeamFilterModel, x: ArrayLike, P: ArrayLike, U: ArrayLike, B: ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    """Centralized prediction with the applied inputs known exactly.
+
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`CentralizedTeamFilter`. In a loop, build the filter once,
+    ``CentralizedTeamFilter(model, B, x_hat0, P0)``, and call its :meth:`~CentralizedTeamFilter.predict`: the fast path.
+
+    Parameters
+    ----------
+    model : TeamFilterModel
+        The team model (:func:`~mascore.team_model.team_filter_model`).
+    x : (runs, N, m) array_like
+        Team estimates.
+    P : (batch, M_r, M_r) array_like
+        Reduced covariance.
+    U : (runs, N, p) array_like
+        Applied inputs.
+    B : (m, p) array_like
+        Input matrix.
+
+    Returns
+    -------
+    x_pred : (runs, N, m) ndarray
+        Predicted estimates.
+    P_pred : (batch, M_r, M_r) ndarray
+        Predicted covariance.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import centralized_team_filter, team_model
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = team_model.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> x, P = centralized_team_filter.centralized_predict(model, np.zeros((1, 3, 2)), np.eye(6)[None],
+    ...                                                    np.zeros((1, 3, 1)), agent.B)
+    >>> x.shape, P.shape
+    ((1, 3, 2), (1, 6, 6))
+    """
+    model = check_model(model)
+    N, m, Mr = model.n_agents, model.m, model.M_r
+    x = _finite(_float_array(x, "x"), "x")
+    if x.ndim != 3 or x.shape[1:] != (N, m):
+        raise ValueError(f"Incompatible dimensions of x; expected (runs, {N}, {m}) but found {x.shape}")
+    P = check_covariances(P, "P", (None, Mr, Mr), kron=model.kron)
+    B = as_matrix(_float_array(B, "B"), "B", (m, None))
+    U = _finite(_float_array(U, "U"), "U")
+    if U.shape != (x.shape[0], N, B.shape[1]):
+        raise ValueError(
+            f"Incompatible dimensions of U; expected ({x.shape[0]}, {N}, {B.shape[1]}) but found {U.shape}"
+        )
+    return finite_result("centralized prediction", *_centralized_predict(model, x, P, U, B))
+
+
+def _centralized_predict(model, x, P, U, B):
+    """:func:`centralized_predict` without checks."""
+    N, mr = model.n_agents, model.m_r
+    x_pred = x @ model.A.T + U @ B.T
+    T = (model.A_r @ P.reshape(P.shape[0], N, mr, N * mr)).reshape(P.shape)
+    T = (model.A_r @ np.swapaxes(T, -1, -2).reshape(P.shape[0], N, mr, N * mr)).reshape(P.shape)
+    return x_pred, symmetric_part(T + np.kron(np.eye(N), model.Q_r))
+
+
+def centralized_update(
+    model: TeamFilterModel, x_pred: ArrayLike, P_pred: ArrayLike, Z: ArrayLike, mask: ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    """Centralized update with *all* agents' measurements (information form).
+
+    Checks every argument in full on every call (including an eigenvalue test of the
+    covariance, which dominates the cost for a large team), then runs the same step as
+    :class:`CentralizedTeamFilter`. In a loop, build the filter once,
+    ``CentralizedTeamFilter(model, B, x_hat0, P0)``, and call its :meth:`~CentralizedTeamFilter.update`: the fast path.
+
+    ``P^{-1} = P^-^{-1} + sum_i H_i^T (H_i R H_i^T)^{-1} H_i``,
+    ``x = x^- + P sum_i H_i^T (H_i R H_i^T)^{-1} (z_i - H_i x^-)``.
+
+    Parameters
+    ----------
+    model : TeamFilterModel
+        The team model (:func:`~mascore.team_model.team_filter_model`).
+    x_pred : (runs, N, m) array_like
+        Predicted team estimates.
+    P_pred : (batch, M_r, M_r) array_like
+        Reduced predicted covariance, positive definite.
+    Z : (runs, N, N, m) array_like
+        Every agent's measurements.
+    mask : (N, N) or (batch, N, N) array_like of bool
+        Sensing mask.
+
+    Returns
+    -------
+    x : (runs, N, m) ndarray
+        Updated estimates.
+    P : (batch, M_r, M_r) ndarray
+        Updated covariance: a lower bound of every agent's.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import distributed_kf as dkf
+    >>> from mascore import centralized_team_filter, team_model
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = team_model.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), path, np.eye(2))           # one run
+    >>> Sigma0 = dkf.eb_initial_covariance(model, np.eye(2))
+    >>> X_pred, Sigma_pred = dkf.eb_predict(model, np.zeros((1, 3, 3, 2)), Sigma0, Lap)
+    >>> X_post, Sigma_post, KH = dkf.eb_update(model, X_pred, Sigma_pred, Z, mask)
+    >>> x, P = centralized_team_filter.centralized_update(model, np.zeros((1, 3, 2)), np.eye(6)[None], Z, mask)
+    >>> bool(np.trace(P[0]) < 6.0)
+    True
+    """
+    model = check_model(model)
+    N, m, Mr = model.n_agents, model.m, model.M_r
+    x_pred = _finite(_float_array(x_pred, "x_pred"), "x_pred")
+    if x_pred.ndim != 3 or x_pred.shape[1:] != (N, m):
+        raise ValueError(f"Incompatible dimensions of x_pred; expected (runs, {N}, {m}) but found {x_pred.shape}")
+    P_pred = check_covariances(P_pred, "P_pred", (None, Mr, Mr), definite=True, kron=model.kron)
+    Zt = check_estimates(model, Z, "Z")
+    S = check_mask(mask, N)
+    if Zt.shape[0] != x_pred.shape[0]:
+        raise ValueError(f"Z has {Zt.shape[0]} runs but x_pred has {x_pred.shape[0]}")
+    for name, b in (("mask", S.shape[0]), ("Z", Zt.shape[0])):
+        if P_pred.shape[0] not in (1, b) and b != 1:
+            raise ValueError(f"{name} has batch {b} but P_pred has {P_pred.shape[0]}")
+    return finite_result("centralized update", *_centralized_update(model, x_pred, P_pred, Zt, S))
+
+
+def _centralized_update(model, x_pred, P_pred, Z, S):
+    """:func:`centralized_update` without checks (`S` a (batch, N, N) bool mask)."""
+    N, m, k = model.n_agents, model.m, model.kron
+    Mr = model.M_r
+    d = mask_vec(model, S)  # (batch, N, Mr)
+    Dm = d[..., :, None] * d[..., None, :]
+    W = np.linalg.inv(Dm * model.R_r + np.eye(Mr) * (1 - d[..., None])) * Dm  # (batch, N, Mr, Mr)
+    info = np.linalg.inv(P_pred) + W.sum(axis=1)
+    P = symmetric_part(np.linalg.inv(info))
+    R_ = x_pred.shape[0]
+    innov = (Z - x_pred[:, None]).reshape(R_, N, Mr, k)
+    total = (W @ innov).sum(axis=1)  # (runs, Mr, k); W broadcasts over runs when batch = 1
+    x = x_pred + (P @ total).reshape(R_, N, m)
+    return x, P
+
+
+#: The centralized filter of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost): the bound.
+METHODS = (
+    MethodSpec("centralized", ("team",),
+               lambda team, x_hat0: CentralizedTeamFilter(
+                   team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N), team.B, x_hat0, team.P0),
+               lambda n, q, d, N: (2.0 * n * (d + 1), filter_cost("centralized", n=N * n, q=(d + 1) * n, degree=d,
+                                                                  n_agents=N).flops),
+               {"team": ("O(N^3 n^3) at the centre", "O(N^2 n^2)")}, lambda n, q, d, N: float((N * n) ** 2 + N * n),
+               whole_filter=True, position=0),
+)

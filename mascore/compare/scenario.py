@@ -1,0 +1,114 @@
+"""A scenario of the comparison declared in one module: its methods, its simulation, its cells and its cost.
+
+The four scenarios of the book (``team``, ``shared``, ``target``, ``localization``) are
+wired into :func:`~mascore.compare.run_cell` and :func:`~mascore.compare.grid_cells`
+directly. Any other is one module of :mod:`mascore.compare` with a module-level
+``SCENARIO``, a :class:`Scenario`: :func:`scenarios` finds it (the source is read, and
+only a module that assigns ``SCENARIO`` is imported), the cell check accepts its
+methods, :func:`~mascore.compare.run_cell` runs its cells and
+:func:`~mascore.compare.grid_cells` adds its cells to the named sweeps.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+import re
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Scenario", "scenarios"]
+
+#: The scenarios wired in by hand (a module may not declare one of these names).
+BUILT_IN = ("team", "shared", "target", "localization")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A scenario: what :func:`~mascore.compare.run_cell` and :func:`~mascore.compare.grid_cells` need of it.
+
+    Parameters
+    ----------
+    task : str
+        Its name, the cells' ``task`` coordinate.
+    methods : callable
+        ``methods()``: the names of its methods, in table order (e.g. read from the specs of the task).
+    simulate : callable
+        ``simulate(method, n_agents, seed, *, noise, dropout, graph, settings)``: per-run metrics, a dict of
+        ``(runs,)`` arrays with at least ``rmse_own`` (and ``cpu_s``, ``nees_own`` where it has them).
+    floats : callable
+        ``floats(method, n_agents, degree)``: floats one agent sends per step.
+    cells : callable
+        ``cells(name)``: its cells of the sweep ``name`` (``"quick"`` or ``"full"``), each a dict of
+        coordinates with ``study``.
+
+    Examples
+    --------
+    >>> from mascore.compare.scenario import scenarios
+    >>> scenarios()                                         # the book's four scenarios are built in
+    {}
+    """
+
+    task: str
+    methods: Callable[[], tuple[str, ...]]
+    simulate: Callable[..., dict[str, np.ndarray]]
+    floats: Callable[[str, int, float], float]
+    cells: Callable[[str], list[dict[str, Any]]]
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.task, str) and self.task) or self.task in BUILT_IN:
+            raise ValueError(f"task must be a new scenario's name (not one of {BUILT_IN}); got {self.task!r}")
+        for attr in ("methods", "simulate", "floats", "cells"):
+            if not callable(getattr(self, attr)):
+                raise TypeError(f"{attr} of scenario {self.task!r} must be callable")
+
+
+def scenarios() -> dict[str, Scenario]:
+    """The scenarios declared by the modules of :mod:`mascore.compare` (a module-level ``SCENARIO``), by task.
+
+    Returns
+    -------
+    dict of str to Scenario
+        Task name -> its scenario (none in the package itself: the book's four are built in).
+
+    Raises
+    ------
+    ValueError
+        Two modules declare one task.
+
+    Examples
+    --------
+    >>> from mascore.compare.scenario import scenarios
+    >>> sorted(scenarios())
+    []
+    """
+    from mascore import compare as package
+
+    found: dict[str, Scenario] = {}
+    for info in pkgutil.iter_modules(package.__path__):
+        if info.name.startswith("_") or info.ispkg:
+            continue
+        name = f"{package.__name__}.{info.name}"
+        module = sys.modules.get(name)
+        if module is None:
+            path = Path(getattr(info.module_finder, "path", "")) / f"{info.name}.py"
+            try:
+                if _SCENARIO_LINE.search(path.read_text(encoding="utf-8")) is None:
+                    continue
+            except OSError:
+                pass
+            module = importlib.import_module(name)
+        scenario = getattr(module, "SCENARIO", None)
+        if isinstance(scenario, Scenario):
+            if scenario.task in found and found[scenario.task] is not scenario:
+                raise ValueError(f"two modules declare the scenario {scenario.task!r} (one is {name})")
+            found[scenario.task] = scenario
+    return found
+
+
+_SCENARIO_LINE = re.compile(r"^SCENARIO\s*(?::[^=\n]*)?=", re.M)

@@ -1,0 +1,326 @@
+"""When the team filters work (Song et al. 2023, Theorem 1): observability of system (43) and eq. (49).
+
+:func:`observable_agents` and :func:`require_observable` test the pairs ``(F_1, H_i)`` of
+system (43) on the sensing graph; :func:`lyapunov_v` is the Lyapunov function of eq. (45)
+and :func:`theorem1_min_eigenvalues` the smallest eigenvalues of ``M_i[k+1]`` (eq. (49))
+along a run of :class:`mascore.distributed_kf.TeamFilter`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._team_kernels import (
+    check_covariances,
+    check_model,
+    check_team_laplacian,
+    reduced_nees,
+)
+from ._validation import (
+    check_adjacency_stack,
+    check_covariance,
+    check_positive,
+    check_positive_int,
+    check_square,
+    finite_result,
+    kron_factor,
+    symmetric_part,
+)
+from ._validation import float_array as _float_array
+from ._validation import require_finite as _finite
+from .graphs import laplacian as graph_laplacian
+from .sensing import sensing_mask
+from .team_model import TeamFilterModel, closed_loop_matrices
+
+__all__ = [
+    "observable_agents",
+    "require_observable",
+    "lyapunov_v",
+    "theorem1_min_eigenvalues",
+]
+
+
+def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: float = 1e-8) -> np.ndarray:
+    """Which agents' pairs ``(F_1, H_i)`` of system (43) are observable.
+
+    For an undirected graph, ``L = V Λ V^T`` block-diagonalizes
+    ``F_1 = (V ⊗ I)(I ⊗ A - Λ ⊗ BK)(V ⊗ I)^T``. When the blocks
+    ``A - λ BK`` of different Laplacian eigenvalues share no eigenvalue and
+    each is non-derogatory (true for the double integrator with positive
+    gains), the PBH test reduces to the graph: ``(F_1, H_i)`` is observable
+    iff, for every Laplacian eigenvalue ``λ`` with eigenvector basis
+    ``V_λ``, the rows of ``V_λ`` of the agents in ``N̄_i`` have full column
+    rank. Symmetric "twin" agents outside ``N̄_i`` (same neighbours) break it.
+    This test is well conditioned; otherwise (directed graphs, or the
+    conditions fail) a rank test of the observability matrix of the shifted
+    system is used, which can call weakly observable pairs unobservable.
+
+    Parameters
+    ----------
+    A : (m, m) array_like
+        Agent transition matrix.
+    BK : (m, m) array_like
+        Input matrix times consensus gain.
+    adjacency : (N, N) array_like
+        Fixed topology (defines ``F_1`` and ``H_i``).
+    tol : float
+        Relative tolerance of the rank decisions.
+
+    Returns
+    -------
+    (N,) ndarray of bool
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import team_model, team_observability
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = team_model.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> team_observability.observable_agents(agent.A, agent.B @ K, graphs.star_graph(4))   # leaves see twin leaves
+    array([ True, False, False, False])
+    """
+    A = check_square(_float_array(A, "A"), "A")
+    BK = check_square(_float_array(BK, "BK"), "BK", A.shape[0])
+    if A.shape[0] == 0:
+        raise ValueError("A must be at least 1 x 1 (an agent with no state)")
+    tol = check_positive(tol, "tol", "(relative rank tolerance)")
+    m = A.shape[0]
+    Adj = check_adjacency_stack(adjacency)
+    if Adj.ndim != 2:
+        raise ValueError(f"adjacency must be a single (N, N) topology here; got shape {Adj.shape}")
+    S = sensing_mask(Adj, allow_isolated=True)
+    L = graph_laplacian(Adj)
+    # work on the per-axis factor when A = A_r ⊗ I_k and BK = BK_r ⊗ I_k (same rank test)
+    for k in range(m, 0, -1):
+        if m % k == 0 and kron_factor(A, k) is not None and kron_factor(BK, k) is not None:
+            A, BK, m = kron_factor(A, k), kron_factor(BK, k), m // k
+            break
+    if np.allclose(Adj, Adj.T):
+        graph_test = _graph_observability(A, BK, L, S, tol)
+        if graph_test is not None:
+            return graph_test
+    F1, _ = closed_loop_matrices(A, BK, L)
+    out = []
+    for row in S:
+        H = np.kron(np.eye(row.size)[row], np.eye(m))
+        out.append(_observable(F1, H, tol))
+    return np.array(out)
+
+
+def _graph_observability(A, BK, L, S, tol) -> np.ndarray | None:
+    """PBH test through the Laplacian eigenvectors (see :func:`observable_agents`); None if not applicable."""
+    lam, V = np.linalg.eigh(L)
+    scale = max(1.0, float(np.max(np.abs(lam))))
+    cuts = np.flatnonzero(np.diff(lam) > 1e-7 * scale) + 1
+    groups = np.split(np.arange(lam.size), cuts)
+    m = A.shape[0]
+    lam_g = np.array([lam[g].mean() for g in groups])
+    M = A[None] - lam_g[:, None, None] * BK[None]  # (G, m, m)
+    mu = np.linalg.eigvals(M)  # (G, m)
+    if m > 1:  # non-derogatory: every eigenvalue has a one-dimensional eigenspace
+        sv = np.linalg.svd(M[:, None] - mu[:, :, None, None] * np.eye(m), compute_uv=False)
+        if np.any(sv[..., m - 2] <= 1e-6 * np.maximum(1.0, sv[..., 0])):
+            return None
+    gid = np.repeat(np.arange(len(groups)), m)
+    dist = np.abs(mu.reshape(-1)[:, None] - mu.reshape(-1)[None, :])
+    if np.any(dist[gid[:, None] != gid[None, :]] < 1e-6):
+        return None
+    Sf = S.astype(float)
+    out = np.ones(S.shape[0], dtype=bool)
+    for g in groups:
+        Vg = V[:, g]
+        rows = Sf[:, :, None] * Vg[None]  # rows of V_g outside N̄_i zeroed (singular values unchanged)
+        out &= np.linalg.svd(rows, compute_uv=False)[:, -1] > tol
+    return out
+
+
+def require_observable(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike) -> None:
+    """Raise ``ValueError`` naming the agents for which system (43) is unobservable.
+
+    Parameters
+    ----------
+    A : (m, m) array_like
+        Agent transition matrix.
+    BK : (m, m) array_like
+        Input matrix times consensus gain.
+    adjacency : (N, N) array_like
+        Sensing graph.
+
+    Raises
+    ------
+    ValueError
+        Naming the agents whose filter cannot estimate the team.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import agents, graphs, rendezvous, sensing
+    >>> from mascore import team_model, team_observability
+    >>> agent = agents.double_integrator(1, 0.1)                                  # 1-D: [p, v]
+    >>> K = rendezvous.rendezvous_gain(0.5, 1.5, 1)
+    >>> model = team_model.team_filter_model(agent.A, agent.B, K, 0.01 * np.eye(2), np.eye(2), n_agents=3)
+    >>> path = graphs.path_graph(3); Lap = graphs.laplacian(path)
+    >>> try:
+    ...     team_observability.require_observable(agent.A, agent.B @ K, graphs.star_graph(4))
+    ... except ValueError as exc:
+    ...     print(str(exc)[:22])
+    system (43) (F_1, H_i)
+    """
+    Adj = check_adjacency_stack(adjacency)
+    if Adj.ndim != 2:
+        raise ValueError(f"adjacency must be a single (N, N) topology here; got shape {Adj.shape}")
+    sensing_mask(Adj)  # isolated agents first, with their own message
+    ok = observable_agents(A, BK, adjacency)
+    if not np.all(ok):
+        bad = np.flatnonzero(~ok).tolist()
+        raise ValueError(
+            f"system (43) (F_1, H_i) is not observable for agent(s) {bad} with this topology (F_1 from A, BK "
+            "and the adjacency's Laplacian, H_i from the adjacency): "
+            "Theorem 1 does not apply and the estimation-based loop needs an observable graph "
+            "(symmetric neighbourhoods, e.g. a star seen from a leaf, hide modes)"
+        )
+
+
+def lyapunov_v(error: ArrayLike, Sigma_r: ArrayLike, kron: int = 1) -> np.ndarray:
+    """Lyapunov function of eq. (45), ``V = e_i^T Σ_i^{-1} e_i`` (= the NEES).
+
+    Parameters
+    ----------
+    error : (..., M) array_like
+        ``e_i = X - X̂_i`` (full team dimension ``M = kron M_r``).
+    Sigma_r : (..., M_r, M_r) array_like
+        Reduced covariance ``Σ̄_i`` (``Σ_i = Σ̄_i ⊗ I_kron``).
+    kron : int
+        Kronecker factor of the model.
+
+    Returns
+    -------
+    (...) ndarray
+        ``V``, chi-square distributed with ``M`` dof for a consistent filter.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import team_observability
+    >>> float(team_observability.lyapunov_v(np.ones(6), np.eye(6)))
+    6.0
+    """
+    kron = check_positive_int(kron, "kron")
+    e = _finite(_float_array(error, "error"), "error")
+    P = check_covariance(_float_array(Sigma_r, "Sigma_r"), "Sigma_r", definite=True)
+    Mr = P.shape[-1]
+    if e.ndim < 1 or e.shape[-1] != Mr * kron:
+        raise ValueError(
+            f"Incompatible dimensions of error; expected (..., {Mr * kron}) = Sigma_r size {Mr} x kron {kron} "
+            f"but found {e.shape}"
+        )
+    try:
+        np.broadcast_shapes(e.shape[:-1], P.shape[:-2])
+    except ValueError:
+        raise ValueError(f"the batch axes of error {e.shape} and Sigma_r {P.shape} do not broadcast") from None
+    return reduced_nees(e, P, kron)
+
+
+def theorem1_min_eigenvalues(
+    model: TeamFilterModel, laplacian: ArrayLike, KH: ArrayLike, Sigma_i: ArrayLike, F2_cross: ArrayLike
+) -> dict[str, np.ndarray]:
+    """Smallest eigenvalues of ``M_i[k+1]`` (eq. (49)) along a run.
+
+    ``M_i[k+1] = Σ_i[k]^{-1} - 𝓕_{i,1}^T 𝓕_{i,2}^T Σ_i[k+1]^{-1} 𝓕_{i,2} 𝓕_{i,1}``
+    with ``𝓕_{i,1}[k] = F_1 + F_2 C_i[k]`` and ``𝓕_{i,2}[k+1] = I - G_i H_i[k+1]``.
+
+    ``C_i`` of Lemma 1 (eq. (44)) is taken as the regression map
+    ``C_i[k] = E[e e_i^T] Σ_i[k]^{-1}``: then ``α_i = e - C_i e_i`` is
+    uncorrelated with ``e_i``, which eqs. (48) and (51) of the proof need, and
+    ``C_i[0] = 1_N ⊗ I`` when all agents start from a common estimate. (The
+    literal recursion ``C_i[k+1] = 𝓕 C_i (𝓕_{i,2} 𝓕_{i,1})^{-1}`` is a ratio of
+    different agents' error-transition products and grows without bound within a
+    few steps.) With this choice eq. (59) shows ``M_i`` is positive definite
+    whenever the covariance recursion is right, so the check is a consistency
+    test of eqs. (29)-(34).
+
+    Parameters
+    ----------
+    model : TeamFilterModel
+        The team model.
+    laplacian : (N, N) array_like
+        Fixed topology.
+    KH : (T+1, N, M_r, M_r) array_like
+        Reduced ``G_i H_i[k]`` (entry 0 unused).
+    Sigma_i : (T+1, N, M_r, M_r) array_like
+        Reduced posterior ``Σ̄_i[k]``.
+    F2_cross : (T+1, N, M_r, M_r) array_like
+        ``F_2 E[e e_i^T]`` from :func:`~mascore.distributed_kf.f2_cross`.
+
+    Returns
+    -------
+    dict with
+        ``min_eig`` (T, N): smallest eigenvalue of ``M_i[k+1]``;
+        ``min_eig_rel`` (T, N): smallest eigenvalue of
+        ``Σ_i^{1/2} M_i Σ_i^{1/2}`` (scale-free, at most 1).
+
+    Examples
+    --------
+    >>> from mascore.papers import song2023
+    >>> r = song2023.fig2(seed=0, n_runs=2, horizon=4.0)
+    >>> sorted(song2023.theorem1(r))                                # via this function
+    ['min_eig', 'min_eig_rel']
+    """
+    model = check_model(model)
+    N, Mr = model.n_agents, model.M_r
+    L = check_team_laplacian(laplacian, N)
+    if L.ndim != 2:
+        raise ValueError(f"laplacian must be a single fixed ({N}, {N}) topology here; got shape {L.shape}")
+    KH = _finite(_float_array(KH, "KH"), "KH")
+    Sig = check_covariances(Sigma_i, "Sigma_i", (None, N, Mr, Mr), definite=True, kron=model.kron)
+    F2C_all = _finite(_float_array(F2_cross, "F2_cross"), "F2_cross")
+    if Sig.shape[0] < 2:
+        raise ValueError(f"Sigma_i must hold at least two steps (T+1 >= 2); got shape {Sig.shape}")
+    for name, arr in (("KH", KH), ("F2_cross", F2C_all)):
+        if arr.shape != Sig.shape:
+            raise ValueError(
+                f"Incompatible dimensions of {name}; KH, Sigma_i and F2_cross must all have shape "
+                f"(T+1, {N}, {Mr}, {Mr}); got {name} {arr.shape} and Sigma_i {Sig.shape}"
+            )
+    F1 = np.kron(np.eye(N), model.A_r) - np.kron(L, model.BK_r)
+    eye = np.eye(Mr)
+    Sig_inv = np.linalg.inv(Sig)
+    F2C = F2C_all[:-1] @ Sig_inv[:-1]  # F_2 C_i[k]
+    T = (eye - KH[1:]) @ (F1 + F2C)  # 𝓕_{i,2}[k+1] 𝓕_{i,1}[k], (T, N, Mr, Mr)
+    M = Sig_inv[:-1] - np.swapaxes(T, -1, -2) @ Sig_inv[1:] @ T
+    root = np.linalg.cholesky(Sig[:-1])
+    rel = np.swapaxes(root, -1, -2) @ M @ root
+    out = {
+        "min_eig": np.linalg.eigvalsh(symmetric_part(M))[..., 0],
+        "min_eig_rel": np.linalg.eigvalsh(symmetric_part(rel))[..., 0],
+    }
+    finite_result("Theorem 1 eigenvalue computation", *out.values())
+    return out
+
+
+def _observable(F: np.ndarray, H: np.ndarray, tol: float) -> bool:
+    """Rank test of the observability matrix ``[H; H F; ...; H F^{n-1}]``.
+
+    ``(F, H)`` and ``(F - I, H)`` have the same unobservable subspace; the
+    shifted matrix is used, scaled to unit norm, because a sampled system has
+    ``F ≈ I`` and its plain powers hide the information in tiny differences.
+    Each block is also rescaled (rank unchanged); one SVD decides.
+    """
+    n = F.shape[0]
+    G = F - np.eye(n)
+    gn = np.linalg.norm(G)
+    F = G / gn if gn > 0 else G
+    blocks, blk = [], H
+    for _ in range(n):
+        nrm = np.linalg.norm(blk)
+        if nrm == 0:
+            break
+        blk = blk / nrm
+        blocks.append(blk)
+        blk = blk @ F
+    s = np.linalg.svd(np.vstack(blocks), compute_uv=False)
+    return int(np.sum(s > tol * s[0])) == n
