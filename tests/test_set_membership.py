@@ -35,7 +35,7 @@ def random_case(seed, p=2):
 def test_paper_example_first_correction_sdp_equals_closed_form():
     """Sec. 5 at k = 0: prior E([50, -50], 2 I), R = 0.1: both methods give the same trace, gain and centre."""
     c, P, y = np.array([50.0, -50.0]), 2 * np.eye(2), np.array([50.6])
-    out = {m: smf.correct(c, P, y, C, D, R, method=m) for m in smf.METHODS}
+    out = {m: smf.correct(c, P, y, C, D, R, method=m) for m in smf.SOLVERS}
     (cs, Ps, Ls), (cf, Pf, Lf) = out["sdp"], out["closed_form"]
     assert np.trace(Ps) == pytest.approx(np.trace(Pf), rel=1e-6)
     assert np.allclose(Ls, Lf, atol=1e-4) and np.allclose(cs, cf, atol=1e-4)
@@ -65,7 +65,7 @@ def test_random_cases_sdp_equals_closed_form(seed, p):
     assert np.trace(Ps) == pytest.approx(np.trace(Pf), rel=1e-6)
 
 
-@pytest.mark.parametrize("method", smf.METHODS)
+@pytest.mark.parametrize("method", smf.SOLVERS)
 def test_correction_contains_every_consistent_state(method):
     """Points of the prior whose output is consistent with y (the true set) lie in E(x_{k|k}, P_{k|k})."""
     k = random_case(11)
@@ -82,7 +82,7 @@ def test_correction_contains_every_consistent_state(method):
     assert np.all(el.contains(np.vstack([true_set, x_true]), c, P, rtol=1e-6))
 
 
-@pytest.mark.parametrize("method", smf.METHODS)
+@pytest.mark.parametrize("method", smf.SOLVERS)
 def test_prediction_contains_true_successor_set(method):
     k = random_case(12)
     rng = k["rng"]
@@ -136,7 +136,7 @@ def test_batched_closed_form_equals_loop():
 # ------------------------------------------------------------------ bad input
 
 
-@pytest.mark.parametrize("method", smf.METHODS)
+@pytest.mark.parametrize("method", smf.SOLVERS)
 def test_empty_intersection_names_step_and_agent(method):
     c, P = np.zeros((4, 2)), np.broadcast_to(np.eye(2), (4, 2, 2))
     y = np.zeros((4, 1))
@@ -145,7 +145,7 @@ def test_empty_intersection_names_step_and_agent(method):
         smf.correct(c, P, y, C, D, R, method=method, step=7, agent=np.arange(1, 5))
 
 
-@pytest.mark.parametrize("method", smf.METHODS)
+@pytest.mark.parametrize("method", smf.SOLVERS)
 def test_non_pd_shape_names_step_and_agent(method):
     P = np.stack([np.eye(2), np.diag([1.0, -0.1])])
     with pytest.raises(ValueError, match=r"prediction step, k = 4, agent 2.*not symmetric positive definite"):
@@ -228,7 +228,7 @@ def _run_model(seed, method, n_steps=4):
     return out
 
 
-@pytest.mark.parametrize("method", smf.METHODS)
+@pytest.mark.parametrize("method", smf.SOLVERS)
 def test_eight_threads_give_the_serial_results_byte_for_byte(method):
     """No module-level state: 8 threads, one model each, reproduce a serial run exactly (both methods)."""
     from concurrent.futures import ThreadPoolExecutor
@@ -242,7 +242,7 @@ def test_eight_threads_give_the_serial_results_byte_for_byte(method):
             assert x.shape == y.shape and x.tobytes() == y.tobytes()
 
 
-@pytest.mark.parametrize("method", smf.METHODS)
+@pytest.mark.parametrize("method", smf.SOLVERS)
 def test_model_methods_equal_the_plain_functions(method):
     A_, G_, C_, D_, Q_, R_ = [[1.0, 0.1], [0.0, 1.0]], np.eye(2), [[1.0, 0.0]], [[1.0]], 1e-3 * np.eye(2), [[0.04]]
     model = _model()

@@ -867,10 +867,10 @@ def run(settings: SetMembershipSettings = SETTINGS, seed: int = 1, progress: boo
     """
     check_settings_type(settings, SetMembershipSettings, "settings")
     seed = check_seed(seed, "seed")
-    if settings.figure_method not in smf.METHODS or settings.table_method not in smf.METHODS:
-        raise ValueError(f"figure_method and table_method must be in {smf.METHODS}; got "
+    if settings.figure_method not in smf.SOLVERS or settings.table_method not in smf.SOLVERS:
+        raise ValueError(f"figure_method and table_method must be in {smf.SOLVERS}; got "
                          f"{settings.figure_method!r}, {settings.table_method!r}")
-    twin_method = next(m for m in smf.METHODS if m != settings.figure_method)
+    twin_method = next(m for m in smf.SOLVERS if m != settings.figure_method)
     kw = dict(seed=seed, n_runs=1, scenario=settings)
     figure_run = simulate(method=settings.figure_method, progress=progress, **kw)
     figure_twin = simulate(method=twin_method, **kw)
