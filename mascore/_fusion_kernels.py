@@ -21,46 +21,127 @@ def metropolis(links: np.ndarray) -> np.ndarray:
 
 
 def ci_objective(infos: np.ndarray, criterion: str):
+    """The criterion ``f(w)`` (trace of ``P`` or ``-log det P^{-1}``) of weights ``(..., k)`` and its gradient."""
     def f(w):
-        info = np.einsum("k,kij->ij", w, infos)
+        info = np.einsum("...k,...kij->...ij", w, infos)
         if criterion == "det":
             sign, logdet = np.linalg.slogdet(info)
-            return -logdet if sign > 0 else np.inf
-        return float(np.trace(np.linalg.inv(info)))
+            return np.where(sign > 0, -logdet, np.inf)
+        return np.trace(np.linalg.inv(info), axis1=-2, axis2=-1)
 
     def grad(w):
-        inv = np.linalg.inv(np.einsum("k,kij->ij", w, infos))
+        inv = np.linalg.inv(np.einsum("...k,...kij->...ij", w, infos))
         if criterion == "det":  # d(-log det) / dw_k = -tr(Om^{-1} Om_k)
-            return -np.einsum("ij,kji->k", inv, infos)
-        return -np.einsum("ij,kjl,li->k", inv, infos, inv)  # d tr(Om^{-1}) / dw_k = -tr(Om^-1 Om_k Om^-1)
+            return -np.einsum("...ij,...kji->...k", inv, infos)
+        return -np.einsum("...ij,...kjl,...li->...k", inv, infos, inv)  # d tr(Om^{-1}) / dw_k = -tr(Om^-1 Om_k Om^-1)
 
     return f, grad
 
 
-def ci_weights(infos: np.ndarray, criterion: str) -> np.ndarray:
-    """The simplex weights minimizing trace or det of the fused covariance (a convex problem)."""
-    from scipy import optimize
+#: Curvature of the criterion, relative to the largest, below which a direction of the weights counts as flat.
+_FLAT = 1e-10
 
-    k = infos.shape[0]
-    if k == 1:
-        return np.ones(1)
-    f, grad = ci_objective(infos, criterion)
-    w0 = np.full(k, 1.0 / k)
-    if k == 2:
-        res = optimize.minimize_scalar(lambda a: f(np.array([a, 1.0 - a])), bounds=(0.0, 1.0), method="bounded",
-                                       options={"xatol": 1e-12})
-        # the bounded search never returns an end point: take one if it is better
-        w = min((np.array([t, 1.0 - t]) for t in (float(res.x), 0.0, 1.0)), key=f)
-    else:
-        res = optimize.minimize(f, w0, jac=grad, method="SLSQP", bounds=[(0.0, 1.0)] * k,
-                                constraints=({"type": "eq", "fun": lambda w: w.sum() - 1.0,
-                                              "jac": lambda w: np.ones_like(w)},),
-                                options={"ftol": 1e-14, "maxiter": 500})
-        w = np.clip(res.x, 0.0, None)
-        w = w / w.sum()
-    # a tie (a flat criterion, e.g. equal covariances) keeps the equal weights: the result does not depend on
-    # where the search stopped
-    return w if f(w) < f(w0) * (1 - 1e-12) else w0
+#: Newton iterations of :func:`ci_weights` (each one step to the optimum of a face, or onto a smaller face).
+CI_MAX_ITER = 100
+
+
+def ci_weights(infos: np.ndarray, criterion: str, valid: np.ndarray | None = None) -> np.ndarray:
+    """The simplex weights minimizing trace or det of the fused covariance (a convex problem), for a batch.
+
+    Parameters
+    ----------
+    infos : (..., k, n, n) ndarray
+        Information matrices ``P_j^{-1}`` (symmetric positive definite), one problem per leading index.
+    criterion : {"trace", "det"}
+        ``trace(P)`` or ``-log det(P^{-1})``, ``P^{-1} = sum_j w_j P_j^{-1}``.
+    valid : (..., k) bool ndarray, optional
+        Which entries take part (the others get weight 0: padding of problems of fewer than k estimates).
+
+    Returns
+    -------
+    (..., k) ndarray
+        The optimal weights: Newton's method on the simplex with an active set, every problem of the batch at
+        once (a step to the optimum of the current face, cut where a weight reaches 0; a weight at 0 freed when
+        its Lagrange multiplier says so), each problem stopped when its step and its multipliers vanish. Equal
+        weights are kept unless they are beaten (a flat criterion gives ``1/k``: the result does not depend on
+        where the search stopped).
+    """
+    shape = infos.shape[:-3]
+    k, n = infos.shape[-3], infos.shape[-1]
+    Om = infos.reshape(-1, k, n, n)
+    B = Om.shape[0]
+    ok = np.ones((B, k), bool) if valid is None else np.broadcast_to(valid, (*shape, k)).reshape(B, k)
+    w0 = ok / ok.sum(axis=1, keepdims=True)
+    f = ci_objective(Om, criterion)[0](w0)
+    w, free, live = w0.copy(), ok.copy(), np.ones(B, bool)
+    for _ in range(CI_MAX_ITER):
+        b = np.flatnonzero(live)
+        if b.size == 0:
+            break
+        w[b], free[b], live[b] = _ci_iteration(Om[b], w[b], free[b], ok[b], criterion)
+    better = ci_objective(Om, criterion)[0](w) < f * (1 - 1e-12)
+    return np.where(better[:, None], w, w0).reshape(*shape, k)
+
+
+def _ci_iteration(Om, w, free, ok, criterion):
+    """One Newton iteration of :func:`ci_weights` for a batch: the new weights, free set and unfinished problems."""
+    d, lam, g = _ci_newton(Om, w, free, criterion)
+    f = ci_objective(Om, criterion)[0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        limit = np.where(free & (d < 0), -w / d, np.inf)  # where a free weight would reach 0
+    alpha = np.minimum(1.0, limit.min(axis=1))
+    f0, big = f(w), np.abs(d).max(axis=1) > 1e-9
+    for _ in range(60):  # far from the optimum, halve the step until the criterion decreases
+        trial = np.where(free, w + alpha[:, None] * d, 0.0)
+        worse = big & ~(f(trial) <= f0)
+        if not worse.any():
+            break
+        alpha = np.where(worse, alpha / 2, alpha)
+    hit = free & (limit <= alpha[:, None] * (1 + 1e-9))  # weights that reached 0 (together: ties) leave the face
+    w = np.where(hit, 0.0, trial)
+    w /= w.sum(axis=1, keepdims=True)
+    free = free & ~hit
+    moving = (np.abs(alpha[:, None] * d).max(axis=1) > 1e-12) | hit.any(axis=1)
+    # on the optimum of its face: free the fixed weights of most negative multiplier g_j + lambda (ties
+    # together, so that equal estimates keep equal weights), or stop
+    mult = np.where(ok & ~free, g + lam[:, None], np.inf)
+    tol = 1e-9 * np.abs(g).max(axis=1, keepdims=True)
+    freeing = ~moving[:, None] & (mult < -tol) & (mult <= mult.min(axis=1, keepdims=True) + tol)
+    free |= freeing
+    return w, free, moving | freeing.any(axis=1)
+
+
+def _ci_newton(Om, w, free, criterion):
+    """Newton step ``d`` on the face of the free weights (``sum d = 0``), its multiplier and the gradient.
+
+    Where the criterion is flat along some weights (estimates with equal covariances, or more than
+    ``n (n + 1) / 2`` of them: the optimal fused covariance is unique, its weights are not), the step is the
+    least-norm one, which leaves the weights along a flat direction as they are (equal, from the start).
+    """
+    B, k, n, _ = Om.shape
+    inv = np.linalg.inv(np.einsum("bk,bkij->bij", w, Om))
+    Bk = np.einsum("bij,bkjl->bkil", inv, Om)  # Om^{-1} Om_k
+    if criterion == "det":  # f = -log det: g_k = -tr(Om^-1 Om_k), H_kl = tr(Om^-1 Om_k Om^-1 Om_l)
+        g = -np.trace(Bk, axis1=-2, axis2=-1)
+        H = np.einsum("bkij,blji->bkl", Bk, Bk)
+    else:  # f = tr(Om^-1): g_k = -tr(Om^-1 Om_k Om^-1), H_kl = 2 tr(Om^-1 Om_k Om^-1 Om_l Om^-1)
+        Ck = np.einsum("bkij,bjl->bkil", Bk, inv)
+        g = -np.trace(Ck, axis1=-2, axis2=-1)
+        H = 2.0 * np.einsum("bkij,blji->bkl", Bk, Ck)
+    scale = np.where(free, np.abs(np.diagonal(H, axis1=1, axis2=2)), 0.0).max(axis=1)  # H / scale: entries ~1
+    K = np.zeros((B, k + 1, k + 1))
+    both = free[:, :, None] & free[:, None, :]
+    K[:, :k, :k] = np.where(both, H / scale[:, None, None], 0.0)
+    K[:, np.arange(k), np.arange(k)] += ~free  # fixed weights: d = 0
+    K[:, :k, k] = K[:, k, :k] = free
+    rhs = np.zeros((B, k + 1))
+    rhs[:, :k] = np.where(free, -g / scale[:, None], 0.0)
+    e, U = np.linalg.eigh(K)  # K symmetric: the least-norm solution, flat directions (|e| ~ 0) left alone
+    inv_e = np.zeros_like(e)
+    np.divide(1.0, e, out=inv_e, where=np.abs(e) > _FLAT * np.abs(e).max(axis=1, keepdims=True))
+    sol = np.einsum("bij,bj,bkj,bk->bi", U, inv_e, U, rhs)
+    sol[:, k] *= scale
+    return np.where(free, sol[:, :k], 0.0), sol[:, k], g
 
 
 def mix(W: np.ndarray, X: np.ndarray, axes: int) -> np.ndarray:

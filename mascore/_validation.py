@@ -365,7 +365,7 @@ def float_array(value: object, name: str) -> np.ndarray:
     """
     if type(value) is _ND and value.dtype is _F64:
         return value
-    if _is_graph(value) or (isinstance(value, (list, tuple)) and value and all(map(_is_graph, value))):
+    if is_graph(value) or (isinstance(value, (list, tuple)) and value and all(map(is_graph, value))):
         return graph_adjacency(value)
     if value is None or isinstance(value, (str, bytes)):
         raise TypeError(f"{name} must be an array of real numbers; got {type(value).__name__} {value!r}")
@@ -386,7 +386,7 @@ def float_array(value: object, name: str) -> np.ndarray:
 # ---------------------------------------------------------------- networkx graphs where an adjacency is expected
 
 
-def _is_graph(value: object) -> bool:
+def is_graph(value: object) -> bool:
     """Whether `value` is a networkx graph (duck-typed, so networkx is imported only by its user)."""
     return type(value).__module__.startswith("networkx") and hasattr(value, "is_directed") and hasattr(value, "adj")
 

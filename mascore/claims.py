@@ -30,7 +30,8 @@ VERDICTS = ("reproduces", "approximately", "does-not-reproduce", "holds", "fails
 _CLAIM_ID = re.compile(r"[a-z][a-z0-9_]*/\S+")
 
 _RECORD_KEYS = ("id", "where", "statement", "paper_value", "value", "tolerance", "verdict", "note")
-_OPTIONAL_KEYS = ("unit", "labels", "rule", "band_reason", "study", "why")
+_OPTIONAL_KEYS = ("unit", "labels", "rule", "band_reason", "study", "why", "written_from", "decided_on", "post_hoc",
+                  "undecided")
 
 
 @dataclass(frozen=True)
@@ -73,8 +74,18 @@ class Claim:
     why : str
         For a claim that does not fully reproduce: one sentence, in a reader's words, of why
         (the reproduction report shows it; the `note` gives the evidence).
+    written_from : str
+        For a claim written from data: the data it was written from (``"seed blocks 0-1"``).
+    decided_on : str
+        The data its verdict is computed on (held-out seed blocks, or why not).
+    post_hoc : str
+        For a claim changed after its data were seen: what was changed, and from what.
     holds : bool, optional
         The decided condition of a qualitative claim (use :meth:`qualitative`).
+    undecided : bool
+        A qualitative claim whose data cannot decide it (an interval across the edge of its
+        band; use :meth:`qualitative` with ``holds=None``). Its verdict is ``"fails"``: the
+        claim is not shown by the data. The record keeps ``"undecided": true`` to say why.
 
     Examples
     --------
@@ -97,13 +108,18 @@ class Claim:
     band_reason: str = ""
     study: str = ""
     why: str = ""
+    written_from: str = ""
+    decided_on: str = ""
+    post_hoc: str = ""
     holds: bool | None = None
+    undecided: bool = False
     verdict: str = field(default="", init=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.id, str) or not _CLAIM_ID.fullmatch(self.id):
             raise ValueError(f"claim id must look like 'PAPER/short-name' with PAPER a ledger's key; got {self.id!r}")
-        for name in ("where", "statement", "note", "unit", "rule", "band_reason", "study", "why"):
+        for name in ("where", "statement", "note", "unit", "rule", "band_reason", "study", "why", "written_from",
+                     "decided_on", "post_hoc"):
             if not isinstance(getattr(self, name), str):
                 raise TypeError(f"{self.id}: {name} must be a string; got {type(getattr(self, name)).__name__}")
         if self.tolerance is not None and not isinstance(self.tolerance, dict):
@@ -122,7 +138,9 @@ class Claim:
             if self.holds is None or self.tolerance is not None:
                 raise ValueError(f"{self.id}: qualitative claims must be built with Claim.qualitative")
             object.__setattr__(self, "holds", bool(self.holds))
-            object.__setattr__(self, "verdict", "holds" if self.holds else "fails")
+            object.__setattr__(self, "undecided", bool(self.undecided))
+            verdict = "holds" if self.holds and not self.undecided else "fails"  # undecided: not shown
+            object.__setattr__(self, "verdict", verdict)
             return
         if not _all_numbers(self.paper_value):
             raise TypeError(f"{self.id}: paper_value must be a number or a list of numbers; got {self.paper_value!r}")
@@ -134,8 +152,9 @@ class Claim:
 
     @classmethod
     def qualitative(
-        cls, id: str, where: str, statement: str, value: Any, holds: bool | np.bool_, note: str = "",
-        *, rule: str = "", unit: str = "", why: str = "",
+        cls, id: str, where: str, statement: str, value: Any, holds: bool | np.bool_ | None, note: str = "",
+        *, rule: str = "", unit: str = "", why: str = "", written_from: str = "", decided_on: str = "",
+        post_hoc: str = "",
     ) -> Claim:
         """A claim without a published number, decided by a measured condition.
 
@@ -149,8 +168,9 @@ class Claim:
             One sentence in our words.
         value : number, list or dict
             The measured quantity (or quantities) that decides the claim.
-        holds : bool
-            The condition evaluated on `value` by the caller's code.
+        holds : bool or None
+            The condition evaluated on `value` by the caller's code; None when the data
+            cannot decide it (e.g. an interval that straddles the rule's band).
         note : str
             Why, what reading we chose.
         rule : str
@@ -159,11 +179,14 @@ class Claim:
             Unit of `value`.
         why : str
             When it fails: one sentence of why, for the reproduction report.
+        written_from, decided_on, post_hoc : str
+            The data the claim was written from, the data that decide it, and what was changed
+            after the data were seen (see the class).
 
         Returns
         -------
         Claim
-            With verdict ``"holds"`` or ``"fails"``.
+            With verdict ``"holds"`` or ``"fails"`` (also when undecided).
 
         Examples
         --------
@@ -172,7 +195,9 @@ class Claim:
         ...                   rule="spread < 1e-6").verdict
         'holds'
         """
-        return cls(id, where, statement, None, value, None, note, unit=unit, rule=rule, why=why, holds=bool(holds))
+        return cls(id, where, statement, None, value, None, note, unit=unit, rule=rule, why=why,
+                   written_from=written_from, decided_on=decided_on, post_hoc=post_hoc,
+                   holds=bool(holds) if holds is not None else False, undecided=holds is None)
 
     @property
     def deviation(self) -> float | None:
@@ -227,6 +252,7 @@ class Claim:
         keys = {k: record[k] for k in (*_RECORD_KEYS, *_OPTIONAL_KEYS) if k in record and k != "verdict"}
         if keys.get("paper_value") is None:
             keys["holds"] = record["verdict"] == "holds"
+            keys["undecided"] = bool(record.get("undecided", False))
         return cls(**keys)
 
 

@@ -19,11 +19,11 @@ Batched update and prediction
 -----------------------------
 ``H_i`` has a size that changes with the neighbourhood, which would force a
 Python loop over agents. The update gathers each filter's ``q_i`` observed
-rows ``H_i Sigma`` instead, factors the ``q_i x q_i`` innovation covariance
-(LAPACK), solves ``V = L^{-1} H_i Sigma`` and subtracts the rank-``q_i``
-correction ``V^T V`` in place (BLAS, no ``M x M`` temporary): ``O(M^2 q)``
-per filter instead of the ``O(M^3)`` of a full ``M x M`` solve, and exactly the
-update with ``H_i`` (tested against :func:`mascore.kalman.update` with the
+rows ``H_i Sigma`` instead, inverts the Cholesky factor of the ``q_i x q_i``
+innovation covariance, forms ``V = L^{-1} H_i Sigma`` and subtracts the
+rank-``q_i`` correction ``V^T V`` in place (no ``M x M`` temporary):
+``O(M^2 q)`` per filter instead of the ``O(M^3)`` of a full ``M x M`` solve, and
+exactly the update with ``H_i`` (tested against :func:`mascore.kalman.update` with the
 explicit ``H_i``). The prediction uses ``F = I kron A + (I kron B) G`` with the
 control Jacobian ``G = dU/dX`` (``nN x 2nN``, written in its final layout):
 ``F P F^T`` costs ``1.5 M^3`` (two matrix products) instead of ``4 M^3``, every
@@ -31,6 +31,17 @@ product by ``A`` or ``B`` being a scaled addition of rows or column blocks, and
 one transpose making the result exactly symmetric. All N filters (and all Monte
 Carlo runs) advance chunk by chunk, each chunk's update and prediction running
 while its covariances are in cache, with the filter's work arrays reused between calls.
+
+Threads: every product of the step is cut into tiles of at most ``2^18``
+multiply-adds, which OpenBLAS (the BLAS of numpy's and scipy's wheels) runs on
+the calling thread, and the innovation covariances are factored by blocks of
+order at most 64 (one LAPACK thread). The step thus never wakes a BLAS thread
+pool: its speed and its results are the same with the BLAS's default number of
+threads as with one, on an idle or a busy machine, and no process-wide thread
+setting is read or changed. (Handing each filter's products to a threaded BLAS
+instead makes the pool synchronise at thousands of small calls per step, and
+numpy's and scipy's pools, each with spinning threads, take the cores from each
+other: several times slower than one thread.)
 
 Shapes: team states are ``(..., N, 2n)`` (rows ``[p_j; v_j]``), covariances
 ``(..., 2nN, 2nN)`` in the matching flattened order; leading axes are the
@@ -64,9 +75,8 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.linalg.blas import dgemm as _dgemm
-from scipy.linalg.blas import dtrsm as _dtrsm
-from scipy.linalg.blas import dtrsv as _dtrsv
 from scipy.linalg.lapack import dpotrf as _dpotrf
+from scipy.linalg.lapack import dtrtri as _dtrtri
 
 from . import _flocking_core as _core
 from ._flocking_core import FlockingGains
@@ -1254,15 +1264,100 @@ def _chunks(K, M):
     return [slice(s, min(s + c, K)) for s in range(0, K, c)]
 
 
-def _gemm_into(alpha, V, beta, P):
-    """``P <- beta P + alpha V^T V`` in place for a C-contiguous symmetric ``(M, M)`` `P` and ``(q, M)`` `V`.
+#: Multiply-adds per BLAS call in the step's kernels. OpenBLAS (the BLAS of numpy's and scipy's wheels) runs a
+#: matrix product of at most 65536 x 4 (its GEMM_MULTITHREAD_THRESHOLD) multiply-adds on the calling thread: the
+#: per-filter products are cut into tiles of this size, so that the step never wakes a BLAS thread pool and runs
+#: the same code, with the same results, whatever the BLAS's number of threads. (Large single products do gain
+#: from threads; thousands of small ones synchronise the pool at every call, and numpy and scipy each bring
+#: their own pool, whose spinning threads then take the cores from each other.)
+_TILE_MACS = 1 << 18
+#: Longest inner dimension of a tile (longer ones are summed over pieces): short tiles with a long inner
+#: dimension run well below the BLAS's rate, as each call packs its operands anew.
+_TILE_K = 128
+#: Rows of a tile (its columns: as many as :data:`_TILE_MACS` allows).
+_TILE_ROWS = 64
+#: Largest factor handed to LAPACK in one call (OpenBLAS's Cholesky and triangular inverse run on one thread up
+#: to this order); larger innovation covariances are factored by blocks (:func:`_cholesky_inverse`).
+_LAPACK_ORDER = 64
 
-    One BLAS call on ``P^T`` (Fortran order, the same memory): no ``M x M`` temporary and no extra pass.
+
+def _tiled_matmul(A, B, out, acc):
+    """``out = A @ B`` for stacks ``(c, m, k) @ (c, k, n)``, as BLAS products of at most :data:`_TILE_MACS`.
+
+    `acc` is a flat work array of at least ``c m n`` doubles (used when ``k > _TILE_K``: the pieces of the
+    inner dimension are summed). The tiles of one row block are one batched ``np.matmul`` over strided views.
     """
-    Pt = P.T
-    out = _dgemm(alpha, V.T, V.T, beta=beta, c=Pt, trans_b=1, overwrite_c=1)
-    if out is not Pt:  # pragma: no cover  (BLAS worked on a copy)
-        P[...] = out.T
+    c, m, k = A.shape
+    n = B.shape[-1]
+    kb = min(k, _TILE_K)
+    r = min(m, _TILE_ROWS)
+    b = max(1, min(n, _TILE_MACS // (r * kb)))
+    nb = n // b
+    acc = acc[: c * m * n].reshape(c, m, n)
+    for k0 in range(0, k, kb):
+        k1 = min(k, k0 + kb)
+        dst = out if k0 == 0 else acc
+        Bk = B[:, k0:k1, :]
+        s0, s1, s2 = Bk.strides
+        Bt = np.lib.stride_tricks.as_strided(Bk, (c, nb, k1 - k0, b), (s0, b * s2, s1, s2))  # column tiles
+        for i0 in range(0, m, r):
+            Ai, Di = A[:, i0:i0 + r, k0:k1], dst[:, i0:i0 + r, :]
+            d0, d1, d2 = Di.strides
+            np.matmul(Ai[:, None], Bt, out=np.lib.stride_tricks.as_strided(Di, (c, nb, Ai.shape[1], b),
+                                                                            (d0, b * d2, d1, d2)))
+            if n > nb * b:
+                np.matmul(Ai, Bk[:, :, nb * b:], out=Di[:, :, nb * b:])
+        if dst is acc:
+            out += acc
+    return out
+
+
+def _cholesky_inverse(S):
+    """``L^{-1}`` for ``S = L L^T`` (``(q, q)`` symmetric positive definite), lower triangular, zero above.
+
+    Up to order :data:`_LAPACK_ORDER` by LAPACK (``potrf``, ``trtri``); above, by 2 x 2 blocks:
+    ``L11 = chol(S11)``, ``L21 = S21 L11^{-T}``, ``L22 = chol(S22 - L21 L21^T)`` and
+    ``(L^{-1})_21 = -L22^{-1} L21 L11^{-1}``, every product a tiled one (:func:`_tiled_matmul`).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If `S` is not positive definite.
+    """
+    q = S.shape[0]
+    if q <= _LAPACK_ORDER:
+        L, info = _dpotrf(S, lower=1, clean=1)  # S symmetric: its C order is its F order
+        if info == 0:
+            Li, info = _dtrtri(L, lower=1)
+        if info != 0:
+            raise np.linalg.LinAlgError("innovation covariance is not positive definite")
+        return np.tril(Li)
+    h = q // 2
+    acc = np.empty(q * q)
+    Li = np.zeros((q, q))
+    Li[:h, :h] = A = _cholesky_inverse(S[:h, :h])
+    L21 = _tiled_matmul(S[None, h:, :h], A.T[None], np.empty((1, q - h, h)), acc)[0]  # S21 L11^{-T}
+    S22 = S[h:, h:] - _tiled_matmul(L21[None], L21.T[None], np.empty((1, q - h, q - h)), acc)[0]
+    Li[h:, h:] = D = _cholesky_inverse(S22)
+    T = _tiled_matmul(L21[None], A[None], np.empty((1, q - h, h)), acc)  # L21 L11^{-1}
+    Li[h:, :h] = -_tiled_matmul(D[None], T, np.empty((1, q - h, h)), acc)[0]
+    return Li
+
+
+def _subtract_gram(P, V, scale):
+    """``P <- scale (P - V^T V)`` in place for a C-contiguous ``(M, M)`` `P` and a ``(q, M)`` `V`.
+
+    By strips of rows of ``P`` (each one in-place BLAS call on the strip's transpose, Fortran order in the same
+    memory), every call at most :data:`_TILE_MACS` multiply-adds: no ``M x M`` temporary and no extra pass.
+    """
+    q, M = V.shape
+    rows = max(1, _TILE_MACS // (M * q))
+    Vt = V.T
+    for i0 in range(0, M, rows):
+        strip = P[i0:i0 + rows].T  # (M, r), Fortran order
+        out = _dgemm(-scale, Vt, V[:, i0:i0 + rows], beta=scale, c=strip, overwrite_c=1)
+        if out is not strip:  # pragma: no cover  (BLAS worked on a copy)
+            strip[...] = out
 
 
 def _update_rows(X, P, z, observed, R, scale, work=None):
@@ -1271,9 +1366,10 @@ def _update_rows(X, P, z, observed, R, scale, work=None):
     `X` ``(c, N, m)``, `P` ``(c, M, M)`` (C-contiguous, overwritten by ``scale * Sigma_post``),
     `z` ``(c, N, m)``, `observed` ``(c, N)`` bool. The observed rows ``H Sigma`` and the innovation
     covariances ``S = H (Sigma + R) H^T`` of the chunk are gathered at once (index lists padded to a common
-    length, the padding unused); then per filter, with its own ``q_i`` entries: ``S = L L^T`` (LAPACK),
-    ``V = L^{-1} H Sigma`` solved in place and ``V^T V`` subtracted in place (BLAS, no ``M x M``
-    temporary), ``O(q_i^3 + q_i^2 M + q_i M^2)`` flops.
+    length ``q``); per filter, with its own ``q_i`` entries, ``L^{-1}`` of ``S = L L^T``
+    (:func:`_cholesky_inverse`); then for the chunk at once ``V = L^{-1} H Sigma`` (zero in the padding) and per
+    filter ``V^T V`` subtracted in place (:func:`_subtract_gram`): ``O(q_i^3 + q_i^2 M + q_i M^2)`` flops, every
+    BLAS call a tile run on the calling thread.
     Returns the updated states ``(c, N, m)``.
     """
     c, N, m = X.shape
@@ -1288,7 +1384,9 @@ def _update_rows(X, P, z, observed, R, scale, work=None):
     agents = np.argsort(~observed, axis=-1, kind="stable")[:, :qa]  # observed agents first, in order
     idx = (agents[..., None] * m + np.arange(m)).reshape(c, qa * m)  # (c, q) observed state indices (padded)
     gather = ((np.arange(c) * M)[:, None] + idx).reshape(-1)
-    Ct = None if work is None else work.rows[: gather.size * M].reshape(gather.size, M)
+    if work is None:
+        work = _Scratch(c, N, m)
+    Ct = work.rows[: gather.size * M].reshape(gather.size, M)
     Ct = np.take(P.reshape(c * M, M), gather, axis=0, out=Ct).reshape(c, qa * m, M)  # H Sigma, (c, q, M)
     q_max = qa * m
     rows = (np.arange(c) * (q_max * M))[:, None, None] + (np.arange(q_max) * M)[None, :, None]
@@ -1297,24 +1395,19 @@ def _update_rows(X, P, z, observed, R, scale, work=None):
     S += np.take(R, pairs)  # eq. (17); only the leading q_k x q_k block of filter k is used
     flat = (np.arange(c) * M)[:, None] + idx
     nu = np.take(z, flat) - np.take(x, flat)  # H (z - X), eq. (16)
-    a = np.zeros(nu.shape)  # L^{-1} nu, zero in the padding
     q = counts * m
-    for k in range(c):  # per filter, with its own q_k observed entries
-        qk = q[k]
-        if qk == 0:
-            if scale != 1.0:
-                P[k] *= scale
-            continue
-        L, info = _dpotrf(S[k, :qk, :qk], lower=1)  # S = L L^T (S symmetric: its C order is its F order)
-        if info != 0:
-            raise np.linalg.LinAlgError("innovation covariance is not positive definite")
-        V = Ct[k, :qk]  # H Sigma, overwritten by V = L^{-1} H Sigma (V^T = (H Sigma)^T L^{-T}, in place)
-        Vt = V.T
-        if _dtrsm(1.0, L, Vt, side=1, lower=1, trans_a=1, overwrite_b=1) is not Vt:  # pragma: no cover
-            raise RuntimeError("dtrsm did not work in place")
-        a[k, :qk] = _dtrsv(L, nu[k, :qk], lower=1)  # L^{-1} nu
-        _gemm_into(-scale, V, scale, P[k])  # eq. (20): Sigma - V^T V (times scale), in place
-    x_post = x + np.einsum("kqm,kq->km", Ct, a)  # eq. (18): X + Sigma H^T S^{-1} nu = X + V^T L^{-1} nu
+    Li = np.zeros((c, q_max, q_max))  # L^{-1} of each filter, zero in the padding
+    for k in range(c):
+        if q[k]:
+            Li[k, : q[k], : q[k]] = _cholesky_inverse(S[k, : q[k], : q[k]])
+    V = _tiled_matmul(Li, Ct, work.V[: c * q_max * M].reshape(c, q_max, M), work.acc)  # L^{-1} H Sigma
+    a = np.einsum("kij,kj->ki", Li, nu)  # L^{-1} nu
+    for k in range(c):  # eq. (20): Sigma - V^T V (times scale), in place
+        if q[k]:
+            _subtract_gram(P[k], V[k, : q[k]], scale)
+        elif scale != 1.0:
+            P[k] *= scale
+    x_post = x + np.einsum("kqm,kq->km", V, a)  # eq. (18): X + Sigma H^T S^{-1} nu = X + V^T L^{-1} nu
     return x_post.reshape(c, N, m)
 
 
@@ -1373,6 +1466,8 @@ class _Scratch:
         self.T = np.empty((c, M, M))
         self.half = np.empty(c * M * M // 2)
         self.rows = np.empty(c * M * M)
+        self.V = np.empty(c * M * M)
+        self.acc = np.empty(c * M * M)
 
     def buffer(self, like):
         """A contiguous temporary of the shape and type of `like` (at most half a chunk of covariances)."""
@@ -1426,8 +1521,8 @@ def _predict_half(X, Ph, model, out, work):
     U, G = _core.control_and_jacobian(X, model.gains, out=work.G[:c], scale=dt)  # eq. (39), and dt dU/dX
     X_next = _core.propagate(X, U, dt)  # eq. (40)
     G = G.reshape(c, nN, M)
-    Y = np.matmul(G, Ph, out=work.Y[:c])  # dt G Sigma / 2
-    Z = np.matmul(Y, np.swapaxes(G, -1, -2), out=work.Z[:c])  # dt^2 G Sigma G^T / 2
+    Y = _tiled_matmul(G, Ph, work.Y[:c], work.acc)  # dt G Sigma / 2
+    Z = _tiled_matmul(Y, np.swapaxes(G, -1, -2), work.Z[:c], work.acc)  # dt^2 G Sigma G^T / 2
     # Y <- Y + dt Z C^T / 2 (positions: -dt^2/2 Z dt / 2, velocities: dt Z dt / 2), with Z = G Sigma G^T
     Yp, Yv = _column_blocks(Y, N, n)
     Zc = _pair_view(Z, N, n)

@@ -29,8 +29,8 @@ Input checks: every public function checks its arguments and names the one at
 fault (finite entries; matching and broadcastable shapes; shape matrices
 symmetric positive definite, or semidefinite where a flat ellipsoid makes sense;
 family parameters strictly inside (0, 1); counts and tolerances). The
-set-membership filter calls the unchecked private kernels (``_intersection_min_trace``,
-``_max_innovation_form``, ``_sum_min_trace``) after checking its own arguments once.
+set-membership filter calls the unchecked kernels of ``mascore._ellipsoid_kernels`` (the same
+minimum-trace intersection, innovation form and sum) after checking its own arguments once.
 A result that overflows (NaN or inf from finite input, e.g. entries near 1e308)
 raises a ``ValueError`` instead of being returned.
 """
@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from . import _ellipsoid_kernels as kernels
 from ._validation import (
     Frozen,
     as_matrix,
@@ -271,7 +272,7 @@ def trace(shape: ArrayLike) -> np.ndarray:
     P = _float_array(shape, "shape")
     if P.ndim < 2 or P.shape[-1] != P.shape[-2]:
         raise ValueError(f"shape must be a square matrix or a stack (..., n, n); got shape {P.shape}")
-    _require_finite(P, "shape")
+    kernels.require_finite(P, "shape")
     return finite_result("trace", np.trace(P, axis1=-2, axis2=-1))
 
 
@@ -304,7 +305,7 @@ def volume(shape: ArrayLike) -> np.ndarray:
     P = _float_array(shape, "shape")
     if P.ndim < 2 or P.shape[-1] != P.shape[-2]:
         raise ValueError(f"shape must be (..., n, n); got {P.shape}")
-    _require_finite(P, "shape")
+    kernels.require_finite(P, "shape")
     scale = np.maximum(np.abs(P).max(axis=(-1, -2), initial=0.0), 1e-300)
     sym = np.abs(P - np.swapaxes(P, -1, -2)).max(axis=(-1, -2), initial=0.0) <= 1e-10 * scale
     eig = np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2)))
@@ -370,11 +371,11 @@ def mahalanobis_sq(points: ArrayLike, center: ArrayLike, shape: ArrayLike) -> np
     >>> float(ell.mahalanobis_sq([2.0, 0.0], [0.0, 0.0], np.diag([4.0, 1.0])))
     1.0
     """
-    P = _shape_matrix(shape, "shape")
+    P = kernels.shape_matrix(shape, "shape")
     n = P.shape[-1]
-    x = _points(points, "points", n)
-    c = _points(center, "center", n)
-    _broadcast(points=x.shape[:-1], center=c.shape[:-1], shape=P.shape[:-2])
+    x = kernels.points(points, "points", n)
+    c = kernels.points(center, "center", n)
+    kernels.broadcast(points=x.shape[:-1], center=c.shape[:-1], shape=P.shape[:-2])
     d = x - c
     P, d = np.broadcast_arrays(P, d[..., None])
     sol = np.linalg.solve(P, d[..., :1])[..., 0]
@@ -412,10 +413,10 @@ def affine_image(
     >>> c, P
     (array([1.]), array([[2.]]))
     """
-    P = _shape_matrix(shape, "shape", definite=False)
+    P = kernels.shape_matrix(shape, "shape", definite=False)
     n = P.shape[-1]
-    c = _points(center, "center", n)
-    _broadcast(center=c.shape[:-1], shape=P.shape[:-2])
+    c = kernels.points(center, "center", n)
+    kernels.broadcast(center=c.shape[:-1], shape=P.shape[:-2])
     M = as_matrix(_float_array(M, "M"), "M")
     if M.shape[1] != n:
         raise ValueError(f"M has {M.shape[1]} columns but the ellipsoid lives in R^{n}")
@@ -466,13 +467,13 @@ def minkowski_sum(
     >>> c, np.diag(P)
     (array([1., 1.]), array([4., 4.]))
     """
-    P1 = _shape_matrix(shape1, "shape1", definite=False)
+    P1 = kernels.shape_matrix(shape1, "shape1", definite=False)
     n = P1.shape[-1]
-    P2 = _shape_matrix(shape2, "shape2", definite=False, size=n)
-    c1 = _points(center1, "center1", n)
-    c2 = _points(center2, "center2", n)
+    P2 = kernels.shape_matrix(shape2, "shape2", definite=False, size=n)
+    c1 = kernels.points(center1, "center1", n)
+    c2 = kernels.points(center2, "center2", n)
     beta = _open_unit(beta, "beta")
-    _broadcast(center1=c1.shape[:-1], shape1=P1.shape[:-2], center2=c2.shape[:-1], shape2=P2.shape[:-2],
+    kernels.broadcast(center1=c1.shape[:-1], shape1=P1.shape[:-2], center2=c2.shape[:-1], shape2=P2.shape[:-2],
                beta=beta.shape)
     beta = beta[..., None, None]
     c = c1 + c2
@@ -518,13 +519,13 @@ def minkowski_sum_min_trace(
     >>> float(np.trace(P)), float(beta)                    # (sqrt 8 + sqrt 2)^2 = 18, beta = 1/3
     (18.0, 0.333...)
     """
-    P1 = _shape_matrix(shape1, "shape1", definite=False)
+    P1 = kernels.shape_matrix(shape1, "shape1", definite=False)
     n = P1.shape[-1]
-    P2 = _shape_matrix(shape2, "shape2", definite=False, size=n)
-    c1 = _points(center1, "center1", n)
-    c2 = _points(center2, "center2", n)
-    _broadcast(center1=c1.shape[:-1], shape1=P1.shape[:-2], center2=c2.shape[:-1], shape2=P2.shape[:-2])
-    P, beta = _sum_min_trace(P1, P2, _sqrt_trace(P1), _sqrt_trace(P2))
+    P2 = kernels.shape_matrix(shape2, "shape2", definite=False, size=n)
+    c1 = kernels.points(center1, "center1", n)
+    c2 = kernels.points(center2, "center2", n)
+    kernels.broadcast(center1=c1.shape[:-1], shape1=P1.shape[:-2], center2=c2.shape[:-1], shape2=P2.shape[:-2])
+    P, beta = kernels.sum_min_trace(P1, P2, kernels.sqrt_trace(P1), kernels.sqrt_trace(P2))
     c = c1 + c2
     return (finite_result("Minkowski sum (center)", c), finite_result("Minkowski sum (shape)", P),
             beta)
@@ -587,26 +588,10 @@ def intersection_gain_form(
     """
     c, P, C, y, W = _intersection_args(center, shape, C, y, W)
     t = _open_unit(t, "t")
-    _broadcast(center=c.shape[:-1], shape=P.shape[:-2], y=y.shape[:-1], W=W.shape[:-2], t=t.shape)
-    new_c, Pt, L = _gain_form(c, P, C, y, W, t, shrink)
+    kernels.broadcast(center=c.shape[:-1], shape=P.shape[:-2], y=y.shape[:-1], W=W.shape[:-2], t=t.shape)
+    new_c, Pt, L = kernels.gain_form(c, P, C, y, W, t, shrink)
     return (finite_result("intersection (center)", new_c), finite_result("intersection (shape)", Pt),
             finite_result("intersection (gain)", L))
-
-
-def _gain_form(c, P, C, y, W, t, shrink):
-    """:func:`intersection_gain_form` on arrays already checked (no argument checks)."""
-    t = np.asarray(t, dtype=float)[..., None, None]
-    PCt = P @ C.T
-    S = (C @ PCt) / (1 - t) + W / t
-    L = np.swapaxes(np.linalg.solve(S, np.swapaxes(PCt, -1, -2)), -1, -2) / (1 - t)
-    IKC = np.eye(P.shape[-1]) - L @ C
-    Pt = IKC @ P @ np.swapaxes(IKC, -1, -2) / (1 - t) + L @ W @ np.swapaxes(L, -1, -2) / t  # Joseph form
-    nu = y - c @ C.T
-    new_c = c + np.einsum("...ij,...j->...i", L, nu)
-    if shrink:
-        delta = 1.0 - np.einsum("...i,...i->...", nu, np.linalg.solve(S, nu[..., None])[..., 0])
-        Pt = delta[..., None, None] * Pt
-    return new_c, 0.5 * (Pt + np.swapaxes(Pt, -1, -2)), L
 
 
 def intersection_family(
@@ -713,23 +698,9 @@ def intersection_min_trace(
     c, P, C, y, W = _intersection_args(center, shape, C, y, W)
     tol = check_positive(tol, "tol")
     max_iter = check_positive_int(max_iter, "max_iter")
-    new_c, new_P, L, t = _intersection_min_trace(c, P, C, y, W, bool(shrink), tol, max_iter)
+    new_c, new_P, L, t = kernels.intersection_min_trace(c, P, C, y, W, bool(shrink), tol, max_iter)
     return (finite_result("intersection (center)", new_c), finite_result("intersection (shape)", new_P),
             finite_result("intersection (gain)", L), t)
-
-
-def _intersection_min_trace(c, P, C, y, W, shrink=False, tol=1e-13, max_iter=100):
-    """:func:`intersection_min_trace` on arrays already converted (no argument checks)."""
-    if C.shape[0] == 1 and not shrink:
-        return _min_trace_one_measurement(c, P, C, y, W)
-    h, m = _trace_profile(P, C, W)
-    if shrink:
-        nu = np.asarray(y, dtype=float) - c @ C.T
-        t = _golden(lambda tt: _trace_delta(tt, P, C, W, nu, h, m), P.shape[:-2], tol=1e-10)
-    else:
-        t = _newton_trace(h, m, tol, max_iter)
-    new_c, new_P, L = _gain_form(c, P, C, y, W, t, shrink)
-    return new_c, new_P, L, t
 
 
 def max_innovation_form(
@@ -773,31 +744,7 @@ def max_innovation_form(
     """
     c, P, C, y, W = _intersection_args(center, shape, C, y, W)
     n_iter = check_positive_int(n_iter, "n_iter")
-    return finite_result("innovation form", _max_innovation_form(c, P, C, y, W, n_iter))
-
-
-def _max_innovation_form(c, P, C, y, W, n_iter=60):
-    """:func:`max_innovation_form` on arrays already converted (no argument checks)."""
-    nu = y - c @ C.T
-    S0 = C @ P @ C.T
-    if C.shape[0] == 1:
-        return nu[..., 0] ** 2 / (np.sqrt(W[..., 0, 0]) + np.sqrt(np.maximum(S0[..., 0, 0], 0.0))) ** 2
-    Fi = np.linalg.inv(np.linalg.cholesky(W))
-    sig, V = np.linalg.eigh(Fi @ S0 @ np.swapaxes(Fi, -1, -2))
-    sig = np.clip(sig, 0.0, None)
-    z2 = np.einsum("...ji,...j->...i", V, np.einsum("...ij,...j->...i", Fi, nu)) ** 2
-    # g(t) = sum z2 * t (1 - t) / ((1 - t) + sig t); g'(t) changes sign once (g concave)
-    lo = np.zeros(sig.shape[:-1])
-    hi = np.full(sig.shape[:-1], 1.0 - _T_MIN)  # t = 1 exactly is 0/0 when a direction is unmeasured (sig = 0)
-    for _ in range(n_iter):
-        mid = 0.5 * (lo + hi)
-        tt = mid[..., None]
-        den = (1 - tt) + sig * tt
-        dg = np.sum(z2 * ((1 - 2 * tt) * den - tt * (1 - tt) * (sig - 1)) / den**2, axis=-1)
-        lo = np.where(dg > 0, mid, lo)
-        hi = np.where(dg > 0, hi, mid)
-    tt = (0.5 * (lo + hi))[..., None]
-    return np.sum(z2 * tt * (1 - tt) / ((1 - tt) + sig * tt), axis=-1)
+    return finite_result("innovation form", kernels.max_innovation_form(c, P, C, y, W, n_iter))
 
 
 def intersection_is_empty(
@@ -904,160 +851,7 @@ def sample_interior(
     return uniform_ellipsoid(rng, c, P, size)
 
 
-def _sqrt_trace(P: np.ndarray) -> np.ndarray:
-    """``sqrt(trace P)`` of a stack of PSD matrices (round-off below zero clipped)."""
-    return np.sqrt(np.maximum(P.trace(axis1=-2, axis2=-1), 0.0))
-
-
-def _sum_min_trace(P1, P2, s1, s2):
-    """Shape and beta of :func:`minkowski_sum_min_trace` given ``s_i = sqrt(trace P_i)`` (no argument checks).
-
-    ``P1 / (1 - b) + P2 / b`` with ``b = s2 / (s1 + s2)`` equals ``(s1 + s2) (P1 / s1 + P2 / s2)``;
-    a zero term drops out. `P1`, `P2` (and `s1`, `s2`) broadcast against each other.
-    """
-    total = s1 + s2
-    if not (total > 0).all():
-        raise ValueError("Minkowski sum of two points: both shape matrices (shape1 and shape2) are zero")
-    w1 = np.divide(total, s1, out=np.zeros(np.shape(total)), where=s1 > 0)
-    w2 = np.divide(total, s2, out=np.zeros(np.shape(total)), where=s2 > 0)
-    P = w1[..., None, None] * P1 + w2[..., None, None] * P2
-    return 0.5 * (P + P.swapaxes(-1, -2)), s2 / total
-
-
-def _trace_profile(P: np.ndarray, C: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """h, m with trace P_t = sum_i h_i / (1 + t (m_i - 1)) (see intersection_min_trace)."""
-    try:
-        E = np.linalg.cholesky(P)
-    except np.linalg.LinAlgError as exc:
-        raise ValueError("prior shape matrix is not positive definite") from exc
-    try:
-        Wi = np.linalg.inv(np.linalg.cholesky(W))
-    except np.linalg.LinAlgError as exc:
-        raise ValueError("measurement shape W = D R D^T must be positive definite") from exc
-    F = Wi @ C @ E  # (..., p, n)
-    m, U = np.linalg.eigh(np.swapaxes(F, -1, -2) @ F)
-    EU = E @ U
-    h = np.einsum("...ij,...ij->...j", EU, EU)
-    return h, np.clip(m, 0.0, None)
-
-
-def _min_trace_one_measurement(c, P, C, y, W):
-    """intersection_min_trace for a single measurement (p = 1), in closed form.
-
-    With ``s = C P C^T``, ``g = P C^T``, ``b = |g|^2 / s``, ``a = trace P - b`` and
-    ``mu = s / W``: ``trace P_t = a / (1 - t) + b / (1 + t (mu - 1))``, whose
-    minimiser is ``t* = (rho - 1) / (mu - 1 + rho)``, ``rho = sqrt(b (mu - 1) / a)``
-    (``t* = 0`` when ``rho <= 1``: the measurement cannot shrink the trace).
-    """
-    C0 = C[0]
-    g = P @ C0  # (..., n)
-    s = g @ C0  # (...,)
-    w = W[..., 0, 0]
-    if not (s >= 0).all():
-        raise ValueError("prior shape matrix is not positive semidefinite (C P C^T < 0)")
-    if not (w > 0).all():
-        raise ValueError("measurement shape W = D R D^T must be positive definite")
-    informative = s > 0  # C = 0 measures nothing: the gain is zero and the prior is kept (t -> 0)
-    b = np.einsum("...i,...i->...", g, g) / np.where(informative, s, 1.0)
-    a = np.maximum(P.trace(axis1=-2, axis2=-1) - b, 0.0)
-    mu1 = s / w - 1.0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rho = np.sqrt(np.maximum(b * mu1, 0.0) / a)
-        t = np.where(np.isfinite(rho), (rho - 1.0) / (mu1 + rho), 1.0)
-    t = np.minimum(np.maximum(np.where(mu1 > 0.0, t, 0.0), _T_MIN), 1.0 - _T_MIN)
-    omt = 1.0 - t
-    w_t = w / t
-    L = g / (omt * (s / omt + w_t))[..., None]  # P C^T S^-1 / (1 - t), S = s / (1 - t) + w / t
-    Lc = L[..., :, None]
-    # Joseph form (I - L C) P (I - L C)^T / (1 - t) + L W L^T / t: the matrix of the SDP, stable as t -> 1
-    IKC = np.eye(P.shape[-1]) - Lc * C0
-    Pt = IKC @ P @ IKC.swapaxes(-1, -2) / omt[..., None, None] + w_t[..., None, None] * Lc * L[..., None, :]
-    nu = y[..., 0] - c @ C0
-    return c + L * nu[..., None], 0.5 * (Pt + Pt.swapaxes(-1, -2)), Lc, t
-
-
-#: Smallest family parameter used (t = 0 or 1 are limits of the family).
-_T_MIN = 1e-12
-
-
-def _newton_trace(h: np.ndarray, m: np.ndarray, tol: float, max_iter: int) -> np.ndarray:
-    """Minimiser over t in (0, 1) of f(t) = sum h / (1 + t (m - 1)), batched."""
-    a = m - 1.0
-    lo = np.zeros(h.shape[:-1])
-    hi = np.ones(h.shape[:-1])
-    t = np.full(h.shape[:-1], 0.5)
-    for _ in range(max_iter):
-        den = 1.0 + t[..., None] * a
-        d1 = -np.sum(h * a / den**2, axis=-1)
-        d2 = 2.0 * np.sum(h * a**2 / den**3, axis=-1)
-        lo = np.where(d1 < 0, t, lo)
-        hi = np.where(d1 < 0, hi, t)
-        step = np.divide(d1, d2, out=np.zeros_like(d1), where=d2 > 0)
-        new = t - step
-        bad = ~((new > lo) & (new < hi))
-        new = np.where(bad, 0.5 * (lo + hi), new)
-        done = np.abs(new - t) <= tol
-        t = new
-        if np.all(done):
-            break
-    return np.clip(t, 1e-15, 1 - 1e-15)
-
-
-def _trace_delta(t, P, C, W, nu, h, m):
-    tt = t[..., None]
-    f = np.sum(h / (1.0 + tt * (m - 1.0)), axis=-1)
-    S = (C @ P @ C.T) / (1 - tt[..., None]) + W / tt[..., None]
-    delta = 1.0 - np.einsum("...i,...i->...", nu, np.linalg.solve(S, nu[..., None])[..., 0])
-    return delta * f
-
-
-def _golden(fun, batch_shape, tol: float = 1e-10) -> np.ndarray:
-    """Batched golden-section minimisation of a unimodal function on (0, 1)."""
-    g = (math.sqrt(5) - 1) / 2
-    a = np.full(batch_shape, 1e-12)
-    b = np.full(batch_shape, 1 - 1e-12)
-    x1 = b - g * (b - a)
-    x2 = a + g * (b - a)
-    f1, f2 = fun(x1), fun(x2)
-    while np.max(b - a) > tol:
-        left = f1 < f2
-        b = np.where(left, x2, b)
-        a = np.where(left, a, x1)
-        x2n = np.where(left, x1, a + g * (b - a))
-        x1n = np.where(left, b - g * (b - a), x2)
-        f_new = fun(np.where(left, x1n, x2n))
-        f2, f1 = np.where(left, f1, f_new), np.where(left, f_new, f2)
-        x1, x2 = x1n, x2n
-    return 0.5 * (a + b)
-
-
 # --------------------------------------------------------------------------- argument checks
-
-
-
-
-def _require_finite(arr: np.ndarray, name: str) -> None:
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{name} contains NaN or infinite entries")
-
-
-def _points(x: ArrayLike, name: str, n: int | None = None) -> np.ndarray:
-    """A finite array (..., n) of points (centres, measurements)."""
-    arr = _float_array(x, name)
-    if arr.ndim < 1:
-        raise ValueError(f"{name} must be an array (..., n); got a scalar")
-    if n is not None and arr.shape[-1] != n:
-        raise ValueError(f"{name} must have last dimension {n}; got shape {arr.shape}")
-    _require_finite(arr, name)
-    return arr
-
-
-def _shape_matrix(P: ArrayLike, name: str, definite: bool = True, size: int | None = None) -> np.ndarray:
-    """A stack (..., n, n) of symmetric positive definite (or semidefinite) shape matrices."""
-    arr = check_covariance(_float_array(P, name), name, size, definite=definite)
-    if arr.shape[-1] == 0:
-        raise ValueError(f"{name} must be at least 1 x 1; got shape {arr.shape}")
-    return arr
 
 
 def _open_unit(t: ArrayLike, name: str) -> np.ndarray:
@@ -1065,7 +859,7 @@ def _open_unit(t: ArrayLike, name: str) -> np.ndarray:
     if isinstance(t, bool):
         raise TypeError(f"{name} must be a number or an array of numbers in (0, 1); got bool")
     arr = _float_array(t, name)
-    _require_finite(arr, name)
+    kernels.require_finite(arr, name)
     if np.any((arr <= 0) | (arr >= 1)):
         bad = arr[(arr <= 0) | (arr >= 1)].ravel()[0]
         raise ValueError(
@@ -1075,20 +869,11 @@ def _open_unit(t: ArrayLike, name: str) -> np.ndarray:
     return arr
 
 
-def _broadcast(**batches: tuple[int, ...]) -> tuple[int, ...]:
-    """Common batch shape of the named arguments, or a ``ValueError`` naming them."""
-    try:
-        return np.broadcast_shapes(*batches.values())
-    except ValueError:
-        listed = ", ".join(f"{k} {v}" for k, v in batches.items())
-        raise ValueError(f"the batch (leading) dimensions do not broadcast: {listed}") from None
-
-
 def _intersection_args(center, shape, C, y, W):
     """Check the prior ellipsoid, the output matrix, the measurement and its shape ``W``."""
-    P = _shape_matrix(shape, "shape")
+    P = kernels.shape_matrix(shape, "shape")
     n = P.shape[-1]
-    c = _points(center, "center", n)
+    c = kernels.points(center, "center", n)
     C = as_matrix(_float_array(C, "C"), "C", (None, n))
     p = C.shape[0]
     if p == 0:
@@ -1096,15 +881,15 @@ def _intersection_args(center, shape, C, y, W):
     y = _float_array(y, "y")
     if y.ndim < 1 or y.shape[-1] != p:
         raise ValueError(f"y must have last dimension {p} (the rows of C); got shape {y.shape}")
-    _require_finite(y, "y")
-    W = _shape_matrix(W, "W", size=p)
-    _broadcast(center=c.shape[:-1], shape=P.shape[:-2], y=y.shape[:-1], W=W.shape[:-2])
+    kernels.require_finite(y, "y")
+    W = kernels.shape_matrix(W, "W", size=p)
+    kernels.broadcast(center=c.shape[:-1], shape=P.shape[:-2], y=y.shape[:-1], W=W.shape[:-2])
     return c, P, C, y, W
 
 
 def _sampling_args(rng, center, shape, size):
     rng = check_generator(rng)
-    P = _shape_matrix(shape, "shape", definite=False)
+    P = kernels.shape_matrix(shape, "shape", definite=False)
     if P.ndim != 2:
         raise ValueError(f"shape must be a single (n, n) matrix; got shape {P.shape}")
     c = as_vector(_float_array(center, "center"), "center", P.shape[0])

@@ -161,7 +161,11 @@ class MethodSpec:
     tasks : tuple of str
         The scenarios where it applies (e.g. ``("target", "localization")``).
     build : callable
-        ``build(model)``: the estimator on a scenario's model.
+        ``build(model)``: the estimator on a scenario's model (the target and localization tasks: a
+        :class:`~mascore.sensor_network.SensorNetworkModel`; the shared task: ``build(None)``); the team
+        task: ``build(team, x_hat0)``, with the scenario's matrices and recipes (``A``, ``B``, ``K``,
+        ``Q_filter``, ``R``, ``N``, ``laplacian``, ``adjacency``, ``P0``, ``bound_scale``,
+        ``vlahakis_design``) and the initial estimates ``(runs, N, n)``.
     cost : callable
         ``cost(n, q, degree, n_agents)``: ``(floats, flops)`` of one agent per step (the busiest:
         the centre of a centralized filter), for state size n and q measurements per agent.
@@ -171,7 +175,8 @@ class MethodSpec:
         ``memory(n, q, degree, n_agents)``: floats one agent holds per step (its estimate, its
         covariance and one round's messages; leading terms).
     not_applicable : mapping of str to str
-        Scenario -> why the method does not apply there (the tables show it).
+        Scenario -> why the method does not apply there (the tables show it, :func:`not_applicable`):
+        a task (``"target"``, ``"localization"``) or a variant of one (``"position"``, ``"switching"``).
     whole_filter : bool
         The busiest agent runs the whole filter (the centre): timed as the team-wide step.
     position : float

@@ -785,8 +785,9 @@ class CovarianceIntersectionFilter(_NetworkFilter):
 
     The weights depend only on the covariances, not on the data: with a batch
     of runs sharing one covariance per agent they are computed once per agent
-    and step; covariances with batch axes are fused one batch element at a
-    time (a weight search each).
+    and step; the searches of all agents with neighbourhoods of one size (and
+    of every batch element of covariances with batch axes) run at once, as one
+    batched Newton iteration on the simplex (:func:`covariance_intersection`).
 
     Parameters
     ----------
@@ -836,14 +837,16 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
         psi, P_loc = information_update(x, P, self._S, mix(M, self.model._information_vectors(z), 1))
         Om, q = information_pair(psi, P_loc)  # (..., N, n, n), (..., N, n)
-        C = np.zeros((*P_loc.shape[:-3], self.model.n_agents, self.model.n_agents))
-        for idx in np.ndindex(*P_loc.shape[:-3]):  # the weights: from the covariances only
-            for i, hood in enumerate(self._hood):
-                infos = Om[idx][hood]
-                if self.criterion is None:
-                    C[idx + (i, hood)] = 1.0 / len(hood)
-                else:
-                    C[idx + (i, hood)] = ci_weights(infos, self.criterion)
+        N = self.model.n_agents
+        C = np.zeros((*P_loc.shape[:-3], N, N))  # the weights: from the covariances only
+        flat, Om_flat = C.reshape(-1, N, N), Om.reshape(-1, *Om.shape[-3:])
+        for size in sorted({len(hood) for hood in self._hood}):  # the agents of one neighbourhood size at once
+            agents = np.array([i for i, hood in enumerate(self._hood) if len(hood) == size])
+            hoods = np.stack([self._hood[i] for i in agents])  # (g, size)
+            if self.criterion is None:
+                flat[:, agents[:, None], hoods] = 1.0 / size
+            else:
+                flat[:, agents[:, None], hoods] = ci_weights(Om_flat[:, hoods], self.criterion)
         # agent i: Omega_i = sum_j C_ij Omega_j, q_i = sum_j C_ij q_j
         Om_f = np.einsum("...ij,...jab->...iab", C, Om)
         q_f = np.einsum("...ij,...ja->...ia", C, q)
@@ -1113,8 +1116,9 @@ def covariance_intersection(means: ArrayLike, covs: ArrayLike, weights: str | Ar
         Their covariances, symmetric positive definite.
     weights : "trace", "det", None or (k,) array_like
         ``"trace"`` (default) or ``"det"``: the weights minimizing that of P
-        (bounded scalar search for k = 2, SLSQP with gradients for k > 2; equal
-        weights unless they are beaten, so a flat criterion gives ``1/k``);
+        (Newton's method on the simplex with an active set, to machine precision; equal
+        weights unless they are beaten, so a flat criterion gives ``1/k``; with more than
+        ``n (n + 1) / 2`` estimates the optimal P is unique, its weights need not be);
         None: equal weights ``1/k``; an array: given weights, non-negative,
         summing to 1.
 

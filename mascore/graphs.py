@@ -618,11 +618,11 @@ def from_networkx(graph: nx.Graph | Sequence[nx.Graph]) -> np.ndarray:
            [1., 0., 1.],
            [0., 1., 0.]])
     """
-    from ._validation import _is_graph, graph_adjacency
+    from ._validation import graph_adjacency, is_graph
 
-    if not (_is_graph(graph) or (isinstance(graph, (list, tuple)) and graph and all(map(_is_graph, graph)))):
+    if not (is_graph(graph) or (isinstance(graph, (list, tuple)) and graph and all(map(is_graph, graph)))):
         raise TypeError(f"graph must be a networkx graph or a list of them; got {type(graph).__name__}")
-    return _check_adjacency(graph_adjacency(graph), "graph") if _is_graph(graph) else _adjacency_stack(
+    return _check_adjacency(graph_adjacency(graph), "graph") if is_graph(graph) else _adjacency_stack(
         graph_adjacency(graph))
 
 

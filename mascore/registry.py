@@ -389,6 +389,15 @@ class Study:
         -------
         pathlib.Path
             The file written.
+
+        Examples
+        --------
+        >>> import dataclasses, tempfile
+        >>> from mascore.papers import ren2005
+        >>> study = ren2005.REGISTRY.study("kalman-consensus")
+        >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50)
+        >>> study.save_run(fewer, 1, study.run(fewer, 1), tempfile.mkdtemp()).name
+        'kalman-consensus.pickle'
         """
         import pickle
 
@@ -602,6 +611,12 @@ def source_digest() -> str:
     -------
     str
         64 hexadecimal digits; it changes when any module of the package changes.
+
+    Examples
+    --------
+    >>> from mascore.registry import source_digest
+    >>> len(source_digest())
+    64
     """
     import hashlib
 
@@ -658,9 +673,11 @@ def caption_values(study: Study, result: Any) -> dict[str, float]:
 
     Examples
     --------
+    >>> import dataclasses
     >>> from mascore.papers import ren2005
     >>> study = ren2005.REGISTRY.study("kalman-consensus")
-    >>> values = caption_values(study, ren2005.run(ren2005.SETTINGS, seed=1))
+    >>> fewer = dataclasses.replace(ren2005.SETTINGS, noise_runs=20, noise_paths=4, bias_runs=50)  # fewer runs
+    >>> values = caption_values(study, ren2005.run(fewer, seed=1))
     >>> round(values["bias-fused"], 3)
     6.985
     """

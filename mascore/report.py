@@ -341,11 +341,13 @@ def reading_paths(records: Sequence[dict], best: dict[str, tuple[str, float]] | 
     _check_records(records, ("paper", "verdict"))
     good = sum(r["verdict"] in ("reproduces", "holds") for r in records)
     near = sum(r["verdict"] == "approximately" for r in records)
-    bad = len(records) - good - near
+    open_ = sum(bool(r.get("undecided")) for r in records)  # failed because their data cannot decide them
+    bad = len(records) - good - near - open_
     if good == len(records):
         verdict = f"All {len(records)} published claims reproduce or hold"
     else:
-        verdict = (f"{good} of {len(records)} published claims reproduce or hold, {near} approximately, "
+        undecided = f", {open_} not shown (their intervals cross the edge of their bands)" if open_ else ""
+        verdict = (f"{good} of {len(records)} published claims reproduce or hold, {near} approximately{undecided}, "
                    f"{bad} do not reproduce or fail; the report says which and why")
     lines = [f"- **Did it reproduce?** {verdict} "
              f"({{doc}}`the reproduction report </notebooks/reproduction_report>`)."]

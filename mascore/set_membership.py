@@ -66,7 +66,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import ellipsoids
+from . import _ellipsoid_kernels as kernels
 from ._validation import Frozen, as_matrix, check_square, frozen_copy, symmetric_part
 from ._validation import float_array as _float_array
 from .estimation import MethodSpec
@@ -446,7 +446,7 @@ class SetMembershipModel(Frozen):
                 raise ValueError("G (disturbance matrix): G Q G^T overflows floating point; G and Q must be of "
                                  "moderate magnitude (rescale the units of the state or of the disturbance)")
             self._set(A=frozen_copy(A), G=frozen_copy(G), Q=frozen_copy(Q), GQG=frozen_copy(GQG))
-            self._set(sqrt_tr_GQG=frozen_copy(ellipsoids._sqrt_trace(GQG)))
+            self._set(sqrt_tr_GQG=frozen_copy(kernels.sqrt_trace(GQG)))
             if self.B is not None:
                 self._set(B=frozen_copy(as_matrix(self.B, "B", (n, None))))
         if self.C is not None:
@@ -712,7 +712,7 @@ class SetMembershipModel(Frozen):
         if check_consistency:
             if W_error is not None:
                 raise ValueError(W_error)
-            q = ellipsoids._max_innovation_form(c, P, C, y, W)
+            q = kernels.max_innovation_form(c, P, C, y, W)
             bad = q > 1.0 + CONSISTENCY_RTOL
             if bad.any():
                 idx = tuple(int(i) for i in np.argwhere(bad)[0]) if bad.ndim else ()
@@ -723,7 +723,7 @@ class SetMembershipModel(Frozen):
                 )
         if method == "closed_form":
             try:
-                new_c, new_P, L, _ = ellipsoids._intersection_min_trace(c, P, C, y, W)
+                new_c, new_P, L, _ = kernels.intersection_min_trace(c, P, C, y, W)
             except ValueError as exc:
                 raise ValueError(f"{_where('correction', step, agent, None, batch)}: {exc}") from exc
         else:
@@ -763,7 +763,7 @@ class SetMembershipModel(Frozen):
         _check_overflow(new_c, APA, A, P, step, agent)
         if method == "closed_form":  # trace-optimal Minkowski sum of E(0, A P A^T) and E(0, G Q G^T)
             with np.errstate(over="ignore", invalid="ignore"):
-                new_P, _ = ellipsoids._sum_min_trace(APA, GQG, ellipsoids._sqrt_trace(APA), sqrt_tr_GQG)
+                new_P, _ = kernels.sum_min_trace(APA, GQG, kernels.sqrt_trace(APA), sqrt_tr_GQG)
             _check_overflow(new_c, new_P, A, P, step, agent)
         else:
             new_P = np.empty_like(P)
@@ -797,12 +797,12 @@ class SetMembershipModel(Frozen):
 
 def _check_run_data(x0_hat, P0, y, B, u):
     """The initial ellipsoid, the measurements and the inputs of :func:`run_filter`, checked."""
-    P = ellipsoids._shape_matrix(P0, "P0")
-    c = ellipsoids._points(x0_hat, "x0_hat", P.shape[-1])
+    P = kernels.shape_matrix(P0, "P0")
+    c = kernels.points(x0_hat, "x0_hat", P.shape[-1])
     y = _float_array(y, "y")
     if y.ndim < 2 or y.shape[0] < 1:
         raise ValueError(f"y must be an array (T_f + 1, ..., p) with at least one measurement; got shape {y.shape}")
-    ellipsoids._broadcast(x0_hat=c.shape[:-1], P0=P.shape[:-2], y=y.shape[1:-1])
+    kernels.broadcast(x0_hat=c.shape[:-1], P0=P.shape[:-2], y=y.shape[1:-1])
     if (B is None) != (u is None):
         raise ValueError("give both B and u, or neither")
     if u is not None:

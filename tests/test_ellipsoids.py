@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from mascore import _ellipsoid_kernels as kernels
 from mascore import ellipsoids as el
 
 
@@ -132,8 +133,8 @@ def test_one_measurement_closed_form_matches_newton_search():
         W = np.array([[rng.uniform(0.01, 3.0)]])
         c = rng.standard_normal(n)
         _, Pa, _, _ = el.intersection_min_trace(c, P, C, C @ c, W)
-        h, m = el._trace_profile(P, C, W)
-        t = el._newton_trace(h, m, 1e-13, 100)
+        h, m = kernels.trace_profile(P, C, W)
+        t = kernels.newton_trace(h, m, 1e-13, 100)
         assert np.trace(Pa) == pytest.approx(np.sum(h / (1 + t * (m - 1))), rel=1e-9)
 
 

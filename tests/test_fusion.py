@@ -287,13 +287,14 @@ def test_covariance_intersection_weights_minimize_the_criterion(criterion):
     """The optimal w against a grid search: 1-D (k = 2, 20001 points) and on the 2-simplex (k = 3, step 1/200)."""
     rng = np.random.default_rng(9)
     crit = np.trace if criterion == "trace" else np.linalg.det
+    batched = (lambda P: np.einsum("...ii->...", P)) if criterion == "trace" else np.linalg.det
     for k, grid in ((2, np.linspace(0, 1, 20001)[:, None] * [1, -1] + [0, 1]),
                     (3, np.array([[a, b, 1 - a - b] for a in np.linspace(0, 1, 201) for b in np.linspace(0, 1, 201)
                                   if a + b <= 1 + 1e-12]))):
         for _ in range(10):
             covs = np.stack([_random_spd(rng, 3) for _ in range(k)])
             infos = np.linalg.inv(covs)
-            values = np.array([crit(np.linalg.inv(np.einsum("k,kij->ij", np.clip(g, 0, 1), infos))) for g in grid])
+            values = batched(np.linalg.inv(np.einsum("gk,kij->gij", np.clip(grid, 0, 1), infos)))  # every grid point
             _, P, w = fusion.covariance_intersection(np.zeros((k, 3)), covs, criterion)
             assert np.all(w >= 0) and abs(w.sum() - 1) < 1e-12
             assert crit(P) <= values.min() * (1 + 1e-9)
@@ -576,3 +577,29 @@ def test_one_agent_and_a_graph_without_links():
             continue
         np.testing.assert_allclose(x, local[0], rtol=1e-10, atol=1e-10)
         np.testing.assert_allclose(P, local[1], rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("criterion", ["trace", "det"])
+def test_batched_ci_weights_meet_the_kkt_conditions_and_equal_single_searches(criterion):
+    """The weight search of many problems at once (padded to a common k): each problem's weights equal its own
+    search, satisfy the optimality conditions on the simplex (gradient + lambda = 0 where w_j > 0, >= 0 where
+    w_j = 0), and equal estimates keep equal weights (the optimum is flat between them)."""
+    from mascore._fusion_kernels import ci_objective, ci_weights
+
+    rng = np.random.default_rng(12)
+    infos = np.linalg.inv(np.stack([[_random_spd(rng, 3) for _ in range(5)] for _ in range(30)]))
+    infos[::3, 1] = infos[::3, 0]  # every third problem: two equal estimates
+    infos[1::3, 2] = 0.05 * infos[1::3, 3]  # a dominated estimate: an optimum on a face of the simplex
+    valid = np.arange(5) < rng.integers(2, 6, 30)[:, None]
+    W = ci_weights(infos, criterion, valid)
+    assert np.all(W[~valid] == 0) and np.allclose(W.sum(axis=1), 1, atol=1e-14) and np.all(W >= 0)
+    for b in range(30):
+        k = int(valid[b].sum())
+        w = ci_weights(infos[b, :k], criterion)
+        np.testing.assert_allclose(W[b, :k], w, atol=1e-12)
+        g = ci_objective(infos[b, :k], criterion)[1](w)
+        lam = -g[w > 1e-9].mean()
+        scale = np.abs(g).max()
+        assert np.all(np.abs(g[w > 1e-9] + lam) <= 1e-7 * scale) and np.all(g + lam >= -1e-7 * scale)
+        if b % 3 == 0:
+            assert abs(w[0] - w[1]) <= 1e-12

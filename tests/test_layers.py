@@ -17,18 +17,10 @@ PACKAGE = Path(__file__).parents[1] / "mascore"
 
 #: Private names still used across modules, to be folded into public ones (issue 28, item 5); none may be added.
 KNOWN_PRIVATE_USES = {
-    ("mascore.graphs", "mascore._validation._is_graph"),
     ("mascore.rendezvous", "mascore.noise._psd_factor"),
     ("mascore.rendezvous", "mascore.sensing._measure"),
     ("mascore.sensing", "mascore.noise._psd_factor"),
     ("mascore.sensing", "mascore.noise._sample_shape"),
-    ("mascore.set_membership", "mascore.ellipsoids._broadcast"),
-    ("mascore.set_membership", "mascore.ellipsoids._intersection_min_trace"),
-    ("mascore.set_membership", "mascore.ellipsoids._max_innovation_form"),
-    ("mascore.set_membership", "mascore.ellipsoids._points"),
-    ("mascore.set_membership", "mascore.ellipsoids._shape_matrix"),
-    ("mascore.set_membership", "mascore.ellipsoids._sqrt_trace"),
-    ("mascore.set_membership", "mascore.ellipsoids._sum_min_trace"),
 }
 
 

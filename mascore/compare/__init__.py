@@ -60,6 +60,13 @@ view in place), noise distribution (Gaussian, bounded uniform, Student-t with 3
 degrees of freedom, all with the same covariance) and a wrong process-noise
 covariance in the filters (``q_scale`` times the true one).
 
+**Statistics** (:mod:`mascore.compare.stats`): accuracy is the ratio of RMS errors over a cell's
+runs to the centralized filter's on the same runs, with a 95 % paired bootstrap interval;
+consistency is the ANEES with the two-sided 95 % chi-square bounds of a consistent filter. The
+claims (:func:`compare_claims`, one function each in :data:`mascore.compare.verdicts.CLAIMS`) were
+written from seed blocks 0-1 and are decided on the held-out blocks 2-3 where the sweep has them,
+by intervals against bands: inside holds, outside fails, across an edge is undecided.
+
 Every random number of a cell comes from :func:`mascore.sweep.cell_seed` on the
 seed axes :data:`SEED_AXES`, which leave out the method, the drop-out probability
 and ``q_scale``: all methods see the same noise (common random numbers), and the
@@ -87,6 +94,9 @@ __all__ = [
     "benchmark_graph",
     "cell_cost",
     "compare_claims",
+    "differing_claims",
+    "anees_bounds",
+    "rms_ratio",
     "fitted_slopes",
     "floats_per_step",
     "grid_cells",
@@ -149,7 +159,11 @@ _NAMES = {
         '_position_headline', 'fitted_slopes', 'headline', 'position_only_kf_rmse'
     ),
     'verdicts': (
-        '_position_claims', 'compare_claims'
+        'CLAIMS', 'HELD_OUT', 'WRITTEN_FROM', 'compare_claims', 'deciding_runs', 'differing_claims'
+    ),
+    'stats': (
+        'BOOTSTRAP_RESAMPLES', 'BOOTSTRAP_SEED', 'Interval', 'NEES_DIMENSION', 'anees_bounds', 'mean_interval',
+        'rms_ratio'
     ),
     'plots': (
         '_concat', '_order', '_plain_ticks', '_plt', 'plot_cost', 'plot_pareto', 'plot_robustness'

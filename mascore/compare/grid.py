@@ -27,6 +27,7 @@ from .benchmark import (
 )
 from .scenario import scenarios
 from .shared import simulate_shared
+from .stats import NEES_DIMENSION, anees_bounds, mean_interval, rms_ratio
 from .tables import fitted_slopes
 from .target import simulate_target, target_cost, target_methods
 from .team import simulate_team, vlahakis_profile
@@ -195,12 +196,15 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
 
 def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n_agents", "noise", "dropout",
                                          "q_scale"), settings: BenchmarkSettings = SETTINGS):
-    """Means and 95 % confidence intervals per group, with the ratio to the bound.
+    """Means and 95 % intervals per group, the RMS-error ratio to the bound, and the ANEES's chi-square bounds.
 
-    The ratio of a method's RMSE to the bound's (``centralized`` or
-    ``central-fusion``) is formed run by run on common random numbers (same
-    seed block and run), so its interval is much tighter than that of a
-    ratio of means.
+    The accuracy is the ratio of RMS errors over the group's runs, the method's against the
+    bound's (``centralized`` or ``central-fusion``) on the same seed blocks and runs, with its
+    95 % paired bootstrap interval (:func:`mascore.compare.stats.rms_ratio`). The consistency is
+    the ANEES (the mean over runs of the per-run NEES per dof) with a bootstrap interval and the
+    two-sided 95 % chi-square bounds of a consistent filter for the group's runs and the task's
+    NEES dimension (:func:`mascore.compare.stats.anees_bounds`). The other metrics: mean and
+    normal-approximation 95 % interval over runs.
 
     Parameters
     ----------
@@ -216,9 +220,11 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
     -------
     pandas.DataFrame
         One row per group: ``n`` runs, and ``mean``/``lo``/``hi`` of
-        ``rmse_own``, ``ratio``, ``nees_own``, ``containment``, ``spread``, ``rmse_far``,
-        ``set_size`` (NaN where the table has none),
-        plus ``floats`` and ``cpu_us`` (CPU per agent per step and run, µs).
+        ``rmse_own``, ``nees_own``, ``containment``, ``spread``, ``rmse_far``,
+        ``set_size`` (NaN where the table has none); ``ratio_mean``/``lo``/``hi``:
+        the ratio of RMS errors to the bound and its interval; ``nees_bound_lo``/``hi``:
+        the ANEES's chi-square bounds; plus ``floats`` and ``cpu_us`` (CPU per agent per
+        step and run, µs).
 
     Examples
     --------
@@ -257,16 +263,25 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
     keys = [c for c in by if c != "method"] + ["block", "run"]
     ref = bound.set_index(keys)["rmse_own"].rename("bound_rmse")
     t = t.join(ref, on=keys)
-    t["ratio"] = t["rmse_own"] / t["bound_rmse"]
     steps = np.where(t["task"] == "shared", settings.shared_steps, settings.n_steps)
     t["cpu_us"] = 1e6 * t["cpu_s"] / (t["n_agents"] * steps * t.groupby("cell")["run"].transform("size"))
-    out = []
+    out, memo = [], {}  # memo: the bootstrap's resamples, drawn once per number of runs in this call
     for key, g in t.groupby(by, sort=False, dropna=False):
         row = dict(zip(by, key if isinstance(key, tuple) else (key,)))
         row["n"] = len(g)
+        g = g.sort_values(["block", "run"], kind="stable")  # the runs in one order: the bootstrap pairs them
         for col in ("rmse_own", "ratio", "nees_own", "containment", "spread", "rmse_far", "set_size"):
-            m, half = _mean_ci(g[col].to_numpy())
-            row[f"{col}_mean"], row[f"{col}_lo"], row[f"{col}_hi"] = m, m - half, m + half
+            if col == "ratio":
+                m, lo, hi = rms_ratio(g["rmse_own"].to_numpy(), g["bound_rmse"].to_numpy(), memo=memo)
+            elif col == "nees_own":
+                m, lo, hi = mean_interval(g[col].to_numpy(), memo=memo)
+            else:
+                m, half = _mean_ci(g[col].to_numpy())
+                lo, hi = m - half, m + half
+            row[f"{col}_mean"], row[f"{col}_lo"], row[f"{col}_hi"] = m, lo, hi
+        runs = int(np.isfinite(g["nees_own"].to_numpy()).sum())
+        dim = NEES_DIMENSION.get(row.get("task", g["task"].iloc[0]))
+        row["nees_bound_lo"], row["nees_bound_hi"] = anees_bounds(runs, dim) if runs and dim else (np.nan, np.nan)
         row["floats"] = float(g["floats"].iloc[0])
         row["cpu_us"] = float(g.drop_duplicates("cell")["cpu_us"].median())
         out.append(row)

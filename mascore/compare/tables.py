@@ -52,9 +52,10 @@ def headline(summary, task: str = "team"):
     Returns
     -------
     pandas.DataFrame
-        Per method: RMSE ratio to the bound with its 95 % interval over the runs (200 seeds on
-        the quick grid), consistency (NEES per dof, or containment for the set-membership
-        filter), floats sent per agent and step, CPU per agent and step (µs, a batch of
+        Per method: the ratio of RMS errors to the bound's with its 95 % paired bootstrap
+        interval over the runs (200 seeds on the quick grid), consistency (the ANEES and whether
+        it lies inside its 95 % chi-square bounds, :func:`consistency_text`; or containment for
+        the set-membership filter), floats sent per agent and step, CPU per agent and step (µs, a batch of
         runs: see the chapter), and per scenario: the control spread and the CPU slope in N
         (team), the analytic flops per agent and step (target). A dash where a quantity does
         not exist; methods that do not apply are listed with the reason.
@@ -87,9 +88,7 @@ def headline(summary, task: str = "team"):
         if m not in frame.index:
             continue
         r = frame.loc[m]
-        nees = r["nees_own_mean"]
-        consistency = ((f"NEES {nees:.2f}" if nees < 100 else f"NEES {nees:.1e}") if np.isfinite(nees)
-                       else f"contains {r['containment_mean']:.3f}" if np.isfinite(r["containment_mean"]) else dash)
+        consistency = consistency_text(r)
         row = {"method": m, "RMSE ratio [95 %]": f"{r['ratio_mean']:.3f} [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]",
                "seeds": int(r["n"]), "consistency": consistency, "floats/step": r["floats"],
                "CPU µs/agent/step": round(r["cpu_us"], 2)}
@@ -131,12 +130,10 @@ def _position_headline(summary):
         if m not in gauss.index:
             continue
         r = gauss.loc[m]
-        nees, inside = r["nees_own_mean"], r["containment_mean"]
         bounded = uniform["containment_mean"].get(m, np.nan)
         rows.append({
             "method": m, "RMSE ratio [95 %]": f"{r['ratio_mean']:.3f} [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]",
-            "consistency": f"NEES {nees:.2f}" if np.isfinite(nees) else f"contains {inside:.3f}"
-            if np.isfinite(inside) else dash,
+            "consistency": consistency_text(r),
             "set size (m)": round(float(size[m]), 3) if np.isfinite(size[m]) else dash,
             "contains, uniform": f"{bounded:.3f}" if np.isfinite(bounded) else dash,
             "floats/step": r["floats"], "CPU µs/agent/step": round(r["cpu_us"], 2)})
@@ -144,6 +141,37 @@ def _position_headline(summary):
         rows.append({"method": m, "RMSE ratio [95 %]": "not applicable", "consistency": why,
                      "set size (m)": dash, "contains, uniform": dash, "floats/step": dash, "CPU µs/agent/step": dash})
     return pd.DataFrame(rows).set_index("method")
+
+
+def consistency_text(row) -> str:
+    """A summary row's consistency in words: the ANEES and its verdict against the chi-square bounds.
+
+    Parameters
+    ----------
+    row : pandas.Series
+        A row of :func:`mascore.compare.summarize` (``nees_own_mean``, ``nees_bound_lo``/``hi``,
+        ``containment_mean``).
+
+    Returns
+    -------
+    str
+        ``"ANEES 1.02, consistent"`` (inside its 95 % chi-square bounds), ``"..., overconfident"`` (above),
+        ``"..., conservative"`` (below); the containment for a set-valued filter; a dash without either.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore.compare.tables import consistency_text
+    >>> consistency_text(pd.Series({"nees_own_mean": 1.3, "nees_bound_lo": 0.87, "nees_bound_hi": 1.14,
+    ...                             "containment_mean": float("nan")}))
+    'ANEES 1.30, overconfident'
+    """
+    nees, inside = row["nees_own_mean"], row["containment_mean"]
+    if np.isfinite(nees):
+        word = ("overconfident" if nees > row["nees_bound_hi"] else "conservative" if nees < row["nees_bound_lo"]
+                else "consistent")
+        return f"ANEES {nees:.2f}, {word}" if nees < 100 else f"ANEES {nees:.1e}, {word}"
+    return f"contains {inside:.3f}" if np.isfinite(inside) else "—"
 
 
 def position_only_kf_rmse(settings: BenchmarkSettings = SETTINGS) -> tuple[float, float]:

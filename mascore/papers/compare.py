@@ -35,12 +35,12 @@ def claims(result: CompareResult) -> list:
     >>> [c.id for c in compare.claims(compare.run())][:1]  # doctest: +SKIP
     ['compare/centralized-bound']
     """
-    return compare_claims(result.summary, phi=result.phi)
+    return compare_claims(result.table, phi=result.phi)
 
 
 FIGURES = (
-    FigureSpec("pareto", "", "Accuracy against communication: each method's own-position RMSE over the centralized "
-               "filter's (run by run, with 95 % intervals) against the floats it sends per agent and step, for "
+    FigureSpec("pareto", "", "Accuracy against communication: each method's own-position RMS error over the "
+               "centralized filter's on the same runs (with 95 % paired bootstrap intervals) against the floats it sends per agent and step, for "
                "N = 4, 8 and 16 on the ring.", lambda r: plot_pareto(r.summary)),
     FigureSpec("cost", "", "CPU time per agent, step and run against the team size, log-log, with each method's "
                "fitted slope: the whole-team filters grow much faster than the per-agent ones.",

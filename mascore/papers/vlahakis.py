@@ -903,8 +903,10 @@ def run(settings: ObserverSettings = SETTINGS, seed: int = 1, progress: bool = F
 
     Examples
     --------
+    >>> import dataclasses
     >>> from mascore.papers import vlahakis
-    >>> result = vlahakis.run(seed=1)
+    >>> coarse = dataclasses.replace(vlahakis.SETTINGS, phi_grid=(-0.3, 2.4, 7), t_end=5.0)  # a quick look
+    >>> result = vlahakis.run(coarse, seed=1)
     >>> sorted(result.intervals)
     [5.0, 25.0]
     >>> len(vlahakis.claims(result))                      # the ledger, from the result alone
