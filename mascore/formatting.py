@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-__all__ = ["format_number", "format_value"]
+__all__ = ["format_number", "format_value", "math_text"]
 
 
 _SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079")
@@ -136,5 +137,79 @@ def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = ""
 
 
 def _label(key: Any) -> str:
-    """A mapping key as text: underscores as spaces."""
-    return str(key).replace("_", " ")
+    """A mapping key as text: an identifier's underscores as spaces (``last_k`` -> ``last k``); a label
+    already written in words keeps its symbols (``largest |A_c^k|``)."""
+    text = str(key)
+    return text if " " in text else text.replace("_", " ")
+
+
+_GREEK = ("alpha", "beta", "gamma", "delta", "epsilon", "lambda", "mu", "nu", "xi", "rho", "sigma", "tau", "phi",
+          "omega", "Gamma", "Delta", "Lambda", "Sigma", "Phi", "Omega")
+_BASE = r"(?:" + "|".join(_GREEK) + r"|[A-Za-z])"
+_SUB = r"(?:_(?:bar|hat|[A-Za-z0-9]+))"
+_SUP = r"(?:\^(?:\([A-Za-z0-9]+\)|-?[A-Za-z0-9]+))"
+_NAME = rf"{_BASE}{_SUB}*{_SUP}?"
+
+
+def _tex(name: str) -> str:
+    """``delta_bar_k`` -> ``\\bar{\\delta}_{k}``; ``P_0`` -> ``P_{0}``; ``A_c^k`` -> ``A_{c}^{k}``."""
+    name, _, power = name.partition("^")
+    base, *parts = name.split("_")
+    tex = f"\\{base}" if base in _GREEK else base
+    for accent in ("bar", "hat"):
+        if accent in parts:
+            parts.remove(accent)
+            tex = f"\\{accent}{{{tex}}}"
+    tex += f"_{{{','.join(parts)}}}" if parts else ""
+    if power:
+        tex += "^\\top" if power == "T" else f"^{{{power}}}"
+    return tex
+
+
+def _root(name: str) -> str:
+    """What ``sqrt(...)`` holds, in TeX: a symbol (``q_bar``, ``p0``) or an operator written out (``trace``)."""
+    if name == "eps":
+        return "\\varepsilon"
+    return f"\\operatorname{{{name}}}" if re.fullmatch(r"[a-z]{4,}", name) else _tex(name)
+
+
+def math_text(text: str) -> str:
+    r"""A ledger statement's ASCII math as MyST math: ``|delta_bar_k|``, ``alpha_w``, ``P_0``, ``Q2``, ``0.9^k``.
+
+    Bars around a name read as a norm, ``sqrt(x)`` as a root, ``xhat_0`` as :math:`\hat x_0`, ``<=`` as ``≤``
+    and ``sup_k`` as a supremum; text without such names, and math already in ``$...$``, come back unchanged.
+
+    Parameters
+    ----------
+    text : str
+        Plain text with names written in ASCII (``alpha_w``, ``trace P_0``, ``|A_c^k|``).
+
+    Returns
+    -------
+    str
+        The text with those names in ``$...$``.
+
+    Examples
+    --------
+    >>> from mascore.formatting import math_text
+    >>> print(math_text("Mean of |delta_bar_k| with alpha_w = 0.05, trace P_0 = 4 and Q2 = 5."))
+    Mean of $\lvert \bar{\delta}_{k} \rvert$ with $\alpha_{w}$ = 0.05, trace $P_{0}$ = 4 and $Q_2$ = 5.
+    >>> print(math_text("|A_c^k| <= 1.1 * 0.9^k for all k; |B_c| sqrt(q_bar); sqrt(trace)"))
+    $\lvert A_{c}^{k} \rvert$ ≤ 1.1 × $0.9^{k}$ for all k; $\lvert B_{c} \rvert$ $\sqrt{\bar{q}}$; $\sqrt{\operatorname{trace}}$
+    """
+    pieces = re.split(r"(\$[^$]*\$)", text)  # math already written as $...$ stays as it is
+    return "".join(p if p.startswith("$") else _ascii_math(p) for p in pieces)
+
+
+def _ascii_math(text: str) -> str:
+    """:func:`math_text` on a piece of text without ``$...$``."""
+    out = re.sub(rf"\|({_NAME})\|", lambda m: f"$\\lvert {_tex(m.group(1))} \\rvert$", text)
+    out = re.sub(rf"sqrt\(({_NAME}|[A-Za-z]\w*)\)", lambda m: f"$\\sqrt{{{_root(m.group(1))}}}$", out)
+    out = re.sub(r"(?<![\w$^])(\d+(?:\.\d+)?|[α-ω])\^([A-Za-z])\b", r"$\1^{\2}$", out)
+    out = re.sub(r"\bsup_k\b", r"$\\sup_k$", out)
+    out = re.sub(r"\b([a-z])hat_([A-Za-z0-9]+)\b", r"$\\hat{\1}_{\2}$", out)
+    out = out.replace("<=", "≤").replace(" * ", " × ")
+    greek = "|".join(_GREEK)
+    out = re.sub(rf"(?<![\\$\w{{])((?:{greek}){_SUB}*{_SUP}?|[A-Za-z]{_SUB}+{_SUP}?|[A-Za-z]\^(?:T|-?[0-9]+))(?![\w$])",
+                 lambda m: f"${_tex(m.group(1))}$", out)
+    return re.sub(r"(?<![\w$])(Q|R)([12])(?![\w$])", r"$\1_\2$", out)

@@ -34,7 +34,7 @@ import numpy as np
 
 from ._optional import require
 from .claims import APPROX_FACTOR, PAPER_DIGITS, VERDICTS, Claim, worst_deviation
-from .formatting import format_number, format_value
+from .formatting import format_number, format_value, math_text
 
 __all__ = [
     "APPROX_FACTOR",
@@ -294,12 +294,13 @@ class ClaimsView:
         lines = ["| # | claim (where the paper says it) | paper | ours | verdict |", "|---|---|---|---|---|"]
         for n, r in enumerate(self.records, 1):
             unit, labels = r.get("unit", ""), r.get("labels")
-            claim = f"{_cell(r.get('statement', ''))} *({_cell(r.get('where', ''))})*"
+            claim = f"{_cell(math_text(r.get('statement', '')))} *({_cell(r.get('where', ''))})*"
             if r.get("rule"):
-                claim += f"<br>*Decided by:* {_cell(r['rule'])}"
+                claim += f"<br>*Decided by:* {_cell(math_text(r['rule']))}"
             lines.append(
-                f"| {n} | {claim} | {_cell(format_value(r.get('paper_value'), PAPER_DIGITS, unit=unit, labels=labels))} "
-                f"| {_cell(format_value(r.get('value'), unit=unit, labels=labels))} | {_cell(_verdict_text(r))} |"
+                f"| {n} | {claim} "
+                f"| {_cell(math_text(format_value(r.get('paper_value'), PAPER_DIGITS, unit=unit, labels=labels)))} "
+                f"| {_cell(math_text(format_value(r.get('value'), unit=unit, labels=labels)))} | {_cell(_verdict_text(r))} |"
             )
         return "\n".join(lines + _notes_markdown(self.records))
 
@@ -337,6 +338,7 @@ def deviation_sentence(record: dict) -> str:
     ``"0.74 % off; tolerance 5 %"`` when it reproduces,
     ``"9.9 % off; tolerance 5 %, approximately within 15 %"`` when approximately reproduced,
     ``"40 % off; more than the 15 % of 'approximately'"`` when it does not reproduce.
+    A vector's deviation is that of its worst entry (``"worst entry 20.75 off; ..."``).
 
     Parameters
     ----------
@@ -361,7 +363,8 @@ def deviation_sentence(record: dict) -> str:
     kind = "rel" if "rel" in tol else "abs"
     unit = f"\u00a0{record['unit']}" if record.get("unit") else ""
     fmt = (lambda v: format_number(100 * v, 3) + "\u00a0%") if kind == "rel" else (lambda v: format_number(v) + unit)
-    off = f"{fmt(worst_deviation(record['paper_value'], record['value'], kind))} off"
+    several = np.size(record["paper_value"]) > 1  # a vector: the deviation is that of its worst entry
+    off = f"{'worst entry ' if several else ''}{fmt(worst_deviation(record['paper_value'], record['value'], kind))} off"
     band = fmt(tol[f"approx_{kind}"])
     if record["verdict"] == "reproduces":
         return f"{off}; tolerance {fmt(tol[kind])}"
@@ -380,7 +383,7 @@ def _notes_markdown(records: Sequence[dict]) -> list[str]:
     """Notes by claim number; a paragraph shared by several claims is printed once."""
     owners: dict[str, list[int]] = {}
     for n, r in enumerate(records, 1):
-        paragraphs = [p.strip() for p in (r.get("note") or "").split("\n\n") if p.strip()]
+        paragraphs = [math_text(p.strip()) for p in (r.get("note") or "").split("\n\n") if p.strip()]
         if r.get("band_reason"):
             paragraphs.append(f"Band of 'approximately' wider than 3 tolerances: {r['band_reason']}")
         for p in paragraphs:
@@ -466,16 +469,23 @@ def ledger_summary(claims: Iterable[Claim | dict], why: Mapping[str, str] | None
         return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
 
     sentences = []
-    if numbers:
+    if len(numbers) == 1:  # "the one published number checked here reproduces", not "of the 1, 1 reproduces"
+        verdict = {"approximately": "reproduces approximately"}.get(numbers[0]["verdict"],
+                                                                    verdict_words(numbers[0]["verdict"]))
+        sentences.append(f"The one published number checked here {verdict}.")
+    elif numbers:
         sentences.append(
-            f"Of the {len(numbers)} published number{'s' if len(numbers) != 1 else ''} checked here, "
+            f"Of the {len(numbers)} published numbers checked here, "
             + counted(numbers, (("reproduces", "reproduces", "reproduce"),
                                 ("approximately", "reproduces approximately", "reproduce approximately"),
                                 ("does-not-reproduce", "does not", "do not"))) + ".")
-    if statements:
+    if len(statements) == 1:
+        lead = "Its" if numbers else "The paper prints no number we check; its"
+        sentences.append(f"{lead} one statement without a number {statements[0]['verdict']}.")
+    elif statements:
         n = len(statements)
         lead = "Of the" if numbers else "The paper prints no number we check; of its"
-        sentences.append(f"{lead} {n} statement{'s' if n != 1 else ''} without a number, "
+        sentences.append(f"{lead} {n} statements without a number, "
                          + counted(statements, (("holds", "holds", "hold"), ("fails", "fails", "fail"))) + ".")
     lines = [" ".join(sentences)]
     missed = [r for r in records if r["verdict"] not in ("reproduces", "holds")]
@@ -492,5 +502,5 @@ def ledger_summary(claims: Iterable[Claim | dict], why: Mapping[str, str] | None
             reason = ""  # a reason shared by the next claims is given once, after the last of them
         reason = f" {reason}" if reason else ""
         verdict = {"approximately": "reproduces approximately"}.get(r["verdict"], r["verdict"].replace("-", " "))
-        lines.append(f"- {r['statement']} ({r['where']}){values} {verdict}.{reason}")
+        lines.append(f"- {math_text(r['statement'])} ({r['where']}){values} {verdict}.{reason}")
     return "\n".join(lines)

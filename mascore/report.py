@@ -13,11 +13,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ._optional import require
+from .formatting import math_text
 from .ledger import VERDICTS, deviation_sentence, verdict_words
 from .registry import paper_keys, paper_registry
 
-__all__ = ["MarkdownText", "attention_list", "best_methods", "errata_list", "math_text", "reading_paths", "verdict_summary",
-           "why"]
+__all__ = ["MarkdownText", "attention_list", "best_methods", "errata_list", "math_text", "method_words",
+           "reading_paths", "verdict_summary", "why"]
 
 #: Verdicts the report lists one by one (everything else is counted only).
 ATTENTION = ("approximately", "does-not-reproduce", "fails")
@@ -46,48 +47,6 @@ class MarkdownText:
 
     def __str__(self) -> str:
         return self.text
-
-
-_GREEK = ("alpha", "beta", "gamma", "delta", "epsilon", "lambda", "mu", "nu", "xi", "rho", "sigma", "tau", "phi",
-          "omega", "Gamma", "Delta", "Lambda", "Sigma", "Phi", "Omega")
-_NAME = r"(?:" + "|".join(_GREEK) + r"|[A-Za-z])(?:_(?:bar|hat|[A-Za-z0-9]+))*"
-
-
-def _tex(name: str) -> str:
-    """``delta_bar_k`` -> ``\\bar\\delta_{k}``; ``P_0`` -> ``P_{0}``."""
-    base, *parts = name.split("_")
-    tex = f"\\{base}" if base in _GREEK else base
-    for accent in ("bar", "hat"):
-        if accent in parts:
-            parts.remove(accent)
-            tex = f"\\{accent}{{{tex}}}"
-    return tex + (f"_{{{','.join(parts)}}}" if parts else "")
-
-
-def math_text(text: str) -> str:
-    r"""A ledger statement's ASCII math as MyST math: ``|delta_bar_k|``, ``alpha_w``, ``P_0``, ``Q2``.
-
-    Parameters
-    ----------
-    text : str
-        Plain text with names written in ASCII (``alpha_w``, ``trace P_0``).
-
-    Returns
-    -------
-    str
-        The text with those names in ``$...$``.
-
-    Examples
-    --------
-    >>> from mascore.report import math_text
-    >>> print(math_text("Mean of |delta_bar_k| with alpha_w = 0.05, trace P_0 = 4 and Q2 = 5."))
-    Mean of $\lvert\bar{\delta}_{k}\rvert$ with $\alpha_{w}$ = 0.05, trace $P_{0}$ = 4 and $Q_2$ = 5.
-    """
-    out = re.sub(rf"\|({_NAME})\|", lambda m: f"$\\lvert{_tex(m.group(1))}\\rvert$", text)
-    greek = "|".join(_GREEK)
-    out = re.sub(rf"(?<![\\$\w])((?:{greek})(?:_(?:bar|hat|[A-Za-z0-9]+))*|[A-Za-z]_[A-Za-z0-9]+)(?![\w$])",
-                 lambda m: f"${_tex(m.group(1))}$", out)
-    return re.sub(r"(?<![\w$])(Q|R)([12])(?![\w$])", r"$\1_\2$", out)
 
 
 def verdict_summary(records: Sequence[dict]):
@@ -320,6 +279,39 @@ def best_methods(summary, n_agents: int = 8) -> dict[str, tuple[str, float]]:
     return out
 
 
+#: Abbreviations of the methods' names, as the glossary writes them.
+_ACRONYMS = {"ci": "CI", "hcmci": "HCMCI", "icf": "ICF", "kf": "KF", "ekf": "EKF"}
+
+
+def method_words(name: str) -> str:
+    """A comparison method's name as prose writes it: ``"hcmci-L5"`` reads ``"HCMCI with 5 consensus steps"``.
+
+    Parameters
+    ----------
+    name : str
+        The method's name in the comparison's tables (``"ci-diffusion"``, ``"hcmci-L1"``, ``"forwarding"``).
+
+    Returns
+    -------
+    str
+        The name with its abbreviations in capitals and its number of consensus steps in words.
+
+    Examples
+    --------
+    >>> from mascore.report import method_words
+    >>> method_words("hcmci-L5"), method_words("hcmci-L1"), method_words("ci-diffusion"), method_words("forwarding")
+    ('HCMCI with 5 consensus steps', 'HCMCI with 1 consensus step', 'CI diffusion', 'forwarding')
+    """
+    words, steps = [], ""
+    for part in name.split("-"):
+        if re.fullmatch(r"L\d+", part):
+            n = int(part[1:])
+            steps = f" with {n} consensus step{'s' if n != 1 else ''}"
+        else:
+            words.append(_ACRONYMS.get(part, part))
+    return " ".join(words) + steps
+
+
 def reading_paths(records: Sequence[dict], best: dict[str, tuple[str, float]] | None = None,
                   apply_examples: Sequence[str] = ()) -> MarkdownText:
     """The intro's four questions, each with its page and a one-line answer computed from the results.
@@ -360,7 +352,7 @@ def reading_paths(records: Sequence[dict], best: dict[str, tuple[str, float]] | 
     lines = [f"- **Did it reproduce?** {verdict} "
              f"({{doc}}`the reproduction report </notebooks/reproduction_report>`)."]
     if best:
-        closest = "; ".join(f"{name}: `{m}`, RMSE {ratio:.2f} times the centralized filter's"
+        closest = "; ".join(f"{name}: {method_words(m)}, RMSE {ratio:.2f} times the centralized filter's"
                             for name, (m, ratio) in best.items())
         lines.append(f"- **Which method for my team?** It depends on what the team estimates. Closest to the "
                      f"centralized filter on a ring of 8 agents, {closest} "

@@ -337,6 +337,35 @@ def _out_argument(text: str) -> Path:
     return path
 
 
+def _compare_file(args: argparse.Namespace, workers: int, start: float) -> int:
+    """``mascore compare --grid FILE.toml``: a sweep of the user's own cells, its table and summary."""
+    import functools
+
+    from .compare import run_cell, summarize
+    from .compare.gridfile import read_grid
+    from .sweep import run_sweep
+
+    try:
+        grid = read_grid(args.grid)
+    except (ValueError, TypeError) as exc:
+        print(f"mascore: {exc}", file=sys.stderr)
+        return 2
+    folder = args.out / "compare"
+    table = run_sweep(list(grid.cells), functools.partial(run_cell, base_seed=args.seed, settings=grid.settings),
+                      folder / f"table-{grid.name}-{args.seed}.csv", workers=workers, scheduler=args.scheduler,
+                      progress=True)
+    summary = summarize(table, settings=grid.settings)
+    summary.to_csv(folder / f"summary-{grid.name}-{args.seed}.csv", index=False)
+    columns = [c for c in ("study", "task", "method", "graph", "n_agents", "noise", "dropout", "n", "ratio_mean",
+                           "ratio_lo", "ratio_hi", "nees_own_mean", "nees_bound_lo", "nees_bound_hi")
+               if c in summary.columns]
+    print(summary[columns].to_string(index=False, float_format=lambda v: f"{v:.3g}"))
+    where = args.scheduler or (f"{workers} local workers" if workers else "this process")
+    print(f"compare: {len(grid.cells)} cells, {len(table)} runs in {time.perf_counter() - start:.1f} s on {where} "
+          f"-> {folder / f'summary-{grid.name}-{args.seed}.csv'}")
+    return 0
+
+
 class _PaperChoices:
     """The choices of ``reproduce PAPER``: the discovered papers and ``all``, looked up only when needed
     (``mascore compare`` and ``--version`` do not import the papers)."""
@@ -346,6 +375,13 @@ class _PaperChoices:
 
     def __iter__(self):
         return iter([*paper_keys(), "all"])
+
+
+def _grid_argument(value: str) -> str:
+    """``--grid``: ``quick``, ``full`` or a grid file (:mod:`mascore.compare.gridfile`)."""
+    if value in ("quick", "full") or value.endswith(".toml"):
+        return value
+    raise argparse.ArgumentTypeError(f"must be 'quick', 'full' or a .toml grid file; got {value!r}")
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -360,6 +396,8 @@ def _compare(args: argparse.Namespace) -> int:
         print(f"mascore: --workers must be >= 0; got {workers}", file=sys.stderr)
         return 2
     start = time.perf_counter()
+    if args.grid not in ("quick", "full"):
+        return _compare_file(args, workers, start)
     study = STUDY
     result = study.run(dataclasses.replace(study.settings, grid=args.grid), args.seed, progress=True, out=args.out,
                        workers=workers, scheduler=args.scheduler)
@@ -421,7 +459,8 @@ def main(argv: list[str] | None = None) -> int:
     rep.add_argument("--set", dest="overrides", metavar="NAME=VALUE", nargs="+", type=_override_argument,
                      default=[], help="change a setting (one paper only); results go beside the default ones")
     cmp = sub.add_parser("compare", help="run the cross-method comparison sweep (Dask) and write its claims")
-    cmp.add_argument("--grid", choices=["quick", "full"], default="quick", help="which sweep (default: quick)")
+    cmp.add_argument("--grid", default="quick", type=_grid_argument,
+                     help="quick, full, or a .toml file of your own cells (default: quick)")
     cmp.add_argument("--out", type=_out_argument, default=Path("results"),
                      help="results directory (default: results/); the sweep resumes from its table there")
     cmp.add_argument("--workers", type=int, default=None,

@@ -7,6 +7,8 @@ table; every method's metrics agree with an independent computation on a tiny ca
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import json
 import os
 import socket
@@ -35,6 +37,11 @@ def _small_cells() -> list[dict]:
     return [c for c in cells if c["n_agents"] == 4 or c["study"] != "scaling"] + fusion
 
 
+#: The sweep-engine tests compare tables, not numbers: a few runs per cell suffice.
+FEW_RUNS = dataclasses.replace(compare.SETTINGS, runs=4)
+_cell_task = functools.partial(compare.run_cell, settings=FEW_RUNS)  # picklable: Dask workers run it
+
+
 def _without_cpu(table: pd.DataFrame) -> pd.DataFrame:
     return table.drop(columns=[CPU]).reset_index(drop=True)
 
@@ -42,7 +49,7 @@ def _without_cpu(table: pd.DataFrame) -> pd.DataFrame:
 @pytest.fixture(scope="module")
 def serial(tmp_path_factory):
     out = tmp_path_factory.mktemp("serial") / "table.csv"
-    return sweep.run_sweep(_small_cells(), compare.run_cell, out, progress=False), out
+    return sweep.run_sweep(_small_cells(), _cell_task, out, progress=False), out
 
 
 def test_grid_cells_cover_the_studies_with_100_seeds():
@@ -84,7 +91,7 @@ def test_same_seed_same_numbers_byte_for_byte():
 
 def test_local_cluster_gives_the_serial_table(serial, tmp_path):
     table, _ = serial
-    parallel = sweep.run_sweep(_small_cells(), compare.run_cell, tmp_path / "t.csv", workers=2, progress=False)
+    parallel = sweep.run_sweep(_small_cells(), _cell_task, tmp_path / "t.csv", workers=2, progress=False)
     pd.testing.assert_frame_equal(_without_cpu(parallel), _without_cpu(table), check_exact=True)
 
 
@@ -111,7 +118,7 @@ def test_scheduler_and_two_workers_give_the_serial_table(serial, tmp_path):
 
         with Client(address, timeout=60) as client:
             client.wait_for_workers(2, timeout=60)
-        remote = sweep.run_sweep(_small_cells(), compare.run_cell, tmp_path / "t.csv", scheduler=address,
+        remote = sweep.run_sweep(_small_cells(), _cell_task, tmp_path / "t.csv", scheduler=address,
                                  progress=False)
     finally:
         for p in reversed(procs):
@@ -124,7 +131,7 @@ def test_scheduler_and_two_workers_give_the_serial_table(serial, tmp_path):
 def _failing_task(cell):
     if cell["method"] == "vlahakis":
         raise KeyboardInterrupt("interrupted")
-    return compare.run_cell(cell)
+    return _cell_task(cell)
 
 
 def test_an_interrupted_sweep_resumes(serial, tmp_path):
@@ -135,7 +142,7 @@ def test_an_interrupted_sweep_resumes(serial, tmp_path):
     partial = pd.read_csv(out)
     assert 0 < partial["cell"].nunique() < len(_small_cells())
     kept = partial.set_index(["cell", "run"])[CPU]
-    resumed = sweep.run_sweep(_small_cells(), compare.run_cell, out, progress=False)
+    resumed = sweep.run_sweep(_small_cells(), _cell_task, out, progress=False)
     pd.testing.assert_frame_equal(_without_cpu(resumed), _without_cpu(table), check_exact=True)
     again = resumed.set_index(["cell", "run"]).loc[kept.index, CPU]
     np.testing.assert_array_equal(again.to_numpy(), kept.to_numpy())  # the finished cells were not rerun
@@ -258,7 +265,7 @@ def test_summary_ratio_is_one_for_the_bound(serial):
     bound = s[s["method"].isin(["centralized", "central-fusion"])]
     np.testing.assert_allclose(bound["ratio_mean"], 1.0)
     assert (s.groupby(["study", "method", "n_agents", "noise", "dropout", "q_scale"])["n"].max()
-            == compare.SETTINGS.runs).all()
+            == FEW_RUNS.runs).all()
 
 
 def test_claims_recompute_from_the_table():

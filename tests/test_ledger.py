@@ -5,6 +5,7 @@ import json
 import pytest
 
 from mascore import ledger, reproduce
+from mascore.formatting import math_text
 from mascore.ledger import Claim
 
 RESULTS_FIELDS = {"id", "where", "statement", "paper_value", "value", "tolerance", "verdict", "note"}
@@ -115,6 +116,21 @@ def test_show_claims_numbers_claims_states_them_and_prints_a_shared_note_once():
     assert text.count(shared) == 1 and "Claims 1, 2." in text and "Claim 1.* own a" in text
 
 
+def test_ledger_table_and_summary_show_ascii_symbols_as_math_and_leave_written_math_alone():
+    claim = Claim("bhattacharjee2021/a", "Table 1", "Mean of |delta_bar_k| with alpha_w = 0.05.", 1.0, 1.5,
+                  {"rel": 0.05})
+    rule = Claim.qualitative("bhattacharjee2021/b", "Fig. 2", "|A_c^k| <= 1.1 * 0.9^k for all k.", {"max": 1.0},
+                             True, rule="max over k of |A_c^k| / (alpha mu^k) <= 1")
+    table = ledger.show_claims([claim, rule])._repr_markdown_()
+    summary = ledger.ledger_summary([claim, rule])
+    for text in (table, summary):
+        assert r"$\lvert \bar{\delta}_{k} \rvert$" in text and r"$\alpha_{w}$" in text
+        assert "|delta_bar_k|" not in text and "alpha_w" not in text
+    assert r"$\lvert A_{c}^{k} \rvert$ ≤ 1.1 × $0.9^{k}$" in table and "<=" not in table
+    written = r"spread $\sqrt{\mathrm{mean}_i \lVert y_i - \bar y\rVert^2}$ of P_0"
+    assert math_text(written) == r"spread $\sqrt{\mathrm{mean}_i \lVert y_i - \bar y\rVert^2}$ of $P_{0}$"
+
+
 def test_write_claims_refuses_an_unknown_ledger_or_a_foreign_claim(tmp_path):
     claim = Claim("vlahakis/a", "w", "s", 2.0, 2.0, {"abs": 0.1})
     with pytest.raises(ValueError, match="paper must be one of"):
@@ -190,3 +206,31 @@ def test_report_takes_the_why_its_paper_module_states(monkeypatch):
     monkeypatch.setattr(ren2005, "WHY", {"ren2005/b": "The paper's schedule is not ours."}, raising=False)
     rows = str(attention_list([_paper_records()[1]])).splitlines()
     assert rows[2].endswith("'approximately'. The paper's schedule is not ours. |")
+
+
+def test_ledger_summary_says_one_number_in_words():
+    one = Claim("ren2005/a", "Fig. 1", "A number.", 2.0, 2.01, {"rel": 0.05})
+    statement = Claim.qualitative("ren2005/b", "Sec. 2", "A statement.", {"x": 1.0}, False, rule="x < 1")
+    assert ledger.ledger_summary([one]) == "The one published number checked here reproduces."
+    assert ledger.ledger_summary([one, statement]).splitlines()[0] == (
+        "The one published number checked here reproduces. Its one statement without a number fails.")
+    assert ledger.ledger_summary([statement]).splitlines()[0] == (
+        "The paper prints no number we check; its one statement without a number fails.")
+
+
+def test_intro_names_the_closest_methods_in_words_not_by_their_table_ids():
+    from mascore.report import method_words, reading_paths
+
+    ok = Claim("ren2005/a", "Sec. 2", "A number.", 2.0, 2.01, {"rel": 0.01}).to_dict() | {"paper": "ren2005"}
+    best = {"common target": ("hcmci-L5", 1.03), "own state": ("forwarding", 1.0)}
+    line = str(reading_paths([ok], best)).splitlines()[1]
+    assert "common target: HCMCI with 5 consensus steps, RMSE 1.03" in line and "own state: forwarding, RMSE 1.00" in line
+    assert "hcmci-L5" not in line and "`forwarding`" not in line
+    assert method_words("ci-L1") == "CI with 1 consensus step" and method_words("icf-L5") == "ICF with 5 consensus steps"
+
+
+def test_deviation_of_a_vector_names_its_worst_entry():
+    record = Claim("vlahakis/v", "Sec. 5", "A gain.", [2.6, 22.8], [2.1, 2.05], {"abs": 1e-4}).to_dict()
+    assert ledger.deviation_sentence(record).startswith("worst entry 20.75 off;")
+    scalar = Claim("vlahakis/s", "Sec. 5", "A number.", 2.0, 3.0, {"abs": 1e-4}).to_dict()
+    assert ledger.deviation_sentence(scalar).startswith("1 off;")

@@ -14,6 +14,7 @@ import pytest  # noqa: E402
 from mascore import observers  # noqa: E402
 from mascore.ledger import format_number, show_claims  # noqa: E402
 from mascore.papers import vlahakis as v  # noqa: E402
+from mascore.reproduce import results_dir  # noqa: E402
 
 E = v.EXAMPLE1
 REQUIRED = [
@@ -41,7 +42,8 @@ EXPECTED_VERDICTS = {
 
 @pytest.fixture(scope="module")
 def result():
-    return v.run(v.SETTINGS, 1)
+    """The published run (seed 1): the one `make test` stored in results/vlahakis, else computed here."""
+    return v.STUDY.load_or_run(v.SETTINGS, 1, store=results_dir() / "vlahakis")
 
 
 @pytest.fixture(scope="module")

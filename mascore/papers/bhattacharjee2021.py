@@ -193,7 +193,7 @@ class SetMembershipSettings:
     figure_method: str = setting("sdp", source="chosen", where="the paper solves the SDPs with SDPT3; we use Clarabel",
                                  note="filter of Figs. 2-6: 'sdp' or 'closed_form'", choices=("sdp", "closed_form"))
     table_method: str = setting("closed_form", source="chosen",
-                                where="same optimum as the SDPs, claim sdp-closed-form-agree; far faster",
+                                where="same optimum as the SDPs (a claim of the ledger checks it), far faster",
                                 note="filter of the Table 1 study", choices=("sdp", "closed_form"))
     n_runs: int = setting(100, source="chosen", where="the paper reports one unseeded draw per row",
                           note="seeds per Table 1 row (run 0 is the ledger's value, the rest the spread)", low=1)

@@ -1287,7 +1287,7 @@ def _beyond_claims(result: KalmanConsensusResult) -> list[Claim]:
         f"{study['values'].size} pairing schedules (standard deviation {format_number(study['std'])} h over "
         "them). The bias shrinks when Q = 0 and nearly vanishes when also Ω → 0 and the self term is dropped; "
         "a schedule-dependent scatter remains. With Q = 0 the run has not finished agreeing after "
-        f"{s.n_steps} steps (tables/bias_by_variant.csv, largest final spread).\n\n" + _BEYOND,
+        f"{s.n_steps} steps (the largest final spread in the table of the variants of the scheme).\n\n" + _BEYOND,
         rule="abs(bias) > 5 standard errors", unit="h")
     oc = result.overconfidence
     ratio = {k: float(np.mean(v["actual"][-1] / v["believed"][-1])) for k, v in oc["variants"].items()}
@@ -1357,7 +1357,8 @@ def prose_values(result: KalmanConsensusResult) -> dict[str, float]:
         ``floor_continuous``), the bias study (``bias``, ``mean_paper``, ``se_paper``, ``std_paper``,
         ``above_average`` and ``below_average`` shares, ``bias_ideal``), the overconfidence study
         (``believed``, ``actual``, ``overconfidence`` = actual / believed, ``times_fused``,
-        ``fused_variance``, ``ideal_actual``, ``ideal_believed``), the theorem runs' final spreads
+        ``fused_variance``, ``ideal_actual``, ``ideal_believed``, ``ideal_below_fused`` = fused_variance /
+        ideal_believed), the theorem runs' final spreads
         (``spread_union_continuous``) and the confidence ratio ``p_ratio`` = P_equal / P_confident.
 
     Examples
@@ -1388,6 +1389,7 @@ def prose_values(result: KalmanConsensusResult) -> dict[str, float]:
         "spread_union_continuous": float(result.union.continuous.spread[-1]),
         "p_ratio": s.P_equal / s.P_confident,
     }
+    out["ideal_below_fused"] = out["fused_variance"] / out["ideal_believed"]
     out["below_average"] = 1 - out["above_average"]
     out["bias_below"] = -out["bias"]
     out.update(max_call=s.max_call, Q=s.Q, Omega=s.Omega, noise_runs=s.noise_runs, noise_paths=s.noise_paths,
@@ -1470,9 +1472,8 @@ FIGURES = (
         "Fig. 1 pairings with agent 7 confident, noise-free; dotted: the central-fusion variance, below which "
         "no estimate from the initial data can go. (a) The paper's settings: the agents' believed variance "
         "settles below their actual one (here {{believed:.2g}} h² against {{actual:.2g}} h²). (b) $Q=0$, a tiny "
-        "$\\Omega$ (here {{ideal_Omega:.0e}} h²), no self term: the actual variances come down to the fused one "
-        "(the solid lines end on the dotted line), but the believed $P_i$ fall through it (here to "
-        "{{ideal_believed:.0e}} h²).",
+        "$\\Omega$, no self term: the actual variances come down to the fused one (the solid lines end on the "
+        "dotted line), but the believed $P_i$ fall through it (here {{ideal_below_fused:,.0f}} times below it).",
         _draw_overconfidence, values=prose_values),
 )
 

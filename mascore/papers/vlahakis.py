@@ -606,7 +606,7 @@ def plot_fig12(res: Fig12Result, axes=None) -> plt.Figure:
         ax.set_xscale("symlog", linthresh=0.1, linscale=0.6)
         ax.set_xlim(0, res.t[-1])
         ax.set_xlabel("time t (s; linear to 0.1 s, then log)")
-        ax.set_title(f"{title}, Q2 = {res.Q2:g}")
+        ax.set_title(f"{title}, $Q_2$ = {res.Q2:g}")
     axes[0].set_ylabel("position estimation error (m)")
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside right center")
@@ -624,20 +624,20 @@ def plot_phi_profile(result: ObserverResult) -> plt.Figure:
         for Q2, color, ls in zip(result.settings.Q2, colors, ("-", "--")):
             gamma = result.profile[(reading, Q2)]
             finite.append(gamma[np.isfinite(gamma)])
-            ax.plot(phis, gamma, ls, color=color, label=f"Γ(Φ), Q2 = {Q2:g}")
+            ax.plot(phis, gamma, ls, color=color, label=f"Γ(Φ), $Q_2$ = {Q2:g}")
             if Q2 in PUBLISHED["Phi"]:
-                ax.axvline(PUBLISHED["Phi"][Q2], color=color, ls=":", label=f"printed Φ, Q2 = {Q2:g}")
+                ax.axvline(PUBLISHED["Phi"][Q2], color=color, ls=":", label=f"printed Φ, $Q_2$ = {Q2:g}")
             if reading == "as-printed":
                 ax.axvspan(*result.intervals[Q2], color=color, alpha=0.08)
             else:
                 d = result.designs[(reading, Q2)]
-                ax.plot(d.Phi.item(), result.gamma_at_lmi[Q2], "o", color=color, label=f"LMI's Φ, Q2 = {Q2:g}")
+                ax.plot(d.Phi.item(), result.gamma_at_lmi[Q2], "o", color=color, label=f"LMI's Φ, $Q_2$ = {Q2:g}")
         low = min(f.min() for f in finite)
         ax.set_ylim(*((low * 0.97, low * 1.25) if reading == "as-printed" else (low * 0.995, low * 1.025)))
         ax.set_xlim(phis[0], phis[-1])
         ax.set_xlabel("coupling gain Φ (-)")
         ax.set_title(titles[reading])
-    axes[0].set_ylabel("Γ(Φ) = min Σ trace(S_i)")
+    axes[0].set_ylabel(r"Γ(Φ) = min Σ trace$(S_i)$")
     handles, labels = axes[1].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside right center")
     return fig

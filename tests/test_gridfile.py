@@ -1,0 +1,60 @@
+"""A sweep of your own from a TOML grid file (mascore compare --grid FILE.toml)."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+from mascore.compare import run_cell
+from mascore.compare.gridfile import read_grid
+from mascore.reproduce import main
+from mascore.sweep import cell_id
+
+GRID = """
+runs = 3
+blocks = [0, 1]
+
+[[study]]
+name = "mine"
+task = "target"
+method = ["centralized", "ci-L1"]
+n_agents = 6
+"""
+
+
+def test_a_grid_file_runs_its_cells_and_equals_the_cells_run_one_by_one(tmp_path, capsys):
+    path = tmp_path / "my_grid.toml"
+    path.write_text(GRID)
+    grid = read_grid(path)
+    assert [(c["method"], c["block"]) for c in grid.cells] == [("centralized", 0), ("centralized", 1),
+                                                               ("ci-L1", 0), ("ci-L1", 1)]
+    assert main(["compare", "--grid", str(path), "--out", str(tmp_path), "--workers", "0"]) == 0
+    assert "4 cells, 12 runs" in capsys.readouterr().out
+    table = pd.read_csv(tmp_path / "compare" / "table-my_grid-0.csv")
+    rows = pd.DataFrame([{**r, **c, "cell": cell_id(c)} for c in grid.cells for r in run_cell(c, 0, grid.settings)])
+    for column in ("rmse_own", "nees_own"):
+        assert table.sort_values(["cell", "run"])[column].tolist() == rows.sort_values(["cell", "run"])[column].tolist()
+    summary = pd.read_csv(tmp_path / "compare" / "summary-my_grid-0.csv")
+    assert summary.loc[summary["method"] == "centralized", "ratio_mean"].tolist() == pytest.approx([1.0])
+
+
+@pytest.mark.parametrize("text, message", [
+    ("runs = 3\n", "no \\[\\[study\\]\\]"),
+    ("runs = 3\n[[study]]\ntask = 'target'\nmethod = 'ci-L9'\nn_agents = 6\n", "method"),
+    ("runs = 3\n[[study]]\ntask = 'target'\nmethod = 'ci-L1'\nn_agents = 6\ngraf = 'ring'\n", "unknown axes"),
+    ("runs = 3\n[[study]]\ntask = 'target'\nmethod = 'ci-L1'\n", "missing \\['n_agents'\\]"),
+    ("runs = 1\n[[study]]\ntask = 'target'\nmethod = 'ci-L1'\nn_agents = 6\n", "runs"),
+    ("runs = [\n", "not a TOML file"),
+])
+def test_a_bad_grid_file_is_refused_by_name_before_anything_runs(tmp_path, text, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises((ValueError, TypeError), match=message):
+        read_grid(path)
+
+
+def test_the_command_line_refuses_a_grid_that_is_neither_named_nor_a_file(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["compare", "--grid", "mine"])
+    assert main(["compare", "--grid", str(tmp_path / "absent.toml"), "--out", str(tmp_path)]) == 2
+    assert "existing .toml file" in capsys.readouterr().err
