@@ -1,0 +1,81 @@
+"""Neighbours of the hostile-input findings of issue 31 ("Nothing silent in the new API").
+
+tests/test_bad_input_own_team.py holds one regression test per finding as it was reported; these
+are the variants a second probe of the same boundaries tried (another count, another non-finite
+argument, a smaller overflow), each refused up front by name before any work.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mascore import agent_cost, agents, compare, fusion, graphs, team_model
+from mascore import distributed_ekf as dekf
+from mascore import distributed_kf as dk
+from mascore import rendezvous as rv
+from mascore.flocking import FlockingGains
+
+HUGE = 10**12
+AGENT = agents.double_integrator(2, 0.1)
+K_GAIN = rv.rendezvous_gain(0.5, 1.5, 2)
+
+
+@pytest.mark.parametrize("call,match", [
+    # a team whose (4N, 4N) covariances need thousands of GiB, before any array is drawn
+    (lambda: compare.simulate_team("local", 10**5, 0, runs=1), r"n_agents asks for too much"),
+    (lambda: compare.node_cost("local", HUGE, n_steps=5), r"n_agents asks for too much"),
+    (lambda: compare.node_costs((4, HUGE), ("local",), n_steps=5), r"n_agents asks for too much"),
+    (lambda: compare.target_model(10**5), r"n_agents asks for too much"),
+    (lambda: compare.localization_model(10**5), r"n_agents asks for too much"),
+    # steps beyond MAX_STEPS, in each simulation that takes a step count
+    (lambda: compare.target_model(4).simulate(np.zeros(4), np.eye(4), HUGE, 0, n_runs=1), r"n_steps = .*MAX_STEPS"),
+    (lambda: rv.simulate_rendezvous(1, rv.RendezvousModel(AGENT.A, AGENT.B, K_GAIN, 0.1 * np.eye(4), np.eye(4), 0.1),
+                                    np.zeros((1, 3, 4)), graphs.path_graph(3), 10**8, "true"), r"n_steps = .*MAX_STEPS"),
+    # a timing request that could never end
+    (lambda: agent_cost.agent_step_cost("target", "local", 4, min_time=np.inf), r"min_time must be a finite"),
+    (lambda: agent_cost.agent_step_cost("target", "local", 4, min_time=np.nan), r"min_time must be a finite"),
+])
+def test_more_huge_or_endless_requests_are_refused_by_name(call, match):
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+def test_a_long_batch_of_steps_is_refused_before_the_centralized_filter_runs():
+    z = np.broadcast_to(np.zeros(4), (HUGE, 1, 4))  # a view: no memory taken by the test itself
+    with pytest.raises(ValueError, match=r"\bz asks for too much"):
+        fusion.CentralizedFilter(compare.target_model(4)).run(np.zeros(4), np.eye(4), z)
+
+
+@pytest.mark.parametrize("make", [lambda m: fusion.ConsensusOnInformationFilter(m, 2),
+                                  lambda m: fusion.InformationConsensusFilter(m, 2),
+                                  fusion.MeasurementForwardingFilter])
+@pytest.mark.parametrize("arg", ["x", "z"])
+def test_information_filters_refuse_non_finite_estimates_and_measurements(make, arg):
+    model = compare.target_model(4)
+    x, P, z = np.zeros((4, 4)), np.stack([np.eye(4)] * 4), np.zeros(4)
+    if arg == "x":
+        x[0, 0] = np.nan
+    else:
+        z[0] = np.inf
+    with pytest.raises(ValueError, match=rf"\b{arg} contains NaN or infinite"):
+        make(model).update(x, P, z)
+
+
+@pytest.mark.parametrize("scale", [1e160, 1e200])
+def test_team_filter_nees_refuses_an_overflow_below_1e300(scale):
+    """(1e160)^2 already overflows: the squared error, not the state, is what must stay finite."""
+    model = team_model.team_filter_model(AGENT.A, AGENT.B, K_GAIN, 0.01 * np.eye(4), np.eye(4), 3)
+    filt = dk.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 12)), P0=np.eye(4))
+    with pytest.raises(ValueError, match=r"X_true: the NEES overflows"):
+        filt.nees(np.full((1, 3, 4), scale))
+    assert np.isfinite(filt.nees(np.full((1, 3, 4), 1e100))).all()  # large but representable: a number
+
+
+def test_flocking_ekf_step_refuses_a_mask_that_observes_nobody():
+    gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])
+    ekf = dekf.FlockingEKF(dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12)),
+                           np.broadcast_to(X, (3, 3, 4)), np.eye(12))
+    with pytest.raises(ValueError, match=r"observed must include every agent itself"):
+        ekf.step(X + 0.1, np.zeros((3, 3), bool))
