@@ -362,13 +362,13 @@ class Study:
         False
         """
         import hashlib
-        import pickle
 
-        digest = hashlib.sha256(pickle.dumps((self.name, self.chapter, settings, seed), protocol=4))
+        kind = f"{type(settings).__module__}.{type(settings).__qualname__}"
+        digest = hashlib.sha256(repr((self.name, self.chapter, kind, settings, int(seed))).encode())
         digest.update(source_digest().encode())
         return digest.hexdigest()
 
-    def save_run(self, settings: Any, seed: int, result: Any, store: str | Path) -> Path:
+    def save_run(self, settings: Any, seed: int, result: Any, store: str | Path) -> Path | None:
         """Store a run's result in `store` for :meth:`load_or_run` (``store/runs/NAME.pickle``).
 
         ``python -m mascore reproduce`` stores every run it makes in the paper's results
@@ -387,8 +387,9 @@ class Study:
 
         Returns
         -------
-        pathlib.Path
-            The file written.
+        pathlib.Path or None
+            The file written; None if the result cannot be pickled (a study defined inside a
+            function, say): nothing is stored and :meth:`load_or_run` computes the run.
 
         Examples
         --------
@@ -401,11 +402,15 @@ class Study:
         """
         import pickle
 
+        try:
+            data = pickle.dumps(result, protocol=4)
+        except (pickle.PicklingError, AttributeError, TypeError):  # local classes cannot be pickled
+            return None
         path = Path(store) / "runs" / f"{self.name}.pickle"
         path.parent.mkdir(parents=True, exist_ok=True)
         with path.open("wb") as f:
             pickle.dump(self.run_key(settings, seed), f, protocol=4)  # read first: a stale file is never unpickled
-            pickle.dump(result, f, protocol=4)
+            f.write(data)
         return path
 
     def load_or_run(self, settings: Any, seed: int, store: str | Path | None = None, progress: bool = False) -> Any:
