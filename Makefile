@@ -52,7 +52,7 @@ HTML_TESTS := tests/test_book_html.py
 
 test: $(STAMP) lint $(RESULTS)  ## lint, the unit tests, doctests, published numbers and every notebook (nbmake), then render the book and check its HTML
 	@rm -rf $(EXECUTED) && mkdir -p $(EXECUTED) book/_build && cp notebooks/*.ipynb $(EXECUTED)/
-	@env -u MPLBACKEND $(BIN)/python -m pytest -n $(JOBS) --nbmake --overwrite --doctest-modules \
+	@env -u MPLBACKEND $(BIN)/python -m pytest -n $(JOBS) --nbmake --overwrite --doctest-modules --durations=25 \
 	    --ignore=$(HTML_TESTS) tests $(EXECUTED) mascore; tests=$$?; \
 	$(BIN)/python -m mascore._booktools cache $(EXECUTED) && \
 	env -u MPLBACKEND $(BIN)/jupyter-book build book --all -W -n --keep-going > $(BOOK_LOG) 2>&1; built=$$?; \

@@ -440,7 +440,7 @@ class _one_thread:
 def agent_flops(task: str, method: str, n_agents: int, degree: int = 2) -> float:
     """Analytic floating-point operations of one agent per step (leading terms; a multiply-add is 2).
 
-    Each method's spec counts them (:attr:`mascore.estimation.MethodSpec.cost`). The fusion filters
+    Each method's spec counts them (``MethodSpec.cost``). The fusion filters
     (target and localization) count as :func:`mascore.fusion_cost.filter_cost` (n = 4, q = 1;
     localization n = 2N, q = 2d). The team task counts the textbook
     algorithm at n = 4: a Kalman step ``4 n^3`` (prediction) plus ``26/3 n^3`` (information

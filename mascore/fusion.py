@@ -39,7 +39,7 @@ covariances, a symmetric graph) and keeps read-only copies; a step checks only
 the shapes of what it is given and that its result is finite (naming the input
 that holds a NaN or inf). Filters hold no estimates and no caches: a filter
 object is immutable and safe to share between threads. Randomness
-(:meth:`~mascore.sensor_network.SensorNetworkModel.simulate`) comes only from the generator passed in.
+(``SensorNetworkModel.simulate``) comes only from the generator passed in.
 
 References
 ----------
@@ -232,7 +232,7 @@ class _NetworkFilter(Frozen):
         P0 : (..., N, n, n) or (n, n) array_like
             Initial covariances, symmetric positive definite.
         z : (K, ..., sum q_i) array_like
-            Measurements of steps 1..K (as :meth:`~mascore.sensor_network.SensorNetworkModel.simulate` returns).
+            Measurements of steps 1..K (as ``SensorNetworkModel.simulate`` returns).
 
         Returns
         -------
@@ -940,7 +940,7 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     P0 : (..., N, n, n) or (n, n) array_like
         Initial covariances, symmetric positive definite.
     z : (K, ..., sum q_i) array_like
-        Measurements of steps 1..K (as :meth:`~mascore.sensor_network.SensorNetworkModel.simulate` returns).
+        Measurements of steps 1..K (as ``SensorNetworkModel.simulate`` returns).
     graphs : sequence of K adjacency matrices or networkx graphs, or (K, N, N) array_like, optional
         The communication graph of each step (undirected, N agents; ``A[i, j] > 0``: i and j
         exchange). Default: the model's graph at every step.

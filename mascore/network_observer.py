@@ -36,7 +36,7 @@ class DiscreteNetworkObserver(Frozen):
         x_i <- x_i + G ((z_ii - C x_i) + Phi sum_j a_ij s_ij ((z_ii - z_ij) - C (x_i - x_j))),
 
     with ``G = dt L`` the discretized gain and ``s_ij`` 1 if the link delivered; the
-    prediction is ``x_i <- A x_i + B u_i``. The gains come from :func:`distributed_observer`
+    prediction is ``x_i <- A x_i + B u_i``. The gains come from :func:`mascore.observers.distributed_observer`
     (the design), so this object holds no estimate: each step returns a new one.
 
     Parameters

@@ -66,7 +66,7 @@ view in place), noise distribution (Gaussian, bounded uniform, Student-t with 3
 degrees of freedom, all with the same covariance) and a wrong process-noise
 covariance in the filters (``q_scale`` times the true one).
 
-**Statistics** (:mod:`mascore.compare.stats`): accuracy is the ratio of RMS errors over a cell's
+**Statistics** (``mascore.compare.stats``): accuracy is the ratio of RMS errors over a cell's
 runs to the centralized filter's on the same runs, with a 95 % paired bootstrap interval;
 consistency is the ANEES with the two-sided 95 % chi-square bounds of a consistent filter. The
 claims (:func:`compare_claims`, one function each in :data:`mascore.compare.verdicts.CLAIMS`) were

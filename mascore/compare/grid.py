@@ -215,10 +215,10 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
 
     The accuracy is the ratio of RMS errors over the group's runs, the method's against the
     bound's (``centralized`` or ``central-fusion``) on the same seed blocks and runs, with its
-    95 % paired bootstrap interval (:func:`mascore.compare.stats.rms_ratio`). The consistency is
+    95 % paired bootstrap interval (``mascore.compare.stats.rms_ratio``). The consistency is
     the ANEES (the mean over runs of the per-run NEES per dof) with a bootstrap interval and the
     two-sided 95 % chi-square bounds of a consistent filter for the group's runs and the task's
-    NEES dimension (:func:`mascore.compare.stats.anees_bounds`). The other metrics: mean and
+    NEES dimension (``mascore.compare.stats.anees_bounds``). The other metrics: mean and
     normal-approximation 95 % interval over runs.
 
     Parameters

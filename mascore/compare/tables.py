@@ -70,7 +70,7 @@ def headline(summary, task: str = "team", costs=None):
     pandas.DataFrame
         Per method: the ratio of RMS errors to the bound's with its 95 % paired bootstrap
         interval over the runs (200 seeds on the quick grid), consistency (the ANEES and whether
-        it lies inside its 95 % chi-square bounds, :func:`consistency_text`; or containment for
+        it lies inside its 95 % chi-square bounds, ``consistency_text``; or containment for
         the set-membership filter), floats sent and received per agent and step (a centralized
         filter's: each agent's measurements up and the estimates it uses down), one agent's CPU
         per step if `costs` is given, and per scenario: the control spread (team), the analytic
@@ -270,7 +270,7 @@ def knob_table(summary):
     from a point: **accuracy**, ``"within 5 %"`` of the bound if the 95 % interval of the RMSE
     ratio lies below :data:`NEAR_BOUND`, ``"not within 5 %"`` if it lies above, else
     ``"undecided"``; **consistency**, the ANEES against its two-sided 95 % chi-square bounds
-    (:func:`anees_verdict`, as in the headline tables: ``"consistent"`` inside, ``"overconfident"``
+    (``anees_verdict``, as in the headline tables: ``"consistent"`` inside, ``"overconfident"``
     above, ``"conservative"`` below; for the set-membership filter ``"contains"`` if its
     containment reaches its confidence, else ``"leaks"``; a dash for an observer without a covariance).
 
@@ -284,7 +284,7 @@ def knob_table(summary):
     pandas.DataFrame
         One row per knob and setting: ``knob``, ``scenario``, ``setting`` (``*``: the paper's own,
         the headline's), ``method``, ``seeds``, ``RMSE ratio [95 %]``, ``consistency`` (the ANEES or
-        the containment, :func:`consistency_text`), the two verdicts, and ``flips``: the verdicts that differ between
+        the containment, ``consistency_text``), the two verdicts, and ``flips``: the verdicts that differ between
         the knob's settings (``"no"`` when none does). Settings whose cells the sweep lacks are left out.
 
     Examples
@@ -344,7 +344,7 @@ def _interval_verdict(lo: float, hi: float, band: float, words: tuple[str, str])
 
 
 def _consistency_verdict(r, confidence: float | None) -> str:
-    """The ANEES against its chi-square bounds (:func:`anees_verdict`), or a set's containment against its confidence."""
+    """The ANEES against its chi-square bounds (``anees_verdict``), or a set's containment against its confidence."""
     if confidence is not None:
         inside = r["containment_mean"]
         return "—" if not np.isfinite(inside) else "contains" if inside >= confidence else "leaks"
