@@ -236,14 +236,21 @@ def _check_records(records: object, keys: tuple[str, ...]) -> None:
 
 #: The comparison's scenarios in the intro's answer: task, the reader's name, and the study that holds it.
 _SCENARIOS = (("team", "own state", "scaling"), ("target", "common target", None),
-              ("localization", "cooperative localization", None))
+              ("localization", "cooperative localization", None), ("shared", "shared quantity", None))
+
+#: The bounds of the scenarios (ratio 1 by definition): never a recommendation.
+_BOUNDS = ("centralized", "central-fusion")
 
 
-def best_methods(summary, n_agents: int = 8) -> dict[str, tuple[str, float]]:
+def best_methods(summary, n_agents: int = 8, *, exclude: Sequence[str] = (),
+                 honest: bool = True) -> dict[str, tuple[str, float]]:
     """Per scenario of the comparison, the method closest to the centralized filter and its RMSE ratio.
 
     On the ring of `n_agents` without drop-outs (the comparison's headline tables), among the
-    methods other than the centralized filter (the bound, ratio 1).
+    methods other than the bound (the centralized filter, or the central fusion of the shared
+    quantity) and `exclude` (say, the knob settings other than each paper's own); with `honest`,
+    a method whose ANEES lies above its chi-square bound (``nees_bound_hi``) is left out: an
+    overconfident filter is not recommended, however close it comes.
 
     Parameters
     ----------
@@ -251,12 +258,16 @@ def best_methods(summary, n_agents: int = 8) -> dict[str, tuple[str, float]]:
         :func:`mascore.compare.summarize` of the sweep.
     n_agents : int
         Team size of the headline tables.
+    exclude : sequence of str
+        Methods not to consider (e.g. :func:`mascore.compare.knob_variants`).
+    honest : bool
+        Leave out the overconfident methods (where the summary has the ANEES and its bounds).
 
     Returns
     -------
     dict
-        Scenario name (``"own state"``, ``"common target"``, ``"cooperative localization"``) ->
-        (method, mean RMSE ratio to the centralized filter), for the scenarios in `summary`.
+        Scenario name (``"own state"``, ``"common target"``, ``"cooperative localization"``,
+        ``"shared quantity"``) -> (method, RMSE ratio to the bound), for the scenarios in `summary`.
 
     Examples
     --------
@@ -267,8 +278,10 @@ def best_methods(summary, n_agents: int = 8) -> dict[str, tuple[str, float]]:
     >>> best_methods(s)
     {'common target': ('ci-L5', 1.2)}
     """
-    frame = summary[(summary["n_agents"] == n_agents) & (summary["dropout"] == 0.0)
-                    & (summary["graph"] == "ring") & (summary["method"] != "centralized")]
+    frame = summary[(summary["n_agents"] == n_agents) & (summary["dropout"] == 0.0) & (summary["graph"] == "ring")
+                    & ~summary["method"].isin([*_BOUNDS, *exclude])]
+    if honest and {"nees_own_mean", "nees_bound_hi"} <= set(frame.columns):
+        frame = frame[~(frame["nees_own_mean"] > frame["nees_bound_hi"])]  # NaN (no covariance) stays
     out = {}
     for task, name, study in _SCENARIOS:
         rows = frame[(frame["task"] == task) & ((frame["study"] == study) if study else True)]
@@ -355,7 +368,8 @@ def reading_paths(records: Sequence[dict], best: dict[str, tuple[str, float]] | 
         closest = "; ".join(f"{name}: {method_words(m)}, RMSE {ratio:.2f} times the centralized filter's"
                             for name, (m, ratio) in best.items())
         lines.append(f"- **Which method for my team?** It depends on what the team estimates. Closest to the "
-                     f"centralized filter on a ring of 8 agents, {closest} "
+                     f"centralized filter on a ring of 8 agents, among the methods that do not overstate their "
+                     f"accuracy: {closest} "
                      f"({{ref}}`the comparison's decision table <decision-table>`).")
     else:
         lines.append("- **Which method for my team?** The comparison puts every method on the same problems "

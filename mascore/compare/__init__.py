@@ -99,6 +99,7 @@ __all__ = [
     "KNOBS",
     "Knob",
     "knob_table",
+    "knob_variants",
     "per_agent_costs",
     "CORE_METHODS",
     "BenchmarkSettings",
@@ -149,7 +150,8 @@ _NAMES = {
         'KNOBS', 'Knob', 'NOISES', 'POSITION_METHODS',
         'POSITION_NOT_APPLICABLE', 'REN_Q', 'SEED_AXES', 'SENSINGS', 'SETTINGS', 'SHARED_METHODS', 'SM_CONFIDENCE',
         'SWITCHING_GRAPHS', 'TEAM_METHODS', 'VLAHAKIS_PHI', '_MAX_SCALE', 'benchmark_graph', 'bound_scale',
-        'check_cell', 'check_n_agents', 'check_run', 'draw_noise', 'floats_per_step', 'mean_degree', 'switching_graphs'
+        'check_cell', 'check_n_agents', 'check_run', 'draw_noise', 'floats_per_step', 'knob_variants', 'mean_degree',
+        'switching_graphs'
     ),
     'team': (
         'SWITCHING_NOT_APPLICABLE', '_C_POS', '_Centralized', '_CentralizedPosition', '_Estimator', '_Forwarding',

@@ -218,6 +218,23 @@ KNOBS = (
 )
 
 
+def knob_variants() -> tuple[str, ...]:
+    """The methods of every knob setting other than its paper's own (:data:`KNOBS`): not recommendations.
+
+    Returns
+    -------
+    tuple of str
+        Method names, e.g. ``"ren-kc-q0.6"`` or ``"hcmci-safe-L5"``.
+
+    Examples
+    --------
+    >>> from mascore.compare import knob_variants
+    >>> "ren-kc-q0.6" in knob_variants(), "ren-kc" in knob_variants()
+    (True, False)
+    """
+    return tuple(sorted({method for knob in KNOBS for label, _, method in knob.settings if label not in knob.recipe}))
+
+
 def benchmark_graph(kind: str, n_agents: int, settings: BenchmarkSettings = SETTINGS) -> np.ndarray:
     """The benchmark's sensing and communication graph, fixed during a run.
 
