@@ -147,15 +147,24 @@ T_MIN = 1e-12
 
 
 def newton_trace(h: np.ndarray, m: np.ndarray, tol: float, max_iter: int) -> np.ndarray:
-    """Minimiser over t in (0, 1) of f(t) = sum h / (1 + t (m - 1)), batched."""
+    """Minimiser over t in (0, 1) of f(t) = sum h / (1 + t (m - 1)), batched.
+
+    Newton's method safeguarded by bisection. One problem (`h` and `m` of shape ``(n,)``) runs on
+    Python floats between its two sums, with the same operations as the batch: the same `t`, bit for
+    bit, at a fraction of the cost (a prior dominated by the measurement puts the optimum at the edge
+    t -> 1, which the bisection reaches in about 43 halvings).
+    """
     a = m - 1.0
+    ha, ha2 = h * a, h * a**2  # the derivatives' numerators, the same at every iteration
+    if h.ndim == 1:
+        return _newton_trace_one(ha, ha2, a, tol, max_iter)
     lo = np.zeros(h.shape[:-1])
     hi = np.ones(h.shape[:-1])
     t = np.full(h.shape[:-1], 0.5)
     for _ in range(max_iter):
         den = 1.0 + t[..., None] * a
-        d1 = -np.sum(h * a / den**2, axis=-1)
-        d2 = 2.0 * np.sum(h * a**2 / den**3, axis=-1)
+        d1 = -np.sum(ha / den**2, axis=-1)
+        d2 = 2.0 * np.sum(ha2 / den**3, axis=-1)
         lo = np.where(d1 < 0, t, lo)
         hi = np.where(d1 < 0, hi, t)
         step = np.divide(d1, d2, out=np.zeros_like(d1), where=d2 > 0)
@@ -167,6 +176,27 @@ def newton_trace(h: np.ndarray, m: np.ndarray, tol: float, max_iter: int) -> np.
         if np.all(done):
             break
     return np.clip(t, 1e-15, 1 - 1e-15)
+
+
+def _newton_trace_one(ha: np.ndarray, ha2: np.ndarray, a: np.ndarray, tol: float, max_iter: int) -> np.ndarray:
+    """:func:`newton_trace` of one problem: ``ha = h a``, ``ha2 = h a^2``, ``a = m - 1``, each ``(n,)``."""
+    lo, hi, t = 0.0, 1.0, 0.5
+    for _ in range(max_iter):
+        den = 1.0 + t * a
+        d1 = -float(np.sum(ha / den**2, axis=-1))
+        d2 = 2.0 * float(np.sum(ha2 / den**3, axis=-1))
+        if d1 < 0:
+            lo = t
+        else:
+            hi = t
+        new = t - (d1 / d2 if d2 > 0 else 0.0)
+        if not (lo < new < hi):
+            new = 0.5 * (lo + hi)
+        done = abs(new - t) <= tol
+        t = new
+        if done:
+            break
+    return np.clip(np.float64(t), 1e-15, 1 - 1e-15)
 
 
 def trace_delta(t, P, C, W, nu, h, m):

@@ -341,44 +341,52 @@ class _Forwarding(_Estimator):
 
 
 class _SetMembership(_Estimator):
+    """The closed-form set-membership filter on each agent's own full state (:mod:`mascore.set_membership`).
+
+    The shape and the gain of the closed form do not depend on the measurements (the S-procedure
+    bound holds for every noise in its set), every agent and run starts from the same shape and
+    measures its own state at every step (drop-outs and switching links do not reach it): the shape
+    ``(4, 4)`` is computed once per step by the spec's :class:`mascore.set_membership.SetMembershipModel`
+    and its gain applied to every agent and run, eq. (2), with the arithmetic of the batched step.
+    """
+
     def __init__(self, team: _Team, x_hat0: np.ndarray, confidence: float | None = None,
                  name: str = "set-membership") -> None:
         super().__init__(team, x_hat0)
         s = team.s
         self.name = name
         confidence = s.sm_confidence if confidence is None else confidence
-        self.shape = np.broadcast_to(bound_scale("gaussian", 4, confidence) * team.P0,
-                                     (*x_hat0.shape[:2], 4, 4)).copy()
-        scale = bound_scale(team.noise, 4, confidence)
-        self.W_meas = scale * team.R
-        self.W_proc = scale * team.Q_filter
+        self.model = method_spec(name, "team").build(team, x_hat0)  # bounds scale_noise Q_filter, scale_noise R
+        self.shape = bound_scale("gaussian", 4, confidence) * team.P0  # (4, 4): the same for every agent and run
 
     def update(self, Z, S):
         N = self.t.N
-        y = Z[:, np.arange(N), np.arange(N)]
-        self.own, self.shape, _ = set_membership.correct(self.own, self.shape, y, np.eye(4), np.eye(4), self.W_meas,
-                                                         check_consistency=False)
+        y = Z[:, np.arange(N), np.arange(N)]                                   # (R, N, 4)
+        _, self.shape, L = self.model.correct(self.own[0, 0], self.shape, y[0, 0], check_consistency=False)
+        nu = y - self.own @ self.model.C.T
+        self.own = self.own + np.einsum("...ij,...j->...i", np.broadcast_to(L, (*nu.shape, 4)), nu)  # eq. (2)
 
     def predict(self, U):
-        self.own, self.shape = set_membership.predict(self.own, self.shape, self.t.A, np.eye(4), self.W_proc,
-                                                      self.t.B, U)
+        _, self.shape = self.model.predict(self.own[0, 0], self.shape, U[0, 0])
+        self.own = self.own @ self.t.A.T + U @ self.t.B.T                      # eq. (4)
 
     def containment(self, x):
         e = x - self.own
-        return np.einsum("...i,...i->...", e, np.linalg.solve(self.shape, e[..., None])[..., 0]) <= 1.0 + 1e-9
+        shape = np.broadcast_to(self.shape, (*e.shape, 4))
+        return np.einsum("...i,...i->...", e, np.linalg.solve(shape, e[..., None])[..., 0]) <= 1.0 + 1e-9
 
     @property
     def set_shape(self):
-        """The set's shape matrices, broadcastable to ``(R, N, 4, 4)``."""
+        """The set's shape matrix ``(4, 4)``, the same for every agent and run."""
         return self.shape
 
     def agent_inputs(self, Z, S, U, i):
-        model = method_spec(self.name, "team").build(self.t, self.own)
         N = self.t.N
-        return (model, *model.agent_inputs(self.own[0], self.shape[0], Z[0, np.arange(N), np.arange(N)], U[0], i))
+        shape = np.broadcast_to(self.shape, (N, 4, 4))
+        return (self.model, *self.model.agent_inputs(self.own[0], shape, Z[0, np.arange(N), np.arange(N)], U[0], i))
 
     def agent_state(self, i):
-        return self.own[0, i], self.shape[0, i]
+        return self.own[0, i], self.shape
 
 
 # ---------------------------------------------------------------- position-only sensing: z_ij = C x_j + nu_ij
