@@ -265,12 +265,13 @@ def _declares_methods(info: pkgutil.ModuleInfo) -> bool:
     """Whether a module's source assigns ``METHODS`` at its top level (read, not imported: the scan stays cheap)."""
     path = Path(getattr(info.module_finder, "path", "")) / f"{info.name}.py"
     try:
-        return _METHODS_LINE.search(path.read_text(encoding="utf-8")) is not None
+        return _METHODS_LINE.search("\n" + path.read_text(encoding="utf-8")) is not None
     except OSError:  # not a plain source file: import it to see
         return True
 
 
-_METHODS_LINE = re.compile(r"^METHODS\s*(?::[^=\n]*)?=", re.M)
+#: ``METHODS =`` at the start of a line (of ``"\n" + source``: a literal prefix, which ``re`` finds fast).
+_METHODS_LINE = re.compile(r"\nMETHODS\s*(?::[^=\n]*)?=")
 
 
 def method_names(task: str) -> tuple[str, ...]:

@@ -424,12 +424,8 @@ def check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[s
     if not isinstance(cell, Mapping):
         raise TypeError(f"{name} must be a mapping of the cell's coordinates (task, method, n_agents, noise, "
                         f"dropout, q_scale); got {type(cell).__name__}")
-    from .scenario import scenarios
-
-    methods_of = {"team": ALL_TEAM_METHODS, "shared": ALL_SHARED_METHODS, "target": estimation.method_names("target"),
-                  "localization": estimation.method_names("localization"),
-                  **{task: s.methods() for task, s in scenarios().items()}}
     task = cell.get("task")
+    methods_of = _methods_of(task)  # the cell's task's methods only: each lookup scans the package
     if task not in methods_of:
         raise ValueError(f"{name}['task'] must be one of {tuple(methods_of)}; got {task!r}")
     required = ("method", "n_agents", "dropout") + (("noise",) if full else ()) + (
@@ -460,6 +456,21 @@ def check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[s
         raise ValueError(f"{name}['method'] {cell['method']!r} does not apply under position-only sensing: "
                          f"{POSITION_NOT_APPLICABLE[cell['method']]}")
     return cell
+
+
+def _methods_of(task: object) -> dict[str, tuple[str, ...]]:
+    """``{task: its method names}`` for a known `task`, else every task's (for the message naming them)."""
+    from .scenario import scenarios
+
+    fixed = {"team": lambda: ALL_TEAM_METHODS, "shared": lambda: ALL_SHARED_METHODS,
+             "target": lambda: estimation.method_names("target"),
+             "localization": lambda: estimation.method_names("localization")}
+    if isinstance(task, str) and task in fixed:
+        return {task: fixed[task]()}
+    found = scenarios()
+    if isinstance(task, str) and task in found:
+        return {task: found[task].methods()}
+    return {**{t: f() for t, f in fixed.items()}, **{t: s.methods() for t, s in found.items()}}
 
 
 def draw_noise(rng: np.random.Generator, noise: str, shape: tuple) -> np.ndarray:
