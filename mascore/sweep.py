@@ -29,7 +29,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -194,6 +194,7 @@ def run_sweep(
     progress: bool = True,
     sort_by: Sequence[str] | None = None,
     cost: Callable[[dict[str, Any]], float] | None = None,
+    group: Callable[[dict[str, Any]], Hashable | None] | None = None,
 ):
     """Run `task` on every cell not yet in `out`; return the whole table.
 
@@ -226,6 +227,13 @@ def run_sweep(
         ``cost(cell) -> float``, a rough estimate of a cell's run time: the cells are
         started in decreasing order of cost (longest first), so that on a cluster
         no worker is left with one long cell at the end. The table does not depend on it.
+    group : callable, optional
+        ``group(cell) -> key``: the pending cells of one (hashable) key run together, as one
+        call ``task([cell, ...]) -> [rows of each cell, ...]`` (one task on a cluster), so that
+        the task can share work between them (say, the seed blocks of one method, whose
+        data-independent covariances are then computed once); a key of None runs its cell
+        alone, as ``task([cell])``. With `group`, `task` takes a list of cells. The rows of a
+        cell must not depend on the other cells of its call: the table does not depend on it.
 
     Returns
     -------
@@ -257,18 +265,20 @@ def run_sweep(
         todo.setdefault(cell_id(cell), dict(cell))
     done = _done_cells(out)
     pending = [(cid, cell) for cid, cell in todo.items() if cid not in done]
+    batches = _batches(pending, group)
     if cost is not None:
-        pending.sort(key=lambda item: -float(cost(item[1])))
+        batches.sort(key=lambda batch: -sum(float(cost(cell)) for _, cell in batch))
     out.parent.mkdir(parents=True, exist_ok=True)
     bar = progress_bar(range(len(todo)), enabled=progress, desc="sweep", unit="cell", initial=len(todo) - len(pending),
                        total=len(todo))
     bar_update = getattr(bar, "update", lambda n: None)
     writer = _Appender(out)
-    results = _results(pending, task, workers, scheduler)
+    results = _results(batches, task, workers, scheduler, grouped=group is not None)
     try:
-        for rows in results:
-            writer.add(rows)
-            bar_update(1)
+        for batch_rows in results:
+            for rows in batch_rows:
+                writer.add(rows)
+            bar_update(len(batch_rows))
     finally:  # keep every finished cell, also when interrupted
         writer.flush()
         results.close()
@@ -339,21 +349,47 @@ class _Appender:
         self.exists, self.rows = True, []
 
 
-def _labelled(task: Callable, cid: str, cell: dict) -> list[dict]:
-    """Run the task on one cell and label its rows with the cell."""
-    rows = task(dict(cell))
-    if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
-        raise TypeError(f"task must return a non-empty list of row dicts; cell {cid} gave {type(rows).__name__}")
-    return [{**row, **cell, CELL_COLUMN: cid} for row in rows]
+def _batches(pending: list[tuple[str, dict]], group: Callable | None) -> list[list[tuple[str, dict]]]:
+    """The pending cells in the calls of the task: one each, or those of one `group` key together (first-seen order)."""
+    if group is None:
+        return [[item] for item in pending]
+    if not callable(group):
+        raise TypeError(f"group must be callable, cell -> hashable key or None; got {type(group).__name__}")
+    batches: dict[object, list[tuple[str, dict]]] = {}
+    for cid, cell in pending:
+        key = group(dict(cell))
+        try:
+            batches.setdefault(("cell", cid) if key is None else ("group", key), []).append((cid, cell))
+        except TypeError:
+            raise TypeError(f"group(cell) must return a hashable key or None; cell {cid} gave {key!r}") from None
+    return list(batches.values())
 
 
-def _results(pending: list[tuple[str, dict]], task: Callable, workers: int, scheduler: str | None):
-    """Yield each pending cell's labelled rows, in completion order."""
-    if not pending:
+def _labelled(task: Callable, batch: list[tuple[str, dict]], grouped: bool = False) -> list[list[dict]]:
+    """Run the task on a batch of cells (one, unless `grouped`) and label each cell's rows with the cell."""
+    if grouped:
+        out = task([dict(cell) for _, cell in batch])
+        if not isinstance(out, list) or len(out) != len(batch):
+            raise TypeError(f"a grouped task must return one list of rows per cell ({len(batch)}); "
+                            f"got {type(out).__name__} for the cells from {batch[0][0]}")
+    else:
+        out = [task(dict(cell)) for _, cell in batch]
+    labelled = []
+    for (cid, cell), rows in zip(batch, out):
+        if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
+            raise TypeError(f"task must return a non-empty list of row dicts; cell {cid} gave {type(rows).__name__}")
+        labelled.append([{**row, **cell, CELL_COLUMN: cid} for row in rows])
+    return labelled
+
+
+def _results(batches: list[list[tuple[str, dict]]], task: Callable, workers: int, scheduler: str | None,
+             grouped: bool = False):
+    """Yield each batch's list of its cells' labelled rows, in completion order."""
+    if not batches:
         return
     if scheduler is None and workers == 0:
-        for cid, cell in pending:
-            yield _labelled(task, cid, cell)
+        for batch in batches:
+            yield _labelled(task, batch, grouped)
         return
     from ._optional import require
 
@@ -379,9 +415,9 @@ def _results(pending: list[tuple[str, dict]], task: Callable, workers: int, sche
                 raise RuntimeError(_NO_MAIN_GUARD) from None
         client = distributed.Client(cluster, set_as_default=False)
     try:
-        futures = [client.submit(_labelled, task, cid, cell, key=f"cell-{i}-{hashlib.sha1(cid.encode()).hexdigest()}",
-                                 pure=False, priority=len(pending) - i)  # in the order given: longest first
-                   for i, (cid, cell) in enumerate(pending)]
+        futures = [client.submit(_labelled, task, batch, grouped, pure=False, priority=len(batches) - i,
+                                 key=f"cells-{i}-{hashlib.sha1(batch[0][0].encode()).hexdigest()}")
+                   for i, batch in enumerate(batches)]  # in the order given: longest first
         # the results are gathered in the background, not by one round trip per cell from this thread
         for future, rows in distributed.as_completed(futures, with_results=True, loop=client.loop):
             future.release()

@@ -40,6 +40,7 @@ def _small_cells() -> list[dict]:
 #: The sweep-engine tests compare tables, not numbers: a few runs per cell suffice.
 FEW_RUNS = dataclasses.replace(compare.SETTINGS, runs=4)
 _cell_task = functools.partial(compare.run_cell, settings=FEW_RUNS)  # picklable: Dask workers run it
+_cells_task = functools.partial(compare.run_cells, settings=FEW_RUNS)  # the same cells, a cell_group at a time
 
 
 def _without_cpu(table: pd.DataFrame) -> pd.DataFrame:
@@ -90,9 +91,29 @@ def test_same_seed_same_numbers_byte_for_byte():
 
 
 def test_local_cluster_gives_the_serial_table(serial, tmp_path):
-    table, _ = serial
-    parallel = sweep.run_sweep(_small_cells(), _cell_task, tmp_path / "t.csv", workers=2, progress=False)
+    table, _ = serial  # one cell at a time; here the cells of a cell_group run together, on two workers
+    parallel = sweep.run_sweep(_small_cells(), _cells_task, tmp_path / "t.csv", workers=2, progress=False,
+                               group=compare.cell_group)
     pd.testing.assert_frame_equal(_without_cpu(parallel), _without_cpu(table), check_exact=True)
+
+
+def test_cells_run_together_give_the_rows_of_each_cell_alone_and_resume_by_cell(tmp_path):
+    cells = [c for c in compare.grid_cells("quick") if c["task"] in ("target", "localization") and c["n_agents"] == 8
+             and c["graph"] in ("ring", "switching") and c["method"] in ("ci-diffusion", "hcmci-L1")
+             and c["block"] in (0, 1)]
+    cells += [c for c in _small_cells() if c["task"] == "shared"][:2]  # cells of no group: alone
+    assert {len({c["block"] for c in cells if compare.cell_group(c) == key}) for key in
+            {compare.cell_group(c) for c in cells} - {None}} == {2}
+    alone = sweep.run_sweep(cells, _cell_task, tmp_path / "alone.csv", progress=False)
+    out = tmp_path / "together.csv"
+    first = sweep.run_sweep([c for c in cells if c["block"] == 0], _cells_task, out, progress=False,
+                            group=compare.cell_group)
+    together = sweep.run_sweep(cells, _cells_task, out, progress=False, group=compare.cell_group)
+    pd.testing.assert_frame_equal(_without_cpu(together), _without_cpu(alone), check_exact=True)
+    kept = together.set_index(["cell", "run"]).loc[first.set_index(["cell", "run"]).index, CPU]
+    np.testing.assert_array_equal(kept.to_numpy(), first[CPU].to_numpy())  # block 0 was not run again
+    with pytest.raises(ValueError, match="cell_group"):
+        compare.run_cells([cells[0], {**cells[0], "method": "centralized"}])
 
 
 def _free_port() -> int:

@@ -106,6 +106,7 @@ __all__ = [
     "CompareResult",
     "benchmark_graph",
     "cell_cost",
+    "cell_group",
     "compare_claims",
     "differing_claims",
     "anees_bounds",
@@ -129,6 +130,7 @@ __all__ = [
     "plot_robustness",
     "run",
     "run_cell",
+    "run_cells",
     "run_compare",
     "simulate_shared",
     "simulate_team",
@@ -168,7 +170,8 @@ _NAMES = {
         'target_methods', 'target_model'
     ),
     'grid': (
-        'CompareResult', '_mean_ci', 'cell_cost', 'grid_cells', 'run', 'run_cell', 'run_compare', 'summarize'
+        'CompareResult', '_mean_ci', 'cell_cost', 'cell_group', 'grid_cells', 'run', 'run_cell', 'run_cells',
+        'run_compare', 'summarize'
     ),
     'tables': (
         'CPU_COLUMN', 'NEAR_BOUND', '_position_headline', 'fitted_slopes', 'headline', 'knob_table',

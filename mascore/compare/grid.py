@@ -209,6 +209,86 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
             for r in range(runs)]
 
 
+def cell_group(cell: Mapping[str, Any]) -> tuple | None:
+    """The cells :func:`run_cells` runs together: a common-target or localization method's seed blocks.
+
+    Parameters
+    ----------
+    cell : mapping
+        A cell's coordinates (:func:`run_cell`).
+
+    Returns
+    -------
+    tuple or None
+        ``(task, method, n_agents, graph)`` for the target and localization tasks, whose filters'
+        covariances do not depend on the data (:func:`simulate_target`): one computation serves every
+        block. None for the other tasks (each cell alone).
+
+    Examples
+    --------
+    >>> from mascore.compare import cell_group
+    >>> cell_group({"task": "target", "method": "ci-L5", "n_agents": 8, "block": 2})
+    ('target', 'ci-L5', 8, 'ring')
+    >>> print(cell_group({"task": "team", "method": "local", "n_agents": 8, "block": 2}))
+    None
+    """
+    if cell.get("task") not in ("target", "localization"):
+        return None
+    return (cell["task"], cell["method"], cell["n_agents"], cell.get("graph", "ring"))
+
+
+def run_cells(cells: Sequence[Mapping[str, Any]], base_seed: int = 0,
+              settings: BenchmarkSettings = SETTINGS) -> list[list[dict[str, Any]]]:
+    """Run cells of one :func:`cell_group` together: each cell's rows, as :func:`run_cell` gives them.
+
+    The seed blocks of a target or localization method run as one batch of their runs (each block's
+    data from its own seed), so that the filter's covariances and weights, which do not depend on the
+    data, are computed once; each block's rows are those of :func:`run_cell` on its cell, number for
+    number, except ``cpu_s``, the block's share of the batch's CPU. Other cells run one by one.
+
+    Parameters
+    ----------
+    cells : sequence of mapping
+        Cells (:func:`run_cell`); for a batch, of one :func:`cell_group` key.
+    base_seed : int
+        The sweep's seed.
+    settings : BenchmarkSettings
+        The benchmark's settings.
+
+    Returns
+    -------
+    list of list of dict
+        Each cell's rows, in the order of `cells`.
+
+    Examples
+    --------
+    >>> from mascore.compare import run_cell, run_cells
+    >>> cells = [{"study": "target", "task": "target", "method": "ci-L1", "n_agents": 8, "noise": "gaussian",
+    ...           "dropout": 0.0, "q_scale": 1.0, "block": b} for b in (0, 1)]
+    >>> together = run_cells(cells)
+    >>> together[1][3]["rmse_own"] == run_cell(cells[1])[3]["rmse_own"]
+    True
+    """
+    cells = [check_cell(c) for c in cells]
+    keys = {cell_group(c) for c in cells}
+    if len(cells) < 2 or None in keys:
+        return [run_cell(c, base_seed, settings) for c in cells]
+    if len(keys) > 1:
+        raise ValueError(f"cells must share one cell_group key to run together; got {sorted(keys, key=str)}")
+    check_settings_type(settings, BenchmarkSettings)
+    first = cells[0]
+    task, method, n_agents, graph = cell_group(first)
+    seeds = [cell_seed(c, SEED_AXES, base_seed) for c in cells]
+    metrics = simulate_target(method, int(n_agents), seeds, graph=graph, settings=settings, task=task)
+    metrics["cpu_s"] = metrics["cpu_s"] / len(cells)  # each block's share of the batch's filtering
+    floats = target_cost(method, int(n_agents), mean_degree(graph, int(n_agents), settings), task)[0]
+    runs = len(metrics["rmse_own"]) // len(cells)
+    nan = float("nan")
+    blank = dict.fromkeys(("rmse_view", "containment", "spread", "rmse_far", "set_size"), nan)
+    return [[{"run": r, "floats": floats, "sensing": nan, **{k: float(v[b * runs + r]) for k, v in metrics.items()},
+              **blank} for r in range(runs)] for b in range(len(cells))]
+
+
 def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n_agents", "noise", "dropout",
                                          "q_scale"), settings: BenchmarkSettings = SETTINGS):
     """Means and 95 % intervals per group, the RMS-error ratio to the bound, and the ANEES's chi-square bounds.
@@ -434,9 +514,9 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
         raise ValueError(f"settings.grid must be 'quick' or 'full'; got {settings.grid!r}")
     with tempfile.TemporaryDirectory(prefix="mascore-compare-") as scratch:
         folder = Path(scratch if out is None else out) / "compare"
-        table = run_sweep(grid_cells(settings.grid), functools.partial(run_cell, base_seed=seed, settings=settings),
+        table = run_sweep(grid_cells(settings.grid), functools.partial(run_cells, base_seed=seed, settings=settings),
                           folder / f"table-{settings.grid}-{seed}.csv", workers=workers, scheduler=scheduler,
-                          progress=progress, cost=cell_cost)
+                          progress=progress, cost=cell_cost, group=cell_group)
     summary = summarize(table, settings=settings)
     profile = vlahakis_profile(8, settings=settings)
     return CompareResult(settings, int(seed), table, summary, fitted_slopes(summary), profile)

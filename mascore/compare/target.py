@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -326,7 +327,7 @@ def target_cost(method: str, n_agents: int, degree: float, task: str = "target")
 def simulate_target(
     method: str,
     n_agents: int,
-    seed: np.random.SeedSequence | int,
+    seed: np.random.SeedSequence | int | Sequence[np.random.SeedSequence | int],
     *,
     graph: str = "ring",
     runs: int | None = None,
@@ -341,8 +342,10 @@ def simulate_target(
         One of :data:`TARGET_METHODS`.
     n_agents : int
         Sensors N >= 3.
-    seed : numpy.random.SeedSequence or int
-        Source of the target's path and the measurements (the same for every method).
+    seed : numpy.random.SeedSequence or int, or a sequence of them
+        Source of the target's path and the measurements (the same for every method). A sequence:
+        one block of `runs` runs per seed, the blocks' runs in order (each block's numbers as with
+        its seed alone: the filters' covariances, which do not depend on the data, serve all blocks).
     graph : {"ring", "geometric", "switching"}
         The communication graph (``"switching"``: graph k of :func:`switching_graphs` at step k; in
         localization it is the sensing graph too, so a step's relative measurements are those of its
@@ -369,7 +372,11 @@ def simulate_target(
     >>> bool(0.5 < m["nees_own"].mean() < 1.5)
     True
     """
+    seeds = list(seed) if isinstance(seed, (list, tuple)) else [seed]
+    if not seeds:
+        raise ValueError("seed must be a seed or a non-empty sequence of seeds (one per block of runs)")
     n_agents, runs = check_run(n_agents, "gaussian", 0.0, 1.0, runs, settings)
+    check_run(n_agents, "gaussian", 0.0, 1.0, runs * len(seeds), settings)  # every block at once
     if task not in ("target", "localization"):
         raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
     spec = estimation.method_spec(method, task)
@@ -383,7 +390,8 @@ def simulate_target(
             n_agents, "ring" if graph == "switching" else graph, s)
     n = model.n_states
     P0 = s.p0 * np.eye(n)
-    x_true, z = model.simulate(np.zeros(n), P0, s.n_steps, np.random.default_rng(seed), n_runs=runs)
+    blocks = [model.simulate(np.zeros(n), P0, s.n_steps, np.random.default_rng(sd), n_runs=runs) for sd in seeds]
+    x_true, z = (np.concatenate(parts, axis=1) for parts in zip(*blocks))  # (K + 1 or K, blocks x runs, ...)
     if graph == "switching":  # the filters hold no state: one filter per step's graph
         if task == "target":
             steps = [(model.on_graph(A), slice(None)) for A in switching_graphs(n_agents, s.n_steps, s)]
@@ -421,4 +429,4 @@ def simulate_target(
         e_nees, P_nees, dof = e, P, 2
     nees = np.einsum("...i,...i->...", e_nees, np.linalg.solve(P_nees, e_nees[..., None])[..., 0]) / dof
     return {"rmse_own": np.sqrt(np.mean(np.sum(e ** 2, -1), axis=(0, 2))),
-            "nees_own": nees.mean(axis=(0, 2)), "cpu_s": np.full(runs, cpu)}
+            "nees_own": nees.mean(axis=(0, 2)), "cpu_s": np.full(runs * len(seeds), cpu)}
