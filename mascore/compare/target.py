@@ -266,6 +266,25 @@ def localization_riccati(n_agents: int, graph: str = "ring",
             "anchor reach": float(reach.mean()), "anchor reach, least": float(reach.mean(0).min())}
 
 
+def _own_position(n_agents: int, whole: bool) -> tuple:
+    """``(of_x, of_P)``: each agent's estimate of its own position ``(..., N, 2)`` and its covariance ``(..., N, 2, 2)``.
+
+    From the localization filters' estimates of the team ``(..., N, 2N)`` (one per agent) or ``(..., 2N)``
+    (`whole`: one for every agent), and their covariances; only these parts are scored.
+    """
+    own = np.arange(n_agents)
+    idx = 2 * own[:, None] + np.arange(2)                      # (N, 2): agent i's own coordinates
+    if whole:
+        return (lambda x: x[..., idx]), (lambda P: P[..., idx[:, :, None], idx[:, None, :]])
+    return (lambda x: x[..., own[:, None], idx]), (lambda P: P[..., own[:, None, None], idx[:, :, None], idx[:, None, :]])
+
+
+def _agent_major(a: np.ndarray, trailing: int) -> np.ndarray:
+    """`a` ``(K', runs, ...)`` copied into memory with its `trailing` axes outermost (the same shape)."""
+    order = (*range(2, 2 + trailing), 0, 1)
+    return np.ascontiguousarray(a.transpose(order)).transpose(np.argsort(order))
+
+
 def target_filter(method: str, model, task: str = "target"):
     """The filter of a common-target method on `model`, as its spec builds it (:data:`mascore.fusion.METHODS`).
 
@@ -395,37 +414,35 @@ def simulate_target(
     if graph == "switching":  # the filters hold no state: one filter per step's graph
         if task == "target":
             steps = [(model.on_graph(A), slice(None)) for A in switching_graphs(n_agents, s.n_steps, s)]
-        filters = [spec.build(m) for m, _ in steps]  # the spec found once (a lookup scans the package)
-        tic = time.thread_time()
-        xk, Pk = model.check_state(np.zeros(n), P0, per_agent=not spec.whole_filter)
-        xs, Ps = [], []
-        for k, f in enumerate(filters):
-            xk, Pk = f.update(*f.predict(xk, Pk), z[k][..., steps[k][1]])
-            xs.append(xk)
-            Ps.append(Pk)
-        x, P = np.stack(xs), np.stack(Ps)
-        cpu = time.thread_time() - tic
     else:
-        filt = target_filter(method, model, task)
-        tic = time.thread_time()
-        x, P = filt.run(np.zeros(n), P0, z)
-        cpu = time.thread_time() - tic
-    w = slice(s.steady_from, s.n_steps)
-    truth = x_true[1:][w]                                      # (K', runs, n)
-    x, P = x[w], P[w]
-    if spec.whole_filter:
-        x, P = x[:, :, None], P[:, None]                       # one estimate, shared by every agent
-    e = truth[:, :, None] - x                                  # (K', runs, N', n)
-    P = np.broadcast_to(P[:, None] if P.ndim == 4 else P, (*e.shape, n))
+        steps = [(model, slice(None))] * s.n_steps
+    built = {id(m): spec.build(m) for m, _ in steps}  # the spec found once (a lookup scans the package)
+    own = _own_position(n_agents, spec.whole_filter) if task == "localization" else None
+    tic = time.thread_time()
+    xk, Pk = model.check_state(np.zeros(n), P0, per_agent=not spec.whole_filter)
+    xs, Ps = [], []  # the steady window's estimates (localization: each agent's own position only)
+    for k, (m, rows) in enumerate(steps):
+        f = built[id(m)]
+        xk, Pk = f.update(*f.predict(xk, Pk), z[k][..., rows])
+        if k >= s.steady_from:
+            xs.append(xk if own is None else own[0](xk))
+            Ps.append(Pk if own is None else own[1](Pk))
+    x, P = np.stack(xs), np.stack(Ps)
+    cpu = time.thread_time() - tic
+    truth = x_true[1:][s.steady_from:]                         # (K', runs, n)
     if task == "target":
+        if spec.whole_filter:
+            x, P = x[:, :, None], P[:, None]                   # one estimate, shared by every agent
+        e = truth[:, :, None] - x                              # (K', runs, N', n)
+        P = np.broadcast_to(P[:, None] if P.ndim == 4 else P, (*e.shape, n))
         e_nees, P_nees, dof = e, P, 4                          # NEES of the whole state, RMSE of the position
         e = e[..., :2]
     else:
-        N = n_agents
-        own = np.arange(N)
-        idx = 2 * own[:, None] + np.arange(2)                 # (N, 2): agent i's own coordinates
-        e = np.broadcast_to(e, (*e.shape[:2], N, n))[:, :, own[:, None], idx]              # (K', runs, N, 2)
-        P = np.broadcast_to(P, (*P.shape[:2], N, n, n))[:, :, own[:, None, None], idx[:, :, None], idx[:, None, :]]
+        idx = 2 * np.arange(n_agents)[:, None] + np.arange(2)  # (N, 2): agent i's own coordinates
+        # laid out agent and coordinate first, as a gather of the whole estimates lays them out: the sums
+        # below add in the order they always have, so the tables keep their numbers bit for bit
+        e = _agent_major(truth[..., idx] - x, 2)               # (K', runs, N, 2)
+        P = _agent_major(np.broadcast_to(P[:, None] if P.ndim == 4 else P, (*e.shape, 2)), 3)
         e_nees, P_nees, dof = e, P, 2
     nees = np.einsum("...i,...i->...", e_nees, np.linalg.solve(P_nees, e_nees[..., None])[..., 0]) / dof
     return {"rmse_own": np.sqrt(np.mean(np.sum(e ** 2, -1), axis=(0, 2))),
