@@ -43,6 +43,7 @@ __all__ = [
     "method_specs",
     "method_spec",
     "method_names",
+    "agent_limits",
     "not_applicable",
     "STUDY_LAYER",
 ]
@@ -181,6 +182,9 @@ class MethodSpec:
         The busiest agent runs the whole filter (the centre): timed as the team-wide step.
     position : float
         Rank in the tables (ascending; ties by name).
+    max_agents : mapping of str to (int, str)
+        Task -> the largest team the comparison's sweeps run it at, and why not beyond (its time or
+        memory; :func:`agent_limits`). A task not listed: no limit.
 
     Examples
     --------
@@ -198,6 +202,7 @@ class MethodSpec:
     not_applicable: Mapping[str, str] = field(default_factory=dict)
     whole_filter: bool = False
     position: float = 0.0
+    max_agents: Mapping[str, tuple[int, str]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not (isinstance(self.name, str) and self.name):
@@ -330,6 +335,28 @@ def method_spec(name: str, task: str | None = None) -> MethodSpec:
         return matches[0]
     where = f" for task {task!r}" if task is not None else ""
     raise ValueError(f"method must be one of {tuple(s.name for s in specs)}{where}; got {name!r}")
+
+
+def agent_limits(task: str) -> dict[str, tuple[int, str]]:
+    """The methods of `task` the comparison runs only up to some team size, with the reason their specs give.
+
+    Parameters
+    ----------
+    task : str
+        The scenario (``"target"``, ``"localization"``, ...).
+
+    Returns
+    -------
+    dict of str to (int, str)
+        Method name -> (largest N, why not beyond) (:attr:`MethodSpec.max_agents`), in table order.
+
+    Examples
+    --------
+    >>> from mascore.estimation import agent_limits
+    >>> agent_limits("localization")["ci-diffusion"][0]
+    32
+    """
+    return {s.name: s.max_agents[task] for s in method_specs(task) if task in s.max_agents}
 
 
 def not_applicable(scenario: str) -> dict[str, str]:

@@ -1337,7 +1337,10 @@ METHODS = (
                _orders(("O(d q n + n^3)", "O(n^2 + d n)"), ("O(N^3)", "O(N^2)")), _memory(), position=9),
     MethodSpec("ci-diffusion", _TASKS, CovarianceIntersectionFilter, _cost("covariance-intersection", 20),
                _orders(("O(n^3 + s d n^2): s weight-search evaluations", "O(d n^2)"), ("O(N^3 + s d N^2)", "O(d N^2)")),
-               _memory(1), position=10),
+               _memory(1), position=10,
+               max_agents={"localization": (32, "its covariance-intersection weight search (Newton steps over the d + 1 "
+                                                "information matrices of 2N x 2N, per agent and step) grows as N^4 per "
+                                                "agent: at N = 64 one method would take most of the full grid's time")}),
     # the knobs' other settings (the comparison sweeps them at N = 8: mascore.compare.FUSION_KNOB_METHODS)
     *(_consensus_spec(kind, L, 11 + 2 * k + j) for k, kind in enumerate(_CONSENSUS) for j, L in enumerate((2, "diam"))),
     *(_safe_hcmci_spec(L, 17 + j) for j, L in enumerate((1, 5))),

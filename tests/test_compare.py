@@ -534,12 +534,12 @@ def test_localization_on_switching_matches_the_time_varying_riccati_recursion():
     half = 1.96 * mse.std(ddof=1) / np.sqrt(mse.size)
     assert abs(mse.mean() - predicted) < 2 * half, (mse.mean(), predicted, half)
     assert abs(m["nees_own"].mean() - 1) < 0.07
-    _, steps = compare._localization_switching(N, s)  # each step's information matrix, exactly
+    _, step = compare._localization_switching(N, s)  # each step's information matrix, exactly
     for k in (0, 40, 149):
         rows = [np.kron(eye[i], I2) for i in (0, N // 2)]
         rows += [np.kron(eye[j] - eye[i], I2) for i in range(N) for j in range(N) if G[k][i, j]]
         H = np.vstack(rows)
-        np.testing.assert_allclose(steps[k][0].information_matrices.sum(0), H.T @ H / s.r, atol=1e-9)
+        np.testing.assert_allclose(step(k)[0].information_matrices.sum(0), H.T @ H / s.r, atol=1e-9)
 
 
 
@@ -826,3 +826,36 @@ def test_accuracy_against_floats_is_drawn_for_every_scenario(task):
     assert [t.get_text() for t in fig.legends[0].get_texts()] == list(methods)
     with pytest.raises(ValueError, match="task must be one of"):
         compare.plot_pareto(summary, "nowhere")
+
+
+def test_model_on_another_graph_equals_the_model_built_on_it():
+    model = compare.target_model(8)
+    A = compare.switching_graphs(8, 3)[2]
+    moved = model.on_graph(A)
+    built = type(model)(model.F, model.Q, model.H, model.R, A)
+    assert moved == built
+    for name in type(model).__slots__:
+        a, b = getattr(moved, name), getattr(built, name)
+        if isinstance(a, np.ndarray):
+            assert a.tobytes() == b.tobytes() and not a.flags.writeable, name
+    with pytest.raises(ValueError, match="adjacency"):
+        model.on_graph(np.ones((3, 3)))
+
+
+def test_the_full_grid_scales_both_fusion_tasks_to_64_where_methods_and_graphs_allow():
+    cells = compare.grid_cells("full")
+    assert len({sweep.cell_id(c) for c in cells}) == len(cells)
+    limits = {task: compare.scale_limits(task) for task in ("target", "localization")}
+    for task in ("target", "localization"):
+        for graph in compare.SCALE_GRAPHS:
+            top = limits[task].get(f"{graph} graph", (64,))[0]
+            for method in compare.target_methods(task):
+                sizes = {c["n_agents"] for c in cells if c["task"] == task and c["graph"] == graph
+                         and c["method"] == method and c["dropout"] == 0.0}
+                stop = min(top, limits[task].get(method, (64,))[0])
+                assert sizes >= {n for n in compare.SCALE_SIZES if n <= stop}, (task, graph, method)
+                assert max(sizes) <= stop, (task, graph, method)
+    assert limits["localization"]["ci-diffusion"][0] == 32 and "N^4" in limits["localization"]["ci-diffusion"][1]
+    with pytest.raises(ValueError, match="connected"):
+        compare.benchmark_graph("geometric", 64)  # why the geometric graph stops at 32
+    assert all(c["n_agents"] < 64 for c in compare.grid_cells("quick"))

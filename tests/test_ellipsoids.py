@@ -182,3 +182,19 @@ def test_max_innovation_form_general_matches_grid():
     S = W[None] / ts[:, None, None] + (C @ P @ C.T)[None] / (1 - ts[:, None, None])
     g = np.einsum("i,kij,j->k", nu, np.linalg.inv(S), nu)
     assert el.max_innovation_form(c, P, C, y, W) == pytest.approx(g.max(), rel=1e-6)
+
+
+def test_newton_trace_of_one_problem_is_the_batched_search_bit_for_bit():
+    """The 1-D search of one problem (on floats) gives the batch's t exactly (a batch of that problem, as every
+    agent and run of the set-membership filter share one), at the edge t -> 1 and inside."""
+    from mascore._ellipsoid_kernels import newton_trace
+
+    rng = np.random.default_rng(5)
+    h = rng.uniform(0.1, 2.0, (40, 4))
+    m = np.concatenate([rng.uniform(1.1, 100.0, (20, 4)), rng.uniform(0.0, 3.0, (20, 4))])  # edge, and inside
+    one = np.array([newton_trace(hi, mi, 1e-13, 100) for hi, mi in zip(h, m)])
+    batch = np.array([newton_trace(np.broadcast_to(hi, (3, 5, 4)), np.broadcast_to(mi, (3, 5, 4)), 1e-13, 100)
+                      for hi, mi in zip(h, m)])
+    assert (batch == batch[:, :1, :1]).all()
+    assert one.tobytes() == batch[:, 0, 0].tobytes()
+    assert (one[:20] > 1 - 1e-12).all() and (one[20:] < 1 - 1e-6).any()

@@ -128,6 +128,7 @@ __all__ = [
     "plot_cost",
     "plot_pareto",
     "plot_robustness",
+    "plot_scale",
     "run",
     "run_cell",
     "run_cells",
@@ -135,9 +136,14 @@ __all__ = [
     "simulate_shared",
     "simulate_team",
     "simulate_target",
+    "scale_limits",
+    "stored_summary",
     "summarize",
     "switching_graphs",
     "SWITCHING_GRAPHS",
+    "SCALE_SIZES",
+    "SCALE_GRAPHS",
+    "SCALE_GRAPH_LIMITS",
     "SWITCHING_NOT_APPLICABLE",
     "target_cost",
     "target_filter",
@@ -171,7 +177,8 @@ _NAMES = {
     ),
     'grid': (
         'CompareResult', '_mean_ci', 'cell_cost', 'cell_group', 'grid_cells', 'run', 'run_cell', 'run_cells',
-        'run_compare', 'summarize'
+        'run_compare', 'scale_limits', 'stored_summary', 'summarize', 'SCALE_SIZES', 'SCALE_GRAPHS',
+        'SCALE_GRAPH_LIMITS'
     ),
     'tables': (
         'CPU_COLUMN', 'NEAR_BOUND', '_position_headline', 'fitted_slopes', 'headline', 'knob_table',
@@ -185,7 +192,7 @@ _NAMES = {
         'rms_ratio'
     ),
     'plots': (
-        '_concat', '_order', '_plain_ticks', '_plt', 'plot_cost', 'plot_pareto', 'plot_robustness'
+        '_concat', '_order', '_plain_ticks', '_plt', 'plot_cost', 'plot_pareto', 'plot_robustness', 'plot_scale'
     ),
     'cost': (
         'NODE_ORDER', 'node_cost', 'node_costs', 'per_agent_costs'

@@ -10,8 +10,9 @@ from typing import Any
 
 import numpy as np
 
+from .. import estimation
 from ..settings import check_settings_type
-from ..sweep import Grid, cell_seed
+from ..sweep import Grid, cell_id, cell_seed
 from .benchmark import (
     CORE_METHODS,
     FUSION_KNOB_METHODS,
@@ -37,6 +38,14 @@ from .team import simulate_team, vlahakis_profile
 # --------------------------------------------------------------------------------------------
 # grids and cells
 
+#: The team sizes and graphs of the full grid's scale study of the common-target and localization tasks.
+SCALE_SIZES = (8, 16, 32, 64)
+SCALE_GRAPHS = ("ring", "geometric", "switching")
+#: Graphs that stop before the largest scale size, with the largest N and the reason.
+SCALE_GRAPH_LIMITS = {"geometric": (32, "no layout of 64 agents in 1000 gives a connected proximity graph at the "
+                                        "benchmark's mean degree (benchmark_graph): it would need a denser layout, "
+                                        "and so another graph than at the smaller sizes")}
+
 
 def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     """The cells of a named sweep: ``"quick"`` (the book, the tests) or ``"full"`` (the CLI).
@@ -59,7 +68,10 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     the scaling study at N = 8 only; 4 blocks in both grids, as the recipes beside them);
     each with ``blocks x settings.runs`` seeds (quick: 2 x 50, full: 4 x 50, N up to
     64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
-    N = 8, position sensing, the shared, target and localization tasks).
+    N = 8, position sensing, the shared, target and localization tasks). The full grid adds the
+    scale study of both fusion tasks: every method at N in :data:`SCALE_SIZES` on every graph of
+    :data:`SCALE_GRAPHS`, each up to the team size its spec allows
+    (:func:`mascore.estimation.agent_limits`, with the reason).
 
     Parameters
     ----------
@@ -128,12 +140,24 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     if not quick:
         studies.append(("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
                                          "graph": ["switching"], "n_agents": [16], "block": blocks200}))
-    cells = []
+        # scale: both fusion tasks at N = 8 to 64 on every graph (a method up to its spec's max_agents)
+        studies += [(task, {**base, "task": [task], "method": list(target_methods(task)), "graph": list(SCALE_GRAPHS),
+                            "n_agents": list(SCALE_SIZES), "block": blocks200}) for task in ("target", "localization")]
+    limits = {task: estimation.agent_limits(task) for task in ("target", "localization")}
+    cells, seen = [], set()
     for study, axes in studies:
         for cell in Grid(axes).cells():
             if cell["method"] == "song-eb" and cell["n_agents"] > 32:
                 continue  # its joint covariance is (2 N^2)^2 floats: 0.5 GB at N = 64
-            cells.append({"study": study, **cell})
+            if cell["n_agents"] > limits.get(cell["task"], {}).get(cell["method"], (np.inf,))[0]:
+                continue  # beyond the method's max_agents (its spec says why)
+            if study in ("target", "localization") and cell["n_agents"] > SCALE_GRAPH_LIMITS.get(
+                    cell.get("graph", "ring"), (np.inf,))[0]:
+                continue  # beyond the graph's largest size (SCALE_GRAPH_LIMITS says why)
+            cell = {"study": study, **cell}
+            if cell_id(cell) not in seen:  # a scale cell the other studies already hold
+                seen.add(cell_id(cell))
+                cells.append(cell)
     for scenario in scenarios().values():  # the scenarios declared in their own modules, after the book's
         cells += [dict(c) for c in scenario.cells(name)]
     return cells
@@ -439,6 +463,61 @@ def run_compare(
     return result.table, result.summary
 
 
+def scale_limits(task: str) -> dict[str, tuple[int, str]]:
+    """Where the full grid's scale study of `task` stops before N = 64, and why: its methods' and its graphs' limits.
+
+    Parameters
+    ----------
+    task : {"target", "localization"}
+        The scenario.
+
+    Returns
+    -------
+    dict of str to (int, str)
+        ``"METHOD"`` or ``"GRAPH graph"`` -> (largest N run, why not beyond): the methods' from their
+        specs (:func:`mascore.estimation.agent_limits`), the graphs' from :data:`SCALE_GRAPH_LIMITS`.
+
+    Examples
+    --------
+    >>> from mascore.compare import scale_limits
+    >>> scale_limits("localization")["ci-diffusion"][0], scale_limits("target")["geometric graph"][0]
+    (32, 32)
+    """
+    if task not in ("target", "localization"):
+        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    return {**estimation.agent_limits(task), **{f"{g} graph": v for g, v in SCALE_GRAPH_LIMITS.items()}}
+
+
+def stored_summary(grid: str, out: str | Path = "results", seed: int = 0):
+    """The summary a run of ``mascore compare --grid GRID`` stored under `out`, if there is one.
+
+    Parameters
+    ----------
+    grid : str
+        The sweep's name (``"quick"``, ``"full"`` or a grid file's).
+    out : str or pathlib.Path
+        The results folder of that run (its ``compare/summary-GRID-SEED.csv``).
+    seed : int
+        The sweep's base seed.
+
+    Returns
+    -------
+    pandas.DataFrame or None
+        :func:`summarize`'s table as stored, or None when no such run was stored.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from mascore.compare import stored_summary
+    >>> print(stored_summary("full", tempfile.mkdtemp()))
+    None
+    """
+    import pandas as pd
+
+    path = Path(out) / "compare" / f"summary-{grid}-{int(seed)}.csv"
+    return pd.read_csv(path) if path.is_file() else None
+
+
 @dataclass(frozen=True, eq=False)
 class CompareResult:
     """The comparison's sweep, once: its table and summary (see :func:`run`).
@@ -545,8 +624,11 @@ def cell_cost(cell: Mapping[str, Any]) -> float:
     True
     """
     check_cell(cell, full=False)
-    if cell["task"] != "team":  # the covariance-intersection weight search: about a team filter at N = 8 per agent
-        return 200.0 * float(cell["n_agents"]) if cell["method"] == "ci-diffusion" else 1.0
+    if cell["task"] in ("target", "localization"):  # per agent: n = 4, or n = 2N (N^3 flops a step)
+        size = cell["n_agents"] / 8 if cell["task"] == "target" else (cell["n_agents"] / 8) ** 4
+        return (1600.0 if cell["method"] == "ci-diffusion" else 150.0) * size  # ci: its weight search
+    if cell["task"] != "team":
+        return 1.0
     n = float(cell["n_agents"])
     whole_team = {"song-eb": n**4, "song-mb": n**3.5, "centralized": n**3}
     per_run = 20.0 if cell["dropout"] > 0 and cell["method"] in whole_team else 1.0

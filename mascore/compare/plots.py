@@ -143,6 +143,74 @@ def plot_cost(costs, task: str = "team"):
     return fig
 
 
+def plot_scale(summary, task: str = "target", grid: str = "quick"):
+    """Accuracy against team size: each method's RMSE ratio to the centralized filter, one panel per graph.
+
+    Parameters
+    ----------
+    summary : pandas.DataFrame
+        Output of :func:`summarize`: the study `task`'s cells without drop-outs, every team size and
+        graph the sweep holds (the full grid: N = 8 to 64 on the ring, geometric and switching graphs).
+    task : {"target", "localization"}
+        The scenario.
+    grid : str
+        The sweep the summary comes from, named in the figure's title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One panel per graph of the summary (ring, geometric, switching), N on a log axis, the ratio
+        (log scale) with its 95 % interval; a method stops at the largest N it was run at
+        (:func:`mascore.estimation.agent_limits`).
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore import compare
+    >>> summary = pd.DataFrame({"study": "target", "task": "target", "method": "ci-L1", "graph": "ring",
+    ...                         "dropout": 0.0, "n_agents": [8, 16], "ratio_mean": [1.3, 1.4],
+    ...                         "ratio_lo": [1.28, 1.37], "ratio_hi": [1.32, 1.43]})
+    >>> [ax.get_title() for ax in compare.plot_scale(summary).axes]
+    ['ring']
+    """
+    if task not in ("target", "localization"):
+        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    plt = _plt()
+    rows = summary[(summary["study"] == task) & (summary["task"] == task) & (summary["dropout"] == 0.0)]
+    if rows.empty:
+        raise ValueError(f"summary has no row of the study {task!r} (rerun the sweep: grid_cells)")
+    graphs = [g for g in ("ring", "geometric", "switching") if g in set(rows["graph"])]
+    methods = [m for m in target_methods(task) if m in set(rows["method"])]
+    sizes = sorted(rows["n_agents"].unique())
+    fig, axes = plt.subplots(1, len(graphs), figsize=(3.6 * len(graphs) + 0.8, 4.4), sharey=True, squeeze=False)
+    colours = plt.get_cmap("tab10" if len(methods) <= 10 else "tab20")
+    for ax, graph in zip(axes[0], graphs):
+        for i, m in enumerate(methods):
+            g = rows[(rows["graph"] == graph) & (rows["method"] == m)].sort_values("n_agents")
+            if not g.empty:
+                ax.errorbar(g["n_agents"], g["ratio_mean"], fmt="o-", color=colours(i), label=m, capsize=2, ms=4,
+                            yerr=[g["ratio_mean"] - g["ratio_lo"], g["ratio_hi"] - g["ratio_mean"]])
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xticks(sizes)
+        ax.set_title(graph)
+        ax.set_xlabel("team size N")
+        ax.axhline(1.0, color="0.5", lw=0.8, ls="--")
+        _plain_ticks(ax)
+    axes[0, 0].set_ylabel(f"{PARETO_SCENARIOS[task][2]} / centralized (log scale)")
+    fig.suptitle(f"{task}: the {grid} grid", fontsize=10)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    for ax in axes[0, 1:]:  # a method absent from the first panel
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    ncol = min(6, len(labels))
+    fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.045 * -(-len(labels) // ncol) + 0.02, 1, 1))
+    return fig
+
+
 def _legend_below(fig, ax, ncol: int = 4) -> None:
     """The axes' legend under the panel, off the data, in rows of at most `ncol` entries that fit its width."""
     handles, labels = ax.get_legend_handles_labels()

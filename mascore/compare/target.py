@@ -154,10 +154,11 @@ def _localization_switching(n_agents: int, settings: BenchmarkSettings):
     union : mascore.sensor_network.SensorNetworkModel
         :func:`localization_model`'s sensing over the union of the step graphs (it draws the data:
         each possible link's measurement has its own noise; a step keeps its current links' rows).
-    steps : list of (mascore.sensor_network.SensorNetworkModel, ndarray of int)
-        Per step k: the model of graph k (anchors' rows, then the relative rows of its current
-        links, as :func:`localization_model` orders them) and the indices of its rows in ``union``'s
-        stacked measurement.
+    step : callable
+        ``step(k) -> (model, rows)``: the model of graph k (anchors' rows, then the relative rows of its
+        current links, as :func:`localization_model` orders them) and the indices ``rows`` of its rows in
+        ``union``'s stacked measurement; built when asked (one step's model at a time in memory: each
+        holds ``(N, 2N, 2N)`` information matrices).
     """
     from .. import sensor_network
 
@@ -182,17 +183,18 @@ def _localization_switching(n_agents: int, settings: BenchmarkSettings):
         rows_of.append(where)
     F, Q = np.eye(n), settings.q_pos * np.eye(n)
     union = sensor_network.SensorNetworkModel(F, Q, H, R, union_adj.astype(float))
-    steps = []
-    for A in G:
+    def step(k: int):
+        A = G[k]
         Hk, Rk, idx = [], [], []
         for i in range(n_agents):
-            keep = [k for k in rows_of[i] if k == "anchor" or A[i, k]]
-            rows = np.concatenate([rows_of[i][k] for k in keep]) if keep else np.zeros(0, int)
+            keep = [j for j in rows_of[i] if j == "anchor" or A[i, j]]
+            rows = np.concatenate([rows_of[i][j] for j in keep]) if keep else np.zeros(0, int)
             idx.append(rows)
             Hk.append(union.H_stacked[rows])
             Rk.append(settings.r * np.eye(len(rows)) if len(rows) else None)
-        steps.append((sensor_network.SensorNetworkModel(F, Q, Hk, Rk, A.astype(float)), np.concatenate(idx)))
-    return union, steps
+        return sensor_network.SensorNetworkModel(F, Q, Hk, Rk, A.astype(float)), np.concatenate(idx)
+
+    return union, step
 
 
 def localization_riccati(n_agents: int, graph: str = "ring",
@@ -403,32 +405,31 @@ def simulate_target(
     if graph not in SWITCHING_GRAPHS:
         raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
     if graph == "switching" and task == "localization":  # the sensing switches too: each step's links' rows
-        model, steps = _localization_switching(n_agents, s)
+        model, step_of = _localization_switching(n_agents, s)
     else:
         model = (target_model if task == "target" else localization_model)(
             n_agents, "ring" if graph == "switching" else graph, s)
+        G = switching_graphs(n_agents, s.n_steps, s) if graph == "switching" else None
+        step_of = (lambda k: (model, slice(None))) if G is None else (lambda k: (model.on_graph(G[k]), slice(None)))
     n = model.n_states
     P0 = s.p0 * np.eye(n)
     blocks = [model.simulate(np.zeros(n), P0, s.n_steps, np.random.default_rng(sd), n_runs=runs) for sd in seeds]
     x_true, z = (np.concatenate(parts, axis=1) for parts in zip(*blocks))  # (K + 1 or K, blocks x runs, ...)
-    if graph == "switching":  # the filters hold no state: one filter per step's graph
-        if task == "target":
-            steps = [(model.on_graph(A), slice(None)) for A in switching_graphs(n_agents, s.n_steps, s)]
-    else:
-        steps = [(model, slice(None))] * s.n_steps
-    built = {id(m): spec.build(m) for m, _ in steps}  # the spec found once (a lookup scans the package)
     own = _own_position(n_agents, spec.whole_filter) if task == "localization" else None
-    tic = time.thread_time()
     xk, Pk = model.check_state(np.zeros(n), P0, per_agent=not spec.whole_filter)
     xs, Ps = [], []  # the steady window's estimates (localization: each agent's own position only)
-    for k, (m, rows) in enumerate(steps):
-        f = built[id(m)]
+    cpu, last = 0.0, None
+    for k in range(s.n_steps):
+        m, rows = step_of(k)
+        if m is not last:  # the filters hold no state: one per step's graph (switching), built when needed
+            f, last = spec.build(m), m  # the spec found once (a lookup scans the package)
+        tic = time.thread_time()
         xk, Pk = f.update(*f.predict(xk, Pk), z[k][..., rows])
+        cpu += time.thread_time() - tic
         if k >= s.steady_from:
             xs.append(xk if own is None else own[0](xk))
             Ps.append(Pk if own is None else own[1](Pk))
     x, P = np.stack(xs), np.stack(Ps)
-    cpu = time.thread_time() - tic
     truth = x_true[1:][s.steady_from:]                         # (K', runs, n)
     if task == "target":
         if spec.whole_filter:
