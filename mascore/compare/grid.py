@@ -31,7 +31,16 @@ from .scenario import scenarios
 from .shared import simulate_shared
 from .stats import NEES_DIMENSION, anees_bounds, mean_interval, rms_ratio
 from .tables import fitted_slopes
-from .target import simulate_target, target_cost, target_methods
+from .target import (
+    LATENCY_METHODS,
+    LINK_STUDIES,
+    LOSS_METHODS,
+    SEND_ON_DELTA_METHODS,
+    link_options,
+    simulate_target,
+    target_cost,
+    target_methods,
+)
 from .team import simulate_team, vlahakis_profile
 
 # --------------------------------------------------------------------------------------------
@@ -125,6 +134,7 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
         *((task, {**base, "task": [task], "method": list(FUSION_KNOB_METHODS), "n_agents": [8],
                   "block": blocks200}) for task in ("target", "localization")),
     ]
+    studies += _link_studies(quick, base, blocks, blocks200)
     if not quick:
         studies.append(("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
                                          "graph": ["switching"], "n_agents": [16], "block": blocks200}))
@@ -137,6 +147,26 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     for scenario in scenarios().values():  # the scenarios declared in their own modules, after the book's
         cells += [dict(c) for c in scenario.cells(name)]
     return cells
+
+
+def _link_studies(quick: bool, base: dict, blocks: list, blocks200: list) -> list[tuple[str, dict]]:
+    """The studies of the target and localization tasks over lossy, late and event-triggered links (N = 8, ring).
+
+    Quick: the target task only, loss 0.1 and 0.3 for the bound, forwarding, CI and ICF at one step;
+    latency without loss; send-on-delta at 0.5 and 1. Full: both tasks, every method of
+    :data:`LOSS_METHODS` at both losses, latency at loss 0, 0.1 and 0.3, and send-on-delta at 0.5, 1 and 2.
+    """
+    tasks = ["target"] if quick else ["target", "localization"]
+    ring8 = {**base, "n_agents": [8], "block": blocks if quick else blocks200}
+    deltas = [s for s in LINK_STUDIES if s.startswith("send-on-delta")][:2 if quick else 3]
+    out = []
+    for task in tasks:
+        loss_methods = ["centralized", "forwarding", "ci-L1", "icf-L1"] if quick else list(LOSS_METHODS)
+        out.append(("loss", {**ring8, "task": [task], "method": loss_methods, "dropout": [0.1, 0.3]}))
+        out.append(("latency", {**ring8, "task": [task], "method": list(LATENCY_METHODS),
+                                "dropout": [0.0] if quick else [0.0, 0.1, 0.3]}))
+        out += [(study, {**ring8, "task": [task], "method": list(SEND_ON_DELTA_METHODS)}) for study in deltas]
+    return out
 
 
 def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSettings = SETTINGS) -> list[dict[str, Any]]:
@@ -176,9 +206,10 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
     seed = cell_seed(cell, SEED_AXES if sensing == "full" else (*SEED_AXES, "sensing"), base_seed)
     common = {"noise": cell["noise"], "dropout": float(cell["dropout"])}
     new = scenarios()
-    if cell["task"] in ("target", "localization"):
+    if cell["task"] in ("target", "localization"):  # dropout: packet loss; the study: latency or send-on-delta
         metrics = simulate_target(cell["method"], int(cell["n_agents"]), seed, graph=cell.get("graph", "ring"),
-                                  settings=settings, task=cell["task"])
+                                  settings=settings, task=cell["task"], loss=float(cell["dropout"]),
+                                  **link_options(cell.get("study", "")))
         nan = np.full_like(metrics["rmse_own"], np.nan)
         metrics.update(rmse_view=nan, containment=nan, spread=nan, rmse_far=nan, set_size=nan)
     elif cell["task"] in new:  # a scenario declared in its own module
@@ -297,7 +328,8 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
         runs = int(np.isfinite(g["nees_own"].to_numpy()).sum())
         dim = NEES_DIMENSION.get(row.get("task", g["task"].iloc[0]))
         row["nees_bound_lo"], row["nees_bound_hi"] = anees_bounds(runs, dim) if runs and dim else (np.nan, np.nan)
-        row["floats"] = float(g["floats"].iloc[0])
+        floats = g["floats"].to_numpy()  # one value per method, but as sent under send-on-delta: their mean
+        row["floats"] = float(floats[0]) if (floats == floats[0]).all() else float(floats.mean())
         row["cpu_us"] = float(g.drop_duplicates("cell")["cpu_us"].median())
         out.append(row)
     return pd.DataFrame(out).sort_values(by, kind="stable", ignore_index=True)  # N numerically, not as text
