@@ -91,6 +91,15 @@ __all__ = [
     "TARGET_METHODS",
     "target_methods",
     "TARGET_NOT_APPLICABLE",
+    "LATENCY_METHODS",
+    "LATENCY_NOT_MODELLED",
+    "LINK_STUDIES",
+    "LOSS_METHODS",
+    "SEND_ON_DELTA_METHODS",
+    "link_options",
+    "link_table",
+    "send_on_delta_table",
+    "plot_send_on_delta",
     "TEAM_METHODS",
     "VLAHAKIS_PHI",
     "REN_Q",
@@ -163,16 +172,17 @@ _NAMES = {
         '_average', 'simulate_shared'
     ),
     'target': (
-        'LOCALIZATION_NOT_APPLICABLE', 'TARGET_METHODS', 'TARGET_NOT_APPLICABLE', '_localization_switching',
-        'localization_model', 'localization_riccati', 'simulate_target', 'target_cost', 'target_filter',
-        'target_methods', 'target_model'
+        'LATENCY_METHODS', 'LATENCY_NOT_MODELLED', 'LINK_STUDIES', 'LOCALIZATION_NOT_APPLICABLE', 'LOSS_METHODS',
+        'SEND_ON_DELTA_METHODS', 'TARGET_METHODS', 'TARGET_NOT_APPLICABLE', '_localization_switching',
+        'link_options', 'localization_model', 'localization_riccati', 'simulate_target', 'target_cost',
+        'target_filter', 'target_methods', 'target_model'
     ),
     'grid': (
         'CompareResult', '_mean_ci', 'cell_cost', 'grid_cells', 'run', 'run_cell', 'run_compare', 'summarize'
     ),
     'tables': (
-        'CPU_COLUMN', 'NEAR_BOUND', '_position_headline', 'fitted_slopes', 'headline', 'knob_table',
-        'position_only_kf_rmse'
+        'CPU_COLUMN', 'NEAR_BOUND', '_position_headline', 'fitted_slopes', 'headline', 'knob_table', 'link_table',
+        'position_only_kf_rmse', 'send_on_delta_table'
     ),
     'verdicts': (
         'CLAIMS', 'HELD_OUT', 'WRITTEN_FROM', 'compare_claims', 'deciding_runs', 'differing_claims'
@@ -182,7 +192,7 @@ _NAMES = {
         'rms_ratio'
     ),
     'plots': (
-        '_concat', '_order', '_plain_ticks', '_plt', 'plot_cost', 'plot_pareto', 'plot_robustness'
+        '_concat', '_order', '_plain_ticks', '_plt', 'plot_cost', 'plot_pareto', 'plot_robustness', 'plot_send_on_delta'
     ),
     'cost': (
         'NODE_ORDER', 'node_cost', 'node_costs', 'per_agent_costs'

@@ -349,3 +349,95 @@ def _consistency_verdict(r, confidence: float | None) -> str:
         inside = r["containment_mean"]
         return "—" if not np.isfinite(inside) else "contains" if inside >= confidence else "leaks"
     return anees_verdict(r) if np.isfinite(r["nees_own_mean"]) else "—"
+
+
+def link_table(summary, task: str = "target"):
+    """Accuracy and consistency of each method over lossy and late links, beside ideal links (N = 8, ring).
+
+    Parameters
+    ----------
+    summary : pandas.DataFrame
+        Output of :func:`summarize` with the studies ``loss`` and ``latency`` (:data:`LINK_STUDIES`).
+    task : {"target", "localization"}
+        The scenario.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per method (table order); columns ``(quantity, links)``: ``RMSE ratio`` (to the
+        centralized filter, which keeps ideal links) and ``NEES/dof``, for ideal links (the task's
+        own study), each packet loss, and one-step latency at each loss the summary holds; NaN where a
+        method has no model of the links (:data:`LATENCY_NOT_MODELLED`).
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore import compare
+    >>> s = pd.DataFrame({"study": ["target", "loss"], "task": "target", "method": "ci-L1", "n_agents": 8,
+    ...                   "graph": "ring", "dropout": [0.0, 0.3], "ratio_mean": [1.3, 1.4], "nees_own_mean": 0.7})
+    >>> compare.link_table(s).columns.tolist()
+    [('RMSE ratio', 'ideal'), ('RMSE ratio', 'loss 0.3'), ('NEES/dof', 'ideal'), ('NEES/dof', 'loss 0.3')]
+    """
+    import pandas as pd
+
+    from .target import LINK_STUDIES
+
+    if task not in ("target", "localization"):
+        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    s = summary[(summary["task"] == task) & (summary["n_agents"] == 8) & (summary["graph"] == "ring")]
+    ideal = s[(s["study"] == task) & (s["dropout"] == 0.0)].assign(links="ideal")
+    lossy = s[s["study"] == "loss"].assign(links=lambda d: [f"loss {p:g}" for p in d["dropout"]])
+    late = s[s["study"] == "latency"].assign(links=lambda d: [f"late, loss {p:g}" for p in d["dropout"]])
+    if lossy.empty and late.empty:
+        raise ValueError(f"summary has no cell of the studies 'loss' or 'latency' ({tuple(LINK_STUDIES)[:2]}) for "
+                         f"{task!r}: rerun the sweep (grid_cells)")
+    rows = pd.concat([ideal, lossy, late])
+    order = [links for links in dict.fromkeys(rows["links"])]
+    methods = [m for m in target_methods(task) if m in set(lossy["method"]) | set(late["method"])]
+    out = {name: rows.pivot_table(index="method", columns="links", values=col).reindex(index=methods, columns=order)
+           for name, col in (("RMSE ratio", "ratio_mean"), ("NEES/dof", "nees_own_mean"))}
+    return pd.concat(out, axis=1)
+
+
+def send_on_delta_table(summary, task: str = "target"):
+    """Send-on-delta: floats sent, accuracy and consistency of CI and ICF per threshold (N = 8, ring).
+
+    Parameters
+    ----------
+    summary : pandas.DataFrame
+        Output of :func:`summarize` with the studies ``send-on-delta-<delta>``.
+    task : {"target", "localization"}
+        The scenario.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Rows ``(method, delta)`` (``delta`` 0: the method sending at every step, from the task's own
+        study); columns ``floats`` (sent per agent and step, as sent), ``RMSE ratio`` with its 95 %
+        interval ``lo``, ``hi``, and ``NEES/dof``.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore import compare
+    >>> s = pd.DataFrame({"study": ["target", "send-on-delta-1"], "task": "target", "method": "ci-L1",
+    ...                   "n_agents": 8, "graph": "ring", "dropout": 0.0, "floats": [14.0, 3.1],
+    ...                   "ratio_mean": [1.3, 1.5], "ratio_lo": 1.2, "ratio_hi": 1.6, "nees_own_mean": 0.6})
+    >>> compare.send_on_delta_table(s).index.tolist()
+    [('ci-L1', 0.0), ('ci-L1', 1.0)]
+    """
+
+    from .target import LINK_STUDIES, SEND_ON_DELTA_METHODS
+
+    if task not in ("target", "localization"):
+        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    s = summary[(summary["task"] == task) & (summary["n_agents"] == 8) & (summary["graph"] == "ring")
+                & (summary["dropout"] == 0.0) & summary["method"].isin(SEND_ON_DELTA_METHODS[1:])]
+    delta = {task: 0.0, **{k: v["send_delta"] for k, v in LINK_STUDIES.items() if "send_delta" in v}}
+    s = s[s["study"].isin(delta)].assign(delta=lambda d: d["study"].map(delta))
+    if not (s["delta"] > 0).any():
+        raise ValueError(f"summary has no send-on-delta cell for {task!r}: rerun the sweep (grid_cells)")
+    cols = {"floats": "floats", "ratio_mean": "RMSE ratio", "ratio_lo": "lo", "ratio_hi": "hi",
+            "nees_own_mean": "NEES/dof"}
+    out = s.set_index(["method", "delta"])[list(cols)].rename(columns=cols)
+    return out.sort_index(level=["method", "delta"]).rename_axis(["method", "delta (std. dev.)"])
