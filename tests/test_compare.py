@@ -55,8 +55,9 @@ def serial(tmp_path_factory):
 def test_grid_cells_cover_the_studies_with_100_seeds():
     cells = compare.grid_cells("quick")
     studies = {c["study"] for c in cells}
-    assert studies == {"scaling", "graph", "dropout", "noise", "wrong-q", "shared", "target", "localization",
-                       "position", "switching"}
+    assert studies - set(compare.LINK_STUDIES) == {"scaling", "graph", "dropout", "noise", "wrong-q", "shared", "target",
+                                                   "localization", "position", "switching"}
+    assert studies & set(compare.LINK_STUDIES) == {"loss", "latency", "send-on-delta-0.5", "send-on-delta-1"}
     blocks = {c["block"] for c in cells}
     assert len(blocks) * compare.SETTINGS.runs >= 100
     assert {c["method"] for c in cells if c["task"] == "team"} == set(compare.ALL_TEAM_METHODS)

@@ -68,7 +68,10 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     the scaling study at N = 8 only; 4 blocks in both grids, as the recipes beside them);
     each with ``blocks x settings.runs`` seeds (quick: 2 x 50, full: 4 x 50, N up to
     64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
-    N = 8, position sensing, the shared, target and localization tasks).
+    N = 8, position sensing, the shared, target and localization tasks); and the links
+    of the target and localization tasks at N = 8 on the ring (:data:`LINK_STUDIES`: ``loss``,
+    ``latency``, ``send-on-delta-<delta>``; a cell's ``dropout`` is the packet loss; quick: the
+    target task only, a few methods, 2 blocks; full: both tasks, 4 blocks).
 
     Parameters
     ----------

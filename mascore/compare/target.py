@@ -496,10 +496,10 @@ SEND_ON_DELTA_METHODS = ("centralized", "ci-L1", "icf-L1")
 LOSS_METHODS = TARGET_METHODS
 #: Why a method has no latency model here (the target and localization tables show it).
 LATENCY_NOT_MODELLED = {
-    "ci-L5": "L rounds per step cannot run within a step when each message takes a step",
-    "hcmci-L1": "its novelty pair is a measurement, not a density that can be predicted to the next step",
-    "diffusion": "its diffused estimates and incremental updates would both lag: not modelled",
-    "ci-diffusion": "its diffused estimates and incremental updates would both lag: not modelled",
+    **{m: "L rounds per step cannot run within a step when each message takes a step" for m in ("ci-L5", "icf-L5")},
+    **{m: "its novelty pair is a measurement, not a density that can be predicted to the next step"
+       for m in ("hcmci-L1", "hcmci-L5")},
+    **{m: "its incremental update and its diffusion would both lag: not modelled" for m in ("diffusion", "ci-diffusion")},
 }
 
 
