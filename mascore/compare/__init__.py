@@ -60,6 +60,11 @@ relative measurements are those of its current links); the papers'
 methods that do not apply are listed with the reason
 (:data:`TARGET_NOT_APPLICABLE`, :data:`LOCALIZATION_NOT_APPLICABLE`).
 
+**Links of the target and localization tasks** (:data:`LINK_STUDIES`, :mod:`mascore.fusion_links`): packet
+loss per link and step (a lost message is not received; each filter fuses what arrived, with its weights on
+the links that delivered), one-step latency (:data:`LATENCY_METHODS`) and send-on-delta messages for CI and
+ICF at one consensus step (:data:`SEND_ON_DELTA_METHODS`, floats counted as sent), at N = 8 on the ring.
+
 **Robustness axes**: link drop-outs (each link's measurement and message lost with
 probability ``dropout`` at each step; a lost message leaves the last received
 view in place), noise distribution (Gaussian, bounded uniform, Student-t with 3
