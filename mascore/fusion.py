@@ -726,7 +726,36 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         return Om + self.model.information_matrices, q + self.model._information_vectors(z)
 
     def pair_estimate(self, Om: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The estimate of a fused pair: ``x = Omega^{-1} q`` of shape (..., N, n), ``P = Omega^{-1}`` (..., N, n, n)."""
+        """The estimate of a fused information pair: ``x = Omega^{-1} q``, ``P = Omega^{-1}``.
+
+        Parameters
+        ----------
+        Om : (..., N, n, n) ndarray
+            Information matrices, positive definite (e.g. weighted sums of :meth:`message_pair`'s).
+        q : (..., N, n) ndarray
+            Information vectors.
+
+        Returns
+        -------
+        x : (..., N, n) ndarray
+            Means.
+        P : (..., N, n, n) ndarray
+            Covariances.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.ring_graph(3))
+        >>> fusion.ConsensusOnInformationFilter(model, 1).pair_estimate(np.full((3, 1, 1), 4.0), np.full((3, 1), 2.0))
+        (array([[0.5],
+               [0.5],
+               [0.5]]), array([[[0.25]],
+        <BLANKLINE>
+               [[0.25]],
+        <BLANKLINE>
+               [[0.25]]]))
+        """
         return from_information(Om, q)
 
     def _correct(self, x, P, z):
@@ -874,7 +903,31 @@ class InformationConsensusFilter(_NetworkFilter):
         return J / N + self.model.information_matrices, q / N + self.model._information_vectors(z)
 
     def pair_estimate(self, V: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The estimate of a fused pair: ``x = V^{-1} v``, ``P = (N V)^{-1}``, shapes ``(..., N, n)``, ``(..., N, n, n)``."""
+        """The estimate of a fused pair: ``x = V^{-1} v``, ``P = (N V)^{-1}``.
+
+        Parameters
+        ----------
+        V : (..., N, n, n) ndarray
+            Information matrices, positive definite (e.g. weighted sums of :meth:`message_pair`'s).
+        v : (..., N, n) ndarray
+            Information vectors.
+
+        Returns
+        -------
+        x : (..., N, n) ndarray
+            Means.
+        P : (..., N, n, n) ndarray
+            Covariances.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.ring_graph(4))
+        >>> x, P = fusion.InformationConsensusFilter(model, 1).pair_estimate(np.ones((4, 1, 1)), np.full((4, 1), 2.0))
+        >>> x[:, 0], P[:, 0, 0]                                   # P = 1 / (N V)
+        (array([2., 2., 2., 2.]), array([0.25, 0.25, 0.25, 0.25]))
+        """
         Vinv = symmetric_part(np.linalg.inv(V))
         return (Vinv @ v[..., None])[..., 0], Vinv / self.model.n_agents
 
