@@ -267,16 +267,16 @@ def plot_send_on_delta(summary, task: str = "target"):
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for i, (method, g) in enumerate(t.groupby(level="method", sort=False)):
         g = g.droplevel("method")
-        ax.errorbar(g["floats"], g["RMSE ratio"], yerr=[g["RMSE ratio"] - g["lo"], g["hi"] - g["RMSE ratio"]],
+        ax.errorbar(g["floats/agent/step"], g["RMSE ratio"], yerr=[g["RMSE ratio"] - g["lo"], g["hi"] - g["RMSE ratio"]],
                     fmt="o-", color=f"C{i}", label=method, capsize=2)
         for d, row in g.iterrows():
-            ax.annotate(f"δ = {d:g}", (row["floats"], row["RMSE ratio"]), textcoords="offset points",
+            ax.annotate(f"δ = {d:g}", (row["floats/agent/step"], row["RMSE ratio"]), textcoords="offset points",
                         xytext=(6, 6), fontsize=9, color=f"C{i}")
     ax.set_xscale("log")
     ax.set_xlabel("floats sent per agent per step (log scale)")
     ax.set_ylabel("RMSE / centralized")
     _plain_ticks(ax)
-    lo, hi = float(t["floats"].min()), float(t["floats"].max())
+    lo, hi = float(t["floats/agent/step"].min()), float(t["floats/agent/step"].max())
     ax.set_xticks([v for v in (0.5, 1, 2, 3, 5, 7, 10, 14, 20, 30, 50, 100, 150, 300) if 0.8 * lo <= v <= 1.25 * hi])
     ax.set_xlim(0.8 * lo, 1.25 * hi)
     _legend_below(fig, ax, ncol=2)

@@ -413,7 +413,7 @@ def send_on_delta_table(summary, task: str = "target"):
     -------
     pandas.DataFrame
         Rows ``(method, delta)`` (``delta`` 0: the method sending at every step, from the task's own
-        study); columns ``floats`` (sent per agent and step, as sent), ``RMSE ratio`` with its 95 %
+        study); columns ``floats/agent/step`` (as sent), ``RMSE ratio`` with its 95 %
         interval ``lo``, ``hi``, and ``NEES/dof``.
 
     Examples
@@ -437,7 +437,7 @@ def send_on_delta_table(summary, task: str = "target"):
     s = s[s["study"].isin(delta)].assign(delta=lambda d: d["study"].map(delta))
     if not (s["delta"] > 0).any():
         raise ValueError(f"summary has no send-on-delta cell for {task!r}: rerun the sweep (grid_cells)")
-    cols = {"floats": "floats", "ratio_mean": "RMSE ratio", "ratio_lo": "lo", "ratio_hi": "hi",
+    cols = {"floats": "floats/agent/step", "ratio_mean": "RMSE ratio", "ratio_lo": "lo", "ratio_hi": "hi",
             "nees_own_mean": "NEES/dof"}
     out = s.set_index(["method", "delta"])[list(cols)].rename(columns=cols)
-    return out.sort_index(level=["method", "delta"]).rename_axis(["method", "delta (std. dev.)"])
+    return out.sort_index(level=["method", "delta"]).rename_axis(["method", "delta"])
