@@ -153,3 +153,19 @@ def test_bad_link_arguments_are_named():
                                     np.zeros((1, 8)), send_delta=-1.0)
     with pytest.raises(ValueError, match="loss must be"):
         fusion_links.lossy_graphs(graphs.ring_graph(4), -0.1, 3, 0)
+
+
+def test_a_lost_link_is_an_absent_edge_with_the_weights_renormalized_over_what_arrived():
+    """The step's CI weights are the Metropolis weights of the delivered graph: zero on lost links, rows of one."""
+    from mascore import sensor_network
+
+    model = compare.target_model(8)
+    G = fusion_links.lossy_graphs(model.adjacency, 0.3, 50, 9)
+    k = int(np.argmax(G.sum(axis=(1, 2)) < model.adjacency.sum()))          # a step that lost a link
+    step = compare.target_filter("ci-L1", sensor_network.SensorNetworkModel(model.F, model.Q, model.H, model.R, G[k]))
+    W = step.round_weights
+    lost = (model.adjacency > 0) & (G[k] == 0)
+    assert lost.any() and (W[lost] == 0).all() and np.allclose(W.sum(1), 1) and np.allclose(W, W.T)
+    degree = (G[k] > 0).sum(1)
+    i, j = np.argwhere(G[k] > 0)[0]
+    assert W[i, j] == pytest.approx(1 / (1 + max(degree[i], degree[j])))       # Xiao, Boyd and Lall's rule
