@@ -102,6 +102,7 @@ __all__ = [
     "LOSS_METHODS",
     "SEND_ON_DELTA_METHODS",
     "link_options",
+    "link_summary",
     "link_table",
     "send_on_delta_table",
     "plot_send_on_delta",
@@ -183,7 +184,8 @@ _NAMES = {
         'target_filter', 'target_methods', 'target_model'
     ),
     'grid': (
-        'CompareResult', '_mean_ci', 'cell_cost', 'grid_cells', 'run', 'run_cell', 'run_compare', 'summarize'
+        'CompareResult', '_mean_ci', 'cell_cost', 'grid_cells', 'link_summary', 'run', 'run_cell', 'run_compare',
+        'summarize'
     ),
     'tables': (
         'CPU_COLUMN', 'NEAR_BOUND', '_position_headline', 'fitted_slopes', 'headline', 'knob_table', 'link_table',

@@ -407,17 +407,19 @@ class CompareResult:
     table : pandas.DataFrame
         One row per Monte Carlo run and cell.
     summary : pandas.DataFrame
-        :func:`summarize` of the table.
+        :func:`summarize` of the table on ideal links (every study but :data:`LINK_STUDIES`).
     slopes : dict
         Method -> fitted CPU slope in N (:func:`fitted_slopes`).
     phi : dict
         The Vlahakis program's value at fixed coupling gains on the ring of 8 (:func:`vlahakis_profile`).
+    links : pandas.DataFrame or None
+        :func:`link_summary` of the table: the studies over lossy, late and event-triggered links.
 
     Examples
     --------
     >>> from mascore.compare import CompareResult
     >>> sorted(CompareResult.__dataclass_fields__)[:3]
-    ['phi', 'seed', 'settings']
+    ['links', 'phi', 'seed']
     """
 
     settings: BenchmarkSettings
@@ -426,6 +428,7 @@ class CompareResult:
     summary: Any
     slopes: dict
     phi: dict
+    links: Any = None
 
 
 def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = False, *,
@@ -472,9 +475,46 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
         table = run_sweep(grid_cells(settings.grid), functools.partial(run_cell, base_seed=seed, settings=settings),
                           folder / f"table-{settings.grid}-{seed}.csv", workers=workers, scheduler=scheduler,
                           progress=progress, cost=cell_cost)
-    summary = summarize(table, settings=settings)
+    lossy = table["study"].isin(LINK_STUDIES)
+    summary = summarize(table[~lossy], settings=settings)
     profile = vlahakis_profile(8, settings=settings)
-    return CompareResult(settings, int(seed), table, summary, fitted_slopes(summary), profile)
+    links = link_summary(table, settings) if lossy.any() else None
+    return CompareResult(settings, int(seed), table, summary, fitted_slopes(summary), profile, links)
+
+
+def link_summary(table, settings: BenchmarkSettings = SETTINGS):
+    """:func:`summarize` of the studies over lossy, late and event-triggered links (:data:`LINK_STUDIES`) alone.
+
+    They are summarized apart from the rest (:attr:`CompareResult.summary`), whose rows they would
+    otherwise share on the coordinates the headline tables select by (task, N, ring, no drop-out).
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The sweep's per-run table (:func:`run_compare`'s first output).
+    settings : BenchmarkSettings
+        The benchmark's settings.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per link study, task, method and loss (``dropout``), as :func:`summarize`; each ratio is
+        to the centralized filter of the same study and loss (it keeps ideal links).
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> table, summary = compare.run_compare("quick", "results", workers=2)  # doctest: +SKIP
+    >>> compare.link_table(summary, compare.link_summary(table))  # doctest: +SKIP
+    """
+    import pandas as pd
+
+    if not isinstance(table, pd.DataFrame) or "study" not in table:
+        raise TypeError("table must be the sweep's per-run table (a pandas DataFrame with a 'study' column)")
+    rows = table[table["study"].isin(LINK_STUDIES)]
+    if rows.empty:
+        raise ValueError(f"table has no row of the link studies {tuple(LINK_STUDIES)}: rerun the sweep (grid_cells)")
+    return summarize(rows, settings=settings)
 
 
 def cell_cost(cell: Mapping[str, Any]) -> float:

@@ -234,13 +234,15 @@ def _order(col: str):
     return None
 
 
-def plot_send_on_delta(summary, task: str = "target"):
+def plot_send_on_delta(summary, links, task: str = "target"):
     """Send-on-delta's trade: RMSE ratio against the floats actually sent, per threshold, for CI and ICF.
 
     Parameters
     ----------
     summary : pandas.DataFrame
-        Output of :func:`summarize` with the studies ``send-on-delta-<delta>`` (:func:`send_on_delta_table`).
+        Output of :func:`summarize` (the methods sending at every step).
+    links : pandas.DataFrame
+        Output of :func:`link_summary`, with the studies ``send-on-delta-<delta>`` (:func:`send_on_delta_table`).
     task : {"target", "localization"}
         The scenario.
 
@@ -257,13 +259,13 @@ def plot_send_on_delta(summary, task: str = "target"):
     >>> s = pd.DataFrame({"study": ["target", "send-on-delta-1"], "task": "target", "method": "ci-L1",
     ...                   "n_agents": 8, "graph": "ring", "dropout": 0.0, "floats": [14.0, 3.1],
     ...                   "ratio_mean": [1.3, 1.5], "ratio_lo": 1.2, "ratio_hi": 1.6, "nees_own_mean": 0.6})
-    >>> compare.plot_send_on_delta(s).axes[0].get_xlabel()
+    >>> compare.plot_send_on_delta(s[:1], s[1:]).axes[0].get_xlabel()
     'floats sent per agent per step (log scale)'
     """
     from .tables import send_on_delta_table
 
     plt = _plt()
-    t = send_on_delta_table(summary, task)
+    t = send_on_delta_table(summary, links, task)
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for i, (method, g) in enumerate(t.groupby(level="method", sort=False)):
         g = g.droplevel("method")

@@ -351,13 +351,15 @@ def _consistency_verdict(r, confidence: float | None) -> str:
     return anees_verdict(r) if np.isfinite(r["nees_own_mean"]) else "—"
 
 
-def link_table(summary, task: str = "target"):
+def link_table(summary, links, task: str = "target"):
     """Accuracy and consistency of each method over lossy and late links, beside ideal links (N = 8, ring).
 
     Parameters
     ----------
     summary : pandas.DataFrame
-        Output of :func:`summarize` with the studies ``loss`` and ``latency`` (:data:`LINK_STUDIES`).
+        Output of :func:`summarize` (its ideal-link rows of `task`).
+    links : pandas.DataFrame
+        Output of :func:`link_summary`, with the studies ``loss`` and ``latency`` (:data:`LINK_STUDIES`).
     task : {"target", "localization"}
         The scenario.
 
@@ -375,7 +377,7 @@ def link_table(summary, task: str = "target"):
     >>> from mascore import compare
     >>> s = pd.DataFrame({"study": ["target", "loss"], "task": "target", "method": "ci-L1", "n_agents": 8,
     ...                   "graph": "ring", "dropout": [0.0, 0.3], "ratio_mean": [1.3, 1.4], "nees_own_mean": 0.7})
-    >>> compare.link_table(s).columns.tolist()
+    >>> compare.link_table(s[:1], s[1:]).columns.tolist()
     [('RMSE ratio', 'ideal'), ('RMSE ratio', 'loss 0.3'), ('NEES/dof', 'ideal'), ('NEES/dof', 'loss 0.3')]
     """
     import pandas as pd
@@ -384,7 +386,8 @@ def link_table(summary, task: str = "target"):
 
     if task not in ("target", "localization"):
         raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
-    s = summary[(summary["task"] == task) & (summary["n_agents"] == 8) & (summary["graph"] == "ring")]
+    s = pd.concat([summary[summary["study"] == task], links[links["study"].isin(LINK_STUDIES)]])
+    s = s[(s["task"] == task) & (s["n_agents"] == 8) & (s["graph"] == "ring")]
     ideal = s[(s["study"] == task) & (s["dropout"] == 0.0)].assign(links="ideal")
     lossy = s[s["study"] == "loss"].assign(links=lambda d: [f"loss {p:g}" for p in d["dropout"]])
     late = s[s["study"] == "latency"].assign(links=lambda d: [f"late, loss {p:g}" for p in d["dropout"]])
@@ -399,13 +402,15 @@ def link_table(summary, task: str = "target"):
     return pd.concat(out, axis=1)
 
 
-def send_on_delta_table(summary, task: str = "target"):
+def send_on_delta_table(summary, links, task: str = "target"):
     """Send-on-delta: floats sent, accuracy and consistency of CI and ICF per threshold (N = 8, ring).
 
     Parameters
     ----------
     summary : pandas.DataFrame
-        Output of :func:`summarize` with the studies ``send-on-delta-<delta>``.
+        Output of :func:`summarize` (its ideal-link rows of `task`: the methods sending at every step).
+    links : pandas.DataFrame
+        Output of :func:`link_summary`, with the studies ``send-on-delta-<delta>``.
     task : {"target", "localization"}
         The scenario.
 
@@ -423,16 +428,18 @@ def send_on_delta_table(summary, task: str = "target"):
     >>> s = pd.DataFrame({"study": ["target", "send-on-delta-1"], "task": "target", "method": "ci-L1",
     ...                   "n_agents": 8, "graph": "ring", "dropout": 0.0, "floats": [14.0, 3.1],
     ...                   "ratio_mean": [1.3, 1.5], "ratio_lo": 1.2, "ratio_hi": 1.6, "nees_own_mean": 0.6})
-    >>> compare.send_on_delta_table(s).index.tolist()
+    >>> compare.send_on_delta_table(s[:1], s[1:]).index.tolist()
     [('ci-L1', 0.0), ('ci-L1', 1.0)]
     """
+    import pandas as pd
 
     from .target import LINK_STUDIES, SEND_ON_DELTA_METHODS
 
     if task not in ("target", "localization"):
         raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
-    s = summary[(summary["task"] == task) & (summary["n_agents"] == 8) & (summary["graph"] == "ring")
-                & (summary["dropout"] == 0.0) & summary["method"].isin(SEND_ON_DELTA_METHODS[1:])]
+    s = pd.concat([summary[summary["study"] == task], links[links["study"].isin(LINK_STUDIES)]])
+    s = s[(s["task"] == task) & (s["n_agents"] == 8) & (s["graph"] == "ring") & (s["dropout"] == 0.0)
+          & s["method"].isin(SEND_ON_DELTA_METHODS[1:])]
     delta = {task: 0.0, **{k: v["send_delta"] for k, v in LINK_STUDIES.items() if "send_delta" in v}}
     s = s[s["study"].isin(delta)].assign(delta=lambda d: d["study"].map(delta))
     if not (s["delta"] > 0).any():
