@@ -22,6 +22,7 @@ the same model, so every method sees exactly the same sensing.
 :func:`covariance_intersection`        fusion under unknown correlation (Julier and Uhlmann 1997)
 :func:`error_covariance`               a filter's exact error covariance (no Monte Carlo)
 :mod:`mascore.fusion_cost`             floats sent and flops per agent per step
+:mod:`mascore.fusion_links`            packet loss, one-step latency and send-on-delta messages
 =====================================  ==========================================================
 
 Shapes: every distributed filter's state is ``x`` of shape ``(..., N, n)`` and

@@ -142,6 +142,8 @@ def test_bad_link_arguments_are_named():
         compare.simulate_target("diffusion", 8, 0, runs=2, latency=1)
     with pytest.raises(ValueError, match="send_delta: method"):
         compare.simulate_target("ci-L5", 8, 0, runs=2, send_delta=1.0)
+    with pytest.raises(ValueError, match="send_delta must be"):
+        compare.simulate_target("ci-L1", 8, 0, runs=2, send_delta=float("nan"))
     with pytest.raises(ValueError, match="send_delta needs a fixed graph"):
         compare.simulate_target("ci-L1", 8, 0, runs=2, send_delta=1.0, loss=0.1)
     model = compare.target_model(8)

@@ -513,6 +513,9 @@ def _check_links(method: str, loss: object, latency: object, send_delta: object,
     if latency and method not in LATENCY_METHODS:
         raise ValueError(f"latency: method must be one of {LATENCY_METHODS}; got {method!r}")
     if send_delta is not None:
+        if isinstance(send_delta, bool) or not isinstance(send_delta, (int, float, np.floating)) \
+                or not np.isfinite(send_delta) or send_delta < 0:
+            raise ValueError(f"send_delta must be a finite Mahalanobis distance >= 0 or None; got {send_delta!r}")
         if method not in SEND_ON_DELTA_METHODS:
             raise ValueError(f"send_delta: method must be one of {SEND_ON_DELTA_METHODS}; got {method!r}")
         if loss or graph == "switching":
