@@ -58,7 +58,9 @@ References
 - Hu, J., Xie, L., Zhang, C. (2012). Diffusion Kalman filtering based on covariance intersection. IEEE
   Trans. Signal Processing 60(2), 891-902.
 - Olfati-Saber, R. (2007). Distributed Kalman filtering for sensor networks. Proc. 46th IEEE Conference on
-  Decision and Control, 5492-5497.
+  Decision and Control, 5492-5498.
+- Olfati-Saber, R., Fax, J. A., Murray, R. M. (2007). Consensus and cooperation in networked multi-agent
+  systems. Proc. IEEE 95(1), 215-233.
 - Bhattacharjee, D., Subbarao, K. (2021). Set-membership filtering-based leader-follower synchronization of
   discrete-time linear multi-agent systems. ASME J. Dyn. Sys., Meas., Control 143(6).
 - Julier, S. J., Uhlmann, J. K. (1997). A non-divergent estimation algorithm in the presence of unknown
@@ -956,9 +958,9 @@ class KalmanConsensusFilter(_NetworkFilter):
 
     Since ``||gamma_i M_i||_2 <= gamma_i ||M_i|| < eps``, the consensus step moves
     ``xbar_i`` toward its neighbours by less than ``eps`` of each difference, and
-    ``eps <= 1 / d_max`` (``d_max`` the largest degree) keeps it a convex combination for
-    every ``M_i``: the step size of Olfati-Saber, Fax and Murray's Perron matrix
-    ``I - eps L``. The normalization makes the step ``eps M_i`` when ``||M_i||`` is small
+    ``eps <= 1 / d_max`` (``d_max`` the largest degree) keeps it a convex combination (positive
+    definite matrix weights ``I - d_i gamma_i M_i`` and ``gamma_i M_i`` summing to the identity)
+    for every ``M_i``: the step size of Olfati-Saber, Fax and Murray's Perron matrix ``I - eps L``. The normalization makes the step ``eps M_i`` when ``||M_i||`` is small
     (a well-measured state), so on accurate sensing the term is weak at small eps.
 
     Parameters
@@ -1124,7 +1126,7 @@ class SetMembershipForwardingFilter(_NetworkFilter):
         >>> import numpy as np
         >>> from mascore import compare, fusion
         >>> round(float(fusion.SetMembershipForwardingFilter(compare.target_model(4)).initial_shape(np.eye(4))[0, 0]), 3)
-        16.125
+        16.014
         """
         from scipy.stats import chi2
 
@@ -1153,7 +1155,7 @@ class SetMembershipForwardingFilter(_NetworkFilter):
         >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.01]], [[[1.0]]] * 2, [[[1.0]]] * 2, graphs.path_graph(2))
         >>> x, E = fusion.SetMembershipForwardingFilter(model).predict(np.ones((2, 1)), np.ones((2, 1, 1)))
         >>> x[:, 0], np.round(E[:, 0, 0], 4)                       # (1 + sqrt(chi2_1(0.997) 0.01))^2
-        (array([1., 1.]), array([1.6354, 1.6354]))
+        (array([1., 1.]), array([1.6816, 1.6816]))
         """
         x, P = self._check_xP(x, P)
         _, shape = self._motion.predict(np.zeros(self.model.n_states), P)
