@@ -19,7 +19,7 @@ the same model, so every method sees exactly the same sensing.
                                          (Cattivelli and Sayed 2010)
 :class:`CovarianceIntersectionFilter`    incremental update, then covariance intersection of the
                                          neighbours' estimates (Hu, Xie and Zhang 2012)
-:class:`KalmanConsensusFilter`           forwarding, then one consensus step on the neighbours'
+:class:`KalmanConsensusNetworkFilter`           forwarding, then one consensus step on the neighbours'
                                          predictions (Olfati-Saber 2007)
 :class:`SetMembershipForwardingFilter`   forwarding into an outer ellipsoid per agent (set-membership,
                                          Bhattacharjee and Subbarao 2021's closed-form steps)
@@ -119,7 +119,7 @@ __all__ = [
     "InformationConsensusFilter",
     "DiffusionKalmanFilter",
     "CovarianceIntersectionFilter",
-    "KalmanConsensusFilter",
+    "KalmanConsensusNetworkFilter",
     "SetMembershipForwardingFilter",
     "covariance_intersection",
     "error_covariance",
@@ -934,7 +934,7 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         return from_information(np.einsum("k,kab->ab", w, infos), w @ qs)
 
 
-class KalmanConsensusFilter(_NetworkFilter):
+class KalmanConsensusNetworkFilter(_NetworkFilter):
     """The Kalman-consensus filter (KCF) of Olfati-Saber (2007), Algorithm 1.
 
     Per step, agent i corrects its prediction ``(xbar_i, P_i)`` with the measurements
@@ -950,18 +950,18 @@ class KalmanConsensusFilter(_NetworkFilter):
     The covariance returned is ``M_i``, the paper's: the error covariance of the
     forwarding estimate, not of ``x_i`` (the consensus term and the correlation it
     brings are left out), so it need not bound the error. With ``eps = 0`` the filter
-    **is** :class:`MeasurementForwardingFilter`, to the last bit. Olfati-Saber proves
-    (his Theorem 2, for the continuous-time filter of which Algorithm 1 is the
-    discrete-time form) that without noise the estimation errors tend to zero and the
-    agents' estimates to a consensus. Each agent sends its ``q_i`` measurement numbers
-    and its prediction ``xbar_i`` (n numbers) per step.
+    **is** :class:`MeasurementForwardingFilter`, to the last bit. Olfati-Saber's Theorem 2
+    (proven for the continuous-time form of the filter) states that without noise the
+    estimation errors tend to zero and the agents' estimates reach a consensus. Each agent
+    sends its ``q_i`` measurement numbers and its prediction ``xbar_i`` (n numbers) per step.
 
     Since ``||gamma_i M_i||_2 <= gamma_i ||M_i|| < eps``, the consensus step moves
     ``xbar_i`` toward its neighbours by less than ``eps`` of each difference, and
-    ``eps <= 1 / d_max`` (``d_max`` the largest degree) keeps it a convex combination (positive
-    definite matrix weights ``I - d_i gamma_i M_i`` and ``gamma_i M_i`` summing to the identity)
-    for every ``M_i``: the step size of Olfati-Saber, Fax and Murray's Perron matrix ``I - eps L``. The normalization makes the step ``eps M_i`` when ``||M_i||`` is small
-    (a well-measured state), so on accurate sensing the term is weak at small eps.
+    ``eps <= 1 / d_max`` (``d_max`` the largest degree) keeps it a convex combination with
+    matrix weights (``I - d_i gamma_i M_i`` and ``gamma_i M_i``, positive semidefinite, summing
+    to the identity) for every ``M_i``: the step size of the Perron matrix ``I - eps L`` of
+    Olfati-Saber, Fax and Murray (2007). The normalization makes the step ``eps M_i`` when
+    ``||M_i||`` is small (a well-measured state), so on accurate sensing the term is weak.
 
     Parameters
     ----------
@@ -981,7 +981,7 @@ class KalmanConsensusFilter(_NetworkFilter):
     >>> import numpy as np
     >>> from mascore import fusion, graphs, sensor_network
     >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.path_graph(3))
-    >>> x, P = fusion.KalmanConsensusFilter(model, eps=0.5).update([[3.0], [0.0], [0.0]], np.ones((3, 1, 1)),
+    >>> x, P = fusion.KalmanConsensusNetworkFilter(model, eps=0.5).update([[3.0], [0.0], [0.0]], np.ones((3, 1, 1)),
     ...                                                            [3.0, 0.0, 0.0])
     >>> x[:, 0]                         # forwarding's (2, 0.75, 0), each pulled toward its neighbours' predictions
     array([1.625, 1.05 , 0.   ])
@@ -1603,7 +1603,7 @@ def _kcf_cost(n: int, q: int, d: int, n_agents: int) -> tuple[float, float]:
 
 def _kcf_spec(name: str, eps: float, position: float) -> MethodSpec:
     """Olfati-Saber's KCF at consensus gain `eps`."""
-    return MethodSpec(name, _TASKS, lambda model: KalmanConsensusFilter(model, eps), _kcf_cost,
+    return MethodSpec(name, _TASKS, lambda model: KalmanConsensusNetworkFilter(model, eps), _kcf_cost,
                       _orders(("O(d q n + n^3)", "O(n^2 + d n)"), ("O(N^3)", "O(N^2)")), _memory(), position=position)
 
 
