@@ -58,7 +58,7 @@ References
 - Hu, J., Xie, L., Zhang, C. (2012). Diffusion Kalman filtering based on covariance intersection. IEEE
   Trans. Signal Processing 60(2), 891-902.
 - Olfati-Saber, R. (2007). Distributed Kalman filtering for sensor networks. Proc. 46th IEEE Conference on
-  Decision and Control, 5492-5498.
+  Decision & Control (CDC), 5492-5498.
 - Olfati-Saber, R., Fax, J. A., Murray, R. M. (2007). Consensus and cooperation in networked multi-agent
   systems. Proc. IEEE 95(1), 215-233.
 - Bhattacharjee, D., Subbarao, K. (2021). Set-membership filtering-based leader-follower synchronization of
