@@ -19,7 +19,7 @@ the same model, so every method sees exactly the same sensing.
                                          (Cattivelli and Sayed 2010)
 :class:`CovarianceIntersectionFilter`    incremental update, then covariance intersection of the
                                          neighbours' estimates (Hu, Xie and Zhang 2012)
-:class:`KalmanConsensusNetworkFilter`           forwarding, then one consensus step on the neighbours'
+:class:`KalmanConsensusNetworkFilter`    forwarding, then one consensus step on the neighbours'
                                          predictions (Olfati-Saber 2007)
 :class:`SetMembershipForwardingFilter`   forwarding into an outer ellipsoid per agent (set-membership,
                                          Bhattacharjee and Subbarao 2021's closed-form steps)
