@@ -79,10 +79,12 @@ from ._team_kernels import (
     F1_means,
     F1_rows,
     apply_gain,
+    apply_output_gain,
     check_batch,
     check_covariances,
     check_estimates,
     check_mask,
+    check_measurements,
     check_model,
     check_runs,
     check_team_laplacian,
@@ -91,8 +93,10 @@ from ._team_kernels import (
     gemm_acc,
     joseph,
     mask_vec,
+    output_gain,
     phi_blocks,
     reduced_nees,
+    team_output_matrix,
 )
 from ._validation import (
     check_covariance,
@@ -109,6 +113,7 @@ from .estimation import Message, MethodSpec
 from .fusion_cost import filter_cost
 from .sensing import team_noise_covariance
 from .team_model import TeamFilterModel, reduce_covariance, team_filter_model
+from .team_observability import require_observable
 
 __all__ = [
     "TeamFilter",
@@ -333,7 +338,7 @@ def mb_update(
     N, Mr = model.n_agents, model.M_r
     X = check_estimates(model, X_pred, "X_pred")
     Sig = check_covariances(Sigma_pred, "Sigma_pred", (None, N, Mr, Mr), kron=model.kron)
-    Zt = check_estimates(model, Z, "Z")
+    Zt = check_measurements(model, Z, "Z")
     S = check_mask(mask, N)
     if S.shape[0] not in (1, Sig.shape[0]):
         raise ValueError(f"mask has {S.shape[0]} topologies but Sigma_pred has {Sig.shape[0]}")
@@ -517,7 +522,7 @@ def eb_update(
     N, Mr = model.n_agents, model.M_r
     X = check_estimates(model, X_pred, "X_pred")
     Sig = check_covariances(Sigma_pred, "Sigma_pred", (None, N * Mr, N * Mr), kron=model.kron)
-    Zt = check_estimates(model, Z, "Z")
+    Zt = check_measurements(model, Z, "Z")
     S = check_mask(mask, N)
     if S.shape[0] not in (1, Sig.shape[0]):
         raise ValueError(
@@ -699,6 +704,14 @@ def _f2_cross(model, Sig, L):
 # ----------------------------------------------------------------------------
 # the whole-team filters: one object per run of filters, owning its state and work arrays
 # ----------------------------------------------------------------------------
+#: Why the measurement-based loop refuses an output matrix (and which methods take one).
+_MB_NEEDS_FULL_STATE = (
+    "mode='mb' (song-mb) needs full-state measurements: its control, eq. (5), steers with the raw "
+    "measurements z_ij - z_ii through the state-feedback gain K, which outputs C_j x_j cannot feed. With an "
+    "output matrix C use mode='eb' (song-eb: the control uses the estimates, eq. (21)) or "
+    "centralized_team_filter.CentralizedTeamFilter"
+)
+
 #: The two loops of Song et al.: ``"eb"`` estimation-based (augmented covariance, eqs. (29)-(34)),
 #: ``"mb"`` measurement-based (every agent's own covariance, eqs. (14)-(20)).
 FILTER_MODES = ("eb", "mb")
@@ -791,6 +804,11 @@ class TeamFilter:
             raise ValueError("exact_control_noise applies to the measurement-based loop (mode='mb') only")
         N, m, Mr = model.n_agents, model.m, model.M_r
         L = check_team_laplacian(laplacian, N, undirected=True)
+        if mode == "mb" and not model.full_state:
+            raise ValueError(_MB_NEEDS_FULL_STATE)
+        if not model.full_state:  # partial sensing: every agent's filter must see the whole team (Theorem 1)
+            for Lk in np.unique(L.reshape(-1, N, N), axis=0):
+                require_observable(model.A, model.BK, np.where(np.eye(N, dtype=bool), 0.0, -Lk), C=model.C)
         X = _float_array(x_hat0, "x_hat0")
         if X.ndim == 2 and X.shape[1] == N * m:
             X = np.broadcast_to(X.reshape(X.shape[0], 1, N, m), (X.shape[0], N, N, m))
@@ -826,7 +844,10 @@ class TeamFilter:
         return self
 
     def _init(self, model, mode, L, X, Sig, KH, exact_control_noise) -> None:
+        if mode == "mb" and not model.full_state:
+            raise ValueError(_MB_NEEDS_FULL_STATE)
         self._model, self._mode, self._exact = model, mode, exact_control_noise
+        self._H = None if model.full_state else team_output_matrix(model)
         self._X, self._Sig = X, Sig
         N, Mr = model.n_agents, model.M_r
         self._KH = np.zeros((Sig.shape[0], N, Mr, Mr)) if KH is None else KH
@@ -1064,10 +1085,11 @@ class TeamFilter:
         True
         """
         model = self._model
-        N, m = model.n_agents, model.m
+        N = model.n_agents
+        p = model.p
         Zt = _float_array(Z, "Z")
-        if Zt.shape != self._X.shape:
-            raise ValueError(f"Incompatible dimensions of Z; expected {self._X.shape} (runs, {N}, {N}, {m}) "
+        if Zt.shape != (*self._X.shape[:3], p):
+            raise ValueError(f"Incompatible dimensions of Z; expected {(*self._X.shape[:3], p)} (runs, {N}, {N}, {p}) "
                              f"but found {Zt.shape}")
         S = check_mask(mask, N)
         nb = self._Sig.shape[0]
@@ -1139,7 +1161,7 @@ class TeamFilter:
         """
         model = self._model
         N = model.n_agents
-        Zt = check_estimates(model, Z, "Z")
+        Zt = check_measurements(model, Z, "Z")
         S = check_mask(mask, N)
         if self._mode == "eb":
             return {"Z": Zt.copy(), "mask": S.copy()}, ()
@@ -1359,6 +1381,27 @@ class TeamFilter:
             if n > 1:  # tile (i', i) = tile (i, i')^T
                 np.copyto(o4[i + 1:, :, i, :], Q3[:, 1:, :].transpose(1, 2, 0))
 
+    def _eb_update_outputs(self, Z: np.ndarray, S: np.ndarray) -> None:
+        """Eqs. (16)-(20) and (33) with partial sensing ``H_i = D_i blockdiag(C_j)``, dense products.
+
+        ``Ψ = blockdiag(I - G_i H_i)``, ``Σ = Ψ Σ^- Ψ^T + blockdiag(G_i R G_i^T)``: the same
+        recursion as the full-state update, with the gains of :func:`mascore._team_kernels.output_gain`
+        (no rank-q row-block form: the gain mixes the states an output combines).
+        """
+        model, Sig, H = self._model, self._Sig, self._H
+        N, Mr = model.n_agents, model.M_r
+        nb, C = Sig.shape[0], N * Mr
+        blocks = Sig.reshape(nb, N, Mr, N, Mr)
+        diag = np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)  # Σ_i^-, (batch, N, Mr, Mr)
+        G, KH, GRG = output_gain(model, H, diag, S)  # eqs. (17), (19)
+        Psi = np.eye(Mr) - KH
+        T = Psi @ Sig.reshape(nb, N, Mr, C)  # rows
+        T = np.swapaxes(T.reshape(nb, C, C), -1, -2)
+        T = (Psi @ T.reshape(nb, N, Mr, C)).reshape(nb, N, Mr, N, Mr)  # columns (by symmetry of Σ^-)
+        T[:, np.arange(N), :, np.arange(N), :] += np.moveaxis(GRG, 1, 0)  # eq. (33): + δ_ij G_i R G_i^T
+        self._X = apply_output_gain(model, H, self._X, Z, G)
+        self._Sig, self._KH = symmetric_part(T.reshape(nb, C, C)), KH
+
     def _eb_update(self, Z: np.ndarray, S: np.ndarray) -> None:
         """Eqs. (16)-(20) and (33) on the augmented covariance.
 
@@ -1369,6 +1412,8 @@ class TeamFilter:
         ``N q`` observed rows): ``O(N^2 M_r^2 q)`` work instead of the ``O(N^2 M_r^3)`` of dense
         products, one pass over Σ^- (in place) with one small batched product per row block.
         """
+        if self._H is not None:
+            return self._eb_update_outputs(Z, S)
         model, Sig = self._model, self._Sig
         N, Mr = model.n_agents, model.M_r
         nb, C = Sig.shape[0], N * Mr

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._systems import output_matrices
 from ._team_kernels import (
     check_covariances,
     check_model,
@@ -41,8 +42,12 @@ __all__ = [
 ]
 
 
-def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: float = 1e-8) -> np.ndarray:
+def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: float = 1e-8, *,
+                      C: ArrayLike | None = None) -> np.ndarray:
     """Which agents' pairs ``(F_1, H_i)`` of system (43) are observable.
+
+    ``H_i`` takes the outputs ``C_j x_j`` of the agents ``j`` in agent i's closed neighbourhood
+    ``N̄_i`` (full states, ``C_j = I``, by default: Song et al.'s eq. (2)).
 
     For an undirected graph, ``L = V Λ V^T`` block-diagonalizes
     ``F_1 = (V ⊗ I)(I ⊗ A - Λ ⊗ BK)(V ⊗ I)^T``. When the blocks
@@ -52,6 +57,11 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
     iff, for every Laplacian eigenvalue ``λ`` with eigenvector basis
     ``V_λ``, the rows of ``V_λ`` of the agents in ``N̄_i`` have full column
     rank. Symmetric "twin" agents outside ``N̄_i`` (same neighbours) break it.
+    With one output matrix ``C`` for all agents the eigenvectors are ``v ⊗ w``
+    (``w`` an eigenvector of ``A - λ BK``) and the test adds ``C w != 0`` for
+    every such ``w``: the pair ``(A - λ BK, C)`` observable for every Laplacian
+    eigenvalue ``λ`` (positions only of the double integrator pass it; velocities
+    only do not: the team's common position is unseen).
     This test is well conditioned; otherwise (directed graphs, or the
     conditions fail) a rank test of the observability matrix of the shifted
     system is used, which can call weakly observable pairs unobservable.
@@ -66,6 +76,9 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
         Fixed topology (defines ``F_1`` and ``H_i``).
     tol : float
         Relative tolerance of the rank decisions.
+    C : (p, m) or (N, p, m) array_like, optional
+        Output matrix of the measurements (one for all agents or one per agent); default the
+        identity (full states).
 
     Returns
     -------
@@ -94,25 +107,36 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
         raise ValueError(f"adjacency must be a single (N, N) topology here; got shape {Adj.shape}")
     S = sensing_mask(Adj, allow_isolated=True)
     L = graph_laplacian(Adj)
-    # work on the per-axis factor when A = A_r ⊗ I_k and BK = BK_r ⊗ I_k (same rank test)
+    N = Adj.shape[0]
+    Cs = None if C is None else output_matrices(C, m, N)
+    shared = Cs is None or bool(np.all(Cs == Cs[:1]))  # one output matrix for all agents
+    # work on the per-axis factor when A = A_r ⊗ I_k, BK = BK_r ⊗ I_k (and C = C_r ⊗ I_k): same rank test
     for k in range(m, 0, -1):
-        if m % k == 0 and kron_factor(A, k) is not None and kron_factor(BK, k) is not None:
+        if (m % k == 0 and kron_factor(A, k) is not None and kron_factor(BK, k) is not None
+                and (Cs is None or kron_factor(Cs, k) is not None)):
             A, BK, m = kron_factor(A, k), kron_factor(BK, k), m // k
+            Cs = None if Cs is None else kron_factor(Cs, k)
             break
-    if np.allclose(Adj, Adj.T):
-        graph_test = _graph_observability(A, BK, L, S, tol)
+    if np.allclose(Adj, Adj.T) and shared:
+        graph_test = _graph_observability(A, BK, L, S, tol, None if Cs is None else Cs[0])
         if graph_test is not None:
             return graph_test
     F1, _ = closed_loop_matrices(A, BK, L)
+    Cs = np.broadcast_to(np.eye(m), (N, m, m)) if Cs is None else Cs
+    p = Cs.shape[1]
     out = []
     for row in S:
-        H = np.kron(np.eye(row.size)[row], np.eye(m))
-        out.append(_observable(F1, H, tol))
+        H = np.zeros((N, p, N, m))
+        H[np.arange(N), :, np.arange(N), :] = Cs * row[:, None, None]
+        out.append(_observable(F1, H.reshape(N * p, N * m)[np.repeat(row, p)], tol))
     return np.array(out)
 
 
-def _graph_observability(A, BK, L, S, tol) -> np.ndarray | None:
-    """PBH test through the Laplacian eigenvectors (see :func:`observable_agents`); None if not applicable."""
+def _graph_observability(A, BK, L, S, tol, C=None) -> np.ndarray | None:
+    """PBH test through the Laplacian eigenvectors (see :func:`observable_agents`); None if not applicable.
+
+    `C` ``(p, m)``: the output matrix of every agent (None: full states).
+    """
     lam, V = np.linalg.eigh(L)
     scale = max(1.0, float(np.max(np.abs(lam))))
     cuts = np.flatnonzero(np.diff(lam) > 1e-7 * scale) + 1
@@ -131,6 +155,8 @@ def _graph_observability(A, BK, L, S, tol) -> np.ndarray | None:
         return None
     Sf = S.astype(float)
     out = np.ones(S.shape[0], dtype=bool)
+    if C is not None and not _outputs_see_every_block(A, BK, lam_g, scale, C):
+        return np.zeros(S.shape[0], dtype=bool)  # a mode v ⊗ w with C w = 0 is unseen by every agent
     for g in groups:
         Vg = V[:, g]
         rows = Sf[:, :, None] * Vg[None]  # rows of V_g outside N̄_i zeroed (singular values unchanged)
@@ -138,7 +164,25 @@ def _graph_observability(A, BK, L, S, tol) -> np.ndarray | None:
     return out
 
 
-def require_observable(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike) -> None:
+def _outputs_see_every_block(A, BK, lam_g, scale, C) -> bool:
+    """PBH of ``(A - λ BK, C)`` for every Laplacian eigenvalue ``λ``: ``[A - λ BK - μ I; C]`` of full column rank.
+
+    Every eigenvector ``v ⊗ w`` of ``F_1`` is seen by the outputs only if ``C w != 0``. The zero
+    eigenvalue is taken exactly (its rounding splits a Jordan block), and the rank is decided at
+    ``1e-6`` relative, as the non-derogatory test above (weakly seen modes count as unseen).
+    """
+    m = A.shape[0]
+    lam = np.where(np.abs(lam_g) <= 1e-7 * scale, 0.0, lam_g)
+    M = A[None] - lam[:, None, None] * BK[None]  # (G, m, m)
+    mu = np.linalg.eigvals(M)  # (G, m)
+    shifted = M[:, None].astype(complex) - mu[:, :, None, None] * np.eye(m)  # (G, m, m, m)
+    stacked = np.concatenate([shifted, np.broadcast_to(C.astype(complex), (*shifted.shape[:2], *C.shape))], axis=-2)
+    sv = np.linalg.svd(stacked, compute_uv=False)  # (G, m, m)
+    size = max(1.0, float(np.abs(M).max()), float(np.abs(C).max()))
+    return bool(np.all(sv[..., -1] > 1e-6 * size))
+
+
+def require_observable(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, *, C: ArrayLike | None = None) -> None:
     """Raise ``ValueError`` naming the agents for which system (43) is unobservable.
 
     Parameters
@@ -149,6 +193,8 @@ def require_observable(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike) -> Non
         Input matrix times consensus gain.
     adjacency : (N, N) array_like
         Sensing graph.
+    C : (p, m) or (N, p, m) array_like, optional
+        Output matrix of the measurements (default: full states).
 
     Raises
     ------
@@ -174,14 +220,23 @@ def require_observable(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike) -> Non
     if Adj.ndim != 2:
         raise ValueError(f"adjacency must be a single (N, N) topology here; got shape {Adj.shape}")
     sensing_mask(Adj)  # isolated agents first, with their own message
-    ok = observable_agents(A, BK, adjacency)
+    ok = observable_agents(A, BK, adjacency, C=C)
     if not np.all(ok):
         bad = np.flatnonzero(~ok).tolist()
+        if C is None:
+            raise ValueError(
+                f"system (43) (F_1, H_i) is not observable for agent(s) {bad} with this topology (F_1 from A, BK "
+                "and the adjacency's Laplacian, H_i from the adjacency): "
+                "Theorem 1 does not apply and the estimation-based loop needs an observable graph "
+                "(symmetric neighbourhoods, e.g. a star seen from a leaf, hide modes)"
+            )
         raise ValueError(
-            f"system (43) (F_1, H_i) is not observable for agent(s) {bad} with this topology (F_1 from A, BK "
-            "and the adjacency's Laplacian, H_i from the adjacency): "
-            "Theorem 1 does not apply and the estimation-based loop needs an observable graph "
-            "(symmetric neighbourhoods, e.g. a star seen from a leaf, hide modes)"
+            f"system (43) (F_1, H_i) is not observable for agent(s) {bad} with this topology and output matrix C "
+            "(F_1 from A, BK and the adjacency's Laplacian, H_i = the outputs C_j x_j of agent i and its "
+            "neighbours): Theorem 1 does not apply and agent i's whole-team filter cannot estimate the team. "
+            "Measure more states (C must see every mode of A - λ BK, for every Laplacian eigenvalue λ: "
+            "positions of a double integrator do, velocities alone do not) or change the graph (symmetric "
+            "neighbourhoods, e.g. a star seen from a leaf, hide modes)"
         )
 
 
