@@ -57,6 +57,12 @@ class CentralizedTeamFilter:
     without re-checking the state this filter produced (the model, `B` and `P0` are
     checked here, once).
 
+    **Any linear sensing.** A model with an output matrix (``z_ij = C_j x_j + nu_ij``,
+    :func:`~mascore.team_model.team_filter_model` with ``C``) is filtered with the same outputs as
+    the agents' filters, so the two compare on the same data: agent j's measurement information
+    is ``c_j C_j^T R_jj^{-1} C_j`` on the separable centre, ``H^T (sum_i W_i) H`` with
+    ``H = blockdiag(C_j)`` otherwise.
+
     **The separable centre.** When one observer's noise is independent across the agents it
     measures (``R`` block-diagonal over agents, e.g. ``I_N ⊗ R_j``) the information of agent j's
     measurements is ``c_j R_jj^{-1}``, with ``c_j`` the number of agents that measure j: the
@@ -251,8 +257,10 @@ class CentralizedTeamFilter:
 
         Parameters
         ----------
-        Z : (runs, N, N, m) array_like
-            Every agent's measurements.
+        Z : (runs, N, N, p) array_like
+            Every agent's measurements;
+            ``p = m`` (full states) unless the model has an output matrix ``C``
+            (``z_ij = C_j x_j + nu_ij``).
         mask : (N, N) or (batch, N, N) array_like of bool
             Sensing mask; a mask per run gives every run its own covariance.
 
@@ -305,8 +313,10 @@ class CentralizedTeamFilter:
 
         Parameters
         ----------
-        Z : (runs, N, N, m) array_like
-            Every agent's measurements.
+        Z : (runs, N, N, p) array_like
+            Every agent's measurements;
+            ``p = m`` (full states) unless the model has an output matrix ``C``
+            (``z_ij = C_j x_j + nu_ij``).
         mask : (N, N) or (batch, N, N) array_like of bool
             The sensing mask.
         U : (runs, N, p) array_like
@@ -491,8 +501,10 @@ def centralized_update(
         Predicted team estimates.
     P_pred : (batch, M_r, M_r) array_like
         Reduced predicted covariance, positive definite.
-    Z : (runs, N, N, m) array_like
-        Every agent's measurements.
+    Z : (runs, N, N, p) array_like
+        Every agent's measurements;
+        ``p = m`` (full states) unless the model has an output matrix ``C``
+        (``z_ij = C_j x_j + nu_ij``).
     mask : (N, N) or (batch, N, N) array_like of bool
         Sensing mask.
 

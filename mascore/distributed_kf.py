@@ -18,6 +18,16 @@ error is ``e_i^- = F_1 e_i + F_2 e + w``, so every agent must propagate the
 full ``N M x N M`` covariance ``Σ`` of ``e`` with all cross-covariances
 ``Σ_ij`` (eqs. (29)-(34)); by Remark 4 it is the same for every agent.
 
+**Any linear sensing.** With an output matrix per agent (``z_ij = C_j x_j + nu_ij``, e.g.
+positions only; :func:`~mascore.team_model.team_filter_model` with ``C``), agent ``i``'s
+measurement matrix is ``H_i = D_i blockdiag(C_1, ..., C_N)``, the rows of the agents it
+senses, and eqs. (16)-(20), (33) hold as written with that ``H_i``. The estimation-based loop
+takes it (the control, eq. (21), uses the estimates); the measurement-based loop does not
+(its control, eq. (5), feeds the raw measurements through the state-feedback gain ``K``).
+:class:`TeamFilter` checks that system (43) stays observable for every agent with these
+outputs (:func:`mascore.team_observability.require_observable`) and refuses it by name
+otherwise. The update then runs on dense products of the agents' row blocks.
+
 Implementation (the "structured" path)
 --------------------------------------
 * Masks instead of ragged selection matrices: ``H_i^T H_i = diag(S_i) ⊗ I_m``
@@ -301,8 +311,10 @@ def mb_update(
         Predicted team estimates.
     Sigma_pred : (batch, N, M_r, M_r) array_like
         Reduced predicted covariances.
-    Z : (runs, N, N, m) array_like
-        Measurements (:func:`mascore.sensing.measure`).
+    Z : (runs, N, N, p) array_like
+        Measurements (:func:`mascore.sensing.measure`);
+        ``p = m`` (full states) unless the model has an output matrix ``C``
+        (``z_ij = C_j x_j + nu_ij``).
     mask : (N, N) or (batch, N, N) array_like of bool
         Sensing mask.
 
@@ -487,8 +499,10 @@ def eb_update(
         Predicted team estimates.
     Sigma_pred : (batch, N M_r, N M_r) array_like
         Predicted augmented covariance.
-    Z : (runs, N, N, m) array_like
-        Measurements.
+    Z : (runs, N, N, p) array_like
+        Measurements;
+        ``p = m`` (full states) unless the model has an output matrix ``C``
+        (``z_ij = C_j x_j + nu_ij``).
     mask : (N, N) or (batch, N, N) array_like of bool
         Sensing mask.
 
@@ -760,7 +774,9 @@ class TeamFilter:
     ------
     ValueError
         Bad shapes, non-finite entries, a covariance that is not symmetric PSD, a
-        Laplacian that is not one, batches that do not fit together.
+        Laplacian that is not one, batches that do not fit together. With an output
+        matrix in the model (partial sensing): ``mode="mb"``, or a topology for which
+        system (43) is not observable for some agent (Theorem 1's condition, named).
     TypeError
         `model` is not a :class:`~mascore.team_model.TeamFilterModel`.
 
@@ -1057,8 +1073,10 @@ class TeamFilter:
 
         Parameters
         ----------
-        Z : (runs, N, N, m) array_like
-            Measurements (:func:`mascore.sensing.measure`; unsensed entries are ignored).
+        Z : (runs, N, N, p) array_like
+            Measurements (:func:`mascore.sensing.measure`; unsensed entries are ignored);
+            ``p = m`` (full states) unless the model has an output matrix ``C``
+            (``z_ij = C_j x_j + nu_ij``).
         mask : (N, N) or (batch, N, N) array_like of bool
             Sensing mask (closed neighbourhoods). A mask per run while the covariance is
             shared (batch 1) gives every run its own covariance from then on.
@@ -1128,8 +1146,10 @@ class TeamFilter:
 
         Parameters
         ----------
-        Z : (runs, N, N, m) array_like
-            The step's measurements.
+        Z : (runs, N, N, p) array_like
+            The step's measurements;
+            ``p = m`` (full states) unless the model has an output matrix ``C``
+            (``z_ij = C_j x_j + nu_ij``).
         mask : (N, N) or (batch, N, N) array_like of bool
             The sensing mask.
         i : int
@@ -1488,7 +1508,15 @@ class TeamFilter:
 _SONG_NOT_APPLICABLE = MappingProxyType({
     "target": "estimates the agents' own states in a rendezvous loop; there is no common target",
     "localization": "needs absolute measurements of the neighbours' states (eq. (2)); here they are relative",
-    "position": "needs full-state measurements of its neighbours (eq. (2))",
+})
+_SONG_MB_NOT_APPLICABLE = MappingProxyType({
+    **_SONG_NOT_APPLICABLE,
+    "position": "steers with its raw measurements of the neighbours (eq. (5)), which must be full states",
+})
+_SONG_EB_NOT_APPLICABLE = MappingProxyType({
+    **_SONG_NOT_APPLICABLE,
+    "position": "not benchmarked with positions only: it takes them through an output matrix "
+                "(team_filter_model(..., C=[I 0])), outside this table",
 })
 
 
@@ -1505,8 +1533,8 @@ METHODS = (
     MethodSpec("song-mb", ("team",), _song_filter("mb"),
                lambda n, q, d, N: (0.0, filter_cost("measurement-forwarding", n=N * n, q=n, degree=d).flops),
                {"team": ("O(N^3 n^3): its own covariance of the whole team", "O(N^2 n^2)")},
-               lambda n, q, d, N: float((N * n) ** 2 + N * n), _SONG_NOT_APPLICABLE, position=3),
+               lambda n, q, d, N: float((N * n) ** 2 + N * n), _SONG_MB_NOT_APPLICABLE, position=3),
     MethodSpec("song-eb", ("team",), _song_filter("eb"), lambda n, q, d, N: (0.0, float(4 * (N * N * n) ** 3)),
                {"team": ("O(N^6 n^3): the joint covariance of all team estimates (dense)", "O(N^4 n^2)")},
-               lambda n, q, d, N: float((N * N * n) ** 2), _SONG_NOT_APPLICABLE, whole_filter=True, position=4),
+               lambda n, q, d, N: float((N * N * n) ** 2), _SONG_EB_NOT_APPLICABLE, whole_filter=True, position=4),
 )
