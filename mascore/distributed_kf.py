@@ -1402,18 +1402,37 @@ class TeamFilter:
                 np.copyto(o4[i + 1:, :, i, :], Q3[:, 1:, :].transpose(1, 2, 0))
 
     def _eb_update_outputs(self, Z: np.ndarray, S: np.ndarray) -> None:
-        """Eqs. (16)-(20) and (33) with partial sensing ``H_i = D_i blockdiag(C_j)``, dense products.
+        """Eqs. (16)-(20) and (33) with partial sensing ``H_i = D_i blockdiag(C_j)``.
 
         ``Ψ = blockdiag(I - G_i H_i)``, ``Σ = Ψ Σ^- Ψ^T + blockdiag(G_i R G_i^T)``: the same
-        recursion as the full-state update, with the gains of :func:`mascore._team_kernels.output_gain`
-        (no rank-q row-block form: the gain mixes the states an output combines).
+        recursion as the full-state update, with the gains of :func:`mascore._team_kernels.output_gain`;
+        dense products for a small team, else the rank-q row blocks of :meth:`_eb_update_rows` on
+        the ``q`` outputs each agent senses.
         """
         model, Sig, H = self._model, self._Sig, self._H
         N, Mr = model.n_agents, model.M_r
         nb, C = Sig.shape[0], N * Mr
         blocks = Sig.reshape(nb, N, Mr, N, Mr)
-        diag = np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)  # Σ_i^-, (batch, N, Mr, Mr)
+        if not self._rows:
+            diag = np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)  # Σ_i^-, (batch, N, Mr, Mr)
+        else:  # the same, in a work array
+            diag = self._buffer(1, nb * N * Mr * Mr).reshape(nb, N, Mr, Mr)
+            for i in range(N):
+                diag[:, i] = blocks[:, i, :, i, :]
         G, KH, GRG = output_gain(model, H, diag, S)  # eqs. (17), (19)
+        if self._rows:
+            idx, _ = observed_indices(np.repeat(S, model.C_r.shape[1], axis=-1).astype(float))  # (b, N, q) outputs
+            q = idx.shape[-1]
+            W = np.take_along_axis(G, np.broadcast_to(idx[..., None, :], (*G.shape[:-1], q)), axis=-1)  # (b, N, Mr, q)
+            Wt = np.swapaxes(W, -1, -2)
+            Rq = model.R_r[idx[..., :, None], idx[..., None, :]]
+            H_sel = H[idx]  # (b, N, q, Mr): the rows of H each agent senses
+            for b in range(nb):
+                bi = b if idx.shape[0] > 1 else 0
+                self._eb_update_rows(Sig[b], idx[bi], W[b], Wt[b], Rq[bi], H_sel[bi])
+            self._X = apply_output_gain(model, H, self._X, Z, G)
+            self._KH = KH
+            return
         Psi = np.eye(Mr) - KH
         T = Psi @ Sig.reshape(nb, N, Mr, C)  # rows
         T = np.swapaxes(T.reshape(nb, C, C), -1, -2)
@@ -1468,14 +1487,25 @@ class TeamFilter:
         self._KH = KH
 
     def _eb_update_rows(self, Sb: np.ndarray, idx: np.ndarray, W: np.ndarray, Wt: np.ndarray,
-                        Rq: np.ndarray) -> None:
-        """``Ψ Σ^- Ψ^T + blockdiag(G_i H_i R H_i^T G_i^T)`` of one covariance, in place in `Sb`."""
+                        Rq: np.ndarray, H_sel: np.ndarray | None = None) -> None:
+        """``Ψ Σ^- Ψ^T + blockdiag(G_i H_i R H_i^T G_i^T)`` of one covariance, in place in `Sb`.
+
+        Full states: ``H_i`` selects the entries `idx` of agent i's block. Partial sensing:
+        `H_sel` ``(N, q, M_r)`` holds the rows of ``H`` that agent i senses (padding rows meet
+        zero columns of `W`), and the "observed rows" ``H_i Σ^-`` replace the selected rows of Σ^-.
+        """
         N, Mr, q = W.shape
         C, Nq = N * Mr, N * q
-        cidx = (np.arange(N)[:, None] * Mr + idx).ravel()  # observed rows/columns (i, idx_i) of Σ^-
         work = self._buffer(2, 2 * Nq * C + Nq * Nq + 4 * N * Mr * q + Mr * C)
-        R = np.take(Sb, cidx, axis=0, out=work[:Nq * C].reshape(Nq, C))  # the observed rows, (N q, C)
-        Rc = np.take(R, cidx, axis=1, out=work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq))
+        if H_sel is None:
+            cidx = (np.arange(N)[:, None] * Mr + idx).ravel()  # observed rows/columns (i, idx_i) of Σ^-
+            R = np.take(Sb, cidx, axis=0, out=work[:Nq * C].reshape(Nq, C))  # the observed rows, (N q, C)
+            Rc = np.take(R, cidx, axis=1, out=work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq))
+        else:  # H_i Σ^-: row block i of Σ^- seen through agent i's sensed outputs, and (H_i Σ^- H_i'^T)
+            R = np.matmul(H_sel, Sb.reshape(N, Mr, C), out=work[:Nq * C].reshape(N, q, C)).reshape(Nq, C)
+            Rc3 = np.matmul(R.reshape(Nq, N, Mr).transpose(1, 0, 2), np.swapaxes(H_sel, -1, -2))  # (N, Nq, q)
+            Rc = work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq)
+            Rc.reshape(Nq, N, q)[...] = Rc3.transpose(1, 0, 2)
         # V_i[:, i'] = Σ[idx_i, i'] - Σ[idx_i, idx_i'] W_i'^T: the rows of (I - G_i H_i) Σ^- that meet W_i'
         Vt = np.matmul(Rc.reshape(Nq, N, q).transpose(1, 0, 2), Wt,
                        out=work[Nq * C + Nq * Nq:2 * Nq * C + Nq * Nq].reshape(N, Nq, Mr))

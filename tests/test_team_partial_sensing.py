@@ -75,10 +75,10 @@ def _run_eb(model, adjacency, P0, x0, Zs, S):
 
 def _measurements(adjacency, C, R, steps, seed=0):
     rng = np.random.default_rng(seed)
-    x = rng.standard_normal((N, 4))
+    x = rng.standard_normal((adjacency.shape[0], 4))
     Zs = []
     for _ in range(steps):
-        x = x @ AGENT.A.T + 0.1 * rng.standard_normal((N, 4))
+        x = x @ AGENT.A.T + 0.1 * rng.standard_normal(x.shape)
         Z, S = sensing.measure(rng, x, adjacency, R, C=C)
         Zs.append(Z)
     return x, Zs, S
@@ -101,6 +101,24 @@ def test_positions_only_equals_dense_reference(reduce):
                                atol=1e-10 * np.abs(Sig_ref).max())
     eig = np.linalg.eigvalsh(filt.Sigma[0])
     assert eig.min() > 0 and np.array_equal(filt.Sigma[0], filt.Sigma[0].T)  # SPD, exactly symmetric
+
+
+@pytest.mark.parametrize("graph", [graphs.ring_graph(14), graphs.path_graph(15)])
+def test_positions_only_row_block_path_equals_dense_reference(graph):
+    """A team large enough for the row-block update (N M_r > 384): the same numbers as the dense equations."""
+    from mascore import _team_kernels
+
+    n = graph.shape[0]
+    R = 0.3 * np.eye(2)
+    model = _model(POSITIONS, R, n=n)
+    assert n * model.M_r > _team_kernels.DENSE_MAX
+    _, Zs, S = _measurements(graph, POSITIONS, R, 3, seed=7)
+    x0 = np.zeros((n, 4))
+    filt = _run_eb(model, graph, np.eye(4), x0, Zs, S)
+    X_ref, Sig_ref = _reference_eb(graph, POSITIONS, np.kron(np.eye(n), R), np.eye(4), x0, Zs)
+    np.testing.assert_allclose(filt.X_hat[0].reshape(n, -1), X_ref, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(expand_covariance(filt.Sigma[0], model.kron), Sig_ref, rtol=0,
+                               atol=1e-10 * np.abs(Sig_ref).max())
 
 
 def test_per_agent_outputs_fall_back_to_the_full_form():
