@@ -273,3 +273,38 @@ def test_measure_with_outputs():
     Z, S = sensing.measure(0, x, graphs.ring_graph(N), 1e-30 * np.eye(2), C=POSITIONS)
     assert Z.shape == (N, N, 2)
     np.testing.assert_allclose(Z[S], np.broadcast_to(x[:, :2], (N, N, 2))[S], atol=1e-9)
+
+
+def test_without_control_coupling_each_agent_is_a_textbook_kalman_filter():
+    """K = 0 (F_2 = 0): agent i's filter is a plain Kalman filter of the team with its own outputs (complete graph)."""
+    n = 3
+    adjacency = graphs.complete_graph(n)
+    R = np.diag([0.2, 0.4])
+    model = team_model.team_filter_model(AGENT.A, AGENT.B, np.zeros((2, 4)), Q, R, n_agents=n, C=POSITIONS)
+    rng = np.random.default_rng(11)
+    x = rng.standard_normal((n, 4))
+    filt = dkf.TeamFilter(model, graphs.laplacian(adjacency), np.zeros((1, n * 4)), P0=np.eye(4))
+    F, Qt = np.kron(np.eye(n), AGENT.A), np.kron(np.eye(n), Q)
+    H, Rt = np.kron(np.eye(n), POSITIONS), np.kron(np.eye(n), R)
+    xs, P = np.zeros(n * 4), np.eye(n * 4)  # agent 0's block of Σ[0] = 1 1^T ⊗ (I_N ⊗ P0)
+    for _ in range(8):
+        x = x @ AGENT.A.T + 0.1 * rng.standard_normal(x.shape)
+        Z, S = sensing.measure(rng, x, adjacency, R, C=POSITIONS)
+        filt.predict()
+        filt.update(Z[None], S)
+        xs, P = F @ xs, F @ P @ F.T + Qt
+        Kg = P @ H.T @ np.linalg.inv(H @ P @ H.T + Rt)
+        xs, P = xs + Kg @ (Z[0].ravel() - H @ xs), (np.eye(n * 4) - Kg @ H) @ P
+    np.testing.assert_allclose(filt.X_hat[0, 0].ravel(), xs, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(expand_covariance(filt.agent_covariances()[0, 0], model.kron), P, rtol=0, atol=1e-10)
+
+
+def test_model_with_outputs_is_frozen_and_pickles():
+    import pickle
+
+    model = _model(POSITIONS)
+    assert not model.C.flags.writeable and not model.C_r.flags.writeable
+    with pytest.raises(AttributeError):
+        model.C = None
+    again = pickle.loads(pickle.dumps(model))
+    assert again == model and np.array_equal(again.C_r, model.C_r) and again.kron == 2
