@@ -1545,8 +1545,8 @@ _SONG_MB_NOT_APPLICABLE = MappingProxyType({
 })
 _SONG_EB_NOT_APPLICABLE = MappingProxyType({
     **_SONG_NOT_APPLICABLE,
-    "position": "takes positions through an output matrix C = [I 0] (team_filter_model(..., C=C)), "
-                "but is not run in this table",
+    "position": "not run in this benchmark with positions only (the filter itself takes them through an "
+                "output matrix: team_filter_model(..., C=[I 0]))",
 })
 
 
