@@ -308,3 +308,41 @@ def test_model_with_outputs_is_frozen_and_pickles():
         model.C = None
     again = pickle.loads(pickle.dumps(model))
     assert again == model and np.array_equal(again.C_r, model.C_r) and again.kron == 2
+
+
+def test_simulate_rendezvous_with_outputs_is_the_written_out_loop():
+    """simulate_rendezvous with positions only (mode "estimation", central=True) == the loop of the public calls."""
+    from mascore import centralized_team_filter as ctf_
+
+    R = 0.04 * np.eye(2)
+    model = rendezvous.RendezvousModel.from_agent(AGENT, K, Q, R, C=POSITIONS)
+    x0 = np.random.default_rng(3).normal(scale=3.0, size=(N, 4))
+    ring = graphs.ring_graph(N)
+    run = rendezvous.simulate_rendezvous(9, model, x0, ring, 30, "estimation", x_hat0=x0.ravel(), P0=np.eye(4),
+                                         central=True, return_estimates=True)
+    proc_rng, meas_rng = np.random.default_rng(9).spawn(2)
+    L = graphs.laplacian(ring)
+    fm = team_model.team_filter_model(AGENT.A, AGENT.B, K, Q, R, N, C=POSITIONS)
+    team = dkf.TeamFilter(fm, L, x0.reshape(1, -1), np.eye(4), mode="eb")
+    central = ctf_.CentralizedTeamFilter(fm, AGENT.B, x0.reshape(1, -1), np.eye(4))
+    x = x0[None]
+    sensing.measure(meas_rng, x, ring, R, C=POSITIONS)  # step 0
+    for _ in range(30):
+        U = rendezvous.consensus_control(team.X_hat, L, K)
+        x = rendezvous.propagate_team(proc_rng, x, U, AGENT.A, AGENT.B, Q)
+        team.predict()
+        central.predict(U)
+        Z, S = sensing.measure(meas_rng, x, ring, R, C=POSITIONS)
+        team.update(Z, S)
+        central.update(Z, S)
+    assert np.array_equal(run.states[-1], x[0]) and np.array_equal(run.estimates[-1], team.X_hat[0])
+    assert run.model.C is not None and run.nees.shape == (31, N)
+    assert np.mean(run.central_pos_error[10:]) < np.mean(run.pos_error[10:])  # the centre sees every measurement
+    with pytest.raises(ValueError, match=r"mode 'measurement' steers with the raw measurements .*'estimation'"):
+        rendezvous.simulate_rendezvous(0, model, x0, ring, 5, "measurement")
+    with pytest.raises(ValueError, match=r"Incompatible dimensions of C"):
+        rendezvous.RendezvousModel.from_agent(AGENT, K, Q, R, C=np.eye(2, 3))
+    with pytest.raises(ValueError, match=r"p = 2: the rows of the output matrix C"):
+        rendezvous.RendezvousModel.from_agent(AGENT, K, Q, np.eye(3) * 0.04, C=POSITIONS)
+    full = rendezvous.RendezvousModel.from_agent(AGENT, K, Q, 0.04 * np.eye(4), C=np.eye(4))
+    assert full.C is None  # the identity: full states
