@@ -95,12 +95,12 @@ def output_matrices(C, m: int, n_agents: int, name: str = "C") -> np.ndarray:
 
 
 def full_state_only(m: int, shape: tuple) -> str:
-    """The message for an R of partial sensing given without an output matrix C (or where full states are needed)."""
+    """The message for an R of partial sensing given without an output matrix C."""
     return (f"R must be ({m}, {m}) per sensed agent or (m N, m N) for the team; got {shape}. Measurements of "
-            f"fewer than the m = {m} states need an output matrix: team_model.team_filter_model(..., C=C) with "
-            f"C of shape (p, {m}) (e.g. positions only, C = [I 0]) and R of (p, p) takes them for Song et al.'s "
-            f"estimation-based whole-team filter (song-eb) and the centralized team filter. The "
-            f"measurement-based loop (song-mb) and the rendezvous simulation (rendezvous.RendezvousModel) steer "
-            f"with full-state measurements (eq. (5)) and need full states; other methods with an output matrix: "
+            f"fewer than the m = {m} states need an output matrix C of shape (p, {m}) (e.g. positions only, "
+            f"C = [I 0]) with R of (p, p): team_model.team_filter_model(..., C=C) and "
+            f"rendezvous.RendezvousModel(..., C=C) take it, for Song et al.'s estimation-based whole-team filter "
+            f"(song-eb; simulate_rendezvous mode 'estimation') and the centralized team filter. The "
+            f"measurement-based loop (song-mb, eq. (5)) needs full states. Other methods with an output matrix: "
             f"mascore.compare's POSITION_METHODS (centralized, local, forwarding, vlahakis, set-membership), "
             f"mascore.fusion's filters with your own H_i (sensor_network.SensorNetworkModel)")
