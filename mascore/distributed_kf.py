@@ -26,7 +26,8 @@ takes it (the control, eq. (21), uses the estimates); the measurement-based loop
 (its control, eq. (5), feeds the raw measurements through the state-feedback gain ``K``).
 :class:`TeamFilter` checks that system (43) stays observable for every agent with these
 outputs (:func:`mascore.team_observability.require_observable`) and refuses it by name
-otherwise. The update then runs on dense products of the agents' row blocks.
+otherwise. The update runs the same dense or row-block kernels as below, with the sensed
+outputs ``H_i Σ^-`` in place of the selected rows of ``Σ^-``.
 
 Implementation (the "structured" path)
 --------------------------------------
