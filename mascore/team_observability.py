@@ -57,11 +57,12 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
     iff, for every Laplacian eigenvalue ``λ`` with eigenvector basis
     ``V_λ``, the rows of ``V_λ`` of the agents in ``N̄_i`` have full column
     rank. Symmetric "twin" agents outside ``N̄_i`` (same neighbours) break it.
-    With one output matrix ``C`` for all agents the eigenvectors are ``v ⊗ w``
-    (``w`` an eigenvector of ``A - λ BK``) and the test adds ``C w != 0`` for
-    every such ``w``: the pair ``(A - λ BK, C)`` observable for every Laplacian
-    eigenvalue ``λ`` (positions only of the double integrator pass it; velocities
-    only do not: the team's common position is unseen).
+    With output matrices ``C_j`` the eigenvectors are still ``v ⊗ w`` (``w`` an
+    eigenvector of ``A - λ BK``), and only the agents whose outputs see ``w``
+    (``C_j w != 0``) count among the rows of ``V_λ``: with one ``C`` for all, the
+    pair ``(A - λ BK, C)`` must be observable for every Laplacian eigenvalue ``λ``
+    (positions only of the double integrator pass; velocities only do not: the
+    team's common position is unseen).
     This test is well conditioned; otherwise (directed graphs, or the
     conditions fail) a rank test of the observability matrix of the shifted
     system is used, which can call weakly observable pairs unobservable.
@@ -109,7 +110,6 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
     L = graph_laplacian(Adj)
     N = Adj.shape[0]
     Cs = None if C is None else output_matrices(C, m, N)
-    shared = Cs is None or bool(np.all(Cs == Cs[:1]))  # one output matrix for all agents
     # work on the per-axis factor when A = A_r ⊗ I_k, BK = BK_r ⊗ I_k (and C = C_r ⊗ I_k): same rank test
     for k in range(m, 0, -1):
         if (m % k == 0 and kron_factor(A, k) is not None and kron_factor(BK, k) is not None
@@ -117,25 +117,33 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
             A, BK, m = kron_factor(A, k), kron_factor(BK, k), m // k
             Cs = None if Cs is None else kron_factor(Cs, k)
             break
-    if np.allclose(Adj, Adj.T) and shared:
-        graph_test = _graph_observability(A, BK, L, S, tol, None if Cs is None else Cs[0])
+    if np.allclose(Adj, Adj.T):
+        graph_test = _graph_observability(A, BK, L, S, tol, Cs)
         if graph_test is not None:
             return graph_test
     F1, _ = closed_loop_matrices(A, BK, L)
-    Cs = np.broadcast_to(np.eye(m), (N, m, m)) if Cs is None else Cs
-    p = Cs.shape[1]
     out = []
-    for row in S:
+    if Cs is None:
+        for row in S:
+            H = np.kron(np.eye(row.size)[row], np.eye(m))
+            out.append(_observable(F1, H, tol))
+        return np.array(out)
+    p = Cs.shape[1]
+    for row in S:  # outputs: the PBH test at every eigenvalue of F_1 (a Krylov rank test misjudges larger teams)
         H = np.zeros((N, p, N, m))
-        H[np.arange(N), :, np.arange(N), :] = Cs * row[:, None, None]
-        out.append(_observable(F1, H.reshape(N * p, N * m)[np.repeat(row, p)], tol))
+        H[np.arange(N), :, np.arange(N), :] = Cs
+        out.append(_pbh_observable(F1, H.reshape(N * p, N * m)[np.repeat(row, p)]))
     return np.array(out)
 
 
 def _graph_observability(A, BK, L, S, tol, C=None) -> np.ndarray | None:
     """PBH test through the Laplacian eigenvectors (see :func:`observable_agents`); None if not applicable.
 
-    `C` ``(p, m)``: the output matrix of every agent (None: full states).
+    `C` ``(N, p, m)``: every agent's output matrix (None: full states). ``F_1``'s eigenvectors are
+    ``v ⊗ w`` whatever the outputs (``v`` in the Laplacian eigenspace of ``λ``, ``w`` the eigenvector of
+    ``A - λ BK`` of one eigenvalue); agent i sees one iff ``v_j C_j w != 0`` for some ``j`` in ``N̄_i``, so
+    for every ``(λ, w)`` the rows of ``V_λ`` of the agents in ``N̄_i`` whose outputs see ``w``
+    (``C_j w != 0``, decided at ``1e-6`` relative) must have full column rank.
     """
     lam, V = np.linalg.eigh(L)
     scale = max(1.0, float(np.max(np.abs(lam))))
@@ -155,31 +163,37 @@ def _graph_observability(A, BK, L, S, tol, C=None) -> np.ndarray | None:
         return None
     Sf = S.astype(float)
     out = np.ones(S.shape[0], dtype=bool)
-    if C is not None and not _outputs_see_every_block(A, BK, lam_g, scale, C):
-        return np.zeros(S.shape[0], dtype=bool)  # a mode v ⊗ w with C w = 0 is unseen by every agent
-    for g in groups:
+    if C is None:
+        for g in groups:
+            Vg = V[:, g]
+            rows = Sf[:, :, None] * Vg[None]  # rows of V_g outside N̄_i zeroed (singular values unchanged)
+            out &= np.linalg.svd(rows, compute_uv=False)[:, -1] > tol
+        return out
+    seen = _outputs_see(A, BK, lam_g, scale, C)  # (G, m, N): whether agent j's outputs see eigenvector w
+    for gi, g in enumerate(groups):
         Vg = V[:, g]
-        rows = Sf[:, :, None] * Vg[None]  # rows of V_g outside N̄_i zeroed (singular values unchanged)
-        out &= np.linalg.svd(rows, compute_uv=False)[:, -1] > tol
+        for e in range(m):
+            rows = (Sf * seen[gi, e][None, :])[:, :, None] * Vg[None]  # agents j in N̄_i that see w
+            out &= np.linalg.svd(rows, compute_uv=False)[:, -1] > tol
     return out
 
 
-def _outputs_see_every_block(A, BK, lam_g, scale, C) -> bool:
-    """PBH of ``(A - λ BK, C)`` for every Laplacian eigenvalue ``λ``: ``[A - λ BK - μ I; C]`` of full column rank.
+def _outputs_see(A, BK, lam_g, scale, C) -> np.ndarray:
+    """``||C_j w|| > 1e-6`` (relative) for every Laplacian eigenvalue group, eigenvector ``w`` of ``A - λ BK``, agent.
 
-    Every eigenvector ``v ⊗ w`` of ``F_1`` is seen by the outputs only if ``C w != 0``. The zero
-    eigenvalue is taken exactly (its rounding splits a Jordan block), and the rank is decided at
-    ``1e-6`` relative, as the non-derogatory test above (weakly seen modes count as unseen).
+    ``w`` is the null vector of ``A - λ BK - μ I`` (one per eigenvalue ``μ``: the blocks are
+    non-derogatory); the zero Laplacian eigenvalue is taken exactly (its rounding splits a Jordan
+    block). Returns ``(G, m, N)`` booleans.
     """
     m = A.shape[0]
     lam = np.where(np.abs(lam_g) <= 1e-7 * scale, 0.0, lam_g)
     M = A[None] - lam[:, None, None] * BK[None]  # (G, m, m)
     mu = np.linalg.eigvals(M)  # (G, m)
-    shifted = M[:, None].astype(complex) - mu[:, :, None, None] * np.eye(m)  # (G, m, m, m)
-    stacked = np.concatenate([shifted, np.broadcast_to(C.astype(complex), (*shifted.shape[:2], *C.shape))], axis=-2)
-    sv = np.linalg.svd(stacked, compute_uv=False)  # (G, m, m)
-    size = max(1.0, float(np.abs(M).max()), float(np.abs(C).max()))
-    return bool(np.all(sv[..., -1] > 1e-6 * size))
+    _, _, Vh = np.linalg.svd(M[:, None].astype(complex) - mu[:, :, None, None] * np.eye(m))  # (G, m, m, m)
+    w = np.conj(Vh[..., -1, :])  # (G, m, m): the null vector of each (group, eigenvalue), unit norm
+    Cw = np.einsum("jpa,gea->gejp", C.astype(complex), w)  # (G, m, N, p)
+    size = max(1.0, float(np.abs(C).max()))
+    return np.linalg.norm(Cw, axis=-1) > 1e-6 * size
 
 
 def require_observable(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, *, C: ArrayLike | None = None) -> None:
@@ -355,6 +369,25 @@ def theorem1_min_eigenvalues(
     }
     finite_result("Theorem 1 eigenvalue computation", *out.values())
     return out
+
+
+def _pbh_observable(F: np.ndarray, H: np.ndarray) -> bool:
+    """PBH test: ``[F - mu I; H]`` of full column rank at every eigenvalue ``mu`` of ``F``.
+
+    Rounding splits a Jordan block's eigenvalue into a cluster; the test is also run at each cluster's
+    mean (which recovers the eigenvalue to high accuracy). The rank is decided at ``1e-6`` relative to
+    ``max(1, |F - I|, |H|)``: weakly observable modes count as unobservable.
+    """
+    n = F.shape[0]
+    mu = np.linalg.eigvals(F)
+    near = np.abs(mu[:, None] - mu[None, :]) < 1e-6
+    means = (near @ mu) / near.sum(axis=1)
+    shifts = np.unique(np.round(np.concatenate([mu, means]), 12))
+    stacked = np.concatenate([F[None].astype(complex) - shifts[:, None, None] * np.eye(n),
+                              np.broadcast_to(H.astype(complex), (shifts.size, *H.shape))], axis=1)
+    smallest = np.linalg.svd(stacked, compute_uv=False)[:, -1]
+    size = max(1.0, float(np.abs(F - np.eye(n)).max()), float(np.abs(H).max()))
+    return bool(np.all(smallest > 1e-6 * size))
 
 
 def _observable(F: np.ndarray, H: np.ndarray, tol: float) -> bool:

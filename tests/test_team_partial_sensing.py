@@ -223,20 +223,43 @@ def test_centralized_with_outputs_equals_textbook_kf(correlated):
     assert x2.shape == (1, N, 4) and np.linalg.eigvalsh(P2[0]).min() > 0
 
 
+def _pbh_observable(adjacency, C):
+    """Agents for which [F_1 - mu I; H_i] has full column rank at every eigenvalue mu of F_1 (dense, independent)."""
+    n = adjacency.shape[0]
+    Cs = _team_C(C, n)
+    F1, _ = closed_loop_matrices(AGENT.A, AGENT.B @ K, graphs.laplacian(adjacency))
+    M = F1.shape[0]
+    mus = np.concatenate([np.linalg.eigvals(F1), [1.0]])  # 1: the Jordan block of the team's common motion
+    S = sensing.sensing_mask(adjacency)
+    out = []
+    for i in range(n):
+        H = np.zeros((0, M))
+        for j in np.flatnonzero(S[i]):
+            row = np.zeros((Cs.shape[1], M))
+            row[:, j * 4:(j + 1) * 4] = Cs[j]
+            H = np.vstack([H, row])
+        smallest = [np.linalg.svd(np.vstack([F1 - mu * np.eye(M), H]), compute_uv=False)[-1] for mu in mus]
+        out.append(min(smallest) > 1e-5)
+    return np.array(out)
+
+
 def test_observability_with_outputs():
     """Positions only: every agent of a ring observes the team; velocities only: no one (the common position)."""
+    import networkx as nx
+
     A, BK = AGENT.A, AGENT.B @ K
     ring = graphs.ring_graph(5)
     assert team_observability.observable_agents(A, BK, ring, C=POSITIONS).all()
     assert not team_observability.observable_agents(A, BK, ring, C=VELOCITIES).any()
-    # the graph test (one C for all) agrees with the rank test (C per agent, scaled: same observability)
-    star = graphs.star_graph(5)
-    per_agent = np.stack([POSITIONS * (1.0 + j) for j in range(5)])
-    for adjacency in (ring, star, graphs.path_graph(5)):
-        a = team_observability.observable_agents(A, BK, adjacency, C=POSITIONS)
-        b = team_observability.observable_agents(A, BK, adjacency, C=per_agent)
-        assert np.array_equal(a, b), adjacency
-    assert not team_observability.observable_agents(A, BK, star, C=POSITIONS).all()  # twin leaves
+    # the Laplacian-eigenvector test equals a dense PBH test, with one C for all and with one C per agent
+    geometric = nx.to_numpy_array(nx.random_geometric_graph(10, 0.45, seed=3), nodelist=range(10))
+    mixed = np.stack([POSITIONS, VELOCITIES, POSITIONS, np.array([[1.0, 0, 0, 0], [0, 0, 0, 1.0]]), POSITIONS])
+    for adjacency, C in ((ring, VELOCITIES), (graphs.star_graph(5), POSITIONS), (graphs.path_graph(5), POSITIONS),
+                         (ring, mixed), (graphs.path_graph(5), mixed), (geometric, POSITIONS),
+                         (geometric, np.stack([POSITIONS * (1.0 + 0.1 * j) for j in range(10)]))):
+        got = team_observability.observable_agents(A, BK, adjacency, C=C)
+        assert np.array_equal(got, _pbh_observable(adjacency, C)), (adjacency, C)
+    assert not team_observability.observable_agents(A, BK, graphs.star_graph(5), C=POSITIONS).all()  # twin leaves
 
 
 def test_unobservable_configuration_is_refused_by_name():
