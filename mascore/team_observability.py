@@ -57,15 +57,16 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
     iff, for every Laplacian eigenvalue ``λ`` with eigenvector basis
     ``V_λ``, the rows of ``V_λ`` of the agents in ``N̄_i`` have full column
     rank. Symmetric "twin" agents outside ``N̄_i`` (same neighbours) break it.
-    With output matrices ``C_j`` the eigenvectors are still ``v ⊗ w`` (``w`` an
-    eigenvector of ``A - λ BK``), and only the agents whose outputs see ``w``
-    (``C_j w != 0``) count among the rows of ``V_λ``: with one ``C`` for all, the
-    pair ``(A - λ BK, C)`` must be observable for every Laplacian eigenvalue ``λ``
-    (positions only of the double integrator pass; velocities only do not: the
-    team's common position is unseen).
     This test is well conditioned; otherwise (directed graphs, or the
     conditions fail) a rank test of the observability matrix of the shifted
     system is used, which can call weakly observable pairs unobservable.
+    With output matrices ``C_j`` the eigenvectors are still ``v ⊗ w`` (``w`` an
+    eigenvector of ``A - λ BK``, times ``I_k`` on the spatial axes when
+    ``A = A_r ⊗ I_k``), seen by agent i only through the outputs ``C_j w`` of the
+    agents ``j`` in ``N̄_i``: with one ``C`` for all, the pair ``(A - λ BK, C)``
+    must be observable for every Laplacian eigenvalue ``λ`` (positions only of the
+    double integrator pass; velocities only do not: the team's common position is
+    unseen). The fallback with outputs is a dense PBH test.
 
     Parameters
     ----------
@@ -108,43 +109,93 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
         raise ValueError(f"adjacency must be a single (N, N) topology here; got shape {Adj.shape}")
     S = sensing_mask(Adj, allow_isolated=True)
     L = graph_laplacian(Adj)
-    N = Adj.shape[0]
-    Cs = None if C is None else output_matrices(C, m, N)
-    # work on the per-axis factor when A = A_r ⊗ I_k, BK = BK_r ⊗ I_k (and C = C_r ⊗ I_k): same rank test
+    if C is not None:
+        return _observable_with_outputs(A, BK, Adj, S, L, output_matrices(C, m, Adj.shape[0]), tol)
+    # work on the per-axis factor when A = A_r ⊗ I_k and BK = BK_r ⊗ I_k (same rank test)
     for k in range(m, 0, -1):
-        if (m % k == 0 and kron_factor(A, k) is not None and kron_factor(BK, k) is not None
-                and (Cs is None or kron_factor(Cs, k) is not None)):
+        if m % k == 0 and kron_factor(A, k) is not None and kron_factor(BK, k) is not None:
             A, BK, m = kron_factor(A, k), kron_factor(BK, k), m // k
-            Cs = None if Cs is None else kron_factor(Cs, k)
             break
     if np.allclose(Adj, Adj.T):
-        graph_test = _graph_observability(A, BK, L, S, tol, Cs)
+        graph_test = _graph_observability(A, BK, L, S, tol)
         if graph_test is not None:
             return graph_test
     F1, _ = closed_loop_matrices(A, BK, L)
     out = []
-    if Cs is None:
-        for row in S:
-            H = np.kron(np.eye(row.size)[row], np.eye(m))
-            out.append(_observable(F1, H, tol))
-        return np.array(out)
-    p = Cs.shape[1]
-    for row in S:  # outputs: the PBH test at every eigenvalue of F_1 (a Krylov rank test misjudges larger teams)
-        H = np.zeros((N, p, N, m))
-        H[np.arange(N), :, np.arange(N), :] = Cs
-        out.append(_pbh_observable(F1, H.reshape(N * p, N * m)[np.repeat(row, p)]))
+    for row in S:
+        H = np.kron(np.eye(row.size)[row], np.eye(m))
+        out.append(_observable(F1, H, tol))
     return np.array(out)
 
 
-def _graph_observability(A, BK, L, S, tol, C=None) -> np.ndarray | None:
-    """PBH test through the Laplacian eigenvectors (see :func:`observable_agents`); None if not applicable.
+def _observable_with_outputs(A, BK, Adj, S, L, C, tol) -> np.ndarray:
+    """:func:`observable_agents` with output matrices `C` ``(N, p, m)``.
 
-    `C` ``(N, p, m)``: every agent's output matrix (None: full states). ``F_1``'s eigenvectors are
-    ``v ⊗ w`` whatever the outputs (``v`` in the Laplacian eigenspace of ``λ``, ``w`` the eigenvector of
-    ``A - λ BK`` of one eigenvalue); agent i sees one iff ``v_j C_j w != 0`` for some ``j`` in ``N̄_i``, so
-    for every ``(λ, w)`` the rows of ``V_λ`` of the agents in ``N̄_i`` whose outputs see ``w``
-    (``C_j w != 0``, decided at ``1e-6`` relative) must have full column rank.
+    With ``A = A_r ⊗ I_k`` and ``BK = BK_r ⊗ I_k`` (whatever `C`), ``F_1``'s eigenspace of a
+    Laplacian eigenvalue ``λ`` (basis ``V_λ``) and an eigenvalue of ``A_r - λ BK_r`` (eigenvector
+    ``w``, the block non-derogatory) is ``{(V_λ ⊗ w ⊗ I_k) c}``, and agent i sees all of it iff
+    the stack over ``j`` in ``N̄_i`` of ``V_λ[j] ⊗ (C_j (w ⊗ I_k))`` has full column rank (PBH).
+    Otherwise (a directed graph, or blocks that share eigenvalues) a dense PBH test.
     """
+    m = A.shape[0]
+    k = next(f for f in range(m, 0, -1)
+             if m % f == 0 and kron_factor(A, f) is not None and kron_factor(BK, f) is not None)
+    if np.allclose(Adj, Adj.T):
+        blocks = _eigen_blocks(kron_factor(A, k), kron_factor(BK, k), L)
+        if blocks is not None:
+            V, groups, W = blocks
+            N, p = C.shape[:2]
+            Cn = C / max(1.0, float(np.abs(C).max()))
+            out = np.ones(N, dtype=bool)
+            for gi, g in enumerate(groups):
+                for w in W[gi].T:  # every eigenvector of the block (one per eigenvalue)
+                    T = Cn @ np.kron(w[:, None], np.eye(k))  # (N, p, k): C_j (w ⊗ I_k)
+                    blk = V[:, g][:, :, None, None] * T[:, None]  # (N, |g|, p, k): V_λ[j, a] T_j
+                    rows = np.moveaxis(blk, 2, 1).reshape(N, p, len(g) * k)  # agent j's p rows
+                    O = (S[:, :, None, None] * rows[None]).reshape(N, N * p, len(g) * k)  # zero rows: j not in N̄_i
+                    out &= np.linalg.svd(O, compute_uv=False)[:, -1] > tol
+            return out
+    F1, _ = closed_loop_matrices(A, BK, L)
+    N, p = C.shape[:2]
+    H = np.zeros((N, p, N, m))
+    H[np.arange(N), :, np.arange(N), :] = C
+    H = H.reshape(N * p, N * m)
+    return np.array([_pbh_observable(F1, H[np.repeat(row, p)]) for row in S])
+
+
+def _eigen_blocks(A, BK, L):
+    """``(V, groups, W)``: Laplacian eigenvectors, their eigenvalue groups and each group's eigenvectors of
+    ``A - λ BK`` (columns of ``W[g]``, unit norm), or None when the blocks are derogatory or share eigenvalues.
+
+    The zero Laplacian eigenvalue is taken exactly and each eigenvector is the null vector of
+    ``A - λ BK - μ I`` at the mean of ``μ``'s rounding cluster (a Jordan block's eigenvalue splits).
+    """
+    lam, V = np.linalg.eigh(L)
+    scale = max(1.0, float(np.max(np.abs(lam))))
+    cuts = np.flatnonzero(np.diff(lam) > 1e-7 * scale) + 1
+    groups = np.split(np.arange(lam.size), cuts)
+    m = A.shape[0]
+    lam_g = np.array([lam[g].mean() for g in groups])
+    lam_g = np.where(np.abs(lam_g) <= 1e-7 * scale, 0.0, lam_g)
+    M = A[None] - lam_g[:, None, None] * BK[None]  # (G, m, m)
+    mu = np.linalg.eigvals(M)  # (G, m)
+    near = np.abs(mu[:, :, None] - mu[:, None, :]) < 1e-6
+    mu = np.einsum("gab,gb->ga", near, mu) / near.sum(axis=-1)  # cluster means
+    if m > 1:  # non-derogatory: every eigenvalue has a one-dimensional eigenspace
+        sv = np.linalg.svd(M[:, None] - mu[:, :, None, None] * np.eye(m), compute_uv=False)
+        if np.any(sv[..., m - 2] <= 1e-6 * np.maximum(1.0, sv[..., 0])):
+            return None
+    gid = np.repeat(np.arange(len(groups)), m)
+    dist = np.abs(mu.reshape(-1)[:, None] - mu.reshape(-1)[None, :])
+    if np.any(dist[gid[:, None] != gid[None, :]] < 1e-6):
+        return None
+    _, _, Vh = np.linalg.svd(M[:, None].astype(complex) - mu[:, :, None, None] * np.eye(m))
+    W = np.swapaxes(np.conj(Vh[..., -1, :]), -1, -2)  # (G, m, m): column e is the null vector of eigenvalue e
+    return V, groups, W
+
+
+def _graph_observability(A, BK, L, S, tol) -> np.ndarray | None:
+    """PBH test through the Laplacian eigenvectors (see :func:`observable_agents`); None if not applicable."""
     lam, V = np.linalg.eigh(L)
     scale = max(1.0, float(np.max(np.abs(lam))))
     cuts = np.flatnonzero(np.diff(lam) > 1e-7 * scale) + 1
@@ -163,37 +214,11 @@ def _graph_observability(A, BK, L, S, tol, C=None) -> np.ndarray | None:
         return None
     Sf = S.astype(float)
     out = np.ones(S.shape[0], dtype=bool)
-    if C is None:
-        for g in groups:
-            Vg = V[:, g]
-            rows = Sf[:, :, None] * Vg[None]  # rows of V_g outside N̄_i zeroed (singular values unchanged)
-            out &= np.linalg.svd(rows, compute_uv=False)[:, -1] > tol
-        return out
-    seen = _outputs_see(A, BK, lam_g, scale, C)  # (G, m, N): whether agent j's outputs see eigenvector w
-    for gi, g in enumerate(groups):
+    for g in groups:
         Vg = V[:, g]
-        for e in range(m):
-            rows = (Sf * seen[gi, e][None, :])[:, :, None] * Vg[None]  # agents j in N̄_i that see w
-            out &= np.linalg.svd(rows, compute_uv=False)[:, -1] > tol
+        rows = Sf[:, :, None] * Vg[None]  # rows of V_g outside N̄_i zeroed (singular values unchanged)
+        out &= np.linalg.svd(rows, compute_uv=False)[:, -1] > tol
     return out
-
-
-def _outputs_see(A, BK, lam_g, scale, C) -> np.ndarray:
-    """``||C_j w|| > 1e-6`` (relative) for every Laplacian eigenvalue group, eigenvector ``w`` of ``A - λ BK``, agent.
-
-    ``w`` is the null vector of ``A - λ BK - μ I`` (one per eigenvalue ``μ``: the blocks are
-    non-derogatory); the zero Laplacian eigenvalue is taken exactly (its rounding splits a Jordan
-    block). Returns ``(G, m, N)`` booleans.
-    """
-    m = A.shape[0]
-    lam = np.where(np.abs(lam_g) <= 1e-7 * scale, 0.0, lam_g)
-    M = A[None] - lam[:, None, None] * BK[None]  # (G, m, m)
-    mu = np.linalg.eigvals(M)  # (G, m)
-    _, _, Vh = np.linalg.svd(M[:, None].astype(complex) - mu[:, :, None, None] * np.eye(m))  # (G, m, m, m)
-    w = np.conj(Vh[..., -1, :])  # (G, m, m): the null vector of each (group, eigenvalue), unit norm
-    Cw = np.einsum("jpa,gea->gejp", C.astype(complex), w)  # (G, m, N, p)
-    size = max(1.0, float(np.abs(C).max()))
-    return np.linalg.norm(Cw, axis=-1) > 1e-6 * size
 
 
 def require_observable(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, *, C: ArrayLike | None = None) -> None:
@@ -374,15 +399,15 @@ def theorem1_min_eigenvalues(
 def _pbh_observable(F: np.ndarray, H: np.ndarray) -> bool:
     """PBH test: ``[F - mu I; H]`` of full column rank at every eigenvalue ``mu`` of ``F``.
 
-    Rounding splits a Jordan block's eigenvalue into a cluster; the test is also run at each cluster's
-    mean (which recovers the eigenvalue to high accuracy). The rank is decided at ``1e-6`` relative to
-    ``max(1, |F - I|, |H|)``: weakly observable modes count as unobservable.
+    Rounding splits a Jordan block's eigenvalue into a cluster; the test runs at each cluster's mean
+    (which recovers the eigenvalue to high accuracy). The rank is decided at ``1e-6`` relative to
+    ``max(1, |F - I|, |H|)``: weakly observable modes count as unobservable. ``O(n^4)`` work: the
+    fallback of small or unstructured teams.
     """
     n = F.shape[0]
     mu = np.linalg.eigvals(F)
     near = np.abs(mu[:, None] - mu[None, :]) < 1e-6
-    means = (near @ mu) / near.sum(axis=1)
-    shifts = np.unique(np.round(np.concatenate([mu, means]), 12))
+    shifts = np.unique(np.round((near @ mu) / near.sum(axis=1), 12))
     stacked = np.concatenate([F[None].astype(complex) - shifts[:, None, None] * np.eye(n),
                               np.broadcast_to(H.astype(complex), (shifts.size, *H.shape))], axis=1)
     smallest = np.linalg.svd(stacked, compute_uv=False)[:, -1]

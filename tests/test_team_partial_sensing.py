@@ -260,6 +260,9 @@ def test_observability_with_outputs():
         got = team_observability.observable_agents(A, BK, adjacency, C=C)
         assert np.array_equal(got, _pbh_observable(adjacency, C)), (adjacency, C)
     assert not team_observability.observable_agents(A, BK, graphs.star_graph(5), C=POSITIONS).all()  # twin leaves
+    # without coupling (K = 0, every block alike: the dense PBH fallback) an agent sees only whom it senses
+    no_coupling = team_observability.observable_agents(A, np.zeros((4, 4)), graphs.path_graph(3), C=POSITIONS)
+    assert no_coupling.tolist() == [False, True, False]
 
 
 def test_unobservable_configuration_is_refused_by_name():
