@@ -26,7 +26,8 @@ rank-``q_i`` correction ``V^T V`` in place (no ``M x M`` temporary):
 exactly the update with ``H_i`` (tested against :func:`mascore.kalman.update` with the
 explicit ``H_i``). The prediction uses ``F = I kron A + (I kron B) G`` with the
 control Jacobian ``G = dU/dX`` (``nN x 2nN``, written in its final layout):
-``F P F^T`` costs ``1.5 M^3`` (two matrix products) instead of ``4 M^3``, every
+``F P F^T`` costs at most ``1.5 M^3`` (two matrix products, the symmetric
+``G P G^T`` from its tiles on and above the diagonal) instead of ``4 M^3``, every
 product by ``A`` or ``B`` being a scaled addition of rows or column blocks, and
 one transpose making the result exactly symmetric. All N filters (and all Monte
 Carlo runs) advance chunk by chunk, each chunk's update and prediction running
@@ -1256,7 +1257,7 @@ def _check_sigma(S, name, M, batch, of):
 
 #: Bytes of covariance handled per chunk of filters: each chunk runs its update and prediction while its
 #: covariances are in cache (a few MB of L2/L3), instead of sweeping memory once per elementary operation.
-_CHUNK_BYTES = 1 << 22
+_CHUNK_BYTES = 1 << 20
 
 
 def _chunks(K, M):
@@ -1505,8 +1506,8 @@ def _predict_half(X, Ph, model, out, work):
 
     ``F = A' + B' G`` with ``A' = I kron A``, ``B' = I kron B`` (the double integrator) and the control
     Jacobian ``G = dU/dX`` (``nN x 2nN``, from :func:`mascore._flocking_core.control_and_jacobian`, scaled
-    by ``dt``). With ``Y = G Sigma`` and ``Z = Y G^T`` (``1.5 M^3`` flops for ``M = 2nN``, two BLAS calls
-    per filter),
+    by ``dt``). With ``Y = G Sigma`` and ``Z = Y G^T`` (``M^3`` and at most ``M^3 / 2`` flops for ``M = 2nN``:
+    ``Z`` is symmetric and only its tiles on and above the diagonal are computed),
 
         F Sigma F^T = X + X^T,   X = [A' Sigma/2 + B' (Y + Z C^T / 2)] A'^T,   C = A'^{-1} B',
 
