@@ -1288,8 +1288,8 @@ def _tiled_matmul(A, B, out, acc, symmetric=False):
     `acc` is a flat work array of at least ``c m n`` doubles (used when ``k > _TILE_K``: the pieces of the
     inner dimension are summed). The tiles of one row block are one batched ``np.matmul`` over strided views.
     With `symmetric` (``m = n`` and ``A @ B`` symmetric, such as ``Y G^T`` with ``Y = G Sigma``), only the tiles
-    on and above the diagonal are computed and the blocks below are their transposes: an exactly symmetric
-    result for about 3/4 of the multiply-adds.
+    that reach the diagonal or lie above it are computed, and the blocks left of them are the transposes of
+    blocks above (about 3/4 of the multiply-adds for ``m = 128``, fewer for larger ``m``).
     """
     c, m, k = A.shape
     n = B.shape[-1]
