@@ -172,7 +172,7 @@ def control_and_jacobian(X: np.ndarray, gains: FlockingGains, with_control: bool
     batch = X.shape[:-2]
     U = np.empty((*batch, N, n)) if with_control else None
     G = np.empty((*batch, N, n, N, m)) if out is None else out
-    Xt = np.ascontiguousarray(np.moveaxis(X, -1, -2))  # (..., m, N)
+    Xt = np.ascontiguousarray(np.swapaxes(X, -1, -2))  # (..., m, N)
     rows = max(1, min(N, _PAIR_BLOCK // max(1, int(np.prod(batch, dtype=np.int64)) * N)))
     for i0 in range(0, N, rows):
         _control_and_jacobian_rows(Xt, gains, i0, min(N, i0 + rows), U, G, scale)

@@ -1304,11 +1304,7 @@ def _tiled_matmul(A, B, out, acc, symmetric=False):
             k1 = min(k, k0 + kb)
             Di = (out if k0 == 0 else acc)[:, i0:i0 + r, j0:]
             Ai, Bk = A[:, i0:i0 + r, k0:k1], B[:, k0:k1, j0:]
-            s0, s1, s2 = Bk.strides
-            Bt = np.lib.stride_tricks.as_strided(Bk, (c, nb, k1 - k0, b), (s0, b * s2, s1, s2))  # column tiles
-            d0, d1, d2 = Di.strides
-            np.matmul(Ai[:, None], Bt, out=np.lib.stride_tricks.as_strided(Di, (c, nb, Ai.shape[1], b),
-                                                                            (d0, b * d2, d1, d2)))
+            np.matmul(Ai[:, None], _column_tiles(Bk, nb, b), out=_column_tiles(Di, nb, b))
             if n - j0 > nb * b:
                 np.matmul(Ai, Bk[:, :, nb * b:], out=Di[:, :, nb * b:])
             if k0:
@@ -1316,6 +1312,15 @@ def _tiled_matmul(A, B, out, acc, symmetric=False):
         if symmetric and j0:
             np.copyto(out[:, i0:i0 + r, :j0], np.swapaxes(out[:, :j0, i0:i0 + r], -1, -2))
     return out
+
+
+def _column_tiles(A, nb, b):
+    """The first ``nb b`` columns of a stack ``A (c, k, n)`` as ``nb`` tiles of ``b`` columns, ``(c, nb, k, b)``.
+
+    A view (splitting the column axis never copies), cheaper to build than ``as_strided``.
+    """
+    c, k, _ = A.shape
+    return A[:, :, : nb * b].reshape(c, k, nb, b).swapaxes(1, 2)
 
 
 def _cholesky_inverse(S):
@@ -1337,7 +1342,7 @@ def _cholesky_inverse(S):
             Li, info = _dtrtri(L, lower=1)
         if info != 0:
             raise np.linalg.LinAlgError("innovation covariance is not positive definite")
-        return np.tril(Li)
+        return Li  # zero above the diagonal: potrf's clean=1 zeroed it and trtri (lower) leaves it
     h = q // 2
     acc = np.empty(q * q)
     Li = np.zeros((q, q))
