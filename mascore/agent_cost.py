@@ -72,7 +72,7 @@ AGENT_TASKS = ("team", "target", "localization")
 #: The team task's methods timed (the estimators of :mod:`mascore.compare`'s own-state task at their own recipe;
 #: their specs sit beside their filters); the methods of the target and localization tasks are all their specs':
 #: see :func:`agent_methods`.
-TEAM_METHODS = ("centralized", "local", "forwarding", "song-mb", "song-eb", "vlahakis", "set-membership")
+TEAM_METHODS = estimation.method_names("team", ("recipe",))
 #: Largest N measured per (task, method), with the reason; the others go to 128.
 MAX_AGENTS = {
     ("team", "song-eb"): (32, "its joint covariance of all agents' team estimates holds (2 N^2)^2 floats (per "
@@ -106,7 +106,7 @@ def agent_methods(task: str) -> tuple[str, ...]:
     if task not in AGENT_TASKS:
         raise ValueError(f"task must be one of {AGENT_TASKS}; got {task!r}")
     if task == "team":
-        return TEAM_METHODS
+        return estimation.method_names("team", ("recipe",))
     return tuple(m for m in estimation.method_names(task) if m not in FUSION_KNOB_METHODS)
 
 
@@ -264,14 +264,14 @@ def _team_step(method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> 
     Z = measure()
     if estimation.method_spec(method, "team").whole_filter:
         U = control(Z)  # the inputs of the timed step (from the views before the update: the work is the same)
-        filt, own, messages = est.agent_inputs(Z, S, U, i)
-        return AgentStep("team", method, N, i, len(nbrs), "whole filter", lambda: filt.agent_step(i, own, messages))
+        own, messages = est.agent_inputs(Z, S, U, i)
+        return AgentStep("team", method, N, i, len(nbrs), "whole filter", lambda: est.agent_step(i, own, messages))
     before = copy.deepcopy(est)  # agent i's prior, and the team's views of this step, from the same state
     est.update(Z, S)
     U = control(Z)
     est.predict(U)
-    filt, own, messages = before.agent_inputs(Z, S, U, i)
-    return AgentStep("team", method, N, i, len(nbrs), "one agent", lambda: filt.agent_step(i, own, messages),
+    own, messages = before.agent_inputs(Z, S, U, i)
+    return AgentStep("team", method, N, i, len(nbrs), "one agent", lambda: before.agent_step(i, own, messages),
                      lambda: est.agent_state(i))
 
 

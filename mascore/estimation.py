@@ -43,10 +43,14 @@ __all__ = [
     "method_specs",
     "method_spec",
     "method_names",
+    "knob_settings",
     "not_applicable",
+    "ROLES",
     "STUDY_LAYER",
 ]
 
+#: What a method is in the tables (:attr:`MethodSpec.role`): its recipe, a shown variant of its knob, a knob setting.
+ROLES = ("recipe", "variant", "knob")
 #: Modules of ``mascore`` above the numerical core (studies, CLI, book tools): never scanned for specs.
 STUDY_LAYER = frozenset({"agent_cost", "compare", "ledger", "papers", "plotting", "registry", "report", "reproduce",
                          "sweep"})
@@ -181,6 +185,14 @@ class MethodSpec:
         The busiest agent runs the whole filter (the centre): timed as the team-wide step.
     position : float
         Rank in the tables (ascending; ties by name).
+    role : {"recipe", "variant", "knob"}
+        ``"recipe"``: the method at its own paper's settings (every study, figure and cost table);
+        ``"variant"``: another setting of its knob shown beside it in the headline tables and at every
+        team size; ``"knob"``: a setting swept at N = 8 only (:data:`mascore.compare.KNOBS`).
+    family : str
+        The method whose knob it sets (``""``: its own name), e.g. ``"ren-kc"`` for ``"ren-kc-q0"``.
+    setting : float or None
+        The value of that knob (None: the scenario's default), e.g. Ren et al.'s Q.
 
     Examples
     --------
@@ -198,10 +210,16 @@ class MethodSpec:
     not_applicable: Mapping[str, str] = field(default_factory=dict)
     whole_filter: bool = False
     position: float = 0.0
+    role: str = "recipe"
+    family: str = ""
+    setting: float | None = None
 
     def __post_init__(self) -> None:
         if not (isinstance(self.name, str) and self.name):
             raise ValueError(f"name must be a non-empty string; got {self.name!r}")
+        if self.role not in ROLES:
+            raise ValueError(f"role of method {self.name!r} must be one of {ROLES}; got {self.role!r}")
+        object.__setattr__(self, "family", self.family or self.name)
         for attr in ("build", "cost"):
             if not callable(getattr(self, attr)):
                 raise TypeError(f"{attr} of method {self.name!r} must be callable")
@@ -265,21 +283,24 @@ def _declares_methods(info: pkgutil.ModuleInfo) -> bool:
     """Whether a module's source assigns ``METHODS`` at its top level (read, not imported: the scan stays cheap)."""
     path = Path(getattr(info.module_finder, "path", "")) / f"{info.name}.py"
     try:
-        return _METHODS_LINE.search(path.read_text(encoding="utf-8")) is not None
+        source = path.read_bytes()
     except OSError:  # not a plain source file: import it to see
         return True
+    return b"METHODS" in source and _METHODS_LINE.search(source) is not None  # the plain search first: fast
 
 
-_METHODS_LINE = re.compile(r"^METHODS\s*(?::[^=\n]*)?=", re.M)
+_METHODS_LINE = re.compile(rb"^METHODS\s*(?::[^=\n]*)?=", re.M)
 
 
-def method_names(task: str) -> tuple[str, ...]:
+def method_names(task: str, roles: Sequence[str] = ROLES) -> tuple[str, ...]:
     """The names of the methods of `task`, in table order (:func:`method_specs`).
 
     Parameters
     ----------
     task : str
         The scenario.
+    roles : sequence of str
+        Keep the methods of these roles (:attr:`MethodSpec.role`; default: all).
 
     Returns
     -------
@@ -291,8 +312,34 @@ def method_names(task: str) -> tuple[str, ...]:
     >>> from mascore.estimation import method_names
     >>> "ci-diffusion" in method_names("localization")
     True
+    >>> method_names("team", ("recipe",))[:3]
+    ('centralized', 'local', 'forwarding')
     """
-    return tuple(s.name for s in method_specs(task))
+    return tuple(s.name for s in method_specs(task) if s.role in roles)
+
+
+def knob_settings(family: str, task: str) -> dict[str, float | None]:
+    """The methods of `task` that set the knob of method `family`, each with its setting, in table order.
+
+    Parameters
+    ----------
+    family : str
+        The method whose knob (:attr:`MethodSpec.family`).
+    task : str
+        The scenario.
+
+    Returns
+    -------
+    dict of str to float or None
+        Method name -> :attr:`MethodSpec.setting` (the recipe's own among them).
+
+    Examples
+    --------
+    >>> from mascore.estimation import knob_settings
+    >>> knob_settings("ren-kc", "shared")["ren-kc-q0"]
+    0.0
+    """
+    return {s.name: s.setting for s in method_specs(task) if s.family == family}
 
 
 def method_spec(name: str, task: str | None = None) -> MethodSpec:

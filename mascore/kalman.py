@@ -953,8 +953,7 @@ def _symmetrize_fresh(P):
 
 #: ``local``: every agent's Kalman filter of its own state from its own full-state measurement.
 METHODS = (
-    MethodSpec("local", ("team",), lambda team, x_hat0: LinearGaussianModel(team.A, team.Q_filter, np.eye(team.A.shape[0]),
-                                                                            team.R, team.B),
+    MethodSpec("local", ("team",), lambda team, x_hat0: LinearGaussianModel(team.A, team.Q_filter, team.C, team.R, team.B),
                lambda n, q, d, N: (float(n), kalman_step_flops(n)), {"team": ("O(n^3)", "O(n^2)")},
                lambda n, q, d, N: float(n**2 + n + d * n), position=1),
 )

@@ -268,16 +268,16 @@ def _team_observer(phi: float | None):
     return build
 
 
-def _vlahakis_spec(name: str, phi: float | None, position: float) -> MethodSpec:
+def _vlahakis_spec(name: str, phi: float | None, position: float, role: str = "recipe") -> MethodSpec:
     return MethodSpec(name, ("team",), _team_observer(phi),
                       lambda n, q, d, N: (float(n), float(2 * n**2 + 2 * n * 2 + 4 * d + 2 * n)),
                       {"team": ("O(n^2 + d n)", "O(n + d n)")}, lambda n, q, d, N: float(n + d * n),
                       _VLAHAKIS_NOT_APPLICABLE if phi is None else {"switching": _VLAHAKIS_NOT_APPLICABLE["switching"]},
-                      position=position)
+                      position=position, role=role, family="vlahakis", setting=phi)
 
 
 #: The Vlahakis observer at the LMI's coupling, and across the interval where its program is optimal on the
 #: comparison's ring of 8 (the knob, :func:`mascore.compare.vlahakis_profile`): its ends -0.1 and 1, and 0, 0.5.
-METHODS = (_vlahakis_spec("vlahakis", None, 5), _vlahakis_spec("vlahakis-phi0", 0.0, 6),
-           _vlahakis_spec("vlahakis-phi1", 1.0, 7), _vlahakis_spec("vlahakis-phi-0.1", -0.1, 7.1),
-           _vlahakis_spec("vlahakis-phi0.5", 0.5, 7.2))
+METHODS = (_vlahakis_spec("vlahakis", None, 5), _vlahakis_spec("vlahakis-phi0", 0.0, 6, "variant"),
+           _vlahakis_spec("vlahakis-phi1", 1.0, 7, "variant"), _vlahakis_spec("vlahakis-phi-0.1", -0.1, 7.1, "knob"),
+           _vlahakis_spec("vlahakis-phi0.5", 0.5, 7.2, "knob"))

@@ -504,8 +504,7 @@ class CentralizedOutputFilter(Frozen):
 #: ``forwarding`` on the team task: the one-hop filter of each agent's own state (its neighbours' measurements of it).
 METHODS = (
     MethodSpec("forwarding", ("team",),
-               lambda team, x_hat0: OwnStateForwardingFilter(team.A, team.B, team.Q_filter, np.eye(team.A.shape[0]),
-                                                             team.R),
-               lambda n, q, d, N: (float(n * d + n), kalman_step_flops(n) + n**3 + 2 * (d + 1) * n),
+               lambda team, x_hat0: OwnStateForwardingFilter(team.A, team.B, team.Q_filter, team.C, team.R),
+               lambda n, q, d, N: (float(q * d + n), kalman_step_flops(n) + n**3 + 2 * (d + 1) * n),
                {"team": ("O(d n + n^3)", "O(n^2 + d n)")}, lambda n, q, d, N: float(n**2 + n + d * n), position=2),
 )

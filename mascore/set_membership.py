@@ -945,20 +945,20 @@ def _team_set_filter(confidence: float | None):
     scenario's default level).
     """
     def build(team, x_hat0: np.ndarray) -> SetMembershipModel:
-        n = team.A.shape[0]
-        scale = team.bound_scale(n, confidence)
-        return SetMembershipModel(A=team.A, G=np.eye(n), C=np.eye(n), D=np.eye(n), Q=scale * team.Q_filter,
-                                  R=scale * team.R, B=team.B)
+        (m, n) = team.C.shape  # what a measurement holds of the state
+        return SetMembershipModel(A=team.A, G=np.eye(n), C=team.C, D=np.eye(m),
+                                  Q=team.bound_scale(n, confidence) * team.Q_filter,
+                                  R=team.bound_scale(m, confidence) * team.R, B=team.B)
     return build
 
 
-def _set_membership_spec(name: str, confidence: float | None, position: float) -> MethodSpec:
+def _set_membership_spec(name: str, confidence: float | None, position: float, role: str = "recipe") -> MethodSpec:
     return MethodSpec(name, ("team",), _team_set_filter(confidence),
                       lambda n, q, d, N: (float(n), kalman_step_flops(n) + 2 * n**3), {"team": ("O(n^3)", "O(n^2)")},
                       lambda n, q, d, N: float(n**2 + n + d * n), _SM_NOT_APPLICABLE if confidence is None else {},
-                      position=position)
+                      position=position, role=role, family="set-membership", setting=confidence)
 
 
 #: The set-membership filter at the scenario's confidence level, and at two others (its knob).
-METHODS = (_set_membership_spec("set-membership", None, 8), _set_membership_spec("set-membership-c90", 0.9, 9),
-           _set_membership_spec("set-membership-c99999", 0.99999, 10))
+METHODS = (_set_membership_spec("set-membership", None, 8), _set_membership_spec("set-membership-c90", 0.9, 9, "knob"),
+           _set_membership_spec("set-membership-c99999", 0.99999, 10, "knob"))

@@ -20,22 +20,22 @@ from .._validation import (
 )
 from ..settings import check_settings, check_settings_type, setting
 
-#: Estimators of the team task, in table order.
-TEAM_METHODS = ("centralized", "local", "forwarding", "song-mb", "song-eb", "vlahakis", "vlahakis-phi0",
-                "vlahakis-phi1", "set-membership")
-#: The Vlahakis observer's coupling gain per team-method name: None is the LMI's choice (with our tie-break);
-#: -0.1 and 1 are the ends of the interval where its program's value is optimal on the ring of 8
-#: (:func:`vlahakis_profile`), 0 and 0.5 points inside it.
-VLAHAKIS_PHI = {"vlahakis": None, "vlahakis-phi0": 0.0, "vlahakis-phi1": 1.0, "vlahakis-phi-0.1": -0.1,
-                "vlahakis-phi0.5": 0.5}
+#: The roles of the methods in the headline tables and at every team size: the recipes and their shown variants.
+SHOWN = ("recipe", "variant")
+#: Estimators of the team task, in table order (their specs': :func:`mascore.estimation.method_names`).
+TEAM_METHODS = estimation.method_names("team", SHOWN)
+#: The Vlahakis observer's coupling gain per team-method name (its specs' settings): None is the LMI's choice
+#: (with our tie-break); -0.1 and 1 are the ends of the interval where its program's value is optimal on the ring
+#: of 8 (:func:`vlahakis_profile`), 0 and 0.5 points inside it.
+VLAHAKIS_PHI = estimation.knob_settings("vlahakis", "team")
 #: The team methods at their own recipe (without the knob variants): the figures' methods.
-CORE_METHODS = tuple(m for m in TEAM_METHODS if m not in VLAHAKIS_PHI or m == "vlahakis")
+CORE_METHODS = estimation.method_names("team", ("recipe",))
 #: Estimators of the shared-quantity task at their own recipe (and Ren et al.'s untuned Q = 0).
-SHARED_METHODS = ("central-fusion", "no-fusion", "average-consensus", "ren-kc", "ren-kc-q0")
-#: Ren et al.'s (Q, Omega) per shared-method name: the paper's 0.1, and the knob swept from 0 to 1.
-REN_Q = {"ren-kc": 0.1, "ren-kc-q0": 0.0, "ren-kc-q0.3": 0.3, "ren-kc-q0.6": 0.6, "ren-kc-q1": 1.0}
+SHARED_METHODS = estimation.method_names("shared", SHOWN)
+#: Ren et al.'s (Q, Omega) per shared-method name (its specs' settings): the paper's 0.1, and the knob from 0 to 1.
+REN_Q = estimation.knob_settings("ren-kc", "shared")
 #: Every shared-method name a cell may carry (Ren et al.'s knob variants run at N = 8 on the ring).
-ALL_SHARED_METHODS = SHARED_METHODS + tuple(m for m in REN_Q if m not in SHARED_METHODS)
+ALL_SHARED_METHODS = estimation.method_names("shared")
 #: Sensing/communication graphs: a ring, or the proximity graph of a random layout.
 GRAPHS = ("ring", "geometric")
 #: Graphs of the common-target and shared tasks: the fixed ones, and a switching proximity topology.
@@ -48,15 +48,18 @@ SEED_AXES = ("task", "n_agents", "noise", "block")
 #: or the position only, ``z_ij = [I 0] x_j + nu_ij`` (a cell without a ``sensing`` coordinate is ``"full"``;
 #: ``"position"`` joins the seed axes, so the cells of before keep their seeds).
 SENSINGS = ("full", "position")
-#: The set-membership filter's confidence level per method name (None: ``settings.sm_confidence``): its knob,
-#: the probability mass of the Gaussian ellipsoids it is given as bounds (bounded noise: the guaranteed bound).
-SM_CONFIDENCE = {"set-membership": None, "set-membership-c90": 0.9, "set-membership-c99999": 0.99999}
-#: The team methods under position-only sensing, in table order.
-POSITION_METHODS = ("centralized", "local", "forwarding", *VLAHAKIS_PHI, *SM_CONFIDENCE)
+#: The set-membership filter's confidence level per method name (its specs' settings; None:
+#: ``settings.sm_confidence``): its knob, the probability mass of the Gaussian ellipsoids it is given as bounds
+#: (bounded noise: the guaranteed bound).
+SM_CONFIDENCE = estimation.knob_settings("set-membership", "team")
 #: Team methods that do not apply under position-only sensing, with the reason.
 POSITION_NOT_APPLICABLE = estimation.not_applicable("position")
+#: Team methods that do not apply on the switching topology, with the reason (the chapter shows them).
+SWITCHING_NOT_APPLICABLE = estimation.not_applicable("switching")
+#: The team methods under position-only sensing, in table order.
+POSITION_METHODS = tuple(m for m in estimation.method_names("team") if m not in POSITION_NOT_APPLICABLE)
 #: Every team-method name a cell may carry (the knobs' variants run at N = 8 in the studies ``scaling``, ``position``).
-ALL_TEAM_METHODS = TEAM_METHODS + tuple(m for m in (*VLAHAKIS_PHI, *SM_CONFIDENCE) if m not in TEAM_METHODS)
+ALL_TEAM_METHODS = TEAM_METHODS + tuple(m for m in estimation.method_names("team") if m not in TEAM_METHODS)
 #: The common-target and localization filters' knob variants (their specs in :mod:`mascore.fusion`): the
 #: consensus steps L in {1, 2, 5} and L = the graph's diameter, and HCMCI's novelty weight omega = N against
 #: the consistency-safe omega of its docstring (``omega max [W^L]_ij <= 1``). Swept at N = 8 on the ring
@@ -330,13 +333,12 @@ def mean_degree(kind: str, n_agents: int, settings: BenchmarkSettings) -> float:
 
 
 def floats_per_step(method: str, n_agents: int, degree: float = 2.0, sensing: str = "full") -> float:
-    """Floats one agent sends per step, by method (the communication cost).
+    """Floats one agent sends per step, by method (the communication cost): its spec's count.
 
     Parameters
     ----------
     method : str
-        One of :data:`TEAM_METHODS` or :data:`SHARED_METHODS` (or a set-membership
-        variant of :data:`SM_CONFIDENCE`).
+        A method of the team task (:data:`ALL_TEAM_METHODS`) or of the shared one (:data:`ALL_SHARED_METHODS`).
     n_agents : int
         Team size N.
     degree : float
@@ -370,22 +372,16 @@ def floats_per_step(method: str, n_agents: int, degree: float = 2.0, sensing: st
     degree = check_positive(degree, "degree", "(mean neighbours per agent)")
     if sensing not in SENSINGS:
         raise ValueError(f"sensing must be one of {SENSINGS}; got {sensing!r}")
-    table = {
-        "centralized": 8.0 * (degree + 1), "local": 4.0, "forwarding": 4.0 * degree + 4.0,
-        "song-mb": 0.0, "song-eb": 0.0, "vlahakis": 4.0, "vlahakis-phi0": 4.0, "vlahakis-phi1": 4.0,
-        "set-membership": 4.0,
-        "central-fusion": 7.0, "no-fusion": 0.0, "average-consensus": 2.0,
-    }
-    table.update({m: 4.0 for m in (*SM_CONFIDENCE, *VLAHAKIS_PHI)})
-    table.update({m: 5.0 for m in REN_Q})
-    if method not in table:
-        raise ValueError(f"method must be one of {ALL_TEAM_METHODS + ALL_SHARED_METHODS}; got {method!r}")
-    if sensing == "position":
-        if method in POSITION_NOT_APPLICABLE:
-            raise ValueError(f"method {method!r} does not apply under position-only sensing: "
-                             f"{POSITION_NOT_APPLICABLE[method]}")
-        table.update({"centralized": 6.0 * (degree + 1), "forwarding": 2.0 * degree + 4.0})
-    return table[method]
+    team, shared = estimation.method_names("team"), estimation.method_names("shared")
+    if method not in team + shared:
+        raise ValueError(f"method must be one of {team + shared}; got {method!r}")
+    if method in shared:  # a 2-D quantity: n = q = 2
+        return float(estimation.method_spec(method, "shared").cost(2, 2, degree, n_agents)[0])
+    why = estimation.method_spec(method, "team").not_applicable.get("position")
+    if sensing == "position" and why is not None:
+        raise ValueError(f"method {method!r} does not apply under position-only sensing: {why}")
+    measured = 4 if sensing == "full" else 2  # z_ij = x_j + nu_ij, or its position [I 0] x_j + nu_ij
+    return float(estimation.method_spec(method, "team").cost(4, measured, degree, n_agents)[0])
 
 
 def check_n_agents(n_agents: object) -> int:
@@ -426,8 +422,7 @@ def check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[s
                         f"dropout, q_scale); got {type(cell).__name__}")
     from .scenario import scenarios
 
-    methods_of = {"team": ALL_TEAM_METHODS, "shared": ALL_SHARED_METHODS, "target": estimation.method_names("target"),
-                  "localization": estimation.method_names("localization"),
+    methods_of = {**{t: estimation.method_names(t) for t in ("team", "shared", "target", "localization")},
                   **{task: s.methods() for task, s in scenarios().items()}}
     task = cell.get("task")
     if task not in methods_of:
@@ -456,9 +451,9 @@ def check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[s
     if sensing not in SENSINGS or (task != "team" and sensing != "full"):
         raise ValueError(f"{name}['sensing'] must be one of {SENSINGS} (a team cell; other tasks have their own "
                          f"sensing model); got {sensing!r} for a {task} cell")
-    if sensing == "position" and cell["method"] in POSITION_NOT_APPLICABLE:
-        raise ValueError(f"{name}['method'] {cell['method']!r} does not apply under position-only sensing: "
-                         f"{POSITION_NOT_APPLICABLE[cell['method']]}")
+    why = estimation.not_applicable("position").get(cell["method"]) if sensing == "position" else None
+    if why is not None:
+        raise ValueError(f"{name}['method'] {cell['method']!r} does not apply under position-only sensing: {why}")
     return cell
 
 
