@@ -155,31 +155,8 @@ class KalmanConsensusFilter(Frozen):
         return {"xi": xi[i].copy(), "P": P[i].copy()}, ((xi[heard].copy(), P[heard].copy()),)
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's step: eqs. (4)-(5) on itself and the neighbours it heard (the same kernel as :meth:`update`).
-
-        Parameters
-        ----------
-        i : int
-            The agent.
-        own, messages
-            From :meth:`agent_inputs`.
-
-        Returns
-        -------
-        xi_i, P_i : ndarray
-            Its estimate ``(m,)`` and covariance ``(m, m)`` after the step.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs
-        >>> from mascore.consensus_filters import KalmanConsensusFilter
-        >>> f = KalmanConsensusFilter(0.1, 0.1)
-        >>> xi, P, G = np.array([[0.0], [2.0], [4.0]]), np.ones((3, 1, 1)), graphs.path_graph(3)
-        >>> x1, P1 = f.agent_step(1, *f.agent_inputs(xi, P, G, 1))
-        >>> bool(np.allclose(x1, f.update(xi, P, G)[0][1]))
-        True
-        """
+        """Agent i's eqs. (4)-(5) on itself and the neighbours it heard: ``xi_i`` ``(m,)``, ``P_i`` ``(m, m)``
+        (:class:`mascore.estimation.Estimator`)."""
         xi_n, P_n = messages[0]
         d = len(xi_n)
         g = np.zeros((d + 1, d + 1))
@@ -189,26 +166,7 @@ class KalmanConsensusFilter(Frozen):
         return xi[0], P[0]
 
     def messages(self, i: int = 0, m: int = 2) -> tuple[Message, ...]:
-        """What an agent broadcasts per step: its state and covariance.
-
-        Parameters
-        ----------
-        i : int
-            The agent (the same for all).
-        m : int
-            The size of the quantity.
-
-        Returns
-        -------
-        tuple of Message
-            ``m + m (m + 1) / 2`` floats.
-
-        Examples
-        --------
-        >>> from mascore.consensus_filters import KalmanConsensusFilter
-        >>> KalmanConsensusFilter(0.1, 0.1).messages(m=2)[0].floats
-        5.0
-        """
+        """Its state and covariance, ``m + m (m + 1) / 2`` floats (:class:`mascore.estimation.Estimator`)."""
         return (Message("state xi_i and covariance P_i", float(m + m * (m + 1) // 2)),)
 
 
@@ -327,54 +285,13 @@ class AverageConsensusFilter(Frozen):
         return {"xi": xi[i].copy(), "degree": deg[i]}, ((xi[heard].copy(), deg[heard].copy()),)
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray]:
-        """Agent i's row of ``W xi``.
-
-        Parameters
-        ----------
-        i : int
-            The agent.
-        own, messages
-            From :meth:`agent_inputs`.
-
-        Returns
-        -------
-        tuple of ndarray
-            Its estimate after the step ``(m,)``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs
-        >>> from mascore.consensus_filters import AverageConsensusFilter
-        >>> f, xi, G = AverageConsensusFilter(), np.array([[0.0], [3.0], [6.0]]), graphs.path_graph(3)
-        >>> bool(np.allclose(f.agent_step(0, *f.agent_inputs(xi, G, 0))[0], f.update(xi, G)[0]))
-        True
-        """
+        """Agent i's row of ``W xi``: ``(xi_i,)``, ``(m,)`` (:class:`mascore.estimation.Estimator`)."""
         xi_n, deg_n = messages[0]
         w = 1.0 / (1.0 + np.maximum(own["degree"], deg_n))
         return ((1.0 - w.sum()) * own["xi"] + w @ xi_n,)
 
     def messages(self, i: int = 0, m: int = 2) -> tuple[Message, ...]:
-        """What an agent broadcasts per step: its state.
-
-        Parameters
-        ----------
-        i : int
-            The agent (the same for all).
-        m : int
-            The size of the quantity.
-
-        Returns
-        -------
-        tuple of Message
-            ``m`` floats.
-
-        Examples
-        --------
-        >>> from mascore.consensus_filters import AverageConsensusFilter
-        >>> AverageConsensusFilter().messages(m=2)[0].floats
-        2.0
-        """
+        """Its state, ``m`` floats (:class:`mascore.estimation.Estimator`)."""
         return (Message("state xi_i", float(m)),)
 
 

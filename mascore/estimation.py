@@ -132,12 +132,30 @@ class Estimator(Protocol):
     filter's own: a state and the data it needs); ``agent_inputs`` cuts agent i's
     own data and its neighbours' messages of one step out of a team-wide state;
     ``agent_step(i, own_data, messages)`` is agent i's step alone; ``messages()``
-    declares what an agent sends per step.
+    declares what an agent sends per step. The filters' methods say what is particular
+    to them and refer here for the rest.
 
     Parameters
     ----------
     *args, **kwargs
         None: a protocol is a type to check against (``isinstance``), not a class to build.
+
+    Notes
+    -----
+    ``agent_inputs(<the filter's team-wide state and data of one step>, i)`` takes one run (no
+    batch axis) and returns ``(own, messages)``: a dict of agent i's own data (copies: its
+    prior, its measurements, its input) and a sequence, one entry per round of the step, of
+    what its neighbours sent it in that round (empty when nothing is sent).
+
+    ``agent_step(i, own, messages)`` computes agent i's step from these alone, with the same
+    kernels as the team-wide ``update`` and ``predict``; it returns a tuple of arrays, agent i's
+    state after the step (its estimate and covariance, or its set's centre and shape), equal
+    to agent i's row of the team-wide step (the tests and :mod:`mascore.agent_cost` check it).
+    A centralized filter's "agent" is the centre: its step is the whole filter's.
+
+    ``messages(i=0, ...)`` returns a tuple of :class:`Message`: what agent i sends per step,
+    to each neighbour or to the centre, with its floats (all rounds together); the floats of the
+    method's spec (:attr:`MethodSpec.cost`) are their sum.
 
     Examples
     --------

@@ -238,52 +238,13 @@ class LinearGaussianModel(Frozen):
                  "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's Kalman update with its own measurement, then its prediction (:func:`update`, :func:`predict`).
-
-        Parameters
-        ----------
-        i : int
-            The agent.
-        own, messages
-            From :meth:`agent_inputs`.
-
-        Returns
-        -------
-        x_i, P_i : ndarray
-            Its predicted estimate ``(m,)`` and covariance ``(m, m)``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import kalman
-        >>> model = kalman.LinearGaussianModel(np.eye(1), 0.1 * np.eye(1), np.eye(1), np.eye(1))
-        >>> x, P = model.agent_step(1, *model.agent_inputs(np.zeros((2, 1)), np.eye(1), [[1.0], [3.0]], None, 1))
-        >>> x, P
-        (array([1.5]), array([[0.6]]))
-        """
+        """Agent i's :func:`update` with its own measurement, then :func:`predict`: ``x_i`` ``(m,)``, ``P_i`` ``(m, m)``
+        (:class:`mascore.estimation.Estimator`)."""
         x, P = update(own["x"], own["P"], own["z"], self)
         return predict(x, P, self, own["u"])
 
     def messages(self, i: int = 0) -> tuple[Message, ...]:
-        """What an agent sends per step: nothing.
-
-        Parameters
-        ----------
-        i : int
-            The agent (the same for all).
-
-        Returns
-        -------
-        tuple of Message
-            Empty.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import kalman
-        >>> kalman.LinearGaussianModel(np.eye(1), np.eye(1), np.eye(1), np.eye(1)).messages()
-        ()
-        """
+        """Nothing (:class:`mascore.estimation.Estimator`)."""
         return ()
 
 

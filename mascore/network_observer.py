@@ -189,58 +189,15 @@ class DiscreteNetworkObserver(Frozen):
         return own, ((x_hat[nbrs] @ self.C.T).copy(),)
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray]:
-        """Agent i's correction with its neighbours' output estimates, then its prediction.
-
-        Parameters
-        ----------
-        i : int
-            The agent.
-        own, messages
-            From :meth:`agent_inputs`.
-
-        Returns
-        -------
-        tuple of ndarray
-            ``(x_i,)``, its estimate after the step, ``(n,)``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs, network_observer
-        >>> obs = network_observer.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
-        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
-        >>> x, z, u = np.zeros((3, 2)), np.ones((3, 3, 1)), np.zeros((3, 1))
-        >>> x_i, = obs.agent_step(1, *obs.agent_inputs(x, z, u, 1))
-        >>> bool(np.allclose(x_i, obs.predict(obs.update(x[None], z[None], np.ones((1, 3, 3))), u[None])[0, 1]))
-        True
-        """
+        """Agent i's correction with its neighbours' output estimates, then its prediction: ``(x_i,)``, ``(n,)``
+        (:class:`mascore.estimation.Estimator`)."""
         p = self.C @ own["x"]
         coupling = own["a"] @ ((own["z"] - own["z_nbrs"]) - (p - messages[0]))
         xu = own["x"] + self.gain @ ((own["z"] - p) + self.coupling * coupling)
         return (self.A @ xu + self.B @ own["u"],)
 
     def messages(self, i: int = 0) -> tuple:
-        """What agent i sends per step: its output estimate ``C x_hat_i``, p floats (a broadcast).
-
-        Parameters
-        ----------
-        i : int
-            The agent (all send the same).
-
-        Returns
-        -------
-        tuple of Message
-            The message.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs, network_observer
-        >>> obs = network_observer.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
-        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
-        >>> obs.messages()[0].floats
-        1.0
-        """
+        """Its output estimate ``C x_hat_i``, p floats, broadcast (:class:`mascore.estimation.Estimator`)."""
         return (Message("output estimate C x_i", float(self.C.shape[0])),)
 
 

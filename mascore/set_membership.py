@@ -591,52 +591,13 @@ class SetMembershipModel(Frozen):
                  "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's closed-form correction with its own measurement, then its prediction (:meth:`correct`, :meth:`predict`).
-
-        Parameters
-        ----------
-        i : int
-            The agent.
-        own, messages
-            From :meth:`agent_inputs`.
-
-        Returns
-        -------
-        center, shape : ndarray
-            Its predicted set ``(n,)``, ``(n, n)``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore.set_membership import SetMembershipModel
-        >>> model = SetMembershipModel(A=np.eye(1), G=np.eye(1), C=np.eye(1), D=np.eye(1), Q=np.eye(1), R=np.eye(1))
-        >>> c, E = model.agent_step(0, *model.agent_inputs(np.zeros((2, 1)), np.eye(1), [[0.5], [1.0]], None, 0))
-        >>> c.shape, E.shape
-        ((1,), (1, 1))
-        """
+        """Agent i's closed-form :meth:`correct` with its own measurement, then :meth:`predict`: its set's centre
+        ``(n,)`` and shape ``(n, n)`` (:class:`mascore.estimation.Estimator`)."""
         c, E, _ = self.correct(own["center"], own["shape"], own["y"], check_consistency=False)
         return self.predict(c, E, own["u"])
 
     def messages(self, i: int = 0) -> tuple:
-        """What an agent sends per step: nothing.
-
-        Parameters
-        ----------
-        i : int
-            The agent (the same for all).
-
-        Returns
-        -------
-        tuple
-            Empty.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore.set_membership import SetMembershipModel
-        >>> SetMembershipModel(A=np.eye(1), G=np.eye(1), C=np.eye(1), D=np.eye(1), Q=np.eye(1), R=np.eye(1)).messages()
-        ()
-        """
+        """Nothing (:class:`mascore.estimation.Estimator`)."""
         return ()
 
     def run(

@@ -321,3 +321,36 @@ def test_every_team_method_is_built_by_its_spec_and_declares_its_cost(spec):
     assert callable(filt.agent_step) and callable(filt.messages)
     floats, flops = spec.cost(4, 4, 2, 4)
     assert floats == compare.floats_per_step(spec.name, 4, 2.0) and flops > 0
+
+
+@pytest.mark.parametrize("spec", estimation.method_specs("shared"), ids=lambda s: s.name)
+def test_a_shared_filters_agent_step_is_its_row_of_the_team_wide_update(spec):
+    from mascore import graphs
+
+    filt = spec.build(None)
+    rng = np.random.default_rng(3)
+    xi, P = rng.standard_normal((6, 2)), np.stack([np.diag(rng.uniform(0.5, 2.0, 2)) for _ in range(6)])
+    G = graphs.ring_graph(6)
+    if spec.name == "average-consensus":
+        xr, Pr = filt.update(xi, G), None
+        own, messages = filt.agent_inputs(xi, G, 2)
+    else:
+        xr, Pr = filt.update(xi, P, G)
+        own, messages = filt.agent_inputs(xi, P, G, 2)
+    out = filt.agent_step(2, own, messages)
+    np.testing.assert_allclose(out[0], xr[2], rtol=1e-12, atol=1e-14)
+    if Pr is not None:
+        np.testing.assert_allclose(out[1], Pr[2], rtol=1e-12, atol=1e-14)
+    assert sum(m.floats for m in filt.messages()) == compare.floats_per_step(spec.name, 6)
+
+
+def test_the_position_centres_step_is_its_team_wide_step():
+    team = compare.team_setup(5, "gaussian", 1.0, compare.SETTINGS, sensing="position")
+    est = compare.make_estimator("centralized", team, np.random.default_rng(1).standard_normal((1, 5, 4)))
+    rng = np.random.default_rng(2)
+    Z, S, U = rng.standard_normal((1, 5, 5, 2)), np.ones((1, 5, 5), bool), rng.standard_normal((1, 5, 2))
+    x, P = est.agent_step(0, *est.agent_inputs(Z, S, U, 0))
+    est.update(Z, S)
+    est.predict(U)
+    np.testing.assert_allclose(x, est.own, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(P, est.P, rtol=1e-12, atol=1e-14)

@@ -44,7 +44,7 @@ def headline(summary, task: str = "team", costs=None):
     summary : pandas.DataFrame
         Output of :func:`summarize`.
     task : {"team", "position", "target", "localization", "shared"} or str
-        The scenario (or one declared in its own module, :mod:`mascore.compare.scenario`, at the cells
+        The scenario (or one declared in its own module, ``mascore.compare.scenario``, at the cells
         of its ``headline``): ``"team"``, own state at N = 8 on the ring (the case where cooperation
         cannot help: forwarding the neighbours' measurements of an agent already is the
         centralized filter); ``"position"``, the same with position-only sensing (the study
