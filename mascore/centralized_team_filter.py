@@ -328,15 +328,66 @@ class CentralizedTeamFilter:
         return {"Z": np.array(Z, dtype=float), "mask": np.array(mask), "U": np.array(U, dtype=float)}, ()
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """The centre's step, :meth:`update` then :meth:`predict` (advances this filter): the team estimates
-        ``(runs, N, m)`` and the covariance, read-only views as :meth:`view` (:class:`mascore.estimation.Estimator`)."""
+        """The centre's step: :meth:`update` with the team's measurements, then :meth:`predict` (advances this filter).
+
+        Parameters
+        ----------
+        i : int
+            Unused (the centre).
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        x_hat, P : ndarray
+            The team estimates ``(runs, N, m)`` and the filter's own covariance after the step
+            (read-only views, as :meth:`view`): the reduced ``(batch, M_r, M_r)``, or the N blocks
+            ``(batch, N, m_r, m_r)`` of a :attr:`separable` filter.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, centralized_team_filter, graphs, rendezvous, sensing, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> Z, mask = sensing.measure(0, np.zeros((1, 3, 2)), graphs.path_graph(3), np.eye(2))
+        >>> x, P = central.agent_step(0, *central.agent_inputs(Z, mask[0], np.zeros((1, 3, 1)), 0))
+        >>> x.shape, P.shape                                     # separable: 3 filters of one agent's axis
+        ((1, 3, 2), (1, 3, 2, 2))
+        """
         self.update(own["Z"], own["mask"])
         self.predict(own["U"])
         return self.view("x_hat"), self.view("P_blocks" if self.separable else "P")
 
     def messages(self, i: int = 0, n_measured: int = 1) -> tuple[Message, ...]:
-        """Up: the ``n_measured`` (degree + 1) measurements of ``m`` numbers; down: the centre's estimates of
-        the same agents (:class:`mascore.estimation.Estimator`)."""
+        """What an agent sends per step, its measurements to the centre, and receives: the estimates it uses.
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+        n_measured : int
+            How many agents it measures (itself and its neighbours: degree + 1).
+
+        Returns
+        -------
+        tuple of Message
+            Its ``n_measured`` measurements of ``m`` numbers each, up; the centre's estimates of the same
+            agents (its own and its neighbours', what its control uses), down.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, centralized_team_filter, rendezvous, team_model
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> central = centralized_team_filter.CentralizedTeamFilter(model, agent.B, np.zeros((1, 6)), np.eye(2))
+        >>> [m.floats for m in central.messages(0, n_measured=3)]
+        [6, 6]
+        """
         floats = check_positive_int(n_measured, "n_measured") * self._model.m
         return (Message("its measurements z_ij of itself and its neighbours, to the centre", floats),
                 Message("the centre's estimates of itself and its neighbours, back to it", floats))

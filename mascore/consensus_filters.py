@@ -5,8 +5,8 @@ it mixes what the neighbours it hears at that step (``G[i, j] > 0``) send it.
 :class:`KalmanConsensusFilter` is the discrete Kalman consensus of Ren, Beard and Kingston
 (2005), eqs. (4)-(5) (:func:`mascore.consensus.kalman_consensus_step`), with its covariance;
 :class:`AverageConsensusFilter` the average with Metropolis weights on the delivered links
-(Xiao, Boyd and Lall 2005), without one; :class:`CentralFusionFilter` (the bound) and
-:class:`NoFusionFilter` the two ends. All implement the estimator protocol
+(Xiao, Boyd and Lall 2005), without one; ``CentralFusionFilter`` (the bound) and
+``NoFusionFilter`` the two ends. All implement the estimator protocol
 (:mod:`mascore.estimation`), with ``fuse(xi, P, G)`` the shared task's whole run, and declare
 their methods of the comparison's ``shared`` task.
 
@@ -24,11 +24,12 @@ from numpy.typing import ArrayLike
 from ._validation import Frozen, check_positive
 from ._validation import float_array as _float_array
 from .consensus import central_fusion, kalman_consensus_step
-from .estimation import Message, MethodSpec
+from .estimation import Message, MethodSpec, protocol_docs
 
-__all__ = ["KalmanConsensusFilter", "AverageConsensusFilter", "CentralFusionFilter", "NoFusionFilter", "METHODS"]
+__all__ = ["KalmanConsensusFilter", "AverageConsensusFilter", "METHODS"]
 
 
+@protocol_docs
 class KalmanConsensusFilter(Frozen):
     """Ren et al.'s discrete Kalman consensus, noise-free messages: one step per :meth:`update`.
 
@@ -113,7 +114,31 @@ class KalmanConsensusFilter(Frozen):
         return kalman_consensus_step(xi, P, G, Q=self.Q, Omega=self.Omega)
 
     def fuse(self, xi: ArrayLike, P: ArrayLike, G: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """The shared task's run: one :meth:`update` per step of `G` ``(steps, ..., N, N)``; the final ``(xi, P)``."""
+        """The shared task's run: one :meth:`update` per step of the delivered links `G`.
+
+        Parameters
+        ----------
+        xi : (..., N, m) array_like
+            The priors.
+        P : (..., N, m, m) array_like
+            Their covariances.
+        G : (steps, ..., N, N) array_like
+            The links delivered at each step.
+
+        Returns
+        -------
+        xi, P : ndarray
+            After the last step.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs
+        >>> from mascore.consensus_filters import KalmanConsensusFilter
+        >>> f, G = KalmanConsensusFilter(0.0, 0.0), np.stack([graphs.path_graph(3)] * 50)
+        >>> f.fuse(np.array([[0.0], [2.0], [4.0]]), np.ones((3, 1, 1)), G)[0][:, 0].round(3)
+        array([2., 2., 2.])
+        """
         for G_k in G:  # noise-free messages
             xi, P = self.update(xi, P, G_k)
         return xi, P
@@ -155,8 +180,7 @@ class KalmanConsensusFilter(Frozen):
         return {"xi": xi[i].copy(), "P": P[i].copy()}, ((xi[heard].copy(), P[heard].copy()),)
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's eqs. (4)-(5) on itself and the neighbours it heard: ``xi_i`` ``(m,)``, ``P_i`` ``(m, m)``
-        (:class:`mascore.estimation.Estimator`)."""
+        # eqs. (4)-(5) on agent i and the neighbours it heard: xi_i (m,), P_i (m, m)
         xi_n, P_n = messages[0]
         d = len(xi_n)
         g = np.zeros((d + 1, d + 1))
@@ -166,10 +190,30 @@ class KalmanConsensusFilter(Frozen):
         return xi[0], P[0]
 
     def messages(self, i: int = 0, m: int = 2) -> tuple[Message, ...]:
-        """Its state and covariance, ``m + m (m + 1) / 2`` floats (:class:`mascore.estimation.Estimator`)."""
+        """What an agent broadcasts per step: its state and covariance.
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+        m : int
+            The size of the quantity.
+
+        Returns
+        -------
+        tuple of Message
+            ``m + m (m + 1) / 2`` floats.
+
+        Examples
+        --------
+        >>> from mascore.consensus_filters import KalmanConsensusFilter
+        >>> KalmanConsensusFilter(0.1, 0.1).messages(m=2)[0].floats
+        5.0
+        """
         return (Message("state xi_i and covariance P_i", float(m + m * (m + 1) // 2)),)
 
 
+@protocol_docs
 class AverageConsensusFilter(Frozen):
     """Average consensus with Metropolis weights on the links delivered at each step; no covariance.
 
@@ -246,7 +290,33 @@ class AverageConsensusFilter(Frozen):
         return W @ np.asarray(xi, dtype=float)
 
     def fuse(self, xi: ArrayLike, P: ArrayLike | None, G: ArrayLike) -> tuple[np.ndarray, None]:
-        """The shared task's run: one :meth:`update` per step of `G` ``(steps, ..., N, N)``; ``(xi, None)``."""
+        """The shared task's run: one :meth:`update` per step of the delivered links `G`.
+
+        Parameters
+        ----------
+        xi : (..., N, m) array_like
+            The priors.
+        P : array_like or None
+            Unused (the average carries no covariance).
+        G : (steps, ..., N, N) array_like
+            The links delivered at each step.
+
+        Returns
+        -------
+        xi : ndarray
+            After the last step.
+        None
+            No covariance.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs
+        >>> from mascore.consensus_filters import AverageConsensusFilter
+        >>> G = np.stack([graphs.path_graph(3)] * 60)
+        >>> AverageConsensusFilter().fuse(np.array([[0.0], [3.0], [6.0]]), None, G)[0][:, 0].round(3)
+        array([3., 3., 3.])
+        """
         for G_k in G:
             xi = self.update(xi, G_k)
         return xi, None
@@ -285,13 +355,32 @@ class AverageConsensusFilter(Frozen):
         return {"xi": xi[i].copy(), "degree": deg[i]}, ((xi[heard].copy(), deg[heard].copy()),)
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray]:
-        """Agent i's row of ``W xi``: ``(xi_i,)``, ``(m,)`` (:class:`mascore.estimation.Estimator`)."""
+        # agent i's row of W xi: (xi_i,), (m,)
         xi_n, deg_n = messages[0]
         w = 1.0 / (1.0 + np.maximum(own["degree"], deg_n))
         return ((1.0 - w.sum()) * own["xi"] + w @ xi_n,)
 
     def messages(self, i: int = 0, m: int = 2) -> tuple[Message, ...]:
-        """Its state, ``m`` floats (:class:`mascore.estimation.Estimator`)."""
+        """What an agent broadcasts per step: its state.
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+        m : int
+            The size of the quantity.
+
+        Returns
+        -------
+        tuple of Message
+            ``m`` floats.
+
+        Examples
+        --------
+        >>> from mascore.consensus_filters import AverageConsensusFilter
+        >>> AverageConsensusFilter().messages(m=2)[0].floats
+        2.0
+        """
         return (Message("state xi_i", float(m)),)
 
 

@@ -467,15 +467,64 @@ class FlockingEKF:
         return {"X": self._X[i].copy(), "Sigma": self._P[i].copy(), "z": z[i].copy(), "observed": observed[i].copy()}, ()
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's EKF alone, :meth:`update` then :meth:`predict` (eqs. (16)-(20), (38)-(40)): its team estimate
-        ``(N, 2n)`` and covariance ``(2nN, 2nN)`` (:class:`mascore.estimation.Estimator`)."""
+        """Agent i's EKF step alone: :meth:`update` with its measurements, then :meth:`predict` (eqs. (16)-(20), (38)-(40)).
+
+        Parameters
+        ----------
+        i : int
+            The agent.
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        X_i, Sigma_i : ndarray
+            Its predicted team estimate ``(N, 2n)`` and covariance ``(2nN, 2nN)``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import distributed_ekf as dekf
+        >>> from mascore.flocking import FlockingGains
+        >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+        >>> X = np.array([[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]])
+        >>> model = dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12))
+        >>> ekf = dekf.FlockingEKF(model, np.broadcast_to(X, (3, 3, 4)), np.eye(12))
+        >>> z, seen = np.broadcast_to(X + 0.1, (3, 3, 4)), np.ones((3, 3), bool)
+        >>> X1, S1 = ekf.agent_step(1, *ekf.agent_inputs(z, seen, 1))
+        >>> _ = ekf.update(z, seen)                                       # every agent's filter, batched
+        >>> X_all, _ = ekf.predict()
+        >>> bool(np.allclose(X1, X_all[1]) and np.allclose(S1, ekf.Sigma[1]))
+        True
+        """
         filt = FlockingEKF._from_checked(self._model, own["X"], own["Sigma"].copy())
         filt.update(own["z"], own["observed"])
         X, _ = filt.predict()
         return X, filt.view("Sigma")
 
     def messages(self, i: int = 0) -> tuple[Message, ...]:
-        """Nothing: it senses its neighbours' states, eq. (2) (:class:`mascore.estimation.Estimator`)."""
+        """What an agent sends per step: nothing (it senses its neighbours' states, eq. (2)).
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+
+        Returns
+        -------
+        tuple of Message
+            Empty.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import distributed_ekf as dekf
+        >>> from mascore.flocking import FlockingGains
+        >>> gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+        >>> dekf.FlockingEKF(dekf.EKFModel(3, 0.1, gains, 0.01 * np.eye(12), np.eye(12)), np.zeros((3, 3, 4)),
+        ...                  np.eye(12)).messages()
+        ()
+        """
         return ()
 
     def step(self, z: ArrayLike, observed: ArrayLike, predict: bool = True,

@@ -1153,10 +1153,40 @@ class TeamFilter:
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
         """Agent i's update with its own measurements (eqs. (16)-(20)), then its prediction (eqs. (14)-(15)).
 
-        Measurement-based: agent i's own team filter alone (the kernels of :meth:`update`, :meth:`predict`): its
-        team estimate ``(N, m)`` and reduced covariance ``(M_r, M_r)``. Estimation-based: the whole filter's step
-        (every agent needs the joint covariance), which advances this filter: ``X_hat``, ``Sigma`` (read-only
-        views). See :class:`mascore.estimation.Estimator`."""
+        Measurement-based loop: agent i's own team filter alone, the same kernels as
+        :meth:`update` and :meth:`predict` on its estimate and covariance. Estimation-based loop:
+        the whole filter's step (every agent needs all agents' joint covariance), which advances
+        this filter.
+
+        Parameters
+        ----------
+        i : int
+            The agent.
+        own, messages
+            From :meth:`agent_inputs`.
+
+        Returns
+        -------
+        X_i, Sigma_i : ndarray
+            Its predicted team estimate ``(N, m)`` and reduced covariance ``(M_r, M_r)``; for the
+            estimation-based loop the filter's ``X_hat`` and ``Sigma`` (read-only views).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous, sensing, team_model
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> path = graphs.path_graph(3)
+        >>> filt = dkf.TeamFilter(model, graphs.laplacian(path), np.zeros((1, 6)), P0=np.eye(2), mode="mb")
+        >>> Z, mask = sensing.measure(1, np.ones((1, 3, 2)), path, np.eye(2))
+        >>> X_1, Sigma_1 = filt.agent_step(1, *filt.agent_inputs(Z, mask[0], 1))
+        >>> filt.update(Z, mask[0]); filt.predict()                   # the whole team, batched
+        >>> bool(np.allclose(X_1, filt.X_hat[0, 1]) and np.allclose(Sigma_1, filt.Sigma[0, 1]))
+        True
+        """
         if self._mode == "eb":
             self.update(own["Z"], own["mask"])
             self.predict()
@@ -1173,7 +1203,29 @@ class TeamFilter:
         return X, symmetric_part(Sig)
 
     def messages(self, i: int = 0) -> tuple[Message, ...]:
-        """Nothing: its filter uses its own measurements only (:class:`mascore.estimation.Estimator`)."""
+        """What an agent sends per step: nothing (its filter uses its own measurements only).
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all).
+
+        Returns
+        -------
+        tuple of Message
+            Empty.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import agents, graphs, rendezvous, team_model
+        >>> from mascore import distributed_kf as dkf
+        >>> agent = agents.double_integrator(1, 0.1)
+        >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 1),
+        ...                                      0.01 * np.eye(2), np.eye(2), n_agents=3)
+        >>> dkf.TeamFilter(model, graphs.laplacian(graphs.path_graph(3)), np.zeros((1, 6)), P0=np.eye(2)).messages()
+        ()
+        """
         return ()
 
     def _set_topology(self, L: np.ndarray | None) -> None:

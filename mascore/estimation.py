@@ -39,6 +39,7 @@ __all__ = [
     "SetState",
     "Message",
     "Estimator",
+    "protocol_docs",
     "MethodSpec",
     "method_specs",
     "method_spec",
@@ -168,8 +169,91 @@ class Estimator(Protocol):
     predict: Callable[..., Any]
     update: Callable[..., Any]
     agent_inputs: Callable[..., tuple[Any, Sequence[Any]]]
-    agent_step: Callable[..., tuple]
-    messages: Callable[..., tuple[Message, ...]]
+
+    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple:
+        """Agent i's step alone, from its own data and its neighbours' messages (the kernels of the team-wide step).
+
+        A filter's method without a docstring of its own takes this one (:func:`protocol_docs`); a
+        comment in it says what its step computes.
+
+        Parameters
+        ----------
+        i : int
+            The agent.
+        own : dict
+            Its own data of the step: the first value of ``agent_inputs``.
+        messages : sequence
+            What its neighbours sent it, one entry per round: the second value of ``agent_inputs``.
+
+        Returns
+        -------
+        tuple of ndarray
+            Agent i's state after the step (estimate and covariance, or the set's centre and shape):
+            its row of the team-wide ``update`` and ``predict``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import kalman
+        >>> model = kalman.LinearGaussianModel(np.eye(1), 0.1 * np.eye(1), np.eye(1), np.eye(1))
+        >>> x, P = np.zeros((2, 1)), np.eye(1)
+        >>> x_1, P_1 = model.agent_step(1, *model.agent_inputs(x, P, [[1.0], [3.0]], None, 1))
+        >>> x_ref, _ = kalman.predict(*kalman.update(x, P, [[1.0], [3.0]], model.H, model.R), model.F, model.Q)
+        >>> bool(np.allclose(x_1, x_ref[1]))
+        True
+        """
+        raise NotImplementedError
+
+    def messages(self, i: int = 0) -> tuple[Message, ...]:
+        """What agent i sends per step (to each neighbour, or to the centre), and how many floats.
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all where the graph is regular).
+
+        Returns
+        -------
+        tuple of Message
+            One per kind of message (empty when the filter sends nothing); their floats sum to the
+            spec's (:attr:`MethodSpec.cost`).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.network_observer import DiscreteNetworkObserver
+        >>> obs = DiscreteNetworkObserver(np.ones((2, 1)), 0.5, np.ones((2, 2)) - np.eye(2), np.eye(2),
+        ...                               np.eye(2, 1), np.array([[1.0, 0.0]]))
+        >>> obs.messages()[0].floats
+        1.0
+        """
+        raise NotImplementedError
+
+
+def protocol_docs(estimator_class: type) -> type:
+    """Class decorator: the methods ``agent_step`` and ``messages`` defined without a docstring take the protocol's.
+
+    Parameters
+    ----------
+    estimator_class : type
+        An estimator class.
+
+    Returns
+    -------
+    type
+        The class, its methods documented once (by :class:`Estimator`).
+
+    Examples
+    --------
+    >>> from mascore import kalman
+    >>> kalman.LinearGaussianModel.agent_step.__doc__ == Estimator.agent_step.__doc__
+    True
+    """
+    for name in ("agent_step", "messages"):
+        method = vars(estimator_class).get(name)
+        if method is not None and method.__doc__ is None:
+            method.__doc__ = getattr(Estimator, name).__doc__
+    return estimator_class
 
 
 @dataclass(frozen=True)

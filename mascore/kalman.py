@@ -53,7 +53,7 @@ from ._validation import Frozen, check_covariance, check_positive_int, finite_re
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .agents import is_system, system_matrices
-from .estimation import Message, MethodSpec
+from .estimation import Message, MethodSpec, protocol_docs
 from .fusion_cost import kalman_step_flops
 
 __all__ = ["LinearGaussianModel", "predict", "update", "kalman_gain", "run_filter", "nees", "nees_interval",
@@ -68,6 +68,7 @@ _F64 = np.dtype(float)
 # ----------------------------------------------------------------------------
 
 
+@protocol_docs
 class LinearGaussianModel(Frozen):
     """A linear Gaussian state-space model, checked once, when it is built.
 
@@ -238,13 +239,12 @@ class LinearGaussianModel(Frozen):
                  "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's :func:`update` with its own measurement, then :func:`predict`: ``x_i`` ``(m,)``, ``P_i`` ``(m, m)``
-        (:class:`mascore.estimation.Estimator`)."""
+        # update with its own measurement, then predict: x_i (m,), P_i (m, m)
         x, P = update(own["x"], own["P"], own["z"], self)
         return predict(x, P, self, own["u"])
 
     def messages(self, i: int = 0) -> tuple[Message, ...]:
-        """Nothing (:class:`mascore.estimation.Estimator`)."""
+        # nothing
         return ()
 
 

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike
 
 from ._validation import Frozen, as_matrix, check_adjacency, frozen_copy
 from ._validation import check_square as _square
-from .estimation import Message, MethodSpec
+from .estimation import Message, MethodSpec, protocol_docs
 
 __all__ = ["DiscreteNetworkObserver", "METHODS"]
 
@@ -25,6 +25,7 @@ __all__ = ["DiscreteNetworkObserver", "METHODS"]
 # the observer in discrete time, on a team (the comparison's estimator)
 
 
+@protocol_docs
 class DiscreteNetworkObserver(Frozen):
     """The distributed observer of Vlahakis and Halikias, discretized (forward Euler), on N agents at once.
 
@@ -189,15 +190,14 @@ class DiscreteNetworkObserver(Frozen):
         return own, ((x_hat[nbrs] @ self.C.T).copy(),)
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray]:
-        """Agent i's correction with its neighbours' output estimates, then its prediction: ``(x_i,)``, ``(n,)``
-        (:class:`mascore.estimation.Estimator`)."""
+        # correction with its neighbours' output estimates, then prediction: (x_i,), (n,)
         p = self.C @ own["x"]
         coupling = own["a"] @ ((own["z"] - own["z_nbrs"]) - (p - messages[0]))
         xu = own["x"] + self.gain @ ((own["z"] - p) + self.coupling * coupling)
         return (self.A @ xu + self.B @ own["u"],)
 
     def messages(self, i: int = 0) -> tuple:
-        """Its output estimate ``C x_hat_i``, p floats, broadcast (:class:`mascore.estimation.Estimator`)."""
+        # its output estimate C x_hat_i, p floats, broadcast
         return (Message("output estimate C x_i", float(self.C.shape[0])),)
 
 

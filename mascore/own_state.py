@@ -27,12 +27,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import Frozen, as_matrix, check_covariance, check_positive, check_positive_int, check_square, frozen_copy
-from .estimation import Message, MethodSpec
+from .estimation import Message, MethodSpec, protocol_docs
 from .fusion_cost import kalman_step_flops
 
 __all__ = ["CentralizedOutputFilter", "OwnStateForwardingFilter"]
 
 
+@protocol_docs
 class OwnStateForwardingFilter(Frozen):
     """Measurement forwarding on the own states: agent i corrects with every delivered measurement of x_i.
 
@@ -194,8 +195,7 @@ class OwnStateForwardingFilter(Frozen):
                  "z": Z[i, i].copy()}, (Z[senders[senders != i], i].copy(),))
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's correction with its own and the received measurements of x_i, then its prediction: ``x_i``
-        ``(n,)``, ``P_i`` ``(n, n)`` (:class:`mascore.estimation.Estimator`)."""
+        # correction with its own and the received measurements of x_i, then prediction: x_i (n,), P_i (n, n)
         z_in = np.insert(messages[0], own["index"], own["z"], axis=0)
         info = np.linalg.inv(own["P"])
         P = np.linalg.inv(info + len(z_in) * self.information)
@@ -204,10 +204,11 @@ class OwnStateForwardingFilter(Frozen):
         return self.A @ x + self.B @ own["u"], self.A @ P @ self.A.T + self.Q
 
     def messages(self, i: int = 0) -> tuple[Message, ...]:
-        """To each neighbour, its measurement of that neighbour, m floats (:class:`mascore.estimation.Estimator`)."""
+        # to each neighbour, its measurement of that neighbour: m floats
         return (Message("measurement z_ij of each neighbour j", float(self.to_state.shape[0])),)
 
 
+@protocol_docs
 class CentralizedOutputFilter(Frozen):
     """One Kalman filter over the team state ``(N n,)`` with every delivered output measurement (information form).
 
@@ -403,12 +404,11 @@ class CentralizedOutputFilter(Frozen):
                 "u": u[None].copy()}, ()
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """The centre's step, the team's correction and prediction: states ``(1, N, n)``, covariance
-        ``(1, N n, N n)`` (:class:`mascore.estimation.Estimator`)."""
+        # the centre's step, the team's correction and prediction: states (1, N, n), covariance (1, N n, N n)
         return self.predict(*self.update(own["x"], own["P"], own["Z"], own["S"]), own["u"])
 
     def messages(self, i: int = 0) -> tuple[Message, ...]:
-        """To the centre, p floats per agent it measures, itself included (:class:`mascore.estimation.Estimator`)."""
+        # to the centre: p floats per agent it measures, itself included
         return (Message("measurements z_ij of itself and its neighbours, to the centre", float(self.C.shape[0])),)
 
 

@@ -69,7 +69,7 @@ from numpy.typing import ArrayLike
 from . import _ellipsoid_kernels as kernels
 from ._validation import Frozen, as_matrix, check_square, frozen_copy, symmetric_part
 from ._validation import float_array as _float_array
-from .estimation import MethodSpec
+from .estimation import MethodSpec, protocol_docs
 from .fusion_cost import kalman_step_flops
 
 __all__ = [
@@ -350,6 +350,7 @@ def run_filter(
 
 
 @dataclass(frozen=True, eq=False)
+@protocol_docs
 class SetMembershipModel(Frozen):
     """The system of eq. (1), checked once: the filter's constant matrices, stored read-only.
 
@@ -591,13 +592,12 @@ class SetMembershipModel(Frozen):
                  "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's closed-form :meth:`correct` with its own measurement, then :meth:`predict`: its set's centre
-        ``(n,)`` and shape ``(n, n)`` (:class:`mascore.estimation.Estimator`)."""
+        # the closed-form correction with its own measurement, then prediction: centre (n,), shape (n, n)
         c, E, _ = self.correct(own["center"], own["shape"], own["y"], check_consistency=False)
         return self.predict(c, E, own["u"])
 
     def messages(self, i: int = 0) -> tuple:
-        """Nothing (:class:`mascore.estimation.Estimator`)."""
+        # nothing
         return ()
 
     def run(

@@ -92,8 +92,6 @@ __all__ = [
     "target_methods",
     "TARGET_NOT_APPLICABLE",
     "TEAM_METHODS",
-    "TeamEstimator",
-    "TeamTask",
     "make_estimator",
     "team_setup",
     "ALL_TEAM_METHODS",

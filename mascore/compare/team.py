@@ -1,12 +1,12 @@
 """The team task: the estimators of the agents' own states in the rendezvous loop, and its simulation.
 
 A method of the team task is its spec's (:class:`mascore.estimation.MethodSpec`, beside its filter):
-``build(team, x_hat0)`` gives its filter on this task's :class:`TeamTask`. The loop steps it through
+``build(team, x_hat0)`` gives its filter on this task's ``TeamTask``. The loop steps it through
 :func:`make_estimator`, which holds the filter's state between the steps for the package's filters
 (by their class) and steps any other object directly: a new team method is one class, with
 ``update(Z, S)``, ``predict(U)`` and the own-state estimates ``own`` ``(R, N, 4)`` (optionally ``own_cov``,
 ``views``, ``link_borne``, ``containment``, ``set_shape``, ``team_estimates`` and the per-agent steps
-``agent_inputs(Z, S, U, i)`` / ``agent_step`` / ``agent_state(i)`` of :class:`TeamEstimator`), and one spec.
+``agent_inputs(Z, S, U, i)`` / ``agent_step`` / ``agent_state(i)`` of ``TeamEstimator``), and one spec.
 """
 
 from __future__ import annotations
@@ -567,7 +567,7 @@ class _SetMembership(TeamEstimator):
 
 
 #: The package's filters of the team task, each with the estimator that steps it (a filter of another class
-#: steps itself: :class:`_Direct`).
+#: steps itself: ``_Direct``).
 _STEPPED_BY = ((CentralizedTeamFilter, _Centralized), (CentralizedOutputFilter, _CentralizedPosition),
                (TeamFilter, _Song), (kalman.LinearGaussianModel, _Local), (OwnStateForwardingFilter, _Forwarding),
                (DiscreteNetworkObserver, _Vlahakis), (set_membership.SetMembershipModel, _SetMembership))
