@@ -22,20 +22,6 @@ from ..settings import check_settings, check_settings_type, setting
 
 #: The roles of the methods in the headline tables and at every team size: the recipes and their shown variants.
 SHOWN = ("recipe", "variant")
-#: Estimators of the team task, in table order (their specs': :func:`mascore.estimation.method_names`).
-TEAM_METHODS = estimation.method_names("team", SHOWN)
-#: The Vlahakis observer's coupling gain per team-method name (its specs' settings): None is the LMI's choice
-#: (with our tie-break); -0.1 and 1 are the ends of the interval where its program's value is optimal on the ring
-#: of 8 (:func:`vlahakis_profile`), 0 and 0.5 points inside it.
-VLAHAKIS_PHI = estimation.knob_settings("vlahakis", "team")
-#: The team methods at their own recipe (without the knob variants): the figures' methods.
-CORE_METHODS = estimation.method_names("team", ("recipe",))
-#: Estimators of the shared-quantity task at their own recipe (and Ren et al.'s untuned Q = 0).
-SHARED_METHODS = estimation.method_names("shared", SHOWN)
-#: Ren et al.'s (Q, Omega) per shared-method name (its specs' settings): the paper's 0.1, and the knob from 0 to 1.
-REN_Q = estimation.knob_settings("ren-kc", "shared")
-#: Every shared-method name a cell may carry (Ren et al.'s knob variants run at N = 8 on the ring).
-ALL_SHARED_METHODS = estimation.method_names("shared")
 #: Sensing/communication graphs: a ring, or the proximity graph of a random layout.
 GRAPHS = ("ring", "geometric")
 #: Graphs of the common-target and shared tasks: the fixed ones, and a switching proximity topology.
@@ -48,24 +34,51 @@ SEED_AXES = ("task", "n_agents", "noise", "block")
 #: or the position only, ``z_ij = [I 0] x_j + nu_ij`` (a cell without a ``sensing`` coordinate is ``"full"``;
 #: ``"position"`` joins the seed axes, so the cells of before keep their seeds).
 SENSINGS = ("full", "position")
-#: The set-membership filter's confidence level per method name (its specs' settings; None:
-#: ``settings.sm_confidence``): its knob, the probability mass of the Gaussian ellipsoids it is given as bounds
-#: (bounded noise: the guaranteed bound).
-SM_CONFIDENCE = estimation.knob_settings("set-membership", "team")
-#: Team methods that do not apply under position-only sensing, with the reason.
-POSITION_NOT_APPLICABLE = estimation.not_applicable("position")
-#: Team methods that do not apply on the switching topology, with the reason (the chapter shows them).
-SWITCHING_NOT_APPLICABLE = estimation.not_applicable("switching")
-#: The team methods under position-only sensing, in table order.
-POSITION_METHODS = tuple(m for m in estimation.method_names("team") if m not in POSITION_NOT_APPLICABLE)
-#: Every team-method name a cell may carry (the knobs' variants run at N = 8 in the studies ``scaling``, ``position``).
-ALL_TEAM_METHODS = TEAM_METHODS + tuple(m for m in estimation.method_names("team") if m not in TEAM_METHODS)
 #: The common-target and localization filters' knob variants (their specs in :mod:`mascore.fusion`): the
 #: consensus steps L in {1, 2, 5} and L = the graph's diameter, and HCMCI's novelty weight omega = N against
 #: the consistency-safe omega of its docstring (``omega max [W^L]_ij <= 1``). Swept at N = 8 on the ring
 #: (2 seed blocks); the headline tables keep the recipes (L = 1 and 5, omega = N).
 FUSION_KNOB_METHODS = ("ci-L2", "ci-Ldiam", "hcmci-L2", "hcmci-Ldiam", "hcmci-safe-L1", "hcmci-safe-L5",
                        "icf-L2", "icf-Ldiam")
+
+
+def _team_methods() -> tuple[str, ...]:
+    shown = estimation.method_names("team", SHOWN)
+    return shown + tuple(m for m in estimation.method_names("team") if m not in shown)
+
+
+#: The names read from the methods' specs when asked (:func:`mascore.estimation.method_specs`: always current,
+#: a new filter module's included; importing this module imports no filter): ``TEAM_METHODS``, the estimators of
+#: the team task in table order; ``CORE_METHODS``, those at their own recipe (the figures'); ``ALL_TEAM_METHODS``,
+#: with the knobs' settings (run at N = 8 in the studies ``scaling``, ``position``); ``POSITION_METHODS``, those
+#: that apply under position-only sensing; ``POSITION_NOT_APPLICABLE`` and ``SWITCHING_NOT_APPLICABLE``, the
+#: others with the reason; ``VLAHAKIS_PHI``, the Vlahakis observer's coupling gain per method (None: the LMI's
+#: choice; -0.1 and 1 are the ends of the interval where its program's value is optimal on the ring of 8,
+#: :func:`vlahakis_profile`); ``SM_CONFIDENCE``, the set-membership filter's confidence level per method (None:
+#: ``settings.sm_confidence``; bounded noise: the guaranteed bound); ``SHARED_METHODS``, the shared task's at
+#: their recipe and Ren et al.'s untuned Q = 0; ``ALL_SHARED_METHODS``, with the knob's settings; ``REN_Q``,
+#: Ren et al.'s Q = Omega per method; ``KNOBS``, every knob swept within its recipe (:class:`Knob`).
+_FROM_SPECS = {
+    "TEAM_METHODS": lambda: estimation.method_names("team", SHOWN),
+    "CORE_METHODS": lambda: estimation.method_names("team", ("recipe",)),
+    "ALL_TEAM_METHODS": _team_methods,
+    "POSITION_NOT_APPLICABLE": lambda: estimation.not_applicable("position"),
+    "SWITCHING_NOT_APPLICABLE": lambda: estimation.not_applicable("switching"),
+    "POSITION_METHODS": lambda: tuple(m for m in estimation.method_names("team")
+                                      if m not in estimation.not_applicable("position")),
+    "VLAHAKIS_PHI": lambda: estimation.knob_settings("vlahakis", "team"),
+    "SM_CONFIDENCE": lambda: estimation.knob_settings("set-membership", "team"),
+    "SHARED_METHODS": lambda: estimation.method_names("shared", SHOWN),
+    "ALL_SHARED_METHODS": lambda: estimation.method_names("shared"),
+    "REN_Q": lambda: estimation.knob_settings("ren-kc", "shared"),
+    "KNOBS": lambda: _knobs(),
+}
+
+
+def __getattr__(name: str):
+    if name in _FROM_SPECS:
+        return _FROM_SPECS[name]()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 #: Largest initial spread or noise std (m, m/s) the benchmark accepts: the squared errors stay far from overflow.
@@ -202,23 +215,25 @@ def _consensus_knob(kind: str, label: str, task: str) -> Knob:
     return Knob(f"{label}: consensus steps L", task, (*settings, ("diameter", task, f"{kind}-Ldiam")), ("1", "5"))
 
 
-#: Every knob swept within its recipe (the chapter's knob table, :func:`knob_table`).
-KNOBS = (
-    Knob("Ren et al.'s Q = Omega", "shared", tuple((f"{q:g}", "shared", m) for m, q in sorted(
-        REN_Q.items(), key=lambda kv: kv[1])), ("0.1",)),
-    Knob("Vlahakis's coupling gain Phi", "team", tuple(
-        ("LMI" if phi is None else f"{phi:g}", "scaling", m)
-        for m, phi in VLAHAKIS_PHI.items()), ("LMI",)),
-    Knob("set-membership confidence (positions only)", "team", tuple(
-        (f"{SETTINGS.sm_confidence if c is None else c:g}", "position", m)
-        for m, c in sorted(SM_CONFIDENCE.items(), key=lambda kv: SETTINGS.sm_confidence if kv[1] is None else kv[1])),
-        (f"{SETTINGS.sm_confidence:g}",)),
-    *(_consensus_knob(kind, label, task) for task in ("target", "localization")
-      for kind, label in (("ci", "CI"), ("icf", "ICF"), ("hcmci", "HCMCI"))),
-    *(Knob(f"HCMCI novelty weight omega (L = {L})", task, (("N", task, f"hcmci-L{L}"),
-                                                          ("safe", task, f"hcmci-safe-L{L}")), ("N",))
-      for task in ("target", "localization") for L in (1, 5)),
-)
+def _knobs() -> tuple[Knob, ...]:
+    """Every knob swept within its recipe (the chapter's knob table, :func:`knob_table`), from the specs."""
+    ren, phi = estimation.knob_settings("ren-kc", "shared"), estimation.knob_settings("vlahakis", "team")
+    confidence = estimation.knob_settings("set-membership", "team")
+    return (
+        Knob("Ren et al.'s Q = Omega", "shared", tuple((f"{q:g}", "shared", m) for m, q in sorted(
+            ren.items(), key=lambda kv: kv[1])), ("0.1",)),
+        Knob("Vlahakis's coupling gain Phi", "team", tuple(
+            ("LMI" if p is None else f"{p:g}", "scaling", m) for m, p in phi.items()), ("LMI",)),
+        Knob("set-membership confidence (positions only)", "team", tuple(
+            (f"{SETTINGS.sm_confidence if c is None else c:g}", "position", m)
+            for m, c in sorted(confidence.items(), key=lambda kv: SETTINGS.sm_confidence if kv[1] is None else kv[1])),
+            (f"{SETTINGS.sm_confidence:g}",)),
+        *(_consensus_knob(kind, label, task) for task in ("target", "localization")
+          for kind, label in (("ci", "CI"), ("icf", "ICF"), ("hcmci", "HCMCI"))),
+        *(Knob(f"HCMCI novelty weight omega (L = {L})", task, (("N", task, f"hcmci-L{L}"),
+                                                              ("safe", task, f"hcmci-safe-L{L}")), ("N",))
+          for task in ("target", "localization") for L in (1, 5)),
+    )
 
 
 def knob_variants() -> tuple[str, ...]:
@@ -235,7 +250,7 @@ def knob_variants() -> tuple[str, ...]:
     >>> "ren-kc-q0.6" in knob_variants(), "ren-kc" in knob_variants()
     (True, False)
     """
-    return tuple(sorted({method for knob in KNOBS for label, _, method in knob.settings if label not in knob.recipe}))
+    return tuple(sorted({method for knob in _knobs() for label, _, method in knob.settings if label not in knob.recipe}))
 
 
 def benchmark_graph(kind: str, n_agents: int, settings: BenchmarkSettings = SETTINGS) -> np.ndarray:

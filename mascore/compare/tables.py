@@ -6,7 +6,7 @@ import numpy as np
 
 from .. import estimation
 from .benchmark import KNOBS, SETTINGS, SHOWN, BenchmarkSettings
-from .target import LOCALIZATION_NOT_APPLICABLE, TARGET_NOT_APPLICABLE, target_cost, target_methods
+from .target import target_cost, target_methods
 
 
 def fitted_slopes(summary) -> dict[str, float]:
@@ -122,8 +122,7 @@ def headline(summary, task: str = "team", costs=None):
             row["flops/agent/step"] = round(target_cost(m, 8, 2, task)[1])
         rows.append(row)
     if task in ("target", "localization"):
-        reasons = TARGET_NOT_APPLICABLE if task == "target" else LOCALIZATION_NOT_APPLICABLE
-        for m, why in reasons.items():
+        for m, why in estimation.not_applicable(task).items():
             rows.append({"method": m, "RMSE ratio [95 %]": "not applicable", "seeds": 0, "consistency": why,
                          "floats/step": dash, **({CPU_COLUMN: dash} if cpu is not None else {}),
                          "flops/agent/step": dash})

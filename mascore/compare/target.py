@@ -23,10 +23,21 @@ from .benchmark import (
 # the common-target task (mascore.fusion)
 
 
-#: Filters of the common-target task at their recipes, in table order (``-L<k>``: k consensus steps per update):
-#: the specs of :data:`mascore.fusion.METHODS` as found at import, without the knob variants of
-#: :data:`FUSION_KNOB_METHODS` (:func:`target_methods` finds those added since).
-TARGET_METHODS = tuple(m for m in estimation.method_names("target") if m not in FUSION_KNOB_METHODS)
+#: Read from the specs when asked (importing this module imports no filter): ``TARGET_METHODS``, the filters of
+#: the common-target task at their recipes in table order (``-L<k>``: k consensus steps per update;
+#: :func:`target_methods`); ``TARGET_NOT_APPLICABLE`` and ``LOCALIZATION_NOT_APPLICABLE``, the papers' methods
+#: that do not apply to the common target or to cooperative localization, with the reason.
+_FROM_SPECS = {
+    "TARGET_METHODS": lambda: target_methods("target"),
+    "TARGET_NOT_APPLICABLE": lambda: estimation.not_applicable("target"),
+    "LOCALIZATION_NOT_APPLICABLE": lambda: estimation.not_applicable("localization"),
+}
+
+
+def __getattr__(name: str):
+    if name in _FROM_SPECS:
+        return _FROM_SPECS[name]()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def target_methods(task: str = "target", knobs: bool = False) -> tuple[str, ...]:
@@ -54,8 +65,6 @@ def target_methods(task: str = "target", knobs: bool = False) -> tuple[str, ...]
     """
     names = estimation.method_names(task)
     return names if knobs else tuple(m for m in names if m not in FUSION_KNOB_METHODS)
-#: Methods of the papers that do not apply to the common target, with the reason (the headline shows them).
-TARGET_NOT_APPLICABLE = estimation.not_applicable("target")  # as the other tasks' specs say
 
 
 def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
@@ -92,8 +101,6 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
     return sensor_network.SensorNetworkModel(F, Q, H, R, benchmark_graph(graph, n_agents, s))
 
 
-#: The papers' methods on cooperative localization: none applies as published, for these reasons.
-LOCALIZATION_NOT_APPLICABLE = estimation.not_applicable("localization")  # as the other tasks' specs say
 
 
 def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):

@@ -17,14 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import estimation, graphs, kalman, rendezvous, set_membership, team_model
+from .. import estimation, graphs
 from .._validation import frozen_copy
 from ..agents import double_integrator
-from ..centralized_team_filter import CentralizedTeamFilter
-from ..distributed_kf import TeamFilter
 from ..estimation import MethodSpec
-from ..network_observer import DiscreteNetworkObserver
-from ..own_state import CentralizedOutputFilter, OwnStateForwardingFilter
 from .benchmark import (
     SENSINGS,
     SETTINGS,
@@ -142,12 +138,14 @@ def team_setup(n_agents: int, noise: str, q_scale: float, s: BenchmarkSettings, 
     """
     if sensing not in SENSINGS:
         raise ValueError(f"sensing must be one of {SENSINGS}; got {sensing!r}")
+    from ..rendezvous import rendezvous_gain
+
     agent = double_integrator(2, s.dt)
     Q = np.diag([s.q_pos, s.q_pos, s.q_vel, s.q_vel])
     switching = graph == "switching"
     adjacency = switching_graphs(n_agents, 1, s)[0] if switching else benchmark_graph(graph, n_agents, s)
     C = np.eye(4) if sensing == "full" else _C_POS
-    return TeamTask(N=n_agents, A=agent.A, B=agent.B, K=rendezvous.rendezvous_gain(*s.rho, 2), Q=Q,
+    return TeamTask(N=n_agents, A=agent.A, B=agent.B, K=rendezvous_gain(*s.rho, 2), Q=Q,
                     Q_filter=q_scale * Q, C=C, R=s.r * np.eye(len(C)), adjacency=adjacency,
                     laplacian=graphs.laplacian(adjacency), P0=s.p0 * np.eye(4), noise=noise, s=s,
                     switching=switching, sensing=sensing)
@@ -284,7 +282,7 @@ class _Centralized(TeamEstimator):
         raise NotImplementedError("the centre runs the whole filter: no agent state of its own")
 
 
-def _own_blocks(P: np.ndarray, model: team_model.TeamFilterModel) -> np.ndarray:
+def _own_blocks(P: np.ndarray, model) -> np.ndarray:
     """Agent i's own ``(4, 4)`` covariance from reduced team covariances: ``(B, N, 4, 4)``.
 
     `P` is ``(B, N m_r, N m_r)`` (one team covariance) or ``(B, N, N m_r, N m_r)`` (agent i's own
@@ -295,7 +293,9 @@ def _own_blocks(P: np.ndarray, model: team_model.TeamFilterModel) -> np.ndarray:
     blocks = np.moveaxis(blocks, 0, -3)
     if P.ndim == 4:  # (B, N agents, N blocks, mr, mr): agent i's block i
         blocks = blocks[:, np.arange(N), np.arange(N)]
-    return team_model.expand_covariance(blocks, model.kron)
+    from ..team_model import expand_covariance
+
+    return expand_covariance(blocks, model.kron)
 
 
 def _own_measurements(Z: np.ndarray) -> np.ndarray:
@@ -312,10 +312,14 @@ class _Local(TeamEstimator):
         self.P = team.P0.copy()
 
     def update(self, Z, S):
-        self.own, self.P = kalman.update(self.own, self.P, _own_measurements(Z), self.filter.H, self.filter.R)
+        from ..kalman import update
+
+        self.own, self.P = update(self.own, self.P, _own_measurements(Z), self.filter.H, self.filter.R)
 
     def predict(self, U):
-        self.own, self.P = kalman.predict(self.own, self.P, self.t.A, self.t.Q_filter, self.t.B, U)
+        from ..kalman import predict
+
+        self.own, self.P = predict(self.own, self.P, self.t.A, self.t.Q_filter, self.t.B, U)
 
     @property
     def own_cov(self):
@@ -440,7 +444,7 @@ class _Vlahakis(TeamEstimator):
     """The Vlahakis observer (:class:`mascore.network_observer.DiscreteNetworkObserver`) with its gains from the LMI."""
 
     @property
-    def observer(self) -> DiscreteNetworkObserver:
+    def observer(self):
         return self.filter
 
     def update(self, Z, S):
@@ -535,8 +539,9 @@ class _SetMembership(TeamEstimator):
             _, self.shape, L = m.correct(self.own[0, 0], self.shape, y[0, 0], check_consistency=False)
             self.own = self.own + (y - self.own @ m.C.T) @ L.T               # eq. (2), every agent and run
         else:
-            self.own, self.shape, _ = set_membership.correct(self.own, self.shape, y, m.C, m.D, m.R,
-                                                             check_consistency=False)
+            from ..set_membership import correct
+
+            self.own, self.shape, _ = correct(self.own, self.shape, y, m.C, m.D, m.R, check_consistency=False)
 
     def predict(self, U):
         m = self.model
@@ -544,7 +549,9 @@ class _SetMembership(TeamEstimator):
             _, self.shape = m.predict(self.own[0, 0], self.shape, U[0, 0])
             self.own = self.own @ m.A.T + U @ m.B.T                            # eq. (4)
         else:
-            self.own, self.shape = set_membership.predict(self.own, self.shape, m.A, m.G, m.Q, m.B, U)
+            from ..set_membership import predict
+
+            self.own, self.shape = predict(self.own, self.shape, m.A, m.G, m.Q, m.B, U)
 
     def containment(self, x):
         e = x - self.own
@@ -566,11 +573,19 @@ class _SetMembership(TeamEstimator):
         return self.own[0, i], self.shape[0, i]
 
 
-#: The package's filters of the team task, each with the estimator that steps it (a filter of another class
-#: steps itself: ``_Direct``).
-_STEPPED_BY = ((CentralizedTeamFilter, _Centralized), (CentralizedOutputFilter, _CentralizedPosition),
-               (TeamFilter, _Song), (kalman.LinearGaussianModel, _Local), (OwnStateForwardingFilter, _Forwarding),
-               (DiscreteNetworkObserver, _Vlahakis), (set_membership.SetMembershipModel, _SetMembership))
+def _stepper(filt) -> type[TeamEstimator]:
+    """The estimator that steps a filter of the package by its class (another class steps itself: ``_Direct``)."""
+    from ..centralized_team_filter import CentralizedTeamFilter
+    from ..distributed_kf import TeamFilter
+    from ..kalman import LinearGaussianModel
+    from ..network_observer import DiscreteNetworkObserver
+    from ..own_state import CentralizedOutputFilter, OwnStateForwardingFilter
+    from ..set_membership import SetMembershipModel
+
+    stepped_by = ((CentralizedTeamFilter, _Centralized), (CentralizedOutputFilter, _CentralizedPosition),
+                  (TeamFilter, _Song), (LinearGaussianModel, _Local), (OwnStateForwardingFilter, _Forwarding),
+                  (DiscreteNetworkObserver, _Vlahakis), (SetMembershipModel, _SetMembership))
+    return next((est for cls, est in stepped_by if isinstance(filt, cls)), _Direct)
 
 
 def make_estimator(method: str, team: TeamTask, x_hat0: np.ndarray) -> TeamEstimator:
@@ -608,8 +623,7 @@ def make_estimator(method: str, team: TeamTask, x_hat0: np.ndarray) -> TeamEstim
     if why is not None:
         raise ValueError(f"method {method!r} does not apply under position-only sensing: {why}")
     filt = spec.build(team, x_hat0)
-    stepper = next((est for cls, est in _STEPPED_BY if isinstance(filt, cls)), _Direct)
-    return stepper(spec, filt, team, x_hat0)
+    return _stepper(filt)(spec, filt, team, x_hat0)
 
 
 def simulate_team(
@@ -699,6 +713,8 @@ def simulate_team(
     why = estimation.method_spec(method, "team").not_applicable.get("switching")
     if graph == "switching" and why is not None:
         raise ValueError(f"{method} does not apply on graph='switching': {why}")
+    from ..rendezvous import consensus_control
+
     team = team_setup(int(n_agents), noise, float(q_scale), settings, graph, sensing)
     topology = switching_graphs(int(n_agents), settings.n_steps, settings) > 0 if team.switching else None
     init_rng, proc_rng, meas_rng, drop_rng = np.random.default_rng(seed).spawn(4)
@@ -738,7 +754,7 @@ def simulate_team(
             view = fresh
         if k >= s.steady_from:
             _accumulate(acc, est, x, view, nominal | eye)
-        U = rendezvous.consensus_control(view, team.laplacian, team.K)
+        U = consensus_control(view, team.laplacian, team.K)
         tic = time.thread_time()
         est.predict(U)
         cpu += time.thread_time() - tic
