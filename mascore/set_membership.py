@@ -346,7 +346,7 @@ def run_filter(
     method = _check_method(method)
     c, P, y, u = _check_run_data(x0_hat, P0, y, B, u)
     model = SetMembershipModel(A=A, G=G, C=C, D=D, Q=Q, R=R, B=B, n=P.shape[-1])
-    return model._run(c, P, y, u, method, agent, solver_options)
+    return model.run(c, P, y, u, method, agent, solver_options)
 
 
 @dataclass(frozen=True, eq=False)
@@ -639,7 +639,19 @@ class SetMembershipModel(Frozen):
         c, P, y, u = _check_run_data(x0_hat, P0, y, self.B, u)
         if P.shape[-1] != self.n:
             raise ValueError(f"P0 must be ({self.n}, {self.n}) like the model's A; got {P.shape}")
-        return self._run(c, P, y, u, method, agent, solver_options)
+        out: dict[str, list] = {k: [] for k in ("cc", "pc", "cp", "pp", "L")}
+        programs: dict = {}  # the run's compiled SDPs (method="sdp"), reused step after step
+        for k in range(y.shape[0]):  # Algorithm 1: correct with y[k], then predict, k = 0..T_f
+            c, P, L = self._correct(c, P, y[k], method, k, agent, True, solver_options, programs)
+            out["cc"].append(c)
+            out["pc"].append(P)
+            out["L"].append(L)
+            uk = None if u is None else u[k]
+            c, P = self._predict(c, P, uk, method, k, agent, solver_options, programs)
+            out["cp"].append(c)
+            out["pp"].append(P)
+        return FilterHistory(np.array(out["cc"]), np.array(out["pc"]), np.array(out["cp"]),
+                             np.array(out["pp"]), np.array(out["L"]))
 
     # -- the steps on checked data (the public methods and functions check first)
 
@@ -738,22 +750,6 @@ class SetMembershipModel(Frozen):
                                  solver_options)
         _check_result(new_P, "prediction", step, agent, batch)
         return new_c, new_P
-
-    def _run(self, c, P, y, u, method, agent, solver_options):
-        """Algorithm 1 on checked data: correct with ``y[k]``, then predict, k = 0..T_f."""
-        out: dict[str, list] = {k: [] for k in ("cc", "pc", "cp", "pp", "L")}
-        programs: dict = {}  # the run's compiled SDPs (method="sdp"), reused step after step
-        for k in range(y.shape[0]):
-            c, P, L = self._correct(c, P, y[k], method, k, agent, True, solver_options, programs)
-            out["cc"].append(c)
-            out["pc"].append(P)
-            out["L"].append(L)
-            uk = None if u is None else u[k]
-            c, P = self._predict(c, P, uk, method, k, agent, solver_options, programs)
-            out["cp"].append(c)
-            out["pp"].append(P)
-        return FilterHistory(np.array(out["cc"]), np.array(out["pc"]), np.array(out["cp"]),
-                             np.array(out["pp"]), np.array(out["L"]))
 
 
 def _check_run_data(x0_hat, P0, y, B, u):
