@@ -37,9 +37,11 @@ SENSINGS = ("full", "position")
 #: The common-target and localization filters' knob variants (their specs in :mod:`mascore.fusion`): the
 #: consensus steps L in {1, 2, 5} and L = the graph's diameter, and HCMCI's novelty weight omega = N against
 #: the consistency-safe omega of its docstring (``omega max [W^L]_ij <= 1``). Swept at N = 8 on the ring
-#: (2 seed blocks); the headline tables keep the recipes (L = 1 and 5, omega = N).
+#: (2 seed blocks); the headline tables keep the recipes (L = 1 and 5, omega = N). Olfati-Saber's KCF gain
+#: eps in {0.01, 0.1, 0.5} (0.1 the headline's; 0.5 = 1 / d_max on the ring, the largest that keeps its consensus
+#: step a convex combination for every covariance).
 FUSION_KNOB_METHODS = ("ci-L2", "ci-Ldiam", "hcmci-L2", "hcmci-Ldiam", "hcmci-safe-L1", "hcmci-safe-L5",
-                       "icf-L2", "icf-Ldiam")
+                       "icf-L2", "icf-Ldiam", "kcf-eps0.01", "kcf-eps0.5")
 
 
 def _team_methods() -> tuple[str, ...]:
@@ -233,6 +235,9 @@ def _knobs() -> tuple[Knob, ...]:
         *(Knob(f"HCMCI novelty weight omega (L = {L})", task, (("N", task, f"hcmci-L{L}"),
                                                               ("safe", task, f"hcmci-safe-L{L}")), ("N",))
           for task in ("target", "localization") for L in (1, 5)),
+        *(Knob("KCF consensus gain eps", task, (("0.01", task, "kcf-eps0.01"), ("0.1", task, "kcf"),
+                                                ("0.5", task, "kcf-eps0.5")), ("0.1",))
+          for task in ("target", "localization")),
     )
 
 
