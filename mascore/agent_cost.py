@@ -89,9 +89,10 @@ def agent_methods(task: str) -> tuple[str, ...]:
     Returns
     -------
     tuple of str
-        :data:`TEAM_METHODS`, or the names of the task's :class:`mascore.estimation.MethodSpec` (a new filter
-        module's included; not the knobs' other settings, :data:`mascore.compare.FUSION_KNOB_METHODS`:
-        the same filters, whose costs follow from the counts).
+        The names of the task's :class:`mascore.estimation.MethodSpec` (a new filter module's included):
+        the team task's at their own recipe (``role="recipe"``), the others' without the knobs' other
+        settings (:data:`mascore.compare.FUSION_KNOB_METHODS`: the same filters, whose costs follow from
+        the counts).
 
     Examples
     --------
