@@ -107,6 +107,9 @@ __all__ = [
     "send_on_delta_table",
     "plot_send_on_delta",
     "TEAM_METHODS",
+    "make_estimator",
+    "team_setup",
+    "ALL_TEAM_METHODS",
     "VLAHAKIS_PHI",
     "REN_Q",
     "ALL_SHARED_METHODS",
@@ -164,18 +167,17 @@ _NAMES = {
         'ALL_SHARED_METHODS', 'ALL_TEAM_METHODS', 'BenchmarkSettings', 'CORE_METHODS', 'FUSION_KNOB_METHODS', 'GRAPHS',
         'KNOBS', 'Knob', 'NOISES', 'POSITION_METHODS',
         'POSITION_NOT_APPLICABLE', 'REN_Q', 'SEED_AXES', 'SENSINGS', 'SETTINGS', 'SHARED_METHODS', 'SM_CONFIDENCE',
-        'SWITCHING_GRAPHS', 'TEAM_METHODS', 'VLAHAKIS_PHI', '_MAX_SCALE', 'benchmark_graph', 'bound_scale',
+        'SHOWN', 'SWITCHING_GRAPHS', 'SWITCHING_NOT_APPLICABLE', 'TEAM_METHODS', 'VLAHAKIS_PHI', '_MAX_SCALE',
+        'benchmark_graph', 'bound_scale',
         'check_cell', 'check_n_agents', 'check_run', 'draw_noise', 'floats_per_step', 'knob_variants', 'mean_degree',
         'switching_graphs'
     ),
     'team': (
-        'SWITCHING_NOT_APPLICABLE', '_C_POS', '_Centralized', '_CentralizedPosition', '_Estimator', '_Forwarding',
-        '_ForwardingPosition', '_Local', '_LocalPosition', '_SetMembership', '_SetMembershipPosition', '_Song', '_Team',
-        '_Vlahakis', '_accumulate', '_own_blocks', '_vlahakis_gains', 'make_estimator', 'simulate_team', 'team_setup',
-        'vlahakis_profile'
+        'TeamEstimator', 'TeamTask', '_C_POS', '_accumulate', '_own_blocks', '_vlahakis_gains', 'make_estimator',
+        'simulate_team', 'team_setup', 'vlahakis_profile'
     ),
     'shared': (
-        '_average', 'simulate_shared'
+        'simulate_shared',
     ),
     'target': (
         'LATENCY_METHODS', 'LATENCY_NOT_MODELLED', 'LINK_STUDIES', 'LOCALIZATION_NOT_APPLICABLE', 'LOSS_METHODS',
@@ -210,8 +212,10 @@ _WHERE = {name: module for module, names in _NAMES.items() for name in names}
 
 def __getattr__(name: str):
     if name in _WHERE:
-        value = getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
-        globals()[name] = value
+        module = importlib.import_module(f"{__name__}.{_WHERE[name]}")
+        value = getattr(module, name)
+        if name in vars(module):  # not one read from the specs when asked (those stay current)
+            globals()[name] = value
         return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 

@@ -10,17 +10,15 @@ from typing import Any
 
 import numpy as np
 
+from .. import estimation
 from ..settings import check_settings_type
 from ..sweep import Grid, cell_seed
 from .benchmark import (
-    CORE_METHODS,
     FUSION_KNOB_METHODS,
-    POSITION_METHODS,
     REN_Q,
     SEED_AXES,
     SETTINGS,
-    SHARED_METHODS,
-    TEAM_METHODS,
+    SHOWN,
     VLAHAKIS_PHI,
     BenchmarkSettings,
     check_cell,
@@ -34,7 +32,6 @@ from .tables import fitted_slopes
 from .target import (
     LATENCY_METHODS,
     LINK_STUDIES,
-    LOSS_METHODS,
     SEND_ON_DELTA_METHODS,
     link_options,
     simulate_target,
@@ -98,20 +95,24 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     sizes = [4, 16] if quick else [4, 16, 32, 64]
     base = {"task": ["team"], "graph": ["ring"], "noise": ["gaussian"], "dropout": [0.0], "q_scale": [1.0],
             "block": blocks}
-    core = list(CORE_METHODS)  # the knob variants: in the scaling study only
+    # the methods as their specs declare them now (a new filter module's included)
+    team, core = list(estimation.method_names("team", SHOWN)), list(estimation.method_names("team", ("recipe",)))
+    shared = list(estimation.method_names("shared", SHOWN))
+    position = [m for m in estimation.method_names("team") if m not in estimation.not_applicable("position")]
+    switching = [m for m in core if m not in estimation.not_applicable("switching")]
     # the quick grid runs the set-membership filter on forwarded measurements (a trace search per agent and step,
     # rebuilt at every step of a switching graph) at N = 8 on the ring only: the headline's cells; the full grid all
     skip = {"sm-forwarding": {"geometric", "switching", 16}} if quick else {}
     studies = [
-        ("scaling", {**base, "method": list(TEAM_METHODS), "n_agents": [8], "block": blocks200}),
-        ("scaling", {**base, "method": list(TEAM_METHODS), "n_agents": sizes}),
+        ("scaling", {**base, "method": team, "n_agents": [8], "block": blocks200}),
+        ("scaling", {**base, "method": team, "n_agents": sizes}),
         ("graph", {**base, "method": core, "graph": ["geometric"], "n_agents": [16] if quick else [16, 32]}),
         ("dropout", {**base, "method": core, "n_agents": [8], "dropout": [0.1, 0.3]}),
         ("noise", {**base, "method": core, "n_agents": [8], "noise": ["uniform", "student-t"]}),
         ("wrong-q", {**base, "method": core, "n_agents": [8], "q_scale": [0.1, 10.0]}),
-        ("shared", {**base, "task": ["shared"], "method": list(SHARED_METHODS), "n_agents": [8],
+        ("shared", {**base, "task": ["shared"], "method": shared, "n_agents": [8],
                     "dropout": [0.0, 0.1, 0.3], "block": blocks200}),
-        ("shared", {**base, "task": ["shared"], "method": list(SHARED_METHODS), "n_agents": [16],
+        ("shared", {**base, "task": ["shared"], "method": shared, "n_agents": [16],
                     "graph": ["geometric", "switching"], "block": blocks200}),
         ("target", {**base, "task": ["target"], "method": list(target_methods("target")), "n_agents": [8, 16],
                     "block": blocks200}),
@@ -120,23 +121,23 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
                     "n_agents": [16], "block": blocks200}),
         ("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
                           "n_agents": [8] if quick else [8, 16], "block": blocks200}),
-        ("position", {**base, "sensing": ["position"], "method": list(POSITION_METHODS), "n_agents": [8],
+        ("position", {**base, "sensing": ["position"], "method": position, "n_agents": [8],
                       "block": blocks200}),
         ("position", {**base, "sensing": ["position"], "method": ["centralized", "local", "set-membership"],
                       "noise": ["uniform"], "n_agents": [8], "block": blocks200}),
         # the switching topology (switching_graphs) for the own state and localization; the quick grid runs
         # localization at N = 8 only (at 16 covariance intersection's weight search costs 6 s of CPU per block)
-        ("switching", {**base, "method": [m for m in core if m not in VLAHAKIS_PHI], "graph": ["switching"],
+        ("switching", {**base, "method": switching, "graph": ["switching"],
                        "n_agents": [16], "block": blocks if quick else blocks200}),
         ("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
                           "graph": ["switching"], "n_agents": [8], "block": blocks if quick else blocks200}),
         # every knob swept within its recipe (KNOBS): at N = 8 on the ring, 200 seeds as the recipes beside them
         # (the claims that read a knob's settings are decided on the held-out blocks 2-3)
-        ("scaling", {**base, "method": [m for m in VLAHAKIS_PHI if m not in TEAM_METHODS], "n_agents": [8],
+        ("scaling", {**base, "method": [m for m in VLAHAKIS_PHI if m not in team], "n_agents": [8],
                      "block": blocks200}),
-        ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in SHARED_METHODS],
+        ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in shared],
                     "n_agents": [8], "block": blocks200}),
-        ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in SHARED_METHODS],
+        ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in shared],
                     "n_agents": [16], "graph": ["geometric", "switching"], "block": blocks200}),
         *((task, {**base, "task": [task], "method": list(FUSION_KNOB_METHODS), "n_agents": [8],
                   "block": blocks200}) for task in ("target", "localization")),
@@ -170,7 +171,7 @@ def _link_studies(quick: bool, base: dict, blocks: list, blocks200: list) -> lis
     deltas = [s for s in LINK_STUDIES if s.startswith("send-on-delta")][:2 if quick else 3]
     out = []
     for task in tasks:
-        loss_methods = ["centralized", "forwarding", "ci-L1", "icf-L1"] if quick else list(LOSS_METHODS)
+        loss_methods = ["centralized", "forwarding", "ci-L1", "icf-L1"] if quick else list(target_methods("target"))
         out.append(("loss", {**ring8, "task": [task], "method": loss_methods, "dropout": [0.1, 0.3]}))
         out.append(("latency", {**ring8, "task": [task], "method": list(LATENCY_METHODS),
                                 "dropout": [0.0] if quick else [0.0, 0.1, 0.3]}))

@@ -4,16 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .benchmark import (
-    KNOBS,
-    POSITION_METHODS,
-    POSITION_NOT_APPLICABLE,
-    SETTINGS,
-    SHARED_METHODS,
-    TEAM_METHODS,
-    BenchmarkSettings,
-)
-from .target import LOCALIZATION_NOT_APPLICABLE, TARGET_NOT_APPLICABLE, target_cost, target_methods
+from .. import estimation
+from .benchmark import KNOBS, SETTINGS, SHOWN, BenchmarkSettings
+from .target import target_cost, target_methods
 
 
 def fitted_slopes(summary) -> dict[str, float]:
@@ -50,8 +43,9 @@ def headline(summary, task: str = "team", costs=None):
     ----------
     summary : pandas.DataFrame
         Output of :func:`summarize`.
-    task : {"team", "position", "target", "localization", "shared"}
-        The scenario: ``"team"``, own state at N = 8 on the ring (the case where cooperation
+    task : {"team", "position", "target", "localization", "shared"} or str
+        The scenario (or one declared in its own module, ``mascore.compare.scenario``, at the cells
+        of its ``headline``): ``"team"``, own state at N = 8 on the ring (the case where cooperation
         cannot help: forwarding the neighbours' measurements of an agent already is the
         centralized filter); ``"position"``, the same with position-only sensing (the study
         ``position``, Gaussian noise; its own table, :func:`_position_headline`); ``"target"``,
@@ -88,17 +82,25 @@ def headline(summary, task: str = "team", costs=None):
     """
     import pandas as pd
 
-    if task not in ("team", "position", "target", "localization", "shared"):
-        raise ValueError(f"task must be 'team', 'position', 'target', 'localization' or 'shared'; got {task!r}")
+    from .scenario import scenarios
+
+    new = scenarios()
+    tasks = ("team", "position", "target", "localization", "shared", *new)
+    if task not in tasks:
+        raise ValueError(f"task must be one of {tasks}; got {task!r}")
     if task == "position":
         return _position_headline(summary, costs)
     dash = "—"
-    frame = summary[(summary["task"] == task) & (summary["n_agents"] == 8) & (summary["dropout"] == 0.0)]
+    where = new[task].headline if task in new else {"n_agents": 8, "dropout": 0.0, "graph": "ring"}
+    frame = summary[summary["task"] == task]
+    for coordinate, value in where.items():
+        if coordinate in frame:  # a summary without a graph column: the ring
+            frame = frame[frame[coordinate] == value]
     if task == "team":
         frame = frame[frame["study"] == "scaling"]
-    frame = frame[frame.get("graph", "ring") == "ring"].set_index("method")
-    methods = {"team": TEAM_METHODS, "target": target_methods("target"),
-               "localization": target_methods("localization"), "shared": SHARED_METHODS}[task]
+    frame = frame.set_index("method")
+    methods = target_methods(task) if task in ("target", "localization") else new[task].methods() if task in new \
+        else estimation.method_names(task, SHOWN)
     cpu = _agent_cpu(costs, task)
     slopes = _agent_slopes(costs, task)
     rows = []
@@ -120,8 +122,7 @@ def headline(summary, task: str = "team", costs=None):
             row["flops/agent/step"] = round(target_cost(m, 8, 2, task)[1])
         rows.append(row)
     if task in ("target", "localization"):
-        reasons = TARGET_NOT_APPLICABLE if task == "target" else LOCALIZATION_NOT_APPLICABLE
-        for m, why in reasons.items():
+        for m, why in estimation.not_applicable(task).items():
             rows.append({"method": m, "RMSE ratio [95 %]": "not applicable", "seeds": 0, "consistency": why,
                          "floats/step": dash, **({CPU_COLUMN: dash} if cpu is not None else {}),
                          "flops/agent/step": dash})
@@ -175,7 +176,8 @@ def _position_headline(summary, costs=None):
     uniform = pos[pos["noise"] == "uniform"].set_index("method")
     size = gauss["set_size_mean"] if "set_size_mean" in gauss else pd.Series(np.nan, gauss.index)
     rows = []
-    for m in POSITION_METHODS:
+    not_applicable = estimation.not_applicable("position")
+    for m in (m for m in estimation.method_names("team") if m not in not_applicable):
         if m not in gauss.index:
             continue
         r = gauss.loc[m]
@@ -186,7 +188,7 @@ def _position_headline(summary, costs=None):
             "set size (m)": round(float(size[m]), 3) if np.isfinite(size[m]) else dash,
             "contains, uniform": f"{bounded:.3f}" if np.isfinite(bounded) else dash,
             "floats/step": r["floats"], **({CPU_COLUMN: dash} if costs is not None else {})})
-    for m, why in POSITION_NOT_APPLICABLE.items():
+    for m, why in not_applicable.items():
         rows.append({"method": m, "RMSE ratio [95 %]": "not applicable", "consistency": why,
                      "set size (m)": dash, "contains, uniform": dash, "floats/step": dash,
                      **({CPU_COLUMN: dash} if costs is not None else {})})

@@ -24,10 +24,24 @@ from .benchmark import (
 # the common-target task (mascore.fusion)
 
 
-#: Filters of the common-target task at their recipes, in table order (``-L<k>``: k consensus steps per update):
-#: the specs of :data:`mascore.fusion.METHODS` as found at import, without the knob variants of
-#: :data:`FUSION_KNOB_METHODS` (:func:`target_methods` finds those added since).
-TARGET_METHODS = tuple(m for m in estimation.method_names("target") if m not in FUSION_KNOB_METHODS)
+#: Read from the specs when asked (importing this module imports no filter): ``TARGET_METHODS``, the filters of
+#: the common-target task at their recipes in table order (``-L<k>``: k consensus steps per update;
+#: :func:`target_methods`); ``TARGET_NOT_APPLICABLE`` and ``LOCALIZATION_NOT_APPLICABLE``, the papers' methods
+#: that do not apply to the common target or to cooperative localization, with the reason; ``LOSS_METHODS``, the
+#: methods of the loss study: every filter of the target tables, whose steps follow any graph (not ``-Ldiam``,
+#: whose L is the diameter of a graph that loss may disconnect, nor ``hcmci-safe-*``, whose weight is the graph's).
+_FROM_SPECS = {
+    "TARGET_METHODS": lambda: target_methods("target"),
+    "LOSS_METHODS": lambda: target_methods("target"),
+    "TARGET_NOT_APPLICABLE": lambda: estimation.not_applicable("target"),
+    "LOCALIZATION_NOT_APPLICABLE": lambda: estimation.not_applicable("localization"),
+}
+
+
+def __getattr__(name: str):
+    if name in _FROM_SPECS:
+        return _FROM_SPECS[name]()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def target_methods(task: str = "target", knobs: bool = False) -> tuple[str, ...]:
@@ -55,8 +69,6 @@ def target_methods(task: str = "target", knobs: bool = False) -> tuple[str, ...]
     """
     names = estimation.method_names(task)
     return names if knobs else tuple(m for m in names if m not in FUSION_KNOB_METHODS)
-#: Methods of the papers that do not apply to the common target, with the reason (the headline shows them).
-TARGET_NOT_APPLICABLE = estimation.not_applicable("target")  # as the other tasks' specs say
 
 
 def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
@@ -93,8 +105,6 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
     return sensor_network.SensorNetworkModel(F, Q, H, R, benchmark_graph(graph, n_agents, s))
 
 
-#: The papers' methods on cooperative localization: none applies as published, for these reasons.
-LOCALIZATION_NOT_APPLICABLE = estimation.not_applicable("localization")  # as the other tasks' specs say
 
 
 def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
@@ -508,9 +518,6 @@ def link_options(study: str) -> dict[str, float]:
 LATENCY_METHODS = ("centralized", "local", "forwarding", "ci-L1", "icf-L1")
 #: Methods with send-on-delta messages (:func:`simulate_target`), and the bound.
 SEND_ON_DELTA_METHODS = ("centralized", "ci-L1", "icf-L1")
-#: Methods of the loss study: every filter of the target tables whose steps follow any graph (not ``-Ldiam``,
-#: whose L is the diameter of a graph that loss may disconnect, nor ``hcmci-safe-*``, whose weight is the graph's).
-LOSS_METHODS = TARGET_METHODS
 #: Why a method has no latency model here (the target and localization tables show it).
 LATENCY_NOT_MODELLED = {
     **{m: "L rounds per step cannot run within a step when each message takes a step" for m in ("ci-L5", "icf-L5")},
