@@ -23,7 +23,7 @@ import numpy as np
 from .benchmark import REN_Q, SETTINGS, SM_CONFIDENCE, VLAHAKIS_PHI
 from .stats import Interval, rms_ratio
 from .tables import position_only_kf_rmse
-from .target import TARGET_METHODS
+from .target import LINK_STUDIES, TARGET_METHODS
 from .team import vlahakis_profile
 
 #: The seed blocks every claim was written from (the quick sweep's, when the claims were first written).
@@ -678,9 +678,9 @@ def _excludes_one(nees: Mapping[str, Interval], methods: Sequence[str]) -> str:
 def switching_target(ev: Evidence):
     """On the switching topology CI filters stay conservative, diffusion becomes overconfident."""
     sw = {"task": "target", "graph": "switching"}
-    ev.rows(**sw)
-    nees = {m: ev.mean("nees_own", m, **sw) for m in TARGET_METHODS}
-    ratio = {m: ev.ratio(m, **sw) for m in TARGET_METHODS}
+    ran = set(ev.rows(**sw)["method"])  # the quick grid runs the set-membership filter on the ring only
+    nees = {m: ev.mean("nees_own", m, **sw) for m in TARGET_METHODS if m in ran}
+    ratio = {m: ev.ratio(m, **sw) for m in TARGET_METHODS if m in ran}
     ring = ev.ratio("diffusion", task="target", graph="ring", n_agents=16)
     return ev.claim(
         "switching-target",
@@ -879,6 +879,7 @@ def compare_claims(table, phi: dict | None = None, *, held_out: Sequence[int] = 
         raise TypeError("table must be the sweep's per-run table (run_compare's first output, with columns "
                         "'block', 'run', 'rmse_own'), not its summary")
     runs = deciding_runs(table, held_out, written_from)
+    runs = runs[~runs["study"].isin(LINK_STUDIES)].copy()  # no claim reads the link studies (link_summary)
     if "sensing" not in runs:
         runs["sensing"] = np.nan
     team = runs["task"] == "team"
