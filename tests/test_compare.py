@@ -860,3 +860,30 @@ def test_the_full_grid_scales_both_fusion_tasks_to_64_where_methods_and_graphs_a
     with pytest.raises(ValueError, match="connected"):
         compare.benchmark_graph("geometric", 64)  # why the geometric graph stops at 32
     assert all(c["n_agents"] < 64 for c in compare.grid_cells("quick"))
+
+
+@pytest.mark.parametrize("method", ["set-membership", "set-membership-c90"])
+def test_full_state_set_membership_shares_one_set_and_equals_a_set_per_agent_and_run(method):
+    """One (4, 4) shape per step serves every agent and run: the same centres, bit for bit, and the same
+    shapes as the batched filter that keeps one set per agent and run (set_membership.correct / predict)."""
+    from mascore import set_membership
+    from mascore.compare.team import make_estimator, team_setup
+
+    team = team_setup(4, "uniform", 1.0, compare.SETTINGS)
+    rng = np.random.default_rng(3)
+    x_hat0 = rng.standard_normal((3, 4, 4))
+    est = make_estimator(method, team, x_hat0)
+    model = est.model
+    own = x_hat0.copy()
+    shape = np.broadcast_to(est.shape, (3, 4, 4, 4)).copy()
+    for _ in range(4):
+        Z = own[:, None] + 0.05 * rng.uniform(-1, 1, (3, 4, 4, 4))
+        U = 0.1 * rng.standard_normal((3, 4, 2))
+        est.update(Z, None)
+        own, shape, _ = set_membership.correct(own, shape, Z[:, np.arange(4), np.arange(4)], model.C, model.D,
+                                               model.R, check_consistency=False)
+        assert est.own.tobytes() == own.tobytes()
+        est.predict(U)
+        own, shape = set_membership.predict(own, shape, model.A, model.G, model.Q, model.B, U)
+        assert est.own.tobytes() == own.tobytes()
+        assert est.shape.shape == (4, 4) and (shape == est.shape).all()
