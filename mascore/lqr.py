@@ -688,8 +688,8 @@ def bottom_up_lqr(
     Parameters
     ----------
     A : (n, n) array_like, or LTIAgent or StateSpace
-        Agent state matrix (continuous time unless `dt` is given), or the agent as a system
-        (then B is left out: ``f(sys, Q1, Q2, R, ...)``; its ``dt`` sets the time base).
+        Agent state matrix in continuous time, or the agent as a continuous-time system
+        (then B is left out: ``f(sys, Q1, Q2, R, ...)``; a discrete-time one is refused).
     B : (n, m) array_like, optional
         Agent input matrix (not with a system); ``(A, B)`` stabilizable.
     Q1 : (n, n) array_like
