@@ -560,20 +560,43 @@ def _hash_key(a: object) -> object:
 
 
 def available_memory_bytes() -> int:
-    """Memory the system can still give this process (``MemAvailable`` of ``/proc/meminfo``, else free pages)."""
+    """Memory the system can still give this process (``MemAvailable`` of ``/proc/meminfo``, else free pages).
+
+    A limit on the process's address space (``ulimit -v``, ``resource.RLIMIT_AS``) lowers it.
+    """
+    limit = _address_space_limit()
     try:
         with open("/proc/meminfo") as fh:
             for line in fh:
                 if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
+                    return min(int(line.split()[1]) * 1024, limit)
     except (OSError, ValueError, IndexError):
         pass
     try:
         import os
 
-        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_AVPHYS_PAGES"))
+        return min(int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_AVPHYS_PAGES")), limit)
     except (AttributeError, OSError, ValueError):  # pragma: no cover - no way to ask: assume 8 GiB
         return 8 * 2**30
+
+
+def _address_space_limit() -> int:
+    """Bytes of address space this process may still map under its soft limit (``2**62`` when there is none)."""
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+    except (ImportError, OSError, ValueError):  # pragma: no cover - not a POSIX system
+        return 2**62
+    if soft == resource.RLIM_INFINITY or soft < 0:
+        return 2**62
+    used = 0
+    try:
+        with open("/proc/self/status") as fh:
+            used = next((int(line.split()[1]) * 1024 for line in fh if line.startswith("VmSize:")), 0)
+    except (OSError, ValueError, IndexError):
+        pass
+    return max(int(soft) - used, 0)
 
 
 def check_fits_in_memory(n_bytes: float, name: str, what: str = "") -> None:
