@@ -29,6 +29,8 @@ __all__ = [
     "check_laplacian",
     "check_positive",
     "check_positive_int",
+    "agent_index",
+    "step_arrays",
     "check_seed",
     "check_steps",
     "check_budget",
@@ -198,6 +200,27 @@ def check_positive_int(n: object, name: str, minimum: int = 1) -> int:
     if n < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}; got {n}")
     return int(n)
+
+
+def agent_index(i: object, n_agents: int, name: str = "i") -> int:
+    """Return agent `i` as an int in ``0..n_agents-1`` (an integer, not a bool or a float), else raise naming `name`."""
+    i = check_positive_int(i, name, minimum=0)
+    if i >= n_agents:
+        raise ValueError(f"{name} must be an agent 0..{n_agents - 1}; got {i}")
+    return i
+
+
+def step_arrays(**named: object) -> tuple[np.ndarray, ...]:
+    """Each named value as a finite float array (a step's inputs), refused by name otherwise.
+
+    Examples
+    --------
+    >>> from mascore._validation import step_arrays
+    >>> x, P = step_arrays(x=[0.0, 1.0], P=[[1.0, 0.0], [0.0, 1.0]])
+    >>> x.shape, P.shape
+    ((2,), (2, 2))
+    """
+    return tuple(require_finite(float_array(value, name), name) for name, value in named.items())
 
 
 def check_steps(n_steps: object, name: str = "n_steps") -> int:

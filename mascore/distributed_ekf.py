@@ -95,6 +95,7 @@ from ._validation import (
     check_positive_int,
     finite_result,
     frozen_copy,
+    require_finite,
     state_view,
 )
 from .estimation import Message
@@ -463,7 +464,7 @@ class FlockingEKF:
         if self._X.ndim != 3:
             raise ValueError(f"agent_inputs needs one run of one filter per agent, X_hat (N, N, 2n); got "
                              f"{self._X.shape}")
-        z, observed = np.asarray(z, dtype=float), np.asarray(observed, dtype=bool)
+        z, observed = require_finite(np.asarray(z, dtype=float), "z"), np.asarray(observed, dtype=bool)
         return {"X": self._X[i].copy(), "Sigma": self._P[i].copy(), "z": z[i].copy(), "observed": observed[i].copy()}, ()
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:

@@ -67,7 +67,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import _ellipsoid_kernels as kernels
-from ._validation import Frozen, as_matrix, check_square, frozen_copy, symmetric_part
+from ._validation import Frozen, agent_index, as_matrix, check_square, frozen_copy, require_finite, symmetric_part
 from ._validation import float_array as _float_array
 from .estimation import MethodSpec
 from .fusion_cost import kalman_step_flops
@@ -459,6 +459,11 @@ class SetMembershipModel(Frozen):
             if not np.isfinite(W).all():
                 raise ValueError("D: D R D^T overflows floating point; D and R must be of moderate magnitude "
                                  "(rescale the units of the measurement or of its noise)")
+            for name, M in (("C", C), ("D R D^T (from D and R)", W)):
+                if M.size and np.abs(M).max() > _MAX_SHAPE_ENTRY:
+                    raise ValueError(f"{name} has entries of magnitude {np.abs(M).max():.3g}, beyond "
+                                     f"{_MAX_SHAPE_ENTRY:g}: the correction would overflow floating point; rescale "
+                                     f"the units of the measurement or of its noise")
             try:
                 _check_pd_small(W, "D R D^T (needed to test the consistency of y)", p)
             except ValueError as exc:
@@ -586,7 +591,9 @@ class SetMembershipModel(Frozen):
         >>> own["y"], messages
         (array([1.]), ())
         """
-        c, E, y = (np.asarray(a, dtype=float) for a in (center, shape, y))
+        c, E, y = (require_finite(_float_array(a, name), name) for a, name in ((center, "center"), (shape, "shape"),
+                                                                              (y, "y")))
+        i = agent_index(i, len(c))
         return ({"center": c[i].copy(), "shape": (E if E.ndim == 2 else E[i]).copy(), "y": y[i].copy(),
                  "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
 
@@ -704,6 +711,10 @@ class SetMembershipModel(Frozen):
             raise ValueError(f"y must have last dimension {p} (rows of C); got shape {y.shape}")
         if not np.isfinite(y).all():
             raise ValueError(f"{_where('correction', step, agent, None, ())}: y has NaN/inf entries")
+        if P.size and np.abs(P).max() > _MAX_SHAPE_ENTRY:  # squared in eqs. (6)-(7): beyond floating point
+            raise ValueError(f"{_where('correction', step, agent, None, ())}: shape has entries of magnitude "
+                             f"{np.abs(P).max():.3g}, beyond {_MAX_SHAPE_ENTRY:g}: the correction would overflow "
+                             f"floating point; rescale the state's units")
         batch = c.shape[:-1]
         if P.shape[:-2] != batch or y.shape[:-1] != batch:
             batch = np.broadcast_shapes(batch, P.shape[:-2], y.shape[:-1])
@@ -838,11 +849,10 @@ def _where(what: str, step, agent, idx, batch) -> str:
     if step is not None:
         parts.append(f"k = {step}")
     if agent is not None:
-        lab = np.broadcast_to(np.asarray(agent), batch) if np.ndim(agent) else np.asarray(agent)
         if idx is None or not np.ndim(agent):
             parts.append(f"agent {agent if not np.ndim(agent) else 'batch'}")
         else:
-            parts.append(f"agent {lab[idx]}")
+            parts.append(f"agent {np.broadcast_to(np.asarray(agent), batch)[idx]}")
     if idx is not None and len(batch):
         parts.append(f"batch index {idx}")
     return ", ".join(parts)
@@ -900,6 +910,10 @@ def _check_overflow(c, P, A, P_prior, step, agent):
         f"{float(np.abs(A).max()):.3g} and the shape up to {float(np.abs(P_prior).max()):.3g}; rescale A or the "
         "state units"
     )
+
+
+#: Largest entry of a prior shape matrix the correction takes: its square stays a float.
+_MAX_SHAPE_ENTRY = 1e150
 
 
 def _check_result(P, what, step, agent, batch):

@@ -767,7 +767,8 @@ def design_synchronization(
     Returns
     -------
     SyncDesign
-        The design and its checks.
+        The design and its checks (its ``r`` is ``inf`` when the matrix of :func:`lemma2_r` is
+        zero, e.g. ``A = 0``: then any circle passes).
 
     Raises
     ------
