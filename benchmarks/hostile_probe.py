@@ -96,6 +96,8 @@ DOCUMENTED = (
     (r"^settings\.setting$", r"^(default|low)$", r".", "a field declaration: values are checked when settings are built"),
     (r"^papers\.bhattacharjee2021\.(design|run)$", r"^A$", r"zero matrix", "A = 0: Lemma 2's r is inf, documented"),
 )
+#: Functions whose messages name an argument by a name the caller gives (``names=("x0", "P0")``).
+ALIASES = {"sensor_network.SensorNetworkModel.check_state": {"x": "x0", "P": "P0"}}
 NONFINITE_DOCUMENTED = re.compile(r"``\+?inf``|returns ``nan``|``nan`` (if|when|for)", re.I)
 
 
@@ -322,7 +324,9 @@ def _worker(conn, memory_limit: int, modules) -> None:
                     result = _public_state(result)
         except (ValueError, TypeError) as exc:
             msg = str(exc)
-            conn.send(("clear" if re.search(rf"\b{re.escape(arg_name)}\b", msg) else "unclear", msg[:300]))
+            names = arg_name if isinstance(arg_name, tuple) else (arg_name,)
+            named = any(re.search(rf"\b{re.escape(n)}\b", msg) for n in names)
+            conn.send(("clear" if named else "unclear", msg[:300]))
             continue
         except MemoryError as exc:
             conn.send(("unclear", f"MemoryError {exc}"[:300]))
@@ -421,10 +425,12 @@ def probe(baselines: Path, csv: Path | None, modules, only: str | None = None) -
                     trial = copy.copy(bound)
                     trial.arguments = dict(bound.arguments)
                     trial.arguments[arg_name] = spoiled
-                    outcome, message = pool.run((key, trial.args, trial.kwargs, named, invalid, False))
+                    alias = ALIASES.get(key, {}).get(named)
+                    outcome, message = pool.run((key, trial.args, trial.kwargs, (named, alias) if alias else named,
+                                                 invalid, False))
                     if outcome == "nonfinite":
                         outcome = "returned" if nan_documented else "silent-nan"
-                    outcome = adjust(key, arg_name, kind, outcome, func)
+                    outcome = adjust(key, arg_name if named == arg_name else f"{arg_name}.{named}", kind, outcome, func)
                     rows.append({"function": key, "argument": arg_name if named == arg_name else f"{arg_name}.{named}",
                                  "spoil": kind, "outcome": outcome, "message": message})
     finally:

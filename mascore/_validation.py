@@ -31,6 +31,7 @@ __all__ = [
     "check_positive_int",
     "agent_index",
     "step_arrays",
+    "check_moderate",
     "check_seed",
     "check_steps",
     "check_budget",
@@ -208,6 +209,19 @@ def agent_index(i: object, n_agents: int, name: str = "i") -> int:
     if i >= n_agents:
         raise ValueError(f"{name} must be an agent 0..{n_agents - 1}; got {i}")
     return i
+
+
+#: Entries beyond this magnitude square to inf (products of two such entries overflow floating point).
+MODERATE = 1e150
+
+
+def check_moderate(*named: tuple[str, np.ndarray], what: str = "the computation") -> None:
+    """Refuse (naming it) an array whose entries overflow floating point once squared (beyond :data:`MODERATE`)."""
+    for name, M in named:
+        big = float(np.abs(M).max()) if M.size else 0.0
+        if big > MODERATE:
+            raise ValueError(f"{name} has entries of magnitude {big:.3g}: {what} overflows floating point; "
+                             f"rescale the problem (units of time, state or input) so that {name} is moderate")
 
 
 def step_arrays(**named: object) -> tuple[np.ndarray, ...]:

@@ -81,7 +81,8 @@ class DiscreteNetworkObserver(Frozen):
         B = as_matrix(B, "B")
         if B.shape[0] != n:
             raise ValueError(f"B must have n = {n} rows; got shape {B.shape}")
-        if not np.isfinite(coupling):
+        if isinstance(coupling, bool) or not isinstance(coupling, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(coupling):
             raise ValueError(f"coupling must be a finite number; got {coupling!r}")
         self._set(gain=frozen_copy(gain), coupling=float(coupling), adjacency=frozen_copy(check_adjacency(adjacency)),
                   A=frozen_copy(A), B=frozen_copy(B), C=frozen_copy(C))
@@ -127,15 +128,16 @@ class DiscreteNetworkObserver(Frozen):
         return finite_result("observer update", x_hat + innovation @ self.gain.T,
                              inputs=((x_hat, "x_hat"), (z, "z"), (links, "links")))
 
-    def _inputs(self, **named) -> tuple[np.ndarray, ...]:
-        """A step's inputs as finite float arrays of this observer's sizes, refused by name."""
+    def _inputs(self, runs: bool = True, **named) -> tuple[np.ndarray, ...]:
+        """A step's inputs as finite float arrays of this observer's sizes (with a leading run axis if `runs`)."""
         N = len(self.adjacency)
         sizes = {"x_hat": (N, self.A.shape[0]), "u": (N, self.B.shape[1]), "z": (N, N, self.C.shape[0]),
                  "links": (N, N)}
         arrays = step_arrays(**named)
         for (name, arr) in zip(named, arrays):
-            if arr.shape[-len(sizes[name]):] != sizes[name]:
-                raise ValueError(f"{name} must have shape (..., {', '.join(map(str, sizes[name]))}); got {arr.shape}")
+            if arr.shape[runs:] != sizes[name] or arr.ndim != len(sizes[name]) + runs:
+                raise ValueError(f"{name} must have shape ({'R, ' if runs else ''}"
+                                 f"{', '.join(map(str, sizes[name]))}); got {arr.shape}")
         return arrays
 
     def predict(self, x_hat: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -197,7 +199,7 @@ class DiscreteNetworkObserver(Frozen):
         >>> messages[0].shape                                  # two neighbours, one output each
         (2, 1)
         """
-        x_hat, z, u = self._inputs(x_hat=x_hat, z=z, u=u)
+        x_hat, z, u = self._inputs(False, x_hat=x_hat, z=z, u=u)
         i = agent_index(i, len(self.adjacency))
         nbrs = np.flatnonzero(self.adjacency[i])
         own = {"x": x_hat[i].copy(), "z": z[i, i].copy(), "z_nbrs": z[i, nbrs].copy(), "u": u[i].copy(),

@@ -31,6 +31,7 @@ from ._validation import (
     agent_index,
     as_matrix,
     check_covariance,
+    check_fits_in_memory,
     check_positive,
     check_positive_int,
     check_square,
@@ -130,7 +131,7 @@ class OwnStateForwardingFilter(Frozen):
         St = np.swapaxes(np.broadcast_to(S, (Z.shape[0], *S.shape[1:])), -1, -2)  # St[r, i, j] = S[r, j, i]
         count = St.sum(-1).astype(float)                                        # (R, N)
         zsum = np.einsum("rij,rjid->rid", St, Z)                                 # sum_j z_ji
-        prior_info = np.linalg.inv(P)
+        prior_info = _inverse(P)
         P_new = np.linalg.inv(prior_info + count[..., None, None] * self.information)
         P_new = 0.5 * (P_new + np.swapaxes(P_new, -1, -2))
         rhs = np.einsum("...ij,...j->...i", prior_info, x) + zsum @ self.to_state
@@ -206,7 +207,7 @@ class OwnStateForwardingFilter(Frozen):
         >>> messages[0]                                            # agent 0's measurement of agent 1
         array([[3.]])
         """
-        x, P, Z, S, u = _step_inputs(self, x=x, P=P, Z=Z, S=S, u=u)
+        x, P, Z, S, u = _step_inputs(self, False, x=x, P=P, Z=Z, S=S, u=u)
         i = agent_index(i, x.shape[0])
         senders = np.flatnonzero(S[:, i])  # i and the neighbours whose z_ji reached it, ascending
         return ({"x": x[i].copy(), "P": P[i].copy(), "u": u[i].copy(), "index": int(np.flatnonzero(senders == i)[0]),
@@ -319,6 +320,7 @@ class CentralizedOutputFilter(Frozen):
         Q = check_covariance(Q, "Q", n)
         r = check_positive(r, "r")
         N = check_positive_int(n_agents, "n_agents")
+        check_fits_in_memory(2 * 8.0 * (N * n) ** 2, "n_agents", f"the ({N * n}, {N * n}) team matrices")
         self._set(A=frozen_copy(A), B=frozen_copy(B), Q=frozen_copy(Q), C=frozen_copy(C),
                   A_team=frozen_copy(np.kron(np.eye(N), A)), Q_team=frozen_copy(np.kron(np.eye(N), Q)),
                   information=frozen_copy(_finite_information(C.T @ C / r, "C")), r=float(r), n_agents=N)
@@ -358,7 +360,7 @@ class CentralizedOutputFilter(Frozen):
         x, P, Z, S = _step_inputs(self, x=x, P=P, Z=Z, S=S)
         R_, N, n = x.shape
         count = S.sum(-2).astype(float)                                   # (B, N): measurements of x_j
-        info = np.linalg.inv(P)
+        info = _inverse(P)
         if info.shape[0] != count.shape[0]:                               # links drop per run: one P per run
             info = np.broadcast_to(info, (count.shape[0], *info.shape[1:])).copy()
         diag = count[..., None, None] * self.information                  # (B, N, n, n)
@@ -468,7 +470,7 @@ class CentralizedOutputFilter(Frozen):
         >>> own["x"].shape, messages
         ((1, 2, 1), ())
         """
-        x, P, Z, S, u = _step_inputs(self, x=x, P=P, Z=Z, S=S, u=u)
+        x, P, Z, S, u = _step_inputs(self, False, x=x, P=P, Z=Z, S=S, u=u)
         return {"x": x[None].copy(), "P": P[None].copy(), "Z": Z[None].copy(), "S": S[None].copy(),
                 "u": u[None].copy()}, ()
 
@@ -544,22 +546,38 @@ def _finite_information(information: np.ndarray, name: str) -> np.ndarray:
     return information
 
 
-def _step_inputs(filt, **named) -> tuple[np.ndarray, ...]:
-    """A step's inputs as arrays, refused by name: finite floats of the filter's sizes, and boolean links ``S``."""
+def _inverse(P: np.ndarray) -> np.ndarray:
+    """``P^-1`` of a step's covariance(s), refused by name if singular."""
+    try:
+        return np.linalg.inv(P)
+    except np.linalg.LinAlgError:
+        raise ValueError("P must be positive definite (invertible); got a singular covariance") from None
+
+
+def _step_inputs(filt, runs: bool = True, **named) -> tuple[np.ndarray, ...]:
+    """A step's inputs, refused by name: finite floats of the filter's sizes, and boolean links ``S``.
+
+    With `runs`, each has a leading run axis (``S`` and a centralized ``P`` may have one run for all).
+    """
     n, k = filt.A.shape[0], filt.B.shape[1]
     p = (filt.H if hasattr(filt, "H") else filt.C).shape[0]
     team = getattr(filt, "n_agents", None)
-    sizes = {"x": (n,), "u": (k,), "Z": (p,), "P": (n, n) if team is None else (team * n, team * n)}
+    N = team if team is not None else (np.shape(named["x"])[-2] if "x" in named and np.ndim(named["x"]) >= 2
+                                       else None)
+    per_agent = {"x": (N, n), "u": (N, k), "Z": (N, N, p), "S": (N, N),
+                 "P": (N, n, n) if team is None else (team * n, team * n)}
     out = []
     for name, value in named.items():
         if name == "S":
             arr = np.asarray(value)
-            if arr.dtype.kind not in "bui" or arr.ndim < 2 or arr.shape[-1] != arr.shape[-2]:
-                raise TypeError(f"S must be a boolean (..., N, N) array of delivered links; got "
-                                f"{type(value).__name__} of dtype {arr.dtype} and shape {arr.shape}")
+            if arr.dtype.kind not in "bui":
+                raise TypeError(f"S must be a boolean array of delivered links; got {type(value).__name__} of dtype "
+                                f"{arr.dtype}")
         else:
             arr = require_finite(float_array(value, name), name)
-            if arr.ndim < len(sizes[name]) or arr.shape[-len(sizes[name]):] != sizes[name]:
-                raise ValueError(f"{name} must have shape (..., {', '.join(map(str, sizes[name]))}); got {arr.shape}")
+        want = per_agent[name]
+        if arr.ndim != len(want) + runs or any(w is not None and a != w for a, w in zip(arr.shape[runs:], want)):
+            shape = ", ".join(["R"] * runs + ["N" if w is None else str(w) for w in want])
+            raise ValueError(f"{name} must have shape ({shape}); got {arr.shape}")
         out.append(arr)
     return tuple(out)

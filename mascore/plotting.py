@@ -273,7 +273,7 @@ def plot_trajectories(
     'x (m)'
     >>> plt.close("all")
     """
-    p = np.asarray(positions, dtype=float)
+    p = float_array(positions, "positions")
     if p.ndim != 3 or p.shape[-1] != 2:
         raise ValueError(f"positions must have shape (T, N, 2); got {p.shape}")
     ax = new_axes(ax)
