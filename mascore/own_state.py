@@ -91,7 +91,9 @@ class OwnStateForwardingFilter(Frozen):
         Q = check_covariance(Q, "Q", n)
         R = check_covariance(R, "R", H.shape[0], definite=True)
         Rinv = np.linalg.inv(R)
-        information = _finite_information(H.T @ Rinv @ H, "H")
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused by name just below
+            information = H.T @ Rinv @ H
+        information = _finite_information(information, "H")
         self._set(A=frozen_copy(A), B=frozen_copy(B), Q=frozen_copy(Q), H=frozen_copy(H), R=frozen_copy(R),
                   information=frozen_copy(information), to_state=frozen_copy(Rinv.T @ H))
 
@@ -321,9 +323,11 @@ class CentralizedOutputFilter(Frozen):
         r = check_positive(r, "r")
         N = check_positive_int(n_agents, "n_agents")
         check_fits_in_memory(2 * 8.0 * (N * n) ** 2, "n_agents", f"the ({N * n}, {N * n}) team matrices")
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused by name in _set below
+            information = C.T @ C / r
         self._set(A=frozen_copy(A), B=frozen_copy(B), Q=frozen_copy(Q), C=frozen_copy(C),
                   A_team=frozen_copy(np.kron(np.eye(N), A)), Q_team=frozen_copy(np.kron(np.eye(N), Q)),
-                  information=frozen_copy(_finite_information(C.T @ C / r, "C")), r=float(r), n_agents=N)
+                  information=frozen_copy(_finite_information(information, "C")), r=float(r), n_agents=N)
 
     def _args(self) -> tuple:
         return (self.A, self.B, self.Q, self.C, self.r, self.n_agents)
