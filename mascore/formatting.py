@@ -42,7 +42,7 @@ def format_number(x: float, digits: int = 4) -> str:
     if isinstance(digits, bool) or not isinstance(digits, int | np.integer):
         raise TypeError(f"digits must be an integer >= 1 (significant digits); got {type(digits).__name__} {digits!r}")
     if not 1 <= digits <= 17:
-        raise ValueError(f"digits must be an integer from 1 to 17 (significant digits of a float); got {digits}")
+        raise ValueError(f"digits must be an integer >= 1 and at most 17 (significant digits of a float); got {digits}")
     digits = int(digits)
     if isinstance(x, bool | np.bool_):
         return str(bool(x))

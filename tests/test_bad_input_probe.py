@@ -105,7 +105,7 @@ def _nan(a, where=0):
     (lambda: plotting.plot_graph(np.zeros((3, 2)), graphs.path_graph(3), sensing_range=-1.0), ValueError,
      r"\bsensing_range must be a finite number > 0"),
     (lambda: claims.worst_deviation([np.nan], [1.0], "abs"), ValueError, r"\bpaper_value contains NaN"),
-    (lambda: formatting.format_number(1.0, HUGE), ValueError, r"\bdigits must be an integer from 1 to 17"),
+    (lambda: formatting.format_number(1.0, HUGE), ValueError, r"\bdigits must be an integer >= 1 and at most 17"),
 ])
 def test_the_probe_findings_are_refused_by_name(call, error, match):
     with pytest.raises(error, match=match):
