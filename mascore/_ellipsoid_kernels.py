@@ -19,12 +19,13 @@ from ._validation import float_array as _float_array
 def gain_form(c, P, C, y, W, t, shrink):
     """:func:`intersection_gain_form` on arrays already checked (no argument checks)."""
     t = np.asarray(t, dtype=float)[..., None, None]
-    PCt = P @ C.T
+    Ct = np.swapaxes(C, -1, -2)  # C may carry batch axes (one C per agent)
+    PCt = P @ Ct
     S = (C @ PCt) / (1 - t) + W / t
     L = np.swapaxes(np.linalg.solve(S, np.swapaxes(PCt, -1, -2)), -1, -2) / (1 - t)
     IKC = np.eye(P.shape[-1]) - L @ C
     Pt = IKC @ P @ np.swapaxes(IKC, -1, -2) / (1 - t) + L @ W @ np.swapaxes(L, -1, -2) / t  # Joseph form
-    nu = y - c @ C.T
+    nu = y - (c @ C.T if C.ndim == 2 else np.einsum("...ij,...j->...i", C, c))
     new_c = c + np.einsum("...ij,...j->...i", L, nu)
     if shrink:
         delta = 1.0 - np.einsum("...i,...i->...", nu, np.linalg.solve(S, nu[..., None])[..., 0])

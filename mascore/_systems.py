@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._validation import float_array, require_finite
 from .agents import check_sampling_time, is_system, system_matrices
 
-__all__ = ["design_args"]
+__all__ = ["design_args", "output_matrices", "full_state_only"]
 
 
 def design_args(fname: str, A, B, rest: dict, dt, time: str | None = None, bname: str = "B"):
@@ -64,11 +65,42 @@ def _complete(fname: str, A, B, names: tuple, rest: tuple, dt):
     return A, B, rest, dt
 
 
+def output_matrices(C, m: int, n_agents: int, name: str = "C") -> np.ndarray:
+    """The agents' output matrices ``(N, p, m)`` from one ``(p, m)`` for all or one per agent, checked (finite).
+
+    Parameters
+    ----------
+    C : (p, m) or (N, p, m) array_like
+        ``z_ij = C_j x_j + nu_ij``: one output matrix for every agent, or one per agent (same ``p``).
+    m : int
+        Agent state size.
+    n_agents : int
+        Team size N.
+    name : str
+        The argument's name in the messages.
+
+    Returns
+    -------
+    (N, p, m) ndarray
+        A new float array.
+    """
+    arr = float_array(C, name)
+    if arr.ndim == 2:
+        arr = np.broadcast_to(arr, (n_agents, *arr.shape))
+    if arr.ndim != 3 or arr.shape[0] != n_agents or arr.shape[2] != m or arr.shape[1] == 0:
+        raise ValueError(f"Incompatible dimensions of {name}; expected (p, {m}) for every agent or "
+                         f"({n_agents}, p, {m}) one per agent (p >= 1 outputs of the m = {m} states), "
+                         f"but found {np.shape(C)}")
+    return require_finite(np.array(arr, dtype=float), name)
+
+
 def full_state_only(m: int, shape: tuple) -> str:
-    """The message for an R of partial sensing given to Song et al.'s whole-team filters (full-state sensing)."""
-    return (f"R must be ({m}, {m}) per sensed agent or (m N, m N) for the team; got {shape}. Song et al.'s "
-            f"whole-team filters (song-mb, song-eb) are implemented for full-state sensing only, as eq. (2) "
-            f"measures every state of each sensed agent. For partial sensing "
-            f"(positions only, a subset of states) use a method that takes an output matrix: mascore.compare's "
-            f"POSITION_METHODS (centralized, local, forwarding, vlahakis, set-membership) on the team, or "
+    """The message for an R of partial sensing given without an output matrix C."""
+    return (f"R must be ({m}, {m}) per sensed agent or (m N, m N) for the team; got {shape}. Measurements of "
+            f"fewer than the m = {m} states need an output matrix C of shape (p, {m}) (e.g. positions only, "
+            f"C = [I 0]) with R of (p, p): team_model.team_filter_model(..., C=C) and "
+            f"rendezvous.RendezvousModel(..., C=C) take it, for Song et al.'s estimation-based whole-team filter "
+            f"(song-eb; simulate_rendezvous mode 'estimation') and the centralized team filter. The "
+            f"measurement-based loop (song-mb, eq. (5)) needs full states. Other methods with an output matrix: "
+            f"mascore.compare's POSITION_METHODS (centralized, local, forwarding, vlahakis, set-membership), "
             f"mascore.fusion's filters with your own H_i (sensor_network.SensorNetworkModel)")

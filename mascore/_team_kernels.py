@@ -49,6 +49,71 @@ def check_estimates(model: TeamFilterModel, X: ArrayLike, name: str) -> np.ndarr
     return _finite(X, name)
 
 
+def check_measurements(model: TeamFilterModel, Z: ArrayLike, name: str = "Z") -> np.ndarray:
+    """Every agent's measurements ``(runs, N, N, p)`` (``p = m`` for full states), finite."""
+    if model.full_state:
+        return check_estimates(model, Z, name)
+    Z = _float_array(Z, name)
+    N, p = model.n_agents, model.p
+    if Z.ndim != 4 or Z.shape[1:] != (N, N, p):
+        raise ValueError(f"Incompatible dimensions of {name}; expected (runs, {N}, {N}, {p}) (p = {p} outputs "
+                         f"C_j x_j per measured agent) but found {Z.shape}")
+    return _finite(Z, name)
+
+
+def team_output_matrix(model: TeamFilterModel) -> np.ndarray:
+    """``H = blockdiag(C_r_1, ..., C_r_N)`` ``(N p_r, M_r)``: every agent's outputs of the reduced team state."""
+    N, mr = model.n_agents, model.m_r
+    pr = model.C_r.shape[1]
+    H = np.zeros((N, pr, N, mr))
+    H[np.arange(N), :, np.arange(N), :] = model.C_r
+    return H.reshape(N * pr, N * mr)
+
+
+def output_gain(model: TeamFilterModel, H: np.ndarray, Sig: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Each agent's gain of partial sensing, eq. (19) with ``H_i = D_i H`` (its sensed rows of ``H``).
+
+    ``G_i = Σ_i^- H^T D (D (H Σ_i^- H^T + R) D + I - D)^{-1} D``: the masked rows of the sensed agents'
+    outputs (``D = diag(S_i) ⊗ I_{p_r}``); a row not sensed has a zero column in ``G_i``.
+
+    Parameters
+    ----------
+    model : TeamFilterModel
+        A model with output matrices (reduced ``C_r``, ``R_r`` of size ``N p_r``).
+    H : (N p_r, M_r) ndarray
+        :func:`team_output_matrix`.
+    Sig : (batch, N, M_r, M_r) ndarray
+        Each agent's predicted reduced covariance ``Σ̄_i^-``.
+    S : (batch, N, N) ndarray of bool
+        Sensing mask.
+
+    Returns
+    -------
+    G : (batch, N, M_r, N p_r) ndarray
+        The gains on the stacked outputs.
+    KH : (batch, N, M_r, M_r) ndarray
+        ``G_i H``.
+    GRG : (batch, N, M_r, M_r) ndarray
+        ``G_i R G_i^T`` (the noise term of the Joseph form, eq. (20)).
+    """
+    R = model.R_r
+    d = np.repeat(S, model.C_r.shape[1], axis=-1).astype(float)  # (batch, N, N p_r)
+    HS = H @ Sig  # (batch, N, N p_r, M_r)
+    S_tilde = (d[..., :, None] * d[..., None, :]) * (HS @ H.T + R) + np.eye(H.shape[0]) * (1.0 - d[..., None])
+    G = np.swapaxes(np.linalg.solve(S_tilde, d[..., :, None] * HS), -1, -2) * d[..., None, :]
+    return G, G @ H, G @ R @ np.swapaxes(G, -1, -2)
+
+
+def apply_output_gain(model: TeamFilterModel, H: np.ndarray, X_pred: np.ndarray, Z: np.ndarray,
+                      G: np.ndarray) -> np.ndarray:
+    """``X̂_i = X̂_i^- + G_i (z_i - H X̂_i^-)`` (eq. (18)) with the reduced gain on the Kronecker axes."""
+    N, k, Mr = model.n_agents, model.kron, model.M_r
+    runs = X_pred.shape[0]
+    X = X_pred.reshape(runs, N, Mr, k)
+    innov = Z.reshape(runs, N, H.shape[0], k) - H @ X
+    return (X + G @ innov).reshape(X_pred.shape)
+
+
 def check_covariances(P: ArrayLike, name: str, shape: tuple, definite: bool = False, kron: int = 1) -> np.ndarray:
     """A stack of covariances of the given shape (None: any batch size >= 1), symmetric PSD (or PD), checked in full.
 

@@ -21,11 +21,12 @@ from numpy.typing import ArrayLike
 from ._masked_gain import observed_indices
 from ._team_kernels import (
     check_covariances,
-    check_estimates,
     check_mask,
+    check_measurements,
     check_model,
     finite_state,
     mask_vec,
+    team_output_matrix,
 )
 from ._validation import (
     as_matrix,
@@ -55,6 +56,12 @@ class CentralizedTeamFilter:
     :meth:`update` run :func:`centralized_predict` and :func:`centralized_update`
     without re-checking the state this filter produced (the model, `B` and `P0` are
     checked here, once).
+
+    **Any linear sensing.** A model with an output matrix (``z_ij = C_j x_j + nu_ij``,
+    :func:`~mascore.team_model.team_filter_model` with ``C``) is filtered with the same outputs as
+    the agents' filters, so the two compare on the same data: agent j's measurement information
+    is ``c_j C_j^T R_jj^{-1} C_j`` on the separable centre, ``H^T (sum_i W_i) H`` with
+    ``H = blockdiag(C_j)`` otherwise.
 
     **The separable centre.** When one observer's noise is independent across the agents it
     measures (``R`` block-diagonal over agents, e.g. ``I_N ⊗ R_j``) the information of agent j's
@@ -124,7 +131,12 @@ class CentralizedTeamFilter:
         inverses = _agent_noise_inverses(model)
         blocks = None if inverses is None else _agent_blocks(P, N, model.m_r)
         self._model, self._B, self._x = model, frozen_copy(B), x
+        self._H = None if model.full_state else team_output_matrix(model)
         self._Rinv = None if blocks is None else frozen_copy(inverses)  # (N, m_r, m_r): R_jj^{-1}, once
+        self._CtRinv = None  # (N, m_r, p_r): C_j^T R_jj^{-1} of partial sensing, once
+        if blocks is not None and not model.full_state:
+            CtRinv = np.swapaxes(model.C_r, -1, -2) @ inverses
+            self._CtRinv, self._Rinv = frozen_copy(CtRinv), frozen_copy(CtRinv @ model.C_r)
         P = P if blocks is None else blocks
         self._P = np.broadcast_to(P, (batch, *P.shape)).copy()
 
@@ -245,8 +257,10 @@ class CentralizedTeamFilter:
 
         Parameters
         ----------
-        Z : (runs, N, N, m) array_like
-            Every agent's measurements.
+        Z : (runs, N, N, p) array_like
+            Every agent's measurements;
+            ``p = m`` (full states) unless the model has an output matrix ``C``
+            (``z_ij = C_j x_j + nu_ij``).
         mask : (N, N) or (batch, N, N) array_like of bool
             Sensing mask; a mask per run gives every run its own covariance.
 
@@ -270,17 +284,21 @@ class CentralizedTeamFilter:
         True
         """
         model = self._model
-        N, m = model.n_agents, model.m
+        N, p = model.n_agents, model.p
         Zt = _float_array(Z, "Z")
-        if Zt.shape != (self._x.shape[0], N, N, m):
-            raise ValueError(f"Incompatible dimensions of Z; expected ({self._x.shape[0]}, {N}, {N}, {m}) "
+        if Zt.shape != (self._x.shape[0], N, N, p):
+            raise ValueError(f"Incompatible dimensions of Z; expected ({self._x.shape[0]}, {N}, {N}, {p}) "
                              f"but found {Zt.shape}")
         S = check_mask(mask, N)
         if S.shape[0] not in (1, self._x.shape[0]) or self._P.shape[0] not in (1, S.shape[0], self._x.shape[0]):
             raise ValueError(f"mask has batch {S.shape[0]} but there are {self._x.shape[0]} runs and "
                              f"{self._P.shape[0]} covariances")
-        if self.separable:
+        if self.separable and self._CtRinv is not None:
+            self._x, self._P = _separable_output_update(model, self._Rinv, self._CtRinv, self._x, self._P, Zt, S)
+        elif self.separable:
             self._x, self._P = _separable_update(model, self._Rinv, self._x, self._P, Zt, S)
+        elif self._H is not None:
+            self._x, self._P = _output_update(model, self._H, self._x, self._P, Zt, S)
         else:
             self._x, self._P = _centralized_update(model, self._x, self._P, Zt, S)
         if not np.isfinite(self._x).all():
@@ -295,8 +313,10 @@ class CentralizedTeamFilter:
 
         Parameters
         ----------
-        Z : (runs, N, N, m) array_like
-            Every agent's measurements.
+        Z : (runs, N, N, p) array_like
+            Every agent's measurements;
+            ``p = m`` (full states) unless the model has an output matrix ``C``
+            (``z_ij = C_j x_j + nu_ij``).
         mask : (N, N) or (batch, N, N) array_like of bool
             The sensing mask.
         U : (runs, N, p) array_like
@@ -388,7 +408,7 @@ class CentralizedTeamFilter:
         >>> [m.floats for m in central.messages(0, n_measured=3)]
         [6, 6]
         """
-        floats = check_positive_int(n_measured, "n_measured") * self._model.m
+        floats = check_positive_int(n_measured, "n_measured") * self._model.p
         return (Message("its measurements z_ij of itself and its neighbours, to the centre", floats),
                 Message("the centre's estimates of itself and its neighbours, back to it", floats))
 
@@ -482,8 +502,10 @@ def centralized_update(
         Predicted team estimates.
     P_pred : (batch, M_r, M_r) array_like
         Reduced predicted covariance, positive definite.
-    Z : (runs, N, N, m) array_like
-        Every agent's measurements.
+    Z : (runs, N, N, p) array_like
+        Every agent's measurements;
+        ``p = m`` (full states) unless the model has an output matrix ``C``
+        (``z_ij = C_j x_j + nu_ij``).
     mask : (N, N) or (batch, N, N) array_like of bool
         Sensing mask.
 
@@ -518,14 +540,34 @@ def centralized_update(
     if x_pred.ndim != 3 or x_pred.shape[1:] != (N, m):
         raise ValueError(f"Incompatible dimensions of x_pred; expected (runs, {N}, {m}) but found {x_pred.shape}")
     P_pred = check_covariances(P_pred, "P_pred", (None, Mr, Mr), definite=True, kron=model.kron)
-    Zt = check_estimates(model, Z, "Z")
+    Zt = check_measurements(model, Z, "Z")
     S = check_mask(mask, N)
     if Zt.shape[0] != x_pred.shape[0]:
         raise ValueError(f"Z has {Zt.shape[0]} runs but x_pred has {x_pred.shape[0]}")
     for name, b in (("mask", S.shape[0]), ("Z", Zt.shape[0])):
         if P_pred.shape[0] not in (1, b) and b != 1:
             raise ValueError(f"{name} has batch {b} but P_pred has {P_pred.shape[0]}")
+    if not model.full_state:
+        return finite_result("centralized update",
+                             *_output_update(model, team_output_matrix(model), x_pred, P_pred, Zt, S))
     return finite_result("centralized update", *_centralized_update(model, x_pred, P_pred, Zt, S))
+
+
+def _output_update(model, H, x_pred, P_pred, Z, S):
+    """:func:`centralized_update` of partial sensing without checks: ``H_i = D_i H``, ``H = blockdiag(C_r_j)``.
+
+    ``P = (P^-^{-1} + H^T (sum_i W_i) H)^{-1}``, ``x = x^- + P H^T sum_i W_i (z_i - H x^-)`` with
+    ``W_i = D (D R D + I - D)^{-1} D`` the information of observer i's sensed outputs.
+    """
+    N, m, k, Mr = model.n_agents, model.m, model.kron, model.M_r
+    runs = x_pred.shape[0]
+    d = np.repeat(S, model.C_r.shape[1], axis=-1).astype(float)  # (batch, N, N p_r)
+    pair = d[..., :, None] * d[..., None, :]
+    Wy = np.linalg.inv(pair * model.R_r + np.eye(H.shape[0]) * (1.0 - d[..., None])) * pair
+    innov = Z.reshape(runs, N, H.shape[0], k) - (H @ x_pred.reshape(runs, Mr, k))[:, None]
+    total = H.T @ (Wy @ innov).sum(axis=1)  # (runs, Mr, k)
+    P = symmetric_part(np.linalg.inv(np.linalg.inv(P_pred) + H.T @ Wy.sum(axis=1) @ H))
+    return x_pred + (P @ total).reshape(runs, N, m), P
 
 
 def _centralized_update(model, x_pred, P_pred, Z, S):
@@ -569,8 +611,12 @@ def _measurement_information(model, S):
 
 
 def _agent_noise_inverses(model) -> np.ndarray | None:
-    """``R_jj^{-1}`` per measured agent ``(N, m_r, m_r)`` if one observer's noise is independent across agents, else None."""
-    N, mr = model.n_agents, model.m_r
+    """``R_jj^{-1}`` per measured agent ``(N, p_r, p_r)`` if one observer's noise is independent across agents, else None.
+
+    ``p_r = m_r`` for full-state sensing.
+    """
+    N = model.n_agents
+    mr = model.m_r if model.full_state else model.C_r.shape[1]
     R = model.R_r.reshape(N, mr, N, mr)
     off = R.copy()
     off[np.arange(N), :, np.arange(N), :] = 0.0
@@ -611,6 +657,21 @@ def _separable_update(model, Rinv, x_pred, P, Z, S):
     measured = (S[..., None] * Z).sum(axis=1)  # (runs, N, m): the sum of the measurements of each agent
     innov = (measured - count[..., None] * x_pred).reshape(runs, N, mr, k)
     return x_pred + (P_new @ (Rinv @ innov)).reshape(runs, N, m), P_new
+
+
+def _separable_output_update(model, info, CtRinv, x_pred, P, Z, S):
+    """:func:`_separable_update` of partial sensing: agent j's ``c_j`` outputs, information ``c_j C_j^T R_jj^{-1} C_j``.
+
+    `info` is ``C_j^T R_jj^{-1} C_j`` ``(N, m_r, m_r)``, `CtRinv` ``C_j^T R_jj^{-1}`` ``(N, m_r, p_r)``.
+    """
+    N, m, k, mr = model.n_agents, model.m, model.kron, model.m_r
+    runs, pr = x_pred.shape[0], CtRinv.shape[-1]
+    count = S.sum(axis=-2).astype(float)  # (b, N): how many agents measure agent j
+    P_new = symmetric_part(np.linalg.inv(np.linalg.inv(P) + count[..., None, None] * info))
+    measured = (S[..., None] * Z).sum(axis=1).reshape(runs, N, pr, k)  # the sum of agent j's outputs
+    x_r = x_pred.reshape(runs, N, mr, k)
+    innov = CtRinv @ measured - count[..., None, None] * (info @ x_r)  # C_j^T R^{-1} (sum_i z_ij - c_j C_j x_j)
+    return x_pred + (P_new @ innov).reshape(runs, N, m), P_new
 
 
 #: The centralized filter of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost): the bound.

@@ -18,6 +18,17 @@ error is ``e_i^- = F_1 e_i + F_2 e + w``, so every agent must propagate the
 full ``N M x N M`` covariance ``Σ`` of ``e`` with all cross-covariances
 ``Σ_ij`` (eqs. (29)-(34)); by Remark 4 it is the same for every agent.
 
+**Any linear sensing.** With an output matrix per agent (``z_ij = C_j x_j + nu_ij``, e.g.
+positions only; :func:`~mascore.team_model.team_filter_model` with ``C``), agent ``i``'s
+measurement matrix is ``H_i = D_i blockdiag(C_1, ..., C_N)``, the rows of the agents it
+senses, and eqs. (16)-(20), (33) hold as written with that ``H_i``. The estimation-based loop
+takes it (the control, eq. (21), uses the estimates); the measurement-based loop does not
+(its control, eq. (5), feeds the raw measurements through the state-feedback gain ``K``).
+:class:`TeamFilter` checks that system (43) stays observable for every agent with these
+outputs (:func:`mascore.team_observability.require_observable`) and refuses it by name
+otherwise. The update runs the same dense or row-block kernels as below, with the sensed
+outputs ``H_i Σ^-`` in place of the selected rows of ``Σ^-``.
+
 Implementation (the "structured" path)
 --------------------------------------
 * Masks instead of ragged selection matrices: ``H_i^T H_i = diag(S_i) ⊗ I_m``
@@ -79,10 +90,12 @@ from ._team_kernels import (
     F1_means,
     F1_rows,
     apply_gain,
+    apply_output_gain,
     check_batch,
     check_covariances,
     check_estimates,
     check_mask,
+    check_measurements,
     check_model,
     check_runs,
     check_team_laplacian,
@@ -91,8 +104,10 @@ from ._team_kernels import (
     gemm_acc,
     joseph,
     mask_vec,
+    output_gain,
     phi_blocks,
     reduced_nees,
+    team_output_matrix,
 )
 from ._validation import (
     check_covariance,
@@ -109,6 +124,7 @@ from .estimation import Message, MethodSpec
 from .fusion_cost import filter_cost
 from .sensing import team_noise_covariance
 from .team_model import TeamFilterModel, reduce_covariance, team_filter_model
+from .team_observability import require_observable
 
 __all__ = [
     "TeamFilter",
@@ -296,8 +312,10 @@ def mb_update(
         Predicted team estimates.
     Sigma_pred : (batch, N, M_r, M_r) array_like
         Reduced predicted covariances.
-    Z : (runs, N, N, m) array_like
-        Measurements (:func:`mascore.sensing.measure`).
+    Z : (runs, N, N, p) array_like
+        Measurements (:func:`mascore.sensing.measure`);
+        ``p = m`` (full states) unless the model has an output matrix ``C``
+        (``z_ij = C_j x_j + nu_ij``).
     mask : (N, N) or (batch, N, N) array_like of bool
         Sensing mask.
 
@@ -333,7 +351,7 @@ def mb_update(
     N, Mr = model.n_agents, model.M_r
     X = check_estimates(model, X_pred, "X_pred")
     Sig = check_covariances(Sigma_pred, "Sigma_pred", (None, N, Mr, Mr), kron=model.kron)
-    Zt = check_estimates(model, Z, "Z")
+    Zt = check_measurements(model, Z, "Z")
     S = check_mask(mask, N)
     if S.shape[0] not in (1, Sig.shape[0]):
         raise ValueError(f"mask has {S.shape[0]} topologies but Sigma_pred has {Sig.shape[0]}")
@@ -482,8 +500,10 @@ def eb_update(
         Predicted team estimates.
     Sigma_pred : (batch, N M_r, N M_r) array_like
         Predicted augmented covariance.
-    Z : (runs, N, N, m) array_like
-        Measurements.
+    Z : (runs, N, N, p) array_like
+        Measurements;
+        ``p = m`` (full states) unless the model has an output matrix ``C``
+        (``z_ij = C_j x_j + nu_ij``).
     mask : (N, N) or (batch, N, N) array_like of bool
         Sensing mask.
 
@@ -517,7 +537,7 @@ def eb_update(
     N, Mr = model.n_agents, model.M_r
     X = check_estimates(model, X_pred, "X_pred")
     Sig = check_covariances(Sigma_pred, "Sigma_pred", (None, N * Mr, N * Mr), kron=model.kron)
-    Zt = check_estimates(model, Z, "Z")
+    Zt = check_measurements(model, Z, "Z")
     S = check_mask(mask, N)
     if S.shape[0] not in (1, Sig.shape[0]):
         raise ValueError(
@@ -699,6 +719,14 @@ def _f2_cross(model, Sig, L):
 # ----------------------------------------------------------------------------
 # the whole-team filters: one object per run of filters, owning its state and work arrays
 # ----------------------------------------------------------------------------
+#: Why the measurement-based loop refuses an output matrix (and which methods take one).
+_MB_NEEDS_FULL_STATE = (
+    "mode='mb' (song-mb) needs full-state measurements: its control, eq. (5), steers with the raw "
+    "measurements z_ij - z_ii through the state-feedback gain K, which outputs C_j x_j cannot feed. With an "
+    "output matrix C use mode='eb' (song-eb: the control uses the estimates, eq. (21)) or "
+    "centralized_team_filter.CentralizedTeamFilter"
+)
+
 #: The two loops of Song et al.: ``"eb"`` estimation-based (augmented covariance, eqs. (29)-(34)),
 #: ``"mb"`` measurement-based (every agent's own covariance, eqs. (14)-(20)).
 FILTER_MODES = ("eb", "mb")
@@ -747,7 +775,9 @@ class TeamFilter:
     ------
     ValueError
         Bad shapes, non-finite entries, a covariance that is not symmetric PSD, a
-        Laplacian that is not one, batches that do not fit together.
+        Laplacian that is not one, batches that do not fit together. With an output
+        matrix in the model (partial sensing): ``mode="mb"``, or a topology for which
+        system (43) is not observable for some agent (Theorem 1's condition, named).
     TypeError
         `model` is not a :class:`~mascore.team_model.TeamFilterModel`.
 
@@ -791,6 +821,11 @@ class TeamFilter:
             raise ValueError("exact_control_noise applies to the measurement-based loop (mode='mb') only")
         N, m, Mr = model.n_agents, model.m, model.M_r
         L = check_team_laplacian(laplacian, N, undirected=True)
+        if mode == "mb" and not model.full_state:
+            raise ValueError(_MB_NEEDS_FULL_STATE)
+        if not model.full_state:  # partial sensing: every agent's filter must see the whole team (Theorem 1)
+            for Lk in np.unique(L.reshape(-1, N, N), axis=0):
+                require_observable(model.A, model.BK, np.where(np.eye(N, dtype=bool), 0.0, -Lk), C=model.C)
         X = _float_array(x_hat0, "x_hat0")
         if X.ndim == 2 and X.shape[1] == N * m:
             X = np.broadcast_to(X.reshape(X.shape[0], 1, N, m), (X.shape[0], N, N, m))
@@ -826,7 +861,10 @@ class TeamFilter:
         return self
 
     def _init(self, model, mode, L, X, Sig, KH, exact_control_noise) -> None:
+        if mode == "mb" and not model.full_state:
+            raise ValueError(_MB_NEEDS_FULL_STATE)
         self._model, self._mode, self._exact = model, mode, exact_control_noise
+        self._H = None if model.full_state else team_output_matrix(model)
         self._X, self._Sig = X, Sig
         N, Mr = model.n_agents, model.M_r
         self._KH = np.zeros((Sig.shape[0], N, Mr, Mr)) if KH is None else KH
@@ -1036,8 +1074,10 @@ class TeamFilter:
 
         Parameters
         ----------
-        Z : (runs, N, N, m) array_like
-            Measurements (:func:`mascore.sensing.measure`; unsensed entries are ignored).
+        Z : (runs, N, N, p) array_like
+            Measurements (:func:`mascore.sensing.measure`; unsensed entries are ignored);
+            ``p = m`` (full states) unless the model has an output matrix ``C``
+            (``z_ij = C_j x_j + nu_ij``).
         mask : (N, N) or (batch, N, N) array_like of bool
             Sensing mask (closed neighbourhoods). A mask per run while the covariance is
             shared (batch 1) gives every run its own covariance from then on.
@@ -1064,10 +1104,11 @@ class TeamFilter:
         True
         """
         model = self._model
-        N, m = model.n_agents, model.m
+        N = model.n_agents
+        p = model.p
         Zt = _float_array(Z, "Z")
-        if Zt.shape != self._X.shape:
-            raise ValueError(f"Incompatible dimensions of Z; expected {self._X.shape} (runs, {N}, {N}, {m}) "
+        if Zt.shape != (*self._X.shape[:3], p):
+            raise ValueError(f"Incompatible dimensions of Z; expected {(*self._X.shape[:3], p)} (runs, {N}, {N}, {p}) "
                              f"but found {Zt.shape}")
         S = check_mask(mask, N)
         nb = self._Sig.shape[0]
@@ -1106,8 +1147,10 @@ class TeamFilter:
 
         Parameters
         ----------
-        Z : (runs, N, N, m) array_like
-            The step's measurements.
+        Z : (runs, N, N, p) array_like
+            The step's measurements;
+            ``p = m`` (full states) unless the model has an output matrix ``C``
+            (``z_ij = C_j x_j + nu_ij``).
         mask : (N, N) or (batch, N, N) array_like of bool
             The sensing mask.
         i : int
@@ -1139,7 +1182,7 @@ class TeamFilter:
         """
         model = self._model
         N = model.n_agents
-        Zt = check_estimates(model, Z, "Z")
+        Zt = check_measurements(model, Z, "Z")
         S = check_mask(mask, N)
         if self._mode == "eb":
             return {"Z": Zt.copy(), "mask": S.copy()}, ()
@@ -1359,6 +1402,46 @@ class TeamFilter:
             if n > 1:  # tile (i', i) = tile (i, i')^T
                 np.copyto(o4[i + 1:, :, i, :], Q3[:, 1:, :].transpose(1, 2, 0))
 
+    def _eb_update_outputs(self, Z: np.ndarray, S: np.ndarray) -> None:
+        """Eqs. (16)-(20) and (33) with partial sensing ``H_i = D_i blockdiag(C_j)``.
+
+        ``Ψ = blockdiag(I - G_i H_i)``, ``Σ = Ψ Σ^- Ψ^T + blockdiag(G_i R G_i^T)``: the same
+        recursion as the full-state update, with the gains of :func:`mascore._team_kernels.output_gain`;
+        dense products for a small team, else the rank-q row blocks of :meth:`_eb_update_rows` on
+        the ``q`` outputs each agent senses.
+        """
+        model, Sig, H = self._model, self._Sig, self._H
+        N, Mr = model.n_agents, model.M_r
+        nb, C = Sig.shape[0], N * Mr
+        blocks = Sig.reshape(nb, N, Mr, N, Mr)
+        if not self._rows:
+            diag = np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)  # Σ_i^-, (batch, N, Mr, Mr)
+        else:  # the same, in a work array
+            diag = self._buffer(1, nb * N * Mr * Mr).reshape(nb, N, Mr, Mr)
+            for i in range(N):
+                diag[:, i] = blocks[:, i, :, i, :]
+        G, KH, GRG = output_gain(model, H, diag, S)  # eqs. (17), (19)
+        if self._rows:
+            idx, _ = observed_indices(np.repeat(S, model.C_r.shape[1], axis=-1).astype(float))  # (b, N, q) outputs
+            q = idx.shape[-1]
+            W = np.take_along_axis(G, np.broadcast_to(idx[..., None, :], (*G.shape[:-1], q)), axis=-1)  # (b, N, Mr, q)
+            Wt = np.swapaxes(W, -1, -2)
+            Rq = model.R_r[idx[..., :, None], idx[..., None, :]]
+            H_sel = H[idx]  # (b, N, q, Mr): the rows of H each agent senses
+            for b in range(nb):
+                bi = b if idx.shape[0] > 1 else 0
+                self._eb_update_rows(Sig[b], idx[bi], W[b], Wt[b], Rq[bi], H_sel[bi])
+            self._X = apply_output_gain(model, H, self._X, Z, G)
+            self._KH = KH
+            return
+        Psi = np.eye(Mr) - KH
+        T = Psi @ Sig.reshape(nb, N, Mr, C)  # rows
+        T = np.swapaxes(T.reshape(nb, C, C), -1, -2)
+        T = (Psi @ T.reshape(nb, N, Mr, C)).reshape(nb, N, Mr, N, Mr)  # columns (by symmetry of Σ^-)
+        T[:, np.arange(N), :, np.arange(N), :] += np.moveaxis(GRG, 1, 0)  # eq. (33): + δ_ij G_i R G_i^T
+        self._X = apply_output_gain(model, H, self._X, Z, G)
+        self._Sig, self._KH = symmetric_part(T.reshape(nb, C, C)), KH
+
     def _eb_update(self, Z: np.ndarray, S: np.ndarray) -> None:
         """Eqs. (16)-(20) and (33) on the augmented covariance.
 
@@ -1369,6 +1452,8 @@ class TeamFilter:
         ``N q`` observed rows): ``O(N^2 M_r^2 q)`` work instead of the ``O(N^2 M_r^3)`` of dense
         products, one pass over Σ^- (in place) with one small batched product per row block.
         """
+        if self._H is not None:
+            return self._eb_update_outputs(Z, S)
         model, Sig = self._model, self._Sig
         N, Mr = model.n_agents, model.M_r
         nb, C = Sig.shape[0], N * Mr
@@ -1403,14 +1488,25 @@ class TeamFilter:
         self._KH = KH
 
     def _eb_update_rows(self, Sb: np.ndarray, idx: np.ndarray, W: np.ndarray, Wt: np.ndarray,
-                        Rq: np.ndarray) -> None:
-        """``Ψ Σ^- Ψ^T + blockdiag(G_i H_i R H_i^T G_i^T)`` of one covariance, in place in `Sb`."""
+                        Rq: np.ndarray, H_sel: np.ndarray | None = None) -> None:
+        """``Ψ Σ^- Ψ^T + blockdiag(G_i H_i R H_i^T G_i^T)`` of one covariance, in place in `Sb`.
+
+        Full states: ``H_i`` selects the entries `idx` of agent i's block. Partial sensing:
+        `H_sel` ``(N, q, M_r)`` holds the rows of ``H`` that agent i senses (padding rows meet
+        zero columns of `W`), and the "observed rows" ``H_i Σ^-`` replace the selected rows of Σ^-.
+        """
         N, Mr, q = W.shape
         C, Nq = N * Mr, N * q
-        cidx = (np.arange(N)[:, None] * Mr + idx).ravel()  # observed rows/columns (i, idx_i) of Σ^-
         work = self._buffer(2, 2 * Nq * C + Nq * Nq + 4 * N * Mr * q + Mr * C)
-        R = np.take(Sb, cidx, axis=0, out=work[:Nq * C].reshape(Nq, C))  # the observed rows, (N q, C)
-        Rc = np.take(R, cidx, axis=1, out=work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq))
+        if H_sel is None:
+            cidx = (np.arange(N)[:, None] * Mr + idx).ravel()  # observed rows/columns (i, idx_i) of Σ^-
+            R = np.take(Sb, cidx, axis=0, out=work[:Nq * C].reshape(Nq, C))  # the observed rows, (N q, C)
+            Rc = np.take(R, cidx, axis=1, out=work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq))
+        else:  # H_i Σ^-: row block i of Σ^- seen through agent i's sensed outputs, and (H_i Σ^- H_i'^T)
+            R = np.matmul(H_sel, Sb.reshape(N, Mr, C), out=work[:Nq * C].reshape(N, q, C)).reshape(Nq, C)
+            Rc3 = np.matmul(R.reshape(Nq, N, Mr).transpose(1, 0, 2), np.swapaxes(H_sel, -1, -2))  # (N, Nq, q)
+            Rc = work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq)
+            Rc.reshape(Nq, N, q)[...] = Rc3.transpose(1, 0, 2)
         # V_i[:, i'] = Σ[idx_i, i'] - Σ[idx_i, idx_i'] W_i'^T: the rows of (I - G_i H_i) Σ^- that meet W_i'
         Vt = np.matmul(Rc.reshape(Nq, N, q).transpose(1, 0, 2), Wt,
                        out=work[Nq * C + Nq * Nq:2 * Nq * C + Nq * Nq].reshape(N, Nq, Mr))
@@ -1443,7 +1539,15 @@ class TeamFilter:
 _SONG_NOT_APPLICABLE = MappingProxyType({
     "target": "estimates the agents' own states in a rendezvous loop; there is no common target",
     "localization": "needs absolute measurements of the neighbours' states (eq. (2)); here they are relative",
-    "position": "needs full-state measurements of its neighbours (eq. (2))",
+})
+_SONG_MB_NOT_APPLICABLE = MappingProxyType({
+    **_SONG_NOT_APPLICABLE,
+    "position": "steers with its raw measurements of the neighbours (eq. (5)), which must be full states",
+})
+_SONG_EB_NOT_APPLICABLE = MappingProxyType({
+    **_SONG_NOT_APPLICABLE,
+    "position": "not run in this benchmark with positions only (the filter itself takes them through an "
+                "output matrix: team_filter_model(..., C=[I 0]))",
 })
 
 
@@ -1460,8 +1564,8 @@ METHODS = (
     MethodSpec("song-mb", ("team",), _song_filter("mb"),
                lambda n, q, d, N: (0.0, filter_cost("measurement-forwarding", n=N * n, q=n, degree=d).flops),
                {"team": ("O(N^3 n^3): its own covariance of the whole team", "O(N^2 n^2)")},
-               lambda n, q, d, N: float((N * n) ** 2 + N * n), _SONG_NOT_APPLICABLE, position=3),
+               lambda n, q, d, N: float((N * n) ** 2 + N * n), _SONG_MB_NOT_APPLICABLE, position=3),
     MethodSpec("song-eb", ("team",), _song_filter("eb"), lambda n, q, d, N: (0.0, float(4 * (N * N * n) ** 3)),
                {"team": ("O(N^6 n^3): the joint covariance of all team estimates (dense)", "O(N^4 n^2)")},
-               lambda n, q, d, N: float((N * N * n) ** 2), _SONG_NOT_APPLICABLE, whole_filter=True, position=4),
+               lambda n, q, d, N: float((N * N * n) ** 2), _SONG_EB_NOT_APPLICABLE, whole_filter=True, position=4),
 )

@@ -20,7 +20,7 @@ def format_number(x: float, digits: int = 4) -> str:
 
     Numbers from 1e-3 to below 1e6 are written out (``0.07681``, ``2.462``, ``136.4``,
     ``12,346``); smaller and larger ones as ``2.776 × 10⁻¹⁷``. Integers are written
-    exactly. Trailing zeros are dropped.
+    exactly; a boolean as ``yes`` or ``no``. Trailing zeros are dropped.
 
     Parameters
     ----------
@@ -45,7 +45,7 @@ def format_number(x: float, digits: int = 4) -> str:
         raise ValueError(f"digits must be an integer >= 1 and at most 17 (significant digits of a float); got {digits}")
     digits = int(digits)
     if isinstance(x, bool | np.bool_):
-        return str(bool(x))
+        return "yes" if x else "no"
     if isinstance(x, int | np.integer):
         return f"{int(x):,}" if abs(int(x)) >= 10_000 else str(int(x))
     if isinstance(x, str | bytes) or not hasattr(x, "__float__"):
@@ -74,8 +74,8 @@ def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = ""
 
     Numbers through :func:`format_number` (with `unit` appended), lists labelled by
     `labels` when given and cut after `max_items` entries (marked with an ellipsis),
-    dicts as ``label = value`` pairs (underscores in labels read as spaces), ``None``
-    as a dash. Any value is shown, by design: NaN and infinities print as ``nan`` and
+    dicts as ``label = value`` pairs (underscores in labels read as spaces), booleans
+    as ``yes`` / ``no``, ``None`` as a dash. Any value is shown, by design: NaN and infinities print as ``nan`` and
     ``inf``, a string as itself (this is a display helper; :class:`mascore.claims.Claim` refuses them).
 
     Parameters
@@ -113,7 +113,7 @@ def format_value(value: Any, digits: int = 4, max_items: int = 4, unit: str = ""
     if value is None:
         return "\u2014"
     if isinstance(value, bool | np.bool_):
-        return str(bool(value))
+        return "yes" if value else "no"
     if isinstance(value, int | float | np.integer | np.floating):
         return format_number(value, digits) + suffix
     if isinstance(value, str):

@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike
 from . import centralized_team_filter, team_model, team_observability
 from . import distributed_kf as dkf
 from ._progress import progress_bar
-from ._systems import full_state_only
+from ._systems import full_state_only, output_matrices
 from ._team_kernels import check_team_laplacian
 from ._validation import (
     Frozen,
@@ -283,6 +283,12 @@ class RendezvousModel(Frozen):
         (e.g. :func:`mascore.agents.double_integrator`) instead of repeating it. A
         double-integrator ``A = [[I, h I], [0, I]]`` with ``h != dt`` is refused (the
         time axis would be wrong).
+    C : (p, m) or (N, p, m) array_like, optional
+        Output matrix of the measurements, ``z_ij = C_j x_j + nu_ij`` (one for every agent or
+        one per agent; e.g. positions only, ``C = [I 0]``), with `R` then of ``(p, p)`` or
+        ``(p N, p N)``. ``None`` (default) or the identity: full states (eq. (2)). Only the
+        control laws that do not steer with raw measurements take it (:func:`simulate_rendezvous`
+        modes ``"true"`` and ``"estimation"``).
 
     Raises
     ------
@@ -309,6 +315,7 @@ class RendezvousModel(Frozen):
     Q: np.ndarray
     R: np.ndarray
     dt: float
+    C: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         A = check_square(_float_array(self.A, "A"), "A")
@@ -318,11 +325,16 @@ class RendezvousModel(Frozen):
         Q = check_covariance(_float_array(self.Q, "Q"), "Q", size=m)
         if Q.ndim != 2:
             raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
+        C = None if self.C is None else _output_matrix(self.C, m)
         R = check_covariance(_float_array(self.R, "R"), "R")
-        if R.ndim == 2 and 0 < R.shape[0] < m:  # partial sensing: say where it is supported
+        if C is None and R.ndim == 2 and 0 < R.shape[0] < m:  # partial sensing without C: say how
             raise ValueError(full_state_only(m, R.shape))
-        if R.ndim != 2 or R.shape[0] % m:
+        if C is None and (R.ndim != 2 or R.shape[0] % m):
             raise ValueError(f"R must be ({m}, {m}) per sensed agent or (m N, m N) for the team; got {R.shape}")
+        if C is not None and (R.ndim != 2 or R.shape[0] % C.shape[-2]):
+            p = C.shape[-2]
+            raise ValueError(f"R must be ({p}, {p}) per sensed agent or (p N, p N) for the team (p = {p}: the rows "
+                             f"of the output matrix C); got {R.shape}")
         dt = self.dt
         if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)):
             raise TypeError(f"dt must be a positive sampling time in seconds; got {type(dt).__name__} {dt!r}")
@@ -331,11 +343,12 @@ class RendezvousModel(Frozen):
         _check_time_base(A, B, float(dt))
         check_sampling_time(self.A, float(dt))  # an A from LTIAgent.from_continuous knows its dt
         self._set(A=frozen_copy(A), B=frozen_copy(B), K=frozen_copy(K), Q=frozen_copy(Q), R=frozen_copy(R),
-                  dt=float(dt))
+                  dt=float(dt), C=None if C is None else frozen_copy(C))
 
     @classmethod
     def from_agent(
-        cls, agent: LTIAgent, K: ArrayLike, Q: ArrayLike, R: ArrayLike, dt: float | None = None
+        cls, agent: LTIAgent, K: ArrayLike, Q: ArrayLike, R: ArrayLike, dt: float | None = None, *,
+        C: ArrayLike | None = None,
     ) -> RendezvousModel:
         """The model of a team of copies of `agent`, on the agent's own time base.
 
@@ -349,6 +362,8 @@ class RendezvousModel(Frozen):
             As in the class (gain; process- and measurement-noise *covariances*).
         dt : float, optional
             Only for an agent without ``dt``; a `dt` different from ``agent.dt`` is refused.
+        C : (p, m) or (N, p, m) array_like, optional
+            Output matrix of the measurements, as in the class (default: full states).
 
         Returns
         -------
@@ -383,7 +398,7 @@ class RendezvousModel(Frozen):
         elif dt is not None and not np.isclose(check_positive(dt, "dt", "seconds"), agent.dt, rtol=1e-9, atol=0):
             raise ValueError(f"dt = {dt!r} s contradicts the agent's sampling time agent.dt = {agent.dt!r} s that its "
                              "A and B were discretized with: leave dt out, or rebuild the agent with this dt")
-        return cls(agent.A, agent.B, K, Q, R, agent.dt if agent.dt is not None else dt)
+        return cls(agent.A, agent.B, K, Q, R, agent.dt if agent.dt is not None else dt, C)
 
     @property
     def m(self) -> int:
@@ -414,6 +429,18 @@ def _check_time_base(A: np.ndarray, B: np.ndarray, dt: float) -> None:
             f"the time axis would be wrong by a factor {dt / h:g}; pass dt = {h:g}, or build A with dt "
             "(RendezvousModel.from_agent(agents.double_integrator(n, dt), ...) takes dt from the agent)"
         )
+
+
+def _output_matrix(C: ArrayLike, m: int) -> np.ndarray | None:
+    """An output matrix ``(p, m)`` or ``(N, p, m)``, finite; ``None`` for the identity (full states)."""
+    arr = _float_array(C, "C")
+    if arr.ndim not in (2, 3) or arr.shape[-1] != m or arr.shape[-2] == 0 or (arr.ndim == 3 and arr.shape[0] == 0):
+        raise ValueError(f"Incompatible dimensions of C; expected (p, {m}) for every agent or (N, p, {m}) one per "
+                         f"agent (p >= 1 outputs of the m = {m} states), but found {arr.shape}")
+    arr = _finite(arr, "C")
+    if arr.shape[-2] == m and np.array_equal(arr, np.broadcast_to(np.eye(m), arr.shape)):
+        return None
+    return arr
 
 
 def _check_model(model: object) -> RendezvousModel:
@@ -490,6 +517,10 @@ def expected_spread(
     if not isinstance(mode, str) or mode not in ("true", "measurement"):
         raise ValueError(f"mode must be 'true' or 'measurement' (linear laws with white noise); got {mode!r}")
     model = _check_model(model)
+    if mode == "measurement" and model.C is not None:
+        raise ValueError("mode 'measurement' steers with the raw measurements (eq. (5)), which must be full states; "
+                         "the model has an output matrix C (use mode 'true', or simulate_rendezvous in mode "
+                         "'estimation')")
     x, single = _states(x0, model.m)
     n_runs, N, m = x.shape
     A, BK, Q, R = model.A, model.B @ model.K, model.Q, model.R
@@ -718,7 +749,12 @@ def simulate_rendezvous(
     x, single = _states(x0, model.m)
     n_runs, N, m = x.shape
     A, B, K, Q, R, dt = model.A, model.B, model.K, model.Q, model.R, model.dt
-    R_team = team_noise_covariance(R, N, m)
+    Cs = None if model.C is None else output_matrices(model.C, m, N)
+    if Cs is not None and mode not in ("true", "estimation"):
+        raise ValueError(f"mode {mode!r} steers with the raw measurements (eq. (5)), which must be full states; with "
+                         "an output matrix C use mode 'estimation' (eq. (21): the control uses every agent's "
+                         "estimates, Song et al.'s estimation-based filter) or 'true'")
+    R_team = team_noise_covariance(R, N, m if Cs is None else Cs.shape[1])
     n_steps = check_steps(n_steps)
     check_fits_in_memory(8.0 * (n_steps + 1) * n_runs * N * m * (1 + (N if return_estimates else 0)), "n_steps",
                          "the state histories")
@@ -739,7 +775,7 @@ def simulate_rendezvous(
         return (Adj[k], S[k], Laps[k]) if switching else (Adj, S, Laps)
 
     filt = mode in ("measurement-filter", "estimation")
-    filter_model = team_model.team_filter_model(A, B, K, Q, R, N) if filt else None
+    filter_model = team_model.team_filter_model(A, B, K, Q, R, N, C=Cs) if filt else None
     if filt:  # the shapes first, then the theory's conditions on the graph
         if x_hat0 is None or P0 is None:
             raise ValueError(f"mode {mode!r} needs x_hat0 and P0 (initial estimate and its covariance)")
@@ -757,7 +793,7 @@ def simulate_rendezvous(
         for adj in np.unique(Adj.reshape(-1, N, N), axis=0):  # each distinct graph once
             require_connected(adj, "mode 'estimation' (every agent estimates the whole team, system (43) "
                               "observable)", "adjacency" if Adj.ndim == 2 else "a graph of adjacency")
-            team_observability.require_observable(filter_model.A, filter_model.BK, adj)
+            team_observability.require_observable(filter_model.A, filter_model.BK, adj, C=filter_model.C)
     proc_rng, meas_rng = rng.spawn(2)
     states = np.empty((n_steps + 1, n_runs, N, m))
     states[0] = x
@@ -807,7 +843,11 @@ def simulate_rendezvous(
 
         pos_slice = slice(0, m // 2)
         record(0)
-    Z, _ = _measure(meas_rng, x, topology(0)[1], R_team)
+    def observe(x: np.ndarray) -> np.ndarray:
+        """What the agents measure of the states: all of them, or the outputs ``C_j x_j``."""
+        return x if Cs is None else np.einsum("...jm,jpm->...jp", x, Cs)
+
+    Z, _ = _measure(meas_rng, observe(x), topology(0)[1], R_team)
     for k in progress_bar(range(n_steps), enabled=progress, desc=f"rendezvous ({mode})", leave=False):
         Lap = topology(k)[2]
         if mode == "true":
@@ -823,7 +863,7 @@ def simulate_rendezvous(
             team.predict(Lap if switching else None)
         x = x_new
         _, S_next, _ = topology(k + 1)
-        Z, _ = _measure(meas_rng, x, S_next, R_team)
+        Z, _ = _measure(meas_rng, observe(x), S_next, R_team)
         if filt:
             team.update(Z, S_next)
         if central_filter is not None:

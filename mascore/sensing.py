@@ -31,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._systems import output_matrices
 from ._validation import (
     check_adjacency_stack,
     check_covariance,
@@ -294,8 +295,10 @@ def measure(
     adjacency: ArrayLike,
     R: ArrayLike,
     allow_isolated: bool = False,
+    *,
+    C: ArrayLike | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Noisy sensing of the closed neighbourhoods, batched (eq. (2)).
+    """Noisy sensing of the closed neighbourhoods, batched (eq. (2), or outputs ``C_j x_j`` with `C`).
 
     Parameters
     ----------
@@ -306,16 +309,19 @@ def measure(
     adjacency : (N, N) or (..., N, N) array_like
         Who senses whom; broadcast against the leading axes of `states`
         (one graph for all runs, or one per run).
-    R : (m, m) or (m N, m N) array_like
-        Measurement-noise covariance (see :func:`team_noise_covariance`).
+    R : (p, p) or (p N, p N) array_like
+        Measurement-noise covariance (see :func:`team_noise_covariance`); ``p = m`` without `C`.
     allow_isolated : bool
         See :func:`sensing_mask`.
+    C : (p, m) or (N, p, m) array_like, optional
+        Output matrix, one for every agent or one per agent: ``z_ij = C_j x_j + nu_ij``
+        (e.g. positions only). Default: full states.
 
     Returns
     -------
-    Z : (..., N, N, m) ndarray
-        ``Z[..., i, j, :] = x_j + nu_ij`` where ``i`` senses ``j``, and ``0``
-        elsewhere (never NaN, so it is safe in masked matrix products).
+    Z : (..., N, N, p) ndarray
+        ``Z[..., i, j, :] = C_j x_j + nu_ij`` (``x_j + nu_ij`` without `C`) where ``i`` senses
+        ``j``, and ``0`` elsewhere (never NaN, so it is safe in masked matrix products).
     S : (..., N, N) ndarray of bool
         The sensing mask used.
 
@@ -346,7 +352,11 @@ def measure(
         raise ValueError(
             f"the leading (batch) axes of states {x.shape} and adjacency {S.shape} do not broadcast"
         ) from None
-    return _measure(rng, x, S, team_noise_covariance(R, n_agents, m))
+    if C is None:
+        return _measure(rng, x, S, team_noise_covariance(R, n_agents, m))
+    Cs = output_matrices(C, m, n_agents)
+    y = np.einsum("...jm,jpm->...jp", x, Cs)  # every agent's outputs C_j x_j
+    return _measure(rng, y, S, team_noise_covariance(R, n_agents, Cs.shape[1]))
 
 
 def _measure(

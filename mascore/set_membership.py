@@ -946,8 +946,10 @@ def _cholesky(P, what, step, agent, idx, batch):
 
 #: Why the set-membership filter of one agent does not apply elsewhere (the tables show it).
 _SM_NOT_APPLICABLE = MappingProxyType({
-    "target": "a single agent's filter; alone, an agent that senses one coordinate cannot observe the target",
-    "localization": "a single agent's filter; without an anchor an agent's relative measurements do not fix it",
+    "target": "a single agent's filter; alone, an agent that senses one coordinate cannot observe the target "
+              "(sm-forwarding is the set-membership filter on its neighbourhood's measurements)",
+    "localization": "a single agent's filter; without an anchor an agent's relative measurements do not fix it "
+                    "(sm-forwarding: on its neighbourhood's measurements)",
 })
 
 

@@ -3,7 +3,8 @@
 :class:`TeamFilterModel` holds the agent dynamics ``A``, the closed-loop term ``BK``, the
 per-agent process noise ``Q`` and the noise ``R`` of one observer's measurement vector, with
 the Kronecker factor the structured recursions run on (``A = A_r ⊗ I_kron``, one factor per
-spatial axis). :func:`team_filter_model` builds it from the agent, its gain and its noises
+spatial axis) and, for partial sensing, the agents' output matrices ``C_j`` (``z_ij = C_j x_j + nu_ij``;
+none: full states, eq. (2)). :func:`team_filter_model` builds it from the agent, its gain and its noises
 and finds the factor; :func:`closed_loop_matrices` gives the dense ``F_1`` and ``F_2`` of
 eqs. (11), (28); :func:`reduce_covariance` and :func:`expand_covariance` move a covariance
 between the full and the per-axis form. The filters that run on this model are in
@@ -19,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._systems import design_args, full_state_only
+from ._systems import design_args, full_state_only, output_matrices
 from ._validation import (
     Frozen,
     as_matrix,
@@ -63,18 +64,24 @@ class TeamFilterModel(Frozen):
         Product of the input matrix and the consensus gain.
     Q : (m, m) array_like
         Per-agent process-noise covariance, symmetric positive semidefinite.
-    R : (m N, m N) array_like
-        Covariance of one observer's noise vector ``nu_i``, symmetric positive definite.
+    R : (p N, p N) array_like
+        Covariance of one observer's noise vector ``nu_i``, symmetric positive definite
+        (``p = m`` for full-state sensing).
     n_agents : int
         N >= 2.
     kron : int
-        Kronecker factor used by the structured recursions: ``A``, ``BK``, ``Q`` and
-        ``R`` must all be of the form ``X_r ⊗ I_kron``.
+        Kronecker factor used by the structured recursions: ``A``, ``BK``, ``Q``, ``R``
+        (and ``C``) must all be of the form ``X_r ⊗ I_kron``.
+    C : (N, p, m) array_like, optional
+        Output matrix of every agent, ``z_ij = C_j x_j + nu_ij`` (partial sensing); ``None``
+        (default): full states, ``C_j = I_m`` (Song et al. eq. (2)).
 
     Attributes
     ----------
     A_r, BK_r, Q_r, R_r : ndarray
         The reduced matrices (read-only views of the full ones).
+    C_r : (N, p_r, m_r) ndarray or None
+        The reduced output matrices (``None`` for full-state sensing).
 
     Raises
     ------
@@ -102,10 +109,12 @@ class TeamFilterModel(Frozen):
     R: np.ndarray
     n_agents: int
     kron: int = 1
+    C: np.ndarray | None = None
     A_r: np.ndarray = field(init=False, repr=False, compare=False)
     BK_r: np.ndarray = field(init=False, repr=False, compare=False)
     Q_r: np.ndarray = field(init=False, repr=False, compare=False)
     R_r: np.ndarray = field(init=False, repr=False, compare=False)
+    C_r: np.ndarray | None = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         A = check_square(_float_array(self.A, "A"), "A")
@@ -115,25 +124,41 @@ class TeamFilterModel(Frozen):
         if Q.ndim != 2:
             raise ValueError(f"Q must be a single ({m}, {m}) matrix; got shape {Q.shape}")
         n_agents = check_positive_int(self.n_agents, "n_agents", minimum=2)
-        R = check_covariance(_float_array(self.R, "R"), "R", size=m * n_agents, definite=True)
+        C = None if self.C is None else output_matrices(self.C, m, n_agents)
+        p = m if C is None else C.shape[1]
+        R = check_covariance(_float_array(self.R, "R"), "R", size=p * n_agents, definite=True)
         if R.ndim != 2:
-            raise ValueError(f"R must be a single ({m * n_agents}, {m * n_agents}) matrix; got shape {R.shape}")
+            raise ValueError(f"R must be a single ({p * n_agents}, {p * n_agents}) matrix; got shape {R.shape}")
         kron = check_positive_int(self.kron, "kron")
         if m % kron:
             raise ValueError(f"kron must divide the agent state size m = {m}; got kron={kron}")
         full = {"A": frozen_copy(A), "BK": frozen_copy(BK), "Q": frozen_copy(Q), "R": frozen_copy(R)}
+        if C is not None:
+            full["C"] = frozen_copy(C)
         for name, M in full.items():
             red = kron_factor(M, kron)
             if red is None:
                 raise ValueError(f"{name} is not of the form {name}_r ⊗ I_{kron} (kron={kron}); "
                                  "build the model with team_filter_model, which finds the factor")
             self._set(**{name: M, f"{name}_r": red})  # a view of the read-only copy: read-only too
+        if C is None:
+            self._set(C=None, C_r=None)
         self._set(n_agents=n_agents, kron=kron)
 
     @property
     def m(self) -> int:
         """Agent state dimension."""
         return self.A.shape[0]
+
+    @property
+    def p(self) -> int:
+        """Size of one measurement ``z_ij`` (``m`` for full-state sensing)."""
+        return self.m if self.C is None else self.C.shape[1]
+
+    @property
+    def full_state(self) -> bool:
+        """Whether every measurement is a full state (Song et al. eq. (2)), i.e. no output matrix."""
+        return self.C is None
 
     @property
     def m_r(self) -> int:
@@ -154,6 +179,8 @@ def team_filter_model(
     R: ArrayLike | None = None,
     n_agents: int | None = None,
     reduce: bool = True,
+    *,
+    C: ArrayLike | None = None,
 ) -> TeamFilterModel:
     """Validate the team model and find its Kronecker factor.
 
@@ -169,14 +196,23 @@ def team_filter_model(
         Consensus gain of eq. (4).
     Q : (m, m) array_like
         Per-agent process-noise covariance, symmetric PSD.
-    R : (m, m) or (m N, m N) array_like
+    R : (p, p) or (p N, p N) array_like
         Measurement-noise covariance per measured agent, or of the whole
         vector ``nu_i`` (the paper's ``R``); symmetric positive definite.
+        ``p = m`` without `C`.
     n_agents : int
         N >= 2.
     reduce : bool
-        Look for a factor ``A = A_r ⊗ I_k`` shared by ``A, BK, Q, R`` (true by
-        default); ``False`` forces the unreduced recursion.
+        Look for a factor ``A = A_r ⊗ I_k`` shared by ``A, BK, Q, R`` (and `C`) (true by
+        default); ``False`` forces the unreduced recursion. An output matrix not of the form
+        ``C_r ⊗ I_k`` lowers the factor (down to 1: the full form).
+    C : (p, m) or (N, p, m) array_like, optional
+        Output matrix of the measurements, ``z_ij = C_j x_j + nu_ij``: one for every agent or
+        one per agent (e.g. positions only of a planar double integrator,
+        ``C = [I_2 0]``). ``None`` (default) or the identity: full states, Song et al.'s eq. (2).
+        Taken by the estimation-based loop and the centralized team filter; the
+        measurement-based loop refuses it (its control, eq. (5), steers with full-state
+        measurements).
 
     Returns
     -------
@@ -193,6 +229,11 @@ def team_filter_model(
     ...                                      np.eye(4), n_agents=5)
     >>> model.kron, model.M_r                                   # the recursions run on one axis
     (2, 10)
+    >>> C = np.hstack([np.eye(2), np.zeros((2, 2))])                  # positions only: [I 0] = [1 0] ⊗ I_2
+    >>> model = team_model.team_filter_model(agent.A, agent.B, rendezvous.rendezvous_gain(0.5, 1.5, 2), np.eye(4),
+    ...                                      np.eye(2), n_agents=5, C=C)
+    >>> model.p, model.kron, model.C_r.shape
+    (2, 2, (5, 1, 2))
     """
     A, B, (K, Q, R, n_agents), _ = design_args("team_filter_model", A, B, dict(K=K, Q=Q, R=R, n_agents=n_agents), None,
                                                time="discrete")
@@ -205,19 +246,29 @@ def team_filter_model(
     Q = check_covariance(_float_array(Q, "Q"), "Q", size=m)
     n_agents = check_positive_int(n_agents, "n_agents", minimum=2)
     check_flag(reduce, "reduce")
+    C_all = None if C is None else output_matrices(C, m, n_agents)
+    if C_all is not None and C_all.shape[1] == m and np.array_equal(C_all, np.broadcast_to(np.eye(m), C_all.shape)):
+        C_all = None  # the identity: full states, the paper's own path
     R_arr = _float_array(R, "R")
-    if R_arr.ndim == 2 and R_arr.shape[0] == R_arr.shape[1] and 0 < R_arr.shape[0] < m:  # partial sensing
-        raise ValueError(full_state_only(m, R_arr.shape))
-    R_team = team_noise_covariance(R, n_agents, m)
+    if C_all is None and R_arr.ndim == 2 and R_arr.shape[0] == R_arr.shape[1] and 0 < R_arr.shape[0] < m:
+        raise ValueError(full_state_only(m, R_arr.shape))  # partial sensing without an output matrix
+    p = m if C_all is None else C_all.shape[1]
+    try:
+        R_team = team_noise_covariance(R, n_agents, p)
+    except ValueError as exc:
+        if C_all is None:
+            raise
+        raise ValueError(f"{exc} (p = {p}: the rows of the output matrix C)") from None
     check_covariance(R_team, "R", definite=True)
     BK = B @ K
     kron = 1
     if reduce:
         for k in range(m, 1, -1):
-            if m % k == 0 and all(kron_factor(X, k) is not None for X in (A, BK, Q, R_team)):
+            if m % k == 0 and all(kron_factor(X, k) is not None
+                                  for X in (A, BK, Q, R_team, *(() if C_all is None else (C_all,)))):
                 kron = k
                 break
-    return TeamFilterModel(A=A, BK=BK, Q=Q, R=R_team, n_agents=int(n_agents), kron=kron)
+    return TeamFilterModel(A=A, BK=BK, Q=Q, R=R_team, n_agents=int(n_agents), kron=kron, C=C_all)
 
 
 def closed_loop_matrices(A: ArrayLike, BK: ArrayLike, laplacian: ArrayLike) -> tuple[np.ndarray, np.ndarray]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._systems import output_matrices
 from ._team_kernels import (
     check_covariances,
     check_model,
@@ -41,8 +42,12 @@ __all__ = [
 ]
 
 
-def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: float = 1e-8) -> np.ndarray:
+def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: float = 1e-8, *,
+                      C: ArrayLike | None = None) -> np.ndarray:
     """Which agents' pairs ``(F_1, H_i)`` of system (43) are observable.
+
+    ``H_i`` takes the outputs ``C_j x_j`` of the agents ``j`` in agent i's closed neighbourhood
+    ``N̄_i`` (full states, ``C_j = I``, by default: Song et al.'s eq. (2)).
 
     For an undirected graph, ``L = V Λ V^T`` block-diagonalizes
     ``F_1 = (V ⊗ I)(I ⊗ A - Λ ⊗ BK)(V ⊗ I)^T``. When the blocks
@@ -55,6 +60,13 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
     This test is well conditioned; otherwise (directed graphs, or the
     conditions fail) a rank test of the observability matrix of the shifted
     system is used, which can call weakly observable pairs unobservable.
+    With output matrices ``C_j`` the eigenvectors are still ``v ⊗ w`` (``w`` an
+    eigenvector of ``A - λ BK``, times ``I_k`` on the spatial axes when
+    ``A = A_r ⊗ I_k``), seen by agent i only through the outputs ``C_j w`` of the
+    agents ``j`` in ``N̄_i``: with one ``C`` for all, the pair ``(A - λ BK, C)``
+    must be observable for every Laplacian eigenvalue ``λ`` (positions only of the
+    double integrator pass; velocities only do not: the team's common position is
+    unseen). The fallback with outputs is a dense PBH test.
 
     Parameters
     ----------
@@ -66,6 +78,9 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
         Fixed topology (defines ``F_1`` and ``H_i``).
     tol : float
         Relative tolerance of the rank decisions.
+    C : (p, m) or (N, p, m) array_like, optional
+        Output matrix of the measurements (one for all agents or one per agent); default the
+        identity (full states).
 
     Returns
     -------
@@ -94,6 +109,8 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
         raise ValueError(f"adjacency must be a single (N, N) topology here; got shape {Adj.shape}")
     S = sensing_mask(Adj, allow_isolated=True)
     L = graph_laplacian(Adj)
+    if C is not None:
+        return _observable_with_outputs(A, BK, Adj, S, L, output_matrices(C, m, Adj.shape[0]), tol)
     # work on the per-axis factor when A = A_r ⊗ I_k and BK = BK_r ⊗ I_k (same rank test)
     for k in range(m, 0, -1):
         if m % k == 0 and kron_factor(A, k) is not None and kron_factor(BK, k) is not None:
@@ -109,6 +126,72 @@ def observable_agents(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, tol: fl
         H = np.kron(np.eye(row.size)[row], np.eye(m))
         out.append(_observable(F1, H, tol))
     return np.array(out)
+
+
+def _observable_with_outputs(A, BK, Adj, S, L, C, tol) -> np.ndarray:
+    """:func:`observable_agents` with output matrices `C` ``(N, p, m)``.
+
+    With ``A = A_r ⊗ I_k`` and ``BK = BK_r ⊗ I_k`` (whatever `C`), ``F_1``'s eigenspace of a
+    Laplacian eigenvalue ``λ`` (basis ``V_λ``) and an eigenvalue of ``A_r - λ BK_r`` (eigenvector
+    ``w``, the block non-derogatory) is ``{(V_λ ⊗ w ⊗ I_k) c}``, and agent i sees all of it iff
+    the stack over ``j`` in ``N̄_i`` of ``V_λ[j] ⊗ (C_j (w ⊗ I_k))`` has full column rank (PBH).
+    Otherwise (a directed graph, or blocks that share eigenvalues) a dense PBH test.
+    """
+    m = A.shape[0]
+    k = next(f for f in range(m, 0, -1)
+             if m % f == 0 and kron_factor(A, f) is not None and kron_factor(BK, f) is not None)
+    if np.allclose(Adj, Adj.T):
+        blocks = _eigen_blocks(kron_factor(A, k), kron_factor(BK, k), L)
+        if blocks is not None:
+            V, groups, W = blocks
+            N, p = C.shape[:2]
+            Cn = C / max(1.0, float(np.abs(C).max()))
+            out = np.ones(N, dtype=bool)
+            for gi, g in enumerate(groups):
+                for w in W[gi].T:  # every eigenvector of the block (one per eigenvalue)
+                    T = Cn @ np.kron(w[:, None], np.eye(k))  # (N, p, k): C_j (w ⊗ I_k)
+                    blk = V[:, g][:, :, None, None] * T[:, None]  # (N, |g|, p, k): V_λ[j, a] T_j
+                    rows = np.moveaxis(blk, 2, 1).reshape(N, p, len(g) * k)  # agent j's p rows
+                    O = (S[:, :, None, None] * rows[None]).reshape(N, N * p, len(g) * k)  # zero rows: j not in N̄_i
+                    out &= np.linalg.svd(O, compute_uv=False)[:, -1] > tol
+            return out
+    F1, _ = closed_loop_matrices(A, BK, L)
+    N, p = C.shape[:2]
+    H = np.zeros((N, p, N, m))
+    H[np.arange(N), :, np.arange(N), :] = C
+    H = H.reshape(N * p, N * m)
+    return np.array([_pbh_observable(F1, H[np.repeat(row, p)]) for row in S])
+
+
+def _eigen_blocks(A, BK, L):
+    """``(V, groups, W)``: Laplacian eigenvectors, their eigenvalue groups and each group's eigenvectors of
+    ``A - λ BK`` (columns of ``W[g]``, unit norm), or None when the blocks are derogatory or share eigenvalues.
+
+    The zero Laplacian eigenvalue is taken exactly and each eigenvector is the null vector of
+    ``A - λ BK - μ I`` at the mean of ``μ``'s rounding cluster (a Jordan block's eigenvalue splits).
+    """
+    lam, V = np.linalg.eigh(L)
+    scale = max(1.0, float(np.max(np.abs(lam))))
+    cuts = np.flatnonzero(np.diff(lam) > 1e-7 * scale) + 1
+    groups = np.split(np.arange(lam.size), cuts)
+    m = A.shape[0]
+    lam_g = np.array([lam[g].mean() for g in groups])
+    lam_g = np.where(np.abs(lam_g) <= 1e-7 * scale, 0.0, lam_g)
+    M = A[None] - lam_g[:, None, None] * BK[None]  # (G, m, m)
+    mu = np.linalg.eigvals(M)  # (G, m)
+    near = np.abs(mu[:, :, None] - mu[:, None, :]) < 1e-6
+    mu = np.einsum("gab,gb->ga", near, mu) / near.sum(axis=-1)  # cluster means
+    if m > 1:  # non-derogatory: every eigenvalue has a one-dimensional eigenspace
+        sv = np.linalg.svd(M[:, None] - mu[:, :, None, None] * np.eye(m), compute_uv=False)
+        if np.any(sv[..., m - 2] <= 1e-6 * np.maximum(1.0, sv[..., 0])):
+            return None
+    gid = np.repeat(np.arange(len(groups)), m)
+    dist = np.abs(mu.reshape(-1)[:, None] - mu.reshape(-1)[None, :])
+    if np.any(dist[gid[:, None] != gid[None, :]] < 1e-6):
+        return None
+    _, _, Vh = np.linalg.svd(M[:, None].astype(complex) - mu[:, :, None, None] * np.eye(m))
+    W = np.swapaxes(np.conj(Vh[..., -1, :]), -1, -2)  # (G, m, m): column e is the null vector of eigenvalue e
+    return V, groups, W
 
 
 def _graph_observability(A, BK, L, S, tol) -> np.ndarray | None:
@@ -138,7 +221,7 @@ def _graph_observability(A, BK, L, S, tol) -> np.ndarray | None:
     return out
 
 
-def require_observable(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike) -> None:
+def require_observable(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike, *, C: ArrayLike | None = None) -> None:
     """Raise ``ValueError`` naming the agents for which system (43) is unobservable.
 
     Parameters
@@ -149,6 +232,8 @@ def require_observable(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike) -> Non
         Input matrix times consensus gain.
     adjacency : (N, N) array_like
         Sensing graph.
+    C : (p, m) or (N, p, m) array_like, optional
+        Output matrix of the measurements (default: full states).
 
     Raises
     ------
@@ -174,14 +259,23 @@ def require_observable(A: ArrayLike, BK: ArrayLike, adjacency: ArrayLike) -> Non
     if Adj.ndim != 2:
         raise ValueError(f"adjacency must be a single (N, N) topology here; got shape {Adj.shape}")
     sensing_mask(Adj)  # isolated agents first, with their own message
-    ok = observable_agents(A, BK, adjacency)
+    ok = observable_agents(A, BK, adjacency, C=C)
     if not np.all(ok):
         bad = np.flatnonzero(~ok).tolist()
+        if C is None:
+            raise ValueError(
+                f"system (43) (F_1, H_i) is not observable for agent(s) {bad} with this topology (F_1 from A, BK "
+                "and the adjacency's Laplacian, H_i from the adjacency): "
+                "Theorem 1 does not apply and the estimation-based loop needs an observable graph "
+                "(symmetric neighbourhoods, e.g. a star seen from a leaf, hide modes)"
+            )
         raise ValueError(
-            f"system (43) (F_1, H_i) is not observable for agent(s) {bad} with this topology (F_1 from A, BK "
-            "and the adjacency's Laplacian, H_i from the adjacency): "
-            "Theorem 1 does not apply and the estimation-based loop needs an observable graph "
-            "(symmetric neighbourhoods, e.g. a star seen from a leaf, hide modes)"
+            f"system (43) (F_1, H_i) is not observable for agent(s) {bad} with this topology and output matrix C "
+            "(F_1 from A, BK and the adjacency's Laplacian, H_i = the outputs C_j x_j of agent i and its "
+            "neighbours): Theorem 1 does not apply and agent i's whole-team filter cannot estimate the team. "
+            "Measure more states (C must see every mode of A - λ BK, for every Laplacian eigenvalue λ: "
+            "positions of a double integrator do, velocities alone do not) or change the graph (symmetric "
+            "neighbourhoods, e.g. a star seen from a leaf, hide modes)"
         )
 
 
@@ -303,6 +397,25 @@ def theorem1_min_eigenvalues(
     }
     finite_result("Theorem 1 eigenvalue computation", *out.values())
     return out
+
+
+def _pbh_observable(F: np.ndarray, H: np.ndarray) -> bool:
+    """PBH test: ``[F - mu I; H]`` of full column rank at every eigenvalue ``mu`` of ``F``.
+
+    Rounding splits a Jordan block's eigenvalue into a cluster; the test runs at each cluster's mean
+    (which recovers the eigenvalue to high accuracy). The rank is decided at ``1e-6`` relative to
+    ``max(1, |F - I|, |H|)``: weakly observable modes count as unobservable. ``O(n^4)`` work: the
+    fallback of small or unstructured teams.
+    """
+    n = F.shape[0]
+    mu = np.linalg.eigvals(F)
+    near = np.abs(mu[:, None] - mu[None, :]) < 1e-6
+    shifts = np.unique(np.round((near @ mu) / near.sum(axis=1), 12))
+    stacked = np.concatenate([F[None].astype(complex) - shifts[:, None, None] * np.eye(n),
+                              np.broadcast_to(H.astype(complex), (shifts.size, *H.shape))], axis=1)
+    smallest = np.linalg.svd(stacked, compute_uv=False)[:, -1]
+    size = max(1.0, float(np.abs(F - np.eye(n)).max()), float(np.abs(H).max()))
+    return bool(np.all(smallest > 1e-6 * size))
 
 
 def _observable(F: np.ndarray, H: np.ndarray, tol: float) -> bool:

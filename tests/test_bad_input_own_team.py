@@ -256,6 +256,6 @@ def test_partial_sensing_for_songs_filters_names_the_methods_that_take_it():
     agent = agents.double_integrator(2, 0.1)
     for call in (lambda: rv.RendezvousModel(agent.A, agent.B, K_GAIN, np.eye(4), 0.01 * np.eye(2), 0.1),
                  lambda: team_model.team_filter_model(agent, K_GAIN, np.eye(4), 0.01 * np.eye(2), 3)):
-        with pytest.raises(ValueError, match=r"got \(2, 2\)\. Song et al.'s whole-team filters .*full-state .*"
+        with pytest.raises(ValueError, match=r"got \(2, 2\)\. .*team_filter_model\(\.\.\., C=C\).*song-eb.*"
                                              r"POSITION_METHODS .*sensor_network.SensorNetworkModel"):
             call()

@@ -65,6 +65,8 @@ MODELS = {  # every checked model or value class: a builder of one instance
     "InformationConsensusFilter": lambda: fusion.InformationConsensusFilter(_sensor_network(), 2),
     "MeasurementForwardingFilter": lambda: fusion.MeasurementForwardingFilter(_sensor_network()),
     "CentralizedFilter": lambda: fusion.CentralizedFilter(_sensor_network()),
+    "KalmanConsensusNetworkFilter": lambda: fusion.KalmanConsensusNetworkFilter(_sensor_network(), 0.2),
+    "SetMembershipForwardingFilter": lambda: fusion.SetMembershipForwardingFilter(_sensor_network(), 0.99),
     "LTIAgent": lambda: agents.LTIAgent.from_continuous([[0.0, 1.0], [0.0, 0.0]], [[0.0], [1.0]], 0.1),
     "Ellipsoid": lambda: ellipsoids.Ellipsoid([1.0, 2.0], np.diag([4.0, 1.0])),
     "SwitchingTopology": lambda: consensus.SwitchingTopology([0.0, 1.0], [graphs.path_graph(3), graphs.ring_graph(3)]),

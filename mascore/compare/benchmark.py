@@ -60,9 +60,11 @@ ALL_TEAM_METHODS = TEAM_METHODS + tuple(m for m in (*VLAHAKIS_PHI, *SM_CONFIDENC
 #: The common-target and localization filters' knob variants (their specs in :mod:`mascore.fusion`): the
 #: consensus steps L in {1, 2, 5} and L = the graph's diameter, and HCMCI's novelty weight omega = N against
 #: the consistency-safe omega of its docstring (``omega max [W^L]_ij <= 1``). Swept at N = 8 on the ring
-#: (2 seed blocks); the headline tables keep the recipes (L = 1 and 5, omega = N).
+#: (2 seed blocks); the headline tables keep the recipes (L = 1 and 5, omega = N). Olfati-Saber's KCF gain
+#: eps in {0.01, 0.1, 0.5} (0.1 the headline's; 0.5 = 1 / d_max on the ring, the largest that keeps its consensus
+#: step a convex combination for every covariance).
 FUSION_KNOB_METHODS = ("ci-L2", "ci-Ldiam", "hcmci-L2", "hcmci-Ldiam", "hcmci-safe-L1", "hcmci-safe-L5",
-                       "icf-L2", "icf-Ldiam")
+                       "icf-L2", "icf-Ldiam", "kcf-eps0.01", "kcf-eps0.5")
 
 
 #: Largest initial spread or noise std (m, m/s) the benchmark accepts: the squared errors stay far from overflow.
@@ -215,6 +217,9 @@ KNOBS = (
     *(Knob(f"HCMCI novelty weight omega (L = {L})", task, (("N", task, f"hcmci-L{L}"),
                                                           ("safe", task, f"hcmci-safe-L{L}")), ("N",))
       for task in ("target", "localization") for L in (1, 5)),
+    *(Knob("KCF consensus gain eps", task, (("0.01", task, "kcf-eps0.01"), ("0.1", task, "kcf"),
+                                            ("0.5", task, "kcf-eps0.5")), ("0.1",))
+      for task in ("target", "localization")),
 )
 
 

@@ -678,9 +678,9 @@ def _excludes_one(nees: Mapping[str, Interval], methods: Sequence[str]) -> str:
 def switching_target(ev: Evidence):
     """On the switching topology CI filters stay conservative, diffusion becomes overconfident."""
     sw = {"task": "target", "graph": "switching"}
-    ev.rows(**sw)
-    nees = {m: ev.mean("nees_own", m, **sw) for m in TARGET_METHODS}
-    ratio = {m: ev.ratio(m, **sw) for m in TARGET_METHODS}
+    ran = set(ev.rows(**sw)["method"])  # the quick grid runs the set-membership filter on the ring only
+    nees = {m: ev.mean("nees_own", m, **sw) for m in TARGET_METHODS if m in ran}
+    ratio = {m: ev.ratio(m, **sw) for m in TARGET_METHODS if m in ran}
     ring = ev.ratio("diffusion", task="target", graph="ring", n_agents=16)
     return ev.claim(
         "switching-target",

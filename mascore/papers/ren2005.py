@@ -1508,8 +1508,8 @@ ERRATA = (
     "eqs. (4)-(5) do, but in continuous time white noise has an intensity, not a covariance, and the two have "
     "different units. We keep the paper's form and read $\\nu_{ij}$ as white noise of intensity $\\Omega_{ij}$.",
     "**The independence assumption** (block-diagonal $R_i$, Sec. II-A) is not harmless: on Fig. 1's data the "
-    "agreed value lands about 1.3 h below the central fusion of the initial data, and the agents' $P_i$ "
-    "understate their actual error variances (beyond the paper).",
+    "agreed value lands well below the central fusion of the initial data (the chapter's bias figure measures "
+    "the gap), and the agents' $P_i$ understate their actual error variances (beyond the paper).",
 )
 
 #: The paper's registry: one study, its figures, tables and claims.
