@@ -442,7 +442,7 @@ class SetMembershipModel(Frozen):
             Q = _check_pd_small(self.Q, "Q", G.shape[1])
             with np.errstate(over="ignore", invalid="ignore"):
                 GQG = G @ Q @ G.T
-            if not np.isfinite(GQG).all():
+            if not np.isfinite(GQG).all() or np.abs(GQG).max() > _MAX_SHAPE_ENTRY:
                 raise ValueError("G (disturbance matrix): G Q G^T overflows floating point; G and Q must be of "
                                  "moderate magnitude (rescale the units of the state or of the disturbance)")
             self._set(A=frozen_copy(A), G=frozen_copy(G), Q=frozen_copy(Q), GQG=frozen_copy(GQG))
@@ -593,6 +593,8 @@ class SetMembershipModel(Frozen):
         """
         c, E, y = (require_finite(_float_array(a, name), name) for a, name in ((center, "center"), (shape, "shape"),
                                                                               (y, "y")))
+        if c.ndim != 2 or E.shape[-2:] != (c.shape[1],) * 2 or E.ndim not in (2, 3) or (E.ndim == 3 and len(E) != len(c)):
+            raise ValueError(f"center must be (N, n) and shape (n, n) or (N, n, n); got {c.shape} and {E.shape}")
         i = agent_index(i, len(c))
         return ({"center": c[i].copy(), "shape": (E if E.ndim == 2 else E[i]).copy(), "y": y[i].copy(),
                  "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
@@ -717,7 +719,7 @@ class SetMembershipModel(Frozen):
                              f"floating point; rescale the state's units")
         batch = c.shape[:-1]
         if P.shape[:-2] != batch or y.shape[:-1] != batch:
-            batch = np.broadcast_shapes(batch, P.shape[:-2], y.shape[:-1])
+            batch = kernels.broadcast(center=batch, shape=P.shape[:-2], y=y.shape[:-1])
             c, P, y = (np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n)),
                        np.broadcast_to(y, (*batch, p)))
         if check_consistency:
@@ -761,7 +763,7 @@ class SetMembershipModel(Frozen):
         n = self.n
         batch = c.shape[:-1]
         if P.shape[:-2] != batch:
-            batch = np.broadcast_shapes(batch, P.shape[:-2])
+            batch = kernels.broadcast(center=batch, shape=P.shape[:-2])
             c, P = np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n))
         new_c = c @ A.T
         if B is not None:
@@ -814,6 +816,10 @@ def _check_run_data(x0_hat, P0, y, B, u):
     if y.ndim < 2 or y.shape[0] < 1:
         raise ValueError(f"y must be an array (T_f + 1, ..., p) with at least one measurement; got shape {y.shape}")
     kernels.broadcast(x0_hat=c.shape[:-1], P0=P.shape[:-2], y=y.shape[1:-1])
+    for name, M in (("x0_hat", c), ("P0", P)):  # the first correction squares them
+        if M.size and np.abs(M).max() > _MAX_SHAPE_ENTRY:
+            raise ValueError(f"{name} has entries of magnitude {np.abs(M).max():.3g}, beyond {_MAX_SHAPE_ENTRY:g}: "
+                             f"the correction would overflow floating point; rescale the state's units")
     if (B is None) != (u is None):
         raise ValueError("give both B and u, or neither")
     if u is not None:

@@ -117,3 +117,25 @@ def test_a_set_membership_error_for_a_labelled_batch_names_the_input_not_numpy()
     model = set_membership.SetMembershipModel(C=np.eye(1, 2), D=np.eye(1), R=np.eye(1), n=2)
     with pytest.raises(ValueError, match=r"correction step, agent batch: center or shape has NaN/inf entries"):
         model.correct(_nan(np.zeros(2)), np.eye(2), np.zeros(1), agent=np.arange(3))
+
+
+def test_set_membership_runs_name_their_own_arguments_when_too_large_or_mismatched():
+    A, G, C, D, Q, R = np.eye(2), np.eye(2), np.eye(1, 2), np.eye(1), 0.01 * np.eye(2), 0.04 * np.eye(1)
+    y = np.zeros((3, 1))
+    with pytest.raises(ValueError, match=r"\bP0 has entries of magnitude 1e\+300"):
+        set_membership.run_filter(np.zeros(2), np.diag([1e300, 1.0]), y, A, G, C, D, Q, R)
+    with pytest.raises(ValueError, match=r"\bx0_hat has entries of magnitude 1e\+300"):
+        set_membership.run_filter(np.array([1e300, 0.0]), np.eye(2), y, A, G, C, D, Q, R)
+    with pytest.raises(ValueError, match=r"G Q G\^T overflows"):
+        set_membership.run_filter(np.zeros(2), np.eye(2), y, A, G, C, D, np.diag([1e300, 1.0]), R)
+    with pytest.raises(ValueError, match=r"do not broadcast: center \(10,\), shape \(11,\)"):
+        set_membership.predict(np.zeros((10, 2)), np.broadcast_to(np.eye(2), (11, 2, 2)), A, G, Q)
+
+
+def test_the_set_membership_forwarding_filter_refuses_a_non_finite_centre():
+    from mascore import fusion
+
+    model = sensor_network.SensorNetworkModel(np.eye(1), 0.01 * np.eye(1), [np.eye(1)] * 2, [np.eye(1)] * 2,
+                                              graphs.path_graph(2))
+    with pytest.raises(ValueError, match=r"\bx contains NaN or infinite"):
+        fusion.SetMembershipForwardingFilter(model).predict(np.array([[np.nan], [1.0]]), np.ones((2, 1, 1)))
