@@ -43,7 +43,7 @@ API_GROUPS: dict[str, tuple[str, ...]] = {
     "Consensus and cooperative control": ("consensus", "consensus_filters", "rendezvous", "flocking", "synchronization",
                                           "lqr", "riccati"),
     "Estimation": ("estimation", "team_model", "distributed_kf", "centralized_team_filter", "team_observability",
-                   "distributed_ekf", "sensor_network", "fusion", "fusion_cost", "own_state", "ellipsoids",
+                   "distributed_ekf", "sensor_network", "fusion", "fusion_cost", "fusion_links", "own_state", "ellipsoids",
                    "set_membership", "observers", "network_observer"),
     "Comparing the methods": ("compare", "papers.compare", "agent_cost", "sweep"),
     "Reproduction and the book": ("registry", "settings", "claims", "ledger", "formatting", "report", "reproduce",

@@ -172,7 +172,7 @@ def control_and_jacobian(X: np.ndarray, gains: FlockingGains, with_control: bool
     batch = X.shape[:-2]
     U = np.empty((*batch, N, n)) if with_control else None
     G = np.empty((*batch, N, n, N, m)) if out is None else out
-    Xt = np.ascontiguousarray(np.moveaxis(X, -1, -2))  # (..., m, N)
+    Xt = np.ascontiguousarray(np.swapaxes(X, -1, -2))  # (..., m, N)
     rows = max(1, min(N, _PAIR_BLOCK // max(1, int(np.prod(batch, dtype=np.int64)) * N)))
     for i0 in range(0, N, rows):
         _control_and_jacobian_rows(Xt, gains, i0, min(N, i0 + rows), U, G, scale)
@@ -207,11 +207,11 @@ def _control_and_jacobian_rows(Xt, gains, i0, i1, U, G, scale=1.0):
     any_near = bool(near.any())
     if any_near:
         np.maximum(de, dmin, out=de)
-    f1 = np.log1p(d2)
-    f1 *= -gains.beta
-    np.exp(f1, out=f1)  # phi1 = (1 + |p|^2)^(-beta)
     one_d2 = d2
     one_d2 += 1.0
+    f1 = np.log2(one_d2)  # base 2: numpy's exp2 is vectorized, its exp (and log1p) are not
+    f1 *= -gains.beta
+    np.exp2(f1, out=f1)  # phi1 = (1 + |p|^2)^(-beta)
     c5 = gains.rho4 * gains.rho5 / 2
     c6 = gains.rho4 * gains.rho6 / 2
     # pair scalars with the signs of -J (G = -J off the diagonal), times `scale`: J = s_I [I 0] + z_I [0 I]

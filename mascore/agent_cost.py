@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import estimation, rendezvous
+from . import estimation
 from ._validation import check_budget, check_positive_int
 from .compare.benchmark import FUSION_KNOB_METHODS, SETTINGS, BenchmarkSettings, check_n_agents
 from .compare.target import localization_model, target_model
@@ -52,7 +52,7 @@ __all__ = [
     "AGENT_METHODS",  # noqa: F822 (read from the specs by the module's __getattr__)
     "AGENT_ORDER",  # noqa: F822 (read from the specs by the module's __getattr__)
     "AGENT_TASKS",
-    "TEAM_METHODS",
+    "TEAM_METHODS",  # noqa: F822 (read from the specs by the module's __getattr__)
     "agent_methods",
     "MAX_AGENTS",
     "WHOLE_FILTER",  # noqa: F822 (read from the specs by the module's __getattr__)
@@ -69,10 +69,6 @@ __all__ = [
 
 #: Tasks whose per-agent cost is measured.
 AGENT_TASKS = ("team", "target", "localization")
-#: The team task's methods timed (the estimators of :mod:`mascore.compare`'s own-state task at their own recipe;
-#: their specs sit beside their filters); the methods of the target and localization tasks are all their specs':
-#: see :func:`agent_methods`.
-TEAM_METHODS = ("centralized", "local", "forwarding", "song-mb", "song-eb", "vlahakis", "set-membership")
 #: Largest N measured per (task, method), with the reason; the others go to 128.
 MAX_AGENTS = {
     ("team", "song-eb"): (32, "its joint covariance of all agents' team estimates holds (2 N^2)^2 floats (per "
@@ -93,9 +89,10 @@ def agent_methods(task: str) -> tuple[str, ...]:
     Returns
     -------
     tuple of str
-        :data:`TEAM_METHODS`, or the names of the task's :class:`mascore.estimation.MethodSpec` (a new filter
-        module's included; not the knobs' other settings, :data:`mascore.compare.FUSION_KNOB_METHODS`:
-        the same filters, whose costs follow from the counts).
+        The names of the task's :class:`mascore.estimation.MethodSpec` (a new filter module's included):
+        the team task's at their own recipe (``role="recipe"``), the others' without the knobs' other
+        settings (:data:`mascore.compare.FUSION_KNOB_METHODS`: the same filters, whose costs follow from
+        the counts).
 
     Examples
     --------
@@ -106,12 +103,14 @@ def agent_methods(task: str) -> tuple[str, ...]:
     if task not in AGENT_TASKS:
         raise ValueError(f"task must be one of {AGENT_TASKS}; got {task!r}")
     if task == "team":
-        return TEAM_METHODS
+        return estimation.method_names("team", ("recipe",))
     return tuple(m for m in estimation.method_names(task) if m not in FUSION_KNOB_METHODS)
 
 
 def __getattr__(name: str):
-    """``AGENT_METHODS``, ``WHOLE_FILTER`` and ``AGENT_ORDER``, read from the specs when asked (always current)."""
+    """``TEAM_METHODS``, ``AGENT_METHODS``, ``WHOLE_FILTER`` and ``AGENT_ORDER``, read from the specs when asked."""
+    if name == "TEAM_METHODS":  # the team task's methods timed: at their own recipe (agent_methods("team"))
+        return agent_methods("team")
     if name == "AGENT_METHODS":  # methods per task
         return {t: agent_methods(t) for t in AGENT_TASKS}
     if name == "WHOLE_FILTER":  # (task, method) whose busiest agent runs the whole filter
@@ -237,6 +236,8 @@ def agent_step(task: str, method: str, n_agents: int, *, agent: int = 0, seed: i
 
 def _team_step(method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> AgentStep:
     """The team task: the estimator of :mod:`mascore.compare` run two steps, then agent i's next step."""
+    from .rendezvous import consensus_control
+
     team = team_setup(N, "gaussian", 1.0, s, "ring")
     rng = np.random.default_rng(seed)
     x = np.concatenate([s.init_pos * rng.standard_normal((1, N, 2)), s.init_vel * rng.standard_normal((1, N, 2))],
@@ -253,7 +254,7 @@ def _team_step(method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> 
 
     def control(Z):
         view = est.views(Z, S)
-        return rendezvous.consensus_control(np.broadcast_to(view, (1, N, N, 4)), team.laplacian, team.K)
+        return consensus_control(np.broadcast_to(view, (1, N, N, 4)), team.laplacian, team.K)
 
     for _ in range(2):  # two steps of the team-wide estimator: a state that is not the initial one
         Z = measure()
@@ -264,14 +265,14 @@ def _team_step(method: str, N: int, i: int, seed: int, s: BenchmarkSettings) -> 
     Z = measure()
     if estimation.method_spec(method, "team").whole_filter:
         U = control(Z)  # the inputs of the timed step (from the views before the update: the work is the same)
-        filt, own, messages = est.agent_inputs(Z, S, U, i)
-        return AgentStep("team", method, N, i, len(nbrs), "whole filter", lambda: filt.agent_step(i, own, messages))
+        own, messages = est.agent_inputs(Z, S, U, i)
+        return AgentStep("team", method, N, i, len(nbrs), "whole filter", lambda: est.agent_step(i, own, messages))
     before = copy.deepcopy(est)  # agent i's prior, and the team's views of this step, from the same state
     est.update(Z, S)
     U = control(Z)
     est.predict(U)
-    filt, own, messages = before.agent_inputs(Z, S, U, i)
-    return AgentStep("team", method, N, i, len(nbrs), "one agent", lambda: filt.agent_step(i, own, messages),
+    own, messages = before.agent_inputs(Z, S, U, i)
+    return AgentStep("team", method, N, i, len(nbrs), "one agent", lambda: before.agent_step(i, own, messages),
                      lambda: est.agent_state(i))
 
 

@@ -40,6 +40,7 @@ from ._validation import (
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .estimation import Message, MethodSpec
+from .own_state import CentralizedOutputFilter
 from .team_model import TeamFilterModel, reduce_covariance, team_filter_model
 
 __all__ = [
@@ -677,12 +678,19 @@ def _separable_output_update(model, info, CtRinv, x_pred, P, Z, S):
 #: The centralized filter of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost): the bound.
 METHODS = (
     MethodSpec("centralized", ("team",),
-               lambda team, x_hat0: CentralizedTeamFilter(
-                   team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N), team.B, x_hat0, team.P0),
-               lambda n, q, d, N: (2.0 * n * (d + 1), _separable_centre_flops(n, d, N)),
+               lambda team, x_hat0: _centralized_filter(team, x_hat0),
+               lambda n, q, d, N: (float((n + q) * (d + 1)), _separable_centre_flops(n, d, N)),
                {"team": ("O(N n^3) at the centre: N separate filters (the own state separates)", "O(N n^2)")},
                lambda n, q, d, N: float(N * (n**2 + n)), whole_filter=True, position=0),
 )
+
+
+def _centralized_filter(team, x_hat0: np.ndarray) -> CentralizedTeamFilter | CentralizedOutputFilter:
+    """``build(team, x_hat0)``: the centre's filter of the team task (positions only: its output filter)."""
+    if team.sensing == "position":
+        return CentralizedOutputFilter(team.A, team.B, team.Q_filter, team.C, team.R[0, 0], team.N)
+    return CentralizedTeamFilter(team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N), team.B,
+                                 x_hat0, team.P0)
 
 
 def _separable_centre_flops(n: int, d: int, N: int) -> float:

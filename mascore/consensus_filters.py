@@ -5,8 +5,10 @@ it mixes what the neighbours it hears at that step (``G[i, j] > 0``) send it.
 :class:`KalmanConsensusFilter` is the discrete Kalman consensus of Ren, Beard and Kingston
 (2005), eqs. (4)-(5) (:func:`mascore.consensus.kalman_consensus_step`), with its covariance;
 :class:`AverageConsensusFilter` the average with Metropolis weights on the delivered links
-(Xiao, Boyd and Lall 2005), without one. Both implement the estimator protocol
-(:mod:`mascore.estimation`) and declare their methods of the comparison's ``shared`` task.
+(Xiao, Boyd and Lall 2005), without one; ``CentralFusionFilter`` (the bound) and
+``NoFusionFilter`` the two ends. All implement the estimator protocol
+(:mod:`mascore.estimation`), with ``fuse(xi, P, G)`` the shared task's whole run, and declare
+their methods of the comparison's ``shared`` task.
 
 Shapes: ``xi`` ``(..., N, m)``, ``P`` ``(..., N, m, m)``, ``G`` ``(..., N, N)`` (zero diagonal).
 """
@@ -21,12 +23,13 @@ from numpy.typing import ArrayLike
 
 from ._validation import Frozen, agent_index, check_positive, check_positive_int, require_finite
 from ._validation import float_array as _float_array
-from .consensus import kalman_consensus_step
-from .estimation import Message, MethodSpec
+from .consensus import central_fusion, kalman_consensus_step
+from .estimation import Message, MethodSpec, protocol_docs
 
 __all__ = ["KalmanConsensusFilter", "AverageConsensusFilter", "METHODS"]
 
 
+@protocol_docs
 class KalmanConsensusFilter(Frozen):
     """Ren et al.'s discrete Kalman consensus, noise-free messages: one step per :meth:`update`.
 
@@ -110,6 +113,36 @@ class KalmanConsensusFilter(Frozen):
         """
         return kalman_consensus_step(xi, P, G, Q=self.Q, Omega=self.Omega)
 
+    def fuse(self, xi: ArrayLike, P: ArrayLike, G: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """The shared task's run: one :meth:`update` per step of the delivered links `G`.
+
+        Parameters
+        ----------
+        xi : (..., N, m) array_like
+            The priors.
+        P : (..., N, m, m) array_like
+            Their covariances.
+        G : (steps, ..., N, N) array_like
+            The links delivered at each step.
+
+        Returns
+        -------
+        xi, P : ndarray
+            After the last step.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs
+        >>> from mascore.consensus_filters import KalmanConsensusFilter
+        >>> f, G = KalmanConsensusFilter(0.0, 0.0), np.stack([graphs.path_graph(3)] * 50)
+        >>> f.fuse(np.array([[0.0], [2.0], [4.0]]), np.ones((3, 1, 1)), G)[0][:, 0].round(3)
+        array([2., 2., 2.])
+        """
+        for G_k in G:  # noise-free messages
+            xi, P = self.update(xi, P, G_k)
+        return xi, P
+
     def agent_inputs(self, xi: ArrayLike, P: ArrayLike, G: ArrayLike, i: int) -> tuple[dict, tuple]:
         """Agent i's state and the states and covariances its neighbours send it at the step (one run).
 
@@ -148,31 +181,7 @@ class KalmanConsensusFilter(Frozen):
         return {"xi": xi[i].copy(), "P": P[i].copy()}, ((xi[heard].copy(), P[heard].copy()),)
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's step: eqs. (4)-(5) on itself and the neighbours it heard (the same kernel as :meth:`update`).
-
-        Parameters
-        ----------
-        i : int
-            The agent.
-        own, messages
-            From :meth:`agent_inputs`.
-
-        Returns
-        -------
-        xi_i, P_i : ndarray
-            Its estimate ``(m,)`` and covariance ``(m, m)`` after the step.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs
-        >>> from mascore.consensus_filters import KalmanConsensusFilter
-        >>> f = KalmanConsensusFilter(0.1, 0.1)
-        >>> xi, P, G = np.array([[0.0], [2.0], [4.0]]), np.ones((3, 1, 1)), graphs.path_graph(3)
-        >>> x1, P1 = f.agent_step(1, *f.agent_inputs(xi, P, G, 1))
-        >>> bool(np.allclose(x1, f.update(xi, P, G)[0][1]))
-        True
-        """
+        # eqs. (4)-(5) on agent i and the neighbours it heard: xi_i (m,), P_i (m, m)
         xi_n, P_n = messages[0]
         d = len(xi_n)
         g = np.zeros((d + 1, d + 1))
@@ -206,6 +215,7 @@ class KalmanConsensusFilter(Frozen):
         return (Message("state xi_i and covariance P_i", float(m + m * (m + 1) // 2)),)
 
 
+@protocol_docs
 class AverageConsensusFilter(Frozen):
     """Average consensus with Metropolis weights on the links delivered at each step; no covariance.
 
@@ -281,6 +291,38 @@ class AverageConsensusFilter(Frozen):
         W = W + np.eye(G_k.shape[-1]) * (1.0 - W.sum(-1))[..., None]
         return W @ xi
 
+    def fuse(self, xi: ArrayLike, P: ArrayLike | None, G: ArrayLike) -> tuple[np.ndarray, None]:
+        """The shared task's run: one :meth:`update` per step of the delivered links `G`.
+
+        Parameters
+        ----------
+        xi : (..., N, m) array_like
+            The priors.
+        P : array_like or None
+            Unused (the average carries no covariance).
+        G : (steps, ..., N, N) array_like
+            The links delivered at each step.
+
+        Returns
+        -------
+        xi : ndarray
+            After the last step.
+        None
+            No covariance.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs
+        >>> from mascore.consensus_filters import AverageConsensusFilter
+        >>> G = np.stack([graphs.path_graph(3)] * 60)
+        >>> AverageConsensusFilter().fuse(np.array([[0.0], [3.0], [6.0]]), None, G)[0][:, 0].round(3)
+        array([3., 3., 3.])
+        """
+        for G_k in G:
+            xi = self.update(xi, G_k)
+        return xi, None
+
     def agent_inputs(self, xi: ArrayLike, G: ArrayLike, i: int) -> tuple[dict, tuple]:
         """Agent i's state and degree, and its neighbours' states and degrees at the step (one run).
 
@@ -316,29 +358,7 @@ class AverageConsensusFilter(Frozen):
         return {"xi": xi[i].copy(), "degree": deg[i]}, ((xi[heard].copy(), deg[heard].copy()),)
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray]:
-        """Agent i's row of ``W xi``.
-
-        Parameters
-        ----------
-        i : int
-            The agent.
-        own, messages
-            From :meth:`agent_inputs`.
-
-        Returns
-        -------
-        tuple of ndarray
-            Its estimate after the step ``(m,)``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs
-        >>> from mascore.consensus_filters import AverageConsensusFilter
-        >>> f, xi, G = AverageConsensusFilter(), np.array([[0.0], [3.0], [6.0]]), graphs.path_graph(3)
-        >>> bool(np.allclose(f.agent_step(0, *f.agent_inputs(xi, G, 0))[0], f.update(xi, G)[0]))
-        True
-        """
+        # agent i's row of W xi: (xi_i,), (m,)
         xi_n, deg_n = messages[0]
         w = 1.0 / (1.0 + np.maximum(own["degree"], deg_n))
         return ((1.0 - w.sum()) * own["xi"] + w @ xi_n,)
@@ -367,6 +387,89 @@ class AverageConsensusFilter(Frozen):
         return (Message("state xi_i", float(check_positive_int(m, "m"))),)
 
 
+class CentralFusionFilter(Frozen):
+    """The bound of the shared task: a centre receives every prior and returns the fused one to all.
+
+    The inverse-covariance weighted mean (:func:`mascore.consensus.central_fusion`), once: the links
+    do not matter (each agent sends its prior up and receives the fused estimate down).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore.consensus_filters import CentralFusionFilter
+    >>> xi, P = CentralFusionFilter().update(np.array([[0.0], [3.0]]), np.array([[[1.0]], [[2.0]]]), None)
+    >>> xi[:, 0], P[:, 0, 0].round(4)
+    (array([1., 1.]), array([0.6667, 0.6667]))
+    """
+
+    def _args(self) -> tuple:
+        return ()
+
+    def predict(self, xi: ArrayLike, P: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """The quantity does not move (identity); see :class:`mascore.estimation.Estimator`."""
+        return np.asarray(xi, dtype=float), np.asarray(P, dtype=float)
+
+    def update(self, xi: ArrayLike, P: ArrayLike, G: ArrayLike | None) -> tuple[np.ndarray, np.ndarray]:
+        """Every agent's estimate ``(..., N, m)`` and covariance ``(..., N, m, m)`` replaced by the fused ones."""
+        xi_f, P_f = central_fusion(xi, P)
+        N = np.shape(xi)[-2]
+        return (np.broadcast_to(xi_f[..., None, :], (*xi_f.shape[:-1], N, xi_f.shape[-1])),
+                np.broadcast_to(P_f[..., None, :, :], (*P_f.shape[:-2], N, *P_f.shape[-2:])))
+
+    def fuse(self, xi: ArrayLike, P: ArrayLike, G: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """The shared task's run: the fusion once, whatever the steps of `G`."""
+        return self.update(xi, P, None)
+
+    def agent_inputs(self, xi: ArrayLike, P: ArrayLike, G: ArrayLike | None, i: int) -> tuple[dict, tuple]:
+        """The centre's data: every prior ``(N, m)``, ``(N, m, m)`` (see :class:`mascore.estimation.Estimator`)."""
+        return {"xi": _float_array(xi, "xi").copy(), "P": _float_array(P, "P").copy()}, ()
+
+    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        """The centre's step: the fused ``(m,)`` estimate and ``(m, m)`` covariance."""
+        return central_fusion(own["xi"], own["P"])
+
+    def messages(self, i: int = 0, m: int = 2) -> tuple[Message, ...]:
+        """Up: the prior and its covariance; down: the fused estimate (``2 m + m (m + 1) / 2`` floats)."""
+        return (Message("prior xi_i and P_i up", float(m + m * (m + 1) // 2)), Message("fused estimate down", float(m)))
+
+
+class NoFusionFilter(Frozen):
+    """No fusion: every agent keeps its prior (the reference without communication).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore.consensus_filters import NoFusionFilter
+    >>> NoFusionFilter().update(np.zeros((3, 2)), np.ones((3, 2, 2)), None)[0].shape
+    (3, 2)
+    """
+
+    def _args(self) -> tuple:
+        return ()
+
+    def predict(self, xi: ArrayLike, P: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Identity; see :class:`mascore.estimation.Estimator`."""
+        return np.asarray(xi, dtype=float), np.asarray(P, dtype=float)
+
+    def update(self, xi: ArrayLike, P: ArrayLike, G: ArrayLike | None) -> tuple[np.ndarray, np.ndarray]:
+        """Identity: no link is used."""
+        return np.asarray(xi, dtype=float), np.asarray(P, dtype=float)
+
+    fuse = update
+
+    def agent_inputs(self, xi: ArrayLike, P: ArrayLike, G: ArrayLike | None, i: int) -> tuple[dict, tuple]:
+        """Agent i's prior; no message (see :class:`mascore.estimation.Estimator`)."""
+        return {"xi": _float_array(xi, "xi")[i].copy(), "P": _float_array(P, "P")[i].copy()}, ()
+
+    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        """Its prior, unchanged."""
+        return own["xi"], own["P"]
+
+    def messages(self, i: int = 0) -> tuple[Message, ...]:
+        """Nothing."""
+        return ()
+
+
 #: Why Ren et al.'s Kalman consensus does not apply elsewhere (the tables show it).
 _REN_NOT_APPLICABLE = MappingProxyType({
     "target": "fuses priors of a quantity nobody measures; with measurements it becomes the consensus filters above",
@@ -382,18 +485,25 @@ def _floats_flops_ren(n: int, q: int, d: int, N: int) -> tuple[float, float]:
 #: The consensus methods of the shared task: Ren et al.'s (Q = Omega = 0.1, the paper's; 0, the knob's other end;
 #: 0.3, 0.6 and 1, the knob swept) and the average.
 METHODS = (
+    MethodSpec("central-fusion", ("shared",), lambda scenario: CentralFusionFilter(),
+               lambda n, q, d, N: (float(2 * n + n * (n + 1) // 2), float(N * (n**3 + 2 * n**2))),
+               {"shared": ("O(N m^3) at the centre", "O(N m^2)")}, lambda n, q, d, N: float(N * (n**2 + n)),
+               whole_filter=True, position=10),
+    MethodSpec("no-fusion", ("shared",), lambda scenario: NoFusionFilter(), lambda n, q, d, N: (0.0, 0.0),
+               {"shared": ("O(1)", "O(m^2)")}, lambda n, q, d, N: float(n**2 + n), position=11),
     MethodSpec("average-consensus", ("shared",), lambda scenario: AverageConsensusFilter(),
                lambda n, q, d, N: (float(n), float(2 * (d + 1) * n)), {"shared": ("O(d m)", "O(d m)")},
                lambda n, q, d, N: float(n + d * n), position=12),
     MethodSpec("ren-kc", ("shared",), lambda scenario: KalmanConsensusFilter(0.1, 0.1), _floats_flops_ren,
                {"shared": ("O(d m^3)", "O(d m^2)")}, lambda n, q, d, N: float((d + 1) * (n**2 + n)), _REN_NOT_APPLICABLE,
-               position=13),
+               position=13, family="ren-kc", setting=0.1),
     MethodSpec("ren-kc-q0", ("shared",), lambda scenario: KalmanConsensusFilter(0.0, 0.0), _floats_flops_ren,
-               {"shared": ("O(d m^3)", "O(d m^2)")}, lambda n, q, d, N: float((d + 1) * (n**2 + n)), position=14),
+               {"shared": ("O(d m^3)", "O(d m^2)")}, lambda n, q, d, N: float((d + 1) * (n**2 + n)), position=14,
+               role="variant", family="ren-kc", setting=0.0),
     # the knob Q = Omega swept further (mascore.compare.KNOBS)
     *(MethodSpec(f"ren-kc-q{q:g}", ("shared",), lambda scenario, q=q: KalmanConsensusFilter(q, q), _floats_flops_ren,
                  {"shared": ("O(d m^3)", "O(d m^2)")}, lambda n, q, d, N: float((d + 1) * (n**2 + n)),
-                 position=14 + k) for k, q in enumerate((0.3, 0.6, 1.0), start=1)),
+                 position=14 + k, role="knob", family="ren-kc", setting=q) for k, q in enumerate((0.3, 0.6, 1.0), start=1)),
 )
 
 

@@ -1562,7 +1562,7 @@ def _song_filter(mode: str):
 
 METHODS = (
     MethodSpec("song-mb", ("team",), _song_filter("mb"),
-               lambda n, q, d, N: (0.0, filter_cost("measurement-forwarding", n=N * n, q=n, degree=d).flops),
+               lambda n, q, d, N: (0.0, filter_cost("measurement-forwarding", n=N * n, q=n, degree=round(d)).flops),
                {"team": ("O(N^3 n^3): its own covariance of the whole team", "O(N^2 n^2)")},
                lambda n, q, d, N: float((N * n) ** 2 + N * n), _SONG_MB_NOT_APPLICABLE, position=3),
     MethodSpec("song-eb", ("team",), _song_filter("eb"), lambda n, q, d, N: (0.0, float(4 * (N * N * n) ** 3)),

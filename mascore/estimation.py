@@ -41,14 +41,19 @@ __all__ = [
     "SetState",
     "Message",
     "Estimator",
+    "protocol_docs",
     "MethodSpec",
     "method_specs",
     "method_spec",
     "method_names",
+    "knob_settings",
     "not_applicable",
+    "ROLES",
     "STUDY_LAYER",
 ]
 
+#: What a method is in the tables (:attr:`MethodSpec.role`): its recipe, a shown variant of its knob, a knob setting.
+ROLES = ("recipe", "variant", "knob")
 #: Modules of ``mascore`` above the numerical core (studies, CLI, book tools): never scanned for specs.
 STUDY_LAYER = frozenset({"agent_cost", "compare", "ledger", "papers", "plotting", "registry", "report", "reproduce",
                          "sweep"})
@@ -141,12 +146,30 @@ class Estimator(Protocol):
     filter's own: a state and the data it needs); ``agent_inputs`` cuts agent i's
     own data and its neighbours' messages of one step out of a team-wide state;
     ``agent_step(i, own_data, messages)`` is agent i's step alone; ``messages()``
-    declares what an agent sends per step.
+    declares what an agent sends per step. The filters' methods say what is particular
+    to them and refer here for the rest.
 
     Parameters
     ----------
     *args, **kwargs
         None: a protocol is a type to check against (``isinstance``), not a class to build.
+
+    Notes
+    -----
+    ``agent_inputs(<the filter's team-wide state and data of one step>, i)`` takes one run (no
+    batch axis) and returns ``(own, messages)``: a dict of agent i's own data (copies: its
+    prior, its measurements, its input) and a sequence, one entry per round of the step, of
+    what its neighbours sent it in that round (empty when nothing is sent).
+
+    ``agent_step(i, own, messages)`` computes agent i's step from these alone, with the same
+    kernels as the team-wide ``update`` and ``predict``; it returns a tuple of arrays, agent i's
+    state after the step (its estimate and covariance, or its set's centre and shape), equal
+    to agent i's row of the team-wide step (the tests and :mod:`mascore.agent_cost` check it).
+    A centralized filter's "agent" is the centre: its step is the whole filter's.
+
+    ``messages(i=0, ...)`` returns a tuple of :class:`Message`: what agent i sends per step,
+    to each neighbour or to the centre, with its floats (all rounds together); the floats of the
+    method's spec (:attr:`MethodSpec.cost`) are their sum.
 
     Examples
     --------
@@ -159,8 +182,91 @@ class Estimator(Protocol):
     predict: Callable[..., Any]
     update: Callable[..., Any]
     agent_inputs: Callable[..., tuple[Any, Sequence[Any]]]
-    agent_step: Callable[..., tuple]
-    messages: Callable[..., tuple[Message, ...]]
+
+    def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple:
+        """Agent i's step alone, from its own data and its neighbours' messages (the kernels of the team-wide step).
+
+        A filter's method without a docstring of its own takes this one (:func:`protocol_docs`); a
+        comment in it says what its step computes.
+
+        Parameters
+        ----------
+        i : int
+            The agent.
+        own : dict
+            Its own data of the step: the first value of ``agent_inputs``.
+        messages : sequence
+            What its neighbours sent it, one entry per round: the second value of ``agent_inputs``.
+
+        Returns
+        -------
+        tuple of ndarray
+            Agent i's state after the step (estimate and covariance, or the set's centre and shape):
+            its row of the team-wide ``update`` and ``predict``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import kalman
+        >>> model = kalman.LinearGaussianModel(np.eye(1), 0.1 * np.eye(1), np.eye(1), np.eye(1))
+        >>> x, P = np.zeros((2, 1)), np.eye(1)
+        >>> x_1, P_1 = model.agent_step(1, *model.agent_inputs(x, P, [[1.0], [3.0]], None, 1))
+        >>> x_ref, _ = kalman.predict(*kalman.update(x, P, [[1.0], [3.0]], model.H, model.R), model.F, model.Q)
+        >>> bool(np.allclose(x_1, x_ref[1]))
+        True
+        """
+        raise NotImplementedError
+
+    def messages(self, i: int = 0) -> tuple[Message, ...]:
+        """What agent i sends per step (to each neighbour, or to the centre), and how many floats.
+
+        Parameters
+        ----------
+        i : int
+            The agent (the same for all where the graph is regular).
+
+        Returns
+        -------
+        tuple of Message
+            One per kind of message (empty when the filter sends nothing); their floats sum to the
+            spec's (:attr:`MethodSpec.cost`).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore.network_observer import DiscreteNetworkObserver
+        >>> obs = DiscreteNetworkObserver(np.ones((2, 1)), 0.5, np.ones((2, 2)) - np.eye(2), np.eye(2),
+        ...                               np.eye(2, 1), np.array([[1.0, 0.0]]))
+        >>> obs.messages()[0].floats
+        1.0
+        """
+        raise NotImplementedError
+
+
+def protocol_docs(estimator_class: type) -> type:
+    """Class decorator: the methods ``agent_step`` and ``messages`` defined without a docstring take the protocol's.
+
+    Parameters
+    ----------
+    estimator_class : type
+        An estimator class.
+
+    Returns
+    -------
+    type
+        The class, its methods documented once (by :class:`Estimator`).
+
+    Examples
+    --------
+    >>> from mascore import kalman
+    >>> kalman.LinearGaussianModel.agent_step.__doc__ == Estimator.agent_step.__doc__
+    True
+    """
+    for name in ("agent_step", "messages"):
+        method = vars(estimator_class).get(name)
+        if method is not None and method.__doc__ is None:
+            method.__doc__ = getattr(Estimator, name).__doc__
+    return estimator_class
 
 
 @dataclass(frozen=True)
@@ -194,6 +300,14 @@ class MethodSpec:
         The busiest agent runs the whole filter (the centre): timed as the team-wide step.
     position : float
         Rank in the tables (ascending; ties by name).
+    role : {"recipe", "variant", "knob"}
+        ``"recipe"``: the method at its own paper's settings (every study, figure and cost table);
+        ``"variant"``: another setting of its knob shown beside it in the headline tables and at every
+        team size; ``"knob"``: a setting swept at N = 8 only (:data:`mascore.compare.KNOBS`).
+    family : str
+        The method whose knob it sets (``""``: its own name), e.g. ``"ren-kc"`` for ``"ren-kc-q0"``.
+    setting : float or None
+        The value of that knob (None: the scenario's default), e.g. Ren et al.'s Q.
 
     Examples
     --------
@@ -211,10 +325,16 @@ class MethodSpec:
     not_applicable: Mapping[str, str] = field(default_factory=dict)
     whole_filter: bool = False
     position: float = 0.0
+    role: str = "recipe"
+    family: str = ""
+    setting: float | None = None
 
     def __post_init__(self) -> None:
         if not (isinstance(self.name, str) and self.name):
             raise ValueError(f"name must be a non-empty string; got {self.name!r}")
+        if self.role not in ROLES:
+            raise ValueError(f"role of method {self.name!r} must be one of {ROLES}; got {self.role!r}")
+        object.__setattr__(self, "family", self.family or self.name)
         for attr in ("build", "cost"):
             if not callable(getattr(self, attr)):
                 raise TypeError(f"{attr} of method {self.name!r} must be callable")
@@ -278,21 +398,24 @@ def _declares_methods(info: pkgutil.ModuleInfo) -> bool:
     """Whether a module's source assigns ``METHODS`` at its top level (read, not imported: the scan stays cheap)."""
     path = Path(getattr(info.module_finder, "path", "")) / f"{info.name}.py"
     try:
-        return _METHODS_LINE.search(path.read_text(encoding="utf-8")) is not None
+        source = path.read_bytes()
     except OSError:  # not a plain source file: import it to see
         return True
+    return b"METHODS" in source and _METHODS_LINE.search(source) is not None  # the plain search first: fast
 
 
-_METHODS_LINE = re.compile(r"^METHODS\s*(?::[^=\n]*)?=", re.M)
+_METHODS_LINE = re.compile(rb"^METHODS\s*(?::[^=\n]*)?=", re.M)
 
 
-def method_names(task: str) -> tuple[str, ...]:
+def method_names(task: str, roles: Sequence[str] = ROLES) -> tuple[str, ...]:
     """The names of the methods of `task`, in table order (:func:`method_specs`).
 
     Parameters
     ----------
     task : str
         The scenario.
+    roles : sequence of str
+        Keep the methods of these roles (:attr:`MethodSpec.role`; default: all).
 
     Returns
     -------
@@ -304,8 +427,34 @@ def method_names(task: str) -> tuple[str, ...]:
     >>> from mascore.estimation import method_names
     >>> "ci-diffusion" in method_names("localization")
     True
+    >>> method_names("team", ("recipe",))[:3]
+    ('centralized', 'local', 'forwarding')
     """
-    return tuple(s.name for s in method_specs(task))
+    return tuple(s.name for s in method_specs(task) if s.role in roles)
+
+
+def knob_settings(family: str, task: str) -> dict[str, float | None]:
+    """The methods of `task` that set the knob of method `family`, each with its setting, in table order.
+
+    Parameters
+    ----------
+    family : str
+        The method whose knob (:attr:`MethodSpec.family`).
+    task : str
+        The scenario.
+
+    Returns
+    -------
+    dict of str to float or None
+        Method name -> :attr:`MethodSpec.setting` (the recipe's own among them).
+
+    Examples
+    --------
+    >>> from mascore.estimation import knob_settings
+    >>> knob_settings("ren-kc", "shared")["ren-kc-q0"]
+    0.0
+    """
+    return {s.name: s.setting for s in method_specs(task) if s.family == family}
 
 
 def method_spec(name: str, task: str | None = None) -> MethodSpec:

@@ -7,6 +7,23 @@ across agents and time. A :class:`~mascore.sensor_network.SensorNetworkModel` ho
 an undirected communication graph, checked once; every filter below is built on
 the same model, so every method sees exactly the same sensing.
 
+:class:`CentralizedFilter`             all measurements at one node: the bound (Kalman 1960)
+:class:`MeasurementForwardingFilter`   own and neighbours' measurements, one hop (exact local KF)
+:class:`ConsensusOnInformationFilter`  L consensus steps on the information pair (Battistelli and
+                                       Chisci 2014); with ``novelty_weight="N"`` the hybrid HCMCI
+                                       of Battistelli et al. (2015)
+:class:`InformationConsensusFilter`    information-weighted consensus (Kamal, Farrell and
+                                       Roy-Chowdhury 2013)
+:class:`DiffusionKalmanFilter`         incremental update, then diffusion of the estimates
+                                       (Cattivelli and Sayed 2010)
+:class:`CovarianceIntersectionFilter`  incremental update, then covariance intersection of the
+                                       neighbours' estimates (Hu, Xie and Zhang 2012)
+:func:`covariance_intersection`        fusion under unknown correlation (Julier and Uhlmann 1997)
+:func:`error_covariance`               a filter's exact error covariance (no Monte Carlo)
+:mod:`mascore.fusion_cost`             floats sent and flops per agent per step
+:mod:`mascore.fusion_links`            packet loss, one-step latency and send-on-delta messages
+=====================================  ==========================================================
+=======
 =======================================  ==========================================================
 :class:`CentralizedFilter`               all measurements at one node: the bound (Kalman 1960)
 :class:`MeasurementForwardingFilter`     own and neighbours' measurements, one hop (exact local KF)
@@ -26,6 +43,7 @@ the same model, so every method sees exactly the same sensing.
 :func:`covariance_intersection`          fusion under unknown correlation (Julier and Uhlmann 1997)
 :func:`error_covariance`                 a filter's exact error covariance (no Monte Carlo)
 :mod:`mascore.fusion_cost`               floats sent and flops per agent per step
+:mod:`mascore.fusion_links`              packet loss, one-step latency and send-on-delta messages
 =======================================  ==========================================================
 
 Shapes: every distributed filter's state is ``x`` of shape ``(..., N, n)`` and
@@ -683,6 +701,94 @@ class ConsensusOnInformationFilter(_NetworkFilter):
             return from_information(cur[0][0] + self.novelty_weight * cur[1][0], cur[0][1] + self.novelty_weight * cur[1][1])
         return from_information(*cur[0])
 
+    # one round of messages, exposed for links that lose, delay or withhold them (mascore.fusion_links)
+
+    @property
+    def round_weights(self) -> np.ndarray:
+        """The (N, N) weights of one consensus round: the Metropolis weights of the model's graph."""
+        return self.model.weights
+
+    @property
+    def pair_scale(self) -> float:
+        """``c``: a pair ``(Omega, q)`` sent is the density of mean ``Omega^{-1} q`` and information ``c Omega`` (1)."""
+        return 1.0
+
+    def message_pair(self, x: ArrayLike, P: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Each agent's message of its one round: its prediction's information pair plus its measurement's.
+
+        Parameters
+        ----------
+        x : (..., N, n) array_like
+            Predicted means.
+        P : (..., N, n, n) array_like
+            Predicted covariances, positive definite.
+        z : (..., sum q_i) array_like
+            The step's stacked measurement.
+
+        Returns
+        -------
+        Omega : (..., N, n, n) ndarray
+            ``P_i-^{-1} + H_i^T R_i^{-1} H_i``.
+        q : (..., N, n) ndarray
+            ``P_i-^{-1} x_i- + H_i^T R_i^{-1} z_i``.
+
+        Raises
+        ------
+        ValueError
+            HCMCI (``novelty_weight != 1``) sends two pairs per round, not one density.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.ring_graph(3))
+        >>> ci = fusion.ConsensusOnInformationFilter(model, 1)
+        >>> Om, q = ci.message_pair(np.zeros((3, 1)), np.ones((3, 1, 1)), [3.0, 0.0, 0.0])
+        >>> x, P = ci.pair_estimate(np.einsum("ij,jab->iab", ci.round_weights, Om), ci.round_weights @ q)
+        >>> bool(np.allclose(x, ci.update(np.zeros((3, 1)), np.ones((3, 1, 1)), [3.0, 0.0, 0.0])[0]))
+        True
+        """
+        if self.novelty_weight != 1.0:
+            raise ValueError("message_pair: HCMCI (novelty_weight != 1) sends a prior and a novelty pair per round, "
+                             "not one density; use novelty_weight=1 (CI)")
+        x, P = self._check_xP(x, P)
+        z = self.model._check_z(z)
+        Om, q = information_pair(x, P)
+        return Om + self.model.information_matrices, q + self.model._information_vectors(z)
+
+    def pair_estimate(self, Om: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The estimate of a fused information pair: ``x = Omega^{-1} q``, ``P = Omega^{-1}``.
+
+        Parameters
+        ----------
+        Om : (..., N, n, n) ndarray
+            Information matrices, positive definite (e.g. weighted sums of :meth:`message_pair`'s).
+        q : (..., N, n) ndarray
+            Information vectors.
+
+        Returns
+        -------
+        x : (..., N, n) ndarray
+            Means.
+        P : (..., N, n, n) ndarray
+            Covariances.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.ring_graph(3))
+        >>> fusion.ConsensusOnInformationFilter(model, 1).pair_estimate(np.full((3, 1, 1), 4.0), np.full((3, 1), 2.0))
+        (array([[0.5],
+               [0.5],
+               [0.5]]), array([[[0.25]],
+        <BLANKLINE>
+               [[0.25]],
+        <BLANKLINE>
+               [[0.25]]]))
+        """
+        return from_information(Om, q)
+
     def _correct(self, x, P, z):
         Om, q = information_pair(x, P)
         Om = mix(self._WL, Om, 2) + self._SL
@@ -778,6 +884,83 @@ class InformationConsensusFilter(_NetworkFilter):
         (Om_f, q_f), = consensus_agent([(Om / N + own["I"], qv / N + iv)], messages, W[i, i], W[i, own["nbrs"]])
         x_f, P_f = from_information(Om_f, q_f)
         return x_f, P_f / N
+
+    # one round of messages, exposed for links that lose, delay or withhold them (mascore.fusion_links)
+
+    @property
+    def round_weights(self) -> np.ndarray:
+        """The (N, N) weights of one consensus iteration, ``I - eps L`` (L the graph's Laplacian)."""
+        return self._consensus_matrix()
+
+    @property
+    def pair_scale(self) -> float:
+        """``c = N``: a pair ``(V, v)`` sent is the density of mean ``V^{-1} v`` and information ``N V``."""
+        return float(self.model.n_agents)
+
+    def message_pair(self, x: ArrayLike, P: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Each agent's message of its first iteration: ``(J_i- / N + H_i^T R_i^{-1} H_i, J_i- x_i- / N + H_i^T R_i^{-1} z_i)``.
+
+        Parameters
+        ----------
+        x : (..., N, n) array_like
+            Predicted means.
+        P : (..., N, n, n) array_like
+            Predicted covariances, positive definite.
+        z : (..., sum q_i) array_like
+            The step's stacked measurement.
+
+        Returns
+        -------
+        V : (..., N, n, n) ndarray
+            The information matrices sent.
+        v : (..., N, n) ndarray
+            The information vectors sent.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.ring_graph(3))
+        >>> icf = fusion.InformationConsensusFilter(model, 1)
+        >>> V, v = icf.message_pair(np.zeros((3, 1)), np.ones((3, 1, 1)), [3.0, 0.0, 0.0])
+        >>> x, P = icf.pair_estimate(np.einsum("ij,jab->iab", icf.round_weights, V), icf.round_weights @ v)
+        >>> bool(np.allclose(P, icf.update(np.zeros((3, 1)), np.ones((3, 1, 1)), [3.0, 0.0, 0.0])[1]))
+        True
+        """
+        x, P = self._check_xP(x, P)
+        z = self.model._check_z(z)
+        N = self.model.n_agents
+        J, q = information_pair(x, P)
+        return J / N + self.model.information_matrices, q / N + self.model._information_vectors(z)
+
+    def pair_estimate(self, V: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The estimate of a fused pair: ``x = V^{-1} v``, ``P = (N V)^{-1}``.
+
+        Parameters
+        ----------
+        V : (..., N, n, n) ndarray
+            Information matrices, positive definite (e.g. weighted sums of :meth:`message_pair`'s).
+        v : (..., N, n) ndarray
+            Information vectors.
+
+        Returns
+        -------
+        x : (..., N, n) ndarray
+            Means.
+        P : (..., N, n, n) ndarray
+            Covariances.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.ring_graph(4))
+        >>> x, P = fusion.InformationConsensusFilter(model, 1).pair_estimate(np.ones((4, 1, 1)), np.full((4, 1), 2.0))
+        >>> x[:, 0], P[:, 0, 0]                                   # P = 1 / (N V)
+        (array([2., 2., 2., 2.]), array([0.25, 0.25, 0.25, 0.25]))
+        """
+        Vinv = symmetric_part(np.linalg.inv(V))
+        return (Vinv @ v[..., None])[..., 0], Vinv / self.model.n_agents
 
     def _correct(self, x, P, z):
         N = self.model.n_agents

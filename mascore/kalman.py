@@ -61,7 +61,7 @@ from ._validation import (
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .agents import is_system, system_matrices
-from .estimation import Message, MethodSpec
+from .estimation import Message, MethodSpec, protocol_docs
 from .fusion_cost import kalman_step_flops
 
 __all__ = ["LinearGaussianModel", "predict", "update", "kalman_gain", "run_filter", "nees", "nees_interval",
@@ -76,6 +76,7 @@ _F64 = np.dtype(float)
 # ----------------------------------------------------------------------------
 
 
+@protocol_docs
 class LinearGaussianModel(Frozen):
     """A linear Gaussian state-space model, checked once, when it is built.
 
@@ -247,52 +248,12 @@ class LinearGaussianModel(Frozen):
                  "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's Kalman update with its own measurement, then its prediction (:func:`update`, :func:`predict`).
-
-        Parameters
-        ----------
-        i : int
-            The agent.
-        own, messages
-            From :meth:`agent_inputs`.
-
-        Returns
-        -------
-        x_i, P_i : ndarray
-            Its predicted estimate ``(m,)`` and covariance ``(m, m)``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import kalman
-        >>> model = kalman.LinearGaussianModel(np.eye(1), 0.1 * np.eye(1), np.eye(1), np.eye(1))
-        >>> x, P = model.agent_step(1, *model.agent_inputs(np.zeros((2, 1)), np.eye(1), [[1.0], [3.0]], None, 1))
-        >>> x, P
-        (array([1.5]), array([[0.6]]))
-        """
+        # update with its own measurement, then predict: x_i (m,), P_i (m, m)
         x, P = update(own["x"], own["P"], own["z"], self)
         return predict(x, P, self, own["u"])
 
     def messages(self, i: int = 0) -> tuple[Message, ...]:
-        """What an agent sends per step: nothing.
-
-        Parameters
-        ----------
-        i : int
-            The agent (the same for all).
-
-        Returns
-        -------
-        tuple of Message
-            Empty.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import kalman
-        >>> kalman.LinearGaussianModel(np.eye(1), np.eye(1), np.eye(1), np.eye(1)).messages()
-        ()
-        """
+        # nothing
         return ()
 
 
@@ -962,8 +923,7 @@ def _symmetrize_fresh(P):
 
 #: ``local``: every agent's Kalman filter of its own state from its own full-state measurement.
 METHODS = (
-    MethodSpec("local", ("team",), lambda team, x_hat0: LinearGaussianModel(team.A, team.Q_filter, np.eye(team.A.shape[0]),
-                                                                            team.R, team.B),
+    MethodSpec("local", ("team",), lambda team, x_hat0: LinearGaussianModel(team.A, team.Q_filter, team.C, team.R, team.B),
                lambda n, q, d, N: (float(n), kalman_step_flops(n)), {"team": ("O(n^3)", "O(n^2)")},
                lambda n, q, d, N: float(n**2 + n + d * n), position=1),
 )

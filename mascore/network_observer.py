@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike
 
 from ._validation import Frozen, agent_index, as_matrix, check_adjacency, finite_result, frozen_copy, step_arrays
 from ._validation import check_square as _square
-from .estimation import Message, MethodSpec
+from .estimation import Message, MethodSpec, protocol_docs
 
 __all__ = ["DiscreteNetworkObserver", "METHODS"]
 
@@ -25,6 +25,7 @@ __all__ = ["DiscreteNetworkObserver", "METHODS"]
 # the observer in discrete time, on a team (the comparison's estimator)
 
 
+@protocol_docs
 class DiscreteNetworkObserver(Frozen):
     """The distributed observer of Vlahakis and Halikias, discretized (forward Euler), on N agents at once.
 
@@ -207,58 +208,14 @@ class DiscreteNetworkObserver(Frozen):
         return own, ((x_hat[nbrs] @ self.C.T).copy(),)
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray]:
-        """Agent i's correction with its neighbours' output estimates, then its prediction.
-
-        Parameters
-        ----------
-        i : int
-            The agent.
-        own, messages
-            From :meth:`agent_inputs`.
-
-        Returns
-        -------
-        tuple of ndarray
-            ``(x_i,)``, its estimate after the step, ``(n,)``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs, network_observer
-        >>> obs = network_observer.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
-        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
-        >>> x, z, u = np.zeros((3, 2)), np.ones((3, 3, 1)), np.zeros((3, 1))
-        >>> x_i, = obs.agent_step(1, *obs.agent_inputs(x, z, u, 1))
-        >>> bool(np.allclose(x_i, obs.predict(obs.update(x[None], z[None], np.ones((1, 3, 3))), u[None])[0, 1]))
-        True
-        """
+        # correction with its neighbours' output estimates, then prediction: (x_i,), (n,)
         p = self.C @ own["x"]
         coupling = own["a"] @ ((own["z"] - own["z_nbrs"]) - (p - messages[0]))
         xu = own["x"] + self.gain @ ((own["z"] - p) + self.coupling * coupling)
         return (self.A @ xu + self.B @ own["u"],)
 
     def messages(self, i: int = 0) -> tuple:
-        """What agent i sends per step: its output estimate ``C x_hat_i``, p floats (a broadcast).
-
-        Parameters
-        ----------
-        i : int
-            The agent (all send the same).
-
-        Returns
-        -------
-        tuple of Message
-            The message.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import graphs, network_observer
-        >>> obs = network_observer.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3), [[1, 0.1], [0, 1]],
-        ...                                         [[0.0], [0.1]], [[1.0, 0.0]])
-        >>> obs.messages()[0].floats
-        1.0
-        """
+        # its output estimate C x_hat_i, p floats, broadcast
         return (Message("output estimate C x_i", float(self.C.shape[0])),)
 
 
@@ -286,16 +243,16 @@ def _team_observer(phi: float | None):
     return build
 
 
-def _vlahakis_spec(name: str, phi: float | None, position: float) -> MethodSpec:
+def _vlahakis_spec(name: str, phi: float | None, position: float, role: str = "recipe") -> MethodSpec:
     return MethodSpec(name, ("team",), _team_observer(phi),
                       lambda n, q, d, N: (float(n), float(2 * n**2 + 2 * n * 2 + 4 * d + 2 * n)),
                       {"team": ("O(n^2 + d n)", "O(n + d n)")}, lambda n, q, d, N: float(n + d * n),
                       _VLAHAKIS_NOT_APPLICABLE if phi is None else {"switching": _VLAHAKIS_NOT_APPLICABLE["switching"]},
-                      position=position)
+                      position=position, role=role, family="vlahakis", setting=phi)
 
 
 #: The Vlahakis observer at the LMI's coupling, and across the interval where its program is optimal on the
 #: comparison's ring of 8 (the knob, :func:`mascore.compare.vlahakis_profile`): its ends -0.1 and 1, and 0, 0.5.
-METHODS = (_vlahakis_spec("vlahakis", None, 5), _vlahakis_spec("vlahakis-phi0", 0.0, 6),
-           _vlahakis_spec("vlahakis-phi1", 1.0, 7), _vlahakis_spec("vlahakis-phi-0.1", -0.1, 7.1),
-           _vlahakis_spec("vlahakis-phi0.5", 0.5, 7.2))
+METHODS = (_vlahakis_spec("vlahakis", None, 5), _vlahakis_spec("vlahakis-phi0", 0.0, 6, "variant"),
+           _vlahakis_spec("vlahakis-phi1", 1.0, 7, "variant"), _vlahakis_spec("vlahakis-phi-0.1", -0.1, 7.1, "knob"),
+           _vlahakis_spec("vlahakis-phi0.5", 0.5, 7.2, "knob"))

@@ -40,12 +40,13 @@ from ._validation import (
     frozen_copy,
     require_finite,
 )
-from .estimation import Message, MethodSpec
+from .estimation import Message, MethodSpec, protocol_docs
 from .fusion_cost import kalman_step_flops
 
 __all__ = ["CentralizedOutputFilter", "OwnStateForwardingFilter"]
 
 
+@protocol_docs
 class OwnStateForwardingFilter(Frozen):
     """Measurement forwarding on the own states: agent i corrects with every delivered measurement of x_i.
 
@@ -216,32 +217,7 @@ class OwnStateForwardingFilter(Frozen):
                  "z": Z[i, i].copy()}, (Z[senders[senders != i], i].copy(),))
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's correction with its own and the received measurements of x_i, then its prediction.
-
-        Parameters
-        ----------
-        i : int
-            The agent.
-        own, messages
-            From :meth:`agent_inputs`.
-
-        Returns
-        -------
-        x_i, P_i : ndarray
-            Its predicted estimate ``(n,)`` and covariance ``(n, n)``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore.own_state import OwnStateForwardingFilter
-        >>> f = OwnStateForwardingFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1))
-        >>> x, P, S = np.zeros((1, 2, 1)), np.ones((1, 2, 1, 1)), np.ones((1, 2, 2), bool)
-        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])      # z_ji = 1 for agent 0, 3 for agent 1
-        >>> u = np.zeros((1, 2, 1))
-        >>> x_i, P_i = f.agent_step(1, *f.agent_inputs(x[0], P[0], Z[0], S[0], u[0], 1))
-        >>> bool(np.allclose(x_i, f.predict(*f.update(x, P, Z, S), u)[0][0, 1]))
-        True
-        """
+        # correction with its own and the received measurements of x_i, then prediction: x_i (n,), P_i (n, n)
         z_in = np.insert(messages[0], own["index"], own["z"], axis=0)
         info = np.linalg.inv(own["P"])
         P = np.linalg.inv(info + len(z_in) * self.information)
@@ -250,31 +226,11 @@ class OwnStateForwardingFilter(Frozen):
         return self.A @ x + self.B @ own["u"], self.A @ P @ self.A.T + self.Q
 
     def messages(self, i: int = 0) -> tuple[Message, ...]:
-        """What agent i sends per step: to each neighbour, its measurement of that neighbour (m floats).
-
-        Parameters
-        ----------
-        i : int
-            The agent (all send the same).
-
-        Returns
-        -------
-        tuple of Message
-            The message (floats per neighbour).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore.own_state import OwnStateForwardingFilter
-        >>> f = OwnStateForwardingFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1))
-        >>> x, P, S = np.zeros((1, 2, 1)), np.ones((1, 2, 1, 1)), np.ones((1, 2, 2), bool)
-        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])      # z_ji = 1 for agent 0, 3 for agent 1
-        >>> f.messages()[0].floats
-        1.0
-        """
+        # to each neighbour, its measurement of that neighbour: m floats
         return (Message("measurement z_ij of each neighbour j", float(self.to_state.shape[0])),)
 
 
+@protocol_docs
 class CentralizedOutputFilter(Frozen):
     """One Kalman filter over the team state ``(N n,)`` with every delivered output measurement (information form).
 
@@ -479,65 +435,19 @@ class CentralizedOutputFilter(Frozen):
                 "u": u[None].copy()}, ()
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """The centre's step: the whole team's correction and prediction.
-
-        Parameters
-        ----------
-        i : int
-            Unused (the centre).
-        own, messages
-            From :meth:`agent_inputs`.
-
-        Returns
-        -------
-        x, P : ndarray
-            The team's predicted states ``(1, N, n)`` and covariance ``(1, N n, N n)``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore.own_state import CentralizedOutputFilter
-        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
-        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
-        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
-        >>> x1, P1 = f.agent_step(0, *f.agent_inputs(x[0], P[0], Z[0], S[0], np.zeros((2, 1)), 0))
-        >>> x1[0, :, 0]
-        array([0.66666667, 2.        ])
-        """
+        # the centre's step, the team's correction and prediction: states (1, N, n), covariance (1, N n, N n)
         return self.predict(*self.update(own["x"], own["P"], own["Z"], own["S"]), own["u"])
 
     def messages(self, i: int = 0) -> tuple[Message, ...]:
-        """What each agent sends the centre per step: p floats per agent it measures (itself included).
-
-        Parameters
-        ----------
-        i : int
-            The agent (all send the same).
-
-        Returns
-        -------
-        tuple of Message
-            The message (floats per agent measured).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore.own_state import CentralizedOutputFilter
-        >>> f = CentralizedOutputFilter(np.eye(1), np.eye(1), np.zeros((1, 1)), np.eye(1), 1.0, 2)
-        >>> x, P, S = np.zeros((1, 2, 1)), np.eye(2)[None], np.ones((1, 2, 2), bool)
-        >>> Z = np.array([[[[1.0], [3.0]], [[1.0], [3.0]]]])
-        >>> f.messages()[0].floats
-        1.0
-        """
+        # to the centre: p floats per agent it measures, itself included
         return (Message("measurements z_ij of itself and its neighbours, to the centre", float(self.C.shape[0])),)
 
 
 #: ``forwarding`` on the team task: the one-hop filter of each agent's own state (its neighbours' measurements of it).
 METHODS = (
     MethodSpec("forwarding", ("team",),
-               lambda team, x_hat0: OwnStateForwardingFilter(team.A, team.B, team.Q_filter, np.eye(team.A.shape[0]),
-                                                             team.R),
-               lambda n, q, d, N: (float(n * d + n), kalman_step_flops(n) + n**3 + 2 * (d + 1) * n),
+               lambda team, x_hat0: OwnStateForwardingFilter(team.A, team.B, team.Q_filter, team.C, team.R),
+               lambda n, q, d, N: (float(q * d + n), kalman_step_flops(n) + n**3 + 2 * (d + 1) * n),
                {"team": ("O(d n + n^3)", "O(n^2 + d n)")}, lambda n, q, d, N: float(n**2 + n + d * n), position=2),
 )
 

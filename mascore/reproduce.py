@@ -408,6 +408,8 @@ def _compare(args: argparse.Namespace) -> int:
     elapsed = time.perf_counter() - start
     folder = args.out / "compare"
     summary.to_csv(folder / f"summary-{args.grid}-{args.seed}.csv", index=False)
+    if getattr(result, "links", None) is not None:  # the lossy, late and event-triggered links, summarized apart
+        result.links.to_csv(folder / f"links-{args.grid}-{args.seed}.csv", index=False)
     claims = study.claims(result)
     write_claims(claims, folder / "claims.json", "compare", args.seed,
                  created_by=f"mascore compare --grid {args.grid} --seed {args.seed}")

@@ -69,7 +69,7 @@ from numpy.typing import ArrayLike
 from . import _ellipsoid_kernels as kernels
 from ._validation import Frozen, agent_index, as_matrix, check_square, frozen_copy, require_finite, symmetric_part
 from ._validation import float_array as _float_array
-from .estimation import MethodSpec
+from .estimation import MethodSpec, protocol_docs
 from .fusion_cost import kalman_step_flops
 
 __all__ = [
@@ -346,10 +346,11 @@ def run_filter(
     method = _check_method(method)
     c, P, y, u = _check_run_data(x0_hat, P0, y, B, u)
     model = SetMembershipModel(A=A, G=G, C=C, D=D, Q=Q, R=R, B=B, n=P.shape[-1])
-    return model._run(c, P, y, u, method, agent, solver_options)
+    return model.run(c, P, y, u, method, agent, solver_options)
 
 
 @dataclass(frozen=True, eq=False)
+@protocol_docs
 class SetMembershipModel(Frozen):
     """The system of eq. (1), checked once: the filter's constant matrices, stored read-only.
 
@@ -600,52 +601,12 @@ class SetMembershipModel(Frozen):
                  "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's closed-form correction with its own measurement, then its prediction (:meth:`correct`, :meth:`predict`).
-
-        Parameters
-        ----------
-        i : int
-            The agent.
-        own, messages
-            From :meth:`agent_inputs`.
-
-        Returns
-        -------
-        center, shape : ndarray
-            Its predicted set ``(n,)``, ``(n, n)``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore.set_membership import SetMembershipModel
-        >>> model = SetMembershipModel(A=np.eye(1), G=np.eye(1), C=np.eye(1), D=np.eye(1), Q=np.eye(1), R=np.eye(1))
-        >>> c, E = model.agent_step(0, *model.agent_inputs(np.zeros((2, 1)), np.eye(1), [[0.5], [1.0]], None, 0))
-        >>> c.shape, E.shape
-        ((1,), (1, 1))
-        """
+        # the closed-form correction with its own measurement, then prediction: centre (n,), shape (n, n)
         c, E, _ = self.correct(own["center"], own["shape"], own["y"], check_consistency=False)
         return self.predict(c, E, own["u"])
 
     def messages(self, i: int = 0) -> tuple:
-        """What an agent sends per step: nothing.
-
-        Parameters
-        ----------
-        i : int
-            The agent (the same for all).
-
-        Returns
-        -------
-        tuple
-            Empty.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore.set_membership import SetMembershipModel
-        >>> SetMembershipModel(A=np.eye(1), G=np.eye(1), C=np.eye(1), D=np.eye(1), Q=np.eye(1), R=np.eye(1)).messages()
-        ()
-        """
+        # nothing
         return ()
 
     def run(
@@ -687,7 +648,19 @@ class SetMembershipModel(Frozen):
         c, P, y, u = _check_run_data(x0_hat, P0, y, self.B, u)
         if P.shape[-1] != self.n:
             raise ValueError(f"P0 must be ({self.n}, {self.n}) like the model's A; got {P.shape}")
-        return self._run(c, P, y, u, method, agent, solver_options)
+        out: dict[str, list] = {k: [] for k in ("cc", "pc", "cp", "pp", "L")}
+        programs: dict = {}  # the run's compiled SDPs (method="sdp"), reused step after step
+        for k in range(y.shape[0]):  # Algorithm 1: correct with y[k], then predict, k = 0..T_f
+            c, P, L = self._correct(c, P, y[k], method, k, agent, True, solver_options, programs)
+            out["cc"].append(c)
+            out["pc"].append(P)
+            out["L"].append(L)
+            uk = None if u is None else u[k]
+            c, P = self._predict(c, P, uk, method, k, agent, solver_options, programs)
+            out["cp"].append(c)
+            out["pp"].append(P)
+        return FilterHistory(np.array(out["cc"]), np.array(out["pc"]), np.array(out["cp"]),
+                             np.array(out["pp"]), np.array(out["L"]))
 
     # -- the steps on checked data (the public methods and functions check first)
 
@@ -790,22 +763,6 @@ class SetMembershipModel(Frozen):
                                  solver_options)
         _check_result(new_P, "prediction", step, agent, batch)
         return new_c, new_P
-
-    def _run(self, c, P, y, u, method, agent, solver_options):
-        """Algorithm 1 on checked data: correct with ``y[k]``, then predict, k = 0..T_f."""
-        out: dict[str, list] = {k: [] for k in ("cc", "pc", "cp", "pp", "L")}
-        programs: dict = {}  # the run's compiled SDPs (method="sdp"), reused step after step
-        for k in range(y.shape[0]):
-            c, P, L = self._correct(c, P, y[k], method, k, agent, True, solver_options, programs)
-            out["cc"].append(c)
-            out["pc"].append(P)
-            out["L"].append(L)
-            uk = None if u is None else u[k]
-            c, P = self._predict(c, P, uk, method, k, agent, solver_options, programs)
-            out["cp"].append(c)
-            out["pp"].append(P)
-        return FilterHistory(np.array(out["cc"]), np.array(out["pc"]), np.array(out["cp"]),
-                             np.array(out["pp"]), np.array(out["L"]))
 
 
 def _check_run_data(x0_hat, P0, y, B, u):
@@ -967,20 +924,20 @@ def _team_set_filter(confidence: float | None):
     scenario's default level).
     """
     def build(team, x_hat0: np.ndarray) -> SetMembershipModel:
-        n = team.A.shape[0]
-        scale = team.bound_scale(n, confidence)
-        return SetMembershipModel(A=team.A, G=np.eye(n), C=np.eye(n), D=np.eye(n), Q=scale * team.Q_filter,
-                                  R=scale * team.R, B=team.B)
+        (m, n) = team.C.shape  # what a measurement holds of the state
+        return SetMembershipModel(A=team.A, G=np.eye(n), C=team.C, D=np.eye(m),
+                                  Q=team.bound_scale(n, confidence) * team.Q_filter,
+                                  R=team.bound_scale(m, confidence) * team.R, B=team.B)
     return build
 
 
-def _set_membership_spec(name: str, confidence: float | None, position: float) -> MethodSpec:
+def _set_membership_spec(name: str, confidence: float | None, position: float, role: str = "recipe") -> MethodSpec:
     return MethodSpec(name, ("team",), _team_set_filter(confidence),
                       lambda n, q, d, N: (float(n), kalman_step_flops(n) + 2 * n**3), {"team": ("O(n^3)", "O(n^2)")},
                       lambda n, q, d, N: float(n**2 + n + d * n), _SM_NOT_APPLICABLE if confidence is None else {},
-                      position=position)
+                      position=position, role=role, family="set-membership", setting=confidence)
 
 
 #: The set-membership filter at the scenario's confidence level, and at two others (its knob).
-METHODS = (_set_membership_spec("set-membership", None, 8), _set_membership_spec("set-membership-c90", 0.9, 9),
-           _set_membership_spec("set-membership-c99999", 0.99999, 10))
+METHODS = (_set_membership_spec("set-membership", None, 8), _set_membership_spec("set-membership-c90", 0.9, 9, "knob"),
+           _set_membership_spec("set-membership-c99999", 0.99999, 10, "knob"))

@@ -471,10 +471,6 @@ def power_norms(M: ArrayLike, k_max: int) -> np.ndarray:
     """
     M = _square(M, "M")
     k_max = check_positive_int(k_max, "k_max")
-    return _power_norms(M, k_max)
-
-
-def _power_norms(M: np.ndarray, k_max: int) -> np.ndarray:
     out = np.empty(k_max + 1)
     Mk = np.eye(M.shape[0])
     for k in range(k_max + 1):
@@ -521,7 +517,7 @@ def fit_alpha(M: ArrayLike, mu: float, k_max: int | None = None) -> float:
     if not rho < mu < 1:
         raise ValueError(f"need rho(A_c) = {rho:.4g} < mu = {mu} < 1")
     k_max = k_max if k_max is not None else int(np.ceil(np.log(1e-12) / np.log(mu)))
-    norms = _power_norms(M, k_max)
+    norms = power_norms(M, k_max)
     return _finite_float(float(np.max(norms / mu ** np.arange(k_max + 1))), "alpha")
 
 
@@ -555,7 +551,7 @@ def exponential_bound_ratio(M: ArrayLike, alpha: float, mu: float, k_max: int) -
     check_positive(alpha, "alpha")
     check_positive(mu, "mu")
     k_max = check_positive_int(k_max, "k_max")
-    norms = _power_norms(M, k_max)
+    norms = power_norms(M, k_max)
     with np.errstate(over="ignore", divide="ignore", under="ignore"):
         ratio = float(np.max(norms / (alpha * mu ** np.arange(k_max + 1))))
     if not np.isfinite(ratio):

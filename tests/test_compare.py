@@ -55,8 +55,9 @@ def serial(tmp_path_factory):
 def test_grid_cells_cover_the_studies_with_100_seeds():
     cells = compare.grid_cells("quick")
     studies = {c["study"] for c in cells}
-    assert studies == {"scaling", "graph", "dropout", "noise", "wrong-q", "shared", "target", "localization",
-                       "position", "switching"}
+    assert studies - set(compare.LINK_STUDIES) == {"scaling", "graph", "dropout", "noise", "wrong-q", "shared", "target",
+                                                   "localization", "position", "switching"}
+    assert studies & set(compare.LINK_STUDIES) == {"loss", "latency", "send-on-delta-0.5", "send-on-delta-1"}
     blocks = {c["block"] for c in cells}
     assert len(blocks) * compare.SETTINGS.runs >= 100
     assert {c["method"] for c in cells if c["task"] == "team"} == set(compare.ALL_TEAM_METHODS)
@@ -191,7 +192,7 @@ def test_local_filter_matches_the_dare_and_its_rmse_matches_its_covariance():
     """The local Kalman filter's covariance reaches the DARE's; its RMSE and NEES agree with it."""
     s = compare.SETTINGS
     team = compare.team_setup(4, "gaussian", 1.0, s)
-    est = compare._Local(team, np.zeros((1, 4, 4)))
+    est = compare.make_estimator("local", team, np.zeros((1, 4, 4)))
     for _ in range(300):
         est.update(np.zeros((1, 4, 4, 4)), np.ones((1, 4, 4), bool))
         est.predict(np.zeros((1, 4, 2)))
@@ -209,7 +210,7 @@ def test_centralized_covariance_matches_the_team_dare():
     s = compare.SETTINGS
     N = 4
     team = compare.team_setup(N, "gaussian", 1.0, s)
-    est = compare._Centralized(team, np.zeros((1, N, 4)))
+    est = compare.make_estimator("centralized", team, np.zeros((1, N, 4)))
     S = (team.adjacency > 0) | np.eye(N, dtype=bool)
     for _ in range(300):
         est.update(np.zeros((1, N, N, 4)), S[None])
@@ -218,13 +219,13 @@ def test_centralized_covariance_matches_the_team_dare():
     H = np.vstack([np.kron(np.eye(N)[j], np.eye(4)) for i in range(N) for j in range(N) if S[i, j]])
     R = np.kron(np.eye(H.shape[0] // 4), team.R)
     prior = sla.solve_discrete_are(A.T, H.T, np.kron(np.eye(N), team.Q), R)
-    own = compare._Centralized.own_cov.fget(est)[0]
+    own = est.own_cov[0]
     prior_own = np.stack([prior[4 * i:4 * i + 4, 4 * i:4 * i + 4] for i in range(N)])
     est.update(np.zeros((1, N, N, 4)), S[None])  # back to the posterior for comparison
     post = prior - prior @ H.T @ np.linalg.solve(H @ prior @ H.T + R, H @ prior)
     post_own = np.stack([post[4 * i:4 * i + 4, 4 * i:4 * i + 4] for i in range(N)])
     np.testing.assert_allclose(own, prior_own, rtol=1e-7)
-    np.testing.assert_allclose(compare._Centralized.own_cov.fget(est)[0], post_own, rtol=1e-7)
+    np.testing.assert_allclose(est.own_cov[0], post_own, rtol=1e-7)
 
 
 def test_set_membership_contains_the_truth_under_bounded_noise():
@@ -331,7 +332,7 @@ def test_forwarding_is_the_centralized_filter_on_the_own_state_task(dropout):
 def test_set_membership_centre_is_the_measurement_with_full_state_sensing():
     team = compare.team_setup(4, "gaussian", 1.0, compare.SETTINGS)
     rng = np.random.default_rng(0)
-    est = compare._SetMembership(team, rng.standard_normal((3, 4, 4)))
+    est = compare.make_estimator("set-membership", team, rng.standard_normal((3, 4, 4)))
     Z = rng.standard_normal((3, 4, 4, 4))
     est.update(Z, np.ones((1, 4, 4), bool))
     np.testing.assert_allclose(est.own, Z[:, np.arange(4), np.arange(4)], atol=1e-6)  # L = I
@@ -340,7 +341,7 @@ def test_set_membership_centre_is_the_measurement_with_full_state_sensing():
 def test_vlahakis_gain_follows_the_filters_q():
     """More process noise in the filter's Q: a larger observer gain (the Q knob is not inverted)."""
     s = compare.SETTINGS
-    gains = [compare._Vlahakis(compare.team_setup(6, "gaussian", q, s), np.zeros((1, 6, 4))).observer.gain[0, 0]
+    gains = [compare.make_estimator("vlahakis", compare.team_setup(6, "gaussian", q, s), np.zeros((1, 6, 4))).filter.gain[0, 0]
              for q in (0.1, 1.0, 10.0)]
     assert gains[0] < gains[1] < gains[2]
 
@@ -568,8 +569,8 @@ def test_simulate_team_refuses_bad_sensing():
 def test_position_only_local_kf_matches_the_dare():
     """The per-agent position-only filter reaches the DARE with C = [1 0] per axis; its MSE matches, within its interval."""
     s = compare.SETTINGS
-    team = compare.team_setup(4, "gaussian", 1.0, s)
-    est = compare._LocalPosition(team, np.zeros((1, 4, 4)))
+    team = compare.team_setup(4, "gaussian", 1.0, s, sensing="position")
+    est = compare.make_estimator("local", team, np.zeros((1, 4, 4)))
     for _ in range(400):
         est.update(np.zeros((1, 4, 4, 2)), np.ones((1, 4, 4), bool))
         est.predict(np.zeros((1, 4, 2)))
@@ -590,8 +591,8 @@ def test_centralized_position_covariance_matches_the_dare_of_three_positions():
     is the DARE with C = [1 0; 1 0; 1 0] per axis."""
     s = compare.SETTINGS
     N = 5
-    team = compare.team_setup(N, "gaussian", 1.0, s)
-    est = compare._CentralizedPosition(team, np.zeros((1, N, 4)))
+    team = compare.team_setup(N, "gaussian", 1.0, s, sensing="position")
+    est = compare.make_estimator("centralized", team, np.zeros((1, N, 4)))
     S = ((team.adjacency > 0) | np.eye(N, dtype=bool))[None]
     for _ in range(400):
         est.predict(np.zeros((1, N, 2)))
@@ -599,7 +600,7 @@ def test_centralized_position_covariance_matches_the_dare_of_three_positions():
     A, C = np.array([[1.0, s.dt], [0.0, 1.0]]), np.ones((3, 1)) @ np.array([[1.0, 0.0]])
     prior = sla.solve_discrete_are(A.T, C.T, np.diag([s.q_pos, s.q_vel]), s.r * np.eye(3))
     post = prior - prior @ C.T @ np.linalg.solve(C @ prior @ C.T + s.r * np.eye(3), C @ prior)
-    own = compare._CentralizedPosition.own_cov.fget(est)[0]
+    own = est.own_cov[0]
     for i in range(N):
         np.testing.assert_allclose(own[i][np.ix_([1, 3], [1, 3])], post, rtol=1e-7)  # y axis
     P = est.P[0]
@@ -626,11 +627,11 @@ def test_set_membership_with_positions_filters_and_contains_the_truth_at_every_s
 
     s = compare.SETTINGS
     N, R = 4, 30
-    team = compare.team_setup(N, "uniform", 1.0, s)
+    team = compare.team_setup(N, "uniform", 1.0, s, sensing="position")
     rng = np.random.default_rng(7)
     box = lambda shape: rng.uniform(-np.sqrt(3.0), np.sqrt(3.0), shape)  # noqa: E731  unit variance, bounded
     x = rng.standard_normal((R, N, 4))
-    est = compare._SetMembershipPosition(team, x + np.sqrt(s.p0) * box((R, N, 4)))
+    est = compare.make_estimator("set-membership", team, x + np.sqrt(s.p0) * box((R, N, 4)))
     q_std = np.sqrt(np.diag(team.Q))
     moved = []
     for k in range(60):

@@ -92,6 +92,92 @@ def test_a_new_filter_is_one_class_and_one_spec_in_one_module(toy_module):
     assert cost["method"].tolist() == [toy_module] and cost["work"].iloc[0] == "O(n^3)"
 
 
+TOY_TEAM = '''
+"""A toy team method: each agent's own Kalman filter, written from scratch, stepping itself, with its spec."""
+
+import numpy as np
+
+from mascore.estimation import Message, MethodSpec
+
+
+class OwnKalman:
+    def __init__(self, team, x_hat0):
+        self.A, self.B, self.Q, self.H, self.R = team.A, team.B, team.Q_filter, team.C, team.R
+        self.own, self.own_cov = x_hat0.copy(), team.P0.copy()
+
+    def _correct(self, x, P, z):
+        K = np.linalg.solve(self.H @ P @ self.H.T + self.R, self.H @ P).T  # P H^T S^-1
+        return x + (z - x @ self.H.T) @ K.T, P - K @ self.H @ P
+
+    def update(self, Z, S):
+        N = Z.shape[1]
+        self.own, self.own_cov = self._correct(self.own, self.own_cov, Z[:, np.arange(N), np.arange(N)])
+
+    def predict(self, U):
+        self.own, self.own_cov = self.own @ self.A.T + U @ self.B.T, self.A @ self.own_cov @ self.A.T + self.Q
+
+    def agent_inputs(self, Z, S, U, i):
+        return {"x": self.own[0, i], "P": self.own_cov, "z": Z[0, i, i], "u": U[0, i]}, ()
+
+    def agent_step(self, i, own, messages):
+        x, P = self._correct(own["x"], own["P"], own["z"])
+        return x @ self.A.T + own["u"] @ self.B.T, self.A @ P @ self.A.T + self.Q
+
+    def agent_state(self, i):
+        return self.own[0, i], self.own_cov
+
+    def messages(self, i=0):
+        return (Message("own estimate", 4.0),)
+
+
+METHODS = (MethodSpec("toy-team", ("team",), OwnKalman, lambda n, q, d, N: (float(n), 12.0 * n**3),
+                      {"team": ("O(n^3)", "O(n^2)")}, lambda n, q, d, N: float(n**2 + n), position=99),)
+'''
+
+
+@pytest.fixture
+def toy_team(tmp_path, monkeypatch):
+    """``mascore.toyteam2099``: one class and one spec of the team task in one new file, and nothing else touched."""
+    (tmp_path / "toyteam2099.py").write_text(TOY_TEAM)
+    monkeypatch.setattr(mascore, "__path__", [*mascore.__path__, str(tmp_path)])
+    monkeypatch.delitem(sys.modules, "mascore.toyteam2099", raising=False)
+    yield "toy-team"
+    sys.modules.pop("mascore.toyteam2099", None)
+    vars(mascore).pop("toyteam2099", None)
+
+
+def test_a_new_team_method_is_one_class_and_one_spec_in_one_module(toy_team):
+    cells = compare.grid_cells("quick")
+    studies = {c["study"] for c in cells if c["method"] == toy_team}
+    assert studies == {"scaling", "graph", "dropout", "noise", "wrong-q", "position", "switching"}
+    assert compare.floats_per_step(toy_team, 8) == 4.0
+    # the sweep and the headline table: the toy is each agent's own Kalman filter, as is "local"
+    cell = {"study": "scaling", "task": "team", "n_agents": 8, "graph": "ring", "noise": "gaussian",
+            "dropout": 0.0, "q_scale": 1.0, "block": 0}
+    rows = [{**r, **cell, "method": m, "cell": m} for m in ("centralized", "local", toy_team)
+            for r in compare.run_cell({**cell, "method": m})]
+    summary = compare.summarize(pd.DataFrame(rows))
+    table = compare.headline(summary, "team")
+    assert list(table.index) == ["centralized", "local", toy_team] and table.loc[toy_team, "floats/step"] == 4.0
+    s = summary.set_index("method")
+    for metric in ("rmse_own_mean", "nees_own_mean", "spread_mean"):
+        assert s.loc[toy_team, metric] == pytest.approx(s.loc["local", metric], rel=1e-9)
+    position = compare.simulate_team(toy_team, 4, 3, runs=5, sensing="position")  # its filter reads team.C
+    assert position["rmse_own"] == pytest.approx(compare.simulate_team("local", 4, 3, runs=5,
+                                                                       sensing="position")["rmse_own"], rel=1e-9)
+    # the cost table: its own agent_step, checked against its team-wide step
+    assert toy_team in agent_cost.AGENT_METHODS["team"]
+    assert agent_cost.max_deviation(agent_cost.agent_step("team", toy_team, 6, agent=2)) < 1e-12
+    cost = agent_cost.agent_costs((4,), ("team",), (toy_team,), repeats=1, min_time=0.0)
+    assert cost["method"].tolist() == [toy_team] and cost["work"].iloc[0] == "O(n^3)"
+    assert cost["flops"].iloc[0] == 12 * 4**3
+
+
+def test_the_toy_team_method_is_gone_with_its_module():
+    assert "toy-team" not in compare.TEAM_METHODS and "toy-team" not in agent_cost.AGENT_METHODS["team"]
+    assert not any(c["method"] == "toy-team" for c in compare.grid_cells("quick"))
+
+
 def test_the_toy_is_gone_with_its_module():
     assert "toy-own" not in compare.target_methods()
 
@@ -171,7 +257,8 @@ def cells(name):
 
 
 SCENARIO = Scenario("toy-walk", lambda: ("centralized", "alone"), simulate,
-                    lambda method, n_agents, degree: float(n_agents) if method == "centralized" else 0.0, cells)
+                    lambda method, n_agents, degree: float(n_agents) if method == "centralized" else 0.0, cells,
+                    headline={"n_agents": 4, "dropout": 0.0})
 '''
 
 
@@ -201,6 +288,9 @@ def test_a_new_scenario_is_one_module(toy_scenario):
     summary = compare.summarize(table)
     ratio = summary.set_index("method").loc["alone", "ratio_mean"]
     assert ratio == pytest.approx(rmse["alone"] / rmse["centralized"], rel=0.05)
+    table = compare.headline(summary, toy_scenario)  # its own headline table, at its headline cells
+    assert list(table.index) == ["centralized", "alone"] and list(table["floats/step"]) == [4.0, 0.0]
+    assert table.loc["alone", "RMSE ratio [95 %]"].startswith(f"{ratio:.3f}")
     with pytest.raises(ValueError, match="must be one of"):
         compare.run_cell({**cells[0], "method": "no-such-method"})
 
@@ -231,3 +321,36 @@ def test_every_team_method_is_built_by_its_spec_and_declares_its_cost(spec):
     assert callable(filt.agent_step) and callable(filt.messages)
     floats, flops = spec.cost(4, 4, 2, 4)
     assert floats == compare.floats_per_step(spec.name, 4, 2.0) and flops > 0
+
+
+@pytest.mark.parametrize("spec", estimation.method_specs("shared"), ids=lambda s: s.name)
+def test_a_shared_filters_agent_step_is_its_row_of_the_team_wide_update(spec):
+    from mascore import graphs
+
+    filt = spec.build(None)
+    rng = np.random.default_rng(3)
+    xi, P = rng.standard_normal((6, 2)), np.stack([np.diag(rng.uniform(0.5, 2.0, 2)) for _ in range(6)])
+    G = graphs.ring_graph(6)
+    if spec.name == "average-consensus":
+        xr, Pr = filt.update(xi, G), None
+        own, messages = filt.agent_inputs(xi, G, 2)
+    else:
+        xr, Pr = filt.update(xi, P, G)
+        own, messages = filt.agent_inputs(xi, P, G, 2)
+    out = filt.agent_step(2, own, messages)
+    np.testing.assert_allclose(out[0], xr[2], rtol=1e-12, atol=1e-14)
+    if Pr is not None:
+        np.testing.assert_allclose(out[1], Pr[2], rtol=1e-12, atol=1e-14)
+    assert sum(m.floats for m in filt.messages()) == compare.floats_per_step(spec.name, 6)
+
+
+def test_the_position_centres_step_is_its_team_wide_step():
+    team = compare.team_setup(5, "gaussian", 1.0, compare.SETTINGS, sensing="position")
+    est = compare.make_estimator("centralized", team, np.random.default_rng(1).standard_normal((1, 5, 4)))
+    rng = np.random.default_rng(2)
+    Z, S, U = rng.standard_normal((1, 5, 5, 2)), np.ones((1, 5, 5), bool), rng.standard_normal((1, 5, 2))
+    x, P = est.agent_step(0, *est.agent_inputs(Z, S, U, 0))
+    est.update(Z, S)
+    est.predict(U)
+    np.testing.assert_allclose(x, est.own, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(P, est.P, rtol=1e-12, atol=1e-14)

@@ -84,6 +84,8 @@ MODELS = {  # every checked model or value class: a builder of one instance
                                                                          [[1.0, 0.0]], 0.5, 3),
     "KalmanConsensusFilter": lambda: consensus_filters.KalmanConsensusFilter(0.1, 0.1),
     "AverageConsensusFilter": lambda: consensus_filters.AverageConsensusFilter(),
+    "CentralFusionFilter": lambda: consensus_filters.CentralFusionFilter(),
+    "NoFusionFilter": lambda: consensus_filters.NoFusionFilter(),
     "DiscreteNetworkObserver": lambda: network_observer.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3),
                                                                          [[1, 0.1], [0, 1]], [[0.0], [0.1]], [[1.0, 0.0]]),
 }
@@ -142,7 +144,8 @@ def test_no_stored_array_can_be_made_writeable_through_base(name):
     """``m.F.base.setflags(write=True); m.F.base[0, 0] = 2`` used to change every model: now refused at every level."""
     obj = MODELS[name]()
     arrays = _assert_frozen_arrays(obj)
-    if name not in ("FlockingGains", "KalmanConsensusFilter", "AverageConsensusFilter"):  # numbers only
+    if name not in ("FlockingGains", "KalmanConsensusFilter", "AverageConsensusFilter", "CentralFusionFilter",
+                    "NoFusionFilter"):  # numbers only, or nothing
         assert arrays, f"{name} holds no array: the probe would pass vacuously"
 
 

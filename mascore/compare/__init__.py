@@ -60,6 +60,11 @@ relative measurements are those of its current links); the papers'
 methods that do not apply are listed with the reason
 (:data:`TARGET_NOT_APPLICABLE`, :data:`LOCALIZATION_NOT_APPLICABLE`).
 
+**Links of the target and localization tasks** (:data:`LINK_STUDIES`, :mod:`mascore.fusion_links`): packet
+loss per link and step (a lost message is not received; each filter fuses what arrived, with its weights on
+the links that delivered), one-step latency (:data:`LATENCY_METHODS`) and send-on-delta messages for CI and
+ICF at one consensus step (:data:`SEND_ON_DELTA_METHODS`, floats counted as sent), at N = 8 on the ring.
+
 **Robustness axes**: link drop-outs (each link's measurement and message lost with
 probability ``dropout`` at each step; a lost message leaves the last received
 view in place), noise distribution (Gaussian, bounded uniform, Student-t with 3
@@ -91,7 +96,20 @@ __all__ = [
     "TARGET_METHODS",
     "target_methods",
     "TARGET_NOT_APPLICABLE",
+    "LATENCY_METHODS",
+    "LATENCY_NOT_MODELLED",
+    "LINK_STUDIES",
+    "LOSS_METHODS",
+    "SEND_ON_DELTA_METHODS",
+    "link_options",
+    "link_summary",
+    "link_table",
+    "send_on_delta_table",
+    "plot_send_on_delta",
     "TEAM_METHODS",
+    "make_estimator",
+    "team_setup",
+    "ALL_TEAM_METHODS",
     "VLAHAKIS_PHI",
     "REN_Q",
     "ALL_SHARED_METHODS",
@@ -149,30 +167,31 @@ _NAMES = {
         'ALL_SHARED_METHODS', 'ALL_TEAM_METHODS', 'BenchmarkSettings', 'CORE_METHODS', 'FUSION_KNOB_METHODS', 'GRAPHS',
         'KNOBS', 'Knob', 'NOISES', 'POSITION_METHODS',
         'POSITION_NOT_APPLICABLE', 'REN_Q', 'SEED_AXES', 'SENSINGS', 'SETTINGS', 'SHARED_METHODS', 'SM_CONFIDENCE',
-        'SWITCHING_GRAPHS', 'TEAM_METHODS', 'VLAHAKIS_PHI', '_MAX_SCALE', 'benchmark_graph', 'bound_scale',
+        'SHOWN', 'SWITCHING_GRAPHS', 'SWITCHING_NOT_APPLICABLE', 'TEAM_METHODS', 'VLAHAKIS_PHI', '_MAX_SCALE',
+        'benchmark_graph', 'bound_scale',
         'check_cell', 'check_n_agents', 'check_run', 'draw_noise', 'floats_per_step', 'knob_variants', 'mean_degree',
         'switching_graphs'
     ),
     'team': (
-        'SWITCHING_NOT_APPLICABLE', '_C_POS', '_Centralized', '_CentralizedPosition', '_Estimator', '_Forwarding',
-        '_ForwardingPosition', '_Local', '_LocalPosition', '_SetMembership', '_SetMembershipPosition', '_Song', '_Team',
-        '_Vlahakis', '_accumulate', '_own_blocks', '_vlahakis_gains', 'make_estimator', 'simulate_team', 'team_setup',
-        'vlahakis_profile'
+        'TeamEstimator', 'TeamTask', '_C_POS', '_accumulate', '_own_blocks', '_vlahakis_gains', 'make_estimator',
+        'simulate_team', 'team_setup', 'vlahakis_profile'
     ),
     'shared': (
-        '_average', 'simulate_shared'
+        'simulate_shared',
     ),
     'target': (
-        'LOCALIZATION_NOT_APPLICABLE', 'TARGET_METHODS', 'TARGET_NOT_APPLICABLE', '_localization_switching',
-        'localization_model', 'localization_riccati', 'simulate_target', 'target_cost', 'target_filter',
-        'target_methods', 'target_model'
+        'LATENCY_METHODS', 'LATENCY_NOT_MODELLED', 'LINK_STUDIES', 'LOCALIZATION_NOT_APPLICABLE', 'LOSS_METHODS',
+        'SEND_ON_DELTA_METHODS', 'TARGET_METHODS', 'TARGET_NOT_APPLICABLE', '_localization_switching',
+        'link_options', 'localization_model', 'localization_riccati', 'simulate_target', 'target_cost',
+        'target_filter', 'target_methods', 'target_model'
     ),
     'grid': (
-        'CompareResult', '_mean_ci', 'cell_cost', 'grid_cells', 'run', 'run_cell', 'run_compare', 'summarize'
+        'CompareResult', '_mean_ci', 'cell_cost', 'grid_cells', 'link_summary', 'run', 'run_cell', 'run_compare',
+        'summarize'
     ),
     'tables': (
-        'CPU_COLUMN', 'NEAR_BOUND', '_position_headline', 'fitted_slopes', 'headline', 'knob_table',
-        'position_only_kf_rmse'
+        'CPU_COLUMN', 'NEAR_BOUND', '_position_headline', 'fitted_slopes', 'headline', 'knob_table', 'link_table',
+        'position_only_kf_rmse', 'send_on_delta_table'
     ),
     'verdicts': (
         'CLAIMS', 'HELD_OUT', 'WRITTEN_FROM', 'compare_claims', 'deciding_runs', 'differing_claims'
@@ -182,7 +201,7 @@ _NAMES = {
         'rms_ratio'
     ),
     'plots': (
-        '_concat', '_order', '_plain_ticks', '_plt', 'plot_cost', 'plot_pareto', 'plot_robustness'
+        '_concat', '_order', '_plain_ticks', '_plt', 'plot_cost', 'plot_pareto', 'plot_robustness', 'plot_send_on_delta'
     ),
     'cost': (
         'NODE_ORDER', 'node_cost', 'node_costs', 'per_agent_costs'
@@ -193,8 +212,10 @@ _WHERE = {name: module for module, names in _NAMES.items() for name in names}
 
 def __getattr__(name: str):
     if name in _WHERE:
-        value = getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
-        globals()[name] = value
+        module = importlib.import_module(f"{__name__}.{_WHERE[name]}")
+        value = getattr(module, name)
+        if name in vars(module):  # not one read from the specs when asked (those stay current)
+            globals()[name] = value
         return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 

@@ -20,22 +20,8 @@ from .._validation import (
 )
 from ..settings import check_settings, check_settings_type, setting
 
-#: Estimators of the team task, in table order.
-TEAM_METHODS = ("centralized", "local", "forwarding", "song-mb", "song-eb", "vlahakis", "vlahakis-phi0",
-                "vlahakis-phi1", "set-membership")
-#: The Vlahakis observer's coupling gain per team-method name: None is the LMI's choice (with our tie-break);
-#: -0.1 and 1 are the ends of the interval where its program's value is optimal on the ring of 8
-#: (:func:`vlahakis_profile`), 0 and 0.5 points inside it.
-VLAHAKIS_PHI = {"vlahakis": None, "vlahakis-phi0": 0.0, "vlahakis-phi1": 1.0, "vlahakis-phi-0.1": -0.1,
-                "vlahakis-phi0.5": 0.5}
-#: The team methods at their own recipe (without the knob variants): the figures' methods.
-CORE_METHODS = tuple(m for m in TEAM_METHODS if m not in VLAHAKIS_PHI or m == "vlahakis")
-#: Estimators of the shared-quantity task at their own recipe (and Ren et al.'s untuned Q = 0).
-SHARED_METHODS = ("central-fusion", "no-fusion", "average-consensus", "ren-kc", "ren-kc-q0")
-#: Ren et al.'s (Q, Omega) per shared-method name: the paper's 0.1, and the knob swept from 0 to 1.
-REN_Q = {"ren-kc": 0.1, "ren-kc-q0": 0.0, "ren-kc-q0.3": 0.3, "ren-kc-q0.6": 0.6, "ren-kc-q1": 1.0}
-#: Every shared-method name a cell may carry (Ren et al.'s knob variants run at N = 8 on the ring).
-ALL_SHARED_METHODS = SHARED_METHODS + tuple(m for m in REN_Q if m not in SHARED_METHODS)
+#: The roles of the methods in the headline tables and at every team size: the recipes and their shown variants.
+SHOWN = ("recipe", "variant")
 #: Sensing/communication graphs: a ring, or the proximity graph of a random layout.
 GRAPHS = ("ring", "geometric")
 #: Graphs of the common-target and shared tasks: the fixed ones, and a switching proximity topology.
@@ -48,15 +34,6 @@ SEED_AXES = ("task", "n_agents", "noise", "block")
 #: or the position only, ``z_ij = [I 0] x_j + nu_ij`` (a cell without a ``sensing`` coordinate is ``"full"``;
 #: ``"position"`` joins the seed axes, so the cells of before keep their seeds).
 SENSINGS = ("full", "position")
-#: The set-membership filter's confidence level per method name (None: ``settings.sm_confidence``): its knob,
-#: the probability mass of the Gaussian ellipsoids it is given as bounds (bounded noise: the guaranteed bound).
-SM_CONFIDENCE = {"set-membership": None, "set-membership-c90": 0.9, "set-membership-c99999": 0.99999}
-#: The team methods under position-only sensing, in table order.
-POSITION_METHODS = ("centralized", "local", "forwarding", *VLAHAKIS_PHI, *SM_CONFIDENCE)
-#: Team methods that do not apply under position-only sensing, with the reason.
-POSITION_NOT_APPLICABLE = estimation.not_applicable("position")
-#: Every team-method name a cell may carry (the knobs' variants run at N = 8 in the studies ``scaling``, ``position``).
-ALL_TEAM_METHODS = TEAM_METHODS + tuple(m for m in (*VLAHAKIS_PHI, *SM_CONFIDENCE) if m not in TEAM_METHODS)
 #: The common-target and localization filters' knob variants (their specs in :mod:`mascore.fusion`): the
 #: consensus steps L in {1, 2, 5} and L = the graph's diameter, and HCMCI's novelty weight omega = N against
 #: the consistency-safe omega of its docstring (``omega max [W^L]_ij <= 1``). Swept at N = 8 on the ring
@@ -65,6 +42,45 @@ ALL_TEAM_METHODS = TEAM_METHODS + tuple(m for m in (*VLAHAKIS_PHI, *SM_CONFIDENC
 #: step a convex combination for every covariance).
 FUSION_KNOB_METHODS = ("ci-L2", "ci-Ldiam", "hcmci-L2", "hcmci-Ldiam", "hcmci-safe-L1", "hcmci-safe-L5",
                        "icf-L2", "icf-Ldiam", "kcf-eps0.01", "kcf-eps0.5")
+
+
+def _team_methods() -> tuple[str, ...]:
+    shown = estimation.method_names("team", SHOWN)
+    return shown + tuple(m for m in estimation.method_names("team") if m not in shown)
+
+
+#: The names read from the methods' specs when asked (:func:`mascore.estimation.method_specs`: always current,
+#: a new filter module's included; importing this module imports no filter): ``TEAM_METHODS``, the estimators of
+#: the team task in table order; ``CORE_METHODS``, those at their own recipe (the figures'); ``ALL_TEAM_METHODS``,
+#: with the knobs' settings (run at N = 8 in the studies ``scaling``, ``position``); ``POSITION_METHODS``, those
+#: that apply under position-only sensing; ``POSITION_NOT_APPLICABLE`` and ``SWITCHING_NOT_APPLICABLE``, the
+#: others with the reason; ``VLAHAKIS_PHI``, the Vlahakis observer's coupling gain per method (None: the LMI's
+#: choice; -0.1 and 1 are the ends of the interval where its program's value is optimal on the ring of 8,
+#: :func:`vlahakis_profile`); ``SM_CONFIDENCE``, the set-membership filter's confidence level per method (None:
+#: ``settings.sm_confidence``; bounded noise: the guaranteed bound); ``SHARED_METHODS``, the shared task's at
+#: their recipe and Ren et al.'s untuned Q = 0; ``ALL_SHARED_METHODS``, with the knob's settings; ``REN_Q``,
+#: Ren et al.'s Q = Omega per method; ``KNOBS``, every knob swept within its recipe (:class:`Knob`).
+_FROM_SPECS = {
+    "TEAM_METHODS": lambda: estimation.method_names("team", SHOWN),
+    "CORE_METHODS": lambda: estimation.method_names("team", ("recipe",)),
+    "ALL_TEAM_METHODS": _team_methods,
+    "POSITION_NOT_APPLICABLE": lambda: estimation.not_applicable("position"),
+    "SWITCHING_NOT_APPLICABLE": lambda: estimation.not_applicable("switching"),
+    "POSITION_METHODS": lambda: tuple(m for m in estimation.method_names("team")
+                                      if m not in estimation.not_applicable("position")),
+    "VLAHAKIS_PHI": lambda: estimation.knob_settings("vlahakis", "team"),
+    "SM_CONFIDENCE": lambda: estimation.knob_settings("set-membership", "team"),
+    "SHARED_METHODS": lambda: estimation.method_names("shared", SHOWN),
+    "ALL_SHARED_METHODS": lambda: estimation.method_names("shared"),
+    "REN_Q": lambda: estimation.knob_settings("ren-kc", "shared"),
+    "KNOBS": lambda: _knobs(),
+}
+
+
+def __getattr__(name: str):
+    if name in _FROM_SPECS:
+        return _FROM_SPECS[name]()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 #: Largest initial spread or noise std (m, m/s) the benchmark accepts: the squared errors stay far from overflow.
@@ -201,26 +217,28 @@ def _consensus_knob(kind: str, label: str, task: str) -> Knob:
     return Knob(f"{label}: consensus steps L", task, (*settings, ("diameter", task, f"{kind}-Ldiam")), ("1", "5"))
 
 
-#: Every knob swept within its recipe (the chapter's knob table, :func:`knob_table`).
-KNOBS = (
-    Knob("Ren et al.'s Q = Omega", "shared", tuple((f"{q:g}", "shared", m) for m, q in sorted(
-        REN_Q.items(), key=lambda kv: kv[1])), ("0.1",)),
-    Knob("Vlahakis's coupling gain Phi", "team", tuple(
-        ("LMI" if phi is None else f"{phi:g}", "scaling", m)
-        for m, phi in VLAHAKIS_PHI.items()), ("LMI",)),
-    Knob("set-membership confidence (positions only)", "team", tuple(
-        (f"{SETTINGS.sm_confidence if c is None else c:g}", "position", m)
-        for m, c in sorted(SM_CONFIDENCE.items(), key=lambda kv: SETTINGS.sm_confidence if kv[1] is None else kv[1])),
-        (f"{SETTINGS.sm_confidence:g}",)),
-    *(_consensus_knob(kind, label, task) for task in ("target", "localization")
-      for kind, label in (("ci", "CI"), ("icf", "ICF"), ("hcmci", "HCMCI"))),
-    *(Knob(f"HCMCI novelty weight omega (L = {L})", task, (("N", task, f"hcmci-L{L}"),
-                                                          ("safe", task, f"hcmci-safe-L{L}")), ("N",))
-      for task in ("target", "localization") for L in (1, 5)),
-    *(Knob("KCF consensus gain eps", task, (("0.01", task, "kcf-eps0.01"), ("0.1", task, "kcf"),
-                                            ("0.5", task, "kcf-eps0.5")), ("0.1",))
-      for task in ("target", "localization")),
-)
+def _knobs() -> tuple[Knob, ...]:
+    """Every knob swept within its recipe (the chapter's knob table, :func:`knob_table`), from the specs."""
+    ren, phi = estimation.knob_settings("ren-kc", "shared"), estimation.knob_settings("vlahakis", "team")
+    confidence = estimation.knob_settings("set-membership", "team")
+    return (
+        Knob("Ren et al.'s Q = Omega", "shared", tuple((f"{q:g}", "shared", m) for m, q in sorted(
+            ren.items(), key=lambda kv: kv[1])), ("0.1",)),
+        Knob("Vlahakis's coupling gain Phi", "team", tuple(
+            ("LMI" if p is None else f"{p:g}", "scaling", m) for m, p in phi.items()), ("LMI",)),
+        Knob("set-membership confidence (positions only)", "team", tuple(
+            (f"{SETTINGS.sm_confidence if c is None else c:g}", "position", m)
+            for m, c in sorted(confidence.items(), key=lambda kv: SETTINGS.sm_confidence if kv[1] is None else kv[1])),
+            (f"{SETTINGS.sm_confidence:g}",)),
+        *(_consensus_knob(kind, label, task) for task in ("target", "localization")
+          for kind, label in (("ci", "CI"), ("icf", "ICF"), ("hcmci", "HCMCI"))),
+        *(Knob(f"HCMCI novelty weight omega (L = {L})", task, (("N", task, f"hcmci-L{L}"),
+                                                              ("safe", task, f"hcmci-safe-L{L}")), ("N",))
+          for task in ("target", "localization") for L in (1, 5)),
+        *(Knob("KCF consensus gain eps", task, (("0.01", task, "kcf-eps0.01"), ("0.1", task, "kcf"),
+                                                ("0.5", task, "kcf-eps0.5")), ("0.1",))
+          for task in ("target", "localization")),
+    )
 
 
 def knob_variants() -> tuple[str, ...]:
@@ -237,7 +255,7 @@ def knob_variants() -> tuple[str, ...]:
     >>> "ren-kc-q0.6" in knob_variants(), "ren-kc" in knob_variants()
     (True, False)
     """
-    return tuple(sorted({method for knob in KNOBS for label, _, method in knob.settings if label not in knob.recipe}))
+    return tuple(sorted({method for knob in _knobs() for label, _, method in knob.settings if label not in knob.recipe}))
 
 
 def benchmark_graph(kind: str, n_agents: int, settings: BenchmarkSettings = SETTINGS) -> np.ndarray:
@@ -335,13 +353,12 @@ def mean_degree(kind: str, n_agents: int, settings: BenchmarkSettings) -> float:
 
 
 def floats_per_step(method: str, n_agents: int, degree: float = 2.0, sensing: str = "full") -> float:
-    """Floats one agent sends per step, by method (the communication cost).
+    """Floats one agent sends per step, by method (the communication cost): its spec's count.
 
     Parameters
     ----------
     method : str
-        One of :data:`TEAM_METHODS` or :data:`SHARED_METHODS` (or a set-membership
-        variant of :data:`SM_CONFIDENCE`).
+        A method of the team task (:data:`ALL_TEAM_METHODS`) or of the shared one (:data:`ALL_SHARED_METHODS`).
     n_agents : int
         Team size N.
     degree : float
@@ -375,22 +392,16 @@ def floats_per_step(method: str, n_agents: int, degree: float = 2.0, sensing: st
     degree = check_positive(degree, "degree", "(mean neighbours per agent)")
     if sensing not in SENSINGS:
         raise ValueError(f"sensing must be one of {SENSINGS}; got {sensing!r}")
-    table = {
-        "centralized": 8.0 * (degree + 1), "local": 4.0, "forwarding": 4.0 * degree + 4.0,
-        "song-mb": 0.0, "song-eb": 0.0, "vlahakis": 4.0, "vlahakis-phi0": 4.0, "vlahakis-phi1": 4.0,
-        "set-membership": 4.0,
-        "central-fusion": 7.0, "no-fusion": 0.0, "average-consensus": 2.0,
-    }
-    table.update({m: 4.0 for m in (*SM_CONFIDENCE, *VLAHAKIS_PHI)})
-    table.update({m: 5.0 for m in REN_Q})
-    if method not in table:
-        raise ValueError(f"method must be one of {ALL_TEAM_METHODS + ALL_SHARED_METHODS}; got {method!r}")
-    if sensing == "position":
-        if method in POSITION_NOT_APPLICABLE:
-            raise ValueError(f"method {method!r} does not apply under position-only sensing: "
-                             f"{POSITION_NOT_APPLICABLE[method]}")
-        table.update({"centralized": 6.0 * (degree + 1), "forwarding": 2.0 * degree + 4.0})
-    return table[method]
+    team, shared = estimation.method_names("team"), estimation.method_names("shared")
+    if method not in team + shared:
+        raise ValueError(f"method must be one of {team + shared}; got {method!r}")
+    if method in shared:  # a 2-D quantity: n = q = 2
+        return float(estimation.method_spec(method, "shared").cost(2, 2, degree, n_agents)[0])
+    why = estimation.method_spec(method, "team").not_applicable.get("position")
+    if sensing == "position" and why is not None:
+        raise ValueError(f"method {method!r} does not apply under position-only sensing: {why}")
+    measured = 4 if sensing == "full" else 2  # z_ij = x_j + nu_ij, or its position [I 0] x_j + nu_ij
+    return float(estimation.method_spec(method, "team").cost(4, measured, degree, n_agents)[0])
 
 
 def check_n_agents(n_agents: object) -> int:
@@ -431,8 +442,7 @@ def check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[s
                         f"dropout, q_scale); got {type(cell).__name__}")
     from .scenario import scenarios
 
-    methods_of = {"team": ALL_TEAM_METHODS, "shared": ALL_SHARED_METHODS, "target": estimation.method_names("target"),
-                  "localization": estimation.method_names("localization"),
+    methods_of = {**{t: estimation.method_names(t) for t in ("team", "shared", "target", "localization")},
                   **{task: s.methods() for task, s in scenarios().items()}}
     task = cell.get("task")
     if task not in methods_of:
@@ -461,9 +471,9 @@ def check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[s
     if sensing not in SENSINGS or (task != "team" and sensing != "full"):
         raise ValueError(f"{name}['sensing'] must be one of {SENSINGS} (a team cell; other tasks have their own "
                          f"sensing model); got {sensing!r} for a {task} cell")
-    if sensing == "position" and cell["method"] in POSITION_NOT_APPLICABLE:
-        raise ValueError(f"{name}['method'] {cell['method']!r} does not apply under position-only sensing: "
-                         f"{POSITION_NOT_APPLICABLE[cell['method']]}")
+    why = estimation.not_applicable("position").get(cell["method"]) if sensing == "position" else None
+    if why is not None:
+        raise ValueError(f"{name}['method'] {cell['method']!r} does not apply under position-only sensing: {why}")
     return cell
 
 

@@ -10,17 +10,15 @@ from typing import Any
 
 import numpy as np
 
+from .. import estimation
 from ..settings import check_settings_type
 from ..sweep import Grid, cell_seed
 from .benchmark import (
-    CORE_METHODS,
     FUSION_KNOB_METHODS,
-    POSITION_METHODS,
     REN_Q,
     SEED_AXES,
     SETTINGS,
-    SHARED_METHODS,
-    TEAM_METHODS,
+    SHOWN,
     VLAHAKIS_PHI,
     BenchmarkSettings,
     check_cell,
@@ -31,7 +29,15 @@ from .scenario import scenarios
 from .shared import simulate_shared
 from .stats import NEES_DIMENSION, anees_bounds, mean_interval, rms_ratio
 from .tables import fitted_slopes
-from .target import simulate_target, target_cost, target_methods
+from .target import (
+    LATENCY_METHODS,
+    LINK_STUDIES,
+    SEND_ON_DELTA_METHODS,
+    link_options,
+    simulate_target,
+    target_cost,
+    target_methods,
+)
 from .team import simulate_team, vlahakis_profile
 
 # --------------------------------------------------------------------------------------------
@@ -60,7 +66,10 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     the scaling study at N = 8 only; 4 blocks in both grids, as the recipes beside them);
     each with ``blocks x settings.runs`` seeds (quick: 2 x 50, full: 4 x 50, N up to
     64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
-    N = 8, position sensing, the shared, target and localization tasks).
+    N = 8, position sensing, the shared, target and localization tasks); and the links
+    of the target and localization tasks at N = 8 on the ring (:data:`LINK_STUDIES`: ``loss``,
+    ``latency``, ``send-on-delta-<delta>``; a cell's ``dropout`` is the packet loss; quick: the
+    target task only, a few methods, 2 blocks; full: both tasks, 4 blocks).
 
     Parameters
     ----------
@@ -86,20 +95,24 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     sizes = [4, 16] if quick else [4, 16, 32, 64]
     base = {"task": ["team"], "graph": ["ring"], "noise": ["gaussian"], "dropout": [0.0], "q_scale": [1.0],
             "block": blocks}
-    core = list(CORE_METHODS)  # the knob variants: in the scaling study only
+    # the methods as their specs declare them now (a new filter module's included)
+    team, core = list(estimation.method_names("team", SHOWN)), list(estimation.method_names("team", ("recipe",)))
+    shared = list(estimation.method_names("shared", SHOWN))
+    position = [m for m in estimation.method_names("team") if m not in estimation.not_applicable("position")]
+    switching = [m for m in core if m not in estimation.not_applicable("switching")]
     # the quick grid runs the set-membership filter on forwarded measurements (a trace search per agent and step,
     # rebuilt at every step of a switching graph) at N = 8 on the ring only: the headline's cells; the full grid all
     skip = {"sm-forwarding": {"geometric", "switching", 16}} if quick else {}
     studies = [
-        ("scaling", {**base, "method": list(TEAM_METHODS), "n_agents": [8], "block": blocks200}),
-        ("scaling", {**base, "method": list(TEAM_METHODS), "n_agents": sizes}),
+        ("scaling", {**base, "method": team, "n_agents": [8], "block": blocks200}),
+        ("scaling", {**base, "method": team, "n_agents": sizes}),
         ("graph", {**base, "method": core, "graph": ["geometric"], "n_agents": [16] if quick else [16, 32]}),
         ("dropout", {**base, "method": core, "n_agents": [8], "dropout": [0.1, 0.3]}),
         ("noise", {**base, "method": core, "n_agents": [8], "noise": ["uniform", "student-t"]}),
         ("wrong-q", {**base, "method": core, "n_agents": [8], "q_scale": [0.1, 10.0]}),
-        ("shared", {**base, "task": ["shared"], "method": list(SHARED_METHODS), "n_agents": [8],
+        ("shared", {**base, "task": ["shared"], "method": shared, "n_agents": [8],
                     "dropout": [0.0, 0.1, 0.3], "block": blocks200}),
-        ("shared", {**base, "task": ["shared"], "method": list(SHARED_METHODS), "n_agents": [16],
+        ("shared", {**base, "task": ["shared"], "method": shared, "n_agents": [16],
                     "graph": ["geometric", "switching"], "block": blocks200}),
         ("target", {**base, "task": ["target"], "method": list(target_methods("target")), "n_agents": [8, 16],
                     "block": blocks200}),
@@ -108,27 +121,28 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
                     "n_agents": [16], "block": blocks200}),
         ("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
                           "n_agents": [8] if quick else [8, 16], "block": blocks200}),
-        ("position", {**base, "sensing": ["position"], "method": list(POSITION_METHODS), "n_agents": [8],
+        ("position", {**base, "sensing": ["position"], "method": position, "n_agents": [8],
                       "block": blocks200}),
         ("position", {**base, "sensing": ["position"], "method": ["centralized", "local", "set-membership"],
                       "noise": ["uniform"], "n_agents": [8], "block": blocks200}),
         # the switching topology (switching_graphs) for the own state and localization; the quick grid runs
         # localization at N = 8 only (at 16 covariance intersection's weight search costs 6 s of CPU per block)
-        ("switching", {**base, "method": [m for m in core if m not in VLAHAKIS_PHI], "graph": ["switching"],
+        ("switching", {**base, "method": switching, "graph": ["switching"],
                        "n_agents": [16], "block": blocks if quick else blocks200}),
         ("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
                           "graph": ["switching"], "n_agents": [8], "block": blocks if quick else blocks200}),
         # every knob swept within its recipe (KNOBS): at N = 8 on the ring, 200 seeds as the recipes beside them
         # (the claims that read a knob's settings are decided on the held-out blocks 2-3)
-        ("scaling", {**base, "method": [m for m in VLAHAKIS_PHI if m not in TEAM_METHODS], "n_agents": [8],
+        ("scaling", {**base, "method": [m for m in VLAHAKIS_PHI if m not in team], "n_agents": [8],
                      "block": blocks200}),
-        ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in SHARED_METHODS],
+        ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in shared],
                     "n_agents": [8], "block": blocks200}),
-        ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in SHARED_METHODS],
+        ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in shared],
                     "n_agents": [16], "graph": ["geometric", "switching"], "block": blocks200}),
         *((task, {**base, "task": [task], "method": list(FUSION_KNOB_METHODS), "n_agents": [8],
                   "block": blocks200}) for task in ("target", "localization")),
     ]
+    studies += _link_studies(quick, base, blocks, blocks200)
     if not quick:
         studies.append(("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
                                          "graph": ["switching"], "n_agents": [16], "block": blocks200}))
@@ -143,6 +157,26 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     for scenario in scenarios().values():  # the scenarios declared in their own modules, after the book's
         cells += [dict(c) for c in scenario.cells(name)]
     return cells
+
+
+def _link_studies(quick: bool, base: dict, blocks: list, blocks200: list) -> list[tuple[str, dict]]:
+    """The studies of the target and localization tasks over lossy, late and event-triggered links (N = 8, ring).
+
+    Quick: the target task only, loss 0.1 and 0.3 for the bound, forwarding, CI and ICF at one step;
+    latency without loss; send-on-delta at 0.5 and 1. Full: both tasks, every method of
+    :data:`LOSS_METHODS` at both losses, latency at loss 0, 0.1 and 0.3, and send-on-delta at 0.5, 1 and 2.
+    """
+    tasks = ["target"] if quick else ["target", "localization"]
+    ring8 = {**base, "n_agents": [8], "block": blocks if quick else blocks200}
+    deltas = [s for s in LINK_STUDIES if s.startswith("send-on-delta")][:2 if quick else 3]
+    out = []
+    for task in tasks:
+        loss_methods = ["centralized", "forwarding", "ci-L1", "icf-L1"] if quick else list(target_methods("target"))
+        out.append(("loss", {**ring8, "task": [task], "method": loss_methods, "dropout": [0.1, 0.3]}))
+        out.append(("latency", {**ring8, "task": [task], "method": list(LATENCY_METHODS),
+                                "dropout": [0.0] if quick else [0.0, 0.1, 0.3]}))
+        out += [(study, {**ring8, "task": [task], "method": list(SEND_ON_DELTA_METHODS)}) for study in deltas]
+    return out
 
 
 def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSettings = SETTINGS) -> list[dict[str, Any]]:
@@ -182,9 +216,10 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
     seed = cell_seed(cell, SEED_AXES if sensing == "full" else (*SEED_AXES, "sensing"), base_seed)
     common = {"noise": cell["noise"], "dropout": float(cell["dropout"])}
     new = scenarios()
-    if cell["task"] in ("target", "localization"):
+    if cell["task"] in ("target", "localization"):  # dropout: packet loss; the study: latency or send-on-delta
         metrics = simulate_target(cell["method"], int(cell["n_agents"]), seed, graph=cell.get("graph", "ring"),
-                                  settings=settings, task=cell["task"])
+                                  settings=settings, task=cell["task"], loss=float(cell["dropout"]),
+                                  **link_options(cell.get("study", "")))
         nan = np.full_like(metrics["rmse_own"], np.nan)  # a set-membership filter has its containment and set size
         metrics.update({k: metrics.pop(k, nan) for k in ("rmse_view", "containment", "spread", "rmse_far", "set_size")})
     elif cell["task"] in new:  # a scenario declared in its own module
@@ -303,7 +338,8 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
         runs = int(np.isfinite(g["nees_own"].to_numpy()).sum())
         dim = NEES_DIMENSION.get(row.get("task", g["task"].iloc[0]))
         row["nees_bound_lo"], row["nees_bound_hi"] = anees_bounds(runs, dim) if runs and dim else (np.nan, np.nan)
-        row["floats"] = float(g["floats"].iloc[0])
+        floats = g["floats"].to_numpy()  # one value per method, but as sent under send-on-delta: their mean
+        row["floats"] = float(floats[0]) if (floats == floats[0]).all() else float(floats.mean())
         row["cpu_us"] = float(g.drop_duplicates("cell")["cpu_us"].median())
         out.append(row)
     return pd.DataFrame(out).sort_values(by, kind="stable", ignore_index=True)  # N numerically, not as text
@@ -378,17 +414,19 @@ class CompareResult:
     table : pandas.DataFrame
         One row per Monte Carlo run and cell.
     summary : pandas.DataFrame
-        :func:`summarize` of the table.
+        :func:`summarize` of the table on ideal links (every study but :data:`LINK_STUDIES`).
     slopes : dict
         Method -> fitted CPU slope in N (:func:`fitted_slopes`).
     phi : dict
         The Vlahakis program's value at fixed coupling gains on the ring of 8 (:func:`vlahakis_profile`).
+    links : pandas.DataFrame or None
+        :func:`link_summary` of the table: the studies over lossy, late and event-triggered links.
 
     Examples
     --------
     >>> from mascore.compare import CompareResult
     >>> sorted(CompareResult.__dataclass_fields__)[:3]
-    ['phi', 'seed', 'settings']
+    ['links', 'phi', 'seed']
     """
 
     settings: BenchmarkSettings
@@ -397,6 +435,7 @@ class CompareResult:
     summary: Any
     slopes: dict
     phi: dict
+    links: Any = None
 
 
 def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = False, *,
@@ -443,9 +482,46 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
         table = run_sweep(grid_cells(settings.grid), functools.partial(run_cell, base_seed=seed, settings=settings),
                           folder / f"table-{settings.grid}-{seed}.csv", workers=workers, scheduler=scheduler,
                           progress=progress, cost=cell_cost)
-    summary = summarize(table, settings=settings)
+    lossy = table["study"].isin(LINK_STUDIES)
+    summary = summarize(table[~lossy], settings=settings)
     profile = vlahakis_profile(8, settings=settings)
-    return CompareResult(settings, int(seed), table, summary, fitted_slopes(summary), profile)
+    links = link_summary(table, settings) if lossy.any() else None
+    return CompareResult(settings, int(seed), table, summary, fitted_slopes(summary), profile, links)
+
+
+def link_summary(table, settings: BenchmarkSettings = SETTINGS):
+    """:func:`summarize` of the studies over lossy, late and event-triggered links (:data:`LINK_STUDIES`) alone.
+
+    They are summarized apart from the rest (:attr:`CompareResult.summary`), whose rows they would
+    otherwise share on the coordinates the headline tables select by (task, N, ring, no drop-out).
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The sweep's per-run table (:func:`run_compare`'s first output).
+    settings : BenchmarkSettings
+        The benchmark's settings.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per link study, task, method and loss (``dropout``), as :func:`summarize`; each ratio is
+        to the centralized filter of the same study and loss (it keeps ideal links).
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> table, summary = compare.run_compare("quick", "results", workers=2)  # doctest: +SKIP
+    >>> compare.link_table(summary, compare.link_summary(table))  # doctest: +SKIP
+    """
+    import pandas as pd
+
+    if not isinstance(table, pd.DataFrame) or "study" not in table:
+        raise TypeError("table must be the sweep's per-run table (a pandas DataFrame with a 'study' column)")
+    rows = table[table["study"].isin(LINK_STUDIES)]
+    if rows.empty:
+        raise ValueError(f"table has no row of the link studies {tuple(LINK_STUDIES)}: rerun the sweep (grid_cells)")
+    return summarize(rows, settings=settings)
 
 
 def cell_cost(cell: Mapping[str, Any]) -> float:

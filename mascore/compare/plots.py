@@ -232,3 +232,54 @@ def _order(col: str):
     if col == "noise":
         return lambda s: s.map({n: i for i, n in enumerate(NOISES)})
     return None
+
+
+def plot_send_on_delta(summary, links, task: str = "target"):
+    """Send-on-delta's trade: RMSE ratio against the floats actually sent, per threshold, for CI and ICF.
+
+    Parameters
+    ----------
+    summary : pandas.DataFrame
+        Output of :func:`summarize` (the methods sending at every step).
+    links : pandas.DataFrame
+        Output of :func:`link_summary`, with the studies ``send-on-delta-<delta>`` (:func:`send_on_delta_table`).
+    task : {"target", "localization"}
+        The scenario.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One line per method from its every-step point (delta 0) to its largest threshold, each point
+        labelled with its delta, 95 % intervals on the ratio.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore import compare
+    >>> s = pd.DataFrame({"study": ["target", "send-on-delta-1"], "task": "target", "method": "ci-L1",
+    ...                   "n_agents": 8, "graph": "ring", "dropout": 0.0, "floats": [14.0, 3.1],
+    ...                   "ratio_mean": [1.3, 1.5], "ratio_lo": 1.2, "ratio_hi": 1.6, "nees_own_mean": 0.6})
+    >>> compare.plot_send_on_delta(s[:1], s[1:]).axes[0].get_xlabel()
+    'floats sent per agent per step (log scale)'
+    """
+    from .tables import send_on_delta_table
+
+    plt = _plt()
+    t = send_on_delta_table(summary, links, task)
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for i, (method, g) in enumerate(t.groupby(level="method", sort=False)):
+        g = g.droplevel("method")
+        ax.errorbar(g["floats/agent/step"], g["RMSE ratio"], yerr=[g["RMSE ratio"] - g["lo"], g["hi"] - g["RMSE ratio"]],
+                    fmt="o-", color=f"C{i}", label=method, capsize=2)
+        for d, row in g.iterrows():
+            ax.annotate(f"δ = {d:g}", (row["floats/agent/step"], row["RMSE ratio"]), textcoords="offset points",
+                        xytext=(6, 6), fontsize=9, color=f"C{i}")
+    ax.set_xscale("log")
+    ax.set_xlabel("floats sent per agent per step (log scale)")
+    ax.set_ylabel("RMSE / centralized")
+    _plain_ticks(ax)
+    lo, hi = float(t["floats/agent/step"].min()), float(t["floats/agent/step"].max())
+    ax.set_xticks([v for v in (0.5, 1, 2, 3, 5, 7, 10, 14, 20, 30, 50, 100, 150, 300) if 0.8 * lo <= v <= 1.25 * hi])
+    ax.set_xlim(0.8 * lo, 1.25 * hi)
+    _legend_below(fig, ax, ncol=2)
+    return fig

@@ -5,8 +5,9 @@ wired into :func:`~mascore.compare.run_cell` and :func:`~mascore.compare.grid_ce
 directly. Any other is one module of :mod:`mascore.compare` with a module-level
 ``SCENARIO``, a :class:`Scenario`: :func:`scenarios` finds it (the source is read, and
 only a module that assigns ``SCENARIO`` is imported), the cell check accepts its
-methods, :func:`~mascore.compare.run_cell` runs its cells and
-:func:`~mascore.compare.grid_cells` adds its cells to the named sweeps.
+methods, :func:`~mascore.compare.run_cell` runs its cells,
+:func:`~mascore.compare.grid_cells` adds its cells to the named sweeps and
+:func:`~mascore.compare.headline` gives its table.
 """
 
 from __future__ import annotations
@@ -15,8 +16,8 @@ import importlib
 import pkgutil
 import re
 import sys
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +47,8 @@ class Scenario:
     cells : callable
         ``cells(name)``: its cells of the sweep ``name`` (``"quick"`` or ``"full"``), each a dict of
         coordinates with ``study``.
+    headline : mapping of str to object
+        The coordinates of the cells of its headline table (default: N = 8, no drop-out, on the ring).
 
     Examples
     --------
@@ -59,6 +62,7 @@ class Scenario:
     simulate: Callable[..., dict[str, np.ndarray]]
     floats: Callable[[str, int, float], float]
     cells: Callable[[str], list[dict[str, Any]]]
+    headline: Mapping[str, Any] = field(default_factory=lambda: {"n_agents": 8, "dropout": 0.0, "graph": "ring"})
 
     def __post_init__(self) -> None:
         if not (isinstance(self.task, str) and self.task) or self.task in BUILT_IN:
@@ -98,7 +102,8 @@ def scenarios() -> dict[str, Scenario]:
         if module is None:
             path = Path(getattr(info.module_finder, "path", "")) / f"{info.name}.py"
             try:
-                if _SCENARIO_LINE.search(path.read_text(encoding="utf-8")) is None:
+                source = path.read_bytes()
+                if b"SCENARIO" not in source or _SCENARIO_LINE.search(source) is None:  # the plain search first
                     continue
             except OSError:
                 pass
@@ -111,4 +116,4 @@ def scenarios() -> dict[str, Scenario]:
     return found
 
 
-_SCENARIO_LINE = re.compile(r"^SCENARIO\s*(?::[^=\n]*)?=", re.M)
+_SCENARIO_LINE = re.compile(rb"^SCENARIO\s*(?::[^=\n]*)?=", re.M)

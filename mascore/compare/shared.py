@@ -6,11 +6,9 @@ import time
 
 import numpy as np
 
-from .. import consensus
+from .. import estimation
 from ..estimation import method_spec
 from .benchmark import (
-    ALL_SHARED_METHODS,
-    REN_Q,
     SETTINGS,
     BenchmarkSettings,
     benchmark_graph,
@@ -39,7 +37,7 @@ def simulate_shared(
     Parameters
     ----------
     method : str
-        One of :data:`SHARED_METHODS`, or a variant of Ren et al.'s knob (:data:`REN_Q`).
+        One of the methods of the shared task (:data:`ALL_SHARED_METHODS`: their specs').
     n_agents : int
         Team size N (a ring, N >= 3).
     seed : numpy.random.SeedSequence or int
@@ -72,8 +70,9 @@ def simulate_shared(
     True
     """
     n_agents, runs = check_run(n_agents, noise, dropout, 1.0, runs, settings, seed)
-    if method not in ALL_SHARED_METHODS:
-        raise ValueError(f"method must be one of {ALL_SHARED_METHODS}; got {method!r}")
+    methods = estimation.method_names("shared")
+    if method not in methods:
+        raise ValueError(f"method must be one of {methods}; got {method!r}")
     start = time.thread_time()
     init_rng, _, _, drop_rng = np.random.default_rng(seed).spawn(4)
     N = int(n_agents)
@@ -83,24 +82,11 @@ def simulate_shared(
     P = var[..., None, None] * np.eye(2)
     adjacency = switching_graphs(N, settings.shared_steps, settings) if graph == "switching" else \
         benchmark_graph(graph, N, settings)
-    nan = np.full(runs, np.nan)
-    if method == "central-fusion":
-        xi, P = consensus.central_fusion(xi, P)
-        xi = np.broadcast_to(xi[:, None], (runs, N, 2))
-        P = np.broadcast_to(P[:, None], (runs, N, 2, 2))
-    elif method == "average-consensus" or method in REN_Q:
-        A_k = adjacency[:, None] if adjacency.ndim == 3 else adjacency  # (steps, 1, N, N) when switching
-        G = A_k * (drop_rng.random((settings.shared_steps, runs, N, N)) >= dropout)
-        filt = method_spec(method, "shared").build(None)  # REN_Q: the paper's Q = Omega = 0.1 (Sec. 5), and 0
-        if method == "average-consensus":
-            for G_k in G:
-                xi = filt.update(xi, G_k)
-            P = None
-        else:
-            for G_k in G:  # noise-free messages
-                xi, P = filt.update(xi, P, G_k)
+    A_k = adjacency[:, None] if adjacency.ndim == 3 else adjacency  # (steps, 1, N, N) when switching
+    G = A_k * (drop_rng.random((settings.shared_steps, runs, N, N)) >= dropout)
+    xi, P = method_spec(method, "shared").build(None).fuse(xi, P, G)  # noise-free messages
     err = np.sum(xi**2, -1)
-    nees = nan if P is None else np.mean(np.einsum("...i,...i->...", xi, np.linalg.solve(P, xi[..., None])[..., 0]),
-                                         -1) / 2
+    nees = np.full(runs, np.nan) if P is None else \
+        np.mean(np.einsum("...i,...i->...", xi, np.linalg.solve(P, xi[..., None])[..., 0]), -1) / 2
     cpu = time.thread_time() - start
     return {"rmse_own": np.sqrt(err.mean(-1)), "nees_own": nees, "cpu_s": np.full(runs, cpu)}

@@ -4,16 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .benchmark import (
-    KNOBS,
-    POSITION_METHODS,
-    POSITION_NOT_APPLICABLE,
-    SETTINGS,
-    SHARED_METHODS,
-    TEAM_METHODS,
-    BenchmarkSettings,
-)
-from .target import LOCALIZATION_NOT_APPLICABLE, TARGET_NOT_APPLICABLE, target_cost, target_methods
+from .. import estimation
+from .benchmark import KNOBS, SETTINGS, SHOWN, BenchmarkSettings
+from .target import target_cost, target_methods
 
 
 def fitted_slopes(summary) -> dict[str, float]:
@@ -50,8 +43,9 @@ def headline(summary, task: str = "team", costs=None):
     ----------
     summary : pandas.DataFrame
         Output of :func:`summarize`.
-    task : {"team", "position", "target", "localization", "shared"}
-        The scenario: ``"team"``, own state at N = 8 on the ring (the case where cooperation
+    task : {"team", "position", "target", "localization", "shared"} or str
+        The scenario (or one declared in its own module, ``mascore.compare.scenario``, at the cells
+        of its ``headline``): ``"team"``, own state at N = 8 on the ring (the case where cooperation
         cannot help: forwarding the neighbours' measurements of an agent already is the
         centralized filter); ``"position"``, the same with position-only sensing (the study
         ``position``, Gaussian noise; its own table, :func:`_position_headline`); ``"target"``,
@@ -88,17 +82,25 @@ def headline(summary, task: str = "team", costs=None):
     """
     import pandas as pd
 
-    if task not in ("team", "position", "target", "localization", "shared"):
-        raise ValueError(f"task must be 'team', 'position', 'target', 'localization' or 'shared'; got {task!r}")
+    from .scenario import scenarios
+
+    new = scenarios()
+    tasks = ("team", "position", "target", "localization", "shared", *new)
+    if task not in tasks:
+        raise ValueError(f"task must be one of {tasks}; got {task!r}")
     if task == "position":
         return _position_headline(summary, costs)
     dash = "—"
-    frame = summary[(summary["task"] == task) & (summary["n_agents"] == 8) & (summary["dropout"] == 0.0)]
+    where = new[task].headline if task in new else {"n_agents": 8, "dropout": 0.0, "graph": "ring"}
+    frame = summary[summary["task"] == task]
+    for coordinate, value in where.items():
+        if coordinate in frame:  # a summary without a graph column: the ring
+            frame = frame[frame[coordinate] == value]
     if task == "team":
         frame = frame[frame["study"] == "scaling"]
-    frame = frame[frame.get("graph", "ring") == "ring"].set_index("method")
-    methods = {"team": TEAM_METHODS, "target": target_methods("target"),
-               "localization": target_methods("localization"), "shared": SHARED_METHODS}[task]
+    frame = frame.set_index("method")
+    methods = target_methods(task) if task in ("target", "localization") else new[task].methods() if task in new \
+        else estimation.method_names(task, SHOWN)
     cpu = _agent_cpu(costs, task)
     slopes = _agent_slopes(costs, task)
     rows = []
@@ -120,8 +122,7 @@ def headline(summary, task: str = "team", costs=None):
             row["flops/agent/step"] = round(target_cost(m, 8, 2, task)[1])
         rows.append(row)
     if task in ("target", "localization"):
-        reasons = TARGET_NOT_APPLICABLE if task == "target" else LOCALIZATION_NOT_APPLICABLE
-        for m, why in reasons.items():
+        for m, why in estimation.not_applicable(task).items():
             rows.append({"method": m, "RMSE ratio [95 %]": "not applicable", "seeds": 0, "consistency": why,
                          "floats/step": dash, **({CPU_COLUMN: dash} if cpu is not None else {}),
                          "flops/agent/step": dash})
@@ -175,7 +176,8 @@ def _position_headline(summary, costs=None):
     uniform = pos[pos["noise"] == "uniform"].set_index("method")
     size = gauss["set_size_mean"] if "set_size_mean" in gauss else pd.Series(np.nan, gauss.index)
     rows = []
-    for m in POSITION_METHODS:
+    not_applicable = estimation.not_applicable("position")
+    for m in (m for m in estimation.method_names("team") if m not in not_applicable):
         if m not in gauss.index:
             continue
         r = gauss.loc[m]
@@ -186,7 +188,7 @@ def _position_headline(summary, costs=None):
             "set size (m)": round(float(size[m]), 3) if np.isfinite(size[m]) else dash,
             "contains, uniform": f"{bounded:.3f}" if np.isfinite(bounded) else dash,
             "floats/step": r["floats"], **({CPU_COLUMN: dash} if costs is not None else {})})
-    for m, why in POSITION_NOT_APPLICABLE.items():
+    for m, why in not_applicable.items():
         rows.append({"method": m, "RMSE ratio [95 %]": "not applicable", "consistency": why,
                      "set size (m)": dash, "contains, uniform": dash, "floats/step": dash,
                      **({CPU_COLUMN: dash} if costs is not None else {})})
@@ -349,3 +351,102 @@ def _consistency_verdict(r, confidence: float | None) -> str:
         inside = r["containment_mean"]
         return "—" if not np.isfinite(inside) else "contains" if inside >= confidence else "leaks"
     return anees_verdict(r) if np.isfinite(r["nees_own_mean"]) else "—"
+
+
+def link_table(summary, links, task: str = "target"):
+    """Accuracy and consistency of each method over lossy and late links, beside ideal links (N = 8, ring).
+
+    Parameters
+    ----------
+    summary : pandas.DataFrame
+        Output of :func:`summarize` (its ideal-link rows of `task`).
+    links : pandas.DataFrame
+        Output of :func:`link_summary`, with the studies ``loss`` and ``latency`` (:data:`LINK_STUDIES`).
+    task : {"target", "localization"}
+        The scenario.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per method (table order); columns ``(quantity, links)``: ``RMSE ratio`` (to the
+        centralized filter, which keeps ideal links) and ``NEES/dof``, for ideal links (the task's
+        own study), each packet loss, and one-step latency at each loss the summary holds; NaN where a
+        method has no model of the links (:data:`LATENCY_NOT_MODELLED`).
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore import compare
+    >>> s = pd.DataFrame({"study": ["target", "loss"], "task": "target", "method": "ci-L1", "n_agents": 8,
+    ...                   "graph": "ring", "dropout": [0.0, 0.3], "ratio_mean": [1.3, 1.4], "nees_own_mean": 0.7})
+    >>> compare.link_table(s[:1], s[1:]).columns.tolist()
+    [('RMSE ratio', 'ideal'), ('RMSE ratio', 'loss 0.3'), ('NEES/dof', 'ideal'), ('NEES/dof', 'loss 0.3')]
+    """
+    import pandas as pd
+
+    from .target import LINK_STUDIES
+
+    if task not in ("target", "localization"):
+        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    s = pd.concat([summary[summary["study"] == task], links[links["study"].isin(LINK_STUDIES)]])
+    s = s[(s["task"] == task) & (s["n_agents"] == 8) & (s["graph"] == "ring")]
+    ideal = s[(s["study"] == task) & (s["dropout"] == 0.0)].assign(links="ideal")
+    lossy = s[s["study"] == "loss"].assign(links=lambda d: [f"loss {p:g}" for p in d["dropout"]])
+    late = s[s["study"] == "latency"].assign(links=lambda d: [f"late, loss {p:g}" for p in d["dropout"]])
+    if lossy.empty and late.empty:
+        raise ValueError(f"summary has no cell of the studies 'loss' or 'latency' ({tuple(LINK_STUDIES)[:2]}) for "
+                         f"{task!r}: rerun the sweep (grid_cells)")
+    rows = pd.concat([ideal, lossy, late])
+    order = [links for links in dict.fromkeys(rows["links"])]
+    methods = [m for m in target_methods(task) if m in set(lossy["method"]) | set(late["method"])]
+    out = {name: rows.pivot_table(index="method", columns="links", values=col).reindex(index=methods, columns=order)
+           for name, col in (("RMSE ratio", "ratio_mean"), ("NEES/dof", "nees_own_mean"))}
+    return pd.concat(out, axis=1)
+
+
+def send_on_delta_table(summary, links, task: str = "target"):
+    """Send-on-delta: floats sent, accuracy and consistency of CI and ICF per threshold (N = 8, ring).
+
+    Parameters
+    ----------
+    summary : pandas.DataFrame
+        Output of :func:`summarize` (its ideal-link rows of `task`: the methods sending at every step).
+    links : pandas.DataFrame
+        Output of :func:`link_summary`, with the studies ``send-on-delta-<delta>``.
+    task : {"target", "localization"}
+        The scenario.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Rows ``(method, delta)`` (``delta`` 0: the method sending at every step, from the task's own
+        study); columns ``floats/agent/step`` (as sent), ``RMSE ratio`` with its 95 %
+        interval ``lo``, ``hi``, and ``NEES/dof``.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore import compare
+    >>> s = pd.DataFrame({"study": ["target", "send-on-delta-1"], "task": "target", "method": "ci-L1",
+    ...                   "n_agents": 8, "graph": "ring", "dropout": 0.0, "floats": [14.0, 3.1],
+    ...                   "ratio_mean": [1.3, 1.5], "ratio_lo": 1.2, "ratio_hi": 1.6, "nees_own_mean": 0.6})
+    >>> compare.send_on_delta_table(s[:1], s[1:]).index.tolist()
+    [('ci-L1', 0.0), ('ci-L1', 1.0)]
+    """
+    import pandas as pd
+
+    from .target import LINK_STUDIES, SEND_ON_DELTA_METHODS
+
+    if task not in ("target", "localization"):
+        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    s = pd.concat([summary[summary["study"] == task], links[links["study"].isin(LINK_STUDIES)]])
+    s = s[(s["task"] == task) & (s["n_agents"] == 8) & (s["graph"] == "ring") & (s["dropout"] == 0.0)
+          & s["method"].isin(SEND_ON_DELTA_METHODS[1:])]
+    delta = {task: 0.0, **{k: v["send_delta"] for k, v in LINK_STUDIES.items() if "send_delta" in v}}
+    s = s[s["study"].isin(delta)].assign(delta=lambda d: d["study"].map(delta))
+    if not (s["delta"] > 0).any():
+        raise ValueError(f"summary has no send-on-delta cell for {task!r}: rerun the sweep (grid_cells)")
+    cols = {"floats": "floats/agent/step", "ratio_mean": "RMSE ratio", "ratio_lo": "lo", "ratio_hi": "hi",
+            "nees_own_mean": "NEES/dof"}
+    out = s.set_index(["method", "delta"])[list(cols)].rename(columns=cols)
+    return out.sort_index(level=["method", "delta"]).rename_axis(["method", "delta"])

@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from .. import estimation
+from .. import estimation, fusion_links
 from .._validation import check_positive, check_positive_int
 from ..agents import double_integrator
 from ..ellipsoids import contains
@@ -25,10 +25,24 @@ from .benchmark import (
 # the common-target task (mascore.fusion)
 
 
-#: Filters of the common-target task at their recipes, in table order (``-L<k>``: k consensus steps per update):
-#: the specs of :data:`mascore.fusion.METHODS` as found at import, without the knob variants of
-#: :data:`FUSION_KNOB_METHODS` (:func:`target_methods` finds those added since).
-TARGET_METHODS = tuple(m for m in estimation.method_names("target") if m not in FUSION_KNOB_METHODS)
+#: Read from the specs when asked (importing this module imports no filter): ``TARGET_METHODS``, the filters of
+#: the common-target task at their recipes in table order (``-L<k>``: k consensus steps per update;
+#: :func:`target_methods`); ``TARGET_NOT_APPLICABLE`` and ``LOCALIZATION_NOT_APPLICABLE``, the papers' methods
+#: that do not apply to the common target or to cooperative localization, with the reason; ``LOSS_METHODS``, the
+#: methods of the loss study: every filter of the target tables, whose steps follow any graph (not ``-Ldiam``,
+#: whose L is the diameter of a graph that loss may disconnect, nor ``hcmci-safe-*``, whose weight is the graph's).
+_FROM_SPECS = {
+    "TARGET_METHODS": lambda: target_methods("target"),
+    "LOSS_METHODS": lambda: target_methods("target"),
+    "TARGET_NOT_APPLICABLE": lambda: estimation.not_applicable("target"),
+    "LOCALIZATION_NOT_APPLICABLE": lambda: estimation.not_applicable("localization"),
+}
+
+
+def __getattr__(name: str):
+    if name in _FROM_SPECS:
+        return _FROM_SPECS[name]()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def target_methods(task: str = "target", knobs: bool = False) -> tuple[str, ...]:
@@ -56,8 +70,6 @@ def target_methods(task: str = "target", knobs: bool = False) -> tuple[str, ...]
     """
     names = estimation.method_names(task)
     return names if knobs else tuple(m for m in names if m not in FUSION_KNOB_METHODS)
-#: Methods of the papers that do not apply to the common target, with the reason (the headline shows them).
-TARGET_NOT_APPLICABLE = estimation.not_applicable("target")  # as the other tasks' specs say
 
 
 def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
@@ -94,8 +106,6 @@ def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings
     return sensor_network.SensorNetworkModel(F, Q, H, R, benchmark_graph(graph, n_agents, s))
 
 
-#: The papers' methods on cooperative localization: none applies as published, for these reasons.
-LOCALIZATION_NOT_APPLICABLE = estimation.not_applicable("localization")  # as the other tasks' specs say
 
 
 def localization_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
@@ -334,6 +344,9 @@ def simulate_target(
     runs: int | None = None,
     settings: BenchmarkSettings = SETTINGS,
     task: str = "target",
+    loss: float = 0.0,
+    latency: int = 0,
+    send_delta: float | None = None,
 ) -> dict[str, np.ndarray]:
     """Track the common target (or localize the team) with one filter of :mod:`mascore.fusion`, batched over runs.
 
@@ -355,6 +368,22 @@ def simulate_target(
         The benchmark's settings (``n_steps``, ``steady_from``, ``p0``).
     task : {"target", "localization"}
         :func:`target_model` or :func:`localization_model`.
+    loss : float
+        Packet loss: each link lost with this probability at each step, in both directions
+        (:func:`mascore.fusion_links.lossy_graphs`; the filters fuse what arrived, with their weights
+        on the links that delivered). The pattern comes from `seed` (a stream of its own, so the
+        target's path and the measurements are those of ``loss = 0``) and is shared by the runs;
+        patterns are nested in `loss`. The centralized filter is the bound and keeps ideal links,
+        ``local`` sends nothing: both are unaffected.
+    latency : {0, 1}
+        Steps a message takes (:data:`LATENCY_METHODS`): ``forwarding`` fuses the neighbours'
+        measurements of the step before, exactly (a Kalman filter on them, one step behind, predicted
+        and corrected with the agent's own fresh measurement); ``ci-L1`` and ``icf-L1`` fuse the
+        neighbours' pairs of the step before, predicted one step (:func:`mascore.fusion_links.track_messages`).
+    send_delta : float, optional
+        Send-on-delta threshold of ``ci-L1`` and ``icf-L1`` (:data:`SEND_ON_DELTA_METHODS`): an agent
+        re-sends only when its estimate moved by more than this Mahalanobis distance since its last
+        send (on a fixed graph, without loss).
 
     Returns
     -------
@@ -362,7 +391,8 @@ def simulate_target(
         Per run: ``rmse_own`` (m), RMS position error of the agents' estimates over the
         steady window (of the target; of its own position for localization); ``nees_own``,
         NEES per degree of freedom with each agent's own P (of that position);
-        ``cpu_s``, CPU of the whole batch's filtering (one value, repeated). A set-membership
+        ``cpu_s``, CPU of the whole batch's filtering (one value, repeated); with `send_delta`
+        also ``floats``: the floats sent per agent and step over the steady window, as sent. A set-membership
         filter (one with ``initial_shape``: its P is an ellipsoid's shape, started at
         ``initial_shape(p0 I)``) has ``nees_own`` NaN and instead ``containment``, the fraction of
         agent-steps of the window whose true state (localization: own position, in the projected
@@ -383,6 +413,7 @@ def simulate_target(
     s = settings
     if graph not in SWITCHING_GRAPHS:
         raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
+    links = _check_links(method, loss, latency, send_delta, graph, task)
     if graph == "switching" and task == "localization":  # the sensing switches too: each step's links' rows
         model, steps = _localization_switching(n_agents, s)
     else:
@@ -395,7 +426,12 @@ def simulate_target(
     set_valued = hasattr(first, "initial_shape")  # a set-membership filter: its state is an ellipsoid, not a Gaussian
     if set_valued:
         P0 = first.initial_shape(P0)
-    if graph == "switching":  # the filters hold no state: one filter per step's graph
+    sent = None
+    if links:
+        G = switching_graphs(n_agents, s.n_steps, s) if graph == "switching" else model.adjacency
+        G = fusion_links.lossy_graphs(G, loss, s.n_steps, np.random.default_rng(_loss_seed(seed)))
+        x, P, cpu, sent = _filter_links(method, model, task, G, z, P0, latency, send_delta)
+    elif graph == "switching":  # the filters hold no state: one filter per step's graph
         from .. import sensor_network
 
         if task == "target":
@@ -443,4 +479,136 @@ def simulate_target(
         nees = np.einsum("...i,...i->...", e_nees, np.linalg.solve(P_nees, e_nees[..., None])[..., 0]) / dof
         out["nees_own"] = nees.mean(axis=(0, 2))
     out["cpu_s"] = np.full(runs, cpu)
+    if sent is not None and send_delta is not None:  # the floats as sent: one pair per send
+        pair = sum(m.floats for m in first.messages())
+        out["floats"] = pair * sent[w].mean(axis=(0, 2))
     return out
+
+
+#: The studies of the target and localization tasks over their links, and what each sets of
+#: :func:`simulate_target` (a cell's ``dropout`` is the packet loss ``loss``): ``loss`` (ideal timing),
+#: ``latency`` (every message one step late) and ``send-on-delta-<delta>`` (fixed graph, no loss).
+LINK_STUDIES = {"loss": {}, "latency": {"latency": 1},
+                **{f"send-on-delta-{d:g}": {"send_delta": d} for d in (0.5, 1.0, 2.0)}}
+
+
+def link_options(study: str) -> dict[str, float]:
+    """The link settings of a study of the target or localization task (:data:`LINK_STUDIES`; others: ideal links).
+
+    Parameters
+    ----------
+    study : str
+        The cell's study.
+
+    Returns
+    -------
+    dict
+        Keyword arguments ``latency`` and ``send_delta`` of :func:`simulate_target` (empty: ideal links).
+
+    Examples
+    --------
+    >>> from mascore.compare.target import link_options
+    >>> link_options("latency"), link_options("send-on-delta-0.5"), link_options("target")
+    ({'latency': 1}, {'send_delta': 0.5}, {})
+    """
+    return dict(LINK_STUDIES.get(study, {}))
+
+
+#: Methods with one-step latency (:func:`simulate_target`): the bound and ``local`` (unaffected), measurement
+#: forwarding, and the consensus filters that send one density per step.
+LATENCY_METHODS = ("centralized", "local", "forwarding", "ci-L1", "icf-L1")
+#: Methods with send-on-delta messages (:func:`simulate_target`), and the bound.
+SEND_ON_DELTA_METHODS = ("centralized", "ci-L1", "icf-L1")
+#: Why a method has no latency model here (the target and localization tables show it).
+LATENCY_NOT_MODELLED = {
+    **{m: "L rounds per step cannot run within a step when each message takes a step" for m in ("ci-L5", "icf-L5")},
+    **{m: "its novelty pair is a measurement, not a density that can be predicted to the next step"
+       for m in ("hcmci-L1", "hcmci-L5")},
+    **{m: "its incremental update and its diffusion would both lag: not modelled" for m in ("diffusion", "ci-diffusion")},
+    "kcf": "its consensus term takes the neighbours' predictions of the step: late ones are not modelled",
+    "sm-forwarding": "a late measurement would have to enter the set of the step before: not modelled",
+}
+
+
+def _check_links(method: str, loss: object, latency: object, send_delta: object, graph: str, task: str) -> bool:
+    """The link arguments of :func:`simulate_target`, checked; True if they depart from ideal links."""
+    loss = float(loss) if isinstance(loss, (int, float, np.floating)) and not isinstance(loss, bool) else loss
+    if not isinstance(loss, float) or not 0.0 <= loss < 1.0:
+        raise ValueError(f"loss must be a probability in [0, 1); got {loss!r}")
+    if isinstance(latency, bool) or latency not in (0, 1):
+        raise ValueError(f"latency must be 0 or 1 (steps); got {latency!r}")
+    if latency and method not in LATENCY_METHODS:
+        raise ValueError(f"latency: method must be one of {LATENCY_METHODS}; got {method!r}")
+    if send_delta is not None:
+        if isinstance(send_delta, bool) or not isinstance(send_delta, (int, float, np.floating)) \
+                or not np.isfinite(send_delta) or send_delta < 0:
+            raise ValueError(f"send_delta must be a finite Mahalanobis distance >= 0 or None; got {send_delta!r}")
+        if method not in SEND_ON_DELTA_METHODS:
+            raise ValueError(f"send_delta: method must be one of {SEND_ON_DELTA_METHODS}; got {method!r}")
+        if loss or graph == "switching":
+            raise ValueError("send_delta needs a fixed graph without loss (a sender's neighbours hold its last send "
+                             f"only if every send reaches them); got loss={loss}, graph={graph!r}")
+    links = bool(loss or latency or send_delta is not None)
+    if links and graph == "switching" and task == "localization":
+        raise ValueError("loss, latency and send-on-delta are not modelled on the switching localization task "
+                         "(its sensing switches with the graph)")
+    return links
+
+
+def _loss_seed(seed: np.random.SeedSequence | int) -> np.random.SeedSequence:
+    """The losses' own stream of a cell's seed (the path and the measurements keep theirs)."""
+    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    return np.random.SeedSequence(ss.entropy, spawn_key=(*ss.spawn_key, 0x1055))
+
+
+def _filter_links(method: str, model, task: str, G: np.ndarray, z: np.ndarray, P0: np.ndarray, latency: int,
+                  send_delta: float | None) -> tuple[np.ndarray, np.ndarray, float, np.ndarray | None]:
+    """Run `method` over the delivered graphs `G` (K, N, N) with the latency and send-on-delta given.
+
+    Returns the estimates ``(K, runs, N, n)``, covariances, the CPU (s) and the sends ``(K, runs, N)``
+    (None unless `send_delta`).
+    """
+    from .. import fusion_links, sensor_network
+
+    spec = estimation.method_spec(method, task)
+    n = model.n_states
+    x0 = np.zeros(n)
+    built: dict[bytes, object] = {}
+
+    def step_filter(A: np.ndarray):  # the method's own filter on the step's graph (its weights, its rule)
+        key = A.tobytes()
+        if key not in built:
+            built[key] = spec.build(sensor_network.SensorNetworkModel(model.F, model.Q, model.H, model.R, A))
+        return built[key]
+
+    if method in ("centralized", "local"):  # the bound keeps ideal links; local sends nothing
+        filt = target_filter(method, model, task)
+        tic = time.thread_time()
+        x, P = filt.run(x0, P0, z)
+        return x, P, time.thread_time() - tic, None
+    filters = [step_filter(A) for A in G]
+    tic = time.thread_time()
+    sent = None
+    if method in ("ci-L1", "icf-L1") and (latency or send_delta is not None):
+        x, P, sent = fusion_links.track_messages(filters, x0, P0, z, latency=latency, send_delta=send_delta)
+    elif latency:  # forwarding: a Kalman filter one step behind on the neighbourhood's data, then the own update
+        own = target_filter("local", model, task)
+        xl, Pl = model.check_state(x0, P0, per_agent=not spec.whole_filter)
+        xs, Ps = [], []
+        for k in range(len(filters)):
+            xp, Pp = own.predict(xl, Pl)
+            x, P = own.update(xp, Pp, z[k])
+            xs.append(x)
+            Ps.append(P)
+            if k + 1 < len(filters):  # the step's measurements reach the neighbours at the next step
+                xl, Pl = filters[k + 1].update(xp, Pp, z[k])
+        x, P = np.stack(xs), np.stack(Ps)
+    else:
+        xk, Pk = model.check_state(x0, P0, per_agent=not spec.whole_filter)
+        xs, Ps = [], []
+        for k, f in enumerate(filters):
+            xk, Pk = f.update(*f.predict(xk, Pk), z[k])
+            xs.append(xk)
+            Ps.append(Pk)
+        x, P = np.stack(xs), np.stack(Ps)
+    return x, P, time.thread_time() - tic, sent

@@ -1,4 +1,13 @@
-"""The team task: the estimators of the agents' own states in the rendezvous loop, and its simulation."""
+"""The team task: the estimators of the agents' own states in the rendezvous loop, and its simulation.
+
+A method of the team task is its spec's (:class:`mascore.estimation.MethodSpec`, beside its filter):
+``build(team, x_hat0)`` gives its filter on this task's ``TeamTask``. The loop steps it through
+:func:`make_estimator`, which holds the filter's state between the steps for the package's filters
+(by their class) and steps any other object directly: a new team method is one class, with
+``update(Z, S)``, ``predict(U)`` and the own-state estimates ``own`` ``(R, N, 4)`` (optionally ``own_cov``,
+``views``, ``link_borne``, ``containment``, ``set_shape``, ``team_estimates`` and the per-agent steps
+``agent_inputs(Z, S, U, i)`` / ``agent_step`` / ``agent_state(i)`` of ``TeamEstimator``), and one spec.
+"""
 
 from __future__ import annotations
 
@@ -8,19 +17,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import estimation, graphs, kalman, rendezvous, set_membership, team_model
+from .. import estimation, graphs
 from .._validation import frozen_copy
 from ..agents import double_integrator
-from ..estimation import method_spec
-from ..own_state import CentralizedOutputFilter, OwnStateForwardingFilter
+from ..estimation import MethodSpec
 from .benchmark import (
-    ALL_TEAM_METHODS,
-    POSITION_NOT_APPLICABLE,
     SENSINGS,
     SETTINGS,
-    SM_CONFIDENCE,
     SWITCHING_GRAPHS,
-    VLAHAKIS_PHI,
     BenchmarkSettings,
     benchmark_graph,
     bound_scale,
@@ -30,13 +34,47 @@ from .benchmark import (
     switching_graphs,
 )
 
-# --------------------------------------------------------------------------------------------
-# the team task
+#: The position-only output matrix of one agent, ``C = [I_2 0]`` (m).
+_C_POS = frozen_copy(np.hstack([np.eye(2), np.zeros((2, 2))]))
 
 
 @dataclass
-class _Team:
-    """Everything the estimators of one team-task cell share."""
+class TeamTask:
+    """Everything the estimators of one team-task cell share (the ``team`` of a spec's ``build(team, x_hat0)``).
+
+    Parameters
+    ----------
+    N : int
+        Team size.
+    A, B : ndarray
+        One agent's double integrator ``(4, 4)``, ``(4, 2)`` (s).
+    K : ndarray
+        The rendezvous gain ``(2, 4)``.
+    Q, Q_filter : ndarray
+        The true process-noise covariance ``(4, 4)`` and the filters' (``q_scale`` times it).
+    C : ndarray
+        What a measurement holds of an agent's state, ``(m, 4)``: ``I_4`` or the position ``[I_2 0]``.
+    R : ndarray
+        The covariance of one measurement ``z_ij = C x_j + nu_ij``, ``(m, m)`` (m² or m²/s²).
+    adjacency, laplacian : ndarray
+        The graph ``(N, N)`` (this step's on the switching topology: :func:`simulate_team` sets them).
+    P0 : ndarray
+        Initial estimation-error covariance ``(4, 4)``.
+    noise : str
+        The noise distribution.
+    s : BenchmarkSettings
+        The benchmark's settings.
+    switching : bool
+        The graph switches.
+    sensing : {"full", "position"}
+        What a measurement holds (:data:`SENSINGS`).
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> compare.team_setup(4, "gaussian", 1.0, compare.SETTINGS, sensing="position").C.shape
+    (2, 4)
+    """
 
     N: int
     A: np.ndarray
@@ -44,13 +82,15 @@ class _Team:
     K: np.ndarray
     Q: np.ndarray
     Q_filter: np.ndarray
+    C: np.ndarray
     R: np.ndarray
     adjacency: np.ndarray
     laplacian: np.ndarray
     P0: np.ndarray
     noise: str
     s: BenchmarkSettings
-    switching: bool = False  # adjacency and laplacian are this step's (simulate_team sets them at every step)
+    switching: bool = False
+    sensing: str = "full"
 
     def bound_scale(self, dim: int, confidence: float | None = None) -> float:
         """The scale of the covariance ellipsoid given to a set-membership filter as its bound (:func:`bound_scale`)."""
@@ -66,59 +106,165 @@ class _Team:
         return self.s.dt * np.kron(L, np.eye(2)), Phi, _C_POS
 
 
-def team_setup(n_agents: int, noise: str, q_scale: float, s: BenchmarkSettings, graph: str = "ring") -> _Team:
+def team_setup(n_agents: int, noise: str, q_scale: float, s: BenchmarkSettings, graph: str = "ring",
+               sensing: str = "full") -> TeamTask:
+    """The team task of one cell: the agents, the graph, the noise, the filters' Q and what is measured.
+
+    Parameters
+    ----------
+    n_agents : int
+        Team size N.
+    noise : {"gaussian", "uniform", "student-t"}
+        The noise distribution.
+    q_scale : float
+        The filters' process-noise covariance over the true one.
+    s : BenchmarkSettings
+        The benchmark's settings.
+    graph : {"ring", "geometric", "switching"}
+        The graph (the first of the switching topology's).
+    sensing : {"full", "position"}
+        What a measurement holds (:data:`SENSINGS`).
+
+    Returns
+    -------
+    TeamTask
+        The cell's task.
+
+    Examples
+    --------
+    >>> from mascore import compare
+    >>> compare.team_setup(4, "gaussian", 1.0, compare.SETTINGS).R.shape
+    (4, 4)
+    """
+    if sensing not in SENSINGS:
+        raise ValueError(f"sensing must be one of {SENSINGS}; got {sensing!r}")
+    from ..rendezvous import rendezvous_gain
+
     agent = double_integrator(2, s.dt)
     Q = np.diag([s.q_pos, s.q_pos, s.q_vel, s.q_vel])
     switching = graph == "switching"
     adjacency = switching_graphs(n_agents, 1, s)[0] if switching else benchmark_graph(graph, n_agents, s)
-    return _Team(N=n_agents, A=agent.A, B=agent.B, K=rendezvous.rendezvous_gain(*s.rho, 2), Q=Q,
-                 Q_filter=q_scale * Q, R=s.r * np.eye(4), adjacency=adjacency,
-                 laplacian=graphs.laplacian(adjacency), P0=s.p0 * np.eye(4), noise=noise, s=s, switching=switching)
+    C = np.eye(4) if sensing == "full" else _C_POS
+    return TeamTask(N=n_agents, A=agent.A, B=agent.B, K=rendezvous_gain(*s.rho, 2), Q=Q,
+                    Q_filter=q_scale * Q, C=C, R=s.r * np.eye(len(C)), adjacency=adjacency,
+                    laplacian=graphs.laplacian(adjacency), P0=s.p0 * np.eye(4), noise=noise, s=s,
+                    switching=switching, sensing=sensing)
 
 
-class _Estimator:
-    """Interface: ``update(Z, S)`` at step k, ``views(Z, S)`` for the control, ``predict(U)``.
+class TeamEstimator:
+    """A filter of the team task stepped by the loop: its state between the steps, the loop's data cut for it.
 
-    ``own`` holds the posterior own-state estimates ``(R, N, 4)``; ``own_cov`` their
-    covariances (broadcastable to ``(R, N, 4, 4)``) or None; ``link_borne`` says whether
-    the neighbours' views travel over the (dropping) links.
+    Built by :func:`make_estimator` from a method's spec. The loop calls ``update(Z, S)`` with the
+    measurements ``Z`` ``(R, N, N, m)`` (``Z[r, i, j]``: agent i's measurement of agent j) and the
+    delivered links ``S`` ``(R or 1, N, N)``, reads the views of the control ``views(Z, S)``
+    ``(R, N, N, 4)``, then calls ``predict(U)`` with the controls applied ``(R, N, 2)``.
+
+    Parameters
+    ----------
+    spec : MethodSpec
+        The method.
+    filt : object
+        Its filter, ``spec.build(team, x_hat0)``.
+    team : TeamTask
+        The cell's task.
+    x_hat0 : ndarray
+        The initial estimates ``(R, N, 4)``.
+
+    Attributes
+    ----------
+    own : ndarray
+        The posterior own-state estimates ``(R, N, 4)``.
+    own_cov : ndarray or None
+        Their covariances, broadcastable to ``(R, N, 4, 4)`` (None: the filter has none).
+    link_borne : bool
+        The neighbours' views travel over the (dropping) links.
+    set_shape : ndarray or None
+        A set-membership filter's shape matrices, broadcastable to ``(R, N, 4, 4)``.
+    team_estimates : ndarray or None
+        Every agent's estimate of every agent ``(R, N, N, 4)`` (a whole-team filter's).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import compare
+    >>> team = compare.team_setup(4, "gaussian", 1.0, compare.SETTINGS)
+    >>> compare.make_estimator("local", team, np.zeros((2, 4, 4))).own.shape
+    (2, 4, 4)
     """
 
     link_borne = True
     own_cov: np.ndarray | None = None
+    set_shape: np.ndarray | None = None
+    team_estimates: np.ndarray | None = None
 
-    def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
-        self.t = team
+    def __init__(self, spec: MethodSpec, filt, team: TeamTask, x_hat0: np.ndarray) -> None:
+        self.filter, self.t = filt, team  # not the spec: an estimator is deep-copied (the cost table's agent step)
         self.own = x_hat0.copy()
 
+    def update(self, Z: np.ndarray, S: np.ndarray) -> None:
+        """The filter's correction with the step's measurements `Z` on the delivered links `S`."""
+        self.filter.update(Z, S)
+        self.own = self.filter.own
+
+    def predict(self, U: np.ndarray) -> None:
+        """The filter's prediction with the controls applied `U`."""
+        self.filter.predict(U)
+        self.own = self.filter.own
+
     def views(self, Z: np.ndarray, S: np.ndarray) -> np.ndarray:
-        """Own estimate of agent j as the view of j for every i (broadcast)."""
+        """What agent i uses of agent j in its control, ``(R, N, N, 4)``: j's own estimate (broadcast)."""
         R, N, m = self.own.shape
         return np.broadcast_to(self.own[:, None], (R, N, N, m))
 
     def containment(self, x: np.ndarray) -> np.ndarray | None:
+        """Whether each agent's true state `x` ``(R, N, 4)`` lies in its set (None: not a set-membership filter)."""
         return None
 
     def agent_inputs(self, Z: np.ndarray, S: np.ndarray, U: np.ndarray, i: int) -> tuple:
-        """``(estimator, own, messages)``: agent i's next step of run 0 (update with `Z`, `S`, prediction with `U`).
+        """``(own, messages)`` of agent i's next step of run 0 (update with `Z`, `S`, prediction with `U`)."""
+        return self.filter.agent_inputs(Z, S, U, i)
 
-        The estimator's own ``agent_inputs``, given the state this adapter holds; ``estimator.agent_step(i,
-        own, messages)`` is the step.
-        """
-        raise NotImplementedError(f"{type(self).__name__} has no agent-level step")
+    def agent_step(self, i: int, own, messages: Sequence):
+        """Agent i's step alone (the filter's ``agent_step``)."""
+        return self.filter.agent_step(i, own, messages)
 
     def agent_state(self, i: int) -> tuple:
-        """Agent i's state of run 0, as the estimator's ``agent_step`` returns it (to check one against the other)."""
-        raise NotImplementedError(f"{type(self).__name__} has no agent-level step")
+        """Agent i's state of run 0, as :meth:`agent_step` returns it (to check one against the other)."""
+        return self.filter.agent_state(i)
 
 
-class _Centralized(_Estimator):
+class _Direct(TeamEstimator):
+    """A filter that is a team estimator itself (a new method's class): its optional parts read from it."""
+
+    @property
+    def own_cov(self):
+        return getattr(self.filter, "own_cov", None)
+
+    @property
+    def link_borne(self):
+        return getattr(self.filter, "link_borne", True)
+
+    @property
+    def set_shape(self):
+        return getattr(self.filter, "set_shape", None)
+
+    @property
+    def team_estimates(self):
+        return getattr(self.filter, "team_estimates", None)
+
+    def views(self, Z, S):
+        views = getattr(self.filter, "views", None)
+        return super().views(Z, S) if views is None else views(Z, S)
+
+    def containment(self, x):
+        inside = getattr(self.filter, "containment", None)
+        return None if inside is None else inside(x)
+
+
+class _Centralized(TeamEstimator):
+    """:class:`mascore.centralized_team_filter.CentralizedTeamFilter`: the centre's filter of the team."""
+
     link_borne = False
-
-    def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
-        super().__init__(team, x_hat0)
-        self.filter = method_spec("centralized", "team").build(team, x_hat0)
-        self.model = self.filter.model
 
     def update(self, Z, S):
         self.filter.update(Z, S)
@@ -130,13 +276,13 @@ class _Centralized(_Estimator):
 
     @property
     def own_cov(self):
-        return _own_blocks(self.filter.P, self.model)
+        return _own_blocks(self.filter.P, self.filter.model)
 
-    def agent_inputs(self, Z, S, U, i):
-        return (self.filter, *self.filter.agent_inputs(Z, S, U, i))
+    def agent_state(self, i):
+        raise NotImplementedError("the centre runs the whole filter: no agent state of its own")
 
 
-def _own_blocks(P: np.ndarray, model: team_model.TeamFilterModel) -> np.ndarray:
+def _own_blocks(P: np.ndarray, model) -> np.ndarray:
     """Agent i's own ``(4, 4)`` covariance from reduced team covariances: ``(B, N, 4, 4)``.
 
     `P` is ``(B, N m_r, N m_r)`` (one team covariance) or ``(B, N, N m_r, N m_r)`` (agent i's own
@@ -147,45 +293,52 @@ def _own_blocks(P: np.ndarray, model: team_model.TeamFilterModel) -> np.ndarray:
     blocks = np.moveaxis(blocks, 0, -3)
     if P.ndim == 4:  # (B, N agents, N blocks, mr, mr): agent i's block i
         blocks = blocks[:, np.arange(N), np.arange(N)]
-    return team_model.expand_covariance(blocks, model.kron)
+    from ..team_model import expand_covariance
+
+    return expand_covariance(blocks, model.kron)
 
 
-class _Local(_Estimator):
-    """A Kalman filter per agent on its own state (:mod:`mascore.kalman`); one covariance serves all agents."""
+def _own_measurements(Z: np.ndarray) -> np.ndarray:
+    """Each agent's measurement of itself, ``Z[:, i, i]``: ``(R, N, m)``."""
+    N = Z.shape[1]
+    return Z[:, np.arange(N), np.arange(N)]
 
-    def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
-        super().__init__(team, x_hat0)
+
+class _Local(TeamEstimator):
+    """A Kalman filter per agent on its own state (:class:`mascore.kalman.LinearGaussianModel`); one covariance."""
+
+    def __init__(self, spec, filt, team, x_hat0):
+        super().__init__(spec, filt, team, x_hat0)
         self.P = team.P0.copy()
 
     def update(self, Z, S):
-        N = self.own.shape[1]
-        self.own, self.P = kalman.update(self.own, self.P, Z[:, np.arange(N), np.arange(N)], np.eye(4), self.t.R)
+        from ..kalman import update
+
+        self.own, self.P = update(self.own, self.P, _own_measurements(Z), self.filter.H, self.filter.R)
 
     def predict(self, U):
-        self.own, self.P = kalman.predict(self.own, self.P, self.t.A, self.t.Q_filter, self.t.B, U)
+        from ..kalman import predict
+
+        self.own, self.P = predict(self.own, self.P, self.t.A, self.t.Q_filter, self.t.B, U)
 
     @property
     def own_cov(self):
         return self.P
 
     def agent_inputs(self, Z, S, U, i):
-        model = method_spec("local", "team").build(self.t, self.own)
-        N = self.t.N
-        return (model, *model.agent_inputs(self.own[0], self.P, Z[0, np.arange(N), np.arange(N)], U[0], i))
+        return self.filter.agent_inputs(self.own[0], self.P, _own_measurements(Z)[0], U[0], i)
 
     def agent_state(self, i):
         return self.own[0, i], self.P
 
 
-class _Song(_Estimator):
-    """Song et al.'s filters; ``X`` is every agent's estimate of the team, ``(R, N, N, 4)``."""
+class _Song(TeamEstimator):
+    """Song et al.'s filters (:class:`mascore.distributed_kf.TeamFilter`); every agent estimates the team."""
 
-    def __init__(self, team: _Team, x_hat0: np.ndarray, estimation_based: bool) -> None:
-        super().__init__(team, x_hat0)
-        self.eb = estimation_based
-        self.link_borne = not estimation_based
-        self.filter = method_spec("song-eb" if estimation_based else "song-mb", "team").build(team, x_hat0)
-        self.model = self.filter.model
+    def __init__(self, spec, filt, team, x_hat0):
+        super().__init__(spec, filt, team, x_hat0)
+        self.eb = filt.mode == "eb"
+        self.link_borne = not self.eb
 
     def update(self, Z, S):
         self.filter.update(Z, S)
@@ -207,10 +360,10 @@ class _Song(_Estimator):
 
     @property
     def own_cov(self):
-        return _own_blocks(self.filter.agent_covariances(), self.model)
+        return _own_blocks(self.filter.agent_covariances(), self.filter.model)
 
     def agent_inputs(self, Z, S, U, i):
-        return (self.filter, *self.filter.agent_inputs(Z, S, i))
+        return self.filter.agent_inputs(Z, S, i)
 
     def agent_state(self, i):
         return self.filter.view("X_hat")[0, i], self.filter.view("Sigma")[0, i]
@@ -287,27 +440,27 @@ def vlahakis_profile(n_agents: int = 8, phis: Sequence[float] = (-0.1, 0.0, 0.31
     return out
 
 
-class _Vlahakis(_Estimator):
+class _Vlahakis(TeamEstimator):
     """The Vlahakis observer (:class:`mascore.network_observer.DiscreteNetworkObserver`) with its gains from the LMI."""
 
-    def __init__(self, team: _Team, x_hat0: np.ndarray, name: str = "vlahakis") -> None:
-        super().__init__(team, x_hat0)
-        self.observer = method_spec(name, "team").build(team, x_hat0)  # the gains of the filter's Q
+    @property
+    def observer(self):
+        return self.filter
 
     def update(self, Z, S):
-        self.own = self.observer.update(self.own, Z[..., :2], S)  # z_ij positions; the links delivered
+        self.own = self.filter.update(self.own, Z[..., :2], S)  # z_ij positions; the links delivered
 
     def predict(self, U):
-        self.own = self.observer.predict(self.own, U)
+        self.own = self.filter.predict(self.own, U)
 
     def agent_inputs(self, Z, S, U, i):
-        return (self.observer, *self.observer.agent_inputs(self.own[0], Z[0, :, :, :2], U[0], i))
+        return self.filter.agent_inputs(self.own[0], Z[0, :, :, :2], U[0], i)
 
     def agent_state(self, i):
         return (self.own[0, i],)
 
 
-class _Forwarding(_Estimator):
+class _Forwarding(TeamEstimator):
     """Measurement forwarding on the own states (:class:`mascore.own_state.OwnStateForwardingFilter`).
 
     With every agent measuring its own full state and the controls known, the team
@@ -316,12 +469,9 @@ class _Forwarding(_Estimator):
     (drop-outs change the count of measurements).
     """
 
-    def __init__(self, team: _Team, x_hat0: np.ndarray, H: np.ndarray | None = None,
-                 R: np.ndarray | None = None) -> None:
-        super().__init__(team, x_hat0)
+    def __init__(self, spec, filt, team, x_hat0):
+        super().__init__(spec, filt, team, x_hat0)
         self.P = np.broadcast_to(team.P0, (*x_hat0.shape[:2], 4, 4)).copy()
-        self.filter = OwnStateForwardingFilter(team.A, team.B, team.Q_filter, np.eye(4) if H is None else H,
-                                               team.R if R is None else R)  # each measurement z_ji = H x_i + nu_ji
 
     def update(self, Z, S):
         self.own, self.P = self.filter.update(self.own, self.P, Z, S)
@@ -334,37 +484,79 @@ class _Forwarding(_Estimator):
         return self.P
 
     def agent_inputs(self, Z, S, U, i):
-        return (self.filter, *self.filter.agent_inputs(self.own[0], self.P[0], Z[0], S[0], U[0], i))
+        return self.filter.agent_inputs(self.own[0], self.P[0], Z[0], S[0], U[0], i)
 
     def agent_state(self, i):
         return self.own[0, i], self.P[0, i]
 
 
-class _SetMembership(_Estimator):
-    def __init__(self, team: _Team, x_hat0: np.ndarray, confidence: float | None = None,
-                 name: str = "set-membership") -> None:
-        super().__init__(team, x_hat0)
-        s = team.s
-        self.name = name
-        confidence = s.sm_confidence if confidence is None else confidence
-        self.shape = np.broadcast_to(bound_scale("gaussian", 4, confidence) * team.P0,
-                                     (*x_hat0.shape[:2], 4, 4)).copy()
-        scale = bound_scale(team.noise, 4, confidence)
-        self.W_meas = scale * team.R
-        self.W_proc = scale * team.Q_filter
+class _CentralizedPosition(_Forwarding):
+    """The centre's Kalman filter of the team with every position measurement.
+
+    :class:`mascore.own_state.CentralizedOutputFilter`, with ``C = [I 0]``.
+    """
+
+    link_borne = False
+
+    def __init__(self, spec, filt, team, x_hat0):
+        TeamEstimator.__init__(self, spec, filt, team, x_hat0)
+        self.P = np.kron(np.eye(team.N), team.P0)[None]
+
+    @property
+    def own_cov(self):
+        return self.filter.own_covariances(self.P)  # (B, N, 4, 4)
+
+    def agent_state(self, i):
+        raise NotImplementedError("the centre runs the whole filter: no agent state of its own")
+
+
+class _SetMembership(TeamEstimator):
+    """The closed-form set-membership filter on each agent's own state (:class:`mascore.set_membership.SetMembershipModel`).
+
+    Full-state sensing: each agent's set and gain, batched over agents and runs. Positions only
+    (``C = [I 0]``): the bounds are the initial set ``s_4 P_0``, the process set ``s_4 Q``, the
+    measurement set ``s_2 r I_2``, with ``s_d`` the chi-square quantile of ``d`` degrees of freedom at
+    the confidence level (bounded noise: ``3 d``, which holds the box of the uniform draws: a guaranteed
+    bound). The shape and the gain of the closed form do not depend on the measurements (the
+    S-procedure bound holds for every noise in its set), and every agent starts from the same shape:
+    they are computed once per step and the gain applied to every agent and run, eq. (2).
+    """
+
+    def __init__(self, spec, filt, team, x_hat0):
+        super().__init__(spec, filt, team, x_hat0)
+        self.model = filt
+        self.position = team.sensing == "position"
+        if self.position:  # (4, 4): the same for every agent
+            self.shape = team.bound_scale(4, spec.setting) * team.P0
+        else:
+            confidence = team.s.sm_confidence if spec.setting is None else spec.setting
+            self.shape = np.broadcast_to(bound_scale("gaussian", 4, confidence) * team.P0,
+                                         (*x_hat0.shape[:2], 4, 4)).copy()
 
     def update(self, Z, S):
-        N = self.t.N
-        y = Z[:, np.arange(N), np.arange(N)]
-        self.own, self.shape, _ = set_membership.correct(self.own, self.shape, y, np.eye(4), np.eye(4), self.W_meas,
-                                                         check_consistency=False)
+        y, m = _own_measurements(Z), self.model
+        if self.position:
+            _, self.shape, L = m.correct(self.own[0, 0], self.shape, y[0, 0], check_consistency=False)
+            self.own = self.own + (y - self.own @ m.C.T) @ L.T               # eq. (2), every agent and run
+        else:
+            from ..set_membership import correct
+
+            self.own, self.shape, _ = correct(self.own, self.shape, y, m.C, m.D, m.R, check_consistency=False)
 
     def predict(self, U):
-        self.own, self.shape = set_membership.predict(self.own, self.shape, self.t.A, np.eye(4), self.W_proc,
-                                                      self.t.B, U)
+        m = self.model
+        if self.position:
+            _, self.shape = m.predict(self.own[0, 0], self.shape, U[0, 0])
+            self.own = self.own @ m.A.T + U @ m.B.T                            # eq. (4)
+        else:
+            from ..set_membership import predict
+
+            self.own, self.shape = predict(self.own, self.shape, m.A, m.G, m.Q, m.B, U)
 
     def containment(self, x):
         e = x - self.own
+        if self.position:
+            return np.einsum("...i,...i->...", e, e @ np.linalg.inv(self.shape)) <= 1.0 + 1e-9
         return np.einsum("...i,...i->...", e, np.linalg.solve(self.shape, e[..., None])[..., 0]) <= 1.0 + 1e-9
 
     @property
@@ -373,130 +565,65 @@ class _SetMembership(_Estimator):
         return self.shape
 
     def agent_inputs(self, Z, S, U, i):
-        model = method_spec(self.name, "team").build(self.t, self.own)
-        N = self.t.N
-        return (model, *model.agent_inputs(self.own[0], self.shape[0], Z[0, np.arange(N), np.arange(N)], U[0], i))
+        if self.position:
+            raise NotImplementedError("positions only: one shape for every agent, computed once per step")
+        return self.filter.agent_inputs(self.own[0], self.shape[0], _own_measurements(Z)[0], U[0], i)
 
     def agent_state(self, i):
         return self.own[0, i], self.shape[0, i]
 
 
-# ---------------------------------------------------------------- position-only sensing: z_ij = C x_j + nu_ij
+def _stepper(filt) -> type[TeamEstimator]:
+    """The estimator that steps a filter of the package by its class (another class steps itself: ``_Direct``)."""
+    from ..centralized_team_filter import CentralizedTeamFilter
+    from ..distributed_kf import TeamFilter
+    from ..kalman import LinearGaussianModel
+    from ..network_observer import DiscreteNetworkObserver
+    from ..own_state import CentralizedOutputFilter, OwnStateForwardingFilter
+    from ..set_membership import SetMembershipModel
 
-#: The position-only output matrix of one agent, ``C = [I_2 0]`` (m).
-_C_POS = frozen_copy(np.hstack([np.eye(2), np.zeros((2, 2))]))
+    stepped_by = ((CentralizedTeamFilter, _Centralized), (CentralizedOutputFilter, _CentralizedPosition),
+                  (TeamFilter, _Song), (LinearGaussianModel, _Local), (OwnStateForwardingFilter, _Forwarding),
+                  (DiscreteNetworkObserver, _Vlahakis), (SetMembershipModel, _SetMembership))
+    return next((est for cls, est in stepped_by if isinstance(filt, cls)), _Direct)
 
 
-class _CentralizedPosition(_Estimator):
-    """The centre's Kalman filter of the team with every position measurement.
+def make_estimator(method: str, team: TeamTask, x_hat0: np.ndarray) -> TeamEstimator:
+    """Method `method`'s filter on the team task, ready to step: its spec's ``build(team, x_hat0)``.
 
-    :class:`mascore.own_state.CentralizedOutputFilter`, with ``C = [I 0]``.
+    Parameters
+    ----------
+    method : str
+        A method of the team task (its :class:`~mascore.estimation.MethodSpec`).
+    team : TeamTask
+        The cell's task (:func:`team_setup`).
+    x_hat0 : ndarray
+        The initial estimates ``(R, N, 4)``.
+
+    Returns
+    -------
+    TeamEstimator
+        The filter with its state.
+
+    Raises
+    ------
+    ValueError
+        An unknown method, or one that does not apply under the team's sensing.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import compare
+    >>> team = compare.team_setup(4, "gaussian", 1.0, compare.SETTINGS)
+    >>> type(compare.make_estimator("song-mb", team, np.zeros((1, 4, 4))).filter).__name__
+    'TeamFilter'
     """
-
-    link_borne = False
-
-    def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
-        super().__init__(team, x_hat0)
-        self.filter = CentralizedOutputFilter(team.A, team.B, team.Q_filter, _C_POS, team.s.r, team.N)
-        self.P = np.kron(np.eye(team.N), team.P0)[None]
-
-    def update(self, Z, S):
-        self.own, self.P = self.filter.update(self.own, self.P, Z, S)
-
-    def predict(self, U):
-        self.own, self.P = self.filter.predict(self.own, self.P, U)
-
-    @property
-    def own_cov(self):
-        return self.filter.own_covariances(self.P)  # (B, N, 4, 4)
-
-
-class _LocalPosition(_Local):
-    """A Kalman filter per agent on its own state from its own position measurement (``H = C``, ``R = r I_2``)."""
-
-    def update(self, Z, S):
-        N = self.own.shape[1]
-        self.own, self.P = kalman.update(self.own, self.P, Z[:, np.arange(N), np.arange(N)], _C_POS,
-                                         self.t.s.r * np.eye(2))
-
-
-class _ForwardingPosition(_Forwarding):
-    """Forwarding with positions only: agent i corrects with its own and its neighbours' position measurements of i."""
-
-    def __init__(self, team: _Team, x_hat0: np.ndarray) -> None:
-        super().__init__(team, x_hat0, H=_C_POS, R=team.s.r * np.eye(2))
-
-
-class _SetMembershipPosition(_Estimator):
-    """The closed-form set-membership filter on each agent's own state from its own position (``C = [I 0]``).
-
-    Bounds: the initial set ``s_4 P_0``, the process set ``s_4 Q``, the measurement set ``s_2 r I_2``,
-    with ``s_d`` the chi-square quantile of ``d`` degrees of freedom at the confidence level (bounded
-    noise: ``3 d``, which holds the box of the uniform draws: a guaranteed bound). The shape and the gain
-    of the closed form do not depend on the measurements (the S-procedure bound holds for every noise
-    in its set), and every agent starts from the same shape: they are computed once per step by
-    :class:`mascore.set_membership.SetMembershipModel` and the gain applied to every agent and run, eq. (2).
-    """
-
-    def __init__(self, team: _Team, x_hat0: np.ndarray, confidence: float | None = None) -> None:
-        super().__init__(team, x_hat0)
-        s = team.s
-        confidence = s.sm_confidence if confidence is None else confidence
-        self.model = set_membership.SetMembershipModel(
-            A=team.A, G=np.eye(4), C=_C_POS, D=np.eye(2), B=team.B,
-            Q=bound_scale(team.noise, 4, confidence) * team.Q_filter,
-            R=bound_scale(team.noise, 2, confidence) * s.r * np.eye(2))
-        self.shape = bound_scale(team.noise, 4, confidence) * team.P0  # (4, 4): the same for every agent
-
-    def update(self, Z, S):
-        N = self.t.N
-        y = Z[:, np.arange(N), np.arange(N)]                                   # (R, N, 2)
-        _, self.shape, L = self.model.correct(self.own[0, 0], self.shape, y[0, 0], check_consistency=False)
-        self.own = self.own + (y - self.own @ _C_POS.T) @ L.T               # eq. (2), every agent and run
-
-    def predict(self, U):
-        _, self.shape = self.model.predict(self.own[0, 0], self.shape, U[0, 0])
-        self.own = self.own @ self.t.A.T + U @ self.t.B.T                   # eq. (4)
-
-    def containment(self, x):
-        e = x - self.own
-        return np.einsum("...i,...i->...", e, e @ np.linalg.inv(self.shape)) <= 1.0 + 1e-9
-
-    @property
-    def set_shape(self):
-        """The set's shape matrix ``(4, 4)``, the same for every agent and run."""
-        return self.shape
-
-
-def make_estimator(method: str, team: _Team, x_hat0: np.ndarray, sensing: str = "full") -> _Estimator:
-    if sensing == "position":
-        position = {"centralized": _CentralizedPosition, "local": _LocalPosition, "forwarding": _ForwardingPosition}
-        if method in position:
-            return position[method](team, x_hat0)
-        if method in SM_CONFIDENCE:
-            return _SetMembershipPosition(team, x_hat0, SM_CONFIDENCE[method])
-        if method in POSITION_NOT_APPLICABLE:
-            raise ValueError(f"method {method!r} does not apply under position-only sensing: "
-                             f"{POSITION_NOT_APPLICABLE[method]}")
-    if method in SM_CONFIDENCE and method != "set-membership":
-        return _SetMembership(team, x_hat0, SM_CONFIDENCE[method], method)
-    if method == "centralized":
-        return _Centralized(team, x_hat0)
-    if method == "local":
-        return _Local(team, x_hat0)
-    if method in ("song-mb", "song-eb"):
-        return _Song(team, x_hat0, estimation_based=method == "song-eb")
-    if method in VLAHAKIS_PHI:
-        return _Vlahakis(team, x_hat0, method)
-    if method == "forwarding":
-        return _Forwarding(team, x_hat0)
-    if method == "set-membership":
-        return _SetMembership(team, x_hat0)
-    raise ValueError(f"method must be one of {ALL_TEAM_METHODS}; got {method!r}")
-
-
-#: Team methods that do not apply on the switching topology, with the reason (the chapter shows them).
-SWITCHING_NOT_APPLICABLE = estimation.not_applicable("switching")
+    spec = estimation.method_spec(method, "team")
+    why = spec.not_applicable.get("position") if team.sensing == "position" else None
+    if why is not None:
+        raise ValueError(f"method {method!r} does not apply under position-only sensing: {why}")
+    filt = spec.build(team, x_hat0)
+    return _stepper(filt)(spec, filt, team, x_hat0)
 
 
 def simulate_team(
@@ -517,8 +644,8 @@ def simulate_team(
     Parameters
     ----------
     method : str
-        One of :data:`TEAM_METHODS` (or a set-membership variant of :data:`SM_CONFIDENCE`);
-        under position sensing one of :data:`POSITION_METHODS`.
+        A method of the team task (:data:`ALL_TEAM_METHODS`: their specs'); under position sensing one of
+        :data:`POSITION_METHODS`.
     n_agents : int
         Team size N (a ring, N >= 3).
     seed : numpy.random.SeedSequence or int
@@ -578,16 +705,17 @@ def simulate_team(
     n_agents, runs = check_run(n_agents, noise, dropout, q_scale, runs, settings, seed)
     if sensing not in SENSINGS:
         raise ValueError(f"sensing must be one of {SENSINGS}; got {sensing!r}")
-    if method not in ALL_TEAM_METHODS:
-        raise ValueError(f"method must be one of {ALL_TEAM_METHODS}; got {method!r}")
-    if sensing == "position" and method in POSITION_NOT_APPLICABLE:
-        raise ValueError(f"method {method!r} does not apply under position-only sensing: "
-                         f"{POSITION_NOT_APPLICABLE[method]}")
+    methods = estimation.method_names("team")
+    if method not in methods:
+        raise ValueError(f"method must be one of {methods}; got {method!r}")
     if graph not in SWITCHING_GRAPHS:
         raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
-    if graph == "switching" and method in SWITCHING_NOT_APPLICABLE:
-        raise ValueError(f"{method} does not apply on graph='switching': {SWITCHING_NOT_APPLICABLE[method]}")
-    team = team_setup(int(n_agents), noise, float(q_scale), settings, graph)
+    why = estimation.method_spec(method, "team").not_applicable.get("switching")
+    if graph == "switching" and why is not None:
+        raise ValueError(f"{method} does not apply on graph='switching': {why}")
+    from ..rendezvous import consensus_control
+
+    team = team_setup(int(n_agents), noise, float(q_scale), settings, graph, sensing)
     topology = switching_graphs(int(n_agents), settings.n_steps, settings) > 0 if team.switching else None
     init_rng, proc_rng, meas_rng, drop_rng = np.random.default_rng(seed).spawn(4)
     N, s = team.N, settings
@@ -597,8 +725,8 @@ def simulate_team(
         x_hat0 = x + np.sqrt(s.p0) * init_rng.standard_normal(x.shape)
     else:  # the noise's distribution: bounded under uniform noise (the set-membership filter's initial set)
         x_hat0 = x + np.sqrt(s.p0) * draw_noise(init_rng, noise, x.shape)
-    est = make_estimator(method, team, x_hat0, sensing)
-    measured = 4 if sensing == "full" else 2  # z_ij = x_j + nu_ij, or its position [I 0] x_j + nu_ij
+    est = make_estimator(method, team, x_hat0)  # refuses a method that does not apply to the sensing
+    measured = len(team.C)  # z_ij = x_j + nu_ij, or its position [I 0] x_j + nu_ij
     cpu = 0.0  # the estimator's own work only: not its design (offline), not the simulation around it
     q_std, r_std = np.sqrt(np.diag(team.Q)), np.sqrt(s.r)
     nominal = team.adjacency > 0
@@ -626,7 +754,7 @@ def simulate_team(
             view = fresh
         if k >= s.steady_from:
             _accumulate(acc, est, x, view, nominal | eye)
-        U = rendezvous.consensus_control(view, team.laplacian, team.K)
+        U = consensus_control(view, team.laplacian, team.K)
         tic = time.thread_time()
         est.predict(U)
         cpu += time.thread_time() - tic
@@ -639,15 +767,15 @@ def simulate_team(
     return {
         "rmse_own": np.sqrt(acc["own"] / n), "rmse_view": np.sqrt(acc["view"] / n),
         "nees_own": acc["nees"] / n if est.own_cov is not None else nan,
-        "containment": acc["contained"] / n if method in SM_CONFIDENCE else nan,
-        "set_size": acc["set_size"] / n if method in SM_CONFIDENCE else nan,
-        "rmse_far": np.sqrt(acc["far"] / acc["far_steps"]) if getattr(est, "team_estimates", None) is not None
+        "containment": acc["contained"] / n if est.set_shape is not None else nan,
+        "set_size": acc["set_size"] / n if est.set_shape is not None else nan,
+        "rmse_far": np.sqrt(acc["far"] / acc["far_steps"]) if est.team_estimates is not None
         and acc["far_steps"] > 0 else nan,
         "spread": np.sqrt(acc["spread"] / n), "cpu_s": np.full(runs, cpu),
     }
 
 
-def _accumulate(acc: dict, est: _Estimator, x: np.ndarray, view: np.ndarray, seen: np.ndarray) -> None:
+def _accumulate(acc: dict, est: TeamEstimator, x: np.ndarray, view: np.ndarray, seen: np.ndarray) -> None:
     """Add one step's squared errors (averaged over agents) to the per-run sums."""
     e = x - est.own
     acc["own"] += np.mean(np.sum(e[..., :2] ** 2, -1), -1)
@@ -659,13 +787,13 @@ def _accumulate(acc: dict, est: _Estimator, x: np.ndarray, view: np.ndarray, see
     inside = est.containment(x)
     if inside is not None:
         acc["contained"] += inside.mean(-1)
-    shape = getattr(est, "set_shape", None)
+    shape = est.set_shape
     if shape is not None:  # the largest semi-axis of the position block (m)
         axis = np.sqrt(np.linalg.eigvalsh(shape[..., :2, :2])[..., -1])
         acc["set_size"] += np.broadcast_to(axis, e.shape[:2]).mean(-1)
     centred = x[..., :2] - x[..., :2].mean(-2, keepdims=True)
     acc["spread"] += np.mean(np.sum(centred**2, -1), -1)
-    team = getattr(est, "team_estimates", None)
+    team = est.team_estimates
     far = ~seen
     if team is not None and far.any():  # agent i's estimates of the agents it neither senses nor hears from
         ef = np.sum((team[..., :2] - x[:, None, :, :2]) ** 2, -1)  # (R, N, N)

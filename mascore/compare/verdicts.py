@@ -23,7 +23,7 @@ import numpy as np
 from .benchmark import REN_Q, SETTINGS, SM_CONFIDENCE, VLAHAKIS_PHI
 from .stats import Interval, rms_ratio
 from .tables import position_only_kf_rmse
-from .target import TARGET_METHODS
+from .target import LINK_STUDIES, TARGET_METHODS
 from .team import vlahakis_profile
 
 #: The seed blocks every claim was written from (the quick sweep's, when the claims were first written).
@@ -879,6 +879,7 @@ def compare_claims(table, phi: dict | None = None, *, held_out: Sequence[int] = 
         raise TypeError("table must be the sweep's per-run table (run_compare's first output, with columns "
                         "'block', 'run', 'rmse_own'), not its summary")
     runs = deciding_runs(table, held_out, written_from)
+    runs = runs[~runs["study"].isin(LINK_STUDIES)].copy()  # no claim reads the link studies (link_summary)
     if "sensing" not in runs:
         runs["sensing"] = np.nan
     team = runs["task"] == "team"

@@ -248,47 +248,25 @@ class SetMembershipSettings:
 
     @property
     def n_agents(self) -> int:
-        """Number of followers N (one initial estimate each).
-
-        Returns
-        -------
-        int
-            ``len(x0_hat)``.
-        """
+        """Number of followers N (one initial estimate each): int, ``len(x0_hat)``."""
         return len(self.x0_hat)
 
     @property
     def mu_bar(self) -> float:
-        """Normalization of Corollary 1, ``alpha sqrt(N) / (1 - mu)``.
-
-        Returns
-        -------
-        float
-            ``mu_bar``.
-        """
+        """Normalization of Corollary 1, ``alpha sqrt(N) / (1 - mu)``: float, ``mu_bar``."""
         return sync.mu_bar(self.alpha, self.mu, self.n_agents)
 
     @property
     def rows(self) -> tuple[DisturbanceSetting, ...]:
-        """The Table 1 rows, each with the paper's published mean and RMS.
-
-        Returns
-        -------
-        tuple of DisturbanceSetting
-            Disturbance amplitudes and filter bounds per row.
-        """
+        """The Table 1 rows, each with the paper's published mean and RMS: tuple of DisturbanceSetting, disturbance
+        amplitudes and filter bounds per row."""
         return tuple(DisturbanceSetting(aw, av, q, r, *pub) for aw, av, q, r, pub in
                      zip(self.alpha_w, self.alpha_v, self.q, self.r, TABLE1_PUBLISHED))
 
     @property
     def figure_setting(self) -> DisturbanceSetting:
-        """The Table 1 row simulated for Figs. 2-6.
-
-        Returns
-        -------
-        DisturbanceSetting
-            Row ``figure_row`` (1-based, as printed) of :attr:`rows`.
-        """
+        """The Table 1 row simulated for Figs. 2-6: DisturbanceSetting, row ``figure_row`` (1-based, as printed) of
+        :attr:`rows`."""
         return self.rows[self.figure_row - 1]
 
 
@@ -465,36 +443,20 @@ class ClosedLoopRun:
 
     @property
     def error(self) -> np.ndarray:
-        """Estimation errors ``e_k = x_k - xhat_{k|k}``.
-
-        Returns
-        -------
-        (R, T+1, N, 2) ndarray
-            One error per run, step and agent.
-        """
+        """Estimation errors ``e_k = x_k - xhat_{k|k}``: (R, T+1, N, 2) ndarray, one error per run, step and agent."""
         return self.x - self.xhat
 
     @property
     def containment(self) -> np.ndarray:
-        """``e^T P^{-1} e`` for every run, step and agent; at most 1 means contained.
-
-        Returns
-        -------
-        (R, T+1, N) ndarray
-            The quadratic form of each error in its corrected ellipsoid.
-        """
+        """``e^T P^{-1} e`` for every run, step and agent; at most 1 means contained: (R, T+1, N) ndarray, the
+        quadratic form of each error in its corrected ellipsoid."""
         e = self.error
         return np.einsum("...i,...i->...", e, np.linalg.solve(self.P, e[..., None])[..., 0])
 
     @property
     def trace(self) -> np.ndarray:
-        """``trace P_{k|k}`` for every run, step and agent.
-
-        Returns
-        -------
-        (R, T+1, N) ndarray
-            The size of each corrected ellipsoid.
-        """
+        """``trace P_{k|k}`` for every run, step and agent: (R, T+1, N) ndarray, the size of each corrected
+        ellipsoid."""
         return np.trace(self.P, axis1=-2, axis2=-1)
 
     def table1_metrics(self) -> tuple[np.ndarray, np.ndarray]:
@@ -819,24 +781,14 @@ class SetMembershipResult:
 
     @property
     def sdp_run(self) -> ClosedLoopRun:
-        """The figure row's run 0 on the SDP path.
-
-        Returns
-        -------
-        ClosedLoopRun
-            `figure_run` or `figure_twin`, whichever used the SDPs.
-        """
+        """The figure row's run 0 on the SDP path: ClosedLoopRun, `figure_run` or `figure_twin`, whichever used the
+        SDPs."""
         return self.figure_run if self.settings.figure_method == "sdp" else self.figure_twin
 
     @property
     def closed_form_run(self) -> ClosedLoopRun:
-        """The figure row's run 0 on the closed-form path.
-
-        Returns
-        -------
-        ClosedLoopRun
-            `figure_run` or `figure_twin`, whichever used the closed form.
-        """
+        """The figure row's run 0 on the closed-form path: ClosedLoopRun, `figure_run` or `figure_twin`, whichever
+        used the closed form."""
         return self.figure_twin if self.settings.figure_method == "sdp" else self.figure_run
 
 

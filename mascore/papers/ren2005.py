@@ -50,30 +50,10 @@ from ..registry import (
 )
 
 __all__ = [
-    "REGISTRY",
-    "SETTINGS",
-    "STUDY",
-    "FIGURES",
-    "TABLES",
-    "Fig1Result",
-    "KalmanConsensusResult",
-    "KalmanConsensusSettings",
-    "SwitchingDemo",
-    "claims",
-    "fig1",
-    "fig1_initial",
-    "fig2_graph",
-    "fig3a_graph",
-    "fig3b_graph",
-    "fixed_graph_run",
-    "no_union_sequence",
-    "noise_continuous",
-    "overconfidence",
-    "plot_fig1",
-    "prose_values",
-    "run",
-    "switching_demo",
-    "union_sequence",
+    "REGISTRY", "SETTINGS", "STUDY", "FIGURES", "TABLES", "Fig1Result", "KalmanConsensusResult",
+    "KalmanConsensusSettings", "SwitchingDemo", "claims", "fig1", "fig1_initial", "fig2_graph", "fig3a_graph",
+    "fig3b_graph", "fixed_graph_run", "no_union_sequence", "noise_continuous", "overconfidence", "plot_fig1",
+    "prose_values", "run", "switching_demo", "union_sequence",
 ]
 
 
@@ -163,13 +143,7 @@ class KalmanConsensusSettings:
 
     @property
     def fig1_xi0(self) -> np.ndarray:
-        """Initial meeting times as an array.
-
-        Returns
-        -------
-        (n,) ndarray
-            The meeting times (h).
-        """
+        """Initial meeting times as an array: (n,) ndarray, the meeting times (h)."""
         return np.asarray(self.xi0, dtype=float)
 
 

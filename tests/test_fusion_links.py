@@ -1,0 +1,173 @@
+"""Packet loss, one-step latency and send-on-delta messages on the target and localization tasks."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from mascore import compare, fusion, fusion_links, graphs
+from mascore.compare import grid
+from mascore.compare.stats import NEES_DIMENSION, anees_bounds
+from mascore.compare.target import LATENCY_METHODS, LINK_STUDIES, SEND_ON_DELTA_METHODS, _filter_links
+
+
+def _cell(study, method, task="target", dropout=0.0, block=0):
+    return {"study": study, "task": task, "method": method, "n_agents": 8, "graph": "ring", "noise": "gaussian",
+            "dropout": dropout, "q_scale": 1.0, "block": block}
+
+
+def test_lossy_graphs_symmetric_nested_seeded_and_at_the_rate():
+    A = graphs.ring_graph(8)
+    G1 = fusion_links.lossy_graphs(A, 0.1, 400, np.random.default_rng(5))
+    G3 = fusion_links.lossy_graphs(A, 0.3, 400, np.random.default_rng(5))
+    assert (G3 == G3.transpose(0, 2, 1)).all()                   # a lost exchange is lost both ways
+    assert not (G3 > A).any() and not (G1 > A).any()             # only the graph's links, never a new one
+    assert not ((G3 > 0) & (G1 == 0)).any()                      # nested: lost at 0.1, lost at 0.3
+    links = 400 * 8                                              # undirected link-steps
+    for p, G in ((0.1, G1), (0.3, G3)):
+        lost = links - G.sum() / 2
+        assert abs(lost - p * links) < 4 * np.sqrt(links * p * (1 - p))    # binomial, 4 sigma
+    again = fusion_links.lossy_graphs(A, 0.3, 400, np.random.default_rng(5))
+    assert again.tobytes() == G3.tobytes()
+    assert fusion_links.lossy_graphs(A, 0.0, 10, 0).tobytes() == np.broadcast_to(A, (10, 8, 8)).tobytes()
+
+
+def test_ideal_links_through_the_link_machinery_are_bit_identical_to_the_tables():
+    """p = 0, latency 0: the per-step filters on the unchanged graph give the plain run's numbers bit for bit."""
+    s = compare.SETTINGS
+    for task in ("target", "localization"):
+        model = (compare.target_model if task == "target" else compare.localization_model)(8, "ring", s)
+        n = model.n_states
+        _, z = model.simulate(np.zeros(n), s.p0 * np.eye(n), 60, np.random.default_rng(1), n_runs=4)
+        G = fusion_links.lossy_graphs(model.adjacency, 0.0, 60, 0)
+        for method in ("forwarding", "ci-L5", "icf-L1", "diffusion"):
+            x, P, _, sent = _filter_links(method, model, task, G, z, s.p0 * np.eye(n), 0, None)
+            xr, Pr = compare.target_filter(method, model, task).run(np.zeros(n), s.p0 * np.eye(n), z)
+            assert sent is None and x.tobytes() == xr.tobytes() and P.tobytes() == Pr.tobytes()
+    # and the grid's own target cells still run without links
+    plain = compare.simulate_target("ci-L1", 8, 3, runs=10)
+    again = compare.simulate_target("ci-L1", 8, 3, runs=10, loss=0.0, latency=0, send_delta=None)
+    assert plain["rmse_own"].tobytes() == again["rmse_own"].tobytes()
+
+
+def test_track_messages_on_ideal_links_is_the_filter():
+    model = compare.target_model(8)
+    _, z = model.simulate(np.zeros(4), np.eye(4), 80, rng=2, n_runs=6)
+    for filt in (fusion.ConsensusOnInformationFilter(model, 1), fusion.InformationConsensusFilter(model, 1)):
+        xr, Pr = filt.run(np.zeros(4), np.eye(4), z)
+        x, P, sent = fusion_links.track_messages([filt] * 80, np.zeros(4), np.eye(4), z)
+        np.testing.assert_allclose(x, xr, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(P, np.broadcast_to(Pr, P.shape), rtol=1e-9, atol=1e-12)
+        assert sent.all()
+        # delta = 0: every agent sends at every step, so the estimates are the plain filter's
+        x0, P0, sent0 = fusion_links.track_messages([filt] * 80, np.zeros(4), np.eye(4), z, send_delta=0.0)
+        assert sent0.all()
+        np.testing.assert_allclose(x0, xr, rtol=1e-9, atol=1e-9)
+
+
+def test_latency_first_step_fuses_nothing_received():
+    """With latency nothing has arrived at the first step: each agent's estimate is its own local filter's."""
+    model = compare.target_model(8)
+    _, z = model.simulate(np.zeros(4), np.eye(4), 3, rng=4, n_runs=2)
+    ci = fusion.ConsensusOnInformationFilter(model, 1)
+    x, P, _ = fusion_links.track_messages([ci] * 3, np.zeros(4), np.eye(4), z, latency=1)
+    local = fusion.ConsensusOnInformationFilter(model, 0)
+    xl, Pl = local.update(*local.predict(np.zeros((8, 4)), np.broadcast_to(np.eye(4), (8, 4, 4))), z[0])
+    np.testing.assert_allclose(x[0], xl, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(P[0], Pl, rtol=1e-12, atol=1e-12)
+    assert not np.allclose(x[1], ci.update(*ci.predict(x[0], P[0]), z[1])[0])   # late pairs differ from fresh ones
+
+
+@pytest.mark.parametrize("delta", [0.0, 1.0])
+@pytest.mark.parametrize("method", ["ci-L1", "icf-L1"])
+def test_send_on_delta_floats_as_sent(method, delta):
+    m = compare.simulate_target(method, 8, 7, runs=10, send_delta=delta)
+    plain_floats = compare.target_cost(method, 8, 2)[0]
+    if delta == 0.0:  # every agent sends at every step: the plain method's floats, and its estimates
+        assert (m["floats"] == plain_floats).all()
+        plain = compare.simulate_target(method, 8, 7, runs=10)
+        np.testing.assert_allclose(m["rmse_own"], plain["rmse_own"], rtol=1e-9)
+    else:
+        assert (m["floats"] < plain_floats).all() and (m["floats"] > 0).all()
+
+
+def test_loss_and_latency_cells_seeded_and_scored_with_the_existing_statistics():
+    """Loss from the cell's seed, byte for byte; ANEES with its chi-square bounds; the exact filters stay consistent.
+
+    Forwarding under loss and under latency is still a Kalman filter (on the measurements that
+    arrived, and one step behind on the neighbours'), and CI's convex combination of consistent
+    densities is consistent whatever arrives: their ANEES must not exceed the upper bound.
+    """
+    rows = []
+    for study, p, methods in (("loss", 0.3, ["centralized", "forwarding", "ci-L1", "icf-L1"]),
+                              ("latency", 0.1, ["centralized", "forwarding", "ci-L1"])):
+        for method in methods:
+            cell = _cell(study, method, dropout=p)
+            out = grid.run_cell(cell)
+            rows += [{**r, **cell, "cell": f"{study}-{method}"} for r in out]
+    again = grid.run_cell(_cell("loss", "ci-L1", dropout=0.3))
+    assert [r["rmse_own"] for r in again] == [r["rmse_own"] for r in rows if r["cell"] == "loss-ci-L1"]
+    s = grid.summarize(pd.DataFrame(rows)).set_index(["study", "method"])
+    lo, hi = anees_bounds(50, NEES_DIMENSION["target"])
+    assert np.allclose(s["nees_bound_lo"], lo) and np.allclose(s["nees_bound_hi"], hi)
+    for key in [("loss", "forwarding"), ("latency", "forwarding"), ("loss", "centralized")]:
+        assert lo <= s.loc[key, "nees_own_mean"] <= hi, key
+    for key in [("loss", "ci-L1"), ("latency", "ci-L1")]:
+        assert s.loc[key, "nees_own_mean"] <= hi, key
+    assert (s["ratio_lo"] <= s["ratio_mean"]).all() and (s.loc[("loss", "centralized"), "ratio_mean"] == 1.0)
+    # loss and latency cost accuracy: worse than on ideal links, on the same seeds
+    ideal = compare.simulate_target("ci-L1", 8, grid.cell_seed(_cell("loss", "ci-L1"), compare.SEED_AXES, 0))
+    assert s.loc[("loss", "ci-L1"), "rmse_own_mean"] > ideal["rmse_own"].mean()
+
+
+def test_link_studies_in_the_grids():
+    quick, full = grid.grid_cells("quick"), grid.grid_cells("full")
+    q = [c for c in quick if c["study"] in LINK_STUDIES]
+    f = [c for c in full if c["study"] in LINK_STUDIES]
+    assert {c["task"] for c in q} == {"target"} and {c["task"] for c in f} == {"target", "localization"}
+    assert {c["dropout"] for c in f if c["study"] == "loss"} == {0.1, 0.3}
+    assert all(c["method"] in LATENCY_METHODS for c in f if c["study"] == "latency")
+    assert all(c["method"] in SEND_ON_DELTA_METHODS for c in f if c["study"].startswith("send-on-delta"))
+    assert all(c["n_agents"] == 8 and c["graph"] == "ring" for c in f)
+    for c in f:  # every cell has its bound in its group (the ratio's reference)
+        assert any(b["method"] == "centralized" and all(b[k] == c[k] for k in ("study", "task", "dropout", "block"))
+                   for b in f)
+
+
+def test_bad_link_arguments_are_named():
+    with pytest.raises(ValueError, match="loss"):
+        compare.simulate_target("ci-L1", 8, 0, runs=2, loss=1.0)
+    with pytest.raises(ValueError, match="latency"):
+        compare.simulate_target("ci-L1", 8, 0, runs=2, latency=2)
+    with pytest.raises(ValueError, match="latency: method"):
+        compare.simulate_target("diffusion", 8, 0, runs=2, latency=1)
+    with pytest.raises(ValueError, match="send_delta: method"):
+        compare.simulate_target("ci-L5", 8, 0, runs=2, send_delta=1.0)
+    with pytest.raises(ValueError, match="send_delta must be"):
+        compare.simulate_target("ci-L1", 8, 0, runs=2, send_delta=float("nan"))
+    with pytest.raises(ValueError, match="send_delta needs a fixed graph"):
+        compare.simulate_target("ci-L1", 8, 0, runs=2, send_delta=1.0, loss=0.1)
+    model = compare.target_model(8)
+    with pytest.raises(ValueError, match="one density"):
+        fusion_links.track_messages([fusion.ConsensusOnInformationFilter(model, 2)], np.zeros(4), np.eye(4),
+                                    np.zeros((1, 8)))
+    with pytest.raises(ValueError, match="send_delta must be"):
+        fusion_links.track_messages([fusion.ConsensusOnInformationFilter(model, 1)], np.zeros(4), np.eye(4),
+                                    np.zeros((1, 8)), send_delta=-1.0)
+    with pytest.raises(ValueError, match="loss must be"):
+        fusion_links.lossy_graphs(graphs.ring_graph(4), -0.1, 3, 0)
+
+
+def test_a_lost_link_is_an_absent_edge_with_the_weights_renormalized_over_what_arrived():
+    """The step's CI weights are the Metropolis weights of the delivered graph: zero on lost links, rows of one."""
+    from mascore import sensor_network
+
+    model = compare.target_model(8)
+    G = fusion_links.lossy_graphs(model.adjacency, 0.3, 50, 9)
+    k = int(np.argmax(G.sum(axis=(1, 2)) < model.adjacency.sum()))          # a step that lost a link
+    step = compare.target_filter("ci-L1", sensor_network.SensorNetworkModel(model.F, model.Q, model.H, model.R, G[k]))
+    W = step.round_weights
+    lost = (model.adjacency > 0) & (G[k] == 0)
+    assert lost.any() and (W[lost] == 0).all() and np.allclose(W.sum(1), 1) and np.allclose(W, W.T)
+    degree = (G[k] > 0).sum(1)
+    i, j = np.argwhere(G[k] > 0)[0]
+    assert W[i, j] == pytest.approx(1 / (1 + max(degree[i], degree[j])))       # Xiao, Boyd and Lall's rule
