@@ -511,7 +511,7 @@ def not_applicable(scenario: str) -> dict[str, str]:
     --------
     >>> from mascore.estimation import not_applicable
     >>> list(not_applicable("position"))
-    ['song-mb', 'song-eb']
+    ['song-mb']
     """
     return {s.name: s.not_applicable[scenario] for s in method_specs() if scenario in s.not_applicable}
 
