@@ -29,6 +29,9 @@ __all__ = [
     "check_laplacian",
     "check_positive",
     "check_positive_int",
+    "agent_index",
+    "step_arrays",
+    "check_moderate",
     "check_seed",
     "check_steps",
     "check_budget",
@@ -198,6 +201,40 @@ def check_positive_int(n: object, name: str, minimum: int = 1) -> int:
     if n < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}; got {n}")
     return int(n)
+
+
+def agent_index(i: object, n_agents: int, name: str = "i") -> int:
+    """Return agent `i` as an int in ``0..n_agents-1`` (an integer, not a bool or a float), else raise naming `name`."""
+    i = check_positive_int(i, name, minimum=0)
+    if i >= n_agents:
+        raise ValueError(f"{name} must be an agent 0..{n_agents - 1}; got {i}")
+    return i
+
+
+#: Entries beyond this magnitude square to inf (products of two such entries overflow floating point).
+MODERATE = 1e150
+
+
+def check_moderate(*named: tuple[str, np.ndarray], what: str = "the computation") -> None:
+    """Refuse (naming it) an array whose entries overflow floating point once squared (beyond :data:`MODERATE`)."""
+    for name, M in named:
+        big = float(np.abs(M).max()) if M.size else 0.0
+        if big > MODERATE:
+            raise ValueError(f"{name} has entries of magnitude {big:.3g}: {what} overflows floating point; "
+                             f"rescale the problem (units of time, state or input) so that {name} is moderate")
+
+
+def step_arrays(**named: object) -> tuple[np.ndarray, ...]:
+    """Each named value as a finite float array (a step's inputs), refused by name otherwise.
+
+    Examples
+    --------
+    >>> from mascore._validation import step_arrays
+    >>> x, P = step_arrays(x=[0.0, 1.0], P=[[1.0, 0.0], [0.0, 1.0]])
+    >>> x.shape, P.shape
+    ((2,), (2, 2))
+    """
+    return tuple(require_finite(float_array(value, name), name) for name, value in named.items())
 
 
 def check_steps(n_steps: object, name: str = "n_steps") -> int:
@@ -560,20 +597,43 @@ def _hash_key(a: object) -> object:
 
 
 def available_memory_bytes() -> int:
-    """Memory the system can still give this process (``MemAvailable`` of ``/proc/meminfo``, else free pages)."""
+    """Memory the system can still give this process (``MemAvailable`` of ``/proc/meminfo``, else free pages).
+
+    A limit on the process's address space (``ulimit -v``, ``resource.RLIMIT_AS``) lowers it.
+    """
+    limit = _address_space_limit()
     try:
         with open("/proc/meminfo") as fh:
             for line in fh:
                 if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
+                    return min(int(line.split()[1]) * 1024, limit)
     except (OSError, ValueError, IndexError):
         pass
     try:
         import os
 
-        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_AVPHYS_PAGES"))
+        return min(int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_AVPHYS_PAGES")), limit)
     except (AttributeError, OSError, ValueError):  # pragma: no cover - no way to ask: assume 8 GiB
         return 8 * 2**30
+
+
+def _address_space_limit() -> int:
+    """Bytes of address space this process may still map under its soft limit (``2**62`` when there is none)."""
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+    except (ImportError, OSError, ValueError):  # pragma: no cover - not a POSIX system
+        return 2**62
+    if soft == resource.RLIM_INFINITY or soft < 0:
+        return 2**62
+    used = 0
+    try:
+        with open("/proc/self/status") as fh:
+            used = next((int(line.split()[1]) * 1024 for line in fh if line.startswith("VmSize:")), 0)
+    except (OSError, ValueError, IndexError):
+        pass
+    return max(int(soft) - used, 0)
 
 
 def check_fits_in_memory(n_bytes: float, name: str, what: str = "") -> None:

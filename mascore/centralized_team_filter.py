@@ -345,7 +345,8 @@ class CentralizedTeamFilter:
         >>> sorted(own), messages
         (['U', 'Z', 'mask'], ())
         """
-        return {"Z": np.array(Z, dtype=float), "mask": np.array(mask), "U": np.array(U, dtype=float)}, ()
+        return {"Z": _finite(np.array(_float_array(Z, "Z")), "Z"), "mask": np.array(mask),
+                "U": _finite(np.array(_float_array(U, "U")), "U")}, ()
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
         """The centre's step: :meth:`update` with the team's measurements, then :meth:`predict` (advances this filter).

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from ._validation import float_array, require_finite
+
 __all__ = ["APPROX_FACTOR", "PAPER_DIGITS", "VERDICTS", "Claim", "worst_deviation"]
 
 
@@ -127,8 +129,8 @@ class Claim:
                             f"got {type(self.tolerance).__name__}")
         if self.holds is not None and not isinstance(self.holds, bool | np.bool_):
             raise TypeError(f"{self.id}: holds must be True, False or None; got {type(self.holds).__name__}")
-        object.__setattr__(self, "value", _jsonable(self.value))
-        object.__setattr__(self, "paper_value", _jsonable(self.paper_value))
+        object.__setattr__(self, "value", _jsonable(self.value, "value"))
+        object.__setattr__(self, "paper_value", _jsonable(self.paper_value, "paper_value"))
         if self.labels is not None:
             if isinstance(self.labels, str | bytes) or not isinstance(self.labels, list | tuple | np.ndarray):
                 raise TypeError(f"{self.id}: labels must be a sequence of strings (one per value); "
@@ -299,8 +301,8 @@ def worst_deviation(paper_value: Any, value: Any, kind: str) -> float:
     >>> worst_deviation([1.0, 2.0], [1.1, 2.0], "abs")
     0.10000000000000009
     """
-    paper = np.atleast_1d(np.asarray(paper_value, dtype=float))
-    ours = np.atleast_1d(np.asarray(value, dtype=float))
+    paper, ours = (np.atleast_1d(require_finite(float_array(v, name), name))
+                   for v, name in ((paper_value, "paper_value"), (value, "value")))
     dev = np.abs(ours - paper)
     if kind == "rel":
         dev = dev / np.maximum(np.abs(paper), np.finfo(float).tiny)
@@ -332,14 +334,14 @@ def _all_numbers(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
-def _jsonable(value: Any) -> Any:
-    """Convert numpy scalars/arrays (possibly nested) to plain JSON types."""
+def _jsonable(value: Any, name: str = "value") -> Any:
+    """Convert numpy scalars/arrays (possibly nested) to plain JSON types; a NaN or inf is refused naming `name`."""
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): _jsonable(v, name) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
+        return [_jsonable(v, name) for v in value]
     if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
+        return _jsonable(value.tolist(), name)
     if isinstance(value, (np.bool_, bool)):
         return bool(value)
     if isinstance(value, (np.integer,)):
@@ -347,6 +349,6 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, (float, np.floating)):
         v = float(value)
         if not math.isfinite(v):
-            raise ValueError(f"claim values must be finite; got {v}")
+            raise ValueError(f"{name}: claim values must be finite; got {v}")
         return v
     return value

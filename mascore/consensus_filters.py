@@ -21,7 +21,7 @@ from types import MappingProxyType
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import Frozen, check_positive
+from ._validation import Frozen, agent_index, check_positive, check_positive_int, require_finite
 from ._validation import float_array as _float_array
 from .consensus import central_fusion, kalman_consensus_step
 from .estimation import Message, MethodSpec, protocol_docs
@@ -82,7 +82,7 @@ class KalmanConsensusFilter(Frozen):
         >>> f.predict(xi, P)[0].shape
         (3, 1)
         """
-        return np.asarray(xi, dtype=float), np.asarray(P, dtype=float)
+        return _finite(xi, "xi"), _finite(P, "P")
 
     def update(self, xi: ArrayLike, P: ArrayLike, G: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """One step of eqs. (4)-(5) with the messages delivered on `G` (:func:`~mascore.consensus.kalman_consensus_step`).
@@ -175,7 +175,8 @@ class KalmanConsensusFilter(Frozen):
         >>> messages[0][0][:, 0]                                  # agents 0 and 2 send their states
         array([0., 4.])
         """
-        xi, P, G = _float_array(xi, "xi"), _float_array(P, "P"), _float_array(G, "G")
+        xi, G, P = _team(xi, G, P)
+        i = agent_index(i, len(xi))
         heard = np.flatnonzero(G[i] > 0)
         return {"xi": xi[i].copy(), "P": P[i].copy()}, ((xi[heard].copy(), P[heard].copy()),)
 
@@ -210,6 +211,7 @@ class KalmanConsensusFilter(Frozen):
         >>> KalmanConsensusFilter(0.1, 0.1).messages(m=2)[0].floats
         5.0
         """
+        m = check_positive_int(m, "m")
         return (Message("state xi_i and covariance P_i", float(m + m * (m + 1) // 2)),)
 
 
@@ -257,7 +259,7 @@ class AverageConsensusFilter(Frozen):
         >>> f.predict(xi).shape
         (3, 1)
         """
-        return np.asarray(xi, dtype=float)
+        return _finite(xi, "xi")
 
     def update(self, xi: ArrayLike, G: ArrayLike) -> np.ndarray:
         """One mixing step ``W xi`` on the delivered links `G`.
@@ -283,11 +285,11 @@ class AverageConsensusFilter(Frozen):
         >>> f.update(xi, G)[:, 0]
         array([1., 3., 5.])
         """
-        G_k = np.asarray(G, dtype=float)
+        xi, G_k, _ = _team(xi, G, batched=True)
         deg = G_k.sum(-1)
         W = G_k / (1.0 + np.maximum(deg[..., :, None], deg[..., None, :]))
         W = W + np.eye(G_k.shape[-1]) * (1.0 - W.sum(-1))[..., None]
-        return W @ np.asarray(xi, dtype=float)
+        return W @ xi
 
     def fuse(self, xi: ArrayLike, P: ArrayLike | None, G: ArrayLike) -> tuple[np.ndarray, None]:
         """The shared task's run: one :meth:`update` per step of the delivered links `G`.
@@ -349,7 +351,8 @@ class AverageConsensusFilter(Frozen):
         >>> f.agent_inputs(xi, G, 1)[1][0][1]                    # its neighbours' degrees
         array([1., 1.])
         """
-        xi, G = _float_array(xi, "xi"), _float_array(G, "G")
+        xi, G, _ = _team(xi, G)
+        i = agent_index(i, len(xi))
         heard = np.flatnonzero(G[i] > 0)
         deg = G.sum(-1)
         return {"xi": xi[i].copy(), "degree": deg[i]}, ((xi[heard].copy(), deg[heard].copy()),)
@@ -381,7 +384,7 @@ class AverageConsensusFilter(Frozen):
         >>> AverageConsensusFilter().messages(m=2)[0].floats
         2.0
         """
-        return (Message("state xi_i", float(m)),)
+        return (Message("state xi_i", float(check_positive_int(m, "m"))),)
 
 
 class CentralFusionFilter(Frozen):
@@ -502,3 +505,32 @@ METHODS = (
                  {"shared": ("O(d m^3)", "O(d m^2)")}, lambda n, q, d, N: float((d + 1) * (n**2 + n)),
                  position=14 + k, role="knob", family="ren-kc", setting=q) for k, q in enumerate((0.3, 0.6, 1.0), start=1)),
 )
+
+
+def _finite(value: ArrayLike, name: str) -> np.ndarray:
+    """`value` as a float array, refused by name if it holds NaN or inf (a step's own input)."""
+    return require_finite(_float_array(value, name), name)
+
+
+def _links(G: ArrayLike) -> np.ndarray:
+    """The delivered links of a step: finite, non-negative weights."""
+    G = _finite(G, "G")
+    if (G < 0).any():
+        raise ValueError("G must hold non-negative link weights (G[i, j] > 0: agent i heard agent j)")
+    return G
+
+
+def _team(xi: ArrayLike, G: ArrayLike, P: ArrayLike | None = None,
+          batched: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """A step's estimates ``(N, m)`` (``(..., N, m)`` if batched), links ``(N, N)`` and covariances ``(N, m, m)``."""
+    xi, G = _finite(xi, "xi"), _links(G)
+    if xi.ndim < 2 or (not batched and xi.ndim != 2):
+        raise ValueError(f"xi must have shape {'(..., N, m)' if batched else '(N, m)'}; got {xi.shape}")
+    N, m = xi.shape[-2:]
+    if G.shape[-2:] != (N, N) or (not batched and G.ndim != 2):
+        raise ValueError(f"G must have shape (N, N) = ({N}, {N}) for xi of shape {xi.shape}; got {G.shape}")
+    if P is not None:
+        P = _finite(P, "P")
+        if P.shape != (N, m, m):
+            raise ValueError(f"P must have shape (N, m, m) = ({N}, {m}, {m}) for xi of shape {xi.shape}; got {P.shape}")
+    return xi, G, P

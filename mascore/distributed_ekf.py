@@ -91,11 +91,13 @@ from ._progress import progress_bar
 from ._validation import (
     SYMMETRY_RTOL,
     Frozen,
+    agent_index,
     check_covariance,
     check_generator,
     check_positive_int,
     finite_result,
     frozen_copy,
+    require_finite,
     state_view,
 )
 from .estimation import Message
@@ -464,7 +466,8 @@ class FlockingEKF:
         if self._X.ndim != 3:
             raise ValueError(f"agent_inputs needs one run of one filter per agent, X_hat (N, N, 2n); got "
                              f"{self._X.shape}")
-        z, observed = np.asarray(z, dtype=float), np.asarray(observed, dtype=bool)
+        z, observed = require_finite(_float_array(z, "z"), "z"), np.asarray(observed, dtype=bool)
+        i = agent_index(i, len(self._X))
         return {"X": self._X[i].copy(), "Sigma": self._P[i].copy(), "z": z[i].copy(), "observed": observed[i].copy()}, ()
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:

@@ -1544,17 +1544,14 @@ _SONG_MB_NOT_APPLICABLE = MappingProxyType({
     **_SONG_NOT_APPLICABLE,
     "position": "steers with its raw measurements of the neighbours (eq. (5)), which must be full states",
 })
-_SONG_EB_NOT_APPLICABLE = MappingProxyType({
-    **_SONG_NOT_APPLICABLE,
-    "position": "not run in this benchmark with positions only (the filter itself takes them through an "
-                "output matrix: team_filter_model(..., C=[I 0]))",
-})
+_SONG_EB_NOT_APPLICABLE = _SONG_NOT_APPLICABLE  # it takes positions only through C = [I 0]
 
 
 def _song_filter(mode: str):
     """``build(team, x_hat0)``: Song et al.'s filter of the team scenario, every agent from the common estimate."""
     def build(team, x_hat0: np.ndarray) -> TeamFilter:
-        model = team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N)
+        C = None if team.sensing == "full" else team.C  # full states: the paper's model itself, bit for bit
+        model = team_filter_model(team.A, team.B, team.K, team.Q_filter, team.R, team.N, C=C)
         runs, N, m = x_hat0.shape  # one common initial estimate; links dropping per run split the covariance
         return TeamFilter(model, team.laplacian, x_hat0.reshape(runs, N * m), team.P0, mode=mode)
     return build

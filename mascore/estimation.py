@@ -34,6 +34,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from ._validation import float_array, require_finite
+
 __all__ = [
     "GaussianState",
     "SetState",
@@ -80,6 +82,9 @@ class GaussianState:
     mean: np.ndarray
     covariance: np.ndarray
 
+    def __post_init__(self) -> None:
+        _check_pair(self, ("mean", "covariance"))
+
 
 @dataclass(frozen=True)
 class SetState:
@@ -103,6 +108,9 @@ class SetState:
     centre: np.ndarray
     shape: np.ndarray
 
+    def __post_init__(self) -> None:
+        _check_pair(self, ("centre", "shape"))
+
 
 @dataclass(frozen=True)
 class Message:
@@ -124,6 +132,11 @@ class Message:
 
     what: str
     floats: float
+
+    def __post_init__(self) -> None:
+        f = self.floats
+        if isinstance(f, bool) or not isinstance(f, (int, float, np.integer, np.floating)) or not 0 <= f < np.inf:
+            raise ValueError(f"floats must be a finite number >= 0 (floats sent per step); got {f!r}")
 
 
 @runtime_checkable
@@ -525,6 +538,16 @@ def not_applicable(scenario: str) -> dict[str, str]:
     --------
     >>> from mascore.estimation import not_applicable
     >>> list(not_applicable("position"))
-    ['song-mb', 'song-eb']
+    ['song-mb']
     """
     return {s.name: s.not_applicable[scenario] for s in method_specs() if scenario in s.not_applicable}
+
+
+def _check_pair(state: object, names: tuple[str, str]) -> None:
+    """A state value's vector ``(..., n)`` and matrix ``(..., n, n)``: finite real arrays of matching shapes."""
+    vector, matrix = (require_finite(float_array(getattr(state, name), name), name) for name in names)
+    if vector.ndim < 1 or matrix.shape != (*vector.shape, vector.shape[-1]):
+        raise ValueError(f"{names[1]} must have shape (..., n, n) = {(*vector.shape, vector.shape[-1])} for "
+                         f"{names[0]} of shape {vector.shape}; got {matrix.shape}")
+    object.__setattr__(state, names[0], vector)
+    object.__setattr__(state, names[1], matrix)

@@ -41,8 +41,8 @@ def format_number(x: float, digits: int = 4) -> str:
     """
     if isinstance(digits, bool) or not isinstance(digits, int | np.integer):
         raise TypeError(f"digits must be an integer >= 1 (significant digits); got {type(digits).__name__} {digits!r}")
-    if digits < 1:
-        raise ValueError(f"digits must be an integer >= 1 (significant digits); got {digits}")
+    if not 1 <= digits <= 17:
+        raise ValueError(f"digits must be an integer >= 1 and at most 17 (significant digits of a float); got {digits}")
     digits = int(digits)
     if isinstance(x, bool | np.bool_):
         return "yes" if x else "no"

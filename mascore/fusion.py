@@ -1341,6 +1341,7 @@ class SetMembershipForwardingFilter(_NetworkFilter):
         (array([1., 1.]), array([1.6816, 1.6816]))
         """
         x, P = self._check_xP(x, P)
+        require_finite(x, "x")  # the shape's prediction does not see the centre
         _, shape = self._motion.predict(np.zeros(self.model.n_states), P)
         return x @ self.model.F.T, shape
 

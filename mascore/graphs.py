@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import check_adjacency, check_laplacian, check_positive, check_positive_int
+from ._validation import check_adjacency, check_fits_in_memory, check_laplacian, check_positive, check_positive_int
 from ._validation import float_array as _float_array
 
 if TYPE_CHECKING:
@@ -646,7 +646,9 @@ def _check_adjacency(A: ArrayLike, name: str = "A") -> np.ndarray:
 
 
 def _check_n(n_agents: int, minimum: int = 1) -> int:
-    return check_positive_int(n_agents, "n_agents", minimum)
+    n_agents = check_positive_int(n_agents, "n_agents", minimum)
+    check_fits_in_memory(8.0 * n_agents**2, "n_agents", f"the ({n_agents}, {n_agents}) adjacency matrix")
+    return n_agents
 
 
 def _adjacency_stack(adjacencies: Sequence[ArrayLike] | np.ndarray) -> np.ndarray:

@@ -49,7 +49,15 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import Frozen, check_covariance, check_positive_int, finite_result, frozen_copy, symmetric_part
+from ._validation import (
+    Frozen,
+    agent_index,
+    check_covariance,
+    check_positive_int,
+    finite_result,
+    frozen_copy,
+    symmetric_part,
+)
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .agents import is_system, system_matrices
@@ -234,7 +242,8 @@ class LinearGaussianModel(Frozen):
         >>> own["z"], messages
         (array([3.]), ())
         """
-        x, P, z = np.asarray(x, dtype=float), np.asarray(P, dtype=float), np.asarray(z, dtype=float)
+        x, P, z = (_finite(_float_array(a, name), name) for a, name in ((x, "x"), (P, "P"), (z, "z")))
+        i = agent_index(i, len(x))
         return ({"x": x[i].copy(), "P": (P if P.ndim == 2 else P[i]).copy(), "z": z[i].copy(),
                  "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
 

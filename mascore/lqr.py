@@ -37,7 +37,9 @@ from ._validation import (
     as_matrix,
     check_adjacency,
     check_covariance,
+    check_fits_in_memory,
     check_laplacian,
+    check_moderate,
     check_positive_int,
     frozen_copy,
 )
@@ -243,19 +245,11 @@ def _solve_lqr(A, B, Q, R, N, discrete: bool):
     return Kt + RinvNt, S, E
 
 
-#: Entries beyond this magnitude square to inf in the Riccati equation: such an input is refused by name.
-_OVERFLOW = 1e150
 
 
 def _check_scale(*named: tuple[str, np.ndarray]) -> None:
     """Refuse (naming it) an input whose entries overflow floating point once squared."""
-    for name, M in named:
-        big = float(np.abs(M).max()) if M.size else 0.0
-        if big > _OVERFLOW:
-            raise ValueError(
-                f"{name} has entries of magnitude {big:.3g}: the Riccati equation overflows floating point; "
-                f"rescale the problem (units of time, state or input) so that {name} is moderate"
-            )
+    check_moderate(*named, what="the Riccati equation")
 
 
 def _solved(solver, A, B, Q, R, discrete: bool):
@@ -688,8 +682,8 @@ def bottom_up_lqr(
     Parameters
     ----------
     A : (n, n) array_like, or LTIAgent or StateSpace
-        Agent state matrix (continuous time unless `dt` is given), or the agent as a system
-        (then B is left out: ``f(sys, Q1, Q2, R, ...)``; its ``dt`` sets the time base).
+        Agent state matrix in continuous time, or the agent as a continuous-time system
+        (then B is left out: ``f(sys, Q1, Q2, R, ...)``; a discrete-time one is refused).
     B : (n, m) array_like, optional
         Agent input matrix (not with a system); ``(A, B)`` stabilizable.
     Q1 : (n, n) array_like
@@ -926,6 +920,7 @@ def _check_agent(A, B, Q1, Q2, R, controllable: bool = True, discrete: bool = Fa
     Q1 = _weight(Q1, "Q1", n)
     Q2 = _weight(Q2, "Q2", n)
     R = _weight(R, "R", B.shape[1], definite=True)
+    _check_scale(("A", A), ("B", B), ("Q1", Q1), ("Q2", Q2), ("R", R))
     if controllable and not is_stabilizable(A, B, discrete=discrete):
         unstable = "|z| >= 1" if discrete else "Re s >= 0"
         raise ValueError(f"(A, B) is not stabilizable (a mode with {unstable} is uncontrollable): "
@@ -954,14 +949,20 @@ def _modal_structure(A, B, Q1, Q2, R, N: int) -> dict:
     return {"P": P0, "P2": P2, "K1": KN + K2, "K2": K2, "P_network": P_network, "K_network": K_network}
 
 
-def _check_agents(n_agents: int) -> int:
-    return check_positive_int(n_agents, "n_agents")
+def _check_agents(n_agents: int, n: int = 1) -> int:
+    n_agents = check_positive_int(n_agents, "n_agents")
+    check_fits_in_memory(8.0 * (n_agents * n) ** 2, "n_agents", "the all-to-all problem's matrices")
+    return n_agents
 
 
 def _weight(M, name, size=None, definite=False, atleast_2d=True) -> np.ndarray:
     """A symmetric positive semidefinite (or definite) weight; a scalar is read as 1 x 1 if `atleast_2d`."""
     M = _float_array(M, name)
-    return check_covariance(np.atleast_2d(M) if atleast_2d else M, name, size, definite=definite)
+    M = np.atleast_2d(M) if atleast_2d else M
+    if M.ndim != 2:
+        raise ValueError(f"{name} must be a matrix ({size if size is not None else 'n'} x "
+                         f"{size if size is not None else 'n'}); got shape {M.shape}")
+    return check_covariance(M, name, size, definite=definite)
 
 
 def _check_gain(gain, m: int | None = None, n: int | None = None) -> None:

@@ -14,7 +14,7 @@ from types import MappingProxyType
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import Frozen, as_matrix, check_adjacency, frozen_copy
+from ._validation import Frozen, agent_index, as_matrix, check_adjacency, finite_result, frozen_copy, step_arrays
 from ._validation import check_square as _square
 from .estimation import Message, MethodSpec, protocol_docs
 
@@ -82,7 +82,8 @@ class DiscreteNetworkObserver(Frozen):
         B = as_matrix(B, "B")
         if B.shape[0] != n:
             raise ValueError(f"B must have n = {n} rows; got shape {B.shape}")
-        if not np.isfinite(coupling):
+        if isinstance(coupling, bool) or not isinstance(coupling, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(coupling):
             raise ValueError(f"coupling must be a finite number; got {coupling!r}")
         self._set(gain=frozen_copy(gain), coupling=float(coupling), adjacency=frozen_copy(check_adjacency(adjacency)),
                   A=frozen_copy(A), B=frozen_copy(B), C=frozen_copy(C))
@@ -116,6 +117,7 @@ class DiscreteNetworkObserver(Frozen):
         >>> obs.update(np.zeros((1, 3, 2)), np.ones((1, 3, 3, 1)), np.ones((1, 3, 3))).shape
         (1, 3, 2)
         """
+        x_hat, z, links = self._inputs(x_hat=x_hat, z=z, links=links)
         N = x_hat.shape[-2]
         p_hat = x_hat @ self.C.T
         own_z = z[:, np.arange(N), np.arange(N)]
@@ -124,7 +126,20 @@ class DiscreteNetworkObserver(Frozen):
         rel_est = p_hat[:, :, None] - p_hat[:, None]
         coupling = np.einsum("rij,rijd->rid", delivered, rel_meas - rel_est)
         innovation = (own_z - p_hat) + self.coupling * coupling
-        return x_hat + innovation @ self.gain.T
+        return finite_result("observer update", x_hat + innovation @ self.gain.T,
+                             inputs=((x_hat, "x_hat"), (z, "z"), (links, "links")))
+
+    def _inputs(self, runs: bool = True, **named) -> tuple[np.ndarray, ...]:
+        """A step's inputs as finite float arrays of this observer's sizes (with a leading run axis if `runs`)."""
+        N = len(self.adjacency)
+        sizes = {"x_hat": (N, self.A.shape[0]), "u": (N, self.B.shape[1]), "z": (N, N, self.C.shape[0]),
+                 "links": (N, N)}
+        arrays = step_arrays(**named)
+        for (name, arr) in zip(named, arrays):
+            if arr.shape[runs:] != sizes[name] or arr.ndim != len(sizes[name]) + runs:
+                raise ValueError(f"{name} must have shape ({'R, ' if runs else ''}"
+                                 f"{', '.join(map(str, sizes[name]))}); got {arr.shape}")
+        return arrays
 
     def predict(self, x_hat: np.ndarray, u: np.ndarray) -> np.ndarray:
         """The prediction ``x_i <- A x_i + B u_i`` of every agent.
@@ -150,7 +165,8 @@ class DiscreteNetworkObserver(Frozen):
         >>> obs.predict(np.ones((1, 3, 2)), np.zeros((1, 3, 1)))[0, 0]
         array([1.1, 1. ])
         """
-        return x_hat @ self.A.T + u @ self.B.T
+        x_hat, u = self._inputs(x_hat=x_hat, u=u)
+        return finite_result("observer prediction", x_hat @ self.A.T + u @ self.B.T, inputs=((x_hat, "x_hat"), (u, "u")))
 
     def agent_inputs(self, x_hat: np.ndarray, z: np.ndarray, u: np.ndarray, i: int) -> tuple[dict, tuple]:
         """Agent i's own data (its estimate, its measurements, its input) and its neighbours' broadcast outputs.
@@ -184,6 +200,8 @@ class DiscreteNetworkObserver(Frozen):
         >>> messages[0].shape                                  # two neighbours, one output each
         (2, 1)
         """
+        x_hat, z, u = self._inputs(False, x_hat=x_hat, z=z, u=u)
+        i = agent_index(i, len(self.adjacency))
         nbrs = np.flatnonzero(self.adjacency[i])
         own = {"x": x_hat[i].copy(), "z": z[i, i].copy(), "z_nbrs": z[i, nbrs].copy(), "u": u[i].copy(),
                "a": self.adjacency[i, nbrs].copy()}

@@ -38,7 +38,7 @@ from ._conic import ConicProgram, clarabel, solve, svec, svec_size, sym_basis
 from ._optional import require
 from ._solver import SolverError
 from ._systems import design_args
-from ._validation import as_matrix, check_adjacency, check_covariance, check_laplacian, finite_result
+from ._validation import as_matrix, check_adjacency, check_covariance, check_laplacian, check_moderate, finite_result
 from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
@@ -368,6 +368,7 @@ def distributed_observer(
     A, Bbar, C, Q1, R = _check_observer(A, Bbar, C, Q1, R, qname="Q1")
     m = C.shape[0]
     Q2 = check_covariance(np.atleast_2d(_float_array(Q2, "Q2")), "Q2", m)
+    check_moderate(("Q2", Q2), what="the LMI (62)")
     if not isinstance(reading, str) or reading not in READINGS:
         raise ValueError(f"reading must be one of {READINGS}; got {reading!r}")
     _check_trace_in(trace_in)
@@ -708,6 +709,7 @@ def bound_at_fixed_phi(
     single = phis.ndim == 0 or phis.shape == (m, m)
     if single or (m == 1 and phis.ndim == 1):
         phis = phis.reshape(-1, m, m)
+    check_moderate(("Phi", phis), what="the fixed-Phi program")
     if phis.ndim != 3 or phis.shape[1:] != (m, m) or not np.all(np.isfinite(phis)):
         raise ValueError(f"Phi must be finite, one ({m}, {m}) gain or a (K, {m}, {m}) stack; got shape "
                          f"{np.shape(Phi)}")
@@ -773,6 +775,8 @@ def _check_mode_program(A, C, L, lam, process_factors, noise_weights, trace_in):
         noise.append(check_covariance(np.atleast_2d(_float_array(noise_weights[k], f"noise_weights[{k}]")),
                                       f"noise_weights[{k}]", m, definite=True))
     _check_trace_in(trace_in)
+    check_moderate(("A", A), ("C", C), ("L", L), ("lam", lam), *((f"process_factors[{k}]", f) for k, f in enumerate(factors)),
+                   *((f"noise_weights[{k}]", w) for k, w in enumerate(noise)), what="the mode program")
     return A, C, L, lam, factors, noise
 
 
@@ -881,6 +885,7 @@ def simulate_estimation_errors(A_e: ArrayLike, e0: ArrayLike, t: ArrayLike) -> n
     True
     """
     A_e = _square(A_e, "A_e")
+    check_moderate(("A_e", A_e), what="the matrix exponential")
     e0 = _matrix(e0, "e0")
     if e0.size != A_e.shape[0]:
         raise ValueError(f"e0 must have N*n = {A_e.shape[0]} entries; got shape {e0.shape}")
@@ -988,6 +993,7 @@ def simulate_network_observer(
     m = C.shape[0]
     L = _matrix(L, "L", (n, m))
     Phi = as_matrix(np.atleast_2d(_float_array(Phi, "Phi")), "Phi", (m, m))
+    check_moderate(("A", A), ("C", C), ("L", L), ("Phi", Phi), what="the simulation")
     Lap = check_laplacian(laplacian, "laplacian", undirected=True, why=_WHY_SYMMETRIC)
     N = Lap.shape[0]
     x0 = _matrix(x0, "x0", (N, n))
@@ -1208,6 +1214,7 @@ def _check_observer(A, Bbar, C, Q, R, qname="Q"):
         raise ValueError(f"Bbar needs at least one column and C at least one row; got shapes {Bbar.shape}, {C.shape}")
     Q = check_covariance(np.atleast_2d(_float_array(Q, qname)), qname, C.shape[0], definite=True)
     R = check_covariance(np.atleast_2d(_float_array(R, "R")), "R", Bbar.shape[1], definite=True)
+    check_moderate(("A", A), ("Bbar", Bbar), ("C", C), (qname, Q), ("R", R), what="the observer's Riccati equation")
     if not is_controllable(A, Bbar):
         raise ValueError("(A, Bbar) is not controllable: the minimum-energy ARE has no positive definite solution")
     if not is_controllable(A.T, C.T):

@@ -26,7 +26,20 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import Frozen, as_matrix, check_covariance, check_positive, check_positive_int, check_square, frozen_copy
+from ._validation import (
+    Frozen,
+    agent_index,
+    as_matrix,
+    check_covariance,
+    check_fits_in_memory,
+    check_positive,
+    check_positive_int,
+    check_square,
+    finite_result,
+    float_array,
+    frozen_copy,
+    require_finite,
+)
 from .estimation import Message, MethodSpec, protocol_docs
 from .fusion_cost import kalman_step_flops
 
@@ -79,8 +92,11 @@ class OwnStateForwardingFilter(Frozen):
         Q = check_covariance(Q, "Q", n)
         R = check_covariance(R, "R", H.shape[0], definite=True)
         Rinv = np.linalg.inv(R)
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused by name just below
+            information = H.T @ Rinv @ H
+        information = _finite_information(information, "H")
         self._set(A=frozen_copy(A), B=frozen_copy(B), Q=frozen_copy(Q), H=frozen_copy(H), R=frozen_copy(R),
-                  information=frozen_copy(H.T @ Rinv @ H), to_state=frozen_copy(Rinv.T @ H))
+                  information=frozen_copy(information), to_state=frozen_copy(Rinv.T @ H))
 
     def _args(self) -> tuple:
         return (self.A, self.B, self.Q, self.H, self.R)
@@ -114,14 +130,16 @@ class OwnStateForwardingFilter(Frozen):
         >>> f.update(x, P, Z, S)[0][0, :, 0]
         array([0.66666667, 2.        ])
         """
+        x, P, Z, S = _step_inputs(self, x=x, P=P, Z=Z, S=S)
         St = np.swapaxes(np.broadcast_to(S, (Z.shape[0], *S.shape[1:])), -1, -2)  # St[r, i, j] = S[r, j, i]
         count = St.sum(-1).astype(float)                                        # (R, N)
         zsum = np.einsum("rij,rjid->rid", St, Z)                                 # sum_j z_ji
-        prior_info = np.linalg.inv(P)
-        P = np.linalg.inv(prior_info + count[..., None, None] * self.information)
-        P = 0.5 * (P + np.swapaxes(P, -1, -2))
+        prior_info = _inverse(P)
+        P_new = np.linalg.inv(prior_info + count[..., None, None] * self.information)
+        P_new = 0.5 * (P_new + np.swapaxes(P_new, -1, -2))
         rhs = np.einsum("...ij,...j->...i", prior_info, x) + zsum @ self.to_state
-        return np.einsum("...ij,...j->...i", P, rhs), P
+        return finite_result("own-state update", np.einsum("...ij,...j->...i", P_new, rhs), P_new,
+                             inputs=((x, "x"), (P, "P"), (Z, "Z")))
 
     def predict(self, x: np.ndarray, P: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The prediction ``x_i <- A x_i + B u_i``, ``P_i <- A P_i A^T + Q`` of every agent and run.
@@ -150,7 +168,9 @@ class OwnStateForwardingFilter(Frozen):
         >>> f.predict(x, P, np.ones((1, 2, 1)))[0][0, :, 0]
         array([1., 1.])
         """
-        return x @ self.A.T + u @ self.B.T, self.A @ P @ self.A.T + self.Q
+        x, P, u = _step_inputs(self, x=x, P=P, u=u)
+        return finite_result("own-state prediction", x @ self.A.T + u @ self.B.T, self.A @ P @ self.A.T + self.Q,
+                             inputs=((x, "x"), (u, "u"), (P, "P")))
 
     def agent_inputs(self, x: np.ndarray, P: np.ndarray, Z: np.ndarray, S: np.ndarray, u: np.ndarray,
                      i: int) -> tuple[dict, tuple]:
@@ -190,6 +210,8 @@ class OwnStateForwardingFilter(Frozen):
         >>> messages[0]                                            # agent 0's measurement of agent 1
         array([[3.]])
         """
+        x, P, Z, S, u = _step_inputs(self, False, x=x, P=P, Z=Z, S=S, u=u)
+        i = agent_index(i, x.shape[0])
         senders = np.flatnonzero(S[:, i])  # i and the neighbours whose z_ji reached it, ascending
         return ({"x": x[i].copy(), "P": P[i].copy(), "u": u[i].copy(), "index": int(np.flatnonzero(senders == i)[0]),
                  "z": Z[i, i].copy()}, (Z[senders[senders != i], i].copy(),))
@@ -256,9 +278,12 @@ class CentralizedOutputFilter(Frozen):
         Q = check_covariance(Q, "Q", n)
         r = check_positive(r, "r")
         N = check_positive_int(n_agents, "n_agents")
+        check_fits_in_memory(2 * 8.0 * (N * n) ** 2, "n_agents", f"the ({N * n}, {N * n}) team matrices")
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused by name in _set below
+            information = C.T @ C / r
         self._set(A=frozen_copy(A), B=frozen_copy(B), Q=frozen_copy(Q), C=frozen_copy(C),
                   A_team=frozen_copy(np.kron(np.eye(N), A)), Q_team=frozen_copy(np.kron(np.eye(N), Q)),
-                  information=frozen_copy(C.T @ C / r), r=float(r), n_agents=N)
+                  information=frozen_copy(_finite_information(information, "C")), r=float(r), n_agents=N)
 
     def _args(self) -> tuple:
         return (self.A, self.B, self.Q, self.C, self.r, self.n_agents)
@@ -292,9 +317,10 @@ class CentralizedOutputFilter(Frozen):
         >>> f.update(x, P, Z, S)[0][0, :, 0]
         array([0.66666667, 2.        ])
         """
+        x, P, Z, S = _step_inputs(self, x=x, P=P, Z=Z, S=S)
         R_, N, n = x.shape
         count = S.sum(-2).astype(float)                                   # (B, N): measurements of x_j
-        info = np.linalg.inv(P)
+        info = _inverse(P)
         if info.shape[0] != count.shape[0]:                               # links drop per run: one P per run
             info = np.broadcast_to(info, (count.shape[0], *info.shape[1:])).copy()
         diag = count[..., None, None] * self.information                  # (B, N, n, n)
@@ -305,7 +331,8 @@ class CentralizedOutputFilter(Frozen):
         P = 0.5 * (P + np.swapaxes(P, -1, -2))
         resid = np.where(S[..., None], Z - (x @ self.C.T)[:, None], 0.0)   # z_ji - C x_i, (R, N, N, p)
         rhs = resid.sum(1) @ self.C / self.r                              # H^T R^-1 (z - H x), (R, N, n)
-        return x + (P @ rhs.reshape(R_, n * N, 1)).reshape(R_, N, n), P
+        return finite_result("centralized update", x + (P @ rhs.reshape(R_, n * N, 1)).reshape(R_, N, n), P,
+                             inputs=((x, "x"), (info, "P"), (Z, "Z")))
 
     def predict(self, x: np.ndarray, P: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The team's prediction.
@@ -334,7 +361,9 @@ class CentralizedOutputFilter(Frozen):
         >>> f.predict(x, P, np.ones((1, 2, 1)))[0][0, :, 0]
         array([1., 1.])
         """
-        return x @ self.A.T + u @ self.B.T, self.A_team @ P @ self.A_team.T + self.Q_team
+        x, P, u = _step_inputs(self, x=x, P=P, u=u)
+        return finite_result("centralized prediction", x @ self.A.T + u @ self.B.T,
+                             self.A_team @ P @ self.A_team.T + self.Q_team, inputs=((x, "x"), (u, "u"), (P, "P")))
 
     def own_covariances(self, P: np.ndarray) -> np.ndarray:
         """Agent i's own block of the team covariance, for every agent.
@@ -361,6 +390,7 @@ class CentralizedOutputFilter(Frozen):
         """
         N, n = self.n_agents, self.A.shape[0]
         idx = np.arange(N)
+        (P,) = _step_inputs(self, P=P)
         return np.moveaxis(P.reshape(-1, N, n, N, n)[:, idx, :, idx, :], 0, 1)
 
     def agent_inputs(self, x: np.ndarray, P: np.ndarray, Z: np.ndarray, S: np.ndarray, u: np.ndarray,
@@ -400,6 +430,7 @@ class CentralizedOutputFilter(Frozen):
         >>> own["x"].shape, messages
         ((1, 2, 1), ())
         """
+        x, P, Z, S, u = _step_inputs(self, False, x=x, P=P, Z=Z, S=S, u=u)
         return {"x": x[None].copy(), "P": P[None].copy(), "Z": Z[None].copy(), "S": S[None].copy(),
                 "u": u[None].copy()}, ()
 
@@ -419,3 +450,48 @@ METHODS = (
                lambda n, q, d, N: (float(q * d + n), kalman_step_flops(n) + n**3 + 2 * (d + 1) * n),
                {"team": ("O(d n + n^3)", "O(n^2 + d n)")}, lambda n, q, d, N: float(n**2 + n + d * n), position=2),
 )
+
+
+def _finite_information(information: np.ndarray, name: str) -> np.ndarray:
+    """The measurement information ``H^T R^-1 H`` of a model, refused (naming `name`) if it overflows."""
+    if not np.isfinite(information).all():
+        raise ValueError(f"{name} is too large: the measurement information {name}^T R^-1 {name} overflows "
+                         f"floating point; rescale the measurement units")
+    return information
+
+
+def _inverse(P: np.ndarray) -> np.ndarray:
+    """``P^-1`` of a step's covariance(s), refused by name if singular."""
+    try:
+        return np.linalg.inv(P)
+    except np.linalg.LinAlgError:
+        raise ValueError("P must be positive definite (invertible); got a singular covariance") from None
+
+
+def _step_inputs(filt, runs: bool = True, **named) -> tuple[np.ndarray, ...]:
+    """A step's inputs, refused by name: finite floats of the filter's sizes, and boolean links ``S``.
+
+    With `runs`, each has a leading run axis (``S`` and a centralized ``P`` may have one run for all).
+    """
+    n, k = filt.A.shape[0], filt.B.shape[1]
+    p = (filt.H if hasattr(filt, "H") else filt.C).shape[0]
+    team = getattr(filt, "n_agents", None)
+    N = team if team is not None else (np.shape(named["x"])[-2] if "x" in named and np.ndim(named["x"]) >= 2
+                                       else None)
+    per_agent = {"x": (N, n), "u": (N, k), "Z": (N, N, p), "S": (N, N),
+                 "P": (N, n, n) if team is None else (team * n, team * n)}
+    out = []
+    for name, value in named.items():
+        if name == "S":
+            arr = np.asarray(value)
+            if arr.dtype.kind not in "bui":
+                raise TypeError(f"S must be a boolean array of delivered links; got {type(value).__name__} of dtype "
+                                f"{arr.dtype}")
+        else:
+            arr = require_finite(float_array(value, name), name)
+        want = per_agent[name]
+        if arr.ndim != len(want) + runs or any(w is not None and a != w for a, w in zip(arr.shape[runs:], want)):
+            shape = ", ".join(["R"] * runs + ["N" if w is None else str(w) for w in want])
+            raise ValueError(f"{name} must have shape ({shape}); got {arr.shape}")
+        out.append(arr)
+    return tuple(out)

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._optional import require
-from ._validation import as_matrix
+from ._validation import as_matrix, check_fits_in_memory, check_positive, check_positive_int, float_array
 
 mpl = require("matplotlib", "mascore.plotting")
 plt = require("matplotlib.pyplot", "mascore.plotting")
@@ -196,6 +196,8 @@ def agent_colors(n_agents: int) -> list:
     >>> len(colors), len(colors[0])
     (3, 4)
     """
+    n_agents = check_positive_int(n_agents, "n_agents")
+    check_fits_in_memory(100.0 * n_agents, "n_agents", "one colour per agent")
     cmap = plt.get_cmap("tab10" if n_agents <= 10 else "tab20")
     return [cmap(i % cmap.N) for i in range(n_agents)]
 
@@ -271,7 +273,7 @@ def plot_trajectories(
     'x (m)'
     >>> plt.close("all")
     """
-    p = np.asarray(positions, dtype=float)
+    p = float_array(positions, "positions")
     if p.ndim != 3 or p.shape[-1] != 2:
         raise ValueError(f"positions must have shape (T, N, 2); got {p.shape}")
     ax = new_axes(ax)
@@ -330,6 +332,8 @@ def plot_graph(
     """
     p = as_matrix(positions, "positions", (None, 2))
     A = as_matrix(A, "A", (p.shape[0], p.shape[0]))
+    if sensing_range is not None:
+        sensing_range = check_positive(sensing_range, "sensing_range")
     ax = new_axes(ax)
     colors = agent_colors(p.shape[0])
     directed = (not np.allclose(A, A.T)) if directed is None else directed
@@ -435,10 +439,10 @@ def plot_band(
     (1, 1)
     >>> plt.close("all")
     """
-    t = np.asarray(t, dtype=float)
-    center = np.asarray(center, dtype=float)
-    if center.shape != t.shape:
-        raise ValueError(f"center must have the shape of t {t.shape}; got {center.shape}")
+    t, center = float_array(t, "t"), float_array(center, "center")
+    for name, value in (("center", center), ("low", low), ("high", high)):
+        if value is not None and float_array(value, name).shape != t.shape:
+            raise ValueError(f"{name} must have the shape of t {t.shape}; got {float_array(value, name).shape}")
     ax = new_axes(ax)
     (line,) = ax.plot(t, center, color=color, label=label)
     if low is not None and high is not None:

@@ -248,6 +248,9 @@ def team_spread(values: ArrayLike) -> np.ndarray:
     y = _finite(_float_array(values, "values"), "values")
     if y.ndim < 2 or y.shape[-2] == 0:
         raise ValueError(f"values must have shape (..., N, d) with N >= 1 agents; got {y.shape}")
+    if y.size and np.abs(y).max() > 1e150:
+        raise ValueError(f"values has entries of magnitude {np.abs(y).max():.3g}: squared they overflow floating "
+                         f"point; rescale their units")
     dev = y - y.mean(axis=-2, keepdims=True)
     return np.sqrt(np.mean(np.sum(dev**2, axis=-1), axis=-1))
 

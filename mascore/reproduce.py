@@ -165,8 +165,9 @@ def apply_settings(paper: str, overrides: dict[str, str]) -> dict[str, object]:
     A name is a field of one or more of the paper's settings dataclasses (``n_runs``), or
     ``STUDY.name`` to change one study only. A value is read as a Python literal (``0.2``,
     ``20``, ``(0.5, 1.5)``, ``'ring'``), else kept as text; the settings are rebuilt with
-    :func:`dataclasses.replace`, so a value outside the field's declared range is refused
-    with the field's name, range and unit.
+    :func:`dataclasses.replace` (all of a study's changes at once, so settings that must agree,
+    such as ``n_agents`` and ``xi0``, change together), and a value outside the field's declared
+    range is refused with the field's name, range and unit.
 
     Parameters
     ----------
@@ -199,6 +200,7 @@ def apply_settings(paper: str, overrides: dict[str, str]) -> dict[str, object]:
 
     registry = paper_registry(paper)
     settings = {study.name: study.settings for study in registry.studies}
+    changes: dict[str, dict] = {s: {} for s in settings}  # applied at once: n_agents and xi0 change together
     for name, text in overrides.items():
         study_name, _, field = name.rpartition(".")
         targets = [s for s in settings if (not study_name or s == study_name)
@@ -212,8 +214,8 @@ def apply_settings(paper: str, overrides: dict[str, str]) -> dict[str, object]:
         except (ValueError, SyntaxError):
             value = text
         for s in targets:
-            settings[s] = dataclasses.replace(settings[s], **{field: value})
-    return settings
+            changes[s][field] = value
+    return {s: dataclasses.replace(v, **changes[s]) if changes[s] else v for s, v in settings.items()}
 
 
 def settings_folder(paper: str, overrides: dict[str, str]) -> str:
@@ -342,7 +344,7 @@ def _compare_file(args: argparse.Namespace, workers: int, start: float) -> int:
     import functools
 
     from .compare import run_cell, summarize
-    from .compare.gridfile import read_grid
+    from .compare.gridfile import AXES, read_grid
     from .sweep import run_sweep
 
     try:
@@ -354,11 +356,12 @@ def _compare_file(args: argparse.Namespace, workers: int, start: float) -> int:
     table = run_sweep(list(grid.cells), functools.partial(run_cell, base_seed=args.seed, settings=grid.settings),
                       folder / f"table-{grid.name}-{args.seed}.csv", workers=workers, scheduler=args.scheduler,
                       progress=True)
-    summary = summarize(table, settings=grid.settings)
+    by = ["study", *AXES]  # every axis a study may set: no two cells of a file share a summary row
+    table = table.assign(sensing=table["sensing"].fillna("-")) if "sensing" in table else table
+    summary = summarize(table, by=[c for c in by if c in table.columns], settings=grid.settings)
     summary.to_csv(folder / f"summary-{grid.name}-{args.seed}.csv", index=False)
-    columns = [c for c in ("study", "task", "method", "graph", "n_agents", "noise", "dropout", "n", "ratio_mean",
-                           "ratio_lo", "ratio_hi", "nees_own_mean", "nees_bound_lo", "nees_bound_hi")
-               if c in summary.columns]
+    columns = [c for c in (*by, "n", "ratio_mean", "ratio_lo", "ratio_hi", "nees_own_mean", "nees_bound_lo",
+                           "nees_bound_hi") if c in summary.columns]
     print(summary[columns].to_string(index=False, float_format=lambda v: f"{v:.3g}"))
     where = args.scheduler or (f"{workers} local workers" if workers else "this process")
     print(f"compare: {len(grid.cells)} cells, {len(table)} runs in {time.perf_counter() - start:.1f} s on {where} "

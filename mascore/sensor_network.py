@@ -319,7 +319,7 @@ class SensorNetworkModel(Frozen):
         i = check_positive_int(i, "i", minimum=0)
         if i >= self.n_agents:
             raise ValueError(f"i must be an agent index below N = {self.n_agents}; got {i}")
-        return z[..., self._slices[i]]
+        return require_finite(z, "z")[..., self._slices[i]]
 
     def information_vectors(self, z: ArrayLike) -> np.ndarray:
         """Each agent's information vector ``H_i^T R_i^{-1} z_i`` (zero for an agent that does not sense).

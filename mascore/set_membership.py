@@ -67,7 +67,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import _ellipsoid_kernels as kernels
-from ._validation import Frozen, as_matrix, check_square, frozen_copy, symmetric_part
+from ._validation import Frozen, agent_index, as_matrix, check_square, frozen_copy, require_finite, symmetric_part
 from ._validation import float_array as _float_array
 from .estimation import MethodSpec, protocol_docs
 from .fusion_cost import kalman_step_flops
@@ -443,7 +443,7 @@ class SetMembershipModel(Frozen):
             Q = _check_pd_small(self.Q, "Q", G.shape[1])
             with np.errstate(over="ignore", invalid="ignore"):
                 GQG = G @ Q @ G.T
-            if not np.isfinite(GQG).all():
+            if not np.isfinite(GQG).all() or np.abs(GQG).max() > _MAX_SHAPE_ENTRY:
                 raise ValueError("G (disturbance matrix): G Q G^T overflows floating point; G and Q must be of "
                                  "moderate magnitude (rescale the units of the state or of the disturbance)")
             self._set(A=frozen_copy(A), G=frozen_copy(G), Q=frozen_copy(Q), GQG=frozen_copy(GQG))
@@ -460,6 +460,11 @@ class SetMembershipModel(Frozen):
             if not np.isfinite(W).all():
                 raise ValueError("D: D R D^T overflows floating point; D and R must be of moderate magnitude "
                                  "(rescale the units of the measurement or of its noise)")
+            for name, M in (("C", C), ("D R D^T (from D and R)", W)):
+                if M.size and np.abs(M).max() > _MAX_SHAPE_ENTRY:
+                    raise ValueError(f"{name} has entries of magnitude {np.abs(M).max():.3g}, beyond "
+                                     f"{_MAX_SHAPE_ENTRY:g}: the correction would overflow floating point; rescale "
+                                     f"the units of the measurement or of its noise")
             try:
                 _check_pd_small(W, "D R D^T (needed to test the consistency of y)", p)
             except ValueError as exc:
@@ -587,7 +592,11 @@ class SetMembershipModel(Frozen):
         >>> own["y"], messages
         (array([1.]), ())
         """
-        c, E, y = (np.asarray(a, dtype=float) for a in (center, shape, y))
+        c, E, y = (require_finite(_float_array(a, name), name) for a, name in ((center, "center"), (shape, "shape"),
+                                                                              (y, "y")))
+        if c.ndim != 2 or E.shape[-2:] != (c.shape[1],) * 2 or E.ndim not in (2, 3) or (E.ndim == 3 and len(E) != len(c)):
+            raise ValueError(f"center must be (N, n) and shape (n, n) or (N, n, n); got {c.shape} and {E.shape}")
+        i = agent_index(i, len(c))
         return ({"center": c[i].copy(), "shape": (E if E.ndim == 2 else E[i]).copy(), "y": y[i].copy(),
                  "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
 
@@ -677,9 +686,13 @@ class SetMembershipModel(Frozen):
             raise ValueError(f"y must have last dimension {p} (rows of C); got shape {y.shape}")
         if not np.isfinite(y).all():
             raise ValueError(f"{_where('correction', step, agent, None, ())}: y has NaN/inf entries")
+        if P.size and np.abs(P).max() > _MAX_SHAPE_ENTRY:  # squared in eqs. (6)-(7): beyond floating point
+            raise ValueError(f"{_where('correction', step, agent, None, ())}: shape has entries of magnitude "
+                             f"{np.abs(P).max():.3g}, beyond {_MAX_SHAPE_ENTRY:g}: the correction would overflow "
+                             f"floating point; rescale the state's units")
         batch = c.shape[:-1]
         if P.shape[:-2] != batch or y.shape[:-1] != batch:
-            batch = np.broadcast_shapes(batch, P.shape[:-2], y.shape[:-1])
+            batch = kernels.broadcast(center=batch, shape=P.shape[:-2], y=y.shape[:-1])
             c, P, y = (np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n)),
                        np.broadcast_to(y, (*batch, p)))
         if check_consistency:
@@ -723,7 +736,7 @@ class SetMembershipModel(Frozen):
         n = self.n
         batch = c.shape[:-1]
         if P.shape[:-2] != batch:
-            batch = np.broadcast_shapes(batch, P.shape[:-2])
+            batch = kernels.broadcast(center=batch, shape=P.shape[:-2])
             c, P = np.broadcast_to(c, (*batch, n)), np.broadcast_to(P, (*batch, n, n))
         new_c = c @ A.T
         if B is not None:
@@ -760,6 +773,10 @@ def _check_run_data(x0_hat, P0, y, B, u):
     if y.ndim < 2 or y.shape[0] < 1:
         raise ValueError(f"y must be an array (T_f + 1, ..., p) with at least one measurement; got shape {y.shape}")
     kernels.broadcast(x0_hat=c.shape[:-1], P0=P.shape[:-2], y=y.shape[1:-1])
+    for name, M in (("x0_hat", c), ("P0", P)):  # the first correction squares them
+        if M.size and np.abs(M).max() > _MAX_SHAPE_ENTRY:
+            raise ValueError(f"{name} has entries of magnitude {np.abs(M).max():.3g}, beyond {_MAX_SHAPE_ENTRY:g}: "
+                             f"the correction would overflow floating point; rescale the state's units")
     if (B is None) != (u is None):
         raise ValueError("give both B and u, or neither")
     if u is not None:
@@ -795,11 +812,10 @@ def _where(what: str, step, agent, idx, batch) -> str:
     if step is not None:
         parts.append(f"k = {step}")
     if agent is not None:
-        lab = np.broadcast_to(np.asarray(agent), batch) if np.ndim(agent) else np.asarray(agent)
         if idx is None or not np.ndim(agent):
             parts.append(f"agent {agent if not np.ndim(agent) else 'batch'}")
         else:
-            parts.append(f"agent {lab[idx]}")
+            parts.append(f"agent {np.broadcast_to(np.asarray(agent), batch)[idx]}")
     if idx is not None and len(batch):
         parts.append(f"batch index {idx}")
     return ", ".join(parts)
@@ -857,6 +873,10 @@ def _check_overflow(c, P, A, P_prior, step, agent):
         f"{float(np.abs(A).max()):.3g} and the shape up to {float(np.abs(P_prior).max()):.3g}; rescale A or the "
         "state units"
     )
+
+
+#: Largest entry of a prior shape matrix the correction takes: its square stays a float.
+_MAX_SHAPE_ENTRY = 1e150
 
 
 def _check_result(P, what, step, agent, batch):

@@ -763,7 +763,8 @@ def design_synchronization(
     Returns
     -------
     SyncDesign
-        The design and its checks.
+        The design and its checks (its ``r`` is ``inf`` when the matrix of :func:`lemma2_r` is
+        zero, e.g. ``A = 0``: then any circle passes).
 
     Raises
     ------
@@ -820,7 +821,8 @@ def design_synchronization(
     if not r0 / c0 < r:
         raise ValueError(
             f"Lemma 2: r0/c0 = {r0 / c0:.4g} is not below r = {r:.4g}. r0/c0 comes from the graph (the eigenvalues "
-            f"of Gamma = L + diag(pinning)): pin more agents, raise the pinning gains or add edges to shrink it. "
+            f"of Gamma = (I + D + G_pin)^-1 (L + G_pin), eq. (15)): pin more agents, raise the pinning gains or "
+            f"add edges to shrink it. "
             f"r comes from the agent (A, B) and the shape of Q only: scaling Q does not change r (P scales with "
             f"it); a less unstable A (e.g. a shorter sampling time) raises it")
     c = 1.0 / c0

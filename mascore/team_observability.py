@@ -316,6 +316,9 @@ def lyapunov_v(error: ArrayLike, Sigma_r: ArrayLike, kron: int = 1) -> np.ndarra
         np.broadcast_shapes(e.shape[:-1], P.shape[:-2])
     except ValueError:
         raise ValueError(f"the batch axes of error {e.shape} and Sigma_r {P.shape} do not broadcast") from None
+    if e.size and np.abs(e).max() > 1e150:
+        raise ValueError(f"error has entries of magnitude {np.abs(e).max():.3g}: squared they overflow floating "
+                         f"point; rescale its units")
     return reduced_nees(e, P, kron)
 
 

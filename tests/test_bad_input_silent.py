@@ -79,3 +79,26 @@ def test_flocking_ekf_step_refuses_a_mask_that_observes_nobody():
                            np.broadcast_to(X, (3, 3, 4)), np.eye(12))
     with pytest.raises(ValueError, match=r"observed must include every agent itself"):
         ekf.step(X + 0.1, np.zeros((3, 3), bool))
+
+
+@pytest.mark.parametrize("make", [graphs.ring_graph, graphs.path_graph, graphs.star_graph, graphs.complete_graph,
+                                  lambda n: graphs.adjacency_from_edges(n, [(0, 1)])])
+def test_a_graph_of_10_to_the_12_agents_is_refused_by_name_before_it_is_allocated(make):
+    with pytest.raises(ValueError, match=r"n_agents asks for too much: .* the \(1000000000000, 1000000000000\) "
+                                         r"adjacency"):
+        make(HUGE)
+
+
+def test_a_limit_on_the_address_space_counts_as_the_memory_available():
+    import resource
+    import subprocess
+    import sys
+
+    code = ("import resource; from mascore import graphs\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (2**31, resource.getrlimit(resource.RLIMIT_AS)[1]))\n"
+            "try:\n    graphs.ring_graph(20_000)\nexcept ValueError as exc:\n    print(exc)\n")
+    if resource.getrlimit(resource.RLIMIT_AS)[1] not in (resource.RLIM_INFINITY,) and \
+            resource.getrlimit(resource.RLIMIT_AS)[1] < 2**31:
+        pytest.skip("the hard limit is below 2 GiB already")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True).stdout
+    assert out.startswith("n_agents asks for too much: about 2.98 GiB")  # 3.2 GB fits in RAM, not under a 2 GiB limit

@@ -570,7 +570,7 @@ def test_old_cells_keep_their_seeds_and_numbers():
 
 @pytest.mark.parametrize("cell, match", [
     ({**_OLD_CELL, "sensing": "velocity"}, "sensing"),
-    ({**_OLD_CELL, "method": "song-eb", "sensing": "position"}, "position"),
+    ({**_OLD_CELL, "method": "song-mb", "sensing": "position"}, "position"),
     ({**_OLD_CELL, "task": "target", "method": "centralized", "sensing": "position"}, "sensing"),
 ])
 def test_bad_sensing_is_refused_by_name(cell, match):

@@ -58,3 +58,44 @@ def test_the_command_line_refuses_a_grid_that_is_neither_named_nor_a_file(tmp_pa
         main(["compare", "--grid", "mine"])
     assert main(["compare", "--grid", str(tmp_path / "absent.toml"), "--out", str(tmp_path)]) == 2
     assert "existing .toml file" in capsys.readouterr().err
+
+
+AXES_GRID = """
+runs = 2
+blocks = [0]
+
+[[study]]
+name = "axes"
+task = "team"
+method = ["centralized", "local"]
+n_agents = 4
+q_scale = [0.5, 2.0]
+sensing = ["full", "position"]
+"""
+
+
+def test_every_axis_of_the_file_has_its_own_summary_row(tmp_path, capsys):
+    path = tmp_path / "axes.toml"
+    path.write_text(AXES_GRID)
+    assert main(["compare", "--grid", str(path), "--out", str(tmp_path), "--workers", "0"]) == 0
+    printed = capsys.readouterr().out
+    assert "q_scale" in printed and "sensing" in printed
+    summary = pd.read_csv(tmp_path / "compare" / "summary-axes-0.csv")
+    assert len(summary) == 8 and set(summary["n"]) == {2}           # 2 methods x 2 q_scale x 2 sensing, 2 runs each
+    central = summary[summary["method"] == "centralized"]
+    assert central["ratio_lo"].tolist() == central["ratio_hi"].tolist() == [1.0] * 4  # the bound against itself
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning", "ignore::ResourceWarning")
+def test_a_grid_file_gives_the_same_tables_on_two_local_dask_workers_and_serially(tmp_path):
+    pytest.importorskip("distributed")
+    path = tmp_path / "tiny.toml"
+    path.write_text(GRID.replace("runs = 3", "runs = 2"))
+    for workers in ("0", "2"):
+        assert main(["compare", "--grid", str(path), "--out", str(tmp_path / workers), "--workers", workers]) == 0
+    for name in ("table-tiny-0.csv", "summary-tiny-0.csv"):
+        serial, parallel = (pd.read_csv(tmp_path / w / "compare" / name) for w in ("0", "2"))
+        keys = ["cell", "run"] if name.startswith("table") else ["study", "method"]
+        serial, parallel = (t.drop(columns=["cpu_s", "cpu_us"], errors="ignore").sort_values(keys, kind="stable")
+                            .reset_index(drop=True) for t in (serial, parallel))
+        pd.testing.assert_frame_equal(serial, parallel, check_exact=True)

@@ -50,3 +50,13 @@ def test_a_run_at_other_settings_writes_beside_the_default_and_names_the_changed
     moved = reproduce.changed_claims(json.loads(before)["claims"], ledger["claims"])
     assert moved  # three steps are too few for consensus: some verdicts change, and the command says which
     assert f"{len(moved)} claim(s) changed verdict" in out and all(line in out for line in moved)
+
+
+def test_settings_that_must_agree_change_together_and_the_error_says_how():
+    with pytest.raises(ValueError, match=r"change the two together, e.g. --set n_agents=6 xi0="):
+        reproduce.apply_settings("ren2005", {"n_agents": "6"})
+    s = reproduce.apply_settings("ren2005", {"n_agents": "6", "xi0": "(1.0, 2.0, 3.0, 4.0, 5.0, 6.0)",
+                                             "confident_agent": "6"})["kalman-consensus"]
+    assert (s.n_agents, s.xi0, s.confident_agent) == (6, (1.0, 2.0, 3.0, 4.0, 5.0, 6.0), 6)
+    with pytest.raises(ValueError, match=r"set it too, e.g. --set confident_agent=6"):
+        reproduce.apply_settings("ren2005", {"n_agents": "6", "xi0": "(1.0, 2.0, 3.0, 4.0, 5.0, 6.0)"})

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from .. import estimation, fusion_links
+from .._validation import check_positive, check_positive_int
 from ..agents import double_integrator
 from ..ellipsoids import contains
 from .benchmark import (
@@ -350,7 +351,7 @@ def target_cost(method: str, n_agents: int, degree: float, task: str = "target")
     >>> target_cost("local", 8, 2)[0], target_cost("ci-L5", 8, 2)[0]
     (0.0, 70.0)
     """
-    d = int(round(degree))
+    n_agents, d = check_positive_int(n_agents, "n_agents"), int(round(check_positive(degree, "degree", allow_zero=True)))
     n, q = (4, 1) if task == "target" else (2 * int(n_agents), 2 * d)
     floats, flops = estimation.method_spec(method, task).cost(n, q, d, int(n_agents))
     return float(floats), float(flops)

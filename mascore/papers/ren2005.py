@@ -122,11 +122,14 @@ class KalmanConsensusSettings:
     def __post_init__(self) -> None:
         check_settings(self)
         if len(self.xi0) != self.n_agents:
+            example = tuple(float(x) for x in range(1, self.n_agents + 1))
             raise ValueError(f"KalmanConsensusSettings.xi0 must hold one initial time per agent (n_agents = "
-                             f"{self.n_agents}); got {len(self.xi0)}")
+                             f"{self.n_agents}); got {len(self.xi0)}: change the two together, e.g. "
+                             f"--set n_agents={self.n_agents} xi0=\"{example}\"")
         if not 1 <= self.confident_agent <= self.n_agents:
             raise ValueError(f"KalmanConsensusSettings.confident_agent must be an agent 1..n_agents "
-                             f"(1..{self.n_agents}); got {self.confident_agent}")
+                             f"(1..{self.n_agents}); got {self.confident_agent}: set it too, e.g. "
+                             f"--set confident_agent={self.n_agents}")
         if self.noise_dt > self.noise_t_final:
             raise ValueError(f"KalmanConsensusSettings.noise_dt must be at most noise_t_final "
                              f"({self.noise_t_final} s); got {self.noise_dt}")
