@@ -7,23 +7,6 @@ across agents and time. A :class:`~mascore.sensor_network.SensorNetworkModel` ho
 an undirected communication graph, checked once; every filter below is built on
 the same model, so every method sees exactly the same sensing.
 
-:class:`CentralizedFilter`             all measurements at one node: the bound (Kalman 1960)
-:class:`MeasurementForwardingFilter`   own and neighbours' measurements, one hop (exact local KF)
-:class:`ConsensusOnInformationFilter`  L consensus steps on the information pair (Battistelli and
-                                       Chisci 2014); with ``novelty_weight="N"`` the hybrid HCMCI
-                                       of Battistelli et al. (2015)
-:class:`InformationConsensusFilter`    information-weighted consensus (Kamal, Farrell and
-                                       Roy-Chowdhury 2013)
-:class:`DiffusionKalmanFilter`         incremental update, then diffusion of the estimates
-                                       (Cattivelli and Sayed 2010)
-:class:`CovarianceIntersectionFilter`  incremental update, then covariance intersection of the
-                                       neighbours' estimates (Hu, Xie and Zhang 2012)
-:func:`covariance_intersection`        fusion under unknown correlation (Julier and Uhlmann 1997)
-:func:`error_covariance`               a filter's exact error covariance (no Monte Carlo)
-:mod:`mascore.fusion_cost`             floats sent and flops per agent per step
-:mod:`mascore.fusion_links`            packet loss, one-step latency and send-on-delta messages
-=====================================  ==========================================================
-=======
 =======================================  ==========================================================
 :class:`CentralizedFilter`               all measurements at one node: the bound (Kalman 1960)
 :class:`MeasurementForwardingFilter`     own and neighbours' measurements, one hop (exact local KF)
@@ -1209,10 +1192,10 @@ class SetMembershipForwardingFilter(_NetworkFilter):
 
     Agent i holds the ellipsoid ``E(c_i, E_i) = {x : (x - c_i)^T E_i^{-1} (x - c_i) <= 1}``.
     Per step it predicts it (the trace-optimal outer ellipsoid of ``F E(c_i, E_i) + W_Q``,
-    :meth:`mascore.set_membership.SetMembershipModel.predict`), then intersects it with the set
+    ``SetMembershipModel.predict``), then intersects it with the set
     the measurements of ``N_i ∪ {i}`` allow (the trace-optimal outer ellipsoid of the
     intersection with ``{x : (y_i - C_i x)^T W_i^{-1} (y_i - C_i x) <= 1}``, ``C_i`` and
-    ``y_i`` the stacked ``H_j``, ``z_j``: :meth:`~mascore.set_membership.SetMembershipModel.correct`,
+    ``y_i`` the stacked ``H_j``, ``z_j``: ``SetMembershipModel.correct``,
     Bhattacharjee and Subbarao 2021, eqs. (2), (4), (6)-(8) in closed form). The shapes and gains
     depend on the shapes only, not on the data: they are computed once per agent and step
     and the gain applied to every run. Each agent sends its ``q_i`` measurement numbers, as

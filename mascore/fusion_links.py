@@ -33,8 +33,8 @@ uncertainty it holds before the step, the same for every method),
 otherwise its neighbours use the last received. ``delta = 0`` sends at every step (almost
 surely: a sure zero move never happens with noisy measurements).
 
-References
-----------
+.. rubric:: References
+
 - Xiao, L., Boyd, S., Lall, S. (2005). A scheme for robust distributed sensor fusion based on average
   consensus. Proc. IPSN, 63-70.
 - Battistelli, G., Chisci, L., Selvi, D. (2018). A distributed Kalman filter with event-triggered
