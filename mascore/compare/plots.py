@@ -197,7 +197,7 @@ def plot_scale(summary, task: str = "target", grid: str = "quick"):
         ax.set_xlabel("team size N")
         ax.axhline(1.0, color="0.5", lw=0.8, ls="--")
         _plain_ticks(ax)
-    axes[0, 0].set_ylabel(f"{PARETO_SCENARIOS[task][2]} / centralized (log scale)")
+    axes[0, 0].set_ylabel(f"{PARETO_SCENARIOS[task][2]}\n/ centralized (log scale)")  # two lines: within the axes
     fig.suptitle(f"{task}: the {grid} grid", fontsize=10)
     handles, labels = axes[0, 0].get_legend_handles_labels()
     for ax in axes[0, 1:]:  # a method absent from the first panel
