@@ -73,6 +73,7 @@ __all__ = [
     "setting",
     "show_settings",
     "study_modules",
+    "render_figure",
     "write_study",
     "allowed_values",
     "check_settings",
@@ -368,7 +369,8 @@ class Study:
         digest.update(source_digest().encode())
         return digest.hexdigest()
 
-    def save_run(self, settings: Any, seed: int, result: Any, store: str | Path) -> Path | None:
+    def save_run(self, settings: Any, seed: int, result: Any, store: str | Path,
+                 pickled: bytes | None = None) -> Path | None:
         """Store a run's result in `store` for :meth:`load_or_run` (``store/runs/NAME.pickle``).
 
         ``python -m mascore reproduce`` stores every run it makes in the paper's results
@@ -384,6 +386,11 @@ class Study:
             The output of ``self.run(settings, seed)``.
         store : str or pathlib.Path
             The folder (a paper's results folder).
+        pickled : bytes, optional
+            ``pickle.dumps(result, protocol=4)`` made by the process that computed `result`
+            (a Dask worker), written as it is: the file is then the same, byte for byte, as
+            a run in this process writes (a result sent between processes keeps its values,
+            not which of its strings are one object).
 
         Returns
         -------
@@ -403,7 +410,7 @@ class Study:
         import pickle
 
         try:
-            data = pickle.dumps(result, protocol=4)
+            data = pickle.dumps(result, protocol=4) if pickled is None else pickled
         except (pickle.PicklingError, AttributeError, TypeError):  # local classes cannot be pickled
             return None
         path = Path(store) / "runs" / f"{self.name}.pickle"
@@ -880,7 +887,8 @@ def paper_registry(key: str) -> PaperRegistry:
     raise ValueError(f"paper must be one of {', '.join(ledger_keys())}; got key {key!r}")
 
 
-def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | Path) -> list[Claim]:
+def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | Path,
+                figures: Mapping[str, Mapping[str, bytes]] | None = None) -> list[Claim]:
     """Write a study's figures (PNG) and tables (CSV) into `out_dir`; return its claims.
 
     Beside each figure, ``NAME.layout.json`` lists the legends that cover its data
@@ -900,6 +908,9 @@ def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | 
         The output of ``study.run``.
     out_dir : str or pathlib.Path
         The paper's output folder (``figures/`` and ``tables/`` are created in it).
+    figures : mapping of str to mapping, optional
+        Figures already drawn from `result` elsewhere (on Dask workers, say): figure name ->
+        :func:`render_figure`'s files. The figures not in it are drawn here.
 
     Returns
     -------
@@ -923,24 +934,68 @@ def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | 
         raise TypeError(f"study must be a Study (one of paper.studies); got {type(study).__name__}")
     if not isinstance(out_dir, str | Path):
         raise TypeError(f"out_dir must be a path (str or pathlib.Path); got {type(out_dir).__name__}")
-    plt = require("matplotlib.pyplot", "drawing a registered figure")
-
-    import json
-
-    from .plotting import legend_overlaps, save_figure, unlabelled_lines
-
     out_dir = Path(out_dir)
+    drawn = figures or {}
     for spec in study.figures:
-        fig = study.draw(spec.name, result)
-        layout = {"legend_overlaps": legend_overlaps(fig),  # read by the book's tests: no legend over data,
-                  "unlabelled_lines": unlabelled_lines(fig)}  # no panel with more than five unlabelled lines
-        save_figure(fig, out_dir / "figures" / f"{spec.name}.png")
-        (out_dir / "figures" / f"{spec.name}.layout.json").write_text(json.dumps(layout, indent=1) + "\n")
-        plt.close("all")
+        files = drawn[spec.name] if spec.name in drawn else render_figure(study, spec.name, result)
+        for relative, data in files.items():
+            path = out_dir / relative
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(data)
     for spec in study.tables:
         (out_dir / "tables").mkdir(parents=True, exist_ok=True)
         spec.build(result).to_csv(out_dir / "tables" / f"{spec.name}.csv", index=False, float_format="%.6g")
     return [dataclasses.replace(c, study=study.name) for c in study.claims(result)]
+
+
+def render_figure(study: Study, name: str, result: Any) -> dict[str, bytes]:
+    """Draw one figure of a study from its result: the files :func:`write_study` writes for it.
+
+    Depends on nothing but its arguments, so the figures of a run can be drawn in any
+    process (``mascore reproduce --workers``) and give the same bytes.
+
+    Parameters
+    ----------
+    study : Study
+        The study.
+    name : str
+        One of its figures.
+    result : object
+        The output of ``study.run``.
+
+    Returns
+    -------
+    dict of str to bytes
+        ``figures/NAME.png`` (the figure, at the book's style and resolution) and
+        ``figures/NAME.layout.json`` (its legends over data and crowded panels), by path
+        relative to the paper's folder.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> from mascore.papers import ren2005
+    >>> from mascore.registry import render_figure
+    >>> study = ren2005.REGISTRY.study("kalman-consensus")
+    >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50)
+    >>> sorted(render_figure(study, "fig1", study.run(fewer, 1)))
+    ['figures/fig1.layout.json', 'figures/fig1.png']
+    """
+    import io
+    import json
+
+    from .plotting import legend_overlaps, unlabelled_lines
+
+    plt = require("matplotlib.pyplot", "drawing a registered figure")
+    fig = study.draw(name, result)
+    try:
+        layout = {"legend_overlaps": legend_overlaps(fig),  # read by the book's tests: no legend over data,
+                  "unlabelled_lines": unlabelled_lines(fig)}  # no panel with more than five unlabelled lines
+        png = io.BytesIO()
+        fig.savefig(png, format="png")
+    finally:
+        plt.close("all")
+    return {f"figures/{name}.png": png.getvalue(),
+            f"figures/{name}.layout.json": (json.dumps(layout, indent=1) + "\n").encode()}
 
 
 def all_figures(papers: Sequence[str] | None = None) -> list[tuple[PaperRegistry, Study, FigureSpec]]:

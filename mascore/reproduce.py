@@ -22,14 +22,16 @@ import shutil
 import sys
 import tempfile
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 from ._progress import progress_bar
 from .ledger import Claim, output_hashes, write_claims
 from .registry import paper_keys, paper_registry, write_study
 
 __all__ = ["DEFAULT_SEED", "apply_settings", "available_papers", "changed_claims", "main", "reproduce_paper",
-           "results_dir", "settings_folder"]
+           "reproduce_papers", "results_dir", "settings_folder"]
 
 #: Seed used when the caller gives none.
 DEFAULT_SEED = 1
@@ -86,7 +88,7 @@ def available_papers() -> list[str]:
 
 def reproduce_paper(
     paper: str, out: str | Path = "results", seed: int = DEFAULT_SEED, created_by: str | None = None,
-    progress: bool = True, overrides: dict[str, str] | None = None,
+    progress: bool = True, overrides: dict[str, str] | None = None, workers: int = 0,
 ) -> list[Claim]:
     """Run one paper's reproduction and write its figures, tables and ledger, all or nothing.
 
@@ -107,6 +109,10 @@ def reproduce_paper(
         Settings to change, ``{name: value}`` as typed on the command line
         (:func:`apply_settings`); the results then go to ``out/PAPER-set-NAME=VALUE.../``,
         beside the default ones, which stay as they are.
+    workers : int
+        0 (default): everything in this process. K >= 1: the paper's studies run, and their
+        figures are drawn, on a local Dask cluster of K single-threaded worker processes
+        (:func:`reproduce_papers`); the files are the same, byte for byte.
 
     Returns
     -------
@@ -134,25 +140,161 @@ def reproduce_paper(
     """
     if paper not in paper_keys():
         raise ValueError(f"paper must be one of {', '.join(paper_keys())} or 'all'; got {paper!r}")
+    ((_, outcome),) = reproduce_papers([paper], out, seed, created_by, progress, overrides, workers)
+    if isinstance(outcome, BaseException):
+        raise outcome
+    return outcome
+
+
+def reproduce_papers(
+    papers: list[str], out: str | Path = "results", seed: int = DEFAULT_SEED, created_by: str | None = None,
+    progress: bool = True, overrides: dict[str, str] | None = None, workers: int = 0,
+) -> Iterator[tuple[str, list[Claim] | Exception]]:
+    """Reproduce several papers, serially or on a local Dask cluster; each paper's outcome as it is written.
+
+    The independent parts of the papers' studies are what the workers share: every
+    study's run, then every figure drawn from it (a figure waits only for its own run).
+    The tables, claims and files are written in this process, paper by paper in the
+    order given, through the same writer as a serial run: the files are the same, byte
+    for byte, with any number of workers (the workers compute with one BLAS thread, as
+    this process does under ``OMP_NUM_THREADS=1``). Each paper's folder is replaced all
+    at once (:func:`reproduce_paper`); a paper that fails leaves its old folder and does
+    not stop the others.
+
+    Parameters
+    ----------
+    papers : list of str
+        Paper keys (:func:`mascore.registry.paper_keys`), each once.
+    out : str or pathlib.Path
+        Results root; paper P goes to ``out/P/`` (or its :func:`settings_folder`).
+    seed : int
+        Seed of every random draw (non-negative).
+    created_by : str, optional
+        Command line recorded in each ``claims.json`` (default: ``mascore reproduce P --seed S``).
+    progress : bool
+        Show the progress bars of the long runs (serial only: the workers run without).
+    overrides : dict of str to str, optional
+        Settings to change (:func:`apply_settings`; one paper only).
+    workers : int
+        0: in this process. K >= 1: on K local worker processes
+        (:func:`mascore.sweep.dask_client`; a script that calls this needs
+        ``if __name__ == "__main__":``).
+
+    Yields
+    ------
+    tuple of (str, list of Claim or Exception)
+        Each paper and its claims, or the error that stopped it, in the order of `papers`.
+
+    Raises
+    ------
+    ValueError
+        An unknown or repeated paper, `overrides` with more than one paper, a bad `seed`,
+        `workers` or `out` (before any work).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from mascore.reproduce import reproduce_papers
+    >>> for paper, claims in reproduce_papers(["ren2005", "vlahakis"], tempfile.mkdtemp(),
+    ...                                       workers=2):  # doctest: +SKIP
+    ...     print(paper, len(claims))
+    ren2005 9
+    vlahakis 12
+    """
+    papers = list(papers)
+    unknown = [p for p in papers if p not in paper_keys()]
+    if unknown or len(set(papers)) != len(papers):
+        raise ValueError(f"papers must be distinct keys of {', '.join(paper_keys())}; got {papers!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer; got {seed!r}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
+        raise ValueError(f"workers must be a non-negative integer (0: in this process); got {workers!r}")
+    if overrides and len(papers) != 1:
+        raise ValueError(f"overrides apply to one paper's settings; got {len(papers)} papers")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"out must be a directory; {str(out)!r} is a file")
-    registry = paper_registry(paper)
-    settings = apply_settings(paper, overrides or {})
+    settings = {p: apply_settings(p, overrides or {}) for p in papers}
     out.mkdir(parents=True, exist_ok=True)
+    if workers == 0:
+        for paper in papers:
+            yield paper, _write_paper(paper, out, seed, created_by, settings[paper], overrides,
+                                      lambda study, s: (study.run(s, seed, progress=progress), None, None))
+        return
+    from .sweep import dask_client
+
+    with dask_client(workers) as client:
+        parts = _submit_parts(client, papers, settings, seed)
+
+        def gathered(study, _settings):
+            run, figures = parts.pop((study.chapter, study.name))  # the futures go once gathered
+            result, pickled = _unpickled(run.result())
+            return result, pickled, {name: future.result() for name, future in figures.items()}
+
+        for paper in papers:
+            yield paper, _write_paper(paper, out, seed, created_by, settings[paper], overrides, gathered)
+
+
+def _submit_parts(client: Any, papers: list[str], settings: dict, seed: int) -> dict:
+    """Submit every study's run and, after it, each of its figures: (chapter, study) -> (run, {figure: future})."""
+    parts = {}
+    for paper in papers:
+        for study in paper_registry(paper).studies:
+            run = client.submit(_pickled_run, study, settings[paper][study.name], seed, pure=False,
+                                key=f"run-{paper}-{study.name}")
+            parts[study.chapter, study.name] = (run, {
+                spec.name: client.submit(_figure_of_run, study, spec.name, run, pure=False,
+                                         key=f"figure-{paper}-{study.name}-{spec.name}")
+                for spec in study.figures})
+    return parts
+
+
+def _pickled_run(study: Any, settings: Any, seed: int) -> tuple[bytes | None, Any]:
+    """A study's run on a worker, pickled there as :meth:`Study.save_run` pickles it: ``(bytes, None)``,
+    or ``(None, result)`` when it cannot be pickled."""
+    import pickle
+
+    result = study.run(settings, seed, progress=False)
+    try:
+        return pickle.dumps(result, protocol=4), None
+    except (pickle.PicklingError, AttributeError, TypeError):  # as save_run: such a run is not stored
+        return None, result
+
+
+def _unpickled(run: tuple[bytes | None, Any]) -> tuple[Any, bytes | None]:
+    """The result of :func:`_pickled_run` and its pickle (None if it has none)."""
+    import pickle
+
+    pickled, result = run
+    return (result, None) if pickled is None else (pickle.loads(pickled), pickled)
+
+
+def _figure_of_run(study: Any, name: str, run: tuple[bytes | None, Any]) -> dict[str, bytes]:
+    """One figure drawn on a worker from a run of :func:`_pickled_run`."""
+    from .registry import render_figure
+
+    return render_figure(study, name, _unpickled(run)[0])
+
+
+def _write_paper(paper: str, out: Path, seed: int, created_by: str | None, settings: dict,
+                 overrides: dict[str, str] | None, compute: Callable) -> list[Claim] | Exception:
+    """Write one paper from ``compute(study, settings) -> (result, its pickle, figures drawn)`` (None: made here),
+    all or nothing."""
+    registry = paper_registry(paper)
     final = out / settings_folder(paper, overrides or {})
     staging = Path(tempfile.mkdtemp(prefix=f".{paper}-incomplete-", dir=out))
     try:
         claims: list[Claim] = []
         for study in registry.studies:
-            result = study.run(settings[study.name], seed, progress=progress)
-            claims += write_study(registry, study, result, staging)
-            study.save_run(settings[study.name], seed, result, staging)  # the chapters draw this very run
+            result, pickled, figures = compute(study, settings[study.name])
+            claims += write_study(registry, study, result, staging, figures)
+            study.save_run(settings[study.name], seed, result, staging, pickled)  # the chapters draw this run
         write_claims(claims, staging / "claims.json", paper, seed,
                      created_by or f"mascore reproduce {paper} --seed {seed}", files=output_hashes(staging))
         _replace_directory(final, staging)
+    except Exception as exc:  # reported by the caller; the old folder stays as it was
+        shutil.rmtree(staging, ignore_errors=True)
+        return exc
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
@@ -317,10 +459,11 @@ def _reproduce_at(args: argparse.Namespace) -> int:
         print(f"mascore: {exc}", file=sys.stderr)
         return 2
     start = time.perf_counter()
-    claims = reproduce_paper(args.paper, args.out, args.seed, created_by=command, overrides=overrides)
+    claims = reproduce_paper(args.paper, args.out, args.seed, created_by=command, overrides=overrides,
+                             workers=args.workers)
     folder = args.out / settings_folder(args.paper, overrides)
     print(f"{args.paper} at {', '.join(f'{k}={v}' for k, v in args.overrides)}: {len(claims)} claims in "
-          f"{time.perf_counter() - start:.1f} s -> {folder}")
+          f"{time.perf_counter() - start:.1f} s on {_where(args.workers)} -> {folder}")
     default = args.out / args.paper / "claims.json"
     if not default.exists():
         print(f"no default ledger at {default} to compare with (run `mascore reproduce {args.paper}` first)")
@@ -330,6 +473,21 @@ def _reproduce_at(args: argparse.Namespace) -> int:
     for line in lines:
         print(f"  {line}")
     return 0
+
+
+def _where(workers: int) -> str:
+    """Where the work ran, for the command's summary line."""
+    return f"{workers} local worker{'s' if workers > 1 else ''}" if workers else "this process"
+
+
+def _workers_argument(text: str) -> int:
+    try:
+        workers = int(text)
+    except ValueError:
+        workers = -1
+    if workers < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer (0: in this process), got {text!r}")
+    return workers
 
 
 def _out_argument(text: str) -> Path:
@@ -363,7 +521,7 @@ def _compare_file(args: argparse.Namespace, workers: int, start: float) -> int:
     columns = [c for c in (*by, "n", "ratio_mean", "ratio_lo", "ratio_hi", "nees_own_mean", "nees_bound_lo",
                            "nees_bound_hi") if c in summary.columns]
     print(summary[columns].to_string(index=False, float_format=lambda v: f"{v:.3g}"))
-    where = args.scheduler or (f"{workers} local workers" if workers else "this process")
+    where = args.scheduler or _where(workers)
     print(f"compare: {len(grid.cells)} cells, {len(table)} runs in {time.perf_counter() - start:.1f} s on {where} "
           f"-> {folder / f'summary-{grid.name}-{args.seed}.csv'}")
     return 0
@@ -413,7 +571,7 @@ def _compare(args: argparse.Namespace) -> int:
     claims = study.claims(result)
     write_claims(claims, folder / "claims.json", "compare", args.seed,
                  created_by=f"mascore compare --grid {args.grid} --seed {args.seed}")
-    where = args.scheduler or (f"{workers} local workers" if workers else "this process")
+    where = args.scheduler or _where(workers)
     for task in ("team", "position", "target", "localization", "shared"):
         print(headline(summary, task).to_string())
     held = sum(c.verdict == "holds" for c in claims)
@@ -425,7 +583,7 @@ def _compare(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point: ``python -m mascore reproduce PAPER|all`` and ``python -m mascore compare``.
 
-    ``reproduce PAPER|all [--out DIR] [--seed S]`` rebuilds the papers;
+    ``reproduce PAPER|all [--out DIR] [--seed S] [--workers K] [--set NAME=VALUE ...]`` rebuilds the papers;
     ``compare [--grid quick|full] [--out DIR] [--workers K] [--scheduler ADDRESS] [--seed S]``
     runs the cross-method sweep (:mod:`mascore.compare`).
 
@@ -461,6 +619,9 @@ def main(argv: list[str] | None = None) -> int:
                      help="results directory (default: results/)")
     rep.add_argument("--seed", type=_seed_argument, default=DEFAULT_SEED,
                      help=f"random seed, a non-negative integer (default: {DEFAULT_SEED})")
+    rep.add_argument("--workers", type=_workers_argument, default=0,
+                     help="local Dask worker processes that run the studies and draw the figures (default: 0, "
+                          "in this process); the files are the same")
     rep.add_argument("--set", dest="overrides", metavar="NAME=VALUE", nargs="+", type=_override_argument,
                      default=[], help="change a setting (one paper only); results go beside the default ones")
     cmp = sub.add_parser("compare", help="run the cross-method comparison sweep (Dask) and write its claims")
@@ -483,20 +644,21 @@ def main(argv: list[str] | None = None) -> int:
         return _reproduce_at(args)
     papers = available_papers() if args.paper == "all" else [args.paper]
     failed = False
-    for paper in progress_bar(papers, enabled=len(papers) > 1, desc="papers", unit="paper"):
-        start = time.perf_counter()
-        try:
-            claims = reproduce_paper(paper, args.out, args.seed,
-                                     created_by=f"mascore reproduce {args.paper} --seed {args.seed}")
-        except Exception as exc:  # report and go on with the other papers
+    start = time.perf_counter()
+    outcomes = reproduce_papers(papers, args.out, args.seed, created_by=f"mascore reproduce {args.paper} --seed "
+                                f"{args.seed}", workers=args.workers)
+    for paper, outcome in progress_bar(outcomes, enabled=len(papers) > 1, total=len(papers), desc="papers",
+                                       unit="paper"):
+        if isinstance(outcome, Exception):  # report and go on with the other papers
             print(f"mascore: reproducing {paper} failed, {args.out / paper} left as it was: "
-                  f"{type(exc).__name__}: {exc}", file=sys.stderr)
+                  f"{type(outcome).__name__}: {outcome}", file=sys.stderr)
             failed = True
             continue
         counts: dict[str, int] = {}
-        for c in claims:
+        for c in outcome:
             counts[c.verdict] = counts.get(c.verdict, 0) + 1
         summary = ", ".join(f"{n} {v}" for v, n in sorted(counts.items()))
-        print(f"{paper}: {len(claims)} claims ({summary}) in {time.perf_counter() - start:.1f} s "
-              f"-> {args.out / paper}")
+        print(f"{paper}: {len(outcome)} claims ({summary}) {'in' if args.workers == 0 else 'after'} "
+              f"{time.perf_counter() - start:.1f} s on {_where(args.workers)} -> {args.out / paper}")
+        start = start if args.workers else time.perf_counter()
     return 1 if failed else 0

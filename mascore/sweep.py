@@ -26,20 +26,22 @@ twice as slow); workers of another cluster are best started the same way,
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import itertools
 import json
-from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ._optional import require
 from ._progress import progress_bar
 from ._validation import check_positive_int
 
-__all__ = ["Grid", "cell_id", "cell_seed", "demo_task", "run_sweep"]
+__all__ = ["Grid", "cell_id", "cell_seed", "dask_client", "demo_task", "run_sweep"]
 
 #: The column holding each row's cell identifier.
 CELL_COLUMN = "cell"
@@ -391,9 +393,57 @@ def _results(batches: list[list[tuple[str, dict]]], task: Callable, workers: int
         for batch in batches:
             yield _labelled(task, batch, grouped)
         return
-    from ._optional import require
-
     distributed = require("distributed", "sweeps on Dask (run_sweep with workers or scheduler)")
+    with dask_client(workers, scheduler) as client:
+        futures = [client.submit(_labelled, task, batch, grouped, pure=False, priority=len(batches) - i,
+                                 key=f"cells-{i}-{hashlib.sha1(batch[0][0].encode()).hexdigest()}")
+                   for i, batch in enumerate(batches)]  # in the order given: longest first
+        # the results are gathered in the background, not by one round trip per cell from this thread
+        for future, rows in distributed.as_completed(futures, with_results=True, loop=client.loop):
+            future.release()
+            yield rows
+
+
+@contextlib.contextmanager
+def dask_client(workers: int, scheduler: str | None = None) -> Iterator[Any]:
+    """A Dask client on a local cluster of single-threaded worker processes, or on a running scheduler.
+
+    The one place where mascore starts Dask workers: ``run_sweep``, ``mascore compare``
+    and ``mascore reproduce --workers`` all use it. The local workers start with one BLAS
+    thread (Dask's nanny) and the C library's memory allocator settings, as a serial run
+    with ``OMP_NUM_THREADS=1``, so a task computes the same numbers in a worker as in this
+    process. A script that starts them without ``if __name__ == "__main__":`` gets one
+    line that says so (each worker process imports the main module again).
+
+    Parameters
+    ----------
+    workers : int
+        Local worker processes (>= 1); ignored when `scheduler` is given.
+    scheduler : str, optional
+        Address of a running Dask scheduler (``"tcp://HOST:8786"``).
+
+    Yields
+    ------
+    distributed.Client
+        The client (not the default client of the process); it and the local cluster are
+        closed when the ``with`` block ends, on an error too.
+
+    Raises
+    ------
+    RuntimeError
+        The local workers could not start from a script without a main guard (the message
+        says how to fix it).
+    ValueError
+        `workers` is not a positive integer (without `scheduler`).
+
+    Examples
+    --------
+    >>> from mascore.sweep import dask_client
+    >>> with dask_client(2) as client:                        # doctest: +SKIP
+    ...     client.submit(sum, [1, 2]).result()
+    3
+    """
+    distributed = require("distributed", "running on Dask (workers or scheduler)")
     if scheduler is not None:
         client = distributed.Client(scheduler, set_as_default=False)
         cluster = None
@@ -415,13 +465,7 @@ def _results(batches: list[list[tuple[str, dict]]], task: Callable, workers: int
                 raise RuntimeError(_NO_MAIN_GUARD) from None
         client = distributed.Client(cluster, set_as_default=False)
     try:
-        futures = [client.submit(_labelled, task, batch, grouped, pure=False, priority=len(batches) - i,
-                                 key=f"cells-{i}-{hashlib.sha1(batch[0][0].encode()).hexdigest()}")
-                   for i, batch in enumerate(batches)]  # in the order given: longest first
-        # the results are gathered in the background, not by one round trip per cell from this thread
-        for future, rows in distributed.as_completed(futures, with_results=True, loop=client.loop):
-            future.release()
-            yield rows
+        yield client
     finally:
         client.close()
         if cluster is not None:
