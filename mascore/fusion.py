@@ -1360,13 +1360,18 @@ class SetMembershipForwardingFilter(_NetworkFilter):
         return c + L[0] @ (np.concatenate(zs) - C[k] @ c), shape[0]
 
 def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
-          graphs: Sequence[object] | ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Run a sensor-network filter over measurements, on a fixed graph or one graph per step.
+          graphs: Sequence[object] | ArrayLike | None = None,
+          sensing: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Run a sensor-network filter over measurements, on a fixed graph or one graph per step, with fixed or per-step sensing.
 
     The one run loop for a user's own network: step k predicts, then fuses ``z[k]``
-    over graph k (the filter's own graph when `graphs` is None). A switching graph
-    rebuilds the filter, with its own settings, on the model with that step's graph
-    (each distinct graph once per call); the sensing ``H_i, R_i`` stays the model's.
+    over graph k (the filter's own graph when `graphs` is None) from the agents that
+    sense at step k (all of them when `sensing` is None). A step whose graph or
+    sensing is not the model's rebuilds the filter, with its own settings, on the
+    model of that step: that graph, and ``H_i, R_i`` of the agents that sense (an
+    agent that does not has no measurement rows: ``H_i`` of shape ``(0, n)``); each
+    distinct (graph, sensing) pair once per call. Everything is checked before the
+    first step.
 
     Parameters
     ----------
@@ -1378,10 +1383,16 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     P0 : (..., N, n, n) or (n, n) array_like
         Initial covariances, symmetric positive definite.
     z : (K, ..., sum q_i) array_like
-        Measurements of steps 1..K (as ``SensorNetworkModel.simulate`` returns).
+        Measurements of steps 1..K (as ``SensorNetworkModel.simulate`` returns). Finite where
+        used; the entries of an agent that does not sense at a step are not read (NaN allowed).
     graphs : sequence of K adjacency matrices or networkx graphs, or (K, N, N) array_like, optional
         The communication graph of each step (undirected, N agents; ``A[i, j] > 0``: i and j
         exchange). Default: the model's graph at every step.
+    sensing : (K, N) array_like of bool, optional
+        ``sensing[k, i]``: agent i measures at step k (a target within its range, say), with the
+        model's ``H_i`` and ``R_i``; False: it measures nothing at that step and only takes
+        part in the exchange. Default: every agent at every step. At a step where no agent
+        senses the filter predicts only (nothing to fuse, nothing exchanged).
 
     Returns
     -------
@@ -1393,8 +1404,8 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     Raises
     ------
     ValueError, TypeError
-        A bad filter, state, measurement or graph (named; a graph by its step), or more
-        graphs or steps than memory holds.
+        A bad filter, state, measurement, graph or sensing mask (named; a graph by its step),
+        or more graphs or steps than memory holds.
 
     Examples
     --------
@@ -1408,11 +1419,19 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     >>> x, P = fusion.track(fusion.ConsensusOnInformationFilter(model, 2), np.zeros(2), np.eye(2), z, switching)
     >>> x.shape, P.shape
     ((20, 4, 2), (20, 4, 2, 2))
+
+    Agents 0 and 1 in range of the target for the first ten steps only:
+
+    >>> in_range = np.ones((20, 4), dtype=bool)
+    >>> in_range[10:, :2] = False
+    >>> x, P = fusion.track(fusion.CentralizedFilter(model), np.zeros(2), np.eye(2), z, sensing=in_range)
+    >>> bool(P[-1, 0, 0] > P[9, 0, 0])          # fewer measurements, larger covariance
+    True
     """
     if not isinstance(filt, _NetworkFilter):
         raise TypeError(f"filt must be one of mascore.fusion's filters (e.g. ConsensusOnInformationFilter(model, "
                         f"L)); got {type(filt).__name__}")
-    if graphs is None:
+    if graphs is None and sensing is None:
         return filt.run(x0, P0, z)
     model = filt.model
     x, P = model.check_state(x0, P0, ("x0", "P0"), per_agent=filt._per_agent)
@@ -1421,31 +1440,73 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
         raise ValueError(f"z must be (K, ..., {model.n_measurements}): one stacked measurement per step; "
                          f"got shape {z.shape}")
     K = z.shape[0]
-    if isinstance(graphs, (str, bytes)) or not hasattr(graphs, "__len__"):
-        raise TypeError(f"graphs must be a sequence of K = {K} adjacency matrices or networkx graphs (one per "
-                        f"step); got {type(graphs).__name__}")
-    if len(graphs) != K:
-        raise ValueError(f"graphs must hold one graph per step: K = {K} (the steps of z); got {len(graphs)}")
     axis = 2 if filt._per_agent else 1
     batch = broadcast_batch("x0", x.shape[:-axis], "z", z.shape[1:-1])
     n, N = model.n_states, model.n_agents
     check_fits_in_memory(8.0 * K * math.prod(batch) * n * (1 + n) * (N if filt._per_agent else 1), "z",
                          "the estimates and covariances of every step and run")
-    require_finite(z, "z")
-    built: dict[bytes, _NetworkFilter] = {}
+    adjacency = _step_graphs(graphs, K, N, model.adjacency)
+    senses = _step_sensing(sensing, K, N)
+    rows = np.repeat(senses, model.measurement_sizes, axis=1)  # (K, sum q_i): the entries of z that are read
+    used = rows.reshape((K,) + (1,) * (z.ndim - 2) + (rows.shape[1],))
+    if not np.all(np.isfinite(z) | ~used):
+        require_finite(np.where(used, z, 0.0), "z" if sensing is None else "z (where the agent senses)")
+    built: dict[tuple[bytes, bytes], _NetworkFilter | None] = {}
     xs, Ps = [], []
     for k in range(K):
-        A = check_adjacency(float_array(graphs[k], f"graphs[{k}]"), f"graphs[{k}]", size=N, undirected=True,
-                            why="the consensus weights and the information exchange are symmetric")
-        key = A.tobytes()
+        key = (adjacency[k].tobytes(), senses[k].tobytes())
         if key not in built:
-            built[key] = filt if np.array_equal(A, model.adjacency) else type(filt)(
-                SensorNetworkModel(model.F, model.Q, model.H, model.R, A), *_settings_for_any_graph(filt))
+            built[key] = _filter_of_step(filt, adjacency[k], senses[k])
         step = built[key]
-        x, P = step.update(*step.predict(x, P), z[k])
+        x, P = filt.predict(x, P) if step is None else step.predict(x, P)
+        if step is not None:
+            x, P = step.update(x, P, z[k] if rows[k].all() else z[k][..., rows[k]])
         xs.append(x)
         Ps.append(P)
     return np.stack(xs), np.stack(Ps)
+
+
+def _step_graphs(graphs: Sequence[object] | ArrayLike | None, K: int, N: int, fixed: np.ndarray) -> list[np.ndarray]:
+    """`track`'s graphs, one checked (N, N) adjacency per step (the model's when None)."""
+    if graphs is None:
+        return [fixed] * K
+    if isinstance(graphs, (str, bytes)) or not hasattr(graphs, "__len__"):
+        raise TypeError(f"graphs must be a sequence of K = {K} adjacency matrices or networkx graphs (one per "
+                        f"step); got {type(graphs).__name__}")
+    if len(graphs) != K:
+        raise ValueError(f"graphs must hold one graph per step: K = {K} (the steps of z); got {len(graphs)}")
+    return [check_adjacency(float_array(graphs[k], f"graphs[{k}]"), f"graphs[{k}]", size=N, undirected=True,
+                            why="the consensus weights and the information exchange are symmetric")
+            for k in range(K)]
+
+
+def _step_sensing(sensing: ArrayLike | None, K: int, N: int) -> np.ndarray:
+    """`track`'s sensing mask, checked: (K, N) bool (every agent at every step when None)."""
+    if sensing is None:
+        return np.ones((K, N), dtype=bool)
+    mask = np.asarray(sensing)
+    if mask.dtype != bool:
+        raise TypeError(f"sensing must be a (K, N) array of bool (True: the agent measures at that step); got "
+                        f"dtype {mask.dtype}")
+    if mask.shape != (K, N):
+        raise ValueError(f"sensing must be (K, N) = ({K}, {N}): one row per step of z, one column per agent; got "
+                         f"shape {mask.shape}")
+    return mask
+
+
+def _filter_of_step(filt: _NetworkFilter, A: np.ndarray, senses: np.ndarray) -> _NetworkFilter | None:
+    """`filt` on a step's graph with only the sensing agents' measurements (None: nobody senses)."""
+    model = filt.model
+    if not senses.any():
+        return None
+    if senses.all() and np.array_equal(A, model.adjacency):
+        return filt
+    n = model.n_states
+    H = [h if s else np.zeros((0, n)) for h, s in zip(model.H, senses)]
+    R = [r if s else None for r, s in zip(model.R, senses)]
+    same_graph = np.array_equal(A, model.adjacency)  # then the filter's own settings hold as they are
+    return type(filt)(SensorNetworkModel(model.F, model.Q, H, R, A),
+                      *(filt._args() if same_graph else _settings_for_any_graph(filt)))
 
 
 def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true: ArrayLike | None = None,

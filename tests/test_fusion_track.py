@@ -89,3 +89,69 @@ def test_bad_graphs_are_named_by_step():
                                        * N / 3)
     with pytest.raises(ValueError, match=r"weights='metropolis'"):
         fusion.track(own, np.zeros(4), np.eye(4), z, _switching())
+
+
+def _in_range():
+    rng = np.random.default_rng(5)
+    mask = rng.random((K, N)) < 0.7  # who sees the target changes from step to step
+    mask[2] = False                  # a step nobody senses: prediction only
+    mask[3] = True
+    return mask
+
+
+@pytest.mark.parametrize("make", FILTERS)
+def test_sensing_that_never_changes_is_the_fixed_sensing_run_bit_for_bit(make):
+    model = _model()
+    _, z = model.simulate(np.zeros(4), np.eye(4), K, rng=6, n_runs=2)
+    filt = make(model)
+    everyone = np.ones((K, N), dtype=bool)
+    for given in (None, _switching()):
+        x_fixed, P_fixed = fusion.track(filt, np.zeros(4), np.eye(4), z, given)
+        x, P = fusion.track(filt, np.zeros(4), np.eye(4), z, given, sensing=everyone)
+        assert x.tobytes() == x_fixed.tobytes() and P.tobytes() == P_fixed.tobytes()
+
+
+@pytest.mark.parametrize("make", FILTERS)
+def test_an_agent_out_of_range_contributes_no_measurement(make):
+    """An independent loop: at each step, the model with the rows of the agents out of range removed."""
+    model = _model()
+    _, z = model.simulate(np.zeros(4), np.eye(4), K, rng=7, n_runs=2)
+    mask = _in_range()
+    z_unread = z.copy()
+    z_unread[:, :, ~mask.any(axis=0)] = np.nan  # never read
+    z_unread[~mask[:, None, :].repeat(2, axis=1)] = np.nan
+    x, P = fusion.track(make(model), np.zeros(4), np.eye(4), z_unread, _switching(), sensing=mask)
+    xk, Pk = model.check_state(np.zeros(4), np.eye(4), per_agent=make(model)._per_agent)
+    for k, A in enumerate(_switching()):
+        if not mask[k].any():
+            xk, Pk = make(model).predict(xk, Pk)
+        else:
+            H = [model.H[i] if mask[k, i] else np.zeros((0, 4)) for i in range(N)]
+            f = make(sensor_network.SensorNetworkModel(model.F, model.Q, H, [model.R[i] if mask[k, i] else None
+                                                                          for i in range(N)], A))
+            xk, Pk = f.update(*f.predict(xk, Pk), z[k][..., mask[k]])  # one row per agent here
+        np.testing.assert_array_equal(x[k], xk)
+        np.testing.assert_array_equal(P[k], Pk)
+    off = np.ones((K, N), dtype=bool)
+    off[:, 1] = False  # agent 1 never in range: the model without its H row
+    H = [h if i != 1 else np.zeros((0, 4)) for i, h in enumerate(model.H)]
+    without = sensor_network.SensorNetworkModel(model.F, model.Q, H, [r if i != 1 else None
+                                                                     for i, r in enumerate(model.R)], model.adjacency)
+    x_off = fusion.track(make(model), np.zeros(4), np.eye(4), z, sensing=off)[0]
+    np.testing.assert_array_equal(x_off, make(without).run(np.zeros(4), np.eye(4), np.delete(z, 1, axis=-1))[0])
+
+
+def test_bad_sensing_is_refused_before_any_step():
+    model = _model()
+    _, z = model.simulate(np.zeros(4), np.eye(4), K, rng=0)
+    filt = fusion.ConsensusOnInformationFilter(model, 2)
+    with pytest.raises(ValueError, match=r"sensing must be \(K, N\) = \(12, 5\)"):
+        fusion.track(filt, np.zeros(4), np.eye(4), z, sensing=np.ones((K, N + 1), dtype=bool))
+    with pytest.raises(TypeError, match=r"sensing must be a \(K, N\) array of bool"):
+        fusion.track(filt, np.zeros(4), np.eye(4), z, sensing=np.ones((K, N)))
+    mask = _in_range()
+    bad = z.copy()
+    k, i = np.argwhere(mask)[-1]
+    bad[k, i] = np.nan  # an agent in range with no number
+    with pytest.raises(ValueError, match=r"z \(where the agent senses\)"):
+        fusion.track(filt, np.zeros(4), np.eye(4), bad, sensing=mask)
