@@ -19,7 +19,9 @@ def design_args(fname: str, A, B, rest: dict, dt, time: str | None = None, bname
     The agent is ``(A, B)`` (continuous time unless `dt` is given) or a system (an LTIAgent or a
     python-control StateSpace) in A's place, python-control's order: the slots after it are shifted.
     An ``A`` sampled by :meth:`mascore.agents.LTIAgent.from_continuous` given as a continuous-time
-    matrix (no `dt`) is refused by name.
+    matrix (no `dt`) is refused by name, and so is any array ``A`` without `dt` whose every
+    eigenvalue has a positive real part (the spectrum of a sampled matrix); ``dt=0`` says that
+    ``A`` is continuous time and skips that check.
     """
     names, rest = tuple(rest), tuple(rest.values())
     if is_system(A):
@@ -32,8 +34,9 @@ def design_args(fname: str, A, B, rest: dict, dt, time: str | None = None, bname
             values[1:hole + 1] = values[:hole]
             B, rest = None, tuple(values[1:])
         A, B, sys_dt = system_matrices(A, time, name="sys", needed_by=fname)
-        if dt is not None and (sys_dt == 0 or (sys_dt is not True
-                                               and not np.isclose(float(dt), sys_dt, rtol=1e-9, atol=0))):
+        if dt is not None and not (_is_zero(dt) and sys_dt == 0) and (
+                sys_dt == 0 or _is_zero(dt)
+                or (sys_dt is not True and not np.isclose(float(dt), sys_dt, rtol=1e-9, atol=0))):
             raise ValueError(f"dt = {dt!r} contradicts the system's own time base (sys.dt = {sys_dt!r}); "
                              "leave dt out: the system carries it")
         dt = sys_dt
@@ -50,11 +53,47 @@ def design_args(fname: str, A, B, rest: dict, dt, time: str | None = None, bname
                 f"arrays and no dt designs in continuous time: pass the continuous-time (agent.A_c, agent.B_c)"
                 + ("" if time == "continuous" else f", or the agent itself (or dt={tagged:g}) for the discrete-time "
                                                    "design"))
+        if _is_zero(dt):  # dt=0: the caller says A is continuous time
+            return _complete(fname, A, B, names, rest, 0.0)
         if dt is not None and time == "continuous":
-            raise ValueError(f"{fname} designs in continuous time only; leave dt out and pass the continuous-time "
-                             f"(A, B)")
+            raise ValueError(f"{fname} designs in continuous time only; leave dt out (or dt=0) and pass the "
+                             f"continuous-time (A, {bname})")
+        if dt is None:
+            _refuse_sampled_looking(fname, A, bname, continuous_only=time == "continuous")
         dt = 0.0 if dt is None else check_sampling_time(A, dt)
     return _complete(fname, A, B, names, rest, dt)
+
+
+def _is_zero(dt) -> bool:
+    """Whether `dt` is the number 0 (continuous time, said explicitly)."""
+    return isinstance(dt, (int, float, np.integer, np.floating)) and not isinstance(dt, bool) and dt == 0
+
+
+def _refuse_sampled_looking(fname: str, A, bname: str, continuous_only: bool) -> None:
+    """Refuse a plain `A`, read as continuous time, whose every eigenvalue has a positive real part.
+
+    ``A = expm(A_c dt)`` has that spectrum whenever ``|Im(s)| dt < pi / 2`` for every mode s of
+    ``A_c`` (integrators give eigenvalues at exactly 1); a continuous-time agent has it only when
+    every one of its modes is unstable. ``dt=0`` says that this is meant.
+    """
+    try:
+        M = np.asarray(A, dtype=float)
+    except (TypeError, ValueError):
+        return  # the design's own checks name what is wrong
+    if M.ndim != 2 or M.shape[0] != M.shape[1] or M.size == 0 or not np.all(np.isfinite(M)):
+        return
+    lam = np.linalg.eigvals(M)
+    if np.all(lam.real > 0):
+        shown = ", ".join(f"{v:.3g}" for v in np.sort_complex(lam)[:4]) + (", ..." if lam.size > 4 else "")
+        remedy = ("pass the continuous-time (A_c, " + bname + ") (agent.A_c, or scipy.linalg.logm(A) / dt)"
+                  if continuous_only else
+                  f"pass dt=<sampling time in s> (or the agent as an LTIAgent or a python-control StateSpace) for "
+                  f"the discrete-time design, or the continuous-time (A_c, {bname})")
+        raise ValueError(
+            f"A looks like a sampled (discrete-time) matrix: every eigenvalue has a positive real part ({shown}), as "
+            f"those of expm(A_c dt) do, while a continuous-time agent has such a spectrum only when all its modes "
+            f"are unstable; {fname} reads an array A without dt as continuous time. {remedy[0].upper() + remedy[1:]}; "
+            f"if A is continuous time, say so with dt=0")
 
 
 def _complete(fname: str, A, B, names: tuple, rest: tuple, dt):

@@ -351,8 +351,10 @@ def centralized_network_lqr(
         Laplacian of a connected undirected graph.
     dt : float, optional
         Sampling time (s) of a discrete-time agent ``x_{k+1} = A x_k + B u_k``: the design is then in
-        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: continuous time,
-        or the system's own time base.
+        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: the system's own
+        time base; for arrays, continuous time, and an ``A`` whose every eigenvalue has a positive
+        real part (the spectrum of a sampled matrix) is refused: give its `dt`, or ``dt=0`` if it is
+        continuous time.
 
     Returns
     -------
@@ -418,8 +420,10 @@ def borrelli_keviczky_structure(
         Team size N.
     dt : float, optional
         Sampling time (s) of a discrete-time agent ``x_{k+1} = A x_k + B u_k``: the design is then in
-        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: continuous time,
-        or the system's own time base.
+        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: the system's own
+        time base; for arrays, continuous time, and an ``A`` whose every eigenvalue has a positive
+        real part (the spectrum of a sampled matrix) is refused: give its `dt`, or ``dt=0`` if it is
+        continuous time.
 
     Returns
     -------
@@ -605,8 +609,10 @@ def top_down_lqr(
         (a self-loop would count in the degree ``d_max`` but not in the Laplacian).
     dt : float, optional
         Sampling time (s) of a discrete-time agent ``x_{k+1} = A x_k + B u_k``: the design is then in
-        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: continuous time,
-        or the system's own time base.
+        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: the system's own
+        time base; for arrays, continuous time, and an ``A`` whose every eigenvalue has a positive
+        real part (the spectrum of a sampled matrix) is refused: give its `dt`, or ``dt=0`` if it is
+        continuous time.
 
     Returns
     -------
@@ -664,6 +670,8 @@ def bottom_up_lqr(
     R: ArrayLike | None = None,
     adjacency: ArrayLike | None = None,
     solver_options: dict | None = None,
+    *,
+    dt: float | None = None,
 ) -> BottomUpLQR:
     """Bottom-up distributed LQR (eq. (18), Deshpande et al. 2011): ``U = -(I (x) K + Lap (x) Phi K) X``.
 
@@ -697,6 +705,10 @@ def bottom_up_lqr(
         Symmetric (undirected), connected, non-negative weights, no self-loops.
     solver_options : dict, optional
         Settings passed to the conic solver (Clarabel) by name; default Clarabel's own.
+    dt : 0, optional
+        The design is in continuous time only. An array ``A`` whose every eigenvalue has a positive
+        real part (the spectrum of a sampled matrix) is refused unless ``dt=0`` says that it is
+        continuous time.
 
     Returns
     -------
@@ -723,7 +735,7 @@ def bottom_up_lqr(
     from .observers import coupled_gain_lmi
 
     A, B, (Q1, Q2, R, adjacency), dt = design_args("bottom_up_lqr", A, B,
-        dict(Q1=Q1, Q2=Q2, R=R, adjacency=adjacency), None, time="continuous")
+        dict(Q1=Q1, Q2=Q2, R=R, adjacency=adjacency), dt, time="continuous")
     A, B, Q1, Q2, R = _check_agent(A, B, Q1, Q2, R)
     _, Lap = _undirected_adjacency(adjacency)
     lam, _ = laplacian_spectrum(Lap, "adjacency")
@@ -811,8 +823,10 @@ def network_controller_cost(
         The controller.
     dt : float, optional
         Sampling time (s) of a discrete-time agent ``x_{k+1} = A x_k + B u_k``: the design is then in
-        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: continuous time,
-        or the system's own time base.
+        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: the system's own
+        time base; for arrays, continuous time, and an ``A`` whose every eigenvalue has a positive
+        real part (the spectrum of a sampled matrix) is refused: give its `dt`, or ``dt=0`` if it is
+        continuous time.
 
     Returns
     -------
@@ -877,8 +891,10 @@ def centralized_network_cost(
         Laplacian of a connected undirected graph.
     dt : float, optional
         Sampling time (s) of a discrete-time agent ``x_{k+1} = A x_k + B u_k``: the design is then in
-        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: continuous time,
-        or the system's own time base.
+        discrete time (costs per step, :func:`dlqr`'s Riccati equation). Default: the system's own
+        time base; for arrays, continuous time, and an ``A`` whose every eigenvalue has a positive
+        real part (the spectrum of a sampled matrix) is refused: give its `dt`, or ``dt=0`` if it is
+        continuous time.
 
     Returns
     -------

@@ -164,7 +164,9 @@ def min_energy_observer(
         Cost weight on the disturbance ``d`` in cost (20), symmetric positive definite (large: trust the
         model). A weight, not a covariance: the *inverse* disturbance intensity, in 1/(disturbance unit)^2.
     dt : float, optional
-        Sampling time (s) of a discrete-time agent (default: continuous time, or the system's own).
+        Sampling time (s) of a discrete-time agent. Default: the system's own time base; for arrays,
+        continuous time, and an ``A`` whose every eigenvalue has a positive real part (the spectrum
+        of a sampled matrix) is refused: give its `dt`, or ``dt=0`` if it is continuous time.
 
     Returns
     -------
@@ -287,6 +289,8 @@ def distributed_observer(
     reading: str = "as-printed",
     trace_in: str = "transformed",
     solver_options: dict | None = None,
+    *,
+    dt: float | None = None,
 ) -> DistributedObserver:
     """LQR-dual distributed observer by the bottom-up method (Sec. 4.2, eqs. (26)-(62)).
 
@@ -332,6 +336,10 @@ def distributed_observer(
         Settings passed to the conic solver (Clarabel) by name, e.g. ``{"max_iter": 500}``;
         default Clarabel's own (``mascore._solver.SOLVER_OPTIONS``). A
         :class:`~mascore.exceptions.SolverError` with status ``optimal_inaccurate`` is the cue to change them.
+    dt : 0, optional
+        The observer is designed in continuous time only. An array ``A`` whose every eigenvalue has a
+        positive real part (the spectrum of a sampled matrix) is refused unless ``dt=0`` says that it
+        is continuous time.
 
     Returns
     -------
@@ -364,7 +372,7 @@ def distributed_observer(
     (True, True)
     """
     A, Bbar, (C, Q1, Q2, R, adjacency), _ = design_args("distributed_observer", A, Bbar,
-        dict(C=C, Q1=Q1, Q2=Q2, R=R, adjacency=adjacency), None, time="continuous", bname="Bbar")
+        dict(C=C, Q1=Q1, Q2=Q2, R=R, adjacency=adjacency), dt, time="continuous", bname="Bbar")
     A, Bbar, C, Q1, R = _check_observer(A, Bbar, C, Q1, R, qname="Q1")
     m = C.shape[0]
     Q2 = check_covariance(np.atleast_2d(_float_array(Q2, "Q2")), "Q2", m)

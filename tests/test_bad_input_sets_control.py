@@ -491,7 +491,8 @@ def test_solver_refuses_a_non_problem():
 def test_documented_infinite_values_stay():
     """inf is a defined value where documented: the cost of an unstable loop, Lemma 2's r when A = 0."""
     unstable = lqr.DistributedGain(np.zeros((1, 2)), np.zeros((1, 2)))
-    assert lqr.network_controller_cost(np.eye(2), B_AG, np.eye(2), np.eye(2), [[1.0]], LAP4, unstable) == np.inf
+    assert lqr.network_controller_cost(np.eye(2), B_AG, np.eye(2), np.eye(2), [[1.0]], LAP4, unstable,
+                                       dt=0) == np.inf  # A = I in continuous time (dt=0 says so)
     assert sync.lemma2_r(np.zeros((2, 2)), np.eye(2), np.eye(2), np.eye(2)) == np.inf
 
 

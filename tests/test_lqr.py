@@ -148,22 +148,22 @@ A_UNS = np.eye(2)  # with B_UNC: the uncontrollable mode z = 1 is unstable, so n
 
 def test_uncontrollable_agent_rejected_by_network_designs():
     assert not riccati.is_controllable(A_UNC, B_UNC) and not riccati.is_stabilizable(A_UNS, B_UNC)
-    w = (np.eye(2), np.eye(2), np.eye(1))
+    w = (np.eye(2), np.eye(2), np.eye(1))  # A = I, continuous time (every mode unstable): said with dt=0
     ring = graphs.ring_graph(4)
     Lap = graphs.laplacian(ring)
     with pytest.raises(ValueError, match=r"\(A, B\) is not stabilizable"):
-        lqr.top_down_lqr(A_UNS, B_UNC, *w, ring)
+        lqr.top_down_lqr(A_UNS, B_UNC, *w, ring, dt=0)
     with pytest.raises(ValueError, match=r"\(A, B\) is not stabilizable"):
-        lqr.centralized_network_lqr(A_UNS, B_UNC, *w, Lap)
+        lqr.centralized_network_lqr(A_UNS, B_UNC, *w, Lap, dt=0)
     with pytest.raises(ValueError, match=r"\(A, B\) is not stabilizable"):
-        lqr.centralized_network_cost(A_UNS, B_UNC, *w, Lap)
+        lqr.centralized_network_cost(A_UNS, B_UNC, *w, Lap, dt=0)
     with pytest.raises(ValueError, match=r"\(A, B\) is not stabilizable"):
-        lqr.borrelli_keviczky_structure(A_UNS, B_UNC, *w, 4)
+        lqr.borrelli_keviczky_structure(A_UNS, B_UNC, *w, 4, dt=0)
     with pytest.raises(ValueError, match=r"\(A, B\) is not stabilizable"):
-        lqr.bottom_up_lqr(A_UNS, B_UNC, *w, ring)
+        lqr.bottom_up_lqr(A_UNS, B_UNC, *w, ring, dt=0)
     # evaluating a given stabilizing gain needs no controllability
     gain = lqr.DistributedGain(np.array([[0.0, 3.0]]), np.zeros((1, 2)))
-    assert np.isfinite(lqr.network_controller_cost(A_UNC, B_UNC, *w, Lap, gain))
+    assert np.isfinite(lqr.network_controller_cost(A_UNC, B_UNC, *w, Lap, gain, dt=0))
 
 
 def test_centralized_network_lqr_rejects_disconnected_laplacian():

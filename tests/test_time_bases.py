@@ -138,3 +138,61 @@ def test_filter_models_take_a_system():
     np.testing.assert_array_equal(net.F, agent.A)
     K1, _, _ = lqr.lqr(agent, np.eye(2), np.eye(1))  # a sampled agent: python-control's lqr -> dlqr
     np.testing.assert_allclose(K1, control.dlqr(agent.A, agent.B, np.eye(2), np.eye(1))[0], rtol=1e-10)
+
+
+def _plain_sampled_oscillator():
+    """A lightly damped oscillator sampled by python-control: plain arrays, no trace of its dt."""
+    sys_d = control.c2d(control.ss([[0.0, 1.0], [-4.0, -0.1]], [[0.0], [1.0]], [[1.0, 0.0]], 0.0), 0.05)
+    return np.asarray(sys_d.A), np.asarray(sys_d.B)
+
+
+def _designs_reading_continuous_time(A, B):
+    """Every design function that reads an array A without dt as continuous time, and can design in discrete time."""
+    ring = graphs.ring_graph(4)
+    Lap = graphs.laplacian(ring)
+    gain = lqr.DistributedGain(np.zeros((1, 2)), np.zeros((1, 2)))
+    return {"top_down_lqr": lambda **k: lqr.top_down_lqr(A, B, **W, adjacency=ring, **k),
+            "centralized_network_lqr": lambda **k: lqr.centralized_network_lqr(A, B, **W, laplacian=Lap, **k),
+            "borrelli_keviczky_structure": lambda **k: lqr.borrelli_keviczky_structure(A, B, **W, n_agents=3, **k),
+            "centralized_network_cost": lambda **k: lqr.centralized_network_cost(A, B, **W, laplacian=Lap, **k),
+            "network_controller_cost": lambda **k: lqr.network_controller_cost(A, B, **W, laplacian=Lap, gain=gain,
+                                                                                **k),
+            "min_energy_observer": lambda **k: observers.min_energy_observer(A, B, [[1.0, 0.0]], [[1.0]], [[1.0]],
+                                                                             **k)}
+
+
+def test_a_plain_discrete_A_without_dt_is_refused_where_continuous_time_is_read():
+    ring = graphs.ring_graph(4)
+    for A, B in (_plain_sampled_oscillator(), (np.array([[1.0, 0.05], [0.0, 1.0]]), np.array([[0.0], [0.05]]))):
+        for name, call in _designs_reading_continuous_time(A, B).items():
+            with pytest.raises(ValueError, match=rf"A looks like a sampled \(discrete-time\) matrix.*{name} reads an "
+                                                 r"array A without dt as continuous time\. Pass dt=.*dt=0"):
+                call()
+            call(dt=0.05)  # the discrete-time design, as asked
+    for call in (lambda: observers.distributed_observer(*_plain_sampled_oscillator(), [[1.0, 0.0]], [[1.0]], [[1.0]],
+                                                          [[1.0]], ring),
+                 lambda: lqr.bottom_up_lqr(*_plain_sampled_oscillator(), **W, adjacency=ring)):  # continuous only
+        with pytest.raises(ValueError, match=r"_(observer|lqr) reads an array A.*continuous-time \(A_c, B.*logm.*dt=0"):
+            call()
+
+
+def test_dt_0_says_continuous_time_and_is_the_default_reading():
+    ring = graphs.ring_graph(4)
+    for A in (A_C, np.array([[0.0, 1.0], [-4.0, -0.1]])):  # not refused: a mode with Re s <= 0
+        default = lqr.top_down_lqr(A, B_C, **W, adjacency=ring)
+        said = lqr.top_down_lqr(A, B_C, **W, adjacency=ring, dt=0)
+        assert default.K_self.tobytes() == said.K_self.tobytes()
+        assert said.spectral_abscissa == default.spectral_abscissa
+    unstable = np.array([[0.5, 1.0], [0.0, 0.2]])  # continuous time, every mode unstable: refused unless said
+    with pytest.raises(ValueError, match=r"every eigenvalue has a positive real part \(0\.2\+0j, 0\.5\+0j\)"):
+        lqr.centralized_network_lqr(unstable, B_C, **W, laplacian=graphs.laplacian(ring))
+    K, _, _ = lqr.centralized_network_lqr(unstable, B_C, **W, laplacian=graphs.laplacian(ring), dt=0)
+    closed = np.kron(np.eye(4), unstable) - np.kron(np.eye(4), B_C) @ K
+    assert np.linalg.eigvals(closed).real.max() < 0  # the continuous-time design, stabilizing
+    sys_c = control.ss(A_C, B_C, np.eye(2), 0.0)
+    assert lqr.top_down_lqr(sys_c, **W, adjacency=ring, dt=0).K_self.tobytes() == \
+        lqr.top_down_lqr(sys_c, **W, adjacency=ring).K_self.tobytes()
+    with pytest.raises(ValueError, match=r"contradicts the system's own time base"):
+        lqr.top_down_lqr(agents.double_integrator(1, 0.1), **W, adjacency=ring, dt=0)
+    with pytest.raises(ValueError, match=r"continuous time only"):
+        observers.distributed_observer(A_C, B_C, [[1.0, 0.0]], [[1.0]], [[1.0]], [[1.0]], ring, dt=0.1)
