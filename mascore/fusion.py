@@ -1362,7 +1362,7 @@ class SetMembershipForwardingFilter(_NetworkFilter):
 def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
           graphs: Sequence[object] | ArrayLike | None = None,
           sensing: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Run a sensor-network filter over measurements, on a fixed graph or one graph per step, with fixed or per-step sensing.
+    """Run a sensor-network filter over measurements, with fixed or per-step graphs and sensing.
 
     The one run loop for a user's own network: step k predicts, then fuses ``z[k]``
     over graph k (the filter's own graph when `graphs` is None) from the agents that
