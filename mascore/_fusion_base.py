@@ -330,13 +330,14 @@ class NetworkFilter(Frozen):
 # the parts of the specs of the common-target and localization tasks (mascore.compare, mascore.agent_cost)
 
 
-def spec_cost(name: str, iterations: int = 1, degree: bool = True):
+def spec_cost(name: str, iterations: int | None = 1, degree: bool = True):
     """``cost(n, q, degree, n_agents) -> (floats, flops)`` of :func:`~mascore.fusion_cost.filter_cost` for `name`.
 
-    No neighbours if not `degree`.
+    `iterations` None: the ring's diameter ``N // 2`` (the graph of the cost tables); no neighbours if not `degree`.
     """
     def cost(n: int, q: int, d: int, n_agents: int) -> tuple[float, float]:
-        c = filter_cost(name, n=n, q=q, degree=d if degree else 0, iterations=iterations, n_agents=n_agents)
+        steps = max(1, n_agents // 2) if iterations is None else iterations
+        c = filter_cost(name, n=n, q=q, degree=d if degree else 0, iterations=steps, n_agents=n_agents)
         return c.floats_sent, c.flops
     return cost
 

@@ -2,7 +2,8 @@
 
 Used by :mod:`mascore.distributed_kf`, :mod:`mascore.centralized_team_filter` and
 :mod:`mascore.team_observability`; shapes as in :mod:`mascore.distributed_kf` (reduced
-covariances ``(batch, N, M_r, M_r)`` per agent or ``(batch, N M_r, N M_r)`` augmented).
+covariances ``(batch, N, M_r, M_r)`` per agent or ``(batch, N M_r, N M_r)`` augmented). The last section
+holds the steps of :class:`~mascore.distributed_kf.TeamFilter` on its own arrays (row blocks in place).
 """
 
 from __future__ import annotations

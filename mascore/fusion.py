@@ -101,7 +101,6 @@ from ._validation import (
     symmetric_part,
 )
 from .estimation import Message, MethodSpec
-from .fusion_cost import filter_cost
 from .fusion_forwarding import KalmanConsensusNetworkFilter, SetMembershipForwardingFilter  # noqa: F401 (their old home)
 from .sensor_network import SensorNetworkModel
 
@@ -1065,35 +1064,30 @@ _CONSENSUS = {  # kind -> (filter of L steps, filter_cost name)
 }
 
 
-def _consensus_spec(kind: str, L: int | str, position: float) -> MethodSpec:
+def _consensus_spec(kind: str, L: int | str, position: float, role: str = "recipe") -> MethodSpec:
     """The spec of `kind` at L consensus steps, or at ``L = "diam"``: the diameter of the model's graph.
 
-    The count of ``-Ldiam`` takes the ring's diameter, ``N // 2`` (the graph of the cost tables).
+    Its knob is L (family `kind`; the setting None: the diameter). The count of ``-Ldiam`` takes the
+    ring's diameter, ``N // 2`` (the graph of the cost tables).
     """
     build, cost_name = _CONSENSUS[kind]
-    if L == "diam":
-        steps, cost = graph_diameter, _ring_diameter_cost(cost_name)
-    else:
-        steps, cost = (lambda model, L=L: L), spec_cost(cost_name, L)
-    return MethodSpec(f"{kind}-L{L}", TASKS, lambda model: build(model, steps(model)), cost,
+    steps = graph_diameter if L == "diam" else (lambda model, L=L: L)
+    return MethodSpec(f"{kind}-L{L}", TASKS, lambda model: build(model, steps(model)),
+                      spec_cost(cost_name, None if L == "diam" else L),
                       spec_orders(("O(n^3 + L d n^2)", "O(d n^2)"), ("O(N^3 + L d N^2)", "O(d N^2)")),
-                      spec_memory(2 if kind == "hcmci" else 1), position=position)
-
-
-def _ring_diameter_cost(name: str):
-    """``cost(n, q, degree, n_agents)`` of :func:`filter_cost` for `name` at ``L = N // 2``, the ring's diameter."""
-    def cost(n: int, q: int, d: int, n_agents: int) -> tuple[float, float]:
-        c = filter_cost(name, n=n, q=q, degree=d, iterations=max(1, n_agents // 2), n_agents=n_agents)
-        return c.floats_sent, c.flops
-    return cost
+                      spec_memory(2 if kind == "hcmci" else 1), position=position, role=role, family=kind,
+                      setting=None if L == "diam" else float(L))
 
 
 def _safe_hcmci_spec(L: int, position: float) -> MethodSpec:
-    """HCMCI at L steps with the largest novelty weight its consistency condition allows (:func:`safe_novelty_weight`)."""
+    """HCMCI at L steps with the largest novelty weight its consistency condition allows (:func:`safe_novelty_weight`).
+
+    A setting of the knob omega of ``hcmci-L<L>`` (the setting None: computed for the model's graph).
+    """
     return MethodSpec(f"hcmci-safe-L{L}", TASKS,
                       lambda model: ConsensusOnInformationFilter(model, L, novelty_weight=safe_novelty_weight(model, L)),
                       spec_cost("hcmci", L), spec_orders(("O(n^3 + L d n^2)", "O(d n^2)"), ("O(N^3 + L d N^2)", "O(d N^2)")),
-                      spec_memory(2), position=position)
+                      spec_memory(2), position=position, role="knob", family=f"hcmci-L{L}")
 
 
 def graph_diameter(model: SensorNetworkModel) -> int:
@@ -1187,7 +1181,8 @@ METHODS = (
                                                 "information matrices of 2N x 2N, per agent and step) grows as N^4 per "
                                                 "agent: at N = 64 one method would take most of the full grid's time")}),
     # the knobs' other settings (the comparison sweeps them at N = 8: mascore.compare.FUSION_KNOB_METHODS)
-    *(_consensus_spec(kind, L, 11 + 2 * k + j) for k, kind in enumerate(_CONSENSUS) for j, L in enumerate((2, "diam"))),
+    *(_consensus_spec(kind, L, 11 + 2 * k + j, "knob") for k, kind in enumerate(_CONSENSUS)
+      for j, L in enumerate((2, "diam"))),
     *(_safe_hcmci_spec(L, 17 + j) for j, L in enumerate((1, 5))),
     # then mascore.fusion_forwarding's: the Kalman-consensus filter and the set-membership filter
 )

@@ -308,10 +308,11 @@ def _kcf_cost(n: int, q: int, d: int, n_agents: int) -> tuple[float, float]:
     return c.floats_sent + n, c.flops + d * n + 4 * n**2
 
 
-def _kcf_spec(name: str, eps: float, position: float) -> MethodSpec:
-    """Olfati-Saber's KCF at consensus gain `eps`."""
+def _kcf_spec(name: str, eps: float, position: float, role: str = "recipe") -> MethodSpec:
+    """Olfati-Saber's KCF at consensus gain `eps` (its knob)."""
     return MethodSpec(name, TASKS, lambda model: KalmanConsensusNetworkFilter(model, eps), _kcf_cost,
-                      spec_orders(("O(d q n + n^3)", "O(n^2 + d n)"), ("O(N^3)", "O(N^2)")), spec_memory(), position=position)
+                      spec_orders(("O(d q n + n^3)", "O(n^2 + d n)"), ("O(N^3)", "O(N^2)")), spec_memory(),
+                      position=position, role=role, family="kcf", setting=eps)
 
 
 def _sm_forwarding_cost(n: int, q: int, d: int, n_agents: int) -> tuple[float, float]:
@@ -325,10 +326,11 @@ def _sm_forwarding_cost(n: int, q: int, d: int, n_agents: int) -> tuple[float, f
 
 
 #: Olfati-Saber's Kalman-consensus filter at its default gain, the set-membership filter on forwarded
-#: measurements (its containment in place of the NEES), then the KCF's gain swept (knob settings).
+#: measurements (its containment in place of the NEES), then the KCF's gain swept (knob settings: 0.5 = 1 / d_max
+#: on the ring, the largest that keeps its consensus step a convex combination for every covariance).
 METHODS = (
     _kcf_spec("kcf", 0.1, 10.5),
     MethodSpec("sm-forwarding", TASKS, SetMembershipForwardingFilter, _sm_forwarding_cost,
                spec_orders(("O(n^3 + d^3 q^3)", "O(n^2 + d q)"), ("O(N^3)", "O(N^2)")), spec_memory(), position=10.6),
-    *(_kcf_spec(f"kcf-eps{eps:g}", eps, 19 + j) for j, eps in enumerate((0.01, 0.5))),
+    *(_kcf_spec(f"kcf-eps{eps:g}", eps, 19 + j, "knob") for j, eps in enumerate((0.01, 0.5))),
 )

@@ -14,7 +14,6 @@ from .. import estimation
 from ..settings import check_settings_type
 from ..sweep import Grid, cell_id, cell_seed
 from .benchmark import (
-    FUSION_KNOB_METHODS,
     REN_Q,
     SEED_AXES,
     SETTINGS,
@@ -150,7 +149,7 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
                     "n_agents": [8], "block": blocks200}),
         ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in shared],
                     "n_agents": [16], "graph": ["geometric", "switching"], "block": blocks200}),
-        *((task, {**base, "task": [task], "method": list(FUSION_KNOB_METHODS), "n_agents": [8],
+        *((task, {**base, "task": [task], "method": sorted(estimation.method_names(task, ("knob",))), "n_agents": [8],
                   "block": blocks200}) for task in ("target", "localization")),
     ]
     studies += _link_studies(quick, base, blocks, blocks200)
@@ -160,12 +159,10 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
         # scale: both fusion tasks at N = 8 to 64 on every graph (a method up to its spec's max_agents)
         studies += [(task, {**base, "task": [task], "method": list(target_methods(task)), "graph": list(SCALE_GRAPHS),
                             "n_agents": list(SCALE_SIZES), "block": blocks200}) for task in ("target", "localization")]
-    limits = {task: estimation.agent_limits(task) for task in ("target", "localization")}
+    limits = {task: estimation.agent_limits(task) for task in ("team", "target", "localization")}
     cells, seen = [], set()
     for study, axes in studies:
         for cell in Grid(axes).cells():
-            if cell["method"] == "song-eb" and cell["n_agents"] > 32:
-                continue  # its joint covariance is (2 N^2)^2 floats: 0.5 GB at N = 64
             if skip.get(cell["method"], set()) & {cell["graph"], cell["n_agents"]}:
                 continue
             if cell["n_agents"] > limits.get(cell["task"], {}).get(cell["method"], (np.inf,))[0]:

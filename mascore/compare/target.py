@@ -12,8 +12,8 @@ from .._validation import check_positive, check_positive_int
 from ..agents import double_integrator
 from ..ellipsoids import contains
 from .benchmark import (
-    FUSION_KNOB_METHODS,
     SETTINGS,
+    SHOWN,
     SWITCHING_GRAPHS,
     BenchmarkSettings,
     benchmark_graph,
@@ -54,7 +54,7 @@ def target_methods(task: str = "target", knobs: bool = False) -> tuple[str, ...]
     task : {"target", "localization"}
         The scenario.
     knobs : bool
-        Include the knob variants (:data:`FUSION_KNOB_METHODS`, swept at N = 8 only).
+        Include the knobs' settings (``role="knob"``: :data:`FUSION_KNOB_METHODS`, swept at N = 8 only).
 
     Returns
     -------
@@ -69,8 +69,7 @@ def target_methods(task: str = "target", knobs: bool = False) -> tuple[str, ...]
     >>> "hcmci-safe-L1" in compare.target_methods(knobs=True), "hcmci-safe-L1" in compare.target_methods()
     (True, False)
     """
-    names = estimation.method_names(task)
-    return names if knobs else tuple(m for m in names if m not in FUSION_KNOB_METHODS)
+    return estimation.method_names(task, estimation.ROLES if knobs else SHOWN)
 
 
 def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
