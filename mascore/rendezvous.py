@@ -45,7 +45,7 @@ from ._validation import require_finite as _finite
 from .agents import LTIAgent, check_sampling_time
 from .graphs import laplacian as graph_laplacian
 from .graphs import require_connected
-from .noise import _psd_factor
+from .noise import psd_factor
 from .sensing import _measure, sensing_mask, team_noise_covariance
 
 __all__ = [
@@ -218,7 +218,7 @@ def propagate_team(
         np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
     except ValueError:
         raise ValueError(f"the leading axes of states {x.shape} and inputs {u.shape} do not broadcast") from None
-    w = rng.standard_normal(x.shape) @ _psd_factor(Q, cholesky_first=True).T
+    w = rng.standard_normal(x.shape) @ psd_factor(Q, cholesky_first=True, check=False).T
     return x @ A.T + u @ B.T + w
 
 

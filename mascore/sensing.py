@@ -39,11 +39,12 @@ from ._validation import (
     check_generator,
     check_mask_values,
     check_positive_int,
+    sample_shape,
 )
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .exceptions import IsolatedAgentError
-from .noise import _psd_factor, _sample_shape
+from .noise import psd_factor
 
 __all__ = [
     "sensing_mask",
@@ -276,14 +277,14 @@ def measurement_noise(
     (5, 3, 3, 2)
     """
     rng = check_generator(rng)
-    shape = _sample_shape(shape, "shape")
+    shape = sample_shape(shape, "shape")
     R_team = team_noise_covariance(R, n_agents, m)
     return _measurement_noise(rng, R_team, shape, n_agents, m)
 
 
 def _measurement_noise(rng: np.random.Generator, R_team: np.ndarray, shape: tuple, n_agents: int, m: int) -> np.ndarray:
     """:func:`measurement_noise` without checks (`R_team` the full ``(m N, m N)`` covariance)."""
-    root = _psd_factor(R_team, cholesky_first=True)
+    root = psd_factor(R_team, cholesky_first=True, check=False)
     std = rng.standard_normal((*shape, n_agents, n_agents * m))
     nu = std @ root.T
     return nu.reshape(*shape, n_agents, n_agents, m)
