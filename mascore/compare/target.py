@@ -299,7 +299,7 @@ def _agent_major(a: np.ndarray, trailing: int) -> np.ndarray:
 
 
 def target_filter(method: str, model, task: str = "target"):
-    """The filter of a common-target method on `model`, as its spec builds it (:data:`mascore.fusion.METHODS`).
+    """The filter of a common-target method on `model`, as its spec builds it (:func:`mascore.estimation.method_spec`).
 
     Parameters
     ----------
