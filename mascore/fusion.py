@@ -199,7 +199,7 @@ class MeasurementForwardingFilter(NetworkFilter):
         self._set(_S=frozen_copy(mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
-        i = mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
+        i = mix(self.model._neighbourhood, self.model.information_vectors(z, check=False), 1)
         return information_update(x, P, self._S, i)
 
 
@@ -254,7 +254,7 @@ class DiffusionKalmanFilter(NetworkFilter):
         self._set(weights=frozen_copy(C), _S=frozen_copy(mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
-        i = mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
+        i = mix(self.model._neighbourhood, self.model.information_vectors(z, check=False), 1)
         psi, P_new = information_update(x, P, self._S, i)
         return mix(self.weights, psi, 1), P_new
 
@@ -263,7 +263,7 @@ class DiffusionKalmanFilter(NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         psi, _ = information_update(xm, Pm, self._S, mix(self.model._neighbourhood,
-                                                             self.model._information_vectors(z), 1))
+                                                     self.model.information_vectors(z, check=False), 1))
         return (*super()._agent_messages(own, xm, Pm, z, i), psi[own["nbrs"]].copy())
 
     def _agent_step(self, i, own, messages):
@@ -358,7 +358,7 @@ class ConsensusOnInformationFilter(NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         Om, q = information_pair(xm, Pm)
-        I, iv = self.model.information_matrices, self.model._information_vectors(z)
+        I, iv = self.model.information_matrices, self.model.information_vectors(z, check=False)
         pairs = [(Om, q), (np.broadcast_to(I, Om.shape), iv)] if self.novelty_weight != 1.0 else [(Om + I, q + iv)]
         return consensus_rounds(self.model.weights, pairs, own["nbrs"], self.n_consensus)
 
@@ -426,7 +426,7 @@ class ConsensusOnInformationFilter(NetworkFilter):
         x, P = self._check_xP(x, P)
         z = self.model._check_z(z)
         Om, q = information_pair(x, P)
-        return Om + self.model.information_matrices, q + self.model._information_vectors(z)
+        return Om + self.model.information_matrices, q + self.model.information_vectors(z, check=False)
 
     def pair_estimate(self, Om: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The estimate of a fused information pair: ``x = Omega^{-1} q``, ``P = Omega^{-1}``.
@@ -464,7 +464,7 @@ class ConsensusOnInformationFilter(NetworkFilter):
     def _correct(self, x, P, z):
         Om, q = information_pair(x, P)
         Om = mix(self._WL, Om, 2) + self._SL
-        q = mix(self._WL, q, 1) + self.novelty_weight * mix(self._WL, self.model._information_vectors(z), 1)
+        q = mix(self._WL, q, 1) + self.novelty_weight * mix(self._WL, self.model.information_vectors(z, check=False), 1)
         return from_information(Om, q)
 
 
@@ -545,7 +545,7 @@ class InformationConsensusFilter(NetworkFilter):
     def _agent_messages(self, own, xm, Pm, z, i):
         N = self.model.n_agents
         Om, q = information_pair(xm, Pm)
-        pairs = [(Om / N + self.model.information_matrices, q / N + self.model._information_vectors(z))]
+        pairs = [(Om / N + self.model.information_matrices, q / N + self.model.information_vectors(z, check=False))]
         return consensus_rounds(self._consensus_matrix(), pairs, own["nbrs"], self.n_iterations)
 
     def _agent_step(self, i, own, messages):
@@ -603,7 +603,7 @@ class InformationConsensusFilter(NetworkFilter):
         z = self.model._check_z(z)
         N = self.model.n_agents
         J, q = information_pair(x, P)
-        return J / N + self.model.information_matrices, q / N + self.model._information_vectors(z)
+        return J / N + self.model.information_matrices, q / N + self.model.information_vectors(z, check=False)
 
     def pair_estimate(self, V: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The estimate of a fused pair: ``x = V^{-1} v``, ``P = (N V)^{-1}``.
@@ -638,7 +638,7 @@ class InformationConsensusFilter(NetworkFilter):
         N = self.model.n_agents
         J, q = information_pair(x, P)
         V = mix(self._WK, J, 2) / N + self._SK
-        v = mix(self._WK, q, 1) / N + mix(self._WK, self.model._information_vectors(z), 1)
+        v = mix(self._WK, q, 1) / N + mix(self._WK, self.model.information_vectors(z, check=False), 1)
         Vinv = symmetric_part(np.linalg.inv(V))
         return (Vinv @ v[..., None])[..., 0], Vinv / N
 
@@ -708,7 +708,7 @@ class CovarianceIntersectionFilter(NetworkFilter):
 
     def _correct(self, x, P, z):
         M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
-        psi, P_loc = information_update(x, P, self._S, mix(M, self.model._information_vectors(z), 1))
+        psi, P_loc = information_update(x, P, self._S, mix(M, self.model.information_vectors(z, check=False), 1))
         Om, q = information_pair(psi, P_loc)  # (..., N, n, n), (..., N, n)
         N = self.model.n_agents
         C = np.zeros((*P_loc.shape[:-3], N, N))  # the weights: from the covariances only
@@ -731,7 +731,7 @@ class CovarianceIntersectionFilter(NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
-        psi, P_loc = information_update(xm, Pm, self._S, mix(M, self.model._information_vectors(z), 1))
+        psi, P_loc = information_update(xm, Pm, self._S, mix(M, self.model.information_vectors(z, check=False), 1))
         Om, q = information_pair(psi[own["nbrs"]], P_loc[own["nbrs"]])
         received = super()._agent_messages(own, xm, Pm, z, i)
         return (received[0] if self.measurements == "neighbourhood" else (), (Om, q))
