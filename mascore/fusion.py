@@ -75,7 +75,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import kalman
-from ._fusion_base import TASKS, NetworkFilter, centre_memory, spec_cost, spec_memory, spec_orders
+from ._fusion_base import TASKS, centre_memory, spec_cost, spec_memory, spec_orders
+from ._fusion_base import NetworkFilter as _NetworkFilter
 from ._fusion_kernels import (
     broadcast_batch,
     ci_weights,
@@ -125,7 +126,7 @@ __all__ = [
 
 
 
-class CentralizedFilter(NetworkFilter):
+class CentralizedFilter(_NetworkFilter):
     """The centralized Kalman filter: one node fuses every agent's measurement (the bound).
 
     The update is :func:`mascore.kalman.update` with the stacked model
@@ -161,7 +162,7 @@ class CentralizedFilter(NetworkFilter):
         return kalman.update(x, P, z, self.model._kf)
 
 
-class MeasurementForwardingFilter(NetworkFilter):
+class MeasurementForwardingFilter(_NetworkFilter):
     """Measurement forwarding: each agent fuses its own and its neighbours' measurements, one hop.
 
     Agent i's update is the exact Kalman update on the measurements of
@@ -203,7 +204,7 @@ class MeasurementForwardingFilter(NetworkFilter):
         return information_update(x, P, self._S, i)
 
 
-class DiffusionKalmanFilter(NetworkFilter):
+class DiffusionKalmanFilter(_NetworkFilter):
     """The diffusion Kalman filter of Cattivelli and Sayed (2010), computed in information form.
 
     Step 1, incremental update: agent i corrects its prediction with the
@@ -271,7 +272,7 @@ class DiffusionKalmanFilter(NetworkFilter):
         return self.weights[i, i] * psi + self.weights[i, own["nbrs"]] @ messages[1], Pn
 
 
-class ConsensusOnInformationFilter(NetworkFilter):
+class ConsensusOnInformationFilter(_NetworkFilter):
     """Consensus on information (CI) of Battistelli and Chisci (2014); the hybrid HCMCI of Battistelli et al. (2015).
 
     Per step, with ``Omega_i- = P_i-^{-1}`` and ``q_i- = Omega_i- x_i-``
@@ -468,7 +469,7 @@ class ConsensusOnInformationFilter(NetworkFilter):
         return from_information(Om, q)
 
 
-class InformationConsensusFilter(NetworkFilter):
+class InformationConsensusFilter(_NetworkFilter):
     """The information-weighted consensus filter (ICF) of Kamal, Farrell and Roy-Chowdhury (2013).
 
     Per step, with ``J_i- = P_i-^{-1}``::
@@ -643,7 +644,7 @@ class InformationConsensusFilter(NetworkFilter):
         return (Vinv @ v[..., None])[..., 0], Vinv / N
 
 
-class CovarianceIntersectionFilter(NetworkFilter):
+class CovarianceIntersectionFilter(_NetworkFilter):
     """Diffusion Kalman filtering with covariance intersection (Hu, Xie and Zhang 2012).
 
     Step 1, incremental update: agent i corrects its prediction with the
@@ -792,7 +793,7 @@ class CovarianceIntersectionFilter(NetworkFilter):
 
 
 
-def track(filt: NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
+def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
           graphs: Sequence[object] | ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Run a sensor-network filter over measurements, on a fixed graph or one graph per step.
 
@@ -842,7 +843,7 @@ def track(filt: NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     >>> x.shape, P.shape
     ((20, 4, 2), (20, 4, 2, 2))
     """
-    if not isinstance(filt, NetworkFilter):
+    if not isinstance(filt, _NetworkFilter):
         raise TypeError(f"filt must be one of mascore.fusion's filters (e.g. ConsensusOnInformationFilter(model, "
                         f"L)); got {type(filt).__name__}")
     if graphs is None:
@@ -865,7 +866,7 @@ def track(filt: NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     check_fits_in_memory(8.0 * K * math.prod(batch) * n * (1 + n) * (N if filt._per_agent else 1), "z",
                          "the estimates and covariances of every step and run")
     require_finite(z, "z")
-    built: dict[bytes, NetworkFilter] = {}
+    built: dict[bytes, _NetworkFilter] = {}
     xs, Ps = [], []
     for k in range(K):
         A = check_adjacency(float_array(graphs[k], f"graphs[{k}]"), f"graphs[{k}]", size=N, undirected=True,
@@ -881,7 +882,7 @@ def track(filt: NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     return np.stack(xs), np.stack(Ps)
 
 
-def error_covariance(filt: NetworkFilter, P0: ArrayLike, n_steps: int, P0_true: ArrayLike | None = None,
+def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true: ArrayLike | None = None,
                      ) -> tuple[np.ndarray, np.ndarray]:
     """The exact error covariance ``E[e_i e_i^T]`` of a filter's estimates, without Monte Carlo.
 
@@ -931,7 +932,7 @@ def error_covariance(filt: NetworkFilter, P0: ArrayLike, n_steps: int, P0_true: 
     >>> bool(np.allclose(P, C))                                 # a Kalman filter: P is its error covariance
     True
     """
-    if not isinstance(filt, NetworkFilter):
+    if not isinstance(filt, _NetworkFilter):
         raise TypeError(f"filt must be a filter of mascore.fusion; got {type(filt).__name__}")
     from ._validation import check_steps
 
@@ -1192,7 +1193,7 @@ METHODS = (
 # kernels (checked arguments)
 
 
-def _settings_for_any_graph(filt: NetworkFilter) -> tuple:
+def _settings_for_any_graph(filt: _NetworkFilter) -> tuple:
     """A filter's constructor arguments after the model, with its graph-dependent defaults left to the new graph."""
     model = filt.model
     if isinstance(filt, DiffusionKalmanFilter):
