@@ -12,8 +12,8 @@ with the same ``predict`` / ``update`` / ``run``, the same checks and the same p
                                             Bhattacharjee and Subbarao 2021's closed-form steps)
 ==========================================  ===========================================================
 
-References
-----------
+.. rubric:: References
+
 - Olfati-Saber, R. (2007). Distributed Kalman filtering for sensor networks. Proc. 46th IEEE Conference on
   Decision & Control (CDC), 5492-5498.
 - Olfati-Saber, R., Fax, J. A., Murray, R. M. (2007). Consensus and cooperation in networked multi-agent
