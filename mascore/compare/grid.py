@@ -77,7 +77,7 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     N = 8, position sensing, the shared, target and localization tasks); and the links
     of the target and localization tasks at N = 8 on the ring (:data:`LINK_STUDIES`: ``loss``,
     ``latency``, ``send-on-delta-<delta>``; a cell's ``dropout`` is the packet loss; quick: the
-    target task only, a few methods, 2 blocks; full: both tasks, 4 blocks). The full grid adds the
+    target task only, a few methods; full: both tasks; 4 blocks in both). The full grid adds the
     scale study of both fusion tasks: every method at N in :data:`SCALE_SIZES` on every graph of
     :data:`SCALE_GRAPHS`, each up to the team size its spec allows
     (:func:`mascore.estimation.agent_limits`, with the reason).
@@ -153,7 +153,7 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
         *((task, {**base, "task": [task], "method": list(FUSION_KNOB_METHODS), "n_agents": [8],
                   "block": blocks200}) for task in ("target", "localization")),
     ]
-    studies += _link_studies(quick, base, blocks, blocks200)
+    studies += _link_studies(quick, base, blocks200)
     if not quick:
         studies.append(("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
                                          "graph": ["switching"], "n_agents": [16], "block": blocks200}))
@@ -182,15 +182,17 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     return cells
 
 
-def _link_studies(quick: bool, base: dict, blocks: list, blocks200: list) -> list[tuple[str, dict]]:
+def _link_studies(quick: bool, base: dict, blocks200: list) -> list[tuple[str, dict]]:
     """The studies of the target and localization tasks over lossy, late and event-triggered links (N = 8, ring).
 
     Quick: the target task only, loss 0.1 and 0.3 for the bound, forwarding, CI and ICF at one step;
     latency without loss; send-on-delta at 0.5 and 1. Full: both tasks, every method of
     :data:`LOSS_METHODS` at both losses, latency at loss 0, 0.1 and 0.3, and send-on-delta at 0.5, 1 and 2.
+    Both grids run 4 blocks: the link claims are written from blocks 0-1 and decided on 2-3
+    (:mod:`mascore.compare.verdicts`).
     """
     tasks = ["target"] if quick else ["target", "localization"]
-    ring8 = {**base, "n_agents": [8], "block": blocks if quick else blocks200}
+    ring8 = {**base, "n_agents": [8], "block": blocks200}
     deltas = [s for s in LINK_STUDIES if s.startswith("send-on-delta")][:2 if quick else 3]
     out = []
     for task in tasks:
