@@ -30,6 +30,7 @@ from .shared import simulate_shared
 from .stats import NEES_DIMENSION, anees_bounds, mean_interval, rms_ratio
 from .tables import fitted_slopes
 from .target import (
+    DIRECTION_LOSS_METHODS,
     LATENCY_METHODS,
     LINK_STUDIES,
     SEND_ON_DELTA_METHODS,
@@ -76,7 +77,7 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
     N = 8, position sensing, the shared, target and localization tasks); and the links
     of the target and localization tasks at N = 8 on the ring (:data:`LINK_STUDIES`: ``loss``,
-    ``latency``, ``send-on-delta-<delta>``; a cell's ``dropout`` is the packet loss; quick: the
+    ``loss-direction``, ``latency``, ``send-on-delta-<delta>``; a cell's ``dropout`` is the packet loss; quick: the
     target task only, a few methods; full: both tasks; 4 blocks in both). The full grid adds the
     scale study of both fusion tasks: every method at N in :data:`SCALE_SIZES` on every graph of
     :data:`SCALE_GRAPHS`, each up to the team size its spec allows
@@ -185,9 +186,11 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
 def _link_studies(quick: bool, base: dict, blocks200: list) -> list[tuple[str, dict]]:
     """The studies of the target and localization tasks over lossy, late and event-triggered links (N = 8, ring).
 
-    Quick: the target task only, loss 0.1 and 0.3 for the bound, forwarding, CI and ICF at one step;
-    latency without loss; send-on-delta at 0.5 and 1. Full: both tasks, every method of
-    :data:`LOSS_METHODS` at both losses, latency at loss 0, 0.1 and 0.3, and send-on-delta at 0.5, 1 and 2.
+    Quick: the target task only, loss 0.1 and 0.3 for the bound, forwarding, CI and ICF at one step
+    (a link lost in both directions at once, and each direction alone: ``loss-direction``); latency
+    without loss; send-on-delta at 0.5 and 1. Full: both tasks, every method of :data:`LOSS_METHODS`
+    at both losses (each direction alone: :data:`DIRECTION_LOSS_METHODS` but local), latency at loss
+    0, 0.1 and 0.3, and send-on-delta at 0.5, 1 and 2.
     Both grids run 4 blocks: the link claims are written from blocks 0-1 and decided on 2-3
     (:mod:`mascore.compare.verdicts`).
     """
@@ -198,6 +201,8 @@ def _link_studies(quick: bool, base: dict, blocks200: list) -> list[tuple[str, d
     for task in tasks:
         loss_methods = ["centralized", "forwarding", "ci-L1", "icf-L1"] if quick else list(target_methods("target"))
         out.append(("loss", {**ring8, "task": [task], "method": loss_methods, "dropout": [0.1, 0.3]}))
+        out.append(("loss-direction", {**ring8, "task": [task], "method": [m for m in DIRECTION_LOSS_METHODS
+                                                                           if m != "local"], "dropout": [0.1, 0.3]}))
         out.append(("latency", {**ring8, "task": [task], "method": list(LATENCY_METHODS),
                                 "dropout": [0.0] if quick else [0.0, 0.1, 0.3]}))
         out += [(study, {**ring8, "task": [task], "method": list(SEND_ON_DELTA_METHODS)}) for study in deltas]

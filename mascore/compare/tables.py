@@ -370,8 +370,9 @@ def link_table(summary, links, task: str = "target"):
     pandas.DataFrame
         One row per method (table order); columns ``(quantity, links)``: ``RMSE ratio`` (to the
         centralized filter, which keeps ideal links) and ``NEES/dof``, for ideal links (the task's
-        own study), each packet loss, and one-step latency at each loss the summary holds; NaN where a
-        method has no model of the links (:data:`LATENCY_NOT_MODELLED`).
+        own study), each packet loss (``loss p``: a link lost in both directions; ``one-way loss p``:
+        each message lost alone, study ``loss-direction``), and one-step latency at each loss the
+        summary holds; NaN where a method has no model of the links (:data:`LATENCY_NOT_MODELLED`).
 
     Examples
     --------
@@ -392,13 +393,14 @@ def link_table(summary, links, task: str = "target"):
     s = s[(s["task"] == task) & (s["n_agents"] == 8) & (s["graph"] == "ring")]
     ideal = s[(s["study"] == task) & (s["dropout"] == 0.0)].assign(links="ideal")
     lossy = s[s["study"] == "loss"].assign(links=lambda d: [f"loss {p:g}" for p in d["dropout"]])
+    one_way = s[s["study"] == "loss-direction"].assign(links=lambda d: [f"one-way loss {p:g}" for p in d["dropout"]])
     late = s[s["study"] == "latency"].assign(links=lambda d: [f"late, loss {p:g}" for p in d["dropout"]])
     if lossy.empty and late.empty:
         raise ValueError(f"summary has no cell of the studies 'loss' or 'latency' ({tuple(LINK_STUDIES)[:2]}) for "
                          f"{task!r}: rerun the sweep (grid_cells)")
-    rows = pd.concat([ideal, lossy, late])
+    rows = pd.concat([ideal, lossy, one_way, late])
     order = [links for links in dict.fromkeys(rows["links"])]
-    methods = [m for m in target_methods(task) if m in set(lossy["method"]) | set(late["method"])]
+    methods = [m for m in target_methods(task) if m in set(lossy["method"]) | set(late["method"]) | set(one_way["method"])]
     out = {name: rows.pivot_table(index="method", columns="links", values=col).reindex(index=methods, columns=order)
            for name, col in (("RMSE ratio", "ratio_mean"), ("NEES/dof", "nees_own_mean"))}
     return pd.concat(out, axis=1)
