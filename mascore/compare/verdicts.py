@@ -1005,18 +1005,16 @@ def compare_claims(table, phi: dict | None = None, *, held_out: Sequence[int] = 
     every["sensing"] = every["sensing"].astype(object).where(every["sensing"].notna(), np.where(team, "full", ""))
     lossy = every["study"].isin(LINK_STUDIES)
     runs = every[~lossy].copy()  # the link studies are summarized apart (link_summary), for LINK_CLAIMS only
-    summary = _summary(runs)
+    summary = _summary(runs) if len(runs) else None
     if phi is None:
         phi = vlahakis_profile(8)
     claims = []
-    for claim in CLAIMS:
+    for claim in CLAIMS if summary is not None else ():
         try:
             claims.append(claim(Evidence(summary, runs, phi)))
         except _Missing:
             continue
     if lossy.any():
-        import pandas as pd
-
         links = pd.concat([summary, _summary(every[lossy])], ignore_index=True)
         for claim in LINK_CLAIMS:
             try:
