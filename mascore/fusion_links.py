@@ -358,7 +358,7 @@ def track_forwarding(model, x0: ArrayLike, P0: ArrayLike, z: ArrayLike, delivere
     >>> ideal = np.broadcast_to(model.adjacency, (50, 8, 8))
     >>> x, P = fusion_links.track_forwarding(model, np.zeros(4), np.eye(4), z, ideal)
     >>> xf, Pf = fusion.MeasurementForwardingFilter(model).run(np.zeros(4), np.eye(4), z)
-    >>> bool(np.allclose(x, xf) and np.allclose(P, Pf))
+    >>> bool(np.allclose(x, xf) and np.allclose(P, Pf[:, None]))
     True
     """
     forwarding = MeasurementForwardingFilter(model)
