@@ -874,8 +874,8 @@ def links_send_on_delta(ev: Evidence):
     accuracy = ev.paired("ci-L1", at, ideal, **_LINKS)
     return ev.claim(
         "links-send-on-delta",
-        "Sending on delta at a threshold of 0.5 standard deviations, consensus on information (one step) sends "
-        "less than 60 % of the floats it sends at every step and keeps its accuracy (its RMSE within 5 % of its "
+        "Sending only on change (a threshold delta = 0.5 standard deviations of the sender's prediction), "
+        "consensus on information (one step) sends less than 60 % of the floats it sends at every step and keeps its accuracy (its RMSE within 5 % of its "
         "own on ideal links, on the same runs); ICF saves less than a quarter of its floats, because its "
         "message moves with every measurement.",
         {"floats sent / every step": {m: _shown(v) for m, v in sent.items()},
@@ -958,7 +958,8 @@ CLAIMS: tuple[Callable[[Evidence], Any], ...] = (
 
 
 def compare_claims(table, phi: dict | None = None, *, held_out: Sequence[int] = HELD_OUT,
-                   written_from: Sequence[int] = WRITTEN_FROM) -> list:
+                   written_from: Sequence[int] = WRITTEN_FROM,
+                   which: Sequence[Callable[[Evidence], Any]] | None = None) -> list:
     """The comparison's claims (``compare/...``), decided on held-out seed blocks by intervals against bands.
 
     Each claim of :data:`CLAIMS` that depends on a method's tuning knob is decided at two or more
@@ -976,6 +977,9 @@ def compare_claims(table, phi: dict | None = None, *, held_out: Sequence[int] = 
     held_out, written_from : sequence of int
         The seed blocks that decide the claims, and those they were written from (used where a
         cell has no held-out block).
+    which : sequence of callables, optional
+        Only these claims of :data:`CLAIMS` and :data:`LINK_CLAIMS` (e.g. ``LINK_CLAIMS`` for the links
+        page; the Vlahakis program is then computed only if one of them is in :data:`CLAIMS`).
 
     Returns
     -------
@@ -1005,18 +1009,22 @@ def compare_claims(table, phi: dict | None = None, *, held_out: Sequence[int] = 
     every["sensing"] = every["sensing"].astype(object).where(every["sensing"].notna(), np.where(team, "full", ""))
     lossy = every["study"].isin(LINK_STUDIES)
     runs = every[~lossy].copy()  # the link studies are summarized apart (link_summary), for LINK_CLAIMS only
+    chosen = set(CLAIMS + LINK_CLAIMS if which is None else which)
+    if not chosen <= set(CLAIMS + LINK_CLAIMS):
+        raise ValueError("which must hold claims of CLAIMS or LINK_CLAIMS (mascore.compare.verdicts)")
+    main = [c for c in CLAIMS if c in chosen] if len(runs) else []
     summary = _summary(runs) if len(runs) else None
-    if phi is None:
+    if phi is None and main:
         phi = vlahakis_profile(8)
     claims = []
-    for claim in CLAIMS if summary is not None else ():
+    for claim in main:
         try:
             claims.append(claim(Evidence(summary, runs, phi)))
         except _Missing:
             continue
     if lossy.any():
         links = pd.concat([summary, _summary(every[lossy])], ignore_index=True)
-        for claim in LINK_CLAIMS:
+        for claim in (c for c in LINK_CLAIMS if c in chosen):
             try:
                 claims.append(claim(Evidence(links, every, phi)))
             except _Missing:
