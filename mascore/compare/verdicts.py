@@ -875,9 +875,9 @@ def links_send_on_delta(ev: Evidence):
     return ev.claim(
         "links-send-on-delta",
         "Sending only on change (a threshold delta = 0.5 standard deviations of the sender's prediction), "
-        "consensus on information (one step) sends less than 60 % of the floats it sends at every step and keeps its accuracy (its RMSE within 5 % of its "
-        "own on ideal links, on the same runs); ICF saves less than a quarter of its floats, because its "
-        "message moves with every measurement.",
+        "consensus on information (one step) sends less than 60 % of the floats it sends at every step and "
+        "keeps its accuracy (its RMSE within 5 % of its own on ideal links, on the same runs); ICF saves less "
+        "than a quarter of its floats, because its message moves with every measurement.",
         {"floats sent / every step": {m: _shown(v) for m, v in sent.items()},
          "ci-L1: RMSE / RMSE on ideal links": _shown(accuracy)},
         all_of([ev.below("ci-L1 floats sent / every step", sent["ci-L1"], 0.6),
