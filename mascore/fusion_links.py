@@ -196,8 +196,10 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
     delivered : (K, ..., N, N) array_like, optional
         Positive where agent i received j's message at step k (:func:`lossy_graphs` with
         ``per_direction=True``, one pattern per run or one for all); the weight of a lost one goes to
-        the receiver's own pair (:func:`delivered_weights`). None: every message arrives. Not with
-        `send_delta` (the receivers of one sender would hold different last pairs).
+        the receiver's own pair (:func:`delivered_weights`). None: every message arrives. With
+        `send_delta` (not with `latency`) each receiver holds the last pair it received from each
+        neighbour, predicted to the step, and fuses that; a neighbour it never heard from has its
+        weight on the receiver's own pair. A sender decides from the last pair it sent.
 
     Returns
     -------
@@ -265,9 +267,8 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
                          f"got shape {z.shape}")
     N, n = model.n_agents, model.n_states
     if delivered is not None:
-        if send_delta is not None:
-            raise ValueError("delivered and send_delta cannot be combined: a sender's neighbours would hold "
-                             "different last pairs")
+        if send_delta is not None and latency:
+            raise ValueError("delivered, send_delta and latency cannot be combined: not modelled")
         delivered = float_array(delivered, "delivered")
         if delivered.ndim < 3 or delivered.shape[0] != len(filters) or delivered.shape[-2:] != (N, N):
             raise ValueError(f"delivered must be (K, ..., N, N) = ({len(filters)}, ..., {N}, {N}); "
@@ -279,6 +280,8 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
     c = first.pair_scale
     held = None       # the pairs the neighbours hold of each sender: its last sent, predicted to this step
     arrived = None    # with latency: the pairs sent at the step before, predicted to this step
+    copies = None     # send-on-delta over lossy links: per link j -> i, i's copy of j's last pair (..., E, ...)
+    heard = None      # per link, whether i has received a pair from j yet
     xs, Ps, sents = [], [], []
     for k, f in enumerate(filters):
         xp, Pp = f.predict(x, P)
@@ -298,7 +301,22 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
                 received = held
         else:
             received = held
-        if delivered is None:
+        if delivered is not None and send_delta is not None:  # each receiver fuses its own copies, one per link
+            if copies is None:  # the links j -> i of the graph; a placeholder copy until one arrives (weight 0)
+                to, frm = np.nonzero((W > 0) & ~np.eye(N, dtype=bool))
+                into = (to[:, None] == np.arange(N)).T.astype(float)                  # (N, E): link e ends at i
+                copies, heard = (held[0][..., frm, :, :], held[1][..., frm, :]), np.zeros((*batch, len(to)), bool)
+            else:
+                copies = _predict_pair(model, c, *copies)
+            arrive = sent[..., frm] & (delivered[k][..., to, frm] > 0)               # (..., E)
+            copies = (np.where(arrive[..., None, None], held[0][..., frm, :, :], copies[0]),
+                      np.where(arrive[..., None], held[1][..., frm, :], copies[1]))
+            heard = heard | arrive
+            w_link = np.where(heard, W[to, frm], 0.0)                                 # (..., E)
+            w_self = 1.0 - w_link @ into.T                                           # the rest on the own pair
+            Om_f = w_self[..., None, None] * Om + np.einsum("ie,...e,...eab->...iab", into, w_link, copies[0])
+            q_f = w_self[..., None] * q + np.einsum("ie,...e,...ea->...ia", into, w_link, copies[1])
+        elif delivered is None:
             off = W - np.diag(np.diag(W))
             w_self = np.diag(W)
             Om_f = w_self[:, None, None] * Om + np.einsum("ij,...jab->...iab", off, received[0])

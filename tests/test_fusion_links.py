@@ -262,8 +262,8 @@ def test_bad_per_direction_arguments_are_named():
         compare.simulate_target("ci-L1", 8, 0, runs=2, loss=0.1, loss_model="both")
     with pytest.raises(ValueError, match="loss_model='direction': method"):
         compare.simulate_target("ci-L5", 8, 0, runs=2, loss=0.1, loss_model="direction")
-    with pytest.raises(ValueError, match="send_delta cannot be combined"):
-        compare.simulate_target("ci-L1", 8, 0, runs=2, loss=0.0, loss_model="direction", send_delta=1.0)
+    with pytest.raises(ValueError, match="send_delta needs a fixed graph"):
+        compare.simulate_target("ci-L1", 8, 0, runs=2, loss=0.1, send_delta=1.0)   # both directions: not modelled
     model = compare.target_model(8)
     with pytest.raises(ValueError, match="delivered must be"):
         fusion_links.track_messages([fusion.ConsensusOnInformationFilter(model, 1)], np.zeros(4), np.eye(4),
@@ -296,3 +296,25 @@ def test_link_claims_are_decided_on_blocks_they_were_not_written_from():
     assert written.value != held.value                                 # and the held-out runs were what decided it
     only_held = {c.id: c for c in compare.compare_claims(table[table["block"] >= 2], phi=phi)}[key]
     assert only_held.value == held.value                               # blocks 0-1 took no part
+
+
+def test_send_on_delta_over_one_way_loss():
+    """Every message delivered: the copies of each receiver are the sender's last send, so the plain send-on-delta
+    numbers; with loss the sends are counted as sent and the receivers fuse what they hold."""
+    model = compare.target_model(8)
+    _, z = model.simulate(np.zeros(4), np.eye(4), 80, rng=2, n_runs=5)
+    every = np.broadcast_to(model.adjacency, (80, 5, 8, 8))
+    for filt in (fusion.ConsensusOnInformationFilter(model, 1), fusion.InformationConsensusFilter(model, 1)):
+        xr, Pr, sr = fusion_links.track_messages([filt] * 80, np.zeros(4), np.eye(4), z, send_delta=0.7)
+        x, P, s = fusion_links.track_messages([filt] * 80, np.zeros(4), np.eye(4), z, send_delta=0.7, delivered=every)
+        assert (s == sr).all() and 0 < s.mean() < 1
+        np.testing.assert_allclose(x, xr, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(P, Pr, rtol=1e-12, atol=1e-14)
+    lossy = compare.simulate_target("ci-L1", 8, 4, runs=20, loss=0.3, loss_model="direction", send_delta=0.5)
+    clean = compare.simulate_target("ci-L1", 8, 4, runs=20, send_delta=0.5)
+    assert (lossy["floats"] > 0).all() and (lossy["floats"] < compare.target_cost("ci-L1", 8, 2)[0]).all()
+    assert not np.array_equal(lossy["rmse_own"], clean["rmse_own"])
+    lo, hi = anees_bounds(20, NEES_DIMENSION["target"])
+    assert lossy["nees_own"].mean() < hi                  # CI fuses consistent (predicted) densities: never overconfident
+    with pytest.raises(ValueError, match="cannot be combined"):
+        compare.simulate_target("ci-L1", 8, 0, runs=2, loss=0.1, loss_model="direction", send_delta=0.5, latency=1)

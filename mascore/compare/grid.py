@@ -77,8 +77,9 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
     N = 8, position sensing, the shared, target and localization tasks); and the links
     of the target and localization tasks at N = 8 on the ring (:data:`LINK_STUDIES`: ``loss``,
-    ``loss-direction``, ``latency``, ``send-on-delta-<delta>``; a cell's ``dropout`` is the packet loss; quick: the
-    target task only, a few methods; full: both tasks; 4 blocks in both). The full grid adds the
+    ``loss-direction``, ``latency``, ``send-on-delta-<delta>``, ``lossy-send-on-delta-0.5``; a cell's
+    ``dropout`` is the packet loss; quick: the target task only, a few methods; full: both tasks;
+    4 blocks in both, :func:`_link_studies`). The full grid adds the
     scale study of both fusion tasks: every method at N in :data:`SCALE_SIZES` on every graph of
     :data:`SCALE_GRAPHS`, each up to the team size its spec allows
     (:func:`mascore.estimation.agent_limits`, with the reason).
@@ -190,9 +191,11 @@ def _link_studies(quick: bool, base: dict, blocks200: list) -> list[tuple[str, d
     (a link lost in both directions at once, and each direction alone: ``loss-direction``); latency
     without loss; send-on-delta at 0.5 and 1. Full: both tasks, every method of :data:`LOSS_METHODS`
     at both losses (each direction alone: :data:`DIRECTION_LOSS_METHODS` but local), latency at loss
-    0, 0.1 and 0.3, and send-on-delta at 0.5, 1 and 2.
-    Both grids run 4 blocks: the link claims are written from blocks 0-1 and decided on 2-3
-    (:mod:`mascore.compare.verdicts`).
+    0, 0.1 and 0.3, and send-on-delta at 0.5, 1 and 2; send-on-delta at 0.5 with each message lost
+    alone (``lossy-send-on-delta-0.5``), quick: at loss 0.3 on blocks 0-1 (no claim reads it), full:
+    at 0.1 and 0.3.
+    Both grids run 4 blocks (but that one): the link claims are written from blocks 0-1 and decided
+    on 2-3 (:mod:`mascore.compare.verdicts`).
     """
     tasks = ["target"] if quick else ["target", "localization"]
     ring8 = {**base, "n_agents": [8], "block": blocks200}
@@ -206,6 +209,9 @@ def _link_studies(quick: bool, base: dict, blocks200: list) -> list[tuple[str, d
         out.append(("latency", {**ring8, "task": [task], "method": list(LATENCY_METHODS),
                                 "dropout": [0.0] if quick else [0.0, 0.1, 0.3]}))
         out += [(study, {**ring8, "task": [task], "method": list(SEND_ON_DELTA_METHODS)}) for study in deltas]
+        out.append(("lossy-send-on-delta-0.5", {**ring8, "task": [task], "method": list(SEND_ON_DELTA_METHODS),
+                                                "dropout": [0.3] if quick else [0.1, 0.3],
+                                                "block": blocks200[:2] if quick else blocks200}))
     return out
 
 

@@ -406,7 +406,7 @@ def link_table(summary, links, task: str = "target"):
     return pd.concat(out, axis=1)
 
 
-def send_on_delta_table(summary, links, task: str = "target"):
+def send_on_delta_table(summary, links, task: str = "target", loss: float = 0.0):
     """Send-on-delta: floats sent, accuracy and consistency of CI and ICF per threshold (N = 8, ring).
 
     Parameters
@@ -417,12 +417,15 @@ def send_on_delta_table(summary, links, task: str = "target"):
         Output of :func:`link_summary`, with the studies ``send-on-delta-<delta>``.
     task : {"target", "localization"}
         The scenario.
+    loss : float
+        0: ideal links. Else the one-way packet loss (each message lost alone): the studies
+        ``lossy-send-on-delta-<delta>`` and, for ``delta`` 0, ``loss-direction`` at that loss.
 
     Returns
     -------
     pandas.DataFrame
         Rows ``(method, delta)`` (``delta`` 0: the method sending at every step, from the task's own
-        study); columns ``floats/agent/step`` (as sent), ``RMSE ratio`` with its 95 %
+        study or, with `loss`, ``loss-direction``); columns ``floats/agent/step`` (as sent), ``RMSE ratio`` with its 95 %
         interval ``lo``, ``hi``, and ``NEES/dof``.
 
     Examples
@@ -441,13 +444,15 @@ def send_on_delta_table(summary, links, task: str = "target"):
 
     if task not in ("target", "localization"):
         raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    lossy = bool(loss)
     s = pd.concat([summary[summary["study"] == task], links[links["study"].isin(LINK_STUDIES)]])
-    s = s[(s["task"] == task) & (s["n_agents"] == 8) & (s["graph"] == "ring") & (s["dropout"] == 0.0)
+    s = s[(s["task"] == task) & (s["n_agents"] == 8) & (s["graph"] == "ring") & (s["dropout"] == float(loss))
           & s["method"].isin(SEND_ON_DELTA_METHODS[1:])]
-    delta = {task: 0.0, **{k: v["send_delta"] for k, v in LINK_STUDIES.items() if "send_delta" in v}}
+    delta = {"loss-direction" if lossy else task: 0.0,
+             **{k: v["send_delta"] for k, v in LINK_STUDIES.items() if "send_delta" in v and ("loss_model" in v) == lossy}}
     s = s[s["study"].isin(delta)].assign(delta=lambda d: d["study"].map(delta))
     if not (s["delta"] > 0).any():
-        raise ValueError(f"summary has no send-on-delta cell for {task!r}: rerun the sweep (grid_cells)")
+        raise ValueError(f"summary has no send-on-delta cell for {task!r} at loss {loss:g}: rerun the sweep (grid_cells)")
     cols = {"floats": "floats/agent/step", "ratio_mean": "RMSE ratio", "ratio_lo": "lo", "ratio_hi": "hi",
             "nees_own_mean": "NEES/dof"}
     out = s.set_index(["method", "delta"])[list(cols)].rename(columns=cols)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -408,7 +409,8 @@ def simulate_target(
     send_delta : float, optional
         Send-on-delta threshold of ``ci-L1`` and ``icf-L1`` (:data:`SEND_ON_DELTA_METHODS`): an agent
         re-sends only when its estimate moved by more than this Mahalanobis distance since its last
-        send (on a fixed graph, without loss).
+        send (on a fixed graph; with loss only per direction, ``loss_model="direction"``: each receiver
+        then fuses the last pair it received from each neighbour, predicted).
     loss_model : {"link", "direction"}
         ``"link"``: as above, a link lost in both directions at once, one pattern per seed shared by
         its runs, every method. ``"direction"`` (:data:`DIRECTION_LOSS_METHODS`): each message
@@ -475,7 +477,7 @@ def simulate_target(
         rng = np.random.default_rng(_loss_seed(seeds[0]))
         if loss_model == "direction":  # one pattern per run, each message j -> i lost alone
             D = fusion_links.lossy_graphs(G, loss, s.n_steps, rng, per_direction=True, n_runs=runs)
-            x, P, cpu, sent = _filter_delivered(method, model, task, G, D, z, P0, latency)
+            x, P, cpu, sent = _filter_delivered(method, model, task, G, D, z, P0, latency, send_delta)
         else:
             G = fusion_links.lossy_graphs(G, loss, s.n_steps, rng)
             x, P, cpu, sent = _filter_links(method, model, task, G, z, P0, latency, send_delta)
@@ -531,9 +533,11 @@ def simulate_target(
 #: The studies of the target and localization tasks over their links, and what each sets of
 #: :func:`simulate_target` (a cell's ``dropout`` is the packet loss ``loss``): ``loss`` (ideal timing, a link
 #: lost in both directions), ``loss-direction`` (each message lost alone, one pattern per run),
-#: ``latency`` (every message one step late) and ``send-on-delta-<delta>`` (fixed graph, no loss).
+#: ``latency`` (every message one step late), ``send-on-delta-<delta>`` (fixed graph, no loss) and
+#: ``lossy-send-on-delta-0.5`` (send-on-delta with each message lost alone).
 LINK_STUDIES = {"loss": {}, "loss-direction": {"loss_model": "direction"}, "latency": {"latency": 1},
-                **{f"send-on-delta-{d:g}": {"send_delta": d} for d in (0.5, 1.0, 2.0)}}
+                **{f"send-on-delta-{d:g}": {"send_delta": d} for d in (0.5, 1.0, 2.0)},
+                "lossy-send-on-delta-0.5": {"send_delta": 0.5, "loss_model": "direction"}}
 
 
 def link_options(study: str) -> dict[str, float]:
@@ -585,9 +589,8 @@ def _check_links(method: str, loss: object, latency: object, send_delta: object,
         raise ValueError(f"loss_model must be 'link' or 'direction'; got {loss_model!r}")
     if loss_model == "direction" and method not in DIRECTION_LOSS_METHODS:
         raise ValueError(f"loss_model='direction': method must be one of {DIRECTION_LOSS_METHODS}; got {method!r}")
-    if loss_model == "direction" and send_delta is not None:
-        raise ValueError("send_delta cannot be combined with loss_model='direction' (the receivers of one sender "
-                         "would hold different last pairs)")
+    if loss_model == "direction" and send_delta is not None and latency:
+        raise ValueError("send_delta, latency and loss_model='direction' cannot be combined: not modelled")
     loss = float(loss) if isinstance(loss, (int, float, np.floating)) and not isinstance(loss, bool) else loss
     if not isinstance(loss, float) or not 0.0 <= loss < 1.0:
         raise ValueError(f"loss must be a probability in [0, 1); got {loss!r}")
@@ -601,9 +604,10 @@ def _check_links(method: str, loss: object, latency: object, send_delta: object,
             raise ValueError(f"send_delta must be a finite Mahalanobis distance >= 0 or None; got {send_delta!r}")
         if method not in SEND_ON_DELTA_METHODS:
             raise ValueError(f"send_delta: method must be one of {SEND_ON_DELTA_METHODS}; got {method!r}")
-        if loss or graph == "switching":
-            raise ValueError("send_delta needs a fixed graph without loss (a sender's neighbours hold its last send "
-                             f"only if every send reaches them); got loss={loss}, graph={graph!r}")
+        if (loss and loss_model != "direction") or graph == "switching":
+            raise ValueError("send_delta needs a fixed graph, and loss only with loss_model='direction' (each "
+                             "receiver then holds its own copy of a sender's last pair); got "
+                             f"loss={loss}, graph={graph!r}")
     links = bool(loss or latency or send_delta is not None)
     if links and graph == "switching" and task == "localization":
         raise ValueError("loss, latency and send-on-delta are not modelled on the switching localization task "
@@ -618,10 +622,11 @@ def _loss_seed(seed: np.random.SeedSequence | int) -> np.random.SeedSequence:
 
 
 def _filter_delivered(method: str, model, task: str, G: np.ndarray, D: np.ndarray, z: np.ndarray, P0: np.ndarray,
-                      latency: int) -> tuple[np.ndarray, np.ndarray, float, None]:
+                      latency: int, send_delta: float | None = None) -> tuple[np.ndarray, np.ndarray, float, Any]:
     """Run `method` over messages lost one direction at a time: `D` ``(K, runs, N, N)``, within the graph(s) `G`.
 
-    Returns the estimates ``(K, runs, N, n)``, covariances, the CPU (s) and None (no sends to count).
+    Returns the estimates ``(K, runs, N, n)``, covariances, the CPU (s) and the sends ``(K, runs, N)``
+    (None unless `send_delta`).
     """
     from .. import sensor_network
 
@@ -637,7 +642,9 @@ def _filter_delivered(method: str, model, task: str, G: np.ndarray, D: np.ndarra
             filters = [spec.build(model)] * len(z)
         else:
             filters = [spec.build(sensor_network.SensorNetworkModel(model.F, model.Q, model.H, model.R, A)) for A in G]
-        x, P, _ = fusion_links.track_messages(filters, x0, P0, z, latency=latency, delivered=D)
+        x, P, sent = fusion_links.track_messages(filters, x0, P0, z, latency=latency, send_delta=send_delta,
+                                                 delivered=D)
+        return x, P, time.thread_time() - tic, sent if send_delta is not None else None
     return x, P, time.thread_time() - tic, None
 
 
