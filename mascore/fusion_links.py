@@ -41,7 +41,9 @@ more than ``delta`` in the Mahalanobis distance under its predicted covariance `
 uncertainty it holds before the step, the same for every method),
 ``sqrt((m_j - m_sent)^T P_j-^{-1} (m_j - m_sent)) > delta`` (the first step always sends);
 otherwise its neighbours use the last received. ``delta = 0`` sends at every step (almost
-surely: a sure zero move never happens with noisy measurements).
+surely: a sure zero move never happens with noisy measurements). Over links that lose messages one
+direction at a time, each receiver keeps its own copy of each neighbour's last pair that reached it
+(predicted to the step), and a neighbour it has not heard from yet has its weight on its own pair.
 
 .. rubric:: References
 
