@@ -50,7 +50,9 @@ book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book in
 # kernels need ipykernel's inline backend to draw their figures, so MPLBACKEND stays unset here
 # (tests/conftest.py gives the test processes themselves a headless backend).
 # --dist worksteal: a worker that runs out of tests takes half of the other's queue, so the long items
-# (the notebooks, the Dask sweeps) do not leave one core idle at the end as xdist's default split does.
+# (the notebooks, the Dask sweeps) do not leave one core idle at the end as xdist's default split did (one
+# worker ran all 34 notebooks). The notebooks are collected first: the longest items start early, and the
+# last ones to share out are the short doctests.
 EXECUTED := results/notebooks
 BOOK_LOG := book/_build/build.log
 # The HTML checks run in one process: it measures the pages in Chromium, several at a time (a session
@@ -60,7 +62,7 @@ HTML_TESTS := tests/test_book_html.py
 test: $(STAMP) lint $(RESULTS)  ## lint, the unit tests, doctests, published numbers and every notebook (nbmake), then render the book and check its HTML
 	@rm -rf $(EXECUTED) && mkdir -p $(EXECUTED) book/_build && cp notebooks/*.ipynb $(EXECUTED)/
 	@env -u MPLBACKEND $(BIN)/python -m pytest -n $(JOBS) --dist worksteal --nbmake --overwrite --doctest-modules --durations=25 \
-	    --ignore=$(HTML_TESTS) tests $(EXECUTED) mascore; tests=$$?; \
+	    --ignore=$(HTML_TESTS) $(EXECUTED) tests mascore; tests=$$?; \
 	$(BIN)/python -m mascore._booktools cache $(EXECUTED) && \
 	env -u MPLBACKEND $(BIN)/jupyter-book build book --all -W -n --keep-going > $(BOOK_LOG) 2>&1; built=$$?; \
 	if [ $$built -ne 0 ]; then tail -n 80 $(BOOK_LOG); echo "The book did not build (the whole log: $(BOOK_LOG))."; exit 1; fi; \
