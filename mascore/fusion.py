@@ -1017,16 +1017,18 @@ def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true:
     row = n
     sub = "dia,dib->iab" if filt._per_agent else "da,db->ab"
     for k in range(K):
-        truth = truth @ model.F.T
+        live = row + n + q  # the sources drawn by step k; the later ones, and the estimates they drive, are still 0
+        truth[:live] = truth[:live] @ model.F.T
         truth[row:row + n] += model._sqrt_Q.T
         row += n
-        z = truth @ model.H_stacked.T
+        z = truth[:live] @ model.H_stacked.T
         z[row:row + q] += model._sqrt_R.T
         row += q
-        x, P = filt.update(*filt.predict(x, P), z)
+        x_live, P = filt.update(*filt.predict(x[:live], P), z)
+        x[:live] = x_live
         if P.ndim > P_out.ndim - 1:  # a filter that returned one covariance per run: they are all equal
             P = P[0]
-        e = (truth[:, None, :] if filt._per_agent else truth) - x
+        e = (truth[:live, None, :] if filt._per_agent else truth[:live]) - x_live
         C_out[k] = np.einsum(sub, e, e)
         P_out[k] = P
     return C_out, P_out
