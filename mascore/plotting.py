@@ -524,7 +524,7 @@ def legend_overlaps(fig: plt.Figure, samples_per_px: float = 0.5, margin_px: flo
     """
     if not isinstance(fig, mpl.figure.Figure):
         raise TypeError(f"fig must be a matplotlib Figure; got {type(fig).__name__}")
-    fig.canvas.draw()
+    fig.draw_without_rendering()  # the layout and every artist's extent, without rasterizing the figure
     axes = [ax for ax in fig.axes if ax.get_visible()]
     legends = [(ax.get_legend(), [ax]) for ax in axes if ax.get_legend() is not None]
     legends += [(leg, axes) for leg in fig.legends]
