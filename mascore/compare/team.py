@@ -709,7 +709,8 @@ def simulate_team(
         raise ValueError("seed must be a seed or a non-empty sequence of seeds (one per block of runs)")
     for sd in seeds:
         n_agents, runs = check_run(n_agents, noise, dropout, q_scale, runs, settings, sd)
-    check_run(n_agents, noise, dropout, q_scale, runs * len(seeds), settings)  # every block at once
+    total = runs * len(seeds)  # every block's runs, stepped at once
+    check_run(n_agents, noise, dropout, q_scale, total, settings)
     if sensing not in SENSINGS:
         raise ValueError(f"sensing must be one of {SENSINGS}; got {sensing!r}")
     methods = estimation.method_names("team")
@@ -735,7 +736,7 @@ def simulate_team(
     nominal = team.adjacency > 0
     eye = np.eye(N, dtype=bool)
     held = None
-    acc = {k: np.zeros(runs * len(seeds)) for k in ("own", "view", "nees", "contained", "spread", "far", "set_size")}
+    acc = {k: np.zeros(total) for k in ("own", "view", "nees", "contained", "spread", "far", "set_size")}
     acc["far_steps"] = 0  # steps with an agent out of reach (every step on a fixed graph that is not complete)
     for k in range(s.n_steps):
         if topology is not None:  # this step's graph: sensing, messages and the control's Laplacian
@@ -766,7 +767,7 @@ def simulate_team(
         if not np.all(np.isfinite(x)):
             raise ValueError(f"{method}: the closed loop diverged (non-finite states at step {k})")
     n = s.n_steps - s.steady_from
-    nan = np.full(runs * len(seeds), np.nan)
+    nan = np.full(total, np.nan)
     return {
         "rmse_own": np.sqrt(acc["own"] / n), "rmse_view": np.sqrt(acc["view"] / n),
         "nees_own": acc["nees"] / n if est.own_cov is not None else nan,
@@ -774,7 +775,7 @@ def simulate_team(
         "set_size": acc["set_size"] / n if est.set_shape is not None else nan,
         "rmse_far": np.sqrt(acc["far"] / acc["far_steps"]) if est.team_estimates is not None
         and acc["far_steps"] > 0 else nan,
-        "spread": np.sqrt(acc["spread"] / n), "cpu_s": np.full(runs * len(seeds), cpu),
+        "spread": np.sqrt(acc["spread"] / n), "cpu_s": np.full(total, cpu),
     }
 
 
