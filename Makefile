@@ -26,11 +26,14 @@ help:  ## list the targets
 
 install: $(STAMP)  ## create .venv and install the locked environment
 
+# --no-compile: pip does not byte-compile the ~10,000 modules of the environment at install (most are never
+# imported here); Python compiles the ones that are imported, once, into __pycache__ as usual.
+
 $(STAMP): requirements.lock pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check pip==$(PIP_VERSION)
-	$(BIN)/python -m pip install --quiet -r requirements.lock
-	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
+	$(BIN)/python -m pip install --quiet --no-compile -r requirements.lock
+	$(BIN)/python -m pip install --quiet --no-compile --no-deps --no-build-isolation -e .
 	@touch $(STAMP)
 
 # The notebooks are executed on both cores into an emptied cache, then the book is rendered
@@ -46,19 +49,25 @@ book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book in
 # (python -m mascore._booktools cache), and the checks of the rendered HTML run last. The notebooks'
 # kernels need ipykernel's inline backend to draw their figures, so MPLBACKEND stays unset here
 # (tests/conftest.py gives the test processes themselves a headless backend).
+# --dist worksteal: a worker that runs out of tests takes half of the other's queue, so the long items
+# (the notebooks, the Dask sweeps) do not leave one core idle at the end as xdist's default split did (one
+# worker ran all 34 notebooks). The notebooks are collected first: the longest items start early, and the
+# last ones to share out are the short doctests.
 EXECUTED := results/notebooks
 BOOK_LOG := book/_build/build.log
+# The HTML checks run in one process: it measures the pages in Chromium, several at a time (a session
+# fixture of tests/test_book_html.py), while the remaining checks only read files.
 HTML_TESTS := tests/test_book_html.py
 
 test: $(STAMP) lint $(RESULTS)  ## lint, the unit tests, doctests, published numbers and every notebook (nbmake), then render the book and check its HTML
 	@rm -rf $(EXECUTED) && mkdir -p $(EXECUTED) book/_build && cp notebooks/*.ipynb $(EXECUTED)/
-	@env -u MPLBACKEND $(BIN)/python -m pytest -n $(JOBS) --nbmake --overwrite --doctest-modules --durations=25 \
-	    --ignore=$(HTML_TESTS) tests $(EXECUTED) mascore; tests=$$?; \
+	@env -u MPLBACKEND $(BIN)/python -m pytest -n $(JOBS) --dist worksteal --nbmake --overwrite --doctest-modules --durations=25 \
+	    --ignore=$(HTML_TESTS) $(EXECUTED) tests mascore; tests=$$?; \
 	$(BIN)/python -m mascore._booktools cache $(EXECUTED) && \
 	env -u MPLBACKEND $(BIN)/jupyter-book build book --all -W -n --keep-going > $(BOOK_LOG) 2>&1; built=$$?; \
 	if [ $$built -ne 0 ]; then tail -n 80 $(BOOK_LOG); echo "The book did not build (the whole log: $(BOOK_LOG))."; exit 1; fi; \
 	echo "The book is built (log: $(BOOK_LOG))."; exit $$tests
-	$(HEADLESS) $(BIN)/python -m pytest -n $(JOBS) $(HTML_TESTS)
+	$(HEADLESS) $(BIN)/python -m pytest -p no:xdist $(HTML_TESTS)
 
 lint: $(STAMP)  ## ruff on the package, the tests and the benchmarks; the layers of the package (import-linter)
 	$(BIN)/ruff check mascore tests benchmarks

@@ -2,10 +2,13 @@
 
 Used by :mod:`mascore.distributed_kf`, :mod:`mascore.centralized_team_filter` and
 :mod:`mascore.team_observability`; shapes as in :mod:`mascore.distributed_kf` (reduced
-covariances ``(batch, N, M_r, M_r)`` per agent or ``(batch, N M_r, N M_r)`` augmented).
+covariances ``(batch, N, M_r, M_r)`` per agent or ``(batch, N M_r, N M_r)`` augmented). The last section
+holds the steps of :class:`~mascore.distributed_kf.TeamFilter` on its own arrays (row blocks in place).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -297,3 +300,126 @@ def reduced_nees(e, P, kron):
     E = e.reshape(*e.shape[:-1], Mr, kron)
     sol = np.linalg.solve(P, E)
     return np.einsum("...ik,...ik->...", E, sol)
+
+
+# ---------------------------------------------------------------- the steps of TeamFilter (its arrays, in place)
+
+
+def mb_noise(model: TeamFilterModel, Lb: np.ndarray) -> np.ndarray:
+    """The process term of eq. (15), ``(I ⊗ BK) E[nu_bar nu_bar^T] (I ⊗ BK)^T + Q``: ``(batch, M_r, M_r)``.
+
+    Block diagonal; it depends on the topology `Lb` ``(batch, N, N)`` and the noise only.
+    """
+    N, mr, Mr = model.n_agents, model.m_r, model.M_r
+    Rr = model.R_r.reshape(N, mr, N, mr)
+    # cov of (L_j ⊗ I) nu_j: sum_{l,l'} L_jl L_jl' R[l, l']
+    Cj = np.einsum("bjl,bjk,lakc->bjac", Lb, Lb, Rr)  # (batch, N, mr, mr)
+    noise = model.BK_r @ Cj @ model.BK_r.T + model.Q_r  # (batch, N, mr, mr)
+    blk = np.zeros((Lb.shape[0], N, mr, N, mr))
+    blk[:, np.arange(N), :, np.arange(N), :] = np.moveaxis(noise, 1, 0)
+    return blk.reshape(Lb.shape[0], Mr, Mr)
+
+
+def eb_predict_rows(model: TeamFilterModel, Qt: np.ndarray, Sb: np.ndarray, blk: tuple,
+                    buffer: Callable[[int, int], np.ndarray]) -> None:
+    """``Σ^- = Φ Σ Φ^T + (1 1^T) ⊗ 𝒬`` of one topology, in place in `Sb` ``(C, C)``, by row blocks.
+
+    With ``G_i = Σ[i] F_2^T = (F_2 Σ[:, i])^T`` (``F_2 Σ`` computed once with the sparse ``F_2``)
+    and ``H = F_2 Σ F_2^T``, tile ``(i, i')`` is ``(F_1 Σ_ii' + (F_2 Σ)_i') F_1^T + F_1 G_i + H + 𝒬``.
+    Σ^- is symmetric, so only the tiles ``i' >= i`` of row block ``i`` are computed (two products
+    with ``F_1``) and written transposed into column block ``i``. Row block ``i`` reads only the
+    tiles ``i' >= i`` of Σ, which no earlier row block wrote: the recursion runs in place.
+
+    `Qt` is ``𝒬 = I_N ⊗ Q_r`` ``(M_r, M_r)``, `blk` the topology's :func:`phi_blocks` (row-block
+    path), ``buffer(slot, size)`` a flat work array of `size` floats owned by the caller.
+    """
+    N, Mr = model.n_agents, model.M_r
+    C = N * Mr
+    F1aug, F1, F1t, F2s, K2t = blk
+    work = buffer(0, 3 * Mr * C + N * Mr * Mr)
+    XP, Q = work[:2 * Mr * C], work[2 * Mr * C:3 * Mr * C]
+    # F_2 Σ, shared by every row block: (Φ Σ)[i] = F_1 Σ[i] + F_2 Σ
+    F2S = F2s @ Sb
+    F2S3 = F2S.reshape(Mr, N, Mr)
+    # H = F_2 Σ F_2^T: column (j, α) sums BK[α, β] L_jl (F_2 Σ)[:, (j, l, β)]
+    H = np.swapaxes(np.matmul(np.swapaxes(F2S3, 0, 1), K2t), 0, 1).reshape(Mr, Mr)
+    # the part of tile (i, i') shared by the whole row block: F_1 G_i + H + 𝒬, G_i = (F_2 Σ)[:, i]^T
+    shared = np.matmul(F1, F2S3.transpose(1, 2, 0), out=work[3 * Mr * C:].reshape(N, Mr, Mr))
+    shared += H + Qt
+    o4 = Sb.reshape(N, Mr, N, Mr)
+    for i in range(N):
+        n, c0 = N - i, i * Mr
+        XPi = XP[:2 * Mr * n * Mr].reshape(2 * Mr, n * Mr)
+        np.copyto(XPi[:Mr], Sb[c0:c0 + Mr, c0:])  # Σ_ii', i' >= i (read before anything is written there)
+        np.copyto(XPi[Mr:], F2S[:, c0:])
+        # (Φ Σ)_ii' = (F_2 Σ)_i' + F_1 Σ_ii' (eq. (34); eq. (32) for i' = i): [F_1, I] has its identity
+        # entry first in every row, so the sparse product adds F_1's terms to (F_2 Σ)_i' in order
+        Pi = F1aug @ XPi
+        Qi = Q[:Mr * n * Mr].reshape(Mr * n, Mr)
+        Q3 = Qi.reshape(Mr, n, Mr)
+        np.copyto(Q3, shared[i][:, None, :])
+        # tile (i, i') = (Φ Σ)_ii' F_1^T + shared (BLAS adds the product to the preset)
+        gemm_acc(Pi.reshape(Mr * n, Mr), F1t, Qi)
+        np.copyto(o4[i, :, i:, :], Q3)
+        if n > 1:  # tile (i', i) = tile (i, i')^T
+            np.copyto(o4[i + 1:, :, i, :], Q3[:, 1:, :].transpose(1, 2, 0))
+
+
+def eb_update_rows(Sb: np.ndarray, idx: np.ndarray, W: np.ndarray, Wt: np.ndarray, Rq: np.ndarray,
+                   H_sel: np.ndarray | None, buffer: Callable[[int, int], np.ndarray]) -> None:
+    """``Ψ Σ^- Ψ^T + blockdiag(G_i H_i R H_i^T G_i^T)`` of one covariance, in place in `Sb`.
+
+    Full states: ``H_i`` selects the entries `idx` of agent i's block. Partial sensing:
+    `H_sel` ``(N, q, M_r)`` holds the rows of ``H`` that agent i senses (padding rows meet
+    zero columns of `W`), and the "observed rows" ``H_i Σ^-`` replace the selected rows of Σ^-.
+    ``buffer(slot, size)``: a flat work array of `size` floats owned by the caller.
+    """
+    N, Mr, q = W.shape
+    C, Nq = N * Mr, N * q
+    work = buffer(2, 2 * Nq * C + Nq * Nq + 4 * N * Mr * q + Mr * C)
+    if H_sel is None:
+        cidx = (np.arange(N)[:, None] * Mr + idx).ravel()  # observed rows/columns (i, idx_i) of Σ^-
+        R = np.take(Sb, cidx, axis=0, out=work[:Nq * C].reshape(Nq, C))  # the observed rows, (N q, C)
+        Rc = np.take(R, cidx, axis=1, out=work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq))
+    else:  # H_i Σ^-: row block i of Σ^- seen through agent i's sensed outputs, and (H_i Σ^- H_i'^T)
+        R = np.matmul(H_sel, Sb.reshape(N, Mr, C), out=work[:Nq * C].reshape(N, q, C)).reshape(Nq, C)
+        Rc3 = np.matmul(R.reshape(Nq, N, Mr).transpose(1, 0, 2), np.swapaxes(H_sel, -1, -2))  # (N, Nq, q)
+        Rc = work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq)
+        Rc.reshape(Nq, N, q)[...] = Rc3.transpose(1, 0, 2)
+    # V_i[:, i'] = Σ[idx_i, i'] - Σ[idx_i, idx_i'] W_i'^T: the rows of (I - G_i H_i) Σ^- that meet W_i'
+    Vt = np.matmul(Rc.reshape(Nq, N, q).transpose(1, 0, 2), Wt,
+                   out=work[Nq * C + Nq * Nq:2 * Nq * C + Nq * Nq].reshape(N, Nq, Mr))
+    np.subtract(R.reshape(Nq, N, Mr).transpose(1, 0, 2), Vt, out=Vt)  # Vt[i', (i, k)] = V_i[k, i']
+    # tile (i, i') = Σ_ii' - [W_i, Σ[i, idx_i']] [V_ii'; W_i'^T]: one batched product over i' per row block,
+    # with Σ[i, idx_i'] = Σ[idx_i', i]^T (Σ^- is symmetric) taken from the observed rows
+    rest = work[2 * Nq * C + Nq * Nq:]
+    Ab = rest[:N * Mr * 2 * q].reshape(N, Mr, 2 * q)
+    Bb = rest[N * Mr * 2 * q:4 * N * Mr * q].reshape(N, 2 * q, Mr)
+    O = rest[4 * N * Mr * q:].reshape(Mr, C)
+    O3 = O.reshape(Mr, N, Mr).transpose(1, 0, 2)
+    Bb[:, q:, :] = Wt
+    R3 = R.reshape(N, q, C)
+    for i in range(N):
+        rows = slice(i * Mr, (i + 1) * Mr)
+        Ab[:, :, :q] = W[i]
+        Ab[:, :, q:] = R3[:, :, rows].transpose(0, 2, 1)
+        Bb[:, :q, :] = Vt[:, i * q:(i + 1) * q]
+        np.matmul(Ab, Bb, out=O3)
+        Si = Sb[rows]  # row block i of Σ^-: read here only, so it is overwritten with its update
+        np.subtract(Si, O, out=Si)
+        Si[:, rows] += W[i] @ Rq[i] @ Wt[i]  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
+
+
+def block_sandwich(Sig: np.ndarray, KH: np.ndarray, added: np.ndarray) -> np.ndarray:
+    """``Ψ Σ^- Ψ^T + blockdiag(added_i)`` with ``Ψ = blockdiag(I - KH_i)``, by dense products (a small team).
+
+    `Sig` ``(batch, C, C)`` with ``C = N M_r``, `KH` and `added` ``(batch, N, M_r, M_r)``; returns ``(batch, C, C)``.
+    """
+    nb, C = Sig.shape[0], Sig.shape[-1]
+    N, Mr = KH.shape[-3], KH.shape[-1]
+    Psi = np.eye(Mr) - KH  # (batch, N, Mr, Mr)
+    T = Psi @ Sig.reshape(nb, N, Mr, C)  # rows
+    T = np.swapaxes(T.reshape(nb, C, C), -1, -2)
+    T = (Psi @ T.reshape(nb, N, Mr, C)).reshape(nb, N, Mr, N, Mr)  # columns (by symmetry of Σ^-)
+    T[:, np.arange(N), :, np.arange(N), :] += np.moveaxis(added, 1, 0)
+    return T.reshape(nb, C, C)

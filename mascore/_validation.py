@@ -194,6 +194,20 @@ def check_seed(seed: object, name: str = "seed") -> int:
     return int(seed)
 
 
+def sample_shape(size: object, name: str = "size") -> tuple[int, ...]:
+    """`size` (an int or a tuple of ints, each >= 0) as a tuple; anything else is refused by name."""
+    dims = (size,) if isinstance(size, (int, np.integer)) and not isinstance(size, bool) else size
+    if isinstance(dims, np.ndarray) and dims.ndim == 1:
+        dims = dims.tolist()
+    if not isinstance(dims, (tuple, list)) or not all(
+        isinstance(d, (int, np.integer)) and not isinstance(d, bool) for d in dims
+    ):
+        raise TypeError(f"{name} must be an int or a tuple of ints (the leading shape of the output); got {size!r}")
+    if any(d < 0 for d in dims):
+        raise ValueError(f"{name} must hold non-negative ints; got {size!r}")
+    return tuple(int(d) for d in dims)
+
+
 def check_positive_int(n: object, name: str, minimum: int = 1) -> int:
     """Return `n` as an int, requiring an integer (not a bool or a float) ``>= minimum``."""
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)):

@@ -44,7 +44,7 @@ import numpy as np
 
 from . import estimation
 from ._validation import check_budget, check_positive_int
-from .compare.benchmark import FUSION_KNOB_METHODS, SETTINGS, BenchmarkSettings, check_n_agents
+from .compare.benchmark import SETTINGS, BenchmarkSettings, check_n_agents
 from .compare.target import localization_model, target_model
 from .compare.team import make_estimator, team_setup
 
@@ -89,10 +89,9 @@ def agent_methods(task: str) -> tuple[str, ...]:
     Returns
     -------
     tuple of str
-        The names of the task's :class:`mascore.estimation.MethodSpec` (a new filter module's included):
-        the team task's at their own recipe (``role="recipe"``), the others' without the knobs' other
-        settings (:data:`mascore.compare.FUSION_KNOB_METHODS`: the same filters, whose costs follow from
-        the counts).
+        The names of the task's :class:`mascore.estimation.MethodSpec` at their own recipe
+        (``role="recipe"``; a new filter module's included): the knobs' other settings are the same
+        filters, whose costs follow from the counts.
 
     Examples
     --------
@@ -102,9 +101,7 @@ def agent_methods(task: str) -> tuple[str, ...]:
     """
     if task not in AGENT_TASKS:
         raise ValueError(f"task must be one of {AGENT_TASKS}; got {task!r}")
-    if task == "team":
-        return estimation.method_names("team", ("recipe",))
-    return tuple(m for m in estimation.method_names(task) if m not in FUSION_KNOB_METHODS)
+    return estimation.method_names(task, ("recipe",))
 
 
 def __getattr__(name: str):

@@ -91,6 +91,7 @@ from ._team_kernels import (
     F1_rows,
     apply_gain,
     apply_output_gain,
+    block_sandwich,
     check_batch,
     check_covariances,
     check_estimates,
@@ -100,10 +101,12 @@ from ._team_kernels import (
     check_runs,
     check_team_laplacian,
     diagonal_blocks,
+    eb_predict_rows,
+    eb_update_rows,
     finite_state,
-    gemm_acc,
     joseph,
     mask_vec,
+    mb_noise,
     output_gain,
     phi_blocks,
     reduced_nees,
@@ -1191,7 +1194,7 @@ class TeamFilter:
         L = Lb[run if Lb.shape[0] > 1 else 0]
         return ({"X": self._X[run, i].copy(), "Sigma": self._Sig[b, i].copy(), "z": Zt[run, i].copy(),
                  "d": mask_vec(model, S[run if S.shape[0] > 1 else 0][None])[0, i], "L": np.array(L),
-                 "noise": self._mb_noise(L[None])[0]}, ())
+                 "noise": mb_noise(self._model, L[None])[0]}, ())
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
         """Agent i's update with its own measurements (eqs. (16)-(20)), then its prediction (eqs. (14)-(15)).
@@ -1306,7 +1309,7 @@ class TeamFilter:
         P = F1_rows(model, T.reshape(*Sig.shape[:2], N, mr, Mr), Lb[:, None]).reshape(*Sig.shape)
         # eq. (15): (I ⊗ BK) E[nu_bar nu_bar^T] (I ⊗ BK)^T + Q (block diagonal)
         Rr = model.R_r.reshape(N, mr, N, mr)
-        P = P + self._mb_noise(Lb)[:, None]
+        P = P + mb_noise(self._model, Lb)[:, None]
         if self._exact:
             KH = self._KH
             # E[e_i nu_bar_i^T] = -KH_i R (L_i ⊗ I)^T, column block i of E[e_i nu_bar^T]
@@ -1320,21 +1323,6 @@ class TeamFilter:
             P = P + full + np.swapaxes(full, -1, -2)
         self._Sig = symmetric_part(P)
 
-    def _mb_noise(self, Lb: np.ndarray) -> np.ndarray:
-        """The process term of eq. (15), ``(I ⊗ BK) E[nu_bar nu_bar^T] (I ⊗ BK)^T + Q``: ``(batch, M_r, M_r)``.
-
-        Block diagonal; it depends on the topology `Lb` ``(batch, N, N)`` and the noise only.
-        """
-        model = self._model
-        N, mr, Mr = model.n_agents, model.m_r, model.M_r
-        Rr = model.R_r.reshape(N, mr, N, mr)
-        # cov of (L_j ⊗ I) nu_j: sum_{l,l'} L_jl L_jl' R[l, l']
-        Cj = np.einsum("bjl,bjk,lakc->bjac", Lb, Lb, Rr)  # (batch, N, mr, mr)
-        noise = model.BK_r @ Cj @ model.BK_r.T + model.Q_r  # (batch, N, mr, mr)
-        blk = np.zeros((Lb.shape[0], N, mr, N, mr))
-        blk[:, np.arange(N), :, np.arange(N), :] = np.moveaxis(noise, 1, 0)
-        return blk.reshape(Lb.shape[0], Mr, Mr)
-
     def _mb_update(self, Z: np.ndarray, S: np.ndarray) -> None:
         """Eqs. (16)-(20), Joseph form, all agents and runs at once."""
         model, Sig = self._model, self._Sig
@@ -1345,12 +1333,7 @@ class TeamFilter:
     def _eb_predict(self) -> None:
         """``Σ^- = Φ Σ Φ^T + (1 1^T) ⊗ 𝒬``: dense products for a small team, else row blocks in place.
 
-        Row blocks: with ``G_i = Σ[i] F_2^T = (F_2 Σ[:, i])^T`` (``F_2 Σ`` computed once with
-        the sparse ``F_2``) and ``H = F_2 Σ F_2^T``, tile ``(i, i')`` is
-        ``(F_1 Σ_ii' + (F_2 Σ)_i') F_1^T + F_1 G_i + H + 𝒬``. Σ^- is symmetric, so only the
-        tiles ``i' >= i`` of row block ``i`` are computed (two products with ``F_1``) and
-        written transposed into column block ``i``. Row block ``i`` reads only the tiles
-        ``i' >= i`` of Σ, which no earlier row block wrote: the recursion runs in place.
+        The row blocks: :func:`mascore._team_kernels.eb_predict_rows`.
         """
         model, Sig = self._model, self._Sig
         N, Mr = model.n_agents, model.M_r
@@ -1366,81 +1349,7 @@ class TeamFilter:
             self._Sig = out
             return
         for b in range(Sig.shape[0]):
-            self._eb_predict_rows(Sig[b], blocks[0 if one else b])
-
-    def _eb_predict_rows(self, Sb: np.ndarray, blk: tuple) -> None:
-        """Σ^- of one topology, in place in `Sb` ``(C, C)`` (see :meth:`_eb_predict`)."""
-        model, Qt = self._model, self._Qt
-        N, Mr = model.n_agents, model.M_r
-        C = N * Mr
-        F1aug, F1, F1t, F2s, K2t = blk
-        work = self._buffer(0, 3 * Mr * C + N * Mr * Mr)
-        XP, Q = work[:2 * Mr * C], work[2 * Mr * C:3 * Mr * C]
-        # F_2 Σ, shared by every row block: (Φ Σ)[i] = F_1 Σ[i] + F_2 Σ
-        F2S = F2s @ Sb
-        F2S3 = F2S.reshape(Mr, N, Mr)
-        # H = F_2 Σ F_2^T: column (j, α) sums BK[α, β] L_jl (F_2 Σ)[:, (j, l, β)]
-        H = np.swapaxes(np.matmul(np.swapaxes(F2S3, 0, 1), K2t), 0, 1).reshape(Mr, Mr)
-        # the part of tile (i, i') shared by the whole row block: F_1 G_i + H + 𝒬, G_i = (F_2 Σ)[:, i]^T
-        shared = np.matmul(F1, F2S3.transpose(1, 2, 0), out=work[3 * Mr * C:].reshape(N, Mr, Mr))
-        shared += H + Qt
-        o4 = Sb.reshape(N, Mr, N, Mr)
-        for i in range(N):
-            n, c0 = N - i, i * Mr
-            XPi = XP[:2 * Mr * n * Mr].reshape(2 * Mr, n * Mr)
-            np.copyto(XPi[:Mr], Sb[c0:c0 + Mr, c0:])  # Σ_ii', i' >= i (read before anything is written there)
-            np.copyto(XPi[Mr:], F2S[:, c0:])
-            # (Φ Σ)_ii' = (F_2 Σ)_i' + F_1 Σ_ii' (eq. (34); eq. (32) for i' = i): [F_1, I] has its identity
-            # entry first in every row, so the sparse product adds F_1's terms to (F_2 Σ)_i' in order
-            Pi = F1aug @ XPi
-            Qi = Q[:Mr * n * Mr].reshape(Mr * n, Mr)
-            Q3 = Qi.reshape(Mr, n, Mr)
-            np.copyto(Q3, shared[i][:, None, :])
-            # tile (i, i') = (Φ Σ)_ii' F_1^T + shared (BLAS adds the product to the preset)
-            gemm_acc(Pi.reshape(Mr * n, Mr), F1t, Qi)
-            np.copyto(o4[i, :, i:, :], Q3)
-            if n > 1:  # tile (i', i) = tile (i, i')^T
-                np.copyto(o4[i + 1:, :, i, :], Q3[:, 1:, :].transpose(1, 2, 0))
-
-    def _eb_update_outputs(self, Z: np.ndarray, S: np.ndarray) -> None:
-        """Eqs. (16)-(20) and (33) with partial sensing ``H_i = D_i blockdiag(C_j)``.
-
-        ``Ψ = blockdiag(I - G_i H_i)``, ``Σ = Ψ Σ^- Ψ^T + blockdiag(G_i R G_i^T)``: the same
-        recursion as the full-state update, with the gains of :func:`mascore._team_kernels.output_gain`;
-        dense products for a small team, else the rank-q row blocks of :meth:`_eb_update_rows` on
-        the ``q`` outputs each agent senses.
-        """
-        model, Sig, H = self._model, self._Sig, self._H
-        N, Mr = model.n_agents, model.M_r
-        nb, C = Sig.shape[0], N * Mr
-        blocks = Sig.reshape(nb, N, Mr, N, Mr)
-        if not self._rows:
-            diag = np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)  # Σ_i^-, (batch, N, Mr, Mr)
-        else:  # the same, in a work array
-            diag = self._buffer(1, nb * N * Mr * Mr).reshape(nb, N, Mr, Mr)
-            for i in range(N):
-                diag[:, i] = blocks[:, i, :, i, :]
-        G, KH, GRG = output_gain(model, H, diag, S)  # eqs. (17), (19)
-        if self._rows:
-            idx, _ = observed_indices(np.repeat(S, model.C_r.shape[1], axis=-1).astype(float))  # (b, N, q) outputs
-            q = idx.shape[-1]
-            W = np.take_along_axis(G, np.broadcast_to(idx[..., None, :], (*G.shape[:-1], q)), axis=-1)  # (b, N, Mr, q)
-            Wt = np.swapaxes(W, -1, -2)
-            Rq = model.R_r[idx[..., :, None], idx[..., None, :]]
-            H_sel = H[idx]  # (b, N, q, Mr): the rows of H each agent senses
-            for b in range(nb):
-                bi = b if idx.shape[0] > 1 else 0
-                self._eb_update_rows(Sig[b], idx[bi], W[b], Wt[b], Rq[bi], H_sel[bi])
-            self._X = apply_output_gain(model, H, self._X, Z, G)
-            self._KH = KH
-            return
-        Psi = np.eye(Mr) - KH
-        T = Psi @ Sig.reshape(nb, N, Mr, C)  # rows
-        T = np.swapaxes(T.reshape(nb, C, C), -1, -2)
-        T = (Psi @ T.reshape(nb, N, Mr, C)).reshape(nb, N, Mr, N, Mr)  # columns (by symmetry of Σ^-)
-        T[:, np.arange(N), :, np.arange(N), :] += np.moveaxis(GRG, 1, 0)  # eq. (33): + δ_ij G_i R G_i^T
-        self._X = apply_output_gain(model, H, self._X, Z, G)
-        self._Sig, self._KH = symmetric_part(T.reshape(nb, C, C)), KH
+            eb_predict_rows(model, Qt, Sig[b], blocks[0 if one else b], self._buffer)
 
     def _eb_update(self, Z: np.ndarray, S: np.ndarray) -> None:
         """Eqs. (16)-(20) and (33) on the augmented covariance.
@@ -1454,82 +1363,60 @@ class TeamFilter:
         """
         if self._H is not None:
             return self._eb_update_outputs(Z, S)
-        model, Sig = self._model, self._Sig
-        N, Mr = model.n_agents, model.M_r
-        nb, C = Sig.shape[0], N * Mr
-        blocks = Sig.reshape(nb, N, Mr, N, Mr)
-        if not self._rows:
-            diag = np.moveaxis(blocks[:, np.arange(N), :, np.arange(N), :], 0, 1)  # Σ_i^-, (batch, N, Mr, Mr)
-        else:  # the same, in a work array
-            diag = self._buffer(1, nb * N * Mr * Mr).reshape(nb, N, Mr, Mr)
-            for i in range(N):
-                diag[:, i] = blocks[:, i, :, i, :]
+        model = self._model
         d = mask_vec(model, S)
-        KH = masked_gain(diag, d, model.R_r)  # G_i H_i, eqs. (17), (19)
+        KH = masked_gain(self._prior_blocks(), d, model.R_r)  # G_i H_i, eqs. (17), (19)
         if not self._rows:  # a small team: dense products of all row blocks at once are cheapest
             KRK = KH @ model.R_r @ np.swapaxes(KH, -1, -2)  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
-            Psi = np.eye(Mr) - KH  # (batch, N, Mr, Mr)
-            T = Psi @ Sig.reshape(nb, N, Mr, C)  # rows
-            T = np.swapaxes(T.reshape(nb, C, C), -1, -2)
-            T = (Psi @ T.reshape(nb, N, Mr, C)).reshape(nb, N, Mr, N, Mr)  # columns (by symmetry of Σ^-)
-            T[:, np.arange(N), :, np.arange(N), :] += np.moveaxis(KRK, 1, 0)
-            self._X = apply_gain(model, self._X, Z, KH)
-            self._Sig, self._KH = T.reshape(nb, C, C), KH
-            return
-        idx, valid = observed_indices(d)  # (batch, N, q)
-        q = idx.shape[-1]
-        W = np.take_along_axis(KH, np.broadcast_to(idx[..., None, :], (*KH.shape[:-1], q)), axis=-1)  # (b, N, Mr, q)
-        Wt = np.swapaxes(W, -1, -2)
-        Rq = model.R_r[idx[..., :, None], idx[..., None, :]]  # R on the observed entries (padding: W is zero there)
-        for b in range(nb):
-            bi = b if idx.shape[0] > 1 else 0  # one mask for all covariances
-            self._eb_update_rows(Sig[b], idx[bi], W[b], Wt[b], Rq[bi])
+            self._Sig = block_sandwich(self._Sig, KH, KRK)
+        else:
+            self._update_rows(KH, observed_indices(d)[0])  # observed entries (batch, N, q)
         self._X = apply_gain(model, self._X, Z, KH)
         self._KH = KH
 
-    def _eb_update_rows(self, Sb: np.ndarray, idx: np.ndarray, W: np.ndarray, Wt: np.ndarray,
-                        Rq: np.ndarray, H_sel: np.ndarray | None = None) -> None:
-        """``Ψ Σ^- Ψ^T + blockdiag(G_i H_i R H_i^T G_i^T)`` of one covariance, in place in `Sb`.
+    def _eb_update_outputs(self, Z: np.ndarray, S: np.ndarray) -> None:
+        """Eqs. (16)-(20) and (33) with partial sensing ``H_i = D_i blockdiag(C_j)``.
 
-        Full states: ``H_i`` selects the entries `idx` of agent i's block. Partial sensing:
-        `H_sel` ``(N, q, M_r)`` holds the rows of ``H`` that agent i senses (padding rows meet
-        zero columns of `W`), and the "observed rows" ``H_i Σ^-`` replace the selected rows of Σ^-.
+        ``Ψ = blockdiag(I - G_i H_i)``, ``Σ = Ψ Σ^- Ψ^T + blockdiag(G_i R G_i^T)``: the same
+        recursion as the full-state update, with the gains of :func:`mascore._team_kernels.output_gain`;
+        dense products for a small team, else the rank-q row blocks on the ``q`` outputs each agent senses.
         """
-        N, Mr, q = W.shape
-        C, Nq = N * Mr, N * q
-        work = self._buffer(2, 2 * Nq * C + Nq * Nq + 4 * N * Mr * q + Mr * C)
-        if H_sel is None:
-            cidx = (np.arange(N)[:, None] * Mr + idx).ravel()  # observed rows/columns (i, idx_i) of Σ^-
-            R = np.take(Sb, cidx, axis=0, out=work[:Nq * C].reshape(Nq, C))  # the observed rows, (N q, C)
-            Rc = np.take(R, cidx, axis=1, out=work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq))
-        else:  # H_i Σ^-: row block i of Σ^- seen through agent i's sensed outputs, and (H_i Σ^- H_i'^T)
-            R = np.matmul(H_sel, Sb.reshape(N, Mr, C), out=work[:Nq * C].reshape(N, q, C)).reshape(Nq, C)
-            Rc3 = np.matmul(R.reshape(Nq, N, Mr).transpose(1, 0, 2), np.swapaxes(H_sel, -1, -2))  # (N, Nq, q)
-            Rc = work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq)
-            Rc.reshape(Nq, N, q)[...] = Rc3.transpose(1, 0, 2)
-        # V_i[:, i'] = Σ[idx_i, i'] - Σ[idx_i, idx_i'] W_i'^T: the rows of (I - G_i H_i) Σ^- that meet W_i'
-        Vt = np.matmul(Rc.reshape(Nq, N, q).transpose(1, 0, 2), Wt,
-                       out=work[Nq * C + Nq * Nq:2 * Nq * C + Nq * Nq].reshape(N, Nq, Mr))
-        np.subtract(R.reshape(Nq, N, Mr).transpose(1, 0, 2), Vt, out=Vt)  # Vt[i', (i, k)] = V_i[k, i']
-        # tile (i, i') = Σ_ii' - [W_i, Σ[i, idx_i']] [V_ii'; W_i'^T]: one batched product over i' per row block,
-        # with Σ[i, idx_i'] = Σ[idx_i', i]^T (Σ^- is symmetric) taken from the observed rows
-        rest = work[2 * Nq * C + Nq * Nq:]
-        Ab = rest[:N * Mr * 2 * q].reshape(N, Mr, 2 * q)
-        Bb = rest[N * Mr * 2 * q:4 * N * Mr * q].reshape(N, 2 * q, Mr)
-        O = rest[4 * N * Mr * q:].reshape(Mr, C)
-        O3 = O.reshape(Mr, N, Mr).transpose(1, 0, 2)
-        Bb[:, q:, :] = Wt
-        R3 = R.reshape(N, q, C)
-        for i in range(N):
-            rows = slice(i * Mr, (i + 1) * Mr)
-            Ab[:, :, :q] = W[i]
-            Ab[:, :, q:] = R3[:, :, rows].transpose(0, 2, 1)
-            Bb[:, :q, :] = Vt[:, i * q:(i + 1) * q]
-            np.matmul(Ab, Bb, out=O3)
-            Si = Sb[rows]  # row block i of Σ^-: read here only, so it is overwritten with its update
-            np.subtract(Si, O, out=Si)
-            Si[:, rows] += W[i] @ Rq[i] @ Wt[i]  # eq. (33): + δ_ij G_i H_i R H_i^T G_i^T
+        model, H = self._model, self._H
+        G, KH, GRG = output_gain(model, H, self._prior_blocks(), S)  # eqs. (17), (19)
+        if not self._rows:
+            self._Sig = symmetric_part(block_sandwich(self._Sig, KH, GRG))  # eq. (33): + δ_ij G_i R G_i^T
+        else:
+            idx, _ = observed_indices(np.repeat(S, model.C_r.shape[1], axis=-1).astype(float))  # (b, N, q) outputs
+            self._update_rows(G, idx, H[idx])  # H[idx] (b, N, q, Mr): the rows of H each agent senses
+        self._X = apply_output_gain(model, H, self._X, Z, G)
+        self._KH = KH
 
+    def _prior_blocks(self) -> np.ndarray:
+        """The agents' blocks ``Σ_i^-`` of the augmented covariance, ``(batch, N, M_r, M_r)`` (a work array: row blocks)."""
+        model, Sig = self._model, self._Sig
+        if not self._rows:
+            return diagonal_blocks(model, Sig)
+        N, Mr, nb = model.n_agents, model.M_r, Sig.shape[0]
+        blocks = Sig.reshape(nb, N, Mr, N, Mr)
+        diag = self._buffer(1, nb * N * Mr * Mr).reshape(nb, N, Mr, Mr)
+        for i in range(N):
+            diag[:, i] = blocks[:, i, :, i, :]
+        return diag
+
+    def _update_rows(self, gain: np.ndarray, idx: np.ndarray, H_sel: np.ndarray | None = None) -> None:
+        """Every covariance's update by rank-q row blocks (:func:`mascore._team_kernels.eb_update_rows`).
+
+        `gain` ``(b, N, M_r, M_r or p N)``: its columns at `idx` ``(b, N, q)`` (observed entries or outputs;
+        padding: zero columns) are ``W``.
+        """
+        q = idx.shape[-1]
+        W = np.take_along_axis(gain, np.broadcast_to(idx[..., None, :], (*gain.shape[:-1], q)), axis=-1)  # (b, N, Mr, q)
+        Wt = np.swapaxes(W, -1, -2)
+        Rq = self._model.R_r[idx[..., :, None], idx[..., None, :]]  # R on the observed entries (padding: W is zero)
+        for b in range(self._Sig.shape[0]):
+            bi = b if idx.shape[0] > 1 else 0  # one mask for all covariances
+            eb_update_rows(self._Sig[b], idx[bi], W[b], Wt[b], Rq[bi], None if H_sel is None else H_sel[bi],
+                           self._buffer)
 
 # ----------------------------------------------------------------------------
 # the methods of the team task (mascore.compare's own-state rendezvous, mascore.agent_cost)
@@ -1564,5 +1451,7 @@ METHODS = (
                lambda n, q, d, N: float((N * n) ** 2 + N * n), _SONG_MB_NOT_APPLICABLE, position=3),
     MethodSpec("song-eb", ("team",), _song_filter("eb"), lambda n, q, d, N: (0.0, float(4 * (N * N * n) ** 3)),
                {"team": ("O(N^6 n^3): the joint covariance of all team estimates (dense)", "O(N^4 n^2)")},
-               lambda n, q, d, N: float((N * N * n) ** 2), _SONG_EB_NOT_APPLICABLE, whole_filter=True, position=4),
+               lambda n, q, d, N: float((N * N * n) ** 2), _SONG_EB_NOT_APPLICABLE, whole_filter=True, position=4,
+               max_agents={"team": (32, "its joint covariance of all agents' team estimates holds (2 N^2)^2 floats "
+                                        "(per axis): 0.5 GB at N = 64")}),
 )

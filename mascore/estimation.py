@@ -309,6 +309,9 @@ class MethodSpec:
         The method whose knob it sets (``""``: its own name), e.g. ``"ren-kc"`` for ``"ren-kc-q0"``.
     setting : float or None
         The value of that knob (None: the scenario's default), e.g. Ren et al.'s Q.
+    knob : str
+        The name of that knob in the knob table (e.g. ``"consensus gain eps"``), for a knob the
+        comparison does not name itself (:data:`mascore.compare.KNOBS`).
     max_agents : mapping of str to (int, str)
         Task -> the largest team the comparison's sweeps run it at, and why not beyond (its time or
         memory; :func:`agent_limits`). A task not listed: no limit.
@@ -332,6 +335,7 @@ class MethodSpec:
     role: str = "recipe"
     family: str = ""
     setting: float | None = None
+    knob: str = ""
     max_agents: Mapping[str, tuple[int, str]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:

@@ -19,10 +19,8 @@ the same model, so every method sees exactly the same sensing.
                                          (Cattivelli and Sayed 2010)
 :class:`CovarianceIntersectionFilter`    incremental update, then covariance intersection of the
                                          neighbours' estimates (Hu, Xie and Zhang 2012)
-:class:`KalmanConsensusNetworkFilter`    forwarding, then one consensus step on the neighbours'
-                                         predictions (Olfati-Saber 2007)
-:class:`SetMembershipForwardingFilter`   forwarding into an outer ellipsoid per agent (set-membership,
-                                         Bhattacharjee and Subbarao 2021's closed-form steps)
+:mod:`mascore.fusion_forwarding`         forwarding, then a consensus step (Olfati-Saber's Kalman-consensus
+                                         filter) or a set update (an outer ellipsoid per agent)
 :func:`covariance_intersection`          fusion under unknown correlation (Julier and Uhlmann 1997)
 :func:`error_covariance`                 a filter's exact error covariance (no Monte Carlo)
 :mod:`mascore.fusion_cost`               floats sent and flops per agent per step
@@ -58,12 +56,6 @@ References
   smoothing. IEEE Trans. Automatic Control 55(9), 2069-2084.
 - Hu, J., Xie, L., Zhang, C. (2012). Diffusion Kalman filtering based on covariance intersection. IEEE
   Trans. Signal Processing 60(2), 891-902.
-- Olfati-Saber, R. (2007). Distributed Kalman filtering for sensor networks. Proc. 46th IEEE Conference on
-  Decision & Control (CDC), 5492-5498.
-- Olfati-Saber, R., Fax, J. A., Murray, R. M. (2007). Consensus and cooperation in networked multi-agent
-  systems. Proc. IEEE 95(1), 215-233.
-- Bhattacharjee, D., Subbarao, K. (2021). Set-membership filtering-based leader-follower synchronization of
-  discrete-time linear multi-agent systems. ASME J. Dyn. Sys., Meas., Control 143(6).
 - Julier, S. J., Uhlmann, J. K. (1997). A non-divergent estimation algorithm in the presence of unknown
   correlations. Proc. American Control Conference, 2369-2373.
 - Xiao, L., Boyd, S., Lall, S. (2005). A scheme for robust distributed sensor fusion based on average
@@ -82,8 +74,9 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _ellipsoid_kernels as ellipsoid_kernels
 from . import kalman
+from ._fusion_base import TASKS, centre_memory, spec_cost, spec_memory, spec_orders
+from ._fusion_base import NetworkFilter as _NetworkFilter
 from ._fusion_kernels import (
     broadcast_batch,
     ci_weights,
@@ -96,7 +89,6 @@ from ._fusion_kernels import (
     psd_sqrt,
 )
 from ._validation import (
-    Frozen,
     check_adjacency,
     check_covariance,
     check_fits_in_memory,
@@ -110,7 +102,7 @@ from ._validation import (
     symmetric_part,
 )
 from .estimation import Message, MethodSpec
-from .fusion_cost import filter_cost
+from .fusion_forwarding import KalmanConsensusNetworkFilter, SetMembershipForwardingFilter  # noqa: F401 (their old home)
 from .sensor_network import SensorNetworkModel
 
 __all__ = [
@@ -120,8 +112,6 @@ __all__ = [
     "InformationConsensusFilter",
     "DiffusionKalmanFilter",
     "CovarianceIntersectionFilter",
-    "KalmanConsensusNetworkFilter",
-    "SetMembershipForwardingFilter",
     "covariance_intersection",
     "error_covariance",
     "track",
@@ -134,306 +124,6 @@ __all__ = [
 # --------------------------------------------------------------------------------------------
 # the filters
 
-
-class _NetworkFilter(Frozen):
-    """Shared predict / update / run of the filters (each defines ``_correct``)."""
-
-    __slots__ = ("model",)
-    _what = "filter update"
-    _per_agent = True
-
-    def __init__(self, model: SensorNetworkModel) -> None:
-        if not isinstance(model, SensorNetworkModel):
-            raise TypeError(f"model must be a SensorNetworkModel; got {type(model).__name__}")
-        self._set(model=model)
-
-    def __reduce__(self) -> tuple:
-        return (type(self), (self.model, *self._args()))
-
-    def __repr__(self) -> str:
-        args = "".join(f", {a!r}" for a in self._args() if not isinstance(a, np.ndarray))
-        return f"{type(self).__name__}({self.model!r}{args})"
-
-    def _args(self) -> tuple:
-        """The constructor's arguments after the model (pickling, repr)."""
-        return ()
-
-    def predict(self, x: ArrayLike, P: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Time update of every agent: ``x- = F x``, ``P- = F P F^T + Q`` (:func:`mascore.kalman.predict`).
-
-        Parameters
-        ----------
-        x : (..., N, n) array_like
-            Means (``(..., n)`` for the centralized filter).
-        P : (..., N, n, n) array_like
-            Covariances (``(..., n, n)`` for the centralized filter).
-
-        Returns
-        -------
-        x_pred, P_pred : ndarray
-            The predictions, same shapes.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs, sensor_network
-        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.5]], [[[1.0]]] * 2, [[[1.0]]] * 2, graphs.path_graph(2))
-        >>> x, P = fusion.MeasurementForwardingFilter(model).predict(np.ones((2, 1)), np.ones((2, 1, 1)))
-        >>> P[:, 0, 0]                                             # 1 + Q
-        array([1.5, 1.5])
-        """
-        x, P = self._check_xP(x, P)
-        return kalman.predict(x, P, self.model._kf)
-
-    def update(self, x: ArrayLike, P: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Measurement update with the filter's communication round(s).
-
-        Parameters
-        ----------
-        x : (..., N, n) array_like
-            Predicted means (``(..., n)`` for the centralized filter).
-        P : (..., N, n, n) array_like
-            Predicted covariances, symmetric positive definite.
-        z : (..., sum q_i) array_like
-            The stacked measurements of every agent, finite.
-
-        Returns
-        -------
-        x_post : ndarray
-            Corrected means; their batch axes are those of `x`, `P` and `z` broadcast.
-        P_post : ndarray
-            Corrected covariances; their batch axes are those of `P` (and `x`): the
-            covariances do not depend on the data.
-
-        Raises
-        ------
-        ValueError
-            A bad shape, a NaN or inf in `x`, `P` or `z`, or a result that overflowed.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs, sensor_network
-        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 2, [[[1.0]]] * 2, graphs.path_graph(2))
-        >>> x, P = fusion.MeasurementForwardingFilter(model).update(np.zeros((2, 1)), np.ones((2, 1, 1)), [3.0, 0.0])
-        >>> x[:, 0], P[:, 0, 0]                                    # both hear both: information 1 + 2
-        (array([1., 1.]), array([0.33333333, 0.33333333]))
-        """
-        x, P = self._check_xP(x, P)
-        require_finite(P, "P")  # an information form would turn an infinite variance into silent zeros
-        z = self.model._check_z(z)
-        axis = 2 if self._per_agent else 1
-        broadcast_batch("x", x.shape[:-axis], "z", z.shape[:-1])
-        try:
-            with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-                out = self._correct(x, P, z)
-        except np.linalg.LinAlgError:
-            out = None
-        if out is None:
-            for value, name in ((x, "x"), (P, "P"), (z, "z")):
-                require_finite(value, name)
-            raise ValueError(f"the {self._what} met a singular matrix: the predicted covariances must be positive "
-                             "definite (Q positive definite or F invertible)")
-        return finite_result(self._what, *out, inputs=((x, "x"), (P, "P"), (z, "z")))
-
-    def run(self, x0: ArrayLike, P0: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """A whole run: predict, then update, for each measurement.
-
-        Parameters
-        ----------
-        x0 : (..., N, n) or (n,) array_like
-            Initial means (one ``(n,)`` mean for every agent allowed).
-        P0 : (..., N, n, n) or (n, n) array_like
-            Initial covariances, symmetric positive definite.
-        z : (K, ..., sum q_i) array_like
-            Measurements of steps 1..K (as ``SensorNetworkModel.simulate`` returns).
-
-        Returns
-        -------
-        x : (K, ..., N, n) ndarray
-            Corrected means after each step (``(K, ..., n)`` for the centralized filter).
-        P : (K, ..., N, n, n) ndarray
-            Corrected covariances. Their leading axes are those of `P0` and `x0`, not of `z`:
-            the covariances do not depend on the data, so runs that share an initial state
-            share them.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs, sensor_network
-        >>> model = sensor_network.SensorNetworkModel(np.eye(2), 0.01 * np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
-        ...                                           graphs.ring_graph(3))
-        >>> x_true, z = model.simulate(np.zeros(2), np.eye(2), 50, rng=0, n_runs=10)   # the same data for all
-        >>> x, P = fusion.ConsensusOnInformationFilter(model, 2).run(np.zeros(2), np.eye(2), z)
-        >>> x.shape, P.shape                                       # (K, runs, N, n); P shared by the runs
-        ((50, 10, 3, 2), (50, 3, 2, 2))
-        """
-        x, P = self.model.check_state(x0, P0, ("x0", "P0"), per_agent=self._per_agent)
-        z = self.model._check_z(z)
-        if z.ndim < 2:
-            raise ValueError(f"z must be (K, ..., {self.model.n_measurements}): one stacked measurement per step; "
-                             f"got shape {z.shape}")
-        axis = 2 if self._per_agent else 1
-        batch = broadcast_batch("x0", x.shape[:-axis], "z", z.shape[1:-1])
-        n = self.model.n_states
-        per_run = n * (1 + n) * (self.model.n_agents if self._per_agent else 1)
-        check_fits_in_memory(8.0 * z.shape[0] * math.prod(batch) * per_run, "z",
-                             "the estimates and covariances of every step and run")
-        require_finite(z, "z")
-        xs, Ps = [], []
-        for k in range(z.shape[0]):
-            x, P = self.predict(x, P)
-            x, P = self.update(x, P, z[k])
-            xs.append(x)
-            Ps.append(P)
-        return np.stack(xs), np.stack(Ps)
-
-    def agent_inputs(self, x: ArrayLike, P: ArrayLike, z: ArrayLike, i: int) -> tuple[dict, tuple]:
-        """Agent i's own data and the messages it receives at one step, cut out of the team-wide filter.
-
-        The team's predictions of the step are the source of the neighbours' messages (each
-        round's, in order): what agent i would receive from them. This is the untimed part of
-        a per-agent measurement (:mod:`mascore.agent_cost`); :meth:`agent_step` is the timed one.
-
-        Parameters
-        ----------
-        x : (N, n) array_like
-            Every agent's estimate before the step (``(n,)`` for the centralized filter).
-        P : (N, n, n) array_like
-            Their covariances (``(n, n)`` for the centralized filter).
-        z : (sum q_i,) array_like
-            The step's stacked measurement.
-        i : int
-            The agent, ``0 <= i < N``.
-
-        Returns
-        -------
-        own : dict
-            Agent i's own data: ``x``, ``P`` (its estimate before the step), ``z`` (its
-            measurement), its neighbourhood ``hood`` (i included, ascending), ``nbrs``,
-            ``index`` (of i in ``hood``), ``HtRinv`` (``H_j^T R_j^{-1}`` of each j in ``hood``),
-            ``S`` (their ``sum H_j^T R_j^{-1} H_j``), ``I`` (its own ``H_i^T R_i^{-1} H_i``): the
-            model's constant parts are known to the agent beforehand.
-        messages : tuple
-            One entry per communication round: the neighbours' messages of that round.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs, sensor_network
-        >>> model = sensor_network.SensorNetworkModel(np.eye(2), 0.1 * np.eye(2), [np.eye(2)] * 4, [np.eye(2)] * 4,
-        ...                                           graphs.ring_graph(4))
-        >>> filt = fusion.ConsensusOnInformationFilter(model, 3)
-        >>> x, P, z = np.zeros((4, 2)), np.broadcast_to(np.eye(2), (4, 2, 2)), np.arange(8.0)
-        >>> own, messages = filt.agent_inputs(x, P, z, 1)
-        >>> len(messages), own["nbrs"].tolist()                       # 3 rounds from neighbours 0 and 2
-        (3, [0, 2])
-        >>> x1, P1 = filt.agent_step(1, own, messages)
-        >>> xr, Pr = filt.update(*filt.predict(x, P), z)               # agent 1's row of the team-wide filter
-        >>> bool(np.allclose(x1, xr[1]) and np.allclose(P1, Pr[1]))
-        True
-        """
-        x, P = self._check_xP(x, P)
-        z = require_finite(self.model._check_z(z), "z")
-        batch = x.shape[:-2] if self._per_agent else x.shape[:-1]
-        if z.ndim != 1 or batch:
-            raise ValueError(f"agent_inputs takes one run: x ({'N, ' if self._per_agent else ''}n) and z (sum q_i,); "
-                             f"got x {x.shape}, z {z.shape}")
-        N, n = self.model.n_agents, self.model.n_states
-        i = check_positive_int(i, "i", minimum=0)
-        if i >= N:
-            raise ValueError(f"i must be an agent index below N = {N}; got {i}")
-        if not self._per_agent:
-            return {"x": x, "P": P, "z": z}, ()
-        m = self.model
-        hood = np.flatnonzero(m._neighbourhood[i])
-        HtRinv = tuple(m.H[j].T @ np.linalg.inv(m.R[j]) if m.H[j].shape[0] else np.zeros((n, 0)) for j in hood)
-        own = {"x": x[i].copy(), "P": P[i].copy(), "z": m.agent_measurement(z, i).copy(), "hood": hood,
-               "nbrs": hood[hood != i], "index": int(np.flatnonzero(hood == i)[0]), "HtRinv": HtRinv,
-               "S": sum(m.information_matrices[j] for j in hood), "I": m.information_matrices[i]}
-        return own, self._agent_messages(own, *self.predict(x, P), z, i)
-
-    def agent_step(self, i: int, own_data: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        """Agent i's step alone: its prediction, its correction with its own data and its neighbours' messages.
-
-        Parameters
-        ----------
-        i : int
-            The agent.
-        own_data, messages
-            From :meth:`agent_inputs` (not checked again: this is the step that is timed).
-
-        Returns
-        -------
-        x_i : (n,) ndarray
-            Agent i's estimate after the step (the centralized filter: the team's ``(n,)``).
-        P_i : (n, n) ndarray
-            Its covariance.
-        """
-        if not self._per_agent:  # the centre runs the whole filter
-            return self.update(*self.predict(own_data["x"], own_data["P"]), own_data["z"])
-        return self._agent_step(i, own_data, messages)
-
-    def messages(self, i: int = 0) -> tuple[Message, ...]:
-        """What agent i sends per step (and a centre's reply to it), with the floats of each message.
-
-        A symmetric matrix counts as ``n (n + 1) / 2`` floats.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs, sensor_network
-        >>> model = sensor_network.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(1, 2)] * 3, [np.eye(1)] * 3,
-        ...                                           graphs.ring_graph(3))
-        >>> fusion.ConsensusOnInformationFilter(model, 2).messages()
-        (Message(what='information pair (Omega, q), per consensus round', floats=10.0),)
-        """
-        q, n = float(self.model.measurement_sizes[i]), self.model.n_states
-        return self._messages(q, n * (n + 1) / 2 + n)
-
-    def _messages(self, q: float, pair: float) -> tuple[Message, ...]:
-        return (Message("measurement z_i, to each neighbour", q),)
-
-    def _agent_messages(self, own: dict, xm: np.ndarray, Pm: np.ndarray, z: np.ndarray, i: int) -> tuple:
-        """The neighbours' messages of each round, from the team's predictions `xm`, `Pm`."""
-        return (tuple(self.model.agent_measurement(z, j).copy() for j in own["nbrs"]),)
-
-    def _agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
-        return self._incremental(own, messages[0])
-
-    def _incremental(self, own: dict, received: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """Prediction, then the correction with the neighbourhood's measurements (information form)."""
-        F, Q = self.model.F, self.model.Q
-        xp, Pp = F @ own["x"], F @ own["P"] @ F.T + Q
-        zs = list(received)
-        zs.insert(own["index"], own["z"])
-        iv = sum(h @ zj for h, zj in zip(own["HtRinv"], zs))
-        S = own["S"]
-        Pn = np.linalg.solve(np.eye(len(xp)) + Pp @ S, Pp)
-        Pn = 0.5 * (Pn + Pn.T)
-        return xp + Pn @ (iv - S @ xp), Pn
-
-    def _check_xP(self, x: ArrayLike, P: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        x, P = float_array(x, "x"), float_array(P, "P")
-        n, N = self.model.n_states, self.model.n_agents
-        if self._per_agent:
-            if x.ndim < 2 or x.shape[-2:] != (N, n):
-                raise ValueError(f"Incompatible dimensions of x; expected (..., N, n) = (..., {N}, {n}) but found "
-                                 f"{x.shape}")
-            if P.ndim < 3 or P.shape[-3:] != (N, n, n):
-                raise ValueError(f"Incompatible dimensions of P; expected (..., N, n, n) = (..., {N}, {n}, {n}) but "
-                                 f"found {P.shape}")
-            broadcast_batch("x", x.shape[:-2], "P", P.shape[:-3])
-        else:
-            if x.ndim < 1 or x.shape[-1] != n:
-                raise ValueError(f"Incompatible dimensions of x; expected (..., {n}) but found {x.shape}")
-            if P.ndim < 2 or P.shape[-2:] != (n, n):
-                raise ValueError(f"Incompatible dimensions of P; expected (..., {n}, {n}) but found {P.shape}")
-            broadcast_batch("x", x.shape[:-1], "P", P.shape[:-2])
-        return x, P
-
-    def _correct(self, x: np.ndarray, P: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        raise NotImplementedError
 
 
 class CentralizedFilter(_NetworkFilter):
@@ -510,7 +200,7 @@ class MeasurementForwardingFilter(_NetworkFilter):
         self._set(_S=frozen_copy(mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
-        i = mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
+        i = mix(self.model._neighbourhood, self.model.information_vectors(z, check=False), 1)
         return information_update(x, P, self._S, i)
 
 
@@ -565,7 +255,7 @@ class DiffusionKalmanFilter(_NetworkFilter):
         self._set(weights=frozen_copy(C), _S=frozen_copy(mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
-        i = mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
+        i = mix(self.model._neighbourhood, self.model.information_vectors(z, check=False), 1)
         psi, P_new = information_update(x, P, self._S, i)
         return mix(self.weights, psi, 1), P_new
 
@@ -574,7 +264,7 @@ class DiffusionKalmanFilter(_NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         psi, _ = information_update(xm, Pm, self._S, mix(self.model._neighbourhood,
-                                                             self.model._information_vectors(z), 1))
+                                                     self.model.information_vectors(z, check=False), 1))
         return (*super()._agent_messages(own, xm, Pm, z, i), psi[own["nbrs"]].copy())
 
     def _agent_step(self, i, own, messages):
@@ -669,7 +359,7 @@ class ConsensusOnInformationFilter(_NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         Om, q = information_pair(xm, Pm)
-        I, iv = self.model.information_matrices, self.model._information_vectors(z)
+        I, iv = self.model.information_matrices, self.model.information_vectors(z, check=False)
         pairs = [(Om, q), (np.broadcast_to(I, Om.shape), iv)] if self.novelty_weight != 1.0 else [(Om + I, q + iv)]
         return consensus_rounds(self.model.weights, pairs, own["nbrs"], self.n_consensus)
 
@@ -737,7 +427,7 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         x, P = self._check_xP(x, P)
         z = self.model._check_z(z)
         Om, q = information_pair(x, P)
-        return Om + self.model.information_matrices, q + self.model._information_vectors(z)
+        return Om + self.model.information_matrices, q + self.model.information_vectors(z, check=False)
 
     def pair_estimate(self, Om: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The estimate of a fused information pair: ``x = Omega^{-1} q``, ``P = Omega^{-1}``.
@@ -775,7 +465,7 @@ class ConsensusOnInformationFilter(_NetworkFilter):
     def _correct(self, x, P, z):
         Om, q = information_pair(x, P)
         Om = mix(self._WL, Om, 2) + self._SL
-        q = mix(self._WL, q, 1) + self.novelty_weight * mix(self._WL, self.model._information_vectors(z), 1)
+        q = mix(self._WL, q, 1) + self.novelty_weight * mix(self._WL, self.model.information_vectors(z, check=False), 1)
         return from_information(Om, q)
 
 
@@ -856,7 +546,7 @@ class InformationConsensusFilter(_NetworkFilter):
     def _agent_messages(self, own, xm, Pm, z, i):
         N = self.model.n_agents
         Om, q = information_pair(xm, Pm)
-        pairs = [(Om / N + self.model.information_matrices, q / N + self.model._information_vectors(z))]
+        pairs = [(Om / N + self.model.information_matrices, q / N + self.model.information_vectors(z, check=False))]
         return consensus_rounds(self._consensus_matrix(), pairs, own["nbrs"], self.n_iterations)
 
     def _agent_step(self, i, own, messages):
@@ -914,7 +604,7 @@ class InformationConsensusFilter(_NetworkFilter):
         z = self.model._check_z(z)
         N = self.model.n_agents
         J, q = information_pair(x, P)
-        return J / N + self.model.information_matrices, q / N + self.model._information_vectors(z)
+        return J / N + self.model.information_matrices, q / N + self.model.information_vectors(z, check=False)
 
     def pair_estimate(self, V: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The estimate of a fused pair: ``x = V^{-1} v``, ``P = (N V)^{-1}``.
@@ -949,7 +639,7 @@ class InformationConsensusFilter(_NetworkFilter):
         N = self.model.n_agents
         J, q = information_pair(x, P)
         V = mix(self._WK, J, 2) / N + self._SK
-        v = mix(self._WK, q, 1) / N + mix(self._WK, self.model._information_vectors(z), 1)
+        v = mix(self._WK, q, 1) / N + mix(self._WK, self.model.information_vectors(z, check=False), 1)
         Vinv = symmetric_part(np.linalg.inv(V))
         return (Vinv @ v[..., None])[..., 0], Vinv / N
 
@@ -1019,7 +709,7 @@ class CovarianceIntersectionFilter(_NetworkFilter):
 
     def _correct(self, x, P, z):
         M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
-        psi, P_loc = information_update(x, P, self._S, mix(M, self.model._information_vectors(z), 1))
+        psi, P_loc = information_update(x, P, self._S, mix(M, self.model.information_vectors(z, check=False), 1))
         Om, q = information_pair(psi, P_loc)  # (..., N, n, n), (..., N, n)
         N = self.model.n_agents
         C = np.zeros((*P_loc.shape[:-3], N, N))  # the weights: from the covariances only
@@ -1042,13 +732,15 @@ class CovarianceIntersectionFilter(_NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
-        psi, P_loc = information_update(xm, Pm, self._S, mix(M, self.model._information_vectors(z), 1))
+        psi, P_loc = information_update(xm, Pm, self._S, mix(M, self.model.information_vectors(z, check=False), 1))
         Om, q = information_pair(psi[own["nbrs"]], P_loc[own["nbrs"]])
         received = super()._agent_messages(own, xm, Pm, z, i)
         return (received[0] if self.measurements == "neighbourhood" else (), (Om, q))
 
     def agent_inputs(self, x: ArrayLike, P: ArrayLike, z: ArrayLike, i: int) -> tuple[dict, tuple]:
-        """Agent i's own data and its neighbours' messages of one step (see :meth:`_NetworkFilter.agent_inputs`).
+        """Agent i's own data and its neighbours' messages of one step (as for every filter of this module).
+
+        See :meth:`~mascore._fusion_base.NetworkFilter.agent_inputs`.
 
         With ``measurements="own"`` the incremental step uses agent i's own measurement only.
 
@@ -1100,264 +792,6 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         return from_information(np.einsum("k,kab->ab", w, infos), w @ qs)
 
 
-class KalmanConsensusNetworkFilter(_NetworkFilter):
-    """The Kalman-consensus filter (KCF) of Olfati-Saber (2007), Algorithm 1.
-
-    Per step, agent i corrects its prediction ``(xbar_i, P_i)`` with the measurements
-    of ``J_i = N_i ∪ {i}`` (as :class:`MeasurementForwardingFilter`), then adds a
-    consensus term on the neighbours' predictions::
-
-        u_j = H_j^T R_j^{-1} z_j,   U_j = H_j^T R_j^{-1} H_j,        j in J_i
-        y_i = sum_j u_j,   S_i = sum_j U_j,   M_i = (P_i^{-1} + S_i)^{-1}
-        x_i = xbar_i + M_i (y_i - S_i xbar_i) + gamma_i M_i sum_{j in N_i} (xbar_j - xbar_i),
-        gamma_i = eps / (1 + ||M_i||),   ||X|| = (trace X^T X)^{1/2}  (Frobenius)
-        P_i <- F M_i F^T + Q,   xbar_i <- F x_i                       (:meth:`predict`)
-
-    The covariance returned is ``M_i``, the paper's: the error covariance of the
-    forwarding estimate, not of ``x_i`` (the consensus term and the correlation it
-    brings are left out), so it need not bound the error. With ``eps = 0`` the filter
-    **is** :class:`MeasurementForwardingFilter`, to the last bit. Olfati-Saber's Theorem 2
-    (proven for the continuous-time form of the filter) states that without noise the
-    estimation errors tend to zero and the agents' estimates reach a consensus. Each agent
-    sends its ``q_i`` measurement numbers and its prediction ``xbar_i`` (n numbers) per step.
-
-    Since ``||gamma_i M_i||_2 <= gamma_i ||M_i|| < eps``, the consensus step moves
-    ``xbar_i`` toward its neighbours by less than ``eps`` of each difference, and
-    ``eps <= 1 / d_max`` (``d_max`` the largest degree) keeps it a convex combination with
-    matrix weights (``I - d_i gamma_i M_i`` and ``gamma_i M_i``, positive semidefinite, summing
-    to the identity) for every ``M_i``: the step size of the Perron matrix ``I - eps L`` of
-    Olfati-Saber, Fax and Murray (2007). The normalization makes the step ``eps M_i`` when
-    ``||M_i||`` is small (a well-measured state), so on accurate sensing the term is weak.
-
-    Parameters
-    ----------
-    model : SensorNetworkModel
-        The sensing and the graph.
-    eps : float
-        The consensus gain, ``>= 0`` (default 0.1 = one sampling time of the benchmark: the
-        step of the continuous-time consensus term discretized; ``0``: forwarding).
-
-    Attributes
-    ----------
-    eps : float
-        As given.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from mascore import fusion, graphs, sensor_network
-    >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.path_graph(3))
-    >>> x, P = fusion.KalmanConsensusNetworkFilter(model, eps=0.5).update([[3.0], [0.0], [0.0]], np.ones((3, 1, 1)),
-    ...                                                            [3.0, 0.0, 0.0])
-    >>> x[:, 0]                         # forwarding's (2, 0.75, 0), each pulled toward its neighbours' predictions
-    array([1.625, 1.05 , 0.   ])
-    """
-
-    __slots__ = ("eps", "_S", "_links")
-    _what = "Kalman-consensus update"
-
-    def _args(self) -> tuple:
-        return (self.eps,)
-
-    def __init__(self, model: SensorNetworkModel, eps: float = 0.1) -> None:
-        super().__init__(model)
-        eps = check_positive(eps, "eps", "(the consensus gain of Olfati-Saber's KCF)", allow_zero=True)
-        links = (model.adjacency > 0).astype(float)
-        self._set(eps=eps, _S=frozen_copy(mix(model._neighbourhood, model.information_matrices, 2)),
-                  _links=frozen_copy(links - np.diag(links.sum(axis=1))))  # row i: sum_j x_j - d_i x_i
-
-    def _correct(self, x, P, z):
-        xf, M = information_update(x, P, self._S, mix(self.model._neighbourhood,
-                                                      self.model._information_vectors(z), 1))
-        gamma = self.eps / (1.0 + np.linalg.norm(M, axis=(-2, -1)))  # (..., N)
-        pull = (M @ mix(self._links, x, 1)[..., None])[..., 0]      # M_i sum_j (xbar_j - xbar_i)
-        return xf + gamma[..., None] * pull, M
-
-    def _messages(self, q, pair):
-        return (Message("measurement z_i, to each neighbour", q),
-                Message("prediction xbar_i", float(self.model.n_states)))
-
-    def _agent_messages(self, own, xm, Pm, z, i):
-        return (*super()._agent_messages(own, xm, Pm, z, i), xm[own["nbrs"]].copy())
-
-    def _agent_step(self, i, own, messages):
-        xf, M = self._incremental(own, messages[0])
-        xbar = self.model.F @ own["x"]
-        gamma = self.eps / (1.0 + np.linalg.norm(M))
-        return xf + gamma * (M @ (messages[1].sum(axis=0) - len(own["nbrs"]) * xbar)), M
-
-
-class SetMembershipForwardingFilter(_NetworkFilter):
-    """A set-membership filter on forwarded measurements: each agent bounds the state by an ellipsoid.
-
-    Agent i holds the ellipsoid ``E(c_i, E_i) = {x : (x - c_i)^T E_i^{-1} (x - c_i) <= 1}``.
-    Per step it predicts it (the trace-optimal outer ellipsoid of ``F E(c_i, E_i) + W_Q``,
-    ``SetMembershipModel.predict``), then intersects it with the set
-    the measurements of ``N_i ∪ {i}`` allow (the trace-optimal outer ellipsoid of the
-    intersection with ``{x : (y_i - C_i x)^T W_i^{-1} (y_i - C_i x) <= 1}``, ``C_i`` and
-    ``y_i`` the stacked ``H_j``, ``z_j``: ``SetMembershipModel.correct``,
-    Bhattacharjee and Subbarao 2021, eqs. (2), (4), (6)-(8) in closed form). The shapes and gains
-    depend on the shapes only, not on the data: they are computed once per agent and step
-    and the gain applied to every run. Each agent sends its ``q_i`` measurement numbers, as
-    :class:`MeasurementForwardingFilter` (whose Kalman update it replaces by the set update).
-
-    **Bounds of Gaussian noise.** The model's noise is Gaussian; a set-membership filter needs
-    sets. The bounds are the covariance ellipsoids scaled by chi-square quantiles at
-    `confidence`: ``W_Q = chi2_n(c) Q`` for the process noise (n numbers),
-    ``W_i = chi2_{p_i}(c) blockdiag(R_j, j in N_i ∪ {i})`` for agent i's ``p_i`` stacked
-    measurements, and the initial set :meth:`initial_shape` ``chi2_n(c) P0``: each holds its
-    noise with probability c at one step. So the ellipsoid is **not** a guaranteed bound:
-    a step whose noise leaves its set can leave the true state outside, and what the set
-    delivers is measured (its containment rate), not promised. Under noise truly bounded by
-    those sets it is a guaranteed bound.
-
-    Parameters
-    ----------
-    model : SensorNetworkModel
-        The sensing and the graph; Q positive definite.
-    confidence : float
-        c in (0, 1), the probability mass of each bound (default 0.997, the benchmark's
-        ``sm_confidence``).
-
-    Attributes
-    ----------
-    confidence : float
-        c.
-
-    Raises
-    ------
-    ValueError
-        A confidence outside (0, 1), or a singular Q.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from mascore import fusion, graphs, sensor_network
-    >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.01]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.path_graph(3))
-    >>> smf = fusion.SetMembershipForwardingFilter(model)
-    >>> c, E = smf.run(np.zeros(1), smf.initial_shape(np.eye(1)), np.zeros((20, 3)))
-    >>> bool(E[-1, 0, 0, 0] > E[-1, 1, 0, 0])                 # the end agent hears two measurements, the middle three
-    True
-    """
-
-    __slots__ = ("confidence", "_motion", "_groups", "_rows")
-    _what = "set-membership forwarding update"
-
-    def _args(self) -> tuple:
-        return (self.confidence,)
-
-    def __init__(self, model: SensorNetworkModel, confidence: float = 0.997) -> None:
-        from scipy.stats import chi2
-
-        from .set_membership import SetMembershipModel
-
-        super().__init__(model)
-        c = check_positive(confidence, "confidence", "(the probability mass of each noise bound)")
-        if c >= 1.0:
-            raise ValueError(f"confidence must lie in (0, 1) (the probability mass of each noise bound); got {confidence!r}")
-        n = model.n_states
-        if np.linalg.eigvalsh(model.Q).min() <= 0:
-            raise ValueError("model.Q must be positive definite for a set-membership filter (its noise bound is an "
-                             "ellipsoid of shape chi2_n(c) Q); got a singular Q")
-        motion = SetMembershipModel(A=model.F, G=np.eye(n), Q=float(chi2.ppf(c, n)) * model.Q)
-        rows = []  # agent i's rows of the stacked measurement: those of N_i and i, in agent order
-        for i in range(model.n_agents):
-            hood = np.flatnonzero(model._neighbourhood[i])
-            rows.append(frozen_copy(np.concatenate([np.arange(model.n_measurements)[model._slices[j]] for j in hood]),
-                                    int))
-        groups = []  # the agents with p stacked measurements, p > 0: their C_i (g, p, n) and W_i (g, p, p), at once
-        for p in sorted({r.size for r in rows} - {0}):
-            agents = np.array([i for i, r in enumerate(rows) if r.size == p])
-            idx = np.stack([rows[i] for i in agents])
-            W = float(chi2.ppf(c, p)) * model.R_stacked[idx[:, :, None], idx[:, None, :]]  # R_j positive definite
-            groups.append((frozen_copy(agents, int), frozen_copy(idx, int), frozen_copy(model.H_stacked[idx]),
-                           frozen_copy(W)))
-        self._set(confidence=c, _motion=motion, _groups=tuple(groups), _rows=tuple(rows))
-
-    def initial_shape(self, P0: ArrayLike) -> np.ndarray:
-        """The initial set's shape for an initial error of covariance `P0`: ``chi2_n(c) P0``.
-
-        Parameters
-        ----------
-        P0 : (..., n, n) array_like
-            The covariance of the initial error, symmetric positive definite.
-
-        Returns
-        -------
-        (..., n, n) ndarray
-            The shape matrix holding a Gaussian initial error with probability c.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import compare, fusion
-        >>> round(float(fusion.SetMembershipForwardingFilter(compare.target_model(4)).initial_shape(np.eye(4))[0, 0]), 3)
-        16.014
-        """
-        from scipy.stats import chi2
-
-        P0 = check_covariance(float_array(P0, "P0"), "P0", size=self.model.n_states, definite=True)
-        return float(chi2.ppf(self.confidence, self.model.n_states)) * P0
-
-    def predict(self, x: ArrayLike, P: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Every agent's predicted set: centre ``F c``, the trace-optimal outer shape of ``F E F^T + W_Q`` (eq. (8)).
-
-        Parameters
-        ----------
-        x : (..., N, n) array_like
-            The centres.
-        P : (..., N, n, n) array_like
-            The shape matrices, positive definite.
-
-        Returns
-        -------
-        x_pred, P_pred : ndarray
-            The predicted centres and shapes, same shapes.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from mascore import fusion, graphs, sensor_network
-        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.01]], [[[1.0]]] * 2, [[[1.0]]] * 2, graphs.path_graph(2))
-        >>> x, E = fusion.SetMembershipForwardingFilter(model).predict(np.ones((2, 1)), np.ones((2, 1, 1)))
-        >>> x[:, 0], np.round(E[:, 0, 0], 4)                       # (1 + sqrt(chi2_1(0.997) 0.01))^2
-        (array([1., 1.]), array([1.6816, 1.6816]))
-        """
-        x, P = self._check_xP(x, P)
-        require_finite(x, "x")  # the shape's prediction does not see the centre
-        _, shape = self._motion.predict(np.zeros(self.model.n_states), P)
-        return x @ self.model.F.T, shape
-
-    def _set_update(self, P: np.ndarray, group: tuple) -> tuple[np.ndarray, np.ndarray]:
-        """The shapes and gains of one group's agents, from their shapes ``(..., g, n, n)`` alone (eqs. (6)-(7))."""
-        _, idx, C, W = group
-        h, m = ellipsoid_kernels.trace_profile(P, C, W)
-        t = ellipsoid_kernels.newton_trace(h, m, 1e-13, 100)
-        _, shape, L = ellipsoid_kernels.gain_form(np.zeros(P.shape[:-1]), P, C, np.zeros(idx.shape), W, t, False)
-        return shape, L
-
-    def _correct(self, x, P, z):
-        batch = np.broadcast_shapes(x.shape[:-2], z.shape[:-1])
-        x_new = np.array(np.broadcast_to(x, (*batch, *x.shape[-2:])))
-        P_new = np.array(P)
-        for group in self._groups:
-            agents, idx, C, _ = group
-            P_new[..., agents, :, :], L = self._set_update(P[..., agents, :, :], group)
-            nu = z[..., idx] - np.einsum("gpn,...gn->...gp", C, x_new[..., agents, :])
-            x_new[..., agents, :] += np.einsum("...gnp,...gp->...gn", L, nu)  # eq. (2), every run
-        return x_new, P_new
-
-    def _agent_step(self, i, own, messages):
-        _, shape = self._motion.predict(np.zeros(self.model.n_states), own["P"])
-        c = self.model.F @ own["x"]
-        if not self._rows[i].size:  # nothing sensed in the neighbourhood: the prediction stands
-            return c, shape
-        agents, _, C, W = next(g for g in self._groups if i in g[0])
-        k = int(np.flatnonzero(agents == i)[0])
-        zs = list(messages[0])
-        zs.insert(own["index"], own["z"])
-        shape, L = self._set_update(shape[None], (None, self._rows[i][None], C[k:k + 1], W[k:k + 1]))
-        return c + L[0] @ (np.concatenate(zs) - C[k] @ c), shape[0]
 
 def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
           graphs: Sequence[object] | ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -1522,16 +956,18 @@ def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true:
     row = n
     sub = "dia,dib->iab" if filt._per_agent else "da,db->ab"
     for k in range(K):
-        truth = truth @ model.F.T
+        live = row + n + q  # the sources drawn by step k; the later ones, and the estimates they drive, are still 0
+        truth[:live] = truth[:live] @ model.F.T
         truth[row:row + n] += model._sqrt_Q.T
         row += n
-        z = truth @ model.H_stacked.T
+        z = truth[:live] @ model.H_stacked.T
         z[row:row + q] += model._sqrt_R.T
         row += q
-        x, P = filt.update(*filt.predict(x, P), z)
+        x_live, P = filt.update(*filt.predict(x[:live], P), z)
+        x[:live] = x_live
         if P.ndim > P_out.ndim - 1:  # a filter that returned one covariance per run: they are all equal
             P = P[0]
-        e = (truth[:, None, :] if filt._per_agent else truth) - x
+        e = (truth[:live, None, :] if filt._per_agent else truth[:live]) - x_live
         C_out[k] = np.einsum(sub, e, e)
         P_out[k] = P
     return C_out, P_out
@@ -1624,33 +1060,6 @@ def covariance_intersection(means: ArrayLike, covs: ArrayLike, weights: str | Ar
 # the methods of the common-target and localization tasks (mascore.compare, mascore.agent_cost)
 
 
-def _cost(name: str, iterations: int = 1, degree: bool = True):
-    """``cost(n, q, degree, n_agents) -> (floats, flops)`` of :func:`~mascore.fusion_cost.filter_cost` for `name`.
-
-    No neighbours if not `degree`.
-    """
-    def cost(n: int, q: int, d: int, n_agents: int) -> tuple[float, float]:
-        c = filter_cost(name, n=n, q=q, degree=d if degree else 0, iterations=iterations, n_agents=n_agents)
-        return c.floats_sent, c.flops
-    return cost
-
-
-def _orders(target: tuple[str, str], localization: tuple[str, str]) -> dict[str, tuple[str, str]]:
-    return {"target": target, "localization": localization}
-
-
-def _memory(pairs: int = 0):
-    """``memory(n, q, degree, n_agents)``: an estimate and covariance and d messages (`pairs` > 0: d + 1 pairs each)."""
-    def memory(n: int, q: int, d: int, n_agents: int) -> float:
-        return float((d + 1) * pairs * (n**2 + n)) if pairs else float(n**2 + n + d * n)
-    return memory
-
-
-def _centre_memory(n: int, q: int, d: int, n_agents: int) -> float:
-    return float(n**2 + n)
-
-
-_TASKS = ("target", "localization")
 _CONSENSUS = {  # kind -> (filter of L steps, filter_cost name)
     "ci": (lambda m, L: ConsensusOnInformationFilter(m, L), "consensus-on-information"),
     "hcmci": (lambda m, L: ConsensusOnInformationFilter(m, L, novelty_weight="N"), "hcmci"),
@@ -1658,35 +1067,30 @@ _CONSENSUS = {  # kind -> (filter of L steps, filter_cost name)
 }
 
 
-def _consensus_spec(kind: str, L: int | str, position: float) -> MethodSpec:
+def _consensus_spec(kind: str, L: int | str, position: float, role: str = "recipe") -> MethodSpec:
     """The spec of `kind` at L consensus steps, or at ``L = "diam"``: the diameter of the model's graph.
 
-    The count of ``-Ldiam`` takes the ring's diameter, ``N // 2`` (the graph of the cost tables).
+    Its knob is L (family `kind`; the setting None: the diameter). The count of ``-Ldiam`` takes the
+    ring's diameter, ``N // 2`` (the graph of the cost tables).
     """
     build, cost_name = _CONSENSUS[kind]
-    if L == "diam":
-        steps, cost = graph_diameter, _ring_diameter_cost(cost_name)
-    else:
-        steps, cost = (lambda model, L=L: L), _cost(cost_name, L)
-    return MethodSpec(f"{kind}-L{L}", _TASKS, lambda model: build(model, steps(model)), cost,
-                      _orders(("O(n^3 + L d n^2)", "O(d n^2)"), ("O(N^3 + L d N^2)", "O(d N^2)")),
-                      _memory(2 if kind == "hcmci" else 1), position=position)
-
-
-def _ring_diameter_cost(name: str):
-    """``cost(n, q, degree, n_agents)`` of :func:`filter_cost` for `name` at ``L = N // 2``, the ring's diameter."""
-    def cost(n: int, q: int, d: int, n_agents: int) -> tuple[float, float]:
-        c = filter_cost(name, n=n, q=q, degree=d, iterations=max(1, n_agents // 2), n_agents=n_agents)
-        return c.floats_sent, c.flops
-    return cost
+    steps = graph_diameter if L == "diam" else (lambda model, L=L: L)
+    return MethodSpec(f"{kind}-L{L}", TASKS, lambda model: build(model, steps(model)),
+                      spec_cost(cost_name, None if L == "diam" else L),
+                      spec_orders(("O(n^3 + L d n^2)", "O(d n^2)"), ("O(N^3 + L d N^2)", "O(d N^2)")),
+                      spec_memory(2 if kind == "hcmci" else 1), position=position, role=role, family=kind,
+                      setting=None if L == "diam" else float(L))
 
 
 def _safe_hcmci_spec(L: int, position: float) -> MethodSpec:
-    """HCMCI at L steps with the largest novelty weight its consistency condition allows (:func:`safe_novelty_weight`)."""
-    return MethodSpec(f"hcmci-safe-L{L}", _TASKS,
+    """HCMCI at L steps with the largest novelty weight its consistency condition allows (:func:`safe_novelty_weight`).
+
+    A setting of the knob omega of ``hcmci-L<L>`` (the setting None: computed for the model's graph).
+    """
+    return MethodSpec(f"hcmci-safe-L{L}", TASKS,
                       lambda model: ConsensusOnInformationFilter(model, L, novelty_weight=safe_novelty_weight(model, L)),
-                      _cost("hcmci", L), _orders(("O(n^3 + L d n^2)", "O(d n^2)"), ("O(N^3 + L d N^2)", "O(d N^2)")),
-                      _memory(2), position=position)
+                      spec_cost("hcmci", L), spec_orders(("O(n^3 + L d n^2)", "O(d n^2)"), ("O(N^3 + L d N^2)", "O(d N^2)")),
+                      spec_memory(2), position=position, role="knob", family=f"hcmci-L{L}")
 
 
 def graph_diameter(model: SensorNetworkModel) -> int:
@@ -1759,60 +1163,31 @@ def safe_novelty_weight(model: SensorNetworkModel, n_consensus: int) -> float:
     return float(1.0 / WL[:, sensing].max())
 
 
-def _kcf_cost(n: int, q: int, d: int, n_agents: int) -> tuple[float, float]:
-    """Forwarding's count (:func:`~mascore.fusion_cost.filter_cost`), plus the prediction sent and the consensus term.
-
-    The term: the sum of d differences (``d n``), its product with M (``2 n^2``), the norm of M (``2 n^2``).
-    """
-    c = filter_cost("measurement-forwarding", n=n, q=q, degree=d, n_agents=n_agents)
-    return c.floats_sent + n, c.flops + d * n + 4 * n**2
-
-
-def _kcf_spec(name: str, eps: float, position: float) -> MethodSpec:
-    """Olfati-Saber's KCF at consensus gain `eps`."""
-    return MethodSpec(name, _TASKS, lambda model: KalmanConsensusNetworkFilter(model, eps), _kcf_cost,
-                      _orders(("O(d q n + n^3)", "O(n^2 + d n)"), ("O(N^3)", "O(N^2)")), _memory(), position=position)
-
-
-def _sm_forwarding_cost(n: int, q: int, d: int, n_agents: int) -> tuple[float, float]:
-    """Forwarding's floats; flops: the trace-optimal sum (``4 n^3``), the intersection's Cholesky factor and
-    eigen-decomposition of the n x n prior (``n^3 / 3 + 9 n^3``), its gain and Joseph-form shape
-    (``2 p n^2 + 2 p^2 n + 8/3 p^3 + 6 n^3``) for the ``p = (d + 1) q`` stacked measurements, and the centre.
-    """
-    c = filter_cost("measurement-forwarding", n=n, q=q, degree=d, n_agents=n_agents)
-    p = (d + 1) * q
-    return c.floats_sent, 4 * n**3 + (1 / 3 + 9 + 6) * n**3 + 2 * p * n**2 + 2 * p**2 * n + 8 / 3 * p**3 + 2 * p * n
-
-
 #: The methods of the common-target and localization tasks, in table order (``-L<k>``: k consensus steps per update).
 METHODS = (
-    MethodSpec("centralized", _TASKS, CentralizedFilter, _cost("centralized"),
-               _orders(("O(N q^2 + n^3) at the centre", "O(n^2 + N q)"),
-                       ("O(N^3) at the centre (n = 2N, N d q)", "O(N^2)")), _centre_memory, whole_filter=True,
+    MethodSpec("centralized", TASKS, CentralizedFilter, spec_cost("centralized"),
+               spec_orders(("O(N q^2 + n^3) at the centre", "O(n^2 + N q)"),
+                       ("O(N^3) at the centre (n = 2N, N d q)", "O(N^2)")), centre_memory, whole_filter=True,
                position=0),
-    MethodSpec("local", _TASKS, lambda model: ConsensusOnInformationFilter(model, 0),
-               _cost("consensus-on-information", 0, degree=False),
-               _orders(("O(n^3)", "O(n^2)"), ("O(N^3): n = 2N", "O(N^2)")), _memory(), position=1),
-    MethodSpec("forwarding", _TASKS, MeasurementForwardingFilter, _cost("measurement-forwarding"),
-               _orders(("O(d q n + n^3)", "O(n^2 + d q)"), ("O(N^3)", "O(N^2)")), _memory(), position=2),
+    MethodSpec("local", TASKS, lambda model: ConsensusOnInformationFilter(model, 0),
+               spec_cost("consensus-on-information", 0, degree=False),
+               spec_orders(("O(n^3)", "O(n^2)"), ("O(N^3): n = 2N", "O(N^2)")), spec_memory(), position=1),
+    MethodSpec("forwarding", TASKS, MeasurementForwardingFilter, spec_cost("measurement-forwarding"),
+               spec_orders(("O(d q n + n^3)", "O(n^2 + d q)"), ("O(N^3)", "O(N^2)")), spec_memory(), position=2),
     *(_consensus_spec(kind, L, 3 + 2 * k + j) for k, kind in enumerate(_CONSENSUS) for j, L in enumerate((1, 5))),
-    MethodSpec("diffusion", _TASKS, DiffusionKalmanFilter, _cost("diffusion-kf"),
-               _orders(("O(d q n + n^3)", "O(n^2 + d n)"), ("O(N^3)", "O(N^2)")), _memory(), position=9),
-    MethodSpec("ci-diffusion", _TASKS, CovarianceIntersectionFilter, _cost("covariance-intersection", 20),
-               _orders(("O(n^3 + s d n^2): s weight-search evaluations", "O(d n^2)"), ("O(N^3 + s d N^2)", "O(d N^2)")),
-               _memory(1), position=10,
+    MethodSpec("diffusion", TASKS, DiffusionKalmanFilter, spec_cost("diffusion-kf"),
+               spec_orders(("O(d q n + n^3)", "O(n^2 + d n)"), ("O(N^3)", "O(N^2)")), spec_memory(), position=9),
+    MethodSpec("ci-diffusion", TASKS, CovarianceIntersectionFilter, spec_cost("covariance-intersection", 20),
+               spec_orders(("O(n^3 + s d n^2): s weight-search evaluations", "O(d n^2)"), ("O(N^3 + s d N^2)", "O(d N^2)")),
+               spec_memory(1), position=10,
                max_agents={"localization": (32, "its covariance-intersection weight search (Newton steps over the d + 1 "
                                                 "information matrices of 2N x 2N, per agent and step) grows as N^4 per "
                                                 "agent: at N = 64 one method would take most of the full grid's time")}),
     # the knobs' other settings (the comparison sweeps them at N = 8: mascore.compare.FUSION_KNOB_METHODS)
-    *(_consensus_spec(kind, L, 11 + 2 * k + j) for k, kind in enumerate(_CONSENSUS) for j, L in enumerate((2, "diam"))),
+    *(_consensus_spec(kind, L, 11 + 2 * k + j, "knob") for k, kind in enumerate(_CONSENSUS)
+      for j, L in enumerate((2, "diam"))),
     *(_safe_hcmci_spec(L, 17 + j) for j, L in enumerate((1, 5))),
-    # Olfati-Saber's Kalman-consensus filter at its default gain, and the set-membership filter on forwarded
-    # measurements (its containment in place of the NEES); then the KCF's gain swept (FUSION_KNOB_METHODS)
-    _kcf_spec("kcf", 0.1, 10.5),
-    MethodSpec("sm-forwarding", _TASKS, SetMembershipForwardingFilter, _sm_forwarding_cost,
-               _orders(("O(n^3 + d^3 q^3)", "O(n^2 + d q)"), ("O(N^3)", "O(N^2)")), _memory(), position=10.6),
-    *(_kcf_spec(f"kcf-eps{eps:g}", eps, 19 + j) for j, eps in enumerate((0.01, 0.5))),
+    # then mascore.fusion_forwarding's: the Kalman-consensus filter and the set-membership filter
 )
 
 

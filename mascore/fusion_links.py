@@ -13,6 +13,16 @@ neighbours and the agent itself; ICF's ``I - eps L`` with its default ``eps = 0.
 of that graph). That is the switching-graph mechanism: the step's filter is the method's
 own, built on the step's graph (:func:`mascore.fusion.track`).
 
+**Loss per direction** (:func:`lossy_graphs` with ``per_direction=True``, for measurement
+forwarding (:func:`track_forwarding`) and the one-round filters of :func:`track_messages`):
+each message ``j -> i`` is lost with probability ``p`` independently of ``i -> j``, of the other
+links, of the steps and, with ``n_runs``, of the runs (one pattern per run). An agent does
+not know what its neighbours received, so it cannot rebuild weights on the step's graph:
+it keeps the weights of the ideal graph and gives the weight of a message it did not
+receive to its own pair (the compensation of Fagnani and Zampieri (2009)), so each row is
+still a convex combination of what it holds; forwarding fuses the measurements that
+arrived, exactly.
+
 **One-step latency** and **send-on-delta** (:func:`track_messages`), for the filters whose
 agents send one density per step (:class:`~mascore.fusion.ConsensusOnInformationFilter` at
 ``L = 1`` and :class:`~mascore.fusion.InformationConsensusFilter` at ``K = 1``): agent i
@@ -31,12 +41,16 @@ more than ``delta`` in the Mahalanobis distance under its predicted covariance `
 uncertainty it holds before the step, the same for every method),
 ``sqrt((m_j - m_sent)^T P_j-^{-1} (m_j - m_sent)) > delta`` (the first step always sends);
 otherwise its neighbours use the last received. ``delta = 0`` sends at every step (almost
-surely: a sure zero move never happens with noisy measurements).
+surely: a sure zero move never happens with noisy measurements). Over links that lose messages one
+direction at a time, each receiver keeps its own copy of each neighbour's last pair that reached it
+(predicted to the step), and a neighbour it has not heard from yet has its weight on its own pair.
 
 .. rubric:: References
 
 - Xiao, L., Boyd, S., Lall, S. (2005). A scheme for robust distributed sensor fusion based on average
   consensus. Proc. IPSN, 63-70.
+- Fagnani, F., Zampieri, S. (2009). Average consensus with packet drop communication. SIAM J. Control
+  Optim. 48(1), 102-133.
 - Battistelli, G., Chisci, L., Selvi, D. (2018). A distributed Kalman filter with event-triggered
   communication and guaranteed stability. Automatica 93, 75-82.
 """
@@ -48,20 +62,22 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._fusion_kernels import symmetric_part
+from ._fusion_kernels import information_update, symmetric_part
 from ._validation import check_adjacency, check_positive_int, float_array, require_finite
-from .fusion import ConsensusOnInformationFilter, InformationConsensusFilter
+from .fusion import ConsensusOnInformationFilter, InformationConsensusFilter, MeasurementForwardingFilter
 
-__all__ = ["lossy_graphs", "track_messages"]
+__all__ = ["delivered_weights", "lossy_graphs", "track_forwarding", "track_messages"]
 
 
-def lossy_graphs(adjacency: ArrayLike, loss: float, n_steps: int, rng: np.random.Generator | int | None,
-                 ) -> np.ndarray:
+def lossy_graphs(adjacency: ArrayLike, loss: float, n_steps: int, rng: np.random.Generator | int | None, *,
+                 per_direction: bool = False, n_runs: int | None = None) -> np.ndarray:
     """The graphs of the links that delivered at each step, each link lost with probability `loss`.
 
     One uniform number per undirected link and step decides: the link is lost at step k when
     its number is below `loss`, in both directions. The same generator state gives nested
-    patterns (a link lost at ``loss = 0.1`` is lost at 0.3 too).
+    patterns (a link lost at ``loss = 0.1`` is lost at 0.3 too). With `per_direction` one
+    number per message ``j -> i`` (``A[i, j] > 0``) decides instead: the graph of a step is
+    directed (``G[k, i, j] > 0``: i received j's message). With `n_runs`, one pattern per run.
 
     Parameters
     ----------
@@ -73,11 +89,15 @@ def lossy_graphs(adjacency: ArrayLike, loss: float, n_steps: int, rng: np.random
         K >= 1 steps.
     rng : numpy.random.Generator or int or None
         The source of the losses.
+    per_direction : bool
+        Lose each direction of a link independently (default: both at once).
+    n_runs : int, optional
+        R >= 1 runs, each with its own pattern (default: one pattern for every run).
 
     Returns
     -------
-    (K, N, N) ndarray
-        ``adjacency`` with the lost links zeroed, per step, symmetric.
+    (K, N, N) or (K, R, N, N) ndarray
+        ``adjacency`` with the lost messages zeroed, per step (and run); symmetric unless `per_direction`.
 
     Examples
     --------
@@ -86,6 +106,9 @@ def lossy_graphs(adjacency: ArrayLike, loss: float, n_steps: int, rng: np.random
     >>> G = fusion_links.lossy_graphs(graphs.ring_graph(8), 0.3, 200, rng=0)
     >>> G.shape, bool((G == G.transpose(0, 2, 1)).all()), round(float(1 - G.sum() / (200 * 16)), 2)
     ((200, 8, 8), True, 0.29)
+    >>> D = fusion_links.lossy_graphs(graphs.ring_graph(8), 0.3, 200, rng=0, per_direction=True, n_runs=5)
+    >>> D.shape, bool((D == D.transpose(0, 1, 3, 2)).all())
+    ((200, 5, 8, 8), False)
     """
     K = check_positive_int(n_steps, "n_steps")
     A = float_array(adjacency, "adjacency")
@@ -99,18 +122,59 @@ def lossy_graphs(adjacency: ArrayLike, loss: float, n_steps: int, rng: np.random
     p = float(loss)
     if not 0.0 <= p < 1.0:
         raise ValueError(f"loss must be a probability in [0, 1); got {loss!r}")
+    runs = () if n_runs is None else (check_positive_int(n_runs, "n_runs"),)
     N = A.shape[1]
+    if runs:
+        A = A[:, None]
+    if per_direction:  # one number per ordered pair: a message j -> i is lost alone
+        u = np.random.default_rng(rng).random((K, *runs, N, N))
+        return np.where(u >= p, A, 0.0)
     iu = np.triu_indices(N, 1)
-    u = np.random.default_rng(rng).random((K, len(iu[0])))
-    keep = np.zeros((K, N, N), dtype=bool)
-    keep[:, iu[0], iu[1]] = u >= p
-    keep |= keep.transpose(0, 2, 1)
+    u = np.random.default_rng(rng).random((K, *runs, len(iu[0])))
+    keep = np.zeros((K, *runs, N, N), dtype=bool)
+    keep[..., iu[0], iu[1]] = u >= p
+    keep |= np.swapaxes(keep, -1, -2)
     return np.where(keep, A, 0.0)
+
+
+def delivered_weights(W: ArrayLike, delivered: ArrayLike) -> np.ndarray:
+    """One consensus round's weights when some messages are lost: a lost message's weight goes to the receiver.
+
+    ``W'_ij = W_ij`` if i received j's message, else 0; ``W'_ii = 1 - sum_{j != i} W'_ij`` (Fagnani and
+    Zampieri 2009): each row stays a convex combination when `W`'s rows are.
+
+    Parameters
+    ----------
+    W : (N, N) array_like
+        The weights on ideal links, rows summing to one.
+    delivered : (..., N, N) array_like
+        Positive where i received j's message (``delivered[..., i, j]``); the diagonal is ignored.
+
+    Returns
+    -------
+    (..., N, N) ndarray
+        The weights of each pattern.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore.fusion_links import delivered_weights
+    >>> W = np.full((3, 3), 1 / 3)
+    >>> delivered_weights(W, [[0, 1, 0], [1, 0, 1], [1, 1, 0]])[0]   # agent 0 lost agent 2's message
+    array([0.66666667, 0.33333333, 0.        ])
+    """
+    W = float_array(W, "W")
+    D = float_array(delivered, "delivered")
+    if W.ndim != 2 or W.shape[0] != W.shape[1] or D.shape[-2:] != W.shape:
+        raise ValueError(f"W must be (N, N) and delivered (..., N, N) of the same N; got {W.shape}, {D.shape}")
+    off = np.where(D > 0, W - np.diag(np.diag(W)), 0.0)
+    eye = np.eye(W.shape[0], dtype=bool)
+    return np.where(eye, (1.0 - off.sum(-1))[..., None], off)
 
 
 def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationConsensusFilter], x0: ArrayLike,
                    P0: ArrayLike, z: ArrayLike, *, latency: int = 0, send_delta: float | None = None,
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   delivered: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Run a one-round consensus filter whose messages arrive late or only on change (see the module's text).
 
     Parameters
@@ -131,13 +195,21 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
     send_delta : float, optional
         Send-on-delta threshold (a Mahalanobis distance, in standard deviations, >= 0); None: every
         agent sends at every step.
+    delivered : (K, ..., N, N) array_like, optional
+        Positive where agent i received j's message at step k (:func:`lossy_graphs` with
+        ``per_direction=True``, one pattern per run or one for all); the weight of a lost one goes to
+        the receiver's own pair (:func:`delivered_weights`). None: every message arrives. With
+        `send_delta` (not with `latency`) each receiver holds the last pair it received from each
+        neighbour, predicted to the step, and fuses that; a neighbour it never heard from has its
+        weight on the receiver's own pair. A sender decides from the last pair it sent.
 
     Returns
     -------
     x : (K, ..., N, n) ndarray
         Each agent's estimate after each step.
     P : (K, ..., N, n, n) ndarray
-        Their covariances (leading axes those of `P0`; with `send_delta` they depend on the data: one per run).
+        Their covariances (leading axes those of `P0`; with `send_delta` they depend on the data, with
+        `delivered` on its pattern: one per run).
     sent : (K, ..., N) ndarray of bool
         Whether agent i sent its pair at step k (all True without `send_delta`).
 
@@ -195,13 +267,23 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
     if z.ndim < 2 or z.shape[0] != len(filters):
         raise ValueError(f"z must be (K, ..., {model.n_measurements}) with K = {len(filters)} (one filter per step); "
                          f"got shape {z.shape}")
-    batch = np.broadcast_shapes(x.shape[:-2], P.shape[:-3], z.shape[1:-1])
     N, n = model.n_agents, model.n_states
-    if send_delta is not None:  # the sends depend on the data, and then so do the covariances: one per run
+    if delivered is not None:
+        if send_delta is not None and latency:
+            raise ValueError("delivered, send_delta and latency cannot be combined: not modelled")
+        delivered = float_array(delivered, "delivered")
+        if delivered.ndim < 3 or delivered.shape[0] != len(filters) or delivered.shape[-2:] != (N, N):
+            raise ValueError(f"delivered must be (K, ..., N, N) = ({len(filters)}, ..., {N}, {N}); "
+                             f"got shape {delivered.shape}")
+    batch = np.broadcast_shapes(x.shape[:-2], P.shape[:-3], z.shape[1:-1],
+                                () if delivered is None else delivered.shape[1:-2])
+    if send_delta is not None or delivered is not None:  # data- or pattern-dependent covariances: one per run
         x, P = np.broadcast_to(x, (*batch, N, n)), np.broadcast_to(P, (*batch, N, n, n))
     c = first.pair_scale
     held = None       # the pairs the neighbours hold of each sender: its last sent, predicted to this step
     arrived = None    # with latency: the pairs sent at the step before, predicted to this step
+    copies = None     # send-on-delta over lossy links: per link j -> i, i's copy of j's last pair (..., E, ...)
+    heard = None      # per link, whether i has received a pair from j yet
     xs, Ps, sents = [], [], []
     for k, f in enumerate(filters):
         xp, Pp = f.predict(x, P)
@@ -221,15 +303,118 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
                 received = held
         else:
             received = held
-        off = W - np.diag(np.diag(W))
-        w_self = np.diag(W)
-        Om_f = w_self[:, None, None] * Om + np.einsum("ij,...jab->...iab", off, received[0])
-        q_f = w_self[:, None] * q + np.einsum("ij,...ja->...ia", off, received[1])
+        if delivered is not None and send_delta is not None:  # each receiver fuses its own copies, one per link
+            if copies is None:  # the links j -> i of the graph; a placeholder copy until one arrives (weight 0)
+                to, frm = np.nonzero((W > 0) & ~np.eye(N, dtype=bool))
+                into = (to[:, None] == np.arange(N)).T.astype(float)                  # (N, E): link e ends at i
+                copies, heard = (held[0][..., frm, :, :], held[1][..., frm, :]), np.zeros((*batch, len(to)), bool)
+            else:
+                copies = _predict_pair(model, c, *copies)
+            arrive = sent[..., frm] & (delivered[k][..., to, frm] > 0)               # (..., E)
+            copies = (np.where(arrive[..., None, None], held[0][..., frm, :, :], copies[0]),
+                      np.where(arrive[..., None], held[1][..., frm, :], copies[1]))
+            heard = heard | arrive
+            w_link = np.where(heard, W[to, frm], 0.0)                                 # (..., E)
+            w_self = 1.0 - w_link @ into.T                                           # the rest on the own pair
+            Om_f = w_self[..., None, None] * Om + np.einsum("ie,...e,...eab->...iab", into, w_link, copies[0])
+            q_f = w_self[..., None] * q + np.einsum("ie,...e,...ea->...ia", into, w_link, copies[1])
+        elif delivered is None:
+            off = W - np.diag(np.diag(W))
+            w_self = np.diag(W)
+            Om_f = w_self[:, None, None] * Om + np.einsum("ij,...jab->...iab", off, received[0])
+            q_f = w_self[:, None] * q + np.einsum("ij,...ja->...ia", off, received[1])
+        else:  # the step's pattern: per run, the lost messages' weights on the receiver's own pair
+            Wk = delivered_weights(W, delivered[k])
+            w_self = np.diagonal(Wk, axis1=-2, axis2=-1)
+            off = Wk * ~np.eye(N, dtype=bool)
+            Om_f = w_self[..., None, None] * Om + np.einsum("...ij,...jab->...iab", off, received[0])
+            q_f = w_self[..., None] * q + np.einsum("...ij,...ja->...ia", off, received[1])
         x, P = f.pair_estimate(symmetric_part(Om_f), q_f)
         xs.append(x)
         Ps.append(P)
         sents.append(sent)
     return np.stack(xs), np.stack(Ps), np.stack(sents)
+
+
+def track_forwarding(model, x0: ArrayLike, P0: ArrayLike, z: ArrayLike, delivered: ArrayLike, *,
+                     latency: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Measurement forwarding over links that lose messages one direction at a time (and may deliver them late).
+
+    Agent i's update is the exact Kalman update on its own measurement and those of the
+    neighbours whose messages it received (:class:`~mascore.fusion.MeasurementForwardingFilter`
+    on the step's delivered graph). With ``latency = 1`` the neighbours' measurements of step k
+    arrive at step k + 1: agent i runs a Kalman filter one step behind on them, predicts it and
+    corrects it with its own fresh measurement (still an exact Kalman filter, on older data).
+
+    Parameters
+    ----------
+    model : mascore.sensor_network.SensorNetworkModel
+        The sensing (its graph is not used: `delivered` says who heard whom).
+    x0 : (..., N, n) or (n,) array_like
+        Initial means.
+    P0 : (..., N, n, n) or (n, n) array_like
+        Initial covariances, symmetric positive definite.
+    z : (K, ..., sum q_i) array_like
+        Measurements of steps 1..K.
+    delivered : (K, ..., N, N) array_like
+        Positive where agent i received j's measurement at step k (:func:`lossy_graphs`); the
+        diagonal is ignored (an agent always has its own).
+    latency : {0, 1}
+        Steps a message takes to arrive.
+
+    Returns
+    -------
+    x : (K, ..., N, n) ndarray
+        Each agent's estimate after each step.
+    P : (K, ..., N, n, n) ndarray
+        Their covariances, the error covariances (one per run when `delivered` has one pattern per run).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import compare, fusion, fusion_links
+    >>> model = compare.target_model(8)
+    >>> x_true, z = model.simulate(np.zeros(4), np.eye(4), 50, rng=0, n_runs=3)
+    >>> ideal = np.broadcast_to(model.adjacency, (50, 8, 8))
+    >>> x, P = fusion_links.track_forwarding(model, np.zeros(4), np.eye(4), z, ideal)
+    >>> xf, Pf = fusion.MeasurementForwardingFilter(model).run(np.zeros(4), np.eye(4), z)
+    >>> bool(np.allclose(x, xf) and np.allclose(P, Pf[:, None]))
+    True
+    """
+    forwarding = MeasurementForwardingFilter(model)
+    if latency not in (0, 1) or isinstance(latency, bool):
+        raise ValueError(f"latency must be 0 or 1 (steps); got {latency!r}")
+    x, P = model.check_state(x0, P0, ("x0", "P0"), per_agent=True)
+    z = require_finite(model._check_z(z), "z")
+    N = model.n_agents
+    D = float_array(delivered, "delivered")
+    if z.ndim < 2 or D.ndim < 3 or D.shape[0] != z.shape[0] or D.shape[-2:] != (N, N):
+        raise ValueError(f"delivered must be (K, ..., {N}, {N}) with K = {z.shape[0] if z.ndim else '?'} (the "
+                         f"steps of z); got shape {D.shape}")
+    heard = np.where(np.eye(N, dtype=bool), 1.0, (D > 0).astype(float))  # (K, ..., N, N): own always
+    batch = np.broadcast_shapes(x.shape[:-2], P.shape[:-3], z.shape[1:-1], D.shape[1:-2])
+    n = model.n_states
+    x, P = np.broadcast_to(x, (*batch, N, n)), np.broadcast_to(P, (*batch, N, n, n))  # one per run (pattern)
+
+    info = model.information_matrices.reshape(N, n * n)
+
+    def correct(x, P, zk, Dk):  # the exact update on the measurements of the agents in Dk's rows
+        S = (Dk @ info).reshape(*Dk.shape[:-1], n, n)
+        return information_update(x, P, S, Dk @ model.information_vectors(zk, check=False))
+
+    own = np.eye(N)
+    xs, Ps = [], []
+    for k in range(z.shape[0]):
+        xp, Pp = forwarding.predict(x, P)
+        if latency:  # x, P: the filter one step behind; the own fresh measurement on top
+            xo, Po = correct(xp, Pp, z[k], own)
+            if k + 1 < z.shape[0]:  # the step's measurements reach the neighbours at the next step
+                x, P = correct(xp, Pp, z[k], heard[k + 1])
+        else:
+            xo, Po = x, P = correct(xp, Pp, z[k], heard[k])
+        xs.append(xo)
+        Ps.append(Po)
+    return np.stack(xs), np.stack(Ps)
 
 
 def _predict_pair(model, c: float, Om: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

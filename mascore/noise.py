@@ -9,24 +9,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_vector, check_covariance, check_generator
+from ._validation import as_vector, check_covariance, check_generator, sample_shape
 from ._validation import float_array as _float_array
 
 __all__ = ["gaussian", "psd_factor", "uniform_box", "uniform_ellipsoid"]
-
-
-def _sample_shape(size: object, name: str = "size") -> tuple[int, ...]:
-    """`size` (an int or a tuple of ints, each >= 0) as a tuple; anything else is refused by name."""
-    dims = (size,) if isinstance(size, (int, np.integer)) and not isinstance(size, bool) else size
-    if isinstance(dims, np.ndarray) and dims.ndim == 1:
-        dims = dims.tolist()
-    if not isinstance(dims, (tuple, list)) or not all(
-        isinstance(d, (int, np.integer)) and not isinstance(d, bool) for d in dims
-    ):
-        raise TypeError(f"{name} must be an int or a tuple of ints (the leading shape of the output); got {size!r}")
-    if any(d < 0 for d in dims):
-        raise ValueError(f"{name} must hold non-negative ints; got {size!r}")
-    return tuple(int(d) for d in dims)
 
 
 def _check_psd(M: object, name: str) -> np.ndarray:
@@ -37,7 +23,7 @@ def _check_psd(M: object, name: str) -> np.ndarray:
     return P
 
 
-def psd_factor(M: ArrayLike, cholesky_first: bool = False) -> np.ndarray:
+def psd_factor(M: ArrayLike, cholesky_first: bool = False, *, check: bool = True) -> np.ndarray:
     """A factor ``F`` with ``F F^T = M`` for a symmetric positive semidefinite ``M``.
 
     Parameters
@@ -48,6 +34,9 @@ def psd_factor(M: ArrayLike, cholesky_first: bool = False) -> np.ndarray:
         Return the lower Cholesky factor when ``M`` is positive definite and fall
         back to the eigenvector factor only when it is singular. By default the
         eigenvector factor ``V diag(sqrt(w))`` is always used.
+    check : bool
+        Check `M` (default). ``False``: `M` is a float array its caller has checked already (the
+        samplers of this package, once per call; as SciPy's ``check_finite=False``).
 
     Returns
     -------
@@ -69,12 +58,8 @@ def psd_factor(M: ArrayLike, cholesky_first: bool = False) -> np.ndarray:
     >>> bool(np.allclose(F @ F.T, M))
     True
     """
-    M = check_covariance(_float_array(M, "M"), "M")
-    return _psd_factor(M, bool(cholesky_first))
-
-
-def _psd_factor(M: np.ndarray, cholesky_first: bool = False) -> np.ndarray:
-    """:func:`psd_factor` without checks."""
+    if check:
+        M = check_covariance(_float_array(M, "M"), "M")
     if cholesky_first:
         try:
             return np.linalg.cholesky(M)
@@ -119,8 +104,8 @@ def gaussian(
     mean = np.zeros(m) if mean is None else as_vector(_float_array(mean, "mean"), "mean")
     if mean.size != m:
         raise ValueError(f"Incompatible dimensions of mean and cov: mean has length {mean.size}, cov is {cov.shape}")
-    size = _sample_shape(size)
-    return mean + rng.standard_normal((*size, m)) @ _psd_factor(cov).T
+    size = sample_shape(size)
+    return mean + rng.standard_normal((*size, m)) @ psd_factor(cov, check=False).T
 
 
 def uniform_box(
@@ -159,7 +144,7 @@ def uniform_box(
         raise ValueError(f"low and high must have the same length; got {low.size} and {high.size}")
     if np.any(high < low):
         raise ValueError(f"high must be >= low in every component; got low={low}, high={high}")
-    size = _sample_shape(size)
+    size = sample_shape(size)
     return low + (high - low) * rng.random((*size, low.size))
 
 
@@ -201,8 +186,8 @@ def uniform_ellipsoid(
     c = as_vector(_float_array(center, "center"), "center")
     if c.size != m:
         raise ValueError(f"Incompatible dimensions of center and shape: center has length {c.size}, shape is {P.shape}")
-    size = _sample_shape(size)
+    size = sample_shape(size)
     direction = rng.standard_normal((*size, m))
     direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
     radius = rng.random((*size, 1)) ** (1.0 / m)
-    return c + (radius * direction) @ _psd_factor(P).T
+    return c + (radius * direction) @ psd_factor(P, check=False).T

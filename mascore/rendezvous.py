@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike
 from . import centralized_team_filter, team_model, team_observability
 from . import distributed_kf as dkf
 from ._progress import progress_bar
+from ._sensing_kernels import masked_measurement
 from ._systems import full_state_only, output_matrices
 from ._team_kernels import check_team_laplacian
 from ._validation import (
@@ -45,8 +46,8 @@ from ._validation import require_finite as _finite
 from .agents import LTIAgent, check_sampling_time
 from .graphs import laplacian as graph_laplacian
 from .graphs import require_connected
-from .noise import _psd_factor
-from .sensing import _measure, sensing_mask, team_noise_covariance
+from .noise import psd_factor
+from .sensing import sensing_mask, team_noise_covariance
 
 __all__ = [
     "MODES",
@@ -218,7 +219,7 @@ def propagate_team(
         np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
     except ValueError:
         raise ValueError(f"the leading axes of states {x.shape} and inputs {u.shape} do not broadcast") from None
-    w = rng.standard_normal(x.shape) @ _psd_factor(Q, cholesky_first=True).T
+    w = rng.standard_normal(x.shape) @ psd_factor(Q, cholesky_first=True, check=False).T
     return x @ A.T + u @ B.T + w
 
 
@@ -847,7 +848,7 @@ def simulate_rendezvous(
         """What the agents measure of the states: all of them, or the outputs ``C_j x_j``."""
         return x if Cs is None else np.einsum("...jm,jpm->...jp", x, Cs)
 
-    Z, _ = _measure(meas_rng, observe(x), topology(0)[1], R_team)
+    Z, _ = masked_measurement(meas_rng, observe(x), topology(0)[1], R_team)
     for k in progress_bar(range(n_steps), enabled=progress, desc=f"rendezvous ({mode})", leave=False):
         Lap = topology(k)[2]
         if mode == "true":
@@ -863,7 +864,7 @@ def simulate_rendezvous(
             team.predict(Lap if switching else None)
         x = x_new
         _, S_next, _ = topology(k + 1)
-        Z, _ = _measure(meas_rng, observe(x), S_next, R_team)
+        Z, _ = masked_measurement(meas_rng, observe(x), S_next, R_team)
         if filt:
             team.update(Z, S_next)
         if central_filter is not None:

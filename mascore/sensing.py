@@ -31,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._sensing_kernels import masked_measurement, team_noise
 from ._systems import output_matrices
 from ._validation import (
     check_adjacency_stack,
@@ -39,11 +40,11 @@ from ._validation import (
     check_generator,
     check_mask_values,
     check_positive_int,
+    sample_shape,
 )
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
 from .exceptions import IsolatedAgentError
-from .noise import _psd_factor, _sample_shape
 
 __all__ = [
     "sensing_mask",
@@ -276,17 +277,9 @@ def measurement_noise(
     (5, 3, 3, 2)
     """
     rng = check_generator(rng)
-    shape = _sample_shape(shape, "shape")
+    shape = sample_shape(shape, "shape")
     R_team = team_noise_covariance(R, n_agents, m)
-    return _measurement_noise(rng, R_team, shape, n_agents, m)
-
-
-def _measurement_noise(rng: np.random.Generator, R_team: np.ndarray, shape: tuple, n_agents: int, m: int) -> np.ndarray:
-    """:func:`measurement_noise` without checks (`R_team` the full ``(m N, m N)`` covariance)."""
-    root = _psd_factor(R_team, cholesky_first=True)
-    std = rng.standard_normal((*shape, n_agents, n_agents * m))
-    nu = std @ root.T
-    return nu.reshape(*shape, n_agents, n_agents, m)
+    return team_noise(rng, R_team, shape, n_agents, m)
 
 
 def measure(
@@ -353,22 +346,10 @@ def measure(
             f"the leading (batch) axes of states {x.shape} and adjacency {S.shape} do not broadcast"
         ) from None
     if C is None:
-        return _measure(rng, x, S, team_noise_covariance(R, n_agents, m))
+        return masked_measurement(rng, x, S, team_noise_covariance(R, n_agents, m))
     Cs = output_matrices(C, m, n_agents)
     y = np.einsum("...jm,jpm->...jp", x, Cs)  # every agent's outputs C_j x_j
-    return _measure(rng, y, S, team_noise_covariance(R, n_agents, Cs.shape[1]))
-
-
-def _measure(
-    rng: np.random.Generator, x: np.ndarray, S: np.ndarray, R_team: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`measure` without checks: `S` the sensing mask, `R_team` the full ``(m N, m N)`` covariance."""
-    n_agents, m = x.shape[-2:]
-    batch = np.broadcast_shapes(x.shape[:-2], S.shape[:-2])
-    nu = _measurement_noise(rng, R_team, batch, n_agents, m)
-    Z = np.broadcast_to(x[..., None, :, :], (*batch, n_agents, n_agents, m)) + nu
-    S = np.broadcast_to(S, (*batch, n_agents, n_agents)).copy()
-    return np.where(S[..., None], Z, 0.0), S
+    return masked_measurement(rng, y, S, team_noise_covariance(R, n_agents, Cs.shape[1]))
 
 
 def stacked_measurement(Z: ArrayLike, mask: ArrayLike, agent: int) -> np.ndarray:

@@ -321,13 +321,16 @@ class SensorNetworkModel(Frozen):
             raise ValueError(f"i must be an agent index below N = {self.n_agents}; got {i}")
         return require_finite(z, "z")[..., self._slices[i]]
 
-    def information_vectors(self, z: ArrayLike) -> np.ndarray:
+    def information_vectors(self, z: ArrayLike, *, check: bool = True) -> np.ndarray:
         """Each agent's information vector ``H_i^T R_i^{-1} z_i`` (zero for an agent that does not sense).
 
         Parameters
         ----------
         z : (..., sum q_i) array_like
             Stacked measurement(s), finite.
+        check : bool
+            Check `z` (default). ``False``: `z` is a float array of the right shape its caller has
+            checked already (the filters' steps).
 
         Returns
         -------
@@ -344,10 +347,8 @@ class SensorNetworkModel(Frozen):
         array([[0.25, 0.5 ],
                [3.  , 0.  ]])
         """
-        z = require_finite(self._check_z(z), "z")
-        return self._information_vectors(z)
-
-    def _information_vectors(self, z: np.ndarray) -> np.ndarray:
+        if check:
+            z = require_finite(self._check_z(z), "z")
         y = z @ self._Rinv  # (..., sum q): R^{-1} z, block by block
         # agent i: sum over its rows r of y_r H_r  ->  owner (N, sum q) @ (y_r H_r) (..., sum q, n)
         return self._owner @ (y[..., :, None] * self.H_stacked)

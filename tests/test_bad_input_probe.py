@@ -133,9 +133,9 @@ def test_set_membership_runs_name_their_own_arguments_when_too_large_or_mismatch
 
 
 def test_the_set_membership_forwarding_filter_refuses_a_non_finite_centre():
-    from mascore import fusion
+    from mascore import fusion_forwarding
 
     model = sensor_network.SensorNetworkModel(np.eye(1), 0.01 * np.eye(1), [np.eye(1)] * 2, [np.eye(1)] * 2,
                                               graphs.path_graph(2))
     with pytest.raises(ValueError, match=r"\bx contains NaN or infinite"):
-        fusion.SetMembershipForwardingFilter(model).predict(np.array([[np.nan], [1.0]]), np.ones((2, 1, 1)))
+        fusion_forwarding.SetMembershipForwardingFilter(model).predict(np.array([[np.nan], [1.0]]), np.ones((2, 1, 1)))

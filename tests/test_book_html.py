@@ -209,14 +209,40 @@ def layout_problems(m: dict) -> list[str]:
     return out
 
 
+#: Chromium processes measuring pages at once. Each spends most of its wall time waiting (start-up, the
+#: page's scripts against the virtual clock), about a third of it on a core: four keep two cores busy.
+BROWSERS = 4
+
+
+def _measure_or_error(path: Path, browser: str) -> dict:
+    """:func:`mascore._booktools.measure_page`, a failure returned as ``{"error": ...}`` for its page's test."""
+    from mascore._booktools import measure_page
+
+    try:
+        return measure_page(path, browser=browser)
+    except Exception as exc:  # the page's own test fails with it; the other pages are still measured
+        return {"error": f"{type(exc).__name__}: {exc}"}
+
+
+@pytest.fixture(scope="session")
+def measured() -> dict[Path, dict]:
+    """Every reading page measured once per session: one Chromium launch per page, `BROWSERS` at a time.
+
+    `make test` runs this file in one process (no xdist workers, which would each measure every page).
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    browser = _browser()
+    with ThreadPoolExecutor(max_workers=BROWSERS) as pool:
+        return dict(zip(READ_PAGES, pool.map(lambda p: _measure_or_error(p, browser), READ_PAGES)))
+
+
 @pytest.mark.parametrize("path", READ_PAGES, ids=lambda p: p.relative_to(HTML).as_posix())
-def test_page_fits_its_column_at_1280px(path):
+def test_page_fits_its_column_at_1280px(path, measured):
     """No formula MathJax rejects, no display equation or table wider than the column, no NaN cell, no
     figure shrunk or blurred (2 image pixels per CSS pixel), at most about 4,000 visible words (headless
     Chromium)."""
-    from mascore._booktools import measure_page
-
-    problems = layout_problems(measure_page(path, browser=_browser()))
+    problems = layout_problems(measured[path])
     assert not problems, "\n".join(problems)
 
 

@@ -19,11 +19,11 @@ from mascore.estimation import Message, MethodSpec
 
 
 class OwnOnlyFilter:
-    def __init__(self, model):
-        self.model = model
+    def __init__(self, model, inflation=1.0):
+        self.model, self.inflation = model, inflation
 
     def predict(self, x, P):
-        F, Q = self.model.F, self.model.Q
+        F, Q = self.model.F, self.inflation * self.model.Q
         return x @ F.T, F @ P @ F.T + Q
 
     def update(self, x, P, z):
@@ -45,15 +45,21 @@ class OwnOnlyFilter:
         return {"x": x[i], "P": P[i], "z": self.model.agent_measurement(z, i)}, ()
 
     def agent_step(self, i, own, messages):
-        F, Q, m = self.model.F, self.model.Q, self.model
+        F, Q, m = self.model.F, self.inflation * self.model.Q, self.model
         return kalman.update(F @ own["x"], F @ own["P"] @ F.T + Q, own["z"], m.H[i], m.R[i])
 
     def messages(self, i=0):
         return ()
 
 
-METHODS = (MethodSpec("toy-own", ("target",), OwnOnlyFilter, lambda n, q, d, N: (0.0, 12.0 * n**3),
-                      {"target": ("O(n^3)", "O(n^2)")}, lambda n, q, d, N: float(n**2 + n), position=99),)
+def _spec(name, inflation, position, role):
+    return MethodSpec(name, ("target",), lambda model: OwnOnlyFilter(model, inflation),
+                      lambda n, q, d, N: (0.0, 12.0 * n**3), {"target": ("O(n^3)", "O(n^2)")},
+                      lambda n, q, d, N: float(n**2 + n), position=position, role=role, family="toy-own",
+                      setting=inflation, knob="process noise inflation")
+
+
+METHODS = (_spec("toy-own", 1.0, 99, "recipe"), _spec("toy-own-q2", 2.0, 99.5, "knob"))
 '''
 
 
@@ -90,6 +96,16 @@ def test_a_new_filter_is_one_class_and_one_spec_in_one_module(toy_module):
     assert agent_cost.max_deviation(step) < 1e-12
     cost = agent_cost.agent_costs((4,), ("target",), (toy_module,), repeats=1, min_time=0.0)
     assert cost["method"].tolist() == [toy_module] and cost["work"].iloc[0] == "O(n^3)"
+    # its knob (a second spec, role "knob"): swept at N = 8 beside the recipe, a row of the knob table,
+    # neither in the headline nor in the cost table
+    knob = "toy-own-q2"
+    assert knob in compare.FUSION_KNOB_METHODS and knob not in compare.target_methods("target")
+    assert {c["n_agents"] for c in target_cells if c["method"] == knob} == {8}
+    assert not any(c["method"] == knob for c in compare.grid_cells("quick") if c["task"] == "localization")
+    [row] = [k for k in compare.KNOBS if any(m == knob for _, _, m in k.settings)]
+    assert row.name == "toy-own: process noise inflation" and row.task == "target" and row.recipe == ("1",)
+    assert row.settings == (("1", "target", toy_module), ("2", "target", knob))
+    assert knob in compare.knob_variants() and knob not in agent_cost.AGENT_METHODS["target"]
 
 
 TOY_TEAM = '''
@@ -180,6 +196,7 @@ def test_the_toy_team_method_is_gone_with_its_module():
 
 def test_the_toy_is_gone_with_its_module():
     assert "toy-own" not in compare.target_methods()
+    assert "toy-own-q2" not in compare.FUSION_KNOB_METHODS and "toy-own-q2" not in compare.knob_variants()
 
 
 @pytest.mark.parametrize("spec", estimation.method_specs("target"), ids=lambda s: s.name)

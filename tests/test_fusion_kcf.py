@@ -1,8 +1,8 @@
 """Olfati-Saber's Kalman-consensus filter and the set-membership filter on forwarded measurements.
 
-The KCF (:class:`mascore.fusion.KalmanConsensusNetworkFilter`) against the statements of its paper
+The KCF (:class:`mascore.fusion_forwarding.KalmanConsensusNetworkFilter`) against the statements of its paper
 (Olfati-Saber 2007, Algorithm 1 and Theorem 2); the set-membership filter
-(:class:`mascore.fusion.SetMembershipForwardingFilter`) against the public set-membership steps
+(:class:`mascore.fusion_forwarding.SetMembershipForwardingFilter`) against the public set-membership steps
 it reuses (a sibling computation) and the guarantee of a set-membership filter (the true state
 stays in the set while every noise stays in its bound).
 """
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from mascore import compare, ellipsoids, fusion, graphs, sensor_network
+from mascore import compare, ellipsoids, fusion, fusion_forwarding, graphs, sensor_network
 from mascore.set_membership import SetMembershipModel
 
 DT = 0.5
@@ -52,11 +52,11 @@ def test_kcf_with_zero_gain_is_the_local_filter_on_neighbour_measurements_bit_fo
     """
     model = _model()
     _, z = model.simulate(X0, P0, 30, rng=4, n_runs=7)
-    x_kcf, P_kcf = fusion.KalmanConsensusNetworkFilter(model, eps=0.0).run(X0, P0, z)
+    x_kcf, P_kcf = fusion_forwarding.KalmanConsensusNetworkFilter(model, eps=0.0).run(X0, P0, z)
     x_fwd, P_fwd = fusion.MeasurementForwardingFilter(model).run(X0, P0, z)
     np.testing.assert_array_equal(x_kcf, x_fwd)
     np.testing.assert_array_equal(P_kcf, P_fwd)
-    x_eps, _ = fusion.KalmanConsensusNetworkFilter(model, eps=0.3).run(X0, P0, z)
+    x_eps, _ = fusion_forwarding.KalmanConsensusNetworkFilter(model, eps=0.3).run(X0, P0, z)
     assert np.abs(x_eps - x_fwd).max() > 1e-3  # the consensus term is not idle
 
 
@@ -72,7 +72,7 @@ def test_kcf_noise_free_errors_vanish_where_forwarding_alone_cannot(eps):
     n = model.n_states
     errors = {}
     for gain in (0.0, eps):
-        xs, _ = fusion.KalmanConsensusNetworkFilter(model, gain).run(starts, np.eye(n), z)
+        xs, _ = fusion_forwarding.KalmanConsensusNetworkFilter(model, gain).run(starts, np.eye(n), z)
         errors[gain] = np.linalg.norm(xs - x[1:, None], axis=-1).max(axis=-1)  # worst agent, per step
     assert errors[eps][-1] < 1e-6 * errors[eps][0]
     assert errors[0.0][-1] > 0.1 * errors[0.0][0]  # forwarding's unobserved directions keep their error
@@ -88,7 +88,7 @@ def test_kcf_consensus_term_shrinks_the_disagreement_between_agents():
     _, z, starts = _noise_free(model, 200, seed=2)
     spread = []
     for eps in (0.0, 0.1, 0.5):
-        xs, _ = fusion.KalmanConsensusNetworkFilter(model, eps).run(starts, np.eye(4), z)
+        xs, _ = fusion_forwarding.KalmanConsensusNetworkFilter(model, eps).run(starts, np.eye(4), z)
         spread.append(float(((xs - xs.mean(axis=1, keepdims=True)) ** 2).sum()))
     assert spread[0] > spread[1] > spread[2]
     assert spread[2] < 0.5 * spread[0]
@@ -98,7 +98,7 @@ def test_kcf_consensus_term_shrinks_the_disagreement_between_agents():
     _, z = model.simulate(np.zeros(n), np.eye(n), 120, rng=3, n_runs=10)
     steady = {}
     for eps in (0.0, 0.5):
-        xs, _ = fusion.KalmanConsensusNetworkFilter(model, eps).run(np.zeros(n), np.eye(n), z)
+        xs, _ = fusion_forwarding.KalmanConsensusNetworkFilter(model, eps).run(np.zeros(n), np.eye(n), z)
         steady[eps] = float(((xs[60:] - xs[60:].mean(axis=-2, keepdims=True)) ** 2).sum(axis=(-2, -1)).mean())
     assert steady[0.5] < 0.01 * steady[0.0]
 
@@ -111,7 +111,7 @@ def test_kcf_step_is_algorithm_1_written_out():
     P = np.stack([P0 * (1 + 0.2 * i) for i in range(5)])
     z = rng.standard_normal(model.n_measurements)
     eps = 0.4
-    x_new, M_new = fusion.KalmanConsensusNetworkFilter(model, eps).update(xbar, P, z)
+    x_new, M_new = fusion_forwarding.KalmanConsensusNetworkFilter(model, eps).update(xbar, P, z)
     A = graphs.ring_graph(5)
     for i in range(5):
         J = [j for j in range(5) if j == i or A[i, j]]
@@ -127,9 +127,9 @@ def test_kcf_step_is_algorithm_1_written_out():
 @pytest.mark.parametrize("eps", [-0.1, float("nan"), float("inf")])
 def test_kcf_refuses_a_bad_gain(eps):
     with pytest.raises(ValueError, match="eps"):
-        fusion.KalmanConsensusNetworkFilter(_model(), eps)
+        fusion_forwarding.KalmanConsensusNetworkFilter(_model(), eps)
     with pytest.raises(TypeError, match="eps"):
-        fusion.KalmanConsensusNetworkFilter(_model(), "0.1")
+        fusion_forwarding.KalmanConsensusNetworkFilter(_model(), "0.1")
 
 
 # --------------------------------------------------------------------------------------------
@@ -142,7 +142,7 @@ def test_set_update_is_the_set_membership_correction_of_each_agent():
     Agent i: C = its neighbourhood's stacked H_j, the bound chi2_p(c) blockdiag(R_j) of its p stacked numbers.
     """
     model = _model()
-    smf = fusion.SetMembershipForwardingFilter(model, confidence=0.99)
+    smf = fusion_forwarding.SetMembershipForwardingFilter(model, confidence=0.99)
     rng = np.random.default_rng(3)
     x = X0 + rng.standard_normal((4, 5, 2))                                   # 4 runs
     E = np.stack([smf.initial_shape(P0 * (1 + 0.3 * i)) for i in range(5)])   # one shape per agent, shared
@@ -173,7 +173,7 @@ def test_set_membership_forwarding_holds_the_true_state_under_noise_within_its_b
     """
     model = _model()
     c = 0.9
-    smf = fusion.SetMembershipForwardingFilter(model, confidence=c)
+    smf = fusion_forwarding.SetMembershipForwardingFilter(model, confidence=c)
     rng = np.random.default_rng(11)
     K, runs = 40, 20
     s_n = chi2.ppf(c, 2)
@@ -214,10 +214,10 @@ def test_simulate_target_scores_the_set_by_its_containment():
 @pytest.mark.parametrize("confidence", [0.0, 1.0, 1.5, float("nan")])
 def test_set_membership_forwarding_refuses_a_bad_confidence(confidence):
     with pytest.raises(ValueError, match="confidence"):
-        fusion.SetMembershipForwardingFilter(_model(), confidence)
+        fusion_forwarding.SetMembershipForwardingFilter(_model(), confidence)
 
 
 def test_set_membership_forwarding_needs_a_process_noise_bound():
     model = sensor_network.SensorNetworkModel(F, np.zeros((2, 2)), H5, R5, graphs.ring_graph(5))
     with pytest.raises(ValueError, match="Q must be positive definite"):
-        fusion.SetMembershipForwardingFilter(model)
+        fusion_forwarding.SetMembershipForwardingFilter(model)

@@ -171,3 +171,150 @@ def test_a_lost_link_is_an_absent_edge_with_the_weights_renormalized_over_what_a
     degree = (G[k] > 0).sum(1)
     i, j = np.argwhere(G[k] > 0)[0]
     assert W[i, j] == pytest.approx(1 / (1 + max(degree[i], degree[j])))       # Xiao, Boyd and Lall's rule
+
+
+def test_lossy_graphs_per_direction_independent_nested_per_run_and_at_the_rate():
+    """Each message j -> i is lost alone with probability p: a binomial count, both directions lost together p^2."""
+    A = graphs.ring_graph(8)
+    K, R = 200, 6
+    D1 = fusion_links.lossy_graphs(A, 0.1, K, np.random.default_rng(3), per_direction=True, n_runs=R)
+    D3 = fusion_links.lossy_graphs(A, 0.3, K, np.random.default_rng(3), per_direction=True, n_runs=R)
+    assert D3.shape == (K, R, 8, 8) and not (D3 > A).any()       # only the graph's links, never a new one
+    assert not ((D3 > 0) & (D1 == 0)).any()                      # nested in p
+    messages = K * R * 16                                        # directed link-steps of the runs
+    for p, D in ((0.1, D1), (0.3, D3)):
+        lost = (A > 0) & (D == 0)
+        assert abs(lost.sum() - p * messages) < 4 * np.sqrt(messages * p * (1 - p))     # binomial, 4 sigma
+        both = (lost & np.swapaxes(lost, -1, -2)).sum() / 2                             # i->j and j->i lost
+        pairs = messages / 2
+        assert abs(both - p * p * pairs) < 4 * np.sqrt(pairs * p * p * (1 - p * p))    # independent directions
+    assert not (D3 == np.swapaxes(D3, -1, -2)).all()             # not symmetric
+    assert not (D3[:, 0] == D3[:, 1]).all()                      # one pattern per run
+    again = fusion_links.lossy_graphs(A, 0.3, K, np.random.default_rng(3), per_direction=True, n_runs=R)
+    assert again.tobytes() == D3.tobytes()
+    assert fusion_links.lossy_graphs(A, 0.0, 5, 0, per_direction=True, n_runs=2).tobytes() \
+        == np.broadcast_to(A, (5, 2, 8, 8)).tobytes()
+
+
+def test_delivered_weights_keep_rows_convex_and_give_the_lost_weight_to_the_receiver():
+    model = compare.target_model(8)
+    W = fusion.ConsensusOnInformationFilter(model, 1).round_weights
+    D = fusion_links.lossy_graphs(model.adjacency, 0.5, 3, 1, per_direction=True, n_runs=4)
+    Wd = fusion_links.delivered_weights(W, D)
+    assert Wd.shape == (3, 4, 8, 8) and np.allclose(Wd.sum(-1), 1.0) and (Wd >= 0).all()
+    lost = (model.adjacency > 0) & (D == 0)
+    assert lost.any() and (Wd[lost] == 0).all()
+    kept = (D > 0)
+    assert (Wd[kept] == np.broadcast_to(W, D.shape)[kept]).all()
+    np.testing.assert_allclose(np.diagonal(Wd, axis1=-2, axis2=-1) - np.diag(W),
+                               np.where(lost, W, 0.0).sum(-1))   # the lost weight, on the receiver's own pair
+    np.testing.assert_allclose(fusion_links.delivered_weights(W, model.adjacency), W, rtol=0, atol=1e-15)
+
+
+def test_per_direction_loss_zero_is_ideal_links_and_the_kernels_are_the_filters():
+    """p = 0: the cells bit for bit; every message delivered: the masked kernels give the filters' own runs."""
+    for method in ("forwarding", "ci-L1", "icf-L1"):
+        plain = compare.simulate_target(method, 8, 3, runs=10)
+        zero = compare.simulate_target(method, 8, 3, runs=10, loss=0.0, loss_model="direction")
+        assert all(plain[k].tobytes() == zero[k].tobytes() for k in ("rmse_own", "nees_own"))
+    model = compare.target_model(8)
+    _, z = model.simulate(np.zeros(4), np.eye(4), 60, rng=2, n_runs=5)
+    every = np.broadcast_to(model.adjacency, (60, 5, 8, 8))
+    xr, Pr = fusion.MeasurementForwardingFilter(model).run(np.zeros(4), np.eye(4), z)
+    x, P = fusion_links.track_forwarding(model, np.zeros(4), np.eye(4), z, every)
+    np.testing.assert_allclose(x, xr, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(P, np.broadcast_to(Pr[:, None], P.shape), rtol=1e-10, atol=1e-14)
+    for filt in (fusion.ConsensusOnInformationFilter(model, 1), fusion.InformationConsensusFilter(model, 1)):
+        for latency in (0, 1):
+            xr, Pr, _ = fusion_links.track_messages([filt] * 60, np.zeros(4), np.eye(4), z, latency=latency)
+            x, P, _ = fusion_links.track_messages([filt] * 60, np.zeros(4), np.eye(4), z, latency=latency,
+                                                  delivered=every)
+            np.testing.assert_allclose(x, xr, rtol=1e-10, atol=1e-12)
+            np.testing.assert_allclose(P, np.broadcast_to(Pr if Pr.ndim == P.ndim else Pr[:, None], P.shape),
+                                       rtol=1e-10, atol=1e-14)
+
+
+def test_track_forwarding_on_symmetric_losses_is_forwarding_on_the_step_graphs():
+    """Two computations: the masked kernel on a symmetric pattern, and the method's own filter of each step's graph."""
+    s = compare.SETTINGS
+    model = compare.target_model(8)
+    _, z = model.simulate(np.zeros(4), s.p0 * np.eye(4), 80, np.random.default_rng(6), n_runs=4)
+    G = fusion_links.lossy_graphs(model.adjacency, 0.3, 80, 8)
+    for latency in (0, 1):
+        x, P, _, _ = _filter_links("forwarding", model, "target", G, z, s.p0 * np.eye(4), latency, None)
+        xm, Pm = fusion_links.track_forwarding(model, np.zeros(4), s.p0 * np.eye(4), z, G, latency=latency)
+        np.testing.assert_allclose(xm, x, rtol=1e-9, atol=1e-10)
+        np.testing.assert_allclose(Pm, np.broadcast_to(P if P.ndim == Pm.ndim else P[:, None], Pm.shape),
+                                   rtol=1e-9, atol=1e-12)
+
+
+def test_forwarding_under_one_way_loss_stays_consistent():
+    """A Kalman filter on the measurements that arrived: its ANEES inside the chi-square bounds of its runs."""
+    m = compare.simulate_target("forwarding", 8, 11, runs=100, loss=0.3, loss_model="direction")
+    lo, hi = anees_bounds(100, NEES_DIMENSION["target"])
+    assert lo <= m["nees_own"].mean() <= hi
+    both = compare.simulate_target("forwarding", 8, 11, runs=100, loss=0.3)
+    assert not np.array_equal(m["rmse_own"], both["rmse_own"])   # another loss pattern, the same data
+
+
+def test_bad_per_direction_arguments_are_named():
+    with pytest.raises(ValueError, match="loss_model must be"):
+        compare.simulate_target("ci-L1", 8, 0, runs=2, loss=0.1, loss_model="both")
+    with pytest.raises(ValueError, match="loss_model='direction': method"):
+        compare.simulate_target("ci-L5", 8, 0, runs=2, loss=0.1, loss_model="direction")
+    with pytest.raises(ValueError, match="send_delta needs a fixed graph"):
+        compare.simulate_target("ci-L1", 8, 0, runs=2, loss=0.1, send_delta=1.0)   # both directions: not modelled
+    model = compare.target_model(8)
+    with pytest.raises(ValueError, match="delivered must be"):
+        fusion_links.track_messages([fusion.ConsensusOnInformationFilter(model, 1)], np.zeros(4), np.eye(4),
+                                    np.zeros((1, 8)), delivered=np.ones((2, 8, 8)))
+    with pytest.raises(ValueError, match="delivered must be"):
+        fusion_links.track_forwarding(model, np.zeros(4), np.eye(4), np.zeros((1, 8)), np.ones((1, 7, 7)))
+    with pytest.raises(ValueError, match="n_runs"):
+        fusion_links.lossy_graphs(graphs.ring_graph(4), 0.1, 3, 0, per_direction=True, n_runs=0)
+
+
+def test_link_claims_are_decided_on_blocks_they_were_not_written_from():
+    """A link claim names blocks 0-1 as written from; with blocks 2-3 in the table it reads those only."""
+    import dataclasses
+
+    few = dataclasses.replace(compare.SETTINGS, runs=4, n_steps=60, steady_from=20)
+    cells = [(study, m, p) for study, p in (("latency", 0.0), ("loss", 0.3))
+             for m in ("centralized", "forwarding", "ci-L1", "icf-L1")]   # the data of links-latency-costs-more
+    rows = []
+    for block in range(4):
+        for study, method, p in cells:
+            cell = _cell(study, method, dropout=p, block=block)
+            rows += [{**r, **cell, "cell": str(sorted(cell.items()))} for r in grid.run_cell(cell, settings=few)]
+    table = pd.DataFrame(rows)
+    phi = {"Phi = 1": 1.0, "Phi = 2": 1.0}
+    key = "compare/links-latency-costs-more"
+    held = {c.id: c for c in compare.compare_claims(table, phi=phi)}[key]
+    assert held.written_from == "seed blocks 0-1" and held.decided_on == "seed blocks 2-3 (held out)"
+    written = {c.id: c for c in compare.compare_claims(table[table["block"] < 2], phi=phi)}[key]
+    assert written.decided_on.startswith("seed blocks 0-1")            # no held-out block: it says so
+    assert written.value != held.value                                 # and the held-out runs were what decided it
+    only_held = {c.id: c for c in compare.compare_claims(table[table["block"] >= 2], phi=phi)}[key]
+    assert only_held.value == held.value                               # blocks 0-1 took no part
+
+
+def test_send_on_delta_over_one_way_loss():
+    """Every message delivered: the copies of each receiver are the sender's last send, so the plain send-on-delta
+    numbers; with loss the sends are counted as sent and the receivers fuse what they hold."""
+    model = compare.target_model(8)
+    _, z = model.simulate(np.zeros(4), np.eye(4), 80, rng=2, n_runs=5)
+    every = np.broadcast_to(model.adjacency, (80, 5, 8, 8))
+    for filt in (fusion.ConsensusOnInformationFilter(model, 1), fusion.InformationConsensusFilter(model, 1)):
+        xr, Pr, sr = fusion_links.track_messages([filt] * 80, np.zeros(4), np.eye(4), z, send_delta=0.7)
+        x, P, s = fusion_links.track_messages([filt] * 80, np.zeros(4), np.eye(4), z, send_delta=0.7, delivered=every)
+        assert (s == sr).all() and 0 < s.mean() < 1
+        np.testing.assert_allclose(x, xr, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(P, Pr, rtol=1e-12, atol=1e-14)
+    lossy = compare.simulate_target("ci-L1", 8, 4, runs=20, loss=0.3, loss_model="direction", send_delta=0.5)
+    clean = compare.simulate_target("ci-L1", 8, 4, runs=20, send_delta=0.5)
+    assert (lossy["floats"] > 0).all() and (lossy["floats"] < compare.target_cost("ci-L1", 8, 2)[0]).all()
+    assert not np.array_equal(lossy["rmse_own"], clean["rmse_own"])
+    lo, hi = anees_bounds(20, NEES_DIMENSION["target"])
+    assert lossy["nees_own"].mean() < hi                  # CI fuses consistent (predicted) densities: never overconfident
+    with pytest.raises(ValueError, match="cannot be combined"):
+        compare.simulate_target("ci-L1", 8, 0, runs=2, loss=0.1, loss_model="direction", send_delta=0.5, latency=1)

@@ -16,12 +16,7 @@ from pathlib import Path
 PACKAGE = Path(__file__).parents[1] / "mascore"
 
 #: Private names still used across modules, to be folded into public ones (issue 28, item 5); none may be added.
-KNOWN_PRIVATE_USES = {
-    ("mascore.rendezvous", "mascore.noise._psd_factor"),
-    ("mascore.rendezvous", "mascore.sensing._measure"),
-    ("mascore.sensing", "mascore.noise._psd_factor"),
-    ("mascore.sensing", "mascore.noise._sample_shape"),
-}
+KNOWN_PRIVATE_USES: set[tuple[str, str]] = set()
 
 
 def _module_name(path: Path) -> str:

@@ -62,7 +62,8 @@ methods that do not apply are listed with the reason
 
 **Links of the target and localization tasks** (:data:`LINK_STUDIES`, :mod:`mascore.fusion_links`): packet
 loss per link and step (a lost message is not received; each filter fuses what arrived, with its weights on
-the links that delivered), one-step latency (:data:`LATENCY_METHODS`) and send-on-delta messages for CI and
+the links that delivered), loss per direction and run (:data:`DIRECTION_LOSS_METHODS`: a message lost alone,
+its weight on the receiver's own pair), one-step latency (:data:`LATENCY_METHODS`) and send-on-delta messages for CI and
 ICF at one consensus step (:data:`SEND_ON_DELTA_METHODS`, floats counted as sent), at N = 8 on the ring.
 
 **Robustness axes**: link drop-outs (each link's measurement and message lost with
@@ -74,7 +75,8 @@ covariance in the filters (``q_scale`` times the true one).
 **Statistics** (``mascore.compare.stats``): accuracy is the ratio of RMS errors over a cell's
 runs to the centralized filter's on the same runs, with a 95 % paired bootstrap interval;
 consistency is the ANEES with the two-sided 95 % chi-square bounds of a consistent filter. The
-claims (:func:`compare_claims`, one function each in :data:`mascore.compare.verdicts.CLAIMS`) were
+claims (:func:`compare_claims`, one function each in :data:`mascore.compare.verdicts.CLAIMS` and
+:data:`~mascore.compare.verdicts.LINK_CLAIMS`) were
 written from seed blocks 0-1 and are decided on the held-out blocks 2-3 where the sweep has them,
 by intervals against bands: inside holds, outside fails, across an edge is undecided.
 
@@ -96,6 +98,7 @@ __all__ = [
     "TARGET_METHODS",
     "target_methods",
     "TARGET_NOT_APPLICABLE",
+    "DIRECTION_LOSS_METHODS",
     "LATENCY_METHODS",
     "LATENCY_NOT_MODELLED",
     "LINK_STUDIES",
@@ -188,7 +191,8 @@ _NAMES = {
         'simulate_shared',
     ),
     'target': (
-        'LATENCY_METHODS', 'LATENCY_NOT_MODELLED', 'LINK_STUDIES', 'LOCALIZATION_NOT_APPLICABLE', 'LOSS_METHODS',
+        'DIRECTION_LOSS_METHODS', 'LATENCY_METHODS', 'LATENCY_NOT_MODELLED', 'LINK_STUDIES',
+        'LOCALIZATION_NOT_APPLICABLE', 'LOSS_METHODS',
         'SEND_ON_DELTA_METHODS', 'TARGET_METHODS', 'TARGET_NOT_APPLICABLE', '_localization_switching',
         'link_options', 'localization_model', 'localization_riccati', 'simulate_target', 'target_cost',
         'target_filter', 'target_methods', 'target_model'
@@ -203,7 +207,7 @@ _NAMES = {
         'position_only_kf_rmse', 'send_on_delta_table'
     ),
     'verdicts': (
-        'CLAIMS', 'HELD_OUT', 'WRITTEN_FROM', 'compare_claims', 'deciding_runs', 'differing_claims'
+        'CLAIMS', 'HELD_OUT', 'LINK_CLAIMS', 'WRITTEN_FROM', 'compare_claims', 'deciding_runs', 'differing_claims'
     ),
     'stats': (
         'BOOTSTRAP_RESAMPLES', 'BOOTSTRAP_SEED', 'Interval', 'NEES_DIMENSION', 'anees_bounds', 'mean_interval',

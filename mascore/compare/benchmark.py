@@ -34,16 +34,6 @@ SEED_AXES = ("task", "n_agents", "noise", "block")
 #: or the position only, ``z_ij = [I 0] x_j + nu_ij`` (a cell without a ``sensing`` coordinate is ``"full"``;
 #: ``"position"`` joins the seed axes, so the cells of before keep their seeds).
 SENSINGS = ("full", "position")
-#: The common-target and localization filters' knob variants (their specs in :mod:`mascore.fusion`): the
-#: consensus steps L in {1, 2, 5} and L = the graph's diameter, and HCMCI's novelty weight omega = N against
-#: the consistency-safe omega of its docstring (``omega max [W^L]_ij <= 1``). Swept at N = 8 on the ring
-#: (2 seed blocks); the headline tables keep the recipes (L = 1 and 5, omega = N). Olfati-Saber's KCF gain
-#: eps in {0.01, 0.1, 0.5} (0.1 the headline's; 0.5 = 1 / d_max on the ring, the largest that keeps its consensus
-#: step a convex combination for every covariance).
-FUSION_KNOB_METHODS = ("ci-L2", "ci-Ldiam", "hcmci-L2", "hcmci-Ldiam", "hcmci-safe-L1", "hcmci-safe-L5",
-                       "icf-L2", "icf-Ldiam", "kcf-eps0.01", "kcf-eps0.5")
-
-
 def _team_methods() -> tuple[str, ...]:
     shown = estimation.method_names("team", SHOWN)
     return shown + tuple(m for m in estimation.method_names("team") if m not in shown)
@@ -59,7 +49,11 @@ def _team_methods() -> tuple[str, ...]:
 #: :func:`vlahakis_profile`); ``SM_CONFIDENCE``, the set-membership filter's confidence level per method (None:
 #: ``settings.sm_confidence``; bounded noise: the guaranteed bound); ``SHARED_METHODS``, the shared task's at
 #: their recipe and Ren et al.'s untuned Q = 0; ``ALL_SHARED_METHODS``, with the knob's settings; ``REN_Q``,
-#: Ren et al.'s Q = Omega per method; ``KNOBS``, every knob swept within its recipe (:class:`Knob`).
+#: Ren et al.'s Q = Omega per method; ``FUSION_KNOB_METHODS``, the common-target and localization filters' knob
+#: settings (``role="knob"``, by name; e.g. the consensus steps L = 2 and the graph's diameter beside the recipes'
+#: L = 1 and 5, HCMCI's consistency-safe omega beside omega = N, the KCF's gain eps = 0.01 and 0.5 beside 0.1),
+#: swept at N = 8 on the ring (2 seed blocks) while the headline tables keep the recipes; ``KNOBS``, every knob
+#: swept within its recipe (:class:`Knob`).
 _FROM_SPECS = {
     "TEAM_METHODS": lambda: estimation.method_names("team", SHOWN),
     "CORE_METHODS": lambda: estimation.method_names("team", ("recipe",)),
@@ -73,6 +67,8 @@ _FROM_SPECS = {
     "SHARED_METHODS": lambda: estimation.method_names("shared", SHOWN),
     "ALL_SHARED_METHODS": lambda: estimation.method_names("shared"),
     "REN_Q": lambda: estimation.knob_settings("ren-kc", "shared"),
+    "FUSION_KNOB_METHODS": lambda: tuple(sorted({m for task in ("target", "localization")
+                                                 for m in estimation.method_names(task, ("knob",))})),
     "KNOBS": lambda: _knobs(),
 }
 
@@ -212,15 +208,37 @@ class Knob:
     recipe: tuple[str, ...]
 
 
-def _consensus_knob(kind: str, label: str, task: str) -> Knob:
-    settings = tuple((s, task, f"{kind}-L{s}") for s in ("1", "2", "5"))
-    return Knob(f"{label}: consensus steps L", task, (*settings, ("diameter", task, f"{kind}-Ldiam")), ("1", "5"))
+def _fusion_knob(name: str, family: str, task: str, default: str = "diameter") -> Knob:
+    """The knob of the fusion filter `family` in `task`, from its specs: its settings by value (None: `default`, last)."""
+    specs = sorted((s for s in estimation.method_specs(task) if s.family == family),
+                   key=lambda s: (s.setting is None, s.setting or 0.0))
+
+    def label(spec: estimation.MethodSpec) -> str:
+        return default if spec.setting is None else f"{spec.setting:g}"
+    return Knob(name, task, tuple((label(s), task, s.name) for s in specs),
+                tuple(label(s) for s in specs if s.role == "recipe"))
 
 
 def _knobs() -> tuple[Knob, ...]:
-    """Every knob swept within its recipe (the chapter's knob table, :func:`knob_table`), from the specs."""
+    """Every knob swept within its recipe (the chapter's knob table, :func:`knob_table`), from the specs.
+
+    A fusion filter's knob not named here (a new filter's) is listed under its family's name, with its
+    specs' :attr:`~mascore.estimation.MethodSpec.knob`.
+    """
     ren, phi = estimation.knob_settings("ren-kc", "shared"), estimation.knob_settings("vlahakis", "team")
     confidence = estimation.knob_settings("set-membership", "team")
+    fusion = (
+        *(_fusion_knob(f"{label}: consensus steps L", kind, task) for task in ("target", "localization")
+          for kind, label in (("ci", "CI"), ("icf", "ICF"), ("hcmci", "HCMCI"))),
+        *(Knob(f"HCMCI novelty weight omega (L = {L})", task, (("N", task, f"hcmci-L{L}"),
+                                                              *(("safe", task, m) for m in estimation.knob_settings(
+                                                                  f"hcmci-L{L}", task))), ("N",))
+          for task in ("target", "localization") for L in (1, 5)),
+        *(_fusion_knob("KCF consensus gain eps", "kcf", task) for task in ("target", "localization")),
+    )
+    named = {method for knob in fusion for _, _, method in knob.settings}
+    new = {(s.family, task): s.knob for task in ("target", "localization")
+           for s in estimation.method_specs(task) if s.role == "knob" and s.name not in named}
     return (
         Knob("Ren et al.'s Q = Omega", "shared", tuple((f"{q:g}", "shared", m) for m, q in sorted(
             ren.items(), key=lambda kv: kv[1])), ("0.1",)),
@@ -230,14 +248,8 @@ def _knobs() -> tuple[Knob, ...]:
             (f"{SETTINGS.sm_confidence if c is None else c:g}", "position", m)
             for m, c in sorted(confidence.items(), key=lambda kv: SETTINGS.sm_confidence if kv[1] is None else kv[1])),
             (f"{SETTINGS.sm_confidence:g}",)),
-        *(_consensus_knob(kind, label, task) for task in ("target", "localization")
-          for kind, label in (("ci", "CI"), ("icf", "ICF"), ("hcmci", "HCMCI"))),
-        *(Knob(f"HCMCI novelty weight omega (L = {L})", task, (("N", task, f"hcmci-L{L}"),
-                                                              ("safe", task, f"hcmci-safe-L{L}")), ("N",))
-          for task in ("target", "localization") for L in (1, 5)),
-        *(Knob("KCF consensus gain eps", task, (("0.01", task, "kcf-eps0.01"), ("0.1", task, "kcf"),
-                                                ("0.5", task, "kcf-eps0.5")), ("0.1",))
-          for task in ("target", "localization")),
+        *fusion,
+        *(_fusion_knob(f"{family}: {knob or 'setting'}", family, task, "default") for (family, task), knob in new.items()),
     )
 
 

@@ -8,9 +8,18 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import estimation
 from .._validation import check_budget, check_positive_int, check_steps
 from .benchmark import CORE_METHODS, SETTINGS, BenchmarkSettings, check_n_agents
 from .team import simulate_team
+
+
+def __getattr__(name: str):
+    """``NODE_ORDER``: the leading-order work and memory per node and step of each team method (its spec's)."""
+    if name == "NODE_ORDER":
+        return {s.name: s.order["team"] for s in estimation.method_specs("team")}
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 # --------------------------------------------------------------------------------------------
 # the cost of one node, one run, one thread
@@ -70,18 +79,6 @@ def node_cost(method: str, n_agents: int, n_steps: int = 20, repeats: int = 3, s
     return 1e6 * best / short.n_steps
 
 
-#: Leading-order work and memory per node and step of the team methods (state size n = 4, degree d, team N).
-NODE_ORDER = {
-    "centralized": ("O(N n^3) at the centre: N separate filters (the own state separates)", "O(N n^2)"),
-    "local": ("O(n^3)", "O(n^2)"),
-    "forwarding": ("O(d n^2 + n^3)", "O(n^2)"),
-    "song-mb": ("O(N^3 n^3): the team's covariance, on every agent", "O(N^2 n^2)"),
-    "song-eb": ("O(N^6 n^3): the joint covariance of all agents' team estimates (dense)", "O(N^4 n^2)"),
-    "vlahakis": ("O(d n)", "O(n)"),
-    "set-membership": ("O(n^3)", "O(n^2)"),
-}
-
-
 def node_costs(sizes: Sequence[int] = (4, 8, 16), methods: Sequence[str] = CORE_METHODS, n_steps: int = 20,
                settings: BenchmarkSettings = SETTINGS):
     """:func:`node_cost` over team sizes, with each method's log-log slope in N.
@@ -89,7 +86,7 @@ def node_costs(sizes: Sequence[int] = (4, 8, 16), methods: Sequence[str] = CORE_
     Parameters
     ----------
     sizes : sequence of int
-        Team sizes (song-eb is skipped beyond 32: its covariance needs 0.5 GB at 64).
+        Team sizes (a method is skipped beyond its spec's ``max_agents``: song-eb's covariance needs 0.5 GB at 64).
     methods : sequence of str
         Team methods.
     n_steps : int
@@ -101,7 +98,7 @@ def node_costs(sizes: Sequence[int] = (4, 8, 16), methods: Sequence[str] = CORE_
     -------
     pandas.DataFrame
         µs per step on the busiest node, one row per method, one column per N, ``slope`` (log-log
-        in N) and the analytic ``work`` and ``memory`` orders (:data:`NODE_ORDER`).
+        in N) and the analytic ``work`` and ``memory`` orders of its spec (:data:`NODE_ORDER`).
 
     See Also
     --------
@@ -126,11 +123,12 @@ def node_costs(sizes: Sequence[int] = (4, 8, 16), methods: Sequence[str] = CORE_
     check_budget("n_steps", n_steps, len(sizes), len(methods), what="timed steps (n_steps x sizes x methods)")
     rows = {}
     for m in methods:
-        costs = {n: node_cost(m, n, n_steps, settings=settings) for n in sizes if not (m == "song-eb" and n > 32)}
+        largest = estimation.agent_limits("team").get(m, (np.inf,))[0]  # its spec's (song-eb's memory)
+        costs = {n: node_cost(m, n, n_steps, settings=settings) for n in sizes if n <= largest}
         row = {f"N = {n}": costs.get(n, np.nan) for n in sizes}
         ns = sorted(costs)
         row["slope"] = float(np.polyfit(np.log(ns), np.log([costs[n] for n in ns]), 1)[0]) if len(ns) > 1 else np.nan
-        row["work"], row["memory"] = NODE_ORDER[m]
+        row["work"], row["memory"] = estimation.method_spec(m, "team").order["team"]
         rows[m] = row
     return pd.DataFrame.from_dict(rows, orient="index")
 

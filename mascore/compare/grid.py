@@ -14,7 +14,6 @@ from .. import estimation
 from ..settings import check_settings_type
 from ..sweep import Grid, cell_id, cell_seed
 from .benchmark import (
-    FUSION_KNOB_METHODS,
     REN_Q,
     SEED_AXES,
     SETTINGS,
@@ -30,6 +29,7 @@ from .shared import simulate_shared
 from .stats import NEES_DIMENSION, anees_bounds, mean_interval, rms_ratio
 from .tables import fitted_slopes
 from .target import (
+    DIRECTION_LOSS_METHODS,
     LATENCY_METHODS,
     LINK_STUDIES,
     SEND_ON_DELTA_METHODS,
@@ -76,8 +76,9 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
     N = 8, position sensing, the shared, target and localization tasks); and the links
     of the target and localization tasks at N = 8 on the ring (:data:`LINK_STUDIES`: ``loss``,
-    ``latency``, ``send-on-delta-<delta>``; a cell's ``dropout`` is the packet loss; quick: the
-    target task only, a few methods, 2 blocks; full: both tasks, 4 blocks). The full grid adds the
+    ``loss-direction``, ``latency``, ``send-on-delta-<delta>``, ``lossy-send-on-delta-0.5``; a cell's
+    ``dropout`` is the packet loss; quick: the target task only, a few methods; full: both tasks;
+    4 blocks in both, :func:`_link_studies`). The full grid adds the
     scale study of both fusion tasks: every method at N in :data:`SCALE_SIZES` on every graph of
     :data:`SCALE_GRAPHS`, each up to the team size its spec allows
     (:func:`mascore.estimation.agent_limits`, with the reason).
@@ -150,22 +151,20 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
                     "n_agents": [8], "block": blocks200}),
         ("shared", {**base, "task": ["shared"], "method": [m for m in REN_Q if m not in shared],
                     "n_agents": [16], "graph": ["geometric", "switching"], "block": blocks200}),
-        *((task, {**base, "task": [task], "method": list(FUSION_KNOB_METHODS), "n_agents": [8],
+        *((task, {**base, "task": [task], "method": sorted(estimation.method_names(task, ("knob",))), "n_agents": [8],
                   "block": blocks200}) for task in ("target", "localization")),
     ]
-    studies += _link_studies(quick, base, blocks, blocks200)
+    studies += _link_studies(quick, base, blocks200)
     if not quick:
         studies.append(("localization", {**base, "task": ["localization"], "method": list(target_methods("localization")),
                                          "graph": ["switching"], "n_agents": [16], "block": blocks200}))
         # scale: both fusion tasks at N = 8 to 64 on every graph (a method up to its spec's max_agents)
         studies += [(task, {**base, "task": [task], "method": list(target_methods(task)), "graph": list(SCALE_GRAPHS),
                             "n_agents": list(SCALE_SIZES), "block": blocks200}) for task in ("target", "localization")]
-    limits = {task: estimation.agent_limits(task) for task in ("target", "localization")}
+    limits = {task: estimation.agent_limits(task) for task in ("team", "target", "localization")}
     cells, seen = [], set()
     for study, axes in studies:
         for cell in Grid(axes).cells():
-            if cell["method"] == "song-eb" and cell["n_agents"] > 32:
-                continue  # its joint covariance is (2 N^2)^2 floats: 0.5 GB at N = 64
             if skip.get(cell["method"], set()) & {cell["graph"], cell["n_agents"]}:
                 continue
             if cell["n_agents"] > limits.get(cell["task"], {}).get(cell["method"], (np.inf,))[0]:
@@ -182,23 +181,34 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     return cells
 
 
-def _link_studies(quick: bool, base: dict, blocks: list, blocks200: list) -> list[tuple[str, dict]]:
+def _link_studies(quick: bool, base: dict, blocks200: list) -> list[tuple[str, dict]]:
     """The studies of the target and localization tasks over lossy, late and event-triggered links (N = 8, ring).
 
-    Quick: the target task only, loss 0.1 and 0.3 for the bound, forwarding, CI and ICF at one step;
-    latency without loss; send-on-delta at 0.5 and 1. Full: both tasks, every method of
-    :data:`LOSS_METHODS` at both losses, latency at loss 0, 0.1 and 0.3, and send-on-delta at 0.5, 1 and 2.
+    Quick: the target task only, loss 0.1 and 0.3 for the bound, forwarding, CI and ICF at one step
+    (a link lost in both directions at once, and each direction alone: ``loss-direction``); latency
+    without loss; send-on-delta at 0.5 and 1. Full: both tasks, every method of :data:`LOSS_METHODS`
+    at both losses (each direction alone: :data:`DIRECTION_LOSS_METHODS` but local), latency at loss
+    0, 0.1 and 0.3, and send-on-delta at 0.5, 1 and 2; send-on-delta at 0.5 with each message lost
+    alone (``lossy-send-on-delta-0.5``), quick: at loss 0.3 on blocks 0-1 (no claim reads it), full:
+    at 0.1 and 0.3.
+    Both grids run 4 blocks (but that one): the link claims are written from blocks 0-1 and decided
+    on 2-3 (:mod:`mascore.compare.verdicts`).
     """
     tasks = ["target"] if quick else ["target", "localization"]
-    ring8 = {**base, "n_agents": [8], "block": blocks if quick else blocks200}
+    ring8 = {**base, "n_agents": [8], "block": blocks200}
     deltas = [s for s in LINK_STUDIES if s.startswith("send-on-delta")][:2 if quick else 3]
     out = []
     for task in tasks:
         loss_methods = ["centralized", "forwarding", "ci-L1", "icf-L1"] if quick else list(target_methods("target"))
         out.append(("loss", {**ring8, "task": [task], "method": loss_methods, "dropout": [0.1, 0.3]}))
+        out.append(("loss-direction", {**ring8, "task": [task], "method": [m for m in DIRECTION_LOSS_METHODS
+                                                                           if m != "local"], "dropout": [0.1, 0.3]}))
         out.append(("latency", {**ring8, "task": [task], "method": list(LATENCY_METHODS),
                                 "dropout": [0.0] if quick else [0.0, 0.1, 0.3]}))
         out += [(study, {**ring8, "task": [task], "method": list(SEND_ON_DELTA_METHODS)}) for study in deltas]
+        out.append(("lossy-send-on-delta-0.5", {**ring8, "task": [task], "method": list(SEND_ON_DELTA_METHODS),
+                                                "dropout": [0.3] if quick else [0.1, 0.3],
+                                                "block": blocks200[:2] if quick else blocks200}))
     return out
 
 

@@ -370,8 +370,9 @@ def link_table(summary, links, task: str = "target"):
     pandas.DataFrame
         One row per method (table order); columns ``(quantity, links)``: ``RMSE ratio`` (to the
         centralized filter, which keeps ideal links) and ``NEES/dof``, for ideal links (the task's
-        own study), each packet loss, and one-step latency at each loss the summary holds; NaN where a
-        method has no model of the links (:data:`LATENCY_NOT_MODELLED`).
+        own study), each packet loss (``loss p``: a link lost in both directions; ``one-way loss p``:
+        each message lost alone, study ``loss-direction``), and one-step latency at each loss the
+        summary holds; NaN where a method has no model of the links (:data:`LATENCY_NOT_MODELLED`).
 
     Examples
     --------
@@ -392,19 +393,20 @@ def link_table(summary, links, task: str = "target"):
     s = s[(s["task"] == task) & (s["n_agents"] == 8) & (s["graph"] == "ring")]
     ideal = s[(s["study"] == task) & (s["dropout"] == 0.0)].assign(links="ideal")
     lossy = s[s["study"] == "loss"].assign(links=lambda d: [f"loss {p:g}" for p in d["dropout"]])
+    one_way = s[s["study"] == "loss-direction"].assign(links=lambda d: [f"one-way loss {p:g}" for p in d["dropout"]])
     late = s[s["study"] == "latency"].assign(links=lambda d: [f"late, loss {p:g}" for p in d["dropout"]])
     if lossy.empty and late.empty:
         raise ValueError(f"summary has no cell of the studies 'loss' or 'latency' ({tuple(LINK_STUDIES)[:2]}) for "
                          f"{task!r}: rerun the sweep (grid_cells)")
-    rows = pd.concat([ideal, lossy, late])
+    rows = pd.concat([ideal, lossy, one_way, late])
     order = [links for links in dict.fromkeys(rows["links"])]
-    methods = [m for m in target_methods(task) if m in set(lossy["method"]) | set(late["method"])]
+    methods = [m for m in target_methods(task) if m in set(lossy["method"]) | set(late["method"]) | set(one_way["method"])]
     out = {name: rows.pivot_table(index="method", columns="links", values=col).reindex(index=methods, columns=order)
            for name, col in (("RMSE ratio", "ratio_mean"), ("NEES/dof", "nees_own_mean"))}
     return pd.concat(out, axis=1)
 
 
-def send_on_delta_table(summary, links, task: str = "target"):
+def send_on_delta_table(summary, links, task: str = "target", loss: float = 0.0):
     """Send-on-delta: floats sent, accuracy and consistency of CI and ICF per threshold (N = 8, ring).
 
     Parameters
@@ -415,12 +417,15 @@ def send_on_delta_table(summary, links, task: str = "target"):
         Output of :func:`link_summary`, with the studies ``send-on-delta-<delta>``.
     task : {"target", "localization"}
         The scenario.
+    loss : float
+        0: ideal links. Else the one-way packet loss (each message lost alone): the studies
+        ``lossy-send-on-delta-<delta>`` and, for ``delta`` 0, ``loss-direction`` at that loss.
 
     Returns
     -------
     pandas.DataFrame
         Rows ``(method, delta)`` (``delta`` 0: the method sending at every step, from the task's own
-        study); columns ``floats/agent/step`` (as sent), ``RMSE ratio`` with its 95 %
+        study or, with `loss`, ``loss-direction``); columns ``floats/agent/step`` (as sent), ``RMSE ratio`` with its 95 %
         interval ``lo``, ``hi``, and ``NEES/dof``.
 
     Examples
@@ -439,13 +444,15 @@ def send_on_delta_table(summary, links, task: str = "target"):
 
     if task not in ("target", "localization"):
         raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    lossy = bool(loss)
     s = pd.concat([summary[summary["study"] == task], links[links["study"].isin(LINK_STUDIES)]])
-    s = s[(s["task"] == task) & (s["n_agents"] == 8) & (s["graph"] == "ring") & (s["dropout"] == 0.0)
+    s = s[(s["task"] == task) & (s["n_agents"] == 8) & (s["graph"] == "ring") & (s["dropout"] == float(loss))
           & s["method"].isin(SEND_ON_DELTA_METHODS[1:])]
-    delta = {task: 0.0, **{k: v["send_delta"] for k, v in LINK_STUDIES.items() if "send_delta" in v}}
+    delta = {"loss-direction" if lossy else task: 0.0,
+             **{k: v["send_delta"] for k, v in LINK_STUDIES.items() if "send_delta" in v and ("loss_model" in v) == lossy}}
     s = s[s["study"].isin(delta)].assign(delta=lambda d: d["study"].map(delta))
     if not (s["delta"] > 0).any():
-        raise ValueError(f"summary has no send-on-delta cell for {task!r}: rerun the sweep (grid_cells)")
+        raise ValueError(f"summary has no send-on-delta cell for {task!r} at loss {loss:g}: rerun the sweep (grid_cells)")
     cols = {"floats": "floats/agent/step", "ratio_mean": "RMSE ratio", "ratio_lo": "lo", "ratio_hi": "hi",
             "nees_own_mean": "NEES/dof"}
     out = s.set_index(["method", "delta"])[list(cols)].rename(columns=cols)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -12,8 +13,8 @@ from .._validation import check_positive, check_positive_int
 from ..agents import double_integrator
 from ..ellipsoids import contains
 from .benchmark import (
-    FUSION_KNOB_METHODS,
     SETTINGS,
+    SHOWN,
     SWITCHING_GRAPHS,
     BenchmarkSettings,
     benchmark_graph,
@@ -54,7 +55,7 @@ def target_methods(task: str = "target", knobs: bool = False) -> tuple[str, ...]
     task : {"target", "localization"}
         The scenario.
     knobs : bool
-        Include the knob variants (:data:`FUSION_KNOB_METHODS`, swept at N = 8 only).
+        Include the knobs' settings (``role="knob"``: :data:`FUSION_KNOB_METHODS`, swept at N = 8 only).
 
     Returns
     -------
@@ -69,8 +70,7 @@ def target_methods(task: str = "target", knobs: bool = False) -> tuple[str, ...]
     >>> "hcmci-safe-L1" in compare.target_methods(knobs=True), "hcmci-safe-L1" in compare.target_methods()
     (True, False)
     """
-    names = estimation.method_names(task)
-    return names if knobs else tuple(m for m in names if m not in FUSION_KNOB_METHODS)
+    return estimation.method_names(task, estimation.ROLES if knobs else SHOWN)
 
 
 def target_model(n_agents: int, graph: str = "ring", settings: BenchmarkSettings = SETTINGS):
@@ -300,7 +300,7 @@ def _agent_major(a: np.ndarray, trailing: int) -> np.ndarray:
 
 
 def target_filter(method: str, model, task: str = "target"):
-    """The filter of a common-target method on `model`, as its spec builds it (:data:`mascore.fusion.METHODS`).
+    """The filter of a common-target method on `model`, as its spec builds it (:func:`mascore.estimation.method_spec`).
 
     Parameters
     ----------
@@ -369,6 +369,7 @@ def simulate_target(
     loss: float = 0.0,
     latency: int = 0,
     send_delta: float | None = None,
+    loss_model: str = "link",
 ) -> dict[str, np.ndarray]:
     """Track the common target (or localize the team) with one filter of :mod:`mascore.fusion`, batched over runs.
 
@@ -407,7 +408,16 @@ def simulate_target(
     send_delta : float, optional
         Send-on-delta threshold of ``ci-L1`` and ``icf-L1`` (:data:`SEND_ON_DELTA_METHODS`): an agent
         re-sends only when its estimate moved by more than this Mahalanobis distance since its last
-        send (on a fixed graph, without loss).
+        send (on a fixed graph; with loss only per direction, ``loss_model="direction"``: each receiver
+        then fuses the last pair it received from each neighbour, predicted).
+    loss_model : {"link", "direction"}
+        ``"link"``: as above, a link lost in both directions at once, one pattern per seed shared by
+        its runs, every method. ``"direction"`` (:data:`DIRECTION_LOSS_METHODS`): each message
+        ``j -> i`` lost alone, one pattern per run (:func:`mascore.fusion_links.lossy_graphs` with
+        ``per_direction=True``); forwarding fuses the measurements that arrived
+        (:func:`mascore.fusion_links.track_forwarding`), ``ci-L1`` and ``icf-L1`` keep their
+        ideal-link weights and give a lost message's weight to the receiver's own pair
+        (:func:`mascore.fusion_links.delivered_weights`); with `latency` too.
 
     Returns
     -------
@@ -441,7 +451,7 @@ def simulate_target(
     s = settings
     if graph not in SWITCHING_GRAPHS:
         raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
-    links = _check_links(method, loss, latency, send_delta, graph, task)
+    links = _check_links(method, loss, latency, send_delta, graph, task, loss_model)
     if graph == "switching" and task == "localization":  # the sensing switches too: each step's links' rows
         model, step_of = _localization_switching(n_agents, s)
     else:
@@ -463,8 +473,13 @@ def simulate_target(
     sent = None
     if links:
         G = switching_graphs(n_agents, s.n_steps, s) if graph == "switching" else model.adjacency
-        G = fusion_links.lossy_graphs(G, loss, s.n_steps, np.random.default_rng(_loss_seed(seeds[0])))
-        x, P, cpu, sent = _filter_links(method, model, task, G, z, P0, latency, send_delta)
+        rng = np.random.default_rng(_loss_seed(seeds[0]))
+        if loss_model == "direction":  # one pattern per run, each message j -> i lost alone
+            D = fusion_links.lossy_graphs(G, loss, s.n_steps, rng, per_direction=True, n_runs=runs)
+            x, P, cpu, sent = _filter_delivered(method, model, task, G, D, z, P0, latency, send_delta)
+        else:
+            G = fusion_links.lossy_graphs(G, loss, s.n_steps, rng)
+            x, P, cpu, sent = _filter_links(method, model, task, G, z, P0, latency, send_delta)
         x, P = x[s.steady_from:], P[s.steady_from:]
         if own is not None:
             x, P = own[0](x), own[1](P)
@@ -515,10 +530,13 @@ def simulate_target(
 
 
 #: The studies of the target and localization tasks over their links, and what each sets of
-#: :func:`simulate_target` (a cell's ``dropout`` is the packet loss ``loss``): ``loss`` (ideal timing),
-#: ``latency`` (every message one step late) and ``send-on-delta-<delta>`` (fixed graph, no loss).
-LINK_STUDIES = {"loss": {}, "latency": {"latency": 1},
-                **{f"send-on-delta-{d:g}": {"send_delta": d} for d in (0.5, 1.0, 2.0)}}
+#: :func:`simulate_target` (a cell's ``dropout`` is the packet loss ``loss``): ``loss`` (ideal timing, a link
+#: lost in both directions), ``loss-direction`` (each message lost alone, one pattern per run),
+#: ``latency`` (every message one step late), ``send-on-delta-<delta>`` (fixed graph, no loss) and
+#: ``lossy-send-on-delta-0.5`` (send-on-delta with each message lost alone).
+LINK_STUDIES = {"loss": {}, "loss-direction": {"loss_model": "direction"}, "latency": {"latency": 1},
+                **{f"send-on-delta-{d:g}": {"send_delta": d} for d in (0.5, 1.0, 2.0)},
+                "lossy-send-on-delta-0.5": {"send_delta": 0.5, "loss_model": "direction"}}
 
 
 def link_options(study: str) -> dict[str, float]:
@@ -532,7 +550,8 @@ def link_options(study: str) -> dict[str, float]:
     Returns
     -------
     dict
-        Keyword arguments ``latency`` and ``send_delta`` of :func:`simulate_target` (empty: ideal links).
+        Keyword arguments ``latency``, ``send_delta`` and ``loss_model`` of :func:`simulate_target`
+        (empty: ideal links, or loss on both directions at once).
 
     Examples
     --------
@@ -546,6 +565,9 @@ def link_options(study: str) -> dict[str, float]:
 #: Methods with one-step latency (:func:`simulate_target`): the bound and ``local`` (unaffected), measurement
 #: forwarding, and the consensus filters that send one density per step.
 LATENCY_METHODS = ("centralized", "local", "forwarding", "ci-L1", "icf-L1")
+#: Methods with loss per direction (:func:`simulate_target`'s ``loss_model="direction"``): the bound and ``local``
+#: (unaffected), measurement forwarding, and the consensus filters that send one density per step.
+DIRECTION_LOSS_METHODS = ("centralized", "local", "forwarding", "ci-L1", "icf-L1")
 #: Methods with send-on-delta messages (:func:`simulate_target`), and the bound.
 SEND_ON_DELTA_METHODS = ("centralized", "ci-L1", "icf-L1")
 #: Why a method has no latency model here (the target and localization tables show it).
@@ -559,8 +581,15 @@ LATENCY_NOT_MODELLED = {
 }
 
 
-def _check_links(method: str, loss: object, latency: object, send_delta: object, graph: str, task: str) -> bool:
+def _check_links(method: str, loss: object, latency: object, send_delta: object, graph: str, task: str,
+                 loss_model: object = "link") -> bool:
     """The link arguments of :func:`simulate_target`, checked; True if they depart from ideal links."""
+    if loss_model not in ("link", "direction"):
+        raise ValueError(f"loss_model must be 'link' or 'direction'; got {loss_model!r}")
+    if loss_model == "direction" and method not in DIRECTION_LOSS_METHODS:
+        raise ValueError(f"loss_model='direction': method must be one of {DIRECTION_LOSS_METHODS}; got {method!r}")
+    if loss_model == "direction" and send_delta is not None and latency:
+        raise ValueError("send_delta, latency and loss_model='direction' cannot be combined: not modelled")
     loss = float(loss) if isinstance(loss, (int, float, np.floating)) and not isinstance(loss, bool) else loss
     if not isinstance(loss, float) or not 0.0 <= loss < 1.0:
         raise ValueError(f"loss must be a probability in [0, 1); got {loss!r}")
@@ -574,9 +603,10 @@ def _check_links(method: str, loss: object, latency: object, send_delta: object,
             raise ValueError(f"send_delta must be a finite Mahalanobis distance >= 0 or None; got {send_delta!r}")
         if method not in SEND_ON_DELTA_METHODS:
             raise ValueError(f"send_delta: method must be one of {SEND_ON_DELTA_METHODS}; got {method!r}")
-        if loss or graph == "switching":
-            raise ValueError("send_delta needs a fixed graph without loss (a sender's neighbours hold its last send "
-                             f"only if every send reaches them); got loss={loss}, graph={graph!r}")
+        if (loss and loss_model != "direction") or graph == "switching":
+            raise ValueError("send_delta needs a fixed graph, and loss only with loss_model='direction' (each "
+                             "receiver then holds its own copy of a sender's last pair); got "
+                             f"loss={loss}, graph={graph!r}")
     links = bool(loss or latency or send_delta is not None)
     if links and graph == "switching" and task == "localization":
         raise ValueError("loss, latency and send-on-delta are not modelled on the switching localization task "
@@ -588,6 +618,33 @@ def _loss_seed(seed: np.random.SeedSequence | int) -> np.random.SeedSequence:
     """The losses' own stream of a cell's seed (the path and the measurements keep theirs)."""
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     return np.random.SeedSequence(ss.entropy, spawn_key=(*ss.spawn_key, 0x1055))
+
+
+def _filter_delivered(method: str, model, task: str, G: np.ndarray, D: np.ndarray, z: np.ndarray, P0: np.ndarray,
+                      latency: int, send_delta: float | None = None) -> tuple[np.ndarray, np.ndarray, float, Any]:
+    """Run `method` over messages lost one direction at a time: `D` ``(K, runs, N, N)``, within the graph(s) `G`.
+
+    Returns the estimates ``(K, runs, N, n)``, covariances, the CPU (s) and the sends ``(K, runs, N)``
+    (None unless `send_delta`).
+    """
+    from .. import sensor_network
+
+    if method in ("centralized", "local"):  # the bound keeps ideal links; local sends nothing
+        return _filter_links(method, model, task, G, z, P0, 0, None)
+    x0 = np.zeros(model.n_states)
+    tic = time.thread_time()
+    if method == "forwarding":
+        x, P = fusion_links.track_forwarding(model, x0, P0, z, D, latency=latency)
+    else:  # the method's own filter of each step's graph, its weights compensated for the lost messages
+        spec = estimation.method_spec(method, task)
+        if np.ndim(G) == 2:
+            filters = [spec.build(model)] * len(z)
+        else:
+            filters = [spec.build(sensor_network.SensorNetworkModel(model.F, model.Q, model.H, model.R, A)) for A in G]
+        x, P, sent = fusion_links.track_messages(filters, x0, P0, z, latency=latency, send_delta=send_delta,
+                                                 delivered=D)
+        return x, P, time.thread_time() - tic, sent if send_delta is not None else None
+    return x, P, time.thread_time() - tic, None
 
 
 def _filter_links(method: str, model, task: str, G: np.ndarray, z: np.ndarray, P0: np.ndarray, latency: int,

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from .benchmark import REN_Q, SETTINGS, SM_CONFIDENCE, VLAHAKIS_PHI
-from .stats import Interval, rms_ratio
+from .stats import Interval, mean_interval, rms_ratio
 from .tables import position_only_kf_rmse
 from .target import LINK_STUDIES, TARGET_METHODS
 from .team import vlahakis_profile
@@ -215,6 +215,24 @@ class Evidence:
         if len(a) != len(b) or not np.array_equal(a[list(_RUN)].to_numpy(), b[list(_RUN)].to_numpy()):
             raise ValueError(f"{method} and {reference} at {where} do not share their runs")
         return rms_ratio(a[column].to_numpy(), b[ref_column].to_numpy())
+
+    def paired(self, method: str, at: Mapping[str, Any], against: Mapping[str, Any], **where: Any) -> Interval:
+        """RMS-error ratio of `method` at the coordinates `at` to itself at `against`, on the same runs.
+
+        The runs of two studies (e.g. ``latency`` and ``loss``) share their seeds (:data:`SEED_AXES
+        <mascore.compare.SEED_AXES>` leave out the study and the loss), so the ratio is paired, with its
+        bootstrap interval (:func:`mascore.compare.stats.rms_ratio`).
+        """
+        self.row(method, **where, **at), self.row(method, **where, **against)
+        a, b = (_select(self.runs, {**where, **c, "method": method}).sort_values(list(_RUN)) for c in (at, against))
+        if len(a) != len(b) or not np.array_equal(a[list(_RUN)].to_numpy(), b[list(_RUN)].to_numpy()):
+            raise ValueError(f"{method} at {at} and at {against} do not share their runs")
+        return rms_ratio(a["rmse_own"].to_numpy(), b["rmse_own"].to_numpy())
+
+    def run_mean(self, column: str, method: str, **where: Any) -> Interval:
+        """The mean over the deciding runs of a per-run `column` (e.g. ``floats`` as sent), bootstrap 95 % interval."""
+        self.row(method, **where)
+        return mean_interval(_select(self.runs, {**where, "method": method})[column].to_numpy(dtype=float))
 
     def claim(self, short: str, statement: str, value: Any, holds: bool | None, rule: str, **extra: str):
         """The claim ``compare/<short>``, with the blocks it was written from and decided on."""
@@ -823,6 +841,110 @@ def localization_knob(ev: Evidence):
                  "after they were seen.")
 
 
+# --------------------------------------------------------------------------------------------
+# the claims of the link studies (LINK_STUDIES: each ratio to the bound of its own study and loss)
+
+_LINKS = {"task": "target", "n_agents": 8, "graph": "ring"}
+_ONE_ROUND = ("ci-L1", "icf-L1")
+_LOSSY = {"loss 0.1": {"study": "loss", "dropout": 0.1}, "loss 0.3": {"study": "loss", "dropout": 0.3},
+          "late": {"study": "latency", "dropout": 0.0}}
+
+
+def links_latency_costs_more(ev: Evidence):
+    """One step of latency costs CI and ICF at one step more than 30 % loss; forwarding about as much."""
+    late, lossy = {"study": "latency", "dropout": 0.0}, {"study": "loss", "dropout": 0.3}
+    ratio = {m: ev.paired(m, late, lossy, **_LINKS) for m in ("forwarding", *_ONE_ROUND)}
+    return ev.claim(
+        "links-latency-costs-more",
+        "On the common target (N = 8, ring), one step of latency costs consensus on information and ICF at one "
+        "consensus step more accuracy than losing 30 % of the exchanges: on the same runs each one's RMSE with "
+        "every message a step late is more than 2 % above its RMSE at 30 % loss; for measurement forwarding, an "
+        "exact Kalman filter on data a step old, the two cost about the same (within 5 %).",
+        {f"{m}: RMSE late / RMSE at loss 0.3": _shown(v) for m, v in ratio.items()},
+        all_of([ev.above(f"{m}: late / loss 0.3", ratio[m], 1.02) for m in _ONE_ROUND]
+               + [ev.inside("forwarding: late / loss 0.3", ratio["forwarding"], 0.95, 1.05)]),
+        "paired RMS ratio late / loss 0.3 above 1.02 for ci-L1 and icf-L1, inside (0.95, 1.05) for forwarding")
+
+
+def links_send_on_delta(ev: Evidence):
+    """Sending on delta 0.5 halves CI's floats at its accuracy; ICF saves little."""
+    at, ideal = {"study": "send-on-delta-0.5", "dropout": 0.0}, {"study": "target", "dropout": 0.0}
+    plain = {m: float(ev.row(m, **ideal, **_LINKS)["floats"]) for m in _ONE_ROUND}
+    sent = {m: scaled(ev.run_mean("floats", m, **at, **_LINKS), 1 / plain[m]) for m in _ONE_ROUND}
+    accuracy = ev.paired("ci-L1", at, ideal, **_LINKS)
+    return ev.claim(
+        "links-send-on-delta",
+        "Sending only on change (a threshold delta = 0.5 standard deviations of the sender's prediction), "
+        "consensus on information (one step) sends less than 60 % of the floats it sends at every step and "
+        "keeps its accuracy (its RMSE within 5 % of its own on ideal links, on the same runs); ICF saves less "
+        "than a quarter of its floats, because its message moves with every measurement.",
+        {"floats sent / every step": {m: _shown(v) for m, v in sent.items()},
+         "ci-L1: RMSE / RMSE on ideal links": _shown(accuracy)},
+        all_of([ev.below("ci-L1 floats sent / every step", sent["ci-L1"], 0.6),
+                ev.inside("ci-L1 RMSE / ideal links", accuracy, 0.95, 1.05),
+                ev.above("icf-L1 floats sent / every step", sent["icf-L1"], 0.75)]),
+        "ci-L1 at delta 0.5: floats fraction interval below 0.6 and paired RMS ratio to ideal links inside "
+        "(0.95, 1.05); icf-L1: floats fraction above 0.75")
+
+
+def links_consistency(ev: Evidence):
+    """Under loss and latency forwarding stays consistent, CI conservative, ICF overconfident and more so with loss."""
+    fwd = {k: ev.row("forwarding", **c, **_LINKS) for k, c in _LOSSY.items()}
+    nees = {m: {k: ev.mean("nees_own", m, **c, **_LINKS) for k, c in _LOSSY.items()} for m in _ONE_ROUND}
+    icf_ideal = ev.mean("nees_own", "icf-L1", study="target", dropout=0.0, **_LINKS)
+    inside_bounds = [ev.check(f"forwarding ({k}) ANEES {r['nees_own_mean']:.4g} against its chi-square bounds "
+                              f"[{r['nees_bound_lo']:.4g}, {r['nees_bound_hi']:.4g}]",
+                              bool(r["nees_bound_lo"] <= r["nees_own_mean"] <= r["nees_bound_hi"]))
+                     for k, r in fwd.items()]
+    return ev.claim(
+        "links-consistency",
+        "Under 10 % and 30 % packet loss and under one step of latency, measurement forwarding stays consistent "
+        "(ANEES inside its chi-square bounds: a Kalman filter on what arrives), consensus on information at one "
+        "step stays conservative (ANEES below 1), and ICF at one step is overconfident (above 1.1), more so at "
+        "30 % loss than on ideal links.",
+        {"forwarding": {k: round(float(r["nees_own_mean"]), 4) for k, r in fwd.items()},
+         **{m: {k: _shown(v) for k, v in d.items()} for m, d in nees.items()}, "icf-L1, ideal links": _shown(icf_ideal)},
+        all_of(inside_bounds + [ev.below(f"ci-L1 ({k}) ANEES", v, 1.0) for k, v in nees["ci-L1"].items()]
+               + [ev.above(f"icf-L1 ({k}) ANEES", v, 1.1) for k, v in nees["icf-L1"].items()]
+               + [ev.before("icf-L1 ANEES: ideal < loss 0.3", icf_ideal, nees["icf-L1"]["loss 0.3"])]),
+        "forwarding ANEES inside its chi-square bounds, ci-L1 below 1, icf-L1 above 1.1, at loss 0.1, 0.3 and "
+        "late; icf-L1 ANEES at loss 0.3 above its ideal-links interval")
+
+
+def links_loss_one_way(ev: Evidence):
+    """Losing each direction alone costs what losing both at once does; the consistency verdicts hold under it."""
+    both, one_way = ({"study": study} for study in ("loss", "loss-direction"))
+    ratio = {m: {p: ev.paired(m, {**one_way, "dropout": p}, {**both, "dropout": p}, **_LINKS) for p in (0.1, 0.3)}
+             for m in ("forwarding", *_ONE_ROUND)}
+    fwd = {p: ev.row("forwarding", **one_way, dropout=p, **_LINKS) for p in (0.1, 0.3)}
+    nees = {m: {p: ev.mean("nees_own", m, **one_way, dropout=p, **_LINKS) for p in (0.1, 0.3)} for m in _ONE_ROUND}
+    return ev.claim(
+        "links-loss-one-way",
+        "Which loss model is used barely matters: with each message lost alone (one pattern per run, a lost "
+        "message's weight on the receiver's own pair) forwarding, consensus on information and ICF at one step "
+        "come within 5 % of their RMSE with each link lost in both directions at once at the same probability "
+        "(10 % and 30 %, on the same runs), and forwarding stays consistent (ANEES inside its chi-square bounds), "
+        "consensus on information conservative (below 1) and ICF overconfident (above 1.1).",
+        {"RMSE one-way / both directions": {m: {f"loss {p:g}": _shown(v) for p, v in d.items()}
+                                            for m, d in ratio.items()},
+         "nees, one-way": {"forwarding": {f"loss {p:g}": round(float(r["nees_own_mean"]), 4) for p, r in fwd.items()},
+                           **{m: {f"loss {p:g}": _shown(v) for p, v in d.items()} for m, d in nees.items()}}},
+        all_of([ev.inside(f"{m} one-way / both at loss {p:g}", v, 0.95, 1.05)
+                for m, d in ratio.items() for p, v in d.items()]
+               + [ev.check(f"forwarding (one-way loss {p:g}) ANEES {r['nees_own_mean']:.4g} against its chi-square "
+                           f"bounds [{r['nees_bound_lo']:.4g}, {r['nees_bound_hi']:.4g}]",
+                           bool(r["nees_bound_lo"] <= r["nees_own_mean"] <= r["nees_bound_hi"])) for p, r in fwd.items()]
+               + [ev.below(f"ci-L1 (one-way loss {p:g}) ANEES", v, 1.0) for p, v in nees["ci-L1"].items()]
+               + [ev.above(f"icf-L1 (one-way loss {p:g}) ANEES", v, 1.1) for p, v in nees["icf-L1"].items()]),
+        "paired RMS ratio one-way / both directions inside (0.95, 1.05) for forwarding, ci-L1, icf-L1 at loss 0.1 "
+        "and 0.3; one-way: forwarding ANEES inside its chi-square bounds, ci-L1 below 1, icf-L1 above 1.1")
+
+
+#: The claims of the link studies, after :data:`CLAIMS` in the ledger; decided on the link studies' summary
+#: (each ratio to the centralized filter of the same study and loss) beside the ideal links' cells.
+LINK_CLAIMS: tuple[Callable[[Evidence], Any], ...] = (links_latency_costs_more, links_send_on_delta, links_consistency,
+                                                     links_loss_one_way)
+
 #: The comparison's claims, in the ledger's order: one function each, from an :class:`Evidence` to a Claim.
 CLAIMS: tuple[Callable[[Evidence], Any], ...] = (
     centralized_bound, own_state_separable, set_membership_is_the_measurement, set_membership_contains,
@@ -836,7 +958,8 @@ CLAIMS: tuple[Callable[[Evidence], Any], ...] = (
 
 
 def compare_claims(table, phi: dict | None = None, *, held_out: Sequence[int] = HELD_OUT,
-                   written_from: Sequence[int] = WRITTEN_FROM) -> list:
+                   written_from: Sequence[int] = WRITTEN_FROM,
+                   which: Sequence[Callable[[Evidence], Any]] | None = None) -> list:
     """The comparison's claims (``compare/...``), decided on held-out seed blocks by intervals against bands.
 
     Each claim of :data:`CLAIMS` that depends on a method's tuning knob is decided at two or more
@@ -854,6 +977,9 @@ def compare_claims(table, phi: dict | None = None, *, held_out: Sequence[int] = 
     held_out, written_from : sequence of int
         The seed blocks that decide the claims, and those they were written from (used where a
         cell has no held-out block).
+    which : sequence of callables, optional
+        Only these claims of :data:`CLAIMS` and :data:`LINK_CLAIMS` (e.g. ``LINK_CLAIMS`` for the links
+        page; the Vlahakis program is then computed only if one of them is in :data:`CLAIMS`).
 
     Returns
     -------
@@ -873,30 +999,46 @@ def compare_claims(table, phi: dict | None = None, *, held_out: Sequence[int] = 
     """
     import pandas as pd
 
-    from .grid import summarize
-
     if not isinstance(table, pd.DataFrame) or not {"block", "run", "rmse_own"} <= set(table.columns):
         raise TypeError("table must be the sweep's per-run table (run_compare's first output, with columns "
                         "'block', 'run', 'rmse_own'), not its summary")
-    runs = deciding_runs(table, held_out, written_from)
-    runs = runs[~runs["study"].isin(LINK_STUDIES)].copy()  # no claim reads the link studies (link_summary)
-    if "sensing" not in runs:
-        runs["sensing"] = np.nan
-    team = runs["task"] == "team"
-    runs["sensing"] = runs["sensing"].astype(object).where(runs["sensing"].notna(), np.where(team, "full", ""))
-    by = ("study", "task", "method", "graph", "n_agents", "noise", "dropout", "q_scale", "sensing")
-    summary = summarize(runs, by=by)
-    blocks = runs.groupby(list(by), dropna=False, sort=False)["blocks"].first().rename("blocks")
-    summary = summary.join(blocks, on=list(by))
-    if phi is None:
+    every = deciding_runs(table, held_out, written_from)
+    if "sensing" not in every:
+        every["sensing"] = np.nan
+    team = every["task"] == "team"
+    every["sensing"] = every["sensing"].astype(object).where(every["sensing"].notna(), np.where(team, "full", ""))
+    lossy = every["study"].isin(LINK_STUDIES)
+    runs = every[~lossy].copy()  # the link studies are summarized apart (link_summary), for LINK_CLAIMS only
+    chosen = set(CLAIMS + LINK_CLAIMS if which is None else which)
+    if not chosen <= set(CLAIMS + LINK_CLAIMS):
+        raise ValueError("which must hold claims of CLAIMS or LINK_CLAIMS (mascore.compare.verdicts)")
+    main = [c for c in CLAIMS if c in chosen] if len(runs) else []
+    summary = _summary(runs) if len(runs) else None
+    if phi is None and main:
         phi = vlahakis_profile(8)
     claims = []
-    for claim in CLAIMS:
+    for claim in main:
         try:
             claims.append(claim(Evidence(summary, runs, phi)))
         except _Missing:
             continue
+    if lossy.any():
+        links = pd.concat([summary, _summary(every[lossy])], ignore_index=True)
+        for claim in (c for c in LINK_CLAIMS if c in chosen):
+            try:
+                claims.append(claim(Evidence(links, every, phi)))
+            except _Missing:
+                continue
     return claims
+
+
+def _summary(runs):
+    """:func:`mascore.compare.summarize` of deciding runs, by cell and sensing, with the blocks of each group."""
+    from .grid import summarize
+
+    by = list(_CELL)
+    blocks = runs.groupby(by, dropna=False, sort=False)["blocks"].first().rename("blocks")
+    return summarize(runs, by=by).join(blocks, on=by)
 
 
 def differing_claims(first: Iterable, second: Iterable) -> list[dict[str, str]]:
