@@ -524,7 +524,7 @@ def legend_overlaps(fig: plt.Figure, samples_per_px: float = 0.5, margin_px: flo
     """
     if not isinstance(fig, mpl.figure.Figure):
         raise TypeError(f"fig must be a matplotlib Figure; got {type(fig).__name__}")
-    fig.canvas.draw()
+    fig.draw_without_rendering()  # the layout and every artist's extent, without rasterizing the figure
     axes = [ax for ax in fig.axes if ax.get_visible()]
     legends = [(ax.get_legend(), [ax]) for ax in axes if ax.get_legend() is not None]
     legends += [(leg, axes) for leg in fig.legends]
@@ -581,8 +581,16 @@ def _along(xy: np.ndarray, samples_per_px: float) -> np.ndarray:
     if len(xy) < 2:
         return xy
     steps = np.maximum(np.ceil(np.linalg.norm(np.diff(xy, axis=0), axis=1) * samples_per_px), 1).astype(int)
-    return np.concatenate([np.linspace(a, b, n, endpoint=False) for a, b, n in zip(xy[:-1], xy[1:], steps)]
-                          + [xy[-1:]])
+    # every segment's np.linspace(a, b, n, endpoint=False) at once, with its arithmetic: j (b - a) / n, or
+    # (j / n) (b - a) for a segment with a zero step in x or y, plus a
+    a, delta = xy[:-1], np.diff(xy, axis=0)
+    step = delta / steps[:, None]
+    first = np.repeat(np.cumsum(steps) - steps, steps)
+    j = (np.arange(first.size) - first).astype(float)[:, None]  # the sample's index in its segment
+    seg = np.repeat(np.arange(len(steps)), steps)
+    flat = np.any(step == 0, axis=1)[seg, None]
+    points = np.where(flat, j / steps[seg, None] * delta[seg], j * step[seg]) + a[seg]
+    return np.concatenate([points, xy[-1:]])
 
 
 def unlabelled_lines(fig: plt.Figure, limit: int = 5) -> list[str]:

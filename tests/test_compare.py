@@ -118,6 +118,29 @@ def test_cells_run_together_give_the_rows_of_each_cell_alone_and_resume_by_cell(
         compare.run_cells([cells[0], {**cells[0], "method": "centralized"}])
 
 
+def test_team_blocks_run_together_give_each_block_alone():
+    # simulate_team on a sequence of seeds steps the blocks as one batch, each block drawn from its own seed's
+    # streams: every method of the scaling study (N = 4), per-run covariances (drop-outs), position sensing and the
+    # switching graph
+    cells = [c for c in compare.grid_cells("quick") if c["task"] == "team" and c["block"] in (0, 1) and (
+        (c["study"] == "scaling" and c["n_agents"] == 4)
+        or (c["study"] == "dropout" and c["dropout"] == 0.3 and c["method"] in ("song-eb", "song-mb"))
+        or (c["study"] == "position" and c["method"] == "set-membership" and c["noise"] == "uniform")
+        or (c["study"] == "switching" and c["method"] == "song-eb"))]
+    groups: dict = {}
+    for c in cells:
+        groups.setdefault(compare.cell_group(c), []).append(c)
+    assert {len(g) for g in groups.values()} == {2} and len(groups) >= 12
+    for group in groups.values():
+        together = compare.run_cells(group, settings=FEW_RUNS)
+        for cell, rows in zip(group, together):
+            alone = compare.run_cell(cell, settings=FEW_RUNS)
+            pd.testing.assert_frame_equal(_without_cpu(pd.DataFrame(rows)), _without_cpu(pd.DataFrame(alone)),
+                                          check_exact=True, obj=str(cell))
+    with pytest.raises(ValueError, match="seed"):
+        compare.simulate_team("local", 4, [], runs=2)
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -131,3 +131,18 @@ def test_lines_labelled_by_a_shared_legend_of_colours_count_as_labelled():
     fig.legend(handles=proxies, loc="outside lower center", ncol=6)
     assert plotting.unlabelled_lines(fig) == []
     plt.close(fig)
+
+
+def test_legend_covers_a_line_that_crosses_it_between_two_far_vertices():
+    # the samples along each segment find it, horizontal and vertical segments (a zero step) included
+    plotting.use_style()
+    fig, ax = plt.subplots(figsize=(4, 4))
+    ax.set(xlim=(0, 1), ylim=(0, 1))
+    ax.plot([0.0, 1.0], [0.5, 0.5], label="across")                # horizontal, through the centre
+    ax.plot([0.5, 0.5], [0.0, 1.0], label="up")                    # vertical, through the centre
+    ax.plot([0.0, 0.2, 1.0], [0.02, 0.02, 0.03], label="below")     # along the bottom edge
+    ax.legend(loc="center")
+    found = plotting.legend_overlaps(fig)
+    assert any("'across'" in o for o in found) and any("'up'" in o for o in found)
+    assert not any("'below'" in o for o in found)
+    plt.close(fig)

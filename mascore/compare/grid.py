@@ -285,7 +285,7 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
 
 
 def cell_group(cell: Mapping[str, Any]) -> tuple | None:
-    """The cells :func:`run_cells` runs together: a common-target or localization method's seed blocks.
+    """The cells :func:`run_cells` runs together: a method's seed blocks of one cell.
 
     Parameters
     ----------
@@ -297,16 +297,20 @@ def cell_group(cell: Mapping[str, Any]) -> tuple | None:
     tuple or None
         ``(task, method, n_agents, graph)`` for the target and localization tasks, whose filters'
         covariances do not depend on the data (:func:`simulate_target`): one computation serves every
-        block. None for the other tasks (each cell alone).
+        block. For the team task, ``("team", (coordinate, value), ...)``: every coordinate but the
+        block (:func:`simulate_team` draws each block from its own seed's streams, and steps them as
+        one batch). None for the other tasks and for lossy or late links (each cell alone).
 
     Examples
     --------
     >>> from mascore.compare import cell_group
     >>> cell_group({"task": "target", "method": "ci-L5", "n_agents": 8, "block": 2})
     ('target', 'ci-L5', 8, 'ring')
-    >>> print(cell_group({"task": "team", "method": "local", "n_agents": 8, "block": 2}))
-    None
+    >>> cell_group({"task": "team", "method": "local", "n_agents": 8, "block": 2})
+    ('team', ('method', 'local'), ('n_agents', 8), ('task', 'team'))
     """
+    if cell.get("task") == "team":
+        return ("team", *sorted((k, v) for k, v in cell.items() if k != "block"))
     if cell.get("task") not in ("target", "localization") or link_options(cell.get("study", "")) \
             or float(cell.get("dropout", 0.0)) > 0:
         return None  # lossy or late links draw their own streams per seed block: each cell alone
@@ -319,8 +323,10 @@ def run_cells(cells: Sequence[Mapping[str, Any]], base_seed: int = 0,
 
     The seed blocks of a target or localization method run as one batch of their runs (each block's
     data from its own seed), so that the filter's covariances and weights, which do not depend on the
-    data, are computed once; each block's rows are those of :func:`run_cell` on its cell, number for
-    number, except ``cpu_s``, the block's share of the batch's CPU. Other cells run one by one.
+    data, are computed once; so do a team-task cell's blocks (the loop's work per step, the filter's
+    design and a covariance shared by the runs done once). Each block's rows are those of
+    :func:`run_cell` on its cell, number for number, except ``cpu_s``, the block's share of the
+    batch's CPU. Other cells run one by one.
 
     Parameters
     ----------
@@ -353,17 +359,42 @@ def run_cells(cells: Sequence[Mapping[str, Any]], base_seed: int = 0,
         raise ValueError(f"cells must share one cell_group key to run together; got {sorted(keys, key=str)}")
     check_settings_type(settings, BenchmarkSettings)
     first = cells[0]
+    if first["task"] == "team":
+        return _team_blocks(cells, base_seed, settings)
     task, method, n_agents, graph = cell_group(first)
     seeds = [cell_seed(c, SEED_AXES, base_seed) for c in cells]
     metrics = simulate_target(method, int(n_agents), seeds, graph=graph, settings=settings, task=task)
-    metrics["cpu_s"] = metrics["cpu_s"] / len(cells)  # each block's share of the batch's filtering
     nan = np.full_like(metrics["rmse_own"], np.nan)  # a set-membership filter has its containment and set size
     metrics.update({k: metrics.pop(k, nan) for k in ("rmse_view", "containment", "spread", "rmse_far", "set_size")})
     floats = target_cost(method, int(n_agents), mean_degree(graph, int(n_agents), settings), task)[0]
-    runs = len(metrics["rmse_own"]) // len(cells)
-    return [[{"run": r, "floats": floats, "sensing": float("nan"),
-              **{k: float(v[b * runs + r]) for k, v in metrics.items()}} for r in range(runs)]
-            for b in range(len(cells))]
+    return _block_rows(metrics, len(cells), floats, float("nan"))
+
+
+def _team_blocks(cells: Sequence[Mapping[str, Any]], base_seed: int,
+                 settings: BenchmarkSettings) -> list[list[dict[str, Any]]]:
+    """The team-task cells of one :func:`cell_group` key (its seed blocks) as one :func:`simulate_team` batch."""
+    first = cells[0]
+    sensing = first.get("sensing", "full")
+    axes = SEED_AXES if sensing == "full" else (*SEED_AXES, "sensing")
+    graph = first.get("graph", "ring")
+    metrics = simulate_team(first["method"], int(first["n_agents"]), [cell_seed(c, axes, base_seed) for c in cells],
+                            noise=first["noise"], dropout=float(first["dropout"]), q_scale=float(first["q_scale"]),
+                            graph=graph, settings=settings, sensing=sensing)
+    floats = floats_per_step(first["method"], int(first["n_agents"]),
+                             degree=mean_degree(graph, int(first["n_agents"]), settings), sensing=sensing)
+    return _block_rows(metrics, len(cells), floats, sensing)
+
+
+def _block_rows(metrics: dict[str, np.ndarray], blocks: int, floats: float,
+                sensing: str | float) -> list[list[dict[str, Any]]]:
+    """Each block's rows from the metrics of a batch of `blocks` equal blocks of runs (:func:`run_cell`'s columns).
+
+    ``cpu_s``, the batch's CPU, becomes each block's share.
+    """
+    metrics = {**metrics, "cpu_s": metrics["cpu_s"] / blocks}
+    runs = len(metrics["rmse_own"]) // blocks
+    return [[{"run": r, "floats": floats, "sensing": sensing, **{k: float(v[b * runs + r]) for k, v in metrics.items()}}
+             for r in range(runs)] for b in range(blocks)]
 
 
 def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n_agents", "noise", "dropout",

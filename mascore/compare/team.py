@@ -626,7 +626,7 @@ def make_estimator(method: str, team: TeamTask, x_hat0: np.ndarray) -> TeamEstim
 def simulate_team(
     method: str,
     n_agents: int,
-    seed: np.random.SeedSequence | int,
+    seed: np.random.SeedSequence | int | Sequence[np.random.SeedSequence | int],
     *,
     noise: str = "gaussian",
     dropout: float = 0.0,
@@ -645,8 +645,12 @@ def simulate_team(
         :data:`POSITION_METHODS`.
     n_agents : int
         Team size N (a ring, N >= 3).
-    seed : numpy.random.SeedSequence or int
-        Source of every random number; the same seed gives the same noise to every method.
+    seed : numpy.random.SeedSequence or int, or a sequence of them
+        Source of every random number; the same seed gives the same noise to every method. A
+        sequence: one block of `runs` runs per seed, each block's initial states, noise and link
+        drops drawn from its own seed's streams, so that each block's numbers are those of the
+        call with its seed alone; the blocks are stepped as one batch (Python's work per step, a
+        filter's design and a covariance recursion that does not depend on the data done once).
     noise : {"gaussian", "uniform", "student-t"}
         Distribution of process and measurement noise (same covariance).
     dropout : float
@@ -691,6 +695,7 @@ def simulate_team(
         the agents to their centroid; and ``cpu_s``, the CPU time (s) of this
         thread spent in the estimator's updates and predictions for the whole
         batch (not its design, not the simulation around it; one value, repeated).
+        With a sequence of seeds: ``(len(seed) runs,)``, the blocks one after the other.
 
     Examples
     --------
@@ -699,7 +704,13 @@ def simulate_team(
     >>> bool(0.5 < m["nees_own"].mean() < 1.5)          # a correct Kalman filter is consistent
     True
     """
-    n_agents, runs = check_run(n_agents, noise, dropout, q_scale, runs, settings, seed)
+    seeds = list(seed) if isinstance(seed, (list, tuple)) else [seed]
+    if not seeds:
+        raise ValueError("seed must be a seed or a non-empty sequence of seeds (one per block of runs)")
+    for sd in seeds:
+        n_agents, runs = check_run(n_agents, noise, dropout, q_scale, runs, settings, sd)
+    total = runs * len(seeds)  # every block's runs, stepped at once
+    check_run(n_agents, noise, dropout, q_scale, total, settings)
     if sensing not in SENSINGS:
         raise ValueError(f"sensing must be one of {SENSINGS}; got {sensing!r}")
     methods = estimation.method_names("team")
@@ -714,14 +725,10 @@ def simulate_team(
 
     team = team_setup(int(n_agents), noise, float(q_scale), settings, graph, sensing)
     topology = switching_graphs(int(n_agents), settings.n_steps, settings) > 0 if team.switching else None
-    init_rng, proc_rng, meas_rng, drop_rng = np.random.default_rng(seed).spawn(4)
+    init_rngs, proc_rngs, meas_rngs, drop_rngs = zip(*(np.random.default_rng(sd).spawn(4) for sd in seeds))
     N, s = team.N, settings
-    x = np.concatenate([s.init_pos * init_rng.standard_normal((runs, N, 2)),
-                        s.init_vel * init_rng.standard_normal((runs, N, 2))], axis=-1)
-    if sensing == "full":
-        x_hat0 = x + np.sqrt(s.p0) * init_rng.standard_normal(x.shape)
-    else:  # the noise's distribution: bounded under uniform noise (the set-membership filter's initial set)
-        x_hat0 = x + np.sqrt(s.p0) * draw_noise(init_rng, noise, x.shape)
+    x, x_hat0 = (np.concatenate(a) for a in zip(*(_initial_states(rng, runs, N, s, sensing, noise)
+                                                   for rng in init_rngs)))
     est = make_estimator(method, team, x_hat0)  # refuses a method that does not apply to the sensing
     measured = len(team.C)  # z_ij = x_j + nu_ij, or its position [I 0] x_j + nu_ij
     cpu = 0.0  # the estimator's own work only: not its design (offline), not the simulation around it
@@ -729,16 +736,16 @@ def simulate_team(
     nominal = team.adjacency > 0
     eye = np.eye(N, dtype=bool)
     held = None
-    acc = {k: np.zeros(runs) for k in ("own", "view", "nees", "contained", "spread", "far", "set_size")}
+    acc = {k: np.zeros(total) for k in ("own", "view", "nees", "contained", "spread", "far", "set_size")}
     acc["far_steps"] = 0  # steps with an agent out of reach (every step on a fixed graph that is not complete)
     for k in range(s.n_steps):
         if topology is not None:  # this step's graph: sensing, messages and the control's Laplacian
             nominal = topology[k]
             team.adjacency = nominal.astype(float)
             team.laplacian = graphs.laplacian(team.adjacency)
-        lost = (drop_rng.random((runs, N, N)) < dropout) & ~eye
+        lost = (_blocks(drop_rngs, lambda rng: rng.random((runs, N, N))) < dropout) & ~eye
         S = (nominal | eye) & ~lost
-        nu = r_std * draw_noise(meas_rng, noise, (runs, N, N, measured))
+        nu = r_std * _blocks(meas_rngs, lambda rng: draw_noise(rng, noise, (runs, N, N, measured)))
         Z = np.where(S[..., None], x[:, None, :, :measured] + nu, 0.0)
         tic = time.thread_time()
         est.update(Z, S if dropout > 0 else S[:1])
@@ -755,12 +762,12 @@ def simulate_team(
         tic = time.thread_time()
         est.predict(U)
         cpu += time.thread_time() - tic
-        w = q_std * draw_noise(proc_rng, noise, (runs, N, 4))
+        w = q_std * _blocks(proc_rngs, lambda rng: draw_noise(rng, noise, (runs, N, 4)))
         x = x @ team.A.T + U @ team.B.T + w
         if not np.all(np.isfinite(x)):
             raise ValueError(f"{method}: the closed loop diverged (non-finite states at step {k})")
     n = s.n_steps - s.steady_from
-    nan = np.full(runs, np.nan)
+    nan = np.full(total, np.nan)
     return {
         "rmse_own": np.sqrt(acc["own"] / n), "rmse_view": np.sqrt(acc["view"] / n),
         "nees_own": acc["nees"] / n if est.own_cov is not None else nan,
@@ -768,8 +775,24 @@ def simulate_team(
         "set_size": acc["set_size"] / n if est.set_shape is not None else nan,
         "rmse_far": np.sqrt(acc["far"] / acc["far_steps"]) if est.team_estimates is not None
         and acc["far_steps"] > 0 else nan,
-        "spread": np.sqrt(acc["spread"] / n), "cpu_s": np.full(runs, cpu),
+        "spread": np.sqrt(acc["spread"] / n), "cpu_s": np.full(total, cpu),
     }
+
+
+def _initial_states(rng: np.random.Generator, runs: int, N: int, s: BenchmarkSettings, sensing: str,
+                    noise: str) -> tuple[np.ndarray, np.ndarray]:
+    """One block's true initial states and initial estimates, ``(runs, N, 4)`` each (m, m/s), from `rng`."""
+    x = np.concatenate([s.init_pos * rng.standard_normal((runs, N, 2)),
+                        s.init_vel * rng.standard_normal((runs, N, 2))], axis=-1)
+    if sensing == "full":
+        return x, x + np.sqrt(s.p0) * rng.standard_normal(x.shape)
+    # the noise's distribution: bounded under uniform noise (the set-membership filter's initial set)
+    return x, x + np.sqrt(s.p0) * draw_noise(rng, noise, x.shape)
+
+
+def _blocks(rngs: Sequence[np.random.Generator], draw) -> np.ndarray:
+    """``draw(rng)`` of every block's stream, the blocks one after the other along the first (run) axis."""
+    return draw(rngs[0]) if len(rngs) == 1 else np.concatenate([draw(rng) for rng in rngs])
 
 
 def _accumulate(acc: dict, est: TeamEstimator, x: np.ndarray, view: np.ndarray, seen: np.ndarray) -> None:
