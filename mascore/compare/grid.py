@@ -521,7 +521,8 @@ def run_compare(
     grid : {"quick", "full"}
         The sweep (:func:`grid_cells`).
     out : str or pathlib.Path
-        Results folder; the table goes to ``out/compare/table-GRID-SEED.csv``.
+        Results folder; the table goes to ``out/compare/table-GRID-SEED.csv`` (the whole result is
+        stored and read back under its key, see :func:`run`).
     workers : int
         0: serially in this process; K: a local Dask cluster of K processes.
     scheduler : str, optional
@@ -654,7 +655,11 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
         Progress bar over cells.
     out : str or pathlib.Path, optional
         Results folder; the table goes to ``out/compare/table-GRID-SEED.csv`` and a later
-        run resumes from it. Default: a temporary folder (nothing is kept).
+        run resumes from it. The result is stored in ``out/compare/runs/`` under a key (the
+        settings, the seed, the package's source and the table's bytes, as
+        :meth:`mascore.registry.Study.run_key`) and returned from there by a later call with the
+        same key, neither swept nor summarized again. Only read folders you wrote yourself (a pickle).
+        Default: a temporary folder (nothing is kept).
     workers : int
         0: serially in this process; K: a local Dask cluster of K processes.
     scheduler : str, optional
