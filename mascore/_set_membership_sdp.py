@@ -13,10 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._solver import LMI_EPS, cp, solve
+from ._optional import require
+from ._solver import CVXPY_PURPOSE, LMI_EPS, solve
 from ._validation import symmetric_part
 
 __all__ = ["correction_sdp", "prediction_sdp"]
+
+cp = require("cvxpy", CVXPY_PURPOSE)
 
 
 class _CorrectionSDP:

@@ -11,23 +11,37 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 from ._optional import require
 from .exceptions import SolverError
 
-cp = require("cvxpy", "the SDPs and LMIs (set-membership method='sdp', the distributed observer, the bottom-up LQR)")
+if TYPE_CHECKING:
+    import cvxpy as cp
 
 __all__ = ["LMI_EPS", "SOLVER", "SOLVER_OPTIONS", "SolverError", "optimal_value", "solve", "solver_options"]
 
-#: cvxpy solver used for every SDP/LMI.
-SOLVER = cp.CLARABEL
+#: cvxpy solver used for every SDP/LMI (the value of ``cvxpy.CLARABEL``; cvxpy is imported only to solve).
+SOLVER = "CLARABEL"
+
+# The statuses optimal_value tells apart, in cvxpy's words (the values of cvxpy.OPTIMAL, cvxpy.OPTIMAL_INACCURATE).
+_OPTIMAL, _OPTIMAL_INACCURATE = "optimal", "optimal_inaccurate"
+
+#: What cvxpy is needed for, in the message of a missing ``sdp`` extra.
+CVXPY_PURPOSE = "the SDPs and LMIs (set-membership method='sdp', the distributed observer, the bottom-up LQR)"
+
 
 #: Default options passed to the solver (Clarabel's own defaults).
 SOLVER_OPTIONS: dict = {}
 
 #: Margin standing in for a strict LMI inequality (``X >> LMI_EPS * I``).
 LMI_EPS = 1e-9
+
+
+def _cvxpy() -> ModuleType:
+    """cvxpy, imported where a program is solved (importing this module, or the observers, does not pay for it)."""
+    return require("cvxpy", CVXPY_PURPOSE)
 
 
 def solver_options(options: Mapping[str, Any] | None) -> dict:
@@ -85,6 +99,7 @@ def solve(problem: cp.Problem, what: str, options: Mapping[str, Any] | None = No
     TypeError
         If `problem` is not a :class:`cvxpy.Problem`, `what` not a string or `options` not a mapping.
     """
+    cp = _cvxpy()
     if not isinstance(problem, cp.Problem):
         raise TypeError(f"problem must be a cvxpy.Problem; got {type(problem).__name__}")
     if not isinstance(what, str):
@@ -131,9 +146,9 @@ def optimal_value(what: str, status: str, value: float | None) -> float:
     >>> optimal_value("toy", "optimal", 2.0)
     2.0
     """
-    if status != cp.OPTIMAL:
+    if status != _OPTIMAL:
         hint = (" (pass looser tolerances or more iterations in solver_options, e.g. "
-                "{'max_iter': 1000, 'tol_feas': 1e-7})") if status == cp.OPTIMAL_INACCURATE else ""
+                "{'max_iter': 1000, 'tol_feas': 1e-7})") if status == _OPTIMAL_INACCURATE else ""
         raise SolverError(f"{what}: solver status is {status!r}, expected 'optimal'{hint}")
     if value is None or not math.isfinite(float(value)):
         raise SolverError(f"{what}: the solver reported 'optimal' with a non-finite value {value!r}")

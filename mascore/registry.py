@@ -362,12 +362,8 @@ class Study:
         >>> study.run_key(study.settings, 0) == study.run_key(study.settings, 1)
         False
         """
-        import hashlib
-
         kind = f"{type(settings).__module__}.{type(settings).__qualname__}"
-        digest = hashlib.sha256(repr((self.name, self.chapter, kind, settings, int(seed))).encode())
-        digest.update(source_digest().encode())
-        return digest.hexdigest()
+        return _run_digest((self.name, self.chapter, kind, settings, int(seed)))
 
     def save_run(self, settings: Any, seed: int, result: Any, store: str | Path,
                  pickled: bytes | None = None) -> Path | None:
@@ -407,18 +403,8 @@ class Study:
         >>> study.save_run(fewer, 1, study.run(fewer, 1), tempfile.mkdtemp()).name
         'kalman-consensus.pickle'
         """
-        import pickle
-
-        try:
-            data = pickle.dumps(result, protocol=4) if pickled is None else pickled
-        except (pickle.PicklingError, AttributeError, TypeError):  # local classes cannot be pickled
-            return None
-        path = Path(store) / "runs" / f"{self.name}.pickle"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("wb") as f:
-            pickle.dump(self.run_key(settings, seed), f, protocol=4)  # read first: a stale file is never unpickled
-            f.write(data)
-        return path
+        return _write_run(Path(store) / "runs" / f"{self.name}.pickle", self.run_key(settings, seed), result,
+                          pickled)
 
     def load_or_run(self, settings: Any, seed: int, store: str | Path | None = None, progress: bool = False) -> Any:
         """The study's result: read from `store` if this exact run is stored there, else computed.
@@ -455,13 +441,9 @@ class Study:
         True
         """
         if store is not None:
-            import pickle
-
-            path = Path(store) / "runs" / f"{self.name}.pickle"
-            if path.is_file():
-                with path.open("rb") as f:
-                    if pickle.load(f) == self.run_key(settings, seed):
-                        return pickle.load(f)
+            found, result = _read_run(Path(store) / "runs" / f"{self.name}.pickle", self.run_key(settings, seed))
+            if found:
+                return result
         return self.run(settings, seed, progress=progress)
 
     def build(self, name: str, result: Any) -> pd.DataFrame:
@@ -637,6 +619,101 @@ def source_digest() -> str:
     for path in sorted(root.rglob("*.py")):
         digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     return digest.hexdigest()
+
+
+def _run_digest(identity: tuple, files: Sequence[Path] = ()) -> str:
+    """The key of a stored run: SHA-256 of `identity`'s repr, the package's source and the bytes of `files`.
+
+    Parameters
+    ----------
+    identity : tuple
+        What names the run (study, settings, seed, ...); its ``repr`` must be deterministic.
+    files : sequence of pathlib.Path
+        Input files the run was computed from (the comparison's sweep table); each must exist.
+
+    Returns
+    -------
+    str
+        64 hexadecimal digits: equal keys, the same result byte for byte.
+    """
+    import hashlib
+
+    digest = hashlib.sha256(repr(identity).encode())
+    digest.update(source_digest().encode())
+    for path in files:
+        digest.update(hashlib.sha256(Path(path).read_bytes()).hexdigest().encode())
+    return digest.hexdigest()
+
+
+def _write_run(path: Path, key: str, result: Any, pickled: bytes | None = None) -> Path | None:
+    """Pickle `result` to `path` after its `key` (read first, so that a stale file is never unpickled).
+
+    The file is written beside `path` and then renamed onto it, so that a reader (another
+    notebook's kernel) sees the old file or the new one, never half of one.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The file (its folder is created).
+    key : str
+        The run's key (:func:`_run_digest`, :meth:`Study.run_key`).
+    result : object
+        What to store.
+    pickled : bytes, optional
+        ``pickle.dumps(result, protocol=4)`` made where `result` was computed, written as it is.
+
+    Returns
+    -------
+    pathlib.Path or None
+        `path`; None if `result` cannot be pickled (a class defined inside a function): nothing is written.
+    """
+    import os
+    import pickle
+    import uuid
+
+    try:
+        data = pickle.dumps(result, protocol=4) if pickled is None else pickled
+    except (pickle.PicklingError, AttributeError, TypeError):  # local classes cannot be pickled
+        return None
+    path.parent.mkdir(parents=True, exist_ok=True)
+    scratch = path.with_name(f".{path.name}.{uuid.uuid4().hex}.part")  # one per writer
+    try:
+        with scratch.open("xb") as f:
+            pickle.dump(key, f, protocol=4)
+            f.write(data)
+        os.replace(scratch, path)
+    except BaseException:
+        scratch.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _read_run(path: Path, key: str) -> tuple[bool, Any]:
+    """The result :func:`_write_run` stored at `path` under `key`: ``(True, result)``, else ``(False, None)``.
+
+    Only the key is read from a file stored under another key (or a missing file). Read only
+    files you wrote yourself (a pickle).
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The file.
+    key : str
+        The key the result must have been stored under.
+
+    Returns
+    -------
+    (bool, object)
+        Whether a result was found, and the result (None when not).
+    """
+    import pickle
+
+    if not path.is_file():
+        return False, None
+    with path.open("rb") as f:
+        if pickle.load(f) != key:
+            return False, None
+        return True, pickle.load(f)
 
 
 def glue_key(spec: FigureSpec, name: str) -> str:

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from .. import estimation
+from ..registry import _read_run, _run_digest, _write_run
 from ..settings import check_settings_type
 from ..sweep import Grid, cell_id, cell_seed
 from .benchmark import (
@@ -520,7 +521,8 @@ def run_compare(
     grid : {"quick", "full"}
         The sweep (:func:`grid_cells`).
     out : str or pathlib.Path
-        Results folder; the table goes to ``out/compare/table-GRID-SEED.csv``.
+        Results folder; the table goes to ``out/compare/table-GRID-SEED.csv`` (the whole result is
+        stored and read back under its key, see :func:`run`).
     workers : int
         0: serially in this process; K: a local Dask cluster of K processes.
     scheduler : str, optional
@@ -653,7 +655,11 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
         Progress bar over cells.
     out : str or pathlib.Path, optional
         Results folder; the table goes to ``out/compare/table-GRID-SEED.csv`` and a later
-        run resumes from it. Default: a temporary folder (nothing is kept).
+        run resumes from it. The result is stored in ``out/compare/runs/`` under a key (the
+        settings, the seed, the package's source and the table's bytes, as
+        :meth:`mascore.registry.Study.run_key`) and returned from there by a later call with the
+        same key, neither swept nor summarized again. Only read folders you wrote yourself (a pickle).
+        Default: a temporary folder (nothing is kept).
     workers : int
         0: serially in this process; K: a local Dask cluster of K processes.
     scheduler : str, optional
@@ -678,6 +684,11 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
 
     if settings.grid not in ("quick", "full"):
         raise ValueError(f"settings.grid must be 'quick' or 'full'; got {settings.grid!r}")
+    key = None if out is None else _stored_run_key(settings, seed, out)
+    if key is not None:  # this very run, stored by an earlier call: read back, not swept and summarized again
+        found, result = _read_run(_stored_run_path(settings, seed, out), key)
+        if found:
+            return result
     with tempfile.TemporaryDirectory(prefix="mascore-compare-") as scratch:
         folder = Path(scratch if out is None else out) / "compare"
         table = run_sweep(grid_cells(settings.grid), functools.partial(run_cells, base_seed=seed, settings=settings),
@@ -687,7 +698,33 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
     summary = summarize(table[~lossy], settings=settings)
     profile = vlahakis_profile(8, settings=settings)
     links = link_summary(table, settings) if lossy.any() else None
-    return CompareResult(settings, int(seed), table, summary, fitted_slopes(summary), profile, links)
+    result = CompareResult(settings, int(seed), table, summary, fitted_slopes(summary), profile, links)
+    if out is not None:
+        _write_run(_stored_run_path(settings, seed, out), _stored_run_key(settings, seed, out), result)
+    return result
+
+
+def _stored_run_path(settings: BenchmarkSettings, seed: int, out: str | Path) -> Path:
+    """Where :func:`run` stores its result under `out`: ``out/compare/runs/compare-GRID-SEED.pickle``."""
+    return Path(out) / "compare" / "runs" / f"compare-{settings.grid}-{int(seed)}.pickle"
+
+
+def _stored_run_key(settings: BenchmarkSettings, seed: int, out: str | Path) -> str | None:
+    """The key of :func:`run`'s result: its settings, seed, the package's source and the sweep's table at `out`.
+
+    As a paper's run key (:meth:`mascore.registry.Study.run_key`), plus the bytes of the table the
+    result was summarized from (a table resumed, extended or deleted since gives another key).
+
+    Returns
+    -------
+    str or None
+        64 hexadecimal digits; None when `out` holds no table yet (no stored result can match).
+    """
+    table = Path(out) / "compare" / f"table-{settings.grid}-{int(seed)}.csv"
+    if not table.is_file():
+        return None
+    kind = f"{type(settings).__module__}.{type(settings).__qualname__}"
+    return _run_digest(("compare", kind, settings, int(seed)), [table])
 
 
 def link_summary(table, settings: BenchmarkSettings = SETTINGS):
