@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from .. import estimation
-from ..registry import _read_run, _run_digest, _write_run
+from .._runstore import read_run, run_digest, write_run
 from ..settings import check_settings_type
 from ..sweep import Grid, cell_id, cell_seed
 from .benchmark import (
@@ -686,7 +686,7 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
         raise ValueError(f"settings.grid must be 'quick' or 'full'; got {settings.grid!r}")
     key = None if out is None else _stored_run_key(settings, seed, out)
     if key is not None:  # this very run, stored by an earlier call: read back, not swept and summarized again
-        found, result = _read_run(_stored_run_path(settings, seed, out), key)
+        found, result = read_run(_stored_run_path(settings, seed, out), key)
         if found:
             return result
     with tempfile.TemporaryDirectory(prefix="mascore-compare-") as scratch:
@@ -700,7 +700,7 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
     links = link_summary(table, settings) if lossy.any() else None
     result = CompareResult(settings, int(seed), table, summary, fitted_slopes(summary), profile, links)
     if out is not None:
-        _write_run(_stored_run_path(settings, seed, out), _stored_run_key(settings, seed, out), result)
+        write_run(_stored_run_path(settings, seed, out), _stored_run_key(settings, seed, out), result)
     return result
 
 
@@ -724,7 +724,7 @@ def _stored_run_key(settings: BenchmarkSettings, seed: int, out: str | Path) -> 
     if not table.is_file():
         return None
     kind = f"{type(settings).__module__}.{type(settings).__qualname__}"
-    return _run_digest(("compare", kind, settings, int(seed)), [table])
+    return run_digest(("compare", kind, settings, int(seed)), [table])
 
 
 def link_summary(table, settings: BenchmarkSettings = SETTINGS):
