@@ -657,7 +657,7 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
         Results folder; the table goes to ``out/compare/table-GRID-SEED.csv`` and a later
         run resumes from it. The result is stored in ``out/compare/runs/`` under a key (the
         settings, the seed, the package's source and the table's bytes, as
-        :meth:`mascore.registry.Study.run_key`) and returned from there by a later call with the
+        ``mascore.registry.Study.run_key``) and returned from there by a later call with the
         same key, neither swept nor summarized again. Only read folders you wrote yourself (a pickle).
         Default: a temporary folder (nothing is kept).
     workers : int
@@ -712,7 +712,7 @@ def _stored_run_path(settings: BenchmarkSettings, seed: int, out: str | Path) ->
 def _stored_run_key(settings: BenchmarkSettings, seed: int, out: str | Path) -> str | None:
     """The key of :func:`run`'s result: its settings, seed, the package's source and the sweep's table at `out`.
 
-    As a paper's run key (:meth:`mascore.registry.Study.run_key`), plus the bytes of the table the
+    As a paper's run key (``mascore.registry.Study.run_key``), plus the bytes of the table the
     result was summarized from (a table resumed, extended or deleted since gives another key).
 
     Returns
