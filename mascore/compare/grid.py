@@ -21,6 +21,7 @@ from .benchmark import (
     SHOWN,
     VLAHAKIS_PHI,
     BenchmarkSettings,
+    _check_cells,
     check_cell,
     floats_per_step,
     mean_degree,
@@ -43,6 +44,10 @@ from .team import simulate_team, vlahakis_profile
 
 # --------------------------------------------------------------------------------------------
 # grids and cells
+
+#: The largest team whose common-target or localization methods run together (:func:`cell_group`): their
+#: data drawn once; a larger team's methods run apart, each a task of its own (a cluster balances them).
+SHARED_DATA_MAX = 16
 
 #: The team sizes and graphs of the full grid's scale study of the common-target and localization tasks.
 SCALE_SIZES = (8, 16, 32, 64)
@@ -246,6 +251,11 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
     """
     check_cell(cell)
     check_settings_type(settings, BenchmarkSettings)
+    return _run_cell(cell, base_seed, settings)
+
+
+def _run_cell(cell: Mapping[str, Any], base_seed: int, settings: BenchmarkSettings) -> list[dict[str, Any]]:
+    """:func:`run_cell` of a checked cell and settings."""
     sensing = cell.get("sensing", "full")
     seed = cell_seed(cell, SEED_AXES if sensing == "full" else (*SEED_AXES, "sensing"), base_seed)
     common = {"noise": cell["noise"], "dropout": float(cell["dropout"])}
@@ -295,17 +305,23 @@ def cell_group(cell: Mapping[str, Any]) -> tuple | None:
     Returns
     -------
     tuple or None
-        ``(task, method, n_agents, graph)`` for the target and localization tasks, whose filters'
-        covariances do not depend on the data (:func:`simulate_target`): one computation serves every
-        block. For the team task, ``("team", (coordinate, value), ...)``: every coordinate but the
-        block (:func:`simulate_team` draws each block from its own seed's streams, and steps them as
-        one batch). None for the other tasks and for lossy or late links (each cell alone).
+        For the target and localization tasks, whose filters' covariances do not depend on the data
+        (:func:`simulate_target`: one computation serves every block), ``(task, n_agents, graph)`` up to
+        :data:`SHARED_DATA_MAX` agents: every method's blocks together, the target's path, the
+        measurements and a switching graph's step models drawn and built once for all the methods (they
+        do not depend on the method); ``(task, method, n_agents, graph)`` beyond (each method a task of
+        its own: a cluster balances them). For the team task, ``("team", (coordinate, value), ...)``:
+        every coordinate but the block (:func:`simulate_team` draws each block from its own seed's
+        streams, and steps them as one batch). None for the other tasks and for lossy or late links
+        (each cell alone).
 
     Examples
     --------
     >>> from mascore.compare import cell_group
     >>> cell_group({"task": "target", "method": "ci-L5", "n_agents": 8, "block": 2})
-    ('target', 'ci-L5', 8, 'ring')
+    ('target', 8, 'ring')
+    >>> cell_group({"task": "target", "method": "ci-L5", "n_agents": 32, "block": 2})
+    ('target', 'ci-L5', 32, 'ring')
     >>> cell_group({"task": "team", "method": "local", "n_agents": 8, "block": 2})
     ('team', ('method', 'local'), ('n_agents', 8), ('task', 'team'))
     """
@@ -314,6 +330,8 @@ def cell_group(cell: Mapping[str, Any]) -> tuple | None:
     if cell.get("task") not in ("target", "localization") or link_options(cell.get("study", "")) \
             or float(cell.get("dropout", 0.0)) > 0:
         return None  # lossy or late links draw their own streams per seed block: each cell alone
+    if cell["n_agents"] <= SHARED_DATA_MAX:
+        return (cell["task"], cell["n_agents"], cell.get("graph", "ring"))
     return (cell["task"], cell["method"], cell["n_agents"], cell.get("graph", "ring"))
 
 
@@ -323,7 +341,8 @@ def run_cells(cells: Sequence[Mapping[str, Any]], base_seed: int = 0,
 
     The seed blocks of a target or localization method run as one batch of their runs (each block's
     data from its own seed), so that the filter's covariances and weights, which do not depend on the
-    data, are computed once; so do a team-task cell's blocks (the loop's work per step, the filter's
+    data, are computed once, and the methods of a small team share each block's data (drawn once,
+    :func:`cell_group`); so do a team-task cell's blocks (the loop's work per step, the filter's
     design and a covariance shared by the runs done once). Each block's rows are those of
     :func:`run_cell` on its cell, number for number, except ``cpu_s``, the block's share of the
     batch's CPU. Other cells run one by one.
@@ -351,23 +370,33 @@ def run_cells(cells: Sequence[Mapping[str, Any]], base_seed: int = 0,
     >>> together[1][3]["rmse_own"] == run_cell(cells[1])[3]["rmse_own"]
     True
     """
-    cells = [check_cell(c) for c in cells]
+    cells = _check_cells(cells)
+    check_settings_type(settings, BenchmarkSettings)
     keys = {cell_group(c) for c in cells}
     if len(cells) < 2 or None in keys:
-        return [run_cell(c, base_seed, settings) for c in cells]
+        return [_run_cell(c, base_seed, settings) for c in cells]
     if len(keys) > 1:
         raise ValueError(f"cells must share one cell_group key to run together; got {sorted(keys, key=str)}")
-    check_settings_type(settings, BenchmarkSettings)
     first = cells[0]
     if first["task"] == "team":
         return _team_blocks(cells, base_seed, settings)
-    task, method, n_agents, graph = cell_group(first)
-    seeds = [cell_seed(c, SEED_AXES, base_seed) for c in cells]
-    metrics = simulate_target(method, int(n_agents), seeds, graph=graph, settings=settings, task=task)
-    nan = np.full_like(metrics["rmse_own"], np.nan)  # a set-membership filter has its containment and set size
-    metrics.update({k: metrics.pop(k, nan) for k in ("rmse_view", "containment", "spread", "rmse_far", "set_size")})
-    floats = target_cost(method, int(n_agents), mean_degree(graph, int(n_agents), settings), task)[0]
-    return _block_rows(metrics, len(cells), floats, float("nan"))
+    task, n_agents, graph = first["task"], int(first["n_agents"]), first.get("graph", "ring")
+    degree = mean_degree(graph, n_agents, settings)
+    memo: dict = {}  # the model, each block's data and a switching graph's step models, shared by the methods
+    methods: dict[str, list[int]] = {}  # each method's cells (its blocks), in the order given
+    for i, c in enumerate(cells):
+        methods.setdefault(c["method"], []).append(i)
+    out: list = [None] * len(cells)
+    for method, idx in methods.items():
+        seeds = [cell_seed(cells[i], SEED_AXES, base_seed) for i in idx]
+        metrics = simulate_target(method, n_agents, seeds, graph=graph, settings=settings, task=task, memo=memo)
+        nan = np.full_like(metrics["rmse_own"], np.nan)  # a set-membership filter has its containment and set size
+        metrics.update({k: metrics.pop(k, nan) for k in ("rmse_view", "containment", "spread", "rmse_far",
+                                                         "set_size")})
+        floats = target_cost(method, n_agents, degree, task)[0]
+        for i, rows in zip(idx, _block_rows(metrics, len(idx), floats, float("nan"))):
+            out[i] = rows
+    return out
 
 
 def _team_blocks(cells: Sequence[Mapping[str, Any]], base_seed: int,
