@@ -720,9 +720,11 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
             return result
     with tempfile.TemporaryDirectory(prefix="mascore-compare-") as scratch:
         folder = Path(scratch if out is None else out) / "compare"
-        table = run_sweep(grid_cells(settings.grid), functools.partial(run_cells, base_seed=seed, settings=settings),
+        cells = grid_cells(settings.grid)
+        costs = {cell_id(c): _cell_cost(c) for c in _check_cells(cells, full=False)}  # one lookup of each task's methods
+        table = run_sweep(cells, functools.partial(run_cells, base_seed=seed, settings=settings),
                           folder / f"table-{settings.grid}-{seed}.csv", workers=workers, scheduler=scheduler,
-                          progress=progress, cost=cell_cost, group=cell_group)
+                          progress=progress, cost=lambda cell: costs[cell_id(cell)], group=cell_group)
     lossy = table["study"].isin(LINK_STUDIES)
     summary = summarize(table[~lossy], settings=settings)
     profile = vlahakis_profile(8, settings=settings)
@@ -813,7 +815,11 @@ def cell_cost(cell: Mapping[str, Any]) -> float:
     >>> cell_cost({**base, "method": "song-eb"}) > cell_cost({**base, "method": "local"})
     True
     """
-    check_cell(cell, full=False)
+    return _cell_cost(check_cell(cell, full=False))
+
+
+def _cell_cost(cell: Mapping[str, Any]) -> float:
+    """:func:`cell_cost` of a checked cell."""
     if cell["task"] in ("target", "localization"):  # per agent: n = 4, or n = 2N (N^3 flops a step)
         size = cell["n_agents"] / 8 if cell["task"] == "target" else (cell["n_agents"] / 8) ** 4
         return (1600.0 if cell["method"] == "ci-diffusion" else 150.0) * size  # ci: its weight search
