@@ -679,8 +679,6 @@ def _filter_delivered(method: str, model, task: str, G: np.ndarray, D: np.ndarra
     Returns the estimates ``(K, runs, N, n)``, covariances, the CPU (s) and the sends ``(K, runs, N)``
     (None unless `send_delta`).
     """
-    from .. import sensor_network
-
     if method in ("centralized", "local"):  # the bound keeps ideal links; local sends nothing
         return _filter_links(method, model, task, G, z, P0, 0, None)
     x0 = np.zeros(model.n_states)
@@ -692,7 +690,7 @@ def _filter_delivered(method: str, model, task: str, G: np.ndarray, D: np.ndarra
         if np.ndim(G) == 2:
             filters = [spec.build(model)] * len(z)
         else:
-            filters = [spec.build(sensor_network.SensorNetworkModel(model.F, model.Q, model.H, model.R, A)) for A in G]
+            filters = [spec.build(model.on_graph(A)) for A in G]
         x, P, sent = fusion_links.track_messages(filters, x0, P0, z, latency=latency, send_delta=send_delta,
                                                  delivered=D)
         return x, P, time.thread_time() - tic, sent if send_delta is not None else None
@@ -706,7 +704,7 @@ def _filter_links(method: str, model, task: str, G: np.ndarray, z: np.ndarray, P
     Returns the estimates ``(K, runs, N, n)``, covariances, the CPU (s) and the sends ``(K, runs, N)``
     (None unless `send_delta`).
     """
-    from .. import fusion_links, sensor_network
+    from .. import fusion_links
 
     spec = estimation.method_spec(method, task)
     n = model.n_states
@@ -716,7 +714,7 @@ def _filter_links(method: str, model, task: str, G: np.ndarray, z: np.ndarray, P
     def step_filter(A: np.ndarray):  # the method's own filter on the step's graph (its weights, its rule)
         key = A.tobytes()
         if key not in built:
-            built[key] = spec.build(sensor_network.SensorNetworkModel(model.F, model.Q, model.H, model.R, A))
+            built[key] = spec.build(model.on_graph(A))
         return built[key]
 
     if method in ("centralized", "local"):  # the bound keeps ideal links; local sends nothing
