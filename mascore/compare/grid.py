@@ -498,10 +498,11 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
     steps = np.where(t["task"] == "shared", settings.shared_steps, settings.n_steps)
     t["cpu_us"] = 1e6 * t["cpu_s"] / (t["n_agents"] * steps * t.groupby("cell")["run"].transform("size"))
     out, memo = [], {}  # memo: the bootstrap's resamples, drawn once per number of runs in this call
+    # the runs of every group in one order, (block, run): the bootstrap pairs them (sorted once, each group keeps it)
+    t = t.sort_values(["block", "run"], kind="stable")
     for key, g in t.groupby(by, sort=False, dropna=False):
         row = dict(zip(by, key if isinstance(key, tuple) else (key,)))
         row["n"] = len(g)
-        g = g.sort_values(["block", "run"], kind="stable")  # the runs in one order: the bootstrap pairs them
         for col in ("rmse_own", "ratio", "nees_own", "containment", "spread", "rmse_far", "set_size"):
             if col == "ratio":
                 m, lo, hi = rms_ratio(g["rmse_own"].to_numpy(), g["bound_rmse"].to_numpy(), memo=memo)
@@ -516,7 +517,7 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
         row["nees_bound_lo"], row["nees_bound_hi"] = anees_bounds(runs, dim) if runs and dim else (np.nan, np.nan)
         floats = g["floats"].to_numpy()  # one value per method, but as sent under send-on-delta: their mean
         row["floats"] = float(floats[0]) if (floats == floats[0]).all() else float(floats.mean())
-        row["cpu_us"] = float(g.drop_duplicates("cell")["cpu_us"].median())
+        row["cpu_us"] = float(g["cpu_us"][~g["cell"].duplicated()].median())  # one value per cell
         out.append(row)
     return pd.DataFrame(out).sort_values(by, kind="stable", ignore_index=True)  # N numerically, not as text
 
