@@ -595,8 +595,6 @@ def _check_links(method: str, loss: object, latency: object, send_delta: object,
         raise ValueError(f"loss must be a probability in [0, 1); got {loss!r}")
     if isinstance(latency, bool) or latency not in (0, 1):
         raise ValueError(f"latency must be 0 or 1 (steps); got {latency!r}")
-    if latency and method not in target_methods(task, knobs=True):
-        raise ValueError(f"latency: method must be one of {target_methods(task, knobs=True)}; got {method!r}")
     if send_delta is not None:
         if isinstance(send_delta, bool) or not isinstance(send_delta, (int, float, np.floating)) \
                 or not np.isfinite(send_delta) or send_delta < 0:
