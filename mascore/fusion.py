@@ -533,6 +533,17 @@ class ConsensusOnInformationFilter(_NetworkFilter):
             Means.
         P : (..., N, n, n) ndarray
             Covariances.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.ring_graph(3))
+        >>> hcmci = fusion.ConsensusOnInformationFilter(model, 1, novelty_weight="N")
+        >>> prior, novelty = (np.ones((3, 1, 1)), np.zeros((3, 1))), (np.ones((3, 1, 1)), np.full((3, 1), 2.0))
+        >>> x, P = hcmci.pairs_estimate([prior, novelty])             # information 1 + 3 x 1, vector 3 x 2
+        >>> x[:, 0], P[:, 0, 0]
+        (array([1.5, 1.5, 1.5]), array([0.25, 0.25, 0.25]))
         """
         if self.novelty_weight == 1.0:
             return self.pair_estimate(*pairs[0])
@@ -724,14 +735,58 @@ class InformationConsensusFilter(_NetworkFilter):
         return (self.pair_scale,)
 
     def message_pairs(self, x: ArrayLike, P: ArrayLike, z: ArrayLike) -> tuple[tuple[np.ndarray, np.ndarray]]:
-        """``(message_pair(x, P, z),)``: the one pair of each iteration.
+        """``(message_pair(x, P, z),)``: the one pair of each iteration (as CI's ``message_pairs``).
 
-        As :meth:`ConsensusOnInformationFilter.message_pairs`; see :meth:`message_pair` for the shapes.
+        Parameters
+        ----------
+        x : (..., N, n) array_like
+            Predicted means.
+        P : (..., N, n, n) array_like
+            Predicted covariances, positive definite.
+        z : (..., sum q_i) array_like
+            The step's stacked measurement.
+
+        Returns
+        -------
+        tuple of one (V, v)
+            ``V`` ``(..., N, n, n)``, ``v`` ``(..., N, n)``: :meth:`message_pair`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.ring_graph(3))
+        >>> (V, v), = fusion.InformationConsensusFilter(model, 1).message_pairs(np.zeros((3, 1)), np.ones((3, 1, 1)),
+        ...                                                                    [3.0, 0.0, 0.0])
+        >>> V[:, 0, 0]                                             # J / N + H^T R^-1 H = 1/3 + 1
+        array([1.33333333, 1.33333333, 1.33333333])
         """
         return (self.message_pair(x, P, z),)
 
     def pairs_estimate(self, pairs: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`pair_estimate` of the one pair after the iterations."""
+        """:meth:`pair_estimate` of the one pair after the iterations.
+
+        Parameters
+        ----------
+        pairs : sequence of one (V, v)
+            ``V`` ``(..., N, n, n)`` positive definite, ``v`` ``(..., N, n)``.
+
+        Returns
+        -------
+        x : (..., N, n) ndarray
+            Means.
+        P : (..., N, n, n) ndarray
+            Covariances, ``(N V)^{-1}``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.ring_graph(4))
+        >>> x, P = fusion.InformationConsensusFilter(model, 1).pairs_estimate([(np.ones((4, 1, 1)), np.full((4, 1), 2.0))])
+        >>> P[:, 0, 0]
+        array([0.25, 0.25, 0.25, 0.25])
+        """
         return self.pair_estimate(*pairs[0])
 
     def _correct(self, x, P, z):

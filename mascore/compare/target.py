@@ -583,6 +583,49 @@ SEND_ON_DELTA_METHODS = ("centralized", "ci-L1", "icf-L1")
 LATENCY_NOT_MODELLED: dict[str, str] = {}
 
 
+def latency_model(method: str, task: str = "target") -> str:
+    """How a method's messages are taken when each arrives one step late (:func:`simulate_target`'s `latency`).
+
+    Parameters
+    ----------
+    method : str
+        One of :data:`LATENCY_METHODS` (or a knob's setting).
+    task : {"target", "localization"}
+        The scenario.
+
+    Returns
+    -------
+    str
+        The treatment, from the method's filter: the bound and ``local`` are unaffected; a consensus
+        filter on information pairs fuses its neighbours' pairs of the step before, predicted, its
+        rounds pipelined (:func:`mascore.fusion_links.track_messages`); a filter on forwarded
+        measurements runs one step behind, or as many as its exchanges follow one another
+        (:func:`mascore.fusion_links.track_behind`).
+
+    Examples
+    --------
+    >>> from mascore.compare.target import latency_model
+    >>> latency_model("diffusion")
+    'its own filter two steps behind (measurements, then estimates), then its own fresh measurements'
+    """
+    if method == "centralized":
+        return "the bound: ideal links"
+    filt = target_filter(method, target_model(4) if task == "target" else localization_model(4), task)
+    rounds = filt.exchanges
+    if rounds == 0:
+        return "sends nothing"
+    if hasattr(filt, "message_pairs"):
+        hybrid = len(filt.pair_scales) > 1
+        return (f"the neighbours' {'prior and novelty pairs' if hybrid else 'pairs'} of the step before, predicted "
+                f"one step{' (the novelty as a late measurement)' if hybrid else ''}"
+                + (f"; {rounds} rounds pipelined across steps" if rounds > 1 else ""))
+    if rounds == 2:
+        return "its own filter two steps behind (measurements, then estimates), then its own fresh measurements"
+    if rounds > 2:
+        return f"its own filter {rounds} steps behind, then its own fresh measurements"
+    return "its own filter one step behind, then its own fresh measurement"
+
+
 def _check_links(method: str, loss: object, latency: object, send_delta: object, graph: str, task: str,
                  loss_model: object = "link") -> bool:
     """The link arguments of :func:`simulate_target`, checked; True if they depart from ideal links."""
