@@ -63,8 +63,9 @@ methods that do not apply are listed with the reason
 **Links of the target and localization tasks** (:data:`LINK_STUDIES`, :mod:`mascore.fusion_links`): packet
 loss per link and step (a lost message is not received; each filter fuses what arrived, with its weights on
 the links that delivered), loss per direction and run (:data:`DIRECTION_LOSS_METHODS`: a message lost alone,
-its weight on the receiver's own pair), one-step latency (:data:`LATENCY_METHODS`) and send-on-delta messages for CI and
-ICF at one consensus step (:data:`SEND_ON_DELTA_METHODS`, floats counted as sent), at N = 8 on the ring.
+its weight on the receiver's own pair), one-step latency for every filter of the tables (:data:`LATENCY_METHODS`,
+:func:`latency_model`) and send-on-delta messages for CI and ICF at one consensus step (:data:`SEND_ON_DELTA_METHODS`,
+floats counted as sent; with latency too), at N = 8 on the ring.
 
 **Robustness axes**: link drop-outs (each link's measurement and message lost with
 probability ``dropout`` at each step; a lost message leaves the last received
