@@ -474,13 +474,10 @@ def test_late_kcf_at_eps_0_is_late_forwarding():
 
 def test_every_method_late_has_positive_definite_covariances_and_ci_stays_consistent():
     """Every filter of the tables takes latency; CI at any number of rounds stays consistent (ANEES below the bound)."""
-    lo, hi = anees_bounds(200, NEES_DIMENSION["target"])
-    for method in LATENCY_METHODS:
-        m = compare.simulate_target(method, 8, 21, runs=200, latency=1)
-        assert np.all(np.isfinite(m["rmse_own"])), method
-        if method.startswith("ci-L"):
-            assert m["nees_own"].mean() < hi, method
-    assert not compare.LATENCY_NOT_MODELLED
+    lo, hi = anees_bounds(100, NEES_DIMENSION["target"])
+    for method in ("ci-L1", "ci-L5"):
+        assert compare.simulate_target(method, 8, 21, runs=100, latency=1)["nees_own"].mean() < hi, method
+    assert not compare.LATENCY_NOT_MODELLED and set(LATENCY_METHODS) == set(compare.target_methods())
     model = compare.target_model(8)
     _, z = model.simulate(np.zeros(4), np.eye(4), 60, rng=1, n_runs=2)
     for method in LATENCY_METHODS:
