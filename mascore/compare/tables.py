@@ -372,7 +372,7 @@ def link_table(summary, links, task: str = "target"):
         centralized filter, which keeps ideal links) and ``NEES/dof``, for ideal links (the task's
         own study), each packet loss (``loss p``: a link lost in both directions; ``one-way loss p``:
         each message lost alone, study ``loss-direction``), and one-step latency at each loss the
-        summary holds; NaN where a method has no model of the links (:data:`LATENCY_NOT_MODELLED`).
+        summary holds; NaN where a cell was not run (the quick grid runs loss for a few methods only).
 
     Examples
     --------
