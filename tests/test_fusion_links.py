@@ -513,3 +513,16 @@ def test_send_on_delta_with_latency():
     assert (m["floats"] < compare.target_cost("ci-L1", 8, 2)[0]).all()
     lossy = compare.simulate_target("ci-L1", 8, 7, runs=20, latency=1, send_delta=0.5, loss=0.3, loss_model="direction")
     assert np.all(np.isfinite(lossy["rmse_own"])) and (lossy["floats"] > 0).all()
+
+
+def test_latency_model_names_the_treatment_simulate_target_runs():
+    model = compare.target_model(8)
+    for task in ("target", "localization"):
+        for method in LATENCY_METHODS:
+            text = compare.latency_model(method, task)
+            if method in ("centralized", "local"):
+                assert text in ("the bound: ideal links", "sends nothing")
+                continue
+            pairs = hasattr(compare.target_filter(method, model), "message_pairs")
+            assert ("predicted one step" in text) == pairs and ("behind" in text) != pairs, (method, text)
+    assert "two steps behind" in compare.latency_model("ci-diffusion") and "5 rounds" in compare.latency_model("icf-L5")
