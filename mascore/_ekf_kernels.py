@@ -17,9 +17,9 @@ from scipy.linalg.lapack import dpotrf, dtrtri
 
 from . import _flocking_core as flocking_core
 
-__all__ = ["CHUNK_BYTES", "LAPACK_ORDER", "TILE_K", "TILE_MACS", "TILE_ROWS", "Scratch", "add_noise", "block_diagonal",
-           "cholesky_inverse", "chunks", "column_blocks", "column_tiles", "pair_view", "predict_half", "strip",
-           "subtract_gram", "symmetrize_sum", "tiled_matmul", "transpose_into", "update_rows"]
+__all__ = ["CHUNK_BYTES", "GRAM_BATCH_ORDER", "LAPACK_ORDER", "TILE_K", "TILE_MACS", "TILE_ROWS", "Scratch",
+           "add_noise", "block_diagonal", "cholesky_inverse", "chunks", "column_blocks", "column_tiles", "pair_view",
+           "predict_half", "strip", "subtract_gram", "symmetrize_sum", "tiled_matmul", "transpose_into", "update_rows"]
 
 
 #: Bytes of covariance handled per chunk of filters: each chunk runs its update and prediction while its
@@ -45,6 +45,10 @@ TILE_MACS = 1 << 18
 TILE_K = 128
 #: Rows of a tile (its columns: as many as :data:`TILE_MACS` allows).
 TILE_ROWS = 64
+#: Largest state size ``M`` whose rank-q downdates ``Sigma - V^T V`` are one batched product per chunk (the
+#: chunk's ``V^T V``, then two passes over its covariances); above it, per filter in place (:func:`subtract_gram`),
+#: where a pass over the chunk costs more than the per-filter calls. Same bytes either way (``scale`` is 1 or 1/2).
+GRAM_BATCH_ORDER = 64
 #: Largest factor handed to LAPACK in one call (OpenBLAS's Cholesky and triangular inverse run on one thread up
 #: to this order); larger innovation covariances are factored by blocks (:func:`cholesky_inverse`).
 LAPACK_ORDER = 64
@@ -149,9 +153,10 @@ def update_rows(X, P, z, observed, R, scale, work=None):
     `z` ``(c, N, m)``, `observed` ``(c, N)`` bool. The observed rows ``H Sigma`` and the innovation
     covariances ``S = H (Sigma + R) H^T`` of the chunk are gathered at once (index lists padded to a common
     length ``q``); per filter, with its own ``q_i`` entries, ``L^{-1}`` of ``S = L L^T``
-    (:func:`cholesky_inverse`); then for the chunk at once ``V = L^{-1} H Sigma`` (zero in the padding) and per
-    filter ``V^T V`` subtracted in place (:func:`subtract_gram`): ``O(q_i^3 + q_i^2 M + q_i M^2)`` flops, every
-    BLAS call a tile run on the calling thread.
+    (:func:`cholesky_inverse`); then for the chunk at once ``V = L^{-1} H Sigma`` (zero in the padding) and
+    ``V^T V`` subtracted: per filter in place (:func:`subtract_gram`), or for ``M <= GRAM_BATCH_ORDER`` as one
+    tiled product for the chunk: ``O(q_i^3 + q_i^2 M + q_i M^2)`` flops, every BLAS call a tile run on the
+    calling thread.
     Returns the updated states ``(c, N, m)``.
     """
     c, N, m = X.shape
@@ -184,11 +189,16 @@ def update_rows(X, P, z, observed, R, scale, work=None):
             Li[k, : q[k], : q[k]] = cholesky_inverse(S[k, : q[k], : q[k]])
     V = tiled_matmul(Li, Ct, work.V[: c * q_max * M].reshape(c, q_max, M), work.acc)  # L^{-1} H Sigma
     a = np.einsum("kij,kj->ki", Li, nu)  # L^{-1} nu
-    for k in range(c):  # eq. (20): Sigma - V^T V (times scale), in place
-        if q[k]:
-            subtract_gram(P[k], V[k, : q[k]], scale)
-        elif scale != 1.0:
-            P[k] *= scale
+    if M <= GRAM_BATCH_ORDER:  # eq. (20) for many small filters: V^T V of the chunk at once (V zero in the padding)
+        P -= tiled_matmul(np.swapaxes(V, -1, -2), V, work.T[:c], work.acc)
+        if scale != 1.0:
+            P *= scale
+    else:
+        for k in range(c):  # eq. (20): Sigma - V^T V (times scale), in place
+            if q[k]:
+                subtract_gram(P[k], V[k, : q[k]], scale)
+            elif scale != 1.0:
+                P[k] *= scale
     x_post = x + np.einsum("kqm,kq->km", V, a)  # eq. (18): X + Sigma H^T S^{-1} nu = X + V^T L^{-1} nu
     return x_post.reshape(c, N, m)
 
