@@ -17,7 +17,7 @@ Shapes: a measurement is the stacked vector ``z = (z_1, ..., z_N)`` of shape
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -169,62 +169,12 @@ class SensorNetworkModel(Frozen):
         A = check_adjacency(float_array(adjacency, "adjacency"), "adjacency", undirected=True,
                             why="the consensus weights and the information exchange are symmetric")
         N = A.shape[0]
-        if isinstance(H, np.ndarray) and H.ndim == 3:
-            H = list(H)
-        if isinstance(R, np.ndarray) and R.ndim == 3:
-            R = list(R)
-        for name, seq in (("H", H), ("R", R)):
-            if isinstance(seq, (str, bytes, np.ndarray)) or not hasattr(seq, "__len__"):
-                raise TypeError(f"{name} must be a sequence of N = {N} matrices (one per agent); got "
-                                f"{type(seq).__name__}")
-            if len(seq) != N:
-                raise ValueError(f"{name} must hold one matrix per agent: N = {N} (the adjacency's size); got "
-                                 f"{len(seq)}")
-        Hs, Rs = [], []
-        for i in range(N):
-            Hi = as_matrix(H[i], f"H[{i}]", (None, n))
-            q = Hi.shape[0]
-            if q == 0:
-                if R[i] is not None and float_array(R[i], f"R[{i}]").size:
-                    raise ValueError(f"R[{i}] must be empty (shape (0, 0)) or None: agent {i} has no measurement "
-                                     f"(H[{i}] has 0 rows)")
-                Ri = np.zeros((0, 0))
-            else:
-                if R[i] is None:
-                    raise TypeError(f"R[{i}] must be a ({q}, {q}) covariance for H[{i}] of shape {Hi.shape}; "
-                                    "got None")
-                Ri = check_covariance(float_array(R[i], f"R[{i}]"), f"R[{i}]", size=q, definite=True)
-            Hs.append(Hi)
-            Rs.append(Ri)
-        sizes = [h.shape[0] for h in Hs]
-        total = sum(sizes)
-        if total == 0:
-            raise ValueError("no agent senses (every H[i] has 0 rows): at least one measurement is needed")
-        H_st = np.concatenate(Hs, axis=0)
-        R_st = np.zeros((total, total))
-        Rinv = np.zeros((total, total))
-        owner = np.zeros((N, total))
-        slices, start = [], 0
-        info = np.zeros((N, n, n))
-        for i, (Hi, Ri) in enumerate(zip(Hs, Rs)):
-            sl = slice(start, start + sizes[i])
-            slices.append(sl)
-            start += sizes[i]
-            if sizes[i]:
-                R_st[sl, sl] = Ri
-                Ri_inv = symmetric_part(np.linalg.inv(Ri))
-                Rinv[sl, sl] = Ri_inv
-                owner[i, sl] = 1.0
-                info[i] = symmetric_part(Hi.T @ Ri_inv @ Hi)
-        finite_result("model's information matrices", info, Rinv, advice="R is too close to singular")
+        Hs, Rs = _checked_sensing(H, R, n, N)
         links = A > 0
-        self._set(F=frozen_copy(F), Q=frozen_copy(Q), H=tuple(frozen_copy(h) for h in Hs),
-                  R=tuple(frozen_copy(r) for r in Rs), adjacency=frozen_copy(A), H_stacked=frozen_copy(H_st),
-                  R_stacked=frozen_copy(R_st), information_matrices=frozen_copy(info),
-                  weights=frozen_copy(metropolis(links)), _kf=kalman.LinearGaussianModel(F, Q, H_st, R_st),
-                  _owner=frozen_copy(owner), _Rinv=frozen_copy(Rinv),
+        self._set(F=frozen_copy(F), Q=frozen_copy(Q), adjacency=frozen_copy(A), weights=frozen_copy(metropolis(links)),
                   _neighbourhood=frozen_copy(links + np.eye(N)),  # N_i together with i
-                  _sqrt_Q=frozen_copy(psd_sqrt(Q)), _sqrt_R=frozen_copy(psd_sqrt(R_st)), _slices=tuple(slices))
+                  _sqrt_Q=frozen_copy(psd_sqrt(Q)))
+        self._set(**_sensing_parts(Hs, Rs, n, N, lambda H_st, R_st: kalman.LinearGaussianModel(F, Q, H_st, R_st)))
 
     def _args(self) -> tuple:
         return (self.F, self.Q, self.H, self.R, self.adjacency)
@@ -265,6 +215,55 @@ class SensorNetworkModel(Frozen):
         new._set(**{name: getattr(self, name) for name in self.__slots__})
         new._set(adjacency=frozen_copy(A), weights=frozen_copy(metropolis(links)),
                  _neighbourhood=frozen_copy(links + np.eye(N)))
+        return new
+
+    def with_sensing(self, H: Sequence[ArrayLike], R: Sequence[ArrayLike], *, check: bool = True,
+                     ) -> SensorNetworkModel:
+        """The same dynamics and graph with other sensing (a step's ``H_i``, ``R_i``, or who senses).
+
+        The dynamics and the graph were checked when this model was built and are shared,
+        read-only, with the new model, which equals ``SensorNetworkModel(F, Q, H, R, adjacency)``
+        (in a fraction of its time: the graph's weights are not computed again).
+
+        Parameters
+        ----------
+        H : sequence of N (q_i, n) array_like
+            Measurement matrices, finite (``(0, n)`` for an agent that does not sense).
+        R : sequence of N (q_i, q_i) array_like
+            Measurement-noise covariances, symmetric positive definite (``(0, 0)`` or None for
+            an agent that does not sense).
+        check : bool
+            Check `H` and `R` as the constructor does (default). ``False``: they are lists of
+            float arrays their caller has checked already (:func:`mascore.fusion.track`, which checks
+            every step's sensing before the first).
+
+        Returns
+        -------
+        SensorNetworkModel
+            The model with that sensing.
+
+        Raises
+        ------
+        ValueError, TypeError
+            A bad matrix, named in the message (``H[2]``, ``R[0]``).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
+        ...                                           graphs.ring_graph(3))
+        >>> far = model.with_sensing([np.eye(2)] * 3, [np.eye(2), 4.0 * np.eye(2), 9.0 * np.eye(2)])
+        >>> far.information_matrices[:, 0, 0]                            # 1 / R_i: noise that grows with range
+        array([1.        , 0.25      , 0.11111111])
+        """
+        n, N = self.n_states, self.n_agents
+        if check:
+            H, R = _checked_sensing(H, R, n, N)
+        new = object.__new__(type(self))
+        new._set(**{name: getattr(self, name) for name in self.__slots__})
+        new._set(**_sensing_parts(list(H), [np.zeros((0, 0)) if r is None else r for r in R], n, N,
+                                  self._kf.with_measurement))
         return new
 
     def __repr__(self) -> str:
@@ -480,3 +479,70 @@ class SensorNetworkModel(Frozen):
             x[k + 1] = x[k] @ self.F.T + gen.standard_normal((*runs, n)) @ self._sqrt_Q.T
             z[k] = x[k + 1] @ self.H_stacked.T + gen.standard_normal((*runs, q)) @ self._sqrt_R.T
         return x, z
+
+
+# --------------------------------------------------------------------------------------------
+# the sensing part of a model (its constructor and SensorNetworkModel.with_sensing)
+
+
+def _checked_sensing(H: Sequence[ArrayLike], R: Sequence[ArrayLike], n: int, N: int,
+                     ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Each agent's ``H_i`` ``(q_i, n)`` and ``R_i`` ``(q_i, q_i)``, checked (``(0, 0)`` for an agent that does not sense)."""
+    if isinstance(H, np.ndarray) and H.ndim == 3:
+        H = list(H)
+    if isinstance(R, np.ndarray) and R.ndim == 3:
+        R = list(R)
+    for name, seq in (("H", H), ("R", R)):
+        if isinstance(seq, (str, bytes, np.ndarray)) or not hasattr(seq, "__len__"):
+            raise TypeError(f"{name} must be a sequence of N = {N} matrices (one per agent); got "
+                            f"{type(seq).__name__}")
+        if len(seq) != N:
+            raise ValueError(f"{name} must hold one matrix per agent: N = {N} (the adjacency's size); got "
+                             f"{len(seq)}")
+    Hs, Rs = [], []
+    for i in range(N):
+        Hi = as_matrix(H[i], f"H[{i}]", (None, n))
+        q = Hi.shape[0]
+        if q == 0:
+            if R[i] is not None and float_array(R[i], f"R[{i}]").size:
+                raise ValueError(f"R[{i}] must be empty (shape (0, 0)) or None: agent {i} has no measurement "
+                                 f"(H[{i}] has 0 rows)")
+            Ri = np.zeros((0, 0))
+        else:
+            if R[i] is None:
+                raise TypeError(f"R[{i}] must be a ({q}, {q}) covariance for H[{i}] of shape {Hi.shape}; "
+                                "got None")
+            Ri = check_covariance(float_array(R[i], f"R[{i}]"), f"R[{i}]", size=q, definite=True)
+        Hs.append(Hi)
+        Rs.append(Ri)
+    if sum(h.shape[0] for h in Hs) == 0:
+        raise ValueError("no agent senses (every H[i] has 0 rows): at least one measurement is needed")
+    return Hs, Rs
+
+
+def _sensing_parts(Hs: list[np.ndarray], Rs: list[np.ndarray], n: int, N: int,
+                   kf: Callable[[np.ndarray, np.ndarray], kalman.LinearGaussianModel]) -> dict[str, object]:
+    """The model's sensing attributes from checked ``H_i``, ``R_i`` (`kf` builds the stacked Kalman model)."""
+    sizes = [h.shape[0] for h in Hs]
+    total = sum(sizes)
+    H_st = np.concatenate(Hs, axis=0)
+    R_st = np.zeros((total, total))
+    Rinv = np.zeros((total, total))
+    owner = np.zeros((N, total))
+    slices, start = [], 0
+    info = np.zeros((N, n, n))
+    for i, (Hi, Ri) in enumerate(zip(Hs, Rs)):
+        sl = slice(start, start + sizes[i])
+        slices.append(sl)
+        start += sizes[i]
+        if sizes[i]:
+            R_st[sl, sl] = Ri
+            Ri_inv = symmetric_part(np.linalg.inv(Ri))
+            Rinv[sl, sl] = Ri_inv
+            owner[i, sl] = 1.0
+            info[i] = symmetric_part(Hi.T @ Ri_inv @ Hi)
+    finite_result("model's information matrices", info, Rinv, advice="R is too close to singular")
+    return dict(H=tuple(frozen_copy(h) for h in Hs), R=tuple(frozen_copy(r) for r in Rs), H_stacked=frozen_copy(H_st),
+                R_stacked=frozen_copy(R_st), information_matrices=frozen_copy(info), _kf=kf(H_st, R_st),
+                _owner=frozen_copy(owner), _Rinv=frozen_copy(Rinv), _sqrt_R=frozen_copy(psd_sqrt(R_st)),
+                _slices=tuple(slices))
