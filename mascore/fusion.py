@@ -1016,15 +1016,17 @@ def _filter_of_step(filt: _NetworkFilter, A: np.ndarray, senses: np.ndarray,
     same_graph = np.array_equal(A, model.adjacency)  # then the filter's own settings hold as they are
     if senses.all() and same_graph and values is None:
         return filt
-    if values is None:
-        H_of, R_of = model.H, model.R
-    else:
-        H_of = [values[0][sl] for sl in model._slices]
-        R_of = [values[1][sl, sl] for sl in model._slices]
-    n = model.n_states
-    H = [h if s else np.zeros((0, n)) for h, s in zip(H_of, senses)]
-    R = [r if s else np.zeros((0, 0)) for r, s in zip(R_of, senses)]
-    step_model = (model if same_graph else model.on_graph(A)).with_sensing(H, R, check=False)
+    step_model = model if same_graph else model.on_graph(A)
+    if values is not None or not senses.all():  # the step's own sensing
+        if values is None:
+            H_of, R_of = model.H, model.R
+        else:
+            H_of = [values[0][sl] for sl in model._slices]
+            R_of = [values[1][sl, sl] for sl in model._slices]
+        n = model.n_states
+        step_model = step_model.with_sensing([h if s else np.zeros((0, n)) for h, s in zip(H_of, senses)],
+                                             [r if s else np.zeros((0, 0)) for r, s in zip(R_of, senses)],
+                                             check=False)
     return type(filt)(step_model, *(filt._args() if same_graph else _settings_for_any_graph(filt)))
 
 
@@ -1101,13 +1103,14 @@ def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true:
     P_out = np.empty((K, *P.shape))
     row = n
     sub = "dia,dib->iab" if filt._per_agent else "da,db->ab"
+    sqrt_R = model._sqrt_R
     for k in range(K):
         live = row + n + q  # the sources drawn by step k; the later ones, and the estimates they drive, are still 0
         truth[:live] = truth[:live] @ model.F.T
         truth[row:row + n] += model._sqrt_Q.T
         row += n
         z = truth[:live] @ model.H_stacked.T
-        z[row:row + q] += model._sqrt_R.T
+        z[row:row + q] += sqrt_R.T
         row += q
         x_live, P = filt.update(*filt.predict(x[:live], P), z)
         x[:live] = x_live

@@ -207,7 +207,7 @@ class LinearGaussianModel(Frozen):
                              f"model's F of shape {self.F.shape} but found {x.shape}")
         return x, P
 
-    def with_measurement(self, H: ArrayLike, R: ArrayLike) -> LinearGaussianModel:
+    def with_measurement(self, H: ArrayLike, R: ArrayLike, *, check: bool = True) -> LinearGaussianModel:
         """The same dynamics with another measurement model (a sensor whose ``H`` or ``R`` changes per step).
 
         Only `H` and `R` are checked: ``F``, ``Q`` and ``B`` were checked when this model was built
@@ -220,6 +220,9 @@ class LinearGaussianModel(Frozen):
             Measurement matrix, finite, ``q >= 1``.
         R : (q, q) or (..., q, q) array_like
             Measurement-noise covariance, symmetric positive definite.
+        check : bool
+            Check `H` and `R` (default). ``False``: they are float arrays of the right shapes
+            that their caller has checked already.
 
         Returns
         -------
@@ -240,7 +243,8 @@ class LinearGaussianModel(Frozen):
         >>> far == kalman.LinearGaussianModel(np.eye(2), 0.1 * np.eye(2), [[1.0, 0.0]], [[4.0]])
         True
         """
-        H, R = _checked_measurement(H, R, self.n_states, f"F of shape {self.F.shape}")
+        if check:
+            H, R = _checked_measurement(H, R, self.n_states, f"F of shape {self.F.shape}")
         new = object.__new__(type(self))
         new._set(**{name: getattr(self, name) for name in self.__slots__})
         new._set(H=frozen_copy(H), R=frozen_copy(R))

@@ -157,7 +157,7 @@ class SensorNetworkModel(Frozen):
     """
 
     __slots__ = ("F", "Q", "H", "R", "adjacency", "H_stacked", "R_stacked", "information_matrices", "weights",
-                 "_kf", "_owner", "_Rinv", "_neighbourhood", "_sqrt_Q", "_sqrt_R", "_slices")
+                 "_kf", "_owner", "_Rinv", "_neighbourhood", "_sqrt_Q", "_slices")
 
     def __init__(self, F: ArrayLike, Q: ArrayLike, H: Sequence[ArrayLike], R: Sequence[ArrayLike],
                  adjacency: ArrayLike) -> None:
@@ -263,8 +263,13 @@ class SensorNetworkModel(Frozen):
         new = object.__new__(type(self))
         new._set(**{name: getattr(self, name) for name in self.__slots__})
         new._set(**_sensing_parts(list(H), [np.zeros((0, 0)) if r is None else r for r in R], n, N,
-                                  self._kf.with_measurement))
+                                  lambda H_st, R_st: self._kf.with_measurement(H_st, R_st, check=check)))
         return new
+
+    @property
+    def _sqrt_R(self) -> np.ndarray:
+        """The symmetric square root of ``R = blockdiag(R_i)`` (drawing the measurement noise)."""
+        return psd_sqrt(self.R_stacked)
 
     def __repr__(self) -> str:
         return (f"SensorNetworkModel(N = {self.n_agents} agents, n = {self.n_states} states, "
@@ -475,9 +480,10 @@ class SensorNetworkModel(Frozen):
         x = np.empty((K + 1, *runs, n))
         z = np.empty((K, *runs, q))
         x[0] = x0 + gen.standard_normal((*runs, n)) @ psd_sqrt(P0).T
+        sqrt_R = self._sqrt_R
         for k in range(K):
             x[k + 1] = x[k] @ self.F.T + gen.standard_normal((*runs, n)) @ self._sqrt_Q.T
-            z[k] = x[k + 1] @ self.H_stacked.T + gen.standard_normal((*runs, q)) @ self._sqrt_R.T
+            z[k] = x[k + 1] @ self.H_stacked.T + gen.standard_normal((*runs, q)) @ sqrt_R.T
         return x, z
 
 
@@ -522,27 +528,33 @@ def _checked_sensing(H: Sequence[ArrayLike], R: Sequence[ArrayLike], n: int, N: 
 
 def _sensing_parts(Hs: list[np.ndarray], Rs: list[np.ndarray], n: int, N: int,
                    kf: Callable[[np.ndarray, np.ndarray], kalman.LinearGaussianModel]) -> dict[str, object]:
-    """The model's sensing attributes from checked ``H_i``, ``R_i`` (`kf` builds the stacked Kalman model)."""
-    sizes = [h.shape[0] for h in Hs]
-    total = sum(sizes)
+    """The model's sensing attributes from checked ``H_i``, ``R_i`` (`kf` builds the stacked Kalman model).
+
+    The agents with ``q_i`` measurements are done at once, for each ``q_i``.
+    """
+    sizes = np.array([h.shape[0] for h in Hs])
+    starts = np.cumsum(sizes) - sizes
+    total = int(sizes.sum())
     H_st = np.concatenate(Hs, axis=0)
     R_st = np.zeros((total, total))
     Rinv = np.zeros((total, total))
     owner = np.zeros((N, total))
-    slices, start = [], 0
     info = np.zeros((N, n, n))
-    for i, (Hi, Ri) in enumerate(zip(Hs, Rs)):
-        sl = slice(start, start + sizes[i])
-        slices.append(sl)
-        start += sizes[i]
-        if sizes[i]:
-            R_st[sl, sl] = Ri
-            Ri_inv = symmetric_part(np.linalg.inv(Ri))
-            Rinv[sl, sl] = Ri_inv
-            owner[i, sl] = 1.0
-            info[i] = symmetric_part(Hi.T @ Ri_inv @ Hi)
+    H_of: list[np.ndarray] = [frozen_copy(np.zeros((0, n)))] * N  # read-only views of one copy per measurement size
+    R_of: list[np.ndarray] = [frozen_copy(np.zeros((0, 0)))] * N
+    for q in sorted(set(sizes.tolist()) - {0}):
+        agents = np.flatnonzero(sizes == q)
+        Ri, Hi = np.stack([Rs[i] for i in agents]), np.stack([Hs[i] for i in agents])  # (g, q, q), (g, q, n)
+        Ri_inv = symmetric_part(np.linalg.inv(Ri))
+        info[agents] = symmetric_part(np.swapaxes(Hi, -1, -2) @ Ri_inv @ Hi)
+        rows = starts[agents, None] + np.arange(q)  # (g, q): the agents' rows of the stacked measurement
+        R_st[rows[:, :, None], rows[:, None, :]] = Ri
+        Rinv[rows[:, :, None], rows[:, None, :]] = Ri_inv
+        owner[agents[:, None], rows] = 1.0
+        Hi, Ri = frozen_copy(Hi), frozen_copy(Ri)
+        for j, i in enumerate(agents):
+            H_of[i], R_of[i] = Hi[j], Ri[j]
     finite_result("model's information matrices", info, Rinv, advice="R is too close to singular")
-    return dict(H=tuple(frozen_copy(h) for h in Hs), R=tuple(frozen_copy(r) for r in Rs), H_stacked=frozen_copy(H_st),
-                R_stacked=frozen_copy(R_st), information_matrices=frozen_copy(info), _kf=kf(H_st, R_st),
-                _owner=frozen_copy(owner), _Rinv=frozen_copy(Rinv), _sqrt_R=frozen_copy(psd_sqrt(R_st)),
-                _slices=tuple(slices))
+    return dict(H=tuple(H_of), R=tuple(R_of), H_stacked=frozen_copy(H_st), R_stacked=frozen_copy(R_st),
+                information_matrices=frozen_copy(info), _kf=kf(H_st, R_st), _owner=frozen_copy(owner),
+                _Rinv=frozen_copy(Rinv), _slices=tuple(slice(int(a), int(a + q)) for a, q in zip(starts, sizes)))
