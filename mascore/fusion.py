@@ -1017,16 +1017,11 @@ def _filter_of_step(filt: _NetworkFilter, A: np.ndarray, senses: np.ndarray,
     if senses.all() and same_graph and values is None:
         return filt
     step_model = model if same_graph else model.on_graph(A)
-    if values is not None or not senses.all():  # the step's own sensing
-        if values is None:
-            H_of, R_of = model.H, model.R
-        else:
-            H_of = [values[0][sl] for sl in model._slices]
-            R_of = [values[1][sl, sl] for sl in model._slices]
-        n = model.n_states
-        step_model = step_model.with_sensing([h if s else np.zeros((0, n)) for h, s in zip(H_of, senses)],
-                                             [r if s else np.zeros((0, 0)) for r, s in zip(R_of, senses)],
-                                             check=False)
+    if values is not None or not senses.all():  # the step's own sensing (checked by track)
+        H, R = (model.H_stacked, model.R_stacked) if values is None else values
+        rows = np.repeat(senses, model.measurement_sizes)  # the rows of the agents that sense
+        step_model = step_model._with_stacked_sensing(H[rows], R[np.ix_(rows, rows)],
+                                                      [q if s else 0 for q, s in zip(model.measurement_sizes, senses)])
     return type(filt)(step_model, *(filt._args() if same_graph else _settings_for_any_graph(filt)))
 
 

@@ -16,8 +16,9 @@ Shapes: a measurement is the stacked vector ``z = (z_1, ..., z_N)`` of shape
 
 from __future__ import annotations
 
+import itertools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -174,7 +175,8 @@ class SensorNetworkModel(Frozen):
         self._set(F=frozen_copy(F), Q=frozen_copy(Q), adjacency=frozen_copy(A), weights=frozen_copy(metropolis(links)),
                   _neighbourhood=frozen_copy(links + np.eye(N)),  # N_i together with i
                   _sqrt_Q=frozen_copy(psd_sqrt(Q)))
-        self._set(**_sensing_parts(Hs, Rs, n, N, lambda H_st, R_st: kalman.LinearGaussianModel(F, Q, H_st, R_st)))
+        H_st, R_st, sizes = _stacked(Hs, Rs)
+        self._set(**_sensing_parts(H_st, R_st, sizes, n, N, kalman.LinearGaussianModel(F, Q, H_st, R_st)))
 
     def _args(self) -> tuple:
         return (self.F, self.Q, self.H, self.R, self.adjacency)
@@ -217,8 +219,7 @@ class SensorNetworkModel(Frozen):
                  _neighbourhood=frozen_copy(links + np.eye(N)))
         return new
 
-    def with_sensing(self, H: Sequence[ArrayLike], R: Sequence[ArrayLike], *, check: bool = True,
-                     ) -> SensorNetworkModel:
+    def with_sensing(self, H: Sequence[ArrayLike], R: Sequence[ArrayLike]) -> SensorNetworkModel:
         """The same dynamics and graph with other sensing (a step's ``H_i``, ``R_i``, or who senses).
 
         The dynamics and the graph were checked when this model was built and are shared,
@@ -232,10 +233,6 @@ class SensorNetworkModel(Frozen):
         R : sequence of N (q_i, q_i) array_like
             Measurement-noise covariances, symmetric positive definite (``(0, 0)`` or None for
             an agent that does not sense).
-        check : bool
-            Check `H` and `R` as the constructor does (default). ``False``: they are lists of
-            float arrays their caller has checked already (:func:`mascore.fusion.track`, which checks
-            every step's sensing before the first).
 
         Returns
         -------
@@ -257,13 +254,14 @@ class SensorNetworkModel(Frozen):
         >>> far.information_matrices[:, 0, 0]                            # 1 / R_i: noise that grows with range
         array([1.        , 0.25      , 0.11111111])
         """
-        n, N = self.n_states, self.n_agents
-        if check:
-            H, R = _checked_sensing(H, R, n, N)
+        return self._with_stacked_sensing(*_stacked(*_checked_sensing(H, R, self.n_states, self.n_agents)))
+
+    def _with_stacked_sensing(self, H_st: np.ndarray, R_st: np.ndarray, sizes: Sequence[int]) -> SensorNetworkModel:
+        """:meth:`with_sensing` from checked stacked arrays: ``H`` ``(sum q_i, n)``, block-diagonal ``R``, the ``q_i``."""
         new = object.__new__(type(self))
         new._set(**{name: getattr(self, name) for name in self.__slots__})
-        new._set(**_sensing_parts(list(H), [np.zeros((0, 0)) if r is None else r for r in R], n, N,
-                                  lambda H_st, R_st: self._kf.with_measurement(H_st, R_st, check=check)))
+        new._set(**_sensing_parts(H_st, R_st, sizes, self.n_states, self.n_agents,
+                                  self._kf.with_measurement(H_st, R_st, check=False)))
         return new
 
     @property
@@ -526,35 +524,40 @@ def _checked_sensing(H: Sequence[ArrayLike], R: Sequence[ArrayLike], n: int, N: 
     return Hs, Rs
 
 
-def _sensing_parts(Hs: list[np.ndarray], Rs: list[np.ndarray], n: int, N: int,
-                   kf: Callable[[np.ndarray, np.ndarray], kalman.LinearGaussianModel]) -> dict[str, object]:
-    """The model's sensing attributes from checked ``H_i``, ``R_i`` (`kf` builds the stacked Kalman model).
-
-    The agents with ``q_i`` measurements are done at once, for each ``q_i``.
-    """
-    sizes = np.array([h.shape[0] for h in Hs])
-    starts = np.cumsum(sizes) - sizes
-    total = int(sizes.sum())
-    H_st = np.concatenate(Hs, axis=0)
+def _stacked(Hs: list[np.ndarray], Rs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """``[H_1; ...; H_N]``, ``blockdiag(R_1, ..., R_N)`` and the ``q_i`` of checked per-agent matrices."""
+    sizes = [h.shape[0] for h in Hs]
+    total = sum(sizes)
     R_st = np.zeros((total, total))
+    start = 0
+    for q, Ri in zip(sizes, Rs):
+        R_st[start:start + q, start:start + q] = Ri
+        start += q
+    return np.concatenate(Hs, axis=0), R_st, sizes
+
+
+def _sensing_parts(H_st: np.ndarray, R_st: np.ndarray, sizes: Sequence[int], n: int, N: int,
+                   kf: kalman.LinearGaussianModel) -> dict[str, object]:
+    """The model's sensing attributes from checked stacked ``H`` and block-diagonal ``R`` of agents of ``q_i``
+    measurements (`kf`: the stacked Kalman model). The agents with ``q_i`` measurements are done at once, per ``q_i``.
+    """
+    starts = [0, *itertools.accumulate(sizes)]
+    total = starts[-1]
     Rinv = np.zeros((total, total))
-    owner = np.zeros((N, total))
+    owner = np.repeat(np.eye(N), sizes, axis=1)  # (N, sum q): agent i's rows
     info = np.zeros((N, n, n))
     H_of: list[np.ndarray] = [frozen_copy(np.zeros((0, n)))] * N  # read-only views of one copy per measurement size
     R_of: list[np.ndarray] = [frozen_copy(np.zeros((0, 0)))] * N
-    for q in sorted(set(sizes.tolist()) - {0}):
-        agents = np.flatnonzero(sizes == q)
-        Ri, Hi = np.stack([Rs[i] for i in agents]), np.stack([Hs[i] for i in agents])  # (g, q, q), (g, q, n)
+    for q in sorted(set(sizes) - {0}):
+        agents = [i for i, size in enumerate(sizes) if size == q]
+        rows = np.add.outer([starts[i] for i in agents], np.arange(q))  # (g, q): their rows of the stacked measurement
+        Ri, Hi = R_st[rows[:, :, None], rows[:, None, :]], H_st[rows]   # (g, q, q), (g, q, n)
         Ri_inv = symmetric_part(np.linalg.inv(Ri))
         info[agents] = symmetric_part(np.swapaxes(Hi, -1, -2) @ Ri_inv @ Hi)
-        rows = starts[agents, None] + np.arange(q)  # (g, q): the agents' rows of the stacked measurement
-        R_st[rows[:, :, None], rows[:, None, :]] = Ri
         Rinv[rows[:, :, None], rows[:, None, :]] = Ri_inv
-        owner[agents[:, None], rows] = 1.0
-        Hi, Ri = frozen_copy(Hi), frozen_copy(Ri)
-        for j, i in enumerate(agents):
-            H_of[i], R_of[i] = Hi[j], Ri[j]
+        for i, h, r in zip(agents, frozen_copy(Hi), frozen_copy(Ri)):
+            H_of[i], R_of[i] = h, r
     finite_result("model's information matrices", info, Rinv, advice="R is too close to singular")
     return dict(H=tuple(H_of), R=tuple(R_of), H_stacked=frozen_copy(H_st), R_stacked=frozen_copy(R_st),
-                information_matrices=frozen_copy(info), _kf=kf(H_st, R_st), _owner=frozen_copy(owner),
-                _Rinv=frozen_copy(Rinv), _slices=tuple(slice(int(a), int(a + q)) for a, q in zip(starts, sizes)))
+                information_matrices=frozen_copy(info), _kf=kf, _owner=frozen_copy(owner), _Rinv=frozen_copy(Rinv),
+                _slices=tuple(map(slice, starts[:-1], starts[1:])))

@@ -180,8 +180,8 @@ def test_per_step_values_equal_to_the_models_give_the_fixed_run_bit_for_bit(make
     H = np.broadcast_to(model.H_stacked, (K, N, 4))
     R = np.broadcast_to(model.R_stacked, (K, N, N))
     rebuilt = []
-    original = sensor_network.SensorNetworkModel.with_sensing
-    monkeypatch.setattr(sensor_network.SensorNetworkModel, "with_sensing",
+    original = sensor_network.SensorNetworkModel._with_stacked_sensing
+    monkeypatch.setattr(sensor_network.SensorNetworkModel, "_with_stacked_sensing",
                         lambda self, *a, **kw: rebuilt.append(1) or original(self, *a, **kw))
     for given in (None, _switching()):
         x_fixed, P_fixed = fusion.track(filt, np.zeros(4), np.eye(4), z, given)
