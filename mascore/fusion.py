@@ -806,9 +806,11 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     graph, and ``H_i(k)``, ``R_i(k)`` of the agents that sense (an agent that does not has no
     measurement rows: ``H_i`` of shape ``(0, n)``); each distinct (graph, sensing) of a call
     once, and a step whose values equal the model's is the model's (no rebuild). Every
-    filter of this module and of :mod:`mascore.fusion_forwarding` takes per-step sensing:
-    each uses ``H_i`` and ``R_i`` only within the step. Everything is checked before the
-    first step.
+    filter of this module and of :mod:`mascore.fusion_forwarding` takes per-step sensing
+    (each uses ``H_i`` and ``R_i`` only within the step), and all but the
+    :class:`~mascore.fusion_forwarding.SetMembershipForwardingFilter` (whose update is computed
+    once per agent and step for every run) take values that differ between the runs of a
+    batch. Everything is checked before the first step.
 
     Parameters
     ----------
@@ -830,25 +832,27 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
         it measures nothing at that step and only takes part in the exchange. Default: every
         agent at every step. At a step where no agent senses the filter predicts only
         (nothing to fuse, nothing exchanged).
-    H : (K, sum q_i, n) array_like, optional
+    H : (K, ..., sum q_i, n) array_like, optional
         The stacked measurement matrix ``[H_1(k); ...; H_N(k)]`` of each step (agent i's
         ``q_i`` rows where the model has them; units of the measurement per unit of the
         state): a sensor that moves, or a range or bearing sensor linearized about a
         trajectory known before the run (then ``z`` holds the linearized measurements
-        ``z_i - h_i(x_ref) + H_i x_ref``). Finite where the agent senses. Default: the model's
-        ``H_i`` at every step.
-    R : (K, sum q_i, sum q_i) array_like, optional
+        ``z_i - h_i(x_ref) + H_i x_ref``). Axes between the first and the last two: one value
+        per run, broadcast with the runs of `x0` and `z` (a range to each run's own target).
+        Finite where the agent senses. Default: the model's ``H_i`` at every step.
+    R : (K, ..., sum q_i, sum q_i) array_like, optional
         The block-diagonal ``blockdiag(R_1(k), ..., R_N(k))`` of each step (measurement units
-        squared): a noise variance that grows with the distance to the target, say. Each block
-        of an agent that senses symmetric positive definite, zero off the blocks (the agents'
-        noises are independent). Default: the model's ``R_i``.
+        squared; run axes as for `H`): a noise variance that grows with the distance to the
+        target, say. Each block of an agent that senses symmetric positive definite, zero off
+        the blocks (the agents' noises are independent). Default: the model's ``R_i``.
 
     Returns
     -------
     x : (K, ..., N, n) ndarray
         Each agent's corrected mean after each step (``(K, ..., n)`` for the centralized filter).
     P : (K, ..., N, n, n) ndarray
-        Their covariances (leading axes those of `P0` and `x0`: they do not depend on the data).
+        Their covariances (leading axes those of `P0` and `x0`, and the run axes of `H` and `R`:
+        they do not depend on the data).
 
     Raises
     ------
@@ -858,10 +862,10 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
 
     Notes
     -----
-    Per-step ``H`` and ``R`` are values known before the run, the same for every run of a
-    batch; sensing that differs between runs (a range to each run's target) is one call per
-    run. An extended Kalman filter, which linearizes about each agent's own prediction during
-    the run, is not this loop: its ``H_i(k)`` depends on the estimates.
+    Per-step ``H`` and ``R`` are values known before the run (per run, if they differ); a
+    sensing mask is one for all runs (a mask that differs between runs is one call per run).
+    An extended Kalman filter, which linearizes about each agent's own prediction during the
+    run, is not this loop: its ``H_i(k)`` depends on the estimates.
 
     Examples
     --------
@@ -914,7 +918,13 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     used = rows.reshape((K,) + (1,) * (z.ndim - 2) + (rows.shape[1],))
     if not np.all(np.isfinite(z) | ~used):
         require_finite(np.where(used, z, 0.0), "z" if sensing is None else "z (where the agent senses)")
-    values = _step_values(H, R, model, senses, rows)
+    values, runs = _step_values(H, R, model, senses, rows)
+    if runs:
+        broadcast_batch("x0 and z", batch, "H and R", runs)
+        if not filt._per_run_sensing:
+            raise ValueError(f"filt: a {type(filt).__name__} takes one H and R per step for all runs (its update is "
+                             f"computed once per agent and step, shared by the runs); got H or R with run axes {runs}: "
+                             "call track once per run")
     built: dict[tuple[bytes, ...], _NetworkFilter | None] = {}
     xs, Ps = [], []
     for k in range(K):
@@ -929,6 +939,8 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
             x, P = step.update(x, P, z[k] if rows[k].all() else z[k][..., rows[k]])
         xs.append(x)
         Ps.append(P)
+    if runs:  # the steps before the first with per-run values have fewer batch axes
+        xs, Ps = np.broadcast_arrays(*xs), np.broadcast_arrays(*Ps)
     return np.stack(xs), np.stack(Ps)
 
 
@@ -961,8 +973,9 @@ def _step_sensing(sensing: ArrayLike | None, K: int, N: int) -> np.ndarray:
 
 
 def _step_values(H: ArrayLike | None, R: ArrayLike | None, model: SensorNetworkModel, senses: np.ndarray,
-                 rows: np.ndarray) -> list[tuple[np.ndarray, np.ndarray] | None]:
-    """`track`'s per-step ``(H(k), R(k))``, checked where read: None at a step whose values are the model's.
+                 rows: np.ndarray) -> tuple[list[tuple[np.ndarray, np.ndarray] | None], tuple[int, ...]]:
+    """`track`'s per-step ``(H(k), R(k))``, checked where read (None at a step whose values are the model's), and
+    their run axes.
 
     The rows (and blocks) of an agent that does not sense at a step are not read; they are
     replaced by the model's, so that a step equal to the model's where read is the model's.
@@ -970,40 +983,44 @@ def _step_values(H: ArrayLike | None, R: ArrayLike | None, model: SensorNetworkM
     K, N = senses.shape
     q, n = model.n_measurements, model.n_states
     if H is None and R is None:
-        return [None] * K
+        return [None] * K, ()
     H_k = np.broadcast_to(model.H_stacked, (K, q, n)) if H is None else float_array(H, "H")
     R_k = np.broadcast_to(model.R_stacked, (K, q, q)) if R is None else float_array(R, "R")
-    for name, value, shape, what in (("H", H_k, (K, q, n), "[H_1(k); ...; H_N(k)]"),
-                                     ("R", R_k, (K, q, q), "blockdiag(R_1(k), ..., R_N(k))")):
-        if value.shape != shape:
-            raise ValueError(f"{name} must be (K, {', '.join(map(str, shape[1:]))}) = {shape}: one stacked {what} per "
-                             f"step of z (agents' measurement sizes {model.measurement_sizes}); got shape {value.shape}")
-    block = np.zeros((q, q), dtype=bool)  # the entries of R(k) on an agent's block
-    for sl in model._slices:
-        block[sl, sl] = True
-    read = rows[:, :, None] & rows[:, None, :]
-    H_k = np.where(rows[:, :, None], H_k, model.H_stacked)
-    R_k = np.where(read, R_k, model.R_stacked)
-    bad = ~np.isfinite(H_k).all(axis=(1, 2))
+    for name, value, tail, what in (("H", H_k, (q, n), "[H_1(k); ...; H_N(k)]"),
+                                    ("R", R_k, (q, q), "blockdiag(R_1(k), ..., R_N(k))")):
+        if value.ndim < 3 or value.shape[0] != K or value.shape[-2:] != tail:
+            raise ValueError(f"{name} must be (K, ..., {tail[0]}, {tail[1]}) with K = {K}: one stacked {what} per step "
+                             f"of z (and per run, on axes between; agents' measurement sizes "
+                             f"{model.measurement_sizes}); got shape {value.shape}")
+    runs = broadcast_batch("H", H_k.shape[1:-2], "R", R_k.shape[1:-2])
+    H_k, R_k = (np.broadcast_to(v.reshape(K, *(1,) * (len(runs) + 3 - v.ndim), *v.shape[1:]), (K, *runs, q, cols))
+                for v, cols in ((H_k, n), (R_k, q)))  # the run axes aligned on the right, as numpy's
+    used = rows.reshape(K, *(1,) * len(runs), q)
+    H_k = np.where(used[..., :, None], H_k, model.H_stacked)
+    R_k = np.where(used[..., :, None] & used[..., None, :], R_k, model.R_stacked)
+    bad = ~np.isfinite(H_k).reshape(K, -1).all(axis=1)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise ValueError(f"H[{k}] (step {k}) contains NaN or infinite entries in the rows of an agent that senses")
+    block = np.zeros((q, q), dtype=bool)  # the entries of R(k) on an agent's block
+    for sl in model._slices:
+        block[sl, sl] = True
     off = (R_k != 0) & ~block
     if off.any():
-        k, r, c = (int(v) for v in np.argwhere(off)[0])
-        raise ValueError(f"R[{k}] (step {k}) must be block diagonal, one block per agent (the agents' noises are "
-                         f"independent); got R[{k}][{r}, {c}] = {R_k[k, r, c]:.3g} off the blocks")
+        at = tuple(int(v) for v in np.argwhere(off)[0])
+        raise ValueError(f"R[{at[0]}] (step {at[0]}) must be block diagonal, one block per agent (the agents' noises "
+                         f"are independent); got R{list(at)} = {R_k[at]:.3g} off the blocks")
     for i, sl in enumerate(model._slices):
         if sl.stop > sl.start:
             try:
-                check_covariance(R_k[:, sl, sl], "R", definite=True)
+                check_covariance(R_k[..., sl, sl], "R", definite=True)
             except ValueError:
                 for k in range(K):  # the first step at fault, named
-                    check_covariance(R_k[k, sl, sl], f"R[{k}] (step {k}), agent {i}'s block "
+                    check_covariance(R_k[k, ..., sl, sl], f"R[{k}] (step {k}), agent {i}'s block "
                                      f"[{sl.start}:{sl.stop}, {sl.start}:{sl.stop}],", definite=True)
                 raise
-    same = (H_k == model.H_stacked).all(axis=(1, 2)) & (R_k == model.R_stacked).all(axis=(1, 2))
-    return [None if same[k] else (H_k[k], R_k[k]) for k in range(K)]
+    same = (H_k == model.H_stacked).reshape(K, -1).all(axis=1) & (R_k == model.R_stacked).reshape(K, -1).all(axis=1)
+    return [None if same[k] else (H_k[k], R_k[k]) for k in range(K)], runs
 
 
 def _filter_of_step(filt: _NetworkFilter, A: np.ndarray, senses: np.ndarray,
@@ -1020,7 +1037,7 @@ def _filter_of_step(filt: _NetworkFilter, A: np.ndarray, senses: np.ndarray,
     if values is not None or not senses.all():  # the step's own sensing (checked by track)
         H, R = (model.H_stacked, model.R_stacked) if values is None else values
         rows = np.repeat(senses, model.measurement_sizes)  # the rows of the agents that sense
-        step_model = step_model._with_stacked_sensing(H[rows], R[np.ix_(rows, rows)],
+        step_model = step_model._with_stacked_sensing(H[..., rows, :], R[..., rows, :][..., rows],
                                                       [q if s else 0 for q, s in zip(model.measurement_sizes, senses)])
     return type(filt)(step_model, *(filt._args() if same_graph else _settings_for_any_graph(filt)))
 

@@ -257,7 +257,9 @@ class SensorNetworkModel(Frozen):
         return self._with_stacked_sensing(*_stacked(*_checked_sensing(H, R, self.n_states, self.n_agents)))
 
     def _with_stacked_sensing(self, H_st: np.ndarray, R_st: np.ndarray, sizes: Sequence[int]) -> SensorNetworkModel:
-        """:meth:`with_sensing` from checked stacked arrays: ``H`` ``(sum q_i, n)``, block-diagonal ``R``, the ``q_i``."""
+        """:meth:`with_sensing` from checked stacked arrays: ``H`` ``(..., sum q_i, n)``, block-diagonal ``R``
+        ``(..., sum q_i, sum q_i)``, the ``q_i``. Leading axes: one sensing per run of a batch (:func:`mascore.fusion.track`;
+        such a model's ``H_i``, ``R_i`` and information matrices have them too, and only its filtering is used)."""
         new = object.__new__(type(self))
         new._set(**{name: getattr(self, name) for name in self.__slots__})
         new._set(**_sensing_parts(H_st, R_st, sizes, self.n_states, self.n_agents,
@@ -286,12 +288,12 @@ class SensorNetworkModel(Frozen):
     @property
     def measurement_sizes(self) -> tuple[int, ...]:
         """``(q_1, ..., q_N)``, the length of each agent's measurement."""
-        return tuple(h.shape[0] for h in self.H)
+        return tuple(h.shape[-2] for h in self.H)
 
     @property
     def n_measurements(self) -> int:
         """``sum q_i``, the length of the stacked measurement ``z``."""
-        return self.H_stacked.shape[0]
+        return self.H_stacked.shape[-2]
 
     def agent_measurement(self, z: ArrayLike, i: int) -> np.ndarray:
         """Agent i's part ``z_i`` of a stacked measurement.
@@ -351,7 +353,8 @@ class SensorNetworkModel(Frozen):
         """
         if check:
             z = require_finite(self._check_z(z), "z")
-        y = z @ self._Rinv  # (..., sum q): R^{-1} z, block by block
+        # (..., sum q): R^{-1} z, block by block (a model built by fusion.track for per-run sensing has batch axes)
+        y = z @ self._Rinv if self._Rinv.ndim == 2 else (z[..., None, :] @ self._Rinv)[..., 0, :]
         # agent i: sum over its rows r of y_r H_r  ->  owner (N, sum q) @ (y_r H_r) (..., sum q, n)
         return self._owner @ (y[..., :, None] * self.H_stacked)
 
@@ -542,21 +545,22 @@ def _sensing_parts(H_st: np.ndarray, R_st: np.ndarray, sizes: Sequence[int], n: 
     measurements (`kf`: the stacked Kalman model). The agents with ``q_i`` measurements are done at once, per ``q_i``.
     """
     starts = [0, *itertools.accumulate(sizes)]
-    total = starts[-1]
-    Rinv = np.zeros((total, total))
+    batch = R_st.shape[:-2]
+    Rinv = np.zeros(R_st.shape)
     owner = np.repeat(np.eye(N), sizes, axis=1)  # (N, sum q): agent i's rows
-    info = np.zeros((N, n, n))
-    H_of: list[np.ndarray] = [frozen_copy(np.zeros((0, n)))] * N  # read-only views of one copy per measurement size
-    R_of: list[np.ndarray] = [frozen_copy(np.zeros((0, 0)))] * N
+    info = np.zeros((*batch, N, n, n))
+    H_of: list[np.ndarray] = [frozen_copy(np.zeros((*batch, 0, n)))] * N  # read-only views of one copy per size
+    R_of: list[np.ndarray] = [frozen_copy(np.zeros((*batch, 0, 0)))] * N
     for q in sorted(set(sizes) - {0}):
         agents = [i for i, size in enumerate(sizes) if size == q]
         rows = np.add.outer([starts[i] for i in agents], np.arange(q))  # (g, q): their rows of the stacked measurement
-        Ri, Hi = R_st[rows[:, :, None], rows[:, None, :]], H_st[rows]   # (g, q, q), (g, q, n)
+        Ri, Hi = R_st[..., rows[:, :, None], rows[:, None, :]], H_st[..., rows, :]  # (..., g, q, q), (..., g, q, n)
         Ri_inv = symmetric_part(np.linalg.inv(Ri))
-        info[agents] = symmetric_part(np.swapaxes(Hi, -1, -2) @ Ri_inv @ Hi)
-        Rinv[rows[:, :, None], rows[:, None, :]] = Ri_inv
-        for i, h, r in zip(agents, frozen_copy(Hi), frozen_copy(Ri)):
-            H_of[i], R_of[i] = h, r
+        info[..., agents, :, :] = symmetric_part(np.swapaxes(Hi, -1, -2) @ Ri_inv @ Hi)
+        Rinv[..., rows[:, :, None], rows[:, None, :]] = Ri_inv
+        Hi, Ri = frozen_copy(Hi), frozen_copy(Ri)
+        for j, i in enumerate(agents):
+            H_of[i], R_of[i] = Hi[..., j, :, :], Ri[..., j, :, :]
     finite_result("model's information matrices", info, Rinv, advice="R is too close to singular")
     return dict(H=tuple(H_of), R=tuple(R_of), H_stacked=frozen_copy(H_st), R_stacked=frozen_copy(R_st),
                 information_matrices=frozen_copy(info), _kf=kf, _owner=frozen_copy(owner), _Rinv=frozen_copy(Rinv),

@@ -276,10 +276,12 @@ def test_bad_per_step_values_are_refused_by_name_and_step_before_any_step(monkey
     monkeypatch.setattr(fusion.ConsensusOnInformationFilter, "predict",
                         lambda self, x, P: steps.append(1) or fusion._NetworkFilter.predict(self, x, P))
     H, R = _turning()
-    with pytest.raises(ValueError, match=r"H must be \(K, 5, 4\) = \(12, 5, 4\)"):
+    with pytest.raises(ValueError, match=r"H must be \(K, \.\.\., 5, 4\) with K = 12"):
         fusion.track(filt, np.zeros(4), np.eye(4), z, H=H[:-1])
-    with pytest.raises(ValueError, match=r"R must be \(K, 5, 5\) = \(12, 5, 5\)"):
+    with pytest.raises(ValueError, match=r"R must be \(K, \.\.\., 5, 5\) with K = 12"):
         fusion.track(filt, np.zeros(4), np.eye(4), z, R=R[:, :4, :4])
+    with pytest.raises(ValueError, match=r"x0 and z .* and H and R .* do not broadcast"):
+        fusion.track(filt, np.zeros(4), np.eye(4), np.stack([z, z], axis=1), R=np.stack([R, R, R], axis=1))
     with pytest.raises(TypeError, match=r"H must be an array of real numbers"):
         fusion.track(filt, np.zeros(4), np.eye(4), z, H="H")
     bad = H.copy()
@@ -318,3 +320,32 @@ def test_with_sensing_is_the_constructor():
         model.with_sensing(Hs, Rs[:2] + [-Rs[2]] + Rs[3:])
     with pytest.raises(ValueError, match=r"H must hold one matrix per agent"):
         model.with_sensing(Hs[:-1], Rs)
+
+
+@pytest.mark.parametrize("make", FILTERS + [fusion_forwarding.KalmanConsensusNetworkFilter])
+def test_per_run_values_in_one_call_are_one_call_per_run(make):
+    """H and R with a run axis (a range to each run's own target): the runs of one call are the calls of each run."""
+    model = _model()
+    runs = 3
+    _, z = model.simulate(np.zeros(4), np.eye(4), K, rng=11, n_runs=runs)
+    H, R = _turning()
+    scale = 1.0 + np.arange(runs)[None, :, None, None]                     # each run its own noise level
+    H_runs, R_runs = np.broadcast_to(H[:, None], (K, runs, N, 4)), R[:, None] * scale
+    mask = _in_range()
+    x, P = fusion.track(make(model), np.zeros(4), np.eye(4), z, _switching(), sensing=mask, H=H_runs, R=R_runs)
+    assert P.shape[:2] == (K, runs)
+    for r in range(runs):
+        x_r, P_r = fusion.track(make(model), np.zeros(4), np.eye(4), z[:, r], _switching(), sensing=mask, H=H,
+                                R=R_runs[:, r])
+        np.testing.assert_allclose(x[:, r], x_r, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(P[:, r], P_r, rtol=1e-10, atol=1e-12)
+
+
+def test_the_set_membership_filter_refuses_per_run_values_by_name():
+    model = _model()
+    _, z = model.simulate(np.zeros(4), np.eye(4), K, rng=12, n_runs=2)
+    _, R = _turning()
+    smf = fusion_forwarding.SetMembershipForwardingFilter(model)
+    with pytest.raises(ValueError, match=r"filt: a SetMembershipForwardingFilter takes one H and R per step for all runs"):
+        fusion.track(smf, np.zeros(4), smf.initial_shape(np.eye(4)), z, R=np.stack([R, 2 * R], axis=1))
+    fusion.track(smf, np.zeros(4), smf.initial_shape(np.eye(4)), z, R=R)   # one R per step: taken
