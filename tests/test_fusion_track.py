@@ -253,19 +253,15 @@ def test_the_centralized_filter_is_consistent_when_the_noise_grows_with_range():
     d = np.linalg.norm(x_true[1:, :, None, :2] - sensors, axis=-1)          # (K, runs, sensors)
     sigma = np.repeat(floor + slope * d, 2, axis=-1)                        # (K, runs, 2 per sensor)
     z = np.tile(x_true[1:, :, :2], n_sensors) + sigma * rng.standard_normal(sigma.shape)
-    nees_told, nees_floor = [], []
     cen = fusion.CentralizedFilter(model)
-    for r in range(runs):
-        R = sigma[:, r, :, None] ** 2 * np.eye(2 * n_sensors)
-        x, P = fusion.track(cen, x0, P0, z[:, r], R=R)
-        nees_told.append(kalman.nees(x_true[1:, r] - x, P))
-        x, P = fusion.track(cen, x0, P0, z[:, r])
-        nees_floor.append(kalman.nees(x_true[1:, r] - x, P))
+    x, P = fusion.track(cen, x0, P0, z, R=sigma[..., None] ** 2 * np.eye(2 * n_sensors))  # R (K, runs, 8, 8)
+    anees_told = kalman.nees(x_true[1:] - x, P).mean(axis=1)                            # (K,): over the runs
+    x, P = fusion.track(cen, x0, P0, z)
+    anees_floor = kalman.nees(x_true[1:] - x, P[:, None]).mean(axis=1)
     low, high = kalman.nees_interval(dof=4, n_runs=runs)  # of one step's average; the time average varies less
-    anees_told = np.mean(nees_told, axis=0)                                 # (K,) over the runs
     assert low <= anees_told[5:].mean() <= high, (low, anees_told[5:].mean(), high)
     assert np.mean((anees_told >= low) & (anees_told <= high)) >= 0.8
-    assert np.mean(nees_floor, axis=0)[5:].mean() > 2 * high
+    assert anees_floor[5:].mean() > 2 * high
 
 
 def test_bad_per_step_values_are_refused_by_name_and_step_before_any_step(monkeypatch):
