@@ -920,7 +920,9 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
         require_finite(np.where(used, z, 0.0), "z" if sensing is None else "z (where the agent senses)")
     values, runs = _step_values(H, R, model, senses, rows)
     if runs:
-        broadcast_batch("x0 and z", batch, "H and R", runs)
+        every = broadcast_batch("x0 and z", batch, "H and R", runs)
+        check_fits_in_memory(8.0 * K * math.prod(every) * n * (1 + n) * (N if filt._per_agent else 1), "H and R",
+                             "the estimates and covariances of every step and run")
         if not filt._per_run_sensing:
             raise ValueError(f"filt: a {type(filt).__name__} takes one H and R per step for all runs (its update is "
                              f"computed once per agent and step, shared by the runs); got H or R with run axes {runs}: "
@@ -932,7 +934,10 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
         key = (adjacency[k].tobytes(), senses[k].tobytes(), *(() if own is None else (own[0].tobytes(),
                                                                                       own[1].tobytes())))
         if key not in built:
-            built[key] = _filter_of_step(filt, adjacency[k], senses[k], own)
+            try:
+                built[key] = _filter_of_step(filt, adjacency[k], senses[k], own)
+            except ValueError as exc:  # e.g. an R(k) too close to singular to invert
+                raise ValueError(f"step {k}: {exc}") from None
         step = built[key]
         x, P = filt.predict(x, P) if step is None else step.predict(x, P)
         if step is not None:

@@ -555,8 +555,9 @@ def _sensing_parts(H_st: np.ndarray, R_st: np.ndarray, sizes: Sequence[int], n: 
         agents = [i for i, size in enumerate(sizes) if size == q]
         rows = np.add.outer([starts[i] for i in agents], np.arange(q))  # (g, q): their rows of the stacked measurement
         Ri, Hi = R_st[..., rows[:, :, None], rows[:, None, :]], H_st[..., rows, :]  # (..., g, q, q), (..., g, q, n)
-        Ri_inv = symmetric_part(np.linalg.inv(Ri))
-        info[..., agents, :, :] = symmetric_part(np.swapaxes(Hi, -1, -2) @ Ri_inv @ Hi)
+        with np.errstate(over="ignore", invalid="ignore"):  # an R too close to singular: refused by name below
+            Ri_inv = symmetric_part(np.linalg.inv(Ri))
+            info[..., agents, :, :] = symmetric_part(np.swapaxes(Hi, -1, -2) @ Ri_inv @ Hi)
         Rinv[..., rows[:, :, None], rows[:, None, :]] = Ri_inv
         Hi, Ri = frozen_copy(Hi), frozen_copy(Ri)
         for j, i in enumerate(agents):

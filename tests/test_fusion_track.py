@@ -298,6 +298,9 @@ def test_bad_per_step_values_are_refused_by_name_and_step_before_any_step(monkey
     bad[9, 3, 3] = np.inf
     with pytest.raises(ValueError, match=r"R\[9\] \(step 9\), agent 3's block .* NaN or infinite"):
         fusion.track(filt, np.zeros(4), np.eye(4), z, R=bad)
+    bad[9, 3, 3] = 1e-320                                                   # positive, but its inverse overflows
+    with pytest.raises(ValueError, match=r"step 9: .*information matrices"):
+        fusion.track(filt, np.zeros(4), np.eye(4), z, R=bad)
     steps.clear()
     fusion.track(filt, np.zeros(4), np.eye(4), z, R=R)
     assert len(steps) == K   # the counter counts: no step ran in the refusals above
