@@ -918,7 +918,7 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     used = rows.reshape((K,) + (1,) * (z.ndim - 2) + (rows.shape[1],))
     if not np.all(np.isfinite(z) | ~used):
         require_finite(np.where(used, z, 0.0), "z" if sensing is None else "z (where the agent senses)")
-    values, runs = _step_values(H, R, model, senses, rows)
+    values, runs = _step_values(H, R, model, rows)
     if runs:
         every = broadcast_batch("x0 and z", batch, "H and R", runs)
         check_fits_in_memory(8.0 * K * math.prod(every) * n * (1 + n) * (N if filt._per_agent else 1), "H and R",
@@ -977,16 +977,15 @@ def _step_sensing(sensing: ArrayLike | None, K: int, N: int) -> np.ndarray:
     return mask
 
 
-def _step_values(H: ArrayLike | None, R: ArrayLike | None, model: SensorNetworkModel, senses: np.ndarray,
-                 rows: np.ndarray) -> tuple[list[tuple[np.ndarray, np.ndarray] | None], tuple[int, ...]]:
-    """`track`'s per-step ``(H(k), R(k))``, checked where read (None at a step whose values are the model's), and
-    their run axes.
+def _step_values(H: ArrayLike | None, R: ArrayLike | None, model: SensorNetworkModel, rows: np.ndarray,
+                 ) -> tuple[list[tuple[np.ndarray, np.ndarray] | None], tuple[int, ...]]:
+    """`track`'s per-step ``(H(k), R(k))``, checked where `rows` ``(K, sum q_i)`` are read (None at a step whose
+    values are the model's), and their run axes.
 
     The rows (and blocks) of an agent that does not sense at a step are not read; they are
     replaced by the model's, so that a step equal to the model's where read is the model's.
     """
-    K, N = senses.shape
-    q, n = model.n_measurements, model.n_states
+    K, q, n = rows.shape[0], model.n_measurements, model.n_states
     if H is None and R is None:
         return [None] * K, ()
     H_k = np.broadcast_to(model.H_stacked, (K, q, n)) if H is None else float_array(H, "H")
