@@ -348,3 +348,24 @@ def test_the_set_membership_filter_refuses_per_run_values_by_name():
     with pytest.raises(ValueError, match=r"filt: a SetMembershipForwardingFilter takes one H and R per step for all runs"):
         fusion.track(smf, np.zeros(4), smf.initial_shape(np.eye(4)), z, R=np.stack([R, 2 * R], axis=1))
     fusion.track(smf, np.zeros(4), smf.initial_shape(np.eye(4)), z, R=R)   # one R per step: taken
+
+
+def test_values_that_repeat_are_built_once_per_call(monkeypatch):
+    model = _model()
+    _, z = model.simulate(np.zeros(4), np.eye(4), K, rng=15)
+    built = []
+    original = sensor_network.SensorNetworkModel._with_stacked_sensing
+    monkeypatch.setattr(sensor_network.SensorNetworkModel, "_with_stacked_sensing",
+                        lambda self, *a: built.append(1) or original(self, *a))
+    R = np.broadcast_to(model.R_stacked, (K, N, N)) * np.where(np.arange(K) % 2, 1.0, 3.0)[:, None, None]
+    x, P = fusion.track(fusion.ConsensusOnInformationFilter(model, 2), np.zeros(4), np.eye(4), z, R=R)
+    assert len(built) == 1          # the odd steps are the model's; the even ones share one R
+    twice = sensor_network.SensorNetworkModel(model.F, model.Q, model.H, [3.0 * r for r in model.R], model.adjacency)
+    f = fusion.ConsensusOnInformationFilter(twice, 2)
+    g = fusion.ConsensusOnInformationFilter(model, 2)
+    xk, Pk = model.check_state(np.zeros(4), np.eye(4))
+    for k in range(K):
+        step = g if k % 2 else f
+        xk, Pk = step.update(*step.predict(xk, Pk), z[k])
+    np.testing.assert_array_equal(x[-1], xk)
+    np.testing.assert_array_equal(P[-1], Pk)
