@@ -57,8 +57,9 @@ LAPACK_ORDER = 64
 def tiled_matmul(A, B, out, acc, symmetric=False):
     """``out = A @ B`` for stacks ``(c, m, k) @ (c, k, n)``, as BLAS products of at most :data:`TILE_MACS`.
 
-    `acc` is a flat work array of at least ``c m n`` doubles (used when ``k > TILE_K``: the pieces of the
-    inner dimension are summed). The tiles of one row block are one batched ``np.matmul`` over strided views.
+    `acc` is a flat work array of at least ``c m n`` doubles (used when ``k > TILE_K``, ``2 TILE_K`` with
+    `symmetric`: the pieces of the inner dimension are summed). The tiles of one row block are one batched
+    ``np.matmul`` over strided views.
     With `symmetric` (``m = n`` and ``A @ B`` symmetric, such as ``Y G^T`` with ``Y = G Sigma``), only the tiles
     that reach the diagonal or lie above it are computed, in row blocks of ``TILE_ROWS / 2`` rows, and the blocks
     left of them are the transposes of blocks above (5/8 of the multiply-adds for ``m = 128``, fewer for larger
