@@ -318,7 +318,10 @@ def api_page(module: str) -> str:
         lines += [f"   {o}" for o in objects]
         lines += [""]
         for o in objects:
-            lines += [f".. auto{'class' if _is_class(name, o) else 'function'}:: {o}", ""]
+            if _is_class(name, o):  # its public methods and properties, each from its own docstring
+                lines += [f".. autoclass:: {o}", "   :members:", ""]
+            else:
+                lines += [f".. autofunction:: {o}", ""]
     lines += ["```", ""]
     return "\n".join(lines)
 

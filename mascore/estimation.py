@@ -187,7 +187,7 @@ class Estimator(Protocol):
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple:
         """Agent i's step alone, from its own data and its neighbours' messages (the kernels of the team-wide step).
 
-        A filter's method without a docstring of its own takes this one (:func:`protocol_docs`); a
+        A filter's method without a docstring of its own takes this one (:func:`~mascore.estimation.protocol_docs`); a
         comment in it says what its step computes.
 
         Parameters
