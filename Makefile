@@ -26,15 +26,17 @@ help:  ## list the targets
 
 install: $(STAMP)  ## create .venv and install the locked environment
 
-# pip byte-compiles the environment at install (no --no-compile): where PYTHONDONTWRITEBYTECODE is set, as on
-# some CI machines, Python never writes a .pyc when it imports, and every kernel, test worker and Dask worker
-# would compile numpy, scipy, pandas and matplotlib again (about 2.5 s per process).
+# .ci/install.py installs with uv (pinned there, bootstrapped into $(VENV)/.uv by the environment's pip; it passes
+# on the indexes pip is configured with), or with pip if uv cannot be installed: the same wheels, about half the
+# time. Both byte-compile the environment at install: where PYTHONDONTWRITEBYTECODE is set, as on some CI
+# machines, Python never writes a .pyc when it imports, and every kernel, test worker and Dask worker would
+# compile numpy, scipy, pandas and matplotlib again (about 2.5 s per process).
+INSTALL = $(BIN)/python .ci/install.py $(VENV)
 
-$(STAMP): requirements.lock pyproject.toml
+$(STAMP): requirements.lock pyproject.toml .ci/install.py
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check pip==$(PIP_VERSION)
-	$(BIN)/python -m pip install --quiet -r requirements.lock
-	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
+	$(INSTALL) pip==$(PIP_VERSION) -r requirements.lock
+	$(INSTALL) --no-deps --no-build-isolation -e .
 	@touch $(STAMP)
 
 # The notebooks are executed on both cores into an emptied cache, then the book is rendered
@@ -82,9 +84,9 @@ MIN_TESTS := tests/test_core_install.py tests/test_agents_noise.py tests/test_gr
              tests/test_ellipsoids.py tests/test_sensing.py tests/test_distributed_kf.py
 test-min:  ## the core alone on its minimum versions: install size, import times, core tests
 	@test -x $(MIN_VENV)/bin/python || $(PYTHON) -m venv $(MIN_VENV)
-	$(MIN_VENV)/bin/python -m pip install --quiet --disable-pip-version-check pip==$(PIP_VERSION)
-	$(MIN_VENV)/bin/python -m pip install --quiet $(MIN_PINS) $(shell grep -E "^(pytest|hypothesis)==" requirements.lock) "setuptools>=77" wheel
-	$(MIN_VENV)/bin/python -m pip install --quiet --no-deps --no-build-isolation -e .
+	$(MIN_VENV)/bin/python .ci/install.py $(MIN_VENV) pip==$(PIP_VERSION) $(MIN_PINS) \
+	    $(shell grep -E "^(pytest|hypothesis|setuptools|wheel)==" requirements.lock)
+	$(MIN_VENV)/bin/python .ci/install.py $(MIN_VENV) --no-deps --no-build-isolation -e .
 	$(MIN_VENV)/bin/python -m pytest -q -p no:cacheprovider $(MIN_TESTS)
 
 reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json, and the quick comparison, into results/
