@@ -264,6 +264,17 @@ class NetworkFilter(Frozen):
             return self.update(*self.predict(own_data["x"], own_data["P"]), own_data["z"])
         return self._agent_step(i, own_data, messages)
 
+    @property
+    def exchanges(self) -> int:
+        """The exchanges of one step that follow one another: each needs what the one before delivered.
+
+        1 here (one message per step, or several sent at once); a filter whose step has more in
+        sequence says so (consensus rounds, or measurements and then the estimates computed from
+        them). Over links that take a step per message, the messages of one step arrive this many
+        steps later (:func:`mascore.fusion_links.track_behind`).
+        """
+        return 1
+
     def messages(self, i: int = 0) -> tuple[Message, ...]:
         """What agent i sends per step (and a centre's reply to it), with the floats of each message.
 

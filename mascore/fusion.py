@@ -259,6 +259,11 @@ class DiffusionKalmanFilter(_NetworkFilter):
         psi, P_new = information_update(x, P, self._S, i)
         return mix(self.weights, psi, 1), P_new
 
+    @property
+    def exchanges(self) -> int:
+        """2: the measurements, then the incremental estimates computed from them."""
+        return 2
+
     def _messages(self, q, pair):
         return (Message("measurement z_i", q), Message("incremental estimate psi_i", float(self.model.n_states)))
 
@@ -462,6 +467,90 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         """
         return from_information(Om, q)
 
+    @property
+    def exchanges(self) -> int:
+        """L: each consensus round needs the one before."""
+        return self.n_consensus
+
+    @property
+    def pair_scales(self) -> tuple[float | None, ...]:
+        """What each pair of :meth:`message_pairs` is: ``c`` for a density (mean ``Omega^{-1} q``, information
+        ``c Omega``), None for a measurement's information (HCMCI's novelty pair)."""
+        return (1.0,) if self.novelty_weight == 1.0 else (1.0, None)
+
+    def message_pairs(self, x: ArrayLike, P: ArrayLike, z: ArrayLike) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+        """The pairs each agent sends in its first round: CI one (:meth:`message_pair`), HCMCI two.
+
+        HCMCI sends its prior pair ``(P_i-^{-1}, P_i-^{-1} x_i-)`` and its novelty pair
+        ``(H_i^T R_i^{-1} H_i, H_i^T R_i^{-1} z_i)``; each round mixes each pair with the same weights.
+
+        Parameters
+        ----------
+        x : (..., N, n) array_like
+            Predicted means.
+        P : (..., N, n, n) array_like
+            Predicted covariances, positive definite.
+        z : (..., sum q_i) array_like
+            The step's stacked measurement.
+
+        Returns
+        -------
+        tuple of (Omega, q)
+            ``Omega`` ``(..., N, n, n)``, ``q`` ``(..., N, n)``; one pair per entry of :attr:`pair_scales`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.ring_graph(3))
+        >>> hcmci = fusion.ConsensusOnInformationFilter(model, 1, novelty_weight="N")
+        >>> pairs = hcmci.message_pairs(np.zeros((3, 1)), np.ones((3, 1, 1)), [3.0, 0.0, 0.0])
+        >>> W = hcmci.round_weights
+        >>> mixed = [(np.einsum("ij,jab->iab", W, Om), W @ q) for Om, q in pairs]
+        >>> bool(np.allclose(hcmci.pairs_estimate(mixed)[0], hcmci.update(np.zeros((3, 1)), np.ones((3, 1, 1)),
+        ...                                                               [3.0, 0.0, 0.0])[0]))
+        True
+        """
+        if self.novelty_weight == 1.0:
+            return (self.message_pair(x, P, z),)
+        x, P = self._check_xP(x, P)
+        z = self.model._check_z(z)
+        Om, q = information_pair(x, P)
+        return (Om, q), (np.broadcast_to(self.model.information_matrices, Om.shape),
+                         self.model.information_vectors(z, check=False))
+
+    def pairs_estimate(self, pairs: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+        """The estimate of the pairs after the rounds: CI :meth:`pair_estimate`; HCMCI ``Omega + w dOmega``, ``q + w dq``.
+
+        Parameters
+        ----------
+        pairs : sequence of (Omega, q)
+            As :meth:`message_pairs` gives them, after the consensus rounds.
+
+        Returns
+        -------
+        x : (..., N, n) ndarray
+            Means.
+        P : (..., N, n, n) ndarray
+            Covariances.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.ring_graph(3))
+        >>> hcmci = fusion.ConsensusOnInformationFilter(model, 1, novelty_weight="N")
+        >>> prior, novelty = (np.ones((3, 1, 1)), np.zeros((3, 1))), (np.ones((3, 1, 1)), np.full((3, 1), 2.0))
+        >>> x, P = hcmci.pairs_estimate([prior, novelty])             # information 1 + 3 x 1, vector 3 x 2
+        >>> x[:, 0], P[:, 0, 0]
+        (array([1.5, 1.5, 1.5]), array([0.25, 0.25, 0.25]))
+        """
+        if self.novelty_weight == 1.0:
+            return self.pair_estimate(*pairs[0])
+        (Om, q), (dOm, dq) = pairs
+        w = self.novelty_weight
+        return from_information(symmetric_part(Om + w * dOm), q + w * dq)
+
     def _correct(self, x, P, z):
         Om, q = information_pair(x, P)
         Om = mix(self._WL, Om, 2) + self._SL
@@ -635,6 +724,71 @@ class InformationConsensusFilter(_NetworkFilter):
         Vinv = symmetric_part(np.linalg.inv(V))
         return (Vinv @ v[..., None])[..., 0], Vinv / self.model.n_agents
 
+    @property
+    def exchanges(self) -> int:
+        """K: each consensus iteration needs the one before."""
+        return self.n_iterations
+
+    @property
+    def pair_scales(self) -> tuple[float]:
+        """``(N,)``: the one pair of :meth:`message_pairs` is a density of information ``N V``."""
+        return (self.pair_scale,)
+
+    def message_pairs(self, x: ArrayLike, P: ArrayLike, z: ArrayLike) -> tuple[tuple[np.ndarray, np.ndarray]]:
+        """``(message_pair(x, P, z),)``: the one pair of each iteration (as CI's ``message_pairs``).
+
+        Parameters
+        ----------
+        x : (..., N, n) array_like
+            Predicted means.
+        P : (..., N, n, n) array_like
+            Predicted covariances, positive definite.
+        z : (..., sum q_i) array_like
+            The step's stacked measurement.
+
+        Returns
+        -------
+        tuple of one (V, v)
+            ``V`` ``(..., N, n, n)``, ``v`` ``(..., N, n)``: :meth:`message_pair`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 3, [[[1.0]]] * 3, graphs.ring_graph(3))
+        >>> (V, v), = fusion.InformationConsensusFilter(model, 1).message_pairs(np.zeros((3, 1)), np.ones((3, 1, 1)),
+        ...                                                                    [3.0, 0.0, 0.0])
+        >>> V[:, 0, 0]                                             # J / N + H^T R^-1 H = 1/3 + 1
+        array([1.33333333, 1.33333333, 1.33333333])
+        """
+        return (self.message_pair(x, P, z),)
+
+    def pairs_estimate(self, pairs: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`pair_estimate` of the one pair after the iterations.
+
+        Parameters
+        ----------
+        pairs : sequence of one (V, v)
+            ``V`` ``(..., N, n, n)`` positive definite, ``v`` ``(..., N, n)``.
+
+        Returns
+        -------
+        x : (..., N, n) ndarray
+            Means.
+        P : (..., N, n, n) ndarray
+            Covariances, ``(N V)^{-1}``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import fusion, graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel([[1.0]], [[0.0]], [[[1.0]]] * 4, [[[1.0]]] * 4, graphs.ring_graph(4))
+        >>> x, P = fusion.InformationConsensusFilter(model, 1).pairs_estimate([(np.ones((4, 1, 1)), np.full((4, 1), 2.0))])
+        >>> P[:, 0, 0]
+        array([0.25, 0.25, 0.25, 0.25])
+        """
+        return self.pair_estimate(*pairs[0])
+
     def _correct(self, x, P, z):
         N = self.model.n_agents
         J, q = information_pair(x, P)
@@ -725,6 +879,11 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         Om_f = np.einsum("...ij,...jab->...iab", C, Om)
         q_f = np.einsum("...ij,...ja->...ia", C, q)
         return from_information(Om_f, q_f)
+
+    @property
+    def exchanges(self) -> int:
+        """2 (the measurements, then the incremental estimates), 1 with ``measurements="own"``."""
+        return 2 if self.measurements == "neighbourhood" else 1
 
     def _messages(self, q, pair):
         return (Message("measurement z_i", q if self.measurements == "neighbourhood" else 0.0),

@@ -23,19 +23,46 @@ receive to its own pair (the compensation of Fagnani and Zampieri (2009)), so ea
 still a convex combination of what it holds; forwarding fuses the measurements that
 arrived, exactly.
 
-**One-step latency** and **send-on-delta** (:func:`track_messages`), for the filters whose
-agents send one density per step (:class:`~mascore.fusion.ConsensusOnInformationFilter` at
-``L = 1`` and :class:`~mascore.fusion.InformationConsensusFilter` at ``K = 1``): agent i
-fuses its own fresh pair with the pairs its neighbours sent, weighted as in one round::
+**One-step latency**: every message arrives one step after it was sent; what is sent is what
+the agent sends on ideal links, computed from what it holds when it sends. Two treatments,
+each the standard one for what the message carries:
 
-    (Omega_i, q_i)+ = W_ii (Omega_i, q_i) + sum_j W_ij (Omega_j, q_j)^received.
+- *Consensus on pairs* (:func:`track_messages`: CI, HCMCI and ICF at any number of rounds, the
+  filters whose messages are information pairs): agent i fuses its own fresh pairs with the
+  pairs its neighbours sent, weighted as in one round::
 
-A received pair that is ``s`` steps old is the sender's density (mean ``Omega^{-1} q``,
-information ``c Omega``, ``c = pair_scale``) predicted ``s`` steps with the model's F and Q, as
-Battistelli, Chisci and Selvi (2018) do with the last received estimate; a predicted
-density is still a consistent one, so CI stays consistent. With latency every pair arrives
-one step after it was sent (at the first step none has arrived: each agent fuses its own
-alone). Under send-on-delta agent j re-sends only when the mean of its new pair has moved
+      (Omega_i, q_i)^l = W_ii (Omega_i, q_i)^{l-1} + sum_j W_ij (Omega_j, q_j)^{l-1, received},
+
+  for ``l = 1..L``. A received pair that is ``s`` steps old is the sender's density (mean
+  ``Omega^{-1} q``, information ``c Omega``, ``c`` its ``pair_scales`` entry) predicted ``s`` steps
+  with the model's F and Q, as Battistelli, Chisci and Selvi (2018) do with the last received
+  estimate; a predicted density is still a consistent one, so CI stays consistent. HCMCI's
+  novelty pair is a measurement's information, not a density: received late, it is the
+  information of a measurement of the state of the step before, predicted as an information
+  pair (``M = F^{-T} dOmega F^{-1}``, ``dOmega' = (I + M Q)^{-1} M``, ``dq' = (I + M Q)^{-1} F^{-T} dq``,
+  which is the late measurement taken as one of the current state with the step's process noise
+  added to its noise; F must be invertible); like HCMCI itself it ignores the correlation this
+  noise has with the prior's. With ``L > 1`` the rounds are pipelined across steps: the message of
+  round l at step k (the sender's pairs after round ``l - 1``) is fused in round l at step
+  ``k + 1``, so information from l hops away is l steps old and each agent still sends L
+  messages per step. At the first step nothing has arrived: each agent keeps its own pairs.
+- *Forwarded measurements* (:func:`track_behind`: forwarding, the Kalman-consensus filter, the
+  set-membership filter, the diffusion filters): a late measurement is not a density to predict;
+  the exact way to use it is to filter it at the step it belongs to (the re-run that the one-lag
+  out-of-sequence update of Bar-Shalom (2002) reproduces without re-running). The messages of
+  step k have all arrived at step ``k + D`` (D the filter's ``exchanges``: the exchanges of one
+  step that follow one another, 1, or 2 for the diffusion filters, whose estimates are computed
+  from the measurements just exchanged), so each agent runs the method's own filter D steps
+  behind, exactly as on ideal links, and takes it to the step with its own fresh measurements
+  (its own Kalman update, or set update). For forwarding this is an exact Kalman filter on older
+  data; for the Kalman-consensus filter it is Olfati-Saber's filter itself one step behind (an
+  agent sends, with its measurement, the prediction of its filter behind, which is what the
+  neighbours' consensus terms take).
+
+**Send-on-delta** (:func:`track_messages`, for the filters whose agents send one density per step:
+:class:`~mascore.fusion.ConsensusOnInformationFilter` at ``L = 1`` and
+:class:`~mascore.fusion.InformationConsensusFilter` at ``K = 1``; with or without latency): agent j
+re-sends only when the mean of its new pair has moved
 from the mean of the last one it sent (predicted to the step, as its neighbours hold it) by
 more than ``delta`` in the Mahalanobis distance under its predicted covariance ``P_j-`` (the
 uncertainty it holds before the step, the same for every method),
@@ -53,6 +80,8 @@ direction at a time, each receiver keeps its own copy of each neighbour's last p
   Optim. 48(1), 102-133.
 - Battistelli, G., Chisci, L., Selvi, D. (2018). A distributed Kalman filter with event-triggered
   communication and guaranteed stability. Automatica 93, 75-82.
+- Bar-Shalom, Y. (2002). Update with out-of-sequence measurements in tracking: exact solution. IEEE Trans.
+  Aerospace and Electronic Systems 38(3), 769-777.
 """
 
 from __future__ import annotations
@@ -65,8 +94,9 @@ from numpy.typing import ArrayLike
 from ._fusion_kernels import information_update, symmetric_part
 from ._validation import check_adjacency, check_positive_int, float_array, require_finite
 from .fusion import ConsensusOnInformationFilter, InformationConsensusFilter, MeasurementForwardingFilter
+from .fusion_forwarding import SetMembershipForwardingFilter
 
-__all__ = ["delivered_weights", "lossy_graphs", "track_forwarding", "track_messages"]
+__all__ = ["delivered_weights", "lossy_graphs", "track_behind", "track_forwarding", "track_messages"]
 
 
 def lossy_graphs(adjacency: ArrayLike, loss: float, n_steps: int, rng: np.random.Generator | int | None, *,
@@ -175,15 +205,16 @@ def delivered_weights(W: ArrayLike, delivered: ArrayLike) -> np.ndarray:
 def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationConsensusFilter], x0: ArrayLike,
                    P0: ArrayLike, z: ArrayLike, *, latency: int = 0, send_delta: float | None = None,
                    delivered: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Run a one-round consensus filter whose messages arrive late or only on change (see the module's text).
+    """Run a consensus filter on information pairs whose messages arrive late or only on change (see the module's text).
 
     Parameters
     ----------
     filters : sequence of K filters
-        The filter of each step, one class, built on the step's graph (one filter repeated on a fixed
-        graph): :class:`~mascore.fusion.ConsensusOnInformationFilter` with ``n_consensus = 1`` and
-        ``novelty_weight = 1``, or :class:`~mascore.fusion.InformationConsensusFilter` with
-        ``n_iterations = 1``; their sensing must be the same.
+        The filter of each step, one class and one setting, built on the step's graph (one filter
+        repeated on a fixed graph): :class:`~mascore.fusion.ConsensusOnInformationFilter` (CI, or HCMCI
+        with ``novelty_weight != 1``) or :class:`~mascore.fusion.InformationConsensusFilter`, any number
+        of rounds; their sensing must be the same. With `send_delta` or `delivered`: one round and one
+        density per step (CI at ``n_consensus = 1``, ICF at ``n_iterations = 1``).
     x0 : (..., N, n) or (n,) array_like
         Initial means.
     P0 : (..., N, n, n) or (n, n) array_like
@@ -191,7 +222,8 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
     z : (K, ..., sum q_i) array_like
         Measurements of steps 1..K.
     latency : {0, 1}
-        Steps a message takes to arrive.
+        Steps a message takes to arrive (with several rounds: each round's message; the rounds are
+        pipelined across steps). HCMCI with latency needs an invertible F.
     send_delta : float, optional
         Send-on-delta threshold (a Mahalanobis distance, in standard deviations, >= 0); None: every
         agent sends at every step.
@@ -199,9 +231,10 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
         Positive where agent i received j's message at step k (:func:`lossy_graphs` with
         ``per_direction=True``, one pattern per run or one for all); the weight of a lost one goes to
         the receiver's own pair (:func:`delivered_weights`). None: every message arrives. With
-        `send_delta` (not with `latency`) each receiver holds the last pair it received from each
-        neighbour, predicted to the step, and fuses that; a neighbour it never heard from has its
-        weight on the receiver's own pair. A sender decides from the last pair it sent.
+        `send_delta` each receiver holds the last pair it received from each neighbour, predicted to
+        the step, and fuses that; a neighbour it never heard from has its weight on the receiver's own
+        pair. A sender decides from the last pair it sent. With `latency` the pattern of step k is
+        that of the messages arriving at step k.
 
     Returns
     -------
@@ -216,8 +249,9 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
     Raises
     ------
     ValueError, TypeError
-        A filter of another kind or with more rounds, filters of different sensing, a bad latency
-        or threshold, shapes that do not fit.
+        A filter of another kind, filters of different settings or sensing, several rounds or
+        HCMCI with `send_delta` or `delivered`, HCMCI late with a singular F, a bad latency or
+        threshold, shapes that do not fit.
 
     Examples
     --------
@@ -233,22 +267,30 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
     >>> xb, Pb, _ = fusion_links.track_messages([ci] * 100, np.zeros(4), np.eye(4), z)   # ideal links: CI
     >>> bool(np.allclose(xa, xb) and np.allclose(Pa, Pb))
     True
+    >>> hcmci = fusion.ConsensusOnInformationFilter(model, 5, novelty_weight="N")
+    >>> x, P, _ = fusion_links.track_messages([hcmci] * 100, np.zeros(4), np.eye(4), z, latency=1)  # 5 rounds, late
+    >>> bool(np.all(np.linalg.eigvalsh(P) > 0))
+    True
     """
     filters = list(filters) if not isinstance(filters, (str, bytes)) else None
     if not filters:
         raise TypeError("filters must be a non-empty sequence of the step filters (one per step)")
     first = filters[0]
     kind = type(first)
-    if kind is ConsensusOnInformationFilter:
-        bad = [f for f in filters if type(f) is not kind or f.n_consensus != 1 or f.novelty_weight != 1.0]
-    elif kind is InformationConsensusFilter:
-        bad = [f for f in filters if type(f) is not kind or f.n_iterations != 1]
-    else:
-        bad = [first]
+    if kind not in (ConsensusOnInformationFilter, InformationConsensusFilter):
+        raise ValueError("filters must all be ConsensusOnInformationFilter (CI, HCMCI) or all "
+                         f"InformationConsensusFilter: consensus on information pairs; got {kind.__name__}")
+    def setting(f):  # the rounds and the pairs (ICF's rate follows each step's graph)
+        return type(f), f.exchanges, getattr(f, "novelty_weight", None)
+
+    bad = [f for f in filters if setting(f) != setting(first)]
     if bad:
-        raise ValueError("filters must all be ConsensusOnInformationFilter(model, 1) (CI) or all "
-                         "InformationConsensusFilter(model, 1): one density sent per step; got "
-                         f"{type(bad[0]).__name__}")
+        raise ValueError(f"filters must all be {kind.__name__} with the same rounds and novelty weight; got "
+                         f"{bad[0]!r} after {first!r}")
+    one_density = first.exchanges == 1 and len(first.pair_scales) == 1
+    if (send_delta is not None or delivered is not None) and not one_density:
+        raise ValueError("send_delta and delivered need one density sent per step: ConsensusOnInformationFilter(model, 1) "
+                         f"(CI) or InformationConsensusFilter(model, 1); got {first!r}")
     model = first.model
     if send_delta is not None and any(not np.array_equal(f.model.adjacency, model.adjacency) for f in filters):
         raise ValueError("send_delta needs one graph for every step: a sender's neighbours hold its last sent pair "
@@ -258,6 +300,9 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
         raise ValueError("filters must share the sensing (H, R) of their models; only the graph may change")
     if latency not in (0, 1) or isinstance(latency, bool):
         raise ValueError(f"latency must be 0 or 1 (steps); got {latency!r}")
+    if latency and None in first.pair_scales and np.linalg.cond(model.F) > 1e12:
+        raise ValueError("latency with HCMCI needs an invertible F: its late novelty pair is a measurement of the state "
+                         "of the step before, taken to the step through F^{-1}")
     if send_delta is not None:
         send_delta = float(send_delta)
         if not (np.isfinite(send_delta) and send_delta >= 0):
@@ -267,21 +312,21 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
     if z.ndim < 2 or z.shape[0] != len(filters):
         raise ValueError(f"z must be (K, ..., {model.n_measurements}) with K = {len(filters)} (one filter per step); "
                          f"got shape {z.shape}")
+    if send_delta is None and delivered is None:
+        return (*_track_rounds(filters, x, P, z, latency), np.ones((*z.shape[:-1], model.n_agents), dtype=bool))
     N, n = model.n_agents, model.n_states
     if delivered is not None:
-        if send_delta is not None and latency:
-            raise ValueError("delivered, send_delta and latency cannot be combined: not modelled")
         delivered = float_array(delivered, "delivered")
         if delivered.ndim < 3 or delivered.shape[0] != len(filters) or delivered.shape[-2:] != (N, N):
             raise ValueError(f"delivered must be (K, ..., N, N) = ({len(filters)}, ..., {N}, {N}); "
                              f"got shape {delivered.shape}")
     batch = np.broadcast_shapes(x.shape[:-2], P.shape[:-3], z.shape[1:-1],
                                 () if delivered is None else delivered.shape[1:-2])
-    if send_delta is not None or delivered is not None:  # data- or pattern-dependent covariances: one per run
-        x, P = np.broadcast_to(x, (*batch, N, n)), np.broadcast_to(P, (*batch, N, n, n))
+    x, P = np.broadcast_to(x, (*batch, N, n)), np.broadcast_to(P, (*batch, N, n, n))  # one covariance per run
     c = first.pair_scale
     held = None       # the pairs the neighbours hold of each sender: its last sent, predicted to this step
     arrived = None    # with latency: the pairs sent at the step before, predicted to this step
+    sent_before = None  # with latency: who sent at the step before (their pairs arrive now)
     copies = None     # send-on-delta over lossy links: per link j -> i, i's copy of j's last pair (..., E, ...)
     heard = None      # per link, whether i has received a pair from j yet
     xs, Ps, sents = [], [], []
@@ -296,25 +341,28 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
         held = (Om, q) if held is None or send_delta is None else (np.where(sent[..., None, None], Om, held[0]),
                                              np.where(sent[..., None], q, held[1]))
         W = f.round_weights
-        if latency:
+        if latency:  # what arrives now: the pairs held at the step before, predicted
             received, arrived = arrived, _predict_pair(model, c, *held)
+            source, sent_before = sent_before, sent
             if received is None:  # the first step: nothing has arrived, each agent keeps its own pair
                 W = np.eye(N)
                 received = held
         else:
-            received = held
+            received, source = held, sent
         if delivered is not None and send_delta is not None:  # each receiver fuses its own copies, one per link
             if copies is None:  # the links j -> i of the graph; a placeholder copy until one arrives (weight 0)
-                to, frm = np.nonzero((W > 0) & ~np.eye(N, dtype=bool))
+                to, frm = np.nonzero((f.round_weights > 0) & ~np.eye(N, dtype=bool))
                 into = (to[:, None] == np.arange(N)).T.astype(float)                  # (N, E): link e ends at i
-                copies, heard = (held[0][..., frm, :, :], held[1][..., frm, :]), np.zeros((*batch, len(to)), bool)
+                copies = (received[0][..., frm, :, :], received[1][..., frm, :])
+                heard = np.zeros((*batch, len(to)), bool)
             else:
                 copies = _predict_pair(model, c, *copies)
-            arrive = sent[..., frm] & (delivered[k][..., to, frm] > 0)               # (..., E)
-            copies = (np.where(arrive[..., None, None], held[0][..., frm, :, :], copies[0]),
-                      np.where(arrive[..., None], held[1][..., frm, :], copies[1]))
+            arrive = (np.zeros(heard.shape, bool) if source is None
+                      else source[..., frm] & (delivered[k][..., to, frm] > 0))      # (..., E)
+            copies = (np.where(arrive[..., None, None], received[0][..., frm, :, :], copies[0]),
+                      np.where(arrive[..., None], received[1][..., frm, :], copies[1]))
             heard = heard | arrive
-            w_link = np.where(heard, W[to, frm], 0.0)                                 # (..., E)
+            w_link = np.where(heard, f.round_weights[to, frm], 0.0)                   # (..., E)
             w_self = 1.0 - w_link @ into.T                                           # the rest on the own pair
             Om_f = w_self[..., None, None] * Om + np.einsum("ie,...e,...eab->...iab", into, w_link, copies[0])
             q_f = w_self[..., None] * q + np.einsum("ie,...e,...ea->...ia", into, w_link, copies[1])
@@ -334,6 +382,136 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
         Ps.append(P)
         sents.append(sent)
     return np.stack(xs), np.stack(Ps), np.stack(sents)
+
+
+def _track_rounds(filters: list, x: np.ndarray, P: np.ndarray, z: np.ndarray,
+                  latency: int) -> tuple[np.ndarray, np.ndarray]:
+    """Consensus on pairs, every message sent (see :func:`track_messages`): L rounds per step, late or not.
+
+    Round l fuses each agent's pairs after round ``l - 1`` with its neighbours' after round ``l - 1``:
+    of this step on ideal timing (the filter's own update, up to rounding: ``W`` applied L times
+    instead of ``W^L``), of the step before predicted one step with `latency` (nothing at the first step).
+    """
+    model = filters[0].model
+    scales, L = filters[0].pair_scales, filters[0].exchanges
+    arrived = None  # with latency, per round: the neighbours' pairs sent in it at the step before, predicted
+    xs, Ps = [], []
+    for k, f in enumerate(filters):
+        xp, Pp = f.predict(x, P)
+        pairs = f.message_pairs(xp, Pp, z[k])
+        W = f.round_weights
+        w_self, off = np.diag(W), W - np.diag(np.diag(W))
+        sent = []
+        for r in range(L):
+            sent.append(pairs)
+            received = pairs if not latency else None if arrived is None else arrived[r]
+            if received is not None:
+                pairs = tuple((w_self[:, None, None] * Om + np.einsum("ij,...jab->...iab", off, rOm),
+                               w_self[:, None] * q + np.einsum("ij,...ja->...ia", off, rq))
+                              for (Om, q), (rOm, rq) in zip(pairs, received))
+        if latency:
+            arrived = [tuple(_late_pair(model, c, *pair) for c, pair in zip(scales, round_pairs))
+                       for round_pairs in sent]
+        x, P = f.pairs_estimate([(symmetric_part(Om), q) for Om, q in pairs])
+        xs.append(x)
+        Ps.append(P)
+    return np.stack(xs), np.stack(Ps)
+
+
+def track_behind(filters: Sequence, x0: ArrayLike, P0: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Run a filter on forwarded measurements whose messages each take one step (see the module's text).
+
+    Each agent runs the filter D steps behind (D = its ``exchanges``: the messages of step k have
+    all arrived at step ``k + D``), exactly as on ideal links, and its estimate of step k is that
+    filter's estimate of step ``k - D`` taken through steps ``k - D + 1 .. k`` by its own filter:
+    the prediction and its own fresh measurement's update (a Kalman update: the ``local`` method's;
+    for the set-membership filter its set update on its own measurement). Before step D nothing has
+    arrived: each agent's own filter alone.
+
+    Parameters
+    ----------
+    filters : sequence of K filters
+        The filter of each step, one class (:class:`~mascore.fusion.MeasurementForwardingFilter`,
+        :class:`~mascore.fusion_forwarding.KalmanConsensusNetworkFilter`,
+        :class:`~mascore.fusion_forwarding.SetMembershipForwardingFilter`,
+        :class:`~mascore.fusion.DiffusionKalmanFilter`, :class:`~mascore.fusion.CovarianceIntersectionFilter`
+        or any other of the package's network filters), built on the graph of the step at which a step's
+        last messages arrive (filter ``k + D`` runs the filter's step k); their sensing must be the same.
+    x0 : (..., N, n) or (n,) array_like
+        Initial means (set centres).
+    P0 : (..., N, n, n) or (n, n) array_like
+        Initial covariances (set shapes), symmetric positive definite.
+    z : (K, ..., sum q_i) array_like
+        Measurements of steps 1..K.
+
+    Returns
+    -------
+    x : (K, ..., N, n) ndarray
+        Each agent's estimate after each step.
+    P : (K, ..., N, n, n) ndarray
+        Their covariances (set shapes); leading axes those of `P0`.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Filters of different classes or sensing, the centralized filter (it has no neighbours),
+        shapes that do not fit.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mascore import compare, fusion, fusion_links
+    >>> model = compare.target_model(8)
+    >>> _, z = model.simulate(np.zeros(4), np.eye(4), 50, rng=0, n_runs=3)
+    >>> dkf = fusion.DiffusionKalmanFilter(model)
+    >>> x, P = fusion_links.track_behind([dkf] * 50, np.zeros(4), np.eye(4), z)
+    >>> xr, Pr = dkf.run(np.zeros(4), np.eye(4), z)        # two steps behind: the filter of step k - 2, then own data
+    >>> local = fusion.ConsensusOnInformationFilter(model, 0)
+    >>> xo, Po = local.update(*local.predict(xr[7], Pr[7]), z[8])
+    >>> xo, Po = local.update(*local.predict(xo, Po), z[9])
+    >>> bool(np.array_equal(x[9], xo) and np.array_equal(P[9], Po))
+    True
+    """
+    filters = list(filters) if not isinstance(filters, (str, bytes)) else None
+    if not filters:
+        raise TypeError("filters must be a non-empty sequence of the step filters (one per step)")
+    first = filters[0]
+    if not first._per_agent:
+        raise ValueError(f"filters must be per-agent network filters; got {type(first).__name__} (one estimate for the "
+                         "team: the bound keeps ideal links)")
+    def setting(f):  # its class and settings (the weights of the step's graph left out)
+        return type(f), [a for a in f._args() if not isinstance(a, np.ndarray)]
+
+    if any(setting(f) != setting(first) for f in filters):
+        raise ValueError(f"filters must all be {type(first).__name__} of one setting; only the graph may change")
+    model = first.model
+    if any(not np.array_equal(f.model.H_stacked, model.H_stacked) or not np.array_equal(f.model.R_stacked, model.R_stacked)
+           for f in filters):
+        raise ValueError("filters must share the sensing (H, R) of their models; only the graph may change")
+    x, P = model.check_state(x0, P0, ("x0", "P0"), per_agent=True)
+    z = require_finite(model._check_z(z), "z")
+    if z.ndim < 2 or z.shape[0] != len(filters):
+        raise ValueError(f"z must be (K, ..., {model.n_measurements}) with K = {len(filters)} (one filter per step); "
+                         f"got shape {z.shape}")
+    if isinstance(first, SetMembershipForwardingFilter):  # its own set update: the filter on the graph without links
+        own = SetMembershipForwardingFilter(model.on_graph(np.zeros((model.n_agents,) * 2)), first.confidence)
+    else:  # each agent's own Kalman filter (the local method)
+        own = ConsensusOnInformationFilter(model, 0)
+    D = max(1, first.exchanges)
+    K = len(filters)
+    behind = (x, P)  # the filter after step k - D (the prior before its first step)
+    xs, Ps = [], []
+    for k in range(K):
+        xo, Po = behind
+        for j in range(max(0, k - D + 1), k + 1):  # the steps not yet arrived: own measurements only
+            xo, Po = own.update(*own.predict(xo, Po), z[j])
+        xs.append(xo)
+        Ps.append(Po)
+        j = k - D + 1  # the step whose last messages arrive at step k + 1
+        if j >= 0 and k + 1 < K:
+            f = filters[k + 1]
+            behind = f.update(*f.predict(*behind), z[j])
+    return np.stack(xs), np.stack(Ps)
 
 
 def track_forwarding(model, x0: ArrayLike, P0: ArrayLike, z: ArrayLike, delivered: ArrayLike, *,
@@ -415,6 +593,23 @@ def track_forwarding(model, x0: ArrayLike, P0: ArrayLike, z: ArrayLike, delivere
         xs.append(xo)
         Ps.append(Po)
     return np.stack(xs), np.stack(Ps)
+
+
+def _late_pair(model, c: float | None, Om: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A pair sent one step before, as it is fused now: a density (scale `c`) or a measurement's information (None)."""
+    return _predict_pair(model, c, Om, q) if c is not None else _predict_information(model, Om, q)
+
+
+def _predict_information(model, Om: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """An information pair one step on, singular or not: ``M = F^-T Om F^-1``, ``((I + M Q)^-1 M, (I + M Q)^-1 F^-T q)``.
+
+    For a measurement's information this is the measurement taken as one of the next state with the
+    step's process noise added to its noise (F invertible: checked by the caller).
+    """
+    F_inv = np.linalg.inv(model.F)
+    M = F_inv.T @ Om @ F_inv
+    A = np.eye(model.n_states) + M @ model.Q
+    return symmetric_part(np.linalg.solve(A, M)), np.linalg.solve(A, (F_inv.T @ q[..., None]))[..., 0]
 
 
 def _predict_pair(model, c: float, Om: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

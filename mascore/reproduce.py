@@ -429,14 +429,21 @@ def _replace_directory(final: Path, staging: Path) -> None:
     shutil.rmtree(old, ignore_errors=True)
 
 
-def _seed_argument(text: str) -> int:
-    try:
-        seed = int(text)
-    except ValueError:
-        seed = -1
-    if seed < 0:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer seed, got {text!r}")
-    return seed
+def _non_negative_argument(what: str) -> Callable[[str], int]:
+    """An argparse ``type`` that reads a non-negative integer; `what` ends its error message."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = -1
+        if value < 0:
+            raise argparse.ArgumentTypeError(f"expected a non-negative integer{what}, got {text!r}")
+        return value
+    return parse
+
+
+_seed_argument = _non_negative_argument(" seed")
+_workers_argument = _non_negative_argument(" (0: in this process)")
 
 
 def _override_argument(text: str) -> tuple[str, str]:
@@ -478,16 +485,6 @@ def _reproduce_at(args: argparse.Namespace) -> int:
 def _where(workers: int) -> str:
     """Where the work ran, for the command's summary line."""
     return f"{workers} local worker{'s' if workers > 1 else ''}" if workers else "this process"
-
-
-def _workers_argument(text: str) -> int:
-    try:
-        workers = int(text)
-    except ValueError:
-        workers = -1
-    if workers < 0:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer (0: in this process), got {text!r}")
-    return workers
 
 
 def _out_argument(text: str) -> Path:

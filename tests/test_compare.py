@@ -59,7 +59,8 @@ def test_grid_cells_cover_the_studies_with_100_seeds():
     assert studies - set(compare.LINK_STUDIES) == {"scaling", "graph", "dropout", "noise", "wrong-q", "shared", "target",
                                                    "localization", "position", "switching"}
     assert studies & set(compare.LINK_STUDIES) == {"loss", "loss-direction", "latency", "send-on-delta-0.5",
-                                                   "send-on-delta-1", "lossy-send-on-delta-0.5"}
+                                                   "send-on-delta-1", "lossy-send-on-delta-0.5",
+                                                   "late-send-on-delta-0.5"}
     blocks = {c["block"] for c in cells}
     assert len(blocks) * compare.SETTINGS.runs >= 100
     assert {c["method"] for c in cells if c["task"] == "team"} == set(compare.ALL_TEAM_METHODS)

@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mascore import compare, fusion, fusion_links, graphs
+from mascore import compare, fusion, fusion_links, graphs, sensor_network
 from mascore.compare import grid
 from mascore.compare.stats import NEES_DIMENSION, anees_bounds
 from mascore.compare.target import LATENCY_METHODS, LINK_STUDIES, SEND_ON_DELTA_METHODS, _filter_links
@@ -138,8 +138,8 @@ def test_bad_link_arguments_are_named():
         compare.simulate_target("ci-L1", 8, 0, runs=2, loss=1.0)
     with pytest.raises(ValueError, match="latency"):
         compare.simulate_target("ci-L1", 8, 0, runs=2, latency=2)
-    with pytest.raises(ValueError, match="latency: method"):
-        compare.simulate_target("diffusion", 8, 0, runs=2, latency=1)
+    with pytest.raises(ValueError, match="not modelled on the switching localization"):
+        compare.simulate_target("kcf", 8, 0, runs=2, latency=1, graph="switching", task="localization")
     with pytest.raises(ValueError, match="send_delta: method"):
         compare.simulate_target("ci-L5", 8, 0, runs=2, send_delta=1.0)
     with pytest.raises(ValueError, match="send_delta must be"):
@@ -149,7 +149,22 @@ def test_bad_link_arguments_are_named():
     model = compare.target_model(8)
     with pytest.raises(ValueError, match="one density"):
         fusion_links.track_messages([fusion.ConsensusOnInformationFilter(model, 2)], np.zeros(4), np.eye(4),
-                                    np.zeros((1, 8)))
+                                    np.zeros((1, 8)), send_delta=1.0)
+    with pytest.raises(ValueError, match="one density"):
+        fusion_links.track_messages([fusion.ConsensusOnInformationFilter(model, 1, "N")], np.zeros(4), np.eye(4),
+                                    np.zeros((1, 8)), delivered=np.ones((1, 8, 8)))
+    with pytest.raises(ValueError, match="same rounds"):
+        fusion_links.track_messages([fusion.ConsensusOnInformationFilter(model, 1),
+                                     fusion.ConsensusOnInformationFilter(model, 2)], np.zeros(4), np.eye(4),
+                                    np.zeros((2, 8)), latency=1)
+    with pytest.raises(ValueError, match="ConsensusOnInformationFilter"):
+        fusion_links.track_messages([fusion.DiffusionKalmanFilter(model)], np.zeros(4), np.eye(4), np.zeros((1, 8)))
+    with pytest.raises(ValueError, match="per-agent"):
+        fusion_links.track_behind([fusion.CentralizedFilter(model)], np.zeros(4), np.eye(4), np.zeros((1, 8)))
+    singular = sensor_network.SensorNetworkModel(np.zeros((4, 4)), np.eye(4), model.H, model.R, model.adjacency)
+    with pytest.raises(ValueError, match="invertible F"):
+        fusion_links.track_messages([fusion.ConsensusOnInformationFilter(singular, 1, "N")], np.zeros(4), np.eye(4),
+                                    np.zeros((1, 8)), latency=1)
     with pytest.raises(ValueError, match="send_delta must be"):
         fusion_links.track_messages([fusion.ConsensusOnInformationFilter(model, 1)], np.zeros(4), np.eye(4),
                                     np.zeros((1, 8)), send_delta=-1.0)
@@ -316,5 +331,198 @@ def test_send_on_delta_over_one_way_loss():
     assert not np.array_equal(lossy["rmse_own"], clean["rmse_own"])
     lo, hi = anees_bounds(20, NEES_DIMENSION["target"])
     assert lossy["nees_own"].mean() < hi                  # CI fuses consistent (predicted) densities: never overconfident
-    with pytest.raises(ValueError, match="cannot be combined"):
-        compare.simulate_target("ci-L1", 8, 0, runs=2, loss=0.1, loss_model="direction", send_delta=0.5, latency=1)
+    with pytest.raises(ValueError, match="send_delta needs a fixed graph"):  # the link model changes the graph
+        compare.simulate_target("ci-L1", 8, 0, runs=2, loss=0.1, send_delta=0.5, latency=1)
+
+
+# --------------------------------------------------------------------------------------------
+# latency for every fusion method (consensus on pairs, rounds pipelined; forwarded measurements, behind)
+
+def _late_reference(model, kind, L, w, z, x0, P0):
+    """Late consensus on pairs, agent by agent, from the module's text: round l fuses the own pairs after round
+    l - 1 with the neighbours' pairs after round l - 1 of the step before, predicted one step (a density
+    through F, Q; a measurement's information by Woodbury, Q invertible); nothing arrives at the first step."""
+    F, Q, W, N, n = model.F, model.Q, model.weights, model.n_agents, model.n_states
+    if kind == "icf":
+        W = fusion.InformationConsensusFilter(model, L).round_weights
+    Fi = np.linalg.inv(F)
+    infos = [model.H[i].T @ np.linalg.inv(model.R[i]) @ model.H[i] for i in range(N)]
+
+    def late(pair, scale):
+        Om, q = pair
+        if scale is None:  # information of the next state: M - M (Q^-1 + M)^-1 M
+            M = Fi.T @ Om @ Fi
+            G = np.eye(n) - M @ np.linalg.inv(np.linalg.inv(Q) + M)
+            return G @ M, G @ Fi.T @ q
+        C = np.linalg.inv(scale * Om)
+        m = C @ q * scale
+        C = F @ C @ F.T + Q
+        return np.linalg.inv(C) / scale, np.linalg.inv(C) @ (F @ m) / scale
+
+    scales = {"ci": (1.0,), "hcmci": (1.0, None), "icf": (float(N),)}[kind]
+    x, P = [x0.copy() for _ in range(N)], [P0.copy() for _ in range(N)]
+    before, out = None, []
+    for k in range(len(z)):
+        pairs = []
+        for i in range(N):
+            xp, Pp = F @ x[i], F @ P[i] @ F.T + Q
+            J = np.linalg.inv(Pp)
+            zi = z[k][model._slices[i]]
+            iv = model.H[i].T @ np.linalg.solve(model.R[i], zi)
+            pairs.append({"ci": [(J + infos[i], J @ xp + iv)], "hcmci": [(J, J @ xp), (infos[i], iv)],
+                          "icf": [(J / N + infos[i], J @ xp / N + iv)]}[kind])
+        sent = []
+        for r in range(L):
+            sent.append(pairs)
+            if before is not None:
+                pairs = [[(W[i, i] * pairs[i][p][0] + sum(W[i, j] * late(before[r][j][p], scales[p])[0]
+                                                          for j in range(N) if j != i and W[i, j]),
+                           W[i, i] * pairs[i][p][1] + sum(W[i, j] * late(before[r][j][p], scales[p])[1]
+                                                          for j in range(N) if j != i and W[i, j]))
+                          for p in range(len(scales))] for i in range(N)]
+        before = sent
+        for i in range(N):
+            if kind == "hcmci":
+                Om, q = pairs[i][0][0] + w * pairs[i][1][0], pairs[i][0][1] + w * pairs[i][1][1]
+            else:
+                Om, q = pairs[i][0]
+            P[i] = np.linalg.inv(Om) / (N if kind == "icf" else 1)
+            x[i] = np.linalg.solve(Om, q)
+        out.append((np.stack(x), np.stack(P)))
+    return np.stack([o[0] for o in out]), np.stack([o[1] for o in out])
+
+
+@pytest.mark.parametrize("kind, L", [("ci", 2), ("hcmci", 1), ("hcmci", 2), ("icf", 2)])
+def test_late_rounds_fuse_the_pairs_sent_the_step_before_predicted(kind, L):
+    """An independent agent-by-agent computation of the pipelined late rounds gives the same numbers."""
+    model = compare.target_model(4)
+    _, z = model.simulate(np.zeros(4), np.eye(4), 6, rng=11)
+    filt = {"ci": fusion.ConsensusOnInformationFilter(model, L), "icf": fusion.InformationConsensusFilter(model, L),
+            "hcmci": fusion.ConsensusOnInformationFilter(model, L, novelty_weight="N")}[kind]
+    x, P, sent = fusion_links.track_messages([filt] * 6, np.zeros(4), np.eye(4), z, latency=1)
+    xr, Pr = _late_reference(model, kind, L, 4.0, z, np.zeros(4), np.eye(4))
+    np.testing.assert_allclose(x, xr, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(P, Pr, rtol=1e-8, atol=1e-12)
+    assert sent.all()
+
+
+def test_a_late_measurement_information_is_the_measurement_of_the_next_state_with_the_process_noise():
+    """HCMCI's late novelty pair: ``(I + M Q)^-1 M`` is ``H'^T R'^-1 H'``, ``H' = H F^-1``, ``R' = R + H' Q H'^T``."""
+    model = compare.target_model(4)
+    H, R = model.H[0], model.R[0]
+    z = np.array([0.7])
+    Om, q = fusion_links._predict_information(model, H.T @ np.linalg.solve(R, H), H.T @ np.linalg.solve(R, z))
+    Hp = H @ np.linalg.inv(model.F)
+    Rp = R + Hp @ model.Q @ Hp.T
+    np.testing.assert_allclose(Om, Hp.T @ np.linalg.solve(Rp, Hp), rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(q, Hp.T @ np.linalg.solve(Rp, z), rtol=1e-10, atol=1e-14)
+
+
+@pytest.mark.parametrize("L, w", [(5, 1.0), (1, "N"), (5, "N")])
+def test_rounds_on_ideal_timing_are_the_filter(L, w):
+    """Latency 0: L rounds applied one after the other are the filter's own update with W^L."""
+    model = compare.target_model(8)
+    _, z = model.simulate(np.zeros(4), np.eye(4), 40, rng=3, n_runs=3)
+    for filt in (fusion.ConsensusOnInformationFilter(model, L, novelty_weight=w), fusion.InformationConsensusFilter(model, L)):
+        xr, Pr = filt.run(np.zeros(4), np.eye(4), z)
+        x, P, _ = fusion_links.track_messages([filt] * 40, np.zeros(4), np.eye(4), z)
+        np.testing.assert_allclose(x, xr, rtol=1e-8, atol=1e-9)
+        np.testing.assert_allclose(P, Pr, rtol=1e-8, atol=1e-12)
+
+
+def _behind_filters(model):
+    from mascore.fusion_forwarding import KalmanConsensusNetworkFilter, SetMembershipForwardingFilter
+
+    return {"forwarding": fusion.MeasurementForwardingFilter(model), "kcf": KalmanConsensusNetworkFilter(model),
+            "diffusion": fusion.DiffusionKalmanFilter(model), "ci-diffusion": fusion.CovarianceIntersectionFilter(model),
+            "sm-forwarding": SetMembershipForwardingFilter(model)}
+
+
+@pytest.mark.parametrize("task", ["target", "localization"])
+def test_behind_is_the_filter_of_d_steps_before_then_own_measurements(task):
+    """The filter behind is the method's own filter, bit for bit, D = its exchanges steps before; then each agent's own
+    update (Kalman; the set update for the set-membership filter) on its measurements of the last D steps."""
+    model = (compare.target_model if task == "target" else compare.localization_model)(8)
+    n = model.n_states
+    _, z = model.simulate(np.zeros(n), np.eye(n), 12, rng=5, n_runs=2)
+    for name, filt in _behind_filters(model).items():
+        P0 = filt.initial_shape(np.eye(n)) if name == "sm-forwarding" else np.eye(n)
+        x, P = fusion_links.track_behind([filt] * 12, np.zeros(n), P0, z)
+        xr, Pr = filt.run(np.zeros(n), P0, z)
+        own = (type(filt)(model.on_graph(np.zeros((8, 8))), filt.confidence) if name == "sm-forwarding"
+               else fusion.ConsensusOnInformationFilter(model, 0))
+        D = filt.exchanges
+        assert D == (2 if "diffusion" in name else 1)
+        for k in (0, D, 11):
+            xo, Po = model.check_state(np.zeros(n), P0, per_agent=True) if k < D else (xr[k - D], Pr[k - D])
+            for j in range(max(0, k - D + 1), k + 1):
+                xo, Po = own.update(*own.predict(xo, Po), z[j])
+            assert np.array_equal(x[k], np.broadcast_to(xo, x[k].shape)), (name, k)
+            assert np.array_equal(P[k], Po), (name, k)
+        assert np.all(np.linalg.eigvalsh(P) > 0), name
+
+
+def test_late_kcf_at_eps_0_is_late_forwarding():
+    from mascore.fusion_forwarding import KalmanConsensusNetworkFilter
+
+    model = compare.target_model(8)
+    _, z = model.simulate(np.zeros(4), np.eye(4), 30, rng=8, n_runs=4)
+    xf, Pf = fusion_links.track_behind([fusion.MeasurementForwardingFilter(model)] * 30, np.zeros(4), np.eye(4), z)
+    xk, Pk = fusion_links.track_behind([KalmanConsensusNetworkFilter(model, eps=0.0)] * 30, np.zeros(4), np.eye(4), z)
+    assert xk.tobytes() == xf.tobytes() and Pk.tobytes() == Pf.tobytes()
+
+
+def test_every_method_late_has_positive_definite_covariances_and_ci_stays_consistent():
+    """Every filter of the tables takes latency; CI at any number of rounds stays consistent (ANEES below the bound)."""
+    lo, hi = anees_bounds(100, NEES_DIMENSION["target"])
+    for method in ("ci-L1", "ci-L5"):
+        assert compare.simulate_target(method, 8, 21, runs=100, latency=1)["nees_own"].mean() < hi, method
+    assert not compare.LATENCY_NOT_MODELLED and set(LATENCY_METHODS) == set(compare.target_methods())
+    model = compare.target_model(8)
+    _, z = model.simulate(np.zeros(4), np.eye(4), 60, rng=1, n_runs=2)
+    for method in LATENCY_METHODS:
+        if method in ("centralized", "local"):
+            continue
+        filt = compare.target_filter(method, model)
+        if hasattr(filt, "message_pairs"):
+            _, P, _ = fusion_links.track_messages([filt] * 60, np.zeros(4), np.eye(4), z, latency=1)
+        else:
+            P0 = filt.initial_shape(np.eye(4)) if hasattr(filt, "initial_shape") else np.eye(4)
+            _, P = fusion_links.track_behind([filt] * 60, np.zeros(4), P0, z)
+        assert np.all(np.linalg.eigvalsh(P) > 0), method
+
+
+def test_send_on_delta_with_latency():
+    """delta = 0 late is latency alone; every message delivered is no loss; a threshold sends fewer floats."""
+    model = compare.target_model(8)
+    _, z = model.simulate(np.zeros(4), np.eye(4), 80, rng=6, n_runs=5)
+    for filt in (fusion.ConsensusOnInformationFilter(model, 1), fusion.InformationConsensusFilter(model, 1)):
+        xl, Pl, _ = fusion_links.track_messages([filt] * 80, np.zeros(4), np.eye(4), z, latency=1)
+        x0, P0, sent0 = fusion_links.track_messages([filt] * 80, np.zeros(4), np.eye(4), z, latency=1, send_delta=0.0)
+        assert sent0.all()
+        np.testing.assert_allclose(x0, xl, rtol=1e-9, atol=1e-10)
+        x1, P1, sent1 = fusion_links.track_messages([filt] * 80, np.zeros(4), np.eye(4), z, latency=1, send_delta=1.0)
+        assert 0 < sent1.mean() < 1
+        every = np.ones((80, 8, 8))
+        xd, Pd, sentd = fusion_links.track_messages([filt] * 80, np.zeros(4), np.eye(4), z, latency=1, send_delta=1.0,
+                                                    delivered=every)
+        assert np.array_equal(sentd, sent1)
+        np.testing.assert_allclose(xd, x1, rtol=1e-9, atol=1e-10)
+        np.testing.assert_allclose(Pd, P1, rtol=1e-9, atol=1e-12)
+    m = compare.simulate_target("ci-L1", 8, 7, runs=20, latency=1, send_delta=1.0)
+    assert (m["floats"] < compare.target_cost("ci-L1", 8, 2)[0]).all()
+    lossy = compare.simulate_target("ci-L1", 8, 7, runs=20, latency=1, send_delta=0.5, loss=0.3, loss_model="direction")
+    assert np.all(np.isfinite(lossy["rmse_own"])) and (lossy["floats"] > 0).all()
+
+
+def test_latency_model_names_the_treatment_simulate_target_runs():
+    model = compare.target_model(8)
+    for task in ("target", "localization"):
+        for method in LATENCY_METHODS:
+            text = compare.latency_model(method, task)
+            if method in ("centralized", "local"):
+                assert text in ("the bound: ideal links", "sends nothing")
+                continue
+            pairs = hasattr(compare.target_filter(method, model), "message_pairs")
+            assert ("predicted one step" in text) == pairs and ("behind" in text) != pairs, (method, text)
+    assert "two steps behind" in compare.latency_model("ci-diffusion") and "5 rounds" in compare.latency_model("icf-L5")

@@ -63,8 +63,9 @@ methods that do not apply are listed with the reason
 **Links of the target and localization tasks** (:data:`LINK_STUDIES`, :mod:`mascore.fusion_links`): packet
 loss per link and step (a lost message is not received; each filter fuses what arrived, with its weights on
 the links that delivered), loss per direction and run (:data:`DIRECTION_LOSS_METHODS`: a message lost alone,
-its weight on the receiver's own pair), one-step latency (:data:`LATENCY_METHODS`) and send-on-delta messages for CI and
-ICF at one consensus step (:data:`SEND_ON_DELTA_METHODS`, floats counted as sent), at N = 8 on the ring.
+its weight on the receiver's own pair), one-step latency for every filter of the tables (:data:`LATENCY_METHODS`,
+:func:`latency_model`) and send-on-delta messages for CI and ICF at one consensus step (:data:`SEND_ON_DELTA_METHODS`,
+floats counted as sent; with latency too), at N = 8 on the ring.
 
 **Robustness axes**: link drop-outs (each link's measurement and message lost with
 probability ``dropout`` at each step; a lost message leaves the last received
@@ -101,6 +102,7 @@ __all__ = [
     "DIRECTION_LOSS_METHODS",
     "LATENCY_METHODS",
     "LATENCY_NOT_MODELLED",
+    "latency_model",
     "LINK_STUDIES",
     "LOSS_METHODS",
     "SEND_ON_DELTA_METHODS",
@@ -194,7 +196,7 @@ _NAMES = {
         'DIRECTION_LOSS_METHODS', 'LATENCY_METHODS', 'LATENCY_NOT_MODELLED', 'LINK_STUDIES',
         'LOCALIZATION_NOT_APPLICABLE', 'LOSS_METHODS',
         'SEND_ON_DELTA_METHODS', 'TARGET_METHODS', 'TARGET_NOT_APPLICABLE', '_localization_switching',
-        'link_options', 'localization_model', 'localization_riccati', 'simulate_target', 'target_cost',
+        'latency_model', 'link_options', 'localization_model', 'localization_riccati', 'simulate_target', 'target_cost',
         'target_filter', 'target_methods', 'target_model'
     ),
     'grid': (

@@ -31,7 +31,6 @@ from .stats import NEES_DIMENSION, anees_bounds, mean_interval, rms_ratio
 from .tables import fitted_slopes
 from .target import (
     DIRECTION_LOSS_METHODS,
-    LATENCY_METHODS,
     LINK_STUDIES,
     SEND_ON_DELTA_METHODS,
     link_options,
@@ -77,7 +76,8 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
     64), and 4 x 50 = 200 seeds in both grids for the headline cells (own state at
     N = 8, position sensing, the shared, target and localization tasks); and the links
     of the target and localization tasks at N = 8 on the ring (:data:`LINK_STUDIES`: ``loss``,
-    ``loss-direction``, ``latency``, ``send-on-delta-<delta>``, ``lossy-send-on-delta-0.5``; a cell's
+    ``loss-direction``, ``latency``, ``send-on-delta-<delta>``, ``lossy-send-on-delta-0.5``,
+    ``late-send-on-delta-0.5``; a cell's
     ``dropout`` is the packet loss; quick: the target task only, a few methods; full: both tasks;
     4 blocks in both, :func:`_link_studies`). The full grid adds the
     scale study of both fusion tasks: every method at N in :data:`SCALE_SIZES` on every graph of
@@ -187,11 +187,13 @@ def _link_studies(quick: bool, base: dict, blocks200: list) -> list[tuple[str, d
 
     Quick: the target task only, loss 0.1 and 0.3 for the bound, forwarding, CI and ICF at one step
     (a link lost in both directions at once, and each direction alone: ``loss-direction``); latency
-    without loss; send-on-delta at 0.5 and 1. Full: both tasks, every method of :data:`LOSS_METHODS`
-    at both losses (each direction alone: :data:`DIRECTION_LOSS_METHODS` but local), latency at loss
-    0, 0.1 and 0.3, and send-on-delta at 0.5, 1 and 2; send-on-delta at 0.5 with each message lost
-    alone (``lossy-send-on-delta-0.5``), quick: at loss 0.3 on blocks 0-1 (no claim reads it), full:
-    at 0.1 and 0.3.
+    without loss (every method of the tables: the claims' five on 4 blocks, the others on block 0);
+    send-on-delta at 0.5 and 1. Full: both tasks, every method of :data:`LOSS_METHODS`
+    at both losses (each direction alone: :data:`DIRECTION_LOSS_METHODS` but local), every method of
+    :data:`LATENCY_METHODS` late at loss 0, 0.1 and 0.3, and send-on-delta at 0.5, 1 and 2; send-on-delta
+    at 0.5 with each message lost alone (``lossy-send-on-delta-0.5``), quick: at loss 0.3 on blocks 0-1
+    (no claim reads it), full: at 0.1 and 0.3; send-on-delta at 0.5 with every message late
+    (``late-send-on-delta-0.5``; quick: block 0).
     Both grids run 4 blocks (but that one): the link claims are written from blocks 0-1 and decided
     on 2-3 (:mod:`mascore.compare.verdicts`).
     """
@@ -204,12 +206,20 @@ def _link_studies(quick: bool, base: dict, blocks200: list) -> list[tuple[str, d
         out.append(("loss", {**ring8, "task": [task], "method": loss_methods, "dropout": [0.1, 0.3]}))
         out.append(("loss-direction", {**ring8, "task": [task], "method": [m for m in DIRECTION_LOSS_METHODS
                                                                            if m != "local"], "dropout": [0.1, 0.3]}))
-        out.append(("latency", {**ring8, "task": [task], "method": list(LATENCY_METHODS),
-                                "dropout": [0.0] if quick else [0.0, 0.1, 0.3]}))
+        if quick:  # the claims' methods on 4 blocks; the others' latency on block 0 (no claim reads it: CPU)
+            claimed = ["centralized", "local", "forwarding", "ci-L1", "icf-L1"]
+            out.append(("latency", {**ring8, "task": [task], "method": claimed, "dropout": [0.0]}))
+            out.append(("latency", {**ring8, "task": [task], "dropout": [0.0], "block": blocks200[:1],
+                                    "method": [m for m in target_methods("target") if m not in claimed]}))
+        else:
+            out.append(("latency", {**ring8, "task": [task], "method": list(target_methods("target")),
+                                    "dropout": [0.0, 0.1, 0.3]}))
         out += [(study, {**ring8, "task": [task], "method": list(SEND_ON_DELTA_METHODS)}) for study in deltas]
         out.append(("lossy-send-on-delta-0.5", {**ring8, "task": [task], "method": list(SEND_ON_DELTA_METHODS),
                                                 "dropout": [0.3] if quick else [0.1, 0.3],
                                                 "block": blocks200[:2] if quick else blocks200}))
+        out.append(("late-send-on-delta-0.5", {**ring8, "task": [task], "method": list(SEND_ON_DELTA_METHODS),
+                                               "block": blocks200[:1] if quick else blocks200}))
     return out
 
 

@@ -372,7 +372,7 @@ def link_table(summary, links, task: str = "target"):
         centralized filter, which keeps ideal links) and ``NEES/dof``, for ideal links (the task's
         own study), each packet loss (``loss p``: a link lost in both directions; ``one-way loss p``:
         each message lost alone, study ``loss-direction``), and one-step latency at each loss the
-        summary holds; NaN where a method has no model of the links (:data:`LATENCY_NOT_MODELLED`).
+        summary holds; NaN where a cell was not run (the quick grid runs loss for a few methods only).
 
     Examples
     --------
@@ -406,7 +406,7 @@ def link_table(summary, links, task: str = "target"):
     return pd.concat(out, axis=1)
 
 
-def send_on_delta_table(summary, links, task: str = "target", loss: float = 0.0):
+def send_on_delta_table(summary, links, task: str = "target", loss: float = 0.0, latency: int = 0):
     """Send-on-delta: floats sent, accuracy and consistency of CI and ICF per threshold (N = 8, ring).
 
     Parameters
@@ -420,12 +420,16 @@ def send_on_delta_table(summary, links, task: str = "target", loss: float = 0.0)
     loss : float
         0: ideal links. Else the one-way packet loss (each message lost alone): the studies
         ``lossy-send-on-delta-<delta>`` and, for ``delta`` 0, ``loss-direction`` at that loss.
+    latency : {0, 1}
+        1: every message one step late: the studies ``late-send-on-delta-<delta>`` and, for
+        ``delta`` 0, ``latency`` (at `loss` 0).
 
     Returns
     -------
     pandas.DataFrame
         Rows ``(method, delta)`` (``delta`` 0: the method sending at every step, from the task's own
-        study or, with `loss`, ``loss-direction``); columns ``floats/agent/step`` (as sent), ``RMSE ratio`` with its 95 %
+        study or, with `loss`, ``loss-direction``, with `latency`, ``latency``); columns
+        ``floats/agent/step`` (as sent), ``RMSE ratio`` with its 95 %
         interval ``lo``, ``hi``, and ``NEES/dof``.
 
     Examples
@@ -444,12 +448,15 @@ def send_on_delta_table(summary, links, task: str = "target", loss: float = 0.0)
 
     if task not in ("target", "localization"):
         raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
-    lossy = bool(loss)
+    lossy, late = bool(loss), bool(latency)
+    if lossy and late:
+        raise ValueError("send_on_delta_table: loss and latency together have no study; give one of them")
     s = pd.concat([summary[summary["study"] == task], links[links["study"].isin(LINK_STUDIES)]])
     s = s[(s["task"] == task) & (s["n_agents"] == 8) & (s["graph"] == "ring") & (s["dropout"] == float(loss))
           & s["method"].isin(SEND_ON_DELTA_METHODS[1:])]
-    delta = {"loss-direction" if lossy else task: 0.0,
-             **{k: v["send_delta"] for k, v in LINK_STUDIES.items() if "send_delta" in v and ("loss_model" in v) == lossy}}
+    delta = {"loss-direction" if lossy else "latency" if late else task: 0.0,
+             **{k: v["send_delta"] for k, v in LINK_STUDIES.items()
+                if "send_delta" in v and ("loss_model" in v) == lossy and bool(v.get("latency")) == late}}
     s = s[s["study"].isin(delta)].assign(delta=lambda d: d["study"].map(delta))
     if not (s["delta"] > 0).any():
         raise ValueError(f"summary has no send-on-delta cell for {task!r} at loss {loss:g}: rerun the sweep (grid_cells)")

@@ -32,10 +32,14 @@ from .benchmark import (
 #: :func:`target_methods`); ``TARGET_NOT_APPLICABLE`` and ``LOCALIZATION_NOT_APPLICABLE``, the papers' methods
 #: that do not apply to the common target or to cooperative localization, with the reason; ``LOSS_METHODS``, the
 #: methods of the loss study: every filter of the target tables, whose steps follow any graph (not ``-Ldiam``,
-#: whose L is the diameter of a graph that loss may disconnect, nor ``hcmci-safe-*``, whose weight is the graph's).
+#: whose L is the diameter of a graph that loss may disconnect, nor ``hcmci-safe-*``, whose weight is the graph's);
+#: ``LATENCY_METHODS``, the methods with one-step latency: every filter of the target tables (the bound and
+#: ``local`` unaffected; the consensus filters on pairs by :func:`mascore.fusion_links.track_messages`, the
+#: filters on forwarded measurements by :func:`mascore.fusion_links.track_behind`).
 _FROM_SPECS = {
     "TARGET_METHODS": lambda: target_methods("target"),
     "LOSS_METHODS": lambda: target_methods("target"),
+    "LATENCY_METHODS": lambda: target_methods("target"),
     "TARGET_NOT_APPLICABLE": lambda: estimation.not_applicable("target"),
     "LOCALIZATION_NOT_APPLICABLE": lambda: estimation.not_applicable("localization"),
 }
@@ -401,15 +405,19 @@ def simulate_target(
         patterns are nested in `loss`. The centralized filter is the bound and keeps ideal links,
         ``local`` sends nothing: both are unaffected.
     latency : {0, 1}
-        Steps a message takes (:data:`LATENCY_METHODS`): ``forwarding`` fuses the neighbours'
-        measurements of the step before, exactly (a Kalman filter on them, one step behind, predicted
-        and corrected with the agent's own fresh measurement); ``ci-L1`` and ``icf-L1`` fuse the
-        neighbours' pairs of the step before, predicted one step (:func:`mascore.fusion_links.track_messages`).
+        Steps a message takes (:data:`LATENCY_METHODS`): the consensus filters on information pairs
+        (CI, HCMCI, ICF, any number of rounds) fuse the neighbours' pairs of the step before, predicted
+        one step, their rounds pipelined across steps (:func:`mascore.fusion_links.track_messages`);
+        the filters on forwarded measurements (forwarding, KCF, the set-membership filter, the two
+        diffusion filters) run their own filter one step behind (two for the diffusion filters, whose
+        estimates follow the measurements' exchange), predicted and corrected with the agent's own
+        fresh measurement (:func:`mascore.fusion_links.track_behind`). With `send_delta` too.
     send_delta : float, optional
         Send-on-delta threshold of ``ci-L1`` and ``icf-L1`` (:data:`SEND_ON_DELTA_METHODS`): an agent
         re-sends only when its estimate moved by more than this Mahalanobis distance since its last
         send (on a fixed graph; with loss only per direction, ``loss_model="direction"``: each receiver
-        then fuses the last pair it received from each neighbour, predicted).
+        then fuses the last pair it received from each neighbour, predicted; with `latency`, the pairs
+        sent at the step before).
     loss_model : {"link", "direction"}
         ``"link"``: as above, a link lost in both directions at once, one pattern per seed shared by
         its runs, every method. ``"direction"`` (:data:`DIRECTION_LOSS_METHODS`): each message
@@ -532,11 +540,13 @@ def simulate_target(
 #: The studies of the target and localization tasks over their links, and what each sets of
 #: :func:`simulate_target` (a cell's ``dropout`` is the packet loss ``loss``): ``loss`` (ideal timing, a link
 #: lost in both directions), ``loss-direction`` (each message lost alone, one pattern per run),
-#: ``latency`` (every message one step late), ``send-on-delta-<delta>`` (fixed graph, no loss) and
-#: ``lossy-send-on-delta-0.5`` (send-on-delta with each message lost alone).
+#: ``latency`` (every message one step late), ``send-on-delta-<delta>`` (fixed graph, no loss),
+#: ``lossy-send-on-delta-0.5`` (send-on-delta with each message lost alone) and ``late-send-on-delta-0.5``
+#: (send-on-delta with every message one step late).
 LINK_STUDIES = {"loss": {}, "loss-direction": {"loss_model": "direction"}, "latency": {"latency": 1},
                 **{f"send-on-delta-{d:g}": {"send_delta": d} for d in (0.5, 1.0, 2.0)},
-                "lossy-send-on-delta-0.5": {"send_delta": 0.5, "loss_model": "direction"}}
+                "lossy-send-on-delta-0.5": {"send_delta": 0.5, "loss_model": "direction"},
+                "late-send-on-delta-0.5": {"send_delta": 0.5, "latency": 1}}
 
 
 def link_options(study: str) -> dict[str, float]:
@@ -562,23 +572,58 @@ def link_options(study: str) -> dict[str, float]:
     return dict(LINK_STUDIES.get(study, {}))
 
 
-#: Methods with one-step latency (:func:`simulate_target`): the bound and ``local`` (unaffected), measurement
-#: forwarding, and the consensus filters that send one density per step.
-LATENCY_METHODS = ("centralized", "local", "forwarding", "ci-L1", "icf-L1")
 #: Methods with loss per direction (:func:`simulate_target`'s ``loss_model="direction"``): the bound and ``local``
 #: (unaffected), measurement forwarding, and the consensus filters that send one density per step.
 DIRECTION_LOSS_METHODS = ("centralized", "local", "forwarding", "ci-L1", "icf-L1")
 #: Methods with send-on-delta messages (:func:`simulate_target`), and the bound.
 SEND_ON_DELTA_METHODS = ("centralized", "ci-L1", "icf-L1")
-#: Why a method has no latency model here (the target and localization tables show it).
-LATENCY_NOT_MODELLED = {
-    **{m: "L rounds per step cannot run within a step when each message takes a step" for m in ("ci-L5", "icf-L5")},
-    **{m: "its novelty pair is a measurement, not a density that can be predicted to the next step"
-       for m in ("hcmci-L1", "hcmci-L5")},
-    **{m: "its incremental update and its diffusion would both lag: not modelled" for m in ("diffusion", "ci-diffusion")},
-    "kcf": "its consensus term takes the neighbours' predictions of the step: late ones are not modelled",
-    "sm-forwarding": "a late measurement would have to enter the set of the step before: not modelled",
-}
+#: Why a method of the tables has no latency model, by name: none (every filter of the tables has one,
+#: :data:`LATENCY_METHODS`). Latency is not modelled on the switching localization task (its sensing switches
+#: with the graph), for any method.
+LATENCY_NOT_MODELLED: dict[str, str] = {}
+
+
+def latency_model(method: str, task: str = "target") -> str:
+    """How a method's messages are taken when each arrives one step late (:func:`simulate_target`'s `latency`).
+
+    Parameters
+    ----------
+    method : str
+        One of :data:`LATENCY_METHODS` (or a knob's setting).
+    task : {"target", "localization"}
+        The scenario.
+
+    Returns
+    -------
+    str
+        The treatment, from the method's filter: the bound and ``local`` are unaffected; a consensus
+        filter on information pairs fuses its neighbours' pairs of the step before, predicted, its
+        rounds pipelined (:func:`mascore.fusion_links.track_messages`); a filter on forwarded
+        measurements runs one step behind, or as many as its exchanges follow one another
+        (:func:`mascore.fusion_links.track_behind`).
+
+    Examples
+    --------
+    >>> from mascore.compare.target import latency_model
+    >>> latency_model("diffusion")
+    'its own filter two steps behind (measurements, then estimates), then its own fresh measurements'
+    """
+    if method == "centralized":
+        return "the bound: ideal links"
+    filt = target_filter(method, target_model(4) if task == "target" else localization_model(4), task)
+    rounds = filt.exchanges
+    if rounds == 0:
+        return "sends nothing"
+    if hasattr(filt, "message_pairs"):
+        hybrid = len(filt.pair_scales) > 1
+        return (f"the neighbours' {'prior and novelty pairs' if hybrid else 'pairs'} of the step before, predicted "
+                f"one step{' (the novelty as a late measurement)' if hybrid else ''}"
+                + (f"; {rounds} rounds pipelined across steps" if rounds > 1 else ""))
+    if rounds == 2:
+        return "its own filter two steps behind (measurements, then estimates), then its own fresh measurements"
+    if rounds > 2:
+        return f"its own filter {rounds} steps behind, then its own fresh measurements"
+    return "its own filter one step behind, then its own fresh measurement"
 
 
 def _check_links(method: str, loss: object, latency: object, send_delta: object, graph: str, task: str,
@@ -588,15 +633,11 @@ def _check_links(method: str, loss: object, latency: object, send_delta: object,
         raise ValueError(f"loss_model must be 'link' or 'direction'; got {loss_model!r}")
     if loss_model == "direction" and method not in DIRECTION_LOSS_METHODS:
         raise ValueError(f"loss_model='direction': method must be one of {DIRECTION_LOSS_METHODS}; got {method!r}")
-    if loss_model == "direction" and send_delta is not None and latency:
-        raise ValueError("send_delta, latency and loss_model='direction' cannot be combined: not modelled")
     loss = float(loss) if isinstance(loss, (int, float, np.floating)) and not isinstance(loss, bool) else loss
     if not isinstance(loss, float) or not 0.0 <= loss < 1.0:
         raise ValueError(f"loss must be a probability in [0, 1); got {loss!r}")
     if isinstance(latency, bool) or latency not in (0, 1):
         raise ValueError(f"latency must be 0 or 1 (steps); got {latency!r}")
-    if latency and method not in LATENCY_METHODS:
-        raise ValueError(f"latency: method must be one of {LATENCY_METHODS}; got {method!r}")
     if send_delta is not None:
         if isinstance(send_delta, bool) or not isinstance(send_delta, (int, float, np.floating)) \
                 or not np.isfinite(send_delta) or send_delta < 0:
@@ -675,20 +716,11 @@ def _filter_links(method: str, model, task: str, G: np.ndarray, z: np.ndarray, P
     filters = [step_filter(A) for A in G]
     tic = time.thread_time()
     sent = None
-    if method in ("ci-L1", "icf-L1") and (latency or send_delta is not None):
+    pairs = hasattr(filters[0], "message_pairs")  # consensus on information pairs (CI, HCMCI, ICF)
+    if pairs and (latency or send_delta is not None):  # their pairs late (predicted) or sent on delta
         x, P, sent = fusion_links.track_messages(filters, x0, P0, z, latency=latency, send_delta=send_delta)
-    elif latency:  # forwarding: a Kalman filter one step behind on the neighbourhood's data, then the own update
-        own = target_filter("local", model, task)
-        xl, Pl = model.check_state(x0, P0, per_agent=not spec.whole_filter)
-        xs, Ps = [], []
-        for k in range(len(filters)):
-            xp, Pp = own.predict(xl, Pl)
-            x, P = own.update(xp, Pp, z[k])
-            xs.append(x)
-            Ps.append(P)
-            if k + 1 < len(filters):  # the step's measurements reach the neighbours at the next step
-                xl, Pl = filters[k + 1].update(xp, Pp, z[k])
-        x, P = np.stack(xs), np.stack(Ps)
+    elif latency:  # on forwarded measurements: the filter a step behind, then the own fresh measurement
+        x, P = fusion_links.track_behind(filters, x0, P0, z)
     else:
         xk, Pk = model.check_state(x0, P0, per_agent=not spec.whole_filter)
         xs, Ps = [], []
