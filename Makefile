@@ -129,5 +129,5 @@ lock:  ## regenerate requirements.lock from pyproject.toml in a scratch venv
 	rm -rf .lock-venv
 
 clean:  ## remove the environment, the built book, results and caches
-	rm -rf $(VENV) $(MIN_VENV) book/_build results .pytest_cache .hypothesis
+	rm -rf $(VENV) $(MIN_VENV) book/_build results .pytest_cache .hypothesis .test-min.log
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +
