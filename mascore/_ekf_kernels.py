@@ -5,7 +5,8 @@ by the Cholesky factor of the innovation covariance (:func:`update_rows`), the p
 through the rank of ``F - I kron A`` (:func:`predict_half`), and the tiled BLAS products, blocked
 transposes and work arrays (:class:`Scratch`) they run on. Every BLAS or LAPACK call is cut to a size
 that OpenBLAS runs on the calling thread (:data:`TILE_MACS`, :data:`LAPACK_ORDER`): the step gives
-the same bytes whatever the BLAS's number of threads.
+the same bytes whatever the BLAS's number of threads. Matrix-vector products stay with numpy's own loops
+(``einsum``): OpenBLAS threads a ``gemv`` from ``2304 x 4`` multiply-adds on.
 """
 
 from __future__ import annotations
@@ -16,14 +17,15 @@ from scipy.linalg.lapack import dpotrf, dtrtri
 
 from . import _flocking_core as flocking_core
 
-__all__ = ["CHUNK_BYTES", "LAPACK_ORDER", "TILE_K", "TILE_MACS", "TILE_ROWS", "Scratch", "add_noise", "block_diagonal",
-           "cholesky_inverse", "chunks", "column_blocks", "column_tiles", "pair_view", "predict_half", "strip",
-           "subtract_gram", "symmetrize_sum", "tiled_matmul", "transpose_into", "update_rows"]
+__all__ = ["CHUNK_BYTES", "GRAM_BATCH_ORDER", "LAPACK_ORDER", "TILE_K", "TILE_MACS", "TILE_ROWS", "Scratch",
+           "add_noise", "block_diagonal", "cholesky_inverse", "chunks", "column_blocks", "column_tiles", "pair_view",
+           "predict_half", "strip", "subtract_gram", "symmetrize_sum", "tiled_matmul", "transpose_into", "update_rows"]
 
 
 #: Bytes of covariance handled per chunk of filters: each chunk runs its update and prediction while its
 #: covariances are in cache (a few MB of L2/L3), instead of sweeping memory once per elementary operation.
-CHUNK_BYTES = 1 << 20
+#: 2 MB (4 filters at N = 64): half the numpy calls per step of 1 MB chunks, the chunk's work arrays still in L3.
+CHUNK_BYTES = 1 << 21
 
 
 def chunks(K, M):
@@ -43,6 +45,10 @@ TILE_MACS = 1 << 18
 TILE_K = 128
 #: Rows of a tile (its columns: as many as :data:`TILE_MACS` allows).
 TILE_ROWS = 64
+#: Largest state size ``M`` whose rank-q downdates ``Sigma - V^T V`` are one batched product per chunk (the
+#: chunk's ``V^T V``, then two passes over its covariances); above it, per filter in place (:func:`subtract_gram`),
+#: where a pass over the chunk costs more than the per-filter calls. Same bytes either way (``scale`` is 1 or 1/2).
+GRAM_BATCH_ORDER = 64
 #: Largest factor handed to LAPACK in one call (OpenBLAS's Cholesky and triangular inverse run on one thread up
 #: to this order); larger innovation covariances are factored by blocks (:func:`cholesky_inverse`).
 LAPACK_ORDER = 64
@@ -51,16 +57,20 @@ LAPACK_ORDER = 64
 def tiled_matmul(A, B, out, acc, symmetric=False):
     """``out = A @ B`` for stacks ``(c, m, k) @ (c, k, n)``, as BLAS products of at most :data:`TILE_MACS`.
 
-    `acc` is a flat work array of at least ``c m n`` doubles (used when ``k > TILE_K``: the pieces of the
-    inner dimension are summed). The tiles of one row block are one batched ``np.matmul`` over strided views.
+    `acc` is a flat work array of at least ``c m n`` doubles (used when ``k > TILE_K``, ``2 TILE_K`` with
+    `symmetric`: the pieces of the inner dimension are summed). The tiles of one row block are one batched
+    ``np.matmul`` over strided views.
     With `symmetric` (``m = n`` and ``A @ B`` symmetric, such as ``Y G^T`` with ``Y = G Sigma``), only the tiles
-    that reach the diagonal or lie above it are computed, and the blocks left of them are the transposes of
-    blocks above (about 3/4 of the multiply-adds for ``m = 128``, fewer for larger ``m``).
+    that reach the diagonal or lie above it are computed, in row blocks of ``TILE_ROWS / 2`` rows, and the blocks
+    left of them are the transposes of blocks above (5/8 of the multiply-adds for ``m = 128``, fewer for larger
+    ``m``).
     """
     c, m, k = A.shape
     n = B.shape[-1]
-    kb = min(k, TILE_K)
-    r = min(m, TILE_ROWS)
+    # symmetric: half-height row blocks and twice the inner depth (the same multiply-adds per tile): more of the
+    # triangle is skipped (5/8 of the products at m = 128 instead of 3/4) and no partial sums for k <= 2 TILE_K
+    kb = min(k, 2 * TILE_K if symmetric else TILE_K)
+    r = min(m, TILE_ROWS // 2 if symmetric else TILE_ROWS)
     b = max(1, min(n, TILE_MACS // (r * kb)))
     acc = acc[: c * m * n].reshape(c, m, n)
     for i0 in range(0, m, r):
@@ -144,9 +154,10 @@ def update_rows(X, P, z, observed, R, scale, work=None):
     `z` ``(c, N, m)``, `observed` ``(c, N)`` bool. The observed rows ``H Sigma`` and the innovation
     covariances ``S = H (Sigma + R) H^T`` of the chunk are gathered at once (index lists padded to a common
     length ``q``); per filter, with its own ``q_i`` entries, ``L^{-1}`` of ``S = L L^T``
-    (:func:`cholesky_inverse`); then for the chunk at once ``V = L^{-1} H Sigma`` (zero in the padding) and per
-    filter ``V^T V`` subtracted in place (:func:`subtract_gram`): ``O(q_i^3 + q_i^2 M + q_i M^2)`` flops, every
-    BLAS call a tile run on the calling thread.
+    (:func:`cholesky_inverse`); then for the chunk at once ``V = L^{-1} H Sigma`` (zero in the padding) and
+    ``V^T V`` subtracted: per filter in place (:func:`subtract_gram`), or for ``M <= GRAM_BATCH_ORDER`` as one
+    tiled product for the chunk: ``O(q_i^3 + q_i^2 M + q_i M^2)`` flops, every BLAS call a tile run on the
+    calling thread.
     Returns the updated states ``(c, N, m)``.
     """
     c, N, m = X.shape
@@ -179,11 +190,16 @@ def update_rows(X, P, z, observed, R, scale, work=None):
             Li[k, : q[k], : q[k]] = cholesky_inverse(S[k, : q[k], : q[k]])
     V = tiled_matmul(Li, Ct, work.V[: c * q_max * M].reshape(c, q_max, M), work.acc)  # L^{-1} H Sigma
     a = np.einsum("kij,kj->ki", Li, nu)  # L^{-1} nu
-    for k in range(c):  # eq. (20): Sigma - V^T V (times scale), in place
-        if q[k]:
-            subtract_gram(P[k], V[k, : q[k]], scale)
-        elif scale != 1.0:
-            P[k] *= scale
+    if M <= GRAM_BATCH_ORDER:  # eq. (20) for many small filters: V^T V of the chunk at once (V zero in the padding)
+        P -= tiled_matmul(np.swapaxes(V, -1, -2), V, work.T[:c], work.acc)
+        if scale != 1.0:
+            P *= scale
+    else:
+        for k in range(c):  # eq. (20): Sigma - V^T V (times scale), in place
+            if q[k]:
+                subtract_gram(P[k], V[k, : q[k]], scale)
+            elif scale != 1.0:
+                P[k] *= scale
     x_post = x + np.einsum("kqm,kq->km", V, a)  # eq. (18): X + Sigma H^T S^{-1} nu = X + V^T L^{-1} nu
     return x_post.reshape(c, N, m)
 
@@ -210,7 +226,7 @@ def pair_view(A, N, n):
 
 def strip(M):
     """Rows per strip of a blocked transpose: a strip of ``M``-long rows spans a few pages (TLB friendly)."""
-    return max(8, min(64, 4096 // M))
+    return max(8, min(64, 8192 // M))
 
 
 def transpose_into(A, T):

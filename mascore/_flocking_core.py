@@ -189,7 +189,7 @@ def _control_and_jacobian_rows(Xt, gains, i0, i1, U, G, scale=1.0):
     n = m // 2
     batch = Xt.shape[:-2]
     r = i1 - i0
-    # components of x_i - x_j as (..., r, N) arrays: p[a], v[a]
+    # components of x_i - x_j as (..., r, N) arrays: p[a], v[a] (each below the allocator's mmap threshold)
     p = [Xt[..., a, i0:i1, None] - Xt[..., a, None, :] for a in range(n)]
     v = [Xt[..., n + a, i0:i1, None] - Xt[..., n + a, None, :] for a in range(n)]
     d2 = p[0] * p[0]
@@ -200,12 +200,11 @@ def _control_and_jacobian_rows(Xt, gains, i0, i1, U, G, scale=1.0):
         vp += np.multiply(v[a], p[a], out=t)
     dmin = gains.min_distance
     de = np.sqrt(d2)
-    ii = np.arange(r)
-    jj = ii + i0  # the pairs (i, i) of an agent with itself
-    de[..., ii, jj] = 1.0  # any finite value there (p = v = 0)
-    near = de <= dmin  # distinct agents closer than d_min: |p| replaced by d_min, the p p^T term dropped
-    any_near = bool(near.any())
-    if any_near:
+    self_pairs = _self_pairs(i0, r, N)  # the pairs (i, i) of an agent with itself, as an index of (..., r*N)
+    de.reshape(*batch, r * N)[..., self_pairs] = 1.0  # any finite value there (p = v = 0)
+    any_near = bool(de.min() <= dmin) if de.size else False
+    if any_near:  # distinct agents closer than d_min: |p| replaced by d_min, the p p^T term dropped
+        near = de <= dmin
         np.maximum(de, dmin, out=de)
     one_d2 = d2
     one_d2 += 1.0
@@ -234,8 +233,8 @@ def _control_and_jacobian_rows(Xt, gains, i0, i1, U, G, scale=1.0):
     nz_I = np.multiply(f1, k * gains.rho3, out=f1)  # -k z_I = k rho3 phi1
     nc_vp = np.multiply(nz_I, -2.0 * gains.beta, out=inv2)
     nc_vp /= one_d2  # -k c_vp
-    ns_I[..., ii, jj] = 0.0  # the pair term of an agent with itself is zero (p = v = 0 there)
-    nz_I[..., ii, jj] = 0.0
+    ns_I.reshape(*batch, r * N)[..., self_pairs] = 0.0  # the pair term of an agent with itself is zero
+    nz_I.reshape(*batch, r * N)[..., self_pairs] = 0.0
     if U is not None:  # the pair term of eq. (6), g = -rho3 phi1 v - rho4 phi2 p = -(nz_I v + ns_I p) / k
         for a in range(n):
             Ua = U[..., i0:i1, a]
@@ -249,10 +248,11 @@ def _control_and_jacobian_rows(Xt, gains, i0, i1, U, G, scale=1.0):
                                         (*st[:-4], st[-4] + st[-2], st[-3], st[-1]))
     t2 = np.empty(t.shape)
     for b in range(n):  # each entry of -J computed in contiguous arrays, then written once into its slot of G
-        A_b = np.multiply(nc_vp, p[b])  # -c_vp p_b
+        pb = p[b]
+        A_b = np.multiply(nc_vp, pb)  # -c_vp p_b
         B_b = np.multiply(nc_pv, v[b])
-        B_b += np.multiply(nc_pp, p[b], out=t)  # -(c_pv v_b + c_pp p_b)
-        C_b = np.multiply(nc_pv, p[b])  # -c_pv p_b
+        B_b += np.multiply(nc_pp, pb, out=t)  # -(c_pv v_b + c_pp p_b)
+        C_b = np.multiply(nc_pv, pb)  # -c_pv p_b
         for a in range(n):
             np.multiply(v[a], A_b, out=t)  # du_a/dp_b = -J
             t += np.multiply(p[a], B_b, out=t2)
@@ -269,6 +269,11 @@ def _control_and_jacobian_rows(Xt, gains, i0, i1, U, G, scale=1.0):
                 if a < b:
                     np.copyto(Gr[..., :, b, :, n + a], t)
                     D[..., b, n + a] = D[..., a, n + b]
+
+
+def _self_pairs(i0, r, N):
+    """Flat indices ``k N + i0 + k`` (``k < r``) of the pairs ``(i0 + k, i0 + k)`` in a ``(r, N)`` block of pairs."""
+    return slice(i0, i0 + r * (N + 1), N + 1)
 
 
 # ----------------------------------------------------------------------------- checks

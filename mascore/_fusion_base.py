@@ -31,6 +31,7 @@ class NetworkFilter(Frozen):
     __slots__ = ("model",)
     _what = "filter update"
     _per_agent = True
+    _per_run_sensing = True  # its correction broadcasts a model's sensing with run axes (fusion.track)
 
     def __init__(self, model: SensorNetworkModel) -> None:
         if not isinstance(model, SensorNetworkModel):

@@ -953,18 +953,23 @@ class CovarianceIntersectionFilter(_NetworkFilter):
 
 
 def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
-          graphs: Sequence[object] | ArrayLike | None = None,
-          sensing: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
+          graphs: Sequence[object] | ArrayLike | None = None, sensing: ArrayLike | None = None,
+          H: ArrayLike | None = None, R: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Run a sensor-network filter over measurements, with fixed or per-step graphs and sensing.
 
     The one run loop for a user's own network: step k predicts, then fuses ``z[k]``
     over graph k (the filter's own graph when `graphs` is None) from the agents that
-    sense at step k (all of them when `sensing` is None). A step whose graph or
-    sensing is not the model's rebuilds the filter, with its own settings, on the
-    model of that step: that graph, and ``H_i, R_i`` of the agents that sense (an
-    agent that does not has no measurement rows: ``H_i`` of shape ``(0, n)``); each
-    distinct (graph, sensing) pair once per call. Everything is checked before the
-    first step.
+    sense at step k (all of them when `sensing` is None), each with its ``H_i`` and ``R_i``
+    of step k (the model's when `H` and `R` are None). A step whose graph or sensing is not
+    the model's rebuilds the filter, with its own settings, on the model of that step: that
+    graph, and ``H_i(k)``, ``R_i(k)`` of the agents that sense (an agent that does not has no
+    measurement rows: ``H_i`` of shape ``(0, n)``); each distinct (graph, sensing) of a call
+    once, and a step whose values equal the model's is the model's (no rebuild). Every
+    filter of this module and of :mod:`mascore.fusion_forwarding` takes per-step sensing
+    (each uses ``H_i`` and ``R_i`` only within the step), and all but the
+    :class:`~mascore.fusion_forwarding.SetMembershipForwardingFilter` (whose update is computed
+    once per agent and step for every run) take values that differ between the runs of a
+    batch. Everything is checked before the first step.
 
     Parameters
     ----------
@@ -982,23 +987,44 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
         The communication graph of each step (undirected, N agents; ``A[i, j] > 0``: i and j
         exchange). Default: the model's graph at every step.
     sensing : (K, N) array_like of bool, optional
-        ``sensing[k, i]``: agent i measures at step k (a target within its range, say), with the
-        model's ``H_i`` and ``R_i``; False: it measures nothing at that step and only takes
-        part in the exchange. Default: every agent at every step. At a step where no agent
-        senses the filter predicts only (nothing to fuse, nothing exchanged).
+        ``sensing[k, i]``: agent i measures at step k (a target within its range, say); False:
+        it measures nothing at that step and only takes part in the exchange. Default: every
+        agent at every step. At a step where no agent senses the filter predicts only
+        (nothing to fuse, nothing exchanged).
+    H : (K, ..., sum q_i, n) array_like, optional
+        The stacked measurement matrix ``[H_1(k); ...; H_N(k)]`` of each step (agent i's
+        ``q_i`` rows where the model has them; units of the measurement per unit of the
+        state): a sensor that moves, or a range or bearing sensor linearized about a
+        trajectory known before the run (then ``z`` holds the linearized measurements
+        ``z_i - h_i(x_ref) + H_i x_ref``). Axes between the first and the last two: one value
+        per run, broadcast with the runs of `x0` and `z` (a range to each run's own target).
+        Finite where the agent senses. Default: the model's ``H_i`` at every step.
+    R : (K, ..., sum q_i, sum q_i) array_like, optional
+        The block-diagonal ``blockdiag(R_1(k), ..., R_N(k))`` of each step (measurement units
+        squared; run axes as for `H`): a noise variance that grows with the distance to the
+        target, say. Each block of an agent that senses symmetric positive definite, zero off
+        the blocks (the agents' noises are independent). Default: the model's ``R_i``.
 
     Returns
     -------
     x : (K, ..., N, n) ndarray
         Each agent's corrected mean after each step (``(K, ..., n)`` for the centralized filter).
     P : (K, ..., N, n, n) ndarray
-        Their covariances (leading axes those of `P0` and `x0`: they do not depend on the data).
+        Their covariances (leading axes those of `P0` and `x0`, and the run axes of `H` and `R`:
+        they do not depend on the data).
 
     Raises
     ------
     ValueError, TypeError
-        A bad filter, state, measurement, graph or sensing mask (named; a graph by its step),
-        or more graphs or steps than memory holds.
+        A bad filter, state, measurement, graph, sensing mask, ``H`` or ``R`` (named; a graph
+        and a step's sensing by their step), or more graphs or steps than memory holds.
+
+    Notes
+    -----
+    Per-step ``H`` and ``R`` are values known before the run (per run, if they differ); a
+    sensing mask is one for all runs (a mask that differs between runs is one call per run).
+    An extended Kalman filter, which linearizes about each agent's own prediction during the
+    run, is not this loop: its ``H_i(k)`` depends on the estimates.
 
     Examples
     --------
@@ -1020,11 +1046,18 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     >>> x, P = fusion.track(fusion.CentralizedFilter(model), np.zeros(2), np.eye(2), z, sensing=in_range)
     >>> bool(P[-1, 0, 0] > P[9, 0, 0])          # fewer measurements, larger covariance
     True
+
+    A noise variance that doubles at step 10 (``R`` of shape ``(K, sum q_i, sum q_i)``):
+
+    >>> R = np.broadcast_to(model.R_stacked, (20, 8, 8)) * np.where(np.arange(20) < 10, 1.0, 2.0)[:, None, None]
+    >>> x, P = fusion.track(fusion.CentralizedFilter(model), np.zeros(2), np.eye(2), z, R=R)
+    >>> bool(P[-1, 0, 0] > P[9, 0, 0])
+    True
     """
     if not isinstance(filt, _NetworkFilter):
         raise TypeError(f"filt must be one of mascore.fusion's filters (e.g. ConsensusOnInformationFilter(model, "
                         f"L)); got {type(filt).__name__}")
-    if graphs is None and sensing is None:
+    if graphs is None and sensing is None and H is None and R is None:
         return filt.run(x0, P0, z)
     model = filt.model
     x, P = model.check_state(x0, P0, ("x0", "P0"), per_agent=filt._per_agent)
@@ -1044,18 +1077,34 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     used = rows.reshape((K,) + (1,) * (z.ndim - 2) + (rows.shape[1],))
     if not np.all(np.isfinite(z) | ~used):
         require_finite(np.where(used, z, 0.0), "z" if sensing is None else "z (where the agent senses)")
-    built: dict[tuple[bytes, bytes], _NetworkFilter | None] = {}
+    values, runs = _step_values(H, R, model, rows)
+    if runs:
+        every = broadcast_batch("x0 and z", batch, "H and R", runs)
+        check_fits_in_memory(8.0 * K * math.prod(every) * n * (1 + n) * (N if filt._per_agent else 1), "H and R",
+                             "the estimates and covariances of every step and run")
+        if not filt._per_run_sensing:
+            raise ValueError(f"filt: a {type(filt).__name__} takes one H and R per step for all runs (its update is "
+                             f"computed once per agent and step, shared by the runs); got H or R with run axes {runs}: "
+                             "call track once per run")
+    built: dict[tuple[bytes, ...], _NetworkFilter | None] = {}
     xs, Ps = [], []
     for k in range(K):
-        key = (adjacency[k].tobytes(), senses[k].tobytes())
+        own = values[k]
+        key = (adjacency[k].tobytes(), senses[k].tobytes(), *(() if own is None else (own[0].tobytes(),
+                                                                                      own[1].tobytes())))
         if key not in built:
-            built[key] = _filter_of_step(filt, adjacency[k], senses[k])
+            try:
+                built[key] = _filter_of_step(filt, adjacency[k], senses[k], own)
+            except ValueError as exc:  # e.g. an R(k) too close to singular to invert
+                raise ValueError(f"step {k}: {exc}") from None
         step = built[key]
         x, P = filt.predict(x, P) if step is None else step.predict(x, P)
         if step is not None:
             x, P = step.update(x, P, z[k] if rows[k].all() else z[k][..., rows[k]])
         xs.append(x)
         Ps.append(P)
+    if runs:  # the steps before the first with per-run values have fewer batch axes
+        xs, Ps = np.broadcast_arrays(*xs), np.broadcast_arrays(*Ps)
     return np.stack(xs), np.stack(Ps)
 
 
@@ -1087,19 +1136,73 @@ def _step_sensing(sensing: ArrayLike | None, K: int, N: int) -> np.ndarray:
     return mask
 
 
-def _filter_of_step(filt: _NetworkFilter, A: np.ndarray, senses: np.ndarray) -> _NetworkFilter | None:
-    """`filt` on a step's graph with only the sensing agents' measurements (None: nobody senses)."""
+def _step_values(H: ArrayLike | None, R: ArrayLike | None, model: SensorNetworkModel, rows: np.ndarray,
+                 ) -> tuple[list[tuple[np.ndarray, np.ndarray] | None], tuple[int, ...]]:
+    """`track`'s per-step ``(H(k), R(k))``, checked where `rows` ``(K, sum q_i)`` are read (None at a step whose
+    values are the model's), and their run axes.
+
+    The rows (and blocks) of an agent that does not sense at a step are not read; they are
+    replaced by the model's, so that a step equal to the model's where read is the model's.
+    """
+    K, q, n = rows.shape[0], model.n_measurements, model.n_states
+    if H is None and R is None:
+        return [None] * K, ()
+    H_k = np.broadcast_to(model.H_stacked, (K, q, n)) if H is None else float_array(H, "H")
+    R_k = np.broadcast_to(model.R_stacked, (K, q, q)) if R is None else float_array(R, "R")
+    for name, value, tail, what in (("H", H_k, (q, n), "[H_1(k); ...; H_N(k)]"),
+                                    ("R", R_k, (q, q), "blockdiag(R_1(k), ..., R_N(k))")):
+        if value.ndim < 3 or value.shape[0] != K or value.shape[-2:] != tail:
+            raise ValueError(f"{name} must be (K, ..., {tail[0]}, {tail[1]}) with K = {K}: one stacked {what} per step "
+                             f"of z (and per run, on axes between; agents' measurement sizes "
+                             f"{model.measurement_sizes}); got shape {value.shape}")
+    runs = broadcast_batch("H", H_k.shape[1:-2], "R", R_k.shape[1:-2])
+    H_k, R_k = (np.broadcast_to(v.reshape(K, *(1,) * (len(runs) + 3 - v.ndim), *v.shape[1:]), (K, *runs, q, cols))
+                for v, cols in ((H_k, n), (R_k, q)))  # the run axes aligned on the right, as numpy's
+    used = rows.reshape(K, *(1,) * len(runs), q)
+    H_k = np.where(used[..., :, None], H_k, model.H_stacked)
+    R_k = np.where(used[..., :, None] & used[..., None, :], R_k, model.R_stacked)
+    bad = ~np.isfinite(H_k).reshape(K, -1).all(axis=1)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"H[{k}] (step {k}) contains NaN or infinite entries in the rows of an agent that senses")
+    block = np.zeros((q, q), dtype=bool)  # the entries of R(k) on an agent's block
+    for sl in model._slices:
+        block[sl, sl] = True
+    off = (R_k != 0) & ~block
+    if off.any():
+        at = tuple(int(v) for v in np.argwhere(off)[0])
+        raise ValueError(f"R[{at[0]}] (step {at[0]}) must be block diagonal, one block per agent (the agents' noises "
+                         f"are independent); got R{list(at)} = {R_k[at]:.3g} off the blocks")
+    for i, sl in enumerate(model._slices):
+        if sl.stop > sl.start:
+            try:
+                check_covariance(R_k[..., sl, sl], "R", definite=True)
+            except ValueError:
+                for k in range(K):  # the first step at fault, named
+                    check_covariance(R_k[k, ..., sl, sl], f"R[{k}] (step {k}), agent {i}'s block "
+                                     f"[{sl.start}:{sl.stop}, {sl.start}:{sl.stop}],", definite=True)
+                raise
+    same = (H_k == model.H_stacked).reshape(K, -1).all(axis=1) & (R_k == model.R_stacked).reshape(K, -1).all(axis=1)
+    return [None if same[k] else (H_k[k], R_k[k]) for k in range(K)], runs
+
+
+def _filter_of_step(filt: _NetworkFilter, A: np.ndarray, senses: np.ndarray,
+                    values: tuple[np.ndarray, np.ndarray] | None = None) -> _NetworkFilter | None:
+    """`filt` on a step's graph with only the sensing agents' measurements, with the step's ``H``, ``R`` when given
+    (None: nobody senses)."""
     model = filt.model
     if not senses.any():
         return None
-    if senses.all() and np.array_equal(A, model.adjacency):
-        return filt
-    n = model.n_states
-    H = [h if s else np.zeros((0, n)) for h, s in zip(model.H, senses)]
-    R = [r if s else None for r, s in zip(model.R, senses)]
     same_graph = np.array_equal(A, model.adjacency)  # then the filter's own settings hold as they are
-    return type(filt)(SensorNetworkModel(model.F, model.Q, H, R, A),
-                      *(filt._args() if same_graph else _settings_for_any_graph(filt)))
+    if senses.all() and same_graph and values is None:
+        return filt
+    step_model = model if same_graph else model.on_graph(A)
+    if values is not None or not senses.all():  # the step's own sensing (checked by track)
+        H, R = (model.H_stacked, model.R_stacked) if values is None else values
+        rows = np.repeat(senses, model.measurement_sizes)  # the rows of the agents that sense
+        step_model = step_model._with_stacked_sensing(H[..., rows, :], R[..., rows, :][..., rows],
+                                                      [q if s else 0 for q, s in zip(model.measurement_sizes, senses)])
+    return type(filt)(step_model, *(filt._args() if same_graph else _settings_for_any_graph(filt)))
 
 
 def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true: ArrayLike | None = None,
@@ -1175,13 +1278,14 @@ def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true:
     P_out = np.empty((K, *P.shape))
     row = n
     sub = "dia,dib->iab" if filt._per_agent else "da,db->ab"
+    sqrt_R = model._sqrt_R
     for k in range(K):
         live = row + n + q  # the sources drawn by step k; the later ones, and the estimates they drive, are still 0
         truth[:live] = truth[:live] @ model.F.T
         truth[row:row + n] += model._sqrt_Q.T
         row += n
         z = truth[:live] @ model.H_stacked.T
-        z[row:row + q] += model._sqrt_R.T
+        z[row:row + q] += sqrt_R.T
         row += q
         x_live, P = filt.update(*filt.predict(x[:live], P), z)
         x[:live] = x_live

@@ -180,6 +180,7 @@ class SetMembershipForwardingFilter(NetworkFilter):
 
     __slots__ = ("confidence", "_motion", "_groups", "_rows")
     _what = "set-membership forwarding update"
+    _per_run_sensing = False  # its shapes and gains are computed once per agent and step, for every run
 
     def _args(self) -> tuple:
         return (self.confidence,)

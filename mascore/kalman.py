@@ -207,6 +207,49 @@ class LinearGaussianModel(Frozen):
                              f"model's F of shape {self.F.shape} but found {x.shape}")
         return x, P
 
+    def with_measurement(self, H: ArrayLike, R: ArrayLike, *, check: bool = True) -> LinearGaussianModel:
+        """The same dynamics with another measurement model (a sensor whose ``H`` or ``R`` changes per step).
+
+        Only `H` and `R` are checked: ``F``, ``Q`` and ``B`` were checked when this model was built
+        and are shared, read-only, with the new one, which equals
+        ``LinearGaussianModel(F, Q, H, R, B)`` (in a fraction of its time).
+
+        Parameters
+        ----------
+        H : (q, m) or (..., q, m) array_like
+            Measurement matrix, finite, ``q >= 1``.
+        R : (q, q) or (..., q, q) array_like
+            Measurement-noise covariance, symmetric positive definite.
+        check : bool
+            Check `H` and `R` (default). ``False``: they are float arrays of the right shapes
+            that their caller has checked already.
+
+        Returns
+        -------
+        LinearGaussianModel
+            The model with that measurement.
+
+        Raises
+        ------
+        ValueError, TypeError
+            A bad `H` or `R`, named in the message.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import kalman
+        >>> model = kalman.LinearGaussianModel(np.eye(2), 0.1 * np.eye(2), [[1.0, 0.0]], [[1.0]])
+        >>> far = model.with_measurement([[1.0, 0.0]], [[4.0]])           # the same sensor, four times the variance
+        >>> far == kalman.LinearGaussianModel(np.eye(2), 0.1 * np.eye(2), [[1.0, 0.0]], [[4.0]])
+        True
+        """
+        if check:
+            H, R = _checked_measurement(H, R, self.n_states, f"F of shape {self.F.shape}")
+        new = object.__new__(type(self))
+        new._set(**{name: getattr(self, name) for name in self.__slots__})
+        new._set(H=frozen_copy(H), R=frozen_copy(R))
+        return new
+
 
     # ------------------------------------------------------------------ one agent's filter (the estimator protocol)
 

@@ -16,6 +16,7 @@ Shapes: a measurement is the stacked vector ``z = (z_1, ..., z_N)`` of shape
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 
@@ -157,7 +158,7 @@ class SensorNetworkModel(Frozen):
     """
 
     __slots__ = ("F", "Q", "H", "R", "adjacency", "H_stacked", "R_stacked", "information_matrices", "weights",
-                 "_kf", "_owner", "_Rinv", "_neighbourhood", "_sqrt_Q", "_sqrt_R", "_slices")
+                 "_kf", "_owner", "_Rinv", "_neighbourhood", "_sqrt_Q", "_slices")
 
     def __init__(self, F: ArrayLike, Q: ArrayLike, H: Sequence[ArrayLike], R: Sequence[ArrayLike],
                  adjacency: ArrayLike) -> None:
@@ -169,62 +170,13 @@ class SensorNetworkModel(Frozen):
         A = check_adjacency(float_array(adjacency, "adjacency"), "adjacency", undirected=True,
                             why="the consensus weights and the information exchange are symmetric")
         N = A.shape[0]
-        if isinstance(H, np.ndarray) and H.ndim == 3:
-            H = list(H)
-        if isinstance(R, np.ndarray) and R.ndim == 3:
-            R = list(R)
-        for name, seq in (("H", H), ("R", R)):
-            if isinstance(seq, (str, bytes, np.ndarray)) or not hasattr(seq, "__len__"):
-                raise TypeError(f"{name} must be a sequence of N = {N} matrices (one per agent); got "
-                                f"{type(seq).__name__}")
-            if len(seq) != N:
-                raise ValueError(f"{name} must hold one matrix per agent: N = {N} (the adjacency's size); got "
-                                 f"{len(seq)}")
-        Hs, Rs = [], []
-        for i in range(N):
-            Hi = as_matrix(H[i], f"H[{i}]", (None, n))
-            q = Hi.shape[0]
-            if q == 0:
-                if R[i] is not None and float_array(R[i], f"R[{i}]").size:
-                    raise ValueError(f"R[{i}] must be empty (shape (0, 0)) or None: agent {i} has no measurement "
-                                     f"(H[{i}] has 0 rows)")
-                Ri = np.zeros((0, 0))
-            else:
-                if R[i] is None:
-                    raise TypeError(f"R[{i}] must be a ({q}, {q}) covariance for H[{i}] of shape {Hi.shape}; "
-                                    "got None")
-                Ri = check_covariance(float_array(R[i], f"R[{i}]"), f"R[{i}]", size=q, definite=True)
-            Hs.append(Hi)
-            Rs.append(Ri)
-        sizes = [h.shape[0] for h in Hs]
-        total = sum(sizes)
-        if total == 0:
-            raise ValueError("no agent senses (every H[i] has 0 rows): at least one measurement is needed")
-        H_st = np.concatenate(Hs, axis=0)
-        R_st = np.zeros((total, total))
-        Rinv = np.zeros((total, total))
-        owner = np.zeros((N, total))
-        slices, start = [], 0
-        info = np.zeros((N, n, n))
-        for i, (Hi, Ri) in enumerate(zip(Hs, Rs)):
-            sl = slice(start, start + sizes[i])
-            slices.append(sl)
-            start += sizes[i]
-            if sizes[i]:
-                R_st[sl, sl] = Ri
-                Ri_inv = symmetric_part(np.linalg.inv(Ri))
-                Rinv[sl, sl] = Ri_inv
-                owner[i, sl] = 1.0
-                info[i] = symmetric_part(Hi.T @ Ri_inv @ Hi)
-        finite_result("model's information matrices", info, Rinv, advice="R is too close to singular")
+        Hs, Rs = _checked_sensing(H, R, n, N)
         links = A > 0
-        self._set(F=frozen_copy(F), Q=frozen_copy(Q), H=tuple(frozen_copy(h) for h in Hs),
-                  R=tuple(frozen_copy(r) for r in Rs), adjacency=frozen_copy(A), H_stacked=frozen_copy(H_st),
-                  R_stacked=frozen_copy(R_st), information_matrices=frozen_copy(info),
-                  weights=frozen_copy(metropolis(links)), _kf=kalman.LinearGaussianModel(F, Q, H_st, R_st),
-                  _owner=frozen_copy(owner), _Rinv=frozen_copy(Rinv),
+        self._set(F=frozen_copy(F), Q=frozen_copy(Q), adjacency=frozen_copy(A), weights=frozen_copy(metropolis(links)),
                   _neighbourhood=frozen_copy(links + np.eye(N)),  # N_i together with i
-                  _sqrt_Q=frozen_copy(psd_sqrt(Q)), _sqrt_R=frozen_copy(psd_sqrt(R_st)), _slices=tuple(slices))
+                  _sqrt_Q=frozen_copy(psd_sqrt(Q)))
+        H_st, R_st, sizes = _stacked(Hs, Rs)
+        self._set(**_sensing_parts(H_st, R_st, sizes, n, N, kalman.LinearGaussianModel(F, Q, H_st, R_st)))
 
     def _args(self) -> tuple:
         return (self.F, self.Q, self.H, self.R, self.adjacency)
@@ -267,6 +219,58 @@ class SensorNetworkModel(Frozen):
                  _neighbourhood=frozen_copy(links + np.eye(N)))
         return new
 
+    def with_sensing(self, H: Sequence[ArrayLike], R: Sequence[ArrayLike]) -> SensorNetworkModel:
+        """The same dynamics and graph with other sensing (a step's ``H_i``, ``R_i``, or who senses).
+
+        The dynamics and the graph were checked when this model was built and are shared,
+        read-only, with the new model, which equals ``SensorNetworkModel(F, Q, H, R, adjacency)``
+        (in a fraction of its time: the graph's weights are not computed again).
+
+        Parameters
+        ----------
+        H : sequence of N (q_i, n) array_like
+            Measurement matrices, finite (``(0, n)`` for an agent that does not sense).
+        R : sequence of N (q_i, q_i) array_like
+            Measurement-noise covariances, symmetric positive definite (``(0, 0)`` or None for
+            an agent that does not sense).
+
+        Returns
+        -------
+        SensorNetworkModel
+            The model with that sensing.
+
+        Raises
+        ------
+        ValueError, TypeError
+            A bad matrix, named in the message (``H[2]``, ``R[0]``).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import graphs, sensor_network
+        >>> model = sensor_network.SensorNetworkModel(np.eye(2), np.eye(2), [np.eye(2)] * 3, [np.eye(2)] * 3,
+        ...                                           graphs.ring_graph(3))
+        >>> far = model.with_sensing([np.eye(2)] * 3, [np.eye(2), 4.0 * np.eye(2), 9.0 * np.eye(2)])
+        >>> far.information_matrices[:, 0, 0]                            # 1 / R_i: noise that grows with range
+        array([1.        , 0.25      , 0.11111111])
+        """
+        return self._with_stacked_sensing(*_stacked(*_checked_sensing(H, R, self.n_states, self.n_agents)))
+
+    def _with_stacked_sensing(self, H_st: np.ndarray, R_st: np.ndarray, sizes: Sequence[int]) -> SensorNetworkModel:
+        """:meth:`with_sensing` from checked stacked arrays: ``H`` ``(..., sum q_i, n)``, block-diagonal ``R``
+        ``(..., sum q_i, sum q_i)``, the ``q_i``. Leading axes: one sensing per run of a batch (:func:`mascore.fusion.track`;
+        such a model's ``H_i``, ``R_i`` and information matrices have them too, and only its filtering is used)."""
+        new = object.__new__(type(self))
+        new._set(**{name: getattr(self, name) for name in self.__slots__})
+        new._set(**_sensing_parts(H_st, R_st, sizes, self.n_states, self.n_agents,
+                                  self._kf.with_measurement(H_st, R_st, check=False)))
+        return new
+
+    @property
+    def _sqrt_R(self) -> np.ndarray:
+        """The symmetric square root of ``R = blockdiag(R_i)`` (drawing the measurement noise)."""
+        return psd_sqrt(self.R_stacked)
+
     def __repr__(self) -> str:
         return (f"SensorNetworkModel(N = {self.n_agents} agents, n = {self.n_states} states, "
                 f"q = {self.measurement_sizes} measurements)")
@@ -284,12 +288,12 @@ class SensorNetworkModel(Frozen):
     @property
     def measurement_sizes(self) -> tuple[int, ...]:
         """``(q_1, ..., q_N)``, the length of each agent's measurement."""
-        return tuple(h.shape[0] for h in self.H)
+        return tuple(h.shape[-2] for h in self.H)
 
     @property
     def n_measurements(self) -> int:
         """``sum q_i``, the length of the stacked measurement ``z``."""
-        return self.H_stacked.shape[0]
+        return self.H_stacked.shape[-2]
 
     def agent_measurement(self, z: ArrayLike, i: int) -> np.ndarray:
         """Agent i's part ``z_i`` of a stacked measurement.
@@ -349,7 +353,8 @@ class SensorNetworkModel(Frozen):
         """
         if check:
             z = require_finite(self._check_z(z), "z")
-        y = z @ self._Rinv  # (..., sum q): R^{-1} z, block by block
+        # (..., sum q): R^{-1} z, block by block (a model built by fusion.track for per-run sensing has batch axes)
+        y = z @ self._Rinv if self._Rinv.ndim == 2 else (z[..., None, :] @ self._Rinv)[..., 0, :]
         # agent i: sum over its rows r of y_r H_r  ->  owner (N, sum q) @ (y_r H_r) (..., sum q, n)
         return self._owner @ (y[..., :, None] * self.H_stacked)
 
@@ -476,7 +481,88 @@ class SensorNetworkModel(Frozen):
         x = np.empty((K + 1, *runs, n))
         z = np.empty((K, *runs, q))
         x[0] = x0 + gen.standard_normal((*runs, n)) @ psd_sqrt(P0).T
+        sqrt_R = self._sqrt_R
         for k in range(K):
             x[k + 1] = x[k] @ self.F.T + gen.standard_normal((*runs, n)) @ self._sqrt_Q.T
-            z[k] = x[k + 1] @ self.H_stacked.T + gen.standard_normal((*runs, q)) @ self._sqrt_R.T
+            z[k] = x[k + 1] @ self.H_stacked.T + gen.standard_normal((*runs, q)) @ sqrt_R.T
         return x, z
+
+
+# --------------------------------------------------------------------------------------------
+# the sensing part of a model (its constructor and SensorNetworkModel.with_sensing)
+
+
+def _checked_sensing(H: Sequence[ArrayLike], R: Sequence[ArrayLike], n: int, N: int,
+                     ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Each agent's ``H_i`` ``(q_i, n)`` and ``R_i`` ``(q_i, q_i)``, checked (``(0, 0)`` for an agent that does not sense)."""
+    if isinstance(H, np.ndarray) and H.ndim == 3:
+        H = list(H)
+    if isinstance(R, np.ndarray) and R.ndim == 3:
+        R = list(R)
+    for name, seq in (("H", H), ("R", R)):
+        if isinstance(seq, (str, bytes, np.ndarray)) or not hasattr(seq, "__len__"):
+            raise TypeError(f"{name} must be a sequence of N = {N} matrices (one per agent); got "
+                            f"{type(seq).__name__}")
+        if len(seq) != N:
+            raise ValueError(f"{name} must hold one matrix per agent: N = {N} (the adjacency's size); got "
+                             f"{len(seq)}")
+    Hs, Rs = [], []
+    for i in range(N):
+        Hi = as_matrix(H[i], f"H[{i}]", (None, n))
+        q = Hi.shape[0]
+        if q == 0:
+            if R[i] is not None and float_array(R[i], f"R[{i}]").size:
+                raise ValueError(f"R[{i}] must be empty (shape (0, 0)) or None: agent {i} has no measurement "
+                                 f"(H[{i}] has 0 rows)")
+            Ri = np.zeros((0, 0))
+        else:
+            if R[i] is None:
+                raise TypeError(f"R[{i}] must be a ({q}, {q}) covariance for H[{i}] of shape {Hi.shape}; "
+                                "got None")
+            Ri = check_covariance(float_array(R[i], f"R[{i}]"), f"R[{i}]", size=q, definite=True)
+        Hs.append(Hi)
+        Rs.append(Ri)
+    if sum(h.shape[0] for h in Hs) == 0:
+        raise ValueError("no agent senses (every H[i] has 0 rows): at least one measurement is needed")
+    return Hs, Rs
+
+
+def _stacked(Hs: list[np.ndarray], Rs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """``[H_1; ...; H_N]``, ``blockdiag(R_1, ..., R_N)`` and the ``q_i`` of checked per-agent matrices."""
+    sizes = [h.shape[0] for h in Hs]
+    total = sum(sizes)
+    R_st = np.zeros((total, total))
+    start = 0
+    for q, Ri in zip(sizes, Rs):
+        R_st[start:start + q, start:start + q] = Ri
+        start += q
+    return np.concatenate(Hs, axis=0), R_st, sizes
+
+
+def _sensing_parts(H_st: np.ndarray, R_st: np.ndarray, sizes: Sequence[int], n: int, N: int,
+                   kf: kalman.LinearGaussianModel) -> dict[str, object]:
+    """The model's sensing attributes from checked stacked ``H`` and block-diagonal ``R`` of agents of ``q_i``
+    measurements (`kf`: the stacked Kalman model). The agents with ``q_i`` measurements are done at once, per ``q_i``.
+    """
+    starts = [0, *itertools.accumulate(sizes)]
+    batch = R_st.shape[:-2]
+    Rinv = np.zeros(R_st.shape)
+    owner = np.repeat(np.eye(N), sizes, axis=1)  # (N, sum q): agent i's rows
+    info = np.zeros((*batch, N, n, n))
+    H_of: list[np.ndarray] = [frozen_copy(np.zeros((*batch, 0, n)))] * N  # read-only views of one copy per size
+    R_of: list[np.ndarray] = [frozen_copy(np.zeros((*batch, 0, 0)))] * N
+    for q in sorted(set(sizes) - {0}):
+        agents = [i for i, size in enumerate(sizes) if size == q]
+        rows = np.add.outer([starts[i] for i in agents], np.arange(q))  # (g, q): their rows of the stacked measurement
+        Ri, Hi = R_st[..., rows[:, :, None], rows[:, None, :]], H_st[..., rows, :]  # (..., g, q, q), (..., g, q, n)
+        with np.errstate(over="ignore", invalid="ignore"):  # an R too close to singular: refused by name below
+            Ri_inv = symmetric_part(np.linalg.inv(Ri))
+            info[..., agents, :, :] = symmetric_part(np.swapaxes(Hi, -1, -2) @ Ri_inv @ Hi)
+        Rinv[..., rows[:, :, None], rows[:, None, :]] = Ri_inv
+        Hi, Ri = frozen_copy(Hi), frozen_copy(Ri)
+        for j, i in enumerate(agents):
+            H_of[i], R_of[i] = Hi[..., j, :, :], Ri[..., j, :, :]
+    finite_result("model's information matrices", info, Rinv, advice="R is too close to singular")
+    return dict(H=tuple(H_of), R=tuple(R_of), H_stacked=frozen_copy(H_st), R_stacked=frozen_copy(R_st),
+                information_matrices=frozen_copy(info), _kf=kf, _owner=frozen_copy(owner), _Rinv=frozen_copy(Rinv),
+                _slices=tuple(map(slice, starts[:-1], starts[1:])))

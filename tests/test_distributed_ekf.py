@@ -391,6 +391,24 @@ def test_tiled_kernels_equal_the_textbook_filter_where_tiles_and_blocks_are_need
     np.testing.assert_allclose(S_pred, S_ref, rtol=1e-12, atol=1e-12 * np.abs(S_ref).max())
 
 
+@pytest.mark.parametrize("m, k", [(5, 3), (68, 136), (130, 520)])
+def test_tiled_symmetric_product_equals_the_full_product(m, k):
+    """The prediction's G Sigma G^T from its tiles on and above the diagonal (row blocks of TILE_ROWS / 2, the
+    blocks left of them mirrored; k = 520: the inner dimension summed over pieces) equals numpy's full product,
+    and so does the general tiled product Y = G Sigma (rows, columns and inner dimension in ragged tiles)."""
+    from mascore import _ekf_kernels as kernels
+
+    rng = np.random.default_rng(5)
+    G = rng.standard_normal((2, m, k))
+    S = rng.standard_normal((2, k, k))
+    S = S + np.swapaxes(S, -1, -2)
+    acc = np.empty(2 * max(m, k) ** 2)
+    Y = kernels.tiled_matmul(G, S, np.empty((2, m, k)), acc)
+    np.testing.assert_allclose(Y, G @ S, rtol=1e-12, atol=1e-12 * np.abs(Y).max())
+    Z = kernels.tiled_matmul(Y, np.swapaxes(G, -1, -2), np.full((2, m, m), np.nan), acc, symmetric=True)
+    np.testing.assert_allclose(Z, Y @ np.swapaxes(G, -1, -2), rtol=1e-12, atol=1e-12 * np.abs(Z).max())
+
+
 # ----------------------------------------------------------------------------- the fast step against a plain one
 
 

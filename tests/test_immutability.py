@@ -60,6 +60,11 @@ MODELS = {  # every checked model or value class: a builder of one instance
     "EKFModel": lambda: dekf.EKFModel(3, 0.1, GAINS, 0.01 * np.eye(12), np.eye(12)),
     "SynchronizationLaw": lambda: sync.SynchronizationLaw(graphs.ring_graph(4), [1.0, 0.0, 0.0, 0.0], np.eye(2), 1.5),
     "SensorNetworkModel": _sensor_network,
+    # built without the constructor (only the new sensing checked): probed as well
+    "SensorNetworkModel.with_sensing": lambda: _sensor_network().with_sensing(
+        [[[1.0, 0.0]], [[0.0, 1.0]], np.zeros((0, 2))], [[[0.5]], [[1.0]], None]),
+    "LinearGaussianModel.with_measurement": lambda: kalman.LinearGaussianModel(
+        F=[[1.0, 0.1], [0.0, 1.0]], Q=0.01 * np.eye(2), H=[[1.0, 0.0]], R=[[0.5]]).with_measurement([[0.0, 1.0]], [[2.0]]),
     "DiffusionKalmanFilter": lambda: fusion.DiffusionKalmanFilter(_sensor_network()),
     "CovarianceIntersectionFilter": lambda: fusion.CovarianceIntersectionFilter(_sensor_network()),
     "ConsensusOnInformationFilter": lambda: fusion.ConsensusOnInformationFilter(_sensor_network(), 2),

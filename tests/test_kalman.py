@@ -315,3 +315,18 @@ def test_model_forms_equal_the_plain_forms_with_inputs_and_batches():
     plain = kalman.run_filter(X, P, z, model_.A, Q, H, R)
     checked = kalman.run_filter(X, P, z, kalman.LinearGaussianModel(model_.A, Q, H, R))
     assert np.array_equal(plain[0], checked[0]) and np.array_equal(plain[1], checked[1])
+
+
+def test_with_measurement_is_the_constructor_and_checks_only_the_measurement():
+    model = kalman.LinearGaussianModel(F=[[1.0, 0.1], [0.0, 1.0]], Q=0.01 * np.eye(2), H=[[1.0, 0.0]], R=[[0.5]])
+    other = model.with_measurement([[0.0, 1.0], [1.0, 1.0]], np.diag([2.0, 3.0]))
+    assert other == kalman.LinearGaussianModel([[1.0, 0.1], [0.0, 1.0]], 0.01 * np.eye(2), [[0.0, 1.0], [1.0, 1.0]],
+                                               np.diag([2.0, 3.0]))
+    assert other.F is model.F and other.Q is model.Q                    # the checked dynamics, shared
+    x, P = kalman.update(np.zeros(2), np.eye(2), [1.0, 2.0], other)
+    np.testing.assert_array_equal(x, kalman.update(np.zeros(2), np.eye(2), [1.0, 2.0], [[0.0, 1.0], [1.0, 1.0]],
+                                                   np.diag([2.0, 3.0]))[0])
+    with pytest.raises(ValueError, match=r"R must be positive definite"):
+        model.with_measurement([[1.0, 0.0]], [[-1.0]])
+    with pytest.raises(ValueError, match=r"Incompatible dimensions of H"):
+        model.with_measurement([[1.0, 0.0, 0.0]], [[1.0]])
