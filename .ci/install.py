@@ -57,7 +57,9 @@ def pip_sources(python: Path) -> list[str]:
         key, sep, value = line.partition("=")
         if not sep:
             continue
-        name = key.rsplit(".", 1)[-1]
+        section, _, name = key.rpartition(".")
+        if section not in (":env:", "global", "install"):  # what `pip install` reads (not download.*, ...)
+            continue
         try:
             text = str(ast.literal_eval(value))  # pip prints each value as a Python literal
         except (ValueError, SyntaxError):
