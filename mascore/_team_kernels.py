@@ -196,6 +196,14 @@ def check_mask(mask: ArrayLike, N: int) -> np.ndarray:
     return S if S.ndim == 3 else S[None]
 
 
+def control_inputs(Y: np.ndarray, L: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """``u_i = -K sum_j L_ij Y[i, j]``: views ``(..., N, N, m)``, Laplacian ``(..., N, N)``, gain ``(p, m)``.
+
+    Returns the inputs ``(..., N, p)`` (:func:`mascore.rendezvous.consensus_control`, which checks its arguments).
+    """
+    return -np.einsum("...ij,...ijm->...im", L, Y) @ K.T
+
+
 def mask_vec(model: TeamFilterModel, S: np.ndarray) -> np.ndarray:
     """(batch, N, N) mask -> (batch, N, M_r) 0/1 vectors ``diag(D_i)`` in reduced coordinates."""
     return np.repeat(S, model.m_r, axis=-1).astype(float)

@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike
 
 from ._validation import Frozen, agent_index, check_positive, check_positive_int, require_finite
 from ._validation import float_array as _float_array
-from .consensus import central_fusion, kalman_consensus_step
+from .consensus import central_fusion, kalman_consensus_discrete, kalman_consensus_step
 from .estimation import Message, MethodSpec, protocol_docs
 
 __all__ = ["KalmanConsensusFilter", "AverageConsensusFilter", "METHODS"]
@@ -139,9 +139,9 @@ class KalmanConsensusFilter(Frozen):
         >>> f.fuse(np.array([[0.0], [2.0], [4.0]]), np.ones((3, 1, 1)), G)[0][:, 0].round(3)
         array([2., 2., 2.])
         """
-        for G_k in G:  # noise-free messages
-            xi, P = self.update(xi, P, G_k)
-        return xi, P
+        # noise-free messages; the arguments checked once, the steps those of update (the trajectory checked at the end)
+        run = kalman_consensus_discrete(xi, P, G, Q=self.Q, Omega=self.Omega)
+        return run.xi[-1], run.P[-1]
 
     def agent_inputs(self, xi: ArrayLike, P: ArrayLike, G: ArrayLike, i: int) -> tuple[dict, tuple]:
         """Agent i's state and the states and covariances its neighbours send it at the step (one run).

@@ -26,7 +26,7 @@ from . import distributed_kf as dkf
 from ._progress import progress_bar
 from ._sensing_kernels import masked_measurement
 from ._systems import full_state_only, output_matrices
-from ._team_kernels import check_team_laplacian
+from ._team_kernels import check_team_laplacian, control_inputs
 from ._validation import (
     Frozen,
     as_matrix,
@@ -131,8 +131,7 @@ def consensus_control(views: ArrayLike, laplacian: ArrayLike, K: ArrayLike) -> n
         raise ValueError(
             f"the leading (batch) axes of laplacian {L.shape} and views {Y.shape} do not broadcast"
         ) from None
-    weighted = np.einsum("...ij,...ijm->...im", L, Y)
-    return -weighted @ K.T
+    return control_inputs(Y, L, K)
 
 
 def true_state_views(states: ArrayLike) -> np.ndarray:

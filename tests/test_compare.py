@@ -116,7 +116,7 @@ def test_cells_run_together_give_the_rows_of_each_cell_alone_and_resume_by_cell(
     kept = together.set_index(["cell", "run"]).loc[first.set_index(["cell", "run"]).index, CPU]
     np.testing.assert_array_equal(kept.to_numpy(), first[CPU].to_numpy())  # block 0 was not run again
     with pytest.raises(ValueError, match="cell_group"):
-        compare.run_cells([cells[0], {**cells[0], "method": "centralized"}])
+        compare.run_cells([cells[0], {**cells[0], "n_agents": 16}])
 
 
 def test_team_blocks_run_together_give_each_block_alone():

@@ -167,6 +167,7 @@ __all__ = [
     "SCALE_SIZES",
     "SCALE_GRAPHS",
     "SCALE_GRAPH_LIMITS",
+    "SHARED_DATA_MAX",
     "SWITCHING_NOT_APPLICABLE",
     "target_cost",
     "target_filter",
@@ -202,7 +203,7 @@ _NAMES = {
     'grid': (
         'CompareResult', '_mean_ci', 'cell_cost', 'cell_group', 'grid_cells', 'link_summary', 'run', 'run_cell',
         'run_cells', 'run_compare', 'scale_limits', 'stored_summary', 'summarize', 'SCALE_SIZES', 'SCALE_GRAPHS',
-        'SCALE_GRAPH_LIMITS'
+        'SCALE_GRAPH_LIMITS', 'SHARED_DATA_MAX'
     ),
     'tables': (
         'CPU_COLUMN', 'NEAR_BOUND', '_position_headline', 'fitted_slopes', 'headline', 'knob_table', 'link_table',

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -404,16 +404,18 @@ def floats_per_step(method: str, n_agents: int, degree: float = 2.0, sensing: st
     degree = check_positive(degree, "degree", "(mean neighbours per agent)")
     if sensing not in SENSINGS:
         raise ValueError(f"sensing must be one of {SENSINGS}; got {sensing!r}")
-    team, shared = estimation.method_names("team"), estimation.method_names("shared")
-    if method not in team + shared:
-        raise ValueError(f"method must be one of {team + shared}; got {method!r}")
+    specs = estimation.method_specs()  # one scan of the package
+    team = {s.name: s for s in specs if "team" in s.tasks}
+    shared = {s.name: s for s in specs if "shared" in s.tasks}
+    if method not in team and method not in shared:
+        raise ValueError(f"method must be one of {tuple(team) + tuple(shared)}; got {method!r}")
     if method in shared:  # a 2-D quantity: n = q = 2
-        return float(estimation.method_spec(method, "shared").cost(2, 2, degree, n_agents)[0])
-    why = estimation.method_spec(method, "team").not_applicable.get("position")
+        return float(shared[method].cost(2, 2, degree, n_agents)[0])
+    why = team[method].not_applicable.get("position")
     if sensing == "position" and why is not None:
         raise ValueError(f"method {method!r} does not apply under position-only sensing: {why}")
     measured = 4 if sensing == "full" else 2  # z_ij = x_j + nu_ij, or its position [I 0] x_j + nu_ij
-    return float(estimation.method_spec(method, "team").cost(4, measured, degree, n_agents)[0])
+    return float(team[method].cost(4, measured, degree, n_agents)[0])
 
 
 def check_n_agents(n_agents: object) -> int:
@@ -449,11 +451,27 @@ def check_run(n_agents: object, noise: object, dropout: object, q_scale: object,
 
 def check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[str, Any]:
     """A cell of the grid, checked: its task, method, team size, drop-out and (`full`) noise and q_scale."""
+    return _check_cell(cell, name, full, None)
+
+
+def _check_cells(cells: Sequence[object], full: bool = True) -> list[Mapping[str, Any]]:
+    """:func:`check_cell` of every cell, each task's methods looked up once (each lookup scans the package)."""
+    known: dict[str, tuple[str, ...]] = {}
+    for cell in cells:
+        task = cell.get("task") if isinstance(cell, Mapping) else None
+        if isinstance(task, str) and task not in known:
+            known.update(_methods_of(task))
+    return [_check_cell(cell, "cell", full, known) for cell in cells]
+
+
+def _check_cell(cell: object, name: str, full: bool, known: Mapping[str, tuple[str, ...]] | None) -> Mapping[str, Any]:
+    """:func:`check_cell`, with the methods of the tasks in `known` given (None: looked up)."""
     if not isinstance(cell, Mapping):
         raise TypeError(f"{name} must be a mapping of the cell's coordinates (task, method, n_agents, noise, "
                         f"dropout, q_scale); got {type(cell).__name__}")
     task = cell.get("task")
-    methods_of = _methods_of(task)  # the cell's task's methods only: each lookup scans the package
+    # the cell's task's methods only: each lookup scans the package
+    methods_of = {task: known[task]} if known and isinstance(task, str) and task in known else _methods_of(task)
     if task not in methods_of:
         raise ValueError(f"{name}['task'] must be one of {tuple(methods_of)}; got {task!r}")
     required = ("method", "n_agents", "dropout") + (("noise",) if full else ()) + (

@@ -21,6 +21,7 @@ from .benchmark import (
     SHOWN,
     VLAHAKIS_PHI,
     BenchmarkSettings,
+    _check_cells,
     check_cell,
     floats_per_step,
     mean_degree,
@@ -42,6 +43,10 @@ from .team import simulate_team, vlahakis_profile
 
 # --------------------------------------------------------------------------------------------
 # grids and cells
+
+#: The largest team whose common-target or localization methods run together (:func:`cell_group`): their
+#: data drawn once; a larger team's methods run apart, each a task of its own (a cluster balances them).
+SHARED_DATA_MAX = 16
 
 #: The team sizes and graphs of the full grid's scale study of the common-target and localization tasks.
 SCALE_SIZES = (8, 16, 32, 64)
@@ -256,6 +261,11 @@ def run_cell(cell: Mapping[str, Any], base_seed: int = 0, settings: BenchmarkSet
     """
     check_cell(cell)
     check_settings_type(settings, BenchmarkSettings)
+    return _run_cell(cell, base_seed, settings)
+
+
+def _run_cell(cell: Mapping[str, Any], base_seed: int, settings: BenchmarkSettings) -> list[dict[str, Any]]:
+    """:func:`run_cell` of a checked cell and settings."""
     sensing = cell.get("sensing", "full")
     seed = cell_seed(cell, SEED_AXES if sensing == "full" else (*SEED_AXES, "sensing"), base_seed)
     common = {"noise": cell["noise"], "dropout": float(cell["dropout"])}
@@ -305,17 +315,23 @@ def cell_group(cell: Mapping[str, Any]) -> tuple | None:
     Returns
     -------
     tuple or None
-        ``(task, method, n_agents, graph)`` for the target and localization tasks, whose filters'
-        covariances do not depend on the data (:func:`simulate_target`): one computation serves every
-        block. For the team task, ``("team", (coordinate, value), ...)``: every coordinate but the
-        block (:func:`simulate_team` draws each block from its own seed's streams, and steps them as
-        one batch). None for the other tasks and for lossy or late links (each cell alone).
+        For the target and localization tasks, whose filters' covariances do not depend on the data
+        (:func:`simulate_target`: one computation serves every block), ``(task, n_agents, graph)`` up to
+        :data:`SHARED_DATA_MAX` agents: every method's blocks together, the target's path, the
+        measurements and a switching graph's step models drawn and built once for all the methods (they
+        do not depend on the method); ``(task, method, n_agents, graph)`` beyond (each method a task of
+        its own: a cluster balances them). For the team task, ``("team", (coordinate, value), ...)``:
+        every coordinate but the block (:func:`simulate_team` draws each block from its own seed's
+        streams, and steps them as one batch). None for the other tasks and for lossy or late links
+        (each cell alone).
 
     Examples
     --------
     >>> from mascore.compare import cell_group
     >>> cell_group({"task": "target", "method": "ci-L5", "n_agents": 8, "block": 2})
-    ('target', 'ci-L5', 8, 'ring')
+    ('target', 8, 'ring')
+    >>> cell_group({"task": "target", "method": "ci-L5", "n_agents": 32, "block": 2})
+    ('target', 'ci-L5', 32, 'ring')
     >>> cell_group({"task": "team", "method": "local", "n_agents": 8, "block": 2})
     ('team', ('method', 'local'), ('n_agents', 8), ('task', 'team'))
     """
@@ -324,6 +340,8 @@ def cell_group(cell: Mapping[str, Any]) -> tuple | None:
     if cell.get("task") not in ("target", "localization") or link_options(cell.get("study", "")) \
             or float(cell.get("dropout", 0.0)) > 0:
         return None  # lossy or late links draw their own streams per seed block: each cell alone
+    if cell["n_agents"] <= SHARED_DATA_MAX:
+        return (cell["task"], cell["n_agents"], cell.get("graph", "ring"))
     return (cell["task"], cell["method"], cell["n_agents"], cell.get("graph", "ring"))
 
 
@@ -333,7 +351,8 @@ def run_cells(cells: Sequence[Mapping[str, Any]], base_seed: int = 0,
 
     The seed blocks of a target or localization method run as one batch of their runs (each block's
     data from its own seed), so that the filter's covariances and weights, which do not depend on the
-    data, are computed once; so do a team-task cell's blocks (the loop's work per step, the filter's
+    data, are computed once, and the methods of a small team share each block's data (drawn once,
+    :func:`cell_group`); so do a team-task cell's blocks (the loop's work per step, the filter's
     design and a covariance shared by the runs done once). Each block's rows are those of
     :func:`run_cell` on its cell, number for number, except ``cpu_s``, the block's share of the
     batch's CPU. Other cells run one by one.
@@ -361,23 +380,33 @@ def run_cells(cells: Sequence[Mapping[str, Any]], base_seed: int = 0,
     >>> together[1][3]["rmse_own"] == run_cell(cells[1])[3]["rmse_own"]
     True
     """
-    cells = [check_cell(c) for c in cells]
+    cells = _check_cells(cells)
+    check_settings_type(settings, BenchmarkSettings)
     keys = {cell_group(c) for c in cells}
     if len(cells) < 2 or None in keys:
-        return [run_cell(c, base_seed, settings) for c in cells]
+        return [_run_cell(c, base_seed, settings) for c in cells]
     if len(keys) > 1:
         raise ValueError(f"cells must share one cell_group key to run together; got {sorted(keys, key=str)}")
-    check_settings_type(settings, BenchmarkSettings)
     first = cells[0]
     if first["task"] == "team":
         return _team_blocks(cells, base_seed, settings)
-    task, method, n_agents, graph = cell_group(first)
-    seeds = [cell_seed(c, SEED_AXES, base_seed) for c in cells]
-    metrics = simulate_target(method, int(n_agents), seeds, graph=graph, settings=settings, task=task)
-    nan = np.full_like(metrics["rmse_own"], np.nan)  # a set-membership filter has its containment and set size
-    metrics.update({k: metrics.pop(k, nan) for k in ("rmse_view", "containment", "spread", "rmse_far", "set_size")})
-    floats = target_cost(method, int(n_agents), mean_degree(graph, int(n_agents), settings), task)[0]
-    return _block_rows(metrics, len(cells), floats, float("nan"))
+    task, n_agents, graph = first["task"], int(first["n_agents"]), first.get("graph", "ring")
+    degree = mean_degree(graph, n_agents, settings)
+    memo: dict = {}  # the model, each block's data and a switching graph's step models, shared by the methods
+    methods: dict[str, list[int]] = {}  # each method's cells (its blocks), in the order given
+    for i, c in enumerate(cells):
+        methods.setdefault(c["method"], []).append(i)
+    out: list = [None] * len(cells)
+    for method, idx in methods.items():
+        seeds = [cell_seed(cells[i], SEED_AXES, base_seed) for i in idx]
+        metrics = simulate_target(method, n_agents, seeds, graph=graph, settings=settings, task=task, memo=memo)
+        nan = np.full_like(metrics["rmse_own"], np.nan)  # a set-membership filter has its containment and set size
+        metrics.update({k: metrics.pop(k, nan) for k in ("rmse_view", "containment", "spread", "rmse_far",
+                                                         "set_size")})
+        floats = target_cost(method, n_agents, degree, task)[0]
+        for i, rows in zip(idx, _block_rows(metrics, len(idx), floats, float("nan"))):
+            out[i] = rows
+    return out
 
 
 def _team_blocks(cells: Sequence[Mapping[str, Any]], base_seed: int,
@@ -479,10 +508,11 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
     steps = np.where(t["task"] == "shared", settings.shared_steps, settings.n_steps)
     t["cpu_us"] = 1e6 * t["cpu_s"] / (t["n_agents"] * steps * t.groupby("cell")["run"].transform("size"))
     out, memo = [], {}  # memo: the bootstrap's resamples, drawn once per number of runs in this call
+    # the runs of every group in one order, (block, run): the bootstrap pairs them (sorted once, each group keeps it)
+    t = t.sort_values(["block", "run"], kind="stable")
     for key, g in t.groupby(by, sort=False, dropna=False):
         row = dict(zip(by, key if isinstance(key, tuple) else (key,)))
         row["n"] = len(g)
-        g = g.sort_values(["block", "run"], kind="stable")  # the runs in one order: the bootstrap pairs them
         for col in ("rmse_own", "ratio", "nees_own", "containment", "spread", "rmse_far", "set_size"):
             if col == "ratio":
                 m, lo, hi = rms_ratio(g["rmse_own"].to_numpy(), g["bound_rmse"].to_numpy(), memo=memo)
@@ -497,7 +527,7 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
         row["nees_bound_lo"], row["nees_bound_hi"] = anees_bounds(runs, dim) if runs and dim else (np.nan, np.nan)
         floats = g["floats"].to_numpy()  # one value per method, but as sent under send-on-delta: their mean
         row["floats"] = float(floats[0]) if (floats == floats[0]).all() else float(floats.mean())
-        row["cpu_us"] = float(g.drop_duplicates("cell")["cpu_us"].median())
+        row["cpu_us"] = float(g["cpu_us"][~g["cell"].duplicated()].median())  # one value per cell
         out.append(row)
     return pd.DataFrame(out).sort_values(by, kind="stable", ignore_index=True)  # N numerically, not as text
 
@@ -701,9 +731,11 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
             return result
     with tempfile.TemporaryDirectory(prefix="mascore-compare-") as scratch:
         folder = Path(scratch if out is None else out) / "compare"
-        table = run_sweep(grid_cells(settings.grid), functools.partial(run_cells, base_seed=seed, settings=settings),
+        cells = grid_cells(settings.grid)
+        costs = {cell_id(c): _cell_cost(c) for c in _check_cells(cells, full=False)}  # one lookup of each task's methods
+        table = run_sweep(cells, functools.partial(run_cells, base_seed=seed, settings=settings),
                           folder / f"table-{settings.grid}-{seed}.csv", workers=workers, scheduler=scheduler,
-                          progress=progress, cost=cell_cost, group=cell_group)
+                          progress=progress, cost=lambda cell: costs[cell_id(cell)], group=cell_group)
     lossy = table["study"].isin(LINK_STUDIES)
     summary = summarize(table[~lossy], settings=settings)
     profile = vlahakis_profile(8, settings=settings)
@@ -794,7 +826,11 @@ def cell_cost(cell: Mapping[str, Any]) -> float:
     >>> cell_cost({**base, "method": "song-eb"}) > cell_cost({**base, "method": "local"})
     True
     """
-    check_cell(cell, full=False)
+    return _cell_cost(check_cell(cell, full=False))
+
+
+def _cell_cost(cell: Mapping[str, Any]) -> float:
+    """:func:`cell_cost` of a checked cell."""
     if cell["task"] in ("target", "localization"):  # per agent: n = 4, or n = 2N (N^3 flops a step)
         size = cell["n_agents"] / 8 if cell["task"] == "target" else (cell["n_agents"] / 8) ** 4
         return (1600.0 if cell["method"] == "ci-diffusion" else 150.0) * size  # ci: its weight search

@@ -374,6 +374,7 @@ def simulate_target(
     latency: int = 0,
     send_delta: float | None = None,
     loss_model: str = "link",
+    memo: dict | None = None,
 ) -> dict[str, np.ndarray]:
     """Track the common target (or localize the team) with one filter of :mod:`mascore.fusion`, batched over runs.
 
@@ -426,6 +427,12 @@ def simulate_target(
         (:func:`mascore.fusion_links.track_forwarding`), ``ci-L1`` and ``icf-L1`` keep their
         ideal-link weights and give a lost message's weight to the receiver's own pair
         (:func:`mascore.fusion_links.delivered_weights`); with `latency` too.
+    memo : dict, optional
+        A dictionary the caller keeps between calls on one task, team size and graph with the same
+        settings (say, every method of one cell): the model, each seed's data (the target's path and the
+        measurements, which do not depend on the method) and, for teams up to 16, the models of a
+        switching graph's steps are computed once and kept in it. The numbers are those of a call
+        without it. Default: nothing is kept.
 
     Returns
     -------
@@ -460,18 +467,15 @@ def simulate_target(
     if graph not in SWITCHING_GRAPHS:
         raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
     links = _check_links(method, loss, latency, send_delta, graph, task, loss_model)
-    if graph == "switching" and task == "localization":  # the sensing switches too: each step's links' rows
-        model, step_of = _localization_switching(n_agents, s)
-    else:
-        model = (target_model if task == "target" else localization_model)(
-            n_agents, "ring" if graph == "switching" else graph, s)
-        G = switching_graphs(n_agents, s.n_steps, s) if graph == "switching" else None
-        step_of = (lambda k: (model, slice(None))) if G is None else (lambda k: (model.on_graph(G[k]), slice(None)))
+    if memo is not None and not isinstance(memo, dict):
+        raise TypeError(f"memo must be a dict (kept by the caller between calls) or None; got {type(memo).__name__}")
+    memo = {} if memo is None else memo
+    model, step_of = _task_model(task, n_agents, graph, s, memo)
     n = model.n_states
     P0 = s.p0 * np.eye(n)
     if links and len(seeds) > 1:
         raise ValueError("loss, latency and send-on-delta draw their own streams per seed: give one seed")
-    blocks = [model.simulate(np.zeros(n), P0, s.n_steps, np.random.default_rng(sd), n_runs=runs) for sd in seeds]
+    blocks = [_seed_data(model, sd, runs, s, memo, (task, n_agents, graph)) for sd in seeds]
     x_true, z = (np.concatenate(parts, axis=1) for parts in zip(*blocks))  # (K + 1 or K, blocks x runs, ...)
     first = spec.build(model)
     set_valued = hasattr(first, "initial_shape")  # a set-membership filter: its state is an ellipsoid, not a Gaussian
@@ -535,6 +539,54 @@ def simulate_target(
         pair = sum(m.floats for m in first.messages())
         out["floats"] = pair * sent[s.steady_from:].mean(axis=(0, 2))
     return out
+
+
+def _task_model(task: str, n_agents: int, graph: str, s: BenchmarkSettings, memo: dict) -> tuple:
+    """``(model, step_of)`` of :func:`simulate_target`, built once per `memo` (``step_of(k) -> (model_k, rows)``).
+
+    The models of a switching graph's steps are kept once built for the common target and for teams
+    up to 16 (a localization model holds ``(N, 2N, 2N)`` information matrices: beyond, one at a time).
+    """
+    key = ("model", task, n_agents, graph, s)
+    if key not in memo:
+        if graph == "switching" and task == "localization":  # the sensing switches too: each step's links' rows
+            model, step_of = _localization_switching(n_agents, s)
+        else:
+            model = (target_model if task == "target" else localization_model)(
+                n_agents, "ring" if graph == "switching" else graph, s)
+            G = switching_graphs(n_agents, s.n_steps, s) if graph == "switching" else None
+            step_of = (lambda k: (model, slice(None))) if G is None else (lambda k: (model.on_graph(G[k]), slice(None)))
+        if graph == "switching" and (task == "target" or n_agents <= 16):
+            step_of = _kept(step_of)
+        memo[key] = (model, step_of)
+    return memo[key]
+
+
+def _kept(step_of):
+    """`step_of`, each step's result kept once computed (the models of a switching graph's steps)."""
+    built: dict[int, tuple] = {}
+
+    def kept(k: int) -> tuple:
+        if k not in built:
+            built[k] = step_of(k)
+        return built[k]
+    return kept
+
+
+def _seed_data(model, seed: np.random.SeedSequence | int, runs: int, s: BenchmarkSettings, memo: dict,
+               where: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """One seed's ``model.simulate`` (the path ``(K + 1, runs, n)`` and measurements ``(K, runs, q)``), once per `memo`."""
+    n = model.n_states
+    if isinstance(seed, np.random.SeedSequence):
+        who = ("seq", tuple(np.atleast_1d(seed.entropy).tolist()), seed.spawn_key, seed.pool_size)
+    elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+        who = ("int", int(seed))
+    else:  # anything else default_rng takes (or refuses): drawn, not kept
+        return model.simulate(np.zeros(n), s.p0 * np.eye(n), s.n_steps, np.random.default_rng(seed), n_runs=runs)
+    key = ("data", *where, s, runs, who)
+    if key not in memo:
+        memo[key] = model.simulate(np.zeros(n), s.p0 * np.eye(n), s.n_steps, np.random.default_rng(seed), n_runs=runs)
+    return memo[key]
 
 
 #: The studies of the target and localization tasks over their links, and what each sets of
@@ -668,8 +720,6 @@ def _filter_delivered(method: str, model, task: str, G: np.ndarray, D: np.ndarra
     Returns the estimates ``(K, runs, N, n)``, covariances, the CPU (s) and the sends ``(K, runs, N)``
     (None unless `send_delta`).
     """
-    from .. import sensor_network
-
     if method in ("centralized", "local"):  # the bound keeps ideal links; local sends nothing
         return _filter_links(method, model, task, G, z, P0, 0, None)
     x0 = np.zeros(model.n_states)
@@ -681,7 +731,7 @@ def _filter_delivered(method: str, model, task: str, G: np.ndarray, D: np.ndarra
         if np.ndim(G) == 2:
             filters = [spec.build(model)] * len(z)
         else:
-            filters = [spec.build(sensor_network.SensorNetworkModel(model.F, model.Q, model.H, model.R, A)) for A in G]
+            filters = [spec.build(model.on_graph(A)) for A in G]
         x, P, sent = fusion_links.track_messages(filters, x0, P0, z, latency=latency, send_delta=send_delta,
                                                  delivered=D)
         return x, P, time.thread_time() - tic, sent if send_delta is not None else None
@@ -695,7 +745,7 @@ def _filter_links(method: str, model, task: str, G: np.ndarray, z: np.ndarray, P
     Returns the estimates ``(K, runs, N, n)``, covariances, the CPU (s) and the sends ``(K, runs, N)``
     (None unless `send_delta`).
     """
-    from .. import fusion_links, sensor_network
+    from .. import fusion_links
 
     spec = estimation.method_spec(method, task)
     n = model.n_states
@@ -705,7 +755,7 @@ def _filter_links(method: str, model, task: str, G: np.ndarray, z: np.ndarray, P
     def step_filter(A: np.ndarray):  # the method's own filter on the step's graph (its weights, its rule)
         key = A.tobytes()
         if key not in built:
-            built[key] = spec.build(sensor_network.SensorNetworkModel(model.F, model.Q, model.H, model.R, A))
+            built[key] = spec.build(model.on_graph(A))
         return built[key]
 
     if method in ("centralized", "local"):  # the bound keeps ideal links; local sends nothing

@@ -615,10 +615,14 @@ def make_estimator(method: str, team: TeamTask, x_hat0: np.ndarray) -> TeamEstim
     >>> type(compare.make_estimator("song-mb", team, np.zeros((1, 4, 4))).filter).__name__
     'TeamFilter'
     """
-    spec = estimation.method_spec(method, "team")
+    return _make_estimator(estimation.method_spec(method, "team"), team, x_hat0)
+
+
+def _make_estimator(spec: MethodSpec, team: TeamTask, x_hat0: np.ndarray) -> TeamEstimator:
+    """:func:`make_estimator` of the method of `spec`."""
     why = spec.not_applicable.get("position") if team.sensing == "position" else None
     if why is not None:
-        raise ValueError(f"method {method!r} does not apply under position-only sensing: {why}")
+        raise ValueError(f"method {spec.name!r} does not apply under position-only sensing: {why}")
     filt = spec.build(team, x_hat0)
     return _stepper(filt)(spec, filt, team, x_hat0)
 
@@ -713,15 +717,15 @@ def simulate_team(
     check_run(n_agents, noise, dropout, q_scale, total, settings)
     if sensing not in SENSINGS:
         raise ValueError(f"sensing must be one of {SENSINGS}; got {sensing!r}")
-    methods = estimation.method_names("team")
-    if method not in methods:
-        raise ValueError(f"method must be one of {methods}; got {method!r}")
+    specs = {spec.name: spec for spec in estimation.method_specs("team")}  # one scan of the package
+    if method not in specs:
+        raise ValueError(f"method must be one of {tuple(specs)}; got {method!r}")
     if graph not in SWITCHING_GRAPHS:
         raise ValueError(f"graph must be one of {SWITCHING_GRAPHS}; got {graph!r}")
-    why = estimation.method_spec(method, "team").not_applicable.get("switching")
+    why = specs[method].not_applicable.get("switching")
     if graph == "switching" and why is not None:
         raise ValueError(f"{method} does not apply on graph='switching': {why}")
-    from ..rendezvous import consensus_control
+    from .._team_kernels import control_inputs
 
     team = team_setup(int(n_agents), noise, float(q_scale), settings, graph, sensing)
     topology = switching_graphs(int(n_agents), settings.n_steps, settings) > 0 if team.switching else None
@@ -729,7 +733,7 @@ def simulate_team(
     N, s = team.N, settings
     x, x_hat0 = (np.concatenate(a) for a in zip(*(_initial_states(rng, runs, N, s, sensing, noise)
                                                    for rng in init_rngs)))
-    est = make_estimator(method, team, x_hat0)  # refuses a method that does not apply to the sensing
+    est = _make_estimator(specs[method], team, x_hat0)  # refuses a method that does not apply to the sensing
     measured = len(team.C)  # z_ij = x_j + nu_ij, or its position [I 0] x_j + nu_ij
     cpu = 0.0  # the estimator's own work only: not its design (offline), not the simulation around it
     q_std, r_std = np.sqrt(np.diag(team.Q)), np.sqrt(s.r)
@@ -743,8 +747,10 @@ def simulate_team(
             nominal = topology[k]
             team.adjacency = nominal.astype(float)
             team.laplacian = graphs.laplacian(team.adjacency)
-        lost = (_blocks(drop_rngs, lambda rng: rng.random((runs, N, N))) < dropout) & ~eye
-        S = (nominal | eye) & ~lost
+        if dropout > 0:  # the drop-outs' own streams (without drop-outs nothing is drawn from them)
+            S = (nominal | eye) & ~((_blocks(drop_rngs, lambda rng: rng.random((runs, N, N))) < dropout) & ~eye)
+        else:
+            S = np.broadcast_to(nominal | eye, (total, N, N))
         nu = r_std * _blocks(meas_rngs, lambda rng: draw_noise(rng, noise, (runs, N, N, measured)))
         Z = np.where(S[..., None], x[:, None, :, :measured] + nu, 0.0)
         tic = time.thread_time()
@@ -758,7 +764,7 @@ def simulate_team(
             view = fresh
         if k >= s.steady_from:
             _accumulate(acc, est, x, view, nominal | eye)
-        U = consensus_control(view, team.laplacian, team.K)
+        U = control_inputs(view, team.laplacian, team.K)  # rendezvous.consensus_control's law (its arguments are ours)
         tic = time.thread_time()
         est.predict(U)
         cpu += time.thread_time() - tic

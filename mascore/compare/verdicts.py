@@ -144,10 +144,14 @@ class Evidence:
         The sweep's per-run rows on the deciding blocks (:func:`deciding_runs`).
     phi : dict
         The Vlahakis program's values (:func:`mascore.compare.vlahakis_profile`).
+    by_method : mapping, optional
+        `runs` split by method (:func:`_by_method`), to select a method's runs from its own rows
+        (the same rows, in the same order, as from `runs`). Default: selected from `runs`.
     """
 
-    def __init__(self, summary, runs, phi: Mapping[str, float]):
+    def __init__(self, summary, runs, phi: Mapping[str, float], by_method: Mapping[str, Any] | None = None):
         self.summary, self.runs, self.phi = summary, runs, phi
+        self.by_method = by_method
         self.blocks: set[str] = set()
         self.missed: list[tuple[bool | None, str]] = []
 
@@ -210,8 +214,8 @@ class Evidence:
                **where: Any) -> Interval:
         """RMS ratio of `method`'s `column` to `reference`'s `ref_column` on the same runs (paired bootstrap)."""
         self.row(method, **where), self.row(reference, **where)
-        a = _select(self.runs, {**where, "method": method}).sort_values(list(_RUN))
-        b = _select(self.runs, {**where, "method": reference}).sort_values(list(_RUN))
+        a = self._runs_of(method, where).sort_values(list(_RUN))
+        b = self._runs_of(reference, where).sort_values(list(_RUN))
         if len(a) != len(b) or not np.array_equal(a[list(_RUN)].to_numpy(), b[list(_RUN)].to_numpy()):
             raise ValueError(f"{method} and {reference} at {where} do not share their runs")
         return rms_ratio(a[column].to_numpy(), b[ref_column].to_numpy())
@@ -224,7 +228,7 @@ class Evidence:
         bootstrap interval (:func:`mascore.compare.stats.rms_ratio`).
         """
         self.row(method, **where, **at), self.row(method, **where, **against)
-        a, b = (_select(self.runs, {**where, **c, "method": method}).sort_values(list(_RUN)) for c in (at, against))
+        a, b = (self._runs_of(method, {**where, **c}).sort_values(list(_RUN)) for c in (at, against))
         if len(a) != len(b) or not np.array_equal(a[list(_RUN)].to_numpy(), b[list(_RUN)].to_numpy()):
             raise ValueError(f"{method} at {at} and at {against} do not share their runs")
         return rms_ratio(a["rmse_own"].to_numpy(), b["rmse_own"].to_numpy())
@@ -232,7 +236,12 @@ class Evidence:
     def run_mean(self, column: str, method: str, **where: Any) -> Interval:
         """The mean over the deciding runs of a per-run `column` (e.g. ``floats`` as sent), bootstrap 95 % interval."""
         self.row(method, **where)
-        return mean_interval(_select(self.runs, {**where, "method": method})[column].to_numpy(dtype=float))
+        return mean_interval(self._runs_of(method, where)[column].to_numpy(dtype=float))
+
+    def _runs_of(self, method: str, where: Mapping[str, Any]):
+        """The runs of `method` at the coordinates `where` (from its own rows when split by method)."""
+        rows = self.runs if self.by_method is None else self.by_method.get(method, self.runs.iloc[:0])
+        return _select(rows, {**where, "method": method})
 
     def claim(self, short: str, statement: str, value: Any, holds: bool | None, rule: str, **extra: str):
         """The claim ``compare/<short>``, with the blocks it was written from and decided on."""
@@ -262,6 +271,11 @@ def _select(frame, where: Mapping[str, Any]):
         col = frame[key]
         mask &= col.isin(v).to_numpy() if isinstance(v, list | tuple) else (col == v).to_numpy()
     return frame[mask]
+
+
+def _by_method(runs) -> dict[str, Any]:
+    """`runs` split by method: each method's rows, in their order in `runs`."""
+    return dict(tuple(runs.groupby("method", sort=False)))
 
 
 def _blocks_text(blocks: Sequence[int]) -> str:
@@ -1017,16 +1031,18 @@ def compare_claims(table, phi: dict | None = None, *, held_out: Sequence[int] = 
     if phi is None and main:
         phi = vlahakis_profile(8)
     claims = []
+    split = _by_method(runs) if main else None
     for claim in main:
         try:
-            claims.append(claim(Evidence(summary, runs, phi)))
+            claims.append(claim(Evidence(summary, runs, phi, split)))
         except _Missing:
             continue
     if lossy.any():
         links = pd.concat([summary, _summary(every[lossy])], ignore_index=True)
+        split = _by_method(every)
         for claim in (c for c in LINK_CLAIMS if c in chosen):
             try:
-                claims.append(claim(Evidence(links, every, phi)))
+                claims.append(claim(Evidence(links, every, phi, split)))
             except _Missing:
                 continue
     return claims
