@@ -26,22 +26,30 @@ help:  ## list the targets
 
 install: $(STAMP)  ## create .venv and install the locked environment
 
-# pip byte-compiles the environment at install (no --no-compile): where PYTHONDONTWRITEBYTECODE is set, as on
-# some CI machines, Python never writes a .pyc when it imports, and every kernel, test worker and Dask worker
-# would compile numpy, scipy, pandas and matplotlib again (about 2.5 s per process).
+# .ci/install.py installs with uv (pinned there, bootstrapped into $(VENV)/.uv by the environment's pip; it passes
+# on the indexes pip is configured with), or with pip if uv cannot be installed: the same wheels, about half the
+# time. Both byte-compile the environment at install: where PYTHONDONTWRITEBYTECODE is set, as on some CI
+# machines, Python never writes a .pyc when it imports, and every kernel, test worker and Dask worker would
+# compile numpy, scipy, pandas and matplotlib again (about 2.5 s per process).
+INSTALL = $(BIN)/python .ci/install.py $(VENV)
 
-$(STAMP): requirements.lock pyproject.toml
+$(STAMP): requirements.lock pyproject.toml .ci/install.py
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check pip==$(PIP_VERSION)
-	$(BIN)/python -m pip install --quiet -r requirements.lock
-	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
+	$(INSTALL) pip==$(PIP_VERSION) -r requirements.lock
+	$(INSTALL) --no-deps --no-build-isolation -e .
 	@touch $(STAMP)
+
+# The package's own modules byte-compiled (only those changed since; a fraction of a second): where
+# PYTHONDONTWRITEBYTECODE is set, no process writes them on import, and each of the ~60 processes of `make test`
+# (notebook kernels, test and Dask workers) would compile what it imports of mascore (about 0.3 s each).
+COMPILE := $(BIN)/python -m compileall -q mascore
 
 # The notebooks are executed on both cores into an emptied cache, then the book is rendered
 # from it (a notebook missing from the cache is executed by the build, which shows why it failed).
 BUILD_BOOK := env -u MPLBACKEND sh -c '$(BIN)/python -m mascore._booktools execute && $(BIN)/jupyter-book build book --all -W -n --keep-going'
 
 book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book into book/_build/html
+	@$(COMPILE)
 	$(BUILD_BOOK)
 	@echo "Open book/_build/html/index.html"
 
@@ -61,7 +69,7 @@ BOOK_LOG := book/_build/build.log
 HTML_TESTS := tests/test_book_html.py
 
 test: $(STAMP) lint $(RESULTS)  ## lint, the unit tests, doctests, published numbers and every notebook (nbmake), then render the book and check its HTML
-	@rm -rf $(EXECUTED) && mkdir -p $(EXECUTED) book/_build && cp notebooks/*.ipynb $(EXECUTED)/
+	@$(COMPILE) && rm -rf $(EXECUTED) && mkdir -p $(EXECUTED) book/_build && cp notebooks/*.ipynb $(EXECUTED)/
 	@env -u MPLBACKEND $(BIN)/python -m pytest -n $(JOBS) --dist worksteal --nbmake --overwrite --doctest-modules --durations=25 \
 	    --ignore=$(HTML_TESTS) $(EXECUTED) tests mascore; tests=$$?; \
 	$(BIN)/python -m mascore._booktools cache $(EXECUTED) && \
@@ -82,9 +90,9 @@ MIN_TESTS := tests/test_core_install.py tests/test_agents_noise.py tests/test_gr
              tests/test_ellipsoids.py tests/test_sensing.py tests/test_distributed_kf.py
 test-min:  ## the core alone on its minimum versions: install size, import times, core tests
 	@test -x $(MIN_VENV)/bin/python || $(PYTHON) -m venv $(MIN_VENV)
-	$(MIN_VENV)/bin/python -m pip install --quiet --disable-pip-version-check pip==$(PIP_VERSION)
-	$(MIN_VENV)/bin/python -m pip install --quiet $(MIN_PINS) $(shell grep -E "^(pytest|hypothesis)==" requirements.lock) "setuptools>=77" wheel
-	$(MIN_VENV)/bin/python -m pip install --quiet --no-deps --no-build-isolation -e .
+	$(MIN_VENV)/bin/python .ci/install.py $(MIN_VENV) pip==$(PIP_VERSION) $(MIN_PINS) \
+	    $(shell grep -E "^(pytest|hypothesis|setuptools|wheel)==" requirements.lock)
+	$(MIN_VENV)/bin/python .ci/install.py $(MIN_VENV) --no-deps --no-build-isolation -e .
 	$(MIN_VENV)/bin/python -m pytest -q -p no:cacheprovider $(MIN_TESTS)
 
 reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json, and the quick comparison, into results/
@@ -95,6 +103,7 @@ reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json, a
 # The papers' studies (one process) run beside the quick comparison's workers: both cores stay busy.
 $(RESULTS): $(STAMP) $(wildcard mascore/*.py mascore/*/*.py)
 	rm -rf results/compare && mkdir -p results  # the package changed: no cell of an older table is reused
+	@$(COMPILE)
 	@$(HEADLESS) $(BIN)/python -m mascore reproduce all --out results > results/reproduce.log 2>&1 & papers=$$!; \
 	$(HEADLESS) $(BIN)/python -m mascore compare --grid quick --out results --workers $(JOBS); grid=$$?; \
 	wait $$papers; reproduced=$$?; cat results/reproduce.log; \
@@ -120,5 +129,5 @@ lock:  ## regenerate requirements.lock from pyproject.toml in a scratch venv
 	rm -rf .lock-venv
 
 clean:  ## remove the environment, the built book, results and caches
-	rm -rf $(VENV) $(MIN_VENV) book/_build results .pytest_cache .hypothesis
+	rm -rf $(VENV) $(MIN_VENV) book/_build results .pytest_cache .hypothesis .test-min.log
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

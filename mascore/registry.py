@@ -322,7 +322,8 @@ class Study:
         >>> import matplotlib.pyplot as plt
         >>> from mascore.papers import ren2005
         >>> study = ren2005.REGISTRY.study("kalman-consensus")
-        >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50)  # fewer runs
+        >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50,
+        ...                                             switch_steps=100, t_final=20.0)  # fewer runs, shorter switching demos
         >>> fig = study.draw("fig1", study.run(fewer, 1))
         >>> len(fig.axes)
         4
@@ -400,7 +401,8 @@ class Study:
         >>> import dataclasses, tempfile
         >>> from mascore.papers import ren2005
         >>> study = ren2005.REGISTRY.study("kalman-consensus")
-        >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50)
+        >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50,
+        ...                                             switch_steps=100, t_final=20.0)  # fewer runs, shorter switching demos
         >>> study.save_run(fewer, 1, study.run(fewer, 1), tempfile.mkdtemp()).name
         'kalman-consensus.pickle'
         """
@@ -435,7 +437,8 @@ class Study:
         >>> import dataclasses, tempfile
         >>> from mascore.papers import ren2005
         >>> study = ren2005.REGISTRY.study("kalman-consensus")
-        >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50)
+        >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50,
+        ...                                             switch_steps=100, t_final=20.0)  # fewer runs, shorter switching demos
         >>> folder = tempfile.mkdtemp()
         >>> path = study.save_run(fewer, 1, study.run(fewer, 1), folder)
         >>> study.load_or_run(fewer, 1, folder).settings == fewer  # read, not recomputed
@@ -648,7 +651,8 @@ def caption_values(study: Study, result: Any) -> dict[str, float]:
     >>> import dataclasses
     >>> from mascore.papers import ren2005
     >>> study = ren2005.REGISTRY.study("kalman-consensus")
-    >>> fewer = dataclasses.replace(ren2005.SETTINGS, noise_runs=20, noise_paths=4, bias_runs=50)  # fewer runs
+    >>> fewer = dataclasses.replace(ren2005.SETTINGS, noise_runs=20, noise_paths=4, bias_runs=50,
+    ...                                               switch_steps=100, t_final=20.0)  # fewer runs, shorter switching demos
     >>> values = caption_values(study, ren2005.run(fewer, seed=1))
     >>> round(values["bias-fused"], 3)
     6.985
@@ -880,13 +884,13 @@ def write_study(paper: PaperRegistry, study: Study, result: Any, out_dir: str | 
     Examples
     --------
     >>> import dataclasses, tempfile
-    >>> from mascore.papers import ren2005
+    >>> from mascore.papers import bhattacharjee2021
     >>> from mascore.registry import write_study
-    >>> study = ren2005.REGISTRY.study("kalman-consensus")
-    >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50)  # fewer runs
-    >>> claims = write_study(ren2005.REGISTRY, study, study.run(fewer, 1), tempfile.mkdtemp())
+    >>> study = bhattacharjee2021.REGISTRY.study("set-membership")
+    >>> quick = dataclasses.replace(study.settings, n_runs=3, t_f=10, figure_method="closed_form")  # a quick look
+    >>> claims = write_study(bhattacharjee2021.REGISTRY, study, study.run(quick, 1), tempfile.mkdtemp())
     >>> {c.study for c in claims}
-    {'kalman-consensus'}
+    {'set-membership'}
     """
     if not isinstance(paper, PaperRegistry):
         raise TypeError(f"paper must be a PaperRegistry (a paper module's REGISTRY); got {type(paper).__name__}")
@@ -936,7 +940,8 @@ def render_figure(study: Study, name: str, result: Any) -> dict[str, bytes]:
     >>> from mascore.papers import ren2005
     >>> from mascore.registry import render_figure
     >>> study = ren2005.REGISTRY.study("kalman-consensus")
-    >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50)
+    >>> fewer = dataclasses.replace(study.settings, noise_runs=20, noise_paths=4, bias_runs=50,
+    ...                                             switch_steps=100, t_final=20.0)  # fewer runs, shorter switching demos
     >>> sorted(render_figure(study, "fig1", study.run(fewer, 1)))
     ['figures/fig1.layout.json', 'figures/fig1.png']
     """

@@ -905,7 +905,7 @@ def run(settings: ObserverSettings = SETTINGS, seed: int = 1, progress: bool = F
     --------
     >>> import dataclasses
     >>> from mascore.papers import vlahakis
-    >>> coarse = dataclasses.replace(vlahakis.SETTINGS, phi_grid=(-0.3, 2.4, 7), t_end=5.0)  # a quick look
+    >>> coarse = dataclasses.replace(vlahakis.SETTINGS, n_agents=3, phi_grid=(-0.3, 2.4, 7), t_end=5.0)  # a quick look
     >>> result = vlahakis.run(coarse, seed=1)
     >>> sorted(result.intervals)
     [5.0, 25.0]
