@@ -32,10 +32,15 @@ install: $(STAMP)  ## create .venv and install the locked environment
 # machines, Python never writes a .pyc when it imports, and every kernel, test worker and Dask worker would
 # compile numpy, scipy, pandas and matplotlib again (about 2.5 s per process).
 INSTALL = $(BIN)/python .ci/install.py $(VENV)
+# The lock is complete (`pip freeze --all`), so it is installed as it is (--no-deps), less one optional
+# package: rfc3987-syntax (with lark), which jsonschema's format checker imports when present and which
+# compiles 39 grammars on import, about 2.5 s in every notebook kernel (glue imports nbformat, nbformat
+# jsonschema); it only checks the syntax of "iri" strings, which nothing here validates.
+LOCK_OMITS := -e '^rfc3987-syntax==' -e '^lark=='
 
 $(STAMP): requirements.lock pyproject.toml .ci/install.py
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(INSTALL) pip==$(PIP_VERSION) -r requirements.lock
+	$(INSTALL) pip==$(PIP_VERSION) --no-deps -r requirements.lock
 	$(INSTALL) --no-deps --no-build-isolation -e .
 	@touch $(STAMP)
 
@@ -125,7 +130,7 @@ lock:  ## regenerate requirements.lock from pyproject.toml in a scratch venv
 	rm -rf .lock-venv && $(PYTHON) -m venv .lock-venv
 	.lock-venv/bin/python -m pip install --quiet pip==$(PIP_VERSION) && .lock-venv/bin/python -m pip install --quiet ".[book,dev,bench]" "setuptools>=77" wheel
 	echo '# Exact versions installed by the Makefile (regenerate with `make lock`).' > requirements.lock
-	.lock-venv/bin/python -m pip freeze --all --exclude-editable | grep -v -e '^mascore' -e '^pip==' >> requirements.lock
+	.lock-venv/bin/python -m pip freeze --all --exclude-editable | grep -v -e '^mascore' -e '^pip==' $(LOCK_OMITS) >> requirements.lock
 	rm -rf .lock-venv
 
 clean:  ## remove the environment, the built book, results and caches
