@@ -21,7 +21,7 @@ import pandas as pd
 import pytest
 import scipy.linalg as sla
 
-from mascore import compare, consensus, graphs, sweep
+from mascore import _team_kernels, compare, consensus, graphs, sweep
 from mascore.reproduce import results_dir
 
 CPU = "cpu_s"  # the only column that depends on the machine and the moment
@@ -490,13 +490,13 @@ def test_switching_own_state_uses_the_graph_of_each_step(monkeypatch):
     from dataclasses import replace
 
     from mascore import distributed_kf as dkf
-    from mascore import graphs, rendezvous
+    from mascore import graphs
 
     s = replace(compare.SETTINGS, n_steps=30, steady_from=10)
     G = compare.switching_graphs(8, s.n_steps, s)
     assert (G != G[0]).any()
     control, predict, masks = [], [], []
-    consensus_control, team_predict, team_update = (rendezvous.consensus_control, dkf.TeamFilter.predict,
+    consensus_control, team_predict, team_update = (_team_kernels.control_inputs, dkf.TeamFilter.predict,
                                                     dkf.TeamFilter.update)
 
     def record_control(view, laplacian, K):
@@ -511,7 +511,7 @@ def test_switching_own_state_uses_the_graph_of_each_step(monkeypatch):
         masks.append(np.array(mask))
         return team_update(self, Z, mask)
 
-    monkeypatch.setattr(rendezvous, "consensus_control", record_control)
+    monkeypatch.setattr(_team_kernels, "control_inputs", record_control)  # the team loop's control law
     monkeypatch.setattr(dkf.TeamFilter, "predict", record_predict)
     monkeypatch.setattr(dkf.TeamFilter, "update", record_update)
     compare.simulate_team("song-eb", 8, 0, graph="switching", runs=3, settings=s)
@@ -722,19 +722,18 @@ def test_switching_own_state_keeps_the_last_received_view_of_an_agent_out_of_rea
     """A view of j held by i is j's broadcast estimate at the last step k' <= k with the link (i, j) in graph k'."""
     from dataclasses import replace
 
-    from mascore import rendezvous
 
     s = replace(compare.SETTINGS, n_steps=40, steady_from=10)
     N = 8
     G = compare.switching_graphs(N, s.n_steps, s) > 0
     views = []
-    consensus_control = rendezvous.consensus_control
+    consensus_control = _team_kernels.control_inputs
 
     def record(view, laplacian, K):
         views.append(np.array(view))
         return consensus_control(view, laplacian, K)
 
-    monkeypatch.setattr(rendezvous, "consensus_control", record)
+    monkeypatch.setattr(_team_kernels, "control_inputs", record)  # the team loop's control law
     compare.simulate_team("local", N, 5, graph="switching", runs=3, settings=s)
     assert len(views) == s.n_steps
     own = np.stack([v[:, np.arange(N), np.arange(N)] for v in views])  # (steps, R, N, 4): j's broadcast estimate

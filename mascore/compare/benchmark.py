@@ -454,7 +454,7 @@ def check_cell(cell: object, name: str = "cell", full: bool = True) -> Mapping[s
     return _check_cell(cell, name, full, None)
 
 
-def _check_cells(cells: Sequence[object], full: bool = True) -> list[Mapping[str, Any]]:
+def check_cells(cells: Sequence[object], full: bool = True) -> list[Mapping[str, Any]]:
     """:func:`check_cell` of every cell, each task's methods looked up once (each lookup scans the package)."""
     known: dict[str, tuple[str, ...]] = {}
     for cell in cells:

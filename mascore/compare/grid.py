@@ -21,8 +21,8 @@ from .benchmark import (
     SHOWN,
     VLAHAKIS_PHI,
     BenchmarkSettings,
-    _check_cells,
     check_cell,
+    check_cells,
     floats_per_step,
     mean_degree,
 )
@@ -380,7 +380,7 @@ def run_cells(cells: Sequence[Mapping[str, Any]], base_seed: int = 0,
     >>> together[1][3]["rmse_own"] == run_cell(cells[1])[3]["rmse_own"]
     True
     """
-    cells = _check_cells(cells)
+    cells = check_cells(cells)
     check_settings_type(settings, BenchmarkSettings)
     keys = {cell_group(c) for c in cells}
     if len(cells) < 2 or None in keys:
@@ -732,7 +732,7 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
     with tempfile.TemporaryDirectory(prefix="mascore-compare-") as scratch:
         folder = Path(scratch if out is None else out) / "compare"
         cells = grid_cells(settings.grid)
-        costs = {cell_id(c): _cell_cost(c) for c in _check_cells(cells, full=False)}  # one lookup of each task's methods
+        costs = {cell_id(c): _cell_cost(c) for c in check_cells(cells, full=False)}  # one lookup of each task's methods
         table = run_sweep(cells, functools.partial(run_cells, base_seed=seed, settings=settings),
                           folder / f"table-{settings.grid}-{seed}.csv", workers=workers, scheduler=scheduler,
                           progress=progress, cost=lambda cell: costs[cell_id(cell)], group=cell_group)
