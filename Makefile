@@ -49,9 +49,11 @@ $(STAMP): requirements.lock pyproject.toml .ci/install.py
 # (notebook kernels, test and Dask workers) would compile what it imports of mascore (about 0.3 s each).
 COMPILE := $(BIN)/python -m compileall -q mascore
 
-# The notebooks are executed on both cores into an emptied cache, then the book is rendered
-# from it (a notebook missing from the cache is executed by the build, which shows why it failed).
-BUILD_BOOK := env -u MPLBACKEND sh -c '$(BIN)/python -m mascore._booktools execute && $(BIN)/jupyter-book build book --all -W -n --keep-going'
+# The notebooks are executed on both cores into an emptied cache while the book's build (one process)
+# reads the API pages, which need no notebook; the build waits for the cache before the first page with
+# executed cells (book/_ext/notebooks_pending.py). A notebook missing from the cache is executed by the
+# build, which shows why it failed.
+BUILD_BOOK := env -u MPLBACKEND $(BIN)/python -m mascore._booktools build
 
 book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book into book/_build/html
 	@$(COMPILE)
@@ -59,8 +61,9 @@ book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book in
 	@echo "Open book/_build/html/index.html"
 
 # `make test` executes every notebook once, as a test: nbmake runs copies of them (results/notebooks)
-# and writes their outputs back (--overwrite); the book is then rendered from those outputs
-# (python -m mascore._booktools cache), and the checks of the rendered HTML run last. The notebooks'
+# and writes their outputs back (--overwrite); the book is rendered from those outputs (`_booktools build`
+# starts the build beside pytest: it reads the API pages meanwhile, and the notebooks' pages once pytest has
+# ended and its outputs are in the cache), and the checks of the rendered HTML run last. The notebooks'
 # kernels need ipykernel's inline backend to draw their figures, so MPLBACKEND stays unset here
 # (tests/conftest.py gives the test processes themselves a headless backend).
 # --dist worksteal: a worker that runs out of tests takes half of the other's queue, so the long items
@@ -75,12 +78,9 @@ HTML_TESTS := tests/test_book_html.py
 
 test: $(STAMP) lint $(RESULTS)  ## lint, the unit tests, doctests, published numbers and every notebook (nbmake), then render the book and check its HTML
 	@$(COMPILE) && rm -rf $(EXECUTED) && mkdir -p $(EXECUTED) book/_build && cp notebooks/*.ipynb $(EXECUTED)/
-	@env -u MPLBACKEND $(BIN)/python -m pytest -n $(JOBS) --dist worksteal --nbmake --overwrite --doctest-modules --durations=25 \
-	    --ignore=$(HTML_TESTS) $(EXECUTED) tests mascore; tests=$$?; \
-	$(BIN)/python -m mascore._booktools cache $(EXECUTED) && \
-	env -u MPLBACKEND $(BIN)/jupyter-book build book --all -W -n --keep-going > $(BOOK_LOG) 2>&1; built=$$?; \
-	if [ $$built -ne 0 ]; then tail -n 80 $(BOOK_LOG); echo "The book did not build (the whole log: $(BOOK_LOG))."; exit 1; fi; \
-	echo "The book is built (log: $(BOOK_LOG))."; exit $$tests
+	@env -u MPLBACKEND $(BIN)/python -m mascore._booktools build --log $(BOOK_LOG) $(EXECUTED) \
+	    $(BIN)/python -m pytest -n $(JOBS) --dist worksteal --nbmake --overwrite --doctest-modules --durations=25 \
+	    --ignore=$(HTML_TESTS) $(EXECUTED) tests mascore
 	$(HEADLESS) $(BIN)/python -m pytest -p no:xdist $(HTML_TESTS)
 
 lint: $(STAMP)  ## ruff on the package, the tests and the benchmarks; the layers of the package (import-linter)

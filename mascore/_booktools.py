@@ -370,13 +370,48 @@ def write_api_pages(folder: str | Path = "book/api") -> int:
     return changed
 
 
+def _emptied_cache(book: Path):
+    """The jupyter-cache of `book` (``_build/.jupyter_cache``), emptied: no output of an earlier build is reused."""
+    import shutil
+
+    from jupyter_cache import get_cache
+
+    cache_path = book / "_build" / ".jupyter_cache"
+    shutil.rmtree(cache_path, ignore_errors=True)
+    return get_cache(str(cache_path))
+
+
+def _add_notebooks(cache, book: Path) -> None:
+    """Add the book's notebooks to the project of `cache`: ``notebooks/*.ipynb`` and the MyST pages with code cells."""
+    for notebook in sorted((book / "notebooks").glob("*.ipynb")):
+        cache.add_nb_to_project(str(notebook))
+    for page in sorted(book.glob("*.md")):  # a text notebook (the intro), read as the build reads it
+        if "```{code-cell}" in page.read_text():
+            cache.add_nb_to_project(str(page), read_data={"name": "myst_nb_md", "type": "plugin"})
+
+
+def _run_project(cache, timeout: int) -> list[str]:
+    """Execute the notebooks of the cache's project on every core, one at a time per core; the failed ones."""
+    import multiprocessing
+
+    from jupyter_cache.executors.basic import ExecutionWorkerLocalMProc, ProcessData
+
+    jobs = [ProcessData(record.pk, record.uri, cache, timeout, False) for record in cache.list_project_records()]
+    # One notebook per task (chunksize 1): Pool.map's default hands out runs of five consecutive notebooks,
+    # which left one core idle while the other ran the last run.
+    with multiprocessing.Pool() as pool:
+        results = list(pool.imap_unordered(ExecutionWorkerLocalMProc(), jobs, chunksize=1))
+    return sorted(uri for status, uri in results if status != 0)
+
+
 def execute_notebooks(book: str | Path = "book", timeout: int = 900) -> list[str]:
     """Execute the book's notebooks on every core into the cache that ``jupyter-book build`` reads.
 
     The cache (``_build/.jupyter_cache`` of `book`) is emptied first, so no output of an
     earlier build, made by other code, is reused; the build then takes each notebook's
     outputs from it (``execute_notebooks: cache``) and executes itself only what is missing,
-    which it reports with its traceback.
+    which it reports with its traceback. The notebooks are ``book/notebooks/*.ipynb`` and the
+    MyST pages of `book` with code cells (the intro).
 
     Parameters
     ----------
@@ -390,19 +425,79 @@ def execute_notebooks(book: str | Path = "book", timeout: int = 900) -> list[str
     list of str
         The notebooks that failed (the build executes them again and shows why).
     """
+    cache = _emptied_cache(Path(book))
+    _add_notebooks(cache, Path(book))
+    return _run_project(cache, timeout)
+
+
+#: Environment variable naming the file that exists while :func:`build_book` executes the notebooks: the
+#: build waits for them before it reads a page with executed cells (book/_ext/notebooks_pending.py).
+NOTEBOOKS_PENDING = "MASCORE_NOTEBOOKS_PENDING"
+
+
+def build_book(book: str | Path = "book", command: list[str] | None = None, executed: str | Path | None = None,
+               log: str | Path | None = None, timeout: int = 900) -> tuple[int, int]:
+    """Render the book with ``jupyter-book build`` while its notebooks are executed.
+
+    The build is one process (Sphinx reads, then writes, one page at a time), so it starts at
+    once and reads the API pages, which need no executed notebook, while the notebooks are
+    executed on the other cores: by :func:`execute_notebooks`, or, given `command`, by that
+    command (``pytest --nbmake`` in ``make test``), whose executed copies in `executed` are then
+    put into the cache by :func:`cache_executed`. The build waits for them before it reads a page
+    with executed cells (book/_ext/notebooks_pending.py, told by :data:`NOTEBOOKS_PENDING`); a
+    notebook missing from the cache is executed by the build, which shows why it fails.
+
+    Parameters
+    ----------
+    book : str or Path
+        The book's folder.
+    command : list of str, optional
+        A command that executes the notebooks into `executed` (default: :func:`execute_notebooks`).
+    executed : str or Path, optional
+        The folder of the notebooks `command` executed; required with `command`.
+    log : str or Path, optional
+        File for the build's output (default: this process's standard output).
+    timeout : int
+        Seconds a cell may run (:func:`execute_notebooks`).
+
+    Returns
+    -------
+    (int, int)
+        The exit status of the build and of `command` (0 without a command).
+    """
+    import contextlib
+    import os
     import shutil
+    import subprocess
 
-    from jupyter_cache import get_cache
-    from jupyter_cache.executors import load_executor
-
-    folder = Path(book)
-    cache_path = folder / "_build" / ".jupyter_cache"
-    shutil.rmtree(cache_path, ignore_errors=True)
-    cache = get_cache(str(cache_path))
-    for notebook in sorted((folder / "notebooks").glob("*.ipynb")):
-        cache.add_nb_to_project(str(notebook))
-    result = load_executor("local-parallel", cache).run_and_cache(timeout=timeout)
-    return sorted(result.excepted + result.errored)
+    if (command is None) != (executed is None):
+        raise ValueError("build_book: give both `command` and `executed` (the folder it writes), or neither")
+    jupyter_book = shutil.which("jupyter-book", path=str(Path(sys.executable).parent)) or shutil.which("jupyter-book")
+    if jupyter_book is None:
+        raise FileNotFoundError("build_book: no `jupyter-book` beside this Python or on the PATH (pip install .[book])")
+    book = Path(book)
+    if command is None:  # the cache is ready, with its project, before the build starts
+        cache = _emptied_cache(book)
+        _add_notebooks(cache, book)
+    pending = (book / "_build" / "notebooks-pending").resolve()
+    pending.parent.mkdir(parents=True, exist_ok=True)
+    pending.write_text(str(os.getpid()))  # the build waits while this process lives and the file exists
+    with open(log, "w") if log is not None else contextlib.nullcontext() as out:
+        try:
+            build = subprocess.Popen([jupyter_book, "build", str(book), "--all", "-W", "-n", "--keep-going"],
+                                     env={**os.environ, NOTEBOOKS_PENDING: str(pending)},
+                                     stdout=out, stderr=subprocess.STDOUT if out else None)
+            if command is None:
+                status = 0
+                for uri in _run_project(cache, timeout):
+                    print(f"{uri}: failed (the book's build shows why)", file=sys.stderr)
+            else:
+                status = subprocess.call(command)
+                for name in cache_executed(executed, book):
+                    print(f"{name}: not executed by the tests (the book's build executes it)", file=sys.stderr)
+        finally:
+            pending.unlink(missing_ok=True)
+        return build.wait(), status
 
 
 def cache_executed(executed: str | Path, book: str | Path = "book") -> list[str]:
@@ -426,16 +521,11 @@ def cache_executed(executed: str | Path, book: str | Path = "book") -> list[str]
     list of str
         The notebooks left out (missing, changed or failed).
     """
-    import shutil
-
     import nbformat
-    from jupyter_cache import get_cache
     from jupyter_cache.base import CacheBundleIn
 
     folder = Path(book)
-    cache_path = folder / "_build" / ".jupyter_cache"
-    shutil.rmtree(cache_path, ignore_errors=True)
-    cache = get_cache(str(cache_path))
+    cache = _emptied_cache(folder)
     left_out = []
     for source in sorted((folder / "notebooks").glob("*.ipynb")):
         copy = Path(executed) / source.name
@@ -455,8 +545,22 @@ def cache_executed(executed: str | Path, book: str | Path = "book") -> list[str]
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m mascore._booktools sync [NOTEBOOK ...]`` (default: every notebook of a study), ``execute``,
-    or ``cache FOLDER`` (:func:`cache_executed`)."""
+    ``cache FOLDER`` (:func:`cache_executed`), or ``build [--log FILE] [FOLDER COMMAND ...]`` (:func:`build_book`:
+    the notebooks executed by COMMAND into FOLDER, or by :func:`execute_notebooks`; the exit status is the
+    build's if it failed, else the command's)."""
     argv = sys.argv[1:] if argv is None else argv
+    if argv and argv[0] == "build":
+        args, log = argv[1:], None
+        if args[:1] == ["--log"]:
+            log, args = args[1], args[2:]
+        built, status = build_book(command=args[1:] or None, executed=args[0] if args else None, log=log)
+        if built != 0:
+            if log is not None:
+                print("".join(Path(log).read_text().splitlines(keepends=True)[-80:]), file=sys.stderr)
+            print("The book did not build" + (f" (the whole log: {log})." if log else "."), file=sys.stderr)
+            return built
+        print("The book is built" + (f" (log: {log})." if log else "."))
+        return status
     if argv and argv[0] == "cache":
         for name in cache_executed(argv[1]):
             print(f"{name}: not executed by the tests (the book's build executes it)", file=sys.stderr)

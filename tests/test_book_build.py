@@ -1,0 +1,147 @@
+"""The book's build: its local Sphinx extensions (book/_ext) and how `_booktools build` runs it beside the notebooks."""
+
+from __future__ import annotations
+
+import gc
+import importlib.util
+import subprocess
+import sys
+import threading
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+pytest.importorskip("sphinx")
+
+ROOT = Path(__file__).resolve().parents[1]
+EXT = ROOT / "book" / "_ext"
+
+
+def extension(name: str):
+    """The local Sphinx extension ``book/_ext/<name>.py``, imported from its file."""
+    spec = importlib.util.spec_from_file_location(f"book_ext_{name}", EXT / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_every_local_extension_is_loaded_by_the_book():
+    config = (ROOT / "book" / "_config.yml").read_text()
+    for path in EXT.glob("*.py"):
+        assert f"    {path.stem}: _ext" in config, path.name
+
+
+def test_the_build_waits_until_the_notebooks_are_executed(tmp_path, monkeypatch):
+    pending = extension("notebooks_pending")
+    marker = tmp_path / "pending"
+    marker.write_text(str(__import__("os").getpid()))  # this process "executes the notebooks"
+    monkeypatch.setenv(pending.PENDING, str(marker))
+    pending.wait_for_notebooks(None, "api/lqr", [""])  # an API page needs no notebook: returns at once
+    reader = threading.Thread(target=pending.wait_for_notebooks, args=(None, "notebooks/song2023_rendezvous", [""]))
+    reader.start()
+    reader.join(timeout=1.0)
+    assert reader.is_alive()  # still waiting while the file exists
+    marker.unlink()
+    reader.join(timeout=30)
+    assert not reader.is_alive()
+
+
+def test_a_dead_executor_does_not_hold_the_build(tmp_path, monkeypatch):
+    pending = extension("notebooks_pending")
+    done = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    marker = tmp_path / "pending"
+    marker.write_text(done.stdout.strip())  # the id of a process that has ended
+    assert not pending.executing(marker)
+    assert not pending.executing(tmp_path / "missing")
+    marker.write_text(str(__import__("os").getpid()))
+    assert pending.executing(marker)
+
+
+def test_api_pages_are_read_first_only_when_notebooks_are_pending(monkeypatch):
+    pending = extension("notebooks_pending")
+    names = ["intro", "api/lqr", "notebooks/a", "api/agents", "bibliography"]
+    unchanged = list(names)
+    monkeypatch.delenv(pending.PENDING, raising=False)
+    pending.api_pages_first(None, None, unchanged)
+    assert unchanged == names
+    monkeypatch.setenv(pending.PENDING, "/nonexistent")
+    reordered = list(names)
+    pending.api_pages_first(None, None, reordered)
+    assert reordered == ["api/lqr", "api/agents", "intro", "notebooks/a", "bibliography"]
+
+
+def test_the_collector_thresholds_are_restored_when_the_build_ends():
+    build_gc = extension("build_gc")
+    before = gc.get_threshold()
+    app = SimpleNamespace()
+    try:
+        build_gc.collect_less(app)
+        assert gc.get_threshold() == build_gc.THRESHOLDS
+    finally:
+        build_gc.restore(app, None)
+    assert gc.get_threshold() == before
+
+
+AUTOSUMMARY_PAGE = """\
+Objects
+=======
+
+.. currentmodule:: mascore.lqr
+
+.. autosummary::
+   :nosignatures:
+
+   lqr
+   TopDownLQR
+"""
+
+
+def _autosummary_table(tmp_path: Path, extensions: list[str]) -> tuple[str, int]:
+    """The HTML of an autosummary table with ``:nosignatures:``, and how many signatures were formatted."""
+    from sphinx.application import Sphinx
+
+    src = tmp_path / "src"
+    src.mkdir(parents=True)
+    (src / "conf.py").write_text(f"import sys\nsys.path.insert(0, {str(EXT)!r})\nextensions = {extensions!r}\n")
+    (src / "index.rst").write_text(AUTOSUMMARY_PAGE)
+    app = Sphinx(str(src), str(src), str(tmp_path / "out"), str(tmp_path / "doctrees"), "html",
+                 status=None, warning=None, freshenv=True)
+    signatures = []
+    app.connect("autodoc-process-signature", lambda *args: signatures.append(args[1]))
+    app.build()
+    html = (tmp_path / "out" / "index.html").read_text()
+    return html[html.index("<table"):html.index("</table>")], len(signatures)
+
+
+def test_autosummary_tables_without_signatures_are_unchanged_and_format_none(tmp_path):
+    plain, formatted = _autosummary_table(tmp_path / "plain", ["sphinx.ext.autodoc", "sphinx.ext.autosummary"])
+    unsigned, none = _autosummary_table(tmp_path / "unsigned", ["sphinx.ext.autodoc", "autosummary_unsigned"])
+    assert "TopDownLQR" in plain and "lqr" in plain
+    assert unsigned == plain
+    assert formatted == 2 and none == 0
+
+
+def test_build_book_needs_the_command_and_its_folder_together(tmp_path):
+    from mascore._booktools import build_book
+
+    with pytest.raises(ValueError, match="command"):
+        build_book(tmp_path, command=["true"])
+    with pytest.raises(ValueError, match="executed"):
+        build_book(tmp_path, executed=tmp_path)
+
+
+def test_the_intro_is_executed_with_the_notebooks(tmp_path):
+    pytest.importorskip("jupyter_cache")
+    pytest.importorskip("myst_nb")
+    from jupyter_cache import get_cache
+
+    from mascore._booktools import _add_notebooks
+
+    cache = get_cache(str(tmp_path / "cache"))
+    _add_notebooks(cache, ROOT / "book")
+    uris = {Path(record.uri).name for record in cache.list_project_records()}
+    assert uris == {p.name for p in (ROOT / "notebooks").glob("*.ipynb")} | {"intro.md"}
+    intro = next(r for r in cache.list_project_records() if r.uri.endswith("intro.md"))
+    code = [c.source for c in cache.get_project_notebook(intro.pk).nb.cells if c.cell_type == "code"]
+    assert code and "reading_paths" in code[0]  # read as MyST: the code cells, not the page as one text cell
