@@ -381,9 +381,10 @@ def _emptied_cache(book: Path):
     return get_cache(str(cache_path))
 
 
-def _add_notebooks(cache, book: Path) -> None:
-    """Add the book's notebooks to the project of `cache`: ``notebooks/*.ipynb`` and the MyST pages with code cells."""
-    for notebook in sorted((book / "notebooks").glob("*.ipynb")):
+def _add_notebooks(cache, book: Path, ipynb: bool = True) -> None:
+    """Add the book's notebooks to the project of `cache`: ``notebooks/*.ipynb`` (unless not `ipynb`) and the
+    MyST pages with code cells."""
+    for notebook in sorted((book / "notebooks").glob("*.ipynb")) if ipynb else []:
         cache.add_nb_to_project(str(notebook))
     for page in sorted(book.glob("*.md")):  # a text notebook (the intro), read as the build reads it
         if "```{code-cell}" in page.read_text():
@@ -443,7 +444,8 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
     once and reads the API pages, which need no executed notebook, while the notebooks are
     executed on the other cores: by :func:`execute_notebooks`, or, given `command`, by that
     command (``pytest --nbmake`` in ``make test``), whose executed copies in `executed` are then
-    put into the cache by :func:`cache_executed`. The build waits for them before it reads a page
+    put into the cache by :func:`cache_executed` (the intro, which is no notebook of
+    ``notebooks/``, is executed meanwhile by this process). The build waits for them before it reads a page
     with executed cells (book/_ext/notebooks_pending.py, told by :data:`NOTEBOOKS_PENDING`); a
     notebook missing from the cache is executed by the build, which shows why it fails.
 
@@ -476,9 +478,8 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
     if jupyter_book is None:
         raise FileNotFoundError("build_book: no `jupyter-book` beside this Python or on the PATH (pip install .[book])")
     book = Path(book)
-    if command is None:  # the cache is ready, with its project, before the build starts
-        cache = _emptied_cache(book)
-        _add_notebooks(cache, book)
+    cache = _emptied_cache(book)  # ready, with its project, before the build starts
+    _add_notebooks(cache, book, ipynb=command is None)  # `command` executes notebooks/*.ipynb, not the intro
     pending = (book / "_build" / "notebooks-pending").resolve()
     pending.parent.mkdir(parents=True, exist_ok=True)
     pending.write_text(str(os.getpid()))  # the build waits while this process lives and the file exists
@@ -487,14 +488,15 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
             build = subprocess.Popen([jupyter_book, "build", str(book), "--all", "-W", "-n", "--keep-going"],
                                      env={**os.environ, NOTEBOOKS_PENDING: str(pending)},
                                      stdout=out, stderr=subprocess.STDOUT if out else None)
-            if command is None:
-                status = 0
-                for uri in _run_project(cache, timeout):
-                    print(f"{uri}: failed (the book's build shows why)", file=sys.stderr)
-            else:
-                status = subprocess.call(command)
-                for name in cache_executed(executed, book):
-                    print(f"{name}: not executed by the tests (the book's build executes it)", file=sys.stderr)
+            running = subprocess.Popen(command) if command is not None else None
+            try:
+                failed = _run_project(cache, timeout)  # all the notebooks, or the intro beside `command`
+            finally:
+                status = running.wait() if running is not None else 0
+            for uri in failed:
+                print(f"{uri}: failed (the book's build shows why)", file=sys.stderr)
+            for name in _cache_copies(cache, executed, book) if command is not None else []:
+                print(f"{name}: not executed by the tests (the book's build executes it)", file=sys.stderr)
         finally:
             pending.unlink(missing_ok=True)
         return build.wait(), status
@@ -521,11 +523,15 @@ def cache_executed(executed: str | Path, book: str | Path = "book") -> list[str]
     list of str
         The notebooks left out (missing, changed or failed).
     """
+    return _cache_copies(_emptied_cache(Path(book)), executed, book)
+
+
+def _cache_copies(cache, executed: str | Path, book: str | Path) -> list[str]:
+    """:func:`cache_executed` into `cache` as it is."""
     import nbformat
     from jupyter_cache.base import CacheBundleIn
 
     folder = Path(book)
-    cache = _emptied_cache(folder)
     left_out = []
     for source in sorted((folder / "notebooks").glob("*.ipynb")):
         copy = Path(executed) / source.name
