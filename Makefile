@@ -106,10 +106,10 @@ reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json, a
 
 # book and test reuse results/ while no source file of the package has changed since.
 # The papers' studies (one process, about 100 CPU-s, song2023 first and longest) run beside the quick comparison's
-# workers (about twice that CPU, in many short cells). The grid runs at a lower priority (nice): the papers' process,
-# which can only ever use one core, gets a whole core from the start, the grid's workers the other one and then both
-# once the papers are done, so that neither leaves a core idle at the end. At equal priority the three processes
-# shared the two cores equally: the papers (2/3 of a core) finished about 20 s after the grid, on one core alone.
+# workers (about twice that CPU, in many short cells). The grid runs at a lower priority (GRID_NICE): the papers'
+# process, which can only ever use one core, has a whole core from the start, the grid's workers the other one, and
+# both once the papers are done, so that no core idles while work remains. At equal priority (GRID_NICE=0) the
+# papers had about half a core and finished some 20 s after the grid, alone on one core.
 GRID_NICE ?= 10
 $(RESULTS): $(STAMP) $(wildcard mascore/*.py mascore/*/*.py)
 	rm -rf results/compare && mkdir -p results  # the package changed: no cell of an older table is reused
