@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import importlib.util
+import os
 import subprocess
 import sys
 import threading
@@ -35,7 +36,7 @@ def test_every_local_extension_is_loaded_by_the_book():
 def test_the_build_waits_until_the_notebooks_are_executed(tmp_path, monkeypatch):
     pending = extension("notebooks_pending")
     marker = tmp_path / "pending"
-    marker.write_text(str(__import__("os").getpid()))  # this process "executes the notebooks"
+    marker.write_text(str(os.getpid()))  # this process "executes the notebooks"
     monkeypatch.setenv(pending.PENDING, str(marker))
     pending.wait_for_notebooks(None, "api/lqr", [""])  # an API page needs no notebook: returns at once
     reader = threading.Thread(target=pending.wait_for_notebooks, args=(None, "notebooks/song2023_rendezvous", [""]))
@@ -54,7 +55,7 @@ def test_a_dead_executor_does_not_hold_the_build(tmp_path, monkeypatch):
     marker.write_text(done.stdout.strip())  # the id of a process that has ended
     assert not pending.executing(marker)
     assert not pending.executing(tmp_path / "missing")
-    marker.write_text(str(__import__("os").getpid()))
+    marker.write_text(str(os.getpid()))
     assert pending.executing(marker)
 
 
