@@ -18,6 +18,7 @@ import importlib
 import json
 import re
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from .registry import PaperRegistry, Study, paper_registries, study_modules
@@ -391,17 +392,36 @@ def _add_notebooks(cache, book: Path, ipynb: bool = True) -> None:
             cache.add_nb_to_project(str(page), read_data={"name": "myst_nb_md", "type": "plugin"})
 
 
-def _run_project(cache, timeout: int) -> list[str]:
-    """Execute the notebooks of the cache's project on every core, one at a time per core; the failed ones."""
+def _run_project(cache, timeout: int, all_cores: Callable[[], bool] | None = None) -> list[str]:
+    """Execute the notebooks of the cache's project on every core, one at a time per core; the failed ones.
+
+    With `all_cores`, one notebook at a time until ``all_cores()`` is true: the cores are shared with
+    another process meanwhile (the book's build reading its API pages), and the notebooks that time their
+    code should not measure it with a third process competing for their core.
+    """
     import multiprocessing
+    import os
+    import time
 
     from jupyter_cache.executors.basic import ExecutionWorkerLocalMProc, ProcessData
 
     jobs = [ProcessData(record.pk, record.uri, cache, timeout, False) for record in cache.list_project_records()]
-    # One notebook per task (chunksize 1): Pool.map's default hands out runs of five consecutive notebooks,
-    # which left one core idle while the other ran the last run.
-    with multiprocessing.Pool() as pool:
-        results = list(pool.imap_unordered(ExecutionWorkerLocalMProc(), jobs, chunksize=1))
+    worker = ExecutionWorkerLocalMProc()
+    cores = os.cpu_count() or 1
+    with multiprocessing.Pool(cores) as pool:
+        if all_cores is None:
+            # One notebook per task (chunksize 1): Pool.map's default hands out runs of five consecutive
+            # notebooks, which left one core idle while the other ran the last run.
+            results = list(pool.imap_unordered(worker, jobs, chunksize=1))
+        else:
+            results, running = [], []
+            while jobs or running:
+                allowed = cores if all_cores() else 1
+                while jobs and len(running) < allowed:
+                    running.append(pool.apply_async(worker, (jobs.pop(0),)))
+                time.sleep(0.05)
+                results += [task.get() for task in running if task.ready()]
+                running = [task for task in running if not task.ready()]
     return sorted(uri for status, uri in results if status != 0)
 
 
@@ -442,12 +462,14 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
 
     The build is one process (Sphinx reads, then writes, one page at a time), so it starts at
     once and reads the API pages, which need no executed notebook, while the notebooks are
-    executed on the other cores: by :func:`execute_notebooks`, or, given `command`, by that
-    command (``pytest --nbmake`` in ``make test``), whose executed copies in `executed` are then
-    put into the cache by :func:`cache_executed` (the intro, which is no notebook of
-    ``notebooks/``, is executed meanwhile by this process). The build waits for them before it reads a page
-    with executed cells (book/_ext/notebooks_pending.py, told by :data:`NOTEBOOKS_PENDING`); a
-    notebook missing from the cache is executed by the build, which shows why it fails.
+    executed: as :func:`execute_notebooks` does, on one core until the build has read those
+    pages and then on every core (no notebook that times its code shares its core with the
+    build), or, given `command`, by that command (``pytest --nbmake`` in ``make test``), whose
+    executed copies in `executed` are then put into the cache by :func:`cache_executed` (the
+    intro, which is no notebook of ``notebooks/``, is executed meanwhile by this process). The
+    build waits for them before it reads a page with executed cells (book/_ext/notebooks_pending.py,
+    told by :data:`NOTEBOOKS_PENDING`); a notebook missing from the cache is executed by the build,
+    which shows why it fails.
 
     Parameters
     ----------
@@ -489,8 +511,11 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
                                      env={**os.environ, NOTEBOOKS_PENDING: str(pending)},
                                      stdout=out, stderr=subprocess.STDOUT if out else None)
             running = subprocess.Popen(command) if command is not None else None
+            # all the notebooks, or the intro beside `command`; on every core once the build waits for them
+            api_read = pending.with_name(pending.name + ".waiting")
+            api_read.unlink(missing_ok=True)
             try:
-                failed = _run_project(cache, timeout)  # all the notebooks, or the intro beside `command`
+                failed = _run_project(cache, timeout, lambda: api_read.exists() or build.poll() is not None)
             finally:
                 status = running.wait() if running is not None else 0
             for uri in failed:
@@ -499,7 +524,9 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
                 print(f"{name}: not executed by the tests (the book's build executes it)", file=sys.stderr)
         finally:
             pending.unlink(missing_ok=True)
-        return build.wait(), status
+        status_build = build.wait()
+        api_read.unlink(missing_ok=True)
+        return status_build, status
 
 
 def cache_executed(executed: str | Path, book: str | Path = "book") -> list[str]:

@@ -43,6 +43,7 @@ def test_the_build_waits_until_the_notebooks_are_executed(tmp_path, monkeypatch)
     reader.start()
     reader.join(timeout=1.0)
     assert reader.is_alive()  # still waiting while the file exists
+    assert Path(f"{marker}.waiting").exists()  # and it has told the executor that it needs no core
     marker.unlink()
     reader.join(timeout=30)
     assert not reader.is_alive()

@@ -5,7 +5,9 @@
 one page after the other, and the API pages, which only import the package, come first.
 Before it reads a page that shows executed cells, the build waits until the notebooks are in
 the cache: while the file named by the environment variable :data:`PENDING` exists and the
-process whose id it holds (the one executing the notebooks) is alive.
+process whose id it holds (the one executing the notebooks) is alive. It first creates that
+file's name + ``.waiting``: the executor then runs notebooks on every core (one until then, so
+that no notebook that times its code shares its core with the build).
 
 Without that variable (a plain ``jupyter-book build``) nothing waits and nothing is reordered.
 """
@@ -54,6 +56,7 @@ def wait_for_notebooks(app, docname: str, source: list[str]) -> None:
     pending = os.environ.get(PENDING)
     if not pending or needs_no_execution(docname):
         return
+    Path(pending + ".waiting").touch()  # tells the executor that this process no longer needs a core
     start = time.monotonic()
     while executing(Path(pending)):
         time.sleep(POLL)
