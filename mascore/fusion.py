@@ -39,8 +39,10 @@ Each filter has ``predict(x, P)`` (``x- = F x``, ``P- = F P F^T + Q``, by
 communication round(s)) and ``run(x0, P0, z)``. The model is checked once, when
 it is built (shapes, finite entries, symmetric positive (semi)definite
 covariances, a symmetric graph) and keeps read-only copies; a step checks only
-the shapes of what it is given and that its result is finite (naming the input
-that holds a NaN or inf). Filters hold no estimates and no caches: a filter
+the shapes of what it is given, that its covariances and measurements are finite
+(one pass over each) and that its result is finite (naming the input that holds
+a NaN or inf). The message and pair methods that :mod:`mascore.fusion_links` calls
+per step check their inputs the same way. Filters hold no estimates and no caches: a filter
 object is immutable and safe to share between threads. Randomness
 (``SensorNetworkModel.simulate``) comes only from the generator passed in.
 

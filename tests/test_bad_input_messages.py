@@ -1,0 +1,135 @@
+"""Issue 31 item 7, second probe: the public methods added for the links and the per-step sensing.
+
+The consensus filters' message and pair methods (what :mod:`mascore.fusion_links` calls per step),
+``SensorNetworkModel.information_vectors``, ``LinearGaussianModel.with_measurement`` and
+``agent_inputs`` returned NaN, or took an infinite covariance as zero information, or failed deep
+inside numpy. One test per class of finding: a NaN, an infinite covariance, an indefinite or
+singular matrix, a wrong shape; each refused by name, before any work.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from mascore import fusion, graphs, kalman, sensor_network
+
+N, n = 3, 2
+MODEL = sensor_network.SensorNetworkModel(np.eye(n), 0.1 * np.eye(n), [np.eye(n)] * N, [np.eye(n)] * N,
+                                          graphs.ring_graph(N))
+CI = fusion.ConsensusOnInformationFilter(MODEL, 1)
+HCMCI = fusion.ConsensusOnInformationFilter(MODEL, 1, novelty_weight="N")
+ICF = fusion.InformationConsensusFilter(MODEL, 1)
+KF = kalman.LinearGaussianModel(np.eye(n), 0.1 * np.eye(n), [[1.0, 0.0]], [[1.0]])
+
+
+def _state():
+    return np.zeros((N, n)), np.stack([np.eye(n)] * N), np.ones(N * n)
+
+
+def _spoiled(arg, value):
+    x, P, z = _state()
+    {"x": x, "P": P, "z": z}[arg].flat[0] = value
+    return x, P, z
+
+
+MESSAGES = [CI.message_pair, CI.message_pairs, HCMCI.message_pairs, ICF.message_pair, ICF.message_pairs]
+
+
+@pytest.mark.parametrize("method", MESSAGES)
+@pytest.mark.parametrize("arg", ["x", "P", "z"])
+def test_a_nan_in_a_message_is_refused_by_name(method, arg):
+    with pytest.raises(ValueError, match=rf"^{arg} contains NaN or infinite entries"):
+        method(*_spoiled(arg, np.nan))
+
+
+@pytest.mark.parametrize("method", MESSAGES)
+def test_an_infinite_covariance_is_not_sent_as_zero_information(method):
+    x, P, z = _spoiled("P", np.inf)
+    with pytest.raises(ValueError, match=r"^P contains NaN or infinite entries"):
+        method(x, P, z)
+
+
+@pytest.mark.parametrize("filt,names", [(CI, ("Om", "q")), (ICF, ("V", "v"))])
+@pytest.mark.parametrize("value", [np.nan, np.inf])
+def test_a_non_finite_pair_is_refused_by_name(filt, names, value):
+    Om, q = np.stack([np.eye(n)] * N), np.ones((N, n))
+    for k, name in enumerate(names):
+        pair = [Om.copy(), q.copy()]
+        pair[k].flat[0] = value
+        with pytest.raises(ValueError, match=rf"^{name} contains NaN or infinite entries"):
+            filt.pair_estimate(*pair)
+    with pytest.raises(ValueError, match=r"^pairs\[1\]\[0\] contains NaN"):
+        HCMCI.pairs_estimate([(Om, q), (np.full_like(Om, value), q)])
+
+
+@pytest.mark.parametrize("filt,name", [(CI, "Om"), (ICF, "V")])
+def test_a_singular_information_matrix_is_refused_by_name(filt, name):
+    with pytest.raises(ValueError, match=rf"^{name} must be positive definite \(invertible\)"):
+        filt.pair_estimate(np.zeros((N, n, n)), np.ones((N, n)))
+
+
+@pytest.mark.parametrize("R,match", [
+    ([[np.nan]], r"^R contains NaN"), ([[np.inf]], r"^R contains NaN"),
+    ([[-1.0]], r"^R must be positive definite"), ([[0.0]], r"^R must be positive definite"),
+    (np.eye(2), r"^Incompatible dimensions of R \(2, 2\) for H \(1, 2\)"),
+])
+def test_a_new_measurement_noise_is_checked_in_full(R, match):
+    with pytest.raises(ValueError, match=match):
+        KF.with_measurement([[1.0, 0.0]], R)
+
+
+@pytest.mark.parametrize("H,match", [([[np.nan, 0.0]], r"^H contains NaN"), ([[np.inf, 0.0]], r"^H contains NaN"),
+                                     ([[1.0, 0.0, 0.0]], r"^Incompatible dimensions of H")])
+def test_a_new_measurement_matrix_is_checked_in_full(H, match):
+    with pytest.raises(ValueError, match=match):
+        KF.with_measurement(H, [[1.0]])
+
+
+def test_no_trusted_flag_skips_the_checks():
+    with pytest.raises(TypeError, match="check"):
+        KF.with_measurement([[1.0, 0.0]], [[np.nan]], check=False)
+    with pytest.raises(TypeError, match="check"):
+        MODEL.information_vectors(np.full(N * n, np.nan), check=False)
+    with pytest.raises(ValueError, match=r"^z contains NaN"):
+        MODEL.information_vectors(np.full(N * n, np.nan))
+
+
+def test_an_indefinite_covariance_is_refused_by_agent_inputs():
+    x, P, z = _state()
+    P[1] = -np.eye(n)
+    with pytest.raises(ValueError, match=r"^P must be positive definite"):
+        fusion.CovarianceIntersectionFilter(MODEL).agent_inputs(x, P, z, 0)
+    with pytest.raises(ValueError, match=r"^P must be positive semidefinite"):
+        KF.agent_inputs(np.zeros((N, n)), -np.eye(n), np.ones((N, 1)), None, 0)
+
+
+@pytest.mark.parametrize("call,name", [
+    (lambda: CI.pair_estimate(np.stack([np.eye(n)] * (N - 1)), np.ones((N, n))), "Om"),
+    (lambda: ICF.pair_estimate(np.stack([np.eye(n)] * N), np.ones((N - 1, n))), "v"),
+    (lambda: CI.pair_estimate(np.stack([np.eye(n)] * N), "q"), "q"),
+    (lambda: fusion.CovarianceIntersectionFilter(MODEL).agent_inputs(np.zeros((N, n)), np.ones((1, N, n, n)),
+                                                                     np.ones(N * n), 0), "P"),
+    (lambda: KF.agent_inputs(np.zeros((1, n)), np.eye(n), np.ones((N, 1)), None, 1), "x"),
+    (lambda: KF.agent_inputs(np.zeros((N, n)), np.ones((1, n, n)), np.ones((N, 1)), None, 1), "P"),
+    (lambda: kalman.run_filter(np.zeros((1, 1, 1)), [[1.0]], np.ones((3, 1)), [[1.0]], [[0.0]], [[1.0]], [[1.0]]),
+     "x0"),
+    (lambda: kalman.LinearGaussianModel(np.eye(n), np.eye(n), np.ones((3, n)), np.eye(2)), "H"),
+    (lambda: MODEL.information_vectors(np.ones(N * n - 1)), "z"),
+])
+def test_a_wrong_shape_is_refused_naming_the_argument(call, name):
+    with pytest.raises((ValueError, TypeError)) as info:
+        call()
+    assert re.search(rf"\b{name}\b", str(info.value)), str(info.value)
+
+
+def test_the_checked_methods_give_the_numbers_of_the_filters_update():
+    x, P, z = _state()
+    for filt in (CI, ICF):
+        W = filt.round_weights
+        Om, q = filt.message_pair(x, P, z)
+        mixed = filt.pair_estimate(np.einsum("ij,jab->iab", W, Om), W @ q)
+        for a, b in zip(mixed, filt.update(x, P, z)):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=0)
