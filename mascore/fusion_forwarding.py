@@ -265,6 +265,7 @@ class SetMembershipForwardingFilter(NetworkFilter):
         """
         x, P = self._check_xP(x, P)
         require_finite(x, "x")  # the shape's prediction does not see the centre
+        require_finite(P, "P")
         _, shape = self._motion.predict(np.zeros(self.model.n_states), P)
         return x @ self.model.F.T, shape
 
