@@ -14,7 +14,7 @@ import re
 import numpy as np
 import pytest
 
-from mascore import fusion, graphs, kalman, sensor_network
+from mascore import fusion, fusion_forwarding, fusion_links, graphs, kalman, sensor_network
 
 N, n = 3, 2
 MODEL = sensor_network.SensorNetworkModel(np.eye(n), 0.1 * np.eye(n), [np.eye(n)] * N, [np.eye(n)] * N,
@@ -133,3 +133,34 @@ def test_the_checked_methods_give_the_numbers_of_the_filters_update():
         mixed = filt.pair_estimate(np.einsum("ij,jab->iab", W, Om), W @ q)
         for a, b in zip(mixed, filt.update(x, P, z)):
             np.testing.assert_allclose(a, b, rtol=1e-12, atol=0)
+
+
+# the links' module (not probed before: it is imported by name, not listed in mascore.__all__)
+
+
+@pytest.mark.parametrize("call,match", [
+    (lambda: fusion_links.delivered_weights(np.full((N, N), np.nan), np.ones((N, N))), r"^W contains NaN"),
+    (lambda: fusion_links.delivered_weights(CI.round_weights, np.full((N, N), np.inf)), r"^delivered contains NaN"),
+    (lambda: fusion_links.track_forwarding(MODEL, np.zeros(n), np.eye(n), np.ones((2, N * n)),
+                                           np.full((2, N, N), np.nan)), r"^delivered contains NaN"),
+    (lambda: fusion_links.track_messages([CI] * 2, np.zeros(n), np.eye(n), np.ones((2, N * n)), send_delta="0.5"),
+     r"^send_delta must be a real number"),
+    (lambda: fusion_links.track_messages([CI] * 2, np.zeros(n), np.eye(n), np.ones((2, N * n)), send_delta=1e300),
+     r"^send_delta must be a distance from 0 to 1e150"),
+    (lambda: fusion_links.lossy_graphs(MODEL.adjacency, "0.1", 3, 0), r"^loss must be a real number"),
+    (lambda: fusion_links.lossy_graphs(MODEL.adjacency, 1.0, 3, 0), r"^loss must be a probability in \[0, 1\)"),
+    (lambda: fusion_links.lossy_graphs(MODEL.adjacency, 0.1, 3, None), r"^rng must be a numpy.random.Generator"),
+    (lambda: fusion_links.lossy_graphs(MODEL.adjacency, 0.1, 3, -1), r"^rng must be a numpy.random.Generator"),
+    (lambda: fusion_links.lossy_graphs(MODEL.adjacency, 0.1, 10**12, 0), r"^n_steps = 1000000000000 is more than"),
+    (lambda: fusion_forwarding.SetMembershipForwardingFilter(MODEL).predict(*_spoiled("P", np.nan)[:2]),
+     r"^P contains NaN"),
+])
+def test_the_links_refuse_bad_input_by_name(call, match):
+    with pytest.raises((ValueError, TypeError), match=match):
+        call()
+
+
+def test_the_lossy_graphs_of_a_seed_and_of_its_generator_are_the_same():
+    a = fusion_links.lossy_graphs(MODEL.adjacency, 0.3, 20, 4, per_direction=True, n_runs=3)
+    b = fusion_links.lossy_graphs(MODEL.adjacency, 0.3, 20, np.random.default_rng(4), per_direction=True, n_runs=3)
+    assert a.tobytes() == b.tobytes() and 0 < (a == 0).sum() < a.size
