@@ -75,7 +75,7 @@ RECORDS = frozenset({
     "papers.bhattacharjee2021.SetMembershipResult", "papers.ren2005.Fig1Result", "papers.song2023.Fig2Result",
     "papers.song2023.Fig3Result", "papers.song2023.RendezvousRun", "papers.vlahakis.ObserverResult",
     "rendezvous.RendezvousResult", "set_membership.FilterHistory", "synchronization.SyncDesign",
-    "settings.SettingsView", "registry.SettingsView",
+    "settings.SettingsView", "registry.SettingsView", "papers.ren2005.SwitchingDemo", "papers.vlahakis.Fig12Result",
 })
 
 #: Outcomes the API documents: (function, argument, spoil) patterns and why the value is valid there.
