@@ -4,7 +4,8 @@ The consensus filters' message and pair methods (what :mod:`mascore.fusion_links
 ``SensorNetworkModel.information_vectors``, ``LinearGaussianModel.with_measurement`` and
 ``agent_inputs`` returned NaN, or took an infinite covariance as zero information, or failed deep
 inside numpy. One test per class of finding: a NaN, an infinite covariance, an indefinite or
-singular matrix, a wrong shape; each refused by name, before any work.
+singular matrix, a wrong shape; each refused by name, before any work. Then the findings of the whole
+probe run after those fixes (modules it had not covered, public names added since the last full probe).
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ import re
 import numpy as np
 import pytest
 
-from mascore import fusion, fusion_forwarding, fusion_links, graphs, kalman, sensor_network
+from mascore import compare, fusion, fusion_forwarding, fusion_links, graphs, kalman, noise, sensor_network
+from mascore.consensus_filters import KalmanConsensusFilter
 
 N, n = 3, 2
 MODEL = sensor_network.SensorNetworkModel(np.eye(n), 0.1 * np.eye(n), [np.eye(n)] * N, [np.eye(n)] * N,
@@ -23,6 +25,7 @@ CI = fusion.ConsensusOnInformationFilter(MODEL, 1)
 HCMCI = fusion.ConsensusOnInformationFilter(MODEL, 1, novelty_weight="N")
 ICF = fusion.InformationConsensusFilter(MODEL, 1)
 KF = kalman.LinearGaussianModel(np.eye(n), 0.1 * np.eye(n), [[1.0, 0.0]], [[1.0]])
+KCF, KCF_G = KalmanConsensusFilter(0.0, 0.0), np.stack([graphs.path_graph(3)] * 5)
 
 
 def _state():
@@ -164,3 +167,37 @@ def test_the_lossy_graphs_of_a_seed_and_of_its_generator_are_the_same():
     a = fusion_links.lossy_graphs(MODEL.adjacency, 0.3, 20, 4, per_direction=True, n_runs=3)
     b = fusion_links.lossy_graphs(MODEL.adjacency, 0.3, 20, np.random.default_rng(4), per_direction=True, n_runs=3)
     assert a.tobytes() == b.tobytes() and 0 < (a == 0).sum() < a.size
+
+
+# the rest of the whole probe: a trusted flag of the samplers, names of a run's arguments, a task's inputs
+
+
+@pytest.mark.parametrize("call,match", [
+    (lambda: noise.psd_factor(np.array([[np.nan, 0.0], [0.0, 1.0]])), r"^M contains NaN"),
+    (lambda: noise.psd_factor(np.array([[np.inf, 0.0], [0.0, 1.0]]), cholesky_first=True), r"^M contains NaN"),
+    (lambda: noise.psd_factor(np.eye(2), check=False), r"check"),
+    (lambda: noise.gaussian(np.random.default_rng(0), np.eye(2), size=10**12), r"^size asks for too much"),
+    (lambda: noise.uniform_box(np.random.default_rng(0), [0.0, 0.0], [1.0, 1.0], size=10**12),
+     r"^size asks for too much"),
+    (lambda: KCF.fuse(np.array([[0.0], [np.nan], [4.0]]), np.ones((3, 1, 1)), KCF_G), r"^xi contains NaN"),
+    (lambda: KCF.fuse(np.array([[0.0], [2.0], [4.0]]), np.ones((2, 1, 1)), KCF_G), r"^P must have shape"),
+    (lambda: KCF.fuse(np.array([[0.0], [2.0], [4.0]]), np.ones((3, 1, 1)), KCF_G[0]), r"^G must have shape"),
+    (lambda: KCF.fuse(np.array([[0.0], [2.0], [4.0]]), np.ones((3, 1, 1)), KCF_G + np.eye(3)),
+     r"^G must have a zero diagonal"),
+    (lambda: compare.team_setup(4, "gaussian", np.nan, compare.SETTINGS), r"^q_scale must be a finite number"),
+    (lambda: compare.make_estimator("local", compare.team_setup(4, "gaussian", 1.0, compare.SETTINGS),
+                                    np.full((1, 4, 4), np.inf)), r"^x_hat0 contains NaN"),
+    (lambda: compare.make_estimator("local", compare.team_setup(4, "gaussian", 1.0, compare.SETTINGS),
+                                    np.zeros((4, 4))), r"^x_hat0 must have shape \(R, N, n\)"),
+])
+def test_the_rest_of_the_api_refuses_bad_input_by_name(call, match):
+    with pytest.raises((ValueError, TypeError), match=match):
+        call()
+
+
+def test_the_sampler_factor_is_the_checked_one_for_stacks_and_singular_matrices():
+    rng = np.random.default_rng(2)
+    G = rng.standard_normal((3, 2, 2))
+    for M in (G @ np.swapaxes(G, -1, -2), np.outer([1.0, 2.0], [1.0, 2.0])):
+        F = noise.psd_factor(M)
+        np.testing.assert_allclose(F @ np.swapaxes(F, -1, -2), M, atol=1e-12)
