@@ -175,7 +175,8 @@ def update_rows(X, P, z, observed, R, scale, work=None):
     if work is None:
         work = Scratch(c, N, m)
     Ct = work.rows[: gather.size * M].reshape(gather.size, M)
-    Ct = np.take(P.reshape(c * M, M), gather, axis=0, out=Ct).reshape(c, qa * m, M)  # H Sigma, (c, q, M)
+    # mode="clip": the indices are in range, and numpy buffers `out` in the default mode ("raise"), a second copy
+    Ct = np.take(P.reshape(c * M, M), gather, axis=0, out=Ct, mode="clip").reshape(c, qa * m, M)  # H Sigma
     q_max = qa * m
     rows = (np.arange(c) * (q_max * M))[:, None, None] + (np.arange(q_max) * M)[None, :, None]
     S = np.take(Ct, rows + idx[:, None, :])  # H Sigma H^T, (c, q, q)
