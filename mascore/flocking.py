@@ -81,9 +81,10 @@ from ._flocking_core import check_vectors as _vectors
 from ._flocking_core import check_weights as _check_weights
 from ._flocking_core import finite_where_input_is as _finite_where_input_is
 from ._flocking_core import float_array as _float_array
+from ._sensing_kernels import masked_measurement
 from ._validation import check_generator, check_positive, finite_result
 from .graphs import complete_graph, proximity_graph
-from .sensing import measure, team_noise_covariance
+from .sensing import team_noise_covariance
 
 __all__ = [
     "DIVERGENCE_LIMIT",
@@ -506,20 +507,21 @@ def simulate_measured_flocking(
     dt = _check_dt(dt)
     _check_gains(gains)
     Lq = _core.noise_factor(Q, "Q", m)
-    team_noise_covariance(_float_array(R, "R"), N, m)  # validates R early
+    R_team = team_noise_covariance(_float_array(R, "R"), N, m)  # checked once; the loop runs the kernels
     if sensing_range is not None:
         sensing_range = _check_range(sensing_range, "use None for a fully connected network")
     batch = X.shape[:-2]
     Xs = np.empty((n_steps + 1, *X.shape))
     As = np.empty((n_steps + 1, *batch, N, N), dtype=bool)
     full = complete_graph(N).astype(bool)
+    closed = np.eye(N, dtype=bool)  # every agent measures itself
     for k in range(n_steps + 1):
         A_k = full if sensing_range is None else proximity_graph(X[..., :n], sensing_range).astype(bool)
         Xs[k] = X
         As[k] = A_k
         if k == n_steps:
             break
-        views, _ = measure(rng, X, A_k, R, allow_isolated=True)  # eq. (2)
+        views, _ = masked_measurement(rng, X, A_k | closed, R_team)  # eq. (2), closed neighbourhoods
         U = control_from_views(views, gains, A_k)  # eq. (7)
         X = _core.propagate(X, U, dt) + rng.standard_normal((*batch, N, m)) @ Lq.T
         _core.check_divergence(X, k + 1, dt)

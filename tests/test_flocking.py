@@ -182,6 +182,27 @@ def test_simulation_is_deterministic_and_shaped():
     np.testing.assert_array_equal(a.X[:, 0], X0)
 
 
+def test_simulation_measures_as_the_public_sensing_does():
+    """The loop's sensing (kernels, checked once) equals eq. (2) by :func:`mascore.sensing.measure` each step:
+    the same draws from the same generator give the same trajectories, bit for bit (ranged and full graph)."""
+    from mascore import graphs, sensing
+
+    X0 = _random_team(np.random.default_rng(8), (3,), N=5)
+    R, dt, steps = np.diag([4.0, 1.0, 0.5, 0.25]), 0.1, 15
+    for sensing_range in (150.0, None):
+        run = flocking.simulate_measured_flocking(X0, steps, dt, GAINS, np.zeros((4, 4)), R, 3, sensing_range)
+        rng, X = np.random.default_rng(3), X0.copy()
+        for k in range(steps):
+            A = (np.ones((5, 5)) - np.eye(5) if sensing_range is None
+                 else graphs.proximity_graph(X[..., :2], sensing_range))
+            views, _ = sensing.measure(rng, X, A, R, allow_isolated=True)
+            U = flocking.control_from_views(views, GAINS, A.astype(bool))
+            p, v = X[..., :2], X[..., 2:]
+            X = np.concatenate([p + dt * v + 0.5 * dt**2 * U, v + dt * U], axis=-1)
+            X = X + rng.standard_normal(X.shape) @ np.zeros((4, 4))  # the process-noise draw (Q = 0)
+            assert run.X[:, k + 1].tobytes() == X.tobytes(), (sensing_range, k)
+
+
 def test_flock_spread_of_known_configuration():
     X = np.array([[1.0, 0, 2, 0], [-1.0, 0, -2, 0]])
     std_p, std_v = flocking.flock_spread(X)
