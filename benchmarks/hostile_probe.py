@@ -75,7 +75,7 @@ RECORDS = frozenset({
     "papers.bhattacharjee2021.SetMembershipResult", "papers.ren2005.Fig1Result", "papers.song2023.Fig2Result",
     "papers.song2023.Fig3Result", "papers.song2023.RendezvousRun", "papers.vlahakis.ObserverResult",
     "rendezvous.RendezvousResult", "set_membership.FilterHistory", "synchronization.SyncDesign",
-    "settings.SettingsView",
+    "settings.SettingsView", "registry.SettingsView", "papers.ren2005.SwitchingDemo", "papers.vlahakis.Fig12Result",
 })
 
 #: Outcomes the API documents: (function, argument, spoil) patterns and why the value is valid there.
@@ -86,7 +86,7 @@ DOCUMENTED = (
     (r"^ellipsoids\.contains$", r"^rtol$", r"^zero$", "rtol = 0: the exact test"),
     (r"^agent_cost\.", r"^min_time$", r"^zero$", "min_time = 0: one repeat"),
     (r"^noise\.", r"^size$", r"^zero$", "size = 0: an empty draw, as numpy's"),
-    (r"^ledger\.format_(number|value)$", r".", r"^(inf|nan)( entry)?$", "formats NaN and inf as text"),
+    (r"^(ledger|formatting)\.format_(number|value)$", r".", r"^(inf|nan)( entry)?$", "formats NaN and inf as text"),
     (r"^plotting\.plot_(band|trajectories)$", r".", r"^(inf|nan) entry$", "matplotlib draws NaN as a gap"),
     (r"^kalman\.predict$", r"^P$", r"^indefinite$", "a step checks shapes and a finite result only (module text)"),
     (r"^(centralized_team_filter\.CentralizedTeamFilter|own_state\.CentralizedOutputFilter)\.agent_inputs$", r"^i$",
@@ -102,12 +102,15 @@ NONFINITE_DOCUMENTED = re.compile(r"``\+?inf``|returns ``nan``|``nan`` (if|when|
 
 
 def module_names() -> list[str]:
-    """Every public module: the submodules in ``mascore.__all__`` and the paper modules."""
+    """Every public module: the submodules in ``mascore.__all__``, the package's other public modules (such as
+    ``fusion_links``, imported by name only) and the paper modules."""
     import mascore
     import mascore.papers
 
     names = [m for m in mascore.__all__ if inspect.ismodule(getattr(mascore, m, None))
              or importlib.util.find_spec(f"mascore.{m}") is not None]
+    names += sorted(p.stem for p in Path(mascore.__file__).parent.glob("*.py")
+                    if not p.stem.startswith("_") and p.stem not in names)
     names = [m for m in names if m not in ("papers", "exceptions")]
     papers = sorted(p.stem for p in Path(mascore.papers.__file__).parent.glob("*.py") if not p.stem.startswith("_"))
     return names + [f"papers.{p}" for p in papers]

@@ -175,12 +175,20 @@ def update_rows(X, P, z, observed, R, scale, work=None):
     if work is None:
         work = Scratch(c, N, m)
     Ct = work.rows[: gather.size * M].reshape(gather.size, M)
-    Ct = np.take(P.reshape(c * M, M), gather, axis=0, out=Ct).reshape(c, qa * m, M)  # H Sigma, (c, q, M)
+    # mode="clip": the indices are in range, and numpy buffers `out` in the default mode ("raise"), a second copy
+    Ct = np.take(P.reshape(c * M, M), gather, axis=0, out=Ct, mode="clip").reshape(c, qa * m, M)  # H Sigma
     q_max = qa * m
+    # the (c, q, q) gathers run in the chunk's work arrays: fresh arrays of that size (2 MB at N = 8, 256 filters)
+    # cost a page fault per 4 kB on every call. Each is dead before its array's own use below: the flat indices
+    # (in V, as integers) before V, S (in T) after the Cholesky factors, H R H^T (in acc) before any product.
+    nq = c * q_max * q_max
+    ij = work.V.view(np.intp)[:nq].reshape(c, q_max, q_max)
     rows = (np.arange(c) * (q_max * M))[:, None, None] + (np.arange(q_max) * M)[None, :, None]
-    S = np.take(Ct, rows + idx[:, None, :])  # H Sigma H^T, (c, q, q)
-    pairs = idx[:, :, None] * M + idx[:, None, :]  # flat (row, column) indices of the observed block
-    S += np.take(R, pairs)  # eq. (17); only the leading q_k x q_k block of filter k is used
+    np.add(rows, idx[:, None, :], out=ij)  # flat indices of H Sigma H^T in Ct
+    S = np.take(Ct, ij, out=work.T.reshape(-1)[:nq].reshape(c, q_max, q_max), mode="clip")  # H Sigma H^T
+    np.multiply(idx[:, :, None], M, out=ij)
+    ij += idx[:, None, :]  # flat (row, column) indices of the observed block in R
+    S += np.take(R, ij, out=work.acc[:nq].reshape(c, q_max, q_max), mode="clip")  # eq. (17): + H R H^T
     flat = (np.arange(c) * M)[:, None] + idx
     nu = np.take(z, flat) - np.take(x, flat)  # H (z - X), eq. (16)
     q = counts * m
@@ -247,7 +255,8 @@ class Scratch:
     """Work arrays of one chunk of filters, owned by one :class:`FlockingEKF` and kept between its calls.
 
     Fresh large temporaries are expensive: the allocator returns freed memory to the system and the next
-    first touch page-faults, so the kernels write into these instead.
+    first touch page-faults, so the kernels write into these instead. :func:`update_rows` also runs its
+    ``(c, q, q)`` gathers in `V`, `T` and `acc` before their main use.
     """
 
     def __init__(self, c, N, m):

@@ -173,9 +173,12 @@ def control_and_jacobian(X: np.ndarray, gains: FlockingGains, with_control: bool
     U = np.empty((*batch, N, n)) if with_control else None
     G = np.empty((*batch, N, n, N, m)) if out is None else out
     Xt = np.ascontiguousarray(np.swapaxes(X, -1, -2))  # (..., m, N)
+    # the diagonal blocks du_i/dx_i = sum_{j != i} J(x_i - x_j) of G, as one strided view (..., N, n, m)
+    st = G.strides
+    D = np.lib.stride_tricks.as_strided(G, (*batch, N, n, m), (*st[:-4], st[-4] + st[-2], st[-3], st[-1]))
     rows = max(1, min(N, _PAIR_BLOCK // max(1, int(np.prod(batch, dtype=np.int64)) * N)))
     for i0 in range(0, N, rows):
-        _control_and_jacobian_rows(Xt, gains, i0, min(N, i0 + rows), U, G, scale)
+        _control_and_jacobian_rows(Xt, gains, i0, min(N, i0 + rows), U, G, D, scale)
     return U, G
 
 
@@ -183,8 +186,11 @@ def control_and_jacobian(X: np.ndarray, gains: FlockingGains, with_control: bool
 _PAIR_BLOCK = 8192
 
 
-def _control_and_jacobian_rows(Xt, gains, i0, i1, U, G, scale=1.0):
-    """Rows ``i0:i1`` (agents ``i``) of :func:`control_and_jacobian`, from ``Xt = X^T`` ``(..., m, N)``."""
+def _control_and_jacobian_rows(Xt, gains, i0, i1, U, G, D, scale=1.0):
+    """Rows ``i0:i1`` (agents ``i``) of :func:`control_and_jacobian`, from ``Xt = X^T`` ``(..., m, N)``.
+
+    `D` is the ``(..., N, n, m)`` strided view of `G`'s diagonal blocks.
+    """
     m, N = Xt.shape[-2:]
     n = m // 2
     batch = Xt.shape[:-2]
@@ -242,10 +248,7 @@ def _control_and_jacobian_rows(Xt, gains, i0, i1, U, G, scale=1.0):
             Ua += np.einsum("...ij,...ij->...i", ns_I, p[a])
             Ua *= -1.0 / k
     Gr = G[..., i0:i1, :, :, :]
-    # the diagonal blocks du_i/dx_i = sum_{j != i} J(x_i - x_j), as a strided view of G
-    st = G.strides
-    D = np.lib.stride_tricks.as_strided(G[..., i0:i1, :, i0:i1, :], (*batch, r, n, m),
-                                        (*st[:-4], st[-4] + st[-2], st[-3], st[-1]))
+    D = D[..., i0:i1, :, :]  # the diagonal blocks of these rows
     t2 = np.empty(t.shape)
     for b in range(n):  # each entry of -J computed in contiguous arrays, then written once into its slot of G
         pb = p[b]

@@ -191,7 +191,7 @@ class NetworkFilter(Frozen):
         x : (N, n) array_like
             Every agent's estimate before the step (``(n,)`` for the centralized filter).
         P : (N, n, n) array_like
-            Their covariances (``(n, n)`` for the centralized filter).
+            Their covariances, symmetric positive definite (``(n, n)`` for the centralized filter).
         z : (sum q_i,) array_like
             The step's stacked measurement.
         i : int
@@ -226,10 +226,12 @@ class NetworkFilter(Frozen):
         """
         x, P = self._check_xP(x, P)
         z = require_finite(self.model._check_z(z), "z")
-        batch = x.shape[:-2] if self._per_agent else x.shape[:-1]
+        batch = x.shape[:-2] + P.shape[:-3] if self._per_agent else x.shape[:-1] + P.shape[:-2]
         if z.ndim != 1 or batch:
-            raise ValueError(f"agent_inputs takes one run: x ({'N, ' if self._per_agent else ''}n) and z (sum q_i,); "
-                             f"got x {x.shape}, z {z.shape}")
+            one = "N, " if self._per_agent else ""
+            raise ValueError(f"agent_inputs takes one run: x ({one}n), P ({one}n, n) and z (sum q_i,); got x {x.shape}, "
+                             f"P {P.shape}, z {z.shape}")
+        x, P = self.model.check_state(x, P, ("x", "P"), per_agent=self._per_agent)  # finite, P positive definite
         N, n = self.model.n_agents, self.model.n_states
         i = check_positive_int(i, "i", minimum=0)
         if i >= N:
@@ -315,24 +317,53 @@ class NetworkFilter(Frozen):
         Pn = 0.5 * (Pn + Pn.T)
         return xp + Pn @ (iv - S @ xp), Pn
 
-    def _check_xP(self, x: ArrayLike, P: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        x, P = float_array(x, "x"), float_array(P, "P")
+    def _check_xP(self, x: ArrayLike, P: ArrayLike, names: tuple[str, str] = ("x", "P")
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """`x` ``(..., N, n)`` and `P` ``(..., N, n, n)`` (``(..., n)``, ``(..., n, n)`` for the centralized filter)
+        as float arrays of the model's sizes with broadcasting batch axes; `names` in the messages."""
+        xname, Pname = names
+        x, P = float_array(x, xname), float_array(P, Pname)
         n, N = self.model.n_states, self.model.n_agents
         if self._per_agent:
             if x.ndim < 2 or x.shape[-2:] != (N, n):
-                raise ValueError(f"Incompatible dimensions of x; expected (..., N, n) = (..., {N}, {n}) but found "
-                                 f"{x.shape}")
+                raise ValueError(f"Incompatible dimensions of {xname}; expected (..., N, n) = (..., {N}, {n}) but "
+                                 f"found {x.shape}")
             if P.ndim < 3 or P.shape[-3:] != (N, n, n):
-                raise ValueError(f"Incompatible dimensions of P; expected (..., N, n, n) = (..., {N}, {n}, {n}) but "
-                                 f"found {P.shape}")
-            broadcast_batch("x", x.shape[:-2], "P", P.shape[:-3])
+                raise ValueError(f"Incompatible dimensions of {Pname}; expected (..., N, n, n) = (..., {N}, {n}, {n}) "
+                                 f"but found {P.shape}")
+            broadcast_batch(xname, x.shape[:-2], Pname, P.shape[:-3])
         else:
             if x.ndim < 1 or x.shape[-1] != n:
-                raise ValueError(f"Incompatible dimensions of x; expected (..., {n}) but found {x.shape}")
+                raise ValueError(f"Incompatible dimensions of {xname}; expected (..., {n}) but found {x.shape}")
             if P.ndim < 2 or P.shape[-2:] != (n, n):
-                raise ValueError(f"Incompatible dimensions of P; expected (..., {n}, {n}) but found {P.shape}")
-            broadcast_batch("x", x.shape[:-1], "P", P.shape[:-2])
+                raise ValueError(f"Incompatible dimensions of {Pname}; expected (..., {n}, {n}) but found {P.shape}")
+            broadcast_batch(xname, x.shape[:-1], Pname, P.shape[:-2])
         return x, P
+
+    def _check_step(self, x: ArrayLike, P: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A step's predictions `x`, `P` and measurement `z` (the public message methods): shapes, batch axes
+        that broadcast, finite entries (an information form would turn an infinite variance into silent zeros)."""
+        x, P = self._check_xP(x, P)
+        z = self.model._check_z(z)
+        broadcast_batch("x", x.shape[:-2], "z", z.shape[:-1])
+        return require_finite(x, "x"), require_finite(P, "P"), require_finite(z, "z")
+
+    def _check_pair(self, Om: ArrayLike, q: ArrayLike, names: tuple[str, str]) -> tuple[np.ndarray, np.ndarray]:
+        """An information pair ``(Omega, q)`` given to a public method: ``(..., N, n, n)`` and ``(..., N, n)``,
+        batch axes that broadcast, finite entries; `names` in the messages."""
+        q, Om = self._check_xP(q, Om, names[::-1])
+        return require_finite(Om, names[0]), require_finite(q, names[1])
+
+    def _pair_result(self, kernel, Om: np.ndarray, q: np.ndarray, names: tuple[str, str]
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """``kernel(Om, q)`` (the estimate of a checked pair), refusing a singular `Om` or a result that overflows."""
+        try:
+            with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+                out = kernel(Om, q)
+        except np.linalg.LinAlgError:
+            raise ValueError(f"{names[0]} must be positive definite (invertible); got a singular matrix") from None
+        return finite_result("estimate of the information pair", *out,
+                             advice=f"{names[0]} is too close to singular or the values overflow floating point")
 
     def _correct(self, x: np.ndarray, P: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError

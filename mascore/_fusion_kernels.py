@@ -1,7 +1,8 @@
 """The kernels the fusion filters share (no checks of their own: callers check).
 
 Used by :mod:`mascore.sensor_network` and :mod:`mascore.fusion`: weighted mixes over the
-agent axis, information-form updates, consensus rounds, covariance-intersection weights.
+agent axis, information-form updates, consensus rounds, covariance-intersection weights; and the
+factor of a covariance that the samplers draw with (:func:`mascore.noise.psd_factor` checks, then calls it).
 """
 
 from __future__ import annotations
@@ -188,12 +189,23 @@ def from_information(Om, q):
     return (P @ q[..., None])[..., 0], P
 
 
+def psd_factor(M: np.ndarray, cholesky_first: bool = False) -> np.ndarray:
+    """:func:`mascore.noise.psd_factor` on a checked `M`: the Cholesky factor first if asked, else (or when `M`
+    is singular) :func:`psd_sqrt`."""
+    if cholesky_first:
+        try:
+            return np.linalg.cholesky(M)
+        except np.linalg.LinAlgError:
+            pass
+    return psd_sqrt(M)
+
+
 def psd_sqrt(M: np.ndarray) -> np.ndarray:
-    """A square root S of a PSD matrix (``S S^T = M``), from its eigen-decomposition."""
+    """A square root S of PSD matrices ``(..., m, m)`` (``S S^T = M``), from their eigen-decomposition."""
     if M.size == 0:
         return np.zeros_like(M)
     lam, V = np.linalg.eigh(M)
-    return V * np.sqrt(np.clip(lam, 0.0, None))
+    return V * np.sqrt(np.clip(lam, 0.0, None))[..., None, :]
 
 
 def broadcast_batch(aname: str, a: tuple, bname: str, b: tuple) -> tuple:

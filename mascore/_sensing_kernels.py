@@ -8,14 +8,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .noise import psd_factor
+from ._fusion_kernels import psd_factor
 
 __all__ = ["masked_measurement", "team_noise"]
 
 
 def team_noise(rng: np.random.Generator, R_team: np.ndarray, shape: tuple, n_agents: int, m: int) -> np.ndarray:
     """:func:`mascore.sensing.measurement_noise` without checks (`R_team` the full ``(m N, m N)`` covariance)."""
-    root = psd_factor(R_team, cholesky_first=True, check=False)
+    root = psd_factor(R_team, cholesky_first=True)
     std = rng.standard_normal((*shape, n_agents, n_agents * m))
     nu = std @ root.T
     return nu.reshape(*shape, n_agents, n_agents, m)

@@ -387,8 +387,8 @@ def eb_update_rows(Sb: np.ndarray, idx: np.ndarray, W: np.ndarray, Wt: np.ndarra
     work = buffer(2, 2 * Nq * C + Nq * Nq + 4 * N * Mr * q + Mr * C)
     if H_sel is None:
         cidx = (np.arange(N)[:, None] * Mr + idx).ravel()  # observed rows/columns (i, idx_i) of Σ^-
-        R = np.take(Sb, cidx, axis=0, out=work[:Nq * C].reshape(Nq, C))  # the observed rows, (N q, C)
-        Rc = np.take(R, cidx, axis=1, out=work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq))
+        R = np.take(Sb, cidx, axis=0, out=work[:Nq * C].reshape(Nq, C), mode="clip")  # observed rows (N q, C)
+        Rc = np.take(R, cidx, axis=1, out=work[Nq * C:Nq * C + Nq * Nq].reshape(Nq, Nq), mode="clip")
     else:  # H_i Σ^-: row block i of Σ^- seen through agent i's sensed outputs, and (H_i Σ^- H_i'^T)
         R = np.matmul(H_sel, Sb.reshape(N, Mr, C), out=work[:Nq * C].reshape(N, q, C)).reshape(Nq, C)
         Rc3 = np.matmul(R.reshape(Nq, N, Mr).transpose(1, 0, 2), np.swapaxes(H_sel, -1, -2))  # (N, Nq, q)

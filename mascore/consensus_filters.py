@@ -140,7 +140,7 @@ class KalmanConsensusFilter(Frozen):
         array([2., 2., 2.])
         """
         # noise-free messages; the arguments checked once, the steps those of update (the trajectory checked at the end)
-        run = kalman_consensus_discrete(xi, P, G, Q=self.Q, Omega=self.Omega)
+        run = kalman_consensus_discrete(*_run(xi, P, G), Q=self.Q, Omega=self.Omega)
         return run.xi[-1], run.P[-1]
 
     def agent_inputs(self, xi: ArrayLike, P: ArrayLike, G: ArrayLike, i: int) -> tuple[dict, tuple]:
@@ -518,6 +518,23 @@ def _links(G: ArrayLike) -> np.ndarray:
     if (G < 0).any():
         raise ValueError("G must hold non-negative link weights (G[i, j] > 0: agent i heard agent j)")
     return G
+
+
+def _run(xi: ArrayLike, P: ArrayLike, G: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A run's priors ``(..., N, m)``, their covariances ``(..., N, m, m)`` and its links ``(steps, ..., N, N)``,
+    refused by the names of :meth:`KalmanConsensusFilter.fuse`."""
+    xi, P, G = _finite(xi, "xi"), _finite(P, "P"), _links(G)
+    if xi.ndim < 2 or xi.shape[-1] == 0:
+        raise ValueError(f"xi must have shape (..., N, m) with m >= 1; got {xi.shape}")
+    N, m = xi.shape[-2:]
+    if P.shape != (*xi.shape, m):
+        raise ValueError(f"P must have shape (..., N, m, m) = {(*xi.shape, m)} for xi of shape {xi.shape}; got {P.shape}")
+    if G.ndim < 3 or G.shape[-2:] != (N, N):
+        raise ValueError(f"G must have shape (steps, ..., N, N) = (steps, ..., {N}, {N}) for xi of shape {xi.shape}; "
+                         f"got {G.shape}")
+    if np.diagonal(G, axis1=-2, axis2=-1).any():
+        raise ValueError("G must have a zero diagonal (an agent always uses its own state)")
+    return xi, P, G
 
 
 def _team(xi: ArrayLike, G: ArrayLike, P: ArrayLike | None = None,

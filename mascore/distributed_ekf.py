@@ -87,6 +87,7 @@ from ._flocking_core import check_steps as _check_steps
 from ._flocking_core import check_team as _check_team
 from ._flocking_core import float_array as _float_array
 from ._progress import progress_bar
+from ._sensing_kernels import masked_measurement
 from ._validation import (
     SYMMETRY_RTOL,
     Frozen,
@@ -102,7 +103,7 @@ from ._validation import (
 from .estimation import Message
 from .flocking import FlockingRun
 from .graphs import proximity_graph
-from .sensing import measure, team_noise_covariance
+from .sensing import team_noise_covariance
 
 __all__ = [
     "EKFModel",
@@ -1012,9 +1013,10 @@ def simulate_estimation_based_flocking(
     post = np.empty((*batch, N, M, M)) if record_nees else None  # the updated covariances, for the NEES
     X_all = np.empty((n_steps + 1, *batch, N, N, m)) if return_estimates else None
     pos_idx = (np.arange(N)[:, None] * m + np.arange(n)[None, :])  # (N, n) flat indices of positions
+    closed = np.eye(N, dtype=bool)  # every agent measures itself
     for k in progress_bar(range(n_steps + 1), enabled=progress, desc="EKF flocking", leave=False):
         A_k = proximity_graph(X[..., :n], sensing_range).astype(bool)
-        z, observed = measure(rng, X, A_k, model.R, allow_isolated=True)  # eqs. (2)-(3)
+        z, observed = masked_measurement(rng, X, A_k | closed, model.R)  # eqs. (2)-(3), closed neighbourhoods
         last = k == n_steps
         # eqs. (16)-(20), then (unless last) eq. (39) and eqs. (38), (40); the covariances overwritten in place
         X_hat, U, X_next, diag = ekf.step(z, observed, predict=not last, posterior_out=post)

@@ -39,8 +39,10 @@ Each filter has ``predict(x, P)`` (``x- = F x``, ``P- = F P F^T + Q``, by
 communication round(s)) and ``run(x0, P0, z)``. The model is checked once, when
 it is built (shapes, finite entries, symmetric positive (semi)definite
 covariances, a symmetric graph) and keeps read-only copies; a step checks only
-the shapes of what it is given and that its result is finite (naming the input
-that holds a NaN or inf). Filters hold no estimates and no caches: a filter
+the shapes of what it is given, that its covariances and measurements are finite
+(one pass over each) and that its result is finite (naming the input that holds
+a NaN or inf). The message and pair methods that :mod:`mascore.fusion_links` calls
+per step check their inputs the same way. Filters hold no estimates and no caches: a filter
 object is immutable and safe to share between threads. Randomness
 (``SensorNetworkModel.simulate``) comes only from the generator passed in.
 
@@ -200,7 +202,7 @@ class MeasurementForwardingFilter(_NetworkFilter):
         self._set(_S=frozen_copy(mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
-        i = mix(self.model._neighbourhood, self.model.information_vectors(z, check=False), 1)
+        i = mix(self.model._neighbourhood, self.model.information_vectors(z), 1)
         return information_update(x, P, self._S, i)
 
 
@@ -255,7 +257,7 @@ class DiffusionKalmanFilter(_NetworkFilter):
         self._set(weights=frozen_copy(C), _S=frozen_copy(mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
-        i = mix(self.model._neighbourhood, self.model.information_vectors(z, check=False), 1)
+        i = mix(self.model._neighbourhood, self.model.information_vectors(z), 1)
         psi, P_new = information_update(x, P, self._S, i)
         return mix(self.weights, psi, 1), P_new
 
@@ -269,7 +271,7 @@ class DiffusionKalmanFilter(_NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         psi, _ = information_update(xm, Pm, self._S, mix(self.model._neighbourhood,
-                                                     self.model.information_vectors(z, check=False), 1))
+                                                     self.model.information_vectors(z), 1))
         return (*super()._agent_messages(own, xm, Pm, z, i), psi[own["nbrs"]].copy())
 
     def _agent_step(self, i, own, messages):
@@ -364,7 +366,7 @@ class ConsensusOnInformationFilter(_NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         Om, q = information_pair(xm, Pm)
-        I, iv = self.model.information_matrices, self.model.information_vectors(z, check=False)
+        I, iv = self.model.information_matrices, self.model.information_vectors(z)
         pairs = [(Om, q), (np.broadcast_to(I, Om.shape), iv)] if self.novelty_weight != 1.0 else [(Om + I, q + iv)]
         return consensus_rounds(self.model.weights, pairs, own["nbrs"], self.n_consensus)
 
@@ -429,20 +431,23 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         if self.novelty_weight != 1.0:
             raise ValueError("message_pair: HCMCI (novelty_weight != 1) sends a prior and a novelty pair per round, "
                              "not one density; use novelty_weight=1 (CI)")
-        x, P = self._check_xP(x, P)
-        z = self.model._check_z(z)
-        Om, q = information_pair(x, P)
-        return Om + self.model.information_matrices, q + self.model.information_vectors(z, check=False)
+        return self._message_pair(*self._check_step(x, P, z))
 
-    def pair_estimate(self, Om: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _message_pair(self, x: np.ndarray, P: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        Om, q = information_pair(x, P)
+        return finite_result("message pair", Om + self.model.information_matrices,
+                             q + self.model.information_vectors(z), advice="P is too close to singular")
+
+    def pair_estimate(self, Om: ArrayLike, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """The estimate of a fused information pair: ``x = Omega^{-1} q``, ``P = Omega^{-1}``.
 
         Parameters
         ----------
-        Om : (..., N, n, n) ndarray
-            Information matrices, positive definite (e.g. weighted sums of :meth:`message_pair`'s).
-        q : (..., N, n) ndarray
-            Information vectors.
+        Om : (..., N, n, n) array_like
+            Information matrices, finite and positive definite (e.g. weighted sums of
+            :meth:`message_pair`'s; a singular one is refused, definiteness is not checked).
+        q : (..., N, n) array_like
+            Information vectors, finite.
 
         Returns
         -------
@@ -465,7 +470,7 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         <BLANKLINE>
                [[0.25]]]))
         """
-        return from_information(Om, q)
+        return self._pair_result(from_information, *self._check_pair(Om, q, ("Om", "q")), ("Om", "q"))
 
     @property
     def exchanges(self) -> int:
@@ -511,13 +516,12 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         ...                                                               [3.0, 0.0, 0.0])[0]))
         True
         """
+        x, P, z = self._check_step(x, P, z)
         if self.novelty_weight == 1.0:
-            return (self.message_pair(x, P, z),)
-        x, P = self._check_xP(x, P)
-        z = self.model._check_z(z)
-        Om, q = information_pair(x, P)
+            return (self._message_pair(x, P, z),)
+        Om, q = finite_result("message pair", *information_pair(x, P), advice="P is too close to singular")
         return (Om, q), (np.broadcast_to(self.model.information_matrices, Om.shape),
-                         self.model.information_vectors(z, check=False))
+                         self.model.information_vectors(z))
 
     def pairs_estimate(self, pairs: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
         """The estimate of the pairs after the rounds: CI :meth:`pair_estimate`; HCMCI ``Omega + w dOmega``, ``q + w dq``.
@@ -545,16 +549,18 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         >>> x[:, 0], P[:, 0, 0]
         (array([1.5, 1.5, 1.5]), array([0.25, 0.25, 0.25]))
         """
+        names = (("pairs[0][0]", "pairs[0][1]"), ("pairs[1][0]", "pairs[1][1]"))
+        pairs = [self._check_pair(Om, q, name) for (Om, q), name in zip(_pair_list(pairs, len(self.pair_scales)), names)]
         if self.novelty_weight == 1.0:
-            return self.pair_estimate(*pairs[0])
+            return self._pair_result(from_information, *pairs[0], names[0])
         (Om, q), (dOm, dq) = pairs
         w = self.novelty_weight
-        return from_information(symmetric_part(Om + w * dOm), q + w * dq)
+        return self._pair_result(from_information, symmetric_part(Om + w * dOm), q + w * dq, names[0])
 
     def _correct(self, x, P, z):
         Om, q = information_pair(x, P)
         Om = mix(self._WL, Om, 2) + self._SL
-        q = mix(self._WL, q, 1) + self.novelty_weight * mix(self._WL, self.model.information_vectors(z, check=False), 1)
+        q = mix(self._WL, q, 1) + self.novelty_weight * mix(self._WL, self.model.information_vectors(z), 1)
         return from_information(Om, q)
 
 
@@ -635,7 +641,7 @@ class InformationConsensusFilter(_NetworkFilter):
     def _agent_messages(self, own, xm, Pm, z, i):
         N = self.model.n_agents
         Om, q = information_pair(xm, Pm)
-        pairs = [(Om / N + self.model.information_matrices, q / N + self.model.information_vectors(z, check=False))]
+        pairs = [(Om / N + self.model.information_matrices, q / N + self.model.information_vectors(z))]
         return consensus_rounds(self._consensus_matrix(), pairs, own["nbrs"], self.n_iterations)
 
     def _agent_step(self, i, own, messages):
@@ -689,21 +695,22 @@ class InformationConsensusFilter(_NetworkFilter):
         >>> bool(np.allclose(P, icf.update(np.zeros((3, 1)), np.ones((3, 1, 1)), [3.0, 0.0, 0.0])[1]))
         True
         """
-        x, P = self._check_xP(x, P)
-        z = self.model._check_z(z)
+        x, P, z = self._check_step(x, P, z)
         N = self.model.n_agents
         J, q = information_pair(x, P)
-        return J / N + self.model.information_matrices, q / N + self.model.information_vectors(z, check=False)
+        return finite_result("message pair", J / N + self.model.information_matrices,
+                             q / N + self.model.information_vectors(z), advice="P is too close to singular")
 
-    def pair_estimate(self, V: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def pair_estimate(self, V: ArrayLike, v: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """The estimate of a fused pair: ``x = V^{-1} v``, ``P = (N V)^{-1}``.
 
         Parameters
         ----------
-        V : (..., N, n, n) ndarray
-            Information matrices, positive definite (e.g. weighted sums of :meth:`message_pair`'s).
-        v : (..., N, n) ndarray
-            Information vectors.
+        V : (..., N, n, n) array_like
+            Information matrices, finite and positive definite (e.g. weighted sums of
+            :meth:`message_pair`'s; a singular one is refused, definiteness is not checked).
+        v : (..., N, n) array_like
+            Information vectors, finite.
 
         Returns
         -------
@@ -721,6 +728,9 @@ class InformationConsensusFilter(_NetworkFilter):
         >>> x[:, 0], P[:, 0, 0]                                   # P = 1 / (N V)
         (array([2., 2., 2., 2.]), array([0.25, 0.25, 0.25, 0.25]))
         """
+        return self._pair_result(self._pair_estimate, *self._check_pair(V, v, ("V", "v")), ("V", "v"))
+
+    def _pair_estimate(self, V: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         Vinv = symmetric_part(np.linalg.inv(V))
         return (Vinv @ v[..., None])[..., 0], Vinv / self.model.n_agents
 
@@ -787,15 +797,15 @@ class InformationConsensusFilter(_NetworkFilter):
         >>> P[:, 0, 0]
         array([0.25, 0.25, 0.25, 0.25])
         """
-        return self.pair_estimate(*pairs[0])
+        (V, v), = _pair_list(pairs, 1)
+        return self.pair_estimate(V, v)
 
     def _correct(self, x, P, z):
         N = self.model.n_agents
         J, q = information_pair(x, P)
         V = mix(self._WK, J, 2) / N + self._SK
-        v = mix(self._WK, q, 1) / N + mix(self._WK, self.model.information_vectors(z, check=False), 1)
-        Vinv = symmetric_part(np.linalg.inv(V))
-        return (Vinv @ v[..., None])[..., 0], Vinv / N
+        v = mix(self._WK, q, 1) / N + mix(self._WK, self.model.information_vectors(z), 1)
+        return self._pair_estimate(V, v)
 
 
 class CovarianceIntersectionFilter(_NetworkFilter):
@@ -863,7 +873,7 @@ class CovarianceIntersectionFilter(_NetworkFilter):
 
     def _correct(self, x, P, z):
         M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
-        psi, P_loc = information_update(x, P, self._S, mix(M, self.model.information_vectors(z, check=False), 1))
+        psi, P_loc = information_update(x, P, self._S, mix(M, self.model.information_vectors(z), 1))
         Om, q = information_pair(psi, P_loc)  # (..., N, n, n), (..., N, n)
         N = self.model.n_agents
         C = np.zeros((*P_loc.shape[:-3], N, N))  # the weights: from the covariances only
@@ -891,7 +901,7 @@ class CovarianceIntersectionFilter(_NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
-        psi, P_loc = information_update(xm, Pm, self._S, mix(M, self.model.information_vectors(z, check=False), 1))
+        psi, P_loc = information_update(xm, Pm, self._S, mix(M, self.model.information_vectors(z), 1))
         Om, q = information_pair(psi[own["nbrs"]], P_loc[own["nbrs"]])
         received = super()._agent_messages(own, xm, Pm, z, i)
         return (received[0] if self.measurements == "neighbourhood" else (), (Om, q))
@@ -908,7 +918,7 @@ class CovarianceIntersectionFilter(_NetworkFilter):
         x : (N, n) array_like
             Every agent's estimate before the step.
         P : (N, n, n) array_like
-            Their covariances.
+            Their covariances, symmetric positive definite.
         z : (sum q_i,) array_like
             The step's stacked measurement.
         i : int
@@ -1545,3 +1555,12 @@ def _check_stochastic(C: ArrayLike, name: str, model: SensorNetworkModel) -> np.
         raise ValueError(f"{name} must be zero where the graph has no link (C[i, l] > 0 needs l = i or "
                          "adjacency[i, l] > 0)")
     return C
+
+
+def _pair_list(pairs: object, count: int) -> list[tuple[object, object]]:
+    """`pairs` as a list of `count` ``(Omega, q)`` pairs (what :meth:`pairs_estimate` takes), else a named error."""
+    if (isinstance(pairs, (str, bytes)) or not isinstance(pairs, Sequence) or len(pairs) != count
+            or not all(isinstance(p, Sequence) and not isinstance(p, (str, bytes)) and len(p) == 2 for p in pairs)):
+        raise TypeError(f"pairs must be a sequence of {count} (Omega, q) pair(s), as message_pairs gives; got "
+                        f"{type(pairs).__name__} {pairs!r:.80}")
+    return [tuple(p) for p in pairs]

@@ -92,14 +92,24 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._fusion_kernels import information_update, symmetric_part
-from ._validation import check_adjacency, check_positive_int, float_array, require_finite
+from ._validation import (
+    check_adjacency,
+    check_fits_in_memory,
+    check_generator,
+    check_positive,
+    check_positive_int,
+    check_probability,
+    check_steps,
+    float_array,
+    require_finite,
+)
 from .fusion import ConsensusOnInformationFilter, InformationConsensusFilter, MeasurementForwardingFilter
 from .fusion_forwarding import SetMembershipForwardingFilter
 
 __all__ = ["delivered_weights", "lossy_graphs", "track_behind", "track_forwarding", "track_messages"]
 
 
-def lossy_graphs(adjacency: ArrayLike, loss: float, n_steps: int, rng: np.random.Generator | int | None, *,
+def lossy_graphs(adjacency: ArrayLike, loss: float, n_steps: int, rng: np.random.Generator | int, *,
                  per_direction: bool = False, n_runs: int | None = None) -> np.ndarray:
     """The graphs of the links that delivered at each step, each link lost with probability `loss`.
 
@@ -116,9 +126,9 @@ def lossy_graphs(adjacency: ArrayLike, loss: float, n_steps: int, rng: np.random
     loss : float
         ``0 <= loss < 1``.
     n_steps : int
-        K >= 1 steps.
-    rng : numpy.random.Generator or int or None
-        The source of the losses.
+        K >= 1 steps (at most ``MAX_STEPS``).
+    rng : numpy.random.Generator or int
+        The source of the losses (a generator or a non-negative seed).
     per_direction : bool
         Lose each direction of a link independently (default: both at once).
     n_runs : int, optional
@@ -140,7 +150,11 @@ def lossy_graphs(adjacency: ArrayLike, loss: float, n_steps: int, rng: np.random
     >>> D.shape, bool((D == D.transpose(0, 1, 3, 2)).all())
     ((200, 5, 8, 8), False)
     """
-    K = check_positive_int(n_steps, "n_steps")
+    K = check_steps(n_steps, "n_steps")
+    p = check_probability(loss, "loss")
+    if p >= 1.0:
+        raise ValueError(f"loss must be a probability in [0, 1); got {loss!r}")
+    rng = check_generator(rng, "rng")
     A = float_array(adjacency, "adjacency")
     if A.ndim == 2:
         A = np.broadcast_to(A, (K, *A.shape))
@@ -149,18 +163,17 @@ def lossy_graphs(adjacency: ArrayLike, loss: float, n_steps: int, rng: np.random
     for k in range(A.shape[0] if A.strides[0] else 1):
         check_adjacency(A[k], f"adjacency[{k}]" if A.strides[0] else "adjacency", size=A.shape[1],
                         undirected=True, why="a lost exchange is lost in both directions")
-    p = float(loss)
-    if not 0.0 <= p < 1.0:
-        raise ValueError(f"loss must be a probability in [0, 1); got {loss!r}")
     runs = () if n_runs is None else (check_positive_int(n_runs, "n_runs"),)
     N = A.shape[1]
+    check_fits_in_memory(2 * 8.0 * K * (runs[0] if runs else 1) * N * N, "n_runs" if runs else "n_steps",
+                         "the graphs of every step (and run)")
     if runs:
         A = A[:, None]
     if per_direction:  # one number per ordered pair: a message j -> i is lost alone
-        u = np.random.default_rng(rng).random((K, *runs, N, N))
+        u = rng.random((K, *runs, N, N))
         return np.where(u >= p, A, 0.0)
     iu = np.triu_indices(N, 1)
-    u = np.random.default_rng(rng).random((K, *runs, len(iu[0])))
+    u = rng.random((K, *runs, len(iu[0])))
     keep = np.zeros((K, *runs, N, N), dtype=bool)
     keep[..., iu[0], iu[1]] = u >= p
     keep |= np.swapaxes(keep, -1, -2)
@@ -193,8 +206,8 @@ def delivered_weights(W: ArrayLike, delivered: ArrayLike) -> np.ndarray:
     >>> delivered_weights(W, [[0, 1, 0], [1, 0, 1], [1, 1, 0]])[0]   # agent 0 lost agent 2's message
     array([0.66666667, 0.33333333, 0.        ])
     """
-    W = float_array(W, "W")
-    D = float_array(delivered, "delivered")
+    W = require_finite(float_array(W, "W"), "W")
+    D = require_finite(float_array(delivered, "delivered"), "delivered")
     if W.ndim != 2 or W.shape[0] != W.shape[1] or D.shape[-2:] != W.shape:
         raise ValueError(f"W must be (N, N) and delivered (..., N, N) of the same N; got {W.shape}, {D.shape}")
     off = np.where(D > 0, W - np.diag(np.diag(W)), 0.0)
@@ -304,9 +317,9 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
         raise ValueError("latency with HCMCI needs an invertible F: its late novelty pair is a measurement of the state "
                          "of the step before, taken to the step through F^{-1}")
     if send_delta is not None:
-        send_delta = float(send_delta)
-        if not (np.isfinite(send_delta) and send_delta >= 0):
-            raise ValueError(f"send_delta must be a finite distance >= 0 or None; got {send_delta!r}")
+        send_delta = check_positive(send_delta, "send_delta", allow_zero=True)
+        if send_delta > 1e150:  # its square is the threshold of a squared distance
+            raise ValueError(f"send_delta must be a distance from 0 to 1e150 or None; got {send_delta!r}")
     x, P = model.check_state(x0, P0, ("x0", "P0"), per_agent=True)
     z = require_finite(model._check_z(z), "z")
     if z.ndim < 2 or z.shape[0] != len(filters):
@@ -316,7 +329,7 @@ def track_messages(filters: Sequence[ConsensusOnInformationFilter | InformationC
         return (*_track_rounds(filters, x, P, z, latency), np.ones((*z.shape[:-1], model.n_agents), dtype=bool))
     N, n = model.n_agents, model.n_states
     if delivered is not None:
-        delivered = float_array(delivered, "delivered")
+        delivered = require_finite(float_array(delivered, "delivered"), "delivered")
         if delivered.ndim < 3 or delivered.shape[0] != len(filters) or delivered.shape[-2:] != (N, N):
             raise ValueError(f"delivered must be (K, ..., N, N) = ({len(filters)}, ..., {N}, {N}); "
                              f"got shape {delivered.shape}")
@@ -565,7 +578,7 @@ def track_forwarding(model, x0: ArrayLike, P0: ArrayLike, z: ArrayLike, delivere
     x, P = model.check_state(x0, P0, ("x0", "P0"), per_agent=True)
     z = require_finite(model._check_z(z), "z")
     N = model.n_agents
-    D = float_array(delivered, "delivered")
+    D = require_finite(float_array(delivered, "delivered"), "delivered")
     if z.ndim < 2 or D.ndim < 3 or D.shape[0] != z.shape[0] or D.shape[-2:] != (N, N):
         raise ValueError(f"delivered must be (K, ..., {N}, {N}) with K = {z.shape[0] if z.ndim else '?'} (the "
                          f"steps of z); got shape {D.shape}")
@@ -578,7 +591,7 @@ def track_forwarding(model, x0: ArrayLike, P0: ArrayLike, z: ArrayLike, delivere
 
     def correct(x, P, zk, Dk):  # the exact update on the measurements of the agents in Dk's rows
         S = (Dk @ info).reshape(*Dk.shape[:-1], n, n)
-        return information_update(x, P, S, Dk @ model.information_vectors(zk, check=False))
+        return information_update(x, P, S, Dk @ model.information_vectors(zk))
 
     own = np.eye(N)
     xs, Ps = [], []

@@ -207,7 +207,7 @@ class LinearGaussianModel(Frozen):
                              f"model's F of shape {self.F.shape} but found {x.shape}")
         return x, P
 
-    def with_measurement(self, H: ArrayLike, R: ArrayLike, *, check: bool = True) -> LinearGaussianModel:
+    def with_measurement(self, H: ArrayLike, R: ArrayLike) -> LinearGaussianModel:
         """The same dynamics with another measurement model (a sensor whose ``H`` or ``R`` changes per step).
 
         Only `H` and `R` are checked: ``F``, ``Q`` and ``B`` were checked when this model was built
@@ -220,9 +220,6 @@ class LinearGaussianModel(Frozen):
             Measurement matrix, finite, ``q >= 1``.
         R : (q, q) or (..., q, q) array_like
             Measurement-noise covariance, symmetric positive definite.
-        check : bool
-            Check `H` and `R` (default). ``False``: they are float arrays of the right shapes
-            that their caller has checked already.
 
         Returns
         -------
@@ -243,8 +240,7 @@ class LinearGaussianModel(Frozen):
         >>> far == kalman.LinearGaussianModel(np.eye(2), 0.1 * np.eye(2), [[1.0, 0.0]], [[4.0]])
         True
         """
-        if check:
-            H, R = _checked_measurement(H, R, self.n_states, f"F of shape {self.F.shape}")
+        H, R = _checked_measurement(H, R, self.n_states, f"F of shape {self.F.shape}")
         new = object.__new__(type(self))
         new._set(**{name: getattr(self, name) for name in self.__slots__})
         new._set(H=frozen_copy(H), R=frozen_copy(R))
@@ -259,9 +255,9 @@ class LinearGaussianModel(Frozen):
         Parameters
         ----------
         x : (N, m) array_like
-            The agents' estimates before the step.
+            The agents' estimates before the step, finite.
         P : (m, m) or (N, m, m) array_like
-            Their covariance(s) (one shared by all agents, or one each).
+            Their covariance(s), symmetric positive semidefinite (one shared by all agents, or one each).
         z : (N, q) array_like
             Each agent's own measurement of the step.
         u : (N, p) array_like or None
@@ -285,8 +281,14 @@ class LinearGaussianModel(Frozen):
         >>> own["z"], messages
         (array([3.]), ())
         """
-        x, P, z = (_finite(_float_array(a, name), name) for a, name in ((x, "x"), (P, "P"), (z, "z")))
-        i = agent_index(i, len(x))
+        x, P = self.check_state(x, P)
+        z = _finite(_float_array(z, "z"), "z")
+        N, q = len(x) if x.ndim else 0, self.n_measurements
+        if x.ndim != 2 or P.ndim not in (2, 3) or (P.ndim == 3 and P.shape[0] != N) or z.shape != (N, q):
+            raise ValueError(f"Incompatible dimensions of x {x.shape}, P {P.shape} and z {z.shape}; expected one row "
+                             f"per agent: x (N, {self.n_states}), P ({self.n_states}, {self.n_states}) or (N, "
+                             f"{self.n_states}, {self.n_states}), z (N, {q})")
+        i = agent_index(i, N)
         return ({"x": x[i].copy(), "P": (P if P.ndim == 2 else P[i]).copy(), "z": z[i].copy(),
                  "u": None if u is None else np.array(np.asarray(u, dtype=float)[i])}, ())
 
@@ -330,7 +332,10 @@ def _checked_measurement(H: ArrayLike, R: ArrayLike, m: int, against: str, q: in
     if H.ndim < 2 or H.shape[-1] != m or H.shape[-2] == 0 or (q is not None and H.shape[-2] != q):
         raise ValueError(f"Incompatible dimensions of H; expected (..., {'q' if q is None else q}, {m}) with "
                          f"q >= 1 for {against} but found {H.shape}")
-    R = check_covariance(R, "R", size=H.shape[-2], definite=True)
+    R = check_covariance(R, "R", definite=True)
+    if R.shape[-1] != H.shape[-2]:
+        raise ValueError(f"Incompatible dimensions of R {R.shape} for H {H.shape}; expected R (..., q, q) with q = "
+                         f"{H.shape[-2]}, the rows of H (one noise covariance row per measurement)")
     return H, R
 
 
@@ -793,7 +798,8 @@ def run_filter(
     z = _finite(_float_array(z, "z"), "z")
     q = model.n_measurements
     if z.ndim < 1 or z.shape[-1] != q or z.shape[1:-1] != x.shape[:-1]:
-        raise ValueError(f"Incompatible dimensions of z; expected (K, *{x.shape[:-1]}, {q}) but found {z.shape}")
+        raise ValueError(f"Incompatible dimensions of z {z.shape} and x0 {x.shape}; expected z (K, *batch, {q}) with "
+                         f"the batch axes {x.shape[:-1]} of x0 (x0 (*batch, {model.n_states}))")
     xs = np.empty((z.shape[0], *x.shape))
     Ps = np.empty((z.shape[0], *P.shape))
     for k in range(z.shape[0]):

@@ -6,10 +6,13 @@ same generator state gives the same numbers, byte for byte.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_vector, check_covariance, check_generator, sample_shape
+from ._fusion_kernels import psd_factor as _factor
+from ._validation import as_vector, check_covariance, check_fits_in_memory, check_generator, sample_shape
 from ._validation import float_array as _float_array
 
 __all__ = ["gaussian", "psd_factor", "uniform_box", "uniform_ellipsoid"]
@@ -23,7 +26,7 @@ def _check_psd(M: object, name: str) -> np.ndarray:
     return P
 
 
-def psd_factor(M: ArrayLike, cholesky_first: bool = False, *, check: bool = True) -> np.ndarray:
+def psd_factor(M: ArrayLike, cholesky_first: bool = False) -> np.ndarray:
     """A factor ``F`` with ``F F^T = M`` for a symmetric positive semidefinite ``M``.
 
     Parameters
@@ -34,9 +37,6 @@ def psd_factor(M: ArrayLike, cholesky_first: bool = False, *, check: bool = True
         Return the lower Cholesky factor when ``M`` is positive definite and fall
         back to the eigenvector factor only when it is singular. By default the
         eigenvector factor ``V diag(sqrt(w))`` is always used.
-    check : bool
-        Check `M` (default). ``False``: `M` is a float array its caller has checked already (the
-        samplers of this package, once per call; as SciPy's ``check_finite=False``).
 
     Returns
     -------
@@ -58,15 +58,14 @@ def psd_factor(M: ArrayLike, cholesky_first: bool = False, *, check: bool = True
     >>> bool(np.allclose(F @ F.T, M))
     True
     """
-    if check:
-        M = check_covariance(_float_array(M, "M"), "M")
-    if cholesky_first:
-        try:
-            return np.linalg.cholesky(M)
-        except np.linalg.LinAlgError:
-            pass
-    w, V = np.linalg.eigh(M)
-    return V * np.sqrt(np.clip(w, 0.0, None))[..., None, :]
+    return _factor(check_covariance(_float_array(M, "M"), "M"), cholesky_first)
+
+
+def _draw_shape(size: object, m: int) -> tuple[int, ...]:
+    """`size` checked (:func:`~mascore._validation.sample_shape`), and its ``(*size, m)`` draws fit in memory."""
+    size = sample_shape(size)
+    check_fits_in_memory(8.0 * math.prod(size) * m, "size", f"{math.prod(size)} draws of {m} numbers")
+    return size
 
 
 def gaussian(
@@ -104,8 +103,8 @@ def gaussian(
     mean = np.zeros(m) if mean is None else as_vector(_float_array(mean, "mean"), "mean")
     if mean.size != m:
         raise ValueError(f"Incompatible dimensions of mean and cov: mean has length {mean.size}, cov is {cov.shape}")
-    size = sample_shape(size)
-    return mean + rng.standard_normal((*size, m)) @ psd_factor(cov, check=False).T
+    size = _draw_shape(size, m)
+    return mean + rng.standard_normal((*size, m)) @ _factor(cov).T
 
 
 def uniform_box(
@@ -144,7 +143,7 @@ def uniform_box(
         raise ValueError(f"low and high must have the same length; got {low.size} and {high.size}")
     if np.any(high < low):
         raise ValueError(f"high must be >= low in every component; got low={low}, high={high}")
-    size = sample_shape(size)
+    size = _draw_shape(size, low.size)
     return low + (high - low) * rng.random((*size, low.size))
 
 
@@ -186,8 +185,8 @@ def uniform_ellipsoid(
     c = as_vector(_float_array(center, "center"), "center")
     if c.size != m:
         raise ValueError(f"Incompatible dimensions of center and shape: center has length {c.size}, shape is {P.shape}")
-    size = sample_shape(size)
+    size = _draw_shape(size, m)
     direction = rng.standard_normal((*size, m))
     direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
     radius = rng.random((*size, 1)) ** (1.0 / m)
-    return c + (radius * direction) @ psd_factor(P, check=False).T
+    return c + (radius * direction) @ _factor(P).T

@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 
 from . import centralized_team_filter, team_model, team_observability
 from . import distributed_kf as dkf
+from ._fusion_kernels import psd_factor
 from ._progress import progress_bar
 from ._sensing_kernels import masked_measurement
 from ._systems import full_state_only, output_matrices
@@ -46,7 +47,6 @@ from ._validation import require_finite as _finite
 from .agents import LTIAgent, check_sampling_time
 from .graphs import laplacian as graph_laplacian
 from .graphs import require_connected
-from .noise import psd_factor
 from .sensing import sensing_mask, team_noise_covariance
 
 __all__ = [
@@ -218,7 +218,7 @@ def propagate_team(
         np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
     except ValueError:
         raise ValueError(f"the leading axes of states {x.shape} and inputs {u.shape} do not broadcast") from None
-    w = rng.standard_normal(x.shape) @ psd_factor(Q, cholesky_first=True, check=False).T
+    w = rng.standard_normal(x.shape) @ psd_factor(Q, cholesky_first=True).T
     return x @ A.T + u @ B.T + w
 
 

@@ -263,7 +263,7 @@ class SensorNetworkModel(Frozen):
         new = object.__new__(type(self))
         new._set(**{name: getattr(self, name) for name in self.__slots__})
         new._set(**_sensing_parts(H_st, R_st, sizes, self.n_states, self.n_agents,
-                                  self._kf.with_measurement(H_st, R_st, check=False)))
+                                  self._kf.with_measurement(H_st, R_st)))
         return new
 
     @property
@@ -325,16 +325,13 @@ class SensorNetworkModel(Frozen):
             raise ValueError(f"i must be an agent index below N = {self.n_agents}; got {i}")
         return require_finite(z, "z")[..., self._slices[i]]
 
-    def information_vectors(self, z: ArrayLike, *, check: bool = True) -> np.ndarray:
+    def information_vectors(self, z: ArrayLike) -> np.ndarray:
         """Each agent's information vector ``H_i^T R_i^{-1} z_i`` (zero for an agent that does not sense).
 
         Parameters
         ----------
         z : (..., sum q_i) array_like
-            Stacked measurement(s), finite.
-        check : bool
-            Check `z` (default). ``False``: `z` is a float array of the right shape its caller has
-            checked already (the filters' steps).
+            Stacked measurement(s), finite (checked: shape and entries, one pass over `z`).
 
         Returns
         -------
@@ -351,8 +348,7 @@ class SensorNetworkModel(Frozen):
         array([[0.25, 0.5 ],
                [3.  , 0.  ]])
         """
-        if check:
-            z = require_finite(self._check_z(z), "z")
+        z = require_finite(self._check_z(z), "z")
         # (..., sum q): R^{-1} z, block by block (a model built by fusion.track for per-run sensing has batch axes)
         y = z @ self._Rinv if self._Rinv.ndim == 2 else (z[..., None, :] @ self._Rinv)[..., 0, :]
         # agent i: sum over its rows r of y_r H_r  ->  owner (N, sum q) @ (y_r H_r) (..., sum q, n)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import estimation, graphs
-from .._validation import frozen_copy
+from .._validation import check_positive, float_array, frozen_copy, require_finite
 from ..agents import double_integrator
 from ..estimation import MethodSpec
 from .benchmark import (
@@ -138,6 +138,7 @@ def team_setup(n_agents: int, noise: str, q_scale: float, s: BenchmarkSettings, 
     """
     if sensing not in SENSINGS:
         raise ValueError(f"sensing must be one of {SENSINGS}; got {sensing!r}")
+    q_scale = check_positive(q_scale, "q_scale")
     from ..rendezvous import rendezvous_gain
 
     agent = double_integrator(2, s.dt)
@@ -594,8 +595,8 @@ def make_estimator(method: str, team: TeamTask, x_hat0: np.ndarray) -> TeamEstim
         A method of the team task (its :class:`~mascore.estimation.MethodSpec`).
     team : TeamTask
         The cell's task (:func:`team_setup`).
-    x_hat0 : ndarray
-        The initial estimates ``(R, N, 4)``.
+    x_hat0 : (R, N, 4) array_like
+        The initial estimates, finite.
 
     Returns
     -------
@@ -615,7 +616,13 @@ def make_estimator(method: str, team: TeamTask, x_hat0: np.ndarray) -> TeamEstim
     >>> type(compare.make_estimator("song-mb", team, np.zeros((1, 4, 4))).filter).__name__
     'TeamFilter'
     """
-    return _make_estimator(estimation.method_spec(method, "team"), team, x_hat0)
+    spec = estimation.method_spec(method, "team")
+    x_hat0 = require_finite(float_array(x_hat0, "x_hat0"), "x_hat0")
+    n = team.A.shape[0]
+    if x_hat0.ndim != 3 or x_hat0.shape[1:] != (team.N, n):
+        raise ValueError(f"x_hat0 must have shape (R, N, n) = (R, {team.N}, {n}): one estimate per run and agent; "
+                         f"got {x_hat0.shape}")
+    return _make_estimator(spec, team, x_hat0)
 
 
 def _make_estimator(spec: MethodSpec, team: TeamTask, x_hat0: np.ndarray) -> TeamEstimator:
