@@ -16,6 +16,10 @@ export MKL_NUM_THREADS := 1
 # show figures. A headless backend is set only where nothing is shown: reproduce and pytest.
 HEADLESS := MPLBACKEND=Agg
 export PYDEVD_DISABLE_FILE_VALIDATION := 1
+# Python writes the .pyc of what it imports into .venv and mascore/__pycache__ (the environment is compiled
+# lazily, not at install): where PYTHONDONTWRITEBYTECODE is set, as on some CI machines, every kernel, test
+# worker and Dask worker would otherwise compile numpy, scipy, pandas and matplotlib again (about 2.5 s each).
+unexport PYTHONDONTWRITEBYTECODE
 
 JOBS ?= 2
 
@@ -28,9 +32,8 @@ install: $(STAMP)  ## create .venv and install the locked environment
 
 # .ci/install.py installs with uv (pinned there, bootstrapped into $(VENV)/.uv by the environment's pip; it passes
 # on the indexes pip is configured with), or with pip if uv cannot be installed: the same wheels, about half the
-# time. Both byte-compile the environment at install: where PYTHONDONTWRITEBYTECODE is set, as on some CI
-# machines, Python never writes a .pyc when it imports, and every kernel, test worker and Dask worker would
-# compile numpy, scipy, pandas and matplotlib again (about 2.5 s per process).
+# time. Neither byte-compiles at install (about 26 s for the ~10,500 modules of the environment, most of them never
+# imported): each module is compiled when a process first imports it, and the .pyc is kept in .venv for the next.
 INSTALL = $(BIN)/python .ci/install.py $(VENV)
 # The lock is complete (`pip freeze --all`), so it is installed as it is (--no-deps), less one optional
 # package: rfc3987-syntax (with lark), which jsonschema's format checker imports when present and which
@@ -44,9 +47,8 @@ $(STAMP): requirements.lock pyproject.toml .ci/install.py
 	$(INSTALL) --no-deps --no-build-isolation -e .
 	@touch $(STAMP)
 
-# The package's own modules byte-compiled (only those changed since; a fraction of a second): where
-# PYTHONDONTWRITEBYTECODE is set, no process writes them on import, and each of the ~60 processes of `make test`
-# (notebook kernels, test and Dask workers) would compile what it imports of mascore (about 0.3 s each).
+# The package's own modules byte-compiled before the processes that import them start side by side (only those
+# changed since; a fraction of a second), so that they do not each compile the same modules at once.
 COMPILE := $(BIN)/python -m compileall -q mascore
 
 # The notebooks are executed on both cores into an emptied cache while the book's build (one process)

@@ -10,9 +10,10 @@ for example ``python .ci/install.py .venv -r requirements.lock``. The arguments 
 
 uv, pinned to ``UV_VERSION``, is installed by the environment's own pip into ``VENV/.uv``
 (outside site-packages: ``pip freeze`` lists exactly what was asked for). It installs the
-same wheels as pip about twice as fast, and byte-compiles them (``--compile-bytecode``),
-as pip does: where ``PYTHONDONTWRITEBYTECODE`` is set, Python never writes a ``.pyc`` on
-import, and every notebook kernel, test worker and Dask worker would compile its imports.
+same wheels as pip, faster. Neither byte-compiles at install (pip is told
+``--no-compile``): compiling the whole environment takes about 26 s, and most of its
+modules are never imported; Python compiles each when it is first imported and keeps the
+``.pyc`` (the Makefile unsets ``PYTHONDONTWRITEBYTECODE`` for its commands).
 
 uv does not read pip's configuration, so the package sources pip is configured with
 (``pip config list``: index-url, extra-index-url, find-links, no-index, constraint; e.g. a
@@ -126,12 +127,13 @@ def install(venv: Path, arguments: list[str]) -> int:
     if uv is None:
         print(f"uv {UV_VERSION} could not be installed: pip installs {' '.join(arguments)} (slower).", flush=True)
     else:
-        command = [str(uv), "pip", "install", "--quiet", "--python", str(python), "--compile-bytecode",
+        command = [str(uv), "pip", "install", "--quiet", "--python", str(python),
                    *pip_sources(python), *arguments]
         if subprocess.run(command, check=False).returncode == 0:
             return 0
         print(f"uv failed to install {' '.join(arguments)}: pip installs it instead (slower).", flush=True)
-    return subprocess.run([str(python), "-m", "pip", "install", *PIP_QUIET, *arguments], check=False).returncode
+    return subprocess.run([str(python), "-m", "pip", "install", *PIP_QUIET, "--no-compile", *arguments],
+                          check=False).returncode
 
 
 if __name__ == "__main__":
