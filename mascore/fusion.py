@@ -202,7 +202,7 @@ class MeasurementForwardingFilter(_NetworkFilter):
         self._set(_S=frozen_copy(mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
-        i = mix(self.model._neighbourhood, self.model.information_vectors(z), 1)
+        i = mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
         return information_update(x, P, self._S, i)
 
 
@@ -257,7 +257,7 @@ class DiffusionKalmanFilter(_NetworkFilter):
         self._set(weights=frozen_copy(C), _S=frozen_copy(mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
-        i = mix(self.model._neighbourhood, self.model.information_vectors(z), 1)
+        i = mix(self.model._neighbourhood, self.model._information_vectors(z), 1)
         psi, P_new = information_update(x, P, self._S, i)
         return mix(self.weights, psi, 1), P_new
 
@@ -271,7 +271,7 @@ class DiffusionKalmanFilter(_NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         psi, _ = information_update(xm, Pm, self._S, mix(self.model._neighbourhood,
-                                                     self.model.information_vectors(z), 1))
+                                                     self.model._information_vectors(z), 1))
         return (*super()._agent_messages(own, xm, Pm, z, i), psi[own["nbrs"]].copy())
 
     def _agent_step(self, i, own, messages):
@@ -366,7 +366,7 @@ class ConsensusOnInformationFilter(_NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         Om, q = information_pair(xm, Pm)
-        I, iv = self.model.information_matrices, self.model.information_vectors(z)
+        I, iv = self.model.information_matrices, self.model._information_vectors(z)
         pairs = [(Om, q), (np.broadcast_to(I, Om.shape), iv)] if self.novelty_weight != 1.0 else [(Om + I, q + iv)]
         return consensus_rounds(self.model.weights, pairs, own["nbrs"], self.n_consensus)
 
@@ -436,7 +436,7 @@ class ConsensusOnInformationFilter(_NetworkFilter):
     def _message_pair(self, x: np.ndarray, P: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         Om, q = information_pair(x, P)
         return finite_result("message pair", Om + self.model.information_matrices,
-                             q + self.model.information_vectors(z), advice="P is too close to singular")
+                             q + self.model._information_vectors(z), advice="P is too close to singular")
 
     def pair_estimate(self, Om: ArrayLike, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """The estimate of a fused information pair: ``x = Omega^{-1} q``, ``P = Omega^{-1}``.
@@ -521,7 +521,7 @@ class ConsensusOnInformationFilter(_NetworkFilter):
             return (self._message_pair(x, P, z),)
         Om, q = finite_result("message pair", *information_pair(x, P), advice="P is too close to singular")
         return (Om, q), (np.broadcast_to(self.model.information_matrices, Om.shape),
-                         self.model.information_vectors(z))
+                         self.model._information_vectors(z))
 
     def pairs_estimate(self, pairs: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
         """The estimate of the pairs after the rounds: CI :meth:`pair_estimate`; HCMCI ``Omega + w dOmega``, ``q + w dq``.
@@ -560,7 +560,7 @@ class ConsensusOnInformationFilter(_NetworkFilter):
     def _correct(self, x, P, z):
         Om, q = information_pair(x, P)
         Om = mix(self._WL, Om, 2) + self._SL
-        q = mix(self._WL, q, 1) + self.novelty_weight * mix(self._WL, self.model.information_vectors(z), 1)
+        q = mix(self._WL, q, 1) + self.novelty_weight * mix(self._WL, self.model._information_vectors(z), 1)
         return from_information(Om, q)
 
 
@@ -641,7 +641,7 @@ class InformationConsensusFilter(_NetworkFilter):
     def _agent_messages(self, own, xm, Pm, z, i):
         N = self.model.n_agents
         Om, q = information_pair(xm, Pm)
-        pairs = [(Om / N + self.model.information_matrices, q / N + self.model.information_vectors(z))]
+        pairs = [(Om / N + self.model.information_matrices, q / N + self.model._information_vectors(z))]
         return consensus_rounds(self._consensus_matrix(), pairs, own["nbrs"], self.n_iterations)
 
     def _agent_step(self, i, own, messages):
@@ -699,7 +699,7 @@ class InformationConsensusFilter(_NetworkFilter):
         N = self.model.n_agents
         J, q = information_pair(x, P)
         return finite_result("message pair", J / N + self.model.information_matrices,
-                             q / N + self.model.information_vectors(z), advice="P is too close to singular")
+                             q / N + self.model._information_vectors(z), advice="P is too close to singular")
 
     def pair_estimate(self, V: ArrayLike, v: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """The estimate of a fused pair: ``x = V^{-1} v``, ``P = (N V)^{-1}``.
@@ -804,7 +804,7 @@ class InformationConsensusFilter(_NetworkFilter):
         N = self.model.n_agents
         J, q = information_pair(x, P)
         V = mix(self._WK, J, 2) / N + self._SK
-        v = mix(self._WK, q, 1) / N + mix(self._WK, self.model.information_vectors(z), 1)
+        v = mix(self._WK, q, 1) / N + mix(self._WK, self.model._information_vectors(z), 1)
         return self._pair_estimate(V, v)
 
 
@@ -873,7 +873,7 @@ class CovarianceIntersectionFilter(_NetworkFilter):
 
     def _correct(self, x, P, z):
         M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
-        psi, P_loc = information_update(x, P, self._S, mix(M, self.model.information_vectors(z), 1))
+        psi, P_loc = information_update(x, P, self._S, mix(M, self.model._information_vectors(z), 1))
         Om, q = information_pair(psi, P_loc)  # (..., N, n, n), (..., N, n)
         N = self.model.n_agents
         C = np.zeros((*P_loc.shape[:-3], N, N))  # the weights: from the covariances only
@@ -901,7 +901,7 @@ class CovarianceIntersectionFilter(_NetworkFilter):
 
     def _agent_messages(self, own, xm, Pm, z, i):
         M = self.model._neighbourhood if self.measurements == "neighbourhood" else np.eye(self.model.n_agents)
-        psi, P_loc = information_update(xm, Pm, self._S, mix(M, self.model.information_vectors(z), 1))
+        psi, P_loc = information_update(xm, Pm, self._S, mix(M, self.model._information_vectors(z), 1))
         Om, q = information_pair(psi[own["nbrs"]], P_loc[own["nbrs"]])
         received = super()._agent_messages(own, xm, Pm, z, i)
         return (received[0] if self.measurements == "neighbourhood" else (), (Om, q))

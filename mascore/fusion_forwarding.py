@@ -106,7 +106,7 @@ class KalmanConsensusNetworkFilter(NetworkFilter):
 
     def _correct(self, x, P, z):
         xf, M = information_update(x, P, self._S, mix(self.model._neighbourhood,
-                                                      self.model.information_vectors(z), 1))
+                                                      self.model._information_vectors(z), 1))
         gamma = self.eps / (1.0 + np.linalg.norm(M, axis=(-2, -1)))  # (..., N)
         pull = (M @ mix(self._links, x, 1)[..., None])[..., 0]      # M_i sum_j (xbar_j - xbar_i)
         return xf + gamma[..., None] * pull, M

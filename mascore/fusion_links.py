@@ -591,7 +591,7 @@ def track_forwarding(model, x0: ArrayLike, P0: ArrayLike, z: ArrayLike, delivere
 
     def correct(x, P, zk, Dk):  # the exact update on the measurements of the agents in Dk's rows
         S = (Dk @ info).reshape(*Dk.shape[:-1], n, n)
-        return information_update(x, P, S, Dk @ model.information_vectors(zk))
+        return information_update(x, P, S, Dk @ model._information_vectors(zk))
 
     own = np.eye(N)
     xs, Ps = [], []

@@ -348,7 +348,10 @@ class SensorNetworkModel(Frozen):
         array([[0.25, 0.5 ],
                [3.  , 0.  ]])
         """
-        z = require_finite(self._check_z(z), "z")
+        return self._information_vectors(require_finite(self._check_z(z), "z"))
+
+    def _information_vectors(self, z: np.ndarray) -> np.ndarray:
+        """:meth:`information_vectors` of a checked `z` (the filters' steps, which check it once at their entry)."""
         # (..., sum q): R^{-1} z, block by block (a model built by fusion.track for per-run sensing has batch axes)
         y = z @ self._Rinv if self._Rinv.ndim == 2 else (z[..., None, :] @ self._Rinv)[..., 0, :]
         # agent i: sum over its rows r of y_r H_r  ->  owner (N, sum q) @ (y_r H_r) (..., sum q, n)
