@@ -18,7 +18,7 @@ import importlib
 import json
 import re
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from .registry import PaperRegistry, Study, paper_registries, study_modules
@@ -30,6 +30,7 @@ __all__ = [
     "chapter_studies",
     "drawn_figures",
     "measure_page",
+    "measure_pages",
     "page_problems",
     "plain_text",
     "public_objects",
@@ -197,12 +198,12 @@ def page_problems(html: str) -> list[str]:
     return problems
 
 
-#: Measures a page as the reader sees it, once MathJax has typeset it: the text column's width,
-#: the words shown, formulas MathJax reports as errors, every display equation and table wider than it, cells
-#: showing NaN, and how much each figure's image is shrunk. Written as JSON into
-#: ``<pre id="mascore-measure">`` for ``--dump-dom``.
+#: Measures a page as the reader sees it, once it has loaded and MathJax has typeset it: the text column's
+#: width, the words shown, formulas MathJax reports as errors, every display equation and table wider than the
+#: column, cells showing NaN, and how much each figure's image is shrunk. An async JavaScript function of no
+#: argument that returns the measures (:func:`measure_pages` calls it in the page).
 _MEASURE_JS = r"""
-(async () => {
+async () => {
   const out = {};
   try {
     if (document.readyState !== "complete") { await new Promise((ok) => window.addEventListener("load", ok)); }
@@ -242,12 +243,13 @@ _MEASURE_JS = r"""
       out.images.push({id: fig ? fig.id : "", natural: img.naturalWidth, shown: Math.round(img.getBoundingClientRect().width)});
     }
   } catch (e) { out.error = String(e); }
-  const pre = document.createElement("pre");
-  pre.id = "mascore-measure";
-  pre.textContent = JSON.stringify(out);
-  document.body.appendChild(pre);
-})();
+  return out;
+}
 """
+
+#: Chromium's switches for measuring: headless, no GPU, no network of its own, a throw-away profile.
+_CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                   "--disable-component-update", "--disable-sync", "--no-first-run")
 
 
 def chromium() -> str | None:
@@ -260,41 +262,254 @@ def chromium() -> str | None:
     return None
 
 
-def measure_page(path: str | Path, width: int = 1280, browser: str | None = None) -> dict:
-    """Render one built page in headless Chromium at `width` px, offline, and measure it.
+def measure_pages(paths: Sequence[str | Path], width: int = 1280, browser: str | None = None, tabs: int = 2,
+                  timeout: float = 120.0) -> dict[Path, dict]:
+    """Render built pages in one headless Chromium, a `width` px by 2000 px window each, and measure them.
 
-    Returns a dict with ``column`` (width of the text column, px), ``words`` (words of the
-    article's rendered text: collapsed blocks left out), ``math_errors`` (formulas
-    MathJax could not typeset), ``equations`` and
-    ``tables`` (those wider than the column: width and what they start with), ``nan``
-    (tables with a cell showing NaN or None) and ``images`` (natural and shown width of
-    every figure's image).
+    One browser is started for all the pages (POSIX: it is driven over its DevTools pipe); `tabs` pages
+    load at once, each in a browser context of its own (its own storage, as a fresh profile would give).
+    A page is measured once its ``load`` event has fired and MathJax has typeset it (``MathJax.startup.promise``).
+
+    Parameters
+    ----------
+    paths : sequence of str or Path
+        Built HTML files.
+    width : int
+        Width of each page's window, CSS px.
+    browser : str, optional
+        Chromium executable (default: :func:`chromium`).
+    tabs : int
+        Pages loading at once (at least 1).
+    timeout : float
+        Seconds a page may take from the start of its loading to its measures (> 0).
+
+    Returns
+    -------
+    dict
+        For each path (as a :class:`~pathlib.Path`, in the order given): ``column`` (width of the text column,
+        px), ``words`` (words of the article's rendered text: collapsed blocks left out), ``math_errors``
+        (formulas MathJax could not typeset), ``equations`` and ``tables`` (those wider than the column: width
+        in px and what they start with), ``nan`` (tables with a cell showing NaN or None) and ``images``
+        (natural and shown width, px, of every figure's image). A page that could not be loaded or measured
+        (missing file, script error, crash, `timeout`) maps to ``{"error": "what happened"}`` alone; the
+        other pages are measured all the same.
+
+    Raises
+    ------
+    FileNotFoundError
+        If `browser` is None and no Chromium is on the PATH.
+    ValueError
+        If `width` or `tabs` is not a positive integer or `timeout` is not positive.
     """
-    import subprocess
     import tempfile
+    import time
 
-    path = Path(path)
+    if isinstance(width, bool) or not isinstance(width, int) or width < 1:
+        raise ValueError(f"width must be a positive whole number of CSS px, got {width!r}")
+    if isinstance(tabs, bool) or not isinstance(tabs, int) or tabs < 1:
+        raise ValueError(f"tabs must be a positive whole number, got {tabs!r}")
+    if not timeout > 0:
+        raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
     browser = browser or chromium()
     if browser is None:
         raise FileNotFoundError("no chromium on the PATH (apt-get install -y chromium)")
-    probe = path.with_name(f".measure-{path.name}")  # beside the page, so its relative links resolve
-    probe.write_text(path.read_text().replace("</body>", f"<script>{_MEASURE_JS}</script></body>", 1))
-    try:
-        with tempfile.TemporaryDirectory() as profile:
-            dom = subprocess.run(
-                [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run", f"--user-data-dir={profile}",
-                 f"--window-size={width},2000", "--virtual-time-budget=20000", "--dump-dom", probe.resolve().as_uri()],
-                capture_output=True, text=True, timeout=180, check=False,
-            ).stdout
-    finally:
-        probe.unlink(missing_ok=True)
-    m = re.search(r'<pre id="mascore-measure"[^>]*>(.*?)</pre>', dom, re.S)
-    if not m:
-        raise RuntimeError(f"{path.name}: the page was not measured (no result in Chromium's DOM)")
-    import html as html_module
+    pages = [Path(p) for p in paths]
+    results: dict[Path, dict] = {}
+    todo = list(dict.fromkeys(pages))[::-1]  # popped from the end: in order
+    with tempfile.TemporaryDirectory() as profile, _DevTools(browser, profile) as devtools:
+        open_pages: list[_OpenPage] = []
+        try:
+            while todo or open_pages:
+                while todo and len(open_pages) < tabs:
+                    open_pages.append(_OpenPage(devtools, todo[-1], width, time.monotonic() + timeout))
+                    todo.pop()
+                message = devtools.receive(until=min(page.deadline for page in open_pages))
+                for page in list(open_pages):
+                    outcome = page.handle(message) if message is not None else None
+                    if outcome is None and time.monotonic() >= page.deadline:
+                        outcome = {"error": f"not measured within {timeout:g} s"}
+                    if outcome is not None:
+                        results[page.path] = outcome
+                        page.close()
+                        open_pages.remove(page)
+        except (OSError, RuntimeError) as exc:  # the browser has gone: every page not yet measured says so
+            for path in [page.path for page in open_pages] + todo:
+                results[path] = {"error": f"{type(exc).__name__}: {exc}"}
+    return {p: results[p] for p in pages}
 
-    return json.loads(html_module.unescape(m.group(1)))
+
+def measure_page(path: str | Path, width: int = 1280, browser: str | None = None, timeout: float = 120.0) -> dict:
+    """Render one built page in headless Chromium at `width` px and measure it (see :func:`measure_pages`).
+
+    Raises
+    ------
+    RuntimeError
+        If the page could not be loaded or measured.
+    """
+    path = Path(path)
+    measures = measure_pages([path], width=width, browser=browser, tabs=1, timeout=timeout)[path]
+    if "error" in measures:
+        raise RuntimeError(f"{path.name}: the page was not measured: {measures['error']}")
+    return measures
+
+
+class _DevTools:
+    """A headless Chromium driven over ``--remote-debugging-pipe``: JSON messages ending in a NUL byte, sent to
+    its file descriptor 3 and read from its descriptor 4 (started with ``posix_spawn``: safe from threads)."""
+
+    def __init__(self, browser: str, profile: str) -> None:
+        import os
+        import tempfile
+
+        to_browser, self._send = os.pipe()
+        self._read, from_browser = os.pipe()
+        self._stderr = tempfile.TemporaryFile()
+        # The child's ends numbered above 4, so that moving them to 2, 3 and 4 cannot overwrite one another.
+        ends = [_fd_above(fd, 5) for fd in (to_browser, from_browser)] + [_fd_above(os.dup(self._stderr.fileno()), 5)]
+        try:
+            self._pid = os.posix_spawn(browser, [browser, *_CHROMIUM_FLAGS, f"--user-data-dir={profile}",
+                                                 "--remote-debugging-pipe", "about:blank"], os.environ,
+                                       file_actions=[(os.POSIX_SPAWN_OPEN, 0, os.devnull, os.O_RDONLY, 0),
+                                                     (os.POSIX_SPAWN_OPEN, 1, os.devnull, os.O_WRONLY, 0),
+                                                     (os.POSIX_SPAWN_DUP2, ends[2], 2),
+                                                     (os.POSIX_SPAWN_DUP2, ends[0], 3),
+                                                     (os.POSIX_SPAWN_DUP2, ends[1], 4)])
+        finally:
+            for fd in ends:
+                os.close(fd)
+        self._exit_code: int | None = None
+        self._buffer = b""
+        self._last_id = 0
+
+    def __enter__(self) -> _DevTools:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        import os
+        import signal
+        import time
+
+        try:
+            self.send("Browser.close")
+        except OSError:
+            pass  # it has gone already
+        until = time.monotonic() + 30
+        try:
+            while self.receive(until) is not None:  # replies and events until the browser closes the pipe
+                pass
+            os.kill(self._pid, signal.SIGKILL)  # still there after 30 s
+        except RuntimeError:
+            pass  # it has exited
+        self._wait()
+        os.close(self._send)
+        os.close(self._read)
+        self._stderr.close()
+
+    def _wait(self) -> int:
+        """The browser's exit code, once it has exited."""
+        import os
+
+        if self._exit_code is None:
+            self._exit_code = os.waitstatus_to_exitcode(os.waitpid(self._pid, 0)[1])
+        return self._exit_code
+
+    def send(self, method: str, params: dict | None = None, session: str | None = None) -> int:
+        """Send one command (to the browser, or to a page's `session`); its id, which its reply carries."""
+        import os
+
+        self._last_id += 1
+        message = {"id": self._last_id, "method": method, "params": params or {}}
+        if session is not None:
+            message["sessionId"] = session
+        os.write(self._send, json.dumps(message).encode() + b"\0")
+        return self._last_id
+
+    def receive(self, until: float) -> dict | None:
+        """The next reply or event, or None if none came before the monotonic time `until`."""
+        import os
+        import select
+        import time
+
+        while b"\0" not in self._buffer:
+            left = until - time.monotonic()
+            if left <= 0 or not select.select([self._read], [], [], left)[0]:
+                return None
+            chunk = os.read(self._read, 1 << 20)
+            if not chunk:
+                self._stderr.seek(0)
+                tail = self._stderr.read().decode(errors="replace").strip().splitlines()[-3:]
+                raise RuntimeError(f"Chromium exited (code {self._wait()}): {' | '.join(tail)}")
+            self._buffer += chunk
+        message, self._buffer = self._buffer.split(b"\0", 1)
+        return json.loads(message)
+
+
+def _fd_above(fd: int, lowest: int) -> int:
+    """A copy of file descriptor `fd` numbered `lowest` or more (not inherited); `fd` is closed."""
+    import fcntl
+    import os
+
+    copy = fcntl.fcntl(fd, fcntl.F_DUPFD_CLOEXEC, lowest)
+    os.close(fd)
+    return copy
+
+
+class _OpenPage:
+    """One page being measured: its browser context, window and DevTools session, and the step it is at."""
+
+    def __init__(self, devtools: _DevTools, path: Path, width: int, deadline: float) -> None:
+        self.devtools, self.path, self.deadline = devtools, path, deadline
+        self.url = path.resolve().as_uri()
+        self.context = self.session = None
+        self.width = width
+        self.waiting = {devtools.send("Target.createBrowserContext"): "context"}
+
+    def handle(self, message: dict) -> dict | None:
+        """Take one message from the browser; the page's measures (or ``{"error": ...}``) once it is done."""
+        step = self.waiting.pop(message.get("id"), None) if "id" in message else None
+        if step is None:
+            if message.get("sessionId") != self.session or self.session is None:
+                return None
+            if message.get("method") == "Page.loadEventFired" and "measures" not in self.waiting.values():
+                expression = f"(async () => [location.href, await ({_MEASURE_JS})()])()"
+                self._send("Runtime.evaluate", {"expression": expression, "awaitPromise": True,
+                                                "returnByValue": True}, "measures")
+            elif message.get("method") == "Inspector.targetCrashed":
+                return {"error": "the page crashed Chromium's renderer"}
+            return None
+        if "error" in message:
+            return {"error": f"DevTools {step}: {message['error'].get('message')}"}
+        result = message.get("result", {})
+        if step == "context":
+            self.context = result["browserContextId"]
+            self._send("Target.createTarget", {"url": "about:blank", "browserContextId": self.context,
+                                               "newWindow": True, "width": self.width, "height": 2000}, "target")
+        elif step == "target":
+            self._send("Target.attachToTarget", {"targetId": result["targetId"], "flatten": True}, "session")
+        elif step == "session":
+            self.session = result["sessionId"]
+            self._send("Page.enable", {}, "enabled")
+            self._send("Inspector.enable", {}, "enabled")
+            self._send("Page.navigate", {"url": self.url}, "navigation")
+        elif step == "navigation" and result.get("errorText"):
+            return {"error": f"Chromium could not open {self.url}: {result['errorText']}"}
+        elif step == "measures":
+            if "exceptionDetails" in result:
+                return {"error": f"the measuring script failed: {result['exceptionDetails'].get('text')}"}
+            href, measures = result["result"]["value"]
+            if href != self.url:
+                return {"error": f"Chromium showed {href} instead of {self.url}"}
+            return measures
+        return None
+
+    def _send(self, method: str, params: dict, step: str) -> None:
+        """Send a command (to the page once it has a session, else to the browser), awaited as `step`."""
+        self.waiting[self.devtools.send(method, params, self.session)] = step
+
+    def close(self) -> None:
+        """Close the page's window and forget its storage (no reply awaited)."""
+        if self.context is not None:
+            self.devtools.send("Target.disposeBrowserContext", {"browserContextId": self.context})
 
 
 def public_objects(module: str) -> list[str]:

@@ -9,7 +9,8 @@ equation or table is wider than the text column, no table cell shows NaN, no
 figure is shrunk below legibility or has fewer than two image pixels per CSS pixel,
 and no page shows more than about 4,000 words. The intro opens with its four reading
 paths. Tests at the end show that each check fails on a page with a figure removed,
-a formula broken or the layout overflowing.
+a formula broken or the layout overflowing, and that a page measured among others is
+attributed its own measures.
 """
 
 from __future__ import annotations
@@ -209,32 +210,20 @@ def layout_problems(m: dict) -> list[str]:
     return out
 
 
-#: Chromium processes measuring pages at once. Each spends most of its wall time waiting (start-up, the
-#: page's scripts against the virtual clock), about a third of it on a core: four keep two cores busy.
-BROWSERS = 4
-
-
-def _measure_or_error(path: Path, browser: str) -> dict:
-    """:func:`mascore._booktools.measure_page`, a failure returned as ``{"error": ...}`` for its page's test."""
-    from mascore._booktools import measure_page
-
-    try:
-        return measure_page(path, browser=browser)
-    except Exception as exc:  # the page's own test fails with it; the other pages are still measured
-        return {"error": f"{type(exc).__name__}: {exc}"}
+#: Pages loading at once in the one Chromium that measures them all.
+TABS = 2
 
 
 @pytest.fixture(scope="session")
 def measured() -> dict[Path, dict]:
-    """Every reading page measured once per session: one Chromium launch per page, `BROWSERS` at a time.
+    """Every reading page measured once per session, all in one Chromium (a page that fails maps to
+    ``{"error": ...}``, reported by its own test).
 
     `make test` runs this file in one process (no xdist workers, which would each measure every page).
     """
-    from concurrent.futures import ThreadPoolExecutor
+    from mascore._booktools import measure_pages
 
-    browser = _browser()
-    with ThreadPoolExecutor(max_workers=BROWSERS) as pool:
-        return dict(zip(READ_PAGES, pool.map(lambda p: _measure_or_error(p, browser), READ_PAGES)))
+    return measure_pages(READ_PAGES, browser=_browser(), tabs=TABS)
 
 
 @pytest.mark.parametrize("path", READ_PAGES, ids=lambda p: p.relative_to(HTML).as_posix())
@@ -246,8 +235,10 @@ def test_page_fits_its_column_at_1280px(path, measured):
     assert not problems, "\n".join(problems)
 
 
-def test_layout_check_fails_on_wide_math_tables_nan_shrunk_or_blurry_figures_and_long_pages():
-    path = HTML / "notebooks" / "building_blocks.html"
+def test_layout_check_fails_on_wide_math_tables_nan_shrunk_or_blurry_figures_and_long_pages(measured):
+    """A bad page among good ones, in one browser: its problems are its own, the good page measures as it does
+    in the session's run, and a missing page is reported as such."""
+    good = HTML / "notebooks" / "building_blocks.html"
     wide_math = "\\[" + " + ".join(f"x_{{{i}}}^{{2}}" for i in range(80)) + "\\]"
     bad = ('<div class="math notranslate nohighlight">' + wide_math + "</div>"
            '<div class="math notranslate nohighlight">\\[\\begin{split}x \\tag{1}\\end{split}\\]</div>'
@@ -258,19 +249,34 @@ def test_layout_check_fails_on_wide_math_tables_nan_shrunk_or_blurry_figures_and
            '<figure id="fig-blurry"><img style="width: 300px" src="data:image/svg+xml;utf8,'
            "%3Csvg xmlns='http://www.w3.org/2000/svg' width='300' height='10'%3E%3C/svg%3E\"></figure>"
            "<p>" + "word " * MAX_WORDS + "</p>")
-    probe = path.with_name(".layout-selftest.html")
-    probe.write_text(path.read_text().replace('<article class="bd-article">', '<article class="bd-article">' + bad, 1))
-    from mascore._booktools import measure_page
+    probe = good.with_name(".layout-selftest.html")
+    probe.write_text(good.read_text().replace('<article class="bd-article">', '<article class="bd-article">' + bad, 1))
+    missing = good.with_name(".no-such-page.html")
+    from mascore._booktools import measure_pages
 
     try:
-        problems = "\n".join(layout_problems(measure_page(probe, browser=_browser())))
+        measures = measure_pages([good, probe, missing], browser=_browser(), tabs=TABS)
     finally:
         probe.unlink(missing_ok=True)
+    problems = "\n".join(layout_problems(measures[probe]))
     assert "display equation" in problems and "table" in problems and "NaN" in problems, problems
     assert "MathJax cannot typeset" in problems, problems
     assert "fig-shrunk" in problems, problems
     assert "fig-blurry has 1 image pixels per CSS pixel" in problems, problems
     assert "visible words" in problems, problems
+    assert measures[good] == measured[good], "a page measures differently beside another page"
+    assert layout_problems(measures[missing]) == ["the page could not be measured: Chromium could not open "
+                                                  f"{missing.resolve().as_uri()}: net::ERR_FILE_NOT_FOUND"]
+
+
+def test_a_page_that_never_finishes_is_reported_not_waited_for(tmp_path):
+    """A page whose typesetting never ends fails its own measure once its time is up."""
+    page = tmp_path / "never.html"
+    page.write_text("<script>window.MathJax = {startup: {promise: new Promise(() => {})}};</script><p>text</p>")
+    from mascore._booktools import measure_page
+
+    with pytest.raises(RuntimeError, match="never.html: the page was not measured: not measured within 1 s"):
+        measure_page(page, browser=_browser(), timeout=1)
 
 
 def _next_page(path: Path) -> str:
