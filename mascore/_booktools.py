@@ -496,7 +496,10 @@ class _OpenPage:
         elif step == "measures":
             if "exceptionDetails" in result:
                 return {"error": f"the measuring script failed: {result['exceptionDetails'].get('text')}"}
-            href, measures = result["result"]["value"]
+            value = result.get("result", {}).get("value")
+            if not (isinstance(value, list) and len(value) == 2 and isinstance(value[1], dict)):
+                return {"error": f"the measuring script returned {value!r}"}
+            href, measures = value
             if href != self.url:
                 return {"error": f"Chromium showed {href} instead of {self.url}"}
             return measures
