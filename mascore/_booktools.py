@@ -314,6 +314,8 @@ def measure_pages(paths: Sequence[str | Path], width: int = 1280, browser: str |
     if browser is None:
         raise FileNotFoundError("no chromium on the PATH (apt-get install -y chromium)")
     pages = [Path(p) for p in paths]
+    if not pages:
+        return {}
     results: dict[Path, dict] = {}
     todo = list(dict.fromkeys(pages))[::-1]  # popped from the end: in order
     with tempfile.TemporaryDirectory() as profile, _DevTools(browser, profile) as devtools:

@@ -281,6 +281,15 @@ def test_layout_check_fails_on_wide_math_tables_nan_shrunk_or_blurry_figures_and
                                                        f"{MISSING_PAGE.resolve().as_uri()}: net::ERR_FILE_NOT_FOUND"]
 
 
+@pytest.mark.parametrize("bad,message", [({"width": 0}, "width must be"), ({"tabs": 1.5}, "tabs must be"),
+                                         ({"timeout": -1}, "timeout must be")])
+def test_measure_pages_refuses_bad_arguments(bad, message):
+    from mascore._booktools import measure_pages
+
+    with pytest.raises(ValueError, match=message):
+        measure_pages([HTML / "intro.html"], **bad)
+
+
 def test_a_page_that_never_finishes_is_reported_not_waited_for(tmp_path):
     """A page whose typesetting never ends fails its own measure once its time is up."""
     page = tmp_path / "never.html"
