@@ -109,12 +109,15 @@ def test_cells_run_together_give_the_rows_of_each_cell_alone_and_resume_by_cell(
     assert {len({c["block"] for c in cells if compare.cell_group(c) == key}) for key in
             {compare.cell_group(c) for c in cells} - {None}} == {2}
     alone = sweep.run_sweep(cells, _cell_task, tmp_path / "alone.csv", progress=False)
-    out = tmp_path / "together.csv"
+    together = sweep.run_sweep(cells, _cells_task, tmp_path / "together.csv", progress=False,
+                               group=compare.cell_group)  # both blocks of a group in one call
+    pd.testing.assert_frame_equal(_without_cpu(together), _without_cpu(alone), check_exact=True)
+    out = tmp_path / "resumed.csv"
     first = sweep.run_sweep([c for c in cells if c["block"] == 0], _cells_task, out, progress=False,
                             group=compare.cell_group)
-    together = sweep.run_sweep(cells, _cells_task, out, progress=False, group=compare.cell_group)
-    pd.testing.assert_frame_equal(_without_cpu(together), _without_cpu(alone), check_exact=True)
-    kept = together.set_index(["cell", "run"]).loc[first.set_index(["cell", "run"]).index, CPU]
+    resumed = sweep.run_sweep(cells, _cells_task, out, progress=False, group=compare.cell_group)  # block 1 alone
+    pd.testing.assert_frame_equal(_without_cpu(resumed), _without_cpu(alone), check_exact=True)
+    kept = resumed.set_index(["cell", "run"]).loc[first.set_index(["cell", "run"]).index, CPU]
     np.testing.assert_array_equal(kept.to_numpy(), first[CPU].to_numpy())  # block 0 was not run again
     with pytest.raises(ValueError, match="cell_group"):
         compare.run_cells([cells[0], {**cells[0], "n_agents": 16}])
