@@ -1,7 +1,8 @@
 """Maintenance of the book: figure captions in the notebooks, checks of the rendered HTML.
 
 ``python -m mascore._booktools sync [NOTEBOOK ...]`` (``make sync``) writes the API reference pages
-``book/api/*.md`` from each module's ``__all__`` (:func:`write_api_pages`), and, into every code cell
+``book/api/*.md`` from each module's ``__all__`` (:func:`write_api_pages`; a long module's reference
+split into sub-pages by topic, :data:`API_TOPICS`) and their entries in ``book/_toc.yml``, and, into every code cell
 that draws a registered figure (``STUDY.draw("NAME", ...)`` or
 ``REGISTRY.study(...).draw("NAME", ...)``), the MyST-NB figure metadata of that
 figure: ``{"mystnb": {"figure": {"name": "fig-PAPER-NAME", "caption": ...}}}``,
@@ -224,6 +225,8 @@ def page_problems(html: str) -> list[str]:
 _BLOCKS = frozenset({"address", "article", "aside", "blockquote", "caption", "dd", "div", "dl", "dt", "figcaption",
                      "figure", "footer", "h1", "h2", "h3", "h4", "h5", "h6", "header", "li", "main", "nav", "ol", "p",
                      "pre", "section", "summary", "table", "td", "th", "tr", "ul"})
+#: Classes of inline elements the theme sets apart from the text before them (numpydoc's parameter types).
+_APART = frozenset({"classifier"})
 #: Elements with no end tag.
 _VOID = frozenset({"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "param", "source",
                    "track", "wbr"})
@@ -233,7 +236,8 @@ def visible_words(html: str) -> int:
     """Words of a built page's article as a reader sees it, counted without a browser.
 
     The text of ``<article class="bd-article">`` without scripts, styles, elements marked ``hidden`` and
-    the body of a closed ``<details>`` (its summary counts), split at whitespace and at block elements;
+    the body of a closed ``<details>`` (its summary counts), split at whitespace, at block elements and
+    before a parameter's type;
     a word is a piece with a letter or digit, as in :func:`measure_page`'s ``words``. Math is counted as
     its TeX source, which MathJax shows as about as many words. Returns 0 for a page without the article.
     """
@@ -250,6 +254,8 @@ def visible_words(html: str) -> int:
                 self.parts.append(" ")
                 return
             a = dict(attrs)
+            if _APART.intersection((a.get("class") or "").split()):
+                self.parts.append(" ")
             inside, hidden = self.stack[-1][1:] if self.stack else (False, False)
             inside = inside or (tag == "article" and "bd-article" in (a.get("class") or "").split())
             closed_details = bool(self.stack) and self.stack[-1][0] == "details" and self.stack[-1][2] is None
