@@ -273,8 +273,10 @@ def visible_words(html: str) -> int:
             if self.stack and self.stack[-1][1] and not self.stack[-1][2]:
                 self.parts.append(data)
 
+    start = re.search(r"<article\b[^>]*\bbd-article\b", html)  # parse the article alone, not the sidebar
+    end = html.rfind("</article>")
     parser = Text()
-    parser.feed(html)
+    parser.feed(html[start.start():end + len("</article>")] if start and end > start.start() else html)
     return sum(1 for w in "".join(parser.parts).split() if re.search(r"[A-Za-z0-9]", w))
 
 
