@@ -505,8 +505,14 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
     if jupyter_book is None:
         raise FileNotFoundError("build_book: no `jupyter-book` beside this Python or on the PATH (pip install .[book])")
     book = Path(book)
-    cache = _emptied_cache(book)  # ready, with its project, before the build starts
-    _add_notebooks(cache, book, ipynb=command is None)  # `command` executes notebooks/*.ipynb, not the intro
+    first_run = subprocess.Popen(first) if first is not None else None  # at once: it does not use the cache
+    try:
+        cache = _emptied_cache(book)  # ready, with its project, before the build starts
+        _add_notebooks(cache, book, ipynb=command is None)  # `command` executes notebooks/*.ipynb, not the intro
+    except BaseException:
+        if first_run is not None:
+            first_run.terminate()
+        raise
     pending = (book / "_build" / "notebooks-pending").resolve()
     pending.parent.mkdir(parents=True, exist_ok=True)
     pending.write_text(str(os.getpid()))  # the build waits while this process lives and the file exists
@@ -517,7 +523,7 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
             build = subprocess.Popen([jupyter_book, "build", str(book), "--all", "-W", "-n", "--keep-going"],
                                      env={**os.environ, NOTEBOOKS_PENDING: str(pending)},
                                      stdout=out, stderr=subprocess.STDOUT if out else None)
-            status = subprocess.call(first) if first is not None else 0
+            status = first_run.wait() if first_run is not None else 0
             if status != 0:
                 print(f"{shlex.join(first)} failed (exit status {status}): the book's build is stopped", file=sys.stderr)
                 build.terminate()
