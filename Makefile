@@ -51,15 +51,17 @@ $(STAMP): requirements.lock pyproject.toml .ci/install.py
 # changed since; a fraction of a second), so that they do not each compile the same modules at once.
 COMPILE := $(BIN)/python -m compileall -q mascore
 
-# The notebooks are executed on both cores into an emptied cache while the book's build (one process)
-# reads the API pages, which need no notebook; the build waits for the cache before the first page with
+# The book's build (one process) starts first and reads the API pages, which need no notebook, while the
+# results stage runs (`--first`: the results the notebooks read, when the package changed); then the notebooks
+# are executed on both cores into an emptied cache. The build waits for the cache before the first page with
 # executed cells (book/_ext/notebooks_pending.py). A notebook missing from the cache is executed by the
-# build, which shows why it failed.
+# build, which shows why it failed; its output is in $(BOOK_LOG) (its last lines are shown if it fails).
 BUILD_BOOK := env -u MPLBACKEND $(BIN)/python -m mascore._booktools build
+BOOK_LOG := book/_build/build.log
 
-book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book into book/_build/html
+book: $(STAMP)  ## execute every notebook and render the HTML book into book/_build/html
 	@$(COMPILE)
-	$(BUILD_BOOK)
+	$(BUILD_BOOK) --log $(BOOK_LOG) --first "$(MAKE) --no-print-directory $(RESULTS)"
 	@echo "Open book/_build/html/index.html"
 
 # `make test` executes every notebook once, as a test: nbmake runs copies of them (results/notebooks)
@@ -73,7 +75,6 @@ book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book in
 # worker ran all 34 notebooks). The notebooks are collected first: the longest items start early, and the
 # last ones to share out are the short doctests.
 EXECUTED := results/notebooks
-BOOK_LOG := book/_build/build.log
 # The HTML checks run in one process: it measures the pages in Chromium, several at a time (a session
 # fixture of tests/test_book_html.py), while the remaining checks only read files.
 HTML_TESTS := tests/test_book_html.py

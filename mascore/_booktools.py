@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib
 import json
 import re
+import shlex
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -652,7 +653,7 @@ NOTEBOOKS_PENDING = "MASCORE_NOTEBOOKS_PENDING"
 
 
 def build_book(book: str | Path = "book", command: list[str] | None = None, executed: str | Path | None = None,
-               log: str | Path | None = None, timeout: int = 900) -> tuple[int, int]:
+               log: str | Path | None = None, timeout: int = 900, first: list[str] | None = None) -> tuple[int, int]:
     """Render the book with ``jupyter-book build`` while its notebooks are executed.
 
     The build is one process (Sphinx reads, then writes, one page at a time), so it starts at
@@ -664,7 +665,8 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
     intro, which is no notebook of ``notebooks/``, is executed meanwhile by this process). The
     build waits for them before it reads a page with executed cells (book/_ext/notebooks_pending.py,
     told by :data:`NOTEBOOKS_PENDING`); a notebook missing from the cache is executed by the build,
-    which shows why it fails.
+    which shows why it fails. With `first`, that command (``make``'s results stage, which the notebooks
+    read) runs before any notebook is executed, while the build reads the API pages.
 
     Parameters
     ----------
@@ -678,11 +680,14 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
         File for the build's output (default: this process's standard output).
     timeout : int
         Seconds a cell may run (:func:`execute_notebooks`).
+    first : list of str, optional
+        A command run to its end before the notebooks are executed; if it fails, the build is stopped.
 
     Returns
     -------
     (int, int)
-        The exit status of the build and of `command` (0 without a command).
+        The exit status of the build (-15 if `first` stopped it) and of `first` if it failed, else of
+        `command` (0 without a command).
     """
     import contextlib
     import os
@@ -695,33 +700,53 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
     if jupyter_book is None:
         raise FileNotFoundError("build_book: no `jupyter-book` beside this Python or on the PATH (pip install .[book])")
     book = Path(book)
-    cache = _emptied_cache(book)  # ready, with its project, before the build starts
-    _add_notebooks(cache, book, ipynb=command is None)  # `command` executes notebooks/*.ipynb, not the intro
+    first_run = subprocess.Popen(first) if first is not None else None  # at once: it does not use the cache
+    try:
+        cache = _emptied_cache(book)  # ready, with its project, before the build starts
+        _add_notebooks(cache, book, ipynb=command is None)  # `command` executes notebooks/*.ipynb, not the intro
+    except BaseException:
+        if first_run is not None:
+            first_run.terminate()
+        raise
     pending = (book / "_build" / "notebooks-pending").resolve()
     pending.parent.mkdir(parents=True, exist_ok=True)
     pending.write_text(str(os.getpid()))  # the build waits while this process lives and the file exists
+    api_read = pending.with_name(pending.name + ".waiting")  # the build creates it once it waits for the notebooks
+    api_read.unlink(missing_ok=True)
     with open(log, "w") if log is not None else contextlib.nullcontext() as out:
         try:
             build = subprocess.Popen([jupyter_book, "build", str(book), "--all", "-W", "-n", "--keep-going"],
                                      env={**os.environ, NOTEBOOKS_PENDING: str(pending)},
                                      stdout=out, stderr=subprocess.STDOUT if out else None)
-            running = subprocess.Popen(command) if command is not None else None
-            # all the notebooks, or the intro beside `command`; on every core once the build waits for them
-            api_read = pending.with_name(pending.name + ".waiting")
-            api_read.unlink(missing_ok=True)
-            try:
-                failed = _run_project(cache, timeout, lambda: api_read.exists() or build.poll() is not None)
-            finally:
-                status = running.wait() if running is not None else 0
-            for uri in failed:
-                print(f"{uri}: failed (the book's build shows why)", file=sys.stderr)
-            for name in _cache_copies(cache, executed, book) if command is not None else []:
-                print(f"{name}: not executed by the tests (the book's build executes it)", file=sys.stderr)
+            status = first_run.wait() if first_run is not None else 0
+            if status != 0:
+                print(f"{shlex.join(first)} failed (exit status {status}): the book's build is stopped", file=sys.stderr)
+                build.terminate()
+            else:
+                status = _execute_beside_build(cache, book, build, api_read, command, executed, timeout)
         finally:
             pending.unlink(missing_ok=True)
         status_build = build.wait()
         api_read.unlink(missing_ok=True)
         return status_build, status
+
+
+def _execute_beside_build(cache, book: Path, build, api_read: Path, command: list[str] | None,
+                          executed: str | Path | None, timeout: int) -> int:
+    """:func:`build_book`'s execution of the notebooks while `build` runs: `command`'s exit status (0 without)."""
+    import subprocess
+
+    running = subprocess.Popen(command) if command is not None else None
+    # all the notebooks, or the intro beside `command`; on every core once the build waits for them
+    try:
+        failed = _run_project(cache, timeout, lambda: api_read.exists() or build.poll() is not None)
+    finally:
+        status = running.wait() if running is not None else 0
+    for uri in failed:
+        print(f"{uri}: failed (the book's build shows why)", file=sys.stderr)
+    for name in _cache_copies(cache, executed, book) if command is not None else []:
+        print(f"{name}: not executed by the tests (the book's build executes it)", file=sys.stderr)
+    return status
 
 
 def cache_executed(executed: str | Path, book: str | Path = "book") -> list[str]:
@@ -773,15 +798,22 @@ def _cache_copies(cache, executed: str | Path, book: str | Path) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m mascore._booktools sync [NOTEBOOK ...]`` (default: every notebook of a study), ``execute``,
-    ``cache FOLDER`` (:func:`cache_executed`), or ``build [--log FILE] [FOLDER COMMAND ...]`` (:func:`build_book`:
-    the notebooks executed by COMMAND into FOLDER, or by :func:`execute_notebooks`; the exit status is the
-    build's if it failed, else the command's)."""
+    ``cache FOLDER`` (:func:`cache_executed`), or ``build [--log FILE] [--first "CMD ARGS"] [FOLDER COMMAND ...]``
+    (:func:`build_book`: CMD run first, then the notebooks executed by COMMAND into FOLDER, or by
+    :func:`execute_notebooks`; the exit status is the build's if it failed, else the commands')."""
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] == "build":
-        args, log = argv[1:], None
-        if args[:1] == ["--log"]:
-            log, args = args[1], args[2:]
-        built, status = build_book(command=args[1:] or None, executed=args[0] if args else None, log=log)
+        args, log, first = argv[1:], None, None
+        while args[:1] in (["--log"], ["--first"]):
+            if args[0] == "--log":
+                log = args[1]
+            else:
+                first = shlex.split(args[1])
+            args = args[2:]
+        built, status = build_book(command=args[1:] or None, executed=args[0] if args else None, log=log,
+                                   first=first)
+        if first is not None and status != 0:
+            return status
         if built != 0:
             if log is not None:
                 print("".join(Path(log).read_text().splitlines(keepends=True)[-80:]), file=sys.stderr)

@@ -133,6 +133,22 @@ def test_build_book_needs_the_command_and_its_folder_together(tmp_path):
         build_book(tmp_path, executed=tmp_path)
 
 
+def test_a_failing_first_command_stops_the_build_before_any_notebook(tmp_path, capsys, monkeypatch):
+    """`make book`'s results stage runs first (``--first``): if it fails, no notebook is executed, the build is
+    stopped and the command's exit status is returned."""
+    pytest.importorskip("jupyter_cache")
+    from mascore._booktools import main
+
+    monkeypatch.chdir(tmp_path)
+    book = tmp_path / "book"
+    (book / "notebooks").mkdir(parents=True)
+    (book / "notebooks" / "x.ipynb").write_text("not a notebook: executing it would fail")
+    status = main(["build", "--log", str(tmp_path / "build.log"), "--first", f"{sys.executable} -c 'exit(3)'"])
+    assert status == 3
+    assert "failed (exit status 3): the book's build is stopped" in capsys.readouterr().err
+    assert not (book / "_build" / "notebooks-pending").exists()
+
+
 def test_the_intro_is_executed_with_the_notebooks(tmp_path):
     pytest.importorskip("jupyter_cache")
     pytest.importorskip("myst_nb")
