@@ -129,7 +129,7 @@ lab: $(STAMP)  ## JupyterLab on notebooks/ with the project's environment
 bench: $(STAMP)  ## timing benchmarks (printed, and written to results/benchmarks/)
 	$(HEADLESS) $(BIN)/python -m benchmarks
 
-sync: $(STAMP)  ## write the API reference pages (book/api) and the registry's figure captions into the notebooks
+sync: $(STAMP)  ## write the API reference pages (book/api, long modules split into sub-pages) and their entries in book/_toc.yml, and the registry's figure captions into the notebooks
 	$(BIN)/python -m mascore._booktools sync
 
 captions: sync
