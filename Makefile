@@ -58,16 +58,19 @@ COMPILE := $(BIN)/python -m compileall -q mascore
 # build, which shows why it failed; its output is in $(BOOK_LOG) (its last lines are shown if it fails).
 BUILD_BOOK := env -u MPLBACKEND $(BIN)/python -m mascore._booktools build
 BOOK_LOG := book/_build/build.log
+# Through a variable: a recipe line that names $(MAKE) itself is run even by `make -n`.
+RESULTS_STAGE = $(MAKE) --no-print-directory $(RESULTS)
 
 book: $(STAMP)  ## execute every notebook and render the HTML book into book/_build/html
 	@$(COMPILE)
-	$(BUILD_BOOK) --log $(BOOK_LOG) --first "$(MAKE) --no-print-directory $(RESULTS)"
+	$(BUILD_BOOK) --log $(BOOK_LOG) --first "$(RESULTS_STAGE)"
 	@echo "Open book/_build/html/index.html"
 
 # `make test` executes every notebook once, as a test: nbmake runs copies of them (results/notebooks)
 # and writes their outputs back (--overwrite); the book is rendered from those outputs (`_booktools build`
-# starts the build beside pytest: it reads the API pages meanwhile, and the notebooks' pages once pytest has
-# ended and its outputs are in the cache), and the checks of the rendered HTML run last. The notebooks'
+# starts the build first, as `make book` does: it reads the API pages during the results stage, and the
+# notebooks' pages once pytest has ended and its outputs are in the cache), and the checks of the rendered
+# HTML run last. The notebooks'
 # kernels need ipykernel's inline backend to draw their figures, so MPLBACKEND stays unset here
 # (tests/conftest.py gives the test processes themselves a headless backend).
 # --dist worksteal: a worker that runs out of tests takes half of the other's queue, so the long items
@@ -79,9 +82,9 @@ EXECUTED := results/notebooks
 # fixture of tests/test_book_html.py), while the remaining checks only read files.
 HTML_TESTS := tests/test_book_html.py
 
-test: $(STAMP) lint $(RESULTS)  ## lint, the unit tests, doctests, published numbers and every notebook (nbmake), then render the book and check its HTML
+test: $(STAMP) lint  ## lint, the unit tests, doctests, published numbers and every notebook (nbmake), then render the book and check its HTML
 	@$(COMPILE) && rm -rf $(EXECUTED) && mkdir -p $(EXECUTED) book/_build && cp notebooks/*.ipynb $(EXECUTED)/
-	@env -u MPLBACKEND $(BIN)/python -m mascore._booktools build --log $(BOOK_LOG) $(EXECUTED) \
+	@$(BUILD_BOOK) --log $(BOOK_LOG) --first "$(RESULTS_STAGE)" $(EXECUTED) \
 	    $(BIN)/python -m pytest -n $(JOBS) --dist worksteal --nbmake --overwrite --doctest-modules --durations=25 \
 	    --ignore=$(HTML_TESTS) $(EXECUTED) tests mascore
 	$(HEADLESS) $(BIN)/python -m pytest -p no:xdist $(HTML_TESTS)
