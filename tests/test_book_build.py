@@ -163,3 +163,17 @@ def test_the_intro_is_executed_with_the_notebooks(tmp_path):
     intro = next(r for r in cache.list_project_records() if r.uri.endswith("intro.md"))
     code = [c.source for c in cache.get_project_notebook(intro.pk).nb.cells if c.cell_type == "code"]
     assert code and "reading_paths" in code[0]  # read as MyST: the code cells, not the page as one text cell
+
+
+def test_make_dry_run_prints_the_book_commands_without_running_them():
+    """`make -n book` / `make -n test` print the build's command line (the results stage runs inside it, through
+    a variable: a recipe line naming $(MAKE) itself would be run even by `make -n`)."""
+    import shutil
+
+    if shutil.which("make") is None:
+        pytest.skip("no make here")
+    for target in ("book", "test"):
+        out = subprocess.run(["make", "-n", target], cwd=ROOT, capture_output=True, text=True, timeout=60)
+        assert out.returncode == 0, out.stderr
+        assert "mascore._booktools build" in out.stdout and "--first" in out.stdout
+        assert "reading sources" not in out.stdout + out.stderr  # nothing was built
