@@ -455,21 +455,27 @@ def test_rmse_matches_the_exact_error_covariance(task, method):
     assert abs(mse.mean() - exact) < 2 * half, (mse.mean(), exact, half)
 
 
-def test_headlines_have_no_nan_and_list_what_does_not_apply():
-    """The headline tables of block 0's cells at N = 8 on the ring, from the rows `mascore compare` wrote.
+def _quick_rows(cells: list[dict]) -> pd.DataFrame:
+    """The rows of `cells` in the quick sweep's table, which ``make test`` wrote before pytest.
 
-    ``make test`` runs the quick grid (``mascore compare --grid quick --out results``) before pytest: these
-    cells' rows are read from its table instead of being computed again (``compare.run_cell``, as there).
+    ``make test`` runs ``mascore compare --grid quick --out results`` first: the rows of the quick grid's cells are
+    read from its table (``compare.run_cell`` at ``compare.SETTINGS``, as here) instead of being computed again.
     """
     path = results_dir() / "compare" / "table-quick-0.csv"
     if not path.exists():
         pytest.skip("the quick sweep has not been run (make reproduce)")
-    cells = {sweep.cell_id(c) for c in compare.grid_cells("quick") if c["block"] == 0 and c["n_agents"] == 8
-             and c["dropout"] == 0.0 and c["graph"] == "ring" and c["study"] in ("target", "localization", "shared")}
+    ids = {sweep.cell_id(c) for c in cells}
     table = pd.read_csv(path)
-    table = table[table["cell"].isin(cells)]
-    assert set(table["cell"]) == cells
-    summary = compare.summarize(table)
+    table = table[table["cell"].isin(ids)]
+    assert set(table["cell"]) == ids and len(table) == len(ids) * compare.SETTINGS.runs
+    return table
+
+
+def test_headlines_have_no_nan_and_list_what_does_not_apply():
+    """The headline tables of block 0's cells at N = 8 on the ring."""
+    summary = compare.summarize(_quick_rows([c for c in compare.grid_cells("quick") if c["block"] == 0 and
+                                             c["n_agents"] == 8 and c["dropout"] == 0.0 and c["graph"] == "ring"
+                                             and c["study"] in ("target", "localization", "shared")]))
     for task in ("target", "localization", "shared"):
         table = compare.headline(summary, task)
         assert not table.isna().any().any(), task
@@ -721,9 +727,8 @@ def test_set_membership_with_positions_filters_and_contains_the_truth_at_every_s
 
 
 def test_position_headline_lists_every_method_and_what_does_not_apply():
-    cells = [c for c in compare.grid_cells("quick") if c["study"] == "position" and c["block"] == 0]
-    rows = [{**r, **c, "cell": sweep.cell_id(c)} for c in cells for r in compare.run_cell(c)]
-    summary = compare.summarize(pd.DataFrame(rows))
+    summary = compare.summarize(_quick_rows([c for c in compare.grid_cells("quick") if c["study"] == "position"
+                                             and c["block"] == 0]))
     table = compare.headline(summary, "position")
     assert list(table.index) == [*compare.POSITION_METHODS, *compare.POSITION_NOT_APPLICABLE]
     assert not table.isna().any().any()
