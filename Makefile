@@ -51,21 +51,26 @@ $(STAMP): requirements.lock pyproject.toml .ci/install.py
 # changed since; a fraction of a second), so that they do not each compile the same modules at once.
 COMPILE := $(BIN)/python -m compileall -q mascore
 
-# The notebooks are executed on both cores into an emptied cache while the book's build (one process)
-# reads the API pages, which need no notebook; the build waits for the cache before the first page with
+# The book's build (one process) starts first and reads the API pages, which need no notebook, while the
+# results stage runs (`--first`: the results the notebooks read, when the package changed); then the notebooks
+# are executed on both cores into an emptied cache. The build waits for the cache before the first page with
 # executed cells (book/_ext/notebooks_pending.py). A notebook missing from the cache is executed by the
-# build, which shows why it failed.
+# build, which shows why it failed; its output is in $(BOOK_LOG) (its last lines are shown if it fails).
 BUILD_BOOK := env -u MPLBACKEND $(BIN)/python -m mascore._booktools build
+BOOK_LOG := book/_build/build.log
+# Through a variable: a recipe line that names $(MAKE) itself is run even by `make -n`.
+RESULTS_STAGE = $(MAKE) --no-print-directory $(RESULTS)
 
-book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book into book/_build/html
+book: $(STAMP)  ## execute every notebook and render the HTML book into book/_build/html
 	@$(COMPILE)
-	$(BUILD_BOOK)
+	$(BUILD_BOOK) --log $(BOOK_LOG) --first "$(RESULTS_STAGE)"
 	@echo "Open book/_build/html/index.html"
 
 # `make test` executes every notebook once, as a test: nbmake runs copies of them (results/notebooks)
 # and writes their outputs back (--overwrite); the book is rendered from those outputs (`_booktools build`
-# starts the build beside pytest: it reads the API pages meanwhile, and the notebooks' pages once pytest has
-# ended and its outputs are in the cache), and the checks of the rendered HTML run last. The notebooks'
+# starts the build first, as `make book` does: it reads the API pages during the results stage, and the
+# notebooks' pages once pytest has ended and its outputs are in the cache), and the checks of the rendered
+# HTML run last. The notebooks'
 # kernels need ipykernel's inline backend to draw their figures, so MPLBACKEND stays unset here
 # (tests/conftest.py gives the test processes themselves a headless backend).
 # --dist worksteal: a worker that runs out of tests takes half of the other's queue, so the long items
@@ -73,14 +78,13 @@ book: $(STAMP) $(RESULTS)  ## execute every notebook and render the HTML book in
 # worker ran all 34 notebooks). The notebooks are collected first: the longest items start early, and the
 # last ones to share out are the short doctests.
 EXECUTED := results/notebooks
-BOOK_LOG := book/_build/build.log
 # The HTML checks run in one process: it measures the pages in Chromium, several at a time (a session
 # fixture of tests/test_book_html.py), while the remaining checks only read files.
 HTML_TESTS := tests/test_book_html.py
 
-test: $(STAMP) lint $(RESULTS)  ## lint, the unit tests, doctests, published numbers and every notebook (nbmake), then render the book and check its HTML
+test: $(STAMP) lint  ## lint, the unit tests, doctests, published numbers and every notebook (nbmake), then render the book and check its HTML
 	@$(COMPILE) && rm -rf $(EXECUTED) && mkdir -p $(EXECUTED) book/_build && cp notebooks/*.ipynb $(EXECUTED)/
-	@env -u MPLBACKEND $(BIN)/python -m mascore._booktools build --log $(BOOK_LOG) $(EXECUTED) \
+	@$(BUILD_BOOK) --log $(BOOK_LOG) --first "$(RESULTS_STAGE)" $(EXECUTED) \
 	    $(BIN)/python -m pytest -n $(JOBS) --dist worksteal --nbmake --overwrite --doctest-modules --durations=25 \
 	    --ignore=$(HTML_TESTS) $(EXECUTED) tests mascore
 	$(HEADLESS) $(BIN)/python -m pytest -p no:xdist $(HTML_TESTS)
@@ -128,7 +132,7 @@ lab: $(STAMP)  ## JupyterLab on notebooks/ with the project's environment
 bench: $(STAMP)  ## timing benchmarks (printed, and written to results/benchmarks/)
 	$(HEADLESS) $(BIN)/python -m benchmarks
 
-sync: $(STAMP)  ## write the API reference pages (book/api) and the registry's figure captions into the notebooks
+sync: $(STAMP)  ## write the API reference pages (book/api, long modules split into sub-pages) and their entries in book/_toc.yml, and the registry's figure captions into the notebooks
 	$(BIN)/python -m mascore._booktools sync
 
 captions: sync

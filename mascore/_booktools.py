@@ -1,7 +1,8 @@
 """Maintenance of the book: figure captions in the notebooks, checks of the rendered HTML.
 
 ``python -m mascore._booktools sync [NOTEBOOK ...]`` (``make sync``) writes the API reference pages
-``book/api/*.md`` from each module's ``__all__`` (:func:`write_api_pages`), and, into every code cell
+``book/api/*.md`` from each module's ``__all__`` (:func:`write_api_pages`; a long module's reference
+split into sub-pages by topic, :data:`API_TOPICS`) and their entries in ``book/_toc.yml``, and, into every code cell
 that draws a registered figure (``STUDY.draw("NAME", ...)`` or
 ``REGISTRY.study(...).draw("NAME", ...)``), the MyST-NB figure metadata of that
 figure: ``{"mystnb": {"figure": {"name": "fig-PAPER-NAME", "caption": ...}}}``,
@@ -17,6 +18,7 @@ from __future__ import annotations
 import importlib
 import json
 import re
+import shlex
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -25,8 +27,11 @@ from .registry import PaperRegistry, Study, paper_registries, study_modules
 
 __all__ = [
     "API_GROUPS",
+    "API_TOPICS",
     "api_groups",
     "api_page",
+    "api_pages",
+    "api_topics",
     "chapter_studies",
     "drawn_figures",
     "measure_page",
@@ -35,6 +40,9 @@ __all__ = [
     "plain_text",
     "public_objects",
     "sync_notebook",
+    "toc_with_api_pages",
+    "topic_key",
+    "visible_words",
     "write_api_pages",
 ]
 
@@ -54,6 +62,23 @@ API_GROUPS: dict[str, tuple[str, ...]] = {
 
 #: The group of the papers' study modules in the API reference.
 PAPERS_GROUP = "The papers' scenarios"
+
+#: The modules whose reference is too long for one page (more than about 3,800 visible words), and the
+#: sub-pages it is split into: ``(slug, title, keys)``, the sub-page ``api/<module>.<slug>.md`` documenting the
+#: public objects whose :func:`topic_key` is one of `keys`: the submodule that defines the object (for a
+#: package) or, for an object defined in the module itself, ``"classes"`` or ``"functions"``. The module's
+#: own page keeps its summary, the table of all its public objects and the objects no sub-page takes, so a
+#: new public name is never left out of the reference.
+API_TOPICS: dict[str, tuple[tuple[str, str, tuple[str, ...]], ...]] = {
+    "compare": (
+        ("tasks", "Tasks and simulations", ("benchmark", "team", "shared", "target")),
+        ("grid", "Running the grid", ("grid", "stats", "verdicts", "cost")),
+        ("tables", "Tables and plots", ("tables", "plots")),
+    ),
+    "distributed_kf": (("functions", "The steps and checks", ("functions",)),),
+    "distributed_ekf": (("functions", "The steps and the simulation", ("functions",)),),
+    "fusion": (("functions", "Tracking, exact errors, fusion rules", ("functions",)),),
+}
 
 _DRAW = re.compile(r"""\.draw\(\s*["'](?P<name>[A-Za-z0-9_\-]+)["']""")
 
@@ -525,26 +550,87 @@ def public_objects(module: str) -> list[str]:
     return [n for n in getattr(mod, "__all__", []) if inspect.isclass(getattr(mod, n)) or callable(getattr(mod, n))]
 
 
-def api_page(module: str) -> str:
-    """The MyST source of the API reference page of ``mascore.<module>``.
+def topic_key(module: str, name: str) -> str:
+    """What :data:`API_TOPICS` groups ``mascore.<module>.<name>`` by.
 
-    A summary table of the public classes and functions, then each one rendered from its
-    NumPy-style docstring (autodoc + numpydoc), in the order of the module's ``__all__``.
+    The submodule that defines it when ``mascore.<module>`` is a package (``"grid"`` for an object of
+    ``mascore.compare.grid``), else ``"classes"`` or ``"functions"``.
+    """
+    import inspect
+
+    package = f"mascore.{module}"
+    obj = getattr(importlib.import_module(package), name)
+    defined_in = getattr(obj, "__module__", "") or ""
+    if defined_in.startswith(package + "."):
+        return defined_in.removeprefix(package + ".").split(".")[0]
+    return "classes" if inspect.isclass(obj) else "functions"
+
+
+def api_topics(module: str) -> list[tuple[str, str, list[str]]]:
+    """The sub-pages of ``mascore.<module>``'s reference: ``(slug, title, names)``.
+
+    The names of a topic are in the order of its keys, then of ``__all__``. Empty for a module not in
+    :data:`API_TOPICS`. Raises ValueError if a topic takes no public object
+    (a stale entry of :data:`API_TOPICS`).
+    """
+    objects = public_objects(module)
+    keys = {name: topic_key(module, name) for name in objects}
+    topics = []
+    for slug, title, wanted in API_TOPICS.get(module, ()):
+        names = sorted((n for n in objects if keys[n] in wanted), key=lambda n: wanted.index(keys[n]))  # stable
+        if not names:
+            raise ValueError(f"API_TOPICS[{module!r}]: the sub-page {slug!r} takes no public object of "
+                             f"mascore.{module} (keys {wanted}; the objects' keys: {sorted(set(keys.values()))})")
+        topics.append((slug, title, names))
+    return topics
+
+
+def _autodoc(module: str, names: list[str]) -> list[str]:
+    """The autodoc directives of `names` (reST lines): a class with its public methods and properties."""
+    lines = []
+    for o in names:
+        if _is_class(module, o):  # its public methods and properties, each from its own docstring
+            lines += [f".. autoclass:: {o}", "   :members:", ""]
+        else:
+            lines += [f".. autofunction:: {o}", ""]
+    return lines
+
+
+def api_pages(module: str) -> dict[str, str]:
+    """The MyST sources of the API reference of ``mascore.<module>``: file name -> text.
+
+    ``<module>.md``: the module's summary, a table of all its public classes and functions (each linked
+    to its entry), then each one rendered from its NumPy-style docstring (autodoc + numpydoc), in the
+    order of the module's ``__all__``. For a module of :data:`API_TOPICS` the entries are shared out:
+    each sub-page ``<module>.<slug>.md`` renders the objects of its topic, the module's page the rest.
     """
     name = f"mascore.{module}"
     objects = public_objects(module)
+    topics = api_topics(module)
+    elsewhere = {o for _, _, names in topics for o in names}
     lines = [f"# `{name}`", "", "```{eval-rst}", f".. automodule:: {name}", "   :no-members:", ""]
+    if topics:
+        links = [f"[{title}]({module}.{slug}.md)" for slug, title, _ in topics]
+        links = " and ".join([", ".join(links[:-1]), links[-1]] if len(links) > 1 else links)
+        where = f"on {links}" if set(objects) <= elsewhere else f"below it, or on {links}"
+        lines += ["```", "", f"The table links every object to its entry: {where}.", "", "```{eval-rst}"]
     if objects:
         lines += [f".. currentmodule:: {name}", "", ".. autosummary::", "   :nosignatures:", ""]
         lines += [f"   {o}" for o in objects]
         lines += [""]
-        for o in objects:
-            if _is_class(name, o):  # its public methods and properties, each from its own docstring
-                lines += [f".. autoclass:: {o}", "   :members:", ""]
-            else:
-                lines += [f".. autofunction:: {o}", ""]
+        lines += _autodoc(name, [o for o in objects if o not in elsewhere])
     lines += ["```", ""]
-    return "\n".join(lines)
+    pages = {f"{module}.md": "\n".join(lines)}
+    for slug, title, names in topics:
+        sub = [f"# {title}", "", f"Part of the reference of [`{name}`]({module}.md).", "", "```{eval-rst}",
+               f".. currentmodule:: {name}", ""] + _autodoc(name, names) + ["```", ""]
+        pages[f"{module}.{slug}.md"] = "\n".join(sub)
+    return pages
+
+
+def api_page(module: str) -> str:
+    """The MyST source of the API reference page of ``mascore.<module>`` (its sub-pages: :func:`api_pages`)."""
+    return api_pages(module)[f"{module}.md"]
 
 
 def _is_class(module: str, name: str) -> bool:
@@ -566,29 +652,139 @@ def api_modules() -> list[str]:
     return [m for group in api_groups().values() for m in group if importlib.util.find_spec(f"mascore.{m}")]
 
 
-def write_api_pages(folder: str | Path = "book/api") -> int:
-    """Write ``folder/<module>.md`` for every module of :func:`api_groups` and the index page.
+def write_api_pages(folder: str | Path = "book/api", toc: str | Path | None = None) -> int:
+    """Write the API reference pages of every module of :func:`api_groups` and the index page into `folder`.
 
+    The pages are :func:`api_pages`; generated pages of modules no longer listed are removed. In the
+    table of contents `toc` (default: ``_toc.yml`` beside `folder`) the entry ``<folder>/index`` gets the
+    module pages as its sections, in the index's order, each with its sub-pages.
     Returns the number of files that changed.
     """
     folder = Path(folder)
+    toc = Path(toc) if toc is not None else folder.parent / "_toc.yml"
     folder.mkdir(parents=True, exist_ok=True)
-    pages = {f"{m}.md": api_page(m) for m in api_modules()}
+    by_module = {m: api_pages(m) for m in api_modules()}
+    pages = {fname: text for module_pages in by_module.values() for fname, text in module_pages.items()}
+    if len(pages) < sum(map(len, by_module.values())) or "index.md" in pages:
+        raise ValueError("two API pages have the same file name: a sub-page's slug (API_TOPICS) names another page")
     index = ["# API reference", "",
              "Every public class and function of the package, rendered from its docstring. Each page opens with",
              "the module's summary; the examples are executed as doctests by `make test`.", ""]
     for group, modules in api_groups().items():
-        present = [m for m in modules if f"{m}.md" in pages]
+        present = [m for m in modules if m in by_module]
         if present:
-            index += [f"## {group}", ""] + [f"- [`mascore.{m}`]({m}.md)" for m in present] + [""]
+            index += [f"## {group}", ""] + [_index_line(m, by_module[m]) for m in present] + [""]
     pages["index.md"] = "\n".join(index)
     changed = 0
+    for stale in sorted(set(p.name for p in folder.glob("*.md")) - set(pages)):
+        (folder / stale).unlink()
+        changed += 1
     for fname, text in pages.items():
         path = folder / fname
         if not path.exists() or path.read_text() != text:
             path.write_text(text)
             changed += 1
+    if toc.exists():
+        old = toc.read_text()
+        new = toc_with_api_pages(old, folder.name, [list(p) for p in by_module.values()])
+        if new != old:
+            toc.write_text(new)
+            changed += 1
     return changed
+
+
+def _index_line(module: str, pages: dict[str, str]) -> str:
+    """The index's line of one module: its page, then its sub-pages (by their titles)."""
+    line = f"- [`mascore.{module}`]({module}.md)"
+    subs = [f"[{text.split(chr(10), 1)[0].removeprefix('# ')}]({fname})" for fname, text in pages.items()
+            if fname != f"{module}.md"]
+    return line + (": " + " · ".join(subs) if subs else "")
+
+
+def toc_with_api_pages(toc: str, folder: str, pages: list[list[str]]) -> str:
+    """`toc` (a ``_toc.yml``) with the sections of its ``<folder>/index`` entry replaced by the API pages.
+
+    `pages` holds one list per module: its page's file name first, then its sub-pages', which become
+    the sections of the module's entry. Raises ValueError if `toc` has no ``file: <folder>/index`` entry.
+    """
+    lines = toc.splitlines()
+    entry = re.compile(rf"^(?P<indent>\s*)- file: {re.escape(folder)}/index\s*(#.*)?$")
+    at = next((i for i, line in enumerate(lines) if entry.match(line)), None)
+    if at is None:
+        raise ValueError(f"the table of contents has no entry '- file: {folder}/index'")
+    indent = len(entry.match(lines[at])["indent"])
+    end = at + 1
+    while end < len(lines) and (not lines[end].strip() or len(lines[end]) - len(lines[end].lstrip()) > indent):
+        end += 1
+    pad = " " * (indent + 2)
+    body = [f"{pad}sections:  # the API pages in the index's order: written by `make sync` (mascore._booktools)"]
+    for module_pages in pages:
+        body.append(f"{pad}  - file: {folder}/{module_pages[0].removesuffix('.md')}")
+        if module_pages[1:]:
+            body.append(f"{pad}    sections:")
+            body += [f"{pad}      - file: {folder}/{fname.removesuffix('.md')}" for fname in module_pages[1:]]
+    return "\n".join(lines[:at + 1] + body + lines[end:]) + ("\n" if toc.endswith("\n") else "")
+
+
+#: Elements whose end starts a new line of a page's rendered text (the others run on, as in ``innerText``).
+_BLOCKS = frozenset({"address", "article", "aside", "blockquote", "caption", "dd", "div", "dl", "dt", "figcaption",
+                     "figure", "footer", "h1", "h2", "h3", "h4", "h5", "h6", "header", "li", "main", "nav", "ol", "p",
+                     "pre", "section", "summary", "table", "td", "th", "tr", "ul"})
+#: Classes of inline elements the theme sets apart from the text before them (numpydoc's parameter types).
+_APART = frozenset({"classifier"})
+#: Elements with no end tag.
+_VOID = frozenset({"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "param", "source",
+                   "track", "wbr"})
+
+
+def visible_words(html: str) -> int:
+    """Words of a built page's article as a reader sees it, counted without a browser.
+
+    The text of ``<article class="bd-article">`` without scripts, styles, elements marked ``hidden`` and
+    the body of a closed ``<details>`` (its summary counts), split at whitespace, at block elements and
+    before a parameter's type; a word is a piece with a letter or digit, as in :func:`measure_page`'s
+    ``words``. Math is counted as its TeX source. On the API pages this is Chromium's count (:func:`measure_page`)
+    to within about 3 % (a few more words on pages with formulas); on the notebooks' pages, with collapsed
+    blocks and display equations, it is not (-24 % to +2 % on three chapters): they are measured in Chromium.
+    Returns 0 for a page without the article.
+    """
+    from html.parser import HTMLParser
+
+    class Text(HTMLParser):
+        def __init__(self) -> None:
+            super().__init__(convert_charrefs=True)
+            self.stack: list[tuple[str, bool, bool]] = []  # (tag, inside the article, hidden)
+            self.parts: list[str] = []
+
+        def handle_starttag(self, tag, attrs):
+            if tag in _VOID:
+                self.parts.append(" ")
+                return
+            a = dict(attrs)
+            if _APART.intersection((a.get("class") or "").split()):
+                self.parts.append(" ")
+            inside, hidden = self.stack[-1][1:] if self.stack else (False, False)
+            inside = inside or (tag == "article" and "bd-article" in (a.get("class") or "").split())
+            closed_details = bool(self.stack) and self.stack[-1][0] == "details" and self.stack[-1][2] is None
+            hidden = bool(hidden or tag in ("script", "style", "template", "noscript") or "hidden" in a
+                          or (closed_details and tag != "summary"))
+            self.stack.append((tag, inside, None if tag == "details" and "open" not in a and not hidden else hidden))
+
+        def handle_endtag(self, tag):
+            while self.stack and self.stack.pop()[0] != tag:
+                pass
+            if tag in _BLOCKS:
+                self.parts.append(" ")
+
+        def handle_data(self, data):
+            if self.stack and self.stack[-1][1] and not self.stack[-1][2]:
+                self.parts.append(data)
+
+    start = re.search(r"<article\b[^>]*\bbd-article\b", html)  # parse the article alone, not the sidebar
+    end = html.rfind("</article>")
+    parser = Text()
+    parser.feed(html[start.start():end + len("</article>")] if start and end > start.start() else html)
+    return sum(1 for w in "".join(parser.parts).split() if re.search(r"[A-Za-z0-9]", w))
 
 
 def _emptied_cache(book: Path):
@@ -677,7 +873,7 @@ NOTEBOOKS_PENDING = "MASCORE_NOTEBOOKS_PENDING"
 
 
 def build_book(book: str | Path = "book", command: list[str] | None = None, executed: str | Path | None = None,
-               log: str | Path | None = None, timeout: int = 900) -> tuple[int, int]:
+               log: str | Path | None = None, timeout: int = 900, first: list[str] | None = None) -> tuple[int, int]:
     """Render the book with ``jupyter-book build`` while its notebooks are executed.
 
     The build is one process (Sphinx reads, then writes, one page at a time), so it starts at
@@ -689,7 +885,8 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
     intro, which is no notebook of ``notebooks/``, is executed meanwhile by this process). The
     build waits for them before it reads a page with executed cells (book/_ext/notebooks_pending.py,
     told by :data:`NOTEBOOKS_PENDING`); a notebook missing from the cache is executed by the build,
-    which shows why it fails.
+    which shows why it fails. With `first`, that command (``make``'s results stage, which the notebooks
+    read) runs before any notebook is executed, while the build reads the API pages.
 
     Parameters
     ----------
@@ -703,11 +900,14 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
         File for the build's output (default: this process's standard output).
     timeout : int
         Seconds a cell may run (:func:`execute_notebooks`).
+    first : list of str, optional
+        A command run to its end before the notebooks are executed; if it fails, the build is stopped.
 
     Returns
     -------
     (int, int)
-        The exit status of the build and of `command` (0 without a command).
+        The exit status of the build (-15 if `first` stopped it) and of `first` if it failed, else of
+        `command` (0 without a command).
     """
     import contextlib
     import os
@@ -720,33 +920,53 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
     if jupyter_book is None:
         raise FileNotFoundError("build_book: no `jupyter-book` beside this Python or on the PATH (pip install .[book])")
     book = Path(book)
-    cache = _emptied_cache(book)  # ready, with its project, before the build starts
-    _add_notebooks(cache, book, ipynb=command is None)  # `command` executes notebooks/*.ipynb, not the intro
+    first_run = subprocess.Popen(first) if first is not None else None  # at once: it does not use the cache
+    try:
+        cache = _emptied_cache(book)  # ready, with its project, before the build starts
+        _add_notebooks(cache, book, ipynb=command is None)  # `command` executes notebooks/*.ipynb, not the intro
+    except BaseException:
+        if first_run is not None:
+            first_run.terminate()
+        raise
     pending = (book / "_build" / "notebooks-pending").resolve()
     pending.parent.mkdir(parents=True, exist_ok=True)
     pending.write_text(str(os.getpid()))  # the build waits while this process lives and the file exists
+    api_read = pending.with_name(pending.name + ".waiting")  # the build creates it once it waits for the notebooks
+    api_read.unlink(missing_ok=True)
     with open(log, "w") if log is not None else contextlib.nullcontext() as out:
         try:
             build = subprocess.Popen([jupyter_book, "build", str(book), "--all", "-W", "-n", "--keep-going"],
                                      env={**os.environ, NOTEBOOKS_PENDING: str(pending)},
                                      stdout=out, stderr=subprocess.STDOUT if out else None)
-            running = subprocess.Popen(command) if command is not None else None
-            # all the notebooks, or the intro beside `command`; on every core once the build waits for them
-            api_read = pending.with_name(pending.name + ".waiting")
-            api_read.unlink(missing_ok=True)
-            try:
-                failed = _run_project(cache, timeout, lambda: api_read.exists() or build.poll() is not None)
-            finally:
-                status = running.wait() if running is not None else 0
-            for uri in failed:
-                print(f"{uri}: failed (the book's build shows why)", file=sys.stderr)
-            for name in _cache_copies(cache, executed, book) if command is not None else []:
-                print(f"{name}: not executed by the tests (the book's build executes it)", file=sys.stderr)
+            status = first_run.wait() if first_run is not None else 0
+            if status != 0:
+                print(f"{shlex.join(first)} failed (exit status {status}): the book's build is stopped", file=sys.stderr)
+                build.terminate()
+            else:
+                status = _execute_beside_build(cache, book, build, api_read, command, executed, timeout)
         finally:
             pending.unlink(missing_ok=True)
         status_build = build.wait()
         api_read.unlink(missing_ok=True)
         return status_build, status
+
+
+def _execute_beside_build(cache, book: Path, build, api_read: Path, command: list[str] | None,
+                          executed: str | Path | None, timeout: int) -> int:
+    """:func:`build_book`'s execution of the notebooks while `build` runs: `command`'s exit status (0 without)."""
+    import subprocess
+
+    running = subprocess.Popen(command) if command is not None else None
+    # all the notebooks, or the intro beside `command`; on every core once the build waits for them
+    try:
+        failed = _run_project(cache, timeout, lambda: api_read.exists() or build.poll() is not None)
+    finally:
+        status = running.wait() if running is not None else 0
+    for uri in failed:
+        print(f"{uri}: failed (the book's build shows why)", file=sys.stderr)
+    for name in _cache_copies(cache, executed, book) if command is not None else []:
+        print(f"{name}: not executed by the tests (the book's build executes it)", file=sys.stderr)
+    return status
 
 
 def cache_executed(executed: str | Path, book: str | Path = "book") -> list[str]:
@@ -798,15 +1018,22 @@ def _cache_copies(cache, executed: str | Path, book: str | Path) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m mascore._booktools sync [NOTEBOOK ...]`` (default: every notebook of a study), ``execute``,
-    ``cache FOLDER`` (:func:`cache_executed`), or ``build [--log FILE] [FOLDER COMMAND ...]`` (:func:`build_book`:
-    the notebooks executed by COMMAND into FOLDER, or by :func:`execute_notebooks`; the exit status is the
-    build's if it failed, else the command's)."""
+    ``cache FOLDER`` (:func:`cache_executed`), or ``build [--log FILE] [--first "CMD ARGS"] [FOLDER COMMAND ...]``
+    (:func:`build_book`: CMD run first, then the notebooks executed by COMMAND into FOLDER, or by
+    :func:`execute_notebooks`; the exit status is the build's if it failed, else the commands')."""
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] == "build":
-        args, log = argv[1:], None
-        if args[:1] == ["--log"]:
-            log, args = args[1], args[2:]
-        built, status = build_book(command=args[1:] or None, executed=args[0] if args else None, log=log)
+        args, log, first = argv[1:], None, None
+        while args[:1] in (["--log"], ["--first"]):
+            if args[0] == "--log":
+                log = args[1]
+            else:
+                first = shlex.split(args[1])
+            args = args[2:]
+        built, status = build_book(command=args[1:] or None, executed=args[0] if args else None, log=log,
+                                   first=first)
+        if first is not None and status != 0:
+            return status
         if built != 0:
             if log is not None:
                 print("".join(Path(log).read_text().splitlines(keepends=True)[-80:]), file=sys.stderr)

@@ -4,7 +4,8 @@
 ``update`` (which calls the filter's ``_correct``), ``run``, and the per-agent protocol
 (``agent_inputs``, ``agent_step``, ``messages``; :class:`mascore.estimation.Estimator`). The
 helpers below it build the parts of a :class:`~mascore.estimation.MethodSpec` of the
-common-target and localization tasks from :func:`~mascore.fusion_cost.filter_cost`.
+common-target and localization tasks from :func:`~mascore.fusion_cost.filter_cost`; the last two
+check arguments the filters share (consensus weights, information pairs).
 """
 
 from __future__ import annotations
@@ -17,12 +18,21 @@ from numpy.typing import ArrayLike
 
 from . import kalman
 from ._fusion_kernels import broadcast_batch
-from ._validation import Frozen, check_fits_in_memory, check_positive_int, finite_result, float_array, require_finite
+from ._validation import (
+    Frozen,
+    check_fits_in_memory,
+    check_positive_int,
+    check_square,
+    finite_result,
+    float_array,
+    require_finite,
+)
 from .estimation import Message
 from .fusion_cost import filter_cost
 from .sensor_network import SensorNetworkModel
 
-__all__ = ["NetworkFilter", "TASKS", "centre_memory", "spec_cost", "spec_memory", "spec_orders"]
+__all__ = ["NetworkFilter", "TASKS", "centre_memory", "check_stochastic", "pair_list", "spec_cost", "spec_memory",
+           "spec_orders"]
 
 
 class NetworkFilter(Frozen):
@@ -401,3 +411,29 @@ def centre_memory(n: int, q: int, d: int, n_agents: int) -> float:
 
 
 TASKS = ("target", "localization")
+
+
+# --------------------------------------------------------------------------------------------
+# argument checks shared by the filters of mascore.fusion
+
+
+def check_stochastic(C: ArrayLike, name: str, model: SensorNetworkModel) -> np.ndarray:
+    """Row-stochastic weights on the graph and the diagonal."""
+    N = model.n_agents
+    C = check_square(C, name, N)
+    if np.any(C < 0) or not np.allclose(C.sum(axis=1), 1.0, rtol=0, atol=1e-9):
+        raise ValueError(f"{name} must be non-negative with rows summing to 1 (convex combinations); "
+                         f"row sums {np.round(C.sum(axis=1), 6).tolist()}")
+    if np.any((C > 0) & (model._neighbourhood == 0)):
+        raise ValueError(f"{name} must be zero where the graph has no link (C[i, l] > 0 needs l = i or "
+                         "adjacency[i, l] > 0)")
+    return C
+
+
+def pair_list(pairs: object, count: int) -> list[tuple[object, object]]:
+    """`pairs` as a list of `count` ``(Omega, q)`` pairs (what :meth:`pairs_estimate` takes), else a named error."""
+    if (isinstance(pairs, (str, bytes)) or not isinstance(pairs, Sequence) or len(pairs) != count
+            or not all(isinstance(p, Sequence) and not isinstance(p, (str, bytes)) and len(p) == 2 for p in pairs)):
+        raise TypeError(f"pairs must be a sequence of {count} (Omega, q) pair(s), as message_pairs gives; got "
+                        f"{type(pairs).__name__} {pairs!r:.80}")
+    return [tuple(p) for p in pairs]

@@ -77,7 +77,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import kalman
-from ._fusion_base import TASKS, centre_memory, spec_cost, spec_memory, spec_orders
+from ._fusion_base import TASKS, centre_memory, check_stochastic, pair_list, spec_cost, spec_memory, spec_orders
 from ._fusion_base import NetworkFilter as _NetworkFilter
 from ._fusion_kernels import (
     broadcast_batch,
@@ -90,13 +90,12 @@ from ._fusion_kernels import (
     mix,
     psd_sqrt,
 )
+from ._fusion_steps import step_graphs, step_sensing, step_values
 from ._validation import (
-    check_adjacency,
     check_covariance,
     check_fits_in_memory,
     check_positive,
     check_positive_int,
-    check_square,
     finite_result,
     float_array,
     frozen_copy,
@@ -253,7 +252,7 @@ class DiffusionKalmanFilter(_NetworkFilter):
                 raise ValueError(f"weights must be 'metropolis' or an (N, N) matrix; got {weights!r}")
             C = model.weights
         else:
-            C = _check_stochastic(weights, "weights", model)
+            C = check_stochastic(weights, "weights", model)
         self._set(weights=frozen_copy(C), _S=frozen_copy(mix(model._neighbourhood, model.information_matrices, 2)))
 
     def _correct(self, x, P, z):
@@ -550,7 +549,7 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         (array([1.5, 1.5, 1.5]), array([0.25, 0.25, 0.25]))
         """
         names = (("pairs[0][0]", "pairs[0][1]"), ("pairs[1][0]", "pairs[1][1]"))
-        pairs = [self._check_pair(Om, q, name) for (Om, q), name in zip(_pair_list(pairs, len(self.pair_scales)), names)]
+        pairs = [self._check_pair(Om, q, name) for (Om, q), name in zip(pair_list(pairs, len(self.pair_scales)), names)]
         if self.novelty_weight == 1.0:
             return self._pair_result(from_information, *pairs[0], names[0])
         (Om, q), (dOm, dq) = pairs
@@ -797,7 +796,7 @@ class InformationConsensusFilter(_NetworkFilter):
         >>> P[:, 0, 0]
         array([0.25, 0.25, 0.25, 0.25])
         """
-        (V, v), = _pair_list(pairs, 1)
+        (V, v), = pair_list(pairs, 1)
         return self.pair_estimate(V, v)
 
     def _correct(self, x, P, z):
@@ -1081,13 +1080,13 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     n, N = model.n_states, model.n_agents
     check_fits_in_memory(8.0 * K * math.prod(batch) * n * (1 + n) * (N if filt._per_agent else 1), "z",
                          "the estimates and covariances of every step and run")
-    adjacency = _step_graphs(graphs, K, N, model.adjacency)
-    senses = _step_sensing(sensing, K, N)
+    adjacency = step_graphs(graphs, K, N, model.adjacency)
+    senses = step_sensing(sensing, K, N)
     rows = np.repeat(senses, model.measurement_sizes, axis=1)  # (K, sum q_i): the entries of z that are read
     used = rows.reshape((K,) + (1,) * (z.ndim - 2) + (rows.shape[1],))
     if not np.all(np.isfinite(z) | ~used):
         require_finite(np.where(used, z, 0.0), "z" if sensing is None else "z (where the agent senses)")
-    values, runs = _step_values(H, R, model, rows)
+    values, runs = step_values(H, R, model, rows)
     if runs:
         every = broadcast_batch("x0 and z", batch, "H and R", runs)
         check_fits_in_memory(8.0 * K * math.prod(every) * n * (1 + n) * (N if filt._per_agent else 1), "H and R",
@@ -1118,82 +1117,7 @@ def track(filt: _NetworkFilter, x0: ArrayLike, P0: ArrayLike, z: ArrayLike,
     return np.stack(xs), np.stack(Ps)
 
 
-def _step_graphs(graphs: Sequence[object] | ArrayLike | None, K: int, N: int, fixed: np.ndarray) -> list[np.ndarray]:
-    """`track`'s graphs, one checked (N, N) adjacency per step (the model's when None)."""
-    if graphs is None:
-        return [fixed] * K
-    if isinstance(graphs, (str, bytes)) or not hasattr(graphs, "__len__"):
-        raise TypeError(f"graphs must be a sequence of K = {K} adjacency matrices or networkx graphs (one per "
-                        f"step); got {type(graphs).__name__}")
-    if len(graphs) != K:
-        raise ValueError(f"graphs must hold one graph per step: K = {K} (the steps of z); got {len(graphs)}")
-    return [check_adjacency(float_array(graphs[k], f"graphs[{k}]"), f"graphs[{k}]", size=N, undirected=True,
-                            why="the consensus weights and the information exchange are symmetric")
-            for k in range(K)]
 
-
-def _step_sensing(sensing: ArrayLike | None, K: int, N: int) -> np.ndarray:
-    """`track`'s sensing mask, checked: (K, N) bool (every agent at every step when None)."""
-    if sensing is None:
-        return np.ones((K, N), dtype=bool)
-    mask = np.asarray(sensing)
-    if mask.dtype != bool:
-        raise TypeError(f"sensing must be a (K, N) array of bool (True: the agent measures at that step); got "
-                        f"dtype {mask.dtype}")
-    if mask.shape != (K, N):
-        raise ValueError(f"sensing must be (K, N) = ({K}, {N}): one row per step of z, one column per agent; got "
-                         f"shape {mask.shape}")
-    return mask
-
-
-def _step_values(H: ArrayLike | None, R: ArrayLike | None, model: SensorNetworkModel, rows: np.ndarray,
-                 ) -> tuple[list[tuple[np.ndarray, np.ndarray] | None], tuple[int, ...]]:
-    """`track`'s per-step ``(H(k), R(k))``, checked where `rows` ``(K, sum q_i)`` are read (None at a step whose
-    values are the model's), and their run axes.
-
-    The rows (and blocks) of an agent that does not sense at a step are not read; they are
-    replaced by the model's, so that a step equal to the model's where read is the model's.
-    """
-    K, q, n = rows.shape[0], model.n_measurements, model.n_states
-    if H is None and R is None:
-        return [None] * K, ()
-    H_k = np.broadcast_to(model.H_stacked, (K, q, n)) if H is None else float_array(H, "H")
-    R_k = np.broadcast_to(model.R_stacked, (K, q, q)) if R is None else float_array(R, "R")
-    for name, value, tail, what in (("H", H_k, (q, n), "[H_1(k); ...; H_N(k)]"),
-                                    ("R", R_k, (q, q), "blockdiag(R_1(k), ..., R_N(k))")):
-        if value.ndim < 3 or value.shape[0] != K or value.shape[-2:] != tail:
-            raise ValueError(f"{name} must be (K, ..., {tail[0]}, {tail[1]}) with K = {K}: one stacked {what} per step "
-                             f"of z (and per run, on axes between; agents' measurement sizes "
-                             f"{model.measurement_sizes}); got shape {value.shape}")
-    runs = broadcast_batch("H", H_k.shape[1:-2], "R", R_k.shape[1:-2])
-    H_k, R_k = (np.broadcast_to(v.reshape(K, *(1,) * (len(runs) + 3 - v.ndim), *v.shape[1:]), (K, *runs, q, cols))
-                for v, cols in ((H_k, n), (R_k, q)))  # the run axes aligned on the right, as numpy's
-    used = rows.reshape(K, *(1,) * len(runs), q)
-    H_k = np.where(used[..., :, None], H_k, model.H_stacked)
-    R_k = np.where(used[..., :, None] & used[..., None, :], R_k, model.R_stacked)
-    bad = ~np.isfinite(H_k).reshape(K, -1).all(axis=1)
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"H[{k}] (step {k}) contains NaN or infinite entries in the rows of an agent that senses")
-    block = np.zeros((q, q), dtype=bool)  # the entries of R(k) on an agent's block
-    for sl in model._slices:
-        block[sl, sl] = True
-    off = (R_k != 0) & ~block
-    if off.any():
-        at = tuple(int(v) for v in np.argwhere(off)[0])
-        raise ValueError(f"R[{at[0]}] (step {at[0]}) must be block diagonal, one block per agent (the agents' noises "
-                         f"are independent); got R{list(at)} = {R_k[at]:.3g} off the blocks")
-    for i, sl in enumerate(model._slices):
-        if sl.stop > sl.start:
-            try:
-                check_covariance(R_k[..., sl, sl], "R", definite=True)
-            except ValueError:
-                for k in range(K):  # the first step at fault, named
-                    check_covariance(R_k[k, ..., sl, sl], f"R[{k}] (step {k}), agent {i}'s block "
-                                     f"[{sl.start}:{sl.stop}, {sl.start}:{sl.stop}],", definite=True)
-                raise
-    same = (H_k == model.H_stacked).reshape(K, -1).all(axis=1) & (R_k == model.R_stacked).reshape(K, -1).all(axis=1)
-    return [None if same[k] else (H_k[k], R_k[k]) for k in range(K)], runs
 
 
 def _filter_of_step(filt: _NetworkFilter, A: np.ndarray, senses: np.ndarray,
@@ -1542,25 +1466,3 @@ def _settings_for_any_graph(filt: _NetworkFilter) -> tuple:
         default = 0.65 / d_max if d_max else 0.0
         return (filt.n_iterations, None if filt.rate == default else filt.rate)
     return filt._args()
-
-
-def _check_stochastic(C: ArrayLike, name: str, model: SensorNetworkModel) -> np.ndarray:
-    """Row-stochastic weights on the graph and the diagonal."""
-    N = model.n_agents
-    C = check_square(C, name, N)
-    if np.any(C < 0) or not np.allclose(C.sum(axis=1), 1.0, rtol=0, atol=1e-9):
-        raise ValueError(f"{name} must be non-negative with rows summing to 1 (convex combinations); "
-                         f"row sums {np.round(C.sum(axis=1), 6).tolist()}")
-    if np.any((C > 0) & (model._neighbourhood == 0)):
-        raise ValueError(f"{name} must be zero where the graph has no link (C[i, l] > 0 needs l = i or "
-                         "adjacency[i, l] > 0)")
-    return C
-
-
-def _pair_list(pairs: object, count: int) -> list[tuple[object, object]]:
-    """`pairs` as a list of `count` ``(Omega, q)`` pairs (what :meth:`pairs_estimate` takes), else a named error."""
-    if (isinstance(pairs, (str, bytes)) or not isinstance(pairs, Sequence) or len(pairs) != count
-            or not all(isinstance(p, Sequence) and not isinstance(p, (str, bytes)) and len(p) == 2 for p in pairs)):
-        raise TypeError(f"pairs must be a sequence of {count} (Omega, q) pair(s), as message_pairs gives; got "
-                        f"{type(pairs).__name__} {pairs!r:.80}")
-    return [tuple(p) for p in pairs]

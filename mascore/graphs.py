@@ -426,7 +426,8 @@ def is_connected(A: ArrayLike) -> bool:
     (True, False)
     """
     A = _check_adjacency(A)
-    return has_spanning_tree(A + A.T)
+    S = A + A.T  # undirected: connected exactly when one search from agent 0 reaches every agent
+    return _reach_count([np.flatnonzero(S[:, j] > 0) for j in range(S.shape[0])], 0) == S.shape[0]
 
 
 def connected_components(A: ArrayLike) -> list[np.ndarray]:

@@ -133,6 +133,22 @@ def test_build_book_needs_the_command_and_its_folder_together(tmp_path):
         build_book(tmp_path, executed=tmp_path)
 
 
+def test_a_failing_first_command_stops_the_build_before_any_notebook(tmp_path, capsys, monkeypatch):
+    """`make book`'s results stage runs first (``--first``): if it fails, no notebook is executed, the build is
+    stopped and the command's exit status is returned."""
+    pytest.importorskip("jupyter_cache")
+    from mascore._booktools import main
+
+    monkeypatch.chdir(tmp_path)
+    book = tmp_path / "book"
+    (book / "notebooks").mkdir(parents=True)
+    (book / "notebooks" / "x.ipynb").write_text("not a notebook: executing it would fail")
+    status = main(["build", "--log", str(tmp_path / "build.log"), "--first", f"{sys.executable} -c 'exit(3)'"])
+    assert status == 3
+    assert "failed (exit status 3): the book's build is stopped" in capsys.readouterr().err
+    assert not (book / "_build" / "notebooks-pending").exists()
+
+
 def test_the_intro_is_executed_with_the_notebooks(tmp_path):
     pytest.importorskip("jupyter_cache")
     pytest.importorskip("myst_nb")
@@ -147,3 +163,17 @@ def test_the_intro_is_executed_with_the_notebooks(tmp_path):
     intro = next(r for r in cache.list_project_records() if r.uri.endswith("intro.md"))
     code = [c.source for c in cache.get_project_notebook(intro.pk).nb.cells if c.cell_type == "code"]
     assert code and "reading_paths" in code[0]  # read as MyST: the code cells, not the page as one text cell
+
+
+def test_make_dry_run_prints_the_book_commands_without_running_them():
+    """`make -n book` / `make -n test` print the build's command line (the results stage runs inside it, through
+    a variable: a recipe line naming $(MAKE) itself would be run even by `make -n`)."""
+    import shutil
+
+    if shutil.which("make") is None:
+        pytest.skip("no make here")
+    for target in ("book", "test"):
+        out = subprocess.run(["make", "-n", target], cwd=ROOT, capture_output=True, text=True, timeout=60)
+        assert out.returncode == 0, out.stderr
+        assert "mascore._booktools build" in out.stdout and "--first" in out.stdout
+        assert "reading sources" not in out.stdout + out.stderr  # nothing was built

@@ -35,18 +35,24 @@ def test_changed_claims_lists_verdicts_that_moved():
     assert reproduce.changed_claims(a, b) == ["p/y: reproduces -> does-not-reproduce", "p/z: absent -> holds"]
 
 
+#: Three consensus steps (too few: verdicts change), and shorter switching, noise and bias runs (a third less CPU).
+SHORT_REN = ["bias_runs=100", "n_steps=3", "noise_paths=10", "noise_runs=20", "noise_t_final=10.0", "switch_steps=100",
+             "t_final=20.0"]  # sorted by name, as the folder's name and the ledger's command list them
+
+
 def test_a_run_at_other_settings_writes_beside_the_default_and_names_the_changed_claims(tmp_path, capsys):
     default = reproduce.results_dir() / "ren2005" / "claims.json"
     if not default.exists():
         pytest.skip("no default ren2005 ledger in results/ (run `mascore reproduce ren2005`)")
     shutil.copytree(default.parent, tmp_path / "ren2005")
     before = (tmp_path / "ren2005" / "claims.json").read_bytes()
-    code = reproduce.main(["reproduce", "ren2005", "--out", str(tmp_path), "--set", "n_steps=3"])
+    code = reproduce.main(["reproduce", "ren2005", "--out", str(tmp_path), "--set", *SHORT_REN])
     out = capsys.readouterr().out
     assert code == 0
     assert (tmp_path / "ren2005" / "claims.json").read_bytes() == before       # the default is not overwritten
-    ledger = json.loads((tmp_path / "ren2005-set-n_steps=3" / "claims.json").read_text())
-    assert ledger["created_by"] == "mascore reproduce ren2005 --seed 1 --set n_steps=3"
+    folder = "ren2005-set-" + "_".join(SHORT_REN)
+    ledger = json.loads((tmp_path / folder / "claims.json").read_text())
+    assert ledger["created_by"] == f"mascore reproduce ren2005 --seed 1 --set {' '.join(SHORT_REN)}"
     moved = reproduce.changed_claims(json.loads(before)["claims"], ledger["claims"])
     assert moved  # three steps are too few for consensus: some verdicts change, and the command says which
     assert f"{len(moved)} claim(s) changed verdict" in out and all(line in out for line in moved)
