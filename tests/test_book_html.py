@@ -173,8 +173,8 @@ def test_every_image_of_a_chapter_is_a_captioned_figure():
 MIN_IMAGE_SCALE = 0.9
 #: Visible words a page may show (collapsed blocks excluded): about 15 minutes of reading.
 MAX_WORDS = 4000
-READ_PAGES = sorted({*(HTML / "notebooks").glob("*.html"), HTML / "notation.html", HTML / "intro.html",
-                     HTML / "bibliography.html"}) if HTML.exists() else []
+READ_PAGES = sorted({*(HTML / "notebooks").glob("*.html"), *(HTML / "api").glob("*.html"), HTML / "notation.html",
+                     HTML / "intro.html", HTML / "bibliography.html"}) if HTML.exists() else []
 READ_PAGES = [p for p in READ_PAGES if p.exists() and not p.name.startswith(".")]
 
 
