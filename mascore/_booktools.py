@@ -930,6 +930,7 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
         raise
     pending = (book / "_build" / "notebooks-pending").resolve()
     pending.parent.mkdir(parents=True, exist_ok=True)
+    (book / "_build" / "html" / "index.html").unlink(missing_ok=True)  # sphinx-external-toc writes it only if missing
     pending.write_text(str(os.getpid()))  # the build waits while this process lives and the file exists
     api_read = pending.with_name(pending.name + ".waiting")  # the build creates it once it waits for the notebooks
     api_read.unlink(missing_ok=True)

@@ -492,7 +492,7 @@ def centralized_update(
     :class:`CentralizedTeamFilter`. In a loop, build the filter once,
     ``CentralizedTeamFilter(model, B, x_hat0, P0)``, and call its :meth:`~CentralizedTeamFilter.update`: the fast path.
 
-    ``P^{-1} = P^-^{-1} + sum_i H_i^T (H_i R H_i^T)^{-1} H_i``,
+    ``P^{-1} = (P^-)^{-1} + sum_i H_i^T (H_i R H_i^T)^{-1} H_i``,
     ``x = x^- + P sum_i H_i^T (H_i R H_i^T)^{-1} (z_i - H_i x^-)``.
 
     Parameters
@@ -557,7 +557,7 @@ def centralized_update(
 def _output_update(model, H, x_pred, P_pred, Z, S):
     """:func:`centralized_update` of partial sensing without checks: ``H_i = D_i H``, ``H = blockdiag(C_r_j)``.
 
-    ``P = (P^-^{-1} + H^T (sum_i W_i) H)^{-1}``, ``x = x^- + P H^T sum_i W_i (z_i - H x^-)`` with
+    ``P = ((P^-)^{-1} + H^T (sum_i W_i) H)^{-1}``, ``x = x^- + P H^T sum_i W_i (z_i - H x^-)`` with
     ``W_i = D (D R D + I - D)^{-1} D`` the information of observer i's sensed outputs.
     """
     N, m, k, Mr = model.n_agents, model.m, model.kron, model.M_r
@@ -574,7 +574,7 @@ def _output_update(model, H, x_pred, P_pred, Z, S):
 def _centralized_update(model, x_pred, P_pred, Z, S):
     """:func:`centralized_update` without checks (`S` a (batch, N, N) bool mask): information form.
 
-    ``P = (P^-^{-1} + sum_i W_i)^{-1}``, ``x = x^- + P sum_i W_i (z_i - x^-)`` with each observer's
+    ``P = ((P^-)^{-1} + sum_i W_i)^{-1}``, ``x = x^- + P sum_i W_i (z_i - x^-)`` with each observer's
     ``W_i = H_i^T (H_i R H_i^T)^{-1} H_i`` formed on its ``q`` observed reduced entries only.
     """
     N, m, k, Mr = model.n_agents, model.m, model.kron, model.M_r

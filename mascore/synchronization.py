@@ -224,10 +224,10 @@ def riccati_gain(A: ArrayLike, B: ArrayLike, P: ArrayLike) -> np.ndarray:
 
 
 def lemma2_r(A: ArrayLike, B: ArrayLike, Q: ArrayLike, P: ArrayLike) -> float:
-    """``r = sigma_max(Q^{-1/2} A^T P B (B^T P B)^{-1} B^T P A Q^{-1/2})^{-1/2}`` (Lemma 2).
+    """The radius r of Lemma 2, which the circle's ``r0 / c0`` must stay below.
 
-    Returns ``inf`` when the matrix is zero (e.g. ``A = 0``): Lemma 2's condition
-    ``r0 / c0 < r`` then holds for every circle.
+    ``r = sigma_max(Q^{-1/2} A^T P B (B^T P B)^{-1} B^T P A Q^{-1/2})^{-1/2}``. Returns ``inf`` when the
+    matrix is zero (e.g. ``A = 0``): Lemma 2's condition ``r0 / c0 < r`` then holds for every circle.
 
     Parameters
     ----------
