@@ -42,7 +42,6 @@ __all__ = [
     "sync_notebook",
     "toc_with_api_pages",
     "topic_key",
-    "visible_words",
     "write_api_pages",
 ]
 
@@ -724,67 +723,6 @@ def toc_with_api_pages(toc: str, folder: str, pages: list[list[str]]) -> str:
             body.append(f"{pad}    sections:")
             body += [f"{pad}      - file: {folder}/{fname.removesuffix('.md')}" for fname in module_pages[1:]]
     return "\n".join(lines[:at + 1] + body + lines[end:]) + ("\n" if toc.endswith("\n") else "")
-
-
-#: Elements whose end starts a new line of a page's rendered text (the others run on, as in ``innerText``).
-_BLOCKS = frozenset({"address", "article", "aside", "blockquote", "caption", "dd", "div", "dl", "dt", "figcaption",
-                     "figure", "footer", "h1", "h2", "h3", "h4", "h5", "h6", "header", "li", "main", "nav", "ol", "p",
-                     "pre", "section", "summary", "table", "td", "th", "tr", "ul"})
-#: Classes of inline elements the theme sets apart from the text before them (numpydoc's parameter types).
-_APART = frozenset({"classifier"})
-#: Elements with no end tag.
-_VOID = frozenset({"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "param", "source",
-                   "track", "wbr"})
-
-
-def visible_words(html: str) -> int:
-    """Words of a built page's article as a reader sees it, counted without a browser.
-
-    The text of ``<article class="bd-article">`` without scripts, styles, elements marked ``hidden`` and
-    the body of a closed ``<details>`` (its summary counts), split at whitespace, at block elements and
-    before a parameter's type; a word is a piece with a letter or digit, as in :func:`measure_page`'s
-    ``words``. Math is counted as its TeX source. On the API pages this is Chromium's count (:func:`measure_page`)
-    to within about 3 % (a few more words on pages with formulas); on the notebooks' pages, with collapsed
-    blocks and display equations, it is not (-24 % to +2 % on three chapters): they are measured in Chromium.
-    Returns 0 for a page without the article.
-    """
-    from html.parser import HTMLParser
-
-    class Text(HTMLParser):
-        def __init__(self) -> None:
-            super().__init__(convert_charrefs=True)
-            self.stack: list[tuple[str, bool, bool]] = []  # (tag, inside the article, hidden)
-            self.parts: list[str] = []
-
-        def handle_starttag(self, tag, attrs):
-            if tag in _VOID:
-                self.parts.append(" ")
-                return
-            a = dict(attrs)
-            if _APART.intersection((a.get("class") or "").split()):
-                self.parts.append(" ")
-            inside, hidden = self.stack[-1][1:] if self.stack else (False, False)
-            inside = inside or (tag == "article" and "bd-article" in (a.get("class") or "").split())
-            closed_details = bool(self.stack) and self.stack[-1][0] == "details" and self.stack[-1][2] is None
-            hidden = bool(hidden or tag in ("script", "style", "template", "noscript") or "hidden" in a
-                          or (closed_details and tag != "summary"))
-            self.stack.append((tag, inside, None if tag == "details" and "open" not in a and not hidden else hidden))
-
-        def handle_endtag(self, tag):
-            while self.stack and self.stack.pop()[0] != tag:
-                pass
-            if tag in _BLOCKS:
-                self.parts.append(" ")
-
-        def handle_data(self, data):
-            if self.stack and self.stack[-1][1] and not self.stack[-1][2]:
-                self.parts.append(data)
-
-    start = re.search(r"<article\b[^>]*\bbd-article\b", html)  # parse the article alone, not the sidebar
-    end = html.rfind("</article>")
-    parser = Text()
-    parser.feed(html[start.start():end + len("</article>")] if start and end > start.start() else html)
-    return sum(1 for w in "".join(parser.parts).split() if re.search(r"[A-Za-z0-9]", w))
 
 
 def _emptied_cache(book: Path):

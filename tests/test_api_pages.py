@@ -2,9 +2,8 @@
 
 The pages ``book/api/*.md`` are written by ``make sync`` (:func:`mascore._booktools.write_api_pages`):
 a page per module, and for the modules of :data:`mascore._booktools.API_TOPICS` sub-pages by topic, nested
-under their module in ``book/_toc.yml``. The built pages are counted without a browser
-(:func:`mascore._booktools.visible_words`: the same count as Chromium's on pages without formulas, up to
-about 3 % more on pages with many, whose TeX source has more words than MathJax shows).
+under their module in ``book/_toc.yml``. The built pages' words are measured in Chromium with the reading
+pages (tests/test_book_html.py).
 """
 
 from __future__ import annotations
@@ -24,15 +23,10 @@ from mascore._booktools import (
     api_pages,
     public_objects,
     toc_with_api_pages,
-    visible_words,
     write_api_pages,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-HTML = ROOT / "book" / "_build" / "html"
-
-#: The most words a reader should meet on one page (as tests/test_book_html.py's ``MAX_WORDS``).
-MAX_WORDS = 4000
 
 _ENTRY = re.compile(r"^\.\. auto(?:function|class):: (\w+)$", re.M)
 
@@ -121,27 +115,3 @@ def test_the_table_of_contents_keeps_everything_but_the_api_sections():
     assert toc_with_api_pages(new, "api", [["a.md"], ["b.md", "b.x.md"]]) == new
     with pytest.raises(ValueError, match="no entry '- file: api/index'"):
         toc_with_api_pages("parts: []\n", "api", [])
-
-
-def test_visible_words_counts_what_a_reader_sees():
-    page = ('<html><body><nav>sidebar words</nav><article class="bd-article"><h1>Title here</h1>'
-            '<p>one two</p><details><summary>three</summary><p>four five</p></details>'
-            '<details open><p>six</p></details><div hidden>x y</div><script>var z = 1;</script>'
-            '<p>a<b>b</b> - 3</p><dl><dt>seven</dt><dd>eight</dd></dl></article><footer>f</footer></body></html>')
-    assert visible_words(page) == 10  # Title here one two three six ab 3 seven eight
-    assert visible_words("<p>no article</p>") == 0
-
-
-API_HTML = sorted((HTML / "api").glob("*.html")) if (HTML / "api").exists() else []
-
-
-@pytest.mark.parametrize("path", API_HTML, ids=lambda p: p.name)
-def test_api_page_shows_at_most_about_4000_words(path):
-    words = visible_words(path.read_text())
-    assert words <= MAX_WORDS, (f"{path.name}: {words} visible words (more than about {MAX_WORDS}): give its module "
-                                "sub-pages in mascore._booktools.API_TOPICS and run `make sync`")
-
-
-def test_the_word_check_fails_on_a_long_page():
-    page = '<article class="bd-article"><p>' + "word " * (MAX_WORDS + 1) + "</p></article>"
-    assert visible_words(page) > MAX_WORDS
