@@ -70,16 +70,15 @@ book: $(STAMP)  ## execute every notebook and render the HTML book into book/_bu
 # and writes their outputs back (--overwrite); the book is rendered from those outputs (`_booktools build`
 # starts the build first, as `make book` does: it reads the API pages during the results stage, and the
 # notebooks' pages once pytest has ended and its outputs are in the cache), and the checks of the rendered
-# HTML run last. The notebooks'
-# kernels need ipykernel's inline backend to draw their figures, so MPLBACKEND stays unset here
-# (tests/conftest.py gives the test processes themselves a headless backend).
+# HTML run last. The notebooks' kernels need ipykernel's inline backend to draw their figures, so MPLBACKEND
+# stays unset here (tests/conftest.py gives the test processes themselves a headless backend).
 # --dist worksteal: a worker that runs out of tests takes half of the other's queue, so the long items
 # (the notebooks, the Dask sweeps) do not leave one core idle at the end as xdist's default split did (one
 # worker ran all 34 notebooks). The notebooks are collected first: the longest items start early, and the
 # last ones to share out are the short doctests.
 EXECUTED := results/notebooks
-# The HTML checks run in one process: it measures the pages in Chromium, several at a time (a session
-# fixture of tests/test_book_html.py), while the remaining checks only read files.
+# The HTML checks run in one process: one headless Chromium measures every page, the reading and the API pages,
+# two at a time (a session fixture of tests/test_book_html.py), while the remaining checks only read files.
 HTML_TESTS := tests/test_book_html.py
 
 test: $(STAMP) lint  ## lint, the unit tests, doctests, published numbers and every notebook (nbmake), then render the book and check its HTML
