@@ -271,9 +271,16 @@ async () => {
 }
 """
 
-#: Chromium's switches for measuring: headless, no GPU, no network of its own, a throw-away profile.
+#: Chromium's switches for measuring: headless, no GPU, no network of its own, a throw-away profile. The pages
+#: are measured in minimized windows (laid out as at full size, not painted); the last three switches keep
+#: such a page's timers and priority as a shown page's.
 _CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                   "--disable-component-update", "--disable-sync", "--no-first-run")
+                   "--disable-component-update", "--disable-sync", "--no-first-run",
+                   "--disable-background-timer-throttling", "--disable-renderer-backgrounding",
+                   "--disable-backgrounding-occluded-windows")
+
+#: Run in each page before its own scripts: the page starts with no stored state, as in a fresh profile.
+_FRESH_STORAGE_JS = "try { localStorage.clear(); sessionStorage.clear(); } catch (e) {}"
 
 
 def chromium() -> str | None:
@@ -290,9 +297,11 @@ def measure_pages(paths: Sequence[str | Path], width: int = 1280, browser: str |
                   timeout: float = 120.0) -> dict[Path, dict]:
     """Render built pages in one headless Chromium, a `width` px by 2000 px window each, and measure them.
 
-    One browser is started for all the pages (POSIX: it is driven over its DevTools pipe); `tabs` pages
-    load at once, each in a browser context of its own (its own storage, as a fresh profile would give).
-    A page is measured once its ``load`` event has fired and MathJax has typeset it (``MathJax.startup.promise``).
+    One browser is started for all the pages (POSIX: it is driven over its DevTools pipe). It opens `tabs`
+    windows, each in a browser context of its own, minimized (a page is laid out as in a shown window of that
+    size, but not painted), and each window loads page after page; every page starts with empty local and
+    session storage, as in a fresh profile. A page is measured once its ``load`` event has fired and MathJax
+    has typeset it (``MathJax.startup.promise``). A window whose page failed is closed and a new one opened.
 
     Parameters
     ----------
@@ -343,23 +352,29 @@ def measure_pages(paths: Sequence[str | Path], width: int = 1280, browser: str |
     results: dict[Path, dict] = {}
     todo = list(dict.fromkeys(pages))[::-1]  # popped from the end: in order
     with tempfile.TemporaryDirectory() as profile, _DevTools(browser, profile) as devtools:
-        open_pages: list[_OpenPage] = []
+        windows: list[_Window] = []
         try:
-            while todo or open_pages:
-                while todo and len(open_pages) < tabs:
-                    open_pages.append(_OpenPage(devtools, todo[-1], width, time.monotonic() + timeout))
-                    todo.pop()
-                message = devtools.receive(until=min(page.deadline for page in open_pages))
-                for page in list(open_pages):
-                    outcome = page.handle(message) if message is not None else None
-                    if outcome is None and time.monotonic() >= page.deadline:
+            while todo or any(window.path for window in windows):
+                for window in windows:
+                    if window.path is None and todo:
+                        window.load(todo.pop(), time.monotonic() + timeout)
+                while todo and len(windows) < tabs:
+                    windows.append(_Window(devtools, width))
+                    windows[-1].load(todo.pop(), time.monotonic() + timeout)
+                loading = [window for window in windows if window.path is not None]
+                message = devtools.receive(until=min(window.deadline for window in loading))
+                for window in list(windows):
+                    outcome = window.handle(message) if message is not None else None
+                    if outcome is None and window.path is not None and time.monotonic() >= window.deadline:
                         outcome = {"error": f"not measured within {timeout:g} s"}
                     if outcome is not None:
-                        results[page.path] = outcome
-                        page.close()
-                        open_pages.remove(page)
+                        results[window.path] = outcome
+                        window.path = None
+                        if "error" in outcome:  # the next page gets a new window
+                            window.close()
+                            windows.remove(window)
         except (OSError, RuntimeError) as exc:  # the browser has gone: every page not yet measured says so
-            for path in [page.path for page in open_pages] + todo:
+            for path in [window.path for window in windows if window.path is not None] + todo:
                 results[path] = {"error": f"{type(exc).__name__}: {exc}"}
     return {p: results[p] for p in pages}
 
@@ -480,23 +495,31 @@ def _fd_above(fd: int, lowest: int) -> int:
     return copy
 
 
-class _OpenPage:
-    """One page being measured: its browser context, window and DevTools session, and the step it is at."""
+class _Window:
+    """A minimized window in a browser context of its own that loads and measures one page after another: the
+    page it is at (`path`, None while it waits for one), its DevTools session and the replies it awaits."""
 
-    def __init__(self, devtools: _DevTools, path: Path, width: int, deadline: float) -> None:
-        self.devtools, self.path, self.deadline = devtools, path, deadline
-        self.url = path.resolve().as_uri()
-        self.context = self.session = None
-        self.width = width
+    def __init__(self, devtools: _DevTools, width: int) -> None:
+        self.devtools, self.width = devtools, width
+        self.context = self.target = self.session = self.path = None
+        self.url, self.deadline, self.ready, self.navigated, self.measuring = "", 0.0, False, False, False
         self.waiting = {devtools.send("Target.createBrowserContext"): "context"}
+
+    def load(self, path: Path, deadline: float) -> None:
+        """Load and measure `path` by the monotonic time `deadline` (once the window is ready)."""
+        self.path, self.url, self.deadline = path, path.resolve().as_uri(), deadline
+        self.navigated = self.measuring = False
+        if self.ready:
+            self._navigate()
 
     def handle(self, message: dict) -> dict | None:
         """Take one message from the browser; the page's measures (or ``{"error": ...}``) once it is done."""
         step = self.waiting.pop(message.get("id"), None) if "id" in message else None
         if step is None:
-            if message.get("sessionId") != self.session or self.session is None:
+            if self.session is None or message.get("sessionId") != self.session or not self.navigated:
                 return None
-            if message.get("method") == "Page.loadEventFired" and "measures" not in self.waiting.values():
+            if message.get("method") == "Page.loadEventFired" and not self.measuring:
+                self.measuring = True
                 expression = f"(async () => [location.href, await ({_MEASURE_JS})()])()"
                 self._send("Runtime.evaluate", {"expression": expression, "awaitPromise": True,
                                                 "returnByValue": True}, "measures")
@@ -511,12 +534,23 @@ class _OpenPage:
             self._send("Target.createTarget", {"url": "about:blank", "browserContextId": self.context,
                                                "newWindow": True, "width": self.width, "height": 2000}, "target")
         elif step == "target":
-            self._send("Target.attachToTarget", {"targetId": result["targetId"], "flatten": True}, "session")
+            self.target = result["targetId"]
+            self._send("Browser.getWindowForTarget", {"targetId": self.target}, "window")
+        elif step == "window":
+            self._send("Browser.setWindowBounds", {"windowId": result["windowId"],
+                                                   "bounds": {"windowState": "minimized"}}, "minimized")
+        elif step == "minimized":
+            self._send("Target.attachToTarget", {"targetId": self.target, "flatten": True}, "session")
         elif step == "session":
             self.session = result["sessionId"]
-            self._send("Page.enable", {}, "enabled")
-            self._send("Inspector.enable", {}, "enabled")
-            self._send("Page.navigate", {"url": self.url}, "navigation")
+            for method, params in (("Page.enable", {}), ("Inspector.enable", {}),
+                                   ("Page.addScriptToEvaluateOnNewDocument", {"source": _FRESH_STORAGE_JS})):
+                self._send(method, params, "enabled")
+            self._send("Runtime.evaluate", {"expression": "0"}, "ready")  # replied to after the three above
+        elif step == "ready":
+            self.ready = True
+            if self.path is not None:
+                self._navigate()
         elif step == "navigation" and result.get("errorText"):
             return {"error": f"Chromium could not open {self.url}: {result['errorText']}"}
         elif step == "measures":
@@ -531,12 +565,16 @@ class _OpenPage:
             return measures
         return None
 
+    def _navigate(self) -> None:
+        self.navigated = True
+        self._send("Page.navigate", {"url": self.url}, "navigation")
+
     def _send(self, method: str, params: dict, step: str) -> None:
         """Send a command (to the page once it has a session, else to the browser), awaited as `step`."""
         self.waiting[self.devtools.send(method, params, self.session)] = step
 
     def close(self) -> None:
-        """Close the page's window and forget its storage (no reply awaited)."""
+        """Close the window and forget its storage (no reply awaited)."""
         if self.context is not None:
             self.devtools.send("Target.disposeBrowserContext", {"browserContextId": self.context})
 
