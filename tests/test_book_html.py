@@ -290,6 +290,22 @@ def test_measure_pages_refuses_bad_arguments(bad, message):
         measure_pages([HTML / "intro.html"], **bad)
 
 
+def test_a_page_measured_after_another_starts_with_empty_storage(tmp_path):
+    """Pages loaded one after another in one window: what a page stores (as the theme stores its mode and the
+    sidebar's scroll) is gone when the next page runs, as in a fresh profile."""
+    writer = tmp_path / "writer.html"
+    writer.write_text("<script>localStorage.setItem('seen', '1'); addEventListener('pagehide', () => "
+                      "sessionStorage.setItem('seen', '1'));</script><article class='bd-article'>one</article>")
+    reader = tmp_path / "reader.html"  # 1 word if both storages are empty, 3 or 5 more if either is not
+    reader.write_text("<article class='bd-article'></article><script>document.querySelector('article').textContent ="
+                      " 'empty' + (localStorage.getItem('seen') ? ' local storage kept' : '') +"
+                      " (sessionStorage.getItem('seen') ? ' session storage kept from before' : '');</script>")
+    from mascore._booktools import measure_pages
+
+    measured = measure_pages([writer, reader], browser=_browser(), tabs=1)
+    assert [measured[writer]["words"], measured[reader]["words"]] == [1, 1], measured
+
+
 def test_a_page_that_never_finishes_is_reported_not_waited_for(tmp_path):
     """A page whose typesetting never ends fails its own measure once its time is up."""
     page = tmp_path / "never.html"
