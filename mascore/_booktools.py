@@ -354,7 +354,7 @@ def measure_pages(paths: Sequence[str | Path], width: int = 1280, browser: str |
     with tempfile.TemporaryDirectory() as profile, _DevTools(browser, profile) as devtools:
         windows: list[_Window] = []
         try:
-            while todo or any(window.path for window in windows):
+            while todo or any(window.path is not None for window in windows):
                 for window in windows:
                     if window.path is None and todo:
                         window.load(todo.pop(), time.monotonic() + timeout)
