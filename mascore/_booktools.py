@@ -368,8 +368,9 @@ def measure_pages(paths: Sequence[str | Path], width: int = 1280, browser: str |
                     if outcome is None and window.path is not None and time.monotonic() >= window.deadline:
                         outcome = {"error": f"not measured within {timeout:g} s"}
                     if outcome is not None:
-                        results[window.path] = outcome
-                        window.path = None
+                        if window.path is not None:  # (else the window broke between two pages)
+                            results[window.path] = outcome
+                            window.path = None
                         if "error" in outcome:  # the next page gets a new window
                             window.close()
                             windows.remove(window)
