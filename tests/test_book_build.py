@@ -177,3 +177,49 @@ def test_make_dry_run_prints_the_book_commands_without_running_them():
         assert out.returncode == 0, out.stderr
         assert "mascore._booktools build" in out.stdout and "--first" in out.stdout
         assert "reading sources" not in out.stdout + out.stderr  # nothing was built
+
+
+def _notebook(path: Path, *sources: str) -> Path:
+    """A notebook at `path` with code cells `sources` (and one Markdown cell, which does not count as code)."""
+    import nbformat
+
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell("# " + "words " * 200)]
+                                  + [nbformat.v4.new_code_cell(s) for s in sources])
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    nbformat.write(nb, path)
+    return path
+
+
+def test_the_code_length_counts_the_code_cells_of_a_notebook_and_the_whole_text_of_a_page(tmp_path):
+    pytest.importorskip("nbformat")
+    from mascore._booktools import _code_length
+
+    assert _code_length(_notebook(tmp_path / "a.ipynb", "x = 1", "y = 22")) == len("x = 1") + len("y = 22")
+    assert _code_length(_notebook(tmp_path / "b.ipynb")) == 0
+    page = tmp_path / "intro.md"
+    page.write_text("# Intro\n\n```{code-cell} ipython3\nprint(1)\n```\n")
+    assert _code_length(page) == len(page.read_text())
+
+
+def test_the_notebooks_are_executed_longest_first_and_their_kernels_killed(tmp_path):
+    """One notebook at a time (`all_cores` never true), so the order in which they run is the order handed out:
+    the longest code first. Each kernel is killed after its last cell: its exit handlers never run. The outputs
+    are in the cache."""
+    pytest.importorskip("jupyter_cache")
+    pytest.importorskip("ipykernel")
+    from jupyter_cache import get_cache
+
+    from mascore._booktools import _run_project
+
+    log = tmp_path / "order.txt"
+    run = f"import atexit, pathlib\nwith open({str(log)!r}, 'a') as f:\n    f.write('{{}}\\n')\n"
+    exit_hook = f"atexit.register(pathlib.Path({str(tmp_path / 'exited')!r}).touch)\n"
+    cache = get_cache(str(tmp_path / "cache"))
+    for name, padding in [("short", 0), ("long", 400), ("middle", 200)]:
+        code = run.format(name) + exit_hook + "#" * padding
+        cache.add_nb_to_project(str(_notebook(tmp_path / f"{name}.ipynb", code, "print('done')")))
+    assert _run_project(cache, timeout=120, all_cores=lambda: False) == []
+    assert log.read_text().split() == ["long", "middle", "short"]
+    assert not (tmp_path / "exited").exists()  # killed, not asked to exit
+    outputs = [cache.get_cache_bundle(record.pk).nb.cells[-1].outputs for record in cache.list_cache_records()]
+    assert len(outputs) == 3 and all(out[0]["text"] == "done\n" for out in outputs)
