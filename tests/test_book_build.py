@@ -149,6 +149,55 @@ def test_a_failing_first_command_stops_the_build_before_any_notebook(tmp_path, c
     assert not (book / "_build" / "notebooks-pending").exists()
 
 
+def _tiny_book(folder: Path, toc: bool = True) -> Path:
+    """A book of one page that builds in a few seconds (without its table of contents it does not build)."""
+    book = folder / "book"
+    (book / "notebooks").mkdir(parents=True)
+    (book / "_config.yml").write_text('title: tiny\nexecute:\n  execute_notebooks: "off"\n')
+    (book / "intro.md").write_text("# Tiny\n\nOne page.\n")
+    if toc:
+        (book / "_toc.yml").write_text("format: jb-book\nroot: intro\n")
+    return book
+
+
+def _python(code: str) -> list[str]:
+    return [sys.executable, "-c", code]
+
+
+def test_make_tests_other_tests_follow_the_notebooks_and_the_html_checks_follow_the_book(tmp_path, capsys):
+    """`make test`: the other tests (``then``) start once the notebooks' command has ended, beside the rest of the
+    build; the HTML checks (``checks``) run once the book is built, their output shown; a failing check fails."""
+    pytest.importorskip("jupyter_cache")
+    from mascore._booktools import build_book
+
+    book, executed = _tiny_book(tmp_path), tmp_path / "executed"
+    executed.mkdir()
+    html = book / "_build" / "html" / "intro.html"
+    order = tmp_path / "order.txt"
+    built, status = build_book(
+        book, command=_python(f"import time; time.sleep(0.5); open({str(executed / 'done')!r}, 'w')"), executed=executed,
+        log=tmp_path / "build.log",
+        then=_python(f"import os; open({str(order)!r}, 'a').write('then %s' % os.path.exists({str(executed / 'done')!r}))"),
+        checks=_python(f"import os; print('checked', os.path.exists({str(html)!r})); raise SystemExit(5)"))
+    assert built == 0
+    assert order.read_text() == "then True"  # started after the notebooks' command
+    assert "checked True" in capsys.readouterr().out  # after the book was built; its output is shown
+    assert status == 5
+
+
+def test_without_a_built_book_the_html_checks_do_not_run_and_the_other_tests_still_count(tmp_path):
+    pytest.importorskip("jupyter_cache")
+    from mascore._booktools import build_book
+
+    book, executed = _tiny_book(tmp_path, toc=False), tmp_path / "executed"
+    executed.mkdir()
+    ran = tmp_path / "checks-ran"
+    built, status = build_book(book, command=_python("pass"), executed=executed, log=tmp_path / "build.log",
+                               then=_python("raise SystemExit(4)"), checks=_python(f"open({str(ran)!r}, 'w')"))
+    assert built != 0 and status == 4
+    assert not ran.exists()
+
+
 def test_the_intro_is_executed_with_the_notebooks(tmp_path):
     pytest.importorskip("jupyter_cache")
     pytest.importorskip("myst_nb")
