@@ -850,7 +850,7 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
         and writes their pages; it is waited for.
     checks : list of str, optional
         A command run once the book is built (not if the build failed), beside `then`; its output is
-        kept in ``checks.log`` beside the book's HTML folder and shown when it ends.
+        kept in ``checks.log`` beside the book's HTML folder and shown once both have ended.
 
     Returns
     -------
@@ -901,20 +901,17 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
         try:
             status_build = build.wait()
             api_read.unlink(missing_ok=True)
-            checked = _run_logged(checks, book / "_build" / "checks.log") if checks and status_build == 0 else 0
+            checks_log = book / "_build" / "checks.log"
+            if checks is not None and status_build == 0:
+                with open(checks_log, "w") as checks_out:  # shown once `then` has ended: outputs not interleaved
+                    checked = subprocess.run(checks, stdout=checks_out, stderr=subprocess.STDOUT).returncode
+            else:
+                checked, checks = 0, None
         finally:
             tested = others.wait() if others is not None else 0
+        if checks is not None:
+            print(checks_log.read_text(), end="", flush=True)
         return status_build, status or tested or checked
-
-
-def _run_logged(command: list[str], log: Path) -> int:
-    """Run `command` with its output into `log`, then show that output; its exit status."""
-    import subprocess
-
-    with open(log, "w") as out:
-        status = subprocess.run(command, stdout=out, stderr=subprocess.STDOUT).returncode
-    print(log.read_text(), end="", flush=True)
-    return status
 
 
 def _execute_beside_build(cache, book: Path, build, api_read: Path, command: list[str] | None,
