@@ -85,6 +85,18 @@ def test_the_collector_thresholds_are_restored_when_the_build_ends():
     assert gc.get_threshold() == before
 
 
+@pytest.mark.parametrize(("code", "tex"), [
+    ("|M^k| <= alpha mu^k", r"|M^k| <= \alpha \mu^k"),  # words: "alphamu" without the commands
+    ("e^T Sigma^{-1} e", r"e^T \Sigma^{-1} e"),
+    ("x_i = sum_l c_{l,i} psi_l", r"x_i = \sum_l c_{l,i} \psi_l"),
+    ("z_{i,x_j} = x_j + nu_ij", r"z_{i,x_j} = x_j + \nu_ij"),
+    ("mu_bar^k + sigma_max(A)^2 + x_hat^T", "mu_bar^k + sigma_max(A)^2 + x_hat^T"),  # names stay names
+    (r"\Sigma_i^- + trace(P)^2 + etas^2", r"\Sigma_i^- + \operatorname{trace}(P)^2 + etas^2"),
+])
+def test_formulas_written_as_code_get_greek_letters_and_operators(code, tex):
+    assert extension("api_math").to_tex(code) == tex
+
+
 AUTOSUMMARY_PAGE = """\
 Objects
 =======
