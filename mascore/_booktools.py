@@ -844,7 +844,8 @@ NOTEBOOKS_PENDING = "MASCORE_NOTEBOOKS_PENDING"
 
 
 def build_book(book: str | Path = "book", command: list[str] | None = None, executed: str | Path | None = None,
-               log: str | Path | None = None, timeout: int = 900, first: list[str] | None = None) -> tuple[int, int]:
+               log: str | Path | None = None, timeout: int = 900, first: list[str] | None = None,
+               then: list[str] | None = None, checks: list[str] | None = None) -> tuple[int, int]:
     """Render the book with ``jupyter-book build`` while its notebooks are executed.
 
     The build is one process (Sphinx reads, then writes, one page at a time), so it starts at
@@ -857,7 +858,11 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
     build waits for them before it reads a page with executed cells (book/_ext/notebooks_pending.py,
     told by :data:`NOTEBOOKS_PENDING`); a notebook missing from the cache is executed by the build,
     which shows why it fails. With `first`, that command (``make``'s results stage, which the notebooks
-    read) runs before any notebook is executed, while the build reads the API pages.
+    read) runs before any notebook is executed, while the build reads the API pages. ``make test`` also
+    gives `then` (the other tests: they start once the notebooks are executed and run beside the rest
+    of the build) and `checks` (the checks of the built HTML: they start once the book is built, beside
+    `then`), so that the build's own tail, one process, and the checks, which mostly wait on the
+    browser, leave no core idle.
 
     Parameters
     ----------
@@ -873,12 +878,18 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
         Seconds a cell may run (:func:`execute_notebooks`).
     first : list of str, optional
         A command run to its end before the notebooks are executed; if it fails, the build is stopped.
+    then : list of str, optional
+        A command started once the notebooks are executed (`command` has ended), while the build reads
+        and writes their pages; it is waited for.
+    checks : list of str, optional
+        A command run once the book is built (not if the build failed), beside `then`; its output is
+        kept in ``checks.log`` beside the book's HTML folder and shown once both have ended.
 
     Returns
     -------
     (int, int)
-        The exit status of the build (-15 if `first` stopped it) and of `first` if it failed, else of
-        `command` (0 without a command).
+        The exit status of the build (-15 if `first` stopped it), and of `first` if it failed, else the
+        first non-zero status of `command`, `then` and `checks` (0 if none failed).
     """
     import contextlib
     import os
@@ -914,13 +925,26 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
             if status != 0:
                 print(f"{shlex.join(first)} failed (exit status {status}): the book's build is stopped", file=sys.stderr)
                 build.terminate()
+                then = checks = None
             else:
                 status = _execute_beside_build(cache, book, build, api_read, command, executed, timeout)
         finally:
             pending.unlink(missing_ok=True)
-        status_build = build.wait()
-        api_read.unlink(missing_ok=True)
-        return status_build, status
+        others = subprocess.Popen(then) if then is not None else None  # beside the build's reading and writing
+        try:
+            status_build = build.wait()
+            api_read.unlink(missing_ok=True)
+            checks_log = book / "_build" / "checks.log"
+            if checks is not None and status_build == 0:
+                with open(checks_log, "w") as checks_out:  # shown once `then` has ended: outputs not interleaved
+                    checked = subprocess.run(checks, stdout=checks_out, stderr=subprocess.STDOUT).returncode
+            else:
+                checked, checks = 0, None
+        finally:
+            tested = others.wait() if others is not None else 0
+        if checks is not None:
+            print(checks_log.read_text(), end="", flush=True)
+        return status_build, status or tested or checked
 
 
 def _execute_beside_build(cache, book: Path, build, api_read: Path, command: list[str] | None,
@@ -990,21 +1014,22 @@ def _cache_copies(cache, executed: str | Path, book: str | Path) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m mascore._booktools sync [NOTEBOOK ...]`` (default: every notebook of a study), ``execute``,
-    ``cache FOLDER`` (:func:`cache_executed`), or ``build [--log FILE] [--first "CMD ARGS"] [FOLDER COMMAND ...]``
-    (:func:`build_book`: CMD run first, then the notebooks executed by COMMAND into FOLDER, or by
-    :func:`execute_notebooks`; the exit status is the build's if it failed, else the commands')."""
+    ``cache FOLDER`` (:func:`cache_executed`), or ``build [--log FILE] [--first "CMD"] [--then "CMD"]
+    [--checks "CMD"] [FOLDER COMMAND ...]`` (:func:`build_book`: the first CMD run first, then the notebooks
+    executed by COMMAND into FOLDER, or by :func:`execute_notebooks`, then the other two as
+    :func:`build_book` says; the exit status is the build's if it failed, else the commands')."""
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] == "build":
-        args, log, first = argv[1:], None, None
-        while args[:1] in (["--log"], ["--first"]):
+        args, log, commands = argv[1:], None, {}
+        while args[:1] in (["--log"], ["--first"], ["--then"], ["--checks"]):
             if args[0] == "--log":
                 log = args[1]
             else:
-                first = shlex.split(args[1])
+                commands[args[0][2:]] = shlex.split(args[1])
             args = args[2:]
         built, status = build_book(command=args[1:] or None, executed=args[0] if args else None, log=log,
-                                   first=first)
-        if first is not None and status != 0:
+                                   **commands)
+        if "first" in commands and built < 0 and status != 0:  # the first command failed: the build was stopped
             return status
         if built != 0:
             if log is not None:

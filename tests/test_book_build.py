@@ -85,6 +85,18 @@ def test_the_collector_thresholds_are_restored_when_the_build_ends():
     assert gc.get_threshold() == before
 
 
+@pytest.mark.parametrize(("code", "tex"), [
+    ("|M^k| <= alpha mu^k", r"|M^k| <= \alpha \mu^k"),  # words: "alphamu" without the commands
+    ("e^T Sigma^{-1} e", r"e^T \Sigma^{-1} e"),
+    ("x_i = sum_l c_{l,i} psi_l", r"x_i = \sum_l c_{l,i} \psi_l"),
+    ("z_{i,x_j} = x_j + nu_ij", r"z_{i,x_j} = x_j + \nu_ij"),
+    ("mu_bar^k + sigma_max(A)^2 + x_hat^T", "mu_bar^k + sigma_max(A)^2 + x_hat^T"),  # names stay names
+    (r"\Sigma_i^- + trace(P)^2 + etas^2", r"\Sigma_i^- + \operatorname{trace}(P)^2 + etas^2"),
+])
+def test_formulas_written_as_code_get_greek_letters_and_operators(code, tex):
+    assert extension("api_math").to_tex(code) == tex
+
+
 AUTOSUMMARY_PAGE = """\
 Objects
 =======
@@ -147,6 +159,55 @@ def test_a_failing_first_command_stops_the_build_before_any_notebook(tmp_path, c
     assert status == 3
     assert "failed (exit status 3): the book's build is stopped" in capsys.readouterr().err
     assert not (book / "_build" / "notebooks-pending").exists()
+
+
+def _tiny_book(folder: Path, toc: bool = True) -> Path:
+    """A book of one page that builds in a few seconds (without its table of contents it does not build)."""
+    book = folder / "book"
+    (book / "notebooks").mkdir(parents=True)
+    (book / "_config.yml").write_text('title: tiny\nexecute:\n  execute_notebooks: "off"\n')
+    (book / "intro.md").write_text("# Tiny\n\nOne page.\n")
+    if toc:
+        (book / "_toc.yml").write_text("format: jb-book\nroot: intro\n")
+    return book
+
+
+def _python(code: str) -> list[str]:
+    return [sys.executable, "-c", code]
+
+
+def test_make_tests_other_tests_follow_the_notebooks_and_the_html_checks_follow_the_book(tmp_path, capsys):
+    """`make test`: the other tests (``then``) start once the notebooks' command has ended, beside the rest of the
+    build; the HTML checks (``checks``) run once the book is built, their output shown; a failing check fails."""
+    pytest.importorskip("jupyter_cache")
+    from mascore._booktools import build_book
+
+    book, executed = _tiny_book(tmp_path), tmp_path / "executed"
+    executed.mkdir()
+    html = book / "_build" / "html" / "intro.html"
+    order = tmp_path / "order.txt"
+    built, status = build_book(
+        book, command=_python(f"import time; time.sleep(0.5); open({str(executed / 'done')!r}, 'w')"), executed=executed,
+        log=tmp_path / "build.log",
+        then=_python(f"import os; open({str(order)!r}, 'a').write('then %s' % os.path.exists({str(executed / 'done')!r}))"),
+        checks=_python(f"import os; print('checked', os.path.exists({str(html)!r})); raise SystemExit(5)"))
+    assert built == 0
+    assert order.read_text() == "then True"  # started after the notebooks' command
+    assert "checked True" in capsys.readouterr().out  # after the book was built; its output is shown
+    assert status == 5
+
+
+def test_without_a_built_book_the_html_checks_do_not_run_and_the_other_tests_still_count(tmp_path):
+    pytest.importorskip("jupyter_cache")
+    from mascore._booktools import build_book
+
+    book, executed = _tiny_book(tmp_path, toc=False), tmp_path / "executed"
+    executed.mkdir()
+    ran = tmp_path / "checks-ran"
+    built, status = build_book(book, command=_python("pass"), executed=executed, log=tmp_path / "build.log",
+                               then=_python("raise SystemExit(4)"), checks=_python(f"open({str(ran)!r}, 'w')"))
+    assert built != 0 and status == 4
+    assert not ran.exists()
 
 
 def test_the_intro_is_executed_with_the_notebooks(tmp_path):
