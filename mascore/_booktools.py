@@ -789,13 +789,17 @@ def _code_length(path: str | Path) -> int:
 
     The executor's estimate of how long a notebook runs, to hand out the longest first: over the book's
     notebooks it orders them about as well as their measured times do (the last few to start are short
-    ones either way), with nothing to record or keep up to date.
+    ones either way), with nothing to record or keep up to date. A file that is no notebook counts 0:
+    the executor then reports it as failed, and the book's build shows why.
     """
     path = Path(path)
     if path.suffix != ".ipynb":
         return len(path.read_text())
-    cells = json.loads(path.read_text())["cells"]
-    return sum(len("".join(cell["source"])) for cell in cells if cell["cell_type"] == "code")
+    try:
+        cells = json.loads(path.read_text())["cells"]
+        return sum(len("".join(cell["source"])) for cell in cells if cell["cell_type"] == "code")
+    except (ValueError, KeyError, TypeError):
+        return 0
 
 
 def _execute_and_kill(project_nb, data):

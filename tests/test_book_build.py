@@ -260,6 +260,21 @@ def test_the_code_length_counts_the_code_cells_of_a_notebook_and_the_whole_text_
     page = tmp_path / "intro.md"
     page.write_text("# Intro\n\n```{code-cell} ipython3\nprint(1)\n```\n")
     assert _code_length(page) == len(page.read_text())
+    (tmp_path / "broken.ipynb").write_text("not a notebook")
+    assert _code_length(tmp_path / "broken.ipynb") == 0
+
+
+def test_a_file_that_is_no_notebook_is_reported_as_failed_not_raised(tmp_path):
+    """The executor lists it among the failed notebooks (the book's build then shows why); the others run."""
+    pytest.importorskip("jupyter_cache")
+    from jupyter_cache import get_cache
+
+    from mascore._booktools import _run_project
+
+    cache = get_cache(str(tmp_path / "cache"))
+    (tmp_path / "broken.ipynb").write_text("not a notebook")
+    cache.add_nb_to_project(str(tmp_path / "broken.ipynb"))
+    assert _run_project(cache, timeout=60) == [str(tmp_path / "broken.ipynb")]
 
 
 def test_the_notebooks_are_executed_longest_first_and_their_kernels_killed(tmp_path):
