@@ -66,27 +66,29 @@ book: $(STAMP)  ## execute every notebook and render the HTML book into book/_bu
 	$(BUILD_BOOK) --log $(BOOK_LOG) --first "$(RESULTS_STAGE)"
 	@echo "Open book/_build/html/index.html"
 
-# `make test` executes every notebook once, as a test: nbmake runs copies of them (results/notebooks)
-# and writes their outputs back (--overwrite); the book is rendered from those outputs (`_booktools build`
-# starts the build first, as `make book` does: it reads the API pages during the results stage, and the
-# notebooks' pages once pytest has ended and its outputs are in the cache), and the checks of the rendered
-# HTML run last. The notebooks' kernels need ipykernel's inline backend to draw their figures, so MPLBACKEND
-# stays unset here (tests/conftest.py gives the test processes themselves a headless backend).
-# --dist worksteal: a worker that runs out of tests takes half of the other's queue, so the long items
-# (the notebooks, the Dask sweeps) do not leave one core idle at the end as xdist's default split did (one
-# worker ran all 34 notebooks). The notebooks are collected first: the longest items start early, and the
-# last ones to share out are the short doctests.
+# `make test` executes every notebook once, as a test: nbmake runs copies of them (results/notebooks) on both
+# cores and writes their outputs back (--overwrite); the book is rendered from those outputs. `_booktools build`
+# starts the book's build first, as `make book` does (it reads the API pages during the results stage); once the
+# notebooks are executed, the other tests (the unit tests and the doctests) start while the build reads and
+# writes the notebooks' pages (one process), and the checks of the rendered HTML run once the book is built,
+# beside those tests (their output is shown when they end): the build's tail and the checks, which mostly wait on
+# the browser, leave no core idle. The notebooks' kernels need ipykernel's inline backend to draw their figures,
+# so MPLBACKEND stays unset for them (tests/conftest.py gives the test processes themselves a headless backend).
+# --dist worksteal: a worker that runs out of items takes half of the other's queue, so that no long item leaves
+# one core idle at the end.
 EXECUTED := results/notebooks
+NOTEBOOK_TESTS = $(BIN)/python -m pytest -n $(JOBS) --dist worksteal --nbmake --overwrite --durations=5 $(EXECUTED)
+OTHER_TESTS = $(BIN)/python -m pytest -n $(JOBS) --dist worksteal --doctest-modules --durations=25 \
+    --ignore=$(HTML_TESTS) tests mascore
 # The HTML checks run in one process: one headless Chromium measures every page, the reading and the API pages,
 # two at a time (a session fixture of tests/test_book_html.py), while the remaining checks only read files.
 HTML_TESTS := tests/test_book_html.py
+HTML_CHECKS = env MPLBACKEND=Agg $(BIN)/python -m pytest -p no:xdist -p no:cacheprovider $(HTML_TESTS)
 
 test: $(STAMP) lint  ## lint, the unit tests, doctests, published numbers and every notebook (nbmake), then render the book and check its HTML
 	@$(COMPILE) && rm -rf $(EXECUTED) && mkdir -p $(EXECUTED) book/_build && cp notebooks/*.ipynb $(EXECUTED)/
-	@$(BUILD_BOOK) --log $(BOOK_LOG) --first "$(RESULTS_STAGE)" $(EXECUTED) \
-	    $(BIN)/python -m pytest -n $(JOBS) --dist worksteal --nbmake --overwrite --doctest-modules --durations=25 \
-	    --ignore=$(HTML_TESTS) $(EXECUTED) tests mascore
-	$(HEADLESS) $(BIN)/python -m pytest -p no:xdist $(HTML_TESTS)
+	@$(BUILD_BOOK) --log $(BOOK_LOG) --first "$(RESULTS_STAGE)" --then "$(OTHER_TESTS)" --checks "$(HTML_CHECKS)" \
+	    $(EXECUTED) $(NOTEBOOK_TESTS)
 
 lint: $(STAMP)  ## ruff on the package, the tests and the benchmarks; the layers of the package (import-linter)
 	$(BIN)/ruff check mascore tests benchmarks

@@ -788,9 +788,12 @@ def _add_notebooks(cache, book: Path, ipynb: bool = True) -> None:
 def _run_project(cache, timeout: int, all_cores: Callable[[], bool] | None = None) -> list[str]:
     """Execute the notebooks of the cache's project on every core, one at a time per core; the failed ones.
 
-    With `all_cores`, one notebook at a time until ``all_cores()`` is true: the cores are shared with
-    another process meanwhile (the book's build reading its API pages), and the notebooks that time their
-    code should not measure it with a third process competing for their core.
+    The notebooks are handed out longest first (:func:`_code_length`), so that the last ones to run are
+    short and neither core idles long at the end while the other finishes. Each kernel is killed once
+    its last cell's outputs are in (:func:`_execute_and_kill`). With `all_cores`, one notebook at a time
+    until ``all_cores()`` is true: the cores are shared with another process meanwhile (the book's build
+    reading its API pages), and the notebooks that time their code should not measure it with a third
+    process competing for their core.
     """
     import multiprocessing
     import os
@@ -798,8 +801,10 @@ def _run_project(cache, timeout: int, all_cores: Callable[[], bool] | None = Non
 
     from jupyter_cache.executors.basic import ExecutionWorkerLocalMProc, ProcessData
 
-    jobs = [ProcessData(record.pk, record.uri, cache, timeout, False) for record in cache.list_project_records()]
+    records = sorted(cache.list_project_records(), key=lambda record: -_code_length(record.uri))  # stable
+    jobs = [ProcessData(record.pk, record.uri, cache, timeout, False) for record in records]
     worker = ExecutionWorkerLocalMProc()
+    worker.execute = _execute_and_kill  # the worker's one step that runs the notebook (picklable: a module function)
     cores = os.cpu_count() or 1
     with multiprocessing.Pool(cores) as pool:
         if all_cores is None:
@@ -816,6 +821,38 @@ def _run_project(cache, timeout: int, all_cores: Callable[[], bool] | None = Non
                 results += [task.get() for task in running if task.ready()]
                 running = [task for task in running if not task.ready()]
     return sorted(uri for status, uri in results if status != 0)
+
+
+def _code_length(path: str | Path) -> int:
+    """Characters in the code cells of notebook `path` (of a MyST page, such as the intro: its whole text).
+
+    The executor's estimate of how long a notebook runs, to hand out the longest first: over the book's
+    notebooks it orders them about as well as their measured times do (the last few to start are short
+    ones either way), with nothing to record or keep up to date. A file that is no notebook counts 0:
+    the executor then reports it as failed, and the book's build shows why.
+    """
+    path = Path(path)
+    if path.suffix != ".ipynb":
+        return len(path.read_text())
+    try:
+        cells = json.loads(path.read_text())["cells"]
+        return sum(len("".join(cell["source"])) for cell in cells if cell["cell_type"] == "code")
+    except (ValueError, KeyError, TypeError):
+        return 0
+
+
+def _execute_and_kill(project_nb, data):
+    """jupyter-cache's execution of one notebook (``ExecutionWorkerLocalMProc.execute``), its kernel then killed.
+
+    The kernel is killed (``shutdown_kernel="immediate"``) once the outputs of its last cell are in,
+    instead of being asked to shut down: a kernel that exits by itself first clears its namespace,
+    collects its garbage and unloads its modules, about half a second of CPU per notebook, and the
+    executor waits for it; nothing it does then reaches the notebook.
+    """
+    from jupyter_cache.executors.utils import single_nb_execution
+
+    return single_nb_execution(project_nb.nb, cwd=str(Path(project_nb.uri).parent), timeout=data.timeout,
+                               allow_errors=data.allow_errors, shutdown_kernel="immediate")
 
 
 def execute_notebooks(book: str | Path = "book", timeout: int = 900) -> list[str]:
@@ -850,7 +887,8 @@ NOTEBOOKS_PENDING = "MASCORE_NOTEBOOKS_PENDING"
 
 
 def build_book(book: str | Path = "book", command: list[str] | None = None, executed: str | Path | None = None,
-               log: str | Path | None = None, timeout: int = 900, first: list[str] | None = None) -> tuple[int, int]:
+               log: str | Path | None = None, timeout: int = 900, first: list[str] | None = None,
+               then: list[str] | None = None, checks: list[str] | None = None) -> tuple[int, int]:
     """Render the book with ``jupyter-book build`` while its notebooks are executed.
 
     The build is one process (Sphinx reads, then writes, one page at a time), so it starts at
@@ -863,7 +901,11 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
     build waits for them before it reads a page with executed cells (book/_ext/notebooks_pending.py,
     told by :data:`NOTEBOOKS_PENDING`); a notebook missing from the cache is executed by the build,
     which shows why it fails. With `first`, that command (``make``'s results stage, which the notebooks
-    read) runs before any notebook is executed, while the build reads the API pages.
+    read) runs before any notebook is executed, while the build reads the API pages. ``make test`` also
+    gives `then` (the other tests: they start once the notebooks are executed and run beside the rest
+    of the build) and `checks` (the checks of the built HTML: they start once the book is built, beside
+    `then`), so that the build's own tail, one process, and the checks, which mostly wait on the
+    browser, leave no core idle.
 
     Parameters
     ----------
@@ -879,12 +921,18 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
         Seconds a cell may run (:func:`execute_notebooks`).
     first : list of str, optional
         A command run to its end before the notebooks are executed; if it fails, the build is stopped.
+    then : list of str, optional
+        A command started once the notebooks are executed (`command` has ended), while the build reads
+        and writes their pages; it is waited for.
+    checks : list of str, optional
+        A command run once the book is built (not if the build failed), beside `then`; its output is
+        kept in ``checks.log`` beside the book's HTML folder and shown once both have ended.
 
     Returns
     -------
     (int, int)
-        The exit status of the build (-15 if `first` stopped it) and of `first` if it failed, else of
-        `command` (0 without a command).
+        The exit status of the build (-15 if `first` stopped it), and of `first` if it failed, else the
+        first non-zero status of `command`, `then` and `checks` (0 if none failed).
     """
     import contextlib
     import os
@@ -920,13 +968,26 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
             if status != 0:
                 print(f"{shlex.join(first)} failed (exit status {status}): the book's build is stopped", file=sys.stderr)
                 build.terminate()
+                then = checks = None
             else:
                 status = _execute_beside_build(cache, book, build, api_read, command, executed, timeout)
         finally:
             pending.unlink(missing_ok=True)
-        status_build = build.wait()
-        api_read.unlink(missing_ok=True)
-        return status_build, status
+        others = subprocess.Popen(then) if then is not None else None  # beside the build's reading and writing
+        try:
+            status_build = build.wait()
+            api_read.unlink(missing_ok=True)
+            checks_log = book / "_build" / "checks.log"
+            if checks is not None and status_build == 0:
+                with open(checks_log, "w") as checks_out:  # shown once `then` has ended: outputs not interleaved
+                    checked = subprocess.run(checks, stdout=checks_out, stderr=subprocess.STDOUT).returncode
+            else:
+                checked, checks = 0, None
+        finally:
+            tested = others.wait() if others is not None else 0
+        if checks is not None:
+            print(checks_log.read_text(), end="", flush=True)
+        return status_build, status or tested or checked
 
 
 def _execute_beside_build(cache, book: Path, build, api_read: Path, command: list[str] | None,
@@ -996,21 +1057,22 @@ def _cache_copies(cache, executed: str | Path, book: str | Path) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m mascore._booktools sync [NOTEBOOK ...]`` (default: every notebook of a study), ``execute``,
-    ``cache FOLDER`` (:func:`cache_executed`), or ``build [--log FILE] [--first "CMD ARGS"] [FOLDER COMMAND ...]``
-    (:func:`build_book`: CMD run first, then the notebooks executed by COMMAND into FOLDER, or by
-    :func:`execute_notebooks`; the exit status is the build's if it failed, else the commands')."""
+    ``cache FOLDER`` (:func:`cache_executed`), or ``build [--log FILE] [--first "CMD"] [--then "CMD"]
+    [--checks "CMD"] [FOLDER COMMAND ...]`` (:func:`build_book`: the first CMD run first, then the notebooks
+    executed by COMMAND into FOLDER, or by :func:`execute_notebooks`, then the other two as
+    :func:`build_book` says; the exit status is the build's if it failed, else the commands')."""
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] == "build":
-        args, log, first = argv[1:], None, None
-        while args[:1] in (["--log"], ["--first"]):
+        args, log, commands = argv[1:], None, {}
+        while args[:1] in (["--log"], ["--first"], ["--then"], ["--checks"]):
             if args[0] == "--log":
                 log = args[1]
             else:
-                first = shlex.split(args[1])
+                commands[args[0][2:]] = shlex.split(args[1])
             args = args[2:]
         built, status = build_book(command=args[1:] or None, executed=args[0] if args else None, log=log,
-                                   first=first)
-        if first is not None and status != 0:
+                                   **commands)
+        if "first" in commands and built < 0 and status != 0:  # the first command failed: the build was stopped
             return status
         if built != 0:
             if log is not None:

@@ -85,6 +85,18 @@ def test_the_collector_thresholds_are_restored_when_the_build_ends():
     assert gc.get_threshold() == before
 
 
+@pytest.mark.parametrize(("code", "tex"), [
+    ("|M^k| <= alpha mu^k", r"|M^k| <= \alpha \mu^k"),  # words: "alphamu" without the commands
+    ("e^T Sigma^{-1} e", r"e^T \Sigma^{-1} e"),
+    ("x_i = sum_l c_{l,i} psi_l", r"x_i = \sum_l c_{l,i} \psi_l"),
+    ("z_{i,x_j} = x_j + nu_ij", r"z_{i,x_j} = x_j + \nu_ij"),
+    ("mu_bar^k + sigma_max(A)^2 + x_hat^T", "mu_bar^k + sigma_max(A)^2 + x_hat^T"),  # names stay names
+    (r"\Sigma_i^- + trace(P)^2 + etas^2", r"\Sigma_i^- + \operatorname{trace}(P)^2 + etas^2"),
+])
+def test_formulas_written_as_code_get_greek_letters_and_operators(code, tex):
+    assert extension("api_math").to_tex(code) == tex
+
+
 AUTOSUMMARY_PAGE = """\
 Objects
 =======
@@ -149,6 +161,55 @@ def test_a_failing_first_command_stops_the_build_before_any_notebook(tmp_path, c
     assert not (book / "_build" / "notebooks-pending").exists()
 
 
+def _tiny_book(folder: Path, toc: bool = True) -> Path:
+    """A book of one page that builds in a few seconds (without its table of contents it does not build)."""
+    book = folder / "book"
+    (book / "notebooks").mkdir(parents=True)
+    (book / "_config.yml").write_text('title: tiny\nexecute:\n  execute_notebooks: "off"\n')
+    (book / "intro.md").write_text("# Tiny\n\nOne page.\n")
+    if toc:
+        (book / "_toc.yml").write_text("format: jb-book\nroot: intro\n")
+    return book
+
+
+def _python(code: str) -> list[str]:
+    return [sys.executable, "-c", code]
+
+
+def test_make_tests_other_tests_follow_the_notebooks_and_the_html_checks_follow_the_book(tmp_path, capsys):
+    """`make test`: the other tests (``then``) start once the notebooks' command has ended, beside the rest of the
+    build; the HTML checks (``checks``) run once the book is built, their output shown; a failing check fails."""
+    pytest.importorskip("jupyter_cache")
+    from mascore._booktools import build_book
+
+    book, executed = _tiny_book(tmp_path), tmp_path / "executed"
+    executed.mkdir()
+    html = book / "_build" / "html" / "intro.html"
+    order = tmp_path / "order.txt"
+    built, status = build_book(
+        book, command=_python(f"import time; time.sleep(0.5); open({str(executed / 'done')!r}, 'w')"), executed=executed,
+        log=tmp_path / "build.log",
+        then=_python(f"import os; open({str(order)!r}, 'a').write('then %s' % os.path.exists({str(executed / 'done')!r}))"),
+        checks=_python(f"import os; print('checked', os.path.exists({str(html)!r})); raise SystemExit(5)"))
+    assert built == 0
+    assert order.read_text() == "then True"  # started after the notebooks' command
+    assert "checked True" in capsys.readouterr().out  # after the book was built; its output is shown
+    assert status == 5
+
+
+def test_without_a_built_book_the_html_checks_do_not_run_and_the_other_tests_still_count(tmp_path):
+    pytest.importorskip("jupyter_cache")
+    from mascore._booktools import build_book
+
+    book, executed = _tiny_book(tmp_path, toc=False), tmp_path / "executed"
+    executed.mkdir()
+    ran = tmp_path / "checks-ran"
+    built, status = build_book(book, command=_python("pass"), executed=executed, log=tmp_path / "build.log",
+                               then=_python("raise SystemExit(4)"), checks=_python(f"open({str(ran)!r}, 'w')"))
+    assert built != 0 and status == 4
+    assert not ran.exists()
+
+
 def test_the_intro_is_executed_with_the_notebooks(tmp_path):
     pytest.importorskip("jupyter_cache")
     pytest.importorskip("myst_nb")
@@ -177,3 +238,64 @@ def test_make_dry_run_prints_the_book_commands_without_running_them():
         assert out.returncode == 0, out.stderr
         assert "mascore._booktools build" in out.stdout and "--first" in out.stdout
         assert "reading sources" not in out.stdout + out.stderr  # nothing was built
+
+
+def _notebook(path: Path, *sources: str) -> Path:
+    """A notebook at `path` with code cells `sources` (and one Markdown cell, which does not count as code)."""
+    import nbformat
+
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell("# " + "words " * 200)]
+                                  + [nbformat.v4.new_code_cell(s) for s in sources])
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    nbformat.write(nb, path)
+    return path
+
+
+def test_the_code_length_counts_the_code_cells_of_a_notebook_and_the_whole_text_of_a_page(tmp_path):
+    pytest.importorskip("nbformat")
+    from mascore._booktools import _code_length
+
+    assert _code_length(_notebook(tmp_path / "a.ipynb", "x = 1", "y = 22")) == len("x = 1") + len("y = 22")
+    assert _code_length(_notebook(tmp_path / "b.ipynb")) == 0
+    page = tmp_path / "intro.md"
+    page.write_text("# Intro\n\n```{code-cell} ipython3\nprint(1)\n```\n")
+    assert _code_length(page) == len(page.read_text())
+    (tmp_path / "broken.ipynb").write_text("not a notebook")
+    assert _code_length(tmp_path / "broken.ipynb") == 0
+
+
+def test_a_file_that_is_no_notebook_is_reported_as_failed_not_raised(tmp_path):
+    """The executor lists it among the failed notebooks (the book's build then shows why); the others run."""
+    pytest.importorskip("jupyter_cache")
+    from jupyter_cache import get_cache
+
+    from mascore._booktools import _run_project
+
+    cache = get_cache(str(tmp_path / "cache"))
+    (tmp_path / "broken.ipynb").write_text("not a notebook")
+    cache.add_nb_to_project(str(tmp_path / "broken.ipynb"))
+    assert _run_project(cache, timeout=60) == [str(tmp_path / "broken.ipynb")]
+
+
+def test_the_notebooks_are_executed_longest_first_and_their_kernels_killed(tmp_path):
+    """One notebook at a time (`all_cores` never true), so the order in which they run is the order handed out:
+    the longest code first. Each kernel is killed after its last cell: its exit handlers never run. The outputs
+    are in the cache."""
+    pytest.importorskip("jupyter_cache")
+    pytest.importorskip("ipykernel")
+    from jupyter_cache import get_cache
+
+    from mascore._booktools import _run_project
+
+    log = tmp_path / "order.txt"
+    run = f"import atexit, pathlib\nwith open({str(log)!r}, 'a') as f:\n    f.write('{{}}\\n')\n"
+    exit_hook = f"atexit.register(pathlib.Path({str(tmp_path / 'exited')!r}).touch)\n"
+    cache = get_cache(str(tmp_path / "cache"))
+    for name, padding in [("short", 0), ("long", 400), ("middle", 200)]:
+        code = run.format(name) + exit_hook + "#" * padding
+        cache.add_nb_to_project(str(_notebook(tmp_path / f"{name}.ipynb", code, "print('done')")))
+    assert _run_project(cache, timeout=120, all_cores=lambda: False) == []
+    assert log.read_text().split() == ["long", "middle", "short"]
+    assert not (tmp_path / "exited").exists()  # killed, not asked to exit
+    outputs = [cache.get_cache_bundle(record.pk).nb.cells[-1].outputs for record in cache.list_cache_records()]
+    assert len(outputs) == 3 and all(out[0]["text"] == "done\n" for out in outputs)

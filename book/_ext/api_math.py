@@ -15,6 +15,23 @@ from sphinx.transforms import SphinxTransform
 
 #: TeX markup: ``_{...}``, a superscript (``^{...}``, ``^T``) or a backslash command such as ``\Sigma``.
 LOOKS_LIKE_TEX = re.compile(r"[_^]\{|\\[A-Za-z]+|\^[A-Za-z0-9]")
+#: Operator names written as words (``sum_k``, ``max_t``), and their TeX.
+OPERATORS = re.compile(r"(?<!\\)\b(sum|trace|det|min|max)(?=[_ (])")
+#: Greek letters written as words (``alpha mu^k``, ``Sigma^{-1}``, ``tau_1``): a whole word, not part of a name
+#: (``mu_bar``, ``sigma_max`` stay as they are; ``nu_ij`` is a subscript).
+GREEK = re.compile(r"(?<![\\\w])(alpha|beta|gamma|delta|epsilon|zeta|eta|theta|iota|kappa|lambda|mu|nu|xi|pi|rho|"
+                   r"sigma|tau|phi|chi|psi|omega|Gamma|Delta|Theta|Lambda|Xi|Pi|Sigma|Phi|Psi|Omega)(?![A-Za-z]|_[A-Za-z]{3})")
+
+
+def to_tex(text: str) -> str:
+    r"""The TeX of a formula written as code: operator names and Greek letters written as words become commands.
+
+    >>> to_tex("max_k |M^k| / (alpha mu^k)")
+    '\\max_k |M^k| / (\\alpha \\mu^k)'
+    """
+    tex = OPERATORS.sub(r"\\\1", text)
+    tex = GREEK.sub(r"\\\1", tex)
+    return tex.replace("\\trace", "\\operatorname{trace}")
 
 
 class LiteralFormulasToMath(SphinxTransform):
@@ -28,8 +45,7 @@ class LiteralFormulasToMath(SphinxTransform):
         for node in list(self.document.findall(nodes.literal)):
             text = node.astext()
             if LOOKS_LIKE_TEX.search(text):
-                tex = re.sub(r"(?<!\\)\b(sum|trace|det|min|max)(?=[_ (])", r"\\\1", text)  # sum_k -> \sum_k
-                tex = tex.replace("\\trace", "\\operatorname{trace}")
+                tex = to_tex(text)
                 node.replace_self(nodes.math(tex, tex))
 
 
