@@ -904,8 +904,7 @@ def build_book(book: str | Path = "book", command: list[str] | None = None, exec
     read) runs before any notebook is executed, while the build reads the API pages. ``make test`` also
     gives `then` (the other tests: they start once the notebooks are executed and run beside the rest
     of the build) and `checks` (the checks of the built HTML: they start once the book is built, beside
-    `then`), so that the build's own tail, one process, and the checks, which mostly wait on the
-    browser, leave no core idle.
+    `then`), so that the build's own tail, one process, leaves no core idle.
 
     Parameters
     ----------
