@@ -71,9 +71,10 @@ book: $(STAMP)  ## execute every notebook and render the HTML book into book/_bu
 # starts the book's build first, as `make book` does (it reads the API pages during the results stage); once the
 # notebooks are executed, the other tests (the unit tests and the doctests) start while the build reads and
 # writes the notebooks' pages (one process), and the checks of the rendered HTML run once the book is built,
-# beside those tests (their output is shown when they end): the build's tail, one process, no longer leaves a core
-# idle, and the tests and the checks share both cores. The notebooks' kernels need ipykernel's inline backend to
-# draw their figures, so MPLBACKEND stays unset for them (tests/conftest.py gives the test processes themselves a headless backend).
+# beside those tests (their output is shown once the tests have ended too): the build's tail, one process, no
+# longer leaves a core idle, and the tests and the checks share both cores. The notebooks' kernels need ipykernel's
+# inline backend to draw their figures, so MPLBACKEND stays unset for them (tests/conftest.py gives the test
+# processes themselves a headless backend).
 # --dist worksteal: a worker that runs out of items takes half of the other's queue, so that no long item leaves
 # one core idle at the end.
 EXECUTED := results/notebooks
