@@ -40,6 +40,7 @@ from .target import (
     target_methods,
 )
 from .team import simulate_team, vlahakis_profile
+from .verdicts import compare_claims
 
 # --------------------------------------------------------------------------------------------
 # grids and cells
@@ -664,12 +665,15 @@ class CompareResult:
         The Vlahakis program's value at fixed coupling gains on the ring of 8 (:func:`vlahakis_profile`).
     links : pandas.DataFrame or None
         :func:`link_summary` of the table: the studies over lossy, late and event-triggered links.
+    claims : tuple of mascore.ledger.Claim
+        :func:`mascore.compare.compare_claims` of the table (with `phi`): the comparison's ledger,
+        decided once, when the sweep was summarized.
 
     Examples
     --------
     >>> from mascore.compare import CompareResult
     >>> sorted(CompareResult.__dataclass_fields__)[:3]
-    ['links', 'phi', 'seed']
+    ['claims', 'links', 'phi']
     """
 
     settings: BenchmarkSettings
@@ -679,6 +683,7 @@ class CompareResult:
     slopes: dict
     phi: dict
     links: Any = None
+    claims: tuple = ()
 
 
 def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = False, *,
@@ -740,7 +745,8 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
     summary = summarize(table[~lossy], settings=settings)
     profile = vlahakis_profile(8, settings=settings)
     links = link_summary(table, settings) if lossy.any() else None
-    result = CompareResult(settings, int(seed), table, summary, fitted_slopes(summary), profile, links)
+    claims = tuple(compare_claims(table, phi=profile))
+    result = CompareResult(settings, int(seed), table, summary, fitted_slopes(summary), profile, links, claims)
     if out is not None:
         write_run(_stored_run_path(settings, seed, out), _stored_run_key(settings, seed, out), result)
     return result
