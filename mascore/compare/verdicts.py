@@ -266,10 +266,11 @@ class Evidence:
 
 
 def _select(frame, where: Mapping[str, Any]):
+    """The rows of `frame` whose column ``key`` equals each value of `where` (a list or tuple: any of them)."""
     mask = np.ones(len(frame), dtype=bool)
     for key, v in where.items():
         col = frame[key]
-        mask &= col.isin(v).to_numpy() if isinstance(v, list | tuple) else (col == v).to_numpy()
+        mask &= col.isin(v).to_numpy() if isinstance(v, list | tuple) else col.to_numpy() == v
     return frame[mask]
 
 
