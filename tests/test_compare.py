@@ -201,7 +201,11 @@ def test_an_interrupted_sweep_resumes(serial, tmp_path):
 
 
 def _allocator_task(cell):
-    return [{"trim": os.environ.get("MALLOC_TRIM_THRESHOLD_", "unset"), "blas": os.environ.get("OMP_NUM_THREADS")}]
+    import dask
+
+    return [{"trim": os.environ.get("MALLOC_TRIM_THRESHOLD_", "unset"), "blas": os.environ.get("OMP_NUM_THREADS"),
+             "profiler": dask.config.get("distributed.worker.profile.enabled"),
+             "tick": dask.config.get("distributed.admin.tick.interval")}]
 
 
 def test_local_workers_keep_the_allocator_defaults_and_one_blas_thread(tmp_path, monkeypatch):
@@ -210,6 +214,9 @@ def test_local_workers_keep_the_allocator_defaults_and_one_blas_thread(tmp_path,
                             progress=False)
     assert table["trim"].tolist() == ["unset", "unset"]
     assert table["blas"].astype(str).tolist() == ["1", "1"]
+    # no dashboard: the workers do not sample their task's stack every 10 ms nor tick their event loop every 20 ms
+    assert table["profiler"].astype(str).tolist() == ["False", "False"]
+    assert table["tick"].tolist() == ["1s", "1s"]
 
 
 def test_run_sweep_refuses_bad_arguments(tmp_path):
