@@ -101,11 +101,14 @@ MIN_VENV := .venv-min
 MIN_PINS := numpy==1.26.4 scipy==1.11.4 networkx==3.2.1
 MIN_TESTS := tests/test_core_install.py tests/test_agents_noise.py tests/test_graphs.py tests/test_consensus.py \
              tests/test_ellipsoids.py tests/test_sensing.py tests/test_distributed_kf.py
+# Where the project's environment exists (CI: `make install` first), it installs $(MIN_VENV) with its uv, and
+# $(MIN_VENV) is created without pip (ensurepip, and a second uv bootstrapped by it: about 7 CPU-s).
+MIN_BY = $(if $(wildcard $(BIN)/python),$(BIN)/python,$(MIN_VENV)/bin/python)
 test-min:  ## the core alone on its minimum versions: install size, import times, core tests
-	@test -x $(MIN_VENV)/bin/python || $(PYTHON) -m venv $(MIN_VENV)
-	$(MIN_VENV)/bin/python .ci/install.py $(MIN_VENV) pip==$(PIP_VERSION) $(MIN_PINS) \
+	@test -x $(MIN_VENV)/bin/python || $(PYTHON) -m venv $(if $(wildcard $(BIN)/python),--without-pip) $(MIN_VENV)
+	$(MIN_BY) .ci/install.py $(MIN_VENV) pip==$(PIP_VERSION) $(MIN_PINS) \
 	    $(shell grep -E "^(pytest|hypothesis|setuptools|wheel)==" requirements.lock)
-	$(MIN_VENV)/bin/python .ci/install.py $(MIN_VENV) --no-deps --no-build-isolation -e .
+	$(MIN_BY) .ci/install.py $(MIN_VENV) --no-deps --no-build-isolation -e .
 	$(MIN_VENV)/bin/python -m pytest -q -p no:cacheprovider $(MIN_TESTS)
 
 reproduce: $(STAMP)  ## rebuild every paper's figures, tables and claims.json, and the quick comparison, into results/

@@ -6,10 +6,13 @@ Usage (the Makefile's install steps)::
 
 for example ``python .ci/install.py .venv -r requirements.lock``. The arguments are those of
 ``pip install`` that ``uv pip install`` shares (``-r``, ``-e``, ``--no-deps``,
-``--no-build-isolation``, requirement specifiers).
+``--no-build-isolation``, requirement specifiers). The ``python`` that runs this script must
+have pip; VENV need not (``make test-min`` creates ``.venv-min`` without pip and installs it
+with the project's ``.venv``, whose uv it reuses).
 
-uv, pinned to ``UV_VERSION``, is installed by the environment's own pip into ``VENV/.uv``
-(outside site-packages: ``pip freeze`` lists exactly what was asked for). It installs the
+uv, pinned to ``UV_VERSION``, is installed by pip into ``VENV/.uv`` unless the environment
+running this script has it already in its own ``.uv`` (outside site-packages: ``pip freeze``
+lists exactly what was asked for). It installs the
 same wheels as pip, faster. Neither byte-compiles at install (pip is told
 ``--no-compile``): compiling the whole environment takes about 26 s, and most of its
 modules are never imported; Python compiles each when it is first imported and keeps the
@@ -39,8 +42,8 @@ def pip_sources(python: Path) -> list[str]:
     Parameters
     ----------
     python : Path
-        The environment's interpreter; its pip reports the configuration (files and ``PIP_*``
-        variables, as ``pip config list`` shows them).
+        An interpreter with pip (the one running this script); its pip reports the configuration
+        (files and ``PIP_*`` variables, as ``pip config list`` shows them).
 
     Returns
     -------
@@ -82,12 +85,13 @@ def pip_sources(python: Path) -> list[str]:
 
 
 def bootstrap_uv(venv: Path) -> Path | None:
-    """``VENV/.uv/bin/uv`` at ``UV_VERSION``, installed by the environment's pip if missing.
+    """uv at ``UV_VERSION``: ``VENV/.uv/bin/uv``, or that of the environment running this script, else
+    installed into ``VENV/.uv`` by the pip of the environment running this script.
 
     Parameters
     ----------
     venv : Path
-        The virtual environment (its ``bin/python`` has pip).
+        The virtual environment to install into.
 
     Returns
     -------
@@ -95,11 +99,13 @@ def bootstrap_uv(venv: Path) -> Path | None:
         The uv executable, or None if pip could not install it.
     """
     target = venv / ".uv"
+    for uv in (target / "bin" / "uv", Path(sys.prefix) / ".uv" / "bin" / "uv"):
+        version = subprocess.run([str(uv), "--version"], capture_output=True, text=True,
+                                 check=False) if uv.exists() else None
+        if version is not None and version.stdout.split()[1:2] == [UV_VERSION]:
+            return uv
     uv = target / "bin" / "uv"
-    version = subprocess.run([str(uv), "--version"], capture_output=True, text=True, check=False) if uv.exists() else None
-    if version is not None and version.stdout.split()[1:2] == [UV_VERSION]:
-        return uv
-    done = subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", *PIP_QUIET, "--upgrade",
+    done = subprocess.run([sys.executable, "-m", "pip", "install", *PIP_QUIET, "--upgrade",
                            "--target", str(target), f"uv=={UV_VERSION}"], capture_output=True, text=True, check=False)
     if done.returncode == 0 and uv.exists():
         return uv
@@ -128,12 +134,12 @@ def install(venv: Path, arguments: list[str]) -> int:
         print(f"uv {UV_VERSION} could not be installed: pip installs {' '.join(arguments)} (slower).", flush=True)
     else:
         command = [str(uv), "pip", "install", "--quiet", "--python", str(python),
-                   *pip_sources(python), *arguments]
+                   *pip_sources(Path(sys.executable)), *arguments]
         if subprocess.run(command, check=False).returncode == 0:
             return 0
         print(f"uv failed to install {' '.join(arguments)}: pip installs it instead (slower).", flush=True)
-    return subprocess.run([str(python), "-m", "pip", "install", *PIP_QUIET, "--no-compile", *arguments],
-                          check=False).returncode
+    return subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", *PIP_QUIET, "--no-compile",
+                           *arguments], check=False).returncode
 
 
 if __name__ == "__main__":

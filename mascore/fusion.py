@@ -1147,9 +1147,13 @@ def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true:
     its covariances do not depend on the data. So the error of each agent is a
     linear map of the noise sources (initial error, process noise, measurement
     noise), and running the filter once per source direction, scaled by the
-    square roots of ``P0_true``, Q and R (a batch of ``n + K (n + sum q_i)`` runs
-    from the mean 0), gives ``E[e e^T] = sum_d e_d e_d^T`` to rounding. Compare
-    it with the filter's own P: a consistent filter has ``P - E[e e^T] >= 0``.
+    square roots of ``P0_true``, Q and R (a batch of runs from the mean 0), gives
+    ``E[e e^T] = sum_d e_d e_d^T`` to rounding. Only the second moment of the
+    joint vector (truth, every agent's estimate) carries over to the next step,
+    so after each step the batch is replaced by a square root of it (QR): at most
+    ``n (N + 2) + sum q_i`` runs per step (``3 n + sum q_i`` for the centralized
+    filter), instead of one per source drawn so far. Compare the result with the
+    filter's own P: a consistent filter has ``P - E[e e^T] >= 0``.
 
     Parameters
     ----------
@@ -1204,30 +1208,26 @@ def error_covariance(filt: _NetworkFilter, P0: ArrayLike, n_steps: int, P0_true:
     P0_true = check_covariance(float_array(P0_true, "P0_true"), "P0_true", size=n)
     if P0_true.ndim != 2:
         raise ValueError(f"P0_true must be one ({n}, {n}) covariance; got shape {P0_true.shape}")
-    D = n + K * (n + q)
-    truth = np.zeros((D, n))
-    truth[:n] = psd_sqrt(P0_true).T
-    x = np.zeros((D, *x.shape))
+    shape = x.shape                                  # one estimate: (N, n), or (n,) for the centralized filter
+    truth = psd_sqrt(P0_true).T                      # (D, n): one run per source direction, D = n at the start
+    x = np.zeros((n, *shape))                        # (D, *shape): the estimates of those runs (from the mean 0)
     C_out = np.empty((K, *P.shape))
     P_out = np.empty((K, *P.shape))
-    row = n
     sub = "dia,dib->iab" if filt._per_agent else "da,db->ab"
-    sqrt_R = model._sqrt_R
+    new_rows = np.zeros((n + q, *shape))             # the step's new sources have no estimate yet
     for k in range(K):
-        live = row + n + q  # the sources drawn by step k; the later ones, and the estimates they drive, are still 0
-        truth[:live] = truth[:live] @ model.F.T
-        truth[row:row + n] += model._sqrt_Q.T
-        row += n
-        z = truth[:live] @ model.H_stacked.T
-        z[row:row + q] += sqrt_R.T
-        row += q
-        x_live, P = filt.update(*filt.predict(x[:live], P), z)
-        x[:live] = x_live
+        truth = np.concatenate([truth @ model.F.T, model._sqrt_Q.T, np.zeros((q, n))])  # + process noise, + R's rows
+        z = truth @ model.H_stacked.T
+        z[len(z) - q:] += model._sqrt_R.T
+        x, P = filt.update(*filt.predict(np.concatenate([x, new_rows]), P), z)
         if P.ndim > P_out.ndim - 1:  # a filter that returned one covariance per run: they are all equal
             P = P[0]
-        e = (truth[:live, None, :] if filt._per_agent else truth[:live]) - x_live
+        e = (truth[:, None, :] if filt._per_agent else truth) - x
         C_out[k] = np.einsum(sub, e, e)
         P_out[k] = P
+        if len(truth) > n + x[0].size:  # keep R of the QR of [truth, x]: the same R^T R, at most n + x[0].size rows
+            r = np.linalg.qr(np.concatenate([truth, x.reshape(len(x), -1)], axis=1), mode="r")
+            truth, x = r[:, :n], r[:, n:].reshape(-1, *shape)
     return C_out, P_out
 
 

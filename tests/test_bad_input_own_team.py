@@ -236,19 +236,34 @@ def test_lemma2_failure_names_the_remedy_and_scaling_q_does_not_change_r():
 
 
 def test_dask_without_a_main_guard_is_explained_in_one_line(tmp_path):
+    """run_sweep and reproduce_paper (both start their workers by sweep.dask_client), in one script without a
+    main guard: each says so in one line, and reproduce_paper writes nothing."""
     pytest.importorskip("distributed")
+    import os
     import subprocess
     import sys
 
     script = tmp_path / "my_sweep.py"
-    script.write_text("from mascore import sweep\n"
-                      "cells = [{'scale': 1.0, 'block': 0}]\n"
-                      f"sweep.run_sweep(cells, sweep.demo_task, {str(tmp_path / 'out')!r}, workers=1, "
-                      "progress=False)\n")
+    script.write_text(  # a worker process imports it (as __mp_main__) and stops at its first call, as it would
+        "import sys\n"
+        "from mascore import sweep\n"
+        "try:\n"
+        f"    sweep.run_sweep([{{'scale': 1.0, 'block': 0}}], sweep.demo_task, {str(tmp_path / 'sweep')!r}, workers=1,\n"
+        "                    progress=False)\n"
+        "except RuntimeError as exc:\n"
+        "    if __name__ != '__main__':\n"
+        "        raise\n"
+        "    print('run_sweep:', exc, file=sys.stderr)\n"
+        "from mascore.reproduce import reproduce_paper\n"
+        f"reproduce_paper('ren2005', {str(tmp_path / 'out')!r}, workers=1, progress=False)\n")
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300,
-                          env={**__import__("os").environ, "OMP_NUM_THREADS": "1"})
-    last = done.stderr.strip().splitlines()[-1]
-    assert done.returncode != 0
+                          env={**os.environ, "OMP_NUM_THREADS": "1"})
+    lines = done.stderr.strip().splitlines()
+    said = [line for line in lines if line.startswith("run_sweep: ")]
+    assert len(said) == 1 and said[0].startswith("run_sweep: local Dask workers could not start"), lines[-20:]
+    assert '__name__ == "__main__"' in said[0]
+    last = lines[-1]  # reproduce_paper's error, uncaught
+    assert done.returncode != 0 and not (tmp_path / "out" / "ren2005").exists()
     assert last.startswith("RuntimeError: local Dask workers could not start") and '__name__ == "__main__"' in last
 
 

@@ -95,10 +95,24 @@ def test_same_seed_same_numbers_byte_for_byte():
             assert one[key].tobytes() == two[key].tobytes(), key
 
 
-def test_local_cluster_gives_the_serial_table(serial, tmp_path):
-    table, _ = serial  # one cell at a time; here the cells of a cell_group run together, on two workers
-    parallel = sweep.run_sweep(_small_cells(), _cells_task, tmp_path / "t.csv", workers=2, progress=False,
-                               group=compare.cell_group)
+def _cells_task_on_a_plain_worker(cells):
+    """`_cells_task`, on a worker started as sweep.dask_client starts it, or an AssertionError that run_sweep passes
+    on: the C library's allocator defaults (Dask's nanny would set MALLOC_TRIM_THRESHOLD_=65536), one BLAS thread,
+    and, with no dashboard, no stack sample of its task every 10 ms nor an event-loop tick every 20 ms."""
+    import dask
+
+    found = (os.environ.get("MALLOC_TRIM_THRESHOLD_", "unset"), os.environ.get("OMP_NUM_THREADS"),
+             dask.config.get("distributed.worker.profile.enabled"), dask.config.get("distributed.admin.tick.interval"))
+    assert found == ("unset", "1", False, "1s"), f"a worker with (trim, BLAS threads, profiler, tick) = {found}"
+    return _cells_task(cells)
+
+
+def test_local_cluster_gives_the_serial_table_on_plain_workers(serial, tmp_path, monkeypatch):
+    """sweep.dask_client's local cluster (one worker: two workers giving the serial table is the scheduler test's)."""
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)  # not inherited from this process
+    table, _ = serial  # one cell at a time; here the cells of a cell_group run together, on a local worker
+    parallel = sweep.run_sweep(_small_cells(), _cells_task_on_a_plain_worker, tmp_path / "t.csv", workers=1,
+                               progress=False, group=compare.cell_group)
     pd.testing.assert_frame_equal(_without_cpu(parallel), _without_cpu(table), check_exact=True)
 
 
@@ -198,25 +212,6 @@ def test_an_interrupted_sweep_resumes(serial, tmp_path):
     pd.testing.assert_frame_equal(_without_cpu(resumed), _without_cpu(table), check_exact=True)
     again = resumed.set_index(["cell", "run"]).loc[kept.index, CPU]
     np.testing.assert_array_equal(again.to_numpy(), kept.to_numpy())  # the finished cells were not rerun
-
-
-def _allocator_task(cell):
-    import dask
-
-    return [{"trim": os.environ.get("MALLOC_TRIM_THRESHOLD_", "unset"), "blas": os.environ.get("OMP_NUM_THREADS"),
-             "profiler": dask.config.get("distributed.worker.profile.enabled"),
-             "tick": dask.config.get("distributed.admin.tick.interval")}]
-
-
-def test_local_workers_keep_the_allocator_defaults_and_one_blas_thread(tmp_path, monkeypatch):
-    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)  # Dask's nanny would set it to 65536
-    table = sweep.run_sweep(sweep.Grid({"block": [0, 1]}).cells(), _allocator_task, tmp_path / "t.csv", workers=1,
-                            progress=False)
-    assert table["trim"].tolist() == ["unset", "unset"]
-    assert table["blas"].astype(str).tolist() == ["1", "1"]
-    # no dashboard: the workers do not sample their task's stack every 10 ms nor tick their event loop every 20 ms
-    assert table["profiler"].astype(str).tolist() == ["False", "False"]
-    assert table["tick"].tolist() == ["1s", "1s"]
 
 
 def test_run_sweep_refuses_bad_arguments(tmp_path):

@@ -416,13 +416,11 @@ def _plain_jacobian(X, dt, gains):
     """``F = I kron A + (I kron B) dU/dX`` written out from the pair Jacobian alone (no shared kernel)."""
     N, m = X.shape
     n = m // 2
+    i, j = np.nonzero(~np.eye(N, dtype=bool))  # every pair i != j, by i then j
+    J = flocking.pair_term_jacobian(X[i, :n] - X[j, :n], X[i, n:] - X[j, n:], gains)  # (N (N - 1), n, m)
     dU = np.zeros((N, n, N, m))
-    for i in range(N):
-        for j in range(N):
-            if j != i:
-                J = flocking.pair_term_jacobian(X[i, :n] - X[j, :n], X[i, n:] - X[j, n:], gains)
-                dU[i, :, j, :] = -J
-                dU[i, :, i, :] += J
+    dU[i, :, j, :] = -J                                                 # d u_i / d x_j
+    dU[np.arange(N), :, np.arange(N), :] = J.reshape(N, N - 1, n, m).sum(1)  # d u_i / d x_i: the sum over j
     A = np.block([[np.eye(n), dt * np.eye(n)], [np.zeros((n, n)), np.eye(n)]])
     B = np.vstack([0.5 * dt**2 * np.eye(n), dt * np.eye(n)])
     F = np.kron(np.eye(N), A)

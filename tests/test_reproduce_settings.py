@@ -35,29 +35,6 @@ def test_changed_claims_lists_verdicts_that_moved():
     assert reproduce.changed_claims(a, b) == ["p/y: reproduces -> does-not-reproduce", "p/z: absent -> holds"]
 
 
-#: Three consensus steps (too few: verdicts change), and shorter switching, noise and bias runs (a third less CPU).
-SHORT_REN = ["bias_runs=100", "n_steps=3", "noise_paths=10", "noise_runs=20", "noise_t_final=10.0", "switch_steps=100",
-             "t_final=20.0"]  # sorted by name, as the folder's name and the ledger's command list them
-
-
-def test_a_run_at_other_settings_writes_beside_the_default_and_names_the_changed_claims(tmp_path, capsys):
-    default = reproduce.results_dir() / "ren2005" / "claims.json"
-    if not default.exists():
-        pytest.skip("no default ren2005 ledger in results/ (run `mascore reproduce ren2005`)")
-    shutil.copytree(default.parent, tmp_path / "ren2005")
-    before = (tmp_path / "ren2005" / "claims.json").read_bytes()
-    code = reproduce.main(["reproduce", "ren2005", "--out", str(tmp_path), "--set", *SHORT_REN])
-    out = capsys.readouterr().out
-    assert code == 0
-    assert (tmp_path / "ren2005" / "claims.json").read_bytes() == before       # the default is not overwritten
-    folder = "ren2005-set-" + "_".join(SHORT_REN)
-    ledger = json.loads((tmp_path / folder / "claims.json").read_text())
-    assert ledger["created_by"] == f"mascore reproduce ren2005 --seed 1 --set {' '.join(SHORT_REN)}"
-    moved = reproduce.changed_claims(json.loads(before)["claims"], ledger["claims"])
-    assert moved  # three steps are too few for consensus: some verdicts change, and the command says which
-    assert f"{len(moved)} claim(s) changed verdict" in out and all(line in out for line in moved)
-
-
 def test_settings_that_must_agree_change_together_and_the_error_says_how():
     with pytest.raises(ValueError, match=r"change the two together, e.g. --set n_agents=6 xi0="):
         reproduce.apply_settings("ren2005", {"n_agents": "6"})
@@ -71,34 +48,42 @@ def test_settings_that_must_agree_change_together_and_the_error_says_how():
 FEW = ["n_runs=3", "t_f=10", "figure_method=closed_form"]  # the cheapest run of a study with six figures
 
 
-def test_on_dask_workers_a_run_at_other_settings_writes_the_same_files_as_a_serial_run(tmp_path):
+def test_a_run_at_other_settings_writes_beside_the_default_names_the_changed_claims_and_equals_a_dask_run(
+        tmp_path, capsys):
+    """``--set``: the run's ledger goes beside the default one (left untouched) and the command lists the verdicts
+    that moved; with ``--workers 1`` the run and each figure are Dask tasks in a worker process, their results sent
+    back here, and every file is the same (a second worker would add a copy of the run between workers, and the
+    start of one more process)."""
     pytest.importorskip("distributed")
-    for workers in ("0", "2"):
+    default = reproduce.results_dir() / "bhattacharjee2021" / "claims.json"
+    if not default.exists():
+        pytest.skip("no default bhattacharjee2021 ledger in results/ (run `mascore reproduce bhattacharjee2021`)")
+    shutil.copytree(default.parent, tmp_path / "0" / "bhattacharjee2021")
+    before = default.read_bytes()
+    for workers in ("0", "1"):
         assert reproduce.main(["reproduce", "bhattacharjee2021", "--out", str(tmp_path / workers), "--workers",
                                workers, "--set", *FEW]) == 0
-    serial = sorted(p.relative_to(tmp_path / "0") for p in (tmp_path / "0").rglob("*") if p.is_file())
-    parallel = sorted(p.relative_to(tmp_path / "2") for p in (tmp_path / "2").rglob("*") if p.is_file())
+    out = capsys.readouterr().out
+    assert (tmp_path / "0" / "bhattacharjee2021" / "claims.json").read_bytes() == before  # not overwritten
+    folder = "bhattacharjee2021-set-" + "_".join(sorted(FEW))  # sorted by name, "+" read as "_"
+    ledger = json.loads((tmp_path / "0" / folder / "claims.json").read_text())
+    assert ledger["created_by"] == f"mascore reproduce bhattacharjee2021 --seed 1 --set {' '.join(FEW)}"
+    moved = reproduce.changed_claims(json.loads(before)["claims"], ledger["claims"])
+    assert moved  # three runs of 10 s are too few: some verdicts change, and the command says which
+    assert f"{len(moved)} claim(s) changed verdict" in out and all(line in out for line in moved)
+    serial = sorted(p.relative_to(tmp_path / "0") for p in (tmp_path / "0" / folder).rglob("*") if p.is_file())
+    parallel = sorted(p.relative_to(tmp_path / "1") for p in (tmp_path / "1").rglob("*") if p.is_file())
     assert serial == parallel and any(p.name == "claims.json" for p in serial)
     assert sum(p.suffix == ".png" for p in serial) == 6 and any(p.suffix == ".pickle" for p in serial)
     for path in serial:  # the ledger, the figures it hashes, the tables and the stored run, byte for byte
-        assert (tmp_path / "0" / path).read_bytes() == (tmp_path / "2" / path).read_bytes(), path
+        assert (tmp_path / "0" / path).read_bytes() == (tmp_path / "1" / path).read_bytes(), path
 
 
-def test_workers_are_checked_and_a_script_without_a_main_guard_is_told_in_one_line(tmp_path):
-    pytest.importorskip("distributed")
-    import os
-    import subprocess
-    import sys
-
+def test_workers_are_checked(tmp_path):
+    """A bad count of workers is refused before any work. (A script without a main guard that asks for workers is
+    told so in one line: tests/test_bad_input_own_team.py runs reproduce_paper and run_sweep in one such script.)"""
     with pytest.raises(SystemExit):
         reproduce.main(["reproduce", "ren2005", "--workers", "-1"])
     with pytest.raises(ValueError, match=r"workers must be a non-negative integer"):
         next(reproduce.reproduce_papers(["ren2005"], tmp_path, workers=1.5))
-    script = tmp_path / "my_rerun.py"
-    script.write_text("from mascore.reproduce import reproduce_paper\n"
-                      f"reproduce_paper('ren2005', {str(tmp_path / 'out')!r}, workers=1, progress=False)\n")
-    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300,
-                          env={**os.environ, "OMP_NUM_THREADS": "1"})
-    last = done.stderr.strip().splitlines()[-1]
-    assert done.returncode != 0 and not (tmp_path / "out" / "ren2005").exists()
-    assert last.startswith("RuntimeError: local Dask workers could not start") and '__name__ == "__main__"' in last
+    assert not any(tmp_path.iterdir())

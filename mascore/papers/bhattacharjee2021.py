@@ -513,9 +513,11 @@ def simulate(
 
     Examples
     --------
+    >>> import dataclasses
     >>> from mascore.papers import bhattacharjee2021 as bs
-    >>> closed_form = bs.simulate(seed=1, method="closed_form")
-    >>> sdp = bs.simulate(seed=1, method="sdp")                   # the same draw on the SDP path
+    >>> first_10_s = dataclasses.replace(bs.SETTINGS, t_f=10)   # the first 10 s of the horizon
+    >>> closed_form = bs.simulate(seed=1, method="closed_form", scenario=first_10_s)
+    >>> sdp = bs.simulate(seed=1, method="sdp", scenario=first_10_s)   # the same draw on the SDP path
     >>> bool(abs(closed_form.P - sdp.P).max() < 1e-4)
     True
     """

@@ -786,9 +786,10 @@ def run(settings: KalmanConsensusSettings = SETTINGS, seed: int = 1, progress: b
     --------
     >>> import dataclasses
     >>> from mascore.papers import ren2005
-    >>> fewer = dataclasses.replace(ren2005.SETTINGS, noise_runs=20, noise_paths=4, bias_runs=50)  # fewer runs
+    >>> fewer = dataclasses.replace(ren2005.SETTINGS, noise_runs=20, noise_paths=4, bias_runs=50,
+    ...                             switch_steps=100, t_final=20.0)  # fewer runs, shorter switching demos
     >>> result = ren2005.run(fewer, seed=1)
-    >>> result.union.union_ok, result.no_union.union_ok
+    >>> result.union.union_ok, result.no_union.union_ok      # whether every window's union has a spanning tree
     (True, False)
     """
     check_settings_type(settings, KalmanConsensusSettings, "settings")
