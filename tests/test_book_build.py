@@ -299,3 +299,30 @@ def test_the_notebooks_are_executed_longest_first_and_their_kernels_killed(tmp_p
     assert not (tmp_path / "exited").exists()  # killed, not asked to exit
     outputs = [cache.get_cache_bundle(record.pk).nb.cells[-1].outputs for record in cache.list_cache_records()]
     assert len(outputs) == 3 and all(out[0]["text"] == "done\n" for out in outputs)
+
+
+def test_make_tests_notebook_kernel_keeps_no_history_and_exits_at_once_after_the_last_cell(tmp_path, monkeypatch):
+    """`make test` runs the notebooks (nbmake) with the kernel of .ci/jupyter: ipykernel with its history in memory
+    and no name left in the notebook's namespace, which, once shut down after the last cell, runs the exit handlers
+    the notebook registered and then exits at once, without clearing the namespace (the default kernel does: an
+    object of the notebook is then deleted, so the check can fail)."""
+    pytest.importorskip("nbmake")
+    pytest.importorskip("ipykernel")
+    from nbmake.nb_run import NotebookRun
+
+    make = (ROOT / "Makefile").read_text()
+    assert "JUPYTER_PATH=$(CURDIR)/.ci/jupyter" in make and "--nbmake-kernel=python3-quick-exit" in make
+    monkeypatch.setenv("JUPYTER_PATH", str(ROOT / ".ci" / "jupyter"))
+    exited, cleared = tmp_path / "exited", tmp_path / "cleared"
+    cells = (f"import atexit, pathlib\natexit.register(pathlib.Path({str(exited)!r}).touch)",
+             f"class Kept:\n    def __del__(self):\n        pathlib.Path({str(cleared)!r}).touch()\nkept = Kept()",
+             "print(get_ipython().history_manager.hist_file, 'os' in dir(), 'gc' in dir())")
+    for kernel, clears in (("python3-quick-exit", False), (None, True)):
+        exited.unlink(missing_ok=True)
+        cleared.unlink(missing_ok=True)
+        result = NotebookRun(_notebook(tmp_path / "nb.ipynb", *cells), 60, kernel=kernel).execute()
+        assert result.error is None
+        printed = result.nb.cells[-1].outputs[0]["text"].split()
+        assert printed[1:] == ["False", "False"] and (kernel is None or printed[0] == ":memory:")
+        assert exited.exists()
+        assert cleared.exists() == clears
