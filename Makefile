@@ -83,7 +83,8 @@ EXECUTED := results/notebooks
 # the kernel down after the last cell (once the exit handlers the notebook itself registered have run). A kernel that
 # exits by itself first clears its namespace, collects its garbage and unloads its modules: about 0.5 s of CPU per
 # notebook, which nbmake waits for. Nothing it would do then reaches the notebook (`make book`'s executor kills them).
-# The session's three processes load no pytest plugin the notebooks do not use (Hypothesis', anyio's: 0.4 s of CPU in each).
+# The session's three processes load no pytest plugin the notebooks do not use (Hypothesis', anyio's: 0.4 s of CPU
+# in each).
 NOTEBOOK_TESTS = env JUPYTER_PATH=$(CURDIR)/.ci/jupyter $(BIN)/python -m pytest -n $(JOBS) --dist worksteal --nbmake \
     --nbmake-kernel=python3-quick-exit -p no:hypothesispytest -p no:anyio --overwrite --durations=5 $(EXECUTED)
 OTHER_TESTS = $(BIN)/python -m pytest -n $(JOBS) --dist worksteal --doctest-modules --durations=25 \

@@ -326,3 +326,55 @@ def test_make_tests_notebook_kernel_keeps_no_history_and_exits_at_once_after_the
         assert printed[1:] == ["False", "False"] and (kernel is None or printed[0] == ":memory:")
         assert exited.exists()
         assert cleared.exists() == clears
+
+
+NUMPYDOC_PAGE = """\
+Objects
+=======
+
+.. autofunction:: mascore.lqr.lqr
+
+.. autoclass:: mascore.lqr.TopDownLQR
+
+.. autofunction:: mascore.kalman.nees
+"""
+
+
+def _numpydoc_page(tmp_path: Path, extension_name: str, monkeypatch) -> tuple[str, int]:
+    """The HTML body of three documented objects, and how many times numpydoc's template was compiled."""
+    import jinja2
+    from sphinx.application import Sphinx
+
+    compiled = []
+    get_template = jinja2.Environment.get_template
+
+    def counting(self, name, *args, **kwargs):
+        compiled.extend([name] if name == "numpydoc_docstring.rst" else [])
+        return get_template(self, name, *args, **kwargs)
+
+    src = tmp_path / "src"
+    src.mkdir(parents=True)
+    (src / "conf.py").write_text(f"import sys\nsys.path.insert(0, {str(EXT)!r})\n"
+                                 f"extensions = ['sphinx.ext.autodoc', {extension_name!r}]\n"
+                                 "numpydoc_show_class_members = False\nautodoc_typehints = 'none'\n")
+    (src / "index.rst").write_text(NUMPYDOC_PAGE)
+    with monkeypatch.context() as patched:
+        patched.setattr(jinja2.Environment, "get_template", counting)
+        app = Sphinx(str(src), str(src), str(tmp_path / "out"), str(tmp_path / "doctrees"), "html",
+                     status=None, warning=None, freshenv=True)
+        app.build()
+    html = (tmp_path / "out" / "index.html").read_text()
+    return html[html.index('<section id="objects">'):html.index("</section>")], len(compiled)
+
+
+def test_numpydoc_renders_the_same_pages_with_its_template_compiled_once(tmp_path, monkeypatch):
+    """book/_ext/numpydoc_template.py sets numpydoc up with its template compiled once per loader (the builder's,
+    and numpydoc's own for the signatures): the same HTML as numpydoc's, which compiles it at every docstring
+    and signature."""
+    numpydoc = pytest.importorskip("numpydoc.numpydoc")
+    monkeypatch.setattr(numpydoc, "get_doc_object", numpydoc.get_doc_object)  # numpydoc's setup replaces it
+    plain, compiled_plain = _numpydoc_page(tmp_path / "plain", "numpydoc", monkeypatch)
+    once, compiled_once = _numpydoc_page(tmp_path / "once", "numpydoc_template", monkeypatch)
+    assert "TopDownLQR" in plain and "Parameters" in plain
+    assert once == plain
+    assert compiled_plain >= 6 and compiled_once == 2
