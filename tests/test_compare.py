@@ -22,6 +22,7 @@ import pytest
 import scipy.linalg as sla
 
 from mascore import _team_kernels, compare, consensus, graphs, sweep
+from mascore.compare import verdicts
 from mascore.reproduce import results_dir
 
 CPU = "cpu_s"  # the only column that depends on the machine and the moment
@@ -200,7 +201,11 @@ def test_an_interrupted_sweep_resumes(serial, tmp_path):
 
 
 def _allocator_task(cell):
-    return [{"trim": os.environ.get("MALLOC_TRIM_THRESHOLD_", "unset"), "blas": os.environ.get("OMP_NUM_THREADS")}]
+    import dask
+
+    return [{"trim": os.environ.get("MALLOC_TRIM_THRESHOLD_", "unset"), "blas": os.environ.get("OMP_NUM_THREADS"),
+             "profiler": dask.config.get("distributed.worker.profile.enabled"),
+             "tick": dask.config.get("distributed.admin.tick.interval")}]
 
 
 def test_local_workers_keep_the_allocator_defaults_and_one_blas_thread(tmp_path, monkeypatch):
@@ -209,6 +214,9 @@ def test_local_workers_keep_the_allocator_defaults_and_one_blas_thread(tmp_path,
                             progress=False)
     assert table["trim"].tolist() == ["unset", "unset"]
     assert table["blas"].astype(str).tolist() == ["1", "1"]
+    # no dashboard: the workers do not sample their task's stack every 10 ms nor tick their event loop every 20 ms
+    assert table["profiler"].astype(str).tolist() == ["False", "False"]
+    assert table["tick"].tolist() == ["1s", "1s"]
 
 
 def test_run_sweep_refuses_bad_arguments(tmp_path):
@@ -336,6 +344,28 @@ def test_claims_recompute_from_the_table():
         assert w["verdict"] == a["verdict"], w["id"]
         assert w["written_from"] == "seed blocks 0-1" and w["decided_on"], w["id"]
         assert json.dumps(w["value"], sort_keys=True) == json.dumps(a["value"], sort_keys=True)
+
+
+def test_every_claim_is_decided_on_a_table_of_the_full_grids_cells():
+    """The claims name every coordinate the full grid varies: on a table with the full grid's cells (its larger
+    teams, four seed blocks, the set-membership filter on the switching target), each claim finds one summary row
+    where it asks for one and gets a verdict. The per-run numbers are synthetic (which metrics a method reports is
+    taken from the quick table `make test` wrote): only the selections are under test, not the verdicts."""
+    table = results_dir() / "compare" / "table-quick-0.csv"
+    if not table.exists():
+        pytest.skip("the quick sweep has not been run (make reproduce)")
+    quick = pd.read_csv(table, keep_default_na=False, na_values=[""], low_memory=False)
+    metrics = ["containment", "cpu_s", "floats", "nees_own", "rmse_far", "rmse_own", "rmse_view", "set_size", "spread"]
+    reports = quick.groupby("method")[metrics].apply(lambda d: d.notna().any())
+    rng = np.random.default_rng(0)
+    rows = [{**cell, "cell": sweep.cell_id(cell), "run": run,
+             **{m: 1.0 + 0.1 * rng.standard_normal() if reports.loc[cell["method"], m] else np.nan for m in metrics}}
+            for cell in compare.grid_cells("full") for run in range(4)]
+    full = pd.DataFrame(rows)
+    assert set(full.columns) == set(quick.columns)
+    phi = {"Phi = -0.1": 1.0, "Phi = 0": 1.0, "Phi = 0.31": 1.0, "Phi = 1": 1.0, "LMI Phi": 0.3, "LMI bound": 1.0}
+    claims = compare.compare_claims(full, phi=phi)
+    assert len(claims) == len(verdicts.CLAIMS) + len(verdicts.LINK_CLAIMS) and all(c.verdict for c in claims)
 
 
 def test_vlahakis_rmse_matches_its_error_covariance():

@@ -371,3 +371,25 @@ def test_the_position_centres_step_is_its_team_wide_step():
     est.predict(U)
     np.testing.assert_allclose(x, est.own, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(P, est.P, rtol=1e-12, atol=1e-14)
+
+
+def test_the_package_scan_lists_the_modules_pkgutil_lists(tmp_path):
+    """The scan's folder listing (one ``os.scandir``) names the modules ``pkgutil.iter_modules`` names, less the
+    private, study-layer and sub-package ones; a path entry that is not a folder is listed through pkgutil."""
+    import importlib.machinery
+    import pkgutil
+    import zipfile
+
+    expected = {m.name for m in pkgutil.iter_modules(mascore.__path__)
+                if not (m.ispkg or m.name.startswith("_") or m.name in estimation.STUDY_LAYER)}
+    listed = estimation._core_modules(mascore.__path__)
+    assert set(listed) == expected
+    assert all(source.endswith(f"{name}.py") for name, source in listed.items())
+    archive = tmp_path / "extra.zip"
+    with zipfile.ZipFile(archive, "w") as z:
+        z.writestr("zipped2099.py", "METHODS = ()\n")
+        z.writestr("_hidden2099.py", "")
+    assert estimation._core_modules([str(archive)]) == {"zipped2099": ""}  # imported to see: not a plain file
+    assert estimation._module_name("lqr.py") == "lqr"
+    assert estimation._module_name("fast" + importlib.machinery.EXTENSION_SUFFIXES[0]) == "fast"
+    assert estimation._module_name("notes.txt") == ""

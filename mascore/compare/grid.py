@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -734,16 +736,20 @@ def run(settings: BenchmarkSettings = SETTINGS, seed: int = 0, progress: bool = 
         found, result = read_run(_stored_run_path(settings, seed, out), key)
         if found:
             return result
-    with tempfile.TemporaryDirectory(prefix="mascore-compare-") as scratch:
+    # On Dask workers this process only waits for the sweep: it solves the Vlahakis programs meanwhile (they do
+    # not depend on the sweep) in a thread of its own, rather than after the sweep with the workers idle.
+    side = ThreadPoolExecutor(1, thread_name_prefix="mascore-compare") if workers or scheduler else None
+    with side or contextlib.nullcontext(), tempfile.TemporaryDirectory(prefix="mascore-compare-") as scratch:
+        profile = side.submit(vlahakis_profile, 8, settings=settings) if side else None
         folder = Path(scratch if out is None else out) / "compare"
         cells = grid_cells(settings.grid)
         costs = {cell_id(c): _cell_cost(c) for c in check_cells(cells, full=False)}  # one lookup of each task's methods
         table = run_sweep(cells, functools.partial(run_cells, base_seed=seed, settings=settings),
                           folder / f"table-{settings.grid}-{seed}.csv", workers=workers, scheduler=scheduler,
                           progress=progress, cost=lambda cell: costs[cell_id(cell)], group=cell_group)
+    profile = profile.result() if profile is not None else vlahakis_profile(8, settings=settings)
     lossy = table["study"].isin(LINK_STUDIES)
     summary = summarize(table[~lossy], settings=settings)
-    profile = vlahakis_profile(8, settings=settings)
     links = link_summary(table, settings) if lossy.any() else None
     claims = tuple(compare_claims(table, phi=profile))
     result = CompareResult(settings, int(seed), table, summary, fitted_slopes(summary), profile, links, claims)
