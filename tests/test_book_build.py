@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import importlib.util
+import json
 import os
 import subprocess
 import sys
@@ -299,3 +300,79 @@ def test_the_notebooks_are_executed_longest_first_and_their_kernels_killed(tmp_p
     assert not (tmp_path / "exited").exists()  # killed, not asked to exit
     outputs = [cache.get_cache_bundle(record.pk).nb.cells[-1].outputs for record in cache.list_cache_records()]
     assert len(outputs) == 3 and all(out[0]["text"] == "done\n" for out in outputs)
+
+
+def test_make_tests_notebook_kernel_keeps_no_history_and_exits_at_once_after_the_last_cell(tmp_path, monkeypatch):
+    """`make test` runs the notebooks (nbmake) with the kernel of .ci/jupyter: ipykernel with its history in memory
+    and no name left in the notebook's namespace, which, once shut down after the last cell, runs the exit handlers
+    the notebook registered and then ends at once, without clearing the namespace (an object of the notebook is
+    never deleted)."""
+    pytest.importorskip("nbmake")
+    pytest.importorskip("ipykernel")
+    from nbmake.nb_run import NotebookRun
+
+    make = (ROOT / "Makefile").read_text()
+    assert "JUPYTER_PATH=$(CURDIR)/.ci/jupyter" in make and "--nbmake-kernel=python3-quick-exit" in make
+    spec = json.loads((ROOT / ".ci" / "jupyter" / "kernels" / "python3-quick-exit" / "kernel.json").read_text())
+    assert any("atexit.register(os._exit, 0)" in arg for arg in spec["argv"])
+    monkeypatch.setenv("JUPYTER_PATH", str(ROOT / ".ci" / "jupyter"))
+    exited, cleared = tmp_path / "exited", tmp_path / "cleared"
+    cells = (f"import atexit, pathlib\natexit.register(pathlib.Path({str(exited)!r}).touch)",
+             f"class Kept:\n    def __del__(self):\n        pathlib.Path({str(cleared)!r}).touch()\nkept = Kept()",
+             "print(get_ipython().history_manager.hist_file, 'os' in dir(), 'gc' in dir())")
+    result = NotebookRun(_notebook(tmp_path / "nb.ipynb", *cells), 60, kernel="python3-quick-exit").execute()
+    assert result.error is None
+    assert result.nb.cells[-1].outputs[0]["text"].split() == [":memory:", "False", "False"]
+    assert exited.exists() and not cleared.exists()
+
+
+NUMPYDOC_PAGE = """\
+Objects
+=======
+
+.. autofunction:: mascore.lqr.lqr
+
+.. autoclass:: mascore.lqr.TopDownLQR
+
+.. autofunction:: mascore.kalman.nees
+"""
+
+
+def _numpydoc_page(tmp_path: Path, extension_name: str, monkeypatch) -> tuple[str, int]:
+    """The HTML body of three documented objects, and how many times numpydoc's template was compiled."""
+    import jinja2
+    from sphinx.application import Sphinx
+
+    compiled = []
+    get_template = jinja2.Environment.get_template
+
+    def counting(self, name, *args, **kwargs):
+        compiled.extend([name] if name == "numpydoc_docstring.rst" else [])
+        return get_template(self, name, *args, **kwargs)
+
+    src = tmp_path / "src"
+    src.mkdir(parents=True)
+    (src / "conf.py").write_text(f"import sys\nsys.path.insert(0, {str(EXT)!r})\n"
+                                 f"extensions = ['sphinx.ext.autodoc', {extension_name!r}]\n"
+                                 "numpydoc_show_class_members = False\nautodoc_typehints = 'none'\n")
+    (src / "index.rst").write_text(NUMPYDOC_PAGE)
+    with monkeypatch.context() as patched:
+        patched.setattr(jinja2.Environment, "get_template", counting)
+        app = Sphinx(str(src), str(src), str(tmp_path / "out"), str(tmp_path / "doctrees"), "html",
+                     status=None, warning=None, freshenv=True)
+        app.build()
+    html = (tmp_path / "out" / "index.html").read_text()
+    return html[html.index('<section id="objects">'):html.index("</section>")], len(compiled)
+
+
+def test_numpydoc_renders_the_same_pages_with_its_template_compiled_once(tmp_path, monkeypatch):
+    """book/_ext/numpydoc_template.py sets numpydoc up with its template compiled once per loader (the builder's,
+    and numpydoc's own for the signatures): the same HTML as numpydoc's, which compiles it at every docstring
+    and signature."""
+    numpydoc = pytest.importorskip("numpydoc.numpydoc")
+    monkeypatch.setattr(numpydoc, "get_doc_object", numpydoc.get_doc_object)  # numpydoc's setup replaces it
+    plain, compiled_plain = _numpydoc_page(tmp_path / "plain", "numpydoc", monkeypatch)
+    once, compiled_once = _numpydoc_page(tmp_path / "once", "numpydoc_template", monkeypatch)
+    assert "TopDownLQR" in plain and "Parameters" in plain
+    assert once == plain
+    assert compiled_plain >= 6 and compiled_once == 2

@@ -33,8 +33,8 @@ Settings the paper leaves out (chosen here, see :class:`SetMembershipSettings`):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
@@ -51,7 +51,6 @@ from .._validation import (
     require_finite,
 )
 from ..ledger import Claim, format_number
-from ..plotting import agent_colors
 from ..registry import (
     FigureSpec,
     PaperRegistry,
@@ -62,6 +61,9 @@ from ..registry import (
     documented_settings,
     setting,
 )
+
+if TYPE_CHECKING:  # the figures' type; pyplot is imported where a figure is drawn
+    import matplotlib.pyplot as plt
 
 __all__ = [
     "FIGURES",
@@ -862,6 +864,9 @@ def plot_fig1(des: sync.SyncDesign | None = None, scenario: SetMembershipSetting
     2
     >>> plt.close("all")
     """
+    import matplotlib.pyplot as plt
+
+    from ..plotting import agent_colors
     check_settings_type(scenario, SetMembershipSettings, "scenario")
     des = des if des is not None else design(scenario)
     adjacency, pinning, n = scenario.matrix("adjacency"), scenario.matrix("pinning"), scenario.n_agents
@@ -952,6 +957,9 @@ def plot_fig2(run: ClosedLoopRun, des: sync.SyncDesign | None = None, k_max: int
     True
     >>> plt.close("all")
     """
+    import matplotlib.pyplot as plt
+
+    from ..plotting import agent_colors
     check_settings_type(scenario, SetMembershipSettings, "scenario")
     s = scenario
     k_max = s.t_f if k_max is None else check_positive_int(k_max, "k_max", minimum=0)
@@ -990,6 +998,7 @@ def plot_fig2(run: ClosedLoopRun, des: sync.SyncDesign | None = None, k_max: int
 
 def plot_fig3_4(run: ClosedLoopRun, agents: tuple[int, int]) -> plt.Figure:
     """Figs. 3-4: errors e_{jk} of two agents (1-based) with the bounds +-sqrt(P_jj)."""
+    import matplotlib.pyplot as plt
     n = run.x.shape[2]
     if len(agents) != 2:
         raise ValueError(f"agents must be a pair of agent numbers (1-based); got {agents!r}")
@@ -1035,6 +1044,9 @@ def plot_fig5(run: ClosedLoopRun) -> plt.Figure:
     1
     >>> plt.close("all")
     """
+    import matplotlib.pyplot as plt
+
+    from ..plotting import agent_colors
     fig, ax = plt.subplots(figsize=(6.4, 3.8), layout="constrained")
     n = run.x.shape[2]
     colors = agent_colors(n)
@@ -1077,6 +1089,9 @@ def plot_fig6(run: ClosedLoopRun, scenario: SetMembershipSettings = SETTINGS) ->
     True
     >>> plt.close("all")
     """
+    import matplotlib.pyplot as plt
+
+    from ..plotting import agent_colors
     check_settings_type(scenario, SetMembershipSettings, "scenario")
     fig, ax = plt.subplots(figsize=(6.4, 3.8), layout="constrained")
     tr = run.trace[0]

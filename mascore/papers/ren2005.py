@@ -18,8 +18,8 @@ builds the tables and decides the claims from its result, for both
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
@@ -37,7 +37,6 @@ from .._validation import (
 )
 from ..graphs import adjacency_from_edges, has_spanning_tree, is_connected, spanning_tree_roots
 from ..ledger import Claim, format_number
-from ..plotting import agent_colors, new_axes
 from ..registry import (
     FigureSpec,
     PaperRegistry,
@@ -48,6 +47,9 @@ from ..registry import (
     documented_settings,
     setting,
 )
+
+if TYPE_CHECKING:  # the figures' type; pyplot is imported where a figure is drawn
+    import matplotlib.pyplot as plt
 
 __all__ = [
     "REGISTRY", "SETTINGS", "STUDY", "FIGURES", "TABLES", "Fig1Result", "KalmanConsensusResult",
@@ -848,6 +850,9 @@ def plot_fig1(res: Fig1Result, axes=None, confident_agent: int = SETTINGS.confid
     (2, 2)
     >>> plt.close("all")
     """
+    import matplotlib.pyplot as plt
+
+    from ..plotting import agent_colors
     _check_agent(confident_agent, "confident_agent", res.equal.xi.shape[-1])
     if axes is None:
         _, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True, layout="constrained")
@@ -873,6 +878,9 @@ def plot_fig1(res: Fig1Result, axes=None, confident_agent: int = SETTINGS.confid
 
 def plot_average(res: Fig1Result, axes=None):
     """Ordinary average consensus (left) and Kalman consensus with the confident agent (right), same pairings."""
+    import matplotlib.pyplot as plt
+
+    from ..plotting import agent_colors
     if axes is None:
         _, axes = plt.subplots(1, 2, figsize=(10, 3.2), sharey=True, layout="constrained")
     for ax, (result, title) in zip(axes, ((res.average, "(a) average consensus"),
@@ -888,6 +896,7 @@ def plot_average(res: Fig1Result, axes=None):
 
 def plot_directed(A, layout, ax=None, highlight=(), title=None):
     """Draw a small directed graph; `highlight` edges (j, i) are drawn bold (the paper's double arrows)."""
+    from ..plotting import new_axes
     A = check_adjacency(A, "A")
     n = A.shape[0]
     layout = as_matrix(layout, "layout", shape=(n, 2))
@@ -918,6 +927,7 @@ def plot_directed(A, layout, ax=None, highlight=(), title=None):
 
 def plot_fig2_fig3(axes=None):
     """Fig. 2 (with one spanning tree in bold) and Fig. 3(a), 3(b) side by side."""
+    import matplotlib.pyplot as plt
     if axes is None:
         _, axes = plt.subplots(1, 3, figsize=(9, 3.0), layout="constrained")
     roots = ", ".join(f"A{r + 1}" for r in spanning_tree_roots(fig2_graph()))
@@ -929,6 +939,9 @@ def plot_fig2_fig3(axes=None):
 
 def plot_switching(demo: SwitchingDemo, axes=None, label=""):
     """States of the discrete (left) and continuous (right) runs."""
+    import matplotlib.pyplot as plt
+
+    from ..plotting import agent_colors
     if axes is None:
         _, axes = plt.subplots(1, 2, figsize=(10, 3.4), layout="constrained")
     colors = agent_colors(demo.discrete.xi.shape[-1])
@@ -945,6 +958,7 @@ def plot_switching(demo: SwitchingDemo, axes=None, label=""):
 
 def plot_overconfidence(study: dict, axes=None, confident_agent: int = SETTINGS.confident_agent):
     """Believed (dashed) and actual (solid) variance of the confident agent and of agent 1, per variant."""
+    import matplotlib.pyplot as plt
     variants = list(study["variants"].values())
     _check_agent(confident_agent, "confident_agent", np.shape(variants[0]["actual"])[-1])
     if axes is None:
@@ -963,6 +977,7 @@ def plot_overconfidence(study: dict, axes=None, confident_agent: int = SETTINGS.
 
 def plot_bias(studies: dict, ax=None):
     """Histograms of the agreed values of several variants, with the central fusion and the plain average."""
+    from ..plotting import new_axes
     ax = new_axes(ax)
     for st in studies.values():
         ax.hist(st["values"], bins=40, alpha=0.5,
@@ -976,24 +991,28 @@ def plot_bias(studies: dict, ax=None):
 
 
 def _draw_fig1(result: KalmanConsensusResult) -> plt.Figure:
+    import matplotlib.pyplot as plt
     fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True, layout="constrained")
     plot_fig1(result.fig1, axes, result.settings.confident_agent)
     return fig
 
 
 def _draw_average(result: KalmanConsensusResult) -> plt.Figure:
+    import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.2), sharey=True, layout="constrained")
     plot_average(result.fig1, axes)
     return fig
 
 
 def _draw_fig2_fig3(result: KalmanConsensusResult) -> plt.Figure:
+    import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, 3, figsize=(9, 3.0), layout="constrained")
     plot_fig2_fig3(axes)
     return fig
 
 
 def _draw_theorems(result: KalmanConsensusResult) -> plt.Figure:
+    import matplotlib.pyplot as plt
     fig, axes = plt.subplots(2, 2, figsize=(10, 6.5), sharey=True, layout="constrained")
     plot_switching(result.union, axes[0], "Fig. 3(a)/3(b) alternating")
     plot_switching(result.no_union, axes[1], "no union has a spanning tree")
@@ -1002,6 +1021,7 @@ def _draw_theorems(result: KalmanConsensusResult) -> plt.Figure:
 
 
 def _draw_noise(result: KalmanConsensusResult) -> plt.Figure:
+    import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(8, 3.6), layout="constrained")
     for key, st in result.noise.items():
         ax.semilogy(st["rms"], label=variant_label(st["Q"], st["Omega"], paper=key == "paper"))
@@ -1013,6 +1033,9 @@ def _draw_noise(result: KalmanConsensusResult) -> plt.Figure:
 
 
 def _draw_noise_continuous(result: KalmanConsensusResult) -> plt.Figure:
+    import matplotlib.pyplot as plt
+
+    from ..plotting import agent_colors
     nc = result.noise_continuous
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.2), layout="constrained")
     for i, c in enumerate(agent_colors(nc["path"].shape[-1])):
@@ -1030,6 +1053,7 @@ def _draw_noise_continuous(result: KalmanConsensusResult) -> plt.Figure:
 
 
 def _draw_bias(result: KalmanConsensusResult) -> plt.Figure:
+    import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(8, 3.6), layout="constrained")
     plot_bias(result.bias, ax)
     fig.legend(loc="outside right upper")
@@ -1037,6 +1061,7 @@ def _draw_bias(result: KalmanConsensusResult) -> plt.Figure:
 
 
 def _draw_overconfidence(result: KalmanConsensusResult) -> plt.Figure:
+    import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.4), sharey=True, layout="constrained")
     plot_overconfidence(result.overconfidence, axes, result.settings.confident_agent)
     return fig

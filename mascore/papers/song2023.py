@@ -19,10 +19,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
-from matplotlib.ticker import FuncFormatter
 
 from .. import distributed_kf as dkf
 from .. import team_model, team_observability
@@ -43,7 +41,6 @@ from ..agents import double_integrator
 from ..graphs import complete_graph, is_connected, laplacian, proximity_graph, ring_graph
 from ..kalman import nees_interval
 from ..ledger import Claim, format_number
-from ..plotting import agent_colors, plot_graph, plot_trajectories
 from ..registry import (
     FigureSpec,
     PaperRegistry,
@@ -1007,6 +1004,9 @@ def plot_fig2(res: Fig2Result, axes=None):
     4
     >>> plt.close("all")
     """
+    import matplotlib.pyplot as plt
+
+    from ..plotting import agent_colors, plot_graph, plot_trajectories
     if axes is None:
         _, axes = plt.subplots(2, 2, figsize=(9, 7.8), layout="constrained")
     ax = np.asarray(axes).reshape(-1)
@@ -1035,6 +1035,7 @@ def plot_fig2(res: Fig2Result, axes=None):
 
 def plot_fig3(res: Fig3Result, axes=None, laws: tuple[str, ...] = (CONVENTIONAL, ESTIMATION, TRUE_STATES)):
     """Song et al. 2023, Fig. 3 (a) position and (b) velocity RMS STD of `laws`; legend below."""
+    import matplotlib.pyplot as plt
     if axes is None:
         _, axes = plt.subplots(1, 2, figsize=(9, 3.8), layout="constrained")
     n_runs = next(iter(res.pos_runs.values())).shape[1]
@@ -1053,6 +1054,9 @@ def plot_fig3(res: Fig3Result, axes=None, laws: tuple[str, ...] = (CONVENTIONAL,
 
 def plot_theorem1(res: Fig2Result, th: dict[str, np.ndarray], agent: int = 0, axes=None):
     """Theorem 1 made visible: ``min eig M_i`` for every agent and ``V`` (eq. (45)) of one agent."""
+    import matplotlib.pyplot as plt
+
+    from ..plotting import agent_colors
     agent = check_positive_int(agent, "agent", minimum=0)
     if agent >= res.setup.n_agents:
         raise ValueError(f"agent must be an agent index in [0, {res.setup.n_agents - 1}]; got {agent}")
@@ -1079,6 +1083,7 @@ def plot_theorem1(res: Fig2Result, th: dict[str, np.ndarray], agent: int = 0, ax
 
 def plot_nees(res: Fig2Result, axes=None):
     """Run-averaged NEES of every agent's team estimate against its 95 % interval (grey band)."""
+    import matplotlib.pyplot as plt
     if axes is None:
         _, axes = plt.subplots(figsize=(9, 3.4), layout="constrained")
     ax = axes
@@ -1101,6 +1106,7 @@ def _plain_log(ax) -> None:
 
     Decades are labelled, and of the minor ticks those at 2, 3 and 5 times a decade.
     """
+    from matplotlib.ticker import FuncFormatter
     ax.set_yscale("log")
     ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.yaxis.set_minor_formatter(FuncFormatter(
@@ -1109,6 +1115,7 @@ def _plain_log(ax) -> None:
 
 def _figure(plot, *args, shape: tuple[int, int] = (1, 2), figsize: tuple[float, float] = (9, 3.8), **kw):
     """A new constrained-layout figure with `shape` axes, drawn by ``plot(*args, axes=axes, **kw)``."""
+    import matplotlib.pyplot as plt
     fig, axes = plt.subplots(*shape, figsize=figsize, layout="constrained")
     plot(*args, axes=axes, **kw)
     return fig

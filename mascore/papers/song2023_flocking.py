@@ -26,8 +26,8 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
@@ -53,7 +53,6 @@ from ..flocking import (
 )
 from ..graphs import is_connected, proximity_graph
 from ..ledger import Claim, format_number
-from ..plotting import agent_colors, plot_graph
 from ..registry import (
     FigureSpec,
     Study,
@@ -64,6 +63,9 @@ from ..registry import (
     setting,
 )
 from ..sensing import measure
+
+if TYPE_CHECKING:  # the figures' type; pyplot is imported where a figure is drawn
+    import matplotlib.pyplot as plt
 
 __all__ = [
     "FLOCKING_ERRATA",
@@ -584,6 +586,9 @@ def plot_fig4(run4: EstimatedFlockingRun, settings: FlockingSettings = SETTINGS)
     the observer's filter for every other agent. Dashed: agents that are not
     the observer's neighbours at the end. One legend below the panels.
     """
+    import matplotlib.pyplot as plt
+
+    from ..plotting import agent_colors, plot_graph
     check_settings_type(settings, FlockingSettings, "settings")
     fig, axes = plt.subplots(3, 2, figsize=(7.5, 10.6), layout="constrained")
     X, Xh, A, t = run4.X, run4.X_hat, run4.adjacency, run4.t
@@ -646,6 +651,7 @@ def plot_fig5(res: Fig5Result) -> plt.Figure:
     True
     >>> plt.close("all")
     """
+    import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, 2, figsize=(7.5, 3.4), layout="constrained")
     for ax, series, ylabel, title in ((axes[0], res.std_p, "RMS STD of positions (m)", "(a) position"),
                                       (axes[1], res.std_v, "RMS STD of velocities (m/s)", "(b) velocity")):
@@ -691,6 +697,9 @@ def plot_fig6(res: Fig5Result, settings: FlockingSettings = SETTINGS, run_index:
     True
     >>> plt.close("all")
     """
+    import matplotlib.pyplot as plt
+
+    from ..plotting import plot_graph
     check_settings_type(settings, FlockingSettings, "settings")
     run_index = check_positive_int(run_index, "run_index", minimum=0)
     if run_index >= res.final.shape[1]:
@@ -716,6 +725,7 @@ def plot_beyond(table: pd.DataFrame, settings: FlockingSettings = SETTINGS) -> p
     cases are left out; a shaded band runs from the last point where every
     case is stable to the last point.
     """
+    import matplotlib.pyplot as plt
     check_settings_type(settings, FlockingSettings, "settings")
     fig, axes = plt.subplots(2, 2, figsize=(7.5, 6.2), layout="constrained")
     by_r = table[table["N"] == settings.n_agents]

@@ -42,8 +42,8 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
@@ -59,7 +59,6 @@ from .._validation import (
     require_finite,
 )
 from ..ledger import Claim, format_number
-from ..plotting import agent_colors
 from ..registry import (
     FigureSpec,
     PaperRegistry,
@@ -70,6 +69,9 @@ from ..registry import (
     documented_settings,
     setting,
 )
+
+if TYPE_CHECKING:  # the figures' type; pyplot is imported where a figure is drawn
+    import matplotlib.pyplot as plt
 
 __all__ = [
     "L_READING",
@@ -590,6 +592,9 @@ def plot_fig12(res: Fig12Result, axes=None) -> plt.Figure:
 
     Returns the figure (a new one unless `axes`, two Axes, is given).
     """
+    import matplotlib.pyplot as plt
+
+    from ..plotting import agent_colors
     if axes is None:
         fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharey=True, layout="constrained")
     fig = axes[0].figure
@@ -615,6 +620,9 @@ def plot_fig12(res: Fig12Result, axes=None) -> plt.Figure:
 
 def plot_phi_profile(result: ObserverResult) -> plt.Figure:
     """Gamma(Phi) for both local gains: (a) as printed, flat on the optimal interval; (b) the printed L."""
+    import matplotlib.pyplot as plt
+
+    from ..plotting import agent_colors
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), layout="constrained")
     phis = result.phi_grid
     colors = agent_colors(len(result.settings.Q2))
