@@ -110,7 +110,7 @@ MIN_PINS := numpy==1.26.4 scipy==1.11.4 networkx==3.2.1
 MIN_TESTS := tests/test_core_install.py tests/test_agents_noise.py tests/test_graphs.py tests/test_consensus.py \
              tests/test_ellipsoids.py tests/test_sensing.py tests/test_distributed_kf.py
 # Where the project's environment exists (CI: `make install` first), it installs $(MIN_VENV) with its uv, and
-# $(MIN_VENV) is created without pip (ensurepip, and a second uv bootstrapped by it: about 7 CPU-s).
+# $(MIN_VENV) is created without pip: no ensurepip, no second uv to bootstrap (about 7 CPU-s less).
 MIN_BY = $(if $(wildcard $(BIN)/python),$(BIN)/python,$(MIN_VENV)/bin/python)
 test-min:  ## the core alone on its minimum versions: install size, import times, core tests
 	@test -x $(MIN_VENV)/bin/python || $(PYTHON) -m venv $(if $(wildcard $(BIN)/python),--without-pip) $(MIN_VENV)

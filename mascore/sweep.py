@@ -33,6 +33,7 @@ import json
 from collections.abc import Callable, Hashable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -479,14 +480,14 @@ def dask_client(workers: int, scheduler: str | None = None) -> Iterator[Any]:
 #:   the nanny's memory check every 0.1 s and the event loops' 20-ms health tick. They cost an idle cluster of
 #:   two workers about 13 % of a core (client, scheduler and nannies 5 %, each worker 4 %), taken from the
 #:   sweep on a machine whose cores run the workers; with the profiler off and the rest at 1-5 s, under 2 %.
-_LOCAL_CLUSTER_CONFIG = {
+_LOCAL_CLUSTER_CONFIG = MappingProxyType({
     "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
     "distributed.worker.profile.enabled": False,
     "distributed.admin.system-monitor.interval": "5s",
     "distributed.admin.system-monitor.disk": False,
     "distributed.admin.tick.interval": "1s",
     "distributed.worker.memory.monitor-interval": "1s",
-}
+})
 
 
 #: What to do when local Dask workers fail to start from a script without a main guard.
