@@ -3,7 +3,9 @@
 ``make bench`` times the quick grid (about two minutes); the full grid takes about 12 minutes.
 
 ``python -m benchmarks.bench_compare --snapshot`` also writes ``benchmarks/data/compare_full.json``,
-which the chapter "Comparing the methods" shows. Each run starts from an empty table in a
+which the chapter "Comparing the methods" shows, and the full grid's verdicts
+(``benchmarks/data/compare_full_claims.json``), against which the claims page lists the claims whose
+verdicts differ between the quick and the full grid. Each run starts from an empty table in a
 temporary folder; the tables of the two runs are checked equal (CPU times aside). Both runs
 are the same engine (:func:`mascore.sweep.run_sweep` with ``workers=1`` and ``workers=2``).
 
@@ -60,20 +62,55 @@ import pandas as pd
 from mascore import compare
 
 SNAPSHOT = Path(__file__).parent / "data" / "compare_full.json"
+#: The full grid's verdicts (id, verdict, undecided, why), written with :data:`SNAPSHOT`.
+FULL_CLAIMS = Path(__file__).parent / "data" / "compare_full_claims.json"
 
 
-def _timed(grid: str, workers: int) -> tuple[float, pd.DataFrame]:
+def _timed(grid: str, workers: int) -> tuple[float, pd.DataFrame, dict]:
     with tempfile.TemporaryDirectory() as out:
         start = time.perf_counter()
         table, _ = compare.run_compare(grid, out, workers=workers, progress=False)
-        return time.perf_counter() - start, table
+        seconds = time.perf_counter() - start
+        return seconds, table, json.loads((Path(out) / "compare" / "claims.json").read_text())
 
 
-def run(grid: str = "quick") -> pd.DataFrame:
-    """Wall time of the grid with 1 and 2 workers, and the speed-up (``make bench``: the quick grid)."""
-    t1, table1 = _timed(grid, 1)
-    t2, table2 = _timed(grid, 2)
+def verdicts_record(ledger: dict, cells: int) -> dict:
+    """The verdicts of a comparison ledger (its ``claims.json``), small enough to commit.
+
+    Parameters
+    ----------
+    ledger : dict
+        The ledger as written by ``python -m mascore compare``.
+    cells : int
+        The number of cells of the grid it was decided on.
+
+    Returns
+    -------
+    dict
+        ``created_by``, ``cells`` and per claim ``id``, ``verdict``, ``undecided`` and ``why``.
+
+    Examples
+    --------
+    >>> ledger = {"created_by": "mascore compare --grid full --seed 0",
+    ...           "claims": [{"id": "compare/a", "verdict": "fails", "why": "N = 64", "value": 1.0}]}
+    >>> verdicts_record(ledger, 3)["claims"]
+    [{'id': 'compare/a', 'verdict': 'fails', 'undecided': False, 'why': 'N = 64'}]
+    """
+    keep = [{"id": c["id"], "verdict": c["verdict"], "undecided": bool(c.get("undecided")), "why": c.get("why")}
+            for c in ledger["claims"]]
+    return {"created_by": ledger["created_by"], "cells": int(cells), "claims": keep}
+
+
+def run(grid: str = "quick", claims: list | None = None) -> pd.DataFrame:
+    """Wall time of the grid with 1 and 2 workers, and the speed-up (``make bench``: the quick grid).
+
+    Appends the 2-worker run's verdicts (:func:`verdicts_record`) to `claims` when given.
+    """
+    t1, table1, _ = _timed(grid, 1)
+    t2, table2, ledger = _timed(grid, 2)
     same = table1.drop(columns="cpu_s").equals(table2.drop(columns="cpu_s"))
+    if claims is not None:
+        claims.append(verdicts_record(ledger, table2["cell"].nunique()))
     return pd.DataFrame([{
         "grid": grid, "cells": table1["cell"].nunique(), "runs": len(table1),
         "cpu_s_total": round(float(table1.drop_duplicates("cell")["cpu_s"].sum()), 1),
@@ -225,9 +262,11 @@ if __name__ == "__main__":
     if "--measure-cells" in sys.argv:
         print(measure_cells().to_string(index=False))
         sys.exit(0)
-    result = run(sys.argv[1] if len(sys.argv) > 1 and not sys.argv[1].startswith("--") else "full")
+    ledgers: list = []
+    result = run(sys.argv[1] if len(sys.argv) > 1 and not sys.argv[1].startswith("--") else "full", ledgers)
     print(result.to_string(index=False))
     if "--snapshot" in sys.argv:
+        FULL_CLAIMS.write_text(json.dumps(ledgers[0], indent=1) + "\n")
         record = result.iloc[0].to_dict()
         record.update(date=time.strftime("%Y-%m-%d"), cpu=platform.processor() or platform.machine(),
                       cores=os.cpu_count())

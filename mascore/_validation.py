@@ -425,9 +425,12 @@ def float_array(value: object, name: str) -> np.ndarray:
         if arr.dtype.kind == "O":  # e.g. Python ints beyond int64, numbers mixed with arrays
             arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
+        system = all(hasattr(value, a) for a in ("A", "B", "C", "D", "dt"))  # python-control's StateSpace and kin
+        hint = (f"; a system's matrices are its attributes ({name} = sys.A, sys.B, ...), and the designs that take "
+                f"a system take it as their first argument" if system else "")
         raise TypeError(
             f"{name} must be an array of real numbers; got a {type(value).__name__} that numpy cannot "
-            f"convert ({exc})"
+            f"convert ({exc}){hint}"
         ) from None
     if arr.dtype.kind not in "biuf":
         raise TypeError(f"{name} must be an array of real numbers; got an array of dtype {arr.dtype}")

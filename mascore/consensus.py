@@ -80,6 +80,7 @@ from ._validation import (
     MAX_STEPS,
     Frozen,
     check_covariance,
+    check_fits_in_memory,
     check_generator,
     check_positive,
     check_positive_int,
@@ -1246,6 +1247,8 @@ def _discrete_topology(topologies, n, n_steps, batch, states="xi0 and P0"):
         n_steps = check_steps(n_steps)
         return (lambda k: _check_topologies(topologies(k), n, f"topologies({k})", stacked=False, states=states)), \
             n_steps
+    if isinstance(topologies, np.ndarray):  # e.g. a broadcast view: its float copy must fit before it is made
+        check_fits_in_memory(8.0 * topologies.size, "topologies", "the graphs as floats (one per step)")
     arr = _float_array(topologies, "topologies")
     if arr.ndim == 2:
         g = _check_topologies(arr, n, "topologies", stacked=False, states=states)

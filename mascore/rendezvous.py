@@ -452,13 +452,14 @@ def _check_model(model: object) -> RendezvousModel:
 def _states(x0: ArrayLike, m: int) -> tuple[np.ndarray, bool]:
     """x0 as (R, N, m) runs, and whether it was a single (N, m) run."""
     x = np.array(_float_array(x0, "x0"), dtype=float)
+    given = x.shape
     single = x.ndim == 2
     if single:
         x = x[None]
     if x.ndim != 3 or 0 in x.shape:
-        raise ValueError(f"x0 must have shape (N, m) for one run or (R, N, m) for R runs; got {x.shape}")
+        raise ValueError(f"x0 must have shape (N, m) for one run or (R, N, m) for R runs; got {given}")
     if x.shape[-1] != m:
-        raise ValueError(f"x0 must hold states of the model's size m = {m} on its last axis; got shape {x.shape}")
+        raise ValueError(f"x0 must hold states of the model's size m = {m} on its last axis; got shape {given}")
     _finite(x, "x0")
     return x, single
 

@@ -473,7 +473,8 @@ def _reproduce_at(args: argparse.Namespace) -> int:
           f"{time.perf_counter() - start:.1f} s on {_where(args.workers)} -> {folder}")
     default = args.out / args.paper / "claims.json"
     if not default.exists():
-        print(f"no default ledger at {default} to compare with (run `mascore reproduce {args.paper}` first)")
+        print(f"no default ledger at {default} to compare with (run `mascore reproduce {args.paper} --seed "
+              f"{args.seed} --out {args.out}` first)")
         return 0
     lines = changed_claims(json.loads(default.read_text())["claims"], [c.to_dict() for c in claims])
     print(f"{len(lines)} claim(s) changed verdict against {default}" + (":" if lines else ""))
@@ -581,7 +582,7 @@ def main(argv: list[str] | None = None) -> int:
     """Command-line entry point: ``python -m mascore reproduce PAPER|all`` and ``python -m mascore compare``.
 
     ``reproduce PAPER|all [--out DIR] [--seed S] [--workers K] [--set NAME=VALUE ...]`` rebuilds the papers;
-    ``compare [--grid quick|full] [--out DIR] [--workers K] [--scheduler ADDRESS] [--seed S]``
+    ``compare [--grid quick|full|FILE.toml] [--out DIR] [--workers K] [--scheduler ADDRESS] [--seed S]``
     runs the cross-method sweep (:mod:`mascore.compare`).
 
     Parameters

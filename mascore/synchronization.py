@@ -824,11 +824,25 @@ def design_synchronization(
             f"of Gamma = (I + D + G_pin)^-1 (L + G_pin), eq. (15)): pin more agents, raise the pinning gains or "
             f"add edges to shrink it. "
             f"r comes from the agent (A, B) and the shape of Q only: scaling Q does not change r (P scales with "
-            f"it); a less unstable A (e.g. a shorter sampling time) raises it")
+            f"it)" + _agent_remedy(A))
     c = 1.0 / c0
     Ac, Bc = closed_loop_matrices(A, B, K, c, Gamma)
     return SyncDesign(P=P, residual=riccati_like_residual(A, B, Q, P), K=K, c=c, r=r, c0=c0, r0=r0,
                       Gamma=Gamma, eigs=eigs, in_circle=inside, A_c=Ac, B_c=Bc, rho=spectral_radius(Ac))
+
+
+def _agent_remedy(A: np.ndarray) -> str:
+    """The end of Lemma 2's message: what the agent's discrete-time `A` says about raising r."""
+    lam = np.linalg.eigvals(A)
+    continuous = lam[(lam.real < 0) & (np.abs(lam) > 1)]
+    if continuous.size:  # expm(A_c dt) has such an eigenvalue only for an unstable mode sampled < 4 times a period
+        shown = ", ".join(f"{v:.3g}" for v in continuous[:4])
+        return (f". A has eigenvalues with a negative real part outside the unit circle ({shown}), as a "
+                f"continuous-time matrix has and a sampled one rarely does: Lemma 2 is for discrete time, so if "
+                f"A is continuous time, sample it first (control.c2d(sys, dt), or LTIAgent.from_continuous)")
+    if np.max(np.abs(lam)) > 1:
+        return "; a less unstable A (e.g. a shorter sampling time) raises it"
+    return ""
 
 
 class SynchronizationLaw(Frozen):

@@ -233,6 +233,21 @@ def test_lemma2_failure_names_the_remedy_and_scaling_q_does_not_change_r():
     assert sync.lemma2_r(A, B, np.eye(2), P1) == pytest.approx(sync.lemma2_r(A, B, 10 * np.eye(2), P10), rel=1e-8)
     d = sync.design_synchronization(A, B, np.eye(2), path, 3 * np.ones(4))  # pinned harder: r0/c0 = 0.35 < r
     assert d.rho < 1
+    with pytest.raises(ValueError, match=r"less unstable A"):  # A unstable (1.05): a shorter sampling time helps
+        sync.design_synchronization(A, B, np.eye(2), path, pin)
+
+
+def test_lemma2_failure_on_a_continuous_time_a_says_to_sample_it_and_on_a_stable_a_not_to_make_it_less_unstable():
+    from mascore import synchronization as sync
+
+    A_c, B = np.array([[0.0, 1.0], [-4.0, -0.2]]), np.array([[0.0], [1.0]])  # a damped oscillator, not sampled
+    path, pin = graphs.path_graph(4), np.array([1.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"negative real part outside the unit circle .* sample it first") as info:
+        sync.design_synchronization(A_c, B, np.eye(2), path, pin)
+    assert "less unstable" not in str(info.value)
+    sampled = agents.LTIAgent.from_continuous(A_c, B, 0.05)  # |eigenvalues| 0.995: stable, nothing to make less so
+    with pytest.raises(ValueError, match=r"scaling Q does not change r \(P scales with it\)$"):
+        sync.design_synchronization(sampled.A, sampled.B, np.eye(2), graphs.path_graph(6), np.eye(6)[0])
 
 
 def test_dask_without_a_main_guard_is_explained_in_one_line(tmp_path):

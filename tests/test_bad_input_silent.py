@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mascore import agent_cost, agents, compare, fusion, graphs, team_model
+from mascore import agent_cost, agents, compare, consensus, fusion, graphs, team_model
 from mascore import distributed_ekf as dekf
 from mascore import distributed_kf as dk
 from mascore import rendezvous as rv
@@ -35,6 +35,10 @@ K_GAIN = rv.rendezvous_gain(0.5, 1.5, 2)
     # a timing request that could never end
     (lambda: agent_cost.agent_step_cost("target", "local", 4, min_time=np.inf), r"min_time must be a finite"),
     (lambda: agent_cost.agent_step_cost("target", "local", 4, min_time=np.nan), r"min_time must be a finite"),
+    # a schedule of 10^12 graphs given as a broadcast view (no memory until it is converted)
+    (lambda: consensus.kalman_consensus_discrete([0.0, 1.0, 2.0], [1.0, 1.0, 1.0],
+                                                 np.broadcast_to(graphs.ring_graph(3), (HUGE, 3, 3)), 0.01, 0.1),
+     r"^topologies asks for too much"),
 ])
 def test_more_huge_or_endless_requests_are_refused_by_name(call, match):
     with pytest.raises(ValueError, match=match):
@@ -102,3 +106,9 @@ def test_a_limit_on_the_address_space_counts_as_the_memory_available():
         pytest.skip("the hard limit is below 2 GiB already")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True).stdout
     assert out.startswith("n_agents asks for too much: about 2.98 GiB")  # 3.2 GB fits in RAM, not under a 2 GiB limit
+
+
+def test_a_wrong_initial_state_is_reported_in_the_shape_it_was_given():
+    model = rv.RendezvousModel(AGENT.A, AGENT.B, K_GAIN, 0.1 * np.eye(4), np.eye(4), 0.1)
+    with pytest.raises(ValueError, match=r"size m = 4 on its last axis; got shape \(5, 3\)$"):
+        rv.simulate_rendezvous(1, model, np.zeros((5, 3)), graphs.path_graph(5), 10, "true")

@@ -15,6 +15,7 @@ import socket
 import subprocess
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -23,8 +24,10 @@ import scipy.linalg as sla
 
 from mascore import _team_kernels, compare, consensus, graphs, sweep
 from mascore.compare import verdicts
+from mascore.ledger import VERDICTS
 from mascore.reproduce import results_dir
 
+ROOT = Path(__file__).resolve().parents[1]
 CPU = "cpu_s"  # the only column that depends on the machine and the moment
 
 
@@ -362,6 +365,23 @@ def test_every_claim_is_decided_on_a_table_of_the_full_grids_cells():
     claims = compare.compare_claims(full, phi=phi)
     assert len(claims) == len(verdicts.CLAIMS) + len(verdicts.LINK_CLAIMS) and all(c.verdict for c in claims)
 
+
+
+def test_the_recorded_full_grid_has_a_verdict_for_every_claim_of_the_quick_ledger():
+    """The claims page lists the claims whose verdicts differ between the quick grid and the committed record of
+    the full grid's last run: the record has one valid verdict for each claim the quick ledger decides (same ids),
+    and it comes from the same run as the committed timing snapshot (same number of cells)."""
+    ledger = results_dir() / "compare" / "claims.json"
+    if not ledger.exists():
+        pytest.skip("the quick sweep has not been run (make reproduce)")
+    data = ROOT / "benchmarks" / "data"
+    record = json.loads((data / "compare_full_claims.json").read_text())
+    timing = json.loads((data / "compare_full.json").read_text())
+    assert record["cells"] == timing["cells"] and record["created_by"].startswith("mascore compare --grid full")
+    quick = json.loads(ledger.read_text())["claims"]
+    assert [c["id"] for c in record["claims"]] == [c["id"] for c in quick]
+    assert all(c["verdict"] in VERDICTS and (c["verdict"] == "fails" or not c["undecided"]) for c in record["claims"])
+    assert all(c["why"] for c in record["claims"] if c["verdict"] == "fails")
 
 def test_vlahakis_rmse_matches_its_error_covariance():
     """The discretized observer's own-position RMSE = the steady error covariance from a Lyapunov equation.

@@ -45,12 +45,27 @@ def test_a_grid_file_runs_its_cells_and_equals_the_cells_run_one_by_one(tmp_path
     ("runs = 3\n[[study]]\ntask = 'target'\nmethod = 'ci-L1'\n", "missing \\['n_agents'\\]"),
     ("runs = 1\n[[study]]\ntask = 'target'\nmethod = 'ci-L1'\nn_agents = 6\n", "runs"),
     ("runs = [\n", "not a TOML file"),
+    # a team beyond the method's limit (its spec's max_agents) or beyond memory: refused before the first cell runs
+    ("runs = 3\n[[study]]\ntask = 'team'\nmethod = 'song-eb'\nn_agents = [4, 200]\n", "song-eb runs teams of at most 32"),
+    ("runs = 3\n[[study]]\ntask = 'target'\nmethod = 'ci-L1'\nn_agents = [4, 1000000]\n", "n_agents asks for too much"),
 ])
 def test_a_bad_grid_file_is_refused_by_name_before_anything_runs(tmp_path, text, message):
     path = tmp_path / "bad.toml"
     path.write_text(text)
     with pytest.raises((ValueError, TypeError), match=message):
         read_grid(path)
+
+
+@pytest.mark.parametrize("task, methods", [("target", ["centralized", "ci-L1"]),
+                                           ("shared", ["central-fusion", "ren-kc"])])
+def test_a_study_without_the_reference_of_its_ratios_gets_it_first(tmp_path, task, methods):
+    """Every ratio is to the centralized filter's error on the same runs: a study that leaves it out would
+    summarize into NaN ratios, so the reference is added (and named once where the study names it)."""
+    path = tmp_path / "ref.toml"
+    path.write_text(f"runs = 3\n[[study]]\ntask = '{task}'\nmethod = '{methods[1]}'\nn_agents = 6\n")
+    assert [c["method"] for c in read_grid(path).cells] == methods
+    path.write_text(f"runs = 3\n[[study]]\ntask = '{task}'\nmethod = {methods[::-1]}\nn_agents = 6\n")
+    assert [c["method"] for c in read_grid(path).cells] == methods[::-1]
 
 
 def test_the_command_line_refuses_a_grid_that_is_neither_named_nor_a_file(tmp_path, capsys):

@@ -71,6 +71,8 @@ def test_a_run_at_other_settings_writes_beside_the_default_names_the_changed_cla
     moved = reproduce.changed_claims(json.loads(before)["claims"], ledger["claims"])
     assert moved  # three runs of 10 s are too few: some verdicts change, and the command says which
     assert f"{len(moved)} claim(s) changed verdict" in out and all(line in out for line in moved)
+    # the folder without a default ledger: the hint names the command that writes it there, with this run's seed
+    assert f"(run `mascore reproduce bhattacharjee2021 --seed 1 --out {tmp_path / '1'}` first)" in out
     serial = sorted(p.relative_to(tmp_path / "0") for p in (tmp_path / "0" / folder).rglob("*") if p.is_file())
     parallel = sorted(p.relative_to(tmp_path / "1") for p in (tmp_path / "1").rglob("*") if p.is_file())
     assert serial == parallel and any(p.name == "claims.json" for p in serial)

@@ -143,9 +143,11 @@ def test_memory_guard_refuses_what_cannot_fit():
 def test_sizes_that_multiply_are_refused_up_front():
     from mascore.papers import ren2005, song2023, song2023_flocking
 
-    with pytest.raises(ValueError, match=r"KalmanConsensusSettings\.noise_runs asks for too much"):
+    with pytest.raises(ValueError, match=r"KalmanConsensusSettings\.noise_runs x noise_steps asks for too much"):
         dataclasses.replace(ren2005.SETTINGS, noise_runs=10**12)
-    with pytest.raises(ValueError, match=r"RendezvousSettings\.fig3_runs asks for too much"):
+    with pytest.raises(ValueError, match=r"RendezvousSettings\.fig3_runs x horizon / dt asks for too much"):
         dataclasses.replace(song2023.SETTINGS, fig3_runs=10**12)
-    with pytest.raises(ValueError, match=r"FlockingSettings\.n_runs asks for too much"):
+    with pytest.raises(ValueError, match=r"FlockingSettings\.n_runs x t_final / dt asks for too much"):
         dataclasses.replace(song2023_flocking.SETTINGS, n_runs=10**12)
+    with pytest.raises(ValueError, match=r"KalmanConsensusSettings\.bias_runs x n_steps asks for too much"):
+        dataclasses.replace(ren2005.SETTINGS, n_steps=10**12)  # the setting changed is in the name it gives

@@ -124,6 +124,8 @@ def test_design_synchronization_takes_a_sampled_state_space():
     np.testing.assert_array_equal(sync.design_synchronization(agents.LTIAgent(A, B), Q, ring, pin).K, ref.K)
     with pytest.raises(ValueError, match=r"A is a continuous-time system .*c2d"):
         sync.design_synchronization(control.ss(A, B, np.eye(2), 0), Q, ring, pin)
+    with pytest.raises(TypeError, match=r"^Q must be an array of real numbers; got a StateSpace .*\(Q = sys\.A"):
+        sync.design_synchronization(A, B, sys_d, ring, pin)  # the system where a matrix belongs: say how to get one
 
 
 def test_filter_models_take_a_system():

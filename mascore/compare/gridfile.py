@@ -24,7 +24,9 @@ baseline's values: a ring, Gaussian noise, no drop-out, the correct process nois
     dropout = [0.0, 0.2]
 
 Every cell is checked before anything runs (:func:`read_grid`), so a misspelt method or graph
-is named with the choices at once.
+is named with the choices at once, and so is a team too large for a method (its spec's
+``max_agents``) or for memory. Every study includes the reference of its ratios, the
+centralized filter (``central-fusion`` on the shared task): it is added where a study leaves it out.
 """
 
 from __future__ import annotations
@@ -34,11 +36,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .. import estimation
 from .._validation import STEP_BUDGET, check_positive_int
 from ..sweep import Grid
-from .benchmark import SETTINGS, check_cell
+from .benchmark import SETTINGS, check_cell, check_run
 
 __all__ = ["GridFile", "read_grid"]
+
+#: The method every ratio of a task is taken against (added to a study that leaves it out).
+REFERENCE = {"shared": "central-fusion"}  # every other task: "centralized"
 
 #: The axes a study of a grid file may set, and the baseline's value of each.
 AXES: dict[str, Any] = {"task": None, "method": None, "n_agents": None, "graph": "ring", "noise": "gaussian",
@@ -120,7 +126,7 @@ def read_grid(path: str | Path) -> GridFile:
     studies = data.get("study")
     if not isinstance(studies, list) or not studies:
         raise ValueError(f"{path}: no [[study]] table (each names a task, methods and team sizes)")
-    cells = []
+    cells, limits = [], {}
     for k, study in enumerate(studies):
         where = f"{path}: study {study.get('name', k + 1)!r}"
         unknown = set(study) - set(AXES) - {"name"}
@@ -130,13 +136,37 @@ def read_grid(path: str | Path) -> GridFile:
         if missing:
             raise ValueError(f"{where}: missing {missing} (every study names its task, methods and team sizes)")
         axes = {a: _values(study.get(a, default), f"{where}: {a}") for a, default in AXES.items()}
+        axes["method"] = _with_reference(axes["method"], axes["task"])
         for cell in Grid({**axes, "block": blocks}).cells():
-            cells.append(dict(check_cell({"study": str(study.get("name", f"study-{k + 1}")), **cell}, where)))
+            cell = dict(check_cell({"study": str(study.get("name", f"study-{k + 1}")), **cell}, where))
+            _check_size(cell, runs, where, limits.setdefault(cell["task"], estimation.agent_limits(cell["task"])))
+            cells.append(cell)
     steps = runs * SETTINGS.n_steps * len(cells)
     if steps > STEP_BUDGET:
         raise ValueError(f"{path}: {len(cells)} cells x {runs} runs x {SETTINGS.n_steps} steps = {steps:.3g} "
                          f"simulated steps is beyond the budget of {STEP_BUDGET:.3g}; fewer cells or runs")
     return GridFile(path.stem, runs, tuple(cells))
+
+
+def _with_reference(methods: list, tasks: list) -> list:
+    """`methods` with the reference of a study's one task first (the ratios' denominator), if it is missing."""
+    if len(tasks) != 1 or not isinstance(tasks[0], str):
+        return methods  # a study of several tasks names each one's methods itself
+    ref = REFERENCE.get(tasks[0], "centralized")
+    return methods if ref in methods else [ref, *methods]
+
+
+def _check_size(cell: dict, runs: int, where: str, limits: dict) -> None:
+    """Refuse up front a cell whose team is beyond its method's limit (`limits`: its task's
+    :func:`mascore.estimation.agent_limits`) or beyond memory."""
+    limit = limits.get(cell["method"])
+    if limit is not None and cell["n_agents"] > limit[0]:
+        raise ValueError(f"{where}: {cell['method']} runs teams of at most {limit[0]} agents in the comparison "
+                         f"({limit[1]}); got n_agents = {cell['n_agents']}")
+    try:
+        check_run(cell["n_agents"], cell["noise"], cell["dropout"], cell["q_scale"], runs, SETTINGS)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
 
 
 def _values(value: Any, name: str) -> list:

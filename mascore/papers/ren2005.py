@@ -136,9 +136,9 @@ class KalmanConsensusSettings:
             raise ValueError(f"KalmanConsensusSettings.noise_dt must be at most noise_t_final "
                              f"({self.noise_t_final} s); got {self.noise_dt}")
         n2 = 8.0 * self.n_agents**2
-        check_fits_in_memory(n2 * self.noise_runs * (self.noise_steps + 1), "KalmanConsensusSettings.noise_runs",
+        check_fits_in_memory(n2 * self.noise_runs * (self.noise_steps + 1), "KalmanConsensusSettings.noise_runs x noise_steps",
                              "the pairings and states of the noise study")
-        check_fits_in_memory(n2 * min(self.bias_runs, 500) * (self.n_steps + 1), "KalmanConsensusSettings.bias_runs",
+        check_fits_in_memory(n2 * min(self.bias_runs, 500) * (self.n_steps + 1), "KalmanConsensusSettings.bias_runs x n_steps",
                              "the pairings of one chunk of the bias study")
         check_fits_in_memory(8.0 * 2 * len(self.switch_xi0) * self.noise_paths * 401,
                              "KalmanConsensusSettings.noise_paths", "the Euler-Maruyama paths at 401 times")

@@ -164,7 +164,7 @@ class RendezvousSettings:
                                  f"({self.dt / 2:g} s) to give one step; got {getattr(self, name)!r}")
         per_run = 8.0 * self.n_agents * (2 * self.n + 3) * (self.horizon / self.dt + 1)  # states, errors, NEES
         for name in ("fig2_runs", "fig3_runs", "process_noise_runs"):
-            check_fits_in_memory(per_run * getattr(self, name), f"RendezvousSettings.{name}",
+            check_fits_in_memory(per_run * getattr(self, name), f"RendezvousSettings.{name} x horizon / dt",
                                  "the states and errors of every run, agent and step")
 
     @property

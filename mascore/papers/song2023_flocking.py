@@ -167,11 +167,11 @@ class FlockingSettings:
                                  f"({self.dt / 2:g} s) to give one step; got {getattr(self, name)!r}")
         m = 2 * self.n_dim
         per_step = 8.0 * (2 * self.n_agents * m + self.n_agents**2)  # states, estimates, graph
-        check_fits_in_memory(3 * per_step * (self.t_final / self.dt + 1) * self.n_runs, "FlockingSettings.n_runs",
+        check_fits_in_memory(3 * per_step * (self.t_final / self.dt + 1) * self.n_runs, "FlockingSettings.n_runs x t_final / dt",
                              "the states, estimates and graphs of every case, run and step")
         biggest = max(self.beyond_sizes)
         check_fits_in_memory(3 * 8.0 * (2 * biggest * m + biggest**2) * (self.beyond_t_final / self.dt + 1)
-                             * self.beyond_runs, "FlockingSettings.beyond_runs", "the runs of the sweep")
+                             * self.beyond_runs, "FlockingSettings.beyond_runs x beyond_t_final / dt", "the runs of the sweep")
 
     @property
     def gains(self) -> FlockingGains:

@@ -167,7 +167,7 @@ class ObserverSettings:
         if self.dt > self.t_end:
             raise ValueError(f"ObserverSettings.dt must be at most t_end ({self.t_end:g} s); got {self.dt!r}")
         check_fits_in_memory(8.0 * 4 * self.n_agents * n * (self.t_end / self.dt + 1) * len(self.Q2),
-                             "ObserverSettings.dt", "the error histories of Figs. 1-2")
+                             "ObserverSettings.t_end / dt", "the error histories of Figs. 1-2")
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(A, Bbar, C)`` as float arrays.
