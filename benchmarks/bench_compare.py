@@ -1,6 +1,7 @@
 """The comparison sweep on one and on two local Dask workers (issue: >= 1.8x on the full grid).
 
-``make bench`` times the quick grid (about two minutes); the full grid takes about 12 minutes.
+``make bench`` times the quick grid (44 s on 2 workers on a quiet 2-core machine); the full grid takes about 35 minutes on
+1 worker and 19 on 2.
 
 ``python -m benchmarks.bench_compare --snapshot`` also writes ``benchmarks/data/compare_full.json``,
 which the chapter "Comparing the methods" shows, and the full grid's verdicts
@@ -45,6 +46,13 @@ Prediction for the full grid: 494 s of work plus about 9 s of fixed costs on 1 w
 924 cells (with the position-sensing and switching studies), nothing else running: 510 s on 1 worker,
 279 s on 2, **1.83x**, the same table. The gap to the prediction is probably the two workers sharing the
 memory bus and the page-fault path of the VM, which CPU times do not show (not measured).
+
+The current full grid (2,572 cells, 128,600 runs: teams of 32 and 64 on every graph, the links, the knobs),
+measured with ``python -m mascore compare --grid full --workers K`` on another 2-core machine (an Intel Xeon),
+the 1-worker run with the other core idle, the 2-worker run beside a few short niced jobs (which can only
+have slowed it): 2,085 s on 1 worker, 1,119 s on 2, **1.86x**, the same table and
+the same verdicts (the committed snapshot). The largest cells (N = 64) run first and gain least: about 1.7x over
+the first 70 cells, where two workers each stream covariances of several MB through the shared cache and memory.
 """
 
 from __future__ import annotations

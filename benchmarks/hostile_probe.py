@@ -167,12 +167,13 @@ class DoctestRecorder:
                 saved = copy.deepcopy((args[1:] if cls is not None else args, kwargs))
             except Exception:  # noqa: BLE001 - an argument that cannot be copied is not recorded
                 return func(*args, **kwargs)
-            result = func(*args, **kwargs)
-            try:
-                pickle.dumps(saved)
-                recorder.calls[key] = saved
+            try:  # pickled before the call: a call may change its arguments (a figure's axes) into unpicklable ones
+                pickled = pickle.dumps(saved)
             except Exception:  # noqa: BLE001
-                pass
+                pickled = None
+            result = func(*args, **kwargs)
+            if pickled is not None:  # the first call that returned normally
+                recorder.calls[key] = pickled
             return result
 
         for attr in ("__name__", "__qualname__", "__doc__", "__module__"):
@@ -186,7 +187,7 @@ class DoctestRecorder:
 
     def pytest_unconfigure(self, config) -> None:
         self.out.parent.mkdir(parents=True, exist_ok=True)
-        self.out.write_bytes(pickle.dumps(self.calls))
+        self.out.write_bytes(pickle.dumps({key: pickle.loads(saved) for key, saved in self.calls.items()}))
         print(f"\nrecorded baselines of {len(self.calls)} of {self.n} callables -> {self.out}")
 
 
