@@ -255,7 +255,8 @@ def check_steps(n_steps: object, name: str = "n_steps") -> int:
     """Return `n_steps` as an int from 1 to :data:`MAX_STEPS` (a longer run is refused, not started)."""
     n_steps = check_positive_int(n_steps, name)
     if n_steps > MAX_STEPS:
-        raise ValueError(f"{name} = {n_steps} is more than MAX_STEPS = {MAX_STEPS}; run fewer steps (in chunks)")
+        raise ValueError(f"{name} = {n_steps} is more than MAX_STEPS = {MAX_STEPS}; run fewer steps, in chunks if "
+                         f"needed: each chunk starting from the last state of the one before")
     return n_steps
 
 

@@ -1083,7 +1083,11 @@ class TeamFilter:
             (``z_ij = C_j x_j + nu_ij``).
         mask : (N, N) or (batch, N, N) array_like of bool
             Sensing mask (closed neighbourhoods). A mask per run while the covariance is
-            shared (batch 1) gives every run its own covariance from then on.
+            shared (batch 1) gives every run its own covariance from then on. A mask must hold
+            every agent itself (its diagonal); a subset of the graph's closed neighbourhoods (lost
+            links, sensors out of range, each agent sensing only itself) uses what was sensed.
+            Theorem 1's observability, checked when the filter is built, is for the full
+            neighbourhoods.
 
         Raises
         ------
