@@ -6,7 +6,9 @@
 ``python -m benchmarks.bench_compare --snapshot`` also writes ``benchmarks/data/compare_full.json``,
 which the chapter "Comparing the methods" shows, and the full grid's verdicts
 (``benchmarks/data/compare_full_claims.json``), against which the claims page lists the claims whose
-verdicts differ between the quick and the full grid. Each run starts from an empty table in a
+verdicts differ between the quick and the full grid, and its summary (``benchmarks/data/compare_full_summary.csv``),
+which the chapters' sections "From 8 to 64 agents" draw when no full grid is stored beside the book's results.
+Each run starts from an empty table in a
 temporary folder; the tables of the two runs are checked equal (CPU times aside). Both runs
 are the same engine (:func:`mascore.sweep.run_sweep` with ``workers=1`` and ``workers=2``).
 
@@ -72,14 +74,18 @@ from mascore import compare
 SNAPSHOT = Path(__file__).parent / "data" / "compare_full.json"
 #: The full grid's verdicts (id, verdict, undecided, why), written with :data:`SNAPSHOT`.
 FULL_CLAIMS = Path(__file__).parent / "data" / "compare_full_claims.json"
+#: The full grid's summary (``summary-full-0.csv`` of its run), written with :data:`SNAPSHOT`.
+FULL_SUMMARY = Path(__file__).parent / "data" / "compare_full_summary.csv"
 
 
-def _timed(grid: str, workers: int) -> tuple[float, pd.DataFrame, dict]:
+def _timed(grid: str, workers: int) -> tuple[float, pd.DataFrame, dict, bytes]:
     with tempfile.TemporaryDirectory() as out:
         start = time.perf_counter()
         table, _ = compare.run_compare(grid, out, workers=workers, progress=False)
         seconds = time.perf_counter() - start
-        return seconds, table, json.loads((Path(out) / "compare" / "claims.json").read_text())
+        folder = Path(out) / "compare"
+        return (seconds, table, json.loads((folder / "claims.json").read_text()),
+                (folder / f"summary-{grid}-0.csv").read_bytes())
 
 
 def verdicts_record(ledger: dict, cells: int) -> dict:
@@ -109,16 +115,17 @@ def verdicts_record(ledger: dict, cells: int) -> dict:
     return {"created_by": ledger["created_by"], "cells": int(cells), "claims": keep}
 
 
-def run(grid: str = "quick", claims: list | None = None) -> pd.DataFrame:
+def run(grid: str = "quick", records: list | None = None) -> pd.DataFrame:
     """Wall time of the grid with 1 and 2 workers, and the speed-up (``make bench``: the quick grid).
 
-    Appends the 2-worker run's verdicts (:func:`verdicts_record`) to `claims` when given.
+    Appends the 2-worker run's verdicts (:func:`verdicts_record`) and its stored summary (CSV bytes) to
+    `records` when given.
     """
-    t1, table1, _ = _timed(grid, 1)
-    t2, table2, ledger = _timed(grid, 2)
+    t1, table1, _, _ = _timed(grid, 1)
+    t2, table2, ledger, summary = _timed(grid, 2)
     same = table1.drop(columns="cpu_s").equals(table2.drop(columns="cpu_s"))
-    if claims is not None:
-        claims.append(verdicts_record(ledger, table2["cell"].nunique()))
+    if records is not None:
+        records += [verdicts_record(ledger, table2["cell"].nunique()), summary]
     return pd.DataFrame([{
         "grid": grid, "cells": table1["cell"].nunique(), "runs": len(table1),
         "cpu_s_total": round(float(table1.drop_duplicates("cell")["cpu_s"].sum()), 1),
@@ -275,6 +282,7 @@ if __name__ == "__main__":
     print(result.to_string(index=False))
     if "--snapshot" in sys.argv:
         FULL_CLAIMS.write_text(json.dumps(ledgers[0], indent=1) + "\n")
+        FULL_SUMMARY.write_bytes(ledgers[1])
         record = result.iloc[0].to_dict()
         record.update(date=time.strftime("%Y-%m-%d"), cpu=platform.processor() or platform.machine(),
                       cores=os.cpu_count())

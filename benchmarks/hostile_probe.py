@@ -76,6 +76,8 @@ RECORDS = frozenset({
     "papers.song2023.Fig3Result", "papers.song2023.RendezvousRun", "papers.vlahakis.ObserverResult",
     "rendezvous.RendezvousResult", "set_membership.FilterHistory", "synchronization.SyncDesign",
     "settings.SettingsView", "registry.SettingsView", "papers.ren2005.SwitchingDemo", "papers.vlahakis.Fig12Result",
+    "distributed_ekf.EstimatedFlockingRun", "papers.song2023_flocking.Fig5Result",
+    "papers.song2023_flocking.FlockingResult",
 })
 
 #: Outcomes the API documents: (function, argument, spoil) patterns and why the value is valid there.
@@ -153,7 +155,8 @@ class DoctestRecorder:
             if owner is not None:
                 setattr(owner, name.rsplit(".", 1)[1], self._wrap(key, obj, method=True))
             elif inspect.isclass(obj):
-                obj.__init__ = self._wrap(key, obj.__init__, method=True, cls=obj)
+                if obj.__init__ is not object.__init__:  # a class built by __new__ alone (a NamedTuple) is not wrapped
+                    obj.__init__ = self._wrap(key, obj.__init__, method=True, cls=obj)
             else:
                 setattr(importlib.import_module(f"mascore.{mod_name}"), name, self._wrap(key, obj))
 

@@ -44,6 +44,7 @@ __all__ = [
     "check_pair_args",
     "check_weights",
     "check_divergence",
+    "check_within_limit",
     "noise_factor",
     "finite_where_input_is",
 ]
@@ -316,7 +317,10 @@ def check_dt(dt: object) -> float:
     """
     if isinstance(dt, np.ndarray) and dt.ndim == 0:
         dt = dt[()]
-    return check_positive(dt, "dt", "s")
+    dt = check_positive(dt, "dt", "s")
+    if not np.isfinite(dt * dt):  # the double integrator uses dt^2 / 2
+        raise ValueError(f"dt must be a sampling time whose square is finite (s); got {dt!r}")
+    return dt
 
 
 def check_range(r: object, hint: str = "") -> float:
@@ -439,6 +443,23 @@ def check_divergence(X: np.ndarray, k: int, dt: float, what: str = "team state")
         )
 
 
+def check_within_limit(values: np.ndarray, name: str, what: str = "entries") -> None:
+    """Refuse up front `values` at or beyond :data:`DIVERGENCE_LIMIT`, where a run would count as diverged.
+
+    Examples
+    --------
+    >>> check_within_limit(np.array([1.0, -2.0]), "X0")
+    >>> check_within_limit(np.array([1e300]), "X0")
+    Traceback (most recent call last):
+    ...
+    ValueError: X0 has entries of 1e+300, at or beyond DIVERGENCE_LIMIT = 1e+07 where a run counts as diverged; ...
+    """
+    big = float(np.max(np.abs(values), initial=0.0))
+    if not big < DIVERGENCE_LIMIT:
+        raise ValueError(f"{name} has {what} of {big:.3g}, at or beyond DIVERGENCE_LIMIT = {DIVERGENCE_LIMIT:g} "
+                         f"where a run counts as diverged; use smaller units (km instead of m) or check the values")
+
+
 def noise_factor(C: ArrayLike, name: str, size: int) -> np.ndarray:
     """``L`` with ``C = L L^T`` for a checked (possibly semidefinite) ``(size, size)`` covariance `C`.
 
@@ -449,7 +470,10 @@ def noise_factor(C: ArrayLike, name: str, size: int) -> np.ndarray:
     array([[4., 0.],
            [0., 0.]])
     """
-    C = check_covariance(float_array(C, name), name, size=size)
+    C = float_array(C, name)
+    if C.ndim != 2:
+        raise ValueError(f"Incompatible dimensions of {name}; expected ({size}, {size}) but found {C.shape}")
+    C = check_covariance(C, name, size=size)
     w, V = np.linalg.eigh(C)
     return V * np.sqrt(np.clip(w, 0, None))
 

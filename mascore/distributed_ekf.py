@@ -980,7 +980,11 @@ def simulate_estimation_based_flocking(
     if X_hat.shape != (*batch, N, N, m) or not np.all(np.isfinite(X_hat)):
         raise ValueError(f"X_hat0 must be finite with shape {(*batch, N, N, m)} (one team estimate per agent, "
                          f"to match X0 of shape {X.shape}); got {X_hat.shape}")
-    Sigma0 = check_covariance(_float_array(Sigma0, "Sigma0"), "Sigma0", size=M)
+    if not isinstance(record_nees, (bool, np.bool_)):
+        raise TypeError(f"record_nees must be True or False; got {type(record_nees).__name__} {record_nees!r}")
+    # the NEES inverts the observer's covariance, which keeps the prior's where nothing is measured
+    Sigma0 = check_covariance(_float_array(Sigma0, "Sigma0"), "Sigma0" + (" (record_nees inverts it)" if record_nees
+                                                                          else ""), size=M, definite=bool(record_nees))
     try:
         np.broadcast_to(Sigma0, (*batch, N, M, M))
     except ValueError:
@@ -1000,6 +1004,12 @@ def simulate_estimation_based_flocking(
             raise TypeError(f"{flag} must be True or False; got {type(value).__name__} {value!r}")
     Lq = _core.noise_factor(Q, "Q", m)
     Lf = Lq if Q_filter is None else _core.noise_factor(Q_filter, "Q_filter", m)
+    # values a run would flag as diverged at its first step, refused by name before it starts
+    for name, values, what in (("X0", X, "entries"), ("X_hat0", X_hat, "entries"),
+                               ("Sigma0", np.sqrt(np.abs(np.diagonal(Sigma0, axis1=-2, axis2=-1))), "standard deviations"),
+                               ("Q", np.sqrt(np.diag(Lq @ Lq.T)), "standard deviations per step"),
+                               ("Q_filter", np.sqrt(np.diag(Lf @ Lf.T)), "standard deviations per step")):
+        _core.check_within_limit(values, name, what)
     model = EKFModel(N, dt, gains, np.kron(np.eye(N), Lf @ Lf.T), team_noise_covariance(_float_array(R, "R"), N, m),
                      state_dim=m)  # checked once: Q_team, R (definite)
     ekf = FlockingEKF._from_checked(model, X_hat, Sigma0)  # owns a copy of the covariances, overwritten in place
@@ -1114,6 +1124,7 @@ def nees_against_q(
     q = _float_array(q_values, "q_values")
     if q.ndim != 1 or q.size == 0 or not np.all(np.isfinite(q)) or np.any(q <= 0):
         raise ValueError(f"q_values must be a non-empty 1-D array of finite values > 0; got {q_values!r}")
+    _core.check_within_limit(np.sqrt(q), "q_values", "standard deviations per step")
     seed = check_positive_int(seed, "seed", minimum=0)
     transient = check_positive_int(transient, "transient", minimum=0)
     if transient >= n_steps if isinstance(n_steps, (int, np.integer)) else False:
@@ -1233,7 +1244,8 @@ def _check_sigma(S, name, M, batch, of):
     """
     S = _float_array(S, name)
     if S.ndim < 2 or S.shape[-2:] != (M, M):
-        raise ValueError(f"Incompatible dimensions of {name}; expected (..., {M}, {M}) but found {S.shape}")
+        raise ValueError(f"Incompatible dimensions of {name}; expected (..., {M}, {M}) (from {of}'s team of "
+                         f"{M} states: fix whichever of the two is wrong) but found {S.shape}")
     _check_batch(S.shape[:-2], batch, name, of)
     flat = S.reshape(-1, M, M)
     chunks = kernels.chunks(flat.shape[0], M)  # chunk by chunk: no temporaries of the size of S

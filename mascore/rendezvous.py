@@ -707,7 +707,8 @@ def simulate_rendezvous(
     Raises
     ------
     ValueError
-        Unknown mode, bad shapes, an isolated agent, or (mode "estimation") a
+        Unknown mode, bad shapes, an isolated agent, (the filter modes) a directed
+        graph: the team filter needs an undirected one, or (mode "estimation") a
         disconnected graph (named as such) or a topology for which system (43) is
         not observable.
 
@@ -763,6 +764,10 @@ def simulate_rendezvous(
                         ("progress", progress), ("switching", switching), ("return_estimates", return_estimates)):
         check_flag(value, flag)
     Adj = check_adjacency_stack(adjacency)
+    if mode in ("measurement-filter", "estimation") and not np.array_equal(Adj != 0, np.swapaxes(Adj, -1, -2) != 0):
+        raise ValueError("adjacency must be symmetric (an undirected graph) for the team filter of mode "
+                         f"{mode!r}: Song et al.'s filter assumes that every agent senses the agents that sense it "
+                         "(a common sensing range, Sec. II); got a directed graph (symmetrize it, e.g. A + A.T > 0)")
     S = sensing_mask(Adj)  # raises on isolated agents
     if switching:
         if S.shape != (n_steps + 1, N, N):

@@ -112,3 +112,68 @@ def test_a_wrong_initial_state_is_reported_in_the_shape_it_was_given():
     model = rv.RendezvousModel(AGENT.A, AGENT.B, K_GAIN, 0.1 * np.eye(4), np.eye(4), 0.1)
     with pytest.raises(ValueError, match=r"size m = 4 on its last axis; got shape \(5, 3\)$"):
         rv.simulate_rendezvous(1, model, np.zeros((5, 3)), graphs.path_graph(5), 10, "true")
+
+
+def _ekf_case():
+    gains = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
+    X = np.array([[[0.0, 0.0, 1.0, 0.0], [100.0, 0.0, 0.0, 1.0], [0.0, 100.0, 0.0, 0.0]]])  # one run of 3 agents
+    return gains, X, np.broadcast_to(X[:, None], (1, 3, 3, 4))
+
+
+@pytest.mark.parametrize("change, match", [
+    ({"dt": 1e300}, r"^dt must be a sampling time whose square is finite"),
+    ({"X0": 1e300}, r"^X0 has entries of 1e\+300, at or beyond DIVERGENCE_LIMIT"),
+    ({"Sigma0": 1e300}, r"^Sigma0 has standard deviations of 1e\+150"),
+    ({"Q": np.eye(4)[None]}, r"^Incompatible dimensions of Q; expected \(4, 4\) but found \(1, 4, 4\)"),
+])
+def test_the_estimated_flocking_run_refuses_what_would_overflow_or_diverge_at_once_by_name(change, match):
+    """Found by the probe once the paper's examples ran under it: these failed at the first step with an
+    OverflowError, a divergence "for these gains" or a matmul error, naming none of the arguments."""
+    gains, X, X_hat = _ekf_case()
+    args = {"X0": X, "X_hat0": X_hat, "Sigma0": np.eye(12), "n_steps": 5, "dt": 0.1, "gains": gains,
+            "Q": 0.01 * np.eye(4), "R": np.eye(4), "rng": 0, "sensing_range": 150.0}
+    if "X0" in change:
+        args["X0"] = X * 0 + change["X0"]
+    elif "Sigma0" in change:
+        args["Sigma0"] = change["Sigma0"] * np.eye(12)
+    else:
+        args.update(change)
+    with pytest.raises(ValueError, match=match):
+        dekf.simulate_estimation_based_flocking(**args)
+
+
+def test_the_nees_sweep_refuses_a_prior_it_would_invert_and_huge_noise_by_name():
+    gains, X, X_hat = _ekf_case()
+    with pytest.raises(ValueError, match=r"^Sigma0 \(record_nees inverts it\) must be positive definite"):
+        dekf.nees_against_q([0.01], X, X_hat, np.zeros((12, 12)), 5, 0.1, gains, np.eye(4), 150.0, seed=0)
+    with pytest.raises(ValueError, match=r"^q_values has standard deviations per step of 1e\+150"):
+        dekf.nees_against_q([1e300], X, X_hat, np.eye(12), 5, 0.1, gains, np.eye(4), 150.0, seed=0)
+
+
+def test_a_wrong_team_names_both_the_estimate_and_its_covariance():
+    gains, X, _ = _ekf_case()
+    with pytest.raises(ValueError, match=r"Sigma; expected \(\.\.\., 8, 8\) \(from X_hat's team of 8 states"):
+        dekf.ekf_predict(X[0, :2], np.eye(12), 0.1, gains, 0.01 * np.eye(8))
+
+
+def test_the_settled_average_refuses_a_series_that_is_not_finite_or_not_on_its_times():
+    from mascore.papers.song2023_flocking import Fig5Result
+
+    t = np.linspace(0.0, 1.0, 11)
+    fig5 = Fig5Result(t, *(np.zeros((3, 11)),) * 2, np.zeros((3, 1, 2, 4)), np.zeros((3, 1, 11)),
+                      np.zeros((3, 11, 2, 4)), np.zeros((1, 11)), (False,) * 3, 0.5)
+    assert fig5.settled(np.ones((3, 11))).tolist() == [1.0, 1.0, 1.0]
+    with pytest.raises(ValueError, match=r"^series contains NaN"):
+        fig5.settled(np.full((3, 11), np.nan))
+    with pytest.raises(ValueError, match=r"^series must be a time series on t, of shape \(\.\.\., 11\)"):
+        fig5.settled(np.ones((3, 10)))
+
+
+@pytest.mark.parametrize("edges", [[(0, 1), (1, 2), (2, 3)], [(0, 1), (1, 0), (1, 2), (2, 3)]])
+def test_a_directed_graph_in_the_team_filter_is_named_as_directed_before_isolation_or_observability(edges):
+    """A directed chain was refused as "agent 0 has no neighbour", a partly directed one as not observable."""
+    model = rv.RendezvousModel(AGENT.A, AGENT.B, K_GAIN, 0.1 * np.eye(4), np.eye(4), 0.1)
+    directed = graphs.adjacency_from_edges(4, edges, directed=True)
+    with pytest.raises(ValueError, match=r"^adjacency must be symmetric \(an undirected graph\) for the team filter"):
+        rv.simulate_rendezvous(1, model, np.zeros((4, 4)), directed, 5, "estimation", x_hat0=np.zeros(16),
+                               P0=np.eye(4))

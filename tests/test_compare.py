@@ -382,6 +382,13 @@ def test_the_recorded_full_grid_has_a_verdict_for_every_claim_of_the_quick_ledge
     assert [c["id"] for c in record["claims"]] == [c["id"] for c in quick]
     assert all(c["verdict"] in VERDICTS and (c["verdict"] == "fails" or not c["undecided"]) for c in record["claims"])
     assert all(c["why"] for c in record["claims"] if c["verdict"] == "fails")
+    # its summary, which the sections "From 8 to 64 agents" draw: one row per cell of the current full grid on
+    # ideal links (the link studies have their own tables), each from 4 seed blocks of the grid's runs
+    summary = pd.read_csv(data / "compare_full_summary.csv")
+    keys = ["study", "task", "method", "graph", "n_agents", "noise", "dropout", "q_scale"]
+    cells = [c for c in compare.grid_cells("full") if c["study"] not in compare.LINK_STUDIES]
+    assert sorted(summary[keys].itertuples(index=False, name=None)) == sorted({tuple(c[k] for k in keys) for c in cells})
+    assert (summary.loc[summary["task"].isin(["target", "localization"]), "n"] == 200).all()
 
 def test_vlahakis_rmse_matches_its_error_covariance():
     """The discretized observer's own-position RMSE = the steady error covariance from a Lyapunov equation.

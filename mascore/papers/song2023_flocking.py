@@ -413,6 +413,10 @@ class Fig5Result:
         >>> fig5.settled(fig5.std_p).shape                       # one value per case
         (3,)
         """
+        series = float_array(series, "series")
+        if series.shape[-1:] != self.t.shape:
+            raise ValueError(f"series must be a time series on t, of shape (..., {self.t.size}); got {series.shape}")
+        require_finite(series, "series")
         return series[..., self.t >= self.t[-1] - self.window].mean(axis=-1)
 
 
