@@ -808,9 +808,8 @@ def switching_localization_diffusion(ev: Evidence):
                + [ev.below(f"ratio over 3 x the ring's, N = {n}", d["switching"], 3 * d["ring"].lo)
                   for n, d in diff.items()]),
         "ANEES below 2 and ratio below 3 x the ring's lower end, at every N with both graphs",
-        note="The quick grid decides it at N = 8 only; the full grid adds N = 16, where the diffusion "
-             "filter is already overconfident on the fixed ring in localization, and the rule fails there "
-             "(its NEES on the switching graph stays above 2).")
+        note="The quick grid decides it at N = 8 only; the full grid adds larger teams, and the rule fails "
+             "at 32 and 64 agents, where the diffusion filter's NEES per dof on the switching graph is above 2.")
 
 
 _LOC8 = {"task": "localization", "n_agents": 8, "graph": "ring"}
