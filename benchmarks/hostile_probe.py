@@ -86,6 +86,8 @@ DOCUMENTED = (
     (r"^fusion\.(ConsensusOnInformationFilter|InformationConsensusFilter|safe_novelty_weight)$",
      r"^(n_consensus|n_iterations)$", r"^zero$", "zero rounds: the filter without exchange (the book's 'local')"),
     (r"^ellipsoids\.contains$", r"^rtol$", r"^zero$", "rtol = 0: the exact test"),
+    (r"^papers\.song2023_flocking\.Fig5Result\.settled$", r"^series$", r"^(nan|inf) entry$",
+     "a case whose run diverged has a NaN series, and its average is NaN (documented in Returns)"),
     (r"^agent_cost\.", r"^min_time$", r"^zero$", "min_time = 0: one repeat"),
     (r"^noise\.", r"^size$", r"^zero$", "size = 0: an empty draw, as numpy's"),
     (r"^(ledger|formatting)\.format_(number|value)$", r".", r"^(inf|nan)( entry)?$", "formats NaN and inf as text"),

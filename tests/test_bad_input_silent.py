@@ -156,15 +156,14 @@ def test_a_wrong_team_names_both_the_estimate_and_its_covariance():
         dekf.ekf_predict(X[0, :2], np.eye(12), 0.1, gains, 0.01 * np.eye(8))
 
 
-def test_the_settled_average_refuses_a_series_that_is_not_finite_or_not_on_its_times():
+def test_the_settled_average_refuses_a_series_not_on_its_times():
     from mascore.papers.song2023_flocking import Fig5Result
 
     t = np.linspace(0.0, 1.0, 11)
     fig5 = Fig5Result(t, *(np.zeros((3, 11)),) * 2, np.zeros((3, 1, 2, 4)), np.zeros((3, 1, 11)),
                       np.zeros((3, 11, 2, 4)), np.zeros((1, 11)), (False,) * 3, 0.5)
     assert fig5.settled(np.ones((3, 11))).tolist() == [1.0, 1.0, 1.0]
-    with pytest.raises(ValueError, match=r"^series contains NaN"):
-        fig5.settled(np.full((3, 11), np.nan))
+    assert np.isnan(fig5.settled(np.full((3, 11), np.nan))).all()  # a diverged case's NaN series: documented
     with pytest.raises(ValueError, match=r"^series must be a time series on t, of shape \(\.\.\., 11\)"):
         fig5.settled(np.ones((3, 10)))
 
