@@ -196,6 +196,8 @@ def math_text(text: str) -> str:
     Mean of $\lvert \bar{\delta}_{k} \rvert$ with $\alpha_{w}$ = 0.05, trace $P_{0}$ = 4 and $Q_2$ = 5.
     >>> print(math_text("|A_c^k| <= 1.1 * 0.9^k for all k; |B_c| sqrt(q_bar); sqrt(trace)"))
     $\lvert A_{c}^{k} \rvert$ ≤ 1.1 × $0.9^{k}$ for all k; $\lvert B_{c} \rvert$ $\sqrt{\bar{q}}$; $\sqrt{\operatorname{trace}}$
+    >>> print(math_text("phi = 1 for vlahakis-phi1 and vlahakis-phi-0.1"))   # a hyphenated name is left alone
+    $\phi$ = 1 for vlahakis-phi1 and vlahakis-phi-0.1
     """
     pieces = re.split(r"(\$[^$]*\$)", text)  # math already written as $...$ stays as it is
     return "".join(p if p.startswith("$") else _ascii_math(p) for p in pieces)
@@ -210,6 +212,7 @@ def _ascii_math(text: str) -> str:
     out = re.sub(r"\b([a-z])hat_([A-Za-z0-9]+)\b", r"$\\hat{\1}_{\2}$", out)
     out = out.replace("<=", "≤").replace(" * ", " × ")
     greek = "|".join(_GREEK)
-    out = re.sub(rf"(?<![\\$\w{{])((?:{greek}){_SUB}*{_SUP}?|[A-Za-z]{_SUB}+{_SUP}?|[A-Za-z]\^(?:T|-?[0-9]+))(?![\w$])",
+    # not inside a hyphenated name (a method such as vlahakis-phi-0.1 keeps its spelling)
+    out = re.sub(rf"(?<![\\$\w{{-])((?:{greek}){_SUB}*{_SUP}?|[A-Za-z]{_SUB}+{_SUP}?|[A-Za-z]\^(?:T|-?[0-9]+))(?![\w$-])",
                  lambda m: f"${_tex(m.group(1))}$", out)
     return re.sub(r"(?<![\w$])(Q|R)([12])(?![\w$])", r"$\1_\2$", out)

@@ -300,7 +300,8 @@ class ClaimsView:
             lines.append(
                 f"| {n} | {claim} "
                 f"| {_cell(math_text(format_value(r.get('paper_value'), PAPER_DIGITS, unit=unit, labels=labels)))} "
-                f"| {_cell(math_text(format_value(r.get('value'), unit=unit, labels=labels)))} | {_cell(_verdict_text(r))} |"
+                f"| {_cell(math_text(format_value(r.get('value'), unit=unit, labels=labels, max_items=VALUE_ITEMS)))} "
+                f"| {_cell(_verdict_text(r))} |"
             )
         return "\n".join(lines + _notes_markdown(self.records))
 
@@ -373,10 +374,27 @@ def deviation_sentence(record: dict) -> str:
     return f"{off}; more than the {band} of 'approximately'"
 
 
+#: Entries of a claim's value shown in the ledger (a mapping shows twice as many): the comparison's claims
+#: decide on up to nine methods at once.
+VALUE_ITEMS = 5
+
+
 def _verdict_text(record: dict) -> str:
     verdict = f"**{verdict_words(record['verdict'])}**"
     sentence = deviation_sentence(record)
-    return f"{verdict}<br>{sentence}" if sentence else verdict
+    marks = [m for m in (sentence, _provenance_mark(record)) if m]
+    return "<br>".join([verdict, *marks])
+
+
+def _provenance_mark(record: dict) -> str:
+    """What a claim's record says of the data it was decided on, when that is not data held out from its writing."""
+    marks = ["*changed after the data were seen*"] if record.get("post_hoc") else []
+    written, decided = record.get("written_from") or "", record.get("decided_on") or ""
+    if written and decided.startswith(written):
+        marks.append("*decided on the blocks it was written from*")
+    elif written and written.split()[-1] in decided:
+        marks.append("*partly decided on the blocks it was written from*")
+    return "; ".join(marks)
 
 
 def _notes_markdown(records: Sequence[dict]) -> list[str]:

@@ -44,7 +44,7 @@ from ._validation import (
 )
 from ._validation import float_array as _float_array
 from ._validation import require_finite as _finite
-from .agents import LTIAgent, check_sampling_time
+from .agents import LTIAgent, check_sampling_time, system_matrices
 from .graphs import laplacian as graph_laplacian
 from .graphs import require_connected
 from .sensing import sensing_mask, team_noise_covariance
@@ -354,10 +354,10 @@ class RendezvousModel(Frozen):
 
         Parameters
         ----------
-        agent : mascore.agents.LTIAgent
+        agent : mascore.agents.LTIAgent or python-control StateSpace
             The discrete-time agent, carrying its sampling time ``agent.dt`` (as
-            :func:`mascore.agents.double_integrator` and
-            :meth:`mascore.agents.LTIAgent.from_continuous` build it).
+            :func:`mascore.agents.double_integrator`,
+            :meth:`mascore.agents.LTIAgent.from_continuous` and ``control.c2d`` build it).
         K, Q, R : array_like
             As in the class (gain; process- and measurement-noise *covariances*).
         dt : float, optional
@@ -390,7 +390,16 @@ class RendezvousModel(Frozen):
         dt = 0.1 s contradicts the agent's sampling ti
         """
         if not isinstance(agent, LTIAgent):
-            raise TypeError(f"agent must be a mascore.agents.LTIAgent; got {type(agent).__name__}")
+            if not all(hasattr(agent, a) for a in ("A", "B", "dt")):
+                raise TypeError(f"agent must be a mascore.agents.LTIAgent or a discrete-time python-control "
+                                f"StateSpace; got {type(agent).__name__}")
+            A, B, sampled = system_matrices(agent, "discrete", name="agent", needed_by="RendezvousModel.from_agent")
+            if sampled is True:  # a discrete StateSpace without a sampling time: dt must say it
+                if dt is None:
+                    raise ValueError("agent is a discrete-time system without a sampling time (dt = True): pass "
+                                     "dt, the sampling time (s) its A and B were discretized with")
+                return cls(A, B, K, Q, R, dt, C)
+            agent = LTIAgent(A, B, dt=float(sampled))
         if agent.dt is None:
             if dt is None:
                 raise ValueError("the agent carries no sampling time (agent.dt is None): pass dt, the sampling "

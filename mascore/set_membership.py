@@ -705,7 +705,9 @@ class SetMembershipModel(Frozen):
                 raise ValueError(
                     f"{_where('correction', step, agent, idx, batch)}: measurement y = {y[idx]} is "
                     f"inconsistent with the prior ellipsoid (empty intersection; the innovation form "
-                    f"max_t nu^T S_t^-1 nu = {float(q[idx]):.6g} > 1)"
+                    f"max_t nu^T S_t^-1 nu = {float(q[idx]):.6g} > 1): the truth left the set, so a bound is "
+                    f"too small for the data: the process or measurement noise ellipsoids (their shape "
+                    f"matrices) or the initial ellipsoid; enlarge the one that is optimistic"
                 )
         if method == "closed_form":
             try:

@@ -235,3 +235,20 @@ def test_deviation_of_a_vector_names_its_worst_entry():
     assert ledger.deviation_sentence(record).startswith("worst entry 20.75 off;")
     scalar = Claim("vlahakis/s", "Sec. 5", "A number.", 2.0, 3.0, {"abs": 1e-4}).to_dict()
     assert ledger.deviation_sentence(scalar).startswith("1 off;")
+
+
+def test_the_ledger_marks_claims_not_decided_on_held_out_data_or_changed_after_it():
+    """A reader of the ledger sees, beside each verdict, a claim changed after its data were seen and one decided
+    (wholly or partly) on the seed blocks it was written from; a claim decided on held-out blocks has no mark."""
+    base = {"where": "w", "statement": "s", "verdict": "holds", "written_from": "seed blocks 0-1"}
+    records = [
+        {**base, "id": "compare/held-out", "decided_on": "seed blocks 2-3 (held out)"},
+        {**base, "id": "compare/in-sample", "decided_on": "seed blocks 0-1: the blocks it was written from"},
+        {**base, "id": "compare/partly", "decided_on": "seed blocks 2-3 (held out) where the sweep has them, else 0-1"},
+        {**base, "id": "compare/post-hoc", "decided_on": "seed blocks 2-3 (held out)", "post_hoc": "Loosened."},
+    ]
+    rows = [line for line in str(ledger.show_claims(records)).splitlines() if line.startswith("| ")][1:]
+    assert "written from" not in rows[0] and "seen" not in rows[0]
+    assert "*decided on the blocks it was written from*" in rows[1]
+    assert "*partly decided on the blocks it was written from*" in rows[2]
+    assert "*changed after the data were seen*" in rows[3] and "written from" not in rows[3]

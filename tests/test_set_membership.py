@@ -141,7 +141,7 @@ def test_empty_intersection_names_step_and_agent(method):
     c, P = np.zeros((4, 2)), np.broadcast_to(np.eye(2), (4, 2, 2))
     y = np.zeros((4, 1))
     y[2] = 5.0  # |y - C c| = 5 > sqrt(0.1) + 1: the strip misses agent 3's ellipsoid
-    with pytest.raises(ValueError, match=r"correction step, k = 7, agent 3.*empty intersection"):
+    with pytest.raises(ValueError, match=r"correction step, k = 7, agent 3.*empty intersection.*a bound is too small"):
         smf.correct(c, P, y, C, D, R, method=method, step=7, agent=np.arange(1, 5))
 
 

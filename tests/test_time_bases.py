@@ -198,3 +198,21 @@ def test_dt_0_says_continuous_time_and_is_the_default_reading():
         lqr.top_down_lqr(agents.double_integrator(1, 0.1), **W, adjacency=ring, dt=0)
     with pytest.raises(ValueError, match=r"continuous time only"):
         observers.distributed_observer(A_C, B_C, [[1.0, 0.0]], [[1.0]], [[1.0]], [[1.0]], ring, dt=0.1)
+
+
+def test_the_rendezvous_model_takes_a_discrete_state_space_as_its_agent():
+    """The filters' model constructors take a python-control system like the design functions (a new user's
+    `from_agent(sys)` was refused with a TypeError that named only LTIAgent)."""
+    agent = agents.double_integrator(2, 0.05)
+    K = rv.rendezvous_gain(0.5, 1.0, 2)
+    ref = rv.RendezvousModel.from_agent(agent, K, 1e-4 * np.eye(4), 0.04 * np.eye(4))
+    sys_d = control.ss(agent.A, agent.B, np.eye(4), 0, 0.05)
+    model = rv.RendezvousModel.from_agent(sys_d, K, 1e-4 * np.eye(4), 0.04 * np.eye(4))
+    np.testing.assert_array_equal(model.A, ref.A)
+    assert model.dt == ref.dt == 0.05
+    with pytest.raises(ValueError, match=r"contradicts the agent's sampling time"):
+        rv.RendezvousModel.from_agent(sys_d, K, 1e-4 * np.eye(4), 0.04 * np.eye(4), dt=0.1)
+    with pytest.raises(ValueError, match=r"continuous-time system .*c2d"):
+        rv.RendezvousModel.from_agent(control.ss(agent.A_c, agent.B_c, np.eye(4), 0), K, np.eye(4), np.eye(4))
+    with pytest.raises(TypeError, match=r"LTIAgent or a discrete-time python-control StateSpace; got str"):
+        rv.RendezvousModel.from_agent("agent", K, np.eye(4), np.eye(4))

@@ -336,10 +336,12 @@ def centralized_bound(ev: Evidence):
         worst[f"{task}: {m}"] = round(float(g["ratio_lo"].min()), 6)
         verdicts += [ev.above(f"{task}: {m}", Interval(v, lo, hi), 1.0 - 1e-9)
                      for v, lo, hi in g[["ratio_mean", "ratio_lo", "ratio_hi"]].to_numpy()]
+    worst = dict(sorted(worst.items(), key=lambda kv: kv[1]))  # the closest to the bound first
     return ev.claim(
         "centralized-bound",
         "The centralized Kalman filter's RMSE lower-bounds every other method's in every condition of the own-state, "
-        "common-target and localization sweeps (the 95 % interval of the ratio of RMS errors at or above 1).",
+        "common-target and localization sweeps (the 95 % interval of the ratio of RMS errors at or above 1; shown: "
+        "each method's lowest lower end over its conditions, the closest to 1 first).",
         worst, all_of(verdicts), "ratio interval above 1 for every method and condition",
         note="Under a wrong Q the centralized filter is wrong too; the ratio is still taken to it.")
 
@@ -714,6 +716,8 @@ def switching_target(ev: Evidence):
     ran = set(ev.rows(**sw)["method"])  # the quick grid runs the set-membership filter on the ring only
     nees = {m: ev.mean("nees_own", m, **sw) for m in TARGET_METHODS if m in ran}
     nees = {m: v for m, v in nees.items() if np.isfinite(v.value)}  # a set-membership filter has no NEES
+    ruled = ("ci-L1", "ci-L5", "ci-diffusion", "diffusion", "hcmci-L1", "hcmci-L5", "icf-L1", "icf-L5")
+    shown_nees = {m: nees[m] for m in ruled if m in nees}  # the values the rule reads, all of them shown
     ratio = {m: ev.ratio(m, **sw) for m in TARGET_METHODS if m in ran}
     ring = ev.ratio("diffusion", task="target", graph="ring", n_agents=16)
     return ev.claim(
@@ -724,7 +728,7 @@ def switching_target(ev: Evidence):
         "Kalman filter, conservative on fixed graphs, becomes overconfident (above 2) and its RMSE over the "
         "centralized filter's more than triples against the fixed ring of 16; HCMCI and ICF are overconfident "
         "(above 1.5) at L = 1 and L = 5.",
-        {"nees": {m: _shown(v) for m, v in nees.items()}, "ratio": {m: _shown(v) for m, v in ratio.items()},
+        {"nees": {m: _shown(v) for m, v in shown_nees.items()}, "diffusion ratio": _shown(ratio["diffusion"]),
          "diffusion ratio, ring of 16": _shown(ring)},
         all_of([ev.below(f"{m} ANEES", nees[m], 0.9) for m in ("ci-L1", "ci-L5")]
                + [ev.below("ci-diffusion ANEES", nees["ci-diffusion"], 1.1),
