@@ -115,17 +115,17 @@ def verdicts_record(ledger: dict, cells: int) -> dict:
     return {"created_by": ledger["created_by"], "cells": int(cells), "claims": keep}
 
 
-def run(grid: str = "quick", records: list | None = None) -> pd.DataFrame:
+def run(grid: str = "quick", records: dict | None = None) -> pd.DataFrame:
     """Wall time of the grid with 1 and 2 workers, and the speed-up (``make bench``: the quick grid).
 
-    Appends the 2-worker run's verdicts (:func:`verdicts_record`) and its stored summary (CSV bytes) to
-    `records` when given.
+    Puts the 2-worker run's verdicts (:func:`verdicts_record`, key ``"claims"``) and its stored summary (CSV
+    bytes, key ``"summary"``) in `records` when given.
     """
     t1, table1, _, _ = _timed(grid, 1)
     t2, table2, ledger, summary = _timed(grid, 2)
     same = table1.drop(columns="cpu_s").equals(table2.drop(columns="cpu_s"))
     if records is not None:
-        records += [verdicts_record(ledger, table2["cell"].nunique()), summary]
+        records.update(claims=verdicts_record(ledger, table2["cell"].nunique()), summary=summary)
     return pd.DataFrame([{
         "grid": grid, "cells": table1["cell"].nunique(), "runs": len(table1),
         "cpu_s_total": round(float(table1.drop_duplicates("cell")["cpu_s"].sum()), 1),
@@ -277,12 +277,12 @@ if __name__ == "__main__":
     if "--measure-cells" in sys.argv:
         print(measure_cells().to_string(index=False))
         sys.exit(0)
-    ledgers: list = []
-    result = run(sys.argv[1] if len(sys.argv) > 1 and not sys.argv[1].startswith("--") else "full", ledgers)
+    records: dict = {}
+    result = run(sys.argv[1] if len(sys.argv) > 1 and not sys.argv[1].startswith("--") else "full", records)
     print(result.to_string(index=False))
     if "--snapshot" in sys.argv:
-        FULL_CLAIMS.write_text(json.dumps(ledgers[0], indent=1) + "\n")
-        FULL_SUMMARY.write_bytes(ledgers[1])
+        FULL_CLAIMS.write_text(json.dumps(records["claims"], indent=1) + "\n")
+        FULL_SUMMARY.write_bytes(records["summary"])
         record = result.iloc[0].to_dict()
         record.update(date=time.strftime("%Y-%m-%d"), cpu=platform.processor() or platform.machine(),
                       cores=os.cpu_count())

@@ -179,10 +179,15 @@ def check_team_laplacian(L: ArrayLike, N: int, name: str = "laplacian", any_batc
             "(pass mascore.graphs.laplacian(A))"
         )
     if undirected and np.abs(L - np.swapaxes(L, -1, -2)).max() > tol:
-        raise ValueError(f"{name} must be symmetric (an undirected graph): Song et al.'s team filter assumes that "
-                         f"every agent senses the agents that sense it (a common sensing range, Sec. II); got a "
-                         f"directed Laplacian (symmetrize the adjacency, e.g. A + A.T > 0)")
+        raise ValueError(undirected_message(name, "a directed Laplacian"))
     return L
+
+
+def undirected_message(name: str, got: str) -> str:
+    """Why Song et al.'s team filter refuses a directed graph, and what to do (for `name`, which is `got`)."""
+    return (f"{name} must be symmetric (an undirected graph): Song et al.'s team filter assumes that every agent "
+            f"senses the agents that sense it (a common sensing range, Sec. II); got {got} (symmetrize the "
+            f"adjacency, e.g. A + A.T > 0)")
 
 
 def check_mask(mask: ArrayLike, N: int) -> np.ndarray:

@@ -999,9 +999,9 @@ def simulate_estimation_based_flocking(
     sensing_range = _check_range(sensing_range)
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be True or False; got {type(progress).__name__} {progress!r}")
-    for flag, value in (("record_nees", record_nees), ("return_estimates", return_estimates)):
-        if not isinstance(value, (bool, np.bool_)):
-            raise TypeError(f"{flag} must be True or False; got {type(value).__name__} {value!r}")
+    if not isinstance(return_estimates, (bool, np.bool_)):  # record_nees is checked with Sigma0, which it reads
+        raise TypeError(f"return_estimates must be True or False; got {type(return_estimates).__name__} "
+                        f"{return_estimates!r}")
     Lq = _core.noise_factor(Q, "Q", m)
     Lf = Lq if Q_filter is None else _core.noise_factor(Q_filter, "Q_filter", m)
     # values a run would flag as diverged at its first step, refused by name before it starts

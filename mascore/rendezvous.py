@@ -27,7 +27,7 @@ from ._fusion_kernels import psd_factor
 from ._progress import progress_bar
 from ._sensing_kernels import masked_measurement
 from ._systems import full_state_only, output_matrices
-from ._team_kernels import check_team_laplacian, control_inputs
+from ._team_kernels import check_team_laplacian, control_inputs, undirected_message
 from ._validation import (
     Frozen,
     as_matrix,
@@ -774,9 +774,7 @@ def simulate_rendezvous(
         check_flag(value, flag)
     Adj = check_adjacency_stack(adjacency)
     if mode in ("measurement-filter", "estimation") and not np.array_equal(Adj != 0, np.swapaxes(Adj, -1, -2) != 0):
-        raise ValueError("adjacency must be symmetric (an undirected graph) for the team filter of mode "
-                         f"{mode!r}: Song et al.'s filter assumes that every agent senses the agents that sense it "
-                         "(a common sensing range, Sec. II); got a directed graph (symmetrize it, e.g. A + A.T > 0)")
+        raise ValueError(undirected_message("adjacency", f"a directed graph, for the team filter of mode {mode!r}"))
     S = sensing_mask(Adj)  # raises on isolated agents
     if switching:
         if S.shape != (n_steps + 1, N, N):

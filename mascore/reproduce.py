@@ -31,7 +31,7 @@ from .ledger import Claim, output_hashes, write_claims
 from .registry import paper_keys, paper_registry, write_study
 
 __all__ = ["DEFAULT_SEED", "apply_settings", "available_papers", "changed_claims", "main", "reproduce_paper",
-           "reproduce_papers", "results_dir", "settings_folder"]
+           "project_dir", "reproduce_papers", "results_dir", "settings_folder"]
 
 #: Seed used when the caller gives none.
 DEFAULT_SEED = 1
@@ -62,11 +62,28 @@ def results_dir() -> Path:
 
     if os.environ.get("MASCORE_RESULTS"):
         return Path(os.environ["MASCORE_RESULTS"])
+    return project_dir() / "results"
+
+
+def project_dir() -> Path:
+    """The checkout the working directory is in: the nearest folder above it with a ``pyproject.toml``.
+
+    The notebooks read the data committed beside the package from there (``benchmarks/data``); outside a
+    checkout, the working directory itself.
+
+    Returns
+    -------
+    pathlib.Path
+        The folder.
+
+    Examples
+    --------
+    >>> from mascore.reproduce import project_dir
+    >>> (project_dir() / "pyproject.toml").exists()
+    True
+    """
     here = Path.cwd().resolve()
-    for folder in (here, *here.parents):
-        if (folder / "pyproject.toml").exists():
-            return folder / "results"
-    return here / "results"
+    return next((folder for folder in (here, *here.parents) if (folder / "pyproject.toml").exists()), here)
 
 
 def available_papers() -> list[str]:

@@ -173,6 +173,7 @@ def test_a_directed_graph_in_the_team_filter_is_named_as_directed_before_isolati
     """A directed chain was refused as "agent 0 has no neighbour", a partly directed one as not observable."""
     model = rv.RendezvousModel(AGENT.A, AGENT.B, K_GAIN, 0.1 * np.eye(4), np.eye(4), 0.1)
     directed = graphs.adjacency_from_edges(4, edges, directed=True)
-    with pytest.raises(ValueError, match=r"^adjacency must be symmetric \(an undirected graph\) for the team filter"):
+    with pytest.raises(ValueError, match=r"^adjacency must be symmetric \(an undirected graph\).* got a directed graph, "
+                                         r"for the team filter of mode 'estimation'"):
         rv.simulate_rendezvous(1, model, np.zeros((4, 4)), directed, 5, "estimation", x_hat0=np.zeros(16),
                                P0=np.eye(4))
