@@ -170,7 +170,7 @@ RAW_LATEX = re.compile(
 
 
 def page_problems(html: str) -> list[str]:
-    """What a reader would trip on in one built page: raw LaTeX, network loads, error/warning output.
+    """What a reader would trip on in one built page: raw LaTeX, network loads, error/warning output, a build date.
 
     Math rendered by MathJax sits in ``<span class="math ...">`` / ``<div class="math ...">``
     and in ``<script>``, code in ``<pre>``/``<code>``; everything else is text the reader
@@ -219,6 +219,8 @@ def page_problems(html: str) -> list[str]:
                 problems.append(f"raw LaTeX in the text: ...{data[start:m.end() + 40].strip()!r}...")
 
     Scan().feed(html)
+    if "Last updated on" in html:
+        problems.append("the page shows the date it was built (a 'Last updated on' footer)")
     return problems
 
 

@@ -607,7 +607,7 @@ class InformationConsensusFilter(_NetworkFilter):
     (array([0.8, 0.8, 0.8, 0.8]), array([0.2, 0.2, 0.2, 0.2]))
     """
 
-    __slots__ = ("n_iterations", "rate", "_WK", "_SK")
+    __slots__ = ("n_iterations", "rate", "_W", "_WK", "_SK")
     _what = "information consensus (ICF) update"
 
     def _args(self) -> tuple:
@@ -626,25 +626,21 @@ class InformationConsensusFilter(_NetworkFilter):
                 raise ValueError(f"rate must lie in (0, 1 / d_max) = (0, {1.0 / d_max:.4g}) for the largest degree "
                                  f"d_max = {d_max}; got {rate!r}")
         Lap = np.diag(links.sum(axis=1).astype(float)) - links
-        WK = np.linalg.matrix_power(np.eye(model.n_agents) - eps * Lap, K)
-        self._set(n_iterations=K, rate=eps, _WK=frozen_copy(WK))
-        self._set(_SK=frozen_copy(mix(WK, model.information_matrices, 2)))
+        W = np.eye(model.n_agents) - eps * Lap
+        self._set(n_iterations=K, rate=eps, _W=frozen_copy(W), _WK=frozen_copy(np.linalg.matrix_power(W, K)))
+        self._set(_SK=frozen_copy(mix(self._WK, model.information_matrices, 2)))
 
     def _messages(self, q, pair):
         return (Message("information pair (V, v), per consensus iteration", self.n_iterations * pair),)
-
-    def _consensus_matrix(self) -> np.ndarray:
-        links = self.model.adjacency > 0
-        return np.eye(self.model.n_agents) - self.rate * (np.diag(links.sum(1)) - links)
 
     def _agent_messages(self, own, xm, Pm, z, i):
         N = self.model.n_agents
         Om, q = information_pair(xm, Pm)
         pairs = [(Om / N + self.model.information_matrices, q / N + self.model._information_vectors(z))]
-        return consensus_rounds(self._consensus_matrix(), pairs, own["nbrs"], self.n_iterations)
+        return consensus_rounds(self._W, pairs, own["nbrs"], self.n_iterations)
 
     def _agent_step(self, i, own, messages):
-        N, W = self.model.n_agents, self._consensus_matrix()
+        N, W = self.model.n_agents, self._W
         xp, Pp = self.model.F @ own["x"], self.model.F @ own["P"] @ self.model.F.T + self.model.Q
         Om, qv = information_pair(xp, Pp)
         iv = own["HtRinv"][own["index"]] @ own["z"]
@@ -656,8 +652,8 @@ class InformationConsensusFilter(_NetworkFilter):
 
     @property
     def round_weights(self) -> np.ndarray:
-        """The (N, N) weights of one consensus iteration, ``I - eps L`` (L the graph's Laplacian)."""
-        return self._consensus_matrix()
+        """The (N, N) weights of one consensus iteration, ``I - eps L`` (L the graph's Laplacian), read-only."""
+        return self._W
 
     @property
     def pair_scale(self) -> float:

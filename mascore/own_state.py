@@ -218,11 +218,11 @@ class OwnStateForwardingFilter(Frozen):
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
         # correction with its own and the received measurements of x_i, then prediction: x_i (n,), P_i (n, n)
-        z_in = np.insert(messages[0], own["index"], own["z"], axis=0)
+        received = messages[0]
         info = np.linalg.inv(own["P"])
-        P = np.linalg.inv(info + len(z_in) * self.information)
+        P = np.linalg.inv(info + (len(received) + 1) * self.information)
         P = 0.5 * (P + P.T)
-        x = P @ (info @ own["x"] + self.to_state.T @ z_in.sum(0))
+        x = P @ (info @ own["x"] + self.to_state.T @ (own["z"] + received.sum(0)))
         return self.A @ x + self.B @ own["u"], self.A @ P @ self.A.T + self.Q
 
     def messages(self, i: int = 0) -> tuple[Message, ...]:

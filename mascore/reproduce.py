@@ -561,7 +561,11 @@ def _grid_argument(value: str) -> str:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    """``mascore compare``: the sweep, then the summary, headline table, figures and claims under ``out/compare``."""
+    """``mascore compare``: the sweep, then its summary, headline tables and claims under ``out/compare``.
+
+    The quick grid's claims are ``claims.json`` (the ledger the book and the report read); the full grid's are
+    ``claims-full.json`` beside it, so that running the full grid leaves the quick ledger as it is.
+    """
     import os
 
     from .compare import headline
@@ -584,14 +588,16 @@ def _compare(args: argparse.Namespace) -> int:
     if getattr(result, "links", None) is not None:  # the lossy, late and event-triggered links, summarized apart
         result.links.to_csv(folder / f"links-{args.grid}-{args.seed}.csv", index=False)
     claims = study.claims(result)
-    write_claims(claims, folder / "claims.json", "compare", args.seed,
+    # the study's own grid writes the ledger the book and the report read; another grid writes beside it
+    ledger = folder / ("claims.json" if args.grid == study.settings.grid else f"claims-{args.grid}.json")
+    write_claims(claims, ledger, "compare", args.seed,
                  created_by=f"mascore compare --grid {args.grid} --seed {args.seed}")
     where = args.scheduler or _where(workers)
     for task in ("team", "position", "target", "localization", "shared"):
         print(headline(summary, task).to_string())
     held = sum(c.verdict == "holds" for c in claims)
     print(f"compare: {len(table['cell'].unique())} cells, {len(table)} runs in {elapsed:.1f} s on {where}; "
-          f"{held} of {len(claims)} claims hold -> {folder}")
+          f"{held} of {len(claims)} claims hold -> {ledger}")
     return 0
 
 

@@ -151,10 +151,11 @@ def test_latex_check_fails_when_a_formula_breaks():
     assert not page_problems(inside_math)
 
 
-def test_network_and_stderr_checks_fail():
+def test_network_stderr_and_date_checks_fail():
     html, _, _ = _sample_page()
     assert any("network" in p for p in page_problems(html + '<script src="https://cdn.example.org/x.js"></script>'))
     assert any("stderr" in p for p in page_problems(html + '<div class="output stderr"><pre>Warning</pre></div>'))
+    assert any("date" in p for p in page_problems(html + '<p class="last-updated">Last updated on Nov 30, 2026.</p>'))
 
 
 def test_every_image_of_a_chapter_is_a_captioned_figure():

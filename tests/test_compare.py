@@ -11,6 +11,7 @@ import dataclasses
 import functools
 import json
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -985,3 +986,49 @@ def test_full_state_set_membership_shares_one_set_and_equals_a_set_per_agent_and
         own, shape = set_membership.predict(own, shape, model.A, model.G, model.Q, model.B, U)
         assert est.own.tobytes() == own.tobytes()
         assert est.shape.shape == (4, 4) and (shape == est.shape).all()
+
+
+def _link_rows() -> tuple[pd.DataFrame, pd.DataFrame]:
+    """An ideal-link summary of two methods, and a links summary with one lossy cell of one and one late cell of the
+    other."""
+    base = {"task": "target", "n_agents": 8, "graph": "ring", "n": 200, "nees_bound_lo": 0.9, "nees_bound_hi": 1.1,
+            "containment_mean": np.nan}
+    ideal = pd.DataFrame([{**base, "study": "target", "method": m, "dropout": 0.0, "ratio_mean": r, "ratio_lo": r - 0.01,
+                           "ratio_hi": r + 0.02, "nees_own_mean": e} for m, r, e in (("ci-L1", 1.3, 0.7),
+                                                                                     ("icf-L1", 1.1, 1.05))])
+    lossy = pd.DataFrame([{**base, "study": "loss", "method": "ci-L1", "dropout": 0.3, "ratio_mean": 1.4,
+                           "ratio_lo": 1.38, "ratio_hi": 1.43, "nees_own_mean": 1.5},
+                          {**base, "study": "latency", "method": "icf-L1", "dropout": 0.0, "ratio_mean": 1.2,
+                           "ratio_lo": 1.19, "ratio_hi": 1.22, "nees_own_mean": 0.95}])
+    return ideal, lossy
+
+
+def test_link_table_as_text_says_what_its_numbers_say():
+    """The shown table (ratios with intervals, ANEES verdicts) and the numeric one agree cell by cell."""
+    ideal, lossy = _link_rows()
+    numbers, text = compare.link_table(ideal, lossy), compare.link_table(ideal, lossy, text=True)
+    assert text.index.tolist() == numbers.index.tolist() == ["ci-L1", "icf-L1"]
+    ratios, shown = numbers["RMSE ratio"], text["RMSE ratio [95 %]"]
+    for m in ratios.index:
+        for links in ratios.columns:
+            if np.isnan(ratios.loc[m, links]):
+                assert shown.loc[m, links] == "—" and text["consistency"].loc[m, links] == "—"
+            else:
+                mean, lo, hi = map(float, re.findall(r"\d+\.\d+", shown.loc[m, links]))
+                assert lo <= mean <= hi and mean == pytest.approx(ratios.loc[m, links], abs=5e-4)
+    assert ratios.columns.tolist() == ["ideal", "loss 0.3", "late, loss 0"]
+    assert text["consistency"].loc["ci-L1"].tolist() == ["ANEES 0.70, conservative", "ANEES 1.50, overconfident", "—"]
+    assert text["consistency"].loc["icf-L1"].tolist() == ["ANEES 1.05, consistent", "—", "ANEES 0.95, consistent"]
+
+
+def test_interval_table_orders_its_cells_and_refuses_ambiguous_ones():
+    ideal, _ = _link_rows()
+    table = compare.interval_table(ideal, "graph", ["icf-L1", "absent", "ci-L1"], order=["ring", "switching"])
+    assert table.to_dict("index") == {"icf-L1": {"ring": "1.100 [1.090, 1.120]", "switching": "—"},
+                                      "ci-L1": {"ring": "1.300 [1.290, 1.320]", "switching": "—"}}
+    with pytest.raises(ValueError, match="two rows for one method and graph"):
+        compare.interval_table(pd.concat([ideal, ideal]), "graph")
+    with pytest.raises(ValueError, match="quantity must be"):
+        compare.interval_table(ideal, "graph", quantity="nees")
+    with pytest.raises(ValueError, match="columns must name a column of frame"):
+        compare.interval_table(ideal, "links")

@@ -114,3 +114,35 @@ def test_a_grid_file_gives_the_same_tables_on_two_local_dask_workers_and_seriall
         serial, parallel = (t.drop(columns=["cpu_s", "cpu_us"], errors="ignore").sort_values(keys, kind="stable")
                             .reset_index(drop=True) for t in (serial, parallel))
         pd.testing.assert_frame_equal(serial, parallel, check_exact=True)
+
+
+def test_the_full_grid_writes_its_claims_beside_the_quick_ledger(tmp_path, monkeypatch, capsys):
+    """``compare --grid full`` must not replace ``claims.json``, the quick grid's ledger that the book reads."""
+    import dataclasses
+    import json
+    import types
+
+    import mascore.compare
+    from mascore.ledger import Claim
+    from mascore.papers import compare as study_module
+
+    def run(settings, seed, **kwargs):  # the sweep itself is not under test: one cell, one claim named by its grid
+        return types.SimpleNamespace(table=pd.DataFrame({"cell": ["c0"]}), summary=pd.DataFrame(), links=None,
+                                     grid=settings.grid)
+
+    def claims(result):
+        return [Claim(f"compare/{result.grid}", "here", "A claim of one grid.", 1.0, 1.0, {"rel": 0.05})]
+
+    fake = types.SimpleNamespace(settings=study_module.STUDY.settings, run=run, claims=claims)
+    monkeypatch.setattr(study_module, "STUDY", fake)
+    monkeypatch.setattr(mascore.compare, "headline", lambda summary, task: pd.DataFrame())
+    folder = tmp_path / "compare"
+    folder.mkdir()
+    ids = {}
+    for grid in ("quick", "full"):
+        assert main(["compare", "--grid", grid, "--out", str(tmp_path), "--workers", "0"]) == 0
+        name = "claims.json" if grid == "quick" else f"claims-{grid}.json"
+        assert str(folder / name) in capsys.readouterr().out
+        ids[grid] = [c["id"] for c in json.loads((folder / name).read_text())["claims"]]
+    assert ids == {"quick": ["compare/quick"], "full": ["compare/full"]}
+    assert dataclasses.asdict(fake.settings)["grid"] == "quick"  # the study's own grid is the quick one

@@ -139,6 +139,8 @@ __all__ = [
     "grid_cells",
     "LOCALIZATION_NOT_APPLICABLE",
     "headline",
+    "interval_table",
+    "ratio_text",
     "localization_model",
     "localization_riccati",
     "node_cost",
@@ -206,8 +208,8 @@ _NAMES = {
         'SCALE_GRAPH_LIMITS', 'SHARED_DATA_MAX'
     ),
     'tables': (
-        'CPU_COLUMN', 'NEAR_BOUND', '_position_headline', 'fitted_slopes', 'headline', 'knob_table', 'link_table',
-        'position_only_kf_rmse', 'send_on_delta_table'
+        'CPU_COLUMN', 'NEAR_BOUND', '_position_headline', 'fitted_slopes', 'headline', 'interval_table', 'knob_table',
+        'link_table', 'position_only_kf_rmse', 'ratio_text', 'send_on_delta_table'
     ),
     'verdicts': (
         'CLAIMS', 'HELD_OUT', 'LINK_CLAIMS', 'WRITTEN_FROM', 'compare_claims', 'deciding_runs', 'differing_claims'

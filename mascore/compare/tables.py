@@ -109,7 +109,7 @@ def headline(summary, task: str = "team", costs=None):
             continue
         r = frame.loc[m]
         consistency = consistency_text(r)
-        row = {"method": m, "RMSE ratio [95 %]": f"{r['ratio_mean']:.3f} [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]",
+        row = {"method": m, "RMSE ratio [95 %]": ratio_text(r),
                "seeds": int(r["n"]), "consistency": consistency, "floats/step": r["floats"]}
         if cpu is not None:
             row[CPU_COLUMN] = _cpu_cell(cpu, m)
@@ -223,6 +223,84 @@ def consistency_text(row) -> str:
         word = anees_verdict(row)
         return f"ANEES {nees:.2f}, {word}" if nees < 100 else f"ANEES {nees:.1e}, {word}"
     return f"contains {inside:.3f}" if np.isfinite(inside) else "—"
+
+
+def ratio_text(row) -> str:
+    """A summary row's RMSE ratio with its 95 % paired bootstrap interval, as the tables show it.
+
+    Parameters
+    ----------
+    row : pandas.Series
+        A row of :func:`mascore.compare.summarize` (``ratio_mean``, ``ratio_lo``, ``ratio_hi``).
+
+    Returns
+    -------
+    str
+        ``"1.023 [1.011, 1.036]"``; a dash for a cell without a ratio.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore.compare.tables import ratio_text
+    >>> ratio_text(pd.Series({"ratio_mean": 1.0234, "ratio_lo": 1.0111, "ratio_hi": 1.0362}))
+    '1.023 [1.011, 1.036]'
+    """
+    if not np.isfinite(row["ratio_mean"]):
+        return "—"
+    return f"{row['ratio_mean']:.3f} [{row['ratio_lo']:.3f}, {row['ratio_hi']:.3f}]"
+
+
+def interval_table(frame, columns: str, methods=None, quantity: str = "ratio", order=None):
+    """Methods against one axis of the sweep, each cell a ratio with its interval or a consistency verdict.
+
+    The tables of the comparison beside the headline ones (another graph, drop-outs) in the same
+    terms: every RMSE ratio with its 95 % paired bootstrap interval (:func:`ratio_text`), every
+    ANEES with its verdict against its 95 % chi-square bounds (:func:`consistency_text`).
+
+    Parameters
+    ----------
+    frame : pandas.DataFrame
+        Rows of :func:`mascore.compare.summarize`, at most one per method and value of `columns`.
+    columns : str
+        The summary's column whose values become the table's columns (``"graph"``, ``"dropout"``).
+    methods : sequence of str, optional
+        The rows, in order (default: the methods of `frame`, sorted); a method without a row is left out.
+    quantity : {"ratio", "consistency"}
+        What a cell shows.
+    order : sequence, optional
+        The columns, in order (default: the values of `columns` in `frame`, sorted); a value the
+        frame does not hold is a column of dashes.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per method, one column per value of `columns`; a dash where the sweep has no cell.
+
+    Raises
+    ------
+    ValueError
+        An unknown `quantity`, `columns` not a column of `frame`, or two rows for one cell.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from mascore.compare.tables import interval_table
+    >>> s = pd.DataFrame({"method": ["ci-L1", "ci-L1"], "graph": ["ring", "switching"], "ratio_mean": [1.2, 1.5],
+    ...                   "ratio_lo": [1.1, 1.4], "ratio_hi": [1.3, 1.6]})
+    >>> interval_table(s, "graph").loc["ci-L1"].tolist()
+    ['1.200 [1.100, 1.300]', '1.500 [1.400, 1.600]']
+    """
+    if quantity not in ("ratio", "consistency"):
+        raise ValueError(f"quantity must be 'ratio' or 'consistency'; got {quantity!r}")
+    if columns not in frame:
+        raise ValueError(f"columns must name a column of frame ({list(frame.columns)}); got {columns!r}")
+    if frame.duplicated(["method", columns]).any():
+        raise ValueError(f"frame has two rows for one method and {columns}: select one cell each (task, N, study)")
+    text = ratio_text if quantity == "ratio" else consistency_text
+    cells = frame.assign(cell=frame.apply(text, axis=1) if len(frame) else "")
+    out = cells.pivot(index="method", columns=columns, values="cell")
+    shown = sorted(out.index) if methods is None else [m for m in methods if m in out.index]
+    return out.reindex(index=shown, columns=out.columns if order is None else list(order)).fillna("—")
 
 
 def anees_verdict(row) -> str:
@@ -353,7 +431,7 @@ def _consistency_verdict(r, confidence: float | None) -> str:
     return anees_verdict(r) if np.isfinite(r["nees_own_mean"]) else "—"
 
 
-def link_table(summary, links, task: str = "target"):
+def link_table(summary, links, task: str = "target", text: bool = False):
     """Accuracy and consistency of each method over lossy and late links, beside ideal links (N = 8, ring).
 
     Parameters
@@ -364,6 +442,10 @@ def link_table(summary, links, task: str = "target"):
         Output of :func:`link_summary`, with the studies ``loss`` and ``latency`` (:data:`LINK_STUDIES`).
     task : {"target", "localization"}
         The scenario.
+    text : bool
+        Cells as the book shows them (:func:`interval_table`): each ratio with its 95 % paired
+        bootstrap interval (``RMSE ratio [95 %]``), each ANEES with its verdict against its 95 %
+        chi-square bounds (``consistency``), a dash where a cell was not run. Default: the means.
 
     Returns
     -------
@@ -401,8 +483,12 @@ def link_table(summary, links, task: str = "target"):
     rows = pd.concat([ideal, lossy, one_way, late])
     order = [links for links in dict.fromkeys(rows["links"])]
     methods = [m for m in target_methods(task) if m in set(lossy["method"]) | set(late["method"]) | set(one_way["method"])]
-    out = {name: rows.pivot_table(index="method", columns="links", values=col).reindex(index=methods, columns=order)
-           for name, col in (("RMSE ratio", "ratio_mean"), ("NEES/dof", "nees_own_mean"))}
+    if text:
+        out = {name: interval_table(rows, "links", methods, quantity, order)
+               for name, quantity in (("RMSE ratio [95 %]", "ratio"), ("consistency", "consistency"))}
+    else:
+        out = {name: rows.pivot_table(index="method", columns="links", values=col).reindex(index=methods, columns=order)
+               for name, col in (("RMSE ratio", "ratio_mean"), ("NEES/dof", "nees_own_mean"))}
     return pd.concat(out, axis=1)
 
 
