@@ -1004,21 +1004,20 @@ def _link_rows() -> tuple[pd.DataFrame, pd.DataFrame]:
 
 
 def test_link_table_as_text_says_what_its_numbers_say():
-    """The shown table (ratios with intervals, ANEES verdicts) and the numeric one agree cell by cell."""
+    """The shown table (ratios with intervals, ANEES verdicts, one row per cell run) and the numeric one agree."""
     ideal, lossy = _link_rows()
     numbers, text = compare.link_table(ideal, lossy), compare.link_table(ideal, lossy, text=True)
-    assert text.index.tolist() == numbers.index.tolist() == ["ci-L1", "icf-L1"]
-    ratios, shown = numbers["RMSE ratio"], text["RMSE ratio [95 %]"]
-    for m in ratios.index:
-        for links in ratios.columns:
-            if np.isnan(ratios.loc[m, links]):
-                assert shown.loc[m, links] == "—" and text["consistency"].loc[m, links] == "—"
-            else:
-                mean, lo, hi = map(float, re.findall(r"\d+\.\d+", shown.loc[m, links]))
-                assert lo <= mean <= hi and mean == pytest.approx(ratios.loc[m, links], abs=5e-4)
-    assert ratios.columns.tolist() == ["ideal", "loss 0.3", "late, loss 0"]
-    assert text["consistency"].loc["ci-L1"].tolist() == ["ANEES 0.70, conservative", "ANEES 1.50, overconfident", "—"]
-    assert text["consistency"].loc["icf-L1"].tolist() == ["ANEES 1.05, consistent", "—", "ANEES 0.95, consistent"]
+    assert numbers.index.tolist() == ["ci-L1", "icf-L1"]
+    assert numbers["RMSE ratio"].columns.tolist() == ["ideal", "loss 0.3", "late, loss 0"]
+    assert text.index.tolist() == [("ci-L1", "ideal"), ("ci-L1", "loss 0.3"), ("icf-L1", "ideal"),
+                                   ("icf-L1", "late, loss 0")]  # table order; the cells not run left out
+    for (m, links), row in text.iterrows():
+        mean, lo, hi = map(float, re.findall(r"\d+\.\d+", row["RMSE ratio [95 %]"]))
+        assert lo <= mean <= hi and mean == pytest.approx(numbers.loc[m, ("RMSE ratio", links)], abs=5e-4)
+        anees = float(re.search(r"ANEES (\d+\.\d+)", row["consistency"]).group(1))
+        assert anees == pytest.approx(numbers.loc[m, ("NEES/dof", links)], abs=5e-3)
+    assert text["consistency"].tolist() == ["ANEES 0.70, conservative", "ANEES 1.50, overconfident",
+                                            "ANEES 1.05, consistent", "ANEES 0.95, consistent"]
 
 
 def test_interval_table_orders_its_cells_and_refuses_ambiguous_ones():

@@ -255,7 +255,7 @@ def interval_table(frame, columns: str, methods=None, quantity: str = "ratio", o
 
     The tables of the comparison beside the headline ones (another graph, drop-outs) in the same
     terms: every RMSE ratio with its 95 % paired bootstrap interval (:func:`ratio_text`), every
-    ANEES with its verdict against its 95 % chi-square bounds (:func:`consistency_text`).
+    ANEES with its verdict against its 95 % chi-square bounds (``consistency_text``).
 
     Parameters
     ----------
@@ -300,7 +300,7 @@ def interval_table(frame, columns: str, methods=None, quantity: str = "ratio", o
     cells = frame.assign(cell=frame.apply(text, axis=1) if len(frame) else "")
     out = cells.pivot(index="method", columns=columns, values="cell")
     shown = sorted(out.index) if methods is None else [m for m in methods if m in out.index]
-    return out.reindex(index=shown, columns=out.columns if order is None else list(order)).fillna("—")
+    return out.reindex(index=shown, columns=out.columns if order is None else list(order)).astype(object).fillna("—")
 
 
 def anees_verdict(row) -> str:
@@ -443,9 +443,10 @@ def link_table(summary, links, task: str = "target", text: bool = False):
     task : {"target", "localization"}
         The scenario.
     text : bool
-        Cells as the book shows them (:func:`interval_table`): each ratio with its 95 % paired
-        bootstrap interval (``RMSE ratio [95 %]``), each ANEES with its verdict against its 95 %
-        chi-square bounds (``consistency``), a dash where a cell was not run. Default: the means.
+        The table as the book shows it: one row per method and links that were run (index
+        ``(method, links)``), with the ratio and its 95 % paired bootstrap interval (``RMSE ratio
+        [95 %]``, :func:`ratio_text`) and the ANEES with its verdict against its 95 % chi-square
+        bounds (``consistency``, or the containment of a set-valued filter). Default: the means.
 
     Returns
     -------
@@ -455,6 +456,7 @@ def link_table(summary, links, task: str = "target", text: bool = False):
         own study), each packet loss (``loss p``: a link lost in both directions; ``one-way loss p``:
         each message lost alone, study ``loss-direction``), and one-step latency at each loss the
         summary holds; NaN where a cell was not run (the quick grid runs loss for a few methods only).
+        With `text`, the long table described there.
 
     Examples
     --------
@@ -484,11 +486,14 @@ def link_table(summary, links, task: str = "target", text: bool = False):
     order = [links for links in dict.fromkeys(rows["links"])]
     methods = [m for m in target_methods(task) if m in set(lossy["method"]) | set(late["method"]) | set(one_way["method"])]
     if text:
-        out = {name: interval_table(rows, "links", methods, quantity, order)
-               for name, quantity in (("RMSE ratio [95 %]", "ratio"), ("consistency", "consistency"))}
-    else:
-        out = {name: rows.pivot_table(index="method", columns="links", values=col).reindex(index=methods, columns=order)
-               for name, col in (("RMSE ratio", "ratio_mean"), ("NEES/dof", "nees_own_mean"))}
+        rows = rows[rows["method"].isin(methods)]
+        place = {m: k for k, m in enumerate(methods)}, {links: k for k, links in enumerate(order)}
+        rows = rows.iloc[np.lexsort((rows["links"].map(place[1]), rows["method"].map(place[0])))]
+        return pd.DataFrame({"RMSE ratio [95 %]": [ratio_text(r) for _, r in rows.iterrows()],
+                             "consistency": [consistency_text(r) for _, r in rows.iterrows()]},
+                            index=pd.MultiIndex.from_frame(rows[["method", "links"]]))
+    out = {name: rows.pivot_table(index="method", columns="links", values=col).reindex(index=methods, columns=order)
+           for name, col in (("RMSE ratio", "ratio_mean"), ("NEES/dof", "nees_own_mean"))}
     return pd.concat(out, axis=1)
 
 
