@@ -202,7 +202,7 @@ def machine() -> dict:
     cpu = cpu_model()
     return {"date": time.strftime("%Y-%m-%d"), "cpu": cpu, "cores": os.cpu_count(),
             "python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
-            "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "unset")}
+            "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS") or os.environ.get("OMP_NUM_THREADS") or "unset"}
 
 
 def write_snapshot(table: pd.DataFrame) -> None:
