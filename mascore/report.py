@@ -368,9 +368,9 @@ def reading_paths(records: Sequence[dict], best: dict[str, tuple[str, float]] | 
         closest = "; ".join(f"{name}: {method_words(m)}, RMSE {ratio:.2f} times the centralized filter's"
                             for name, (m, ratio) in best.items())
         lines.append(f"- **Which method for my team?** It depends on what the team estimates. Closest to the "
-                     f"centralized filter on a ring of 8 agents, among the methods that do not overstate their "
-                     f"accuracy: {closest} "
-                     f"({{ref}}`the comparison's decision table <decision-table>`).")
+                     f"centralized filter on a ring of 8 agents, among the methods whose ANEES is not above its 95 % "
+                     f"chi-square bound: {closest}. Larger teams and other graphs can change the answer "
+                     f"({{ref}}`the comparison's decision table <decision-table>` and its scenario pages).")
     else:
         lines.append("- **Which method for my team?** The comparison puts every method on the same problems "
                      "({doc}`comparing the methods </notebooks/comparing_methods>`).")
