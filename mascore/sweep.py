@@ -454,8 +454,11 @@ def dask_client(workers: int, scheduler: str | None = None) -> Iterator[Any]:
         workers = check_positive_int(workers, "workers")
         with dask.config.set(_LOCAL_CLUSTER_CONFIG):
             try:
+                # no dashboard; the scheduler's HTTP endpoint on a free local port (not 8787, which another
+                # cluster on the machine may hold)
                 cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                                   dashboard_address=None, silence_logs=40)
+                                                   dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False},
+                                                   silence_logs=40)
             except RuntimeError as exc:
                 if not _unguarded_main(exc):
                     raise
