@@ -1068,7 +1068,8 @@ FIGURES = (
         "and (f) its statistical error $\\sqrt{\\operatorname{tr}\\Sigma_{1,p_j}}$. Look for: (d) follows (c) "
         "closely; while an agent is in range, its statistical error (f) is small (on average {{sigma_in:.1f}} m "
         "after the first {{transient:.0f}} s); out of range it rises to a bounded plateau (on average "
-        "{{sigma_out:.1f}} m), and the actual error (e) swings well above that plateau (up to {{max_out:.0f}} m); "
+        "{{sigma_out:.1f}} m), and the actual error (e) swings well above that plateau (up to {{max_out:.0f}} m after "
+        "the first {{transient:.0f}} s); "
         "both drop at once when the agent comes back.",
         lambda result: plot_fig4(result.fig4, result.settings),
         lambda result: _fig4_caption_values(result),
