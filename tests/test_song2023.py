@@ -202,8 +202,9 @@ def test_published_claims(published):
     documented mismatch."""
     _, claims = published("song2023")
     by_id = {c.id: c for c in claims if c.study == "rendezvous"}
-    for key in ("fig2-error-matches-covariance", "nees-rendezvous", "nees-rendezvous-measurement-based", "theorem1-lyapunov-decrease",
-                "centralized-bound", "fig3-velocity-std", "fig3-position-std-remark6", "fig3-velocity-std-remark6"):
+    for key in ("fig2-error-matches-covariance", "nees-rendezvous", "nees-rendezvous-measurement-based",
+                "theorem1-lyapunov-decrease", "centralized-bound", "fig3-velocity-std", "fig3-position-std-remark6",
+                "fig3-velocity-std-remark6"):
         assert by_id[f"song2023/{key}"].verdict == "holds", key
     # documented mismatch: on the neighbours' estimates the position spreads of the two laws are
     # statistically indistinguishable; Remark 6's reading gives the paper's ordering
