@@ -33,7 +33,7 @@ _CLAIM_ID = re.compile(r"[a-z][a-z0-9_]*/\S+")
 
 _RECORD_KEYS = ("id", "where", "statement", "paper_value", "value", "tolerance", "verdict", "note")
 _OPTIONAL_KEYS = ("unit", "labels", "rule", "band_reason", "study", "why", "written_from", "decided_on", "post_hoc",
-                  "undecided")
+                  "own_check", "undecided")
 
 
 @dataclass(frozen=True)
@@ -82,6 +82,10 @@ class Claim:
         The data its verdict is computed on (held-out seed blocks, or why not).
     post_hoc : str
         For a claim changed after its data were seen: what was changed, and from what.
+    own_check : str
+        For a check of our own that the paper does not state (a reference bound, a filter's
+        consistency, an explanation of a printed number, a result beyond the paper's setting): what it
+        adds. The report counts these apart from the paper's claims.
     holds : bool, optional
         The decided condition of a qualitative claim (use :meth:`qualitative`).
     undecided : bool
@@ -113,6 +117,7 @@ class Claim:
     written_from: str = ""
     decided_on: str = ""
     post_hoc: str = ""
+    own_check: str = ""
     holds: bool | None = None
     undecided: bool = False
     verdict: str = field(default="", init=False)
@@ -121,7 +126,7 @@ class Claim:
         if not isinstance(self.id, str) or not _CLAIM_ID.fullmatch(self.id):
             raise ValueError(f"claim id must look like 'PAPER/short-name' with PAPER a ledger's key; got {self.id!r}")
         for name in ("where", "statement", "note", "unit", "rule", "band_reason", "study", "why", "written_from",
-                     "decided_on", "post_hoc"):
+                     "decided_on", "post_hoc", "own_check"):
             if not isinstance(getattr(self, name), str):
                 raise TypeError(f"{self.id}: {name} must be a string; got {type(getattr(self, name)).__name__}")
         if self.tolerance is not None and not isinstance(self.tolerance, dict):
@@ -156,7 +161,7 @@ class Claim:
     def qualitative(
         cls, id: str, where: str, statement: str, value: Any, holds: bool | np.bool_ | None, note: str = "",
         *, rule: str = "", unit: str = "", why: str = "", written_from: str = "", decided_on: str = "",
-        post_hoc: str = "",
+        post_hoc: str = "", own_check: str = "",
     ) -> Claim:
         """A claim without a published number, decided by a measured condition.
 
@@ -184,6 +189,8 @@ class Claim:
         written_from, decided_on, post_hoc : str
             The data the claim was written from, the data that decide it, and what was changed
             after the data were seen (see the class).
+        own_check : str
+            For a check of our own that the paper does not state: what it adds (see the class).
 
         Returns
         -------
@@ -198,7 +205,7 @@ class Claim:
         'holds'
         """
         return cls(id, where, statement, None, value, None, note, unit=unit, rule=rule, why=why,
-                   written_from=written_from, decided_on=decided_on, post_hoc=post_hoc,
+                   written_from=written_from, decided_on=decided_on, post_hoc=post_hoc, own_check=own_check,
                    holds=bool(holds) if holds is not None else False, undecided=holds is None)
 
     @property

@@ -473,7 +473,8 @@ def ledger_summary(claims: Iterable[Claim | dict], why: Mapping[str, str] | None
     records = [c.to_dict() if isinstance(c, Claim) else dict(c) for c in claims]
     why = dict(why or {})
     numbers = [r for r in records if r.get("paper_value") is not None]
-    statements = [r for r in records if r.get("paper_value") is None]
+    statements = [r for r in records if r.get("paper_value") is None and not r.get("own_check")]
+    own = [r for r in records if r.get("paper_value") is None and r.get("own_check")]
 
     def counted(rs: list[dict], verdicts: tuple[tuple[str, str, str], ...]) -> str:
         parts = []
@@ -505,6 +506,12 @@ def ledger_summary(claims: Iterable[Claim | dict], why: Mapping[str, str] | None
         lead = "Of the" if numbers else "The paper prints no number we check; of its"
         sentences.append(f"{lead} {n} statements without a number, "
                          + counted(statements, (("holds", "holds", "hold"), ("fails", "fails", "fail"))) + ".")
+    if own:
+        sentences.append(f"Beside {'them' if numbers or statements else 'the paper'}, "
+                         + ("one check of our own, which " + own[0]["verdict"] if len(own) == 1 else
+                            f"{len(own)} checks of our own: "
+                            + counted(own, (("holds", "holds", "hold"), ("fails", "fails", "fail"))))
+                         + ".")
     lines = [" ".join(sentences)]
     missed = [r for r in records if r["verdict"] not in ("reproduces", "holds")]
     if missed:

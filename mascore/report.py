@@ -81,6 +81,9 @@ def verdict_summary(records: Sequence[dict]):
         table.loc[r["paper"], r["verdict"]] += 1
     table = table.loc[:, table.sum() > 0]
     table["total"] = table.sum(axis=1)
+    own = [sum(bool(r.get("own_check")) for r in records if r["paper"] == p) for p in papers]
+    if any(own):  # the checks of our own that the papers do not state, counted in the verdicts beside them
+        table["of them, our own checks"] = own
     table.loc["all papers"] = table.sum()
     table.index = [paper_registry(p).citation if p in papers else p for p in table.index]
     table.columns = [verdict_words(c) if c in VERDICTS else c for c in table.columns]
@@ -352,6 +355,8 @@ def reading_paths(records: Sequence[dict], best: dict[str, tuple[str, float]] | 
     - **Did it reproduce?** All 1 published claims reproduce or hold
     """
     _check_records(records, ("paper", "verdict"))
+    own = [r for r in records if r.get("own_check")]  # checks of our own, which the papers do not state
+    records = [r for r in records if not r.get("own_check")]
     good = sum(r["verdict"] in ("reproduces", "holds") for r in records)
     near = sum(r["verdict"] == "approximately" for r in records)
     open_ = sum(bool(r.get("undecided")) for r in records)  # failed because their data cannot decide them
@@ -361,7 +366,12 @@ def reading_paths(records: Sequence[dict], best: dict[str, tuple[str, float]] | 
     else:
         undecided = f", {open_} not shown (their intervals cross the edge of their bands)" if open_ else ""
         verdict = (f"{good} of {len(records)} published claims reproduce or hold, {near} approximately{undecided}, "
-                   f"{bad} do not reproduce or fail; the report says which and why")
+                   f"{bad} do not reproduce or fail")
+    if own:
+        verdict += (f"; beside them, {sum(r['verdict'] == 'holds' for r in own)} of {len(own)} checks of our own "
+                    "hold")
+    if good < len(records):
+        verdict += "; the report says which and why"
     lines = [f"- **Did it reproduce?** {verdict} "
              f"({{doc}}`the reproduction report </notebooks/reproduction_report>`)."]
     if best:

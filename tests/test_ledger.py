@@ -252,3 +252,22 @@ def test_the_ledger_marks_claims_not_decided_on_held_out_data_or_changed_after_i
     assert "*decided on the blocks it was written from*" in rows[1]
     assert "*partly decided on the blocks it was written from*" in rows[2]
     assert "*changed after the data were seen*" in rows[3] and "written from" not in rows[3]
+
+
+def test_checks_of_our_own_are_counted_apart_from_the_papers_claims():
+    """A claim the paper does not state (own_check) keeps its verdict but is not counted as the paper's."""
+    from mascore.ledger import ledger_summary
+    from mascore.report import reading_paths, verdict_summary
+
+    paper = Claim("ren2005/a", "Fig. 1", "A number.", 2.0, 2.01, {"rel": 0.05})
+    ours = Claim.qualitative("ren2005/b", "beyond the paper", "A check of ours.", {"gap": 0.0}, True,
+                             rule="gap >= 0", own_check="a reference the paper does not give")
+    assert Claim.from_dict(ours.to_dict()) == ours and ours.to_dict()["own_check"].startswith("a reference")
+    assert "own_check" not in paper.to_dict()
+    text = ledger_summary([paper, ours]).splitlines()[0]
+    assert text == "The one published number checked here reproduces. Beside them, one check of our own, which holds."
+    records = [c.to_dict() | {"paper": "ren2005"} for c in (paper, ours)]
+    assert "All 1 published claims reproduce or hold; beside them, 1 of 1 checks of our own hold" in \
+        str(reading_paths(records))
+    table = verdict_summary(records)
+    assert table.loc["all papers", "total"] == 2 and table.loc["all papers", "of them, our own checks"] == 1

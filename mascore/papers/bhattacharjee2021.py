@@ -1299,7 +1299,8 @@ def _twins_claim(result: SetMembershipResult) -> Claim:
         "same input ellipsoid (Clarabel's tolerances are 10⁻⁸). Run separately in closed loop the two paths drift "
         f"apart by up to {format_number(drift, 2)} in trace: the trace is flat at its optimum, so a solver tolerance "
         "eps moves the optimal Minkowski-sum parameter, and the shape, by O(sqrt(eps)).",
-        rule="largest relative trace difference per step ≤ 10⁻⁶ (corrections and predictions)")
+        rule="largest relative trace difference per step ≤ 10⁻⁶ (corrections and predictions)",
+        own_check="our closed forms of the paper's SDPs, checked against the SDPs")
 
 
 def claims(result: SetMembershipResult) -> list[Claim]:

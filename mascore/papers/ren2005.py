@@ -1247,7 +1247,8 @@ def _theorem_claims(result: KalmanConsensusResult) -> list[Claim]:
         "Not a theorem of the paper (its condition is sufficient); we check the example, Fig. 3(b) alternating "
         "with Fig. 3(a) stripped of its bridge A3 → A6: each group agrees internally, the two groups keep "
         "different values.\n\n" + shared,
-        rule="no union has a spanning tree, and spread ratio > 0.1 in both time bases")
+        rule="no union has a spanning tree, and spread ratio > 0.1 in both time bases",
+        own_check="the converse of the paper's sufficient condition, on its own example")
     return [thm32, thm39, converse]
 
 
@@ -1272,7 +1273,8 @@ def _noise_claim(result: KalmanConsensusResult) -> Claim:
         "the gains decay like 1/k and the disagreement keeps shrinking like 1/√k: consensus is then reached "
         "in mean square, slowly.",
         rule=f"floor (Ω = {big}) > 10⁻² h and > floor (Ω = {small}); "
-             "abs(slope) < 0.1 for both Ω; slope (Q = 0) < -0.3")
+             "abs(slope) < 0.1 for both Ω; slope (Q = 0) < -0.3",
+        own_check="measured on the paper's equations; the paper does not say what noise does to consensus")
 
 
 def _beyond_claims(result: KalmanConsensusResult) -> list[Claim]:
@@ -1291,7 +1293,7 @@ def _beyond_claims(result: KalmanConsensusResult) -> list[Claim]:
         "them). The bias shrinks when Q = 0 and nearly vanishes when also Ω → 0 and the self term is dropped; "
         "a schedule-dependent scatter remains. With Q = 0 the run has not finished agreeing after "
         f"{s.n_steps} steps (the largest final spread in the table of the variants of the scheme).\n\n" + _BEYOND,
-        rule="abs(bias) > 5 standard errors", unit="h")
+        rule="abs(bias) > 5 standard errors", unit="h", own_check="a result beyond the paper, on its Fig. 1 data")
     oc = result.overconfidence
     ratio = {k: float(np.mean(v["actual"][-1] / v["believed"][-1])) for k, v in oc["variants"].items()}
     paper_v, ideal_v = oc["variants"]["paper"], oc["variants"]["ideal"]
@@ -1313,7 +1315,8 @@ def _beyond_claims(result: KalmanConsensusResult) -> list[Claim]:
         "of the D[k] of eq. (8). In the ideal variant the agreed value is nearly the fused one, but P_i keeps "
         "shrinking far below the central-fusion variance "
         f"{format_number(oc['fused_variance'])} h², which no estimate from these data can beat.\n\n" + _BEYOND,
-        rule="actual / believed > 1.2 (paper) and > 100 (ideal variant)")
+        rule="actual / believed > 1.2 (paper) and > 100 (ideal variant)",
+        own_check="a result beyond the paper: how its covariances compare with the actual errors")
     return [bias, overconfident]
 
 

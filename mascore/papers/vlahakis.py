@@ -1006,7 +1006,8 @@ def _gain_claims(r: ObserverResult) -> list[Claim]:
         f"(its poles are {_poles(r, mixed.L)}). Eqs. (29)-(30) state the consistent convention, so this "
         "explains the printed number without reproducing the equations: the gain claim above keeps the "
         "as-printed value.",
-        rule="largest difference from the printed L ≤ 5 × 10⁻⁵ (the printed number's rounding)")
+        rule="largest difference from the printed L ≤ 5 × 10⁻⁵ (the printed number's rounding)",
+        own_check="our explanation of a printed number that eqs. (29)-(30) do not give")
     return [gain, mixed_claim]
 
 
@@ -1098,7 +1099,8 @@ def _interval_claim(r: ObserverResult) -> Claim:
         "them: every Φ of the interval is as optimal, the solver's pick inside it (ours: the smallest |Y2|, "
         "about 0) is arbitrary, and the printed J is not N trace(Ŝ).",
         rule="optimal Φ low ≤ printed Φ ≤ optimal Φ high for both Q2, and Γ(printed Φ) = N trace(Ŝ) "
-             "within 10⁻⁶ (relative)")
+             "within 10⁻⁶ (relative)",
+        own_check="our finding about the printed Φ: the paper does not state that its program leaves Φ free")
 
 
 def _behaviour_claims(r: ObserverResult) -> list[Claim]:
