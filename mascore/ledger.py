@@ -387,8 +387,11 @@ def _verdict_text(record: dict) -> str:
 
 
 def _provenance_mark(record: dict) -> str:
-    """What a claim's record says of the data it was decided on, when that is not data held out from its writing."""
+    """What a claim's record says of its provenance: a check of our own, or data it was decided on that were not
+    held out from its writing."""
     marks = ["*changed after the data were seen*"] if record.get("post_hoc") else []
+    if record.get("own_check"):
+        marks.append("*a check of our own, not the paper's*")
     written, decided = record.get("written_from") or "", record.get("decided_on") or ""
     if written and decided.startswith(written):
         marks.append("*decided on the blocks it was written from*")

@@ -269,5 +269,6 @@ def test_checks_of_our_own_are_counted_apart_from_the_papers_claims():
     records = [c.to_dict() | {"paper": "ren2005"} for c in (paper, ours)]
     assert "All 1 published claims reproduce or hold; beside them, 1 of 1 checks of our own hold" in \
         str(reading_paths(records))
+    assert "a check of our own" in str(ledger.show_claims([ours])) and "our own" not in str(ledger.show_claims([paper]))
     table = verdict_summary(records)
     assert table.loc["all papers", "total"] == 2 and table.loc["all papers", "of them, our own checks"] == 1
