@@ -475,9 +475,9 @@ def ledger_summary(claims: Iterable[Claim | dict], why: Mapping[str, str] | None
     """
     records = [c.to_dict() if isinstance(c, Claim) else dict(c) for c in claims]
     why = dict(why or {})
-    numbers = [r for r in records if r.get("paper_value") is not None]
+    own = [r for r in records if r.get("own_check")]  # checks of our own, counted apart from the paper's claims
+    numbers = [r for r in records if r.get("paper_value") is not None and not r.get("own_check")]
     statements = [r for r in records if r.get("paper_value") is None and not r.get("own_check")]
-    own = [r for r in records if r.get("paper_value") is None and r.get("own_check")]
 
     def counted(rs: list[dict], verdicts: tuple[tuple[str, str, str], ...]) -> str:
         parts = []
@@ -511,9 +511,12 @@ def ledger_summary(claims: Iterable[Claim | dict], why: Mapping[str, str] | None
                          + counted(statements, (("holds", "holds", "hold"), ("fails", "fails", "fail"))) + ".")
     if own:
         sentences.append(f"Beside {'them' if numbers or statements else 'the paper'}, "
-                         + ("one check of our own, which " + own[0]["verdict"] if len(own) == 1 else
+                         + ("one check of our own, which " + verdict_words(own[0]["verdict"]) if len(own) == 1 else
                             f"{len(own)} checks of our own: "
-                            + counted(own, (("holds", "holds", "hold"), ("fails", "fails", "fail"))))
+                            + counted(own, (("reproduces", "reproduces", "reproduce"), ("holds", "holds", "hold"),
+                                            ("approximately", "approximately", "approximately"),
+                                            ("does-not-reproduce", "does not", "do not"),
+                                            ("fails", "fails", "fail"))))
                          + ".")
     lines = [" ".join(sentences)]
     missed = [r for r in records if r["verdict"] not in ("reproduces", "holds")]

@@ -194,8 +194,7 @@ class OwnStateForwardingFilter(Frozen):
         Returns
         -------
         own : dict
-            Its prior ``x``, ``P``, its input ``u``, its own measurement ``z`` and its ``index`` among
-            the senders of measurements of x_i.
+            Its prior ``x``, ``P``, its input ``u`` and its own measurement ``z``.
         messages : tuple
             One round: the neighbours' delivered measurements ``z_ji`` of x_i, ``(c_i - 1, m)``.
 
@@ -213,8 +212,8 @@ class OwnStateForwardingFilter(Frozen):
         x, P, Z, S, u = _step_inputs(self, False, x=x, P=P, Z=Z, S=S, u=u)
         i = agent_index(i, x.shape[0])
         senders = np.flatnonzero(S[:, i])  # i and the neighbours whose z_ji reached it, ascending
-        return ({"x": x[i].copy(), "P": P[i].copy(), "u": u[i].copy(), "index": int(np.flatnonzero(senders == i)[0]),
-                 "z": Z[i, i].copy()}, (Z[senders[senders != i], i].copy(),))
+        return ({"x": x[i].copy(), "P": P[i].copy(), "u": u[i].copy(), "z": Z[i, i].copy()},
+                (Z[senders[senders != i], i].copy(),))
 
     def agent_step(self, i: int, own: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
         # correction with its own and the received measurements of x_i, then prediction: x_i (n,), P_i (n, n)

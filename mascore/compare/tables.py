@@ -489,8 +489,8 @@ def link_table(summary, links, task: str = "target", text: bool = False):
         rows = rows[rows["method"].isin(methods)]
         place = {m: k for k, m in enumerate(methods)}, {links: k for k, links in enumerate(order)}
         rows = rows.iloc[np.lexsort((rows["links"].map(place[1]), rows["method"].map(place[0])))]
-        return pd.DataFrame({"RMSE ratio [95 %]": [ratio_text(r) for _, r in rows.iterrows()],
-                             "consistency": [consistency_text(r) for _, r in rows.iterrows()]},
+        return pd.DataFrame({"RMSE ratio [95 %]": rows.apply(ratio_text, axis=1).to_numpy(),
+                             "consistency": rows.apply(consistency_text, axis=1).to_numpy()},
                             index=pd.MultiIndex.from_frame(rows[["method", "links"]]))
     out = {name: rows.pivot_table(index="method", columns="links", values=col).reindex(index=methods, columns=order)
            for name, col in (("RMSE ratio", "ratio_mean"), ("NEES/dof", "nees_own_mean"))}
