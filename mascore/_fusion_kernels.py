@@ -180,13 +180,18 @@ def consensus_agent(pairs: list, rounds: Sequence, w_self: float, w_nb: np.ndarr
 def information_pair(x, P):
     """``(P^{-1}, P^{-1} x)``."""
     Om = symmetric_part(np.linalg.inv(P))
-    return Om, (Om @ x[..., None])[..., 0]
+    return Om, _times_vectors(Om, x)
 
 
 def from_information(Om, q):
     """``(Om^{-1} q, Om^{-1})``."""
     P = symmetric_part(np.linalg.inv(Om))
-    return (P @ q[..., None])[..., 0], P
+    return _times_vectors(P, q), P
+
+
+def _times_vectors(M, v):
+    """``M v`` for one vector (one agent's step) or stacks ``(..., n, n)`` times ``(..., n)``."""
+    return M @ v if v.ndim == 1 else (M @ v[..., None])[..., 0]
 
 
 def psd_factor(M: np.ndarray, cholesky_first: bool = False) -> np.ndarray:

@@ -530,7 +530,7 @@ def finite_result(
 
 def symmetric_part(M: np.ndarray) -> np.ndarray:
     """``(M + M^T) / 2`` over the last two axes (a plain kernel: no checks)."""
-    return 0.5 * (M + np.swapaxes(M, -1, -2))
+    return 0.5 * (M + M.swapaxes(-1, -2))
 
 
 def frozen_copy(arr: ArrayLike, dtype: type = float) -> np.ndarray:

@@ -375,7 +375,8 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         Om, qv = information_pair(xp, Pp)
         iv = own["HtRinv"][own["index"]] @ own["z"]
         cur = [(Om, qv), (own["I"], iv)] if self.novelty_weight != 1.0 else [(Om + own["I"], qv + iv)]
-        cur = consensus_agent(cur, messages, W[i, i], W[i, own["nbrs"]])
+        if messages:  # L rounds (none at L = 0: each agent's local filter)
+            cur = consensus_agent(cur, messages, W[i, i], W[i, own["nbrs"]])
         if self.novelty_weight != 1.0:
             return from_information(cur[0][0] + self.novelty_weight * cur[1][0], cur[0][1] + self.novelty_weight * cur[1][1])
         return from_information(*cur[0])
