@@ -8,6 +8,7 @@ import pytest
 
 import mascore
 from mascore import agent_cost, compare, estimation, fusion
+from mascore.compare.benchmark import check_cells
 
 TOY_FILTER = '''
 """A toy filter: each agent's own Kalman filter, written from scratch, with its spec."""
@@ -106,6 +107,27 @@ def test_a_new_filter_is_one_class_and_one_spec_in_one_module(toy_module):
     assert row.name == "toy-own: process noise inflation" and row.task == "target" and row.recipe == ("1",)
     assert row.settings == (("1", "target", toy_module), ("2", "target", knob))
     assert knob in compare.knob_variants() and knob not in agent_cost.AGENT_METHODS["target"]
+
+
+def test_a_new_filter_on_the_protocol_alone_runs_over_lossy_links_and_is_kept_from_late_ones(toy_module):
+    # loss: the method's own filter rebuilt on each step's delivered graph, whatever its class
+    cell = {"study": "loss", "task": "target", "method": toy_module, "n_agents": 8, "graph": "ring",
+            "noise": "gaussian", "dropout": 0.3, "q_scale": 1.0, "block": 0}
+    assert np.isfinite([r["rmse_own"] for r in compare.run_cell(cell)]).all()
+    # latency: fusion_links takes a network filter's messages late; the toy's are not modelled, and it says why
+    assert toy_module not in compare.LATENCY_METHODS
+    assert "no treatment of its late messages" in compare.LATENCY_NOT_MODELLED[toy_module]
+    with pytest.raises(ValueError, match="no model of late messages"):
+        compare.latency_model(toy_module)
+    with pytest.raises(ValueError, match="latency: method 'toy-own'"):
+        compare.simulate_target(toy_module, 8, 0, runs=2, latency=1)
+    # both grids: the toy's cells where its spec and its filter allow, so every cell passes the cell check
+    for name in ("quick", "full"):
+        cells = compare.grid_cells(name)
+        assert len(check_cells(cells)) == len(cells)
+        assert not any(c["method"] == toy_module and c.get("study") == "latency" for c in cells)
+        assert not any(c["method"] == toy_module and c["task"] == "localization" for c in cells)
+        assert any(c["method"] == toy_module and c.get("study") == "loss" for c in cells) == (name == "full")
 
 
 TOY_TEAM = '''

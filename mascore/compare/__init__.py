@@ -102,7 +102,9 @@ __all__ = [
     "DIRECTION_LOSS_METHODS",
     "LATENCY_METHODS",
     "LATENCY_NOT_MODELLED",
+    "latency_methods",
     "latency_model",
+    "latency_not_modelled",
     "LINK_STUDIES",
     "LOSS_METHODS",
     "SEND_ON_DELTA_METHODS",
@@ -199,7 +201,8 @@ _NAMES = {
         'DIRECTION_LOSS_METHODS', 'LATENCY_METHODS', 'LATENCY_NOT_MODELLED', 'LINK_STUDIES',
         'LOCALIZATION_NOT_APPLICABLE', 'LOSS_METHODS',
         'SEND_ON_DELTA_METHODS', 'TARGET_METHODS', 'TARGET_NOT_APPLICABLE', '_localization_switching',
-        'latency_model', 'link_options', 'localization_model', 'localization_riccati', 'simulate_target', 'target_cost',
+        'latency_methods', 'latency_model', 'latency_not_modelled', 'link_options', 'localization_model',
+        'localization_riccati', 'simulate_target', 'target_cost',
         'target_filter', 'target_methods', 'target_model'
     ),
     'grid': (

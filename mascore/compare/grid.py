@@ -36,6 +36,7 @@ from .target import (
     DIRECTION_LOSS_METHODS,
     LINK_STUDIES,
     SEND_ON_DELTA_METHODS,
+    latency_methods,
     link_options,
     simulate_target,
     target_cost,
@@ -210,7 +211,8 @@ def _link_studies(quick: bool, base: dict, blocks200: list) -> list[tuple[str, d
     deltas = [s for s in LINK_STUDIES if s.startswith("send-on-delta")][:2 if quick else 3]
     out = []
     for task in tasks:
-        loss_methods = ["centralized", "forwarding", "ci-L1", "icf-L1"] if quick else list(target_methods("target"))
+        loss_methods = ["centralized", "forwarding", "ci-L1", "icf-L1"] if quick else list(target_methods(task))
+        late = latency_methods(task)
         out.append(("loss", {**ring8, "task": [task], "method": loss_methods, "dropout": [0.1, 0.3]}))
         out.append(("loss-direction", {**ring8, "task": [task], "method": [m for m in DIRECTION_LOSS_METHODS
                                                                            if m != "local"], "dropout": [0.1, 0.3]}))
@@ -218,9 +220,9 @@ def _link_studies(quick: bool, base: dict, blocks200: list) -> list[tuple[str, d
             claimed = ["centralized", "local", "forwarding", "ci-L1", "icf-L1"]
             out.append(("latency", {**ring8, "task": [task], "method": claimed, "dropout": [0.0]}))
             out.append(("latency", {**ring8, "task": [task], "dropout": [0.0], "block": blocks200[:1],
-                                    "method": [m for m in target_methods("target") if m not in claimed]}))
+                                    "method": [m for m in late if m not in claimed]}))
         else:
-            out.append(("latency", {**ring8, "task": [task], "method": list(target_methods("target")),
+            out.append(("latency", {**ring8, "task": [task], "method": list(late),
                                     "dropout": [0.0, 0.1, 0.3]}))
         out += [(study, {**ring8, "task": [task], "method": list(SEND_ON_DELTA_METHODS)}) for study in deltas]
         out.append(("lossy-send-on-delta-0.5", {**ring8, "task": [task], "method": list(SEND_ON_DELTA_METHODS),

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from .. import estimation, fusion_links
+from .._fusion_base import NetworkFilter
 from .._validation import check_positive, check_positive_int
 from ..agents import double_integrator
 from ..ellipsoids import contains
@@ -33,13 +34,16 @@ from .benchmark import (
 #: that do not apply to the common target or to cooperative localization, with the reason; ``LOSS_METHODS``, the
 #: methods of the loss study: every filter of the target tables, whose steps follow any graph (not ``-Ldiam``,
 #: whose L is the diameter of a graph that loss may disconnect, nor ``hcmci-safe-*``, whose weight is the graph's);
-#: ``LATENCY_METHODS``, the methods with one-step latency: every filter of the target tables (the bound and
-#: ``local`` unaffected; the consensus filters on pairs by :func:`mascore.fusion_links.track_messages`, the
-#: filters on forwarded measurements by :func:`mascore.fusion_links.track_behind`).
+#: ``LATENCY_METHODS``, the methods with one-step latency: every filter of the target tables that is a fusion
+#: network filter (the bound and ``local`` unaffected; the consensus filters on pairs by
+#: :func:`mascore.fusion_links.track_messages`, the filters on forwarded measurements by
+#: :func:`mascore.fusion_links.track_behind`; :func:`latency_methods`); ``LATENCY_NOT_MODELLED``, the others, with
+#: the reason.
 _FROM_SPECS = {
     "TARGET_METHODS": lambda: target_methods("target"),
     "LOSS_METHODS": lambda: target_methods("target"),
-    "LATENCY_METHODS": lambda: target_methods("target"),
+    "LATENCY_METHODS": lambda: latency_methods("target"),
+    "LATENCY_NOT_MODELLED": lambda: latency_not_modelled("target"),
     "TARGET_NOT_APPLICABLE": lambda: estimation.not_applicable("target"),
     "LOCALIZATION_NOT_APPLICABLE": lambda: estimation.not_applicable("localization"),
 }
@@ -629,10 +633,45 @@ def link_options(study: str) -> dict[str, float]:
 DIRECTION_LOSS_METHODS = ("centralized", "local", "forwarding", "ci-L1", "icf-L1")
 #: Methods with send-on-delta messages (:func:`simulate_target`), and the bound.
 SEND_ON_DELTA_METHODS = ("centralized", "ci-L1", "icf-L1")
-#: Why a method of the tables has no latency model, by name: none (every filter of the tables has one,
-#: :data:`LATENCY_METHODS`). Latency is not modelled on the switching localization task (its sensing switches
-#: with the graph), for any method.
-LATENCY_NOT_MODELLED: dict[str, str] = {}
+#: Why a method has no model of late messages: its filter does not say how many exchanges of a step follow one
+#: another, nor how it is rebuilt on another graph (what :mod:`mascore.fusion_links` reads of a network filter).
+_NO_LATENCY_MODEL = ("its filter is not a network filter of mascore.fusion (no count of the exchanges that follow "
+                     "one another in a step): mascore.fusion_links has no treatment of its late messages")
+
+
+def latency_methods(task: str = "target") -> tuple[str, ...]:
+    """The methods of `task` with a model of one-step latency (:func:`latency_model`), in table order.
+
+    Every filter of the tables that is a network filter of :mod:`mascore.fusion` (the bound and ``local``
+    unaffected); a filter written on the estimator protocol alone is left out, with the reason
+    (:func:`latency_not_modelled`). Latency is not modelled on the switching localization task (its
+    sensing switches with the graph), for any method.
+
+    Examples
+    --------
+    >>> from mascore.compare.target import latency_methods
+    >>> latency_methods()[:4]
+    ('centralized', 'local', 'forwarding', 'ci-L1')
+    """
+    return tuple(m for m in target_methods(task) if _late_filter(m, task) is not None)
+
+
+def latency_not_modelled(task: str = "target") -> dict[str, str]:
+    """The methods of `task` without a model of one-step latency, each with the reason (none of the book's).
+
+    Examples
+    --------
+    >>> from mascore.compare.target import latency_not_modelled
+    >>> latency_not_modelled()
+    {}
+    """
+    return {m: _NO_LATENCY_MODEL for m in target_methods(task) if _late_filter(m, task) is None}
+
+
+def _late_filter(method: str, task: str):
+    """The method's filter on a team of 4 if :mod:`mascore.fusion_links` can take its messages late, else None."""
+    filt = target_filter(method, target_model(4) if task == "target" else localization_model(4), task)
+    return filt if isinstance(filt, NetworkFilter) else None
 
 
 def latency_model(method: str, task: str = "target") -> str:
@@ -662,7 +701,9 @@ def latency_model(method: str, task: str = "target") -> str:
     """
     if method == "centralized":
         return "the bound: ideal links"
-    filt = target_filter(method, target_model(4) if task == "target" else localization_model(4), task)
+    filt = _late_filter(method, task)
+    if filt is None:
+        raise ValueError(f"method {method!r} has no model of late messages: {_NO_LATENCY_MODEL}")
     rounds = filt.exchanges
     if rounds == 0:
         return "sends nothing"
@@ -690,6 +731,8 @@ def _check_links(method: str, loss: object, latency: object, send_delta: object,
         raise ValueError(f"loss must be a probability in [0, 1); got {loss!r}")
     if isinstance(latency, bool) or latency not in (0, 1):
         raise ValueError(f"latency must be 0 or 1 (steps); got {latency!r}")
+    if latency and method not in ("centralized", "local") and _late_filter(method, task) is None:
+        raise ValueError(f"latency: method {method!r} has no model of late messages: {_NO_LATENCY_MODEL}")
     if send_delta is not None:
         if isinstance(send_delta, bool) or not isinstance(send_delta, (int, float, np.floating)) \
                 or not np.isfinite(send_delta) or send_delta < 0:
