@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ._optional import require
+from .compare.scenario import reference_method
 from .formatting import math_text
 from .ledger import VERDICTS, deviation_sentence, verdict_words
 from .registry import paper_keys, paper_registry
@@ -242,7 +243,7 @@ _SCENARIOS = (("team", "own state", "scaling"), ("target", "common target", None
               ("localization", "cooperative localization", None), ("shared", "shared quantity", None))
 
 #: The bounds of the scenarios (ratio 1 by definition): never a recommendation.
-_BOUNDS = ("centralized", "central-fusion")
+_BOUNDS = tuple({reference_method(task): None for task, _, _ in _SCENARIOS})
 
 
 def best_methods(summary, n_agents: int = 8, *, exclude: Sequence[str] = (),

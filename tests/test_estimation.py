@@ -9,6 +9,8 @@ import pytest
 import mascore
 from mascore import agent_cost, compare, estimation, fusion
 from mascore.compare.benchmark import check_cells
+from mascore.compare.scenario import Scenario
+from mascore.compare.tables import anees_verdict, consistency_text
 
 TOY_FILTER = '''
 """A toy filter: each agent's own Kalman filter, written from scratch, with its spec."""
@@ -276,28 +278,29 @@ from mascore.compare.scenario import Scenario
 def simulate(method, n_agents, seed, *, noise="gaussian", dropout=0.0, graph="ring", settings=None):
     rng = np.random.default_rng(seed)
     runs, steps = 20, 40
-    x, xh, P, sq = np.zeros(runs), np.zeros((runs, n_agents)), 1.0, np.zeros(runs)
-    R = 1.0 / n_agents if method == "centralized" else 1.0  # the centre: the mean of the N measurements
+    x, xh, P, sq, nees = np.zeros(runs), np.zeros((runs, n_agents)), 1.0, np.zeros(runs), np.zeros(runs)
+    R = 1.0 / n_agents if method == "centre" else 1.0  # the centre: the mean of the N measurements
     for _ in range(steps):
         x = x + 0.1 * rng.standard_normal(runs)
         z = x[:, None] + rng.standard_normal((runs, n_agents))
-        if method == "centralized":
+        if method == "centre":
             z = np.broadcast_to(z.mean(1, keepdims=True), z.shape)
         P = P + 0.01
         K = P / (P + R)
         xh, P = xh + K * (z - xh), (1 - K) * P
         sq += np.mean((xh - x[:, None]) ** 2, 1)
-    return {"rmse_own": np.sqrt(sq / steps), "cpu_s": np.zeros(runs)}
+        nees += (xh[:, 0] - x) ** 2 / P  # agent 0's NEES (its state: one scalar)
+    return {"rmse_own": np.sqrt(sq / steps), "cpu_s": np.zeros(runs), "nees_own": nees / steps}
 
 
 def cells(name):
     return [{"study": "toy", "task": "toy-walk", "method": m, "n_agents": 4, "graph": "ring", "noise": "gaussian",
-             "dropout": 0.0, "q_scale": 1.0, "block": 0} for m in ("centralized", "alone")]
+             "dropout": 0.0, "q_scale": 1.0, "block": 0} for m in ("centre", "alone")]
 
 
-SCENARIO = Scenario("toy-walk", lambda: ("centralized", "alone"), simulate,
-                    lambda method, n_agents, degree: float(n_agents) if method == "centralized" else 0.0, cells,
-                    headline={"n_agents": 4, "dropout": 0.0})
+SCENARIO = Scenario("toy-walk", lambda: ("centre", "alone"), simulate,
+                    lambda method, n_agents, degree: float(n_agents) if method == "centre" else 0.0, cells,
+                    headline={"n_agents": 4, "dropout": 0.0}, reference="centre", nees_dimension=1)
 '''
 
 
@@ -317,21 +320,34 @@ def test_a_new_scenario_is_one_module(toy_scenario):
 
     assert toy_scenario in scenarios()
     cells = [c for c in compare.grid_cells("quick") if c["task"] == toy_scenario]  # the sweep has its cells
-    assert {c["method"] for c in cells} == {"centralized", "alone"}
+    assert {c["method"] for c in cells} == {"centre", "alone"}
     rows = [{**r, **c, "cell": c["method"]} for c in cells for r in compare.run_cell(c)]
     table = pd.DataFrame(rows)
     assert set(table["floats"]) == {4.0, 0.0} and np.isnan(table["containment"]).all()
     rmse = table.groupby("method")["rmse_own"].mean()
     # the centre averages N = 4 measurements of the walk: its error is below an agent's alone
-    assert rmse["centralized"] < 0.8 * rmse["alone"]
-    summary = compare.summarize(table)
+    assert rmse["centre"] < 0.8 * rmse["alone"]
+    summary = compare.summarize(table)  # the ratios against the reference the scenario names
     ratio = summary.set_index("method").loc["alone", "ratio_mean"]
-    assert ratio == pytest.approx(rmse["alone"] / rmse["centralized"], rel=0.05)
+    assert ratio == pytest.approx(rmse["alone"] / rmse["centre"], rel=0.05)
     table = compare.headline(summary, toy_scenario)  # its own headline table, at its headline cells
-    assert list(table.index) == ["centralized", "alone"] and list(table["floats/step"]) == [4.0, 0.0]
+    assert list(table.index) == ["centre", "alone"] and list(table["floats/step"]) == [4.0, 0.0]
     assert table.loc["alone", "RMSE ratio [95 %]"].startswith(f"{ratio:.3f}")
+    # consistency against the chi-square bounds of its NEES dimension: both are Kalman filters of the walk
+    assert table.loc["alone", "consistency"].endswith(", consistent")
+    bounds = summary.set_index("method").loc["alone", ["nees_bound_lo", "nees_bound_hi"]].to_numpy(float)
+    np.testing.assert_allclose(bounds, compare.anees_bounds(20, 1))
     with pytest.raises(ValueError, match="must be one of"):
         compare.run_cell({**cells[0], "method": "no-such-method"})
+
+
+def test_no_consistency_verdict_without_bounds():
+    row = pd.Series({"nees_own_mean": 50.0, "nees_bound_lo": np.nan, "nees_bound_hi": np.nan,
+                     "containment_mean": np.nan})
+    assert anees_verdict(row) == "—"
+    assert consistency_text(row) == "ANEES 50.00 (no chi-square bounds: no NEES dimension)"
+    with pytest.raises(ValueError, match="nees_dimension"):
+        Scenario("toy", lambda: (), lambda *a, **k: {}, lambda *a: 0.0, lambda name: [], nees_dimension=0)
 
 
 def test_the_toy_scenario_is_gone_with_its_module():

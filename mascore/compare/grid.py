@@ -28,9 +28,9 @@ from .benchmark import (
     floats_per_step,
     mean_degree,
 )
-from .scenario import scenarios
+from .scenario import nees_dimension, reference_method, scenarios
 from .shared import simulate_shared
-from .stats import NEES_DIMENSION, anees_bounds, mean_interval, rms_ratio
+from .stats import anees_bounds, mean_interval, rms_ratio
 from .tables import fitted_slopes
 from .target import (
     DIRECTION_LOSS_METHODS,
@@ -506,7 +506,8 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
     for col in ("rmse_far", "set_size"):  # tables of before these metrics
         if col not in t:
             t[col] = np.nan
-    bound = t[t["method"].isin(["centralized", "central-fusion"])]
+    references = {task: reference_method(task) for task in t["task"].unique()}
+    bound = t[t["method"] == t["task"].map(references)]
     keys = [c for c in by if c != "method"] + ["block", "run"]
     ref = bound.set_index(keys)["rmse_own"].rename("bound_rmse")
     t = t.join(ref, on=keys)
@@ -528,7 +529,7 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
                 lo, hi = m - half, m + half
             row[f"{col}_mean"], row[f"{col}_lo"], row[f"{col}_hi"] = m, lo, hi
         runs = int(np.isfinite(g["nees_own"].to_numpy()).sum())
-        dim = NEES_DIMENSION.get(row.get("task", g["task"].iloc[0]))
+        dim = nees_dimension(row.get("task", g["task"].iloc[0]))
         row["nees_bound_lo"], row["nees_bound_hi"] = anees_bounds(runs, dim) if runs and dim else (np.nan, np.nan)
         floats = g["floats"].to_numpy()  # one value per method, but as sent under send-on-delta: their mean
         row["floats"] = float(floats[0]) if (floats == floats[0]).all() else float(floats.mean())

@@ -40,11 +40,9 @@ from .. import estimation
 from .._validation import STEP_BUDGET, check_positive_int
 from ..sweep import Grid
 from .benchmark import SETTINGS, check_cell, check_run
+from .scenario import reference_method
 
 __all__ = ["GridFile", "read_grid"]
-
-#: The method every ratio of a task is taken against (added to a study that leaves it out).
-REFERENCE = {"shared": "central-fusion"}  # every other task: "centralized"
 
 #: The axes a study of a grid file may set, and the baseline's value of each.
 AXES: dict[str, Any] = {"task": None, "method": None, "n_agents": None, "graph": "ring", "noise": "gaussian",
@@ -152,7 +150,7 @@ def _with_reference(methods: list, tasks: list) -> list:
     """`methods` with the reference of a study's one task first (the ratios' denominator), if it is missing."""
     if len(tasks) != 1 or not isinstance(tasks[0], str):
         return methods  # a study of several tasks names each one's methods itself
-    ref = REFERENCE.get(tasks[0], "centralized")
+    ref = reference_method(tasks[0])
     return methods if ref in methods else [ref, *methods]
 
 

@@ -23,10 +23,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Scenario", "scenarios"]
+from .stats import NEES_DIMENSION
+
+__all__ = ["Scenario", "scenarios", "reference_method", "nees_dimension"]
 
 #: The scenarios wired in by hand (a module may not declare one of these names).
 BUILT_IN = ("team", "shared", "target", "localization")
+
+#: The reference of a built-in task's ratios where it is not ``"centralized"``.
+_REFERENCE = {"shared": "central-fusion"}
 
 
 @dataclass(frozen=True)
@@ -49,6 +54,12 @@ class Scenario:
         coordinates with ``study``.
     headline : mapping of str to object
         The coordinates of the cells of its headline table (default: N = 8, no drop-out, on the ring).
+    reference : str
+        The method whose RMSE every ratio of the scenario is taken against, run in the same cells (default
+        ``"centralized"``): one of ``methods()``.
+    nees_dimension : int, optional
+        Dimension of the state whose NEES ``simulate`` records as ``nees_own``; the consistency verdicts
+        use its chi-square bounds. None (default): no NEES, and no verdict.
 
     Examples
     --------
@@ -63,10 +74,17 @@ class Scenario:
     floats: Callable[[str, int, float], float]
     cells: Callable[[str], list[dict[str, Any]]]
     headline: Mapping[str, Any] = field(default_factory=lambda: {"n_agents": 8, "dropout": 0.0, "graph": "ring"})
+    reference: str = "centralized"
+    nees_dimension: int | None = None
 
     def __post_init__(self) -> None:
         if not (isinstance(self.task, str) and self.task) or self.task in BUILT_IN:
             raise ValueError(f"task must be a new scenario's name (not one of {BUILT_IN}); got {self.task!r}")
+        if not (isinstance(self.reference, str) and self.reference):
+            raise ValueError(f"reference of scenario {self.task!r} must be a method's name; got {self.reference!r}")
+        d = self.nees_dimension
+        if d is not None and (isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 1):
+            raise ValueError(f"nees_dimension of scenario {self.task!r} must be an integer >= 1 or None; got {d!r}")
         for attr in ("methods", "simulate", "floats", "cells"):
             if not callable(getattr(self, attr)):
                 raise TypeError(f"{attr} of scenario {self.task!r} must be callable")
@@ -117,3 +135,33 @@ def scenarios() -> dict[str, Scenario]:
 
 
 _SCENARIO_LINE = re.compile(rb"^SCENARIO\s*(?::[^=\n]*)?=", re.M)
+
+
+def reference_method(task: str) -> str:
+    """The method whose RMSE every ratio of `task` is taken against: its centralized filter, unless it says otherwise.
+
+    Examples
+    --------
+    >>> from mascore.compare.scenario import reference_method
+    >>> reference_method("target"), reference_method("shared")
+    ('centralized', 'central-fusion')
+    """
+    if task in BUILT_IN:
+        return _REFERENCE.get(task, "centralized")
+    scenario = scenarios().get(task)
+    return "centralized" if scenario is None else scenario.reference
+
+
+def nees_dimension(task: str) -> int | None:
+    """Dimension of the state whose NEES the cells of `task` record (None: no NEES recorded).
+
+    Examples
+    --------
+    >>> from mascore.compare.scenario import nees_dimension
+    >>> nees_dimension("target"), nees_dimension("localization")
+    (4, 2)
+    """
+    if task in NEES_DIMENSION:
+        return NEES_DIMENSION[task]
+    scenario = scenarios().get(task)
+    return None if scenario is None else scenario.nees_dimension

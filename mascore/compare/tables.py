@@ -221,7 +221,8 @@ def consistency_text(row) -> str:
     nees, inside = row["nees_own_mean"], row["containment_mean"]
     if np.isfinite(nees):
         word = anees_verdict(row)
-        return f"ANEES {nees:.2f}, {word}" if nees < 100 else f"ANEES {nees:.1e}, {word}"
+        text = f"ANEES {nees:.2f}" if nees < 100 else f"ANEES {nees:.1e}"
+        return f"{text}, {word}" if word != "—" else f"{text} (no chi-square bounds: no NEES dimension)"
     return f"contains {inside:.3f}" if np.isfinite(inside) else "—"
 
 
@@ -306,6 +307,8 @@ def interval_table(frame, columns: str, methods=None, quantity: str = "ratio", o
 def anees_verdict(row) -> str:
     """``"consistent"`` if a summary row's ANEES lies inside its 95 % chi-square bounds, else over/conservative.
 
+    ``"—"`` where there is no ANEES or no bounds (a set filter, or a scenario that records no NEES).
+
     Examples
     --------
     >>> import pandas as pd
@@ -313,7 +316,9 @@ def anees_verdict(row) -> str:
     >>> anees_verdict(pd.Series({"nees_own_mean": 0.8, "nees_bound_lo": 0.87, "nees_bound_hi": 1.14}))
     'conservative'
     """
-    nees = row["nees_own_mean"]
+    nees, lo, hi = row["nees_own_mean"], row["nees_bound_lo"], row["nees_bound_hi"]
+    if not (np.isfinite(nees) and np.isfinite(lo) and np.isfinite(hi)):
+        return "—"
     return "overconfident" if nees > row["nees_bound_hi"] else "conservative" if nees < row["nees_bound_lo"] \
         else "consistent"
 
