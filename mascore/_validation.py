@@ -589,6 +589,13 @@ class Frozen:
         for name, value in values.items():
             object.__setattr__(self, name, value)
 
+    def _freeze_arrays(self) -> None:
+        """Store every array field of a dataclass as a read-only copy of its own dtype (constructor only)."""
+        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+            value = getattr(self, f.name)
+            if isinstance(value, np.ndarray):
+                self._set(**{f.name: frozen_copy(value, value.dtype)})
+
     def _args(self) -> tuple:
         """The constructor's positional arguments that rebuild this object (pickle, copy, ``==``)."""
         return tuple(getattr(self, f.name) for f in dataclasses.fields(self) if f.init)  # type: ignore[arg-type]

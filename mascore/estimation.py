@@ -35,7 +35,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from ._validation import float_array, require_finite
+from ._validation import Frozen, float_array, frozen_copy, require_finite
 
 __all__ = [
     "GaussianState",
@@ -61,8 +61,8 @@ STUDY_LAYER = frozenset({"agent_cost", "compare", "ledger", "papers", "plotting"
                          "sweep"})
 
 
-@dataclass(frozen=True)
-class GaussianState:
+@dataclass(frozen=True, eq=False)
+class GaussianState(Frozen):
     """A Gaussian estimate: mean ``(..., n)`` and covariance ``(..., n, n)`` (per agent: ``(..., N, n)``).
 
     Parameters
@@ -87,8 +87,8 @@ class GaussianState:
         _check_pair(self, ("mean", "covariance"))
 
 
-@dataclass(frozen=True)
-class SetState:
+@dataclass(frozen=True, eq=False)
+class SetState(Frozen):
     """A set-membership estimate: the ellipsoid ``{x: (x - c)^T E^-1 (x - c) <= 1}``.
 
     Parameters
@@ -582,10 +582,11 @@ def not_applicable(scenario: str) -> dict[str, str]:
 
 
 def _check_pair(state: object, names: tuple[str, str]) -> None:
-    """A state value's vector ``(..., n)`` and matrix ``(..., n, n)``: finite real arrays of matching shapes."""
+    """A state value's vector ``(..., n)`` and matrix ``(..., n, n)``: finite real arrays of matching shapes, stored
+    as read-only copies."""
     vector, matrix = (require_finite(float_array(getattr(state, name), name), name) for name in names)
     if vector.ndim < 1 or matrix.shape != (*vector.shape, vector.shape[-1]):
         raise ValueError(f"{names[1]} must have shape (..., n, n) = {(*vector.shape, vector.shape[-1])} for "
                          f"{names[0]} of shape {vector.shape}; got {matrix.shape}")
-    object.__setattr__(state, names[0], vector)
-    object.__setattr__(state, names[1], matrix)
+    object.__setattr__(state, names[0], frozen_copy(vector))
+    object.__setattr__(state, names[1], frozen_copy(matrix))

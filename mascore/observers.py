@@ -38,7 +38,7 @@ from ._conic import ConicProgram, clarabel, solve, svec, svec_size, sym_basis
 from ._optional import require
 from ._solver import SolverError
 from ._systems import design_args
-from ._validation import as_matrix, check_adjacency, check_covariance, check_laplacian, check_moderate, finite_result
+from ._validation import Frozen, as_matrix, check_adjacency, check_covariance, check_laplacian, check_moderate, finite_result
 from ._validation import as_matrix as _matrix
 from ._validation import check_square as _square
 from ._validation import float_array as _float_array
@@ -106,8 +106,8 @@ def is_observable(A: ArrayLike, C: ArrayLike) -> bool:
     return is_controllable(A.T, C.T)
 
 
-@dataclass(frozen=True)
-class MinEnergyObserver:
+@dataclass(frozen=True, eq=False)
+class MinEnergyObserver(Frozen):
     """Minimum-energy observer, eqs. (23)-(25).
 
     Parameters
@@ -135,6 +135,9 @@ class MinEnergyObserver:
     S: np.ndarray
     cost: float
     E: np.ndarray
+
+    def __post_init__(self) -> None:
+        self._freeze_arrays()
 
 
 def min_energy_observer(
@@ -197,8 +200,8 @@ def min_energy_observer(
     return MinEnergyObserver(L=K.T, S=S, cost=float(np.trace(S)), E=E)
 
 
-@dataclass(frozen=True)
-class DistributedObserver:
+@dataclass(frozen=True, eq=False)
+class DistributedObserver(Frozen):
     """Result of :func:`distributed_observer` (Vlahakis and Halikias, Sec. 4.2).
 
     Parameters
@@ -265,6 +268,9 @@ class DistributedObserver:
     disagreement_abscissa: float
     reading: str
     trace_in: str
+
+    def __post_init__(self) -> None:
+        self._freeze_arrays()
 
     @property
     def hurwitz(self) -> bool:

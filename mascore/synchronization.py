@@ -625,8 +625,8 @@ def bound_eq21(Bc: ArrayLike, G_dist: ArrayLike, p0: float, q_bar: float) -> flo
                          "bound of eq. (21)")
 
 
-@dataclass(frozen=True)
-class SyncDesign:
+@dataclass(frozen=True, eq=False)
+class SyncDesign(Frozen):
     """Result of :func:`design_synchronization` (Lemma 2).
 
     Parameters
@@ -683,6 +683,9 @@ class SyncDesign:
     A_c: np.ndarray
     B_c: np.ndarray
     rho: float
+
+    def __post_init__(self) -> None:
+        self._freeze_arrays()
 
 
 def default_circle(adjacency: ArrayLike, pinning: ArrayLike) -> tuple[float, float]:

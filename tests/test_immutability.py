@@ -21,12 +21,14 @@ from mascore import (
     consensus,
     consensus_filters,
     ellipsoids,
+    estimation,
     fusion,
     fusion_forwarding,
     graphs,
     kalman,
     lqr,
     network_observer,
+    observers,
     own_state,
     rendezvous,
     sensing,
@@ -42,6 +44,7 @@ from mascore.flocking import FlockingGains
 
 GAINS = FlockingGains(rho3=3.0, rho4=1.0, rho5=2.0, rho6=1.0, beta=0.33, R=120.0)
 AGENT = agents.double_integrator(1, 0.1)
+OSCILLATOR = (np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]]))
 SM_KW = dict(A=[[1.0, 0.1], [0.0, 1.0]], G=np.eye(2), C=[[1.0, 0.0]], D=[[1.0]], Q=0.01 * np.eye(2), R=[[0.04]])
 
 
@@ -94,6 +97,16 @@ MODELS = {  # every checked model or value class: a builder of one instance
     "NoFusionFilter": lambda: consensus_filters.NoFusionFilter(),
     "DiscreteNetworkObserver": lambda: network_observer.DiscreteNetworkObserver([[0.5], [0.1]], 0.2, graphs.ring_graph(3),
                                                                          [[1, 0.1], [0, 1]], [[0.0], [0.1]], [[1.0, 0.0]]),
+    "GaussianState": lambda: estimation.GaussianState(np.zeros((3, 2)), np.broadcast_to(np.eye(2), (3, 2, 2))),
+    "SetState": lambda: estimation.SetState(np.zeros(2), np.diag([2.0, 1.0])),
+    # design results: read-only too, complex and boolean arrays included
+    "MinEnergyObserver": lambda: observers.min_energy_observer(*OSCILLATOR, np.eye(1), np.eye(1)),
+    "DistributedObserver": lambda: observers.distributed_observer(*OSCILLATOR, 10.0 * np.eye(1), 5.0 * np.eye(1),
+                                                                  np.eye(1), graphs.ring_graph(4)),
+    "SyncDesign": lambda: sync.design_synchronization(
+        np.array([[0.0, -1.0], [1.0, 0.0]]), np.eye(2), 0.1 * np.eye(2),
+        graphs.adjacency_from_edges(4, [(3, 0), (0, 1), (1, 2), (2, 3)], directed=True), [1.0, 0.0, 0.0, 0.0],
+        c0=2 / 3, r0=0.6),
 }
 
 
@@ -209,9 +222,12 @@ def test_objects_keep_copies_not_the_callers_arrays():
     ell = ellipsoids.Ellipsoid(c, P)
     times = np.array([0.0, 1.0])
     topo = consensus.SwitchingTopology(times, [graphs.path_graph(3), graphs.ring_graph(3)])
-    A[0, 0], B[1, 0], c[0], P[0, 0], times[1] = np.nan, np.nan, 5.0, 9.0, 0.5
+    mean, cov = np.zeros(2), np.eye(2)
+    state = estimation.GaussianState(mean, cov)
+    A[0, 0], B[1, 0], c[0], P[0, 0], times[1], mean[0], cov[1, 1] = np.nan, np.nan, 5.0, 9.0, 0.5, np.nan, 4.0
     assert np.isfinite(agent.step(np.ones(2), np.ones(1))).all()
     assert agent.A[0, 0] == 1.0 and ell.center[0] == 0.0 and ell.shape[0, 0] == 4.0 and topo.times[1] == 1.0
+    assert state.mean[0] == 0.0 and state.covariance[1, 1] == 1.0
     assert topo.at(0.75) is not None and np.array_equal(topo.at(0.75), graphs.path_graph(3))
 
 
