@@ -71,7 +71,7 @@ PAPERS_GROUP = "The papers' scenarios"
 API_TOPICS: dict[str, tuple[tuple[str, str, tuple[str, ...]], ...]] = {
     "compare": (
         ("tasks", "Tasks and simulations", ("benchmark", "team", "shared", "target")),
-        ("grid", "Running the grid", ("grid", "stats", "verdicts", "cost")),
+        ("grid", "Running the grid", ("grid", "summary", "stats", "verdicts", "cost")),
         ("tables", "Tables and plots", ("tables", "plots")),
     ),
     "distributed_kf": (("functions", "The steps and checks", ("functions",)),),

@@ -206,8 +206,8 @@ _NAMES = {
         'target_filter', 'target_methods', 'target_model'
     ),
     'grid': (
-        'CompareResult', '_mean_ci', 'cell_cost', 'cell_group', 'grid_cells', 'link_summary', 'run', 'run_cell',
-        'run_cells', 'run_compare', 'scale_limits', 'stored_summary', 'summarize', 'SCALE_SIZES', 'SCALE_GRAPHS',
+        'CompareResult', 'cell_cost', 'cell_group', 'grid_cells', 'link_summary', 'run', 'run_cell',
+        'run_cells', 'run_compare', 'scale_limits', 'stored_summary', 'SCALE_SIZES', 'SCALE_GRAPHS',
         'SCALE_GRAPH_LIMITS', 'SHARED_DATA_MAX'
     ),
     'tables': (
@@ -216,6 +216,9 @@ _NAMES = {
     ),
     'verdicts': (
         'CLAIMS', 'HELD_OUT', 'LINK_CLAIMS', 'WRITTEN_FROM', 'compare_claims', 'deciding_runs', 'differing_claims'
+    ),
+    'summary': (
+        'summarize',
     ),
     'stats': (
         'BOOTSTRAP_RESAMPLES', 'BOOTSTRAP_SEED', 'Interval', 'NEES_DIMENSION', 'anees_bounds', 'mean_interval',

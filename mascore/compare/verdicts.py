@@ -22,6 +22,7 @@ import numpy as np
 
 from .benchmark import REN_Q, SETTINGS, SM_CONFIDENCE, VLAHAKIS_PHI
 from .stats import Interval, mean_interval, rms_ratio
+from .summary import summarize
 from .tables import position_only_kf_rmse
 from .target import LINK_STUDIES, TARGET_METHODS
 from .team import vlahakis_profile
@@ -1055,7 +1056,6 @@ def compare_claims(table, phi: dict | None = None, *, held_out: Sequence[int] = 
 
 def _summary(runs):
     """:func:`mascore.compare.summarize` of deciding runs, by cell and sensing, with the blocks of each group."""
-    from .grid import summarize
 
     by = list(_CELL)
     blocks = runs.groupby(by, dropna=False, sort=False)["blocks"].first().rename("blocks")
