@@ -69,12 +69,6 @@ __all__ = [
 
 #: Tasks whose per-agent cost is measured.
 AGENT_TASKS = ("team", "target", "localization")
-#: Largest N measured per (task, method), with the reason; the others go to 128.
-MAX_AGENTS = {
-    ("team", "song-eb"): (32, "its joint covariance of all agents' team estimates holds (2 N^2)^2 floats (per "
-                              "axis): 0.5 GB at N = 64, 8.6 GB at 128"),
-}
-
 #: Longest timing (s of CPU, repeats x min_time) :func:`agent_step_cost` accepts.
 _MAX_TIMING_S = 3600.0
 
@@ -105,7 +99,8 @@ def agent_methods(task: str) -> tuple[str, ...]:
 
 
 def __getattr__(name: str):
-    """``TEAM_METHODS``, ``AGENT_METHODS``, ``WHOLE_FILTER`` and ``AGENT_ORDER``, read from the specs when asked."""
+    """``TEAM_METHODS``, ``AGENT_METHODS``, ``WHOLE_FILTER``, ``AGENT_ORDER`` and ``MAX_AGENTS``, read from the specs
+    when asked."""
     if name == "TEAM_METHODS":  # the team task's methods timed: at their own recipe (agent_methods("team"))
         return agent_methods("team")
     if name == "AGENT_METHODS":  # methods per task
@@ -114,6 +109,8 @@ def __getattr__(name: str):
         return {(t, m) for t in AGENT_TASKS for m in agent_methods(t) if estimation.method_spec(m, t).whole_filter}
     if name == "AGENT_ORDER":  # (task, method) -> (work, memory) per agent and step
         return {(t, m): estimation.method_spec(m, t).order[t] for t in AGENT_TASKS for m in agent_methods(t)}
+    if name == "MAX_AGENTS":  # (task, method) -> the largest N timed, and why (the others go to 128)
+        return {(t, m): limit for t in AGENT_TASKS for m, limit in estimation.agent_limits(t, step=True).items()}
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -530,7 +527,8 @@ def agent_costs(sizes: Sequence[int] = (4, 8, 16, 32, 64, 128), tasks: Sequence[
     Parameters
     ----------
     sizes : sequence of int
-        Team sizes N (each >= 3). A method is measured up to its :data:`MAX_AGENTS` limit.
+        Team sizes N (each >= 3). A method is measured up to its spec's limit for one step
+        (:func:`mascore.estimation.agent_limits` with ``step=True``; ``MAX_AGENTS``).
     tasks : sequence of str
         Tasks (:data:`AGENT_TASKS`).
     methods : sequence of str, optional
@@ -563,9 +561,9 @@ def agent_costs(sizes: Sequence[int] = (4, 8, 16, 32, 64, 128), tasks: Sequence[
     for task in tasks:
         if task not in AGENT_TASKS:
             raise ValueError(f"tasks must be among {AGENT_TASKS}; got {task!r}")
-        known = agent_methods(task)
+        known, limits = agent_methods(task), estimation.agent_limits(task, step=True)
         for m in (known if methods is None else [m for m in methods if m in known]):
-            limit, why = MAX_AGENTS.get((task, m), (max(sizes), ""))
+            limit, why = limits.get(m, (max(sizes), ""))
             for N in sizes:
                 us = agent_step_cost(task, m, N, repeats=repeats, min_time=min_time, settings=settings) \
                     if N <= limit else np.nan

@@ -1457,5 +1457,5 @@ METHODS = (
                {"team": ("O(N^6 n^3): the joint covariance of all team estimates (dense)", "O(N^4 n^2)")},
                lambda n, q, d, N: float((N * N * n) ** 2), _SONG_EB_NOT_APPLICABLE, whole_filter=True, position=4,
                max_agents={"team": (32, "its joint covariance of all agents' team estimates holds (2 N^2)^2 floats "
-                                        "(per axis): 0.5 GB at N = 64")}),
+                                        "(per axis): 0.5 GB at N = 64, 8.6 GB at 128")}),
 )

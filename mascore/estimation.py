@@ -316,6 +316,10 @@ class MethodSpec:
     max_agents : mapping of str to (int, str)
         Task -> the largest team the comparison's sweeps run it at, and why not beyond (its time or
         memory; :func:`agent_limits`). A task not listed: no limit.
+    step_max_agents : mapping of str to (int, str), optional
+        Task -> the largest team at which one agent's step is timed (:mod:`mascore.agent_cost`), and why.
+        None (default): the same as `max_agents`; give it where one step goes further than a sweep
+        (a limit of time over many runs and steps, not of memory).
 
     Examples
     --------
@@ -338,6 +342,7 @@ class MethodSpec:
     setting: float | None = None
     knob: str = ""
     max_agents: Mapping[str, tuple[int, str]] = field(default_factory=dict)
+    step_max_agents: Mapping[str, tuple[int, str]] | None = None
 
     def __post_init__(self) -> None:
         if not (isinstance(self.name, str) and self.name):
@@ -536,13 +541,15 @@ def method_spec(name: str, task: str | None = None) -> MethodSpec:
     raise ValueError(f"method must be one of {tuple(s.name for s in specs)}{where}; got {name!r}")
 
 
-def agent_limits(task: str) -> dict[str, tuple[int, str]]:
+def agent_limits(task: str, *, step: bool = False) -> dict[str, tuple[int, str]]:
     """The methods of `task` the comparison runs only up to some team size, with the reason their specs give.
 
     Parameters
     ----------
     task : str
         The scenario (``"target"``, ``"localization"``, ...).
+    step : bool
+        The limits of timing one agent's step (:attr:`MethodSpec.step_max_agents`) instead of the sweeps'.
 
     Returns
     -------
@@ -552,10 +559,12 @@ def agent_limits(task: str) -> dict[str, tuple[int, str]]:
     Examples
     --------
     >>> from mascore.estimation import agent_limits
-    >>> agent_limits("localization")["ci-diffusion"][0]
-    32
+    >>> agent_limits("localization")["ci-diffusion"][0], "ci-diffusion" in agent_limits("localization", step=True)
+    (32, False)
     """
-    return {s.name: s.max_agents[task] for s in method_specs(task) if task in s.max_agents}
+    limits = ((s.name, s.max_agents if not step or s.step_max_agents is None else s.step_max_agents)
+              for s in method_specs(task))
+    return {name: limit[task] for name, limit in limits if task in limit}
 
 
 def not_applicable(scenario: str) -> dict[str, str]:

@@ -1437,7 +1437,8 @@ METHODS = (
                spec_memory(1), position=10,
                max_agents={"localization": (32, "its covariance-intersection weight search (Newton steps over the d + 1 "
                                                 "information matrices of 2N x 2N, per agent and step) grows as N^4 per "
-                                                "agent: at N = 64 one method would take most of the full grid's time")}),
+                                                "agent: at N = 64 one method would take most of the full grid's time")},
+               step_max_agents={}),  # one agent's step, timed alone, to N = 128
     # the knobs' other settings (the comparison sweeps them at N = 8: mascore.compare.FUSION_KNOB_METHODS)
     *(_consensus_spec(kind, L, 11 + 2 * k + j, "knob") for k, kind in enumerate(_CONSENSUS)
       for j, L in enumerate((2, "diam"))),

@@ -86,7 +86,8 @@ def test_consensus_rounds_cost_flops_and_time_scale_with_l():
 
 
 def test_table_stops_where_memory_stops(monkeypatch):
-    monkeypatch.setitem(agent_cost.MAX_AGENTS, ("team", "song-eb"), (4, "too big for the test"))
+    limits = {"song-eb": (4, "too big for the test")}
+    monkeypatch.setattr(agent_cost.estimation, "agent_limits", lambda task, step=False: limits if step else {})
     t = agent_cost.agent_costs((4, 8), ("team",), ("song-eb", "vlahakis"), repeats=1, min_time=0.0)
     eb = t[t["method"] == "song-eb"].set_index("n_agents")
     assert eb.loc[4, "us_per_step"] > 0 and np.isnan(eb.loc[8, "us_per_step"])

@@ -59,7 +59,8 @@ def _spec(name, inflation, position, role):
     return MethodSpec(name, ("target",), lambda model: OwnOnlyFilter(model, inflation),
                       lambda n, q, d, N: (0.0, 12.0 * n**3), {"target": ("O(n^3)", "O(n^2)")},
                       lambda n, q, d, N: float(n**2 + n), position=position, role=role, family="toy-own",
-                      setting=inflation, knob="process noise inflation")
+                      setting=inflation, knob="process noise inflation",
+                      max_agents={"target": (16, "toy: not beyond 16")})
 
 
 METHODS = (_spec("toy-own", 1.0, 99, "recipe"), _spec("toy-own-q2", 2.0, 99.5, "knob"))
@@ -97,8 +98,13 @@ def test_a_new_filter_is_one_class_and_one_spec_in_one_module(toy_module):
     assert toy_module in agent_cost.AGENT_METHODS["target"]
     step = agent_cost.agent_step("target", toy_module, 6, agent=2)
     assert agent_cost.max_deviation(step) < 1e-12
-    cost = agent_cost.agent_costs((4,), ("target",), (toy_module,), repeats=1, min_time=0.0)
-    assert cost["method"].tolist() == [toy_module] and cost["work"].iloc[0] == "O(n^3)"
+    cost = agent_cost.agent_costs((4, 32), ("target",), (toy_module,), repeats=1, min_time=0.0)
+    assert cost["method"].tolist() == [toy_module] * 2 and cost["work"].iloc[0] == "O(n^3)"
+    # its spec's limit: the cost table stops where the sweeps stop, and says why
+    assert cost["us_per_step"].iloc[0] > 0 and np.isnan(cost["us_per_step"].iloc[1])
+    assert set(cost["stops_at"]) == {16} and set(cost["why"]) == {"toy: not beyond 16"}
+    assert agent_cost.MAX_AGENTS[("target", toy_module)] == (16, "toy: not beyond 16")
+    assert max(c["n_agents"] for c in compare.grid_cells("full") if c["method"] == toy_module) == 16
     # its knob (a second spec, role "knob"): swept at N = 8 beside the recipe, a row of the knob table,
     # neither in the headline nor in the cost table
     knob = "toy-own-q2"
