@@ -54,7 +54,7 @@ __all__ = [
     "AGENT_TASKS",
     "TEAM_METHODS",  # noqa: F822 (read from the specs by the module's __getattr__)
     "agent_methods",
-    "MAX_AGENTS",
+    "MAX_AGENTS",  # noqa: F822 (read from the specs by the module's __getattr__)
     "WHOLE_FILTER",  # noqa: F822 (read from the specs by the module's __getattr__)
     "AgentStep",
     "agent_costs",

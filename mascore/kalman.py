@@ -207,6 +207,64 @@ class LinearGaussianModel(Frozen):
                              f"model's F of shape {self.F.shape} but found {x.shape}")
         return x, P
 
+    def predict(self, x: ArrayLike, P: ArrayLike, u: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The prediction of the estimator protocol: ``predict(x, P, model, u)`` (:func:`predict`), this model's.
+
+        Parameters
+        ----------
+        x : (..., m) array_like
+            Estimates.
+        P : (..., m, m) array_like
+            Their covariances, symmetric positive semidefinite.
+        u : (..., p) array_like, optional
+            Known input (the model's ``B`` then needed).
+
+        Returns
+        -------
+        x_pred : (..., m) ndarray
+            Predicted estimates.
+        P_pred : (..., m, m) ndarray
+            Predicted covariances.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import kalman
+        >>> model = kalman.LinearGaussianModel(np.eye(1), 0.1 * np.eye(1), np.eye(1), np.eye(1))
+        >>> model.update(*model.predict(np.zeros(1), np.eye(1)), [2.0])[0]     # P- = 1.1, gain 1.1 / 2.1
+        array([1.04761905])
+        """
+        return predict(x, P, self, u)
+
+    def update(self, x: ArrayLike, P: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """The update of the estimator protocol: ``update(x, P, z, model)`` (:func:`update`), this model's.
+
+        Parameters
+        ----------
+        x : (..., m) array_like
+            Predicted estimates.
+        P : (..., m, m) array_like
+            Their covariances, symmetric positive semidefinite.
+        z : (..., q) array_like
+            Measurements.
+
+        Returns
+        -------
+        x_post : (..., m) ndarray
+            Updated estimates.
+        P_post : (..., m, m) ndarray
+            Updated covariances (Joseph form).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import kalman
+        >>> model = kalman.LinearGaussianModel(np.eye(1), 0.1 * np.eye(1), np.eye(1), np.eye(1))
+        >>> model.update(np.zeros(1), np.eye(1), [1.0])[1]                    # P = 1 - 1/2
+        array([[0.5]])
+        """
+        return update(x, P, z, self)
+
     def with_measurement(self, H: ArrayLike, R: ArrayLike) -> LinearGaussianModel:
         """The same dynamics with another measurement model (a sensor whose ``H`` or ``R`` changes per step).
 

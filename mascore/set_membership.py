@@ -61,7 +61,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -516,6 +516,40 @@ class SetMembershipModel(Frozen):
         method = _check_method(method)
         c, P = self._ellipsoid(center, shape, "correction", step, agent, self.C)
         return self._correct(c, P, y, method, step, agent, check_consistency, solver_options, programs)
+
+    def update(self, center: ArrayLike, shape: ArrayLike, y: ArrayLike, **options: Any
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The update of the estimator protocol: :meth:`correct` (the paper's correction step).
+
+        Parameters
+        ----------
+        center : (..., n) array_like
+            Predicted centre.
+        shape : (..., n, n) array_like
+            Predicted shape, positive definite.
+        y : (..., p) array_like
+            Measurement.
+        **options
+            Those of :meth:`correct` (``method``, ``solver_options``, ...).
+
+        Returns
+        -------
+        center : (..., n) ndarray
+        shape : (..., n, n) ndarray
+        gain : (..., n, p) ndarray
+            As :meth:`correct`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mascore import set_membership as sm
+        >>> model = sm.SetMembershipModel(A=[[1.0, 0.1], [0.0, 1.0]], G=np.eye(2), C=[[1.0, 0.0]], D=[[1.0]],
+        ...                               Q=0.01 * np.eye(2), R=[[0.04]])
+        >>> all(np.array_equal(a, b) for a, b in zip(model.update(np.zeros(2), np.eye(2), [0.1]),
+        ...                                          model.correct(np.zeros(2), np.eye(2), [0.1])))
+        True
+        """
+        return self.correct(center, shape, y, **options)
 
     def predict(
         self, center: ArrayLike, shape: ArrayLike, u: ArrayLike | None = None, method: Method = "closed_form",

@@ -347,6 +347,16 @@ def test_a_new_scenario_is_one_module(toy_scenario):
         compare.run_cell({**cells[0], "method": "no-such-method"})
 
 
+def test_every_method_builds_an_estimator_of_the_protocol():
+    """What every spec builds, on every task's model, implements the protocol (predict, update, the agent's step)."""
+    team = compare.team_setup(4, "gaussian", 1.0, compare.SETTINGS, "ring")
+    models = {"team": (team, np.zeros((1, 4, 4))), "target": (compare.target_model(4),),
+              "localization": (compare.localization_model(4),), "shared": (None,)}
+    for task, args in models.items():
+        for spec in estimation.method_specs(task):
+            assert isinstance(spec.build(*args), estimation.Estimator), (task, spec.name)
+
+
 def test_no_consistency_verdict_without_bounds():
     row = pd.Series({"nees_own_mean": 50.0, "nees_bound_lo": np.nan, "nees_bound_hi": np.nan,
                      "containment_mean": np.nan})

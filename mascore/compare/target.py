@@ -647,6 +647,16 @@ def latency_methods(task: str = "target") -> tuple[str, ...]:
     (:func:`latency_not_modelled`). Latency is not modelled on the switching localization task (its
     sensing switches with the graph), for any method.
 
+    Parameters
+    ----------
+    task : {"target", "localization"}
+        The scenario.
+
+    Returns
+    -------
+    tuple of str
+        The methods' names.
+
     Examples
     --------
     >>> from mascore.compare.target import latency_methods
@@ -658,6 +668,16 @@ def latency_methods(task: str = "target") -> tuple[str, ...]:
 
 def latency_not_modelled(task: str = "target") -> dict[str, str]:
     """The methods of `task` without a model of one-step latency, each with the reason (none of the book's).
+
+    Parameters
+    ----------
+    task : {"target", "localization"}
+        The scenario.
+
+    Returns
+    -------
+    dict of str to str
+        Method name -> why its messages cannot be taken late.
 
     Examples
     --------
