@@ -547,7 +547,8 @@ def frozen_copy(arr: ArrayLike, dtype: type = float) -> np.ndarray:
 def state_view(obj: object, name: str, fields: dict[str, str]) -> np.ndarray:
     """A read-only view of the state array `name` of a filter `obj` (``fields`` maps names to attributes).
 
-    What a filter's ``view(name)`` returns: no copy, but the next step may overwrite it.
+    What a filter's ``view(name)`` returns: no copy, but the next step may overwrite it. Its memory is the
+    filter's, so the flag guards against a slip, not against a caller who sets it writeable again.
     """
     if name not in fields:
         raise ValueError(f"name must be one of {tuple(fields)}; got {name!r}")

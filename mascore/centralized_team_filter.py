@@ -56,7 +56,8 @@ class CentralizedTeamFilter:
     Holds the team estimate and its reduced covariance; :meth:`predict` and
     :meth:`update` run :func:`centralized_predict` and :func:`centralized_update`
     without re-checking the state this filter produced (the model, `B` and `P0` are
-    checked here, once).
+    checked here, once). Filters share nothing, so independent filters may run in different
+    threads; one filter object is not for concurrent use (its state changes at every step).
 
     **Any linear sensing.** A model with an output matrix (``z_ij = C_j x_j + nu_ij``,
     :func:`~mascore.team_model.team_filter_model` with ``C``) is filtered with the same outputs as
@@ -187,6 +188,8 @@ class CentralizedTeamFilter:
         -------
         ndarray
             A read-only view, replaced or overwritten by the next step (copy it to keep it).
+            The memory is the filter's own: the flag only guards against a slip (a caller who sets it
+            writeable again writes into the filter's state); to change values, take the property (a copy).
 
         Raises
         ------

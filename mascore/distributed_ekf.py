@@ -336,6 +336,8 @@ class FlockingEKF:
         -------
         ndarray
             A read-only view: the next call may replace or overwrite it in place (copy it to keep it).
+            The memory is the filter's own: the flag only guards against a slip (a caller who sets it
+            writeable again writes into the filter's state); to change values, take the property (a copy).
 
         Examples
         --------

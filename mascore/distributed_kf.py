@@ -745,7 +745,8 @@ class TeamFilter:
     gains), the ``Φ`` blocks derived from the topology (recomputed only when the
     topology changes) and its work arrays, reused from step to step: the augmented
     covariance of a large team is updated in place. Filters share nothing, so
-    independent filters may run in different threads.
+    independent filters may run in different threads; one filter object is not for
+    concurrent use (its state and work arrays change at every step).
 
     Parameters
     ----------
@@ -922,6 +923,8 @@ class TeamFilter:
         -------
         ndarray
             A read-only view: the next step may overwrite it in place (copy it to keep it).
+            The memory is the filter's own: the flag only guards against a slip (a caller who sets it
+            writeable again writes into the filter's state); to change values, take the property (a copy).
 
         Examples
         --------
