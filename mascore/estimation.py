@@ -31,6 +31,7 @@ import re
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -357,6 +358,15 @@ class MethodSpec:
         if missing:
             raise ValueError(f"method {self.name!r}: order must give the work and memory of every task; "
                              f"missing {missing}")
+        both = sorted(set(self.tasks) & set(self.not_applicable))
+        if both:
+            raise ValueError(f"method {self.name!r}: {both} both in tasks and in not_applicable; a method applies to "
+                             "a task or says why not")
+        object.__setattr__(self, "tasks", tuple(self.tasks))
+        for attr in ("order", "not_applicable", "max_agents", "step_max_agents"):  # read-only: specs are shared
+            value = getattr(self, attr)
+            if value is not None:
+                object.__setattr__(self, attr, MappingProxyType(dict(value)))
 
 
 def method_specs(task: str | None = None) -> tuple[MethodSpec, ...]:

@@ -271,6 +271,18 @@ def test_a_spec_is_checked_when_declared():
         estimation.MethodSpec("x", ("target",), fusion.CentralizedFilter, lambda *a: (0.0, 0.0), {})
     with pytest.raises(ValueError, match="method must be one of"):
         estimation.method_spec("no-such-method", "target")
+    with pytest.raises(ValueError, match="both in tasks and in not_applicable"):
+        estimation.MethodSpec("x", ("target",), fusion.CentralizedFilter, lambda *a: (0.0, 0.0),
+                              {"target": ("O(1)", "O(1)")}, not_applicable={"target": "why"})
+
+
+def test_a_spec_is_read_only():
+    spec = estimation.method_spec("ci-L5", "target")
+    with pytest.raises(TypeError):
+        spec.not_applicable["localization"] = "x"
+    with pytest.raises(TypeError):
+        spec.order["target"] = ("O(1)", "O(1)")
+    assert "localization" not in estimation.method_spec("ci-L5", "target").not_applicable
 
 
 TOY_SCENARIO = '''
