@@ -93,3 +93,34 @@ def test_the_cost_tables_and_the_specs_load_neither_the_studies_nor_pandas_matpl
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout.strip().splitlines()[-1]) == []
+
+
+def _contract_modules() -> set[str]:
+    """Every module an import-linter contract of ``pyproject.toml`` names: the layers, and the core's sources."""
+    import tomllib
+
+    config = tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())["tool"]["importlinter"]
+    named = set()
+    for contract in config["contracts"]:
+        for layer in contract.get("layers", []):
+            named |= {m.strip() for m in layer.replace("|", ":").split(":")}
+        named |= set(contract.get("source_modules", []))
+    return named
+
+
+def unclassified(modules, named) -> list[str]:
+    """The modules no contract covers (a module is covered by itself or by a package that is named)."""
+    return sorted(m for m in modules if not any(m == n or m.startswith(f"{n}.") for n in named))
+
+
+def test_every_module_of_the_package_is_in_a_contract():
+    """A new module is one the contracts check: the core's forbidden imports, or a layer, not neither."""
+    modules = {_module_name(p) for p in PACKAGE.rglob("*.py") if p.name != "__init__.py"}  # a package: its modules
+    missing = unclassified(modules, _contract_modules())
+    assert not missing, (f"{missing} in no import contract: add each to the core's source_modules in pyproject.toml "
+                         "(a module of the numerical core) or to a layer")
+
+
+def test_the_contract_coverage_check_can_fail():
+    assert unclassified({"mascore.kalman", "mascore.toyfilter", "mascore.compare.toy"},
+                        {"mascore.kalman", "mascore.compare"}) == ["mascore.toyfilter"]
