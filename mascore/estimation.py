@@ -363,10 +363,32 @@ class MethodSpec:
             raise ValueError(f"method {self.name!r}: {both} both in tasks and in not_applicable; a method applies to "
                              "a task or says why not")
         object.__setattr__(self, "tasks", tuple(self.tasks))
+        for attr in ("max_agents", "step_max_agents"):
+            if getattr(self, attr) is not None:
+                object.__setattr__(self, attr, {task: _checked_limit(self.name, attr, task, limit, self.tasks)
+                                                for task, limit in dict(getattr(self, attr)).items()})
         for attr in ("order", "not_applicable", "max_agents", "step_max_agents"):  # read-only: specs are shared
             value = getattr(self, attr)
             if value is not None:
                 object.__setattr__(self, attr, MappingProxyType(dict(value)))
+
+    def __copy__(self) -> MethodSpec:  # immutable: a copy is itself (its mappings are read-only)
+        return self
+
+    def __deepcopy__(self, memo: dict) -> MethodSpec:
+        return self
+
+
+def _checked_limit(name: str, attr: str, task: object, limit: object, tasks: Sequence[str]) -> tuple[int, str]:
+    """A spec's team-size limit of one task: ``(N >= 1, why)`` for a task of the method."""
+    if task not in tasks:
+        raise ValueError(f"{attr} of method {name!r}: {task!r} is not one of its tasks {tuple(tasks)}")
+    ok = (isinstance(limit, (tuple, list)) and len(limit) == 2 and isinstance(limit[0], (int, np.integer))
+          and not isinstance(limit[0], bool) and limit[0] >= 1 and isinstance(limit[1], str) and limit[1])
+    if not ok:
+        raise ValueError(f"{attr} of method {name!r}, task {task!r}: expected (largest N >= 1, why not beyond); "
+                         f"got {limit!r}")
+    return int(limit[0]), limit[1]
 
 
 def method_specs(task: str | None = None) -> tuple[MethodSpec, ...]:

@@ -1,5 +1,6 @@
 """The estimator protocol and the method specs: every filter declared once, found by the comparison and the cost table."""
 
+import copy
 import sys
 
 import numpy as np
@@ -276,6 +277,33 @@ def test_a_spec_is_checked_when_declared():
                               {"target": ("O(1)", "O(1)")}, not_applicable={"target": "why"})
 
 
+@pytest.mark.parametrize(("limit", "match"), [({"target": 16}, "expected"), ({"target": ("16", "w")}, "expected"),
+                                              ({"target": (0, "w")}, "expected"), ({"target": (8, "")}, "expected"),
+                                              ({"targett": (8, "w")}, "not one of its tasks")])
+def test_a_spec_limit_is_checked_where_it_is_declared(limit, match):
+    with pytest.raises(ValueError, match=match):
+        estimation.MethodSpec("x", ("target",), fusion.CentralizedFilter, lambda *a: (0.0, 0.0),
+                              {"target": ("O(1)", "O(1)")}, max_agents=limit)
+
+
+def test_a_scenario_names_a_reference_among_its_methods_and_no_taken_name(tmp_path, monkeypatch):
+    from mascore.compare.scenario import scenarios
+
+    source = TOY_SCENARIO.replace('reference="centre", ', "")  # the default reference, "centralized", is not its
+    (tmp_path / "toyscenario2098.py").write_text(source)
+    monkeypatch.setattr(compare, "__path__", [*compare.__path__, str(tmp_path)])
+    monkeypatch.delitem(sys.modules, "mascore.compare.toyscenario2098", raising=False)
+    try:
+        with pytest.raises(ValueError, match="its reference 'centralized'.* is not one of its methods"):
+            scenarios()
+    finally:
+        sys.modules.pop("mascore.compare.toyscenario2098", None)
+        vars(compare).pop("toyscenario2098", None)
+    for taken in ("position", "switching", "target"):
+        with pytest.raises(ValueError, match="new scenario's name"):
+            Scenario(taken, lambda: (), lambda *a, **k: {}, lambda *a: 0.0, lambda name: [])
+
+
 def test_a_spec_is_read_only():
     spec = estimation.method_spec("ci-L5", "target")
     with pytest.raises(TypeError):
@@ -283,6 +311,9 @@ def test_a_spec_is_read_only():
     with pytest.raises(TypeError):
         spec.order["target"] = ("O(1)", "O(1)")
     assert "localization" not in estimation.method_spec("ci-L5", "target").not_applicable
+    assert copy.deepcopy(spec) is spec and copy.copy(spec) is spec
+    with pytest.raises(TypeError):
+        estimation.method_spec("song-eb", "team").max_agents["team"] = (10**6, "x")
 
 
 TOY_SCENARIO = '''
@@ -337,6 +368,8 @@ def test_a_new_scenario_is_one_module(toy_scenario):
     from mascore.compare.scenario import scenarios
 
     assert toy_scenario in scenarios()
+    with pytest.raises(TypeError):  # shared by every table: read-only
+        scenarios()[toy_scenario].headline["n_agents"] = 99
     cells = [c for c in compare.grid_cells("quick") if c["task"] == toy_scenario]  # the sweep has its cells
     assert {c["method"] for c in cells} == {"centre", "alone"}
     rows = [{**r, **c, "cell": c["method"]} for c in cells for r in compare.run_cell(c)]

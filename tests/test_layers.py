@@ -13,6 +13,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 PACKAGE = Path(__file__).parents[1] / "mascore"
 
 #: Private names still used across modules, to be folded into public ones (issue 28, item 5); none may be added.
@@ -95,32 +97,57 @@ def test_the_cost_tables_and_the_specs_load_neither_the_studies_nor_pandas_matpl
     assert json.loads(proc.stdout.strip().splitlines()[-1]) == []
 
 
-def _contract_modules() -> set[str]:
-    """Every module an import-linter contract of ``pyproject.toml`` names: the layers, and the core's sources."""
+
+def _contracts() -> list[dict]:
     import tomllib
 
-    config = tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())["tool"]["importlinter"]
-    named = set()
-    for contract in config["contracts"]:
-        for layer in contract.get("layers", []):
-            named |= {m.strip() for m in layer.replace("|", ":").split(":")}
-        named |= set(contract.get("source_modules", []))
-    return named
+    return tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())["tool"]["importlinter"]["contracts"]
 
 
-def unclassified(modules, named) -> list[str]:
-    """The modules no contract covers (a module is covered by itself or by a package that is named)."""
-    return sorted(m for m in modules if not any(m == n or m.startswith(f"{n}.") for n in named))
+def _named(modules: set[str], names: set[str]) -> set[str]:
+    """The modules that are one of `names` or inside one of them (a package named covers its modules)."""
+    return {m for m in modules if any(m == n or m.startswith(f"{n}.") for n in names)}
 
 
-def test_every_module_of_the_package_is_in_a_contract():
-    """A new module is one the contracts check: the core's forbidden imports, or a layer, not neither."""
-    modules = {_module_name(p) for p in PACKAGE.rglob("*.py") if p.name != "__init__.py"}  # a package: its modules
-    missing = unclassified(modules, _contract_modules())
-    assert not missing, (f"{missing} in no import contract: add each to the core's source_modules in pyproject.toml "
-                         "(a module of the numerical core) or to a layer")
+def _package_graph():
+    grimp = pytest.importorskip("grimp")
+    return grimp.build_graph("mascore", include_external_packages=True, cache_dir=None)
 
 
-def test_the_contract_coverage_check_can_fail():
-    assert unclassified({"mascore.kalman", "mascore.toyfilter", "mascore.compare.toy"},
-                        {"mascore.kalman", "mascore.compare"}) == ["mascore.toyfilter"]
+def cycles(graph) -> list[list[str]]:
+    """The import cycles among the package's modules (every import statement, in functions too)."""
+    import networkx as nx
+
+    edges = nx.DiGraph((m, i) for m in graph.modules if m.startswith("mascore")
+                       for i in graph.find_modules_directly_imported_by(m) if i.startswith("mascore"))
+    return sorted(sorted(c) for c in nx.simple_cycles(edges))
+
+
+def core_breaches(graph, upper: set[str], forbidden: list[str]) -> list[tuple[str, str]]:
+    """(core module, forbidden module) pairs with an import chain; the core: every module not in `upper`."""
+    core = {m for m in graph.modules if m.startswith("mascore.")} - _named(set(graph.modules), upper)
+    return sorted((m, f) for m in core for f in forbidden
+                  if f in graph.modules and graph.chain_exists(importer=m, imported=f, as_packages=True))
+
+
+def test_the_house_has_no_cycle():
+    """No two modules import each other, through any chain (the layers contract lets a ``:`` group do so)."""
+    assert cycles(_package_graph()) == []
+
+
+def test_the_core_by_exclusion_imports_no_layer_above_it():
+    """Every module not in a layer above the core is core, listed or not: a new filter module is checked as it is."""
+    layers, forbidden = _contracts()
+    upper = {m.strip() for layer in layers["layers"] for m in layer.replace("|", ":").split(":")}
+    upper |= {m for m in forbidden["forbidden_modules"] if m.startswith("mascore")}
+    assert core_breaches(_package_graph(), upper, forbidden["forbidden_modules"]) == []
+
+
+def test_the_graph_checks_can_fail():
+    grimp = pytest.importorskip("grimp")
+    graph = grimp.ImportGraph()
+    for importer, imported in [("mascore.a", "mascore.b"), ("mascore.b", "mascore.a"), ("mascore.toy", "pandas"),
+                               ("mascore.compare.x", "pandas"), ("mascore.c", "mascore.a")]:
+        graph.add_import(importer=importer, imported=imported)
+    assert cycles(graph) == [["mascore.a", "mascore.b"]]
+    assert core_breaches(graph, {"mascore.compare"}, ["pandas", "mascore.compare"]) == [("mascore.toy", "pandas")]

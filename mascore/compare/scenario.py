@@ -19,6 +19,7 @@ import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,8 @@ __all__ = ["Scenario", "scenarios", "reference_method", "nees_dimension"]
 
 #: The scenarios wired in by hand (a module may not declare one of these names).
 BUILT_IN = ("team", "shared", "target", "localization")
+#: Names taken by the built-in scenarios' variants (the headline tables and the specs' ``not_applicable`` keys).
+_RESERVED = (*BUILT_IN, "position", "switching")
 
 #: The reference of a built-in task's ratios where it is not ``"centralized"``.
 _REFERENCE = {"shared": "central-fusion"}
@@ -58,14 +61,15 @@ class Scenario:
         The method whose RMSE every ratio of the scenario is taken against, run in the same cells (default
         ``"centralized"``): one of ``methods()``.
     nees_dimension : int, optional
-        Dimension of the state whose NEES ``simulate`` records as ``nees_own``; the consistency verdicts
-        use its chi-square bounds. None (default): no NEES, and no verdict.
+        Dimension d of the state whose NEES ``simulate`` records as ``nees_own``, which is the NEES per
+        degree of freedom (the NEES divided by d, averaged over the run's steps); the consistency verdicts
+        use the chi-square bounds of d. None (default): no NEES, and no verdict.
 
     Examples
     --------
-    >>> from mascore.compare.scenario import scenarios
-    >>> scenarios()                                         # the book's four scenarios are built in
-    {}
+    >>> from mascore.compare.scenario import BUILT_IN, scenarios
+    >>> [task for task in BUILT_IN if task in scenarios()]    # the book's four scenarios are built in
+    []
     """
 
     task: str
@@ -78,13 +82,20 @@ class Scenario:
     nees_dimension: int | None = None
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.task, str) and self.task) or self.task in BUILT_IN:
-            raise ValueError(f"task must be a new scenario's name (not one of {BUILT_IN}); got {self.task!r}")
+        if not (isinstance(self.task, str) and self.task) or self.task in _RESERVED:
+            raise ValueError(f"task must be a new scenario's name (not one of {_RESERVED}); got {self.task!r}")
         if not (isinstance(self.reference, str) and self.reference):
             raise ValueError(f"reference of scenario {self.task!r} must be a method's name; got {self.reference!r}")
         d = self.nees_dimension
         if d is not None and (isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 1):
             raise ValueError(f"nees_dimension of scenario {self.task!r} must be an integer >= 1 or None; got {d!r}")
+        object.__setattr__(self, "headline", MappingProxyType(dict(self.headline)))  # read-only: it is shared
+
+    def __copy__(self) -> Scenario:  # immutable: a copy is itself (its mappings are read-only)
+        return self
+
+    def __deepcopy__(self, memo: dict) -> Scenario:
+        return self
         for attr in ("methods", "simulate", "floats", "cells"):
             if not callable(getattr(self, attr)):
                 raise TypeError(f"{attr} of scenario {self.task!r} must be callable")
@@ -101,13 +112,13 @@ def scenarios() -> dict[str, Scenario]:
     Raises
     ------
     ValueError
-        Two modules declare one task.
+        Two modules declare one task, or a scenario's reference is not one of its methods.
 
     Examples
     --------
     >>> from mascore.compare.scenario import scenarios
-    >>> sorted(scenarios())
-    []
+    >>> "target" in scenarios()                               # built in: not a module's
+    False
     """
     from mascore import compare as package
 
@@ -130,6 +141,10 @@ def scenarios() -> dict[str, Scenario]:
         if isinstance(scenario, Scenario):
             if scenario.task in found and found[scenario.task] is not scenario:
                 raise ValueError(f"two modules declare the scenario {scenario.task!r} (one is {name})")
+            if scenario.reference not in scenario.methods():
+                raise ValueError(f"scenario {scenario.task!r} ({name}): its reference {scenario.reference!r}, which "
+                                 f"every ratio is taken against, is not one of its methods {scenario.methods()}; "
+                                 "name it with Scenario(..., reference=...)")
             found[scenario.task] = scenario
     return found
 
