@@ -591,11 +591,16 @@ class Frozen:
             object.__setattr__(self, name, value)
 
     def _freeze_arrays(self) -> None:
-        """Store every array field of a dataclass as a read-only copy of its own dtype (constructor only)."""
+        """Store every array field of a dataclass (an array, or a field annotated ``np.ndarray``) as a read-only copy
+        of its own dtype (constructor only); such a field that is not a numeric or boolean array is refused."""
         for f in dataclasses.fields(self):  # type: ignore[arg-type]
             value = getattr(self, f.name)
-            if isinstance(value, np.ndarray):
-                self._set(**{f.name: frozen_copy(value, value.dtype)})
+            if value is not None and (isinstance(value, np.ndarray) or "ndarray" in str(f.type)):
+                arr = np.asarray(value)
+                if arr.dtype.kind not in "biufc":
+                    raise TypeError(f"{type(self).__name__}.{f.name} must be a numeric array; got "
+                                    f"{type(value).__name__} {value!r:.60}")
+                self._set(**{f.name: frozen_copy(arr, arr.dtype)})
 
     def _args(self) -> tuple:
         """The constructor's positional arguments that rebuild this object (pickle, copy, ``==``)."""

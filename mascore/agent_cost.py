@@ -118,7 +118,8 @@ def __getattr__(name: str):
 class AgentStep:
     """One agent's step of a method, ready to time, with the team-wide filter's numbers to check it against.
 
-    Built by :func:`agent_step`; the fields are the parameters.
+    Built by :func:`agent_step`; the fields are the parameters. A plain (mutable) record: its ``run``
+    calls a filter's ``agent_step`` (see that filter's notes on threads).
 
     Parameters
     ----------
@@ -573,7 +574,8 @@ def agent_costs(sizes: Sequence[int] = (4, 8, 16, 32, 64, 128), tasks: Sequence[
                 rows.append({"task": task, "method": m, "n_agents": N, "us_per_step": us,
                              "flops": agent_flops(task, m, N), "memory_floats": agent_memory(task, m, N),
                              "scope": "whole filter" if _whole_filter(task, m) else "one agent",
-                             "work": work, "memory": mem, "stops_at": min(limit, max(sizes)), "why": why})
+                             "work": work, "memory": mem, "stops_at": min(limit, max(sizes)),
+                             "why": why if limit < max(sizes) else ""})  # the reason where the limit is reached
     return pd.DataFrame(rows)
 
 

@@ -133,6 +133,8 @@ _ODE_CHECK_EVERY = 10_000
 class ConsensusResult:
     """Trajectory of a consensus run.
 
+    A run's output: its arrays are the caller's, writeable and shared with no model or filter.
+
     Parameters
     ----------
     t : (T,) ndarray

@@ -837,6 +837,8 @@ def ekf_flocking_step(
 class EstimatedFlockingRun(FlockingRun):
     """Outcome of :func:`simulate_estimation_based_flocking`.
 
+    A run's output: its arrays are the caller's, writeable and shared with no model or filter.
+
     Parameters
     ----------
     t : (T+1,) ndarray

@@ -36,7 +36,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from ._validation import Frozen, float_array, frozen_copy, require_finite
+from ._validation import Frozen, check_covariance, float_array, frozen_copy, require_finite
 
 __all__ = [
     "GaussianState",
@@ -71,7 +71,7 @@ class GaussianState(Frozen):
     mean : ndarray
         The mean.
     covariance : ndarray
-        The covariance.
+        The covariance, symmetric positive semidefinite.
 
     Examples
     --------
@@ -85,7 +85,7 @@ class GaussianState(Frozen):
     covariance: np.ndarray
 
     def __post_init__(self) -> None:
-        _check_pair(self, ("mean", "covariance"))
+        _check_pair(self, ("mean", "covariance"), definite=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,7 +111,7 @@ class SetState(Frozen):
     shape: np.ndarray
 
     def __post_init__(self) -> None:
-        _check_pair(self, ("centre", "shape"))
+        _check_pair(self, ("centre", "shape"), definite=True)
 
 
 @dataclass(frozen=True)
@@ -622,12 +622,13 @@ def not_applicable(scenario: str) -> dict[str, str]:
     return {s.name: s.not_applicable[scenario] for s in method_specs() if scenario in s.not_applicable}
 
 
-def _check_pair(state: object, names: tuple[str, str]) -> None:
+def _check_pair(state: object, names: tuple[str, str], definite: bool) -> None:
     """A state value's vector ``(..., n)`` and matrix ``(..., n, n)``: finite real arrays of matching shapes, stored
     as read-only copies."""
     vector, matrix = (require_finite(float_array(getattr(state, name), name), name) for name in names)
     if vector.ndim < 1 or matrix.shape != (*vector.shape, vector.shape[-1]):
         raise ValueError(f"{names[1]} must have shape (..., n, n) = {(*vector.shape, vector.shape[-1])} for "
                          f"{names[0]} of shape {vector.shape}; got {matrix.shape}")
+    check_covariance(matrix, names[1], definite=definite)  # symmetric, positive semidefinite (a set's: definite)
     object.__setattr__(state, names[0], frozen_copy(vector))
     object.__setattr__(state, names[1], frozen_copy(matrix))

@@ -417,6 +417,8 @@ def closed_loop_jacobian(X: ArrayLike, dt: float, gains: FlockingGains) -> np.nd
 class FlockingRun:
     """Outcome of a flocking simulation.
 
+    A run's output: its arrays are the caller's, writeable and shared with no model or filter.
+
     Parameters
     ----------
     t : (T+1,) ndarray

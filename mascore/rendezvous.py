@@ -579,6 +579,8 @@ MODES = ("true", "measurement", "measurement-filter", "estimation")
 class RendezvousResult:
     """Output of :func:`simulate_rendezvous` (``T`` steps, ``R`` runs, ``N`` agents).
 
+    A run's output: its arrays are the caller's, writeable and shared with no model or filter.
+
     With one run (``x0`` of shape ``(N, m)``) the run axis ``R`` is absent.
 
     Parameters

@@ -238,6 +238,8 @@ def predict(
 class FilterHistory:
     """Output of :func:`run_filter` over k = 0..T_f.
 
+    A run's output: its arrays are the caller's, writeable and shared with no model or filter.
+
     Parameters
     ----------
     center_corr : (T_f + 1, ..., n) ndarray

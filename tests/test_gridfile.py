@@ -48,6 +48,11 @@ def test_a_grid_file_runs_its_cells_and_equals_the_cells_run_one_by_one(tmp_path
     # a team beyond the method's limit (its spec's max_agents) or beyond memory: refused before the first cell runs
     ("runs = 3\n[[study]]\ntask = 'team'\nmethod = 'song-eb'\nn_agents = [4, 200]\n", "song-eb runs teams of at most 32"),
     ("runs = 3\n[[study]]\ntask = 'target'\nmethod = 'ci-L1'\nn_agents = [4, 1000000]\n", "n_agents asks for too much"),
+    # a study named as a link study runs over those links: a method without a model of them is refused up front
+    ("runs = 3\n[[study]]\nname = 'send-on-delta-0.5'\ntask = 'target'\nmethod = 'ci-L5'\nn_agents = 8\n",
+     "study 'send-on-delta-0.5': send_delta: method must be one of"),
+    ("runs = 3\n[[study]]\nname = 'latency'\ntask = 'localization'\nmethod = 'ci-L1'\nn_agents = 8\n"
+     "graph = 'switching'\n", "not modelled on the switching localization task"),
 ])
 def test_a_bad_grid_file_is_refused_by_name_before_anything_runs(tmp_path, text, message):
     path = tmp_path / "bad.toml"

@@ -63,8 +63,9 @@ methods that do not apply are listed with the reason
 **Links of the target and localization tasks** (:data:`LINK_STUDIES`, :mod:`mascore.fusion_links`): packet
 loss per link and step (a lost message is not received; each filter fuses what arrived, with its weights on
 the links that delivered), loss per direction and run (:data:`DIRECTION_LOSS_METHODS`: a message lost alone,
-its weight on the receiver's own pair), one-step latency for every filter of the tables (:data:`LATENCY_METHODS`,
-:func:`latency_model`) and send-on-delta messages for CI and ICF at one consensus step (:data:`SEND_ON_DELTA_METHODS`,
+its weight on the receiver's own pair), one-step latency for every network filter of the tables (:data:`LATENCY_METHODS`,
+:func:`latency_model`; the others in :data:`LATENCY_NOT_MODELLED`, with the reason) and send-on-delta messages
+for CI and ICF at one consensus step (:data:`SEND_ON_DELTA_METHODS`,
 floats counted as sent; with latency too), at N = 8 on the ring.
 
 **Robustness axes**: link drop-outs (each link's measurement and message lost with
@@ -102,6 +103,7 @@ __all__ = [
     "DIRECTION_LOSS_METHODS",
     "LATENCY_METHODS",
     "LATENCY_NOT_MODELLED",
+    "check_link_cell",
     "latency_methods",
     "latency_model",
     "latency_not_modelled",
@@ -201,7 +203,7 @@ _NAMES = {
         'DIRECTION_LOSS_METHODS', 'LATENCY_METHODS', 'LATENCY_NOT_MODELLED', 'LINK_STUDIES',
         'LOCALIZATION_NOT_APPLICABLE', 'LOSS_METHODS',
         'SEND_ON_DELTA_METHODS', 'TARGET_METHODS', 'TARGET_NOT_APPLICABLE', '_localization_switching',
-        'latency_methods', 'latency_model', 'latency_not_modelled', 'link_options', 'localization_model',
+        'check_link_cell', 'latency_methods', 'latency_model', 'latency_not_modelled', 'link_options', 'localization_model',
         'localization_riccati', 'simulate_target', 'target_cost',
         'target_filter', 'target_methods', 'target_model'
     ),

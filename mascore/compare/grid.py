@@ -171,7 +171,7 @@ def grid_cells(name: str = "quick") -> list[dict[str, Any]]:
         # scale: both fusion tasks at N = 8 to 64 on every graph (a method up to its spec's max_agents)
         studies += [(task, {**base, "task": [task], "method": list(target_methods(task)), "graph": list(SCALE_GRAPHS),
                             "n_agents": list(SCALE_SIZES), "block": blocks200}) for task in ("target", "localization")]
-    limits = {task: estimation.agent_limits(task) for task in ("team", "target", "localization")}
+    limits = {task: estimation.agent_limits(task) for task in ("team", "shared", "target", "localization")}
     cells, seen = [], set()
     for study, axes in studies:
         for cell in Grid(axes).cells():
@@ -196,10 +196,11 @@ def _link_studies(quick: bool, base: dict, blocks200: list) -> list[tuple[str, d
 
     Quick: the target task only, loss 0.1 and 0.3 for the bound, forwarding, CI and ICF at one step
     (a link lost in both directions at once, and each direction alone: ``loss-direction``); latency
-    without loss (every method of the tables: the claims' five on 4 blocks, the others on block 0);
+    without loss (every method of :func:`~mascore.compare.latency_methods`: the claims' five on 4 blocks, the
+    others on block 0);
     send-on-delta at 0.5 and 1. Full: both tasks, every method of :data:`LOSS_METHODS`
     at both losses (each direction alone: :data:`DIRECTION_LOSS_METHODS` but local), every method of
-    :data:`LATENCY_METHODS` late at loss 0, 0.1 and 0.3, and send-on-delta at 0.5, 1 and 2; send-on-delta
+    :func:`~mascore.compare.latency_methods` late at loss 0, 0.1 and 0.3, and send-on-delta at 0.5, 1 and 2; send-on-delta
     at 0.5 with each message lost alone (``lossy-send-on-delta-0.5``), quick: at loss 0.3 on blocks 0-1
     (no claim reads it), full: at 0.1 and 0.3; send-on-delta at 0.5 with every message late
     (``late-send-on-delta-0.5``; quick: block 0).

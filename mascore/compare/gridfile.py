@@ -25,7 +25,9 @@ baseline's values: a ring, Gaussian noise, no drop-out, the correct process nois
 
 Every cell is checked before anything runs (:func:`read_grid`), so a misspelt method or graph
 is named with the choices at once, and so is a team too large for a method (its spec's
-``max_agents``) or for memory. Every study includes the reference of its ratios, the
+``max_agents``) or for memory. A study named as one of the link studies of the comparison
+(``"latency"``, ``"send-on-delta-0.5"``, ...: :data:`~mascore.compare.LINK_STUDIES`) runs its cells over those
+links, and its methods are checked for them too. Every study includes the reference of its ratios, the
 centralized filter (``central-fusion`` on the shared task): it is added where a study leaves it out.
 """
 
@@ -41,6 +43,7 @@ from .._validation import STEP_BUDGET, check_positive_int
 from ..sweep import Grid
 from .benchmark import SETTINGS, check_cell, check_run
 from .scenario import reference_method
+from .target import check_link_cell
 
 __all__ = ["GridFile", "read_grid"]
 
@@ -137,6 +140,10 @@ def read_grid(path: str | Path) -> GridFile:
         axes["method"] = _with_reference(axes["method"], axes["task"])
         for cell in Grid({**axes, "block": blocks}).cells():
             cell = dict(check_cell({"study": str(study.get("name", f"study-{k + 1}")), **cell}, where))
+            try:
+                check_link_cell(cell)
+            except ValueError as err:
+                raise ValueError(f"{where}: {err}") from None
             _check_size(cell, runs, where, limits.setdefault(cell["task"], estimation.agent_limits(cell["task"])))
             cells.append(cell)
     steps = runs * SETTINGS.n_steps * len(cells)

@@ -739,6 +739,39 @@ def latency_model(method: str, task: str = "target") -> str:
     return "its own filter one step behind, then its own fresh measurement"
 
 
+def check_link_cell(cell: dict) -> None:
+    """Refuse up front a cell of the target or localization task whose method cannot run over its study's links.
+
+    A cell's study sets its links when it is one of :data:`LINK_STUDIES` (``"latency"``: one step late;
+    ``"send-on-delta-0.5"``: ...), and its ``dropout`` is the packet loss: the checks of
+    :func:`simulate_target` for those settings, made before a sweep runs.
+
+    Parameters
+    ----------
+    cell : dict
+        A cell: ``task``, ``method``, ``study``, and ``dropout`` and ``graph`` (default 0 and the ring).
+
+    Raises
+    ------
+    ValueError
+        The method has no model of those links (e.g. one-step latency for a filter on the estimator protocol
+        alone), or the links do not go with the graph or the task.
+
+    Examples
+    --------
+    >>> from mascore.compare.target import check_link_cell
+    >>> check_link_cell({"task": "target", "method": "ci-L5", "study": "send-on-delta-0.5"})
+    Traceback (most recent call last):
+    ...
+    ValueError: send_delta: method must be one of ('centralized', 'ci-L1', 'icf-L1'); got 'ci-L5'
+    """
+    if cell.get("task") not in ("target", "localization"):
+        return
+    options = link_options(str(cell.get("study", "")))
+    _check_links(cell["method"], float(cell.get("dropout", 0.0)), options.get("latency", 0), options.get("send_delta"),
+                 cell.get("graph", "ring"), cell["task"], options.get("loss_model", "link"))
+
+
 def _check_links(method: str, loss: object, latency: object, send_delta: object, graph: str, task: str,
                  loss_model: object = "link") -> bool:
     """The link arguments of :func:`simulate_target`, checked; True if they depart from ideal links."""
