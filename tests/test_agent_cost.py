@@ -141,6 +141,8 @@ def test_snapshot_covers_every_method_and_stops_where_stated():
     for task in agent_cost.AGENT_TASKS:
         for m in agent_cost.AGENT_METHODS[task]:
             rows = t[(t["task"] == task) & (t["method"] == m)].set_index("n_agents")
+            assert len(rows), (f"{task} {m}: not in the snapshot the cost tables show (their CPU column reads '-' "
+                               "for it): measure it again, python -m benchmarks.bench_agent_cost --snapshot")
             limit = agent_cost.MAX_AGENTS.get((task, m), (128, ""))[0]
             assert sorted(rows.index) == [4, 8, 16, 32, 64, 128]
             assert (rows.loc[rows.index <= limit, "us_per_step"] > 0).all()

@@ -60,7 +60,9 @@ def serial(tmp_path_factory):
 
 
 def test_grid_cells_cover_the_studies_with_100_seeds():
-    cells = compare.grid_cells("quick")
+    from mascore.compare.scenario import BUILT_IN
+
+    cells = [c for c in compare.grid_cells("quick") if c["task"] in BUILT_IN]  # a scenario's module adds its own
     studies = {c["study"] for c in cells}
     assert studies - set(compare.LINK_STUDIES) == {"scaling", "graph", "dropout", "noise", "wrong-q", "shared", "target",
                                                    "localization", "position", "switching"}
