@@ -213,8 +213,9 @@ class NetworkFilter(Frozen):
             Agent i's own data: ``x``, ``P`` (its estimate before the step), ``z`` (its
             measurement), its neighbourhood ``hood`` (i included, ascending), ``nbrs``,
             ``index`` (of i in ``hood``), ``HtRinv`` (``H_j^T R_j^{-1}`` of each j in ``hood``),
-            ``S`` (their ``sum H_j^T R_j^{-1} H_j``), ``I`` (its own ``H_i^T R_i^{-1} H_i``): the
-            model's constant parts are known to the agent beforehand.
+            ``S`` (their ``sum H_j^T R_j^{-1} H_j``), ``I`` (its own ``H_i^T R_i^{-1} H_i``), and for a
+            filter that mixes its neighbours' messages ``w_self`` and ``w_nb`` (its row of the mixing
+            weights): the model's constant parts are known to the agent beforehand.
         messages : tuple
             One entry per communication round: the neighbours' messages of that round.
 
@@ -254,7 +255,14 @@ class NetworkFilter(Frozen):
         own = {"x": x[i].copy(), "P": P[i].copy(), "z": m.agent_measurement(z, i).copy(), "hood": hood,
                "nbrs": hood[hood != i], "index": int(np.flatnonzero(hood == i)[0]), "HtRinv": HtRinv,
                "S": sum(m.information_matrices[j] for j in hood), "I": m.information_matrices[i]}
+        W = self._mixing_weights()
+        if W is not None:
+            own["w_self"], own["w_nb"] = float(W[i, i]), W[i, own["nbrs"]].copy()
         return own, self._agent_messages(own, *self.predict(x, P), z, i)
+
+    def _mixing_weights(self) -> np.ndarray | None:
+        """The (N, N) weights with which an agent mixes its own and its neighbours' messages (None: it does not)."""
+        return None
 
     def agent_step(self, i: int, own_data: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
         """Agent i's step alone: its prediction, its correction with its own data and its neighbours' messages.

@@ -275,7 +275,10 @@ class DiffusionKalmanFilter(_NetworkFilter):
 
     def _agent_step(self, i, own, messages):
         psi, Pn = self._incremental(own, messages[0])
-        return self.weights[i, i] * psi + self.weights[i, own["nbrs"]] @ messages[1], Pn
+        return own["w_self"] * psi + own["w_nb"] @ messages[1], Pn
+
+    def _mixing_weights(self):
+        return self.weights
 
 
 class ConsensusOnInformationFilter(_NetworkFilter):
@@ -369,14 +372,16 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         pairs = [(Om, q), (np.broadcast_to(I, Om.shape), iv)] if self.novelty_weight != 1.0 else [(Om + I, q + iv)]
         return consensus_rounds(self.model.weights, pairs, own["nbrs"], self.n_consensus)
 
+    def _mixing_weights(self):
+        return self.model.weights
+
     def _agent_step(self, i, own, messages):
-        W = self.model.weights
         xp, Pp = self.model.F @ own["x"], self.model.F @ own["P"] @ self.model.F.T + self.model.Q
         Om, qv = information_pair(xp, Pp)
         iv = own["HtRinv"][own["index"]] @ own["z"]
         cur = [(Om, qv), (own["I"], iv)] if self.novelty_weight != 1.0 else [(Om + own["I"], qv + iv)]
         if messages:  # L rounds (none at L = 0: each agent's local filter)
-            cur = consensus_agent(cur, messages, W[i, i], W[i, own["nbrs"]])
+            cur = consensus_agent(cur, messages, own["w_self"], own["w_nb"])
         if self.novelty_weight != 1.0:
             return from_information(cur[0][0] + self.novelty_weight * cur[1][0], cur[0][1] + self.novelty_weight * cur[1][1])
         return from_information(*cur[0])
@@ -640,12 +645,15 @@ class InformationConsensusFilter(_NetworkFilter):
         pairs = [(Om / N + self.model.information_matrices, q / N + self.model._information_vectors(z))]
         return consensus_rounds(self._W, pairs, own["nbrs"], self.n_iterations)
 
+    def _mixing_weights(self):
+        return self._W
+
     def _agent_step(self, i, own, messages):
-        N, W = self.model.n_agents, self._W
+        N = self.model.n_agents
         xp, Pp = self.model.F @ own["x"], self.model.F @ own["P"] @ self.model.F.T + self.model.Q
         Om, qv = information_pair(xp, Pp)
         iv = own["HtRinv"][own["index"]] @ own["z"]
-        (Om_f, q_f), = consensus_agent([(Om / N + own["I"], qv / N + iv)], messages, W[i, i], W[i, own["nbrs"]])
+        (Om_f, q_f), = consensus_agent([(Om / N + own["I"], qv / N + iv)], messages, own["w_self"], own["w_nb"])
         x_f, P_f = from_information(Om_f, q_f)
         return x_f, P_f / N
 
