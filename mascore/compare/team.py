@@ -158,7 +158,8 @@ class TeamEstimator:
     Built by :func:`make_estimator` from a method's spec. The loop calls ``update(Z, S)`` with the
     measurements ``Z`` ``(R, N, N, m)`` (``Z[r, i, j]``: agent i's measurement of agent j) and the
     delivered links ``S`` ``(R or 1, N, N)``, reads the views of the control ``views(Z, S)``
-    ``(R, N, N, 4)``, then calls ``predict(U)`` with the controls applied ``(R, N, 2)``.
+    ``(R, N, N, 4)``, then calls ``predict(U)`` with the controls applied ``(R, N, 2)``. It holds the
+    filter's state between the steps: one object per run loop, not for concurrent use.
 
     Parameters
     ----------
