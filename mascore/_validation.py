@@ -139,8 +139,8 @@ def check_covariance(
             f"Incompatible dimensions of {name}; expected ({size}, {size}) "
             f"but found {arr.shape[-2:]}"
         )
-    if not arr.size:  # (..., 0, 0): no eigenvalue, read as 0
-        if definite:
+    if not arr.size:  # (..., 0, 0): no eigenvalue, read as 0; an empty batch (0, ..., n, n): nothing to check
+        if definite and arr.shape[-1] == 0:
             raise ValueError(f"{name} must be positive definite; smallest eigenvalue is 0")
         return arr
     largest = float(abs(arr).max())  # NaN or inf anywhere makes it NaN or inf: the finiteness test too
@@ -595,8 +595,13 @@ class Frozen:
         of its own dtype (constructor only); such a field that is not a numeric or boolean array is refused."""
         for f in dataclasses.fields(self):  # type: ignore[arg-type]
             value = getattr(self, f.name)
-            if value is not None and (isinstance(value, np.ndarray) or "ndarray" in str(f.type)):
-                arr = np.asarray(value)
+            if value is None and "None" in str(f.type):  # an optional array left out
+                continue
+            if isinstance(value, np.ndarray) or "ndarray" in str(f.type):
+                try:
+                    arr = np.asarray(value)
+                except ValueError:  # a ragged nesting
+                    arr = np.asarray(None)
                 if arr.dtype.kind not in "biufc":
                     raise TypeError(f"{type(self).__name__}.{f.name} must be a numeric array; got "
                                     f"{type(value).__name__} {value!r:.60}")

@@ -557,11 +557,21 @@ def agent_costs(sizes: Sequence[int] = (4, 8, 16, 32, 64, 128), tasks: Sequence[
     """
     import pandas as pd
 
+    for name, value in (("sizes", sizes), ("tasks", tasks), ("methods", methods)):
+        if isinstance(value, (str, bytes)) or not (value is None and name == "methods" or isinstance(value, Sequence)):
+            raise TypeError(f"{name} must be a sequence (a list or a tuple); got {value!r}")
+    if not sizes:
+        raise ValueError("sizes must name at least one team size N")
     sizes = [check_n_agents(n) for n in sizes]
-    rows = []
     for task in tasks:
         if task not in AGENT_TASKS:
             raise ValueError(f"tasks must be among {AGENT_TASKS}; got {task!r}")
+    known_any = {m for task in tasks for m in agent_methods(task)}
+    unknown = [m for m in (methods or ()) if m not in known_any]
+    if unknown:
+        raise ValueError(f"methods {unknown} are not methods of the tasks {tuple(tasks)}: one of {sorted(known_any)}")
+    rows = []
+    for task in tasks:
         known, limits = agent_methods(task), estimation.agent_limits(task, step=True)
         for m in (known if methods is None else [m for m in methods if m in known]):
             limit, why = limits.get(m, (max(sizes), ""))

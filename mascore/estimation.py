@@ -354,6 +354,13 @@ class MethodSpec:
         for attr in ("build", "cost"):
             if not callable(getattr(self, attr)):
                 raise TypeError(f"{attr} of method {self.name!r} must be callable")
+        if isinstance(self.tasks, str) or not self.tasks or not all(isinstance(t, str) and t for t in self.tasks):
+            raise ValueError(f"tasks of method {self.name!r} must be a non-empty tuple of task names; got {self.tasks!r}")
+        bad = {t: o for t, o in dict(self.order).items()
+               if not (isinstance(o, (tuple, list)) and len(o) == 2 and all(isinstance(w, str) for w in o))}
+        if bad:
+            raise ValueError(f"order of method {self.name!r}: each task's (work, memory) orders as two strings; "
+                             f"got {bad}")
         missing = [t for t in self.tasks if t not in self.order]
         if missing:
             raise ValueError(f"method {self.name!r}: order must give the work and memory of every task; "
@@ -377,6 +384,9 @@ class MethodSpec:
 
     def __deepcopy__(self, memo: dict) -> MethodSpec:
         return self
+
+    def __hash__(self) -> int:  # equal specs share their name and tasks
+        return hash((self.name, self.tasks))
 
 
 def _checked_limit(name: str, attr: str, task: object, limit: object, tasks: Sequence[str]) -> tuple[int, str]:
@@ -588,12 +598,22 @@ def agent_limits(task: str, *, step: bool = False) -> dict[str, tuple[int, str]]
     dict of str to (int, str)
         Method name -> (largest N, why not beyond) (:attr:`MethodSpec.max_agents`), in table order.
 
+    Raises
+    ------
+    ValueError
+        A task no method declares.
+
     Examples
     --------
     >>> from mascore.estimation import agent_limits
     >>> agent_limits("localization")["ci-diffusion"][0], "ci-diffusion" in agent_limits("localization", step=True)
     (32, False)
     """
+    if not isinstance(step, bool):
+        raise TypeError(f"step must be True or False; got {step!r}")
+    tasks = {t for s in method_specs() for t in s.tasks}
+    if task not in tasks:
+        raise ValueError(f"task must be one of the methods' tasks {tuple(sorted(tasks))}; got {task!r}")
     limits = ((s.name, s.max_agents if not step or s.step_max_agents is None else s.step_max_agents)
               for s in method_specs(task))
     return {name: limit[task] for name, limit in limits if task in limit}
@@ -626,7 +646,9 @@ def _check_pair(state: object, names: tuple[str, str], definite: bool) -> None:
     """A state value's vector ``(..., n)`` and matrix ``(..., n, n)``: finite real arrays of matching shapes, stored
     as read-only copies."""
     vector, matrix = (require_finite(float_array(getattr(state, name), name), name) for name in names)
-    if vector.ndim < 1 or matrix.shape != (*vector.shape, vector.shape[-1]):
+    if vector.ndim < 1:
+        raise ValueError(f"{names[0]} must be an array (..., n) with n >= 1; got shape {vector.shape}")
+    if matrix.shape != (*vector.shape, vector.shape[-1]):
         raise ValueError(f"{names[1]} must have shape (..., n, n) = {(*vector.shape, vector.shape[-1])} for "
                          f"{names[0]} of shape {vector.shape}; got {matrix.shape}")
     check_covariance(matrix, names[1], definite=definite)  # symmetric, positive semidefinite (a set's: definite)

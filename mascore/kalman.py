@@ -215,7 +215,8 @@ class LinearGaussianModel(Frozen):
         x : (..., m) array_like
             Estimates.
         P : (..., m, m) array_like
-            Their covariances, symmetric positive semidefinite.
+            Their covariances, symmetric positive semidefinite: this fast path checks their shapes and
+            finiteness only (check a state from outside once with :meth:`check_state`).
         u : (..., p) array_like, optional
             Known input (the model's ``B`` then needed).
 
@@ -244,7 +245,8 @@ class LinearGaussianModel(Frozen):
         x : (..., m) array_like
             Predicted estimates.
         P : (..., m, m) array_like
-            Their covariances, symmetric positive semidefinite.
+            Their covariances, symmetric positive semidefinite: this fast path checks their shapes and
+            finiteness only (check a state from outside once with :meth:`check_state`).
         z : (..., q) array_like
             Measurements.
 
@@ -509,6 +511,7 @@ def predict(
         x_pred, P_pred, ok = _predict_one(x, P, F, Q, B, u)
     else:
         try:
+            np.broadcast_shapes(x.shape[:-1], P.shape[:-2])  # the estimates and their covariances: one batch
             x_pred, P_pred, ok = _predict_stack(x, P, F, Q, B, u)
         except ValueError as exc:  # leading (batch) axes that do not broadcast
             raise ValueError(

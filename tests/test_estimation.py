@@ -492,3 +492,59 @@ def test_the_package_scan_lists_the_modules_pkgutil_lists(tmp_path):
     assert estimation._module_name("lqr.py") == "lqr"
     assert estimation._module_name("fast" + importlib.machinery.EXTENSION_SUFFIXES[0]) == "fast"
     assert estimation._module_name("notes.txt") == ""
+
+
+def test_the_new_names_refuse_bad_input_by_name():
+    """The third trial's findings: each refused up front, naming what was wrong."""
+    from mascore.compare.scenario import nees_dimension, reference_method
+
+    with pytest.raises(TypeError, match="methods of scenario 'x' must be callable"):
+        Scenario("x", ("a",), print, print, print)
+    for call in (lambda: reference_method("bogus"), lambda: nees_dimension("bogus"),
+                 lambda: estimation.agent_limits("bogus")):
+        with pytest.raises(ValueError, match="task must be one of"):
+            call()
+    with pytest.raises(TypeError, match="step must be True or False"):
+        estimation.agent_limits("team", step="yes")
+    with pytest.raises(ValueError, match="tasks of method 'x' must be a non-empty tuple"):
+        estimation.MethodSpec("x", (), fusion.CentralizedFilter, lambda *a: (0.0, 0.0), {})
+    with pytest.raises(ValueError, match="each task's \\(work, memory\\) orders"):
+        estimation.MethodSpec("x", ("target",), fusion.CentralizedFilter, lambda *a: (0.0, 0.0), {"target": 5})
+    with pytest.raises(ValueError, match="mean must be an array"):
+        estimation.GaussianState(0.0, np.eye(1))
+    assert estimation.SetState(np.zeros((0, 2)), np.zeros((0, 2, 2))).shape.shape == (0, 2, 2)  # an empty batch
+    spec = estimation.method_spec("ci-L5", "target")
+    assert hash(spec) == hash(estimation.method_spec("ci-L5", "target"))
+    for task in ("bogus", None):
+        with pytest.raises(ValueError, match="task must be 'target' or 'localization'"):
+            compare.latency_methods(task)
+    with pytest.raises(ValueError, match="task must be 'target' or 'localization'"):
+        compare.latency_model("centralized", "bogus")
+    assert "4 rounds" in compare.latency_model("ci-Ldiam")  # the diameter of the latency study's ring of 8
+    for cell, error, match in [("x", TypeError, "must be a mapping"),
+                               ({"task": "target", "study": "loss"}, ValueError, "lacks the coordinates"),
+                               ({"task": "target", "method": "bogus", "n_agents": 8, "dropout": 0.2, "study": "loss"},
+                                ValueError, "method")]:
+        with pytest.raises(error, match=match):
+            compare.check_link_cell(cell)
+    for kwargs, error, match in [(dict(sizes=(4,), tasks=("target",), methods=("bogus",)), ValueError, "bogus"),
+                                 (dict(sizes=(4,), tasks=("target",), methods="local"), TypeError, "methods"),
+                                 (dict(sizes=()), ValueError, "sizes"), (dict(sizes=4), TypeError, "sizes"),
+                                 (dict(sizes=(4,), tasks="target"), TypeError, "tasks")]:
+        with pytest.raises(error, match=match):
+            agent_cost.agent_costs(**kwargs, repeats=1, min_time=0.0)
+    with pytest.raises(ValueError, match="table has no rows"):
+        compare.summarize(pd.DataFrame(columns=["task", "method", "n_agents", "cell", "block", "run", "rmse_own",
+                                                "cpu_s", "floats", "nees_own", "containment", "spread", "study",
+                                                "graph", "noise", "dropout", "q_scale"]))
+
+
+def test_a_diverged_run_is_counted_not_hidden():
+    cell = {"study": "target", "task": "target", "n_agents": 4, "graph": "ring", "noise": "gaussian",
+            "dropout": 0.0, "q_scale": 1.0, "block": 0}
+    rows = [{**r, **cell, "method": m, "cell": m} for m in ("centralized", "local")
+            for r in compare.run_cell({**cell, "method": m})]
+    table = pd.DataFrame(rows)
+    table.loc[table.index[-1], "rmse_own"] = np.inf  # one run of "local" diverged
+    s = compare.summarize(table).set_index("method")
+    assert s.loc["local", "n_diverged"] == 1 and s.loc["centralized", "n_diverged"] == 0

@@ -330,3 +330,12 @@ def test_with_measurement_is_the_constructor_and_checks_only_the_measurement():
         model.with_measurement([[1.0, 0.0]], [[-1.0]])
     with pytest.raises(ValueError, match=r"Incompatible dimensions of H"):
         model.with_measurement([[1.0, 0.0, 0.0]], [[1.0]])
+
+
+def test_predict_refuses_estimates_and_covariances_of_two_batches():
+    model = kalman.LinearGaussianModel(np.eye(2), 0.1 * np.eye(2), [[1.0, 0.0]], [[1.0]])
+    P = np.eye(2) * np.arange(1.0, 5.0)[:, None, None]  # 4 covariances for 3 estimates
+    for call in (lambda: model.predict(np.zeros((3, 2)), P), lambda: kalman.predict(np.zeros((3, 2)), P, np.eye(2),
+                                                                                      0.1 * np.eye(2))):
+        with pytest.raises(ValueError, match="batch axes of x \\(3, 2\\), P \\(4, 2, 2\\)"):
+            call()

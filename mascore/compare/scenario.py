@@ -89,6 +89,9 @@ class Scenario:
         d = self.nees_dimension
         if d is not None and (isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 1):
             raise ValueError(f"nees_dimension of scenario {self.task!r} must be an integer >= 1 or None; got {d!r}")
+        for attr in ("methods", "simulate", "floats", "cells"):
+            if not callable(getattr(self, attr)):
+                raise TypeError(f"{attr} of scenario {self.task!r} must be callable")
         object.__setattr__(self, "headline", MappingProxyType(dict(self.headline)))  # read-only: it is shared
 
     def __copy__(self) -> Scenario:  # immutable: a copy is itself (its mappings are read-only)
@@ -96,9 +99,9 @@ class Scenario:
 
     def __deepcopy__(self, memo: dict) -> Scenario:
         return self
-        for attr in ("methods", "simulate", "floats", "cells"):
-            if not callable(getattr(self, attr)):
-                raise TypeError(f"{attr} of scenario {self.task!r} must be callable")
+
+    def __hash__(self) -> int:  # one scenario per task
+        return hash(self.task)
 
 
 def scenarios() -> dict[str, Scenario]:
@@ -163,8 +166,7 @@ def reference_method(task: str) -> str:
     """
     if task in BUILT_IN:
         return _REFERENCE.get(task, "centralized")
-    scenario = scenarios().get(task)
-    return "centralized" if scenario is None else scenario.reference
+    return _scenario(task).reference
 
 
 def nees_dimension(task: str) -> int | None:
@@ -178,5 +180,12 @@ def nees_dimension(task: str) -> int | None:
     """
     if task in NEES_DIMENSION:
         return NEES_DIMENSION[task]
-    scenario = scenarios().get(task)
-    return None if scenario is None else scenario.nees_dimension
+    return _scenario(task).nees_dimension
+
+
+def _scenario(task: object) -> Scenario:
+    """The scenario of a task that is not built in, or a clear refusal."""
+    found = scenarios()
+    if task not in found:
+        raise ValueError(f"task must be one of {(*BUILT_IN, *found)}; got {task!r}")
+    return found[task]

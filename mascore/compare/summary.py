@@ -42,12 +42,21 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
     Returns
     -------
     pandas.DataFrame
-        One row per group: ``n`` runs, and ``mean``/``lo``/``hi`` of
+        One row per group: ``n`` runs, ``n_diverged`` of them with a non-finite error (left out of
+        the means and the ratio, and counted here), and ``mean``/``lo``/``hi`` of
         ``rmse_own``, ``nees_own``, ``containment``, ``spread``, ``rmse_far``,
         ``set_size`` (NaN where the table has none); ``ratio_mean``/``lo``/``hi``:
         the ratio of RMS errors to the bound and its interval; ``nees_bound_lo``/``hi``:
         the ANEES's chi-square bounds; plus ``floats`` and ``cpu_us`` (CPU per agent per
-        step and run, µs).
+        step and run, µs). A group whose task's reference has no rows has NaN ratios.
+
+    Raises
+    ------
+    ValueError
+        A table without rows or without the columns named, an empty `by`, or a task that is
+        neither built in nor a scenario's.
+    TypeError
+        `table` is not a DataFrame, or `by` not a sequence of names.
 
     Examples
     --------
@@ -70,12 +79,16 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
     if isinstance(by, str) or not isinstance(by, Sequence):
         raise TypeError(f"by must be a sequence of column names; got {by!r}")
     by = list(by)
+    if not by:
+        raise ValueError("by must name at least one grouping column (default: study, task, method, ...)")
     needed = {"task", "method", "n_agents", "cell", "block", "run", "rmse_own", "cpu_s", "floats", "nees_own",
               "containment", "spread"} | set(by) - {"graph"}
     missing = sorted(needed - set(table.columns))
     if missing:
         raise ValueError(f"table lacks the columns {missing} (rows of run_cell with their cell coordinates; "
                          f"by = {by})")
+    if table.empty:
+        raise ValueError("table has no rows: nothing to summarize (run the sweep's cells first)")
     t = table.copy()
     if "graph" not in t:
         t["graph"] = "ring"
@@ -95,6 +108,7 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
     for key, g in t.groupby(by, sort=False, dropna=False):
         row = dict(zip(by, key if isinstance(key, tuple) else (key,)))
         row["n"] = len(g)
+        row["n_diverged"] = int((~np.isfinite(g["rmse_own"].to_numpy(float))).sum())  # left out of the statistics
         for col in ("rmse_own", "ratio", "nees_own", "containment", "spread", "rmse_far", "set_size"):
             if col == "ratio":
                 m, lo, hi = rms_ratio(g["rmse_own"].to_numpy(), g["bound_rmse"].to_numpy(), memo=memo)

@@ -19,6 +19,7 @@ from .benchmark import (
     SWITCHING_GRAPHS,
     BenchmarkSettings,
     benchmark_graph,
+    check_cell,
     check_n_agents,
     check_run,
     switching_graphs,
@@ -663,6 +664,8 @@ def latency_methods(task: str = "target") -> tuple[str, ...]:
     >>> latency_methods()[:4]
     ('centralized', 'local', 'forwarding', 'ci-L1')
     """
+    if task not in ("target", "localization"):
+        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
     return tuple(m for m in target_methods(task) if _late_filter(m, task) is not None)
 
 
@@ -685,12 +688,17 @@ def latency_not_modelled(task: str = "target") -> dict[str, str]:
     >>> [m for m in ("ci-L1", "diffusion", "kcf", "sm-forwarding") if m in latency_not_modelled()]   # the book's: none
     []
     """
+    if task not in ("target", "localization"):
+        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
     return {m: _NO_LATENCY_MODEL for m in target_methods(task) if _late_filter(m, task) is None}
 
 
 def _late_filter(method: str, task: str):
-    """The method's filter on a team of 4 if :mod:`mascore.fusion_links` can take its messages late, else None."""
-    filt = target_filter(method, target_model(4) if task == "target" else localization_model(4), task)
+    """The method's filter on the latency study's team (the ring of 8) if :mod:`mascore.fusion_links` can take its
+    messages late, else None."""
+    if task not in ("target", "localization"):
+        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    filt = target_filter(method, target_model(8) if task == "target" else localization_model(8), task)
     return filt if isinstance(filt, NetworkFilter) else None
 
 
@@ -719,6 +727,8 @@ def latency_model(method: str, task: str = "target") -> str:
     >>> latency_model("diffusion")
     'its own filter two steps behind (measurements, then estimates), then its own fresh measurements'
     """
+    if task not in ("target", "localization"):
+        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
     if method == "centralized":
         return "the bound: ideal links"
     filt = _late_filter(method, task)
@@ -748,24 +758,29 @@ def check_link_cell(cell: dict) -> None:
 
     Parameters
     ----------
-    cell : dict
-        A cell: ``task``, ``method``, ``study``, and ``dropout`` and ``graph`` (default 0 and the ring).
+    cell : mapping
+        A cell of the grid (:func:`~mascore.compare.benchmark.check_cell` checks its coordinates first):
+        ``task``, ``method``, ``n_agents``, ``dropout``, and ``study`` and ``graph`` (default: none, the ring).
 
     Raises
     ------
     ValueError
-        The method has no model of those links (e.g. one-step latency for a filter on the estimator protocol
-        alone), or the links do not go with the graph or the task.
+        A bad coordinate; the method has no model of those links (e.g. one-step latency for a filter on the
+        estimator protocol alone), or the links do not go with the graph or the task.
+    TypeError
+        `cell` is not a mapping.
 
     Examples
     --------
     >>> from mascore.compare.target import check_link_cell
-    >>> check_link_cell({"task": "target", "method": "ci-L5", "study": "send-on-delta-0.5"})
+    >>> check_link_cell({"task": "target", "method": "ci-L5", "n_agents": 8, "dropout": 0.0,
+    ...                  "study": "send-on-delta-0.5"})
     Traceback (most recent call last):
     ...
     ValueError: send_delta: method must be one of ('centralized', 'ci-L1', 'icf-L1'); got 'ci-L5'
     """
-    if cell.get("task") not in ("target", "localization"):
+    cell = check_cell(cell, "cell", full=False)
+    if cell["task"] not in ("target", "localization"):
         return
     options = link_options(str(cell.get("study", "")))
     _check_links(cell["method"], float(cell.get("dropout", 0.0)), options.get("latency", 0), options.get("send_delta"),
