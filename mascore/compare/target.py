@@ -759,7 +759,7 @@ def check_link_cell(cell: dict) -> None:
     Parameters
     ----------
     cell : mapping
-        A cell of the grid (:func:`~mascore.compare.benchmark.check_cell` checks its coordinates first):
+        A cell of the grid (``check_cell`` checks its coordinates first):
         ``task``, ``method``, ``n_agents``, ``dropout``, and ``study`` and ``graph`` (default: none, the ring).
 
     Raises
