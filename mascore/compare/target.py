@@ -465,8 +465,7 @@ def simulate_target(
         raise ValueError("seed must be a seed or a non-empty sequence of seeds (one per block of runs)")
     n_agents, runs = check_run(n_agents, "gaussian", 0.0, 1.0, runs, settings)
     check_run(n_agents, "gaussian", 0.0, 1.0, runs * len(seeds), settings)  # every block at once
-    if task not in ("target", "localization"):
-        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    _check_fusion_task(task)
     spec = estimation.method_spec(method, task)
     s = settings
     if graph not in SWITCHING_GRAPHS:
@@ -664,8 +663,7 @@ def latency_methods(task: str = "target") -> tuple[str, ...]:
     >>> latency_methods()[:4]
     ('centralized', 'local', 'forwarding', 'ci-L1')
     """
-    if task not in ("target", "localization"):
-        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    _check_fusion_task(task)
     return tuple(m for m in target_methods(task) if _late_filter(m, task) is not None)
 
 
@@ -688,16 +686,20 @@ def latency_not_modelled(task: str = "target") -> dict[str, str]:
     >>> [m for m in ("ci-L1", "diffusion", "kcf", "sm-forwarding") if m in latency_not_modelled()]   # the book's: none
     []
     """
+    _check_fusion_task(task)
+    return {m: _NO_LATENCY_MODEL for m in target_methods(task) if _late_filter(m, task) is None}
+
+
+def _check_fusion_task(task: object) -> None:
+    """Refuse a task other than the two of the fusion filters, by name."""
     if task not in ("target", "localization"):
         raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
-    return {m: _NO_LATENCY_MODEL for m in target_methods(task) if _late_filter(m, task) is None}
 
 
 def _late_filter(method: str, task: str):
     """The method's filter on the latency study's team (the ring of 8) if :mod:`mascore.fusion_links` can take its
     messages late, else None."""
-    if task not in ("target", "localization"):
-        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    _check_fusion_task(task)
     filt = target_filter(method, target_model(8) if task == "target" else localization_model(8), task)
     return filt if isinstance(filt, NetworkFilter) else None
 
@@ -727,8 +729,7 @@ def latency_model(method: str, task: str = "target") -> str:
     >>> latency_model("diffusion")
     'its own filter two steps behind (measurements, then estimates), then its own fresh measurements'
     """
-    if task not in ("target", "localization"):
-        raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
+    _check_fusion_task(task)
     if method == "centralized":
         return "the bound: ideal links"
     filt = _late_filter(method, task)
