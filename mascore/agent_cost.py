@@ -558,7 +558,8 @@ def agent_costs(sizes: Sequence[int] = (4, 8, 16, 32, 64, 128), tasks: Sequence[
     import pandas as pd
 
     for name, value in (("sizes", sizes), ("tasks", tasks), ("methods", methods)):
-        if isinstance(value, (str, bytes)) or not (value is None and name == "methods" or isinstance(value, Sequence)):
+        if isinstance(value, (str, bytes)) or not (value is None and name == "methods"
+                                                   or isinstance(value, (Sequence, np.ndarray))):
             raise TypeError(f"{name} must be a sequence (a list or a tuple); got {value!r}")
     if not sizes:
         raise ValueError("sizes must name at least one team size N")

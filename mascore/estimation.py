@@ -611,11 +611,12 @@ def agent_limits(task: str, *, step: bool = False) -> dict[str, tuple[int, str]]
     """
     if not isinstance(step, bool):
         raise TypeError(f"step must be True or False; got {step!r}")
-    tasks = {t for s in method_specs() for t in s.tasks}
+    specs = method_specs()  # one scan of the package
+    tasks = {t for s in specs for t in s.tasks}
     if task not in tasks:
         raise ValueError(f"task must be one of the methods' tasks {tuple(sorted(tasks))}; got {task!r}")
     limits = ((s.name, s.max_agents if not step or s.step_max_agents is None else s.step_max_agents)
-              for s in method_specs(task))
+              for s in specs if task in s.tasks)
     return {name: limit[task] for name, limit in limits if task in limit}
 
 
@@ -646,7 +647,7 @@ def _check_pair(state: object, names: tuple[str, str], definite: bool) -> None:
     """A state value's vector ``(..., n)`` and matrix ``(..., n, n)``: finite real arrays of matching shapes, stored
     as read-only copies."""
     vector, matrix = (require_finite(float_array(getattr(state, name), name), name) for name in names)
-    if vector.ndim < 1:
+    if vector.ndim < 1 or vector.shape[-1] < 1:
         raise ValueError(f"{names[0]} must be an array (..., n) with n >= 1; got shape {vector.shape}")
     if matrix.shape != (*vector.shape, vector.shape[-1]):
         raise ValueError(f"{names[1]} must have shape (..., n, n) = {(*vector.shape, vector.shape[-1])} for "

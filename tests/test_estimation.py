@@ -364,7 +364,8 @@ def toy_scenario(tmp_path, monkeypatch):
     vars(compare).pop("toyscenario2099", None)
 
 
-def test_a_new_scenario_is_one_module(toy_scenario):
+def test_a_new_scenario_is_one_module(toy_scenario, tmp_path):
+    from mascore.compare.gridfile import read_grid
     from mascore.compare.scenario import scenarios
 
     assert toy_scenario in scenarios()
@@ -390,6 +391,10 @@ def test_a_new_scenario_is_one_module(toy_scenario):
     np.testing.assert_allclose(bounds, compare.anees_bounds(20, 1))
     with pytest.raises(ValueError, match="must be one of"):
         compare.run_cell({**cells[0], "method": "no-such-method"})
+    # a grid file of your own names it like a built-in task (its reference first)
+    path = tmp_path / "walk.toml"
+    path.write_text("runs = 3\n[[study]]\ntask = 'toy-walk'\nmethod = 'alone'\nn_agents = 4\n")
+    assert [c["method"] for c in read_grid(path).cells] == ["centre", "alone"]
 
 
 def test_every_method_builds_an_estimator_of_the_protocol():
@@ -510,8 +515,11 @@ def test_the_new_names_refuse_bad_input_by_name():
         estimation.MethodSpec("x", (), fusion.CentralizedFilter, lambda *a: (0.0, 0.0), {})
     with pytest.raises(ValueError, match="each task's \\(work, memory\\) orders"):
         estimation.MethodSpec("x", ("target",), fusion.CentralizedFilter, lambda *a: (0.0, 0.0), {"target": 5})
-    with pytest.raises(ValueError, match="mean must be an array"):
-        estimation.GaussianState(0.0, np.eye(1))
+    for mean, cov in ((0.0, np.eye(1)), (np.zeros(0), np.zeros((0, 0)))):
+        with pytest.raises(ValueError, match="mean must be an array"):
+            estimation.GaussianState(mean, cov)
+    assert agent_cost.agent_costs(np.array([4]), ("target",), ("local",), repeats=1, min_time=0.0)["n_agents"].tolist() \
+        == [4]  # sizes as an array
     assert estimation.SetState(np.zeros((0, 2)), np.zeros((0, 2, 2))).shape.shape == (0, 2, 2)  # an empty batch
     spec = estimation.method_spec("ci-L5", "target")
     assert hash(spec) == hash(estimation.method_spec("ci-L5", "target"))
@@ -523,8 +531,8 @@ def test_the_new_names_refuse_bad_input_by_name():
     assert "4 rounds" in compare.latency_model("ci-Ldiam")  # the diameter of the latency study's ring of 8
     for cell, error, match in [("x", TypeError, "must be a mapping"),
                                ({"task": "target", "study": "loss"}, ValueError, "lacks the coordinates"),
-                               ({"task": "target", "method": "bogus", "n_agents": 8, "dropout": 0.2, "study": "loss"},
-                                ValueError, "method")]:
+                               ({"task": "target", "method": "bogus", "n_agents": 8, "dropout": 0.2, "noise": "gaussian",
+                                 "study": "loss"}, ValueError, "cell\\['method'\\] of a target cell must be one of")]:
         with pytest.raises(error, match=match):
             compare.check_link_cell(cell)
     for kwargs, error, match in [(dict(sizes=(4,), tasks=("target",), methods=("bogus",)), ValueError, "bogus"),

@@ -48,6 +48,9 @@ def test_a_grid_file_runs_its_cells_and_equals_the_cells_run_one_by_one(tmp_path
     # a team beyond the method's limit (its spec's max_agents) or beyond memory: refused before the first cell runs
     ("runs = 3\n[[study]]\ntask = 'team'\nmethod = 'song-eb'\nn_agents = [4, 200]\n", "song-eb runs teams of at most 32"),
     ("runs = 3\n[[study]]\ntask = 'target'\nmethod = 'ci-L1'\nn_agents = [4, 1000000]\n", "n_agents asks for too much"),
+    # a misspelt task is named with the file and the study
+    ("runs = 3\n[[study]]\nname = 'mine'\ntask = 'targte'\nmethod = 'ci-L1'\nn_agents = 6\n",
+     "bad.toml: study 'mine'\\['task'\\] must be one of"),
     # a study named as a link study runs over those links: a method without a model of them is refused up front
     ("runs = 3\n[[study]]\nname = 'send-on-delta-0.5'\ntask = 'target'\nmethod = 'ci-L5'\nn_agents = 8\n",
      "study 'send-on-delta-0.5': send_delta: method must be one of"),

@@ -41,7 +41,7 @@ from typing import Any
 from .. import estimation
 from .._validation import STEP_BUDGET, check_positive_int
 from ..sweep import Grid
-from .benchmark import SETTINGS, check_cell, check_run
+from .benchmark import SETTINGS, check_run
 from .scenario import reference_method
 from .target import check_link_cell
 
@@ -128,6 +128,7 @@ def read_grid(path: str | Path) -> GridFile:
     if not isinstance(studies, list) or not studies:
         raise ValueError(f"{path}: no [[study]] table (each names a task, methods and team sizes)")
     cells, limits = [], {}
+    spec_tasks = {t for spec in estimation.method_specs() for t in spec.tasks}  # a scenario's task has no specs
     for k, study in enumerate(studies):
         where = f"{path}: study {study.get('name', k + 1)!r}"
         unknown = set(study) - set(AXES) - {"name"}
@@ -139,12 +140,11 @@ def read_grid(path: str | Path) -> GridFile:
         axes = {a: _values(study.get(a, default), f"{where}: {a}") for a, default in AXES.items()}
         axes["method"] = _with_reference(axes["method"], axes["task"])
         for cell in Grid({**axes, "block": blocks}).cells():
-            cell = dict(check_cell({"study": str(study.get("name", f"study-{k + 1}")), **cell}, where))
-            try:
-                check_link_cell(cell)
-            except ValueError as err:
-                raise ValueError(f"{where}: {err}") from None
-            _check_size(cell, runs, where, limits.setdefault(cell["task"], estimation.agent_limits(cell["task"])))
+            cell = check_link_cell({"study": str(study.get("name", f"study-{k + 1}")), **cell}, where)
+            task = cell["task"]
+            if task not in limits:
+                limits[task] = estimation.agent_limits(task) if task in spec_tasks else {}
+            _check_size(cell, runs, where, limits[task])
             cells.append(cell)
     steps = runs * SETTINGS.n_steps * len(cells)
     if steps > STEP_BUDGET:
@@ -157,7 +157,10 @@ def _with_reference(methods: list, tasks: list) -> list:
     """`methods` with the reference of a study's one task first (the ratios' denominator), if it is missing."""
     if len(tasks) != 1 or not isinstance(tasks[0], str):
         return methods  # a study of several tasks names each one's methods itself
-    ref = reference_method(tasks[0])
+    try:
+        ref = reference_method(tasks[0])
+    except ValueError:  # an unknown task: the cell check names it, with the file and the study
+        return methods
     return methods if ref in methods else [ref, *methods]
 
 

@@ -664,7 +664,8 @@ def latency_methods(task: str = "target") -> tuple[str, ...]:
     ('centralized', 'local', 'forwarding', 'ci-L1')
     """
     _check_fusion_task(task)
-    return tuple(m for m in target_methods(task) if _late_filter(m, task) is not None)
+    late = _takes_late(target_methods(task), task)
+    return tuple(m for m, ok in late.items() if ok)
 
 
 def latency_not_modelled(task: str = "target") -> dict[str, str]:
@@ -687,7 +688,7 @@ def latency_not_modelled(task: str = "target") -> dict[str, str]:
     []
     """
     _check_fusion_task(task)
-    return {m: _NO_LATENCY_MODEL for m in target_methods(task) if _late_filter(m, task) is None}
+    return {m: _NO_LATENCY_MODEL for m, ok in _takes_late(target_methods(task), task).items() if not ok}
 
 
 def _check_fusion_task(task: object) -> None:
@@ -696,9 +697,26 @@ def _check_fusion_task(task: object) -> None:
         raise ValueError(f"task must be 'target' or 'localization'; got {task!r}")
 
 
+def _takes_late(methods, task: str) -> dict[str, bool]:
+    """Whether :mod:`mascore.fusion_links` can take each method's messages late: its filter is a network filter.
+
+    A spec built by its filter class says so without a filter; the others are built once, on one small model.
+    """
+    _check_fusion_task(task)
+    model, out = None, {}
+    for method in methods:
+        build = estimation.method_spec(method, task).build
+        if isinstance(build, type):
+            out[method] = issubclass(build, NetworkFilter)
+            continue
+        if model is None:
+            model = target_model(4) if task == "target" else localization_model(4)
+        out[method] = isinstance(build(model), NetworkFilter)
+    return out
+
+
 def _late_filter(method: str, task: str):
-    """The method's filter on the latency study's team (the ring of 8) if :mod:`mascore.fusion_links` can take its
-    messages late, else None."""
+    """The method's filter on the latency study's team (the ring of 8) if it is a network filter, else None."""
     _check_fusion_task(task)
     filt = target_filter(method, target_model(8) if task == "target" else localization_model(8), task)
     return filt if isinstance(filt, NetworkFilter) else None
@@ -750,7 +768,7 @@ def latency_model(method: str, task: str = "target") -> str:
     return "its own filter one step behind, then its own fresh measurement"
 
 
-def check_link_cell(cell: dict) -> None:
+def check_link_cell(cell: dict, name: str = "cell") -> dict:
     """Refuse up front a cell of the target or localization task whose method cannot run over its study's links.
 
     A cell's study sets its links when it is one of :data:`LINK_STUDIES` (``"latency"``: one step late;
@@ -760,8 +778,15 @@ def check_link_cell(cell: dict) -> None:
     Parameters
     ----------
     cell : mapping
-        A cell of the grid (``check_cell`` checks its coordinates first):
-        ``task``, ``method``, ``n_agents``, ``dropout``, and ``study`` and ``graph`` (default: none, the ring).
+        A cell of the grid (``check_cell`` checks its coordinates first): ``task``, ``method``,
+        ``n_agents``, ``dropout``, ``noise``, and ``study`` and ``graph`` (default: none, the ring).
+    name : str
+        What the messages call the cell (e.g. a grid file's study).
+
+    Returns
+    -------
+    dict
+        The cell, checked.
 
     Raises
     ------
@@ -774,18 +799,22 @@ def check_link_cell(cell: dict) -> None:
     Examples
     --------
     >>> from mascore.compare.target import check_link_cell
-    >>> check_link_cell({"task": "target", "method": "ci-L5", "n_agents": 8, "dropout": 0.0,
+    >>> check_link_cell({"task": "target", "method": "ci-L5", "n_agents": 8, "dropout": 0.0, "noise": "gaussian",
     ...                  "study": "send-on-delta-0.5"})
     Traceback (most recent call last):
     ...
-    ValueError: send_delta: method must be one of ('centralized', 'ci-L1', 'icf-L1'); got 'ci-L5'
+    ValueError: cell: send_delta: method must be one of ('centralized', 'ci-L1', 'icf-L1'); got 'ci-L5'
     """
-    cell = check_cell(cell, "cell", full=False)
-    if cell["task"] not in ("target", "localization"):
-        return
-    options = link_options(str(cell.get("study", "")))
-    _check_links(cell["method"], float(cell.get("dropout", 0.0)), options.get("latency", 0), options.get("send_delta"),
-                 cell.get("graph", "ring"), cell["task"], options.get("loss_model", "link"))
+    cell = check_cell(cell, name)
+    if cell["task"] in ("target", "localization"):
+        options = link_options(str(cell.get("study", "")))
+        try:
+            _check_links(cell["method"], float(cell.get("dropout", 0.0)), options.get("latency", 0),
+                         options.get("send_delta"), cell.get("graph", "ring"), cell["task"],
+                         options.get("loss_model", "link"))
+        except ValueError as err:
+            raise ValueError(f"{name}: {err}") from None
+    return dict(cell)
 
 
 def _check_links(method: str, loss: object, latency: object, send_delta: object, graph: str, task: str,
@@ -800,7 +829,7 @@ def _check_links(method: str, loss: object, latency: object, send_delta: object,
         raise ValueError(f"loss must be a probability in [0, 1); got {loss!r}")
     if isinstance(latency, bool) or latency not in (0, 1):
         raise ValueError(f"latency must be 0 or 1 (steps); got {latency!r}")
-    if latency and method not in ("centralized", "local") and _late_filter(method, task) is None:
+    if latency and method not in ("centralized", "local") and not _takes_late([method], task)[method]:
         raise ValueError(f"latency: method {method!r} has no model of late messages: {_NO_LATENCY_MODEL}")
     if send_delta is not None:
         if isinstance(send_delta, bool) or not isinstance(send_delta, (int, float, np.floating)) \
