@@ -23,7 +23,7 @@ def summarize(table, by: Sequence[str] = ("study", "task", "method", "graph", "n
 
     The accuracy is the ratio of RMS errors over the group's runs, the method's against the
     reference's (the task's centralized filter, ``central-fusion`` on the shared task, or a scenario's
-    ``reference``: :func:`~mascore.compare.scenario.reference_method`) on the same seed blocks and runs, with its
+    ``reference``) on the same seed blocks and runs, with its
     95 % paired bootstrap interval (``mascore.compare.stats.rms_ratio``). The consistency is
     the ANEES (the mean over runs of the per-run NEES per dof) with a bootstrap interval and the
     two-sided 95 % chi-square bounds of a consistent filter for the group's runs and the task's
