@@ -261,8 +261,9 @@ class NetworkFilter(Frozen):
         return own, self._agent_messages(own, *self.predict(x, P), z, i)
 
     def _mixing_weights(self) -> np.ndarray | None:
-        """The (N, N) weights with which an agent mixes its own and its neighbours' messages (None: it does not)."""
-        return None
+        """The (N, N) weights with which an agent mixes its own and its neighbours' messages (None: it does not):
+        a consensus filter's weights of one round, ``round_weights``."""
+        return getattr(self, "round_weights", None)
 
     def agent_step(self, i: int, own_data: dict, messages: Sequence) -> tuple[np.ndarray, np.ndarray]:
         """Agent i's step alone: its prediction, its correction with its own data and its neighbours' messages.

@@ -370,14 +370,14 @@ class MethodSpec:
             raise ValueError(f"method {self.name!r}: {both} both in tasks and in not_applicable; a method applies to "
                              "a task or says why not")
         object.__setattr__(self, "tasks", tuple(self.tasks))
-        for attr in ("max_agents", "step_max_agents"):
-            if getattr(self, attr) is not None:
-                object.__setattr__(self, attr, {task: _checked_limit(self.name, attr, task, limit, self.tasks)
-                                                for task, limit in dict(getattr(self, attr)).items()})
         for attr in ("order", "not_applicable", "max_agents", "step_max_agents"):  # read-only: specs are shared
             value = getattr(self, attr)
-            if value is not None:
-                object.__setattr__(self, attr, MappingProxyType(dict(value)))
+            if value is None:
+                continue
+            value = dict(value)
+            if attr.endswith("max_agents"):  # the limits checked where they are declared
+                value = {task: _checked_limit(self.name, attr, task, limit, self.tasks) for task, limit in value.items()}
+            object.__setattr__(self, attr, MappingProxyType(value))
 
     def __copy__(self) -> MethodSpec:  # immutable: a copy is itself (its mappings are read-only)
         return self

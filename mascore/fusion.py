@@ -372,9 +372,6 @@ class ConsensusOnInformationFilter(_NetworkFilter):
         pairs = [(Om, q), (np.broadcast_to(I, Om.shape), iv)] if self.novelty_weight != 1.0 else [(Om + I, q + iv)]
         return consensus_rounds(self.model.weights, pairs, own["nbrs"], self.n_consensus)
 
-    def _mixing_weights(self):
-        return self.model.weights
-
     def _agent_step(self, i, own, messages):
         xp, Pp = self.model.F @ own["x"], self.model.F @ own["P"] @ self.model.F.T + self.model.Q
         Om, qv = information_pair(xp, Pp)
@@ -644,9 +641,6 @@ class InformationConsensusFilter(_NetworkFilter):
         Om, q = information_pair(xm, Pm)
         pairs = [(Om / N + self.model.information_matrices, q / N + self.model._information_vectors(z))]
         return consensus_rounds(self._W, pairs, own["nbrs"], self.n_iterations)
-
-    def _mixing_weights(self):
-        return self._W
 
     def _agent_step(self, i, own, messages):
         N = self.model.n_agents

@@ -158,6 +158,11 @@ _SCENARIO_LINE = re.compile(rb"^SCENARIO\s*(?::[^=\n]*)?=", re.M)
 def reference_method(task: str) -> str:
     """The method whose RMSE every ratio of `task` is taken against: its centralized filter, unless it says otherwise.
 
+    Raises
+    ------
+    ValueError
+        A task neither built in nor declared by a scenario module.
+
     Examples
     --------
     >>> from mascore.compare.scenario import reference_method
@@ -171,6 +176,11 @@ def reference_method(task: str) -> str:
 
 def nees_dimension(task: str) -> int | None:
     """Dimension of the state whose NEES the cells of `task` record (None: no NEES recorded).
+
+    Raises
+    ------
+    ValueError
+        A task neither built in nor declared by a scenario module.
 
     Examples
     --------

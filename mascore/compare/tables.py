@@ -319,8 +319,7 @@ def anees_verdict(row) -> str:
     nees, lo, hi = row["nees_own_mean"], row["nees_bound_lo"], row["nees_bound_hi"]
     if not (np.isfinite(nees) and np.isfinite(lo) and np.isfinite(hi)):
         return "—"
-    return "overconfident" if nees > row["nees_bound_hi"] else "conservative" if nees < row["nees_bound_lo"] \
-        else "consistent"
+    return "overconfident" if nees > hi else "conservative" if nees < lo else "consistent"
 
 
 def position_only_kf_rmse(settings: BenchmarkSettings = SETTINGS) -> tuple[float, float]:
@@ -433,7 +432,7 @@ def _consistency_verdict(r, confidence: float | None) -> str:
     if confidence is not None:
         inside = r["containment_mean"]
         return "—" if not np.isfinite(inside) else "contains" if inside >= confidence else "leaks"
-    return anees_verdict(r) if np.isfinite(r["nees_own_mean"]) else "—"
+    return anees_verdict(r)
 
 
 def link_table(summary, links, task: str = "target", text: bool = False):

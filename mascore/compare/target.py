@@ -657,15 +657,18 @@ def latency_methods(task: str = "target") -> tuple[str, ...]:
     tuple of str
         The methods' names.
 
+    Raises
+    ------
+    ValueError
+        A task other than ``"target"`` and ``"localization"``.
+
     Examples
     --------
     >>> from mascore.compare.target import latency_methods
     >>> latency_methods()[:4]
     ('centralized', 'local', 'forwarding', 'ci-L1')
     """
-    _check_fusion_task(task)
-    late = _takes_late(target_methods(task), task)
-    return tuple(m for m, ok in late.items() if ok)
+    return tuple(m for m, ok in _takes_late(target_methods(task), task).items() if ok)
 
 
 def latency_not_modelled(task: str = "target") -> dict[str, str]:
@@ -681,13 +684,17 @@ def latency_not_modelled(task: str = "target") -> dict[str, str]:
     dict of str to str
         Method name -> why its messages cannot be taken late.
 
+    Raises
+    ------
+    ValueError
+        A task other than ``"target"`` and ``"localization"``.
+
     Examples
     --------
     >>> from mascore.compare.target import latency_not_modelled
     >>> [m for m in ("ci-L1", "diffusion", "kcf", "sm-forwarding") if m in latency_not_modelled()]   # the book's: none
     []
     """
-    _check_fusion_task(task)
     return {m: _NO_LATENCY_MODEL for m, ok in _takes_late(target_methods(task), task).items() if not ok}
 
 
@@ -715,13 +722,6 @@ def _takes_late(methods, task: str) -> dict[str, bool]:
     return out
 
 
-def _late_filter(method: str, task: str):
-    """The method's filter on the latency study's team (the ring of 8) if it is a network filter, else None."""
-    _check_fusion_task(task)
-    filt = target_filter(method, target_model(8) if task == "target" else localization_model(8), task)
-    return filt if isinstance(filt, NetworkFilter) else None
-
-
 def latency_model(method: str, task: str = "target") -> str:
     """How a method's messages are taken when each arrives one step late (:func:`simulate_target`'s `latency`).
 
@@ -741,6 +741,12 @@ def latency_model(method: str, task: str = "target") -> str:
         measurements runs one step behind, or as many as its exchanges follow one another
         (:func:`mascore.fusion_links.track_behind`).
 
+    Raises
+    ------
+    ValueError
+        An unknown task or method, or a method whose filter has no model of late messages
+        (:func:`latency_not_modelled`).
+
     Examples
     --------
     >>> from mascore.compare.target import latency_model
@@ -750,8 +756,9 @@ def latency_model(method: str, task: str = "target") -> str:
     _check_fusion_task(task)
     if method == "centralized":
         return "the bound: ideal links"
-    filt = _late_filter(method, task)
-    if filt is None:
+    # built on the latency study's team, the ring of 8 (the rounds of an -Ldiam filter are its diameter)
+    filt = target_filter(method, target_model(8) if task == "target" else localization_model(8), task)
+    if not isinstance(filt, NetworkFilter):
         raise ValueError(f"method {method!r} has no model of late messages: {_NO_LATENCY_MODEL}")
     rounds = filt.exchanges
     if rounds == 0:
